@@ -1,0 +1,248 @@
+//! Test support: an independent simulator of the rod's statics and of the sensor.
+//!
+//! It solves the six equilibrium equations of MODEL.md 4 with a generic dense
+//! least-squares solve (nalgebra dynamic matrices), so it shares no code with the
+//! estimator's closed forms: each checks the other.
+#![allow(
+    dead_code,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing
+)]
+
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use sar_estimator::StaticPose;
+
+/// The true manipulator and support, as the simulator knows them.
+#[derive(Debug, Clone, Copy)]
+pub struct Truth {
+    pub mass_kg: f64,
+    pub com_m: f64,
+    pub length_m: f64,
+    pub offset_m: f64,
+    pub support_m: Vector3<f64>,
+    pub gravity_mps2: Vector3<f64>,
+    /// Coulomb friction magnitude at the support, N (>= 0).
+    pub friction_n: f64,
+}
+
+/// The article's Table 2 manipulators: (true m kg, true c m).
+pub const TABLE2: [(f64, f64); 4] = [
+    (1.611, 0.115),
+    (2.593, 0.103),
+    (3.198, 0.125),
+    (4.159, 0.1456),
+];
+
+/// Gravity of MODEL.md 2.
+pub fn gravity() -> Vector3<f64> {
+    Vector3::new(0.0, -9.80665, 0.0)
+}
+
+/// u and w from q4, q5 (written here again on purpose, from MODEL.md 3).
+pub fn rod_frame(q4: f64, q5: f64) -> (Vector3<f64>, Vector3<f64>) {
+    let u = Vector3::new(q4.sin() * q5.cos(), q5.sin(), q4.cos() * q5.cos());
+    let w = Vector3::new(q4.sin() * q5.sin(), -q5.cos(), q4.cos() * q5.sin());
+    (u, w)
+}
+
+/// Any unit basis (e1, e2) across u.
+pub fn basis_across(u: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let helper = if u.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = u.cross(&helper).normalize();
+    let e2 = u.cross(&e1);
+    (e1, e2)
+}
+
+/// What the robot applies to the rod at A (F_A, {0}, N) and the U-joint torsion
+/// M_T (N m, along n = -(s4, 0, c4)), for a rod with U-joint centre `a_m`,
+/// direction `u`, normal `w`, with the tip applying `tip_force_n` to the tissue
+/// (F_D = -tip_force_n) and the support's friction acting on the rod as
+/// `-slide_sign * friction_n * u`.
+///
+/// Unknowns: F_A (3), the support's reaction across u (2), M_T (1). Equations:
+/// force balance (3) and moments about A (3).
+pub fn ujoint_force(
+    truth: &Truth,
+    a_m: &Vector3<f64>,
+    u: &Vector3<f64>,
+    w: &Vector3<f64>,
+    tip_force_n: &Vector3<f64>,
+    slide_sign: f64,
+) -> (Vector3<f64>, f64) {
+    let d = truth.offset_m;
+    let r_b = truth.support_m - a_m;
+    // B on the rod axis: r_b = d w + s u.
+    let s = r_b.dot(u);
+    assert!(
+        (r_b - (w * d + u * s)).norm() < 1e-9,
+        "support not on the rod axis"
+    );
+    let r_c = w * d + u * truth.com_m;
+    let r_d = w * d + u * truth.length_m;
+    let (e1, e2) = basis_across(u);
+    let n = -Vector3::new(u.x, 0.0, u.z).normalize();
+    let weight = truth.gravity_mps2 * truth.mass_kg;
+    let f_d = -tip_force_n;
+    let friction = -u * (slide_sign * truth.friction_n);
+    let mut k = DMatrix::<f64>::zeros(6, 6);
+    let mut rhs = DVector::<f64>::zeros(6);
+    // Force: F_A + b1 e1 + b2 e2 = -(m g + F_D + friction).
+    let known_force = weight + f_d + friction;
+    // Moment about A: b1 (r_b x e1) + b2 (r_b x e2) + M_T n = -(r_c x mg + r_d x F_D + r_b x friction).
+    let known_moment = r_c.cross(&weight) + r_d.cross(&f_d) + r_b.cross(&friction);
+    let (m1, m2) = (r_b.cross(&e1), r_b.cross(&e2));
+    for i in 0..3 {
+        k[(i, i)] = 1.0;
+        k[(i, 3)] = e1[i];
+        k[(i, 4)] = e2[i];
+        rhs[i] = -known_force[i];
+        k[(3 + i, 3)] = m1[i];
+        k[(3 + i, 4)] = m2[i];
+        k[(3 + i, 5)] = n[i];
+        rhs[3 + i] = -known_moment[i];
+    }
+    let x = k.svd(true, true).solve(&rhs, 1e-14).unwrap();
+    (Vector3::new(x[0], x[1], x[2]), x[5])
+}
+
+/// The raw sensor reading (sensor frame, N) without noise: f_s = R^T (-F_A) + b.
+pub fn ideal_reading(
+    rotation: &Matrix3<f64>,
+    f_a: &Vector3<f64>,
+    bias_n: &Vector3<f64>,
+) -> Vector3<f64> {
+    rotation.transpose() * (-f_a) + bias_n
+}
+
+/// Seeded sensor noise of MODEL.md 7: independent normal noise per sensor axis.
+pub struct NoisySensor {
+    rng: ChaCha8Rng,
+    normals: [Normal<f64>; 3],
+}
+
+impl NoisySensor {
+    pub fn new(std_n: [f64; 3], seed: u64) -> Self {
+        Self {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            normals: std_n.map(|s| Normal::new(0.0, s).unwrap()),
+        }
+    }
+
+    /// One noisy sample of `ideal`.
+    pub fn sample(&mut self, ideal: &Vector3<f64>) -> Vector3<f64> {
+        let mut v = *ideal;
+        for i in 0..3 {
+            v[i] += self.normals[i].sample(&mut self.rng);
+        }
+        v
+    }
+
+    /// The mean of `samples` noisy samples of `ideal`.
+    pub fn mean(&mut self, ideal: &Vector3<f64>, samples: u32) -> Vector3<f64> {
+        let mut sum = Vector3::zeros();
+        for _ in 0..samples {
+            sum += self.sample(ideal);
+        }
+        sum / f64::from(samples)
+    }
+}
+
+/// One pose of a protocol: the rod direction and the distance a = |AB| (d = 0),
+/// and the sign of the last slide (+1: the rod slid along u, -1: against).
+#[derive(Debug, Clone, Copy)]
+pub struct ProtocolPose {
+    pub rod_dir: Vector3<f64>,
+    pub support_distance_m: f64,
+    pub slide_sign: f64,
+}
+
+/// The distances of the identification protocols (MODEL.md 5.1).
+pub const PROTOCOL_DISTANCES_M: [f64; 5] = [0.04, 0.07, 0.12, 0.20, 0.30];
+
+/// The article's protocol (Sec. 5.2): rod horizontal along +X0 at the support's
+/// height, a swept outward (the rod slides against u) and back inward (along u).
+pub fn article_protocol() -> Vec<ProtocolPose> {
+    let mut poses = Vec::new();
+    for &a in PROTOCOL_DISTANCES_M.iter() {
+        poses.push(ProtocolPose {
+            rod_dir: Vector3::x(),
+            support_distance_m: a,
+            slide_sign: -1.0,
+        });
+    }
+    for &a in PROTOCOL_DISTANCES_M.iter().rev() {
+        poses.push(ProtocolPose {
+            rod_dir: Vector3::x(),
+            support_distance_m: a,
+            slide_sign: 1.0,
+        });
+    }
+    poses
+}
+
+/// The richer protocol of MODEL.md 5.1: four rod directions on a 35 degree cone
+/// around X0, a in PROTOCOL_DISTANCES_M, sweeping alternately outward and inward.
+pub fn cone_protocol() -> Vec<ProtocolPose> {
+    let half_angle = 35f64.to_radians();
+    let mut poses = Vec::new();
+    for k in 0..4 {
+        let phi = f64::from(k) * core::f64::consts::FRAC_PI_2;
+        let u = Vector3::new(
+            half_angle.cos(),
+            half_angle.sin() * phi.cos(),
+            half_angle.sin() * phi.sin(),
+        );
+        let outward = k % 2 == 0;
+        let order: Vec<f64> = if outward {
+            PROTOCOL_DISTANCES_M.to_vec()
+        } else {
+            PROTOCOL_DISTANCES_M.iter().rev().copied().collect()
+        };
+        for a in order {
+            poses.push(ProtocolPose {
+                rod_dir: u,
+                support_distance_m: a,
+                slide_sign: if outward { -1.0 } else { 1.0 },
+            });
+        }
+    }
+    poses
+}
+
+/// Simulates a protocol with nothing at the tip (d = 0): the averaged sensor
+/// readings that the estimator's identification takes.
+pub fn simulate_static_poses(
+    truth: &Truth,
+    rotation: &Matrix3<f64>,
+    bias_n: &Vector3<f64>,
+    protocol: &[ProtocolPose],
+    samples: u32,
+    sensor: &mut NoisySensor,
+) -> Vec<StaticPose> {
+    assert_eq!(truth.offset_m, 0.0, "the protocols are for d = 0");
+    protocol
+        .iter()
+        .map(|p| {
+            let a_m = truth.support_m - p.rod_dir * p.support_distance_m;
+            let q4 = p.rod_dir.x.atan2(p.rod_dir.z);
+            let q5 = p.rod_dir.y.asin();
+            let (u, w) = rod_frame(q4, q5);
+            let (f_a, _) = ujoint_force(truth, &a_m, &u, &w, &Vector3::zeros(), p.slide_sign);
+            let ideal = ideal_reading(rotation, &f_a, bias_n);
+            StaticPose {
+                ujoint_m: a_m,
+                mean_reading_n: sensor.mean(&ideal, samples),
+                samples,
+                slide_sign: p.slide_sign,
+            }
+        })
+        .collect()
+}

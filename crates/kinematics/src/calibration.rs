@@ -1,0 +1,226 @@
+//! Validated calibration of the robot and profile of the manipulator (MODEL.md 2).
+//!
+//! Both types can only be built through constructors that check every value, so a
+//! value of either type in hand is known to be finite and physically meaningful.
+
+use crate::{Mat3, Vec3};
+
+/// Why a calibration or profile value was refused.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// A value is NaN or infinite.
+    #[error("{field} is not a finite number")]
+    NonFinite {
+        /// Which value.
+        field: &'static str,
+    },
+    /// `R_0s` is not orthonormal within [`ORTHONORMAL_TOLERANCE`].
+    #[error("sensor_rotation is not orthonormal: |R^T R - I| reaches {deviation:e}")]
+    RotationNotOrthonormal {
+        /// Largest absolute entry of `R^T R - I`.
+        deviation: f64,
+    },
+    /// `R_0s` is orthonormal but a reflection.
+    #[error("sensor_rotation has determinant {det}, not +1 (a reflection)")]
+    RotationNotProper {
+        /// Its determinant.
+        det: f64,
+    },
+    /// Gravity's magnitude is outside [`GRAVITY_RANGE_MPS2`].
+    #[error("gravity has magnitude {magnitude_mps2} m/s^2, outside 0.1..100")]
+    GravityOutOfRange {
+        /// Its magnitude.
+        magnitude_mps2: f64,
+    },
+    /// The rod length L is not positive.
+    #[error("length_m must be > 0, got {length_m} m")]
+    NonPositiveLength {
+        /// The value given.
+        length_m: f64,
+    },
+    /// The rod offset |d| is not below the rod length.
+    #[error("offset_m must satisfy |d| < L, got d = {offset_m} m with L = {length_m} m")]
+    OffsetTooLarge {
+        /// The offset given.
+        offset_m: f64,
+        /// The length given.
+        length_m: f64,
+    },
+    /// The mass is negative.
+    #[error("mass_kg must be >= 0, got {mass_kg} kg")]
+    NegativeMass {
+        /// The value given.
+        mass_kg: f64,
+    },
+}
+
+/// Largest accepted entry of `R^T R - I` for the sensor rotation.
+pub const ORTHONORMAL_TOLERANCE: f64 = 1e-6;
+/// Accepted range of the gravity magnitude, m/s^2.
+pub const GRAVITY_RANGE_MPS2: (f64, f64) = (0.1, 100.0);
+
+fn finite3(v: &Vec3, field: &'static str) -> Result<(), ConfigError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(ConfigError::NonFinite { field })
+    }
+}
+
+fn finite(x: f64, field: &'static str) -> Result<(), ConfigError> {
+    if x.is_finite() {
+        Ok(())
+    } else {
+        Err(ConfigError::NonFinite { field })
+    }
+}
+
+/// The robot's calibration: where things are, in the base frame {0}.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Calibration {
+    p_home_m: Vec3,
+    ujoint_offset_m: Vec3,
+    sensor_offset_m: Vec3,
+    sensor_rotation: Mat3,
+    support_m: Vec3,
+    gravity_mps2: Vec3,
+}
+
+impl Calibration {
+    /// Checks and builds a calibration.
+    ///
+    /// - `p_home_m`: P at q = 0; `ujoint_offset_m`: a_off = A - P;
+    ///   `sensor_offset_m`: s_off = S - P; `support_m`: B; all in {0}, metres.
+    /// - `sensor_rotation`: R_0s, whose columns are the sensor's axes in {0}.
+    /// - `gravity_mps2`: g in {0}.
+    pub fn new(
+        p_home_m: Vec3,
+        ujoint_offset_m: Vec3,
+        sensor_offset_m: Vec3,
+        sensor_rotation: Mat3,
+        support_m: Vec3,
+        gravity_mps2: Vec3,
+    ) -> Result<Self, ConfigError> {
+        finite3(&p_home_m, "p_home")?;
+        finite3(&ujoint_offset_m, "ujoint_offset")?;
+        finite3(&sensor_offset_m, "sensor_offset")?;
+        finite3(&support_m, "support")?;
+        finite3(&gravity_mps2, "gravity")?;
+        if !sensor_rotation.iter().all(|x| x.is_finite()) {
+            return Err(ConfigError::NonFinite {
+                field: "sensor_rotation",
+            });
+        }
+        let deviation = (sensor_rotation.transpose() * sensor_rotation - Mat3::identity()).amax();
+        if deviation > ORTHONORMAL_TOLERANCE {
+            return Err(ConfigError::RotationNotOrthonormal { deviation });
+        }
+        let det = sensor_rotation.determinant();
+        if det <= 0.0 {
+            return Err(ConfigError::RotationNotProper { det });
+        }
+        let magnitude_mps2 = gravity_mps2.norm();
+        if !(GRAVITY_RANGE_MPS2.0..=GRAVITY_RANGE_MPS2.1).contains(&magnitude_mps2) {
+            return Err(ConfigError::GravityOutOfRange { magnitude_mps2 });
+        }
+        Ok(Self {
+            p_home_m,
+            ujoint_offset_m,
+            sensor_offset_m,
+            sensor_rotation,
+            support_m,
+            gravity_mps2,
+        })
+    }
+
+    /// The same calibration with another support point B (used by support
+    /// calibration, which estimates B).
+    pub fn with_support(&self, support_m: Vec3) -> Result<Self, ConfigError> {
+        finite3(&support_m, "support")?;
+        Ok(Self { support_m, ..*self })
+    }
+
+    /// P at q = 0, {0}, m.
+    pub fn p_home_m(&self) -> Vec3 {
+        self.p_home_m
+    }
+    /// a_off = A - P, {0}, m.
+    pub fn ujoint_offset_m(&self) -> Vec3 {
+        self.ujoint_offset_m
+    }
+    /// s_off = S - P, {0}, m.
+    pub fn sensor_offset_m(&self) -> Vec3 {
+        self.sensor_offset_m
+    }
+    /// R_0s: maps sensor coordinates to base coordinates.
+    pub fn sensor_rotation(&self) -> Mat3 {
+        self.sensor_rotation
+    }
+    /// B, the support point, {0}, m.
+    pub fn support_m(&self) -> Vec3 {
+        self.support_m
+    }
+    /// g, {0}, m/s^2.
+    pub fn gravity_mps2(&self) -> Vec3 {
+        self.gravity_mps2
+    }
+}
+
+/// The manipulator in use: a straight rod hanging in the U-joint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Profile {
+    length_m: f64,
+    offset_m: f64,
+    mass_kg: f64,
+    com_m: f64,
+}
+
+impl Profile {
+    /// Checks and builds a profile: `length_m` L > 0 (A to tip along the rod),
+    /// `offset_m` d with |d| < L (rod axis from A along w), `mass_kg` m >= 0,
+    /// `com_m` c (A to the centre of mass along the rod; any finite value).
+    pub fn new(
+        length_m: f64,
+        offset_m: f64,
+        mass_kg: f64,
+        com_m: f64,
+    ) -> Result<Self, ConfigError> {
+        finite(length_m, "length_m")?;
+        finite(offset_m, "offset_m")?;
+        finite(mass_kg, "mass_kg")?;
+        finite(com_m, "com_m")?;
+        if length_m <= 0.0 {
+            return Err(ConfigError::NonPositiveLength { length_m });
+        }
+        if offset_m.abs() >= length_m {
+            return Err(ConfigError::OffsetTooLarge { offset_m, length_m });
+        }
+        if mass_kg < 0.0 {
+            return Err(ConfigError::NegativeMass { mass_kg });
+        }
+        Ok(Self {
+            length_m,
+            offset_m,
+            mass_kg,
+            com_m,
+        })
+    }
+
+    /// L, m.
+    pub fn length_m(&self) -> f64 {
+        self.length_m
+    }
+    /// d, m.
+    pub fn offset_m(&self) -> f64 {
+        self.offset_m
+    }
+    /// m, kg.
+    pub fn mass_kg(&self) -> f64 {
+        self.mass_kg
+    }
+    /// c, m.
+    pub fn com_m(&self) -> f64 {
+        self.com_m
+    }
+}

@@ -1,0 +1,29 @@
+//! Frames, calibration and closed-form kinematics of the surgical assistance robot.
+//!
+//! This crate is the geometric half of `../shared/spec/MODEL.md` (sections 2 and 3):
+//! the validated calibration and manipulator profile, the passive U-joint angles
+//! q4, q5 in closed form, the named points A, S, C, D, the rod direction u, and the
+//! inverse kinematics from a wanted tip position to the active joints.
+//!
+//! Invariants (see `ARCHITECTURE.md`):
+//! - `#![no_std]`, no `alloc`, no I/O, no panics on any input: every degenerate
+//!   input is a typed error, never a NaN.
+//! - A [`Calibration`] or [`Profile`] that exists is valid: fields are private and
+//!   only the validating constructors make them.
+//! - SI units everywhere, and the unit is the last part of every name.
+#![no_std]
+
+pub mod calibration;
+pub mod dh;
+pub mod pose;
+
+pub use calibration::{Calibration, ConfigError, Profile};
+pub use pose::{ActiveJoints, Pose, PoseError, forward, inverse, rod_frame};
+
+/// A 3-vector of `f64` in some named frame (the name of the variable says which).
+pub type Vec3 = nalgebra::Vector3<f64>;
+/// A 3x3 matrix of `f64`.
+pub type Mat3 = nalgebra::Matrix3<f64>;
+
+/// Distances below this are treated as zero by the degenerate-pose checks (1 um).
+pub const MIN_DISTANCE_M: f64 = 1e-6;
