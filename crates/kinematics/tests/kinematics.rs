@@ -1,0 +1,261 @@
+//! The closed forms of MODEL.md 3 against an independent Denavit-Hartenberg chain,
+//! inverse kinematics round trips, degenerate poses and calibration validation.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing, clippy::panic)]
+
+use core::f64::consts::{FRAC_PI_2, PI};
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use proptest::prelude::*;
+use proptest::test_runner::{Config, RngSeed};
+use sar_kinematics::dh::{axis, origin, sar_chain};
+use sar_kinematics::{
+    ActiveJoints, Calibration, ConfigError, PoseError, Profile, Vec3, forward, inverse, rod_frame,
+};
+
+fn config(cases: u32, seed: u64) -> Config {
+    Config {
+        cases,
+        rng_seed: RngSeed::Fixed(seed),
+        failure_persistence: None,
+        ..Config::default()
+    }
+}
+
+fn gravity() -> Vec3 {
+    Vec3::new(0.0, -9.80665, 0.0)
+}
+
+fn calibration(p_home: Vec3, a_off: Vec3, support: Vec3) -> Calibration {
+    Calibration::new(p_home, a_off, Vec3::new(0.0, -0.03, 0.0), Matrix3::identity(), support, gravity())
+        .unwrap()
+}
+
+/// Wraps an angle difference into (-pi, pi].
+fn angle_diff(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(2.0 * PI);
+    if d > PI { d - 2.0 * PI } else { d }
+}
+
+fn close(a: &Vec3, b: &Vec3, tol: f64) -> bool {
+    (a - b).amax() <= tol
+}
+
+prop_compose! {
+    fn vec3(range: f64)(x in -range..range, y in -range..range, z in -range..range) -> Vec3 {
+        Vec3::new(x, y, z)
+    }
+}
+
+proptest! {
+    #![proptest_config(config(5000, 0x5a4_0001))]
+
+    /// Random joints q1..q5, offset d and support distance s: the DH chain gives A,
+    /// u, w and D; a support placed on that rod axis must give back the same q4, q5
+    /// and points through the closed form, to 1e-12.
+    #[test]
+    fn closed_form_matches_dh_chain(
+        p_home in vec3(0.5),
+        a_off in vec3(0.1),
+        q123 in vec3(0.2),
+        q4 in -PI..PI,
+        q5 in -1.2f64..1.2,
+        length_m in 0.2f64..0.5,
+        offset_m in prop_oneof![Just(0.0), -0.01f64..0.01],
+        s_frac in 0.0f64..1.0,
+        com_m in -0.05f64..0.3,
+    ) {
+        let profile = Profile::new(length_m, offset_m, 2.0, com_m).unwrap();
+        let provisional = calibration(p_home, a_off, Vec3::zeros());
+        let chain = sar_chain(&provisional, &profile);
+        let joints = [q123.x, q123.y, q123.z, q4, q5];
+        let a_dh = origin(&chain.frame(&joints, 3));
+        let frame5 = chain.frame(&joints, 5);
+        let u_dh = axis(&frame5, 0);
+        let w_dh = -axis(&frame5, 1);
+        let d_dh = origin(&chain.tool_frame(&joints));
+        // The DH chain agrees with MODEL.md's u and w written from q4, q5.
+        let (u_model, w_model) = rod_frame(q4, q5);
+        prop_assert!(close(&u_dh, &u_model, 1e-12) && close(&w_dh, &w_model, 1e-12));
+
+        let s = 0.04 + s_frac * (length_m - 0.05);
+        let support = a_dh + w_dh * offset_m + u_dh * s;
+        let cal = calibration(p_home, a_off, support);
+        let q = ActiveJoints { q3_m: q123.x, q2_m: q123.y, q1_m: q123.z };
+        let pose = forward(&cal, &profile, &q).unwrap();
+        prop_assert!(angle_diff(pose.q4_rad, q4).abs() < 1e-12, "q4 {} vs {}", pose.q4_rad, q4);
+        prop_assert!((pose.q5_rad - q5).abs() < 1e-12, "q5 {} vs {}", pose.q5_rad, q5);
+        prop_assert!(close(&pose.ujoint_m, &a_dh, 1e-12));
+        prop_assert!(close(&pose.rod_dir, &u_dh, 1e-12));
+        prop_assert!(close(&pose.rod_normal, &w_dh, 1e-12));
+        prop_assert!(close(&pose.tip_m, &d_dh, 1e-12), "D {:?} vs {:?}", pose.tip_m, d_dh);
+        let c_dh = a_dh + w_dh * offset_m + u_dh * com_m;
+        prop_assert!(close(&pose.com_m, &c_dh, 1e-12));
+        prop_assert!((pose.support_along_rod_m - s).abs() < 1e-12);
+        prop_assert!((pose.support_distance_m - (s * s + offset_m * offset_m).sqrt()).abs() < 1e-12);
+        prop_assert!((pose.tip_beyond_support_m - (length_m - s)).abs() < 1e-12);
+        prop_assert!(close(&pose.sensor_m, &(pose.carriage_m + Vec3::new(0.0, -0.03, 0.0)), 0.0));
+    }
+
+    /// Inverse then forward kinematics puts the tip where it was asked, for d = 0
+    /// and d != 0, to 1e-12 m.
+    #[test]
+    fn inverse_then_forward_reaches_the_tip(
+        support in vec3(0.5),
+        p_home in vec3(0.5),
+        a_off in vec3(0.1),
+        q4 in -PI..PI,
+        q5 in -1.0f64..1.0,
+        beyond_frac in 0.05f64..0.85,
+        length_m in 0.2f64..0.5,
+        offset_m in prop_oneof![Just(0.0), -0.01f64..0.01],
+    ) {
+        let profile = Profile::new(length_m, offset_m, 2.0, 0.1).unwrap();
+        let cal = calibration(p_home, a_off, support);
+        let (u, _) = rod_frame(q4, q5);
+        let tip = support + u * (beyond_frac * length_m);
+        let q = inverse(&cal, &profile, &tip).unwrap();
+        let pose = forward(&cal, &profile, &q).unwrap();
+        prop_assert!(close(&pose.tip_m, &tip, 1e-12), "{:?} vs {:?}", pose.tip_m, tip);
+        prop_assert!(close(&pose.rod_dir, &u, 1e-12));
+    }
+
+    /// No finite input, however odd, gives a NaN or infinite output: either a
+    /// finite pose or a typed error.
+    #[test]
+    fn forward_never_returns_non_finite_numbers(
+        support in vec3(2.0),
+        q123 in vec3(2.0),
+        length_m in 1e-3f64..3.0,
+        offset_frac in -0.99f64..0.99,
+    ) {
+        let profile = Profile::new(length_m, offset_frac * length_m, 1.0, 0.1).unwrap();
+        let cal = calibration(Vec3::zeros(), Vec3::zeros(), support);
+        let q = ActiveJoints { q3_m: q123.x, q2_m: q123.y, q1_m: q123.z };
+        if let Ok(pose) = forward(&cal, &profile, &q) {
+            for v in [pose.ujoint_m, pose.tip_m, pose.com_m, pose.rod_dir, pose.rod_normal] {
+                prop_assert!(v.iter().all(|x| x.is_finite()));
+            }
+            prop_assert!(pose.q4_rad.is_finite() && pose.q5_rad.is_finite());
+            prop_assert!(pose.tip_beyond_support_m > 0.0);
+            prop_assert!((pose.rod_dir.norm() - 1.0).abs() < 1e-12);
+            prop_assert!(pose.rod_dir.dot(&pose.rod_normal).abs() < 1e-12);
+        }
+    }
+}
+
+/// MODEL.md 3 with P_home + a_off = 0: the article's equations 8-10.
+#[test]
+fn article_equations_8_to_10() {
+    let (q1, q2, q3) = (0.03, -0.02, 0.05);
+    let (l, d) = (0.35, 0.004);
+    let (q4, q5) = (1.3f64, 0.2f64);
+    let (u, w) = rod_frame(q4, q5);
+    let a = Vec3::new(q3, q2, q1);
+    let s = 0.12;
+    let support = a + w * d + u * s;
+    let cal = calibration(Vec3::new(0.1, 0.2, 0.3), Vec3::new(-0.1, -0.2, -0.3), support);
+    let profile = Profile::new(l, d, 1.0, 0.1).unwrap();
+    let pose = forward(&cal, &profile, &ActiveJoints { q1_m: q1, q2_m: q2, q3_m: q3 }).unwrap();
+    let (s4, c4, s5, c5) = (q4.sin(), q4.cos(), q5.sin(), q5.cos());
+    let expected = Vec3::new(
+        l * s4 * c5 + d * s4 * s5 + q3,
+        l * s5 - d * c5 + q2,
+        l * c4 * c5 + d * c4 * s5 + q1,
+    );
+    assert!(close(&pose.tip_m, &expected, 1e-15), "{:?} vs {expected:?}", pose.tip_m);
+}
+
+/// d = 0: u = r/|r|, q5 = asin(ry/|r|), s = |r|; nominal insertion is q4 = pi/2, q5 = 0.
+#[test]
+fn zero_offset_is_the_plain_direction_to_the_support() {
+    let support = Vec3::new(0.45, 0.2, 0.0);
+    let cal = calibration(Vec3::zeros(), Vec3::new(0.0, -0.08, 0.0), support);
+    let profile = Profile::new(0.35, 0.0, 2.593, 0.103).unwrap();
+    let nominal = forward(&cal, &profile, &ActiveJoints { q1_m: 0.0, q2_m: 0.28, q3_m: 0.3 }).unwrap();
+    assert!((nominal.q4_rad - FRAC_PI_2).abs() < 1e-15 && nominal.q5_rad.abs() < 1e-15);
+    assert!(close(&nominal.rod_dir, &Vec3::x(), 1e-15));
+    assert!((nominal.support_distance_m - 0.15).abs() < 1e-15);
+    let q = ActiveJoints { q1_m: 0.02, q2_m: 0.25, q3_m: 0.31 };
+    let pose = forward(&cal, &profile, &q).unwrap();
+    let r = support - (q.displacement_m() + Vec3::new(0.0, -0.08, 0.0));
+    assert!(close(&pose.rod_dir, &(r / r.norm()), 1e-15));
+    assert!((pose.q5_rad - (r.y / r.norm()).asin()).abs() < 1e-15);
+    assert!((pose.support_along_rod_m - r.norm()).abs() < 1e-15);
+}
+
+#[test]
+fn degenerate_poses_are_typed_errors() {
+    let support = Vec3::new(0.45, 0.2, 0.0);
+    let cal = calibration(Vec3::zeros(), Vec3::zeros(), support);
+    let rod = Profile::new(0.35, 0.0, 2.0, 0.1).unwrap();
+    let offset_rod = Profile::new(0.35, 0.02, 2.0, 0.1).unwrap();
+    let at = |x: f64, y: f64, z: f64| ActiveJoints { q3_m: x, q2_m: y, q1_m: z };
+    assert!(matches!(
+        forward(&cal, &rod, &at(0.45, 0.2, 0.0)),
+        Err(PoseError::UJointAtSupport { .. })
+    ));
+    assert!(matches!(
+        forward(&cal, &offset_rod, &at(0.44, 0.2, 0.0)),
+        Err(PoseError::SupportWithinOffset { .. })
+    ));
+    assert!(matches!(forward(&cal, &rod, &at(0.45, 0.0, 0.0)), Err(PoseError::VerticalRod { .. })));
+    assert!(matches!(forward(&cal, &rod, &at(0.10, 0.2, 0.0)), Err(PoseError::TipAtSupport { .. })));
+    assert!(matches!(
+        forward(&cal, &rod, &at(0.05, 0.2, 0.0)),
+        Err(PoseError::SupportBeyondTip { .. })
+    ));
+    assert!(matches!(
+        forward(&cal, &rod, &at(f64::NAN, 0.2, 0.0)),
+        Err(PoseError::NonFinite { .. })
+    ));
+    // Inverse: the tip at the support, out of reach, vertical, NaN.
+    assert!(matches!(inverse(&cal, &rod, &support), Err(PoseError::TipAtSupport { .. })));
+    assert!(matches!(
+        inverse(&cal, &rod, &(support + Vec3::x() * 0.4)),
+        Err(PoseError::SupportBeyondTip { .. })
+    ));
+    assert!(matches!(
+        inverse(&cal, &rod, &(support - Vec3::y() * 0.1)),
+        Err(PoseError::VerticalRod { .. })
+    ));
+    assert!(matches!(
+        inverse(&cal, &rod, &Vec3::new(f64::INFINITY, 0.0, 0.0)),
+        Err(PoseError::NonFinite { .. })
+    ));
+}
+
+#[test]
+fn invalid_calibrations_and_profiles_are_refused() {
+    let ok = |r: Matrix3<f64>, g: Vec3| {
+        Calibration::new(Vec3::zeros(), Vec3::zeros(), Vec3::zeros(), r, Vec3::x(), g)
+    };
+    let rotation = Rotation3::from_euler_angles(0.3, -0.2, 1.1).into_inner();
+    assert!(ok(rotation, gravity()).is_ok());
+    assert!(matches!(
+        ok(rotation * 1.001, gravity()),
+        Err(ConfigError::RotationNotOrthonormal { .. })
+    ));
+    let reflection = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
+    assert!(matches!(ok(reflection, gravity()), Err(ConfigError::RotationNotProper { .. })));
+    let mut nan_rotation = Matrix3::identity();
+    nan_rotation[(1, 2)] = f64::NAN;
+    assert!(matches!(ok(nan_rotation, gravity()), Err(ConfigError::NonFinite { .. })));
+    assert!(matches!(
+        ok(Matrix3::identity(), Vec3::zeros()),
+        Err(ConfigError::GravityOutOfRange { .. })
+    ));
+    assert!(matches!(
+        Calibration::new(
+            Vec3::new(f64::NAN, 0.0, 0.0),
+            Vec3::zeros(),
+            Vec3::zeros(),
+            Matrix3::identity(),
+            Vec3::x(),
+            gravity()
+        ),
+        Err(ConfigError::NonFinite { field: "p_home" })
+    ));
+    assert!(matches!(Profile::new(0.0, 0.0, 1.0, 0.1), Err(ConfigError::NonPositiveLength { .. })));
+    assert!(matches!(Profile::new(0.3, 0.3, 1.0, 0.1), Err(ConfigError::OffsetTooLarge { .. })));
+    assert!(matches!(Profile::new(0.3, 0.0, -1.0, 0.1), Err(ConfigError::NegativeMass { .. })));
+    assert!(matches!(Profile::new(0.3, 0.0, 1.0, f64::NAN), Err(ConfigError::NonFinite { .. })));
+}
