@@ -105,11 +105,12 @@ pub fn axis(t: &Transform, i: usize) -> Vec3 {
 }
 
 fn translation(v: Vec3) -> Transform {
-    let mut t = Transform::identity();
-    t[(0, 3)] = v.x;
-    t[(1, 3)] = v.y;
-    t[(2, 3)] = v.z;
-    t
+    Transform::new(
+        1.0, 0.0, 0.0, v.x, //
+        0.0, 1.0, 0.0, v.y, //
+        0.0, 0.0, 1.0, v.z, //
+        0.0, 0.0, 0.0, 1.0,
+    )
 }
 
 /// The SAR as a DH chain. Joint vector order: `[q3, q2, q1, q4, q5]`.
@@ -121,16 +122,13 @@ pub fn sar_chain(cal: &Calibration, profile: &Profile) -> DhChain<5> {
     use core::f64::consts::PI;
     let a_home = cal.p_home_m() + cal.ujoint_offset_m();
     // DH frame 0: x0 = Y0, y0 = Z0, z0 = X0 (the q3 axis), origin at A for q = 0.
-    let mut base = translation(a_home);
-    base[(0, 0)] = 0.0;
-    base[(1, 0)] = 1.0;
-    base[(2, 0)] = 0.0;
-    base[(0, 1)] = 0.0;
-    base[(1, 1)] = 0.0;
-    base[(2, 1)] = 1.0;
-    base[(0, 2)] = 1.0;
-    base[(1, 2)] = 0.0;
-    base[(2, 2)] = 0.0;
+    // Columns: x0 = Y0, y0 = Z0, z0 = X0.
+    let base = Transform::new(
+        0.0, 0.0, 1.0, a_home.x, //
+        1.0, 0.0, 0.0, a_home.y, //
+        0.0, 1.0, 0.0, a_home.z, //
+        0.0, 0.0, 0.0, 1.0,
+    );
     let prismatic = |theta_rad| DhLink {
         kind: JointKind::Prismatic,
         theta_rad,
