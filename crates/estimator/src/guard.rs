@@ -1,1 +1,843 @@
-//! (placeholder: filled by its own change)
+//! The force-limit guard: a state machine fed once per control cycle with the
+//! tip-force estimate F_tip (MODEL.md 4.1), its standard deviation and the age
+//! and validity of every input. It decides whether the robot may keep moving.
+//!
+//! States, from least to most severe: [`GuardState::Ok`], [`GuardState::Warn`],
+//! [`GuardState::Stop`] (latched), [`GuardState::Fault`] (latched).
+//!
+//! Each [`Guard::step`] first looks for a fault condition in a fixed order
+//! (cycle order, sensor validity, sensor age, joints validity, joints age, pose,
+//! invalid numbers, observability). Any fault condition sends the guard to
+//! `Fault` at once, without debounce: NaN, infinite, stale or unobservable input
+//! is never `Ok` or `Warn`. Otherwise the tip force is split into three parts,
+//! total |F|, axial |F . u| and lateral |F - (F . u) u|, each compared with its
+//! own warn and stop limits; entering `Warn` or `Stop` and leaving `Warn` are
+//! debounced over consecutive cycles. `Stop` and `Fault` are left only through an
+//! accepted [`Guard::reset`].
+//!
+//! Real-time path: no allocation, no panic, O(1) per step, fixed-size state.
+
+use core::fmt;
+
+use crate::{SettingError, Vec3};
+
+/// How far the norm of the rod direction u may be from 1.
+pub const ROD_DIR_UNIT_TOLERANCE: f64 = 1e-6;
+
+/// Bounds on the squared norm of u that match [`ROD_DIR_UNIT_TOLERANCE`] (no
+/// square root on the good path).
+const ROD_DIR_NORM2_MIN: f64 = (1.0 - ROD_DIR_UNIT_TOLERANCE) * (1.0 - ROD_DIR_UNIT_TOLERANCE);
+const ROD_DIR_NORM2_MAX: f64 = (1.0 + ROD_DIR_UNIT_TOLERANCE) * (1.0 + ROD_DIR_UNIT_TOLERANCE);
+
+/// Above this largest component magnitude (N) the force is scaled before its
+/// norms are taken, so that no square overflows.
+const SCALE_ABOVE_N: f64 = 1e150;
+
+/// The limits of the guard, as the caller fills them (e.g. from a
+/// configuration file). [`GuardConfig::new`] checks them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GuardLimits {
+    /// Warn limit on the total tip force |F_tip|, N.
+    pub warn_total_n: f64,
+    /// Stop limit on the total tip force |F_tip|, N.
+    pub stop_total_n: f64,
+    /// Warn limit on the axial part |F_tip . u|, N.
+    pub warn_axial_n: f64,
+    /// Stop limit on the axial part |F_tip . u|, N.
+    pub stop_axial_n: f64,
+    /// Warn limit on the lateral part |F_tip - (F_tip . u) u|, N.
+    pub warn_lateral_n: f64,
+    /// Stop limit on the lateral part |F_tip - (F_tip . u) u|, N.
+    pub stop_lateral_n: f64,
+    /// `Warn` clears only when every part is below its warn limit minus this, N.
+    pub hysteresis_n: f64,
+    /// Consecutive cycles a condition must hold before `Warn` or `Stop` is
+    /// entered, and before `Warn` is left.
+    pub debounce_cycles: u32,
+    /// Largest accepted age of the force sensor reading, ns.
+    pub max_sensor_age_ns: u64,
+    /// Largest accepted age of the joint positions, ns.
+    pub max_joints_age_ns: u64,
+    /// Any per-axis standard deviation of F_tip above this means the force is
+    /// not observable: a fault, N.
+    pub max_std_n: f64,
+}
+
+/// Checked guard limits. Exists only if valid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GuardConfig {
+    limits: GuardLimits,
+    /// Warn limits in [`ForcePart::ALL`] order, N.
+    warn_n: [f64; 3],
+    /// Stop limits in [`ForcePart::ALL`] order, N.
+    stop_n: [f64; 3],
+    /// Warn limits minus the hysteresis, in [`ForcePart::ALL`] order, N.
+    clear_n: [f64; 3],
+}
+
+fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
+    SettingError::Invalid { field, value, why }
+}
+
+impl GuardConfig {
+    /// Checks the limits: all finite; for each of total, axial and lateral
+    /// 0 < warn < stop; 0 <= hysteresis < every warn limit; debounce >= 1;
+    /// both maximum ages > 0; max_std_n > 0.
+    pub fn new(limits: GuardLimits) -> Result<Self, SettingError> {
+        let pairs = [
+            (
+                "warn_total_n",
+                limits.warn_total_n,
+                "stop_total_n",
+                limits.stop_total_n,
+            ),
+            (
+                "warn_axial_n",
+                limits.warn_axial_n,
+                "stop_axial_n",
+                limits.stop_axial_n,
+            ),
+            (
+                "warn_lateral_n",
+                limits.warn_lateral_n,
+                "stop_lateral_n",
+                limits.stop_lateral_n,
+            ),
+        ];
+        for (warn_field, warn, stop_field, stop) in pairs {
+            if !(warn.is_finite() && warn > 0.0) {
+                return Err(invalid(warn_field, warn, "must be finite and > 0"));
+            }
+            if !(stop.is_finite() && stop > warn) {
+                return Err(invalid(
+                    stop_field,
+                    stop,
+                    "must be finite and > its warn limit",
+                ));
+            }
+        }
+        let h = limits.hysteresis_n;
+        let min_warn = limits
+            .warn_total_n
+            .min(limits.warn_axial_n)
+            .min(limits.warn_lateral_n);
+        if !(h.is_finite() && h >= 0.0 && h < min_warn) {
+            return Err(invalid(
+                "hysteresis_n",
+                h,
+                "must be finite, >= 0 and < every warn limit",
+            ));
+        }
+        if limits.debounce_cycles < 1 {
+            return Err(invalid(
+                "debounce_cycles",
+                f64::from(limits.debounce_cycles),
+                "must be >= 1",
+            ));
+        }
+        if limits.max_sensor_age_ns == 0 {
+            return Err(invalid("max_sensor_age_ns", 0.0, "must be > 0"));
+        }
+        if limits.max_joints_age_ns == 0 {
+            return Err(invalid("max_joints_age_ns", 0.0, "must be > 0"));
+        }
+        if !(limits.max_std_n.is_finite() && limits.max_std_n > 0.0) {
+            return Err(invalid(
+                "max_std_n",
+                limits.max_std_n,
+                "must be finite and > 0",
+            ));
+        }
+        let warn_n = [
+            limits.warn_total_n,
+            limits.warn_axial_n,
+            limits.warn_lateral_n,
+        ];
+        let stop_n = [
+            limits.stop_total_n,
+            limits.stop_axial_n,
+            limits.stop_lateral_n,
+        ];
+        let clear_n = warn_n.map(|w| w - h);
+        Ok(Self {
+            limits,
+            warn_n,
+            stop_n,
+            clear_n,
+        })
+    }
+
+    /// The checked limits.
+    pub fn limits(&self) -> GuardLimits {
+        self.limits
+    }
+}
+
+/// What the tip-force estimator delivered this cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TipInput {
+    /// An estimate.
+    Estimate {
+        /// F_tip, what the tip applies to the tissue, {0}, N.
+        force_n: Vec3,
+        /// Standard deviation of each component of F_tip, {0}, N.
+        std_n: Vec3,
+        /// u, the unit rod direction, {0}.
+        rod_dir: Vec3,
+    },
+    /// The estimator said the force is not observable (near the singularity
+    /// a -> L).
+    NotObservable,
+    /// The kinematics refused the pose (degenerate pose).
+    PoseInvalid,
+}
+
+/// Everything the guard looks at in one control cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GuardInput {
+    /// Control cycle number; must strictly increase from step to step.
+    pub cycle: u64,
+    /// Age of the force sensor reading, ns.
+    pub sensor_age_ns: u64,
+    /// Whether the force sensor reported its reading valid.
+    pub sensor_valid: bool,
+    /// Age of the joint positions, ns.
+    pub joints_age_ns: u64,
+    /// Whether the joint positions are valid.
+    pub joints_valid: bool,
+    /// The tip-force estimate.
+    pub tip: TipInput,
+}
+
+/// The guard's decision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GuardState {
+    /// The robot may move.
+    Ok,
+    /// The robot may move; the tip force is near a stop limit.
+    Warn,
+    /// A stop limit was exceeded: the robot must stop. Latched until reset.
+    Stop,
+    /// The force cannot be trusted: the robot must stop. Latched until reset.
+    Fault,
+}
+
+impl fmt::Display for GuardState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Ok => "ok",
+            Self::Warn => "warn",
+            Self::Stop => "stop",
+            Self::Fault => "fault",
+        })
+    }
+}
+
+/// One of the three parts of the tip force that have their own limits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ForcePart {
+    /// |F_tip|.
+    Total,
+    /// |F_tip . u|, along the rod.
+    Axial,
+    /// |F_tip - (F_tip . u) u|, across the rod.
+    Lateral,
+}
+
+impl ForcePart {
+    /// The parts in the order they are checked (and reported when several
+    /// exceed their limits in the same cycle).
+    pub const ALL: [ForcePart; 3] = [Self::Total, Self::Axial, Self::Lateral];
+}
+
+impl fmt::Display for ForcePart {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Total => "total",
+            Self::Axial => "axial",
+            Self::Lateral => "lateral",
+        })
+    }
+}
+
+/// A vector field of [`TipInput::Estimate`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TipField {
+    /// `force_n`.
+    Force,
+    /// `std_n`.
+    Std,
+    /// `rod_dir`.
+    RodDir,
+}
+
+impl fmt::Display for TipField {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Force => "force_n",
+            Self::Std => "std_n",
+            Self::RodDir => "rod_dir",
+        })
+    }
+}
+
+/// A component of a vector in {0}.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Axis {
+    /// X0.
+    X,
+    /// Y0.
+    Y,
+    /// Z0.
+    Z,
+}
+
+impl Axis {
+    /// X, Y, Z.
+    pub const ALL: [Axis; 3] = [Self::X, Self::Y, Self::Z];
+}
+
+impl fmt::Display for Axis {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::X => "x",
+            Self::Y => "y",
+            Self::Z => "z",
+        })
+    }
+}
+
+/// Why the guard is in its state, or why a reset was refused. Carries the facts
+/// (values, limits, which part or field); its `Display` is a short sentence.
+#[non_exhaustive]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Reason {
+    /// No input has been stepped yet (the initial state).
+    NoInputYet,
+    /// The cycle number did not increase.
+    CycleOutOfOrder {
+        /// The largest cycle accepted before.
+        previous: u64,
+        /// The cycle received.
+        got: u64,
+    },
+    /// The force sensor flagged its reading invalid.
+    SensorInvalid,
+    /// The force sensor reading is too old.
+    SensorStale {
+        /// Its age, ns.
+        age_ns: u64,
+        /// The largest accepted age, ns.
+        max_age_ns: u64,
+    },
+    /// The joint positions are flagged invalid.
+    JointsInvalid,
+    /// The joint positions are too old.
+    JointsStale {
+        /// Their age, ns.
+        age_ns: u64,
+        /// The largest accepted age, ns.
+        max_age_ns: u64,
+    },
+    /// The kinematics refused the pose.
+    PoseInvalid,
+    /// A component of the estimate is NaN or infinite.
+    NonFinite {
+        /// Which vector.
+        field: TipField,
+        /// Which component.
+        axis: Axis,
+    },
+    /// A standard deviation is negative.
+    NegativeStd {
+        /// Which component.
+        axis: Axis,
+        /// Its value, N.
+        std_n: f64,
+    },
+    /// The rod direction is not a unit vector (within
+    /// [`ROD_DIR_UNIT_TOLERANCE`]).
+    RodDirNotUnit {
+        /// Its norm (finite or +inf, never NaN).
+        norm: f64,
+    },
+    /// The estimator said the tip force is not observable.
+    EstimatorNotObservable,
+    /// The tip force is not observable: its standard deviation is too large.
+    NotObservable {
+        /// The largest per-axis standard deviation, N.
+        std_max_n: f64,
+        /// The configured maximum, N.
+        max_std_n: f64,
+    },
+    /// A part of the tip force is at or above its stop limit.
+    AboveStop {
+        /// Which part.
+        part: ForcePart,
+        /// Its value, N (finite or +inf, never NaN).
+        force_n: f64,
+        /// Its stop limit, N.
+        limit_n: f64,
+    },
+    /// A part of the tip force is at or above its warn limit.
+    AboveWarn {
+        /// Which part.
+        part: ForcePart,
+        /// Its value, N (finite or +inf, never NaN).
+        force_n: f64,
+        /// Its warn limit, N.
+        limit_n: f64,
+    },
+    /// Every part has been below its warn limit minus the hysteresis for the
+    /// debounce time.
+    BelowWarn,
+    /// An accepted reset.
+    Reset,
+}
+
+impl fmt::Display for Reason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::NoInputYet => f.write_str("no input has been received yet"),
+            Self::CycleOutOfOrder { previous, got } => {
+                write!(f, "cycle {got} does not follow cycle {previous}")
+            }
+            Self::SensorInvalid => f.write_str("the force sensor reading is invalid"),
+            Self::SensorStale { age_ns, max_age_ns } => write!(
+                f,
+                "the force sensor reading is {age_ns} ns old (max {max_age_ns} ns)"
+            ),
+            Self::JointsInvalid => f.write_str("the joint positions are invalid"),
+            Self::JointsStale { age_ns, max_age_ns } => write!(
+                f,
+                "the joint positions are {age_ns} ns old (max {max_age_ns} ns)"
+            ),
+            Self::PoseInvalid => f.write_str("the kinematics refused the pose"),
+            Self::NonFinite { field, axis } => {
+                write!(f, "{field}.{axis} of the tip estimate is not finite")
+            }
+            Self::NegativeStd { axis, std_n } => {
+                write!(f, "std_n.{axis} = {std_n} N is negative")
+            }
+            Self::RodDirNotUnit { norm } => {
+                write!(f, "the rod direction has norm {norm}, not 1")
+            }
+            Self::EstimatorNotObservable => {
+                f.write_str("the estimator says the tip force is not observable")
+            }
+            Self::NotObservable {
+                std_max_n,
+                max_std_n,
+            } => write!(
+                f,
+                "the tip force is not observable: std {std_max_n:.3} N > max {max_std_n:.3} N"
+            ),
+            Self::AboveStop {
+                part,
+                force_n,
+                limit_n,
+            } => write!(
+                f,
+                "{part} tip force {force_n:.3} N is at or above the stop limit {limit_n:.3} N"
+            ),
+            Self::AboveWarn {
+                part,
+                force_n,
+                limit_n,
+            } => write!(
+                f,
+                "{part} tip force {force_n:.3} N is at or above the warn limit {limit_n:.3} N"
+            ),
+            Self::BelowWarn => {
+                f.write_str("every tip force part is below its warn limit minus the hysteresis")
+            }
+            Self::Reset => f.write_str("reset accepted"),
+        }
+    }
+}
+
+/// A change of state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transition {
+    /// The input's cycle (for a reset, the cycle passed to it).
+    pub cycle: u64,
+    /// The state left.
+    pub from: GuardState,
+    /// The state entered.
+    pub to: GuardState,
+    /// Why.
+    pub reason: Reason,
+}
+
+/// A reset was refused because its cause persists in the most recent input.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("reset refused: {reason}")]
+pub struct ResetRefused {
+    /// The cause that persists.
+    pub reason: Reason,
+}
+
+/// The force-limit guard. Fixed-size; see the module documentation. Not
+/// `Copy`, so that a copy cannot be stepped by mistake instead of the original.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Guard {
+    config: GuardConfig,
+    state: GuardState,
+    reason: Reason,
+    /// The largest cycle stepped so far (None before the first step).
+    last_cycle: Option<u64>,
+    /// What in the most recent input would refuse a reset (a fault condition,
+    /// a part at or above its stop limit, or no input yet).
+    blocker: Option<Reason>,
+    /// Consecutive cycles with a part at or above its stop limit.
+    stop_count: u32,
+    /// Consecutive cycles with a part at or above its warn limit.
+    warn_count: u32,
+    /// Consecutive cycles with every part below warn minus hysteresis.
+    clear_count: u32,
+}
+
+/// Magnitudes of the total, axial and lateral parts of `force_n` for the unit
+/// direction `rod_dir` (both finite), in [`ForcePart::ALL`] order. Never NaN;
+/// +inf only when the magnitude exceeds `f64::MAX`.
+fn force_parts_n(force_n: &Vec3, rod_dir: &Vec3) -> [f64; 3] {
+    let largest = force_n.x.abs().max(force_n.y.abs()).max(force_n.z.abs());
+    let (f, scale) = if largest > SCALE_ABOVE_N {
+        (force_n / largest, largest)
+    } else {
+        (*force_n, 1.0)
+    };
+    let along = f.dot(rod_dir);
+    let lateral = f - rod_dir * along;
+    [
+        f.norm() * scale,
+        along.abs() * scale,
+        lateral.norm() * scale,
+    ]
+}
+
+/// The first part (in [`ForcePart::ALL`] order) at or above its limit, with
+/// its value and limit. A NaN value would count as above (conservative).
+fn first_at_or_above(parts_n: &[f64; 3], limits_n: &[f64; 3]) -> Option<(ForcePart, f64, f64)> {
+    ForcePart::ALL
+        .iter()
+        .zip(parts_n.iter().zip(limits_n.iter()))
+        .find(|(_, (value, limit))| value.is_nan() || **value >= **limit)
+        .map(|(part, (value, limit))| (*part, *value, *limit))
+}
+
+impl Guard {
+    /// A guard in `Fault` with [`Reason::NoInputYet`]: a reset after a good
+    /// input is needed before the robot may move.
+    pub fn new(config: GuardConfig) -> Self {
+        Self {
+            config,
+            state: GuardState::Fault,
+            reason: Reason::NoInputYet,
+            last_cycle: None,
+            blocker: Some(Reason::NoInputYet),
+            stop_count: 0,
+            warn_count: 0,
+            clear_count: 0,
+        }
+    }
+
+    /// The current state.
+    pub fn state(&self) -> GuardState {
+        self.state
+    }
+
+    /// Why the guard is in its current state (the latched first reason for
+    /// `Stop` and `Fault`; the entering reason for `Warn`; `Reset` or
+    /// `BelowWarn` for `Ok`).
+    pub fn reason(&self) -> Reason {
+        self.reason
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &GuardConfig {
+        &self.config
+    }
+
+    /// What in the most recent input would make [`Guard::reset`] refuse, if
+    /// anything: a fault condition, a part at or above its stop limit, or
+    /// [`Reason::NoInputYet`].
+    pub fn reset_blocker(&self) -> Option<Reason> {
+        self.blocker
+    }
+
+    /// Feeds one control cycle. Returns `Some` only when the state changed.
+    pub fn step(&mut self, input: &GuardInput) -> Option<Transition> {
+        let cycle = input.cycle;
+        let parts_n = match self.evaluate(input) {
+            Err(fault) => {
+                self.blocker = Some(fault);
+                self.stop_count = 0;
+                self.warn_count = 0;
+                self.clear_count = 0;
+                return self.enter(GuardState::Fault, fault, cycle);
+            }
+            Ok(parts_n) => parts_n,
+        };
+        let cfg = &self.config;
+        let stop_hit = first_at_or_above(&parts_n, &cfg.stop_n);
+        let warn_hit = first_at_or_above(&parts_n, &cfg.warn_n);
+        let clear = parts_n
+            .iter()
+            .zip(cfg.clear_n.iter())
+            .all(|(value, limit)| *value < *limit);
+        let debounce = cfg.limits.debounce_cycles;
+
+        self.stop_count = if stop_hit.is_some() {
+            self.stop_count.saturating_add(1)
+        } else {
+            0
+        };
+        self.warn_count = if warn_hit.is_some() {
+            self.warn_count.saturating_add(1)
+        } else {
+            0
+        };
+        self.clear_count = if clear {
+            self.clear_count.saturating_add(1)
+        } else {
+            0
+        };
+        self.blocker = stop_hit.map(|(part, force_n, limit_n)| Reason::AboveStop {
+            part,
+            force_n,
+            limit_n,
+        });
+
+        match self.state {
+            GuardState::Stop | GuardState::Fault => None,
+            GuardState::Ok | GuardState::Warn => {
+                if let Some((part, force_n, limit_n)) = stop_hit
+                    && self.stop_count >= debounce
+                {
+                    let reason = Reason::AboveStop {
+                        part,
+                        force_n,
+                        limit_n,
+                    };
+                    return self.enter(GuardState::Stop, reason, cycle);
+                }
+                if self.state == GuardState::Ok {
+                    if let Some((part, force_n, limit_n)) = warn_hit
+                        && self.warn_count >= debounce
+                    {
+                        let reason = Reason::AboveWarn {
+                            part,
+                            force_n,
+                            limit_n,
+                        };
+                        return self.enter(GuardState::Warn, reason, cycle);
+                    }
+                } else if clear && self.clear_count >= debounce {
+                    return self.enter(GuardState::Ok, Reason::BelowWarn, cycle);
+                }
+                None
+            }
+        }
+    }
+
+    /// Asks to leave `Stop` or `Fault` for `Ok`. In `Ok` or `Warn` it does
+    /// nothing (`Ok(None)`). Refused while the cause persists in the most
+    /// recent input: any fault condition, any part at or above its stop limit
+    /// (not debounced), or no input stepped yet. An accepted reset clears the
+    /// debounce counters; `cycle` is only recorded in the transition.
+    pub fn reset(&mut self, cycle: u64) -> Result<Option<Transition>, ResetRefused> {
+        match self.state {
+            GuardState::Ok | GuardState::Warn => Ok(None),
+            GuardState::Stop | GuardState::Fault => {
+                if let Some(reason) = self.blocker {
+                    return Err(ResetRefused { reason });
+                }
+                self.stop_count = 0;
+                self.warn_count = 0;
+                self.clear_count = 0;
+                Ok(self.enter(GuardState::Ok, Reason::Reset, cycle))
+            }
+        }
+    }
+
+    /// Moves to `to` with `reason` unless already there (a latched state keeps
+    /// its first reason).
+    fn enter(&mut self, to: GuardState, reason: Reason, cycle: u64) -> Option<Transition> {
+        if self.state == to {
+            return None;
+        }
+        let from = self.state;
+        self.state = to;
+        self.reason = reason;
+        Some(Transition {
+            cycle,
+            from,
+            to,
+            reason,
+        })
+    }
+
+    /// The first fault condition of `input` in the fixed order, or the force
+    /// parts. Records the cycle if it is in order.
+    fn evaluate(&mut self, input: &GuardInput) -> Result<[f64; 3], Reason> {
+        if let Some(previous) = self.last_cycle
+            && input.cycle <= previous
+        {
+            return Err(Reason::CycleOutOfOrder {
+                previous,
+                got: input.cycle,
+            });
+        }
+        self.last_cycle = Some(input.cycle);
+
+        let limits = &self.config.limits;
+        if !input.sensor_valid {
+            return Err(Reason::SensorInvalid);
+        }
+        if input.sensor_age_ns > limits.max_sensor_age_ns {
+            return Err(Reason::SensorStale {
+                age_ns: input.sensor_age_ns,
+                max_age_ns: limits.max_sensor_age_ns,
+            });
+        }
+        if !input.joints_valid {
+            return Err(Reason::JointsInvalid);
+        }
+        if input.joints_age_ns > limits.max_joints_age_ns {
+            return Err(Reason::JointsStale {
+                age_ns: input.joints_age_ns,
+                max_age_ns: limits.max_joints_age_ns,
+            });
+        }
+        let (force_n, std_n, rod_dir) = match input.tip {
+            TipInput::PoseInvalid => return Err(Reason::PoseInvalid),
+            TipInput::NotObservable => return Err(Reason::EstimatorNotObservable),
+            TipInput::Estimate {
+                force_n,
+                std_n,
+                rod_dir,
+            } => (force_n, std_n, rod_dir),
+        };
+        for (field, vector) in [
+            (TipField::Force, &force_n),
+            (TipField::Std, &std_n),
+            (TipField::RodDir, &rod_dir),
+        ] {
+            for (axis, value) in Axis::ALL.iter().zip(vector.iter()) {
+                if !value.is_finite() {
+                    return Err(Reason::NonFinite { field, axis: *axis });
+                }
+            }
+        }
+        for (axis, value) in Axis::ALL.iter().zip(std_n.iter()) {
+            if *value < 0.0 {
+                return Err(Reason::NegativeStd {
+                    axis: *axis,
+                    std_n: *value,
+                });
+            }
+        }
+        let norm2 = rod_dir.norm_squared();
+        if !(ROD_DIR_NORM2_MIN..=ROD_DIR_NORM2_MAX).contains(&norm2) {
+            return Err(Reason::RodDirNotUnit {
+                norm: rod_dir.norm(),
+            });
+        }
+        let std_max_n = std_n.x.max(std_n.y).max(std_n.z);
+        if std_max_n > limits.max_std_n {
+            return Err(Reason::NotObservable {
+                std_max_n,
+                max_std_n: limits.max_std_n,
+            });
+        }
+        Ok(force_parts_n(&force_n, &rod_dir))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits(debounce_cycles: u32) -> GuardLimits {
+        GuardLimits {
+            warn_total_n: 9.0,
+            stop_total_n: 17.0,
+            warn_axial_n: 8.0,
+            stop_axial_n: 15.0,
+            warn_lateral_n: 6.0,
+            stop_lateral_n: 10.0,
+            hysteresis_n: 1.0,
+            debounce_cycles,
+            max_sensor_age_ns: 1_000_000,
+            max_joints_age_ns: 1_000_000,
+            max_std_n: 2.0,
+        }
+    }
+
+    fn input(cycle: u64, force_n: Vec3) -> GuardInput {
+        GuardInput {
+            cycle,
+            sensor_age_ns: 0,
+            sensor_valid: true,
+            joints_age_ns: 0,
+            joints_valid: true,
+            tip: TipInput::Estimate {
+                force_n,
+                std_n: Vec3::zeros(),
+                rod_dir: Vec3::x(),
+            },
+        }
+    }
+
+    #[test]
+    fn counters_saturate_at_u32_max() {
+        let mut g = Guard::new(GuardConfig::new(limits(u32::MAX)).unwrap());
+        g.step(&input(0, Vec3::zeros()));
+        g.reset(0).unwrap();
+        g.stop_count = u32::MAX - 2;
+        g.warn_count = u32::MAX - 2;
+        let high = Vec3::new(20.0, 0.0, 0.0);
+        assert_eq!(g.step(&input(1, high)), None);
+        assert_eq!(g.stop_count, u32::MAX - 1);
+        let t = g.step(&input(2, high)).unwrap();
+        assert_eq!((t.from, t.to), (GuardState::Ok, GuardState::Stop));
+        for c in 3..10 {
+            assert_eq!(g.step(&input(c, high)), None);
+        }
+        assert_eq!((g.stop_count, g.warn_count), (u32::MAX, u32::MAX));
+
+        g.clear_count = u32::MAX;
+        g.step(&input(10, Vec3::zeros()));
+        assert_eq!(g.clear_count, u32::MAX);
+        assert_eq!((g.stop_count, g.warn_count), (0, 0));
+    }
+
+    #[test]
+    fn force_parts_are_continuous_across_the_scaling_threshold() {
+        let u = Vec3::new(0.6, 0.0, 0.8);
+        let dir = Vec3::new(0.3, -0.5, 0.2).normalize();
+        for k in [0.999_999, 1.0, 1.000_001] {
+            let f = dir * (SCALE_ABOVE_N * k / dir.amax());
+            let p = force_parts_n(&f, &u);
+            let mag = SCALE_ABOVE_N * k / dir.amax();
+            let axial = dir.dot(&u).abs() * mag;
+            let lateral = newton_sqrt(1.0 - dir.dot(&u) * dir.dot(&u)) * mag;
+            assert!((p[0] / mag - 1.0).abs() < 1e-12, "{p:?}");
+            assert!((p[1] / axial - 1.0).abs() < 1e-12, "{p:?}");
+            assert!((p[2] / lateral - 1.0).abs() < 1e-12, "{p:?}");
+        }
+        let p = force_parts_n(&Vec3::new(f64::MAX, f64::MAX, f64::MAX), &u);
+        assert!(p.iter().all(|x| !x.is_nan()));
+        assert_eq!(p[0], f64::INFINITY);
+    }
+
+    /// sqrt by Newton's method, so the check does not reuse the norm under test.
+    fn newton_sqrt(x: f64) -> f64 {
+        let mut y = if x > 1.0 { x } else { 1.0 };
+        for _ in 0..100 {
+            y = 0.5 * (y + x / y);
+        }
+        y
+    }
+}

@@ -1,0 +1,1710 @@
+//! Tests of the force-limit guard: every transition, every fault cause, the
+//! reset rules, configuration checks, extreme inputs, and a seeded property
+//! test against an independent reference model of the state machine.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
+
+use nalgebra::Vector3;
+use proptest::prelude::*;
+use proptest::test_runner::{Config as ProptestConfig, RngSeed};
+use sar_estimator::SettingError;
+use sar_estimator::guard::{
+    Axis, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState, Reason, TipField,
+    TipInput, Transition,
+};
+
+type V = Vector3<f64>;
+
+const MS_NS: u64 = 1_000_000;
+
+/// Limits chosen so that each part can exceed its stop (or warn) limit alone:
+/// sqrt(15^2 + 10^2) = 18.0 > 17 and sqrt(8^2 + 6^2) = 10 > 9, and the
+/// hysteresis band of the total, [8, 9), is reachable with axial < 7 and
+/// lateral < 5 (sqrt(7^2 + 5^2) = 8.6).
+fn limits() -> GuardLimits {
+    GuardLimits {
+        warn_total_n: 9.0,
+        stop_total_n: 17.0,
+        warn_axial_n: 8.0,
+        stop_axial_n: 15.0,
+        warn_lateral_n: 6.0,
+        stop_lateral_n: 10.0,
+        hysteresis_n: 1.0,
+        debounce_cycles: 3,
+        max_sensor_age_ns: 2 * MS_NS,
+        max_joints_age_ns: 3 * MS_NS,
+        max_std_n: 2.0,
+    }
+}
+
+/// A tilted, turned rod direction (unit) and two unit vectors across it.
+fn rod_basis() -> (V, V, V) {
+    let u = V::new(0.48, 0.6, 0.64); // 0.2304 + 0.36 + 0.4096 = 1
+    let e1 = u.cross(&V::y()).normalize();
+    let e2 = u.cross(&e1);
+    (u, e1, e2)
+}
+
+/// A force with the given axial and lateral magnitudes on [`rod_basis`].
+fn force(axial_n: f64, lateral_n: f64) -> V {
+    let (u, e1, e2) = rod_basis();
+    u * axial_n + (e1 * 0.6 + e2 * 0.8) * lateral_n
+}
+
+/// Total, axial and lateral magnitudes, computed with the cross product (not
+/// the projection the guard uses).
+fn parts(f: &V, u: &V) -> [f64; 3] {
+    [
+        (f.x * f.x + f.y * f.y + f.z * f.z).sqrt(),
+        f.dot(u).abs(),
+        f.cross(u).norm(),
+    ]
+}
+
+fn input(cycle: u64, force_n: V) -> GuardInput {
+    GuardInput {
+        cycle,
+        sensor_age_ns: 500_000,
+        sensor_valid: true,
+        joints_age_ns: 700_000,
+        joints_valid: true,
+        tip: TipInput::Estimate {
+            force_n,
+            std_n: V::new(0.3, 0.4, 0.5),
+            rod_dir: rod_basis().0,
+        },
+    }
+}
+
+/// A guard and its cycle counter.
+struct Rig {
+    guard: Guard,
+    cycle: u64,
+}
+
+impl Rig {
+    fn with(limits: GuardLimits) -> Self {
+        Self {
+            guard: Guard::new(GuardConfig::new(limits).unwrap()),
+            cycle: 0,
+        }
+    }
+
+    /// A guard brought to Ok by a zero-force input and a reset.
+    fn ok_with(limits: GuardLimits) -> Self {
+        let mut rig = Self::with(limits);
+        assert_eq!(rig.push(V::zeros()), None);
+        rig.guard.reset(rig.cycle).unwrap();
+        assert_eq!(rig.guard.state(), GuardState::Ok);
+        rig
+    }
+
+    fn ok() -> Self {
+        Self::ok_with(limits())
+    }
+
+    fn next(&mut self) -> u64 {
+        self.cycle += 1;
+        self.cycle
+    }
+
+    /// Steps a good input with this force.
+    fn push(&mut self, force_n: V) -> Option<Transition> {
+        let c = self.next();
+        let t = self.guard.step(&input(c, force_n));
+        if let Some(t) = t {
+            assert_eq!(t.cycle, c);
+            assert_ne!(t.from, t.to);
+            assert_eq!(t.to, self.guard.state());
+        }
+        t
+    }
+
+    /// Steps a good input changed by `edit`.
+    fn push_with(&mut self, edit: impl FnOnce(&mut GuardInput)) -> Option<Transition> {
+        let c = self.next();
+        let mut i = input(c, V::zeros());
+        edit(&mut i);
+        self.guard.step(&i)
+    }
+
+    /// Steps `n` times the same force and asserts no transition.
+    fn hold(&mut self, force_n: V, n: u32) {
+        for _ in 0..n {
+            assert_eq!(self.push(force_n), None, "state {:?}", self.guard.state());
+        }
+    }
+
+    fn state(&self) -> GuardState {
+        self.guard.state()
+    }
+
+    /// A guard brought from Ok to `state` (Ok, Warn or Stop) by forces.
+    fn in_state(state: GuardState) -> Self {
+        let mut rig = Self::ok();
+        let f = match state {
+            GuardState::Ok => return rig,
+            GuardState::Warn => warn_axial(),
+            GuardState::Stop => stop_axial(),
+            GuardState::Fault => unreachable!(),
+        };
+        rig.hold(f, 2);
+        assert_eq!(rig.push(f).unwrap().to, state);
+        rig
+    }
+}
+
+// Forces for each condition, checked against the limits by `force_levels_are_what_they_claim`.
+/// Below every clear threshold.
+fn low() -> V {
+    force(2.0, 1.0)
+}
+/// In the warn band of the axial part only.
+fn warn_axial() -> V {
+    force(8.5, 0.0)
+}
+/// In the warn band of the lateral part only.
+fn warn_lateral() -> V {
+    force(0.0, 6.5)
+}
+/// In the warn band of the total only.
+fn warn_total() -> V {
+    force(7.5, 5.5)
+}
+/// Above the stop limit of the axial part only (total and lateral below stop).
+fn stop_axial() -> V {
+    force(16.0, 0.0)
+}
+/// Above the stop limit of the lateral part only.
+fn stop_lateral() -> V {
+    force(0.0, 11.0)
+}
+/// Above the stop limit of the total only.
+fn stop_total() -> V {
+    force(14.5, 9.5)
+}
+
+const PARTS: [ForcePart; 3] = [ForcePart::Total, ForcePart::Axial, ForcePart::Lateral];
+
+fn index(part: ForcePart) -> usize {
+    PARTS.iter().position(|p| *p == part).unwrap()
+}
+
+fn stop_force(part: ForcePart) -> V {
+    match part {
+        ForcePart::Total => stop_total(),
+        ForcePart::Axial => stop_axial(),
+        ForcePart::Lateral => stop_lateral(),
+    }
+}
+
+fn warn_force(part: ForcePart) -> V {
+    match part {
+        ForcePart::Total => warn_total(),
+        ForcePart::Axial => warn_axial(),
+        ForcePart::Lateral => warn_lateral(),
+    }
+}
+
+#[test]
+fn force_levels_are_what_they_claim() {
+    let l = limits();
+    let warn = [l.warn_total_n, l.warn_axial_n, l.warn_lateral_n];
+    let stop = [l.stop_total_n, l.stop_axial_n, l.stop_lateral_n];
+    let u = rod_basis().0;
+    for (i, part) in PARTS.iter().enumerate() {
+        let s = parts(&stop_force(*part), &u);
+        let w = parts(&warn_force(*part), &u);
+        for j in 0..3 {
+            assert_eq!(s[j] >= stop[j], i == j, "stop {part:?} part {j}: {s:?}");
+            assert_eq!(w[j] >= warn[j], i == j, "warn {part:?} part {j}: {w:?}");
+            assert!(w[j] < stop[j]);
+        }
+    }
+    let lo = parts(&low(), &u);
+    for j in 0..3 {
+        assert!(lo[j] < warn[j] - l.hysteresis_n);
+    }
+}
+
+// ---------------------------------------------------------------- start, reset
+
+#[test]
+fn starts_in_fault_and_a_reset_after_a_good_input_gives_ok() {
+    let mut rig = Rig::with(limits());
+    assert_eq!(rig.state(), GuardState::Fault);
+    assert_eq!(rig.guard.reason(), Reason::NoInputYet);
+
+    // Refused before any input.
+    let refused = rig.guard.reset(7).unwrap_err();
+    assert_eq!(refused.reason, Reason::NoInputYet);
+    assert_eq!(rig.state(), GuardState::Fault);
+
+    // A good input does not leave the latched Fault by itself.
+    for _ in 0..10 {
+        assert_eq!(rig.push(V::zeros()), None);
+    }
+    assert_eq!(rig.state(), GuardState::Fault);
+    assert_eq!(rig.guard.reason(), Reason::NoInputYet);
+
+    let t = rig.guard.reset(1234).unwrap().unwrap();
+    assert_eq!(
+        t,
+        Transition {
+            cycle: 1234,
+            from: GuardState::Fault,
+            to: GuardState::Ok,
+            reason: Reason::Reset
+        }
+    );
+    assert_eq!(rig.state(), GuardState::Ok);
+    assert_eq!(rig.guard.reason(), Reason::Reset);
+}
+
+#[test]
+fn reset_in_ok_or_warn_is_a_no_op() {
+    let mut rig = Rig::ok();
+    rig.hold(warn_axial(), 1);
+    assert_eq!(rig.guard.reset(99), Ok(None));
+    assert_eq!(rig.state(), GuardState::Ok);
+    // The reset did not clear the warn count: two more cycles enter Warn.
+    rig.hold(warn_axial(), 1);
+    let t = rig.push(warn_axial()).unwrap();
+    assert_eq!(t.to, GuardState::Warn);
+    let reason = rig.guard.reason();
+    assert_eq!(rig.guard.reset(100), Ok(None));
+    assert_eq!(rig.state(), GuardState::Warn);
+    assert_eq!(rig.guard.reason(), reason);
+}
+
+// ---------------------------------------------------------------- Ok <-> Warn
+
+#[test]
+fn ok_to_warn_after_debounce_for_each_part() {
+    let u = rod_basis().0;
+    for part in PARTS {
+        let mut rig = Rig::ok();
+        let f = warn_force(part);
+        rig.hold(f, 2);
+        assert_eq!(rig.state(), GuardState::Ok);
+        let t = rig.push(f).unwrap();
+        assert_eq!((t.from, t.to), (GuardState::Ok, GuardState::Warn));
+        match t.reason {
+            Reason::AboveWarn {
+                part: p,
+                force_n,
+                limit_n,
+            } => {
+                assert_eq!(p, part);
+                assert!((force_n - parts(&f, &u)[index(part)]).abs() < 1e-9);
+                assert!(force_n >= limit_n);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(rig.guard.reason(), t.reason);
+    }
+}
+
+#[test]
+fn a_dip_restarts_the_warn_debounce() {
+    let mut rig = Rig::ok();
+    rig.hold(warn_axial(), 2);
+    rig.hold(low(), 1); // the dip
+    rig.hold(warn_axial(), 2);
+    assert_eq!(rig.state(), GuardState::Ok);
+    let t = rig.push(warn_axial()).unwrap();
+    assert_eq!(t.to, GuardState::Warn);
+    assert_eq!(t.cycle, rig.cycle);
+}
+
+#[test]
+fn debounce_one_switches_in_a_single_cycle() {
+    let mut rig = Rig::ok_with(GuardLimits {
+        debounce_cycles: 1,
+        ..limits()
+    });
+    assert_eq!(rig.push(warn_lateral()).unwrap().to, GuardState::Warn);
+    let t = rig.push(low()).unwrap();
+    assert_eq!((t.to, t.reason), (GuardState::Ok, Reason::BelowWarn));
+    assert_eq!(rig.push(stop_lateral()).unwrap().to, GuardState::Stop);
+}
+
+#[test]
+fn warn_clears_only_below_warn_minus_hysteresis_after_debounce() {
+    // Forces inside [warn - hysteresis, warn) of one part, the others clear.
+    let bands = [
+        (ForcePart::Total, force(6.5, 4.8)),
+        (ForcePart::Axial, force(7.5, 0.0)),
+        (ForcePart::Lateral, force(0.0, 5.5)),
+    ];
+    let l = limits();
+    let warn = [l.warn_total_n, l.warn_axial_n, l.warn_lateral_n];
+    let u = rod_basis().0;
+    for (part, band) in bands {
+        let p = parts(&band, &u);
+        for j in 0..3 {
+            let in_band = p[j] >= warn[j] - l.hysteresis_n && p[j] < warn[j];
+            assert_eq!(in_band, j == index(part), "{part:?}: {p:?}");
+            assert!(p[j] < warn[j]);
+        }
+
+        let mut rig = Rig::ok();
+        rig.hold(warn_force(part), 2);
+        assert_eq!(rig.push(warn_force(part)).unwrap().to, GuardState::Warn);
+        // In the band: stays Warn however long.
+        rig.hold(band, 50);
+        assert_eq!(rig.state(), GuardState::Warn);
+        // Below: two cycles are not enough, a band cycle restarts the count.
+        rig.hold(low(), 2);
+        rig.hold(band, 1);
+        rig.hold(low(), 2);
+        assert_eq!(rig.state(), GuardState::Warn);
+        let t = rig.push(low()).unwrap();
+        assert_eq!(
+            (t.from, t.to, t.reason),
+            (GuardState::Warn, GuardState::Ok, Reason::BelowWarn)
+        );
+        assert_eq!(rig.guard.reason(), Reason::BelowWarn);
+    }
+}
+
+#[test]
+fn zero_hysteresis_clears_just_below_warn() {
+    let mut rig = Rig::ok_with(GuardLimits {
+        hysteresis_n: 0.0,
+        ..limits()
+    });
+    rig.hold(warn_axial(), 2);
+    assert_eq!(rig.push(warn_axial()).unwrap().to, GuardState::Warn);
+    let just_below = force(7.99, 0.0);
+    rig.hold(just_below, 2);
+    assert_eq!(rig.push(just_below).unwrap().to, GuardState::Ok);
+}
+
+// ---------------------------------------------------------------- Stop
+
+fn assert_stop(t: Transition, from: GuardState, part: ForcePart, f: &V) {
+    assert_eq!((t.from, t.to), (from, GuardState::Stop));
+    match t.reason {
+        Reason::AboveStop {
+            part: p,
+            force_n,
+            limit_n,
+        } => {
+            assert_eq!(p, part);
+            assert!((force_n - parts(f, &rod_basis().0)[index(part)]).abs() < 1e-9);
+            assert!(force_n >= limit_n);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn ok_to_stop_for_each_part_alone() {
+    for part in PARTS {
+        let mut rig = Rig::ok();
+        let f = stop_force(part);
+        rig.hold(f, 2);
+        assert_eq!(rig.state(), GuardState::Ok, "{part:?}");
+        let t = rig.push(f).unwrap();
+        assert_stop(t, GuardState::Ok, part, &f);
+        assert_eq!(rig.guard.reason(), t.reason);
+    }
+}
+
+#[test]
+fn warn_to_stop_for_each_part_alone() {
+    for part in PARTS {
+        for warn_part in PARTS {
+            let mut rig = Rig::ok();
+            rig.hold(warn_force(warn_part), 2);
+            assert_eq!(
+                rig.push(warn_force(warn_part)).unwrap().to,
+                GuardState::Warn
+            );
+            let f = stop_force(part);
+            rig.hold(f, 2);
+            assert_eq!(rig.state(), GuardState::Warn);
+            let t = rig.push(f).unwrap();
+            assert_stop(t, GuardState::Warn, part, &f);
+        }
+    }
+}
+
+#[test]
+fn a_dip_restarts_the_stop_debounce() {
+    let mut rig = Rig::ok();
+    rig.hold(stop_axial(), 2);
+    // Below stop, still above warn: the third warn-level cycle enters Warn.
+    assert_eq!(rig.push(warn_axial()).unwrap().to, GuardState::Warn);
+    rig.hold(stop_axial(), 2);
+    assert_eq!(rig.state(), GuardState::Warn);
+    assert_eq!(rig.push(stop_axial()).unwrap().to, GuardState::Stop);
+}
+
+#[test]
+fn stop_is_latched() {
+    let mut rig = Rig::ok();
+    rig.hold(stop_total(), 2);
+    let t = rig.push(stop_total()).unwrap();
+    rig.hold(V::zeros(), 100);
+    rig.hold(stop_lateral(), 10);
+    rig.hold(V::zeros(), 10);
+    assert_eq!(rig.state(), GuardState::Stop);
+    assert_eq!(rig.guard.reason(), t.reason);
+}
+
+#[test]
+fn stop_to_fault_and_fault_never_returns_to_stop() {
+    let mut rig = Rig::ok();
+    rig.hold(stop_axial(), 2);
+    rig.push(stop_axial()).unwrap();
+    let t = rig.push_with(|i| i.sensor_valid = false).unwrap();
+    assert_eq!(
+        (t.from, t.to, t.reason, t.cycle),
+        (
+            GuardState::Stop,
+            GuardState::Fault,
+            Reason::SensorInvalid,
+            rig.cycle
+        )
+    );
+    rig.hold(stop_axial(), 20);
+    assert_eq!(rig.state(), GuardState::Fault);
+    assert_eq!(rig.guard.reason(), Reason::SensorInvalid);
+}
+
+// ---------------------------------------------------------------- faults
+
+/// Each fault cause alone, with the reason it must give.
+/// An edit of a good input.
+type Edit = Box<dyn Fn(&mut GuardInput)>;
+
+fn fault_cases() -> Vec<(&'static str, Edit, Reason)> {
+    let set_tip = |f: V, s: V, u: V| TipInput::Estimate {
+        force_n: f,
+        std_n: s,
+        rod_dir: u,
+    };
+    let u = rod_basis().0;
+    let s = V::new(0.3, 0.4, 0.5);
+    vec![
+        (
+            "sensor invalid",
+            Box::new(|i: &mut GuardInput| i.sensor_valid = false),
+            Reason::SensorInvalid,
+        ),
+        (
+            "sensor stale",
+            Box::new(|i: &mut GuardInput| i.sensor_age_ns = 2 * MS_NS + 1),
+            Reason::SensorStale {
+                age_ns: 2 * MS_NS + 1,
+                max_age_ns: 2 * MS_NS,
+            },
+        ),
+        (
+            "joints invalid",
+            Box::new(|i: &mut GuardInput| i.joints_valid = false),
+            Reason::JointsInvalid,
+        ),
+        (
+            "joints stale",
+            Box::new(|i: &mut GuardInput| i.joints_age_ns = u64::MAX),
+            Reason::JointsStale {
+                age_ns: u64::MAX,
+                max_age_ns: 3 * MS_NS,
+            },
+        ),
+        (
+            "pose invalid",
+            Box::new(|i: &mut GuardInput| i.tip = TipInput::PoseInvalid),
+            Reason::PoseInvalid,
+        ),
+        (
+            "NaN force",
+            Box::new(move |i: &mut GuardInput| i.tip = set_tip(V::new(0.0, f64::NAN, 0.0), s, u)),
+            Reason::NonFinite {
+                field: TipField::Force,
+                axis: Axis::Y,
+            },
+        ),
+        (
+            "infinite force",
+            Box::new(move |i: &mut GuardInput| {
+                i.tip = set_tip(V::new(f64::NEG_INFINITY, 0.0, 0.0), s, u)
+            }),
+            Reason::NonFinite {
+                field: TipField::Force,
+                axis: Axis::X,
+            },
+        ),
+        (
+            "infinite std",
+            Box::new(move |i: &mut GuardInput| {
+                i.tip = set_tip(V::zeros(), V::new(0.1, 0.1, f64::INFINITY), u)
+            }),
+            Reason::NonFinite {
+                field: TipField::Std,
+                axis: Axis::Z,
+            },
+        ),
+        (
+            "NaN rod_dir",
+            Box::new(move |i: &mut GuardInput| {
+                i.tip = set_tip(V::zeros(), s, V::new(f64::NAN, 0.0, 1.0))
+            }),
+            Reason::NonFinite {
+                field: TipField::RodDir,
+                axis: Axis::X,
+            },
+        ),
+        (
+            "negative std",
+            Box::new(move |i: &mut GuardInput| {
+                i.tip = set_tip(V::zeros(), V::new(0.1, -0.1, 0.1), u)
+            }),
+            Reason::NegativeStd {
+                axis: Axis::Y,
+                std_n: -0.1,
+            },
+        ),
+        (
+            "rod_dir not unit",
+            Box::new(move |i: &mut GuardInput| {
+                i.tip = set_tip(V::zeros(), s, V::new(0.0, 0.0, 1.00001))
+            }),
+            Reason::RodDirNotUnit { norm: 1.00001 },
+        ),
+        (
+            "not observable (estimator)",
+            Box::new(|i: &mut GuardInput| i.tip = TipInput::NotObservable),
+            Reason::EstimatorNotObservable,
+        ),
+        (
+            "std above max",
+            Box::new(move |i: &mut GuardInput| {
+                i.tip = set_tip(V::zeros(), V::new(0.1, 2.5, 2.1), u)
+            }),
+            Reason::NotObservable {
+                std_max_n: 2.5,
+                max_std_n: 2.0,
+            },
+        ),
+    ]
+}
+
+#[test]
+fn each_fault_cause_enters_fault_at_once_from_ok_warn_and_stop() {
+    for (name, edit, reason) in fault_cases() {
+        for from in [GuardState::Ok, GuardState::Warn, GuardState::Stop] {
+            let mut rig = Rig::in_state(from);
+            // Debounce is 3: a single cycle must be enough.
+            let t = rig
+                .push_with(&edit)
+                .unwrap_or_else(|| panic!("{name} from {from:?}"));
+            assert_eq!(
+                t,
+                Transition {
+                    cycle: rig.cycle,
+                    from,
+                    to: GuardState::Fault,
+                    reason
+                },
+                "{name}"
+            );
+            assert_eq!(rig.guard.reason(), reason, "{name}");
+            assert_eq!(rig.guard.reset_blocker(), Some(reason), "{name}");
+        }
+    }
+}
+
+#[test]
+fn fault_is_latched_and_keeps_its_first_reason() {
+    for (first_name, first_edit, first_reason) in fault_cases() {
+        let mut rig = Rig::ok();
+        rig.push_with(&first_edit).unwrap();
+        for (name, edit, _) in fault_cases() {
+            assert_eq!(rig.push_with(&edit), None, "{first_name} then {name}");
+            rig.hold(stop_total(), 4);
+            rig.hold(warn_axial(), 4);
+            rig.hold(V::zeros(), 4);
+        }
+        assert_eq!(rig.state(), GuardState::Fault);
+        assert_eq!(rig.guard.reason(), first_reason, "{first_name}");
+    }
+}
+
+#[test]
+fn the_initial_fault_keeps_no_input_yet() {
+    let mut rig = Rig::with(limits());
+    for (name, edit, _) in fault_cases() {
+        assert_eq!(rig.push_with(&edit), None, "{name}");
+    }
+    assert_eq!(rig.guard.reason(), Reason::NoInputYet);
+}
+
+type InputEdit = fn(&mut GuardInput);
+
+#[test]
+fn fault_conditions_are_checked_in_the_documented_order() {
+    // Input-level causes, most important first; each case removes the ones before.
+    let input_level: [(Reason, InputEdit); 6] = [
+        (
+            Reason::CycleOutOfOrder {
+                previous: 1,
+                got: 1,
+            },
+            |i| i.cycle = 1,
+        ),
+        (Reason::SensorInvalid, |i| i.sensor_valid = false),
+        (
+            Reason::SensorStale {
+                age_ns: 9 * MS_NS,
+                max_age_ns: 2 * MS_NS,
+            },
+            |i| i.sensor_age_ns = 9 * MS_NS,
+        ),
+        (Reason::JointsInvalid, |i| i.joints_valid = false),
+        (
+            Reason::JointsStale {
+                age_ns: 9 * MS_NS,
+                max_age_ns: 3 * MS_NS,
+            },
+            |i| i.joints_age_ns = 9 * MS_NS,
+        ),
+        (Reason::PoseInvalid, |i| i.tip = TipInput::PoseInvalid),
+    ];
+    for k in 0..input_level.len() {
+        let mut rig = Rig::with(limits());
+        rig.guard.step(&input(1, V::zeros()));
+        rig.guard.reset(1).unwrap();
+        let mut i = input(2, V::zeros());
+        for (_, edit) in &input_level[k..] {
+            edit(&mut i);
+        }
+        let t = rig.guard.step(&i).unwrap();
+        assert_eq!(t.reason, input_level[k].0, "k = {k}");
+    }
+
+    // Within an estimate: non-finite, then a negative std, then a non-unit
+    // direction, then a std above max.
+    let u = rod_basis().0;
+    let tips = [
+        (
+            TipInput::Estimate {
+                force_n: V::new(0.0, 0.0, f64::NAN),
+                std_n: V::new(f64::NAN, -1.0, 9.0),
+                rod_dir: u * 2.0,
+            },
+            Reason::NonFinite {
+                field: TipField::Force,
+                axis: Axis::Z,
+            },
+        ),
+        (
+            TipInput::Estimate {
+                force_n: V::zeros(),
+                std_n: V::new(9.0, -1.0, 9.0),
+                rod_dir: V::new(f64::INFINITY, 0.0, 0.0),
+            },
+            Reason::NonFinite {
+                field: TipField::RodDir,
+                axis: Axis::X,
+            },
+        ),
+        (
+            TipInput::Estimate {
+                force_n: V::zeros(),
+                std_n: V::new(9.0, -1.0, 9.0),
+                rod_dir: u * 2.0,
+            },
+            Reason::NegativeStd {
+                axis: Axis::Y,
+                std_n: -1.0,
+            },
+        ),
+        (
+            TipInput::Estimate {
+                force_n: V::zeros(),
+                std_n: V::new(9.0, 1.0, 9.5),
+                rod_dir: u * 0.5,
+            },
+            Reason::RodDirNotUnit { norm: 0.5 },
+        ),
+        (
+            TipInput::Estimate {
+                force_n: V::zeros(),
+                std_n: V::new(9.0, 1.0, 9.5),
+                rod_dir: u,
+            },
+            Reason::NotObservable {
+                std_max_n: 9.5,
+                max_std_n: 2.0,
+            },
+        ),
+    ];
+    for (tip, reason) in tips {
+        let mut rig = Rig::ok();
+        let t = rig.push_with(|i| i.tip = tip).unwrap();
+        match (t.reason, reason) {
+            (Reason::RodDirNotUnit { norm: a }, Reason::RodDirNotUnit { norm: b }) => {
+                assert!((a - b).abs() < 1e-12)
+            }
+            (got, want) => assert_eq!(got, want),
+        }
+    }
+}
+
+#[test]
+fn values_at_the_fault_limits_are_accepted() {
+    let mut rig = Rig::ok();
+    let (u, _, _) = rod_basis();
+    assert_eq!(
+        rig.push_with(|i| {
+            i.sensor_age_ns = 2 * MS_NS;
+            i.joints_age_ns = 3 * MS_NS;
+            i.tip = TipInput::Estimate {
+                force_n: V::zeros(),
+                std_n: V::new(2.0, 0.0, 2.0),
+                rod_dir: u * (1.0 + 5e-7),
+            };
+        }),
+        None
+    );
+    assert_eq!(rig.state(), GuardState::Ok);
+    assert_eq!(rig.guard.reset_blocker(), None);
+}
+
+#[test]
+fn a_repeated_or_earlier_cycle_is_a_fault_and_the_largest_cycle_is_kept() {
+    let mut rig = Rig::ok();
+    let mut g = rig.guard;
+    assert_eq!(g.step(&input(10, V::zeros())), None);
+    let t = g.step(&input(10, V::zeros())).unwrap();
+    assert_eq!(
+        (t.cycle, t.to, t.reason),
+        (
+            10,
+            GuardState::Fault,
+            Reason::CycleOutOfOrder {
+                previous: 10,
+                got: 10
+            }
+        )
+    );
+    // An earlier cycle: still compared with 10, and the reset is refused.
+    assert_eq!(g.step(&input(4, V::zeros())), None);
+    assert_eq!(
+        g.reset(4).unwrap_err().reason,
+        Reason::CycleOutOfOrder {
+            previous: 10,
+            got: 4
+        }
+    );
+    assert_eq!(
+        g.reason(),
+        Reason::CycleOutOfOrder {
+            previous: 10,
+            got: 10
+        }
+    );
+    assert_eq!(g.step(&input(11, V::zeros())), None);
+    assert_eq!(g.reset(11).unwrap().unwrap().to, GuardState::Ok);
+
+    // Also from Ok straight after a reset.
+    rig.guard = g;
+    let t = rig.guard.step(&input(5, V::zeros())).unwrap();
+    assert_eq!(
+        t.reason,
+        Reason::CycleOutOfOrder {
+            previous: 11,
+            got: 5
+        }
+    );
+}
+
+// ---------------------------------------------------------------- reset rules
+
+#[test]
+fn reset_is_refused_while_the_force_is_at_or_above_stop() {
+    for part in PARTS {
+        let mut rig = Rig::ok();
+        rig.hold(stop_force(part), 2);
+        rig.push(stop_force(part)).unwrap();
+        let refused = rig.guard.reset(rig.cycle).unwrap_err();
+        match refused.reason {
+            Reason::AboveStop { part: p, .. } => assert_eq!(p, part),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(rig.state(), GuardState::Stop);
+        // Below stop but above warn: accepted; then Warn comes back after the debounce.
+        rig.hold(warn_force(part), 1);
+        let t = rig.guard.reset(rig.cycle + 1000).unwrap().unwrap();
+        assert_eq!(
+            t,
+            Transition {
+                cycle: rig.cycle + 1000,
+                from: GuardState::Stop,
+                to: GuardState::Ok,
+                reason: Reason::Reset
+            }
+        );
+        rig.hold(warn_force(part), 2);
+        let t = rig.push(warn_force(part)).unwrap();
+        assert_eq!((t.from, t.to), (GuardState::Ok, GuardState::Warn));
+    }
+}
+
+#[test]
+fn reset_is_refused_exactly_at_the_stop_limit() {
+    let mut rig = Rig::ok();
+    let along_x = |f: f64| {
+        move |i: &mut GuardInput| {
+            i.tip = TipInput::Estimate {
+                force_n: V::new(f, 0.0, 0.0),
+                std_n: V::zeros(),
+                rod_dir: V::x(),
+            }
+        }
+    };
+    for _ in 0..2 {
+        rig.push_with(along_x(15.0));
+    }
+    let t = rig.push_with(along_x(15.0)).unwrap();
+    assert_eq!(
+        t.reason,
+        Reason::AboveStop {
+            part: ForcePart::Axial,
+            force_n: 15.0,
+            limit_n: 15.0
+        }
+    );
+    assert!(rig.guard.reset(0).is_err());
+    rig.push_with(along_x(14.999));
+    assert!(rig.guard.reset(0).is_ok());
+}
+
+#[test]
+fn reset_judges_the_most_recent_input_without_debounce() {
+    let mut rig = Rig::in_state(GuardState::Stop);
+    rig.hold(low(), 5);
+    rig.hold(stop_lateral(), 1);
+    assert!(matches!(
+        rig.guard.reset(0).unwrap_err().reason,
+        Reason::AboveStop {
+            part: ForcePart::Lateral,
+            ..
+        }
+    ));
+    rig.hold(low(), 1);
+    assert_eq!(rig.guard.reset(0).unwrap().unwrap().to, GuardState::Ok);
+}
+
+#[test]
+fn reset_is_refused_while_a_fault_persists() {
+    let mut rig = Rig::ok();
+    let stale = |i: &mut GuardInput| i.sensor_age_ns = 5 * MS_NS;
+    rig.push_with(stale).unwrap();
+    let want = Reason::SensorStale {
+        age_ns: 5 * MS_NS,
+        max_age_ns: 2 * MS_NS,
+    };
+    assert_eq!(rig.guard.reset(0).unwrap_err().reason, want);
+    rig.push_with(stale);
+    assert_eq!(rig.guard.reset(0).unwrap_err().reason, want);
+    // The most recent input decides: now the joints.
+    rig.push_with(|i| i.joints_valid = false);
+    assert_eq!(
+        rig.guard.reset(0).unwrap_err().reason,
+        Reason::JointsInvalid
+    );
+    assert_eq!(rig.state(), GuardState::Fault);
+    assert_eq!(rig.guard.reason(), want);
+    // Cause gone: accepted.
+    rig.hold(low(), 1);
+    assert_eq!(rig.guard.reset_blocker(), None);
+    let t = rig.guard.reset(77).unwrap().unwrap();
+    assert_eq!(
+        (t.cycle, t.from, t.to, t.reason),
+        (77, GuardState::Fault, GuardState::Ok, Reason::Reset)
+    );
+}
+
+#[test]
+fn an_accepted_reset_clears_the_debounce_counters() {
+    // Warn count: two warn-level cycles before the reset do not count after it.
+    let mut rig = Rig::in_state(GuardState::Stop);
+    rig.hold(warn_axial(), 2);
+    rig.guard.reset(0).unwrap().unwrap();
+    rig.hold(warn_axial(), 2);
+    assert_eq!(rig.state(), GuardState::Ok);
+    assert_eq!(rig.push(warn_axial()).unwrap().to, GuardState::Warn);
+
+    // Stop count: the same with a stop-level force between the reset refusals.
+    let mut rig = Rig::in_state(GuardState::Stop);
+    rig.push_with(|i| i.sensor_valid = false).unwrap();
+    rig.hold(stop_axial(), 2);
+    rig.hold(warn_axial(), 1);
+    rig.guard.reset(0).unwrap().unwrap();
+    rig.hold(stop_axial(), 2);
+    assert_eq!(rig.state(), GuardState::Ok);
+    assert_eq!(rig.push(stop_axial()).unwrap().to, GuardState::Stop);
+}
+
+// ---------------------------------------------------------------- configuration
+
+#[test]
+fn invalid_configurations_are_refused() {
+    type LimitsEdit = fn(&mut GuardLimits);
+    let cases: Vec<(&str, LimitsEdit)> = vec![
+        ("warn_total_n", |l| l.warn_total_n = 0.0),
+        ("warn_total_n", |l| l.warn_total_n = -1.0),
+        ("warn_total_n", |l| l.warn_total_n = f64::NAN),
+        ("stop_total_n", |l| l.stop_total_n = l.warn_total_n),
+        ("stop_total_n", |l| l.stop_total_n = 5.0),
+        ("stop_total_n", |l| l.stop_total_n = f64::INFINITY),
+        ("warn_axial_n", |l| l.warn_axial_n = f64::NEG_INFINITY),
+        ("stop_axial_n", |l| l.warn_axial_n = l.stop_axial_n + 1.0),
+        ("stop_axial_n", |l| l.stop_axial_n = f64::NAN),
+        ("warn_lateral_n", |l| l.warn_lateral_n = -0.0),
+        ("stop_lateral_n", |l| l.stop_lateral_n = l.warn_lateral_n),
+        ("hysteresis_n", |l| l.hysteresis_n = -0.1),
+        ("hysteresis_n", |l| l.hysteresis_n = f64::NAN),
+        ("hysteresis_n", |l| l.hysteresis_n = l.warn_lateral_n),
+        ("hysteresis_n", |l| l.hysteresis_n = 7.0),
+        ("hysteresis_n", |l| l.hysteresis_n = f64::INFINITY),
+        ("debounce_cycles", |l| l.debounce_cycles = 0),
+        ("max_sensor_age_ns", |l| l.max_sensor_age_ns = 0),
+        ("max_joints_age_ns", |l| l.max_joints_age_ns = 0),
+        ("max_std_n", |l| l.max_std_n = 0.0),
+        ("max_std_n", |l| l.max_std_n = -2.0),
+        ("max_std_n", |l| l.max_std_n = f64::NAN),
+        ("max_std_n", |l| l.max_std_n = f64::INFINITY),
+    ];
+    for (field, edit) in cases {
+        let mut l = limits();
+        edit(&mut l);
+        match GuardConfig::new(l) {
+            Err(SettingError::Invalid { field: f, .. }) => assert_eq!(f, field),
+            other => panic!("{field}: {other:?}"),
+        }
+    }
+    // The offending value is reported.
+    let mut l = limits();
+    l.stop_total_n = 5.0;
+    let err = GuardConfig::new(l).unwrap_err();
+    assert!(matches!(err, SettingError::Invalid { value, .. } if value == 5.0));
+    assert!(err.to_string().contains("stop_total_n"));
+}
+
+#[test]
+fn edge_valid_configurations_are_accepted() {
+    let l = GuardLimits {
+        hysteresis_n: 0.0,
+        debounce_cycles: u32::MAX,
+        max_sensor_age_ns: u64::MAX,
+        max_joints_age_ns: 1,
+        max_std_n: f64::MAX,
+        ..limits()
+    };
+    let c = GuardConfig::new(l).unwrap();
+    assert_eq!(c.limits(), l);
+    assert!(GuardConfig::new(limits()).is_ok());
+}
+
+// ---------------------------------------------------------------- extremes
+
+#[test]
+fn extreme_cycles_and_ages_do_not_panic() {
+    let l = GuardLimits {
+        max_sensor_age_ns: u64::MAX,
+        ..limits()
+    };
+    let mut g = Guard::new(GuardConfig::new(l).unwrap());
+    assert_eq!(g.step(&input(0, V::zeros())), None); // cycle 0 is fine first
+    g.reset(0).unwrap();
+    let mut i = input(u64::MAX - 1, V::zeros());
+    i.sensor_age_ns = u64::MAX; // equal to the max: not stale
+    assert_eq!(g.step(&i), None);
+    assert_eq!(g.step(&input(u64::MAX, V::zeros())), None);
+    assert_eq!(g.state(), GuardState::Ok);
+    let t = g.step(&input(u64::MAX, V::zeros())).unwrap();
+    assert_eq!(
+        t.reason,
+        Reason::CycleOutOfOrder {
+            previous: u64::MAX,
+            got: u64::MAX
+        }
+    );
+    assert!(g.reset(u64::MAX).is_err());
+}
+
+#[test]
+fn huge_forces_stop_with_a_number_not_nan() {
+    for f in [
+        V::new(1e308, -1e308, 1e308),
+        V::new(f64::MAX, f64::MAX, -f64::MAX),
+        V::new(0.0, 1e200, 0.0),
+        V::new(1e160, 0.0, 1e-300),
+    ] {
+        let mut rig = Rig::ok();
+        rig.push_with(|i| {
+            i.tip = TipInput::Estimate {
+                force_n: f,
+                std_n: V::zeros(),
+                rod_dir: V::x(),
+            }
+        });
+        assert!(matches!(
+            rig.guard.reset_blocker(),
+            Some(Reason::AboveStop { force_n, .. }) if !force_n.is_nan() && force_n >= 17.0
+        ));
+        for _ in 0..2 {
+            rig.push_with(|i| {
+                i.tip = TipInput::Estimate {
+                    force_n: f,
+                    std_n: V::zeros(),
+                    rod_dir: V::x(),
+                }
+            });
+        }
+        assert_eq!(rig.state(), GuardState::Stop, "{f:?}");
+        match rig.guard.reason() {
+            Reason::AboveStop {
+                part: ForcePart::Total,
+                force_n,
+                ..
+            } => {
+                let want = f.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+                assert!(force_n >= want, "{f:?}: {force_n}");
+                if f.iter().filter(|x| **x != 0.0).count() == 1 {
+                    assert!((force_n - want).abs() <= 1e-12 * want);
+                }
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}
+
+#[test]
+fn huge_debounce_never_transitions_early() {
+    let mut rig = Rig::ok_with(GuardLimits {
+        debounce_cycles: u32::MAX,
+        ..limits()
+    });
+    rig.hold(stop_total(), 2000);
+    assert_eq!(rig.state(), GuardState::Ok);
+}
+
+// ---------------------------------------------------------------- display
+
+#[test]
+fn reasons_display_their_facts() {
+    let cases = [
+        (
+            Reason::SensorStale {
+                age_ns: 4_321_000,
+                max_age_ns: 2_000_000,
+            },
+            ["4321000", "2000000"],
+        ),
+        (
+            Reason::AboveStop {
+                part: ForcePart::Axial,
+                force_n: 16.25,
+                limit_n: 15.0,
+            },
+            ["axial", "16.250"],
+        ),
+        (
+            Reason::AboveWarn {
+                part: ForcePart::Lateral,
+                force_n: 6.5,
+                limit_n: 6.0,
+            },
+            ["lateral", "6.500"],
+        ),
+        (
+            Reason::CycleOutOfOrder {
+                previous: 41,
+                got: 40,
+            },
+            ["41", "40"],
+        ),
+        (
+            Reason::NonFinite {
+                field: TipField::Std,
+                axis: Axis::Z,
+            },
+            ["std_n", "z"],
+        ),
+        (
+            Reason::NotObservable {
+                std_max_n: 3.5,
+                max_std_n: 2.0,
+            },
+            ["3.500", "2.000"],
+        ),
+    ];
+    for (reason, facts) in cases {
+        let text = reason.to_string();
+        for fact in facts {
+            assert!(text.contains(fact), "{text:?} lacks {fact}");
+        }
+    }
+    for (_, _, reason) in fault_cases() {
+        assert!(!reason.to_string().is_empty());
+    }
+    let mut g = Guard::new(GuardConfig::new(limits()).unwrap());
+    let refused = g.reset(0).unwrap_err();
+    assert!(
+        refused
+            .to_string()
+            .contains(&Reason::NoInputYet.to_string())
+    );
+}
+
+// ---------------------------------------------------------------- property test
+
+/// What one generated input is.
+#[derive(Debug, Clone, Copy)]
+enum Kind {
+    Good,
+    SensorInvalid,
+    SensorStale,
+    JointsInvalid,
+    JointsStale,
+    PoseInvalid,
+    NotObservable,
+    NanForce(usize),
+    InfStd(usize),
+    NanRod(usize),
+    NegativeStd(usize),
+    RodNotUnit,
+    StdHigh,
+    /// A cycle this far at or behind the largest one so far.
+    CycleBack(u64),
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Op {
+    Step {
+        kind: Kind,
+        axial_n: f64,
+        lateral_n: f64,
+        /// Rod heading, tilt, and the angle of the lateral force around u, rad.
+        angles: (f64, f64, f64),
+        std_n: (f64, f64, f64),
+        dcycle: u64,
+    },
+    Reset,
+}
+
+fn kind_strategy() -> impl Strategy<Value = Kind> {
+    prop_oneof![
+        30 => Just(Kind::Good),
+        1 => Just(Kind::SensorInvalid),
+        1 => Just(Kind::SensorStale),
+        1 => Just(Kind::JointsInvalid),
+        1 => Just(Kind::JointsStale),
+        1 => Just(Kind::PoseInvalid),
+        1 => Just(Kind::NotObservable),
+        1 => (0..3usize).prop_map(Kind::NanForce),
+        1 => (0..3usize).prop_map(Kind::InfStd),
+        1 => (0..3usize).prop_map(Kind::NanRod),
+        1 => (0..3usize).prop_map(Kind::NegativeStd),
+        1 => Just(Kind::RodNotUnit),
+        1 => Just(Kind::StdHigh),
+        1 => (0..4u64).prop_map(Kind::CycleBack),
+    ]
+}
+
+fn op_strategy() -> impl Strategy<Value = Op> {
+    let axial = prop_oneof![0.0..6.0_f64, 6.0..9.5_f64, 9.5..14.0_f64, 14.0..30.0_f64];
+    let lateral = prop_oneof![0.0..4.0_f64, 4.0..7.0_f64, 7.0..9.5_f64, 9.5..20.0_f64];
+    let step = (
+        kind_strategy(),
+        axial,
+        any::<bool>(),
+        lateral,
+        (0.0..6.3_f64, -1.3..1.3_f64, 0.0..6.3_f64),
+        (0.0..1.9_f64, 0.0..1.9_f64, 0.0..1.9_f64),
+        1..4u64,
+    )
+        .prop_map(
+            |(kind, axial_n, negative, lateral_n, angles, std_n, dcycle)| Op::Step {
+                kind,
+                axial_n: if negative { -axial_n } else { axial_n },
+                lateral_n,
+                angles,
+                std_n,
+                dcycle,
+            },
+        );
+    prop_oneof![12 => step, 1 => Just(Op::Reset)]
+}
+
+/// Builds the input for `op` (a step) and advances the largest cycle.
+fn make_input(op: &Op, largest_cycle: &mut u64) -> GuardInput {
+    let Op::Step {
+        kind,
+        axial_n,
+        lateral_n,
+        angles: (heading, tilt, around),
+        std_n: (sx, sy, sz),
+        dcycle,
+    } = *op
+    else {
+        unreachable!()
+    };
+    let u = V::new(
+        tilt.cos() * heading.sin(),
+        tilt.sin(),
+        tilt.cos() * heading.cos(),
+    );
+    let e1 = u.cross(&V::y()).normalize();
+    let e2 = u.cross(&e1);
+    let mut force_n = u * axial_n + (e1 * around.cos() + e2 * around.sin()) * lateral_n;
+    let mut std_n = V::new(sx, sy, sz);
+    let mut rod_dir = u;
+    let cycle = match kind {
+        Kind::CycleBack(k) => largest_cycle.saturating_sub(k),
+        _ => {
+            *largest_cycle += dcycle;
+            *largest_cycle
+        }
+    };
+    let mut i = GuardInput {
+        cycle,
+        sensor_age_ns: 1_000_000,
+        sensor_valid: true,
+        joints_age_ns: 1_500_000,
+        joints_valid: true,
+        tip: TipInput::NotObservable,
+    };
+    match kind {
+        Kind::SensorInvalid => i.sensor_valid = false,
+        Kind::SensorStale => i.sensor_age_ns = 2 * MS_NS + dcycle,
+        Kind::JointsInvalid => i.joints_valid = false,
+        Kind::JointsStale => i.joints_age_ns = u64::MAX - dcycle,
+        Kind::NanForce(a) => force_n[a] = f64::NAN,
+        Kind::InfStd(a) => std_n[a] = f64::INFINITY,
+        Kind::NanRod(a) => rod_dir[a] = f64::NAN,
+        Kind::NegativeStd(a) => std_n[a] = -0.01 - std_n[a],
+        Kind::RodNotUnit => rod_dir *= 1.0 + 1e-4 * dcycle as f64,
+        Kind::StdHigh => std_n[dcycle as usize - 1] = 2.01 + 10.0 * sx,
+        _ => {}
+    }
+    i.tip = match kind {
+        Kind::PoseInvalid => TipInput::PoseInvalid,
+        Kind::NotObservable => TipInput::NotObservable,
+        _ => TipInput::Estimate {
+            force_n,
+            std_n,
+            rod_dir,
+        },
+    };
+    i
+}
+
+/// One classified input of the reference model.
+#[derive(Debug, Clone, Copy)]
+enum Class {
+    Fault(Reason),
+    Force {
+        stop: Option<Reason>,
+        warn: Option<Reason>,
+        clear: bool,
+    },
+}
+
+/// An independent reference model: the state machine written with a window
+/// over the inputs since the last accepted reset instead of counters.
+struct Model {
+    l: GuardLimits,
+    state: GuardState,
+    reason: Reason,
+    largest_cycle: Option<u64>,
+    last: Option<Class>,
+    since_reset: Vec<Class>,
+}
+
+impl Model {
+    fn new(l: GuardLimits) -> Self {
+        Self {
+            l,
+            state: GuardState::Fault,
+            reason: Reason::NoInputYet,
+            largest_cycle: None,
+            last: None,
+            since_reset: Vec::new(),
+        }
+    }
+
+    fn classify(&mut self, i: &GuardInput) -> Class {
+        let l = &self.l;
+        if let Some(previous) = self.largest_cycle
+            && i.cycle <= previous
+        {
+            return Class::Fault(Reason::CycleOutOfOrder {
+                previous,
+                got: i.cycle,
+            });
+        }
+        self.largest_cycle = Some(i.cycle);
+        if !i.sensor_valid {
+            return Class::Fault(Reason::SensorInvalid);
+        }
+        if i.sensor_age_ns > l.max_sensor_age_ns {
+            return Class::Fault(Reason::SensorStale {
+                age_ns: i.sensor_age_ns,
+                max_age_ns: l.max_sensor_age_ns,
+            });
+        }
+        if !i.joints_valid {
+            return Class::Fault(Reason::JointsInvalid);
+        }
+        if i.joints_age_ns > l.max_joints_age_ns {
+            return Class::Fault(Reason::JointsStale {
+                age_ns: i.joints_age_ns,
+                max_age_ns: l.max_joints_age_ns,
+            });
+        }
+        let (f, s, u) = match i.tip {
+            TipInput::PoseInvalid => return Class::Fault(Reason::PoseInvalid),
+            TipInput::NotObservable => return Class::Fault(Reason::EstimatorNotObservable),
+            TipInput::Estimate {
+                force_n,
+                std_n,
+                rod_dir,
+            } => (force_n, std_n, rod_dir),
+        };
+        let axes = [Axis::X, Axis::Y, Axis::Z];
+        for (field, v) in [
+            (TipField::Force, f),
+            (TipField::Std, s),
+            (TipField::RodDir, u),
+        ] {
+            for a in 0..3 {
+                if v[a].is_nan() || v[a].is_infinite() {
+                    return Class::Fault(Reason::NonFinite {
+                        field,
+                        axis: axes[a],
+                    });
+                }
+            }
+        }
+        for a in 0..3 {
+            if s[a] < 0.0 {
+                return Class::Fault(Reason::NegativeStd {
+                    axis: axes[a],
+                    std_n: s[a],
+                });
+            }
+        }
+        let norm = (u.x * u.x + u.y * u.y + u.z * u.z).sqrt();
+        if (norm - 1.0).abs() > 1e-6 {
+            return Class::Fault(Reason::RodDirNotUnit { norm });
+        }
+        let std_max_n = s.iter().cloned().fold(f64::MIN, f64::max);
+        if std_max_n > l.max_std_n {
+            return Class::Fault(Reason::NotObservable {
+                std_max_n,
+                max_std_n: l.max_std_n,
+            });
+        }
+        let p = parts(&f, &u);
+        let warn = [l.warn_total_n, l.warn_axial_n, l.warn_lateral_n];
+        let stop = [l.stop_total_n, l.stop_axial_n, l.stop_lateral_n];
+        let first = |limits: [f64; 3], above: bool| {
+            (0..3).find(|&j| p[j] >= limits[j]).map(|j| {
+                if above {
+                    Reason::AboveStop {
+                        part: PARTS[j],
+                        force_n: p[j],
+                        limit_n: limits[j],
+                    }
+                } else {
+                    Reason::AboveWarn {
+                        part: PARTS[j],
+                        force_n: p[j],
+                        limit_n: limits[j],
+                    }
+                }
+            })
+        };
+        Class::Force {
+            stop: first(stop, true),
+            warn: first(warn, false),
+            clear: (0..3).all(|j| p[j] < warn[j] - l.hysteresis_n),
+        }
+    }
+
+    fn go(&mut self, to: GuardState, reason: Reason, cycle: u64) -> Option<Transition> {
+        if to == self.state {
+            return None;
+        }
+        let t = Transition {
+            cycle,
+            from: self.state,
+            to,
+            reason,
+        };
+        self.state = to;
+        self.reason = reason;
+        Some(t)
+    }
+
+    fn step(&mut self, i: &GuardInput) -> Option<Transition> {
+        let class = self.classify(i);
+        self.last = Some(class);
+        if let Class::Fault(reason) = class {
+            return self.go(GuardState::Fault, reason, i.cycle);
+        }
+        self.since_reset.push(class);
+        if !matches!(self.state, GuardState::Ok | GuardState::Warn) {
+            return None;
+        }
+        let n = self.l.debounce_cycles as usize;
+        if self.since_reset.len() < n {
+            return None;
+        }
+        let window = &self.since_reset[self.since_reset.len() - n..];
+        let all = |pred: &dyn Fn(&Class) -> bool| window.iter().all(pred);
+        let Class::Force { stop, warn, .. } = class else {
+            unreachable!()
+        };
+        if all(&|c| matches!(c, Class::Force { stop: Some(_), .. })) {
+            return self.go(GuardState::Stop, stop.unwrap(), i.cycle);
+        }
+        if self.state == GuardState::Ok && all(&|c| matches!(c, Class::Force { warn: Some(_), .. }))
+        {
+            return self.go(GuardState::Warn, warn.unwrap(), i.cycle);
+        }
+        if self.state == GuardState::Warn && all(&|c| matches!(c, Class::Force { clear: true, .. }))
+        {
+            return self.go(GuardState::Ok, Reason::BelowWarn, i.cycle);
+        }
+        None
+    }
+
+    fn reset(&mut self, cycle: u64) -> Result<Option<Transition>, Reason> {
+        if matches!(self.state, GuardState::Ok | GuardState::Warn) {
+            return Ok(None);
+        }
+        match self.last {
+            None => Err(Reason::NoInputYet),
+            Some(Class::Fault(r)) => Err(r),
+            Some(Class::Force { stop: Some(r), .. }) => Err(r),
+            Some(Class::Force { stop: None, .. }) => {
+                self.since_reset.clear();
+                Ok(self.go(GuardState::Ok, Reason::Reset, cycle))
+            }
+        }
+    }
+}
+
+/// Equal reasons, with floating-point facts compared to 1e-9 (the model
+/// computes them another way).
+fn same_reason(a: &Reason, b: &Reason) -> bool {
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-9 * (1.0 + x.abs().max(y.abs()));
+    match (a, b) {
+        (Reason::RodDirNotUnit { norm: x }, Reason::RodDirNotUnit { norm: y }) => close(*x, *y),
+        (
+            Reason::AboveStop {
+                part: p,
+                force_n: x,
+                limit_n: lx,
+            },
+            Reason::AboveStop {
+                part: q,
+                force_n: y,
+                limit_n: ly,
+            },
+        )
+        | (
+            Reason::AboveWarn {
+                part: p,
+                force_n: x,
+                limit_n: lx,
+            },
+            Reason::AboveWarn {
+                part: q,
+                force_n: y,
+                limit_n: ly,
+            },
+        ) => p == q && close(*x, *y) && lx == ly,
+        _ => a == b,
+    }
+}
+
+fn same_transition(a: &Option<Transition>, b: &Option<Transition>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(x), Some(y)) => {
+            x.cycle == y.cycle
+                && x.from == y.from
+                && x.to == y.to
+                && same_reason(&x.reason, &y.reason)
+        }
+        _ => false,
+    }
+}
+
+const SEED: u64 = 0x5A4_6A7D;
+const CASES: u32 = 400;
+
+fn sequence_strategy() -> impl Strategy<Value = (u32, f64, Vec<(Op, usize)>)> {
+    (
+        1..5u32,
+        0.0..2.5_f64,
+        prop::collection::vec((op_strategy(), 1..6usize), 1..80),
+    )
+}
+
+/// The generator is not vacuous: over the same seeded cases, the real guard
+/// goes through every transition and both reset outcomes.
+#[test]
+fn the_generator_reaches_every_transition() {
+    use proptest::strategy::ValueTree;
+    use proptest::test_runner::{TestRng, TestRunner};
+    use std::collections::BTreeSet;
+    let config = ProptestConfig {
+        rng_seed: RngSeed::Fixed(SEED),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    };
+    let rng = TestRng::from_seed(proptest::test_runner::RngAlgorithm::ChaCha, &[7; 32]);
+    let mut runner = TestRunner::new_with_rng(config, rng);
+    let strategy = sequence_strategy();
+    let mut seen = BTreeSet::new();
+    let (mut accepted, mut refused) = (0, 0);
+    for _ in 0..CASES {
+        let (debounce, hysteresis_n, ops) = strategy.new_tree(&mut runner).unwrap().current();
+        let l = GuardLimits {
+            debounce_cycles: debounce,
+            hysteresis_n,
+            ..limits()
+        };
+        let mut guard = Guard::new(GuardConfig::new(l).unwrap());
+        let mut largest_cycle = 0;
+        for (op, repeat) in &ops {
+            for _ in 0..*repeat {
+                let t = match op {
+                    Op::Reset => match guard.reset(largest_cycle) {
+                        Ok(t) => {
+                            accepted += usize::from(t.is_some());
+                            t
+                        }
+                        Err(_) => {
+                            refused += 1;
+                            None
+                        }
+                    },
+                    Op::Step { .. } => guard.step(&make_input(op, &mut largest_cycle)),
+                };
+                if let Some(t) = t {
+                    seen.insert((t.from as u8, t.to as u8));
+                }
+            }
+        }
+    }
+    use GuardState as S;
+    for (from, to) in [
+        (S::Fault, S::Ok),
+        (S::Stop, S::Ok),
+        (S::Ok, S::Warn),
+        (S::Warn, S::Ok),
+        (S::Ok, S::Stop),
+        (S::Warn, S::Stop),
+        (S::Ok, S::Fault),
+        (S::Warn, S::Fault),
+        (S::Stop, S::Fault),
+    ] {
+        assert!(
+            seen.contains(&(from as u8, to as u8)),
+            "{from:?} -> {to:?} never seen"
+        );
+    }
+    assert!(
+        accepted > 10 && refused > 10,
+        "{accepted} accepted, {refused} refused"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: CASES,
+        rng_seed: RngSeed::Fixed(SEED),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+
+    #[test]
+    fn random_sequences_keep_the_invariants_and_match_the_model(
+        (debounce, hysteresis_n, ops) in sequence_strategy(),
+    ) {
+        let l = GuardLimits { debounce_cycles: debounce, hysteresis_n, ..limits() };
+        let mut guard = Guard::new(GuardConfig::new(l).unwrap());
+        let mut model = Model::new(l);
+        let mut largest_cycle = 0u64;
+        for (op, repeat) in &ops {
+            for _ in 0..*repeat {
+                let before = guard.state();
+                match op {
+                    Op::Reset => {
+                        let cycle = largest_cycle;
+                        let got = guard.reset(cycle);
+                        let want = model.reset(cycle);
+                        match (&got, &want) {
+                            (Ok(g), Ok(w)) => prop_assert!(same_transition(g, w), "{got:?} vs {want:?}"),
+                            (Err(g), Err(w)) => {
+                                prop_assert!(same_reason(&g.reason, w), "{got:?} vs {want:?}");
+                                prop_assert_eq!(guard.state(), before);
+                            }
+                            _ => prop_assert!(false, "{:?} vs {:?}", got, want),
+                        }
+                        if let Ok(Some(t)) = got {
+                            prop_assert!(matches!(before, GuardState::Stop | GuardState::Fault));
+                            prop_assert_eq!((t.cycle, t.from, t.to, t.reason),
+                                (cycle, before, GuardState::Ok, Reason::Reset));
+                        }
+                    }
+                    Op::Step { .. } => {
+                        let input = make_input(op, &mut largest_cycle);
+                        let got = guard.step(&input);
+                        let want = model.step(&input);
+                        prop_assert!(same_transition(&got, &want), "{:?} vs {:?} for {:?}", got, want, input);
+                        // The spec's invariants, stated directly.
+                        let faulty = matches!(model.last, Some(Class::Fault(_)));
+                        if faulty {
+                            prop_assert_eq!(guard.state(), GuardState::Fault);
+                        }
+                        match before {
+                            GuardState::Fault => prop_assert_eq!(guard.state(), GuardState::Fault),
+                            GuardState::Stop => prop_assert!(matches!(
+                                guard.state(), GuardState::Stop | GuardState::Fault)),
+                            _ => {}
+                        }
+                        match got {
+                            Some(t) => {
+                                prop_assert_ne!(t.from, t.to);
+                                prop_assert_eq!(t.cycle, input.cycle);
+                                prop_assert_eq!(t.from, before);
+                                prop_assert_eq!(t.to, guard.state());
+                                prop_assert_eq!(t.reason, guard.reason());
+                            }
+                            None => prop_assert_eq!(guard.state(), before),
+                        }
+                    }
+                }
+                prop_assert_eq!(guard.state(), model.state);
+                prop_assert!(same_reason(&guard.reason(), &model.reason));
+            }
+        }
+    }
+}
