@@ -150,10 +150,10 @@ pub struct IdentificationOptions {
 ///
 /// Standard errors come from the inverse of the weighted triangular factor
 /// (the noise model's covariance of the estimate), multiplied by
-/// `sqrt(chi2_dof)` when there is at least one degree of freedom, so that a
-/// noise model that is too optimistic or too pessimistic, or a model that does
-/// not fit, widens or narrows them honestly. With no degree of freedom they are
-/// the noise model's alone.
+/// `max(1, sqrt(chi2_dof))` when there is at least one degree of freedom: never
+/// smaller than the noise model says, and widened when the residuals scatter
+/// more than it (a noise model that is too optimistic, or a model that does not
+/// fit). With no degree of freedom they are the noise model's alone.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IdentificationResult {
     /// m, kg.
@@ -566,7 +566,8 @@ impl Identification {
         let unweighted_ss = (as_matrix(&self.unweighted) * z).norm_squared();
         let dof = self.rows - needed;
         let chi2_dof = if dof > 0 { chi2 / f64::from(dof) } else { 0.0 };
-        let scale = if dof > 0 { chi2_dof } else { 1.0 };
+        // Never claim more than the noise model, nor less than the scatter shows.
+        let scale = if dof > 0 { chi2_dof.max(1.0) } else { 1.0 };
         let covariance = unit_covariance * scale;
         let var = |i: usize| covariance.get((i, i)).copied().unwrap_or(0.0).max(0.0);
         let std = |i: usize| ComplexField::sqrt(var(i));

@@ -233,10 +233,12 @@ impl Default for SupportOptions {
 /// The result of a support calibration.
 ///
 /// Standard errors come from the inverse of the weighted normal matrix at the
-/// solution, with the configured sensor noise as the weights; they are NOT
-/// scaled by sqrt(chi2_dof). A `chi2_dof` far above 1 means the model does not
+/// solution, with the configured sensor noise as the weights, multiplied by
+/// `max(1, sqrt(chi2_dof))`: never smaller than the noise model says, and widened
+/// when the residuals scatter more than it (the same rule as
+/// [`crate::identification`]). A `chi2_dof` far above 1 means the model does not
 /// fit (an offset d, an untared sensor, a support that does not pivot about one
-/// point) and then the standard errors are too small.
+/// point): the widened errors are then still only a lower bound of the real ones.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SupportFit {
     /// m, kg.
@@ -931,15 +933,19 @@ impl SupportCalibration {
             return Err(SupportError::NonPositiveMass { mass_kg: mass });
         }
         let moment = at6(theta, I_MOMENT);
-        let std = |k: usize| sqrt(at(&cov, k, k).max(0.0));
-        // c = M / m: gradient (-M/m^2, 1/m).
-        let (dm, d_moment) = (-moment / (mass * mass), 1.0 / mass);
-        let var_c = dm * dm * at(&cov, I_MASS, I_MASS)
-            + d_moment * d_moment * at(&cov, I_MOMENT, I_MOMENT)
-            + 2.0 * dm * d_moment * at(&cov, I_MASS, I_MOMENT);
         let unknowns = free.iter().filter(|&&f| f).count();
         let equations = 3 * self.len;
         let dof = equations.saturating_sub(unknowns).max(1);
+        let chi2_dof = normal.cost / dof as f64;
+        // Never claim more than the noise model, nor less than the scatter shows.
+        let inflation = chi2_dof.max(1.0);
+        let std = |k: usize| sqrt((at(&cov, k, k) * inflation).max(0.0));
+        // c = M / m: gradient (-M/m^2, 1/m).
+        let (dm, d_moment) = (-moment / (mass * mass), 1.0 / mass);
+        let var_c = (dm * dm * at(&cov, I_MASS, I_MASS)
+            + d_moment * d_moment * at(&cov, I_MOMENT, I_MOMENT)
+            + 2.0 * dm * d_moment * at(&cov, I_MASS, I_MOMENT))
+            * inflation;
         let mut held = [true; 3];
         let mut support_std = [None; 3];
         for k in 0..3 {
@@ -965,7 +971,7 @@ impl SupportCalibration {
             held,
             friction_n: friction.then_some(at6(theta, I_FRICTION)),
             friction_std_n: friction.then(|| std(I_FRICTION)),
-            chi2_dof: normal.cost / dof as f64,
+            chi2_dof,
             residual_rms_n: sqrt(normal.raw_sq_n2 / equations.max(1) as f64),
             condition,
             iterations,

@@ -247,7 +247,8 @@ fn dense_fit(
     let cov_unit = DMatrix::from_fn(p, p, |i, j| cov_scaled[(i, j)] / (norms[i] * norms[j]));
     let chi2 = (&aw * &theta - &yw).norm_squared();
     let chi2_dof = chi2 / (n - p) as f64;
-    let cov = cov_unit * chi2_dof;
+    // The documented rule: widen by the scatter, never narrow below the noise model.
+    let cov = cov_unit * chi2_dof.max(1.0);
     let std: Vec<f64> = (0..p).map(|i| cov[(i, i)].sqrt()).collect();
     let (m, mm) = (theta[0], theta[1]);
     let com = mm / m;
