@@ -1,1 +1,409 @@
-//! (placeholder: filled by its own change)
+//! The tip force from one force-sensor reading (MODEL.md 4.1 and 4.3), with the
+//! standard deviation that the sensor's noise gives it.
+//!
+//! - d = 0 (the default): the closed form of MODEL.md 4.1, no decomposition.
+//! - d != 0: the six equilibrium equations of MODEL.md 4.3 (unknowns F_D, the
+//!   support's reaction in a basis across u, and the U-joint torsion M_T), solved
+//!   on the stack by LU with a pivot check.
+//!
+//! Both report `NotObservable` instead of a number when the standard deviation of
+//! the tip force exceeds the configured limit: near the singularity (tip at the
+//! support) the estimate is dominated by noise, and "no force" must never be
+//! reported there.
+
+use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3};
+use nalgebra::{ComplexField, Matrix6, SMatrix};
+
+/// How far |u|^2 (and |w|^2, u . w) of a pose may stray from 1 (and 0).
+pub const POSE_UNIT_TOLERANCE: f64 = 1e-6;
+
+/// With d != 0: a pivot of the (dimensionless, equilibrated) 6x6 system below
+/// this is treated as singular. This is only a backstop: the standard deviation
+/// check rejects such poses long before.
+pub const MIN_RELATIVE_PIVOT: f64 = 1e-12;
+
+/// Settings of the tip-force estimator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TipForceConfig {
+    /// Largest accepted standard deviation of any axis of the tip force, N
+    /// (finite, > 0). Above it the force is reported as not observable.
+    pub max_std_n: f64,
+}
+
+/// Why no tip force was given.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TipForceError {
+    /// An input is NaN or infinite.
+    #[error("{input} is not a finite number (NaN or infinite)")]
+    NonFinite {
+        /// Which input.
+        input: &'static str,
+    },
+    /// The tip force is not observable here: its standard deviation exceeds the
+    /// limit, or the system is singular (then `std_max_n` is infinite).
+    #[error(
+        "tip force not observable: standard deviation {std_max_n} N above the limit \
+         (tip {lever_m} m beyond the support)"
+    )]
+    NotObservable {
+        /// L - s: the tip's distance beyond the support along the rod, m.
+        lever_m: f64,
+        /// The largest per-axis standard deviation, N (infinite when singular).
+        std_max_n: f64,
+    },
+    /// The pose is not one the forward kinematics can give.
+    #[error("invalid pose: {quantity} = {value}")]
+    InvalidPose {
+        /// What is wrong: `"|rod_dir|^2 - 1"`, `"|rod_normal|^2 - 1"`,
+        /// `"rod_dir . rod_normal"`, `"support_distance_m"`, `"support_along_rod_m"`.
+        quantity: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The inputs are finite but so large that the result overflows.
+    #[error("the tip force overflows (inputs far out of range)")]
+    NonFiniteResult,
+}
+
+/// One tip-force estimate, all in the base frame {0}.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TipForceEstimate {
+    /// F_tip = -F_D: what the tip applies to the tissue, N.
+    pub force_n: Vec3,
+    /// Per-axis standard deviation of `force_n` due to the sensor noise of one
+    /// sample, N.
+    pub std_n: Vec3,
+    /// F_tip . u, N (positive: the tip pushes along the rod, into the tissue).
+    pub axial_n: f64,
+    /// |F_tip - (F_tip . u) u|, N.
+    pub lateral_n: f64,
+    /// F_A: what the robot applies to the rod at A, N.
+    pub ujoint_force_n: Vec3,
+    /// M_T: the U-joint's torsion on the rod along n = -(s4, 0, c4), N m (0 when d = 0).
+    pub torsion_nm: f64,
+}
+
+/// The tip-force estimator: everything that does not change with the pose is
+/// computed once, here.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TipForceEstimator {
+    calibration: Calibration,
+    /// C = R_0s diag(std^2) R_0s^T: covariance of F_A in {0}, N^2.
+    covariance_n2: Mat3,
+    /// The diagonal of C, N^2.
+    covariance_diag_n2: Vec3,
+    /// m g, N.
+    weight_n: Vec3,
+    length_m: f64,
+    com_m: f64,
+    offset_m: f64,
+    max_std_n: f64,
+}
+
+fn finite3(v: &Vec3) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// x > 0 (false for NaN).
+fn positive(x: f64) -> bool {
+    x > 0.0
+}
+
+/// |x| <= tolerance (false for NaN).
+fn within(x: f64, tolerance: f64) -> bool {
+    x.abs() <= tolerance
+}
+
+/// x >= limit (false for NaN).
+fn at_least(x: f64, limit: f64) -> bool {
+    x >= limit
+}
+
+/// sqrt(variance); a round-off negative variance gives 0, NaN gives infinity
+/// (so that it fails the limit).
+fn std_of_variance(var_n2: f64) -> f64 {
+    if var_n2 >= 0.0 {
+        <f64 as ComplexField>::sqrt(var_n2)
+    } else if var_n2.is_nan() {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
+/// The largest entry, with NaN counted as infinite.
+fn worst(std_n: &Vec3) -> f64 {
+    std_n.iter().fold(0.0, |acc: f64, &s| {
+        if s.is_nan() {
+            f64::INFINITY
+        } else {
+            acc.max(s)
+        }
+    })
+}
+
+impl TipForceEstimator {
+    /// Builds the estimator; `config.max_std_n` must be finite and > 0.
+    pub fn new(
+        cal: &Calibration,
+        profile: &Profile,
+        noise: &SensorNoise,
+        config: TipForceConfig,
+    ) -> Result<Self, SettingError> {
+        let max_std_n = config.max_std_n;
+        if !(max_std_n.is_finite() && max_std_n > 0.0) {
+            return Err(SettingError::Invalid {
+                field: "max_std_n",
+                value: max_std_n,
+                why: "must be finite and > 0",
+            });
+        }
+        let covariance_n2 = noise.base_covariance_n2(&cal.sensor_rotation());
+        Ok(Self {
+            calibration: *cal,
+            covariance_n2,
+            covariance_diag_n2: covariance_n2.diagonal(),
+            weight_n: cal.gravity_mps2() * profile.mass_kg(),
+            length_m: profile.length_m(),
+            com_m: profile.com_m(),
+            offset_m: profile.offset_m(),
+            max_std_n,
+        })
+    }
+
+    /// The limit on the standard deviation, N.
+    pub fn max_std_n(&self) -> f64 {
+        self.max_std_n
+    }
+
+    /// The tip force for one reading.
+    ///
+    /// `pose` must come from [`sar_kinematics::forward`] with the calibration and
+    /// profile this estimator was built with. `reading_n`: the raw sensor force,
+    /// sensor frame, before bias removal; `bias_n`: the tare, sensor frame.
+    pub fn estimate(
+        &self,
+        pose: &Pose,
+        reading_n: &Vec3,
+        bias_n: &Vec3,
+    ) -> Result<TipForceEstimate, TipForceError> {
+        if !finite3(reading_n) {
+            return Err(TipForceError::NonFinite { input: "reading_n" });
+        }
+        if !finite3(bias_n) {
+            return Err(TipForceError::NonFinite { input: "bias_n" });
+        }
+        let u = pose.rod_dir;
+        if !finite3(&u) {
+            return Err(TipForceError::NonFinite {
+                input: "pose.rod_dir",
+            });
+        }
+        let unit_error = u.norm_squared() - 1.0;
+        if !within(unit_error, POSE_UNIT_TOLERANCE) {
+            return Err(TipForceError::InvalidPose {
+                quantity: "|rod_dir|^2 - 1",
+                value: unit_error,
+            });
+        }
+        let f_a = crate::ujoint_force_n(&self.calibration, reading_n, bias_n);
+        if self.offset_m == 0.0 {
+            self.closed_form(pose, &u, &f_a)
+        } else {
+            self.with_offset(pose, &u, &f_a)
+        }
+    }
+
+    /// Checks the standard deviation (from the per-axis variance `var_n2`) and
+    /// the result, and assembles the estimate.
+    fn finish(
+        &self,
+        u: &Vec3,
+        force_n: Vec3,
+        var_n2: &Vec3,
+        lever_m: f64,
+        ujoint_force_n: Vec3,
+        torsion_nm: f64,
+    ) -> Result<TipForceEstimate, TipForceError> {
+        let std_n = var_n2.map(std_of_variance);
+        if !std_n.iter().all(|&s| s <= self.max_std_n) {
+            return Err(TipForceError::NotObservable {
+                lever_m,
+                std_max_n: worst(&std_n),
+            });
+        }
+        if !(finite3(&force_n) && torsion_nm.is_finite()) {
+            return Err(TipForceError::NonFiniteResult);
+        }
+        let axial_n = force_n.dot(u);
+        let lateral_n = (force_n - u * axial_n).norm();
+        if !(axial_n.is_finite() && lateral_n.is_finite()) {
+            return Err(TipForceError::NonFiniteResult);
+        }
+        Ok(TipForceEstimate {
+            force_n,
+            std_n,
+            axial_n,
+            lateral_n,
+            ujoint_force_n,
+            torsion_nm,
+        })
+    }
+
+    /// MODEL.md 4.1 (d = 0).
+    fn closed_form(
+        &self,
+        pose: &Pose,
+        u: &Vec3,
+        f_a: &Vec3,
+    ) -> Result<TipForceEstimate, TipForceError> {
+        let a = pose.support_distance_m;
+        if !a.is_finite() {
+            return Err(TipForceError::NonFinite {
+                input: "pose.support_distance_m",
+            });
+        }
+        if !positive(a) {
+            return Err(TipForceError::InvalidPose {
+                quantity: "support_distance_m",
+                value: a,
+            });
+        }
+        let lever_m = self.length_m - a;
+        if !positive(lever_m) {
+            return Err(TipForceError::NotObservable {
+                lever_m,
+                std_max_n: f64::INFINITY,
+            });
+        }
+        let k = a / lever_m;
+        // F_tip . u = -F_D . u = (F_A + m g) . u
+        let axial = (f_a + self.weight_n).dot(u);
+        // F_tip_perp = -F_D_perp = -(a F_A_perp + (a - c) m g_perp) / (L - a)
+        let moment = f_a * a + self.weight_n * (a - self.com_m);
+        let moment_perp = moment - u * moment.dot(u);
+        let force_n = u * axial - moment_perp / lever_m;
+        // J = dF_tip/dF_A = u u^T - k (I - u u^T) = (1 + k) u u^T - k I, and
+        // diag(J C J^T)_i = k^2 C_ii - 2 k (1 + k) u_i (C u)_i + (1 + k)^2 u_i^2 (u . C u).
+        let cu = self.covariance_n2 * u;
+        let ucu = u.dot(&cu);
+        let p = 1.0 + k;
+        let var_n2 = self.covariance_diag_n2 * (k * k) - u.component_mul(&cu) * (2.0 * k * p)
+            + u.component_mul(u) * (p * p * ucu);
+        self.finish(u, force_n, &var_n2, lever_m, *f_a, 0.0)
+    }
+
+    /// MODEL.md 4.3 (d != 0): the 6x6 system, equilibrated so that every entry
+    /// is dimensionless and of order one (moment rows divided by L, the torsion
+    /// unknown taken as M_T / L).
+    fn with_offset(
+        &self,
+        pose: &Pose,
+        u: &Vec3,
+        f_a: &Vec3,
+    ) -> Result<TipForceEstimate, TipForceError> {
+        let w = pose.rod_normal;
+        let s = pose.support_along_rod_m;
+        if !finite3(&w) {
+            return Err(TipForceError::NonFinite {
+                input: "pose.rod_normal",
+            });
+        }
+        if !s.is_finite() {
+            return Err(TipForceError::NonFinite {
+                input: "pose.support_along_rod_m",
+            });
+        }
+        let unit_error = w.norm_squared() - 1.0;
+        if !within(unit_error, POSE_UNIT_TOLERANCE) {
+            return Err(TipForceError::InvalidPose {
+                quantity: "|rod_normal|^2 - 1",
+                value: unit_error,
+            });
+        }
+        let cross = u.dot(&w);
+        if !within(cross, POSE_UNIT_TOLERANCE) {
+            return Err(TipForceError::InvalidPose {
+                quantity: "rod_dir . rod_normal",
+                value: cross,
+            });
+        }
+        if !positive(s) {
+            return Err(TipForceError::InvalidPose {
+                quantity: "support_along_rod_m",
+                value: s,
+            });
+        }
+        let length = self.length_m;
+        let lever_m = length - s;
+        let singular = TipForceError::NotObservable {
+            lever_m,
+            std_max_n: f64::INFINITY,
+        };
+        if !positive(lever_m) {
+            return Err(singular);
+        }
+        // Torsion axis n = -(s4, 0, c4) = -(ux, 0, uz) / c5.
+        let heading = Vec3::new(u.x, 0.0, u.z);
+        let c5 = heading.norm();
+        if !positive(c5) {
+            return Err(singular);
+        }
+        let n = -heading / c5;
+        // Support basis across u: e1 = w, e2 = u x w.
+        let e1 = w;
+        let e2 = u.cross(&w);
+        let d = self.offset_m;
+        let r_b = (w * d + u * s) / length;
+        let r_c = (w * d + u * self.com_m) / length;
+        let r_d = (w * d + u * length) / length;
+
+        // Unknowns x = (F_D, b1, b2, M_T / L).
+        // Force:  F_D + b1 e1 + b2 e2                         = -(F_A + m g)
+        // Moment: r_D x F_D + b1 r_B x e1 + b2 r_B x e2 + (M_T/L) n = -r_C x m g   (all / L)
+        let mut k = Matrix6::<f64>::zeros();
+        k.fixed_view_mut::<3, 3>(0, 0).copy_from(&Mat3::identity());
+        k.fixed_view_mut::<3, 3>(3, 0)
+            .copy_from(&r_d.cross_matrix());
+        k.fixed_view_mut::<3, 1>(0, 3).copy_from(&e1);
+        k.fixed_view_mut::<3, 1>(3, 3).copy_from(&r_b.cross(&e1));
+        k.fixed_view_mut::<3, 1>(0, 4).copy_from(&e2);
+        k.fixed_view_mut::<3, 1>(3, 4).copy_from(&r_b.cross(&e2));
+        k.fixed_view_mut::<3, 1>(3, 5).copy_from(&n);
+
+        // Column 0: the measurement; columns 1..4: [I; 0], whose solution's top
+        // block is K^-1[0..3, 0..3] = dF_tip/dF_A (rhs = -F_A - m g, F_tip = -F_D).
+        let mut rhs = SMatrix::<f64, 6, 4>::zeros();
+        rhs.fixed_view_mut::<3, 1>(0, 0)
+            .copy_from(&(-(f_a + self.weight_n)));
+        rhs.fixed_view_mut::<3, 1>(3, 0)
+            .copy_from(&(-r_c.cross(&self.weight_n)));
+        rhs.fixed_view_mut::<3, 3>(0, 1)
+            .copy_from(&Mat3::identity());
+
+        let lu = k.lu();
+        let smallest_pivot = lu
+            .u()
+            .diagonal()
+            .iter()
+            .fold(f64::INFINITY, |acc: f64, p| acc.min(p.abs()));
+        if !at_least(smallest_pivot, MIN_RELATIVE_PIVOT) {
+            return Err(singular);
+        }
+        let Some(x) = lu.solve(&rhs) else {
+            return Err(singular);
+        };
+        let force_n: Vec3 = -x.fixed_view::<3, 1>(0, 0).clone_owned();
+        let Some(&torsion_scaled) = x.get((5, 0)) else {
+            return Err(singular);
+        };
+        let torsion_nm = torsion_scaled * length;
+        let jacobian: Mat3 = x.fixed_view::<3, 3>(0, 1).clone_owned();
+        // diag(J C J^T)_i = sum_k (J C)_ik J_ik.
+        let var_n2 = (jacobian * self.covariance_n2)
+            .component_mul(&jacobian)
+            .column_sum();
+        self.finish(u, force_n, &var_n2, lever_m, *f_a, torsion_nm)
+    }
+}
