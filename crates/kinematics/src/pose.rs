@@ -7,7 +7,7 @@
 //! rod does not reach.
 
 use crate::{Calibration, MIN_DISTANCE_M, Profile, Vec3};
-use libm::{asin, atan2, cos, sin, sqrt};
+use libm::{atan2, cos, sin, sqrt};
 
 /// Why a pose has no (unique, finite) kinematic solution.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -114,6 +114,7 @@ pub fn rod_frame(q4_rad: f64, q5_rad: f64) -> (Vec3, Vec3) {
 const VERTICAL_RATIO: f64 = 1e-9;
 
 /// Closed-form forward kinematics: active joints -> passive joints, points, u.
+#[inline]
 pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result<Pose, PoseError> {
     if !(q.q1_m.is_finite() && q.q2_m.is_finite() && q.q3_m.is_finite()) {
         return Err(PoseError::NonFinite {
@@ -139,10 +140,20 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
     if r_h <= VERTICAL_RATIO * rho {
         return Err(PoseError::VerticalRod { horizontal_m: r_h });
     }
-    let q4_rad = atan2(r.x, r.z);
-    let q5_rad = atan2(r.y, r_h) + asin(d / rho);
+    // q4 = atan2(rx, rz); q5 = alpha + beta with alpha = atan2(ry, r_h) and
+    // beta = asin(d / rho) (MODEL.md 3). Their sines and cosines follow from r
+    // without trigonometry; only the angles themselves need atan2.
+    let (inv_rho, inv_r_h) = (1.0 / rho, 1.0 / r_h);
+    let (s4, c4) = (r.x * inv_r_h, r.z * inv_r_h);
+    let (s_alpha, c_alpha) = (r.y * inv_rho, r_h * inv_rho);
     let s = sqrt(rho * rho - d * d);
-    let (rod_dir, rod_normal) = rod_frame(q4_rad, q5_rad);
+    let (s_beta, c_beta) = (d * inv_rho, s * inv_rho);
+    let s5 = s_alpha * c_beta + c_alpha * s_beta;
+    let c5 = c_alpha * c_beta - s_alpha * s_beta;
+    let q4_rad = atan2(r.x, r.z);
+    let q5_rad = atan2(s5, c5);
+    let rod_dir = Vec3::new(s4 * c5, s5, c4 * c5);
+    let rod_normal = Vec3::new(s4 * s5, -c5, c4 * s5);
     let margin_m = profile.length_m() - s;
     if margin_m.abs() < MIN_DISTANCE_M {
         return Err(PoseError::TipAtSupport { margin_m });

@@ -1,6 +1,11 @@
 //! The closed forms of MODEL.md 3 against an independent Denavit-Hartenberg chain,
 //! inverse kinematics round trips, degenerate poses and calibration validation.
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing, clippy::panic)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
 
 use core::f64::consts::{FRAC_PI_2, PI};
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -25,8 +30,15 @@ fn gravity() -> Vec3 {
 }
 
 fn calibration(p_home: Vec3, a_off: Vec3, support: Vec3) -> Calibration {
-    Calibration::new(p_home, a_off, Vec3::new(0.0, -0.03, 0.0), Matrix3::identity(), support, gravity())
-        .unwrap()
+    Calibration::new(
+        p_home,
+        a_off,
+        Vec3::new(0.0, -0.03, 0.0),
+        Matrix3::identity(),
+        support,
+        gravity(),
+    )
+    .unwrap()
 }
 
 /// Wraps an angle difference into (-pi, pi].
@@ -152,16 +164,33 @@ fn article_equations_8_to_10() {
     let a = Vec3::new(q3, q2, q1);
     let s = 0.12;
     let support = a + w * d + u * s;
-    let cal = calibration(Vec3::new(0.1, 0.2, 0.3), Vec3::new(-0.1, -0.2, -0.3), support);
+    let cal = calibration(
+        Vec3::new(0.1, 0.2, 0.3),
+        Vec3::new(-0.1, -0.2, -0.3),
+        support,
+    );
     let profile = Profile::new(l, d, 1.0, 0.1).unwrap();
-    let pose = forward(&cal, &profile, &ActiveJoints { q1_m: q1, q2_m: q2, q3_m: q3 }).unwrap();
+    let pose = forward(
+        &cal,
+        &profile,
+        &ActiveJoints {
+            q1_m: q1,
+            q2_m: q2,
+            q3_m: q3,
+        },
+    )
+    .unwrap();
     let (s4, c4, s5, c5) = (q4.sin(), q4.cos(), q5.sin(), q5.cos());
     let expected = Vec3::new(
         l * s4 * c5 + d * s4 * s5 + q3,
         l * s5 - d * c5 + q2,
         l * c4 * c5 + d * c4 * s5 + q1,
     );
-    assert!(close(&pose.tip_m, &expected, 1e-15), "{:?} vs {expected:?}", pose.tip_m);
+    assert!(
+        close(&pose.tip_m, &expected, 1e-15),
+        "{:?} vs {expected:?}",
+        pose.tip_m
+    );
 }
 
 /// d = 0: u = r/|r|, q5 = asin(ry/|r|), s = |r|; nominal insertion is q4 = pi/2, q5 = 0.
@@ -170,11 +199,24 @@ fn zero_offset_is_the_plain_direction_to_the_support() {
     let support = Vec3::new(0.45, 0.2, 0.0);
     let cal = calibration(Vec3::zeros(), Vec3::new(0.0, -0.08, 0.0), support);
     let profile = Profile::new(0.35, 0.0, 2.593, 0.103).unwrap();
-    let nominal = forward(&cal, &profile, &ActiveJoints { q1_m: 0.0, q2_m: 0.28, q3_m: 0.3 }).unwrap();
+    let nominal = forward(
+        &cal,
+        &profile,
+        &ActiveJoints {
+            q1_m: 0.0,
+            q2_m: 0.28,
+            q3_m: 0.3,
+        },
+    )
+    .unwrap();
     assert!((nominal.q4_rad - FRAC_PI_2).abs() < 1e-15 && nominal.q5_rad.abs() < 1e-15);
     assert!(close(&nominal.rod_dir, &Vec3::x(), 1e-15));
     assert!((nominal.support_distance_m - 0.15).abs() < 1e-15);
-    let q = ActiveJoints { q1_m: 0.02, q2_m: 0.25, q3_m: 0.31 };
+    let q = ActiveJoints {
+        q1_m: 0.02,
+        q2_m: 0.25,
+        q3_m: 0.31,
+    };
     let pose = forward(&cal, &profile, &q).unwrap();
     let r = support - (q.displacement_m() + Vec3::new(0.0, -0.08, 0.0));
     assert!(close(&pose.rod_dir, &(r / r.norm()), 1e-15));
@@ -188,7 +230,11 @@ fn degenerate_poses_are_typed_errors() {
     let cal = calibration(Vec3::zeros(), Vec3::zeros(), support);
     let rod = Profile::new(0.35, 0.0, 2.0, 0.1).unwrap();
     let offset_rod = Profile::new(0.35, 0.02, 2.0, 0.1).unwrap();
-    let at = |x: f64, y: f64, z: f64| ActiveJoints { q3_m: x, q2_m: y, q1_m: z };
+    let at = |x: f64, y: f64, z: f64| ActiveJoints {
+        q3_m: x,
+        q2_m: y,
+        q1_m: z,
+    };
     assert!(matches!(
         forward(&cal, &rod, &at(0.45, 0.2, 0.0)),
         Err(PoseError::UJointAtSupport { .. })
@@ -197,8 +243,14 @@ fn degenerate_poses_are_typed_errors() {
         forward(&cal, &offset_rod, &at(0.44, 0.2, 0.0)),
         Err(PoseError::SupportWithinOffset { .. })
     ));
-    assert!(matches!(forward(&cal, &rod, &at(0.45, 0.0, 0.0)), Err(PoseError::VerticalRod { .. })));
-    assert!(matches!(forward(&cal, &rod, &at(0.10, 0.2, 0.0)), Err(PoseError::TipAtSupport { .. })));
+    assert!(matches!(
+        forward(&cal, &rod, &at(0.45, 0.0, 0.0)),
+        Err(PoseError::VerticalRod { .. })
+    ));
+    assert!(matches!(
+        forward(&cal, &rod, &at(0.10, 0.2, 0.0)),
+        Err(PoseError::TipAtSupport { .. })
+    ));
     assert!(matches!(
         forward(&cal, &rod, &at(0.05, 0.2, 0.0)),
         Err(PoseError::SupportBeyondTip { .. })
@@ -208,7 +260,10 @@ fn degenerate_poses_are_typed_errors() {
         Err(PoseError::NonFinite { .. })
     ));
     // Inverse: the tip at the support, out of reach, vertical, NaN.
-    assert!(matches!(inverse(&cal, &rod, &support), Err(PoseError::TipAtSupport { .. })));
+    assert!(matches!(
+        inverse(&cal, &rod, &support),
+        Err(PoseError::TipAtSupport { .. })
+    ));
     assert!(matches!(
         inverse(&cal, &rod, &(support + Vec3::x() * 0.4)),
         Err(PoseError::SupportBeyondTip { .. })
@@ -235,10 +290,16 @@ fn invalid_calibrations_and_profiles_are_refused() {
         Err(ConfigError::RotationNotOrthonormal { .. })
     ));
     let reflection = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
-    assert!(matches!(ok(reflection, gravity()), Err(ConfigError::RotationNotProper { .. })));
+    assert!(matches!(
+        ok(reflection, gravity()),
+        Err(ConfigError::RotationNotProper { .. })
+    ));
     let mut nan_rotation = Matrix3::identity();
     nan_rotation[(1, 2)] = f64::NAN;
-    assert!(matches!(ok(nan_rotation, gravity()), Err(ConfigError::NonFinite { .. })));
+    assert!(matches!(
+        ok(nan_rotation, gravity()),
+        Err(ConfigError::NonFinite { .. })
+    ));
     assert!(matches!(
         ok(Matrix3::identity(), Vec3::zeros()),
         Err(ConfigError::GravityOutOfRange { .. })
@@ -254,8 +315,20 @@ fn invalid_calibrations_and_profiles_are_refused() {
         ),
         Err(ConfigError::NonFinite { field: "p_home" })
     ));
-    assert!(matches!(Profile::new(0.0, 0.0, 1.0, 0.1), Err(ConfigError::NonPositiveLength { .. })));
-    assert!(matches!(Profile::new(0.3, 0.3, 1.0, 0.1), Err(ConfigError::OffsetTooLarge { .. })));
-    assert!(matches!(Profile::new(0.3, 0.0, -1.0, 0.1), Err(ConfigError::NegativeMass { .. })));
-    assert!(matches!(Profile::new(0.3, 0.0, 1.0, f64::NAN), Err(ConfigError::NonFinite { .. })));
+    assert!(matches!(
+        Profile::new(0.0, 0.0, 1.0, 0.1),
+        Err(ConfigError::NonPositiveLength { .. })
+    ));
+    assert!(matches!(
+        Profile::new(0.3, 0.3, 1.0, 0.1),
+        Err(ConfigError::OffsetTooLarge { .. })
+    ));
+    assert!(matches!(
+        Profile::new(0.3, 0.0, -1.0, 0.1),
+        Err(ConfigError::NegativeMass { .. })
+    ));
+    assert!(matches!(
+        Profile::new(0.3, 0.0, 1.0, f64::NAN),
+        Err(ConfigError::NonFinite { .. })
+    ));
 }

@@ -109,7 +109,10 @@ pub fn ujoint_force(
         k[(3 + i, 5)] = n[i];
         rhs[3 + i] = -known_moment[i];
     }
-    let x = k.svd(true, true).solve(&rhs, 1e-14).unwrap();
+    let x = k
+        .lu()
+        .solve(&rhs)
+        .expect("the equilibrium system is singular");
     (Vector3::new(x[0], x[1], x[2]), x[5])
 }
 
@@ -245,4 +248,80 @@ pub fn simulate_static_poses(
             }
         })
         .collect()
+}
+
+/// The calibration of INTERFACES.md 2's example file (R_0s = I).
+pub fn example_calibration() -> sar_estimator::Calibration {
+    sar_estimator::Calibration::new(
+        Vector3::zeros(),
+        Vector3::new(0.0, -0.08, 0.0),
+        Vector3::new(0.0, -0.03, 0.0),
+        Matrix3::identity(),
+        Vector3::new(0.45, 0.20, 0.0),
+        gravity(),
+    )
+    .unwrap()
+}
+
+/// Manipulator 2 of Table 2 (L = 0.35 m, d = 0).
+pub fn manipulator2() -> sar_estimator::Profile {
+    sar_estimator::Profile::new(0.35, 0.0, 2.593, 0.103).unwrap()
+}
+
+/// The truth behind `example_calibration` and `manipulator2`, frictionless.
+pub fn manipulator2_truth() -> Truth {
+    Truth {
+        mass_kg: 2.593,
+        com_m: 0.103,
+        length_m: 0.35,
+        offset_m: 0.0,
+        support_m: Vector3::new(0.45, 0.20, 0.0),
+        gravity_mps2: gravity(),
+        friction_n: 0.0,
+    }
+}
+
+/// Guard limits for tests: total 10/15 N, axial 8/12 N, lateral 6/10 N,
+/// hysteresis 1 N, debounce 3 cycles, inputs at most 5 ms old, std at most 2 N.
+pub fn test_guard_limits() -> sar_estimator::guard::GuardLimits {
+    sar_estimator::guard::GuardLimits {
+        warn_total_n: 10.0,
+        stop_total_n: 15.0,
+        warn_axial_n: 8.0,
+        stop_axial_n: 12.0,
+        warn_lateral_n: 6.0,
+        stop_lateral_n: 10.0,
+        hysteresis_n: 1.0,
+        debounce_cycles: 3,
+        max_sensor_age_ns: 5_000_000,
+        max_joints_age_ns: 5_000_000,
+        max_std_n: 2.0,
+    }
+}
+
+/// The per-cycle estimator of the example robot with manipulator 2 and HEX-6 noise.
+pub fn example_estimator_config() -> sar_estimator::cycle::EstimatorConfig {
+    sar_estimator::cycle::EstimatorConfig {
+        calibration: example_calibration(),
+        profile: manipulator2(),
+        noise: sar_estimator::SensorNoise::hex6(),
+        tip: sar_estimator::tip_force::TipForceConfig { max_std_n: 2.0 },
+        guard: sar_estimator::guard::GuardConfig::new(test_guard_limits()).unwrap(),
+    }
+}
+
+/// The sensor reading (sensor frame, R_0s = I, bias `bias_n`) for the example
+/// robot at active joints `q` = (q1, q2, q3) with `tip_force_n` at the tip.
+pub fn example_reading(
+    q: [f64; 3],
+    tip_force_n: &Vector3<f64>,
+    bias_n: &Vector3<f64>,
+) -> Vector3<f64> {
+    let truth = manipulator2_truth();
+    let a_m = Vector3::new(q[2], q[1] - 0.08, q[0]);
+    let r = truth.support_m - a_m;
+    let u = r / r.norm();
+    let (_, w) = rod_frame(u.x.atan2(u.z), u.y.asin());
+    let (f_a, _) = ujoint_force(&truth, &a_m, &u, &w, tip_force_n, 0.0);
+    ideal_reading(&Matrix3::identity(), &f_a, bias_n)
 }

@@ -1,0 +1,208 @@
+//! The per-cycle path allocates nothing: it runs many times under a counting
+//! global allocator that counts every allocation made on this test's thread.
+#![allow(
+    unsafe_code,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note() {
+    // try_with: the thread-local may be gone during thread teardown.
+    let _ = ARMED.try_with(|armed| {
+        if armed.get() {
+            let _ = COUNT.try_with(|c| c.set(c.get() + 1));
+        }
+    });
+}
+
+// SAFETY: forwards every call unchanged to the system allocator; only counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Counts the allocations `f` makes on this thread.
+fn allocations_in<R>(f: impl FnOnce() -> R) -> (R, u64) {
+    COUNT.with(|c| c.set(0));
+    ARMED.with(|a| a.set(true));
+    let r = f();
+    ARMED.with(|a| a.set(false));
+    (r, COUNT.with(Cell::get))
+}
+
+#[test]
+fn the_counter_sees_an_allocation() {
+    let (v, n) = allocations_in(|| std::hint::black_box(vec![1u8; 64]));
+    assert_eq!(v.len(), 64);
+    assert!(n >= 1, "the counting allocator must see a Vec's allocation");
+}
+
+mod common;
+use common::*;
+use nalgebra::Vector3;
+use sar_estimator::SensorNoise;
+use sar_estimator::cycle::{CycleInput, Estimator, JointSample, SensorSample};
+use sar_estimator::guard::GuardState;
+use sar_estimator::identification::{Identification, IdentificationOptions};
+use sar_estimator::support::{SupportCalibration, SupportOptions};
+use sar_kinematics::ActiveJoints;
+
+/// Builds a scripted run (before counting): moving poses, pushes through Warn
+/// and Stop, a NaN sample, a stale sample, a degenerate pose, an unobservable
+/// pose, so that every branch of the path is taken.
+fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
+    let bias_n = Vector3::new(0.4, -1.1, 0.25);
+    let mut sensor = NoisySensor::new(SensorNoise::HEX6_STD_N, 0x5eed_0a11);
+    (1..=cycles)
+        .map(|cycle| {
+            let phase = cycle % 1000;
+            let t = cycle as f64 * 1e-3;
+            let mut q = [
+                0.01 * t.sin(),
+                0.28 + 0.02 * (0.7 * t).sin(),
+                0.30 + 0.02 * (0.3 * t).cos(),
+            ];
+            let tip = Vector3::new(f64::from(phase as u32 % 400) * 0.05, 0.5, -0.3);
+            let mut reading = sensor.sample(&example_reading(q, &tip, &bias_n));
+            let now_ns = 1_000_000_000 + cycle * 1_000_000;
+            let mut sensor_stamp_ns = now_ns - 200_000;
+            match phase {
+                500 => reading.x = f64::NAN,
+                600 => sensor_stamp_ns = now_ns - 50_000_000,
+                700 => q = [0.0, 0.28, 0.45], // U-joint at the support
+                800 => q = [0.0, 0.28, 0.1005], // tip almost at the support
+                _ => {}
+            }
+            CycleInput {
+                cycle,
+                now_ns,
+                sensor: SensorSample {
+                    force_n: reading,
+                    torque_nm: Vector3::zeros(),
+                    stamp_ns: sensor_stamp_ns,
+                    valid: true,
+                },
+                joints: JointSample {
+                    joints: ActiveJoints {
+                        q1_m: q[0],
+                        q2_m: q[1],
+                        q3_m: q[2],
+                    },
+                    stamp_ns: now_ns - 100_000,
+                    valid: true,
+                },
+            }
+        })
+        .collect()
+}
+
+/// 20 000 cycles of the whole per-cycle path (kinematics, tip force, guard,
+/// resets) allocate nothing; and the run did visit Warn, Stop and Fault.
+#[test]
+fn the_per_cycle_path_allocates_nothing() {
+    let inputs = scripted_inputs(20_000);
+    let mut estimator =
+        Estimator::new(&example_estimator_config(), Vector3::new(0.4, -1.1, 0.25)).unwrap();
+    let mut seen = [false; 4];
+    let (_, allocations) = allocations_in(|| {
+        for input in &inputs {
+            let out = estimator.cycle(input);
+            let k = match out.guard_state {
+                GuardState::Ok => 0,
+                GuardState::Warn => 1,
+                GuardState::Stop => 2,
+                GuardState::Fault => 3,
+            };
+            seen[k] = true;
+            if matches!(out.guard_state, GuardState::Stop | GuardState::Fault) {
+                let _ = estimator.reset_guard(input.cycle);
+            }
+        }
+    });
+    assert_eq!(allocations, 0, "the per-cycle path allocated");
+    assert_eq!(seen, [true; 4], "the script must visit every guard state");
+}
+
+/// Identification updates and solves, and a support fit, allocate nothing either.
+#[test]
+fn identification_and_support_fit_allocate_nothing() {
+    let truth = Truth {
+        friction_n: 0.3,
+        ..manipulator2_truth()
+    };
+    let cal = example_calibration();
+    let bias_n = Vector3::new(0.4, -1.1, 0.25);
+    let mut sensor = NoisySensor::new(SensorNoise::HEX6_STD_N, 7);
+    let poses = simulate_static_poses(
+        &truth,
+        &cal.sensor_rotation(),
+        &bias_n,
+        &cone_protocol(),
+        10,
+        &mut sensor,
+    );
+    let options = IdentificationOptions {
+        bias_across_gravity: true,
+        friction: true,
+    };
+    let mut ident = Identification::new(&cal, &SensorNoise::hex6(), bias_n, options).unwrap();
+    let mut support = SupportCalibration::new(
+        &cal,
+        &SensorNoise::hex6(),
+        bias_n,
+        SupportOptions {
+            friction: true,
+            calibrate_support: true,
+            max_support_std_m: 1e-3,
+            max_iterations: 50,
+        },
+    )
+    .unwrap();
+    let ((m_ident, m_support), allocations) = allocations_in(|| {
+        for p in &poses {
+            ident.add(p).unwrap();
+            support.push(p).unwrap();
+        }
+        (
+            ident.solve().unwrap().mass_kg,
+            support.fit().unwrap().mass_kg,
+        )
+    });
+    assert_eq!(allocations, 0);
+    assert!(
+        (m_ident / truth.mass_kg - 1.0).abs() < 0.01
+            && (m_support / truth.mass_kg - 1.0).abs() < 0.01
+    );
+}
