@@ -1,0 +1,81 @@
+//! Clocks: the host's monotonic clock, and a simulated clock that tests and
+//! scenario runs advance by hand, so that a simulation is deterministic.
+
+use std::cell::Cell;
+use std::rc::Rc;
+
+/// A monotonic clock in nanoseconds.
+pub trait Clock {
+    /// Now, ns.
+    fn now_ns(&self) -> u64;
+    /// Returns once `now_ns() >= deadline_ns` (at once if already past).
+    fn sleep_until_ns(&self, deadline_ns: u64);
+}
+
+/// The host's `CLOCK_MONOTONIC`, the time base of every stamp and recording.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MonotonicClock;
+
+impl Clock for MonotonicClock {
+    fn now_ns(&self) -> u64 {
+        let mut ts = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC exists on Linux.
+        #[allow(unsafe_code)]
+        let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+        if rc != 0 {
+            return 0;
+        }
+        u64::try_from(ts.tv_sec)
+            .unwrap_or(0)
+            .saturating_mul(1_000_000_000)
+            .saturating_add(u64::try_from(ts.tv_nsec).unwrap_or(0))
+    }
+
+    fn sleep_until_ns(&self, deadline_ns: u64) {
+        // Bounded: each sleep is at most the remaining time, and the loop ends
+        // as soon as the clock passes the deadline.
+        loop {
+            let now = self.now_ns();
+            if now >= deadline_ns {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_nanos(deadline_ns - now));
+        }
+    }
+}
+
+/// A simulated clock: time moves only when told. Clones share the same time.
+#[derive(Debug, Clone, Default)]
+pub struct SimClock {
+    now_ns: Rc<Cell<u64>>,
+}
+
+impl SimClock {
+    /// A clock at `start_ns`.
+    pub fn new(start_ns: u64) -> Self {
+        Self {
+            now_ns: Rc::new(Cell::new(start_ns)),
+        }
+    }
+
+    /// Moves time forward by `dt_ns` (saturating).
+    pub fn advance_ns(&self, dt_ns: u64) {
+        self.now_ns.set(self.now_ns.get().saturating_add(dt_ns));
+    }
+}
+
+impl Clock for SimClock {
+    fn now_ns(&self) -> u64 {
+        self.now_ns.get()
+    }
+
+    /// Simulated sleep: jumps to the deadline (never backwards).
+    fn sleep_until_ns(&self, deadline_ns: u64) {
+        if deadline_ns > self.now_ns.get() {
+            self.now_ns.set(deadline_ns);
+        }
+    }
+}

@@ -1,0 +1,70 @@
+//! The six-axis force/torque sensor trait and its sample.
+
+use crate::{Error, Vec3};
+
+/// The device's own status word. Zero is "all good"; other bits are
+/// device-specific (overload, temperature, ...) and make the sample invalid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct SensorStatus(pub u32);
+
+impl SensorStatus {
+    /// All good.
+    pub const OK: Self = Self(0);
+
+    /// Whether the device says the sample is good.
+    pub fn is_ok(self) -> bool {
+        self == Self::OK
+    }
+}
+
+/// One force/torque sample, as the driver received it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WrenchSample {
+    /// Force, sensor frame, N, after count scaling, before any bias removal.
+    pub force_n: Vec3,
+    /// Torque, sensor frame, N m.
+    pub torque_nm: Vec3,
+    /// The device's own sample counter (wraps at u32::MAX); a gap means samples
+    /// were lost.
+    pub counter: u32,
+    /// The device's status for this sample.
+    pub status: SensorStatus,
+    /// Host monotonic time at which the sample was received, ns.
+    pub received_ns: u64,
+}
+
+impl WrenchSample {
+    /// Valid: the device says so and every number is finite.
+    pub fn is_valid(&self) -> bool {
+        self.status.is_ok()
+            && self.force_n.iter().all(|x| x.is_finite())
+            && self.torque_nm.iter().all(|x| x.is_finite())
+    }
+
+    /// Age of the sample at host time `now_ns` (0 for a sample from the future).
+    pub fn age_ns(&self, now_ns: u64) -> u64 {
+        now_ns.saturating_sub(self.received_ns)
+    }
+}
+
+/// A six-axis force/torque sensor.
+pub trait ForceSensor {
+    /// The implementation's error.
+    type Error: Error;
+
+    /// The newest sample received since the last `poll` or `wait`, or `None`
+    /// when nothing new arrived. Never blocks. Older unreturned samples are
+    /// dropped (their loss shows as a gap in `counter`).
+    fn poll(&mut self) -> Result<Option<WrenchSample>, Self::Error>;
+
+    /// Waits at most `timeout_ns` for a sample newer than the last one returned,
+    /// and returns it; `ErrorKind::Timeout` when none arrived in time.
+    fn wait(&mut self, timeout_ns: u64) -> Result<WrenchSample, Self::Error>;
+
+    /// Device-side tare: the device subtracts its present reading from later
+    /// ones. `ErrorKind::Unsupported` where the device has no such command.
+    fn tare(&mut self) -> Result<(), Self::Error>;
+
+    /// Undoes the device-side tare. `ErrorKind::Unsupported` likewise.
+    fn clear_tare(&mut self) -> Result<(), Self::Error>;
+}
