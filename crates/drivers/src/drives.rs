@@ -7,9 +7,13 @@ use sar_kinematics::ActiveJoints;
 /// The drives' state, a reduced CiA 402 state machine.
 ///
 /// `Ready --enable--> Enabled`; `Enabled --disable--> Ready`;
-/// any state `--quick_stop--> QuickStop` (decelerate at the limit, then hold);
-/// `QuickStop --disable--> Ready`; a fault from any state `--> Fault`;
-/// `Fault --fault_reset--> Ready` once the cause is gone.
+/// `Ready`, `Enabled` or `QuickStop --quick_stop--> QuickStop` (decelerate at
+/// the limit, then hold); `QuickStop --disable--> Ready`; a fault from any state
+/// `--> Fault`; `Fault --fault_reset--> Ready` once the cause is gone.
+///
+/// A fault is only ever cleared by `fault_reset`: in `Fault`, `quick_stop` is
+/// accepted (the axes are already braking or stopped) but the state stays
+/// `Fault`, and `disable` and `enable` are `ErrorKind::InvalidState`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum DriveState {
     /// Powered, not following targets.
@@ -50,7 +54,8 @@ pub trait AxisDrives {
     /// `Ready -> Enabled`; `ErrorKind::InvalidState` from `Fault` or `QuickStop`.
     fn enable(&mut self) -> Result<(), Self::Error>;
 
-    /// `Enabled` or `QuickStop -> Ready` (the axes stop following targets).
+    /// `Enabled` or `QuickStop -> Ready` (the axes brake and stop following
+    /// targets); `ErrorKind::InvalidState` in `Fault`.
     fn disable(&mut self) -> Result<(), Self::Error>;
 
     /// New target positions (q1, q2, q3 in metres). Only while `Enabled`
@@ -58,7 +63,8 @@ pub trait AxisDrives {
     /// targets are `ErrorKind::InvalidArgument`.
     fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), Self::Error>;
 
-    /// Quick stop: decelerate at the limit and hold. Allowed in every state.
+    /// Quick stop: decelerate at the limit and hold. Accepted in every state;
+    /// in `Fault` the state stays `Fault`.
     fn quick_stop(&mut self) -> Result<(), Self::Error>;
 
     /// `Fault -> Ready` once the cause is gone; `ErrorKind::InvalidState` in
