@@ -299,6 +299,12 @@ fn at<const N: usize>(v: &SVector<f64, N>, i: usize) -> f64 {
     v.get(i).copied().unwrap_or(0.0)
 }
 
+/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
+/// give 0, a standard error of zero, which the finiteness checks cannot catch).
+fn non_negative(x: f64) -> f64 {
+    if x < 0.0 { 0.0 } else { x }
+}
+
 /// The streaming weighted least-squares identification of MODEL.md 5.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Identification {
@@ -569,7 +575,7 @@ impl Identification {
         // Never claim more than the noise model, nor less than the scatter shows.
         let scale = if dof > 0 { chi2_dof.max(1.0) } else { 1.0 };
         let covariance = unit_covariance * scale;
-        let var = |i: usize| covariance.get((i, i)).copied().unwrap_or(0.0).max(0.0);
+        let var = |i: usize| non_negative(covariance.get((i, i)).copied().unwrap_or(0.0));
         let std = |i: usize| ComplexField::sqrt(var(i));
 
         let mass_kg = at(&theta, 0);
@@ -586,7 +592,7 @@ impl Identification {
             mass_kg,
             mass_std_kg: std(0),
             com_m,
-            com_std_m: ComplexField::sqrt(com_var.max(0.0)),
+            com_std_m: ComplexField::sqrt(non_negative(com_var)),
             moment_kgm,
             moment_std_kgm: std(1),
             bias_across_n: self
@@ -798,7 +804,7 @@ impl LineFit {
         }
         let b1 = self.sxy / self.sxx;
         let b0 = self.mean_y - b1 * self.mean_x;
-        let ssr = (self.syy - b1 * self.sxy).max(0.0);
+        let ssr = non_negative(self.syy - b1 * self.sxy);
         let s2 = ssr / (n - 2.0);
         let var_b1 = s2 / self.sxx;
         let var_b0 = s2 * (1.0 / n + self.mean_x * self.mean_x / self.sxx);
@@ -821,7 +827,7 @@ impl LineFit {
             mass_kg: b0 / self.gravity_norm_mps2,
             mass_std_kg: ComplexField::sqrt(var_b0) / self.gravity_norm_mps2,
             com_m,
-            com_std_m: ComplexField::sqrt(com_var.max(0.0)),
+            com_std_m: ComplexField::sqrt(non_negative(com_var)),
             residual_rms_n: ComplexField::sqrt(ssr / n),
             condition,
             poses: self.count,
