@@ -261,7 +261,9 @@ fn equilibrium_residual(
     let f_d = -tip_n;
     let f_b = -(f_a + weight + f_d);
     let a_m = case.pose.ujoint_m;
-    let n = -Vector3::new(case.u.x, 0.0, case.u.z).normalize();
+    // MODEL.md 4: n = -(s4, 0, c4).
+    let q4 = case.pose.q4_rad;
+    let n = -Vector3::new(q4.sin(), 0.0, q4.cos());
     let moment = (t.support_m - a_m).cross(&f_b)
         + (case.pose.com_m - a_m).cross(&weight)
         + (case.pose.tip_m - a_m).cross(&f_d)
@@ -825,4 +827,36 @@ fn basis_across_r_ab_is_wrong_with_an_offset() {
     // The order of magnitude of MODEL.md 4.3 (loosely: within a factor 3).
     assert!((0.5 / 3.0..0.5 * 3.0).contains(&worst[0]), "{worst:?}");
     assert!((2.5 / 3.0..2.5 * 3.0).contains(&worst[1]), "{worst:?}");
+}
+
+/// d != 0 with the rod tilted up past the vertical (q5 = 1.8 rad, c5 < 0), a
+/// pose the forward kinematics give when B is close above A: the torsion is
+/// reported along MODEL.md's n = -(s4, 0, c4), not along -(ux, 0, uz)/|..|
+/// (which is +(s4, 0, c4) here, the simulator's convention), and the six
+/// equilibrium equations hold with it.
+#[test]
+fn torsion_follows_the_model_axis_when_c5_is_negative() {
+    let case = build(&Params {
+        offset_m: 0.03,
+        support_frac: 0.05 / 0.35,
+        ..base_params(1.2, 1.8, [0.3, -0.2, 0.1])
+    });
+    assert!(case.pose.q5_rad.cos() < 0.0);
+    let est = estimator(&case, 1e9)
+        .estimate(&case.pose, &case.reading_n, &case.bias_n)
+        .unwrap();
+    assert!((est.force_n - case.tip_n).norm() < 1e-9 * force_scale(&case));
+    // The simulator's n is -(ux, 0, uz)/|..| = +(s4, 0, c4) here.
+    let n_sim = -Vector3::new(case.u.x, 0.0, case.u.z).normalize();
+    let n_model = -Vector3::new(case.pose.q4_rad.sin(), 0.0, case.pose.q4_rad.cos());
+    assert!((n_sim + n_model).norm() < 1e-12);
+    assert!(case.torsion_nm.abs() > 1e-3, "{}", case.torsion_nm);
+    assert!(
+        (est.torsion_nm + case.torsion_nm).abs() < 1e-9 * force_scale(&case),
+        "{} vs {}",
+        est.torsion_nm,
+        -case.torsion_nm
+    );
+    let residual = equilibrium_residual(&case, &est.force_n, &est.ujoint_force_n, est.torsion_nm);
+    assert!(residual < EQUILIBRIUM_TOLERANCE, "{residual:e}");
 }
