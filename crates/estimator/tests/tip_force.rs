@@ -860,3 +860,71 @@ fn torsion_follows_the_model_axis_when_c5_is_negative() {
     let residual = equilibrium_residual(&case, &est.force_n, &est.ujoint_force_n, est.torsion_nm);
     assert!(residual < EQUILIBRIUM_TOLERANCE, "{residual:e}");
 }
+
+/// Signs by hand, without the simulator: rod horizontal along +X0 (u = X0),
+/// a = 0.15 m, L = 0.35 m, R_0s = I, no bias.
+/// - Massless rod, the tip pushing 5 N into the tissue along +X0: the tissue
+///   pushes back (F_D = -5 X0), the support takes nothing along u, so the robot
+///   pushes F_A = +5 X0 and the sensor reads what the tool applies to it,
+///   f_s = -F_A = (-5, 0, 0). That reading must give F_tip = (+5, 0, 0).
+/// - Massless rod, the tip pushing 2 N sideways along +Z0: moments about A give
+///   F_B = -(L / a) F_D, so F_A = -F_B - F_D = ((L - a) / a) F_D
+///   = -(0.2 / 0.15) 2 Z0 and f_s = (0, 0, +8/3).
+/// - A 2 kg rod with c = 0.1 m, nothing at the tip: F_A,y = m|g| - m c |g| / a
+///   (MODEL.md 5.2), so f_s,y = -(2 - 0.2 / 0.15) |g| gives F_tip = 0.
+#[test]
+fn signs_by_hand_on_a_horizontal_rod() {
+    let g = 9.80665;
+    let support = Vector3::new(0.45, 0.2, 0.0);
+    let cal = Calibration::new(
+        Vector3::zeros(),
+        Vector3::zeros(),
+        Vector3::zeros(),
+        Matrix3::identity(),
+        support,
+        Vector3::new(0.0, -g, 0.0),
+    )
+    .unwrap();
+    let joints = ActiveJoints {
+        q1_m: 0.0,
+        q2_m: 0.2,
+        q3_m: 0.3,
+    };
+    for (mass_kg, reading, expected) in [
+        (
+            0.0,
+            Vector3::new(-5.0, 0.0, 0.0),
+            Vector3::new(5.0, 0.0, 0.0),
+        ),
+        (
+            0.0,
+            Vector3::new(0.0, 0.0, 8.0 / 3.0),
+            Vector3::new(0.0, 0.0, 2.0),
+        ),
+        (
+            2.0,
+            Vector3::new(0.0, -(2.0 - 0.2 / 0.15) * g, 0.0),
+            Vector3::zeros(),
+        ),
+    ] {
+        let profile = Profile::new(0.35, 0.0, mass_kg, 0.1).unwrap();
+        let pose = forward(&cal, &profile, &joints).unwrap();
+        assert!((pose.rod_dir - Vector3::x()).norm() < 1e-15);
+        assert!((pose.support_distance_m - 0.15).abs() < 1e-15);
+        let est = TipForceEstimator::new(
+            &cal,
+            &profile,
+            &SensorNoise::hex6(),
+            TipForceConfig { max_std_n: 5.0 },
+        )
+        .unwrap()
+        .estimate(&pose, &reading, &Vector3::zeros())
+        .unwrap();
+        assert!(
+            (est.force_n - expected).norm() < 1e-12,
+            "reading {reading:?}: {:?} vs {expected:?}",
+            est.force_n
+        );
+        assert!((est.axial_n - expected.x).abs() < 1e-12);
+    }
+}
