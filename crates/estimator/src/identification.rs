@@ -310,7 +310,8 @@ fn non_negative(x: f64) -> f64 {
 pub struct Identification {
     support_m: Vec3,
     gravity_mps2: Vec3,
-    rotation: Mat3,
+    /// For R_0s and F_A = [`crate::ujoint_force_n`].
+    calibration: Calibration,
     bias_n: Vec3,
     variance_n2: Vec3,
     bias_basis_s: [Vec3; 2],
@@ -360,7 +361,7 @@ impl Identification {
         Ok(Self {
             support_m: cal.support_m(),
             gravity_mps2: cal.gravity_mps2(),
-            rotation: cal.sensor_rotation(),
+            calibration: *cal,
             bias_n,
             variance_n2,
             bias_basis_s: bias_across_gravity_basis(cal),
@@ -398,7 +399,8 @@ impl Identification {
             .rows
             .checked_add(3)
             .ok_or(IdentificationError::TooManyPoses { poses: self.poses })?;
-        let force_a_n = -(self.rotation * (pose.mean_reading_n - self.bias_n));
+        let force_a_n =
+            crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
         finite_vec(&force_a_n, "F_A")?;
 
         // G: rows p1.(u x v), p2.(u x v), u.v; orthonormal.
@@ -412,7 +414,7 @@ impl Identification {
         let gravity_rows: [f64; 3] = (g_rows * self.gravity_mps2).into();
         let moment_coef = [1.0 / a, 1.0 / a, 0.0];
         let friction_coef = [0.0, 0.0, pose.slide_sign];
-        let g_r = g_rows * self.rotation;
+        let g_r = g_rows * self.calibration.sensor_rotation();
         let [e1, e2] = self.bias_basis_s;
         let bias1: [f64; 3] = (-(g_r * e1)).into();
         let bias2: [f64; 3] = (-(g_r * e2)).into();
@@ -651,7 +653,8 @@ pub struct LineFit {
     gravity_norm_mps2: f64,
     /// Unit vector against gravity, {0}.
     up: Vec3,
-    rotation: Mat3,
+    /// For F_A = [`crate::ujoint_force_n`].
+    calibration: Calibration,
     bias_n: Vec3,
     tolerance_rad: f64,
     sin_tolerance: f64,
@@ -711,7 +714,7 @@ impl LineFit {
             support_m: cal.support_m(),
             gravity_norm_mps2,
             up: -gravity / gravity_norm_mps2,
-            rotation: cal.sensor_rotation(),
+            calibration: *cal,
             bias_n,
             tolerance_rad: horizontal_tolerance_rad,
             sin_tolerance: ComplexField::sin(horizontal_tolerance_rad),
@@ -741,7 +744,8 @@ impl LineFit {
             .count
             .checked_add(1)
             .ok_or(IdentificationError::TooManyPoses { poses: self.count })?;
-        let force_a_n = -(self.rotation * (pose.mean_reading_n - self.bias_n));
+        let force_a_n =
+            crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
         let x = 1.0 / a;
         let y = force_a_n.dot(&self.up);
         finite(y, "vertical force")?;
