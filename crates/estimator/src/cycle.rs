@@ -98,6 +98,18 @@ pub struct EstimatorConfig {
     pub guard: GuardConfig,
 }
 
+/// Refuses a tare with a NaN or infinite component, reporting that component.
+fn check_tare(bias_n: &Vec3) -> Result<(), SettingError> {
+    match bias_n.iter().find(|x| !x.is_finite()) {
+        Some(&value) => Err(SettingError::Invalid {
+            field: "bias_n",
+            value,
+            why: "the tare must be finite",
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The per-cycle estimator: owns the tip-force estimator, the tare and the guard.
 #[derive(Debug, Clone)]
 pub struct Estimator {
@@ -112,13 +124,7 @@ pub struct Estimator {
 impl Estimator {
     /// Builds the estimator; `bias_n` is the sensor's tare (sensor frame, N).
     pub fn new(config: &EstimatorConfig, bias_n: Vec3) -> Result<Self, SettingError> {
-        if !bias_n.iter().all(|x| x.is_finite()) {
-            return Err(SettingError::Invalid {
-                field: "bias_n",
-                value: f64::NAN,
-                why: "the tare must be finite",
-            });
-        }
+        check_tare(&bias_n)?;
         let guard = Guard::new(config.guard);
         let last = CycleOutput {
             cycle: 0,
@@ -216,13 +222,7 @@ impl Estimator {
 
     /// Replaces the tare (sensor frame, N). Refuses a non-finite one.
     pub fn set_bias(&mut self, bias_n: Vec3) -> Result<(), SettingError> {
-        if !bias_n.iter().all(|x| x.is_finite()) {
-            return Err(SettingError::Invalid {
-                field: "bias_n",
-                value: f64::NAN,
-                why: "the tare must be finite",
-            });
-        }
+        check_tare(&bias_n)?;
         self.bias_n = bias_n;
         Ok(())
     }

@@ -299,12 +299,19 @@ fn at<const N: usize>(v: &SVector<f64, N>, i: usize) -> f64 {
     v.get(i).copied().unwrap_or(0.0)
 }
 
+/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
+/// give 0, a standard error of zero, which the finiteness checks cannot catch).
+fn non_negative(x: f64) -> f64 {
+    if x < 0.0 { 0.0 } else { x }
+}
+
 /// The streaming weighted least-squares identification of MODEL.md 5.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Identification {
     support_m: Vec3,
     gravity_mps2: Vec3,
-    rotation: Mat3,
+    /// For R_0s and F_A = [`crate::ujoint_force_n`].
+    calibration: Calibration,
     bias_n: Vec3,
     variance_n2: Vec3,
     bias_basis_s: [Vec3; 2],
@@ -354,7 +361,7 @@ impl Identification {
         Ok(Self {
             support_m: cal.support_m(),
             gravity_mps2: cal.gravity_mps2(),
-            rotation: cal.sensor_rotation(),
+            calibration: *cal,
             bias_n,
             variance_n2,
             bias_basis_s: bias_across_gravity_basis(cal),
@@ -392,7 +399,8 @@ impl Identification {
             .rows
             .checked_add(3)
             .ok_or(IdentificationError::TooManyPoses { poses: self.poses })?;
-        let force_a_n = -(self.rotation * (pose.mean_reading_n - self.bias_n));
+        let force_a_n =
+            crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
         finite_vec(&force_a_n, "F_A")?;
 
         // G: rows p1.(u x v), p2.(u x v), u.v; orthonormal.
@@ -406,7 +414,7 @@ impl Identification {
         let gravity_rows: [f64; 3] = (g_rows * self.gravity_mps2).into();
         let moment_coef = [1.0 / a, 1.0 / a, 0.0];
         let friction_coef = [0.0, 0.0, pose.slide_sign];
-        let g_r = g_rows * self.rotation;
+        let g_r = g_rows * self.calibration.sensor_rotation();
         let [e1, e2] = self.bias_basis_s;
         let bias1: [f64; 3] = (-(g_r * e1)).into();
         let bias2: [f64; 3] = (-(g_r * e2)).into();
@@ -569,7 +577,7 @@ impl Identification {
         // Never claim more than the noise model, nor less than the scatter shows.
         let scale = if dof > 0 { chi2_dof.max(1.0) } else { 1.0 };
         let covariance = unit_covariance * scale;
-        let var = |i: usize| covariance.get((i, i)).copied().unwrap_or(0.0).max(0.0);
+        let var = |i: usize| non_negative(covariance.get((i, i)).copied().unwrap_or(0.0));
         let std = |i: usize| ComplexField::sqrt(var(i));
 
         let mass_kg = at(&theta, 0);
@@ -586,7 +594,7 @@ impl Identification {
             mass_kg,
             mass_std_kg: std(0),
             com_m,
-            com_std_m: ComplexField::sqrt(com_var.max(0.0)),
+            com_std_m: ComplexField::sqrt(non_negative(com_var)),
             moment_kgm,
             moment_std_kgm: std(1),
             bias_across_n: self
@@ -645,7 +653,8 @@ pub struct LineFit {
     gravity_norm_mps2: f64,
     /// Unit vector against gravity, {0}.
     up: Vec3,
-    rotation: Mat3,
+    /// For F_A = [`crate::ujoint_force_n`].
+    calibration: Calibration,
     bias_n: Vec3,
     tolerance_rad: f64,
     sin_tolerance: f64,
@@ -705,7 +714,7 @@ impl LineFit {
             support_m: cal.support_m(),
             gravity_norm_mps2,
             up: -gravity / gravity_norm_mps2,
-            rotation: cal.sensor_rotation(),
+            calibration: *cal,
             bias_n,
             tolerance_rad: horizontal_tolerance_rad,
             sin_tolerance: ComplexField::sin(horizontal_tolerance_rad),
@@ -735,7 +744,8 @@ impl LineFit {
             .count
             .checked_add(1)
             .ok_or(IdentificationError::TooManyPoses { poses: self.count })?;
-        let force_a_n = -(self.rotation * (pose.mean_reading_n - self.bias_n));
+        let force_a_n =
+            crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
         let x = 1.0 / a;
         let y = force_a_n.dot(&self.up);
         finite(y, "vertical force")?;
@@ -798,7 +808,7 @@ impl LineFit {
         }
         let b1 = self.sxy / self.sxx;
         let b0 = self.mean_y - b1 * self.mean_x;
-        let ssr = (self.syy - b1 * self.sxy).max(0.0);
+        let ssr = non_negative(self.syy - b1 * self.sxy);
         let s2 = ssr / (n - 2.0);
         let var_b1 = s2 / self.sxx;
         let var_b0 = s2 * (1.0 / n + self.mean_x * self.mean_x / self.sxx);
@@ -821,7 +831,7 @@ impl LineFit {
             mass_kg: b0 / self.gravity_norm_mps2,
             mass_std_kg: ComplexField::sqrt(var_b0) / self.gravity_norm_mps2,
             com_m,
-            com_std_m: ComplexField::sqrt(com_var.max(0.0)),
+            com_std_m: ComplexField::sqrt(non_negative(com_var)),
             residual_rms_n: ComplexField::sqrt(ssr / n),
             condition,
             poses: self.count,

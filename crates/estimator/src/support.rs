@@ -109,6 +109,12 @@ fn below_or_nan(x: f64, limit: f64) -> bool {
     x.is_nan() || x < limit
 }
 
+/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
+/// give 0: a standard error of zero).
+fn non_negative(x: f64) -> f64 {
+    if x < 0.0 { 0.0 } else { x }
+}
+
 /// Why a support calibration could not be set up or did not give a result.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -192,6 +198,15 @@ pub enum SupportError {
         iterations: u32,
         /// The norm of the last scaled step tried.
         step: f64,
+    },
+    /// A value of the result is NaN or infinite (finite inputs so large that
+    /// the cost overflows).
+    #[error("the fit's {field} is not finite ({value}): readings far out of range")]
+    NonFiniteResult {
+        /// Which value.
+        field: &'static str,
+        /// The value.
+        value: f64,
     },
     /// The fitted mass is not positive, so c = M / m is meaningless.
     #[error("the fitted mass is {mass_kg} kg: not positive")]
@@ -794,13 +809,16 @@ impl SupportCalibration {
                 continue;
             };
             let mut worst = 0.0f64;
+            let mut determined = true;
             for k in 0..3 {
                 if free.get(I_SUPPORT + k) == Some(&true) {
-                    let var = at(&cov, I_SUPPORT + k, I_SUPPORT + k);
-                    worst = worst.max(sqrt(var.max(0.0)));
+                    let std = sqrt(non_negative(at(&cov, I_SUPPORT + k, I_SUPPORT + k)));
+                    // NaN fails this too (f64::max would drop it).
+                    determined &= std <= self.options.max_support_std_m;
+                    worst = worst.max(std);
                 }
             }
-            if worst.is_nan() || worst > self.options.max_support_std_m {
+            if !determined {
                 continue;
             }
             let better = match best {
@@ -939,7 +957,7 @@ impl SupportCalibration {
         let chi2_dof = normal.cost / dof as f64;
         // Never claim more than the noise model, nor less than the scatter shows.
         let inflation = chi2_dof.max(1.0);
-        let std = |k: usize| sqrt((at(&cov, k, k) * inflation).max(0.0));
+        let std = |k: usize| sqrt(non_negative(at(&cov, k, k) * inflation));
         // c = M / m: gradient (-M/m^2, 1/m).
         let (dm, d_moment) = (-moment / (mass * mass), 1.0 / mass);
         let var_c = (dm * dm * at(&cov, I_MASS, I_MASS)
@@ -959,11 +977,11 @@ impl SupportCalibration {
             }
         }
         let friction = self.options.friction;
-        Ok(SupportFit {
+        let fit = SupportFit {
             mass_kg: mass,
             mass_std_kg: std(I_MASS),
             com_m: moment / mass,
-            com_std_m: sqrt(var_c.max(0.0)),
+            com_std_m: sqrt(non_negative(var_c)),
             moment_kgm: moment,
             moment_std_kgm: std(I_MOMENT),
             support_m: support,
@@ -976,7 +994,38 @@ impl SupportCalibration {
             condition,
             iterations,
             poses: u32::try_from(self.len).unwrap_or(u32::MAX),
-        })
+        };
+        check_finite(&fit)?;
+        Ok(fit)
+    }
+}
+
+/// Every number of a fit is finite: finite but huge readings can overflow the
+/// cost (then chi2_dof and the standard errors are infinite, or NaN).
+fn check_finite(fit: &SupportFit) -> Result<(), SupportError> {
+    let [sx, sy, sz] = fit.support_std_m.map(|s| s.unwrap_or(0.0));
+    let values = [
+        ("mass_kg", fit.mass_kg),
+        ("mass_std_kg", fit.mass_std_kg),
+        ("com_m", fit.com_m),
+        ("com_std_m", fit.com_std_m),
+        ("moment_kgm", fit.moment_kgm),
+        ("moment_std_kgm", fit.moment_std_kgm),
+        ("support_m.x", fit.support_m.x),
+        ("support_m.y", fit.support_m.y),
+        ("support_m.z", fit.support_m.z),
+        ("support_std_m.x", sx),
+        ("support_std_m.y", sy),
+        ("support_std_m.z", sz),
+        ("friction_n", fit.friction_n.unwrap_or(0.0)),
+        ("friction_std_n", fit.friction_std_n.unwrap_or(0.0)),
+        ("chi2_dof", fit.chi2_dof),
+        ("residual_rms_n", fit.residual_rms_n),
+        ("condition", fit.condition),
+    ];
+    match values.iter().find(|(_, v)| !v.is_finite()) {
+        Some(&(field, value)) => Err(SupportError::NonFiniteResult { field, value }),
+        None => Ok(()),
     }
 }
 

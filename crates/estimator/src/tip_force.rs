@@ -344,13 +344,11 @@ impl TipForceEstimator {
         if !positive(lever_m) {
             return Err(singular);
         }
-        // Torsion axis n = -(s4, 0, c4) = -(ux, 0, uz) / c5.
-        let heading = Vec3::new(u.x, 0.0, u.z);
-        let c5 = heading.norm();
-        if !positive(c5) {
-            return Err(singular);
-        }
-        let n = -heading / c5;
+        // Torsion axis n = -(s4, 0, c4) (MODEL.md 4): u x w = (c4, 0, -s4) is the
+        // q5 axis, whatever the sign of c5, and n = Y0 x (u x w) is unit and
+        // perpendicular to both joint axes. (-(ux, 0, uz) / |..| would flip n
+        // for the rods with c5 < 0 that the forward kinematics give with d != 0.)
+        let n = Vec3::y().cross(&u.cross(&w));
         // Support basis across u: e1 = w, e2 = u x w.
         let e1 = w;
         let e2 = u.cross(&w);

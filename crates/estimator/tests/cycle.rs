@@ -311,3 +311,37 @@ fn reported_std_matches_the_scatter_with_sensor_noise() {
         }
     }
 }
+
+/// A tare with a NaN or infinite component is refused, at construction and
+/// when replaced, with the offending value; a refused tare leaves the old one.
+#[test]
+fn a_non_finite_tare_is_refused() {
+    let bad = Estimator::new(
+        &example_estimator_config(),
+        Vector3::new(0.0, f64::NEG_INFINITY, 0.0),
+    );
+    assert!(matches!(
+        bad,
+        Err(sar_estimator::SettingError::Invalid { field: "bias_n", value, .. })
+            if value == f64::NEG_INFINITY
+    ));
+    let mut rig = Rig::armed();
+    let e = rig
+        .estimator
+        .set_bias(Vector3::new(f64::INFINITY, 0.0, 0.0))
+        .unwrap_err();
+    assert!(matches!(
+        e,
+        sar_estimator::SettingError::Invalid { field: "bias_n", value, .. }
+            if value == f64::INFINITY
+    ));
+    assert!(
+        rig.estimator
+            .set_bias(Vector3::new(0.0, f64::NAN, 0.0))
+            .is_err()
+    );
+    // The old tare is still in use: the scripted force comes back.
+    let f = Vector3::new(1.0, -2.0, 0.5);
+    let out = rig.push(NOMINAL_Q, &f);
+    assert!((estimate(&out).force_n - f).norm() < 1e-9);
+}

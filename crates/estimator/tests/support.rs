@@ -702,3 +702,29 @@ proptest! {
         }
     }
 }
+
+/// Finite readings so large that the cost overflows (1e160 N): a typed error,
+/// never a fit with infinite standard errors or a NaN one turned into 0.
+#[test]
+fn overflowing_readings_are_refused() {
+    let rotation = Matrix3::identity();
+    let truth = truth(1, 0.3);
+    let clean = simulate(&truth, &rotation, &cone_protocol(), 1, [0.0; 3], 1);
+    for calibrate in [false, true] {
+        for scale in [1e160, 1e300] {
+            let poses: Vec<StaticPose> = clean
+                .iter()
+                .enumerate()
+                .map(|(i, p)| StaticPose {
+                    // Not an exact multiple of a consistent set: residuals too.
+                    mean_reading_n: p.mean_reading_n * scale
+                        + Vector3::x() * (scale * 1e-3 * (i as f64).sin()),
+                    ..*p
+                })
+                .collect();
+            let cal = calibration(rotation, true_support());
+            let result = fit_poses(&cal, Vector3::zeros(), options(true, calibrate), &poses);
+            assert!(result.is_err(), "scale {scale:e}: {result:?}");
+        }
+    }
+}

@@ -261,7 +261,9 @@ fn equilibrium_residual(
     let f_d = -tip_n;
     let f_b = -(f_a + weight + f_d);
     let a_m = case.pose.ujoint_m;
-    let n = -Vector3::new(case.u.x, 0.0, case.u.z).normalize();
+    // MODEL.md 4: n = -(s4, 0, c4).
+    let q4 = case.pose.q4_rad;
+    let n = -Vector3::new(q4.sin(), 0.0, q4.cos());
     let moment = (t.support_m - a_m).cross(&f_b)
         + (case.pose.com_m - a_m).cross(&weight)
         + (case.pose.tip_m - a_m).cross(&f_d)
@@ -825,4 +827,104 @@ fn basis_across_r_ab_is_wrong_with_an_offset() {
     // The order of magnitude of MODEL.md 4.3 (loosely: within a factor 3).
     assert!((0.5 / 3.0..0.5 * 3.0).contains(&worst[0]), "{worst:?}");
     assert!((2.5 / 3.0..2.5 * 3.0).contains(&worst[1]), "{worst:?}");
+}
+
+/// d != 0 with the rod tilted up past the vertical (q5 = 1.8 rad, c5 < 0), a
+/// pose the forward kinematics give when B is close above A: the torsion is
+/// reported along MODEL.md's n = -(s4, 0, c4), not along -(ux, 0, uz)/|..|
+/// (which is +(s4, 0, c4) here, the simulator's convention), and the six
+/// equilibrium equations hold with it.
+#[test]
+fn torsion_follows_the_model_axis_when_c5_is_negative() {
+    let case = build(&Params {
+        offset_m: 0.03,
+        support_frac: 0.05 / 0.35,
+        ..base_params(1.2, 1.8, [0.3, -0.2, 0.1])
+    });
+    assert!(case.pose.q5_rad.cos() < 0.0);
+    let est = estimator(&case, 1e9)
+        .estimate(&case.pose, &case.reading_n, &case.bias_n)
+        .unwrap();
+    assert!((est.force_n - case.tip_n).norm() < 1e-9 * force_scale(&case));
+    // The simulator's n is -(ux, 0, uz)/|..| = +(s4, 0, c4) here.
+    let n_sim = -Vector3::new(case.u.x, 0.0, case.u.z).normalize();
+    let n_model = -Vector3::new(case.pose.q4_rad.sin(), 0.0, case.pose.q4_rad.cos());
+    assert!((n_sim + n_model).norm() < 1e-12);
+    assert!(case.torsion_nm.abs() > 1e-3, "{}", case.torsion_nm);
+    assert!(
+        (est.torsion_nm + case.torsion_nm).abs() < 1e-9 * force_scale(&case),
+        "{} vs {}",
+        est.torsion_nm,
+        -case.torsion_nm
+    );
+    let residual = equilibrium_residual(&case, &est.force_n, &est.ujoint_force_n, est.torsion_nm);
+    assert!(residual < EQUILIBRIUM_TOLERANCE, "{residual:e}");
+}
+
+/// Signs by hand, without the simulator: rod horizontal along +X0 (u = X0),
+/// a = 0.15 m, L = 0.35 m, R_0s = I, no bias.
+/// - Massless rod, the tip pushing 5 N into the tissue along +X0: the tissue
+///   pushes back (F_D = -5 X0), the support takes nothing along u, so the robot
+///   pushes F_A = +5 X0 and the sensor reads what the tool applies to it,
+///   f_s = -F_A = (-5, 0, 0). That reading must give F_tip = (+5, 0, 0).
+/// - Massless rod, the tip pushing 2 N sideways along +Z0: moments about A give
+///   F_B = -(L / a) F_D, so F_A = -F_B - F_D = ((L - a) / a) F_D
+///   = -(0.2 / 0.15) 2 Z0 and f_s = (0, 0, +8/3).
+/// - A 2 kg rod with c = 0.1 m, nothing at the tip: F_A,y = m|g| - m c |g| / a
+///   (MODEL.md 5.2), so f_s,y = -(2 - 0.2 / 0.15) |g| gives F_tip = 0.
+#[test]
+fn signs_by_hand_on_a_horizontal_rod() {
+    let g = 9.80665;
+    let support = Vector3::new(0.45, 0.2, 0.0);
+    let cal = Calibration::new(
+        Vector3::zeros(),
+        Vector3::zeros(),
+        Vector3::zeros(),
+        Matrix3::identity(),
+        support,
+        Vector3::new(0.0, -g, 0.0),
+    )
+    .unwrap();
+    let joints = ActiveJoints {
+        q1_m: 0.0,
+        q2_m: 0.2,
+        q3_m: 0.3,
+    };
+    for (mass_kg, reading, expected) in [
+        (
+            0.0,
+            Vector3::new(-5.0, 0.0, 0.0),
+            Vector3::new(5.0, 0.0, 0.0),
+        ),
+        (
+            0.0,
+            Vector3::new(0.0, 0.0, 8.0 / 3.0),
+            Vector3::new(0.0, 0.0, 2.0),
+        ),
+        (
+            2.0,
+            Vector3::new(0.0, -(2.0 - 0.2 / 0.15) * g, 0.0),
+            Vector3::zeros(),
+        ),
+    ] {
+        let profile = Profile::new(0.35, 0.0, mass_kg, 0.1).unwrap();
+        let pose = forward(&cal, &profile, &joints).unwrap();
+        assert!((pose.rod_dir - Vector3::x()).norm() < 1e-15);
+        assert!((pose.support_distance_m - 0.15).abs() < 1e-15);
+        let est = TipForceEstimator::new(
+            &cal,
+            &profile,
+            &SensorNoise::hex6(),
+            TipForceConfig { max_std_n: 5.0 },
+        )
+        .unwrap()
+        .estimate(&pose, &reading, &Vector3::zeros())
+        .unwrap();
+        assert!(
+            (est.force_n - expected).norm() < 1e-12,
+            "reading {reading:?}: {:?} vs {expected:?}",
+            est.force_n
+        );
+        assert!((est.axial_n - expected.x).abs() < 1e-12);
+    }
 }

@@ -33,10 +33,13 @@ pub enum PoseError {
         /// d.
         offset_m: f64,
     },
-    /// B is straight above or below A: q4 is undefined.
+    /// B is straight above or below A: q4 is undefined. From [`inverse`] with
+    /// d != 0 also: the rod is so near vertical that A to B heads against it.
     #[error("the rod is vertical (horizontal distance {horizontal_m:e} m): heading undefined")]
     VerticalRod {
-        /// sqrt(rx^2 + rz^2).
+        /// Horizontal distance from A to B along the rod's heading, m:
+        /// sqrt(rx^2 + rz^2) from [`forward`]; s c5 + d s5 (negative on the
+        /// other branch) from [`inverse`].
         horizontal_m: f64,
     },
     /// The tip is at the support: the statics are singular there.
@@ -179,7 +182,9 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
 }
 
 /// Inverse kinematics: the active joints that put the tip at `tip_m` ({0}, m),
-/// with the rod through the calibrated support B. Valid for any offset d.
+/// with the rod through the calibrated support B. Valid for any offset d; with
+/// d != 0, a rod so near vertical that [`forward`] would give the other branch
+/// is refused as [`PoseError::VerticalRod`].
 pub fn inverse(
     cal: &Calibration,
     profile: &Profile,
@@ -208,10 +213,15 @@ pub fn inverse(
     }
     let u = to_tip / beyond_m;
     let c5 = sqrt(u.x * u.x + u.z * u.z);
-    if c5 <= VERTICAL_RATIO {
-        return Err(PoseError::VerticalRod {
-            horizontal_m: c5 * s,
-        });
+    // B - A = s u + d w has the horizontal part (s c5 + d s5) (s4, 0, c4). The
+    // forward kinematics take the heading from it, so it must point along the
+    // rod's heading: otherwise (rods within asin(|d| / rho) of vertical) the
+    // joints below would put the rod on the other branch (MODEL.md 3), with the
+    // tip far from `tip_m`.
+    let horizontal_m = s * c5 + d * u.y;
+    let rho = sqrt(s * s + d * d);
+    if c5 <= VERTICAL_RATIO || horizontal_m <= VERTICAL_RATIO * rho {
+        return Err(PoseError::VerticalRod { horizontal_m });
     }
     // w = (s4 s5, -c5, c4 s5) with s4 = ux / c5, c4 = uz / c5, s5 = uy.
     let w = Vec3::new(u.x * u.y / c5, -c5, u.z * u.y / c5);

@@ -130,6 +130,42 @@ proptest! {
         prop_assert!(close(&pose.rod_dir, &u, 1e-12));
     }
 
+    /// With d != 0 and steep rods (including within asin(|d| / rho) of
+    /// vertical, where the line through B at offset d has two branches): the
+    /// inverse either refuses the tip as a vertical rod, exactly when B - A
+    /// would head against the rod, or gives joints that put the tip there.
+    #[test]
+    fn inverse_never_returns_the_other_branch(
+        support in vec3(0.5),
+        q4 in -PI..PI,
+        tilt in 1e-4f64..0.3,
+        down in any::<bool>(),
+        beyond_frac in 0.05f64..0.95,
+        offset_m in prop_oneof![-0.02f64..-0.001, 0.001f64..0.02],
+    ) {
+        let length_m = 0.35;
+        let profile = Profile::new(length_m, offset_m, 2.0, 0.1).unwrap();
+        let cal = calibration(Vec3::zeros(), Vec3::zeros(), support);
+        let q5 = if down { tilt - FRAC_PI_2 } else { FRAC_PI_2 - tilt };
+        let (u, _) = rod_frame(q4, q5);
+        let tip = support + u * (beyond_frac * length_m);
+        let s = length_m - beyond_frac * length_m;
+        // Written from MODEL.md 3: B - A = s u + d w, horizontal part (s c5 + d s5) heading.
+        let ahead = s * q5.cos() + offset_m * q5.sin();
+        match inverse(&cal, &profile, &tip) {
+            Ok(q) => {
+                prop_assert!(ahead > 0.0, "accepted a tip on the other branch");
+                let pose = forward(&cal, &profile, &q).unwrap();
+                prop_assert!(close(&pose.tip_m, &tip, 1e-9), "{:?} vs {:?}", pose.tip_m, tip);
+            }
+            Err(PoseError::VerticalRod { horizontal_m }) => {
+                prop_assert!(ahead <= 1e-9 * (s * s + offset_m * offset_m).sqrt() + 1e-15);
+                prop_assert!((horizontal_m - ahead).abs() < 1e-12);
+            }
+            Err(other) => prop_assert!(false, "{other:?}"),
+        }
+    }
+
     /// No finite input, however odd, gives a NaN or infinite output: either a
     /// finite pose or a typed error.
     #[test]
@@ -272,10 +308,22 @@ fn degenerate_poses_are_typed_errors() {
         inverse(&cal, &rod, &(support - Vec3::y() * 0.1)),
         Err(PoseError::VerticalRod { .. })
     ));
+    // d = 10 mm, B 0.1 m from A along the rod, the rod 0.05 rad from pointing
+    // straight down: A to B heads against the rod (0.1 sin 0.05 < 0.01 cos 0.05).
+    // The joints for it would put the tip about 5 cm away; it is refused.
+    let tilted = Vec3::new(0.05f64.sin(), -0.05f64.cos(), 0.0);
+    assert!(matches!(
+        inverse(&cal, &offset_rod_10mm(), &(support + tilted * 0.25)),
+        Err(PoseError::VerticalRod { horizontal_m }) if horizontal_m < 0.0
+    ));
     assert!(matches!(
         inverse(&cal, &rod, &Vec3::new(f64::INFINITY, 0.0, 0.0)),
         Err(PoseError::NonFinite { .. })
     ));
+}
+
+fn offset_rod_10mm() -> Profile {
+    Profile::new(0.35, 0.01, 2.0, 0.1).unwrap()
 }
 
 #[test]
