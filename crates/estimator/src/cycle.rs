@@ -60,6 +60,9 @@ pub enum TipOutcome {
     PoseInvalid(PoseError),
     /// The sensor sample was marked invalid, stamped in the future, or not finite.
     SensorInvalid,
+    /// The joint positions were marked invalid or stamped in the future: no
+    /// pose, no estimate.
+    JointsInvalid,
 }
 
 /// What one cycle produces.
@@ -92,9 +95,8 @@ pub struct EstimatorConfig {
     pub profile: Profile,
     /// The sensor's noise.
     pub noise: SensorNoise,
-    /// When the tip force counts as not observable.
-    pub tip: TipForceConfig,
-    /// The force-limit guard.
+    /// The force-limit guard. Its `max_std_n` is also the tip-force
+    /// estimator's limit of observability (one setting, one place).
     pub guard: GuardConfig,
 }
 
@@ -143,7 +145,9 @@ impl Estimator {
                 &config.calibration,
                 &config.profile,
                 &config.noise,
-                config.tip,
+                TipForceConfig {
+                    max_std_n: config.guard.limits().max_std_n,
+                },
             )?,
             guard,
             bias_n,
@@ -167,13 +171,27 @@ impl Estimator {
         out.cycle = input.cycle;
         out.sensor_age_ns = sensor_age_ns;
         out.joints_age_ns = joints_age_ns;
-        let tip_input = match forward(&self.calibration, &self.profile, &input.joints.joints) {
-            Err(e) => {
+        let pose = if joints_valid {
+            Some(forward(
+                &self.calibration,
+                &self.profile,
+                &input.joints.joints,
+            ))
+        } else {
+            None
+        };
+        let tip_input = match pose {
+            None => {
+                out.pose = None;
+                out.tip = TipOutcome::JointsInvalid;
+                TipInput::NotObservable
+            }
+            Some(Err(e)) => {
                 out.pose = None;
                 out.tip = TipOutcome::PoseInvalid(e);
                 TipInput::PoseInvalid
             }
-            Ok(pose) => {
+            Some(Ok(pose)) => {
                 let pose = out.pose.insert(pose);
                 if !sensor_valid {
                     out.tip = TipOutcome::SensorInvalid;

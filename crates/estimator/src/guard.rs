@@ -61,7 +61,20 @@ pub struct GuardLimits {
     /// Any per-axis standard deviation of F_tip above this means the force is
     /// not observable: a fault, N.
     pub max_std_n: f64,
+    /// k: each part is compared with its limits after adding `k |std_n|`
+    /// (|std_n| bounds the standard deviation of every part), so that a force
+    /// that may be above a limit counts as above it. 0 compares the estimate
+    /// itself; 2 stops a force whose estimate is within two standard deviations
+    /// below the limit. 0 <= k <= [`MAX_STD_MARGIN`].
+    pub std_margin: f64,
 }
+
+/// Largest accepted `debounce_cycles` (0.1 s at 1 kHz): a larger debounce would
+/// in effect disable Stop.
+pub const MAX_DEBOUNCE_CYCLES: u32 = 100;
+
+/// Largest accepted `std_margin`.
+pub const MAX_STD_MARGIN: f64 = 10.0;
 
 /// Checked guard limits. Exists only if valid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -82,7 +95,8 @@ fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
 impl GuardConfig {
     /// Checks the limits: all finite; for each of total, axial and lateral
     /// 0 < warn < stop; 0 <= hysteresis < every warn limit; debounce >= 1;
-    /// both maximum ages > 0; max_std_n > 0.
+    /// both maximum ages > 0; max_std_n > 0; 1 <= debounce <= 100;
+    /// 0 <= std_margin <= 10.
     pub fn new(limits: GuardLimits) -> Result<Self, SettingError> {
         let pairs = [
             (
@@ -128,12 +142,16 @@ impl GuardConfig {
                 "must be finite, >= 0 and < every warn limit",
             ));
         }
-        if limits.debounce_cycles < 1 {
+        if !(1..=MAX_DEBOUNCE_CYCLES).contains(&limits.debounce_cycles) {
             return Err(invalid(
                 "debounce_cycles",
                 f64::from(limits.debounce_cycles),
-                "must be >= 1",
+                "must be >= 1 and <= 100",
             ));
+        }
+        let k = limits.std_margin;
+        if !(k.is_finite() && (0.0..=MAX_STD_MARGIN).contains(&k)) {
+            return Err(invalid("std_margin", k, "must be finite, >= 0 and <= 10"));
         }
         if limits.max_sensor_age_ns == 0 {
             return Err(invalid("max_sensor_age_ns", 0.0, "must be > 0"));
@@ -374,7 +392,8 @@ pub enum Reason {
     AboveStop {
         /// Which part.
         part: ForcePart,
-        /// Its value, N (finite or +inf, never NaN).
+        /// Its value plus the margin `std_margin |std_n|`, N (finite or +inf,
+        /// never NaN).
         force_n: f64,
         /// Its stop limit, N.
         limit_n: f64,
@@ -383,7 +402,8 @@ pub enum Reason {
     AboveWarn {
         /// Which part.
         part: ForcePart,
-        /// Its value, N (finite or +inf, never NaN).
+        /// Its value plus the margin `std_margin |std_n|`, N (finite or +inf,
+        /// never NaN).
         force_n: f64,
         /// Its warn limit, N.
         limit_n: f64,
@@ -751,7 +771,9 @@ impl Guard {
                 max_std_n: limits.max_std_n,
             });
         }
-        Ok(force_parts_n(&force_n, &rod_dir))
+        // The margin: k |std| bounds k standard deviations of every part.
+        let margin_n = limits.std_margin * std_n.norm();
+        Ok(force_parts_n(&force_n, &rod_dir).map(|part_n| part_n + margin_n))
     }
 }
 
@@ -772,6 +794,7 @@ mod tests {
             max_sensor_age_ns: 1_000_000,
             max_joints_age_ns: 1_000_000,
             max_std_n: 2.0,
+            std_margin: 0.0,
         }
     }
 
@@ -792,17 +815,15 @@ mod tests {
 
     #[test]
     fn counters_saturate_at_u32_max() {
-        let mut g = Guard::new(GuardConfig::new(limits(u32::MAX)).unwrap());
+        let mut g = Guard::new(GuardConfig::new(limits(MAX_DEBOUNCE_CYCLES)).unwrap());
         g.step(&input(0, Vec3::zeros()));
         g.reset(0).unwrap();
+        let high = Vec3::new(20.0, 0.0, 0.0);
+        // Counters near the top, in Stop (latched), keep counting without overflow.
+        g.state = GuardState::Stop;
         g.stop_count = u32::MAX - 2;
         g.warn_count = u32::MAX - 2;
-        let high = Vec3::new(20.0, 0.0, 0.0);
-        assert_eq!(g.step(&input(1, high)), None);
-        assert_eq!(g.stop_count, u32::MAX - 1);
-        let t = g.step(&input(2, high)).unwrap();
-        assert_eq!((t.from, t.to), (GuardState::Ok, GuardState::Stop));
-        for c in 3..10 {
+        for c in 1..10 {
             assert_eq!(g.step(&input(c, high)), None);
         }
         assert_eq!((g.stop_count, g.warn_count), (u32::MAX, u32::MAX));

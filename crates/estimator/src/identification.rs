@@ -35,9 +35,9 @@ pub const MAX_CONDITION: f64 = 1e8;
 const MAX_UNKNOWNS: usize = 5;
 /// Width of the augmented factor: the unknowns and the right-hand side.
 const WIDTH: usize = MAX_UNKNOWNS + 1;
-/// Iteration cap of the singular value decomposition of the (at most 5x5)
-/// scaled factor; it converges in a few dozen.
-const SVD_MAX_ITERATIONS: usize = 1000;
+/// Iteration cap of the symmetric eigensolver on the (at most 5x5) scaled
+/// factor; it converges in a few dozen.
+const EIGEN_MAX_ITERATIONS: usize = 1000;
 
 /// One augmented row: coefficients of the unknowns, then the right-hand side.
 type Row = [f64; WIDTH];
@@ -530,17 +530,24 @@ impl Identification {
         let scaled = SMatrix::<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>::from_fn(|i, j| {
             r5.get((i, j)).copied().unwrap_or(0.0) / at(&norms, j)
         });
-        let singular = scaled
-            .try_svd(false, false, f64::EPSILON, SVD_MAX_ITERATIONS)
-            .ok_or(ill(f64::INFINITY))?
-            .singular_values;
-        let largest = singular.max();
-        let smallest = singular.min();
-        let condition = if smallest > 0.0 {
-            largest / smallest
-        } else {
-            f64::INFINITY
+        // cond2(S) = sigma_max(S) sigma_max(S^-1), each from the LARGEST
+        // eigenvalue of a symmetric matrix (accurate, unlike the smallest).
+        // No SVD: nalgebra's SVD returned wrong decompositions for some 5x5
+        // triangular matrices (reconstruction errors up to 1e-2 in a test of
+        // 200 000 random ones); its symmetric eigensolver did not (5e-15).
+        let Some(scaled_inv) =
+            scaled.solve_upper_triangular(&SMatrix::<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>::identity())
+        else {
+            return Err(ill(f64::INFINITY));
         };
+        let largest_eigenvalue = |m: SMatrix<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>| {
+            m.try_symmetric_eigen(f64::EPSILON, EIGEN_MAX_ITERATIONS)
+                .map_or(f64::INFINITY, |e| e.eigenvalues.max())
+        };
+        let condition = ComplexField::sqrt(
+            largest_eigenvalue(scaled.transpose() * scaled)
+                * largest_eigenvalue(scaled_inv.transpose() * scaled_inv),
+        );
         if condition.is_nan() || condition > MAX_CONDITION {
             return Err(ill(condition));
         }

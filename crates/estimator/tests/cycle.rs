@@ -127,7 +127,9 @@ fn a_push_ramp_warns_then_stops_and_latches() {
     let mut warn_at = None;
     let mut stop_at = None;
     for k in 0..=200u32 {
-        let force = f64::from(k) * 0.1; // 0 .. 20 N along u
+        // 0.05 .. 20.05 N along u: each step lands 0.05 N past a 0.1 N grid, so
+        // no estimate sits exactly on a limit (8 N axial warn, 12 N axial stop).
+        let force = f64::from(k) * 0.1 + 0.05;
         let out = rig.push(NOMINAL_Q, &(u * force));
         if let Some(t) = out.transition {
             match t.to {
@@ -137,7 +139,8 @@ fn a_push_ramp_warns_then_stops_and_latches() {
             }
         }
     }
-    // The axial warn limit (8 N) is met first: at k = 80, and 3 cycles of debounce.
+    // The axial warn limit (8 N) is passed first: at k = 80 (8.05 N), then 3
+    // cycles of debounce (80, 81, 82); the stop limit at k = 120 (12.05 N).
     let (k_warn, reason) = warn_at.unwrap();
     assert_eq!(k_warn, 82);
     assert!(
@@ -253,6 +256,21 @@ fn bad_inputs_fault_the_guard() {
     input.joints.stamp_ns = input.now_ns - 5_000_001;
     let out = *rig.estimator.cycle(&input);
     assert!(matches!(out.guard_reason, Reason::JointsStale { .. }));
+
+    // Joints the drives mark invalid: no pose, no estimate, a Fault.
+    let mut rig = Rig::armed();
+    let mut input = rig.input(
+        NOMINAL_Q,
+        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
+    );
+    input.joints.valid = false;
+    let out = *rig.estimator.cycle(&input);
+    assert!(out.pose.is_none());
+    assert_eq!(out.tip, TipOutcome::JointsInvalid);
+    assert_eq!(
+        (out.guard_state, out.guard_reason),
+        (GuardState::Fault, Reason::JointsInvalid)
+    );
 
     // A degenerate pose: the U-joint at the support.
     let mut rig = Rig::armed();

@@ -13,8 +13,8 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
 use sar_estimator::SettingError;
 use sar_estimator::guard::{
-    Axis, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState, Reason, TipField,
-    TipInput, Transition,
+    Axis, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState, MAX_DEBOUNCE_CYCLES,
+    MAX_STD_MARGIN, Reason, TipField, TipInput, Transition,
 };
 
 type V = Vector3<f64>;
@@ -38,6 +38,7 @@ fn limits() -> GuardLimits {
         max_sensor_age_ns: 2 * MS_NS,
         max_joints_age_ns: 3 * MS_NS,
         max_std_n: 2.0,
+        std_margin: 0.0,
     }
 }
 
@@ -1005,10 +1006,11 @@ fn invalid_configurations_are_refused() {
 fn edge_valid_configurations_are_accepted() {
     let l = GuardLimits {
         hysteresis_n: 0.0,
-        debounce_cycles: u32::MAX,
+        debounce_cycles: MAX_DEBOUNCE_CYCLES,
         max_sensor_age_ns: u64::MAX,
         max_joints_age_ns: 1,
         max_std_n: f64::MAX,
+        std_margin: 0.0,
         ..limits()
     };
     let c = GuardConfig::new(l).unwrap();
@@ -1091,13 +1093,88 @@ fn huge_forces_stop_with_a_number_not_nan() {
 }
 
 #[test]
-fn huge_debounce_never_transitions_early() {
+fn the_largest_debounce_transitions_exactly_when_it_ends() {
     let mut rig = Rig::ok_with(GuardLimits {
-        debounce_cycles: u32::MAX,
+        debounce_cycles: MAX_DEBOUNCE_CYCLES,
         ..limits()
     });
-    rig.hold(stop_total(), 2000);
+    rig.hold(stop_total(), MAX_DEBOUNCE_CYCLES - 1);
     assert_eq!(rig.state(), GuardState::Ok);
+    let t = rig.push(stop_total()).unwrap();
+    assert_eq!(t.to, GuardState::Stop);
+}
+
+#[test]
+fn a_debounce_that_would_disable_stop_is_refused() {
+    for debounce_cycles in [MAX_DEBOUNCE_CYCLES + 1, u32::MAX] {
+        let err = GuardConfig::new(GuardLimits {
+            debounce_cycles,
+            ..limits()
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("debounce_cycles"), "{err}");
+    }
+}
+
+#[test]
+fn std_margin_is_checked() {
+    for std_margin in [-0.1, f64::NAN, f64::INFINITY, MAX_STD_MARGIN + 0.1] {
+        let err = GuardConfig::new(GuardLimits {
+            std_margin,
+            ..limits()
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("std_margin"), "{err}");
+    }
+    assert!(
+        GuardConfig::new(GuardLimits {
+            std_margin: MAX_STD_MARGIN,
+            ..limits()
+        })
+        .is_ok()
+    );
+}
+
+/// With a margin of k standard deviations, a force whose estimate is below the
+/// stop limit but within k |std| of it stops; the same input with k = 0 does not.
+#[test]
+fn std_margin_stops_a_force_that_may_be_above_the_limit() {
+    let l = limits();
+    let u = V::new(1.0, 0.0, 0.0);
+    let std_n = V::new(0.3, 0.4, 0.0); // |std| = 0.5 N
+    // Axial estimate 0.8 N below the axial stop limit; lateral and total below theirs.
+    let force_n = u * (l.stop_axial_n - 0.8);
+    let run = |std_margin: f64| {
+        let mut g = Guard::new(GuardConfig::new(GuardLimits { std_margin, ..l }).unwrap());
+        g.step(&input(1, V::zeros()));
+        g.reset(1).unwrap();
+        for cycle in 2..=u64::from(l.debounce_cycles) + 1 {
+            g.step(&GuardInput {
+                tip: TipInput::Estimate {
+                    force_n,
+                    std_n,
+                    rod_dir: u,
+                },
+                ..input(cycle, force_n)
+            });
+        }
+        (g.state(), g.reason())
+    };
+    let (state, _) = run(0.0);
+    assert_ne!(state, GuardState::Stop);
+    let (state, reason) = run(2.0);
+    assert_eq!(state, GuardState::Stop);
+    match reason {
+        Reason::AboveStop {
+            part: ForcePart::Axial,
+            force_n,
+            limit_n,
+        } => {
+            assert!((force_n - (l.stop_axial_n - 0.8 + 1.0)).abs() < 1e-12);
+            assert_eq!(limit_n, l.stop_axial_n);
+        }
+        other => panic!("{other:?}"),
+    }
 }
 
 // ---------------------------------------------------------------- display
@@ -1417,7 +1494,8 @@ impl Model {
                 max_std_n: l.max_std_n,
             });
         }
-        let p = parts(&f, &u);
+        let margin = l.std_margin * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+        let p = parts(&f, &u).map(|x| x + margin);
         let warn = [l.warn_total_n, l.warn_axial_n, l.warn_lateral_n];
         let stop = [l.stop_total_n, l.stop_axial_n, l.stop_lateral_n];
         let first = |limits: [f64; 3], above: bool| {
@@ -1648,7 +1726,9 @@ proptest! {
     fn random_sequences_keep_the_invariants_and_match_the_model(
         (debounce, hysteresis_n, ops) in sequence_strategy(),
     ) {
-        let l = GuardLimits { debounce_cycles: debounce, hysteresis_n, ..limits() };
+        // Half the sequences compare with a margin of 1.5 standard deviations.
+        let std_margin = if debounce % 2 == 0 { 1.5 } else { 0.0 };
+        let l = GuardLimits { debounce_cycles: debounce, hysteresis_n, std_margin, ..limits() };
         let mut guard = Guard::new(GuardConfig::new(l).unwrap());
         let mut model = Model::new(l);
         let mut largest_cycle = 0u64;

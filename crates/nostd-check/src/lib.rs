@@ -8,7 +8,6 @@ use sar_estimator::cycle::{CycleInput, Estimator, EstimatorConfig, JointSample, 
 use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
-use sar_estimator::tip_force::TipForceConfig;
 use sar_estimator::{SensorNoise, StaticPose};
 use sar_kinematics::{ActiveJoints, Calibration, Mat3, Profile, Vec3};
 
@@ -34,13 +33,13 @@ fn config() -> Option<EstimatorConfig> {
         max_sensor_age_ns: 5_000_000,
         max_joints_age_ns: 5_000_000,
         max_std_n: 2.0,
+        std_margin: 0.0,
     })
     .ok()?;
     Some(EstimatorConfig {
         calibration,
         profile: Profile::new(0.35, 0.0, 2.593, 0.103).ok()?,
         noise: SensorNoise::hex6(),
-        tip: TipForceConfig { max_std_n: 2.0 },
         guard,
     })
 }

@@ -88,7 +88,8 @@ pub fn ujoint_force(
     let r_c = w * d + u * truth.com_m;
     let r_d = w * d + u * truth.length_m;
     let (e1, e2) = basis_across(u);
-    let n = -Vector3::new(u.x, 0.0, u.z).normalize();
+    // n = -(s4, 0, c4) = Y0 x (u x w), right also when c5 < 0 (MODEL.md 4).
+    let n = Vector3::y().cross(&u.cross(w));
     let weight = truth.gravity_mps2 * truth.mass_kg;
     let f_d = -tip_force_n;
     let friction = -u * (slide_sign * truth.friction_n);
@@ -296,6 +297,7 @@ pub fn test_guard_limits() -> sar_estimator::guard::GuardLimits {
         max_sensor_age_ns: 5_000_000,
         max_joints_age_ns: 5_000_000,
         max_std_n: 2.0,
+        std_margin: 0.0,
     }
 }
 
@@ -305,7 +307,6 @@ pub fn example_estimator_config() -> sar_estimator::cycle::EstimatorConfig {
         calibration: example_calibration(),
         profile: manipulator2(),
         noise: sar_estimator::SensorNoise::hex6(),
-        tip: sar_estimator::tip_force::TipForceConfig { max_std_n: 2.0 },
         guard: sar_estimator::guard::GuardConfig::new(test_guard_limits()).unwrap(),
     }
 }
