@@ -1,0 +1,755 @@
+//! The simulated world: axes, rod, support, sensor and the fault script, and
+//! the event loop that advances it lazily to the clock's time.
+//!
+//! Everything happens at fixed instants from the start: physics steps at
+//! `j * physics_step_ns`, sensor measurements at `k * period_ns` (received
+//! `latency_ns` later), position reports at `k * position_period_ns`, scripted
+//! drive faults at their time. [`World::advance`] processes these in time order
+//! (ties: physics step, drive fault, measurement, reception, position report)
+//! up to the present, and commands act at the present time after it. So the
+//! results depend on the commands and their times, never on when or how often
+//! the simulator is polled.
+//!
+//! The axes move along closed-form profiles ([`super::axes`]), exact at any
+//! instant. The physics step integrates what has memory: the sign of the last
+//! slide of the rod in the support, which fixes the (locked) friction.
+
+use super::axes::{AxisPlan, AxisState, Limits};
+use super::spec::{ContactKey, Fault, SimSpec};
+use super::statics::{self, Equilibrium, Loads};
+use super::{STATUS_OUT_OF_MODEL, SimError};
+use crate::{Clock, DriveState, JointPositions, SensorStatus, Vec3, WrenchSample};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use sar_kinematics::{ActiveJoints, Pose, forward};
+use std::collections::VecDeque;
+
+/// Shortest accepted period of anything (physics step, samples, positions), ns.
+pub const MIN_PERIOD_NS: u64 = 1_000;
+/// Longest accepted physics step, ns.
+pub const MAX_PHYSICS_STEP_NS: u64 = 10_000_000;
+/// Most sensor samples that may be in flight (measured, not yet received).
+pub const MAX_IN_FLIGHT: u64 = 65_536;
+/// Below this slide speed (m/s) the rod counts as not sliding in the support.
+pub const SLIDE_SPEED_EPS_MPS: f64 = 1e-9;
+
+fn ns_to_s(ns: u64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+fn joints_of(x: [f64; 3]) -> ActiveJoints {
+    let [q1_m, q2_m, q3_m] = x;
+    ActiveJoints { q1_m, q2_m, q3_m }
+}
+
+fn array_of(q: &ActiveJoints) -> [f64; 3] {
+    [q.q1_m, q.q2_m, q.q3_m]
+}
+
+/// The tip force of the contact script at `t_ns` (piecewise linear, zero before
+/// the first key, held after the last; at equal key times the later key wins).
+pub(crate) fn contact_at(keys: &[ContactKey], t_ns: u64) -> Vec3 {
+    let after = keys.partition_point(|k| k.t_ns <= t_ns);
+    let Some(last) = after.checked_sub(1).and_then(|i| keys.get(i)) else {
+        return Vec3::zeros();
+    };
+    match keys.get(after) {
+        None => last.force_n,
+        Some(next) => {
+            // next.t_ns > t_ns >= last.t_ns, so the span is > 0.
+            let span = ns_to_s(next.t_ns - last.t_ns);
+            let f = ns_to_s(t_ns - last.t_ns) / span;
+            last.force_n + (next.force_n - last.force_n) * f
+        }
+    }
+}
+
+/// Everything physical at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Physics {
+    pub joints: ActiveJoints,
+    pub speeds_mps: [f64; 3],
+    pub pose: Pose,
+    pub loads: Loads,
+    pub equilibrium: Equilibrium,
+    /// Noise-free reading with the bias, before the tare, sensor frame.
+    pub reading_n: Vec3,
+    pub reading_nm: Vec3,
+    pub bias_n: Vec3,
+    pub bias_nm: Vec3,
+}
+
+fn check_finite(field: &'static str, value: f64) -> Result<(), SimError> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(SimError::InvalidSpec {
+            field,
+            value,
+            why: "must be finite",
+        })
+    }
+}
+
+fn check_vec(field: &'static str, v: &Vec3) -> Result<(), SimError> {
+    v.iter().try_for_each(|&x| check_finite(field, x))
+}
+
+fn check_positive(field: &'static str, value: f64) -> Result<(), SimError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(SimError::InvalidSpec {
+            field,
+            value,
+            why: "must be finite and > 0",
+        })
+    }
+}
+
+fn check_non_negative(field: &'static str, value: f64) -> Result<(), SimError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(SimError::InvalidSpec {
+            field,
+            value,
+            why: "must be finite and >= 0",
+        })
+    }
+}
+
+fn check_period(field: &'static str, ns: u64, max_ns: u64) -> Result<(), SimError> {
+    if (MIN_PERIOD_NS..=max_ns).contains(&ns) {
+        Ok(())
+    } else {
+        Err(SimError::InvalidSpec {
+            field,
+            value: ns as f64,
+            why: "must be at least 1000 ns (and a physics step at most 10 ms)",
+        })
+    }
+}
+
+/// Checks one fault (index `index` in the list).
+pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
+    match *fault {
+        Fault::SensorSilent { from_ns, until_ns } => match until_ns {
+            Some(until) if until <= from_ns => Err(SimError::InvalidSpec {
+                field: "faults.sensor_silent.until_ns",
+                value: until as f64,
+                why: "must be after from_ns",
+            }),
+            _ => Ok(()),
+        },
+        Fault::NanSample { .. } | Fault::DriveFault { .. } => Ok(()),
+        Fault::EncoderJump { axis, jump_m, .. } => {
+            if axis > 2 {
+                return Err(SimError::FaultAxis { index, axis });
+            }
+            check_finite("faults.encoder_jump.jump_m", jump_m)
+        }
+    }
+}
+
+/// When a fault starts, ns from start.
+pub(crate) fn fault_start_ns(fault: &Fault) -> u64 {
+    match *fault {
+        Fault::SensorSilent { from_ns, .. } => from_ns,
+        Fault::NanSample { at_ns }
+        | Fault::EncoderJump { at_ns, .. }
+        | Fault::DriveFault { at_ns, .. } => at_ns,
+    }
+}
+
+/// Checks what the types of [`SimSpec`] do not.
+fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
+    check_non_negative("friction_n", spec.friction_n)?;
+    check_non_negative("tip_mass_kg", spec.tip_mass_kg)?;
+    check_period("physics_step_ns", spec.physics_step_ns, MAX_PHYSICS_STEP_NS)?;
+    let axes = &spec.axes;
+    check_positive("axes.max_speed_mps", axes.max_speed_mps)?;
+    check_positive("axes.max_accel_mps2", axes.max_accel_mps2)?;
+    check_positive("axes.lead_m_per_turn", axes.lead_m_per_turn)?;
+    check_positive("axes.counts_per_turn", f64::from(axes.counts_per_turn))?;
+    check_period("axes.position_period_ns", axes.position_period_ns, u64::MAX)?;
+    for (&(min_m, max_m), start_m) in axes.travel_m.iter().zip(array_of(&axes.start)) {
+        check_finite("axes.travel_m", min_m)?;
+        check_finite("axes.travel_m", max_m)?;
+        if min_m >= max_m {
+            return Err(SimError::InvalidSpec {
+                field: "axes.travel_m",
+                value: max_m,
+                why: "the upper end must be above the lower end",
+            });
+        }
+        check_finite("axes.start", start_m)?;
+        if !(min_m..=max_m).contains(&start_m) {
+            return Err(SimError::InvalidSpec {
+                field: "axes.start",
+                value: start_m,
+                why: "must be within the axis' travel",
+            });
+        }
+    }
+    let sensor = &spec.sensor;
+    check_period("sensor.period_ns", sensor.period_ns, u64::MAX)?;
+    let in_flight = sensor.latency_ns / sensor.period_ns + 1;
+    if in_flight > MAX_IN_FLIGHT {
+        return Err(SimError::LatencyTooLong {
+            latency_ns: sensor.latency_ns,
+            period_ns: sensor.period_ns,
+            limit: MAX_IN_FLIGHT,
+        });
+    }
+    for &x in sensor.noise_n.iter() {
+        check_non_negative("sensor.noise_n", x)?;
+    }
+    for &x in sensor.noise_nm.iter() {
+        check_non_negative("sensor.noise_nm", x)?;
+    }
+    check_vec("sensor.bias_n", &sensor.bias_n)?;
+    check_vec("sensor.bias_nm", &sensor.bias_nm)?;
+    check_vec("sensor.drift_n_per_s", &sensor.drift_n_per_s)?;
+    let mut previous_ns = 0;
+    for (index, key) in spec.contact.iter().enumerate() {
+        check_vec("contact.force_n", &key.force_n)?;
+        if key.t_ns < previous_ns {
+            return Err(SimError::ContactNotSorted {
+                index,
+                t_ns: key.t_ns,
+                previous_ns,
+            });
+        }
+        previous_ns = key.t_ns;
+    }
+    for (index, fault) in spec.faults.iter().enumerate() {
+        check_fault(index, fault)?;
+    }
+    Ok(())
+}
+
+/// The simulated world. See the module doc.
+#[derive(Debug)]
+pub(crate) struct World<C> {
+    clock: C,
+    t0_ns: u64,
+    spec: SimSpec,
+    limits: Limits,
+    /// The faults, with whether a drive fault has fired.
+    faults: Vec<(Fault, bool)>,
+    /// Every event at or before this time (ns from start) is processed.
+    done_ns: u64,
+    next_step: u64,
+    next_measurement: u64,
+    next_report: u64,
+    plans: [AxisPlan; 3],
+    state: DriveState,
+    slide_sign: f64,
+    rng: ChaCha8Rng,
+    /// Measured, not yet received: (receive time from start, sample).
+    in_flight: VecDeque<(u64, WrenchSample)>,
+    newest: Option<WrenchSample>,
+    /// The device-side tare (force, torque), sensor frame.
+    tare: Option<(Vec3, Vec3)>,
+    positions: JointPositions,
+}
+
+impl<C: Clock> World<C> {
+    /// Checks `spec` and builds the world at the clock's present time.
+    pub fn new(spec: SimSpec, clock: C) -> Result<Self, SimError> {
+        check_spec(&spec)?;
+        let pose = forward(&spec.calibration, &spec.profile, &spec.axes.start)
+            .map_err(SimError::StartPose)?;
+        let loads = Loads {
+            tip_force_n: Vec3::zeros(),
+            tip_mass_kg: spec.tip_mass_kg,
+            friction_n: Vec3::zeros(),
+        };
+        statics::equilibrium(&spec.calibration, &spec.profile, &pose, &loads)
+            .ok_or(SimError::StartStaticsSingular)?;
+        let t0_ns = clock.now_ns();
+        let start = array_of(&spec.axes.start);
+        let limits = Limits {
+            max_speed_mps: spec.axes.max_speed_mps,
+            max_accel_mps2: spec.axes.max_accel_mps2,
+        };
+        let capacity = usize::try_from(spec.sensor.latency_ns / spec.sensor.period_ns + 1)
+            .unwrap_or(1)
+            .max(1);
+        let mut world = Self {
+            clock,
+            t0_ns,
+            limits,
+            faults: spec.faults.iter().map(|f| (*f, false)).collect(),
+            done_ns: 0,
+            next_step: 1,
+            next_measurement: 0,
+            next_report: 0,
+            plans: start.map(|x| AxisPlan::hold(0, x)),
+            state: DriveState::Ready,
+            slide_sign: 0.0,
+            rng: ChaCha8Rng::seed_from_u64(spec.seed),
+            in_flight: VecDeque::with_capacity(capacity),
+            newest: None,
+            tare: None,
+            positions: JointPositions {
+                joints: spec.axes.start,
+                stamp_ns: t0_ns,
+                valid: true,
+            },
+            spec,
+        };
+        world.process_until(0);
+        Ok(world)
+    }
+
+    /// The specification.
+    pub fn spec(&self) -> &SimSpec {
+        &self.spec
+    }
+
+    /// The clock's time at the start, ns.
+    pub fn t0_ns(&self) -> u64 {
+        self.t0_ns
+    }
+
+    /// Time from the start, ns (processed up to).
+    pub fn elapsed_ns(&self) -> u64 {
+        self.done_ns
+    }
+
+    /// The clock.
+    pub fn clock(&self) -> &C {
+        &self.clock
+    }
+
+    /// Processes every event up to the clock's present time.
+    pub fn advance(&mut self) {
+        let now = self.clock.now_ns().saturating_sub(self.t0_ns);
+        if now > self.done_ns {
+            self.process_until(now);
+        }
+    }
+
+    /// Processes every pending event at or before `until_ns` (each stream
+    /// keeps the index of its next event, so nothing is processed twice).
+    fn process_until(&mut self, until_ns: u64) {
+        let step = self.spec.physics_step_ns;
+        let period = self.spec.sensor.period_ns;
+        let report_period = self.spec.axes.position_period_ns;
+        loop {
+            let t_step = self.next_step.saturating_mul(step);
+            let t_fault = self.next_drive_fault();
+            let t_measure = self.next_measurement.saturating_mul(period);
+            let t_receive = self.in_flight.front().map(|(t, _)| *t);
+            let t_report = self.next_report.saturating_mul(report_period);
+            let t = [
+                Some(t_step),
+                t_fault,
+                Some(t_measure),
+                t_receive,
+                Some(t_report),
+            ]
+            .into_iter()
+            .flatten()
+            .min()
+            .unwrap_or(u64::MAX);
+            if t > until_ns || t == u64::MAX {
+                break;
+            }
+            if t == t_step {
+                self.physics_step(t);
+                self.next_step += 1;
+            } else if t_fault == Some(t) {
+                self.fire_drive_faults(t);
+            } else if t == t_measure {
+                self.measure(self.next_measurement, t);
+                self.next_measurement += 1;
+            } else if t_receive == Some(t) {
+                if let Some((_, sample)) = self.in_flight.pop_front() {
+                    self.newest = Some(sample);
+                }
+            } else {
+                self.report(t);
+                self.next_report += 1;
+            }
+        }
+        self.done_ns = self.done_ns.max(until_ns);
+    }
+
+    fn next_drive_fault(&self) -> Option<u64> {
+        self.faults
+            .iter()
+            .filter_map(|(f, fired)| match *f {
+                Fault::DriveFault { at_ns, .. } if !fired => Some(at_ns),
+                _ => None,
+            })
+            .min()
+    }
+
+    fn fire_drive_faults(&mut self, t_ns: u64) {
+        let mut code_now = None;
+        for (fault, fired) in &mut self.faults {
+            if let Fault::DriveFault { at_ns, code } = *fault
+                && !*fired
+                && at_ns == t_ns
+            {
+                *fired = true;
+                code_now = Some(code);
+            }
+        }
+        if let Some(code) = code_now {
+            self.state = DriveState::Fault { code };
+            self.brake_all(t_ns);
+        }
+    }
+
+    /// The axes' states at `t_ns` (>= the plans' start).
+    fn axes_at(&self, t_ns: u64) -> [AxisState; 3] {
+        self.plans.map(|p| p.at(t_ns))
+    }
+
+    fn brake_all(&mut self, t_ns: u64) {
+        let limits = self.limits;
+        self.plans = self.axes_at(t_ns).map(|s| AxisPlan::brake(t_ns, s, limits));
+    }
+
+    /// The physics step at `t_ns`: updates the sign of the last slide from the
+    /// rate at which the rod slides in the support now.
+    fn physics_step(&mut self, t_ns: u64) {
+        let states = self.axes_at(t_ns);
+        let cal = &self.spec.calibration;
+        let [s1, s2, s3] = states;
+        let a_m = cal.p_home_m() + Vec3::new(s3.x_m, s2.x_m, s1.x_m) + cal.ujoint_offset_m();
+        let a_dot = Vec3::new(s3.v_mps, s2.v_mps, s1.v_mps);
+        let r = cal.support_m() - a_m;
+        let d = self.spec.profile.offset_m();
+        let along_sq = r.norm_squared() - d * d;
+        if along_sq <= 0.0 {
+            return;
+        }
+        // s = sqrt(|r|^2 - d^2): ds/dt = -(r . dA/dt) / s. Inserting (slide
+        // +1, the rod moving along u through the support) is ds/dt < 0.
+        let ds_dt = -r.dot(&a_dot) / along_sq.sqrt();
+        if ds_dt < -SLIDE_SPEED_EPS_MPS {
+            self.slide_sign = 1.0;
+        } else if ds_dt > SLIDE_SPEED_EPS_MPS {
+            self.slide_sign = -1.0;
+        }
+    }
+
+    /// The sensor bias at `t_ns` (force drifts linearly), sensor frame.
+    fn bias_at(&self, t_ns: u64) -> (Vec3, Vec3) {
+        let sensor = &self.spec.sensor;
+        (
+            sensor.bias_n + sensor.drift_n_per_s * ns_to_s(t_ns),
+            sensor.bias_nm,
+        )
+    }
+
+    /// Everything physical at `t_ns` (ns from start, not before the last
+    /// command), with the friction of the last physics step.
+    pub fn physics_at(&self, t_ns: u64) -> Result<Physics, SimError> {
+        let states = self.axes_at(t_ns);
+        let joints = joints_of(states.map(|s| s.x_m));
+        let spec = &self.spec;
+        let pose =
+            forward(&spec.calibration, &spec.profile, &joints).map_err(SimError::PoseOutOfModel)?;
+        let loads = Loads {
+            tip_force_n: contact_at(&spec.contact, t_ns),
+            tip_mass_kg: spec.tip_mass_kg,
+            friction_n: pose.rod_dir * (-self.slide_sign * spec.friction_n),
+        };
+        let equilibrium = statics::equilibrium(&spec.calibration, &spec.profile, &pose, &loads)
+            .ok_or(SimError::StaticsSingular)?;
+        let (ideal_n, ideal_nm) = statics::ideal_wrench(&spec.calibration, &pose, &equilibrium);
+        let (bias_n, bias_nm) = self.bias_at(t_ns);
+        Ok(Physics {
+            joints,
+            speeds_mps: states.map(|s| s.v_mps),
+            pose,
+            loads,
+            equilibrium,
+            reading_n: ideal_n + bias_n,
+            reading_nm: ideal_nm + bias_nm,
+            bias_n,
+            bias_nm,
+        })
+    }
+
+    fn silent_at(&self, t_ns: u64) -> bool {
+        self.faults.iter().any(|(f, _)| match *f {
+            Fault::SensorSilent { from_ns, until_ns } => {
+                from_ns <= t_ns && until_ns.is_none_or(|until| t_ns < until)
+            }
+            _ => false,
+        })
+    }
+
+    fn nan_at(&self, k: u64) -> bool {
+        let period = self.spec.sensor.period_ns;
+        self.faults.iter().any(|(f, _)| match *f {
+            Fault::NanSample { at_ns } => at_ns.div_ceil(period) == k,
+            _ => false,
+        })
+    }
+
+    /// Sensor measurement `k` at `t_ns`.
+    fn measure(&mut self, k: u64, t_ns: u64) {
+        // Draw the noise of every sample, sent or not, so that the noise of a
+        // sample depends only on the seed and its index.
+        let mut draw = [0.0; 6];
+        for x in &mut draw {
+            *x = self.rng.sample(StandardNormal);
+        }
+        if self.silent_at(t_ns) {
+            return;
+        }
+        let sensor = &self.spec.sensor;
+        let [n0, n1, n2, n3, n4, n5] = draw;
+        let noise_n = Vec3::new(n0, n1, n2).component_mul(&sensor.noise_n);
+        let noise_nm = Vec3::new(n3, n4, n5).component_mul(&sensor.noise_nm);
+        let (mut force_n, mut torque_nm, status) = match self.physics_at(t_ns) {
+            Ok(p) => {
+                let (tare_n, tare_nm) = self.tare.unwrap_or((Vec3::zeros(), Vec3::zeros()));
+                (
+                    p.reading_n - tare_n + noise_n,
+                    p.reading_nm - tare_nm + noise_nm,
+                    SensorStatus::OK,
+                )
+            }
+            Err(_) => {
+                let (bias_n, bias_nm) = self.bias_at(t_ns);
+                (bias_n, bias_nm, STATUS_OUT_OF_MODEL)
+            }
+        };
+        if self.nan_at(k) {
+            force_n = Vec3::repeat(f64::NAN);
+            torque_nm = Vec3::repeat(f64::NAN);
+        }
+        let receive_ns = t_ns.saturating_add(sensor.latency_ns);
+        self.in_flight.push_back((
+            receive_ns,
+            WrenchSample {
+                force_n,
+                torque_nm,
+                // The device's counter wraps at u32::MAX by design.
+                counter: (k & u64::from(u32::MAX)) as u32,
+                status,
+                received_ns: self.t0_ns.saturating_add(receive_ns),
+            },
+        ));
+    }
+
+    /// Position report at `t_ns`.
+    fn report(&mut self, t_ns: u64) {
+        let axes = &self.spec.axes;
+        let count_m = axes.lead_m_per_turn / f64::from(axes.counts_per_turn);
+        let mut offsets = [0.0; 3];
+        for (f, _) in &self.faults {
+            if let Fault::EncoderJump {
+                at_ns,
+                axis,
+                jump_m,
+            } = *f
+                && at_ns <= t_ns
+                && let Some(o) = offsets.get_mut(axis)
+            {
+                *o += jump_m;
+            }
+        }
+        let mut reported = [0.0; 3];
+        for ((r, s), o) in reported.iter_mut().zip(self.axes_at(t_ns)).zip(offsets) {
+            *r = ((s.x_m + o) / count_m).round() * count_m;
+        }
+        self.positions = JointPositions {
+            joints: joints_of(reported),
+            stamp_ns: self.t0_ns.saturating_add(t_ns),
+            valid: !matches!(self.state, DriveState::Fault { .. }),
+        };
+    }
+
+    /// Takes the newest received sample not yet returned.
+    pub fn take_newest(&mut self) -> Option<WrenchSample> {
+        self.newest.take()
+    }
+
+    /// The clock time at which the next sample will be received, if any will.
+    pub fn next_receive_ns(&self) -> Option<u64> {
+        if let Some((t, _)) = self.in_flight.front() {
+            return Some(self.t0_ns.saturating_add(*t));
+        }
+        let period = self.spec.sensor.period_ns;
+        let mut t = self.next_measurement.saturating_mul(period);
+        // Each pass leaves at least one silent window behind for good, so
+        // faults.len() + 1 passes suffice.
+        for _ in 0..=self.faults.len() {
+            let mut moved = false;
+            for (f, _) in &self.faults {
+                if let Fault::SensorSilent { from_ns, until_ns } = *f
+                    && from_ns <= t
+                    && until_ns.is_none_or(|until| t < until)
+                {
+                    let until = until_ns?;
+                    t = until.div_ceil(period).saturating_mul(period);
+                    moved = true;
+                }
+            }
+            if !moved {
+                break;
+            }
+        }
+        Some(
+            self.t0_ns
+                .saturating_add(t)
+                .saturating_add(self.spec.sensor.latency_ns),
+        )
+    }
+
+    /// Sets the device-side tare to the present noise-free reading.
+    pub fn tare(&mut self) -> Result<(), SimError> {
+        let p = self.physics_at(self.done_ns)?;
+        self.tare = Some((p.reading_n, p.reading_nm));
+        Ok(())
+    }
+
+    /// Removes the device-side tare.
+    pub fn clear_tare(&mut self) {
+        self.tare = None;
+    }
+
+    /// The device-side tare, if set (force, torque; sensor frame).
+    pub fn tare_value(&self) -> Option<(Vec3, Vec3)> {
+        self.tare
+    }
+
+    /// The sign of the last slide (+1 inserting, -1 retracting, 0 none yet).
+    pub fn slide_sign(&self) -> f64 {
+        self.slide_sign
+    }
+
+    /// The latest position report.
+    pub fn positions(&self) -> JointPositions {
+        self.positions
+    }
+
+    /// The drives' state.
+    pub fn state(&self) -> DriveState {
+        self.state
+    }
+
+    /// Where the axes' present plans end (their targets, or where they stop).
+    pub fn plan_ends(&self) -> ActiveJoints {
+        joints_of(self.plans.map(|p| p.end_m()))
+    }
+
+    /// Adds a fault; it must start after the present time.
+    pub fn inject(&mut self, fault: Fault) -> Result<(), SimError> {
+        check_fault(self.faults.len(), &fault)?;
+        let at_ns = fault_start_ns(&fault);
+        if at_ns <= self.done_ns {
+            return Err(SimError::FaultNotInFuture {
+                at_ns,
+                elapsed_ns: self.done_ns,
+            });
+        }
+        self.faults.push((fault, false));
+        Ok(())
+    }
+
+    // Commands (at the present time, after `advance`).
+
+    /// `Ready -> Enabled`.
+    pub fn enable(&mut self) -> Result<(), SimError> {
+        match self.state {
+            DriveState::Ready | DriveState::Enabled => {
+                // The axes keep their present plan (a hold, or the stop that
+                // followed a disable): enabling does not move them.
+                self.state = DriveState::Enabled;
+                Ok(())
+            }
+            state => Err(SimError::InvalidState {
+                command: "enable",
+                state,
+            }),
+        }
+    }
+
+    /// `Enabled | QuickStop -> Ready`; the axes brake to a stop.
+    pub fn disable(&mut self) -> Result<(), SimError> {
+        match self.state {
+            DriveState::Enabled | DriveState::QuickStop => {
+                self.state = DriveState::Ready;
+                self.brake_all(self.done_ns);
+                Ok(())
+            }
+            DriveState::Ready => Ok(()),
+            state @ DriveState::Fault { .. } => Err(SimError::InvalidState {
+                command: "disable",
+                state,
+            }),
+        }
+    }
+
+    /// New targets (only while `Enabled`).
+    pub fn set_targets(&mut self, targets: &ActiveJoints) -> Result<(), SimError> {
+        if self.state != DriveState::Enabled {
+            return Err(SimError::InvalidState {
+                command: "set_targets",
+                state: self.state,
+            });
+        }
+        let wanted = array_of(targets);
+        for (axis, (&value_m, &(min_m, max_m))) in wanted
+            .iter()
+            .zip(self.spec.axes.travel_m.iter())
+            .enumerate()
+        {
+            if !value_m.is_finite() {
+                return Err(SimError::TargetNonFinite { axis, value_m });
+            }
+            if !(min_m..=max_m).contains(&value_m) {
+                return Err(SimError::TargetOutOfTravel {
+                    axis,
+                    target_m: value_m,
+                    min_m,
+                    max_m,
+                });
+            }
+        }
+        forward(&self.spec.calibration, &self.spec.profile, targets)
+            .map_err(SimError::TargetPose)?;
+        let now = self.done_ns;
+        let limits = self.limits;
+        let states = self.axes_at(now);
+        for ((plan, state), target) in self.plans.iter_mut().zip(states).zip(wanted) {
+            *plan = AxisPlan::to_target(now, state, target, limits);
+        }
+        Ok(())
+    }
+
+    /// Quick stop: brake at the limit and hold (a fault stays a fault).
+    pub fn quick_stop(&mut self) -> Result<(), SimError> {
+        if !matches!(self.state, DriveState::Fault { .. }) {
+            self.state = DriveState::QuickStop;
+            self.brake_all(self.done_ns);
+        }
+        Ok(())
+    }
+
+    /// `Fault -> Ready` (the simulated cause is gone at once).
+    pub fn fault_reset(&mut self) -> Result<(), SimError> {
+        match self.state {
+            DriveState::Fault { .. } => {
+                self.state = DriveState::Ready;
+                Ok(())
+            }
+            state => Err(SimError::InvalidState {
+                command: "fault_reset",
+                state,
+            }),
+        }
+    }
+}

@@ -1,0 +1,160 @@
+//! The [`ForceSensor`] conformance checks. Each takes a fresh harness.
+
+use super::SensorHarness;
+use sar_drivers::{Error, ErrorKind, ForceSensor, WrenchSample};
+
+/// `next` comes after `prev`: its counter moved forward (by less than half the
+/// counter's range, allowing the wrap) and it was not received earlier.
+pub fn is_newer(prev: &WrenchSample, next: &WrenchSample) -> bool {
+    let advance = next.counter.wrapping_sub(prev.counter);
+    (1..=u32::MAX / 2).contains(&advance) && next.received_ns >= prev.received_ns
+}
+
+fn wait_ok<H: SensorHarness>(h: &mut H) -> WrenchSample {
+    let bound = h.arrival_bound_ns();
+    match h.sensor().wait(bound) {
+        Ok(s) => s,
+        Err(e) => panic!(
+            "no sample within the arrival bound {bound} ns: {e} ({:?})",
+            e.kind()
+        ),
+    }
+}
+
+/// Two polls in a row take no time, and do not return the same sample twice.
+pub fn poll_does_not_block_and_returns_each_sample_once<H: SensorHarness>(h: &mut H) {
+    h.let_time_pass(h.arrival_bound_ns());
+    let before = h.now_ns();
+    let first = h.sensor().poll().unwrap();
+    let second = h.sensor().poll().unwrap();
+    let took = h.now_ns() - before;
+    assert!(took <= 2 * h.call_slack_ns(), "two polls took {took} ns");
+    let first = first.expect("a sample arrived within the arrival bound");
+    if let Some(second) = second {
+        assert!(is_newer(&first, &second), "{first:?} then {second:?}");
+    }
+}
+
+/// Polling faster than the sample rate: every returned sample is newer than
+/// the one before (counter forward, received_ns not backwards) and was
+/// received no later than the poll returned.
+pub fn polled_samples_are_in_order_and_not_from_the_future<H: SensorHarness>(h: &mut H) {
+    let step = (h.period_ns() / 3).max(1);
+    let mut last: Option<WrenchSample> = None;
+    let mut count = 0;
+    for _ in 0..90 {
+        h.let_time_pass(step);
+        let sample = h.sensor().poll().unwrap();
+        let now = h.now_ns();
+        if let Some(s) = sample {
+            assert!(
+                s.received_ns <= now,
+                "received at {} after now {now}",
+                s.received_ns
+            );
+            if let Some(prev) = &last {
+                assert!(is_newer(prev, &s), "{prev:?} then {s:?}");
+            }
+            last = Some(s);
+            count += 1;
+        }
+    }
+    assert!(count >= 10, "only {count} samples in 30 periods");
+}
+
+/// After a pause of many periods, one poll gives the newest sample: recent,
+/// and with a counter gap for the samples it dropped.
+pub fn poll_after_a_pause_returns_the_newest<H: SensorHarness>(h: &mut H) {
+    let first = wait_ok(h);
+    h.let_time_pass(10 * h.period_ns());
+    let s = h
+        .sensor()
+        .poll()
+        .unwrap()
+        .expect("samples arrived during the pause");
+    let age = h.now_ns() - s.received_ns;
+    assert!(
+        age <= h.arrival_bound_ns() + h.call_slack_ns(),
+        "newest sample {age} ns old"
+    );
+    assert!(is_newer(&first, &s));
+    assert!(
+        s.counter.wrapping_sub(first.counter) >= 2,
+        "no gap for the dropped samples: {} then {}",
+        first.counter,
+        s.counter
+    );
+}
+
+/// `wait` returns a sample newer than the last one returned, within its bound.
+pub fn wait_returns_a_newer_sample_within_the_bound<H: SensorHarness>(h: &mut H) {
+    let mut last = wait_ok(h);
+    for _ in 0..10 {
+        let before = h.now_ns();
+        let s = wait_ok(h);
+        let after = h.now_ns();
+        assert!(is_newer(&last, &s), "{last:?} then {s:?}");
+        assert!(s.received_ns <= after);
+        assert!(after - before <= h.arrival_bound_ns() + h.call_slack_ns());
+        last = s;
+    }
+}
+
+/// `wait` with a short timeout returns a newer sample or a `Timeout`-kind
+/// error, and never takes longer than its timeout.
+pub fn wait_times_out_within_its_timeout<H: SensorHarness>(h: &mut H) {
+    let mut last = wait_ok(h);
+    for timeout_ns in [0, 1, h.period_ns() / 4, h.period_ns() / 2] {
+        let before = h.now_ns();
+        let result = h.sensor().wait(timeout_ns);
+        let took = h.now_ns() - before;
+        assert!(
+            took <= timeout_ns + h.call_slack_ns(),
+            "wait({timeout_ns}) took {took} ns"
+        );
+        match result {
+            Ok(s) => {
+                assert!(is_newer(&last, &s));
+                last = s;
+            }
+            Err(e) => assert_eq!(e.kind(), ErrorKind::Timeout, "{e}"),
+        }
+    }
+}
+
+/// `poll` after `wait` does not give the waited sample again.
+pub fn poll_after_wait_does_not_repeat<H: SensorHarness>(h: &mut H) {
+    let s = wait_ok(h);
+    if let Some(p) = h.sensor().poll().unwrap() {
+        assert!(is_newer(&s, &p));
+    }
+}
+
+/// `tare` and `clear_tare` succeed or say `Unsupported`; samples keep coming.
+pub fn tare_and_clear_tare_are_ok_or_unsupported<H: SensorHarness>(h: &mut H) {
+    let _ = wait_ok(h);
+    for (name, result) in [
+        ("tare", h.sensor().tare()),
+        ("clear_tare", h.sensor().clear_tare()),
+    ] {
+        if let Err(e) = result {
+            assert_eq!(e.kind(), ErrorKind::Unsupported, "{name}: {e}");
+        }
+    }
+    let s = wait_ok(h);
+    assert!(s.is_valid());
+}
+
+/// In normal operation samples are valid, and valid means finite.
+pub fn samples_are_valid_and_finite_in_normal_operation<H: SensorHarness>(h: &mut H) {
+    for _ in 0..20 {
+        let s = wait_ok(h);
+        assert!(s.is_valid(), "{s:?}");
+        assert!(
+            s.force_n
+                .iter()
+                .chain(s.torque_nm.iter())
+                .all(|x| x.is_finite())
+        );
+    }
+}
