@@ -20,7 +20,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use raw::{AxisName, FaultKind, FaultToml, FileToml, MotionToml};
 use sar_kinematics::{
-    ActiveJoints, Calibration, ConfigError, Mat3, PoseError, Profile, forward, inverse,
+    ActiveJoints, Calibration, ConfigError, MIN_DISTANCE_M, Mat3, PoseError, Profile, forward,
+    inverse,
 };
 use std::path::Path;
 
@@ -51,8 +52,13 @@ pub const MAX_TIME_S: f64 = 1e6;
 /// The path between two targets is checked with the kinematics at least at
 /// this many instants...
 pub const PATH_CHECK_POINTS: u32 = 32;
-/// ...and at least every this long, s.
+/// ...and at least every this long, s...
 pub const PATH_CHECK_INTERVAL_S: f64 = 0.01;
+/// ...but at most at this many (a move of more than 1000 s).
+pub const PATH_CHECK_MAX_POINTS: u32 = 100_000;
+/// A path whose U-joint passes this close to the vertical through the
+/// support, m, makes the rod vertical.
+pub const VERTICAL_CLEARANCE_M: f64 = 1e-9;
 
 /// A checked scenario: what to simulate and what to run on it.
 #[derive(Debug, Clone, PartialEq)]
@@ -462,7 +468,11 @@ impl Machine {
     }
 
     /// Checks the path from `from` to `to`, each axis on its own trapezoid,
-    /// at intermediate instants, and follows the slide of the rod along it.
+    /// and follows the slide of the rod along it. The kinematics checks the
+    /// path at [`PATH_CHECK_POINTS`] instants at least, [`PATH_CHECK_INTERVAL_S`]
+    /// apart at most (up to [`PATH_CHECK_MAX_POINTS`]); the conditions that hold
+    /// at single points (the U-joint at the support or within the rod offset of
+    /// it, a vertical rod) are checked on the chords between those instants too.
     fn check_path(
         &self,
         ctx: &Ctx<'_>,
@@ -476,12 +486,44 @@ impl Machine {
         let start = from.displacement_m();
         let delta = to.displacement_m() - start;
         let total_s = move_time_s(from, to, max_speed_mps, max_accel_mps2);
-        // At most ~1e8 points (a move of 1e6 s); in practice a few hundred.
-        let points = ((total_s / PATH_CHECK_INTERVAL_S).ceil() as u32).max(PATH_CHECK_POINTS);
+        let points = (total_s / PATH_CHECK_INTERVAL_S).ceil().clamp(
+            f64::from(PATH_CHECK_POINTS),
+            f64::from(PATH_CHECK_MAX_POINTS),
+        ) as u32;
+        let b = self.calibration.support_m();
+        let a_at_zero = self.calibration.p_home_m() + self.calibration.ujoint_offset_m();
+        let min_distance_m = self.profile.offset_m().abs() + MIN_DISTANCE_M;
+        let mut previous_a = a_at_zero + start;
         for k in 1..=points {
             let t_s = total_s * f64::from(k) / f64::from(points);
             let progress = |d: f64| axis_progress_m(d, max_speed_mps, max_accel_mps2, t_s);
             let p = start + Vec3::new(progress(delta.x), progress(delta.y), progress(delta.z));
+            let a = a_at_zero + p;
+            let percent = t_s / total_s * 100.0;
+            let distance_m = distance_to_segment(&b, &previous_a, &a);
+            if distance_m <= min_distance_m {
+                return Err(ctx.err(
+                    key,
+                    format!(
+                        "the path from the previous position takes the U-joint {distance_m:.2e} m \
+                         from the support (around {percent:.0} % of the move's time), a pose the \
+                         kinematics refuses"
+                    ),
+                ));
+            }
+            let flat = |v: Vec3| Vec3::new(v.x, 0.0, v.z);
+            let horizontal_m = distance_to_segment(&flat(b), &flat(previous_a), &flat(a));
+            if horizontal_m <= VERTICAL_CLEARANCE_M {
+                return Err(ctx.err(
+                    key,
+                    format!(
+                        "the path from the previous position puts the rod vertical (the U-joint \
+                         passes {horizontal_m:.2e} m from the vertical through the support, \
+                         around {percent:.0} % of the move's time), a pose the kinematics refuses"
+                    ),
+                ));
+            }
+            previous_a = a;
             let q = ActiveJoints {
                 q1_m: p.z,
                 q2_m: p.y,
@@ -494,8 +536,7 @@ impl Machine {
                     key,
                     format!(
                         "the path from the previous position crosses a pose the kinematics \
-                         refuses ({:.0} % of the move's time): {e}",
-                        t_s / total_s * 100.0
+                         refuses ({percent:.0} % of the move's time): {e}"
                     ),
                 ));
             }
@@ -503,6 +544,18 @@ impl Machine {
         }
         Ok(())
     }
+}
+
+/// Distance from `p` to the segment from `a` to `b`.
+fn distance_to_segment(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
+    let ab = b - a;
+    let len2 = ab.norm_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a + ab * t - p).norm()
 }
 
 fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ScenarioError> {

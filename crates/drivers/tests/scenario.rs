@@ -552,6 +552,21 @@ fn bad_files() -> Vec<(&'static str, String, &'static str, &'static str)> {
             "vertical",
         ),
         (
+            "a path through the support",
+            replaced("tip = [0.62, 0.21, 0.01]", "ujoint = [0.60, 0.20, 0.0]"),
+            "motion[2]",
+            "from the support",
+        ),
+        (
+            "a path through the vertical",
+            replaced(
+                "tip = [0.62, 0.21, 0.01]",
+                "ujoint = [0.44, 0.10, 0.0]\nhold_s = 0.0\n\n[[motion]]\nujoint = [0.46, 0.10, 0.0]",
+            ),
+            "motion[3]",
+            "vertical",
+        ),
+        (
             "outside the travel",
             replaced("joints = [0.0, 0.28, 0.25]", "joints = [0.0, 0.28, 0.65]"),
             "motion[0].joints",
