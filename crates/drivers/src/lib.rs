@@ -12,6 +12,7 @@
 pub mod clock;
 pub mod drives;
 pub mod error;
+pub mod runner;
 pub mod scenario;
 pub mod sensor;
 pub mod sim;

@@ -1,0 +1,163 @@
+//! The file's shape as serde reads it. Every table refuses unknown keys, so a
+//! typo is an error, never a silently ignored value. Values are checked later
+//! (`super::build`), where each check names its key.
+
+use serde::Deserialize;
+
+/// The whole file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct FileToml {
+    pub name: String,
+    #[serde(default)]
+    pub description: Option<String>,
+    pub seed: u64,
+    #[serde(default)]
+    pub physics_step_s: Option<f64>,
+    pub robot: RobotToml,
+    pub manipulator: ManipulatorToml,
+    #[serde(default)]
+    pub support: Option<SupportToml>,
+    #[serde(default)]
+    pub axes: Option<AxesToml>,
+    #[serde(default)]
+    pub sensor: Option<SensorToml>,
+    #[serde(default)]
+    pub motion: Vec<MotionToml>,
+    #[serde(default)]
+    pub random_motion: Option<RandomMotionToml>,
+    #[serde(default)]
+    pub contact: Vec<ContactToml>,
+    #[serde(default)]
+    pub tip_mass: Option<TipMassToml>,
+    #[serde(default)]
+    pub fault: Vec<FaultToml>,
+}
+
+/// `[robot]`: the true geometry, with the keys of INTERFACES.md 2 `[geometry]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RobotToml {
+    pub gravity: [f64; 3],
+    pub support: [f64; 3],
+    pub p_home: [f64; 3],
+    pub ujoint_offset: [f64; 3],
+    pub sensor_offset: [f64; 3],
+    pub sensor_rotation: [[f64; 3]; 3],
+}
+
+/// `[manipulator]`: the true manipulator.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ManipulatorToml {
+    #[serde(default)]
+    pub name: Option<String>,
+    pub length_m: f64,
+    pub offset_m: f64,
+    pub mass_kg: f64,
+    pub com_m: f64,
+}
+
+/// `[support]`: the support's friction.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SupportToml {
+    pub friction_n: f64,
+}
+
+/// `[axes]`: every key optional (defaults: the article's axes).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct AxesToml {
+    pub max_speed_mps: Option<f64>,
+    pub max_accel_mps2: Option<f64>,
+    pub lead_m_per_turn: Option<f64>,
+    pub counts_per_turn: Option<u32>,
+    pub position_rate_hz: Option<f64>,
+    pub travel_m: Option<[[f64; 2]; 3]>,
+    pub start: Option<[f64; 3]>,
+}
+
+/// `[sensor]`: every key optional (defaults: the HEX-6 of the article).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SensorToml {
+    pub rate_hz: Option<f64>,
+    pub latency_s: Option<f64>,
+    pub noise_n: Option<[f64; 3]>,
+    pub noise_nm: Option<[f64; 3]>,
+    pub bias_n: Option<[f64; 3]>,
+    pub bias_nm: Option<[f64; 3]>,
+    pub drift_n_per_s: Option<[f64; 3]>,
+    pub has_tare: Option<bool>,
+}
+
+/// `[[motion]]`: one step; exactly one target.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct MotionToml {
+    pub joints: Option<[f64; 3]>,
+    pub ujoint: Option<[f64; 3]>,
+    pub tip: Option<[f64; 3]>,
+    pub rod_dir: Option<[f64; 3]>,
+    pub support_distance_m: Option<f64>,
+    pub hold_s: Option<f64>,
+}
+
+/// `[random_motion]`: random tip targets after the `[[motion]]` steps.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RandomMotionToml {
+    pub count: u32,
+    pub max_angle_deg: f64,
+    pub beyond_m: [f64; 2],
+    pub hold_s: f64,
+}
+
+/// `[[contact]]`: one keyframe of the tip force.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ContactToml {
+    pub t_s: f64,
+    pub force_n: [f64; 3],
+}
+
+/// `[tip_mass]`: a known mass hung at the tip.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct TipMassToml {
+    pub mass_kg: f64,
+}
+
+/// The kinds of `[[fault]]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum FaultKind {
+    SensorSilent,
+    NanSample,
+    EncoderJump,
+    DriveFault,
+}
+
+/// An axis by its joint name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum AxisName {
+    Q1,
+    Q2,
+    Q3,
+}
+
+/// `[[fault]]`: one fault; which keys it takes depends on `kind` (checked later,
+/// so that the error names the key).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct FaultToml {
+    pub kind: FaultKind,
+    pub from_s: Option<f64>,
+    pub until_s: Option<f64>,
+    pub at_s: Option<f64>,
+    pub axis: Option<AxisName>,
+    pub jump_m: Option<f64>,
+    pub code: Option<u16>,
+}

@@ -1,0 +1,861 @@
+//! The closed loop: the shipped scenarios run on the simulator through the
+//! generic runner, and the simulated readings go through the estimator.
+//!
+//! - Determinism: every shipped scenario, run twice with its seed, gives the
+//!   same samples bit for bit; another seed gives other noise.
+//! - Tip force: the contact scenario's samples, with the positions of the same
+//!   instant, through `sar_estimator::cycle::Estimator` (true geometry and
+//!   profile, the simulated bias as tare) give back the simulator's tip force
+//!   within the reported standard deviation; the guard stops during the push.
+//! - Identification: the article's protocol gives back each Table 2
+//!   manipulator's m and c; Table 3's hung masses come back; the cone protocol
+//!   calibrates a support given 2.7 mm off.
+//! - Faults: the guard goes to Fault for a silent sensor, a NaN sample and a
+//!   drive fault; an encoder jump is silent (its effect on the estimate is
+//!   measured).
+//!
+//! Run with `--nocapture` to see the figures.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
+
+use sar_drivers::runner::{EndReason, Run, RunEvent, RunOptions, run};
+use sar_drivers::scenario::{Scenario, load};
+use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
+use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3, WrenchSample};
+use sar_estimator::SensorNoise;
+use sar_estimator::StaticPose;
+use sar_estimator::cycle::{
+    CycleInput, Estimator, EstimatorConfig, JointSample, SensorSample, TipOutcome,
+};
+use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState, Reason};
+use sar_estimator::identification::{Identification, IdentificationOptions, IdentificationResult};
+use sar_estimator::support::{SupportCalibration, SupportOptions};
+use sar_estimator::tip_force::TipForceConfig;
+use sar_kinematics::{ActiveJoints, forward};
+use std::path::{Path, PathBuf};
+
+/// Host time at which every simulated run starts (not 0, so that host and
+/// simulator times differ and a mix-up shows).
+const HOST_START_NS: u64 = 1_000_000_000;
+/// The runner's polling period (every 500 Hz sample and 1 kHz position).
+const PERIOD_NS: u64 = 1_000_000;
+/// Samples received in the first part of a hold are left out (the axes may
+/// still be doing their last micrometres when the runner sees them arrive).
+const SETTLE_NS: u64 = 20_000_000;
+
+fn scenarios_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios")
+}
+
+fn scenario(file: &str) -> Scenario {
+    load(&scenarios_dir().join(file)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn shipped() -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(scenarios_dir())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// The drives, with the simulator's truth taken at every position read (every
+/// tick of the runner): the runner stays generic, the test sees the truth.
+struct TruthTap {
+    drives: SimDrives<SimClock>,
+    sim: Simulator<SimClock>,
+    truths: Vec<Truth>,
+}
+
+impl AxisDrives for TruthTap {
+    type Error = SimError;
+
+    fn positions(&mut self) -> Result<JointPositions, SimError> {
+        if let Ok(truth) = self.sim.truth() {
+            self.truths.push(truth);
+        }
+        self.drives.positions()
+    }
+
+    fn state(&mut self) -> Result<DriveState, SimError> {
+        self.drives.state()
+    }
+
+    fn enable(&mut self) -> Result<(), SimError> {
+        self.drives.enable()
+    }
+
+    fn disable(&mut self) -> Result<(), SimError> {
+        self.drives.disable()
+    }
+
+    fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), SimError> {
+        self.drives.set_targets(targets)
+    }
+
+    fn quick_stop(&mut self) -> Result<(), SimError> {
+        self.drives.quick_stop()
+    }
+
+    fn fault_reset(&mut self) -> Result<(), SimError> {
+        self.drives.fault_reset()
+    }
+}
+
+/// A run of a scenario on the simulator, with the truth at every tick when asked.
+struct Simulated {
+    run: Run,
+    truths: Vec<Truth>,
+}
+
+impl Simulated {
+    /// The truth at host time `t_ns` (a tick of the runner).
+    fn truth_at(&self, t_ns: u64) -> Option<&Truth> {
+        let elapsed = t_ns.checked_sub(HOST_START_NS)?;
+        let i = self.truths.partition_point(|t| t.elapsed_ns < elapsed);
+        self.truths.get(i).filter(|t| t.elapsed_ns == elapsed)
+    }
+}
+
+fn simulate_with_seed(s: &Scenario, seed: u64, with_truth: bool) -> Simulated {
+    let clock = SimClock::new(HOST_START_NS);
+    let mut spec = s.spec.clone();
+    spec.seed = seed;
+    let sim = Simulator::new(spec, clock.clone()).unwrap_or_else(|e| panic!("{}: {e}", s.name));
+    let options = RunOptions::for_script(&s.script, PERIOD_NS);
+    let mut sensor = sim.sensor();
+    let (run, truths) = if with_truth {
+        let mut tap = TruthTap {
+            drives: sim.drives(),
+            sim: sim.clone(),
+            truths: Vec::new(),
+        };
+        let run = run(&s.script, &mut sensor, &mut tap, &clock, &options);
+        (run, tap.truths)
+    } else {
+        let mut drives = sim.drives();
+        (
+            run(&s.script, &mut sensor, &mut drives, &clock, &options),
+            Vec::new(),
+        )
+    };
+    let run = run.unwrap_or_else(|e| panic!("{}: {e}", s.name));
+    assert_eq!(run.start_ns, HOST_START_NS);
+    Simulated { run, truths }
+}
+
+fn simulate(s: &Scenario, with_truth: bool) -> Simulated {
+    simulate_with_seed(s, s.spec.seed, with_truth)
+}
+
+// ---------------------------------------------------------------------------
+// Determinism.
+
+type SampleBits = ([u64; 6], u32, u32, u64);
+type PositionBits = ([u64; 3], u64, bool);
+
+fn sample_bits(s: &WrenchSample) -> SampleBits {
+    let f = s.force_n;
+    let t = s.torque_nm;
+    (
+        [f.x, f.y, f.z, t.x, t.y, t.z].map(f64::to_bits),
+        s.counter,
+        s.status.0,
+        s.received_ns,
+    )
+}
+
+fn position_bits(p: &JointPositions) -> PositionBits {
+    let q = p.joints;
+    (
+        [q.q1_m, q.q2_m, q.q3_m].map(f64::to_bits),
+        p.stamp_ns,
+        p.valid,
+    )
+}
+
+#[test]
+fn every_scenario_runs_and_the_same_seed_gives_the_same_samples_bit_for_bit() {
+    for file in shipped() {
+        let s = load(&file).unwrap();
+        let first = simulate(&s, false).run;
+        let second = simulate(&s, false).run;
+        let name = &s.name;
+        // It ran: to its end (or the drive fault), with samples all along.
+        let want_end = if name == "fault-drive-fault" {
+            EndReason::DriveFault { code: 0x2310 }
+        } else {
+            EndReason::ScriptDone
+        };
+        assert_eq!(first.end, want_end, "{name}: {:?}", first.events);
+        let elapsed_ns = first.end_ns - first.start_ns;
+        assert!(
+            elapsed_ns >= s.script.nominal_duration_ns().min(2_200_000_000),
+            "{name}"
+        );
+        let expected_samples = elapsed_ns / s.spec.sensor.period_ns;
+        let silent_ns = if name == "fault-sensor-silent" {
+            500_000_000
+        } else {
+            0
+        };
+        let missing = expected_samples - (silent_ns / s.spec.sensor.period_ns);
+        assert!(
+            (first.sensor_samples.len() as u64).abs_diff(missing) <= 2,
+            "{name}: {} samples for {missing}",
+            first.sensor_samples.len()
+        );
+        // Bit for bit.
+        assert_eq!(first.end_ns, second.end_ns, "{name}");
+        assert_eq!(first.holds, second.holds, "{name}");
+        assert_eq!(first.steps, second.steps, "{name}");
+        assert_eq!(first.slides, second.slides, "{name}");
+        let a: Vec<SampleBits> = first.sensor_samples.iter().map(sample_bits).collect();
+        let b: Vec<SampleBits> = second.sensor_samples.iter().map(sample_bits).collect();
+        assert!(a == b, "{name}: sensor samples differ between two runs");
+        let a: Vec<PositionBits> = first.positions.iter().map(position_bits).collect();
+        let b: Vec<PositionBits> = second.positions.iter().map(position_bits).collect();
+        assert!(a == b, "{name}: positions differ between two runs");
+        // Holds reached their targets and the measured slide signs are the
+        // planned ones (the encoder jump makes the later arrivals time out).
+        if name != "fault-encoder-jump" && name != "fault-drive-fault" {
+            assert!(first.holds.iter().all(|h| h.arrived), "{name}");
+            for h in &first.holds {
+                let planned = s.script.steps[h.step].planned_slide_sign;
+                assert_eq!(h.slide_sign, planned, "{name}: step {}", h.step);
+            }
+        }
+        println!(
+            "{name}: {:.2} s simulated, {} sensor samples, {} positions, {} holds, end {:?}",
+            elapsed_ns as f64 * 1e-9,
+            first.sensor_samples.len(),
+            first.positions.len(),
+            first.holds.len(),
+            first.end
+        );
+    }
+}
+
+#[test]
+fn another_seed_gives_other_noise_and_the_same_motion() {
+    let s = scenario("identify_manipulator_1.toml");
+    let a = simulate(&s, false).run;
+    let b = simulate_with_seed(&s, s.spec.seed + 1, false).run;
+    let pa: Vec<PositionBits> = a.positions.iter().map(position_bits).collect();
+    let pb: Vec<PositionBits> = b.positions.iter().map(position_bits).collect();
+    assert!(pa == pb, "the motion does not depend on the seed");
+    assert_eq!(a.sensor_samples.len(), b.sensor_samples.len());
+    let mut same = 0;
+    let mut diff_sq = Vec3::zeros();
+    for (x, y) in a.sensor_samples.iter().zip(&b.sensor_samples) {
+        assert_eq!(x.received_ns, y.received_ns);
+        if x.force_n == y.force_n {
+            same += 1;
+        }
+        let d = x.force_n - y.force_n;
+        diff_sq += d.component_mul(&d);
+    }
+    assert_eq!(same, 0, "some samples have the same noise");
+    // The difference of two independent noises has std sqrt(2) times the noise.
+    let n = a.sensor_samples.len() as f64;
+    let rms = (diff_sq / n).map(f64::sqrt);
+    let want = s.spec.sensor.noise_n * 2f64.sqrt();
+    for i in 0..3 {
+        assert!(
+            (rms[i] / want[i] - 1.0).abs() < 0.05,
+            "axis {i}: rms of the difference {} vs {}",
+            rms[i],
+            want[i]
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Tip force.
+
+/// Guard limits for the closed-loop tests: total 10/15 N, axial 8/12 N, lateral
+/// 6/10 N, hysteresis 1 N, debounce 3 cycles, inputs at most 5 ms old, std at
+/// most 3 N.
+fn guard_limits() -> GuardLimits {
+    GuardLimits {
+        warn_total_n: 10.0,
+        stop_total_n: 15.0,
+        warn_axial_n: 8.0,
+        stop_axial_n: 12.0,
+        warn_lateral_n: 6.0,
+        stop_lateral_n: 10.0,
+        hysteresis_n: 1.0,
+        debounce_cycles: 3,
+        max_sensor_age_ns: 5_000_000,
+        max_joints_age_ns: 5_000_000,
+        max_std_n: 3.0,
+    }
+}
+
+/// The estimator with the scenario's TRUE geometry and profile, its sensor
+/// noise, and its (constant) simulated bias as the tare.
+fn estimator_for(s: &Scenario) -> Estimator {
+    assert_eq!(
+        s.spec.sensor.drift_n_per_s,
+        Vec3::zeros(),
+        "the tare is the bias at start"
+    );
+    let config = EstimatorConfig {
+        calibration: s.spec.calibration,
+        profile: s.spec.profile,
+        noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
+        tip: TipForceConfig { max_std_n: 3.0 },
+        guard: GuardConfig::new(guard_limits()).unwrap(),
+    };
+    Estimator::new(&config, s.spec.sensor.bias_n).unwrap()
+}
+
+/// The positions at host time `t_ns`, linear between the two reports around it.
+fn joints_at(run: &Run, t_ns: u64) -> Option<JointPositions> {
+    let before = *run.positions_at(t_ns)?;
+    if before.stamp_ns == t_ns {
+        return Some(before);
+    }
+    let after = run.positions_in(t_ns, u64::MAX).first()?;
+    let w = (t_ns - before.stamp_ns) as f64 / (after.stamp_ns - before.stamp_ns) as f64;
+    let lerp = |a: f64, b: f64| a + (b - a) * w;
+    Some(JointPositions {
+        joints: ActiveJoints {
+            q1_m: lerp(before.joints.q1_m, after.joints.q1_m),
+            q2_m: lerp(before.joints.q2_m, after.joints.q2_m),
+            q3_m: lerp(before.joints.q3_m, after.joints.q3_m),
+        },
+        stamp_ns: t_ns,
+        valid: before.valid && after.valid,
+    })
+}
+
+fn sensor_input(sample: &WrenchSample) -> SensorSample {
+    SensorSample {
+        force_n: sample.force_n,
+        torque_nm: sample.torque_nm,
+        stamp_ns: sample.received_ns,
+        valid: sample.is_valid(),
+    }
+}
+
+#[test]
+fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
+    let s = scenario("random_contact_manipulator_2.toml");
+    let sim = simulate(&s, true);
+    let run = &sim.run;
+    assert_eq!(run.end, EndReason::ScriptDone);
+    let latency_ns = s.spec.sensor.latency_ns;
+    let friction_n = s.spec.friction_n;
+    assert!(friction_n > 0.0);
+    let mut est = estimator_for(&s);
+    let (mut sum_z2, mut sum_e2, mut sum_raw_e2) = (Vec3::zeros(), Vec3::zeros(), Vec3::zeros());
+    let (mut n, mut beyond_4_std, mut sum_std) = (0usize, 0usize, Vec3::zeros());
+    let mut max_err = Vec3::zeros();
+    let mut transitions = Vec::new();
+    let mut cycle = 0;
+    for sample in &run.sensor_samples {
+        // The sample measures 1 latency before it is received; take the
+        // positions and the truth of that instant.
+        let measured_ns = sample.received_ns - latency_ns;
+        let Some(joints) = joints_at(run, measured_ns) else {
+            continue;
+        };
+        cycle += 1;
+        let input = CycleInput {
+            cycle,
+            now_ns: sample.received_ns,
+            sensor: sensor_input(sample),
+            joints: JointSample {
+                joints: joints.joints,
+                stamp_ns: joints.stamp_ns,
+                valid: joints.valid,
+            },
+        };
+        let out = *est.cycle(&input);
+        if cycle == 1 {
+            // Leave the initial Fault (no input yet) once a good input is in.
+            let t = est.reset_guard(cycle).unwrap().unwrap();
+            transitions.push((measured_ns, t.to, t.reason));
+        } else if let Some(t) = out.transition {
+            transitions.push((measured_ns, t.to, t.reason));
+        }
+        let truth = sim
+            .truth_at(measured_ns)
+            .expect("a truth at every measurement");
+        let TipOutcome::Estimate(e) = out.tip else {
+            panic!("no estimate at {measured_ns} ns: {:?}", out.tip);
+        };
+        // Friction at the support acts along the rod like an axial tip force
+        // (MODEL.md 4.1): the estimate is F_tip minus the friction force.
+        let expected = truth.tip_force_n - truth.friction_force_n;
+        let err = e.force_n - expected;
+        let raw = e.force_n - truth.tip_force_n;
+        let z = err.component_div(&e.std_n);
+        sum_z2 += z.component_mul(&z);
+        sum_e2 += err.component_mul(&err);
+        sum_raw_e2 += raw.component_mul(&raw);
+        sum_std += e.std_n;
+        max_err = max_err.zip_map(&err, |m, x| m.max(x.abs()));
+        if z.amax() > 4.0 {
+            beyond_4_std += 1;
+        }
+        n += 1;
+    }
+    let nf = n as f64;
+    let rms_z = (sum_z2 / nf).map(f64::sqrt);
+    let rms_err = (sum_e2 / nf).map(f64::sqrt);
+    let rms_raw = (sum_raw_e2 / nf).map(f64::sqrt);
+    let mean_std = sum_std / nf;
+    println!(
+        "tip force over {n} samples: RMS error (x, y, z) = ({:.3}, {:.3}, {:.3}) N, mean reported \
+         std ({:.3}, {:.3}, {:.3}) N, RMS error / std ({:.3}, {:.3}, {:.3}), max |error| ({:.2}, \
+         {:.2}, {:.2}) N, {beyond_4_std} samples beyond 4 std; ignoring the 0.3 N friction: RMS \
+         error ({:.3}, {:.3}, {:.3}) N",
+        rms_err.x,
+        rms_err.y,
+        rms_err.z,
+        mean_std.x,
+        mean_std.y,
+        mean_std.z,
+        rms_z.x,
+        rms_z.y,
+        rms_z.z,
+        max_err.x,
+        max_err.y,
+        max_err.z,
+        rms_raw.x,
+        rms_raw.y,
+        rms_raw.z
+    );
+    assert!(
+        n + 5 >= run.sensor_samples.len(),
+        "{n} of {}",
+        run.sensor_samples.len()
+    );
+    for i in 0..3 {
+        assert!(
+            (0.9..1.1).contains(&rms_z[i]),
+            "axis {i}: RMS error / std = {}",
+            rms_z[i]
+        );
+    }
+    assert!(
+        (beyond_4_std as f64) < 1e-3 * nf,
+        "{beyond_4_std} of {n} samples beyond 4 std"
+    );
+    // The guard: Ok from the first cycle, never Fault, Stop during the push
+    // (17.2 to 17.6 s at 17.5 N; ramps from 16.9 s, released at 17.8 s).
+    println!("guard transitions: {transitions:?}");
+    assert!(matches!(
+        transitions.first(),
+        Some((_, GuardState::Ok, Reason::Reset))
+    ));
+    assert!(
+        transitions.iter().all(|t| t.1 != GuardState::Fault),
+        "{transitions:?}"
+    );
+    let stops: Vec<_> = transitions
+        .iter()
+        .filter(|t| t.1 == GuardState::Stop)
+        .collect();
+    assert_eq!(stops.len(), 1, "{transitions:?}");
+    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
+    println!("guard Stop at {stop_s:.3} s: {}", stops[0].2);
+    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
+    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+}
+
+// ---------------------------------------------------------------------------
+// Identification.
+
+/// The static poses of a run: per hold, the mean sensor reading after the
+/// settling margin, A from the forward kinematics at the mean positions, the
+/// slide sign that the runner saw.
+fn static_poses(s: &Scenario, run: &Run) -> Vec<StaticPose> {
+    run.holds
+        .iter()
+        .map(|h| {
+            assert!(h.arrived);
+            let from = h.start_ns + SETTLE_NS;
+            let samples = run.sensor_samples_in(from, h.end_ns);
+            assert!(samples.len() > 200, "{} samples", samples.len());
+            assert!(samples.iter().all(WrenchSample::is_valid));
+            let mean_reading_n =
+                samples.iter().map(|x| x.force_n).sum::<Vec3>() / samples.len() as f64;
+            let positions = run.positions_in(from, h.end_ns);
+            let mean_q = positions
+                .iter()
+                .map(|p| p.joints.displacement_m())
+                .sum::<Vec3>()
+                / positions.len() as f64;
+            let q = ActiveJoints {
+                q1_m: mean_q.z,
+                q2_m: mean_q.y,
+                q3_m: mean_q.x,
+            };
+            let pose = forward(&s.spec.calibration, &s.spec.profile, &q).unwrap();
+            StaticPose {
+                ujoint_m: pose.ujoint_m,
+                mean_reading_n,
+                samples: samples.len() as u32,
+                slide_sign: h.slide_sign,
+            }
+        })
+        .collect()
+}
+
+/// Identification with friction, the configured support = the true one and
+/// the simulated bias as the tare.
+fn identify(s: &Scenario) -> IdentificationResult {
+    let run = simulate(s, false).run;
+    assert_eq!(run.end, EndReason::ScriptDone);
+    let mut id = Identification::new(
+        &s.spec.calibration,
+        &SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
+        s.spec.sensor.bias_n,
+        IdentificationOptions {
+            bias_across_gravity: false,
+            friction: true,
+        },
+    )
+    .unwrap();
+    for pose in static_poses(s, &run) {
+        id.add(&pose).unwrap();
+    }
+    id.solve().unwrap()
+}
+
+#[test]
+fn identification_gives_back_m_and_c_of_each_table2_manipulator() {
+    for k in 1..=4 {
+        let s = scenario(&format!("identify_manipulator_{k}.toml"));
+        let (m, c) = (s.spec.profile.mass_kg(), s.spec.profile.com_m());
+        let r = identify(&s);
+        let (dm, dc) = (r.mass_kg - m, r.com_m - c);
+        println!(
+            "manipulator {k}: m = {:.5} +- {:.5} kg (true {m}, error {:+.4} %, {:+.2} std), c = \
+             {:.6} +- {:.6} m (true {c}, error {:+.4} %, {:+.2} std), friction {:.3} +- {:.3} N \
+             (true {}), chi2/dof {:.2}, {} poses",
+            r.mass_kg,
+            r.mass_std_kg,
+            dm / m * 100.0,
+            dm / r.mass_std_kg,
+            r.com_m,
+            r.com_std_m,
+            dc / c * 100.0,
+            dc / r.com_std_m,
+            r.friction_n.unwrap(),
+            r.friction_std_n.unwrap(),
+            s.spec.friction_n,
+            r.chi2_dof,
+            r.poses
+        );
+        assert_eq!(r.poses, 10);
+        assert!(dm.abs() <= 3.0 * r.mass_std_kg, "manipulator {k}: m");
+        assert!(dc.abs() <= 3.0 * r.com_std_m, "manipulator {k}: c");
+        assert!(
+            dm.abs() < 0.01 * m && dc.abs() < 0.01 * c,
+            "manipulator {k}"
+        );
+        let f = r.friction_n.unwrap();
+        assert!((f - s.spec.friction_n).abs() <= 3.0 * r.friction_std_n.unwrap());
+        assert!(r.chi2_dof < 3.0, "chi2/dof {}", r.chi2_dof);
+    }
+}
+
+#[test]
+fn table3_the_hung_mass_comes_back() {
+    let base = identify(&scenario("identify_manipulator_2.toml"));
+    let length_m = 0.35;
+    for (file, hung_kg, article_kg) in [
+        ("table3_mass_0_51kg.toml", 0.51, 0.5061),
+        ("table3_mass_1_03kg.toml", 1.03, 1.013),
+        ("table3_mass_2_04kg.toml", 2.04, 2.030),
+    ] {
+        let s = scenario(file);
+        assert_eq!(s.spec.tip_mass_kg, hung_kg);
+        let r = identify(&s);
+        let found_kg = r.mass_kg - base.mass_kg;
+        let std_kg = (r.mass_std_kg.powi(2) + base.mass_std_kg.powi(2)).sqrt();
+        // The hung mass acts at the tip: the first moment grows by m_t L.
+        let lever_m = (r.moment_kgm - base.moment_kgm) / found_kg;
+        println!(
+            "Table 3, {hung_kg} kg hung: identified {found_kg:.4} +- {std_kg:.4} kg (error {:+.3} \
+             %, article {article_kg} kg = {:+.3} %), at {lever_m:.4} m from A (L = {length_m} m)",
+            (found_kg - hung_kg) / hung_kg * 100.0,
+            (article_kg - hung_kg) / hung_kg * 100.0
+        );
+        assert!((found_kg - hung_kg).abs() <= 3.0 * std_kg, "{file}");
+        assert!((found_kg - hung_kg).abs() < 0.01 * hung_kg, "{file}");
+        assert!(
+            (lever_m - length_m).abs() < 0.01 * length_m,
+            "{file}: lever {lever_m}"
+        );
+    }
+}
+
+#[test]
+fn cone_protocol_calibrates_a_support_given_off() {
+    let s = scenario("identify_cone_manipulator_2.toml");
+    let run = simulate(&s, false).run;
+    assert_eq!(run.end, EndReason::ScriptDone);
+    let poses = static_poses(&s, &run);
+    assert_eq!(poses.len(), 20);
+    let truth_b = s.spec.calibration.support_m();
+    let configured = s
+        .spec
+        .calibration
+        .with_support(truth_b + Vec3::new(0.002, -0.0015, 0.001))
+        .unwrap();
+    let noise = SensorNoise::new(s.spec.sensor.noise_n).unwrap();
+    let mut cal = SupportCalibration::new(
+        &configured,
+        &noise,
+        s.spec.sensor.bias_n,
+        SupportOptions::default(),
+    )
+    .unwrap();
+    for p in &poses {
+        cal.push(p).unwrap();
+    }
+    let fit = cal.fit().unwrap();
+    let (m, c) = (s.spec.profile.mass_kg(), s.spec.profile.com_m());
+    let db = fit.support_m - truth_b;
+    println!(
+        "cone protocol, support given 2.7 mm off: B error ({:.4}, {:.4}, {:.4}) mm, std ({:?}) \
+         m; m error {:+.4} % ({:+.2} std), c error {:+.4} % ({:+.2} std), friction {:.3} N, \
+         {} iterations",
+        db.x * 1e3,
+        db.y * 1e3,
+        db.z * 1e3,
+        fit.support_std_m,
+        (fit.mass_kg - m) / m * 100.0,
+        (fit.mass_kg - m) / fit.mass_std_kg,
+        (fit.com_m - c) / c * 100.0,
+        (fit.com_m - c) / fit.com_std_m,
+        fit.friction_n.unwrap_or(f64::NAN),
+        fit.iterations
+    );
+    assert_eq!(fit.held, [false; 3], "the cone determines all of B");
+    for i in 0..3 {
+        let std = fit.support_std_m[i].unwrap();
+        assert!(
+            db[i].abs() <= 3.0 * std.max(1e-6),
+            "B[{i}] off by {} m",
+            db[i]
+        );
+    }
+    assert!(db.norm() < 2e-4, "B off by {} m", db.norm());
+    assert!((fit.mass_kg - m).abs() <= 3.0 * fit.mass_std_kg);
+    assert!((fit.com_m - c).abs() <= 3.0 * fit.com_std_m);
+    assert!((fit.mass_kg - m).abs() < 0.005 * m && (fit.com_m - c).abs() < 0.005 * c);
+}
+
+// ---------------------------------------------------------------------------
+// Faults.
+
+/// A guard transition: host time, new state, reason.
+type GuardEvent = (u64, GuardState, Reason);
+
+/// What the daemon's loop would do: one cycle per position report (1 kHz),
+/// with the newest sensor sample received by then. Returns the guard's
+/// transitions (host time, new state, reason) after the first reset, and the
+/// estimates (host time, F_tip) of the cycles that gave one.
+fn daemon_loop(s: &Scenario, run: &Run) -> (Vec<GuardEvent>, Vec<(u64, Vec3)>) {
+    let mut est = estimator_for(s);
+    let mut transitions = Vec::new();
+    let mut estimates = Vec::new();
+    let mut next_sample = 0;
+    let mut latest: Option<&WrenchSample> = None;
+    for (i, p) in run.positions.iter().enumerate() {
+        let now = p.stamp_ns;
+        while let Some(x) = run.sensor_samples.get(next_sample) {
+            if x.received_ns > now {
+                break;
+            }
+            latest = Some(x);
+            next_sample += 1;
+        }
+        let Some(sample) = latest else { continue };
+        let cycle = i as u64 + 1;
+        let out = *est.cycle(&CycleInput {
+            cycle,
+            now_ns: now,
+            sensor: sensor_input(sample),
+            joints: JointSample {
+                joints: p.joints,
+                stamp_ns: p.stamp_ns,
+                valid: p.valid,
+            },
+        });
+        if transitions.is_empty() {
+            let t = est.reset_guard(cycle).unwrap().unwrap();
+            transitions.push((now, t.to, t.reason));
+        } else if let Some(t) = out.transition {
+            transitions.push((now, t.to, t.reason));
+        }
+        if let TipOutcome::Estimate(e) = out.tip {
+            estimates.push((now, e.force_n));
+        }
+    }
+    (transitions, estimates)
+}
+
+/// Checks the guard is Ok until the fault at 2.0 s, then Fault within
+/// `within_ns` for `reason`; returns the delay from 2.0 s to the Fault.
+fn assert_fault_after_2s(
+    name: &str,
+    transitions: &[GuardEvent],
+    within_ns: u64,
+    reason: fn(&Reason) -> bool,
+) -> u64 {
+    let fault_at = HOST_START_NS + 2_000_000_000;
+    assert_eq!(transitions[0].1, GuardState::Ok, "{name}");
+    let first_fault = transitions
+        .iter()
+        .find(|t| t.1 == GuardState::Fault)
+        .unwrap_or_else(|| panic!("{name}: no Fault in {transitions:?}"));
+    assert!(
+        transitions
+            .iter()
+            .take_while(|t| t.1 != GuardState::Fault)
+            .all(|t| t.1 == GuardState::Ok),
+        "{name}: {transitions:?}"
+    );
+    assert!(
+        (fault_at..fault_at + within_ns).contains(&first_fault.0),
+        "{name}: Fault at {} ns",
+        first_fault.0
+    );
+    assert!(reason(&first_fault.2), "{name}: {:?}", first_fault.2);
+    first_fault.0 - fault_at
+}
+
+#[test]
+fn the_guard_faults_for_a_silent_sensor_a_nan_sample_and_a_drive_fault() {
+    let s = scenario("fault_sensor_silent.toml");
+    let run = simulate(&s, false).run;
+    let (t, _) = daemon_loop(&s, &run);
+    let delay = assert_fault_after_2s(&s.name, &t, 10_000_000, |r| {
+        matches!(r, Reason::SensorStale { .. })
+    });
+    println!(
+        "sensor silent at 2.0 s: guard Fault (stale) {:.1} ms later",
+        delay as f64 * 1e-6
+    );
+    // The samples came back after 2.5 s; the Fault stays latched.
+    assert!(
+        run.sensor_samples
+            .iter()
+            .any(|x| x.received_ns > HOST_START_NS + 2_600_000_000)
+    );
+    assert_eq!(t.last().unwrap().1, GuardState::Fault);
+
+    let s = scenario("fault_nan_sample.toml");
+    let run = simulate(&s, false).run;
+    let nan: Vec<_> = run
+        .sensor_samples
+        .iter()
+        .filter(|x| !x.is_valid())
+        .collect();
+    assert_eq!(nan.len(), 1, "one NaN sample");
+    let (t, _) = daemon_loop(&s, &run);
+    let delay = assert_fault_after_2s(&s.name, &t, 5_000_000, |r| {
+        matches!(r, Reason::SensorInvalid)
+    });
+    println!(
+        "NaN sample measured at 2.0 s: guard Fault (sensor invalid) {:.1} ms later",
+        delay as f64 * 1e-6
+    );
+
+    let s = scenario("fault_drive_fault.toml");
+    let run = simulate(&s, false).run;
+    assert_eq!(run.end, EndReason::DriveFault { code: 0x2310 });
+    assert!(run.events.iter().any(|e| matches!(
+        e,
+        RunEvent::DriveFault { at_ns, code: 0x2310 } if *at_ns == HOST_START_NS + 2_000_000_000
+    )));
+    let (t, _) = daemon_loop(&s, &run);
+    let delay = assert_fault_after_2s(&s.name, &t, 2_000_000, |r| {
+        matches!(r, Reason::JointsInvalid)
+    });
+    println!(
+        "drive fault at 2.0 s: guard Fault (joints invalid) {:.1} ms later",
+        delay as f64 * 1e-6
+    );
+}
+
+#[test]
+fn an_encoder_jump_is_silent_and_shifts_the_estimate() {
+    let s = scenario("fault_encoder_jump.toml");
+    let run = simulate(&s, false).run;
+    let (transitions, estimates) = daemon_loop(&s, &run);
+    // Silent: the guard never leaves Ok.
+    assert_eq!(transitions.len(), 1, "{transitions:?}");
+    assert_eq!(transitions[0].1, GuardState::Ok);
+    // The same hold (the second), before and after the jump at 2.0 s.
+    let hold = run.holds.iter().find(|h| h.step == 1).unwrap();
+    let jump_ns = HOST_START_NS + 2_000_000_000;
+    assert!(hold.start_ns + SETTLE_NS < jump_ns && jump_ns + 500_000_000 < hold.end_ns);
+    let mean = |from: u64, to: u64| {
+        let v: Vec<Vec3> = estimates
+            .iter()
+            .filter(|(t, _)| (from..to).contains(t))
+            .map(|(_, f)| *f)
+            .collect();
+        v.iter().sum::<Vec3>() / v.len() as f64
+    };
+    let before = mean(hold.start_ns + SETTLE_NS, jump_ns);
+    let after = mean(jump_ns + 5_000_000, hold.end_ns);
+    let truth = s.spec.contact[0].force_n;
+    let shift = after - before;
+    println!(
+        "encoder jump of 2 mm on q3 at 2.0 s: silent (guard stays Ok); mean F_tip before ({:.3}, \
+         {:.3}, {:.3}) N, after ({:.3}, {:.3}, {:.3}) N, shift ({:.3}, {:.3}, {:.3}) N (|{:.3}| N; \
+         truth ({}, {}, {}) N); later arrivals time out: {} events",
+        before.x,
+        before.y,
+        before.z,
+        after.x,
+        after.y,
+        after.z,
+        shift.x,
+        shift.y,
+        shift.z,
+        shift.norm(),
+        truth.x,
+        truth.y,
+        truth.z,
+        run.events
+            .iter()
+            .filter(|e| matches!(e, RunEvent::ArrivalTimeout { .. }))
+            .count()
+    );
+    // Before the jump the estimate is the truth (minus the friction) within
+    // the noise of the mean; the jump moves it by far more than that noise.
+    let rod = forward(
+        &s.spec.calibration,
+        &s.spec.profile,
+        &s.script.steps[1].target,
+    )
+    .unwrap()
+    .rod_dir;
+    let expected = truth + rod * s.spec.friction_n * hold.slide_sign;
+    assert!(
+        (before - expected).norm() < 0.1,
+        "before: {before:?} vs {expected:?}"
+    );
+    assert!(shift.norm() > 0.1, "shift {shift:?}");
+    // The reported position is off by the jump: the next target is never "reached".
+    let after_jump = run.positions_at(jump_ns + 10_000_000).unwrap();
+    let true_q3 = s.script.steps[1].target.q3_m;
+    assert!((after_jump.joints.q3_m - true_q3 - 0.002).abs() < 2e-6);
+    assert!(after_jump.valid);
+}
