@@ -34,7 +34,6 @@ use sar_estimator::cycle::{
 use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState, Reason};
 use sar_estimator::identification::{Identification, IdentificationOptions, IdentificationResult};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
-use sar_estimator::tip_force::TipForceConfig;
 use sar_kinematics::{ActiveJoints, forward};
 use std::path::{Path, PathBuf};
 
@@ -295,6 +294,7 @@ fn guard_limits() -> GuardLimits {
         max_sensor_age_ns: 5_000_000,
         max_joints_age_ns: 5_000_000,
         max_std_n: 3.0,
+        std_margin: 0.0,
     }
 }
 
@@ -310,7 +310,6 @@ fn estimator_for(s: &Scenario) -> Estimator {
         calibration: s.spec.calibration,
         profile: s.spec.profile,
         noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
-        tip: TipForceConfig { max_std_n: 3.0 },
         guard: GuardConfig::new(guard_limits()).unwrap(),
     };
     Estimator::new(&config, s.spec.sensor.bias_n).unwrap()

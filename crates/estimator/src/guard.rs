@@ -772,7 +772,11 @@ impl Guard {
             });
         }
         // The margin: k |std| bounds k standard deviations of every part.
-        let margin_n = limits.std_margin * std_n.norm();
+        let margin_n = if limits.std_margin > 0.0 {
+            limits.std_margin * std_n.norm()
+        } else {
+            0.0
+        };
         Ok(force_parts_n(&force_n, &rod_dir).map(|part_n| part_n + margin_n))
     }
 }
