@@ -996,7 +996,7 @@ fn rod_offset_statics_agree_with_the_estimator_and_show_the_torsion() {
     assert!((e.torsion_nm - t.torsion_nm).abs() < 1e-9);
     assert!(t.torsion_nm.abs() > 1e-3, "torsion {}", t.torsion_nm);
     // The torque reading carries -M_T n.
-    let n = -Vec3::new(t.pose.q4_rad.sin(), 0.0, t.pose.q4_rad.cos());
+    let n = -Vec3::new(t.pose.q4_rad().sin(), 0.0, t.pose.q4_rad().cos());
     let lever = t.pose.ujoint_m - t.pose.sensor_m;
     let torque = lever.cross(&(-t.ujoint_force_n)) - n * t.torsion_nm + t.bias_nm;
     assert!((s.torque_nm - torque).amax() < 1e-9);
@@ -1018,7 +1018,7 @@ fn rod_offset_statics_agree_with_the_estimator_and_show_the_torsion() {
     let force_sum = t.ujoint_force_n + support + weight + f_d;
     assert!(force_sum.amax() < 1e-9, "{force_sum}");
     let a = t.pose.ujoint_m;
-    let n = -Vec3::new(t.pose.q4_rad.sin(), 0.0, t.pose.q4_rad.cos());
+    let n = -Vec3::new(t.pose.q4_rad().sin(), 0.0, t.pose.q4_rad().cos());
     let moment_sum = (Vec3::new(0.45, 0.20, 0.0) - a).cross(&support)
         + (t.pose.com_m - a).cross(&weight)
         + (t.pose.tip_m - a).cross(&f_d)

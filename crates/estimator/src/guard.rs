@@ -587,6 +587,7 @@ impl Guard {
     }
 
     /// Feeds one control cycle. Returns `Some` only when the state changed.
+    #[inline]
     pub fn step(&mut self, input: &GuardInput) -> Option<Transition> {
         let cycle = input.cycle;
         let parts_n = match self.evaluate(input) {
@@ -700,6 +701,7 @@ impl Guard {
 
     /// The first fault condition of `input` in the fixed order, or the force
     /// parts. Records the cycle if it is in order.
+    #[inline]
     fn evaluate(&mut self, input: &GuardInput) -> Result<[f64; 3], Reason> {
         if let Some(previous) = self.last_cycle
             && input.cycle <= previous

@@ -262,7 +262,7 @@ fn equilibrium_residual(
     let f_b = -(f_a + weight + f_d);
     let a_m = case.pose.ujoint_m;
     // MODEL.md 4: n = -(s4, 0, c4).
-    let q4 = case.pose.q4_rad;
+    let q4 = case.pose.q4_rad();
     let n = -Vector3::new(q4.sin(), 0.0, q4.cos());
     let moment = (t.support_m - a_m).cross(&f_b)
         + (case.pose.com_m - a_m).cross(&weight)
@@ -841,7 +841,7 @@ fn torsion_follows_the_model_axis_when_c5_is_negative() {
         support_frac: 0.05 / 0.35,
         ..base_params(1.2, 1.8, [0.3, -0.2, 0.1])
     });
-    assert!(case.pose.q5_rad.cos() < 0.0);
+    assert!(case.pose.q5_rad().cos() < 0.0);
     let est = estimator(&case, 1e9)
         .estimate(&case.pose, &case.reading_n, &case.bias_n)
         .unwrap();

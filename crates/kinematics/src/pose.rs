@@ -91,16 +91,29 @@ pub struct Pose {
     pub rod_dir: Vec3,
     /// w, unit, perpendicular to u in u's vertical plane (MODEL.md 3).
     pub rod_normal: Vec3,
-    /// q4, about Y0, rad.
-    pub q4_rad: f64,
-    /// q5, tilt out of the horizontal plane, rad.
-    pub q5_rad: f64,
     /// a = |B - A|, m.
     pub support_distance_m: f64,
     /// s = sqrt(a^2 - d^2): from the foot of A on the rod axis to B, along u, m.
     pub support_along_rod_m: f64,
     /// L - s: from the support to the tip along u, m (> 0).
     pub tip_beyond_support_m: f64,
+}
+
+impl Pose {
+    /// q4, about Y0, rad, in (-pi, pi]. Computed on demand (an atan2) from u
+    /// and w, whose cross product is (c4, 0, -s4): the per-cycle path that
+    /// needs only u does not pay for the angles.
+    pub fn q4_rad(&self) -> f64 {
+        let (u, w) = (&self.rod_dir, &self.rod_normal);
+        // (u x w).x = c4, -(u x w).z = s4.
+        atan2(u.y * w.x - u.x * w.y, u.y * w.z - u.z * w.y)
+    }
+
+    /// q5, tilt out of the horizontal plane, rad, in (-pi, pi]: s5 = u.y,
+    /// c5 = -w.y. Computed on demand.
+    pub fn q5_rad(&self) -> f64 {
+        atan2(self.rod_dir.y, -self.rod_normal.y)
+    }
 }
 
 /// u and w from the passive joints (MODEL.md 3).
@@ -145,7 +158,7 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
     }
     // q4 = atan2(rx, rz); q5 = alpha + beta with alpha = atan2(ry, r_h) and
     // beta = asin(d / rho) (MODEL.md 3). Their sines and cosines follow from r
-    // without trigonometry; only the angles themselves need atan2.
+    // without trigonometry; the angles themselves are Pose::q4_rad/q5_rad.
     let (inv_rho, inv_r_h) = (1.0 / rho, 1.0 / r_h);
     let (s4, c4) = (r.x * inv_r_h, r.z * inv_r_h);
     let (s_alpha, c_alpha) = (r.y * inv_rho, r_h * inv_rho);
@@ -153,8 +166,6 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
     let (s_beta, c_beta) = (d * inv_rho, s * inv_rho);
     let s5 = s_alpha * c_beta + c_alpha * s_beta;
     let c5 = c_alpha * c_beta - s_alpha * s_beta;
-    let q4_rad = atan2(r.x, r.z);
-    let q5_rad = atan2(s5, c5);
     let rod_dir = Vec3::new(s4 * c5, s5, c4 * c5);
     let rod_normal = Vec3::new(s4 * s5, -c5, c4 * s5);
     let margin_m = profile.length_m() - s;
@@ -173,8 +184,6 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
         tip_m: axis_m + rod_dir * profile.length_m(),
         rod_dir,
         rod_normal,
-        q4_rad,
-        q5_rad,
         support_distance_m: rho,
         support_along_rod_m: s,
         tip_beyond_support_m: margin_m,

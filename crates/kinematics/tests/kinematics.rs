@@ -93,8 +93,8 @@ proptest! {
         let cal = calibration(p_home, a_off, support);
         let q = ActiveJoints { q3_m: q123.x, q2_m: q123.y, q1_m: q123.z };
         let pose = forward(&cal, &profile, &q).unwrap();
-        prop_assert!(angle_diff(pose.q4_rad, q4).abs() < 1e-12, "q4 {} vs {}", pose.q4_rad, q4);
-        prop_assert!((pose.q5_rad - q5).abs() < 1e-12, "q5 {} vs {}", pose.q5_rad, q5);
+        prop_assert!(angle_diff(pose.q4_rad(), q4).abs() < 1e-12, "q4 {} vs {}", pose.q4_rad(), q4);
+        prop_assert!((pose.q5_rad() - q5).abs() < 1e-12, "q5 {} vs {}", pose.q5_rad(), q5);
         prop_assert!(close(&pose.ujoint_m, &a_dh, 1e-12));
         prop_assert!(close(&pose.rod_dir, &u_dh, 1e-12));
         prop_assert!(close(&pose.rod_normal, &w_dh, 1e-12));
@@ -182,7 +182,7 @@ proptest! {
             for v in [pose.ujoint_m, pose.tip_m, pose.com_m, pose.rod_dir, pose.rod_normal] {
                 prop_assert!(v.iter().all(|x| x.is_finite()));
             }
-            prop_assert!(pose.q4_rad.is_finite() && pose.q5_rad.is_finite());
+            prop_assert!(pose.q4_rad().is_finite() && pose.q5_rad().is_finite());
             prop_assert!(pose.tip_beyond_support_m > 0.0);
             prop_assert!((pose.rod_dir.norm() - 1.0).abs() < 1e-12);
             prop_assert!(pose.rod_dir.dot(&pose.rod_normal).abs() < 1e-12);
@@ -245,7 +245,7 @@ fn zero_offset_is_the_plain_direction_to_the_support() {
         },
     )
     .unwrap();
-    assert!((nominal.q4_rad - FRAC_PI_2).abs() < 1e-15 && nominal.q5_rad.abs() < 1e-15);
+    assert!((nominal.q4_rad() - FRAC_PI_2).abs() < 1e-15 && nominal.q5_rad().abs() < 1e-15);
     assert!(close(&nominal.rod_dir, &Vec3::x(), 1e-15));
     assert!((nominal.support_distance_m - 0.15).abs() < 1e-15);
     let q = ActiveJoints {
@@ -256,7 +256,7 @@ fn zero_offset_is_the_plain_direction_to_the_support() {
     let pose = forward(&cal, &profile, &q).unwrap();
     let r = support - (q.displacement_m() + Vec3::new(0.0, -0.08, 0.0));
     assert!(close(&pose.rod_dir, &(r / r.norm()), 1e-15));
-    assert!((pose.q5_rad - (r.y / r.norm()).asin()).abs() < 1e-15);
+    assert!((pose.q5_rad() - (r.y / r.norm()).asin()).abs() < 1e-15);
     assert!((pose.support_along_rod_m - r.norm()).abs() < 1e-15);
 }
 

@@ -58,7 +58,7 @@ pub(crate) fn equilibrium(
     let u = pose.rod_dir;
     let e1 = pose.rod_normal;
     let e2 = u.cross(&e1);
-    let n = -Vec3::new(pose.q4_rad.sin(), 0.0, pose.q4_rad.cos());
+    let n = -Vec3::new(pose.q4_rad().sin(), 0.0, pose.q4_rad().cos());
     let r_b = cal.support_m() - pose.ujoint_m;
     let r_c = pose.com_m - pose.ujoint_m;
     let r_d = pose.tip_m - pose.ujoint_m;
