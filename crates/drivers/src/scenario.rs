@@ -14,7 +14,7 @@ mod raw;
 
 use crate::Vec3;
 use crate::runner::SlideTracker;
-use crate::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec};
+use crate::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimError, SimSpec};
 use locate::Locator;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -425,6 +425,28 @@ fn profile_error_key(e: &ConfigError) -> String {
     }
 }
 
+/// The file's key for a refusal of the simulator's checks.
+fn sim_error_key(e: &SimError) -> String {
+    match e {
+        SimError::InvalidSpec { field, .. } => match *field {
+            "friction_n" => "support.friction_n",
+            "tip_mass_kg" => "tip_mass.mass_kg",
+            "physics_step_ns" => "physics_step_s",
+            "axes.position_period_ns" => "axes.position_rate_hz",
+            "sensor.period_ns" => "sensor.rate_hz",
+            "contact.force_n" => "contact",
+            f if f.starts_with("faults.") => "fault",
+            other => other,
+        }
+        .to_owned(),
+        SimError::ContactNotSorted { index, .. } => format!("contact[{index}].t_s"),
+        SimError::FaultAxis { index, .. } => format!("fault[{index}].axis"),
+        SimError::StartPose(_) | SimError::StartStaticsSingular => "axes.start".to_owned(),
+        SimError::LatencyTooLong { .. } => "sensor.latency_s".to_owned(),
+        _ => String::new(),
+    }
+}
+
 fn joints_from(q: [f64; 3]) -> ActiveJoints {
     let [q1_m, q2_m, q3_m] = q;
     ActiveJoints { q1_m, q2_m, q3_m }
@@ -773,6 +795,10 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ScenarioError> {
         faults,
         physics_step_ns,
     };
+    // The simulator's own checks (e.g. more samples in flight than it holds,
+    // times equal once in ns), so that it never refuses a loaded file later
+    // with an error that cannot name the file.
+    crate::sim::validate(&spec).map_err(|e| ctx.err(&sim_error_key(&e), e.to_string()))?;
     Ok(Scenario {
         name: file.name,
         description: file.description.unwrap_or_default(),

@@ -18,7 +18,7 @@ use sar_drivers::runner::{
 use sar_drivers::scenario::{
     Scenario, ScenarioError, axis_move_time_s, axis_progress_m, load, move_time_s, parse,
 };
-use sar_drivers::sim::Fault;
+use sar_drivers::sim::{Fault, Simulator};
 use sar_drivers::{
     AxisDrives, Clock, DriveState, ErrorKind, ForceSensor, JointPositions, SensorStatus, SimClock,
     Vec3, WrenchSample,
@@ -680,6 +680,25 @@ fn bad_files() -> Vec<(&'static str, String, &'static str, &'static str)> {
             "sensor.rate_hz",
             "Hz",
         ),
+        (
+            // Accepted by every key's own check; refused by the simulator.
+            "latency that puts too many samples in flight",
+            replaced(
+                "noise_n = [0.2, 0.2, 0.8]",
+                "noise_n = [0.2, 0.2, 0.8]\nlatency_s = 200.0",
+            ),
+            "sensor.latency_s",
+            "in flight",
+        ),
+        (
+            // Apart in seconds, equal once in ns.
+            "silent window of zero length in ns",
+            format!(
+                "{MINIMAL}\n[[fault]]\nkind = \"sensor_silent\"\nfrom_s = 1.0\nuntil_s = 1.0000000001\n"
+            ),
+            "fault",
+            "until_ns",
+        ),
     ]
 }
 
@@ -774,8 +793,14 @@ proptest! {
         let at = (0..=at).rev().find(|i| text.is_char_boundary(*i)).unwrap();
         let end = (at + cut).min(text.len());
         text.replace_range(at..end, insert);
-        if let Err(e) = parse(&text, ORIGIN) {
-            prop_assert!(e.to_string().starts_with(&format!("{ORIGIN}: ")), "{}", e);
+        match parse(&text, ORIGIN) {
+            Err(e) => prop_assert!(e.to_string().starts_with(&format!("{ORIGIN}: ")), "{}", e),
+            // A file that loads is one the simulator accepts.
+            Ok(s) => prop_assert!(
+                Simulator::new(s.spec, SimClock::new(0)).is_ok(),
+                "loaded but refused by the simulator:\n{}",
+                text
+            ),
         }
     }
 }

@@ -49,6 +49,7 @@ use sar_kinematics::{ActiveJoints, Pose};
 use std::cell::RefCell;
 use std::rc::Rc;
 use world::World;
+pub(crate) use world::validate;
 
 /// Status of a sample taken while the simulated pose is outside the model (no
 /// kinematic solution or singular statics): the sample is invalid, its values

@@ -163,6 +163,24 @@ pub(crate) fn fault_start_ns(fault: &Fault) -> u64 {
     }
 }
 
+/// Checks everything [`World::new`] checks: what the types of [`SimSpec`] do
+/// not, the start pose and its statics. Scenario files call it too, so that a
+/// file the loader accepts is never refused by the simulator later (where the
+/// error could not name the file).
+pub(crate) fn validate(spec: &SimSpec) -> Result<(), SimError> {
+    check_spec(spec)?;
+    let pose =
+        forward(&spec.calibration, &spec.profile, &spec.axes.start).map_err(SimError::StartPose)?;
+    let loads = Loads {
+        tip_force_n: Vec3::zeros(),
+        tip_mass_kg: spec.tip_mass_kg,
+        friction_n: Vec3::zeros(),
+    };
+    statics::equilibrium(&spec.calibration, &spec.profile, &pose, &loads)
+        .ok_or(SimError::StartStaticsSingular)?;
+    Ok(())
+}
+
 /// Checks what the types of [`SimSpec`] do not.
 fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
     check_non_negative("friction_n", spec.friction_n)?;
@@ -259,16 +277,7 @@ pub(crate) struct World<C> {
 impl<C: Clock> World<C> {
     /// Checks `spec` and builds the world at the clock's present time.
     pub fn new(spec: SimSpec, clock: C) -> Result<Self, SimError> {
-        check_spec(&spec)?;
-        let pose = forward(&spec.calibration, &spec.profile, &spec.axes.start)
-            .map_err(SimError::StartPose)?;
-        let loads = Loads {
-            tip_force_n: Vec3::zeros(),
-            tip_mass_kg: spec.tip_mass_kg,
-            friction_n: Vec3::zeros(),
-        };
-        statics::equilibrium(&spec.calibration, &spec.profile, &pose, &loads)
-            .ok_or(SimError::StartStaticsSingular)?;
+        validate(&spec)?;
         let t0_ns = clock.now_ns();
         let start = array_of(&spec.axes.start);
         let limits = Limits {
