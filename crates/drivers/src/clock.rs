@@ -16,8 +16,9 @@ pub trait Clock {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct MonotonicClock;
 
-impl Clock for MonotonicClock {
-    fn now_ns(&self) -> u64 {
+impl MonotonicClock {
+    /// `CLOCK_MONOTONIC` in ns, or `None` when the clock cannot be read.
+    fn read_ns() -> Option<u64> {
         let mut ts = libc::timespec {
             tv_sec: 0,
             tv_nsec: 0,
@@ -26,19 +27,29 @@ impl Clock for MonotonicClock {
         #[allow(unsafe_code)]
         let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
         if rc != 0 {
-            return 0;
+            return None;
         }
-        u64::try_from(ts.tv_sec)
-            .unwrap_or(0)
-            .saturating_mul(1_000_000_000)
-            .saturating_add(u64::try_from(ts.tv_nsec).unwrap_or(0))
+        Some(
+            u64::try_from(ts.tv_sec)
+                .ok()?
+                .saturating_mul(1_000_000_000)
+                .saturating_add(u64::try_from(ts.tv_nsec).ok()?),
+        )
+    }
+}
+
+impl Clock for MonotonicClock {
+    /// Now, ns (0 if the clock cannot be read: every stamp then looks stale).
+    fn now_ns(&self) -> u64 {
+        Self::read_ns().unwrap_or(0)
     }
 
     fn sleep_until_ns(&self, deadline_ns: u64) {
         // Bounded: each sleep is at most the remaining time, and the loop ends
-        // as soon as the clock passes the deadline.
-        loop {
-            let now = self.now_ns();
+        // as soon as the clock passes the deadline. A clock that cannot be
+        // read ends the sleep at once (rather than sleeping `deadline_ns` from
+        // a reading of 0, i.e. for about the machine's uptime).
+        while let Some(now) = Self::read_ns() {
             if now >= deadline_ns {
                 return;
             }
@@ -77,5 +88,38 @@ impl Clock for SimClock {
         if deadline_ns > self.now_ns.get() {
             self.now_ns.set(deadline_ns);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn monotonic_clock_reads_never_go_back_and_sleep_reaches_the_deadline() {
+        let clock = MonotonicClock;
+        let first = clock.now_ns();
+        assert!(first > 0, "CLOCK_MONOTONIC read as 0");
+        let deadline = first + 2_000_000;
+        clock.sleep_until_ns(deadline);
+        let after = clock.now_ns();
+        assert!(after >= deadline, "woke at {after}, before {deadline}");
+        // A deadline in the past returns without sleeping into the future.
+        clock.sleep_until_ns(first);
+        assert!(clock.now_ns() >= after);
+    }
+
+    #[test]
+    fn sim_clock_clones_share_time_and_never_go_back() {
+        let a = SimClock::new(100);
+        let b = a.clone();
+        a.advance_ns(50);
+        assert_eq!(b.now_ns(), 150);
+        b.sleep_until_ns(120);
+        assert_eq!(a.now_ns(), 150);
+        b.sleep_until_ns(400);
+        assert_eq!(a.now_ns(), 400);
+        a.advance_ns(u64::MAX);
+        assert_eq!(b.now_ns(), u64::MAX);
     }
 }
