@@ -4,7 +4,7 @@
 use crate::Error;
 use sar_kinematics::ActiveJoints;
 
-/// The drives' state, a reduced CiA 402 state machine.
+/// The state of the three drives taken together, a reduced CiA 402 state machine.
 ///
 /// `Ready --enable--> Enabled`; `Enabled --disable--> Ready`;
 /// `Ready`, `Enabled` or `QuickStop --quick_stop--> QuickStop` (decelerate at
@@ -14,6 +14,11 @@ use sar_kinematics::ActiveJoints;
 /// A fault is only ever cleared by `fault_reset`: in `Fault`, `quick_stop` is
 /// accepted (the axes are already braking or stopped) but the state stays
 /// `Fault`, and `disable` and `enable` are `ErrorKind::InvalidState`.
+///
+/// `QuickStop` is a latch: it is left only through `disable`, even where the
+/// device itself would allow more (a CiA 402 adapter keeps it in software).
+/// A fault on ANY axis is a fault of all three: the implementation brings the
+/// other axes to a quick stop itself (a real driver must, the drives will not).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum DriveState {
     /// Powered, not following targets.
@@ -24,6 +29,9 @@ pub enum DriveState {
     QuickStop,
     /// Faulted, with the device's fault code; targets are refused.
     Fault {
+        /// The axis that faulted (0 = q1, 1 = q2, 2 = q3), `None` when the
+        /// device cannot tell or the fault is not an axis's own.
+        axis: Option<u8>,
         /// Device-specific fault code.
         code: u16,
     },
@@ -34,13 +42,21 @@ pub enum DriveState {
 pub struct JointPositions {
     /// q1, q2, q3, metres.
     pub joints: ActiveJoints,
-    /// Host monotonic time of the positions, ns.
+    /// Host monotonic time at which the positions were MEASURED (for a real
+    /// drive: the receive time less the known transport delay), ns.
     pub stamp_ns: u64,
     /// The drives' word that the positions are good (encoders healthy, no fault).
     pub valid: bool,
 }
 
 /// The three axis drives.
+///
+/// Commands are requests: a real drive needs several exchanges (CiA 402
+/// controlword/statusword round trips) before its state changes, so a command
+/// may return before `state()` shows the result. No call blocks beyond the
+/// implementation's own bounded exchange time. Targets are positions the drives
+/// plan a limited-speed, limited-acceleration move to (profile position mode),
+/// never set points they jump to.
 pub trait AxisDrives {
     /// The implementation's error.
     type Error: Error;

@@ -372,7 +372,7 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
             }),
         }
         match self.drives.state() {
-            Ok(DriveState::Fault { code }) => {
+            Ok(DriveState::Fault { code, .. }) => {
                 if self.fault.is_none() {
                     self.fault = Some(code);
                     self.run
@@ -453,7 +453,7 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
             if let Err(e) = self.drives.set_targets(step.target) {
                 // A fault that the drives report only now still ends the run
                 // as a drive fault, not as a refused target.
-                if let Ok(DriveState::Fault { code }) = self.drives.state() {
+                if let Ok(DriveState::Fault { code, .. }) = self.drives.state() {
                     if self.fault.is_none() {
                         self.fault = Some(code);
                         let at_ns = self.clock.now_ns();

@@ -29,7 +29,8 @@ pub struct WrenchSample {
     pub counter: u32,
     /// The device's status for this sample.
     pub status: SensorStatus,
-    /// Host monotonic time at which the sample was received, ns.
+    /// Host monotonic time at which the sample was RECEIVED, ns (it was
+    /// measured up to the sensor's latency earlier).
     pub received_ns: u64,
 }
 

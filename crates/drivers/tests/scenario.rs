@@ -952,7 +952,10 @@ impl FakeDrives {
             let now = self.at(at);
             self.axes = [(now[0], now[0]), (now[1], now[1]), (now[2], now[2])];
             self.since_ns = at;
-            self.state = DriveState::Fault { code: 0x2310 };
+            self.state = DriveState::Fault {
+                axis: None,
+                code: 0x2310,
+            };
         }
     }
 }

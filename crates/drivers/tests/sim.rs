@@ -291,6 +291,9 @@ impl DrivesHarness for SimDrivesHarness {
     fn call_slack_ns(&self) -> u64 {
         0
     }
+    fn transition_bound_ns(&self) -> u64 {
+        0
+    }
     fn provoke_fault(&mut self) -> bool {
         let at_ns = self.rig.elapsed() + 1;
         self.rig
@@ -1211,7 +1214,13 @@ fn drive_fault_stops_the_axes_and_reset_clears_it() {
     rig.drives.set_targets(horizontal(0.04)).unwrap();
     rig.run_until(S);
     let at_fault = rig.truth();
-    assert_eq!(at_fault.drive_state, DriveState::Fault { code: 0x7305 });
+    assert_eq!(
+        at_fault.drive_state,
+        DriveState::Fault {
+            axis: None,
+            code: 0x7305
+        }
+    );
     assert!((at_fault.joint_speeds_mps[2] - V_MAX).abs() < 1e-15);
     rig.clock.advance_ns(50 * MS);
     assert!((rig.truth().joint_speeds_mps[2] - V_MAX / 2.0).abs() < 1e-12);
@@ -1232,7 +1241,10 @@ fn drive_fault_stops_the_axes_and_reset_clears_it() {
     rig.drives.quick_stop().unwrap();
     assert_eq!(
         rig.drives.state().unwrap(),
-        DriveState::Fault { code: 0x7305 }
+        DriveState::Fault {
+            axis: None,
+            code: 0x7305
+        }
     );
     rig.drives.fault_reset().unwrap();
     assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);

@@ -410,7 +410,7 @@ impl<C: Clock> World<C> {
             }
         }
         if let Some(code) = code_now {
-            self.state = DriveState::Fault { code };
+            self.state = DriveState::Fault { axis: None, code };
             self.brake_all(t_ns);
         }
     }

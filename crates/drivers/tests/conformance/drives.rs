@@ -13,6 +13,27 @@ fn state<H: DrivesHarness>(h: &mut H) -> DriveState {
     h.drives().state().unwrap()
 }
 
+/// Commands are requests (a real drive needs several exchanges): polls the
+/// state, letting time pass, until it is `want` or the harness's
+/// `transition_bound_ns` has passed, and asserts it got there.
+fn await_state<H: DrivesHarness>(h: &mut H, want: DriveState) {
+    let bound_ns = h.transition_bound_ns();
+    let step_ns = (bound_ns / 100).max(100_000);
+    let start_ns = h.now_ns();
+    loop {
+        let now = state(h);
+        if now == want {
+            return;
+        }
+        let waited_ns = h.now_ns().saturating_sub(start_ns);
+        assert!(
+            waited_ns < bound_ns,
+            "state {now:?}, not {want:?}, after {waited_ns} ns"
+        );
+        h.let_time_pass(step_ns);
+    }
+}
+
 fn positions<H: DrivesHarness>(h: &mut H) -> JointPositions {
     h.drives().positions().unwrap()
 }
@@ -63,11 +84,11 @@ pub fn starts_ready_and_refuses_targets<H: DrivesHarness>(h: &mut H) {
 /// `Ready`, where they are refused again.
 pub fn enable_accepts_targets_and_disable_refuses_them<H: DrivesHarness>(h: &mut H) {
     h.drives().enable().unwrap();
-    assert_eq!(state(h), DriveState::Enabled);
+    await_state(h, DriveState::Enabled);
     let target = h.reachable_target();
     h.drives().set_targets(target).unwrap();
     h.drives().disable().unwrap();
-    assert_eq!(state(h), DriveState::Ready);
+    await_state(h, DriveState::Ready);
     assert_eq!(
         kind(h.drives().set_targets(target)),
         Some(ErrorKind::InvalidState)
@@ -79,6 +100,7 @@ pub fn enable_accepts_targets_and_disable_refuses_them<H: DrivesHarness>(h: &mut
 pub fn invalid_targets_are_invalid_arguments<H: DrivesHarness>(h: &mut H) {
     let start = positions(h).joints;
     h.drives().enable().unwrap();
+    await_state(h, DriveState::Enabled);
     let good = h.reachable_target();
     for axis in 0..3 {
         for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
@@ -109,7 +131,7 @@ pub fn invalid_targets_are_invalid_arguments<H: DrivesHarness>(h: &mut H) {
 /// `enable`; `disable` leads back to `Ready`, from which `enable` works.
 pub fn quick_stop_from_ready_and_back<H: DrivesHarness>(h: &mut H) {
     h.drives().quick_stop().unwrap();
-    assert_eq!(state(h), DriveState::QuickStop);
+    await_state(h, DriveState::QuickStop);
     let target = h.reachable_target();
     assert_eq!(
         kind(h.drives().set_targets(target)),
@@ -117,9 +139,9 @@ pub fn quick_stop_from_ready_and_back<H: DrivesHarness>(h: &mut H) {
     );
     assert_eq!(kind(h.drives().enable()), Some(ErrorKind::InvalidState));
     h.drives().disable().unwrap();
-    assert_eq!(state(h), DriveState::Ready);
+    await_state(h, DriveState::Ready);
     h.drives().enable().unwrap();
-    assert_eq!(state(h), DriveState::Enabled);
+    await_state(h, DriveState::Enabled);
 }
 
 /// `quick_stop` during a move stops the axes short of the target and holds them.
@@ -127,10 +149,11 @@ pub fn quick_stop_while_moving_stops_and_holds<H: DrivesHarness>(h: &mut H) {
     let start = positions(h).joints;
     let target = h.reachable_target();
     h.drives().enable().unwrap();
+    await_state(h, DriveState::Enabled);
     h.drives().set_targets(target).unwrap();
     h.let_time_pass(h.settle_bound_ns() / 10);
     h.drives().quick_stop().unwrap();
-    assert_eq!(state(h), DriveState::QuickStop);
+    await_state(h, DriveState::QuickStop);
     settle(h);
     let stopped = positions(h).joints;
     settle(h);
@@ -148,7 +171,7 @@ pub fn quick_stop_while_moving_stops_and_holds<H: DrivesHarness>(h: &mut H) {
         Some(ErrorKind::InvalidState)
     );
     h.drives().disable().unwrap();
-    assert_eq!(state(h), DriveState::Ready);
+    await_state(h, DriveState::Ready);
 }
 
 /// `fault_reset` outside `Fault` is `InvalidState` (and changes nothing).
@@ -159,6 +182,7 @@ pub fn fault_reset_outside_fault_is_invalid_state<H: DrivesHarness>(h: &mut H) {
     );
     assert_eq!(state(h), DriveState::Ready);
     h.drives().enable().unwrap();
+    await_state(h, DriveState::Enabled);
     assert_eq!(
         kind(h.drives().fault_reset()),
         Some(ErrorKind::InvalidState)
@@ -196,6 +220,7 @@ pub fn positions_are_stamped_fresh_and_in_order<H: DrivesHarness>(h: &mut H) {
 pub fn reaches_a_reachable_target_and_holds<H: DrivesHarness>(h: &mut H) {
     let target = h.reachable_target();
     h.drives().enable().unwrap();
+    await_state(h, DriveState::Enabled);
     h.drives().set_targets(target).unwrap();
     settle(h);
     let p = positions(h);
@@ -220,6 +245,7 @@ pub fn reaches_a_reachable_target_and_holds<H: DrivesHarness>(h: &mut H) {
 /// provoke a fault.)
 pub fn transient_fault_is_reported_and_reset<H: DrivesHarness>(h: &mut H) {
     h.drives().enable().unwrap();
+    await_state(h, DriveState::Enabled);
     if !h.provoke_fault() {
         return;
     }
@@ -246,8 +272,9 @@ pub fn transient_fault_is_reported_and_reset<H: DrivesHarness>(h: &mut H) {
         "quick_stop in Fault must leave the fault"
     );
     h.drives().fault_reset().unwrap();
-    assert_eq!(state(h), DriveState::Ready);
+    await_state(h, DriveState::Ready);
     h.drives().enable().unwrap();
+    await_state(h, DriveState::Enabled);
     h.let_time_pass(h.report_age_bound_ns());
     assert!(positions(h).valid);
 }

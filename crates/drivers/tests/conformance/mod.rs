@@ -71,6 +71,9 @@ pub trait DrivesHarness {
     /// How much of the harness's time a call may take without counting as
     /// blocking, ns.
     fn call_slack_ns(&self) -> u64;
+    /// The longest a commanded state change (enable, disable, quick stop,
+    /// fault reset) may take to show in `state()`, ns (0: at once).
+    fn transition_bound_ns(&self) -> u64;
     /// Provokes a transient drive fault (one that `fault_reset` clears) and
     /// lets it take effect; false if the harness cannot.
     fn provoke_fault(&mut self) -> bool {
