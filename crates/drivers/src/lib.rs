@@ -10,6 +10,7 @@
 //! (`tests/conformance/`).
 
 pub mod clock;
+mod convert;
 pub mod drives;
 pub mod error;
 pub mod runner;

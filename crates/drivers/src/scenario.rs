@@ -13,9 +13,10 @@ mod locate;
 mod raw;
 
 use crate::Vec3;
+use crate::convert::{joints_from_array, joints_from_displacement, joints_to_array};
 use crate::runner::SlideTracker;
 use crate::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimError, SimSpec};
-use locate::Locator;
+use locate::{Locator, join};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use raw::{AxisName, FaultKind, FaultToml, FileToml, MotionToml};
@@ -396,14 +397,6 @@ impl Ctx<'_> {
     }
 }
 
-fn join(parent: &str, key: &str) -> String {
-    if parent.is_empty() {
-        key.to_owned()
-    } else {
-        format!("{parent}.{key}")
-    }
-}
-
 fn calibration_error_key(e: &ConfigError) -> String {
     match e {
         ConfigError::NonFinite { field } => format!("robot.{field}"),
@@ -447,19 +440,9 @@ fn sim_error_key(e: &SimError) -> String {
     }
 }
 
-fn joints_from(q: [f64; 3]) -> ActiveJoints {
-    let [q1_m, q2_m, q3_m] = q;
-    ActiveJoints { q1_m, q2_m, q3_m }
-}
-
 /// The active joints that put A at `ujoint_m`.
 fn joints_for_ujoint(cal: &Calibration, ujoint_m: &Vec3) -> ActiveJoints {
-    let q = ujoint_m - cal.ujoint_offset_m() - cal.p_home_m();
-    ActiveJoints {
-        q1_m: q.z,
-        q2_m: q.y,
-        q3_m: q.x,
-    }
+    joints_from_displacement(&(ujoint_m - cal.ujoint_offset_m() - cal.p_home_m()))
 }
 
 /// The geometry a script is checked against.
@@ -472,7 +455,7 @@ struct Machine {
 impl Machine {
     /// Checks that `q` is inside the travel and a pose the kinematics accepts.
     fn check_pose(&self, ctx: &Ctx<'_>, key: &str, q: &ActiveJoints) -> Result<(), ScenarioError> {
-        let values = [q.q1_m, q.q2_m, q.q3_m];
+        let values = joints_to_array(q);
         for ((name, value), (min, max)) in ["q1", "q2", "q3"].iter().zip(values).zip(self.travel_m)
         {
             if !(min..=max).contains(&value) {
@@ -546,11 +529,7 @@ impl Machine {
                 ));
             }
             previous_a = a;
-            let q = ActiveJoints {
-                q1_m: p.z,
-                q2_m: p.y,
-                q3_m: p.x,
-            };
+            let q = joints_from_displacement(&p);
             if k < points
                 && let Err(e) = forward(&self.calibration, &self.profile, &q)
             {
@@ -716,7 +695,7 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ScenarioError> {
     }
     let start = match axes.start {
         Some(q) => {
-            let q = joints_from(q);
+            let q = joints_from_array(q);
             machine.check_pose(ctx, "axes.start", &q)?;
             q
         }
@@ -861,7 +840,7 @@ fn resolve_step(
     }
     let cal = &machine.calibration;
     if let Some(q) = step.joints {
-        return Ok((format!("{key}.joints"), joints_from(q)));
+        return Ok((format!("{key}.joints"), joints_from_array(q)));
     }
     if let Some(a) = step.ujoint {
         return Ok((

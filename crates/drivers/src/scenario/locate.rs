@@ -30,7 +30,8 @@ fn contains(outer: &Range<usize>, inner: &Range<usize>) -> bool {
     outer.start <= inner.start && inner.end <= outer.end
 }
 
-fn join(parent: &str, key: &str) -> String {
+/// The dotted key of `key` inside `parent` ("" for the top level).
+pub(super) fn join(parent: &str, key: &str) -> String {
     if parent.is_empty() {
         key.to_owned()
     } else {

@@ -7,6 +7,8 @@
 //! arrival exactly at the target, without overshoot or chatter, and positions at
 //! any instant that do not depend on how often the simulator is polled.
 
+use crate::convert::ns_to_s;
+
 /// One phase of constant acceleration.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 struct Phase {
@@ -39,11 +41,6 @@ pub(crate) struct AxisState {
 pub(crate) struct Limits {
     pub max_speed_mps: f64,
     pub max_accel_mps2: f64,
-}
-
-fn ns_to_s(ns: u64) -> f64 {
-    // Exact below 2^53 ns (104 days).
-    ns as f64 * 1e-9
 }
 
 impl AxisPlan {

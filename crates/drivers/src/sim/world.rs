@@ -18,6 +18,7 @@ use super::axes::{AxisPlan, AxisState, Limits};
 use super::spec::{ContactKey, Fault, SimSpec};
 use super::statics::{self, Equilibrium, Loads};
 use super::{STATUS_OUT_OF_MODEL, SimError};
+use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
 use crate::{Clock, DriveState, JointPositions, SensorStatus, Vec3, WrenchSample};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -33,19 +34,6 @@ pub const MAX_PHYSICS_STEP_NS: u64 = 10_000_000;
 pub const MAX_IN_FLIGHT: u64 = 65_536;
 /// Below this slide speed (m/s) the rod counts as not sliding in the support.
 pub const SLIDE_SPEED_EPS_MPS: f64 = 1e-9;
-
-fn ns_to_s(ns: u64) -> f64 {
-    ns as f64 * 1e-9
-}
-
-fn joints_of(x: [f64; 3]) -> ActiveJoints {
-    let [q1_m, q2_m, q3_m] = x;
-    ActiveJoints { q1_m, q2_m, q3_m }
-}
-
-fn array_of(q: &ActiveJoints) -> [f64; 3] {
-    [q.q1_m, q.q2_m, q.q3_m]
-}
 
 /// The tip force of the contact script at `t_ns` (piecewise linear, zero before
 /// the first key, held after the last; at equal key times the later key wins).
@@ -192,7 +180,7 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
     check_positive("axes.lead_m_per_turn", axes.lead_m_per_turn)?;
     check_positive("axes.counts_per_turn", f64::from(axes.counts_per_turn))?;
     check_period("axes.position_period_ns", axes.position_period_ns, u64::MAX)?;
-    for (&(min_m, max_m), start_m) in axes.travel_m.iter().zip(array_of(&axes.start)) {
+    for (&(min_m, max_m), start_m) in axes.travel_m.iter().zip(joints_to_array(&axes.start)) {
         check_finite("axes.travel_m", min_m)?;
         check_finite("axes.travel_m", max_m)?;
         if min_m >= max_m {
@@ -279,7 +267,7 @@ impl<C: Clock> World<C> {
     pub fn new(spec: SimSpec, clock: C) -> Result<Self, SimError> {
         validate(&spec)?;
         let t0_ns = clock.now_ns();
-        let start = array_of(&spec.axes.start);
+        let start = joints_to_array(&spec.axes.start);
         let limits = Limits {
             max_speed_mps: spec.axes.max_speed_mps,
             max_accel_mps2: spec.axes.max_accel_mps2,
@@ -462,7 +450,7 @@ impl<C: Clock> World<C> {
     /// command), with the friction of the last physics step.
     pub fn physics_at(&self, t_ns: u64) -> Result<Physics, SimError> {
         let states = self.axes_at(t_ns);
-        let joints = joints_of(states.map(|s| s.x_m));
+        let joints = joints_from_array(states.map(|s| s.x_m));
         let spec = &self.spec;
         let pose =
             forward(&spec.calibration, &spec.profile, &joints).map_err(SimError::PoseOutOfModel)?;
@@ -574,7 +562,7 @@ impl<C: Clock> World<C> {
             *r = ((s.x_m + o) / count_m).round() * count_m;
         }
         self.positions = JointPositions {
-            joints: joints_of(reported),
+            joints: joints_from_array(reported),
             stamp_ns: self.t0_ns.saturating_add(t_ns),
             valid: !matches!(self.state, DriveState::Fault { .. }),
         };
@@ -651,7 +639,7 @@ impl<C: Clock> World<C> {
 
     /// Where the axes' present plans end (their targets, or where they stop).
     pub fn plan_ends(&self) -> ActiveJoints {
-        joints_of(self.plans.map(|p| p.end_m()))
+        joints_from_array(self.plans.map(|p| p.end_m()))
     }
 
     /// Adds a fault; it must start after the present time.
@@ -710,7 +698,7 @@ impl<C: Clock> World<C> {
                 state: self.state,
             });
         }
-        let wanted = array_of(targets);
+        let wanted = joints_to_array(targets);
         for (axis, (&value_m, &(min_m, max_m))) in wanted
             .iter()
             .zip(self.spec.axes.travel_m.iter())
