@@ -13,6 +13,7 @@ pub mod clock;
 mod convert;
 pub mod drives;
 pub mod error;
+pub mod motion;
 pub mod runner;
 pub mod scenario;
 pub mod sensor;

@@ -9,12 +9,12 @@
 //! bounded: the run ends at the end of the script, at `max_duration_ns`, or
 //! shortly after a drive fault, and says which.
 
-use crate::scenario::{MotionScript, move_time_s};
+use crate::motion::{SlideTracker, move_time_s};
+use crate::scenario::MotionScript;
 use crate::{
-    AxisDrives, Clock, DriveState, Error, ErrorKind, ForceSensor, JointPositions, Vec3,
-    WrenchSample,
+    AxisDrives, Clock, DriveState, Error, ErrorKind, ForceSensor, JointPositions, WrenchSample,
 };
-use sar_kinematics::{ActiveJoints, Calibration};
+use sar_kinematics::ActiveJoints;
 
 /// Default polling period, ns (1 kHz: every sample of a 500 Hz sensor and of
 /// 1 kHz positions).
@@ -24,9 +24,6 @@ pub const DEFAULT_PERIOD_NS: u64 = 1_000_000;
 pub const DEFAULT_ARRIVAL_TOLERANCE_M: f64 = 1e-5;
 /// Default time to keep recording after a drive fault, ns.
 pub const DEFAULT_LINGER_AFTER_FAULT_NS: u64 = 200_000_000;
-/// A change of a = |B - A| larger than this, against the present slide
-/// direction, counts as a new slide (a few encoder counts), m.
-pub const SLIDE_THRESHOLD_M: f64 = 5e-6;
 /// Margin added to every arrival timeout, ns.
 pub const ARRIVAL_MARGIN_NS: u64 = 1_000_000_000;
 
@@ -231,65 +228,6 @@ pub enum RunError {
         /// What the drives said.
         message: String,
     },
-}
-
-/// Follows a = |B - A| over a sequence of positions and keeps the sign of the
-/// last slide of the rod in the support: +1 when A last moved towards B (the
-/// rod slid along u, inserting), -1 away, 0 before any slide. A reversal counts
-/// once a has come back by more than [`SLIDE_THRESHOLD_M`] from its extreme,
-/// so that encoder quantisation does not flip it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SlideTracker {
-    support_m: Vec3,
-    ujoint_at_zero_m: Vec3,
-    reference_m: Option<f64>,
-    sign: f64,
-}
-
-impl SlideTracker {
-    /// A tracker for the geometry of `calibration` (B, P_home, a_off), with no
-    /// position seen yet.
-    pub fn new(calibration: &Calibration) -> Self {
-        Self {
-            support_m: calibration.support_m(),
-            ujoint_at_zero_m: calibration.p_home_m() + calibration.ujoint_offset_m(),
-            reference_m: None,
-            sign: 0.0,
-        }
-    }
-
-    /// The sign of the last slide (+1, -1, or 0 before any).
-    pub fn sign(&self) -> f64 {
-        self.sign
-    }
-
-    /// Takes the next position; returns true when the sign changed.
-    pub fn update(&mut self, q: &ActiveJoints) -> bool {
-        let a = (self.support_m - self.ujoint_at_zero_m - q.displacement_m()).norm();
-        if !a.is_finite() {
-            return false;
-        }
-        let Some(reference) = self.reference_m else {
-            self.reference_m = Some(a);
-            return false;
-        };
-        // `reference` is the extreme of a in the present slide direction (or
-        // the first value before any slide).
-        let change = a - reference;
-        if (self.sign > 0.0 && change < 0.0) || (self.sign < 0.0 && change > 0.0) {
-            self.reference_m = Some(a);
-            false
-        } else if change.abs() > SLIDE_THRESHOLD_M {
-            // a shrinking: A moves towards B, the rod slides along u (+1).
-            let sign = -change.signum();
-            self.reference_m = Some(a);
-            let changed = sign != self.sign;
-            self.sign = sign;
-            changed
-        } else {
-            false
-        }
-    }
 }
 
 /// A change of the slide direction seen in the positions.

@@ -14,7 +14,7 @@ mod raw;
 
 use crate::Vec3;
 use crate::convert::{joints_from_array, joints_from_displacement, joints_to_array};
-use crate::runner::SlideTracker;
+use crate::motion::{SlideTracker, axis_progress_m, move_time_s};
 use crate::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimError, SimSpec};
 use locate::{Locator, join};
 use rand::{Rng, SeedableRng};
@@ -127,62 +127,6 @@ impl MotionScript {
         }
         total_ns
     }
-}
-
-/// Time for one axis to move `distance_m` from rest to rest with a speed and an
-/// acceleration limit (trapezoid, or triangle for short moves), s.
-pub fn axis_move_time_s(distance_m: f64, max_speed_mps: f64, max_accel_mps2: f64) -> f64 {
-    let d = distance_m.abs();
-    if !(d.is_finite() && max_speed_mps > 0.0 && max_accel_mps2 > 0.0) {
-        return 0.0;
-    }
-    let ramp_m = max_speed_mps * max_speed_mps / max_accel_mps2;
-    if d >= ramp_m {
-        d / max_speed_mps + max_speed_mps / max_accel_mps2
-    } else {
-        2.0 * (d / max_accel_mps2).sqrt()
-    }
-}
-
-/// How far an axis has gone, m, `t_s` after starting from rest a move of
-/// `distance_m` (signed) with a speed and an acceleration limit (the
-/// time-optimal trapezoid or triangle of [`axis_move_time_s`]; the whole
-/// distance after the end).
-pub fn axis_progress_m(distance_m: f64, max_speed_mps: f64, max_accel_mps2: f64, t_s: f64) -> f64 {
-    let d = distance_m.abs();
-    let total_s = axis_move_time_s(d, max_speed_mps, max_accel_mps2);
-    if t_s.is_nan() || t_s <= 0.0 || total_s <= 0.0 {
-        return 0.0;
-    }
-    if t_s >= total_s {
-        return distance_m;
-    }
-    let a = max_accel_mps2;
-    // Time spent accelerating (and, symmetrically, braking).
-    let ramp_s = (max_speed_mps / a).min(total_s / 2.0);
-    let v_peak = a * ramp_s;
-    let gone = if t_s < ramp_s {
-        0.5 * a * t_s * t_s
-    } else if t_s < total_s - ramp_s {
-        0.5 * a * ramp_s * ramp_s + v_peak * (t_s - ramp_s)
-    } else {
-        let left_s = total_s - t_s;
-        d - 0.5 * a * left_s * left_s
-    };
-    gone.clamp(0.0, d) * distance_m.signum()
-}
-
-/// Time of the slowest axis for a move from `from` to `to`, s.
-pub fn move_time_s(
-    from: &ActiveJoints,
-    to: &ActiveJoints,
-    max_speed_mps: f64,
-    max_accel_mps2: f64,
-) -> f64 {
-    (to.displacement_m() - from.displacement_m())
-        .iter()
-        .map(|d| axis_move_time_s(*d, max_speed_mps, max_accel_mps2))
-        .fold(0.0, f64::max)
 }
 
 fn seconds_to_ns_saturating(s: f64) -> u64 {

@@ -12,12 +12,11 @@
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
-use sar_drivers::runner::{
-    EndReason, RunError, RunEvent, RunOptions, SLIDE_THRESHOLD_M, SlideTracker, run,
+use sar_drivers::motion::{
+    SLIDE_THRESHOLD_M, SlideTracker, axis_move_time_s, axis_progress_m, move_time_s,
 };
-use sar_drivers::scenario::{
-    Scenario, ScenarioError, axis_move_time_s, axis_progress_m, load, move_time_s, parse,
-};
+use sar_drivers::runner::{EndReason, RunError, RunEvent, RunOptions, run};
+use sar_drivers::scenario::{Scenario, ScenarioError, load, parse};
 use sar_drivers::sim::{Fault, Simulator};
 use sar_drivers::{
     AxisDrives, Clock, DriveState, ErrorKind, ForceSensor, JointPositions, SensorStatus, SimClock,

@@ -32,7 +32,6 @@
 //! simulated drive fault is gone at once, so `fault_reset` always succeeds from
 //! `Fault`. Positions are `valid: false` while in `Fault`.
 
-mod axes;
 mod error;
 pub mod spec;
 mod statics;

@@ -10,15 +10,15 @@
 //! results depend on the commands and their times, never on when or how often
 //! the simulator is polled.
 //!
-//! The axes move along closed-form profiles ([`super::axes`]), exact at any
+//! The axes move along closed-form profiles ([`crate::motion`]), exact at any
 //! instant. The physics step integrates what has memory: the sign of the last
 //! slide of the rod in the support, which fixes the (locked) friction.
 
-use super::axes::{AxisPlan, AxisState, Limits};
 use super::spec::{ContactKey, Fault, SimSpec};
 use super::statics::{self, Equilibrium, Loads};
 use super::{STATUS_OUT_OF_MODEL, SimError};
 use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
+use crate::motion::{AxisPlan, AxisState, Limits};
 use crate::{Clock, DriveState, JointPositions, SensorStatus, Vec3, WrenchSample};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

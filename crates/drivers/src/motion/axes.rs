@@ -1,7 +1,9 @@
-//! Motion of one simulated axis: a time-optimal profile with a speed and an
+//! Motion of one axis: a time-optimal profile with a speed and an
 //! acceleration limit (accelerate, cruise, brake; a trapezoid or a triangle),
 //! planned in closed form from the present position and velocity whenever the
-//! target changes, and evaluated exactly at any later time.
+//! target changes, and evaluated exactly at any later time. The simulator's
+//! axes move on it; the scenario checks and the runner's timeouts take their
+//! move times from it.
 //!
 //! Planning in closed form (rather than integrating step by step) gives an
 //! arrival exactly at the target, without overshoot or chatter, and positions at
@@ -143,7 +145,12 @@ impl AxisPlan {
     /// Position and velocity at `t_ns` (>= the plan's start; earlier times
     /// give the start).
     pub fn at(&self, t_ns: u64) -> AxisState {
-        let mut left_s = ns_to_s(t_ns.saturating_sub(self.start_ns));
+        self.after_s(ns_to_s(t_ns.saturating_sub(self.start_ns)))
+    }
+
+    /// Position and velocity `elapsed_s` after the plan's start (>= 0).
+    pub fn after_s(&self, elapsed_s: f64) -> AxisState {
+        let mut left_s = elapsed_s;
         let (mut x, mut v) = (self.x0_m, self.v0_mps);
         for phase in &self.phases {
             let a = phase.accel_mps2;
@@ -167,6 +174,11 @@ impl AxisPlan {
     /// Where the plan ends (and holds), m.
     pub fn end_m(&self) -> f64 {
         self.end_m
+    }
+
+    /// Time from the plan's start to its end, s.
+    pub fn duration_s(&self) -> f64 {
+        self.phases.iter().map(|p| p.duration_s).sum()
     }
 }
 
