@@ -141,21 +141,6 @@ impl<C: Clock + Clone> Simulator<C> {
         }
     }
 
-    /// The clock's time at the simulator's start, ns.
-    pub fn start_ns(&self) -> Result<u64, SimError> {
-        with_world(&self.world, |w| Ok(w.t0_ns()))
-    }
-
-    /// The specification it runs.
-    pub fn spec(&self) -> Result<SimSpec, SimError> {
-        with_world(&self.world, |w| Ok(w.spec().clone()))
-    }
-
-    /// Where the axes' present motion ends (the targets, or where a stop ends), m.
-    pub fn motion_end(&self) -> Result<ActiveJoints, SimError> {
-        with_world(&self.world, |w| Ok(w.plan_ends()))
-    }
-
     /// Adds a fault on demand. Its start (`at_ns`, `from_ns`; ns from the
     /// simulator's start) must be after the present time.
     pub fn inject_fault(&self, fault: Fault) -> Result<(), SimError> {

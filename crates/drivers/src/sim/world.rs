@@ -307,11 +307,6 @@ impl<C: Clock> World<C> {
         &self.spec
     }
 
-    /// The clock's time at the start, ns.
-    pub fn t0_ns(&self) -> u64 {
-        self.t0_ns
-    }
-
     /// Time from the start, ns (processed up to).
     pub fn elapsed_ns(&self) -> u64 {
         self.done_ns
@@ -635,11 +630,6 @@ impl<C: Clock> World<C> {
     /// The drives' state.
     pub fn state(&self) -> DriveState {
         self.state
-    }
-
-    /// Where the axes' present plans end (their targets, or where they stop).
-    pub fn plan_ends(&self) -> ActiveJoints {
-        joints_from_array(self.plans.map(|p| p.end_m()))
     }
 
     /// Adds a fault; it must start after the present time.
