@@ -6,9 +6,10 @@
 //! - Each axis moves on a time-optimal profile under a speed and an
 //!   acceleration limit (the simulator's planner, `axes`); the time and the
 //!   progress of a move from rest to rest come from that same planner.
-//! - The rod slides in the support; the runner follows the direction of its
-//!   last slide (identification's friction coefficient), which changes only
-//!   after a slide of [`SLIDE_THRESHOLD_M`] the other way.
+//! - The rod slides in the support; the direction of its last slide fixes the
+//!   sign of the support's friction (in the simulator) and identification's
+//!   friction coefficient (followed by the runner), and changes only after a
+//!   slide of [`SLIDE_THRESHOLD_M`] the other way, in both.
 
 mod axes;
 
@@ -17,8 +18,17 @@ pub(crate) use axes::{AxisPlan, AxisState, Limits};
 use crate::Vec3;
 use sar_kinematics::{ActiveJoints, Calibration};
 
-/// A change of a = |B - A| larger than this, against the present slide
-/// direction, counts as a new slide (a few encoder counts), m.
+/// The slide of the rod in the support, m, against the direction of its last
+/// slide, after which the rod counts as sliding the other way.
+///
+/// A real support's friction does not reverse the instant the rod does: the
+/// contact first deforms over a small pre-sliding displacement (micro-slip),
+/// during which the friction keeps the sign of the last slide. The simulator
+/// reverses the support's friction only after a slide of this size the other
+/// way, and the runner's [`SlideTracker`] calls the slide reversed after the
+/// same (a few encoder counts of the article's axes, so that quantisation does
+/// not flip it either): identification's friction coefficient is then the sign
+/// of the friction actually in the readings. One constant for both.
 pub const SLIDE_THRESHOLD_M: f64 = 5e-6;
 
 /// The plan of a move of `distance_m` from rest to rest, from 0 at time 0;
@@ -126,8 +136,9 @@ impl SlideDirection {
 /// Follows a = |B - A| over a sequence of positions and keeps the sign of the
 /// last slide of the rod in the support: +1 when A last moved towards B (the
 /// rod slid along u, inserting), -1 away, 0 before any slide. A reversal counts
-/// once a has come back by more than [`SLIDE_THRESHOLD_M`] from its extreme,
-/// so that encoder quantisation does not flip it.
+/// once a has come back by more than [`SLIDE_THRESHOLD_M`] from its extreme
+/// (the simulator's friction reverses after the same slide), so that encoder
+/// quantisation does not flip it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SlideTracker {
     support_m: Vec3,

@@ -22,8 +22,9 @@
     clippy::panic
 )]
 
+use sar_drivers::motion::SLIDE_THRESHOLD_M;
 use sar_drivers::runner::{EndReason, Run, RunEvent, RunOptions, run};
-use sar_drivers::scenario::{Scenario, load};
+use sar_drivers::scenario::{Scenario, load, parse};
 use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3, WrenchSample};
 use sar_estimator::SensorNoise;
@@ -286,6 +287,110 @@ fn another_seed_gives_other_noise_and_the_same_motion() {
             rms[i],
             want[i]
         );
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The slide direction: runner and simulator agree on a tiny reversal.
+
+/// A lateral move of q1 from -0.05 m to `end_q1_m` with the rod horizontal at
+/// the support's height and A 0.2 m before B: a = |B - A| = sqrt(0.2^2 + q1^2)
+/// shrinks by about 6 mm (the rod inserts), then grows again past q1 = 0 by
+/// about end_q1_m^2 / 0.4 m. Friction 0.3 N, no noise.
+fn lateral_sweep(end_q1_m: f64) -> Scenario {
+    let text = format!(
+        r#"
+name = "lateral-sweep"
+seed = 11
+
+[robot]
+gravity = [0.0, -9.80665, 0.0]
+support = [0.45, 0.20, 0.0]
+p_home = [0.0, 0.0, 0.0]
+ujoint_offset = [0.0, -0.08, 0.0]
+sensor_offset = [0.0, -0.03, 0.0]
+sensor_rotation = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+
+[manipulator]
+length_m = 0.35
+offset_m = 0.0
+mass_kg = 2.593
+com_m = 0.103
+
+[support]
+friction_n = 0.3
+
+[axes]
+start = [-0.05, 0.28, 0.25]
+
+[sensor]
+noise_n = [0.0, 0.0, 0.0]
+noise_nm = [0.0, 0.0, 0.0]
+
+[[motion]]
+joints = [{end_q1_m:?}, 0.28, 0.25]
+hold_s = 0.5
+"#
+    );
+    parse(&text, "lateral-sweep").unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The reviewer's case: at the end of an inserting slide, a comes back by only
+/// 25 nm (q1 ends at +0.0001 m), far less than the pre-sliding displacement of
+/// the support: the runner still calls the last slide inserting (+1), and the
+/// simulator's friction must not have flipped either (it did, at any slide
+/// faster than 1e-9 m/s: 0.6 N of error in the pose's axial row). A reversal of
+/// 10 um (q1 ends at +0.002 m) flips both.
+#[test]
+fn a_reversal_below_the_pre_sliding_threshold_flips_neither_the_runner_nor_the_friction() {
+    for (end_q1_m, want_reversal_m, want_sign) in [(0.0001, 25e-9, 1.0), (0.002, 10e-6, -1.0)] {
+        let s = lateral_sweep(end_q1_m);
+        // The geometry is the one described: a is smallest at q1 = 0 and comes
+        // back by the wanted amount, below or above the threshold.
+        let a_of = |q1_m: f64| {
+            let q = ActiveJoints {
+                q1_m,
+                q2_m: 0.28,
+                q3_m: 0.25,
+            };
+            forward(&s.spec.calibration, &s.spec.profile, &q)
+                .unwrap()
+                .support_distance_m
+        };
+        assert!((a_of(0.0) - 0.2).abs() < 1e-15);
+        assert!(a_of(-0.05) - a_of(0.0) > 6e-3);
+        let reversal_m = a_of(end_q1_m) - a_of(0.0);
+        assert!(
+            (reversal_m / want_reversal_m - 1.0).abs() < 1e-3,
+            "{reversal_m}"
+        );
+        assert_eq!(reversal_m < SLIDE_THRESHOLD_M, want_sign > 0.0);
+
+        let sim = simulate(&s, true);
+        let hold = sim.run.holds.first().expect("the hold");
+        assert!(hold.arrived);
+        assert_eq!(hold.slide_sign, want_sign, "runner, q1 -> {end_q1_m}");
+        assert_eq!(s.script.steps[0].planned_slide_sign, want_sign);
+        // The simulator's physics, at the start and at the end of the hold.
+        let f = s.spec.friction_n;
+        let end_ns = hold.end_ns - PERIOD_NS;
+        for t_ns in [hold.start_ns, end_ns] {
+            let truth = sim.truth_at(t_ns).expect("a truth at every tick");
+            assert_eq!(
+                truth.slide_sign, hold.slide_sign,
+                "simulator vs runner, q1 -> {end_q1_m}"
+            );
+            // The axial row of identification (MODEL.md 5, with friction):
+            // u . F_A = -m (u . g) + slide f, with the runner's slide sign.
+            let u = truth.pose.rod_dir;
+            let g = s.spec.calibration.gravity_mps2();
+            let row_n = -s.spec.profile.mass_kg() * u.dot(&g) + hold.slide_sign * f;
+            let axial_n = truth.ujoint_force_n.dot(&u);
+            assert!(
+                (axial_n - row_n).abs() < 1e-9,
+                "q1 -> {end_q1_m}: u . F_A = {axial_n} N, the row says {row_n} N"
+            );
+        }
     }
 }
 

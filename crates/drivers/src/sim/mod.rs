@@ -10,7 +10,9 @@
 //!   the U-joint torsion), independent of the estimator's inverse solution, with
 //!   the rod's weight, a tip-force script, a mass hung at the tip and the
 //!   support's Coulomb friction (MODEL.md 5: along the rod, opposite to the
-//!   slide, locked at its last value when the rod stops, zero before any slide);
+//!   slide, locked at its last value when the rod stops, zero before any slide;
+//!   it reverses only once the rod has slid the support's pre-sliding
+//!   displacement, [`crate::motion::SLIDE_THRESHOLD_M`], the other way);
 //! - the force/torque sensor: the wrench of MODEL.md 4 in the sensor frame plus
 //!   a bias with linear drift and seeded normal noise per sensor axis (ChaCha8),
 //!   sampled at a fixed period and received after a latency; an optional
@@ -39,7 +41,7 @@ mod world;
 
 pub use error::SimError;
 pub use spec::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec};
-pub use world::{MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS, SLIDE_SPEED_EPS_MPS};
+pub use world::{MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS};
 
 use crate::{
     AxisDrives, Clock, DriveState, ForceSensor, JointPositions, SensorStatus, Vec3, WrenchSample,
@@ -78,7 +80,8 @@ pub struct Truth {
     /// The support's friction on the rod, along u, N.
     pub friction_force_n: Vec3,
     /// Sign of the last slide: +1 inserting (the rod moved along u through the
-    /// support), -1 retracting, 0 before any slide.
+    /// support), -1 retracting, 0 before any slide (a slide, or a reversal,
+    /// counts once the rod has gone [`crate::motion::SLIDE_THRESHOLD_M`]).
     pub slide_sign: f64,
     /// F_tip from the contact script: what the tip applies to the tissue, N.
     pub tip_force_n: Vec3,

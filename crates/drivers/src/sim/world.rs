@@ -11,14 +11,16 @@
 //! the simulator is polled.
 //!
 //! The axes move along closed-form profiles ([`crate::motion`]), exact at any
-//! instant. The physics step integrates what has memory: the sign of the last
-//! slide of the rod in the support, which fixes the (locked) friction.
+//! instant. The physics step follows what has memory: the direction of the
+//! last slide of the rod in the support, which fixes the (locked) friction and
+//! reverses only after the support's pre-sliding displacement
+//! ([`crate::motion::SLIDE_THRESHOLD_M`]), as the runner's does.
 
 use super::spec::{ContactKey, Fault, SimSpec};
 use super::statics::{self, Equilibrium, Loads};
 use super::{STATUS_OUT_OF_MODEL, SimError};
 use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
-use crate::motion::{AxisPlan, AxisState, Limits};
+use crate::motion::{AxisPlan, AxisState, Limits, SlideDirection};
 use crate::{Clock, DriveState, JointPositions, SensorStatus, Vec3, WrenchSample};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -32,8 +34,6 @@ pub const MIN_PERIOD_NS: u64 = 1_000;
 pub const MAX_PHYSICS_STEP_NS: u64 = 10_000_000;
 /// Most sensor samples that may be in flight (measured, not yet received).
 pub const MAX_IN_FLIGHT: u64 = 65_536;
-/// Below this slide speed (m/s) the rod counts as not sliding in the support.
-pub const SLIDE_SPEED_EPS_MPS: f64 = 1e-9;
 
 /// The tip force of the contact script at `t_ns` (piecewise linear, zero before
 /// the first key, held after the last; at equal key times the later key wins).
@@ -252,7 +252,8 @@ pub(crate) struct World<C> {
     next_report: u64,
     plans: [AxisPlan; 3],
     state: DriveState,
-    slide_sign: f64,
+    /// The direction of the last slide, from s (A's foot on the rod axis to B).
+    slide: SlideDirection,
     rng: ChaCha8Rng,
     /// Measured, not yet received: (receive time from start, sample).
     in_flight: VecDeque<(u64, WrenchSample)>,
@@ -281,12 +282,13 @@ impl<C: Clock> World<C> {
             limits,
             faults: spec.faults.iter().map(|f| (*f, false)).collect(),
             done_ns: 0,
-            next_step: 1,
+            // The step at 0 takes the start's slide distance as the reference.
+            next_step: 0,
             next_measurement: 0,
             next_report: 0,
             plans: start.map(|x| AxisPlan::hold(0, x)),
             state: DriveState::Ready,
-            slide_sign: 0.0,
+            slide: SlideDirection::default(),
             rng: ChaCha8Rng::seed_from_u64(spec.seed),
             in_flight: VecDeque::with_capacity(capacity),
             newest: None,
@@ -408,28 +410,22 @@ impl<C: Clock> World<C> {
         self.plans = self.axes_at(t_ns).map(|s| AxisPlan::brake(t_ns, s, limits));
     }
 
-    /// The physics step at `t_ns`: updates the sign of the last slide from the
-    /// rate at which the rod slides in the support now.
+    /// The physics step at `t_ns`: follows the slide of the rod in the
+    /// support, s = sqrt(|B - A|^2 - d^2) (from A's foot on the rod axis to B,
+    /// along the rod). Inserting (slide +1, the rod moving along u through the
+    /// support) shrinks s; a reversal counts once s has come back by more than
+    /// the pre-sliding displacement.
     fn physics_step(&mut self, t_ns: u64) {
-        let states = self.axes_at(t_ns);
+        let joints = joints_from_array(self.axes_at(t_ns).map(|s| s.x_m));
         let cal = &self.spec.calibration;
-        let [s1, s2, s3] = states;
-        let a_m = cal.p_home_m() + Vec3::new(s3.x_m, s2.x_m, s1.x_m) + cal.ujoint_offset_m();
-        let a_dot = Vec3::new(s3.v_mps, s2.v_mps, s1.v_mps);
+        let a_m = cal.p_home_m() + joints.displacement_m() + cal.ujoint_offset_m();
         let r = cal.support_m() - a_m;
         let d = self.spec.profile.offset_m();
         let along_sq = r.norm_squared() - d * d;
         if along_sq <= 0.0 {
             return;
         }
-        // s = sqrt(|r|^2 - d^2): ds/dt = -(r . dA/dt) / s. Inserting (slide
-        // +1, the rod moving along u through the support) is ds/dt < 0.
-        let ds_dt = -r.dot(&a_dot) / along_sq.sqrt();
-        if ds_dt < -SLIDE_SPEED_EPS_MPS {
-            self.slide_sign = 1.0;
-        } else if ds_dt > SLIDE_SPEED_EPS_MPS {
-            self.slide_sign = -1.0;
-        }
+        self.slide.update(along_sq.sqrt());
     }
 
     /// The sensor bias at `t_ns` (force drifts linearly), sensor frame.
@@ -452,7 +448,7 @@ impl<C: Clock> World<C> {
         let loads = Loads {
             tip_force_n: contact_at(&spec.contact, t_ns),
             tip_mass_kg: spec.tip_mass_kg,
-            friction_n: pose.rod_dir * (-self.slide_sign * spec.friction_n),
+            friction_n: pose.rod_dir * (-self.slide.sign() * spec.friction_n),
         };
         let equilibrium = statics::equilibrium(&spec.calibration, &spec.profile, &pose, &loads)
             .ok_or(SimError::StaticsSingular)?;
@@ -619,7 +615,7 @@ impl<C: Clock> World<C> {
 
     /// The sign of the last slide (+1 inserting, -1 retracting, 0 none yet).
     pub fn slide_sign(&self) -> f64 {
-        self.slide_sign
+        self.slide.sign()
     }
 
     /// The latest position report.
