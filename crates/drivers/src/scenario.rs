@@ -406,7 +406,7 @@ fn join(parent: &str, key: &str) -> String {
 
 fn calibration_error_key(e: &ConfigError) -> String {
     match e {
-        ConfigError::NonFinite { field } => format!("robot.{field}"),
+        ConfigError::NonFinite { field, .. } => format!("robot.{field}"),
         ConfigError::RotationNotOrthonormal { .. } | ConfigError::RotationNotProper { .. } => {
             "robot.sensor_rotation".to_owned()
         }
@@ -417,7 +417,7 @@ fn calibration_error_key(e: &ConfigError) -> String {
 
 fn profile_error_key(e: &ConfigError) -> String {
     match e {
-        ConfigError::NonFinite { field } => format!("manipulator.{field}"),
+        ConfigError::NonFinite { field, .. } => format!("manipulator.{field}"),
         ConfigError::NonPositiveLength { .. } => "manipulator.length_m".to_owned(),
         ConfigError::OffsetTooLarge { .. } => "manipulator.offset_m".to_owned(),
         ConfigError::NegativeMass { .. } => "manipulator.mass_kg".to_owned(),
