@@ -102,3 +102,19 @@ pub struct StaticPose {
     /// the friction unknown.
     pub slide_sign: f64,
 }
+
+/// `Err(error(value))` for the first NaN or infinite `value` among `values`.
+#[inline]
+pub(crate) fn check_finite<'a, E>(
+    values: impl IntoIterator<Item = &'a f64>,
+    error: impl FnOnce(f64) -> E,
+) -> Result<(), E> {
+    // A plain loop: `find` on nalgebra's iterators cost 12 ns on the per-cycle
+    // path (tip force, d = 0).
+    for &value in values {
+        if !value.is_finite() {
+            return Err(error(value));
+        }
+    }
+    Ok(())
+}

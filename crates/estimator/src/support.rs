@@ -21,7 +21,9 @@
 //!
 //! Fixed capacity ([`SUPPORT_CAPACITY`] poses), no allocation, no panics.
 
-use crate::{Calibration, Mat3, SensorNoise, SettingError, StaticPose, Vec3, ujoint_force_n};
+use crate::{
+    Calibration, Mat3, SensorNoise, SettingError, StaticPose, Vec3, check_finite, ujoint_force_n,
+};
 use nalgebra::{Cholesky, ComplexField, SMatrix, SVector};
 
 /// How many static poses a [`SupportCalibration`] holds at most.
@@ -573,16 +575,11 @@ impl SupportCalibration {
         bias_n: Vec3,
         options: SupportOptions,
     ) -> Result<Self, SupportError> {
-        for &value in bias_n.iter() {
-            if !value.is_finite() {
-                return Err(SettingError::Invalid {
-                    field: "bias_n",
-                    value,
-                    why: "each tare component must be finite",
-                }
-                .into());
-            }
-        }
+        check_finite(&bias_n, |value| SettingError::Invalid {
+            field: "bias_n",
+            value,
+            why: "each tare component must be finite",
+        })?;
         if !(options.max_support_std_m.is_finite() && options.max_support_std_m > 0.0) {
             return Err(SettingError::Invalid {
                 field: "max_support_std_m",
@@ -995,14 +992,14 @@ impl SupportCalibration {
             iterations,
             poses: u32::try_from(self.len).unwrap_or(u32::MAX),
         };
-        check_finite(&fit)?;
+        check_result(&fit)?;
         Ok(fit)
     }
 }
 
 /// Every number of a fit is finite: finite but huge readings can overflow the
 /// cost (then chi2_dof and the standard errors are infinite, or NaN).
-fn check_finite(fit: &SupportFit) -> Result<(), SupportError> {
+fn check_result(fit: &SupportFit) -> Result<(), SupportError> {
     let [sx, sy, sz] = fit.support_std_m.map(|s| s.unwrap_or(0.0));
     let values = [
         ("mass_kg", fit.mass_kg),
