@@ -17,7 +17,7 @@
 //! sensor frame, basis [`bias_across_gravity_basis`]). The bias along gravity
 //! cannot be told from m: the sensor must be tared with the rod detached.
 
-use crate::{Calibration, Mat3, SensorNoise, StaticPose, Vec3, check_finite};
+use crate::{Calibration, Mat3, PoseInputError, SensorNoise, StaticPose, Vec3, check_finite};
 use nalgebra::{ComplexField, SMatrix, SVector};
 
 /// Poses whose U-joint centre is closer than this to the support are refused, m.
@@ -56,15 +56,9 @@ pub enum IdentificationError {
         /// The offending value.
         value: f64,
     },
-    /// A pose with no samples averaged.
-    #[error("a pose has 0 samples; at least 1 is needed")]
-    ZeroSamples,
-    /// The slide sign is not -1, 0 or +1.
-    #[error("slide_sign = {slide_sign} is not one of -1, 0, +1")]
-    InvalidSlideSign {
-        /// The value given.
-        slide_sign: f64,
-    },
+    /// A pose's own values are invalid ([`StaticPose::check`]).
+    #[error(transparent)]
+    Pose(#[from] PoseInputError),
     /// The U-joint centre A is (almost) at the support B: u is undefined.
     #[error("the U-joint centre is {distance_m:e} m from the support, below {min_m} m")]
     SupportTooClose {
@@ -230,17 +224,7 @@ fn non_finite(field: &'static str) -> impl FnOnce(f64) -> IdentificationError {
 
 /// Checks a pose and returns (u, a) with a = |B - A|, u = (B - A) / a.
 fn pose_geometry(pose: &StaticPose, support_m: &Vec3) -> Result<(Vec3, f64), IdentificationError> {
-    check_finite(&pose.ujoint_m, non_finite("ujoint_m"))?;
-    check_finite(&pose.mean_reading_n, non_finite("mean_reading_n"))?;
-    check_finite(&[pose.slide_sign], non_finite("slide_sign"))?;
-    if pose.samples == 0 {
-        return Err(IdentificationError::ZeroSamples);
-    }
-    if !(pose.slide_sign == -1.0 || pose.slide_sign == 0.0 || pose.slide_sign == 1.0) {
-        return Err(IdentificationError::InvalidSlideSign {
-            slide_sign: pose.slide_sign,
-        });
-    }
+    pose.check()?;
     let r = support_m - pose.ujoint_m;
     let a = r.norm();
     check_finite(&[a], non_finite("support distance"))?;

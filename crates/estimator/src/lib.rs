@@ -103,6 +103,56 @@ pub struct StaticPose {
     pub slide_sign: f64,
 }
 
+/// Why a [`StaticPose`]'s own values were refused ([`StaticPose::check`]).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PoseInputError {
+    /// A value of the pose is NaN or infinite.
+    #[error("{field} is not finite ({value})")]
+    NonFinite {
+        /// Which value: `"ujoint_m"`, `"mean_reading_n"` or `"slide_sign"`.
+        field: &'static str,
+        /// The offending value (the first non-finite component of a vector).
+        value: f64,
+    },
+    /// No samples were averaged.
+    #[error("samples = {samples}; at least 1 is needed")]
+    NoSamples {
+        /// The value given.
+        samples: u32,
+    },
+    /// The slide sign is not -1, 0 or +1.
+    #[error("slide_sign = {slide_sign} is not one of -1, 0, +1")]
+    BadSlideSign {
+        /// The value given.
+        slide_sign: f64,
+    },
+}
+
+impl StaticPose {
+    /// Checks the pose's own values, in this order: `ujoint_m`,
+    /// `mean_reading_n` and `slide_sign` finite, `samples` >= 1, `slide_sign`
+    /// one of -1, 0, +1. Where A lies relative to the support is for the user
+    /// of the pose to check.
+    pub fn check(&self) -> Result<(), PoseInputError> {
+        let non_finite = |field| move |value| PoseInputError::NonFinite { field, value };
+        check_finite(&self.ujoint_m, non_finite("ujoint_m"))?;
+        check_finite(&self.mean_reading_n, non_finite("mean_reading_n"))?;
+        check_finite(&[self.slide_sign], non_finite("slide_sign"))?;
+        if self.samples == 0 {
+            return Err(PoseInputError::NoSamples {
+                samples: self.samples,
+            });
+        }
+        if !(self.slide_sign == -1.0 || self.slide_sign == 0.0 || self.slide_sign == 1.0) {
+            return Err(PoseInputError::BadSlideSign {
+                slide_sign: self.slide_sign,
+            });
+        }
+        Ok(())
+    }
+}
+
 /// `Err(error(value))` for the first NaN or infinite `value` among `values`.
 #[inline]
 pub(crate) fn check_finite<'a, E>(

@@ -22,7 +22,8 @@
 //! Fixed capacity ([`SUPPORT_CAPACITY`] poses), no allocation, no panics.
 
 use crate::{
-    Calibration, Mat3, SensorNoise, SettingError, StaticPose, Vec3, check_finite, ujoint_force_n,
+    Calibration, Mat3, PoseInputError, SensorNoise, SettingError, StaticPose, Vec3, check_finite,
+    ujoint_force_n,
 };
 use nalgebra::{Cholesky, ComplexField, SMatrix, SVector};
 
@@ -130,29 +131,13 @@ pub enum SupportError {
         /// The capacity.
         capacity: usize,
     },
-    /// A pose has a NaN or infinite value.
-    #[error("pose {pose}: {field} is not a finite number")]
-    NonFinite {
+    /// A pose's own values are invalid ([`StaticPose::check`]).
+    #[error("pose {pose}: {error}")]
+    Pose {
         /// Index of the pose (the one being pushed: the current length).
         pose: usize,
-        /// Which value.
-        field: &'static str,
-    },
-    /// A pose averages no samples.
-    #[error("pose {pose}: samples must be >= 1, got {samples}")]
-    NoSamples {
-        /// Index of the pose.
-        pose: usize,
-        /// The value given.
-        samples: u32,
-    },
-    /// A pose's slide sign is not -1, 0 or +1.
-    #[error("pose {pose}: slide_sign must be -1, 0 or +1, got {slide_sign}")]
-    BadSlideSign {
-        /// Index of the pose.
-        pose: usize,
-        /// The value given.
-        slide_sign: f64,
+        /// What is wrong with it.
+        error: PoseInputError,
     },
     /// Fewer equations (3 per pose) than free unknowns plus one.
     #[error("{poses} poses give {equations} equations for {unknowns} unknowns: too few")]
@@ -633,36 +618,8 @@ impl SupportCalibration {
                 capacity: SUPPORT_CAPACITY,
             });
         }
-        if !pose.ujoint_m.iter().all(|x| x.is_finite()) {
-            return Err(SupportError::NonFinite {
-                pose: index,
-                field: "ujoint_m",
-            });
-        }
-        if !pose.mean_reading_n.iter().all(|x| x.is_finite()) {
-            return Err(SupportError::NonFinite {
-                pose: index,
-                field: "mean_reading_n",
-            });
-        }
-        if !pose.slide_sign.is_finite() {
-            return Err(SupportError::NonFinite {
-                pose: index,
-                field: "slide_sign",
-            });
-        }
-        if pose.samples == 0 {
-            return Err(SupportError::NoSamples {
-                pose: index,
-                samples: 0,
-            });
-        }
-        if !(pose.slide_sign == -1.0 || pose.slide_sign == 0.0 || pose.slide_sign == 1.0) {
-            return Err(SupportError::BadSlideSign {
-                pose: index,
-                slide_sign: pose.slide_sign,
-            });
-        }
+        pose.check()
+            .map_err(|error| SupportError::Pose { pose: index, error })?;
         let Some(slot) = self.poses.get_mut(index) else {
             return Err(SupportError::Full {
                 capacity: SUPPORT_CAPACITY,

@@ -23,7 +23,7 @@ use sar_estimator::identification::{
     Identification, IdentificationError, IdentificationOptions, IdentificationResult, LineFit,
     MAX_CONDITION, MIN_SUPPORT_DISTANCE_M, bias_across_gravity_basis,
 };
-use sar_estimator::{Calibration, SensorNoise, StaticPose};
+use sar_estimator::{Calibration, PoseInputError, SensorNoise, StaticPose};
 
 type V3 = Vector3<f64>;
 type M3 = Matrix3<f64>;
@@ -954,10 +954,10 @@ fn refused_poses_leave_the_state_unchanged() {
             |e| {
                 matches!(
                     e,
-                    IdentificationError::NonFinite {
+                    IdentificationError::Pose(PoseInputError::NonFinite {
                         field: "ujoint_m",
                         ..
-                    }
+                    })
                 )
             },
         ),
@@ -969,10 +969,10 @@ fn refused_poses_leave_the_state_unchanged() {
             |e| {
                 matches!(
                     e,
-                    IdentificationError::NonFinite {
+                    IdentificationError::Pose(PoseInputError::NonFinite {
                         field: "mean_reading_n",
                         ..
-                    }
+                    })
                 )
             },
         ),
@@ -984,29 +984,37 @@ fn refused_poses_leave_the_state_unchanged() {
             |e| {
                 matches!(
                     e,
-                    IdentificationError::NonFinite {
+                    IdentificationError::Pose(PoseInputError::NonFinite {
                         field: "slide_sign",
                         ..
-                    }
+                    })
                 )
             },
         ),
         (StaticPose { samples: 0, ..good }, |e| {
-            matches!(e, IdentificationError::ZeroSamples)
+            matches!(
+                e,
+                IdentificationError::Pose(PoseInputError::NoSamples { samples: 0 })
+            )
         }),
         (
             StaticPose {
                 slide_sign: 0.5,
                 ..good
             },
-            |e| matches!(e, IdentificationError::InvalidSlideSign { slide_sign } if *slide_sign == 0.5),
+            |e| matches!(e, IdentificationError::Pose(PoseInputError::BadSlideSign { slide_sign }) if *slide_sign == 0.5),
         ),
         (
             StaticPose {
                 slide_sign: -2.0,
                 ..good
             },
-            |e| matches!(e, IdentificationError::InvalidSlideSign { .. }),
+            |e| {
+                matches!(
+                    e,
+                    IdentificationError::Pose(PoseInputError::BadSlideSign { .. })
+                )
+            },
         ),
         (
             StaticPose {
@@ -1243,7 +1251,9 @@ fn line_fit_refusals() {
             samples: 0,
             ..article[0]
         }),
-        Err(IdentificationError::ZeroSamples)
+        Err(IdentificationError::Pose(PoseInputError::NoSamples {
+            samples: 0
+        }))
     ));
     assert!(matches!(
         fit.add(&StaticPose {

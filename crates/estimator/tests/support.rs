@@ -18,7 +18,7 @@ use sar_estimator::support::{
     MIN_SUPPORT_DISTANCE_M, SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportFit,
     SupportOptions,
 };
-use sar_estimator::{Calibration, SensorNoise, SettingError, StaticPose};
+use sar_estimator::{Calibration, PoseInputError, SensorNoise, SettingError, StaticPose};
 
 const LENGTH_M: f64 = 0.35;
 
@@ -453,40 +453,55 @@ fn nan_and_bad_input_are_refused() {
     bad.ujoint_m.y = f64::NAN;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NonFinite {
-            field: "ujoint_m",
-            ..
+        Err(SupportError::Pose {
+            pose: 0,
+            error: PoseInputError::NonFinite {
+                field: "ujoint_m",
+                ..
+            }
         })
     ));
     let mut bad = some_pose();
     bad.mean_reading_n.z = f64::INFINITY;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NonFinite {
-            field: "mean_reading_n",
-            ..
+        Err(SupportError::Pose {
+            pose: 0,
+            error: PoseInputError::NonFinite {
+                field: "mean_reading_n",
+                ..
+            }
         })
     ));
     let mut bad = some_pose();
     bad.slide_sign = f64::NAN;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NonFinite {
-            field: "slide_sign",
-            ..
+        Err(SupportError::Pose {
+            pose: 0,
+            error: PoseInputError::NonFinite {
+                field: "slide_sign",
+                ..
+            }
         })
     ));
     let mut bad = some_pose();
     bad.slide_sign = 0.5;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::BadSlideSign { .. })
+        Err(SupportError::Pose {
+            error: PoseInputError::BadSlideSign { slide_sign: 0.5 },
+            ..
+        })
     ));
     let mut bad = some_pose();
     bad.samples = 0;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NoSamples { .. })
+        Err(SupportError::Pose {
+            error: PoseInputError::NoSamples { samples: 0 },
+            ..
+        })
     ));
     assert!(support.is_empty());
 
