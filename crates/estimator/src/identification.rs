@@ -17,11 +17,11 @@
 //! sensor frame, basis [`bias_across_gravity_basis`]). The bias along gravity
 //! cannot be told from m: the sensor must be tared with the rod detached.
 
-use crate::{Calibration, Mat3, PoseInputError, SensorNoise, StaticPose, Vec3, check_finite};
+use crate::{
+    Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, StaticPose, Vec3,
+    check_finite,
+};
 use nalgebra::{ComplexField, SMatrix, SVector};
-
-/// Poses whose U-joint centre is closer than this to the support are refused, m.
-pub const MIN_SUPPORT_DISTANCE_M: f64 = 1e-3;
 
 /// Largest accepted condition number of the weighted design matrix after its
 /// columns are scaled to unit norm. Above it the problem is reported as rank

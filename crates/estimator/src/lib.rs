@@ -19,6 +19,11 @@ pub mod tip_force;
 
 pub use sar_kinematics::{Calibration, Mat3, Pose, Profile, Vec3};
 
+/// Smallest accepted distance a = |B - A| between the U-joint centre and the
+/// support, m: identification and support calibration refuse a pose closer
+/// than this. The model's 1/a and 1/a^2 terms make closer poses meaningless.
+pub const MIN_SUPPORT_DISTANCE_M: f64 = 0.005;
+
 /// Why an estimator setting was refused.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -132,8 +137,8 @@ pub enum PoseInputError {
 impl StaticPose {
     /// Checks the pose's own values, in this order: `ujoint_m`,
     /// `mean_reading_n` and `slide_sign` finite, `samples` >= 1, `slide_sign`
-    /// one of -1, 0, +1. Where A lies relative to the support is for the user
-    /// of the pose to check.
+    /// one of -1, 0, +1. Where A lies relative to the support
+    /// ([`MIN_SUPPORT_DISTANCE_M`]) is for the user of the pose to check.
     pub fn check(&self) -> Result<(), PoseInputError> {
         let non_finite = |field| move |value| PoseInputError::NonFinite { field, value };
         check_finite(&self.ujoint_m, non_finite("ujoint_m"))?;

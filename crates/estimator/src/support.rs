@@ -22,17 +22,13 @@
 //! Fixed capacity ([`SUPPORT_CAPACITY`] poses), no allocation, no panics.
 
 use crate::{
-    Calibration, Mat3, PoseInputError, SensorNoise, SettingError, StaticPose, Vec3, check_finite,
-    ujoint_force_n,
+    Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, SettingError,
+    StaticPose, Vec3, check_finite, ujoint_force_n,
 };
 use nalgebra::{Cholesky, ComplexField, SMatrix, SVector};
 
 /// How many static poses a [`SupportCalibration`] holds at most.
 pub const SUPPORT_CAPACITY: usize = 64;
-
-/// Smallest accepted distance a = |B - A| between the U-joint centre and the
-/// support, m. The model's 1/a and 1/a^2 terms make closer poses meaningless.
-pub const MIN_SUPPORT_DISTANCE_M: f64 = 0.005;
 
 /// Largest accepted distance between the fitted and the configured support
 /// point, m (B is measured by hand to a few millimetres). Trial steps beyond it

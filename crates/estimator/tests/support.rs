@@ -15,10 +15,11 @@ use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
 use sar_estimator::support::{
-    MIN_SUPPORT_DISTANCE_M, SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportFit,
-    SupportOptions,
+    SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportFit, SupportOptions,
 };
-use sar_estimator::{Calibration, PoseInputError, SensorNoise, SettingError, StaticPose};
+use sar_estimator::{
+    Calibration, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, SettingError, StaticPose,
+};
 
 const LENGTH_M: f64 = 0.35;
 
