@@ -19,7 +19,7 @@
 
 use crate::{
     Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, StaticPose, Vec3,
-    check_finite,
+    check_finite, com_std_m, non_negative,
 };
 use nalgebra::{ComplexField, SMatrix, SVector};
 
@@ -267,12 +267,6 @@ fn entry(factor: &Factor, i: usize, j: usize) -> f64 {
 
 fn at<const N: usize>(v: &SVector<f64, N>, i: usize) -> f64 {
     v.get(i).copied().unwrap_or(0.0)
-}
-
-/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
-/// give 0, a standard error of zero, which the finiteness checks cannot catch).
-fn non_negative(x: f64) -> f64 {
-    if x < 0.0 { 0.0 } else { x }
 }
 
 /// The streaming weighted least-squares identification of MODEL.md 5.
@@ -563,13 +557,11 @@ impl Identification {
         }
         let com_m = moment_kgm / mass_kg;
         let cov_mass_moment = covariance.get((0, 1)).copied().unwrap_or(0.0);
-        let com_var =
-            (var(1) - 2.0 * com_m * cov_mass_moment + com_m * com_m * var(0)) / (mass_kg * mass_kg);
         let result = IdentificationResult {
             mass_kg,
             mass_std_kg: std(0),
             com_m,
-            com_std_m: ComplexField::sqrt(non_negative(com_var)),
+            com_std_m: com_std_m(mass_kg, moment_kgm, var(0), var(1), cov_mass_moment),
             moment_kgm,
             moment_std_kgm: std(1),
             bias_across_n: self
@@ -784,9 +776,6 @@ impl LineFit {
             });
         }
         let com_m = -b1 / b0;
-        // c = -b1 / b0: dc/db1 = -1/b0, dc/db0 = b1/b0^2.
-        let (d_b1, d_b0) = (-1.0 / b0, b1 / (b0 * b0));
-        let com_var = d_b1 * d_b1 * var_b1 + d_b0 * d_b0 * var_b0 + 2.0 * d_b1 * d_b0 * cov_b0_b1;
         let result = LineFitResult {
             b0_n: b0,
             b0_std_n: ComplexField::sqrt(var_b0),
@@ -795,7 +784,9 @@ impl LineFit {
             mass_kg: b0 / self.gravity_norm_mps2,
             mass_std_kg: ComplexField::sqrt(var_b0) / self.gravity_norm_mps2,
             com_m,
-            com_std_m: ComplexField::sqrt(non_negative(com_var)),
+            // c = (-b1) / b0 = M / m: the ratio of (m, M) scaled by |g|, which
+            // does not change it, nor its first-order standard error.
+            com_std_m: com_std_m(b0, -b1, var_b0, var_b1, -cov_b0_b1),
             residual_rms_n: ComplexField::sqrt(ssr / n),
             condition,
             poses: self.count,

@@ -158,6 +158,29 @@ impl StaticPose {
     }
 }
 
+/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
+/// give 0, a standard error of zero, which the finiteness checks cannot catch).
+pub(crate) fn non_negative(x: f64) -> f64 {
+    if x < 0.0 { 0.0 } else { x }
+}
+
+/// First-order standard error of the centre of mass c = M / m, from the
+/// variances of m and M and their covariance:
+/// `var c = (var M - 2 c cov(m, M) + c^2 var m) / m^2`. A round-off negative
+/// variance gives 0; NaN stays NaN.
+pub(crate) fn com_std_m(
+    mass_kg: f64,
+    moment_kgm: f64,
+    mass_var_kg2: f64,
+    moment_var_kg2m2: f64,
+    cov_kg2m: f64,
+) -> f64 {
+    let com_m = moment_kgm / mass_kg;
+    let var_m2 = (moment_var_kg2m2 - 2.0 * com_m * cov_kg2m + com_m * com_m * mass_var_kg2)
+        / (mass_kg * mass_kg);
+    nalgebra::ComplexField::sqrt(non_negative(var_m2))
+}
+
 /// `Err(error(value))` for the first NaN or infinite `value` among `values`.
 #[inline]
 pub(crate) fn check_finite<'a, E>(
@@ -172,4 +195,36 @@ pub(crate) fn check_finite<'a, E>(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The ratio form of `com_std_m` is the delta method g^T S g with the
+    /// gradient g = (-M / m^2, 1 / m) of c = M / m; a round-off negative
+    /// variance gives 0 and NaN stays NaN.
+    #[test]
+    fn com_std_is_the_delta_method() {
+        for &(m, moment, vm, vmm, cov) in &[
+            (1.611, 0.185, 4e-4, 9e-6, -5e-5),
+            (2.593, -0.267, 1e-2, 3e-4, 1.5e-3),
+            (0.3, 0.03, 1e-6, 1e-8, 0.0),
+            (1e3, 1e2, 1.0, 1e-2, 0.09),
+        ] {
+            let (dm, dmm) = (-moment / (m * m), 1.0 / m);
+            let var = dm * dm * vm + dmm * dmm * vmm + 2.0 * dm * dmm * cov;
+            let expected = nalgebra::ComplexField::sqrt(var);
+            let got = com_std_m(m, moment, vm, vmm, cov);
+            assert!(
+                (got - expected).abs() <= 1e-12 * expected,
+                "{got} vs {expected}"
+            );
+        }
+        // Perfectly correlated m and M with c = M / m exact: variance 0, or a
+        // round-off negative one, gives 0.
+        assert_eq!(com_std_m(2.0, 0.2, 1.0, 0.01 * (1.0 - 1e-12), 0.1), 0.0);
+        assert!(com_std_m(2.0, 0.2, f64::NAN, 0.01, 0.1).is_nan());
+        assert!(com_std_m(2.0, 0.2, 1.0, 0.01, f64::NAN).is_nan());
+    }
 }

@@ -23,7 +23,7 @@
 
 use crate::{
     Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, SettingError,
-    StaticPose, Vec3, check_finite, ujoint_force_n,
+    StaticPose, Vec3, check_finite, com_std_m, non_negative, ujoint_force_n,
 };
 use nalgebra::{Cholesky, ComplexField, SMatrix, SVector};
 
@@ -106,12 +106,6 @@ fn indicator(free: &[bool; N_UNKNOWNS], want: bool) -> Vec6 {
 /// `x < limit` or NaN.
 fn below_or_nan(x: f64, limit: f64) -> bool {
     x.is_nan() || x < limit
-}
-
-/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
-/// give 0: a standard error of zero).
-fn non_negative(x: f64) -> f64 {
-    if x < 0.0 { 0.0 } else { x }
 }
 
 /// Why a support calibration could not be set up or did not give a result.
@@ -908,12 +902,7 @@ impl SupportCalibration {
         // Never claim more than the noise model, nor less than the scatter shows.
         let inflation = chi2_dof.max(1.0);
         let std = |k: usize| sqrt(non_negative(at(&cov, k, k) * inflation));
-        // c = M / m: gradient (-M/m^2, 1/m).
-        let (dm, d_moment) = (-moment / (mass * mass), 1.0 / mass);
-        let var_c = (dm * dm * at(&cov, I_MASS, I_MASS)
-            + d_moment * d_moment * at(&cov, I_MOMENT, I_MOMENT)
-            + 2.0 * dm * d_moment * at(&cov, I_MASS, I_MOMENT))
-            * inflation;
+        let var = |i: usize, j: usize| at(&cov, i, j) * inflation;
         let mut held = [true; 3];
         let mut support_std = [None; 3];
         for k in 0..3 {
@@ -931,7 +920,13 @@ impl SupportCalibration {
             mass_kg: mass,
             mass_std_kg: std(I_MASS),
             com_m: moment / mass,
-            com_std_m: sqrt(non_negative(var_c)),
+            com_std_m: com_std_m(
+                mass,
+                moment,
+                var(I_MASS, I_MASS),
+                var(I_MOMENT, I_MOMENT),
+                var(I_MASS, I_MOMENT),
+            ),
             moment_kgm: moment,
             moment_std_kgm: std(I_MOMENT),
             support_m: support,
