@@ -343,7 +343,7 @@ impl Ctx<'_> {
 
 fn calibration_error_key(e: &ConfigError) -> String {
     match e {
-        ConfigError::NonFinite { field } => format!("robot.{field}"),
+        ConfigError::NonFinite { field, .. } => format!("robot.{field}"),
         ConfigError::RotationNotOrthonormal { .. } | ConfigError::RotationNotProper { .. } => {
             "robot.sensor_rotation".to_owned()
         }
@@ -354,7 +354,7 @@ fn calibration_error_key(e: &ConfigError) -> String {
 
 fn profile_error_key(e: &ConfigError) -> String {
     match e {
-        ConfigError::NonFinite { field } => format!("manipulator.{field}"),
+        ConfigError::NonFinite { field, .. } => format!("manipulator.{field}"),
         ConfigError::NonPositiveLength { .. } => "manipulator.length_m".to_owned(),
         ConfigError::OffsetTooLarge { .. } => "manipulator.offset_m".to_owned(),
         ConfigError::NegativeMass { .. } => "manipulator.mass_kg".to_owned(),

@@ -24,7 +24,7 @@
 //! 6x5). nalgebra's SVD is not used: on some of these very matrices it returns
 //! a wrong decomposition without reporting it.
 
-use crate::{Calibration, Pose, Profile, Vec3};
+use crate::{Calibration, Pose, Profile, Vec3, check_finite};
 use nalgebra::{Matrix5, SMatrix, Vector5};
 
 /// Above this condition number (1-norm: |A|_1 |A^-1|_1, within a factor 5 of
@@ -46,10 +46,12 @@ pub const MIN_SUPPORT_BASIS_SINE: f64 = 1e-9;
 #[non_exhaustive]
 pub enum ArticleError {
     /// An input is NaN or infinite.
-    #[error("{input} is not a finite number (NaN or infinite)")]
+    #[error("{input} is not a finite number ({value})")]
     NonFinite {
         /// Which input.
         input: &'static str,
+        /// The offending value (the first non-finite component).
+        value: f64,
     },
     /// The system is singular: its condition number exceeds [`MAX_CONDITION`]
     /// (infinite when it cannot be inverted at all). Every horizontal rod gives
@@ -70,10 +72,6 @@ pub enum ArticleError {
     NonFiniteResult,
 }
 
-fn finite3(v: &Vec3) -> bool {
-    v.iter().all(|x| x.is_finite())
-}
-
 /// Eq. 23, equilibrated: rows 0..3 the moments about A (X, Y, Z) divided by L,
 /// rows 3..6 the forces; columns (F_D, F_B1, F_B2). Returns the matrix and the
 /// right-hand side.
@@ -83,14 +81,17 @@ fn equation_23(
     pose: &Pose,
     ujoint_force_n: &Vec3,
 ) -> Result<(SMatrix<f64, 6, 5>, SMatrix<f64, 6, 1>), ArticleError> {
-    if !finite3(ujoint_force_n) {
-        return Err(ArticleError::NonFinite {
-            input: "ujoint_force_n",
-        });
-    }
-    if !(finite3(&pose.ujoint_m) && finite3(&pose.com_m) && finite3(&pose.tip_m)) {
-        return Err(ArticleError::NonFinite { input: "pose" });
-    }
+    check_finite(ujoint_force_n, |value| ArticleError::NonFinite {
+        input: "ujoint_force_n",
+        value,
+    })?;
+    check_finite(
+        pose.ujoint_m.iter().chain(&pose.com_m).chain(&pose.tip_m),
+        |value| ArticleError::NonFinite {
+            input: "pose",
+            value,
+        },
+    )?;
     let a = pose.ujoint_m;
     let g = cal.gravity_mps2();
     let weight = g * profile.mass_kg();
@@ -127,9 +128,7 @@ fn equation_23(
         .copy_from(&(-r_ac.cross(&weight)));
     rhs.fixed_view_mut::<3, 1>(3, 0)
         .copy_from(&(-(ujoint_force_n + weight)));
-    if !(m.iter().all(|x| x.is_finite()) && rhs.iter().all(|x| x.is_finite())) {
-        return Err(ArticleError::NonFiniteResult);
-    }
+    check_finite(m.iter().chain(&rhs), |_| ArticleError::NonFiniteResult)?;
     Ok((m, rhs))
 }
 
@@ -164,11 +163,8 @@ fn check_condition(m: &Matrix5<f64>, inverse: Option<&Matrix5<f64>>) -> Result<(
 /// F_tip = -F_D from the solution vector (F_D, F_B1, F_B2).
 fn tip_force_of(x: &Vector5<f64>) -> Result<Vec3, ArticleError> {
     let tip_force_n: Vec3 = -x.fixed_view::<3, 1>(0, 0).clone_owned();
-    if finite3(&tip_force_n) {
-        Ok(tip_force_n)
-    } else {
-        Err(ArticleError::NonFiniteResult)
-    }
+    check_finite(&tip_force_n, |_| ArticleError::NonFiniteResult)?;
+    Ok(tip_force_n)
 }
 
 /// The article's Eq. 24: Eq. 23 without the Y moment row, a 5x5 inverted.

@@ -102,14 +102,11 @@ pub struct EstimatorConfig {
 
 /// Refuses a tare with a NaN or infinite component, reporting that component.
 fn check_tare(bias_n: &Vec3) -> Result<(), SettingError> {
-    match bias_n.iter().find(|x| !x.is_finite()) {
-        Some(&value) => Err(SettingError::Invalid {
-            field: "bias_n",
-            value,
-            why: "the tare must be finite",
-        }),
-        None => Ok(()),
-    }
+    crate::check_finite(bias_n, |value| SettingError::Invalid {
+        field: "bias_n",
+        value,
+        why: "the tare must be finite",
+    })
 }
 
 /// The per-cycle estimator: owns the tip-force estimator, the tare and the guard.

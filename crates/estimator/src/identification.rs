@@ -17,11 +17,11 @@
 //! sensor frame, basis [`bias_across_gravity_basis`]). The bias along gravity
 //! cannot be told from m: the sensor must be tared with the rod detached.
 
-use crate::{Calibration, Mat3, SensorNoise, StaticPose, Vec3};
+use crate::{
+    Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, StaticPose, Vec3,
+    check_finite, com_std_m, non_negative,
+};
 use nalgebra::{ComplexField, SMatrix, SVector};
-
-/// Poses whose U-joint centre is closer than this to the support are refused, m.
-pub const MIN_SUPPORT_DISTANCE_M: f64 = 1e-3;
 
 /// Largest accepted condition number of the weighted design matrix after its
 /// columns are scaled to unit norm. Above it the problem is reported as rank
@@ -56,15 +56,9 @@ pub enum IdentificationError {
         /// The offending value.
         value: f64,
     },
-    /// A pose with no samples averaged.
-    #[error("a pose has 0 samples; at least 1 is needed")]
-    ZeroSamples,
-    /// The slide sign is not -1, 0 or +1.
-    #[error("slide_sign = {slide_sign} is not one of -1, 0, +1")]
-    InvalidSlideSign {
-        /// The value given.
-        slide_sign: f64,
-    },
+    /// A pose's own values are invalid ([`StaticPose::check`]).
+    #[error(transparent)]
+    Pose(#[from] PoseInputError),
     /// The U-joint centre A is (almost) at the support B: u is undefined.
     #[error("the U-joint centre is {distance_m:e} m from the support, below {min_m} m")]
     SupportTooClose {
@@ -223,37 +217,17 @@ fn basis_across(n: &Vec3) -> (Vec3, Vec3) {
     (e1, e2)
 }
 
-fn finite_vec(v: &Vec3, field: &'static str) -> Result<(), IdentificationError> {
-    match v.iter().find(|x| !x.is_finite()) {
-        Some(&value) => Err(IdentificationError::NonFinite { field, value }),
-        None => Ok(()),
-    }
-}
-
-fn finite(value: f64, field: &'static str) -> Result<(), IdentificationError> {
-    if value.is_finite() {
-        Ok(())
-    } else {
-        Err(IdentificationError::NonFinite { field, value })
-    }
+/// The error for a non-finite `field`, for [`check_finite`].
+fn non_finite(field: &'static str) -> impl FnOnce(f64) -> IdentificationError {
+    move |value| IdentificationError::NonFinite { field, value }
 }
 
 /// Checks a pose and returns (u, a) with a = |B - A|, u = (B - A) / a.
 fn pose_geometry(pose: &StaticPose, support_m: &Vec3) -> Result<(Vec3, f64), IdentificationError> {
-    finite_vec(&pose.ujoint_m, "ujoint_m")?;
-    finite_vec(&pose.mean_reading_n, "mean_reading_n")?;
-    finite(pose.slide_sign, "slide_sign")?;
-    if pose.samples == 0 {
-        return Err(IdentificationError::ZeroSamples);
-    }
-    if !(pose.slide_sign == -1.0 || pose.slide_sign == 0.0 || pose.slide_sign == 1.0) {
-        return Err(IdentificationError::InvalidSlideSign {
-            slide_sign: pose.slide_sign,
-        });
-    }
+    pose.check()?;
     let r = support_m - pose.ujoint_m;
     let a = r.norm();
-    finite(a, "support distance")?;
+    check_finite(&[a], non_finite("support distance"))?;
     if a < MIN_SUPPORT_DISTANCE_M {
         return Err(IdentificationError::SupportTooClose {
             distance_m: a,
@@ -287,22 +261,12 @@ fn givens_add(factor: &mut Factor, width: usize, mut row: Row) {
     }
 }
 
-fn factor_is_finite(factor: &Factor) -> Option<f64> {
-    factor.iter().flatten().copied().find(|x| !x.is_finite())
-}
-
 fn entry(factor: &Factor, i: usize, j: usize) -> f64 {
     factor.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
 }
 
 fn at<const N: usize>(v: &SVector<f64, N>, i: usize) -> f64 {
     v.get(i).copied().unwrap_or(0.0)
-}
-
-/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
-/// give 0, a standard error of zero, which the finiteness checks cannot catch).
-fn non_negative(x: f64) -> f64 {
-    if x < 0.0 { 0.0 } else { x }
 }
 
 /// The streaming weighted least-squares identification of MODEL.md 5.
@@ -337,7 +301,7 @@ impl Identification {
         bias_n: Vec3,
         options: IdentificationOptions,
     ) -> Result<Self, IdentificationError> {
-        finite_vec(&bias_n, "bias_n")?;
+        check_finite(&bias_n, non_finite("bias_n"))?;
         let std_n = noise.std_n();
         let variance_n2 = std_n.component_mul(&std_n);
         for (&std, &var) in std_n.iter().zip(variance_n2.iter()) {
@@ -401,7 +365,7 @@ impl Identification {
             .ok_or(IdentificationError::TooManyPoses { poses: self.poses })?;
         let force_a_n =
             crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
-        finite_vec(&force_a_n, "F_A")?;
+        check_finite(&force_a_n, non_finite("F_A"))?;
 
         // G: rows p1.(u x v), p2.(u x v), u.v; orthonormal.
         let (p1, p2) = basis_across(&u);
@@ -473,12 +437,10 @@ impl Identification {
             givens_add(&mut weighted, width, row);
             givens_add(&mut unweighted, width, *plain_row);
         }
-        if let Some(value) = factor_is_finite(&weighted).or(factor_is_finite(&unweighted)) {
-            return Err(IdentificationError::NonFinite {
-                field: "accumulated factor",
-                value,
-            });
-        }
+        check_finite(
+            weighted.iter().chain(unweighted.iter()).flatten(),
+            non_finite("accumulated factor"),
+        )?;
         self.weighted = weighted;
         self.unweighted = unweighted;
         self.poses = poses;
@@ -589,19 +551,17 @@ impl Identification {
 
         let mass_kg = at(&theta, 0);
         let moment_kgm = at(&theta, 1);
-        finite(mass_kg, "estimated mass")?;
+        check_finite(&[mass_kg], non_finite("estimated mass"))?;
         if mass_kg <= 0.0 {
             return Err(IdentificationError::NonPositiveMass { mass_kg });
         }
         let com_m = moment_kgm / mass_kg;
         let cov_mass_moment = covariance.get((0, 1)).copied().unwrap_or(0.0);
-        let com_var =
-            (var(1) - 2.0 * com_m * cov_mass_moment + com_m * com_m * var(0)) / (mass_kg * mass_kg);
         let result = IdentificationResult {
             mass_kg,
             mass_std_kg: std(0),
             com_m,
-            com_std_m: ComplexField::sqrt(non_negative(com_var)),
+            com_std_m: com_std_m(mass_kg, moment_kgm, var(0), var(1), cov_mass_moment),
             moment_kgm,
             moment_std_kgm: std(1),
             bias_across_n: self
@@ -641,13 +601,7 @@ fn check_result(r: &IdentificationResult) -> Result<(), IdentificationError> {
         r.chi2_dof,
         r.condition,
     ];
-    match values.iter().find(|x| !x.is_finite()) {
-        Some(&value) => Err(IdentificationError::NonFinite {
-            field: "identification result",
-            value,
-        }),
-        None => Ok(()),
-    }
+    check_finite(&values, non_finite("identification result"))
 }
 
 /// The article's simplified method (MODEL.md 5.2): with the rod horizontal and
@@ -709,7 +663,7 @@ impl LineFit {
         bias_n: Vec3,
         horizontal_tolerance_rad: f64,
     ) -> Result<Self, IdentificationError> {
-        finite_vec(&bias_n, "bias_n")?;
+        check_finite(&bias_n, non_finite("bias_n"))?;
         if !(0.0..core::f64::consts::FRAC_PI_2).contains(&horizontal_tolerance_rad) {
             return Err(IdentificationError::InvalidTolerance {
                 tolerance_rad: horizontal_tolerance_rad,
@@ -755,7 +709,7 @@ impl LineFit {
             crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
         let x = 1.0 / a;
         let y = force_a_n.dot(&self.up);
-        finite(y, "vertical force")?;
+        check_finite(&[y], non_finite("vertical force"))?;
         let n = f64::from(count);
         let dx = x - self.mean_x;
         let dy = y - self.mean_y;
@@ -764,15 +718,10 @@ impl LineFit {
         let sxx = self.sxx + dx * (x - mean_x);
         let sxy = self.sxy + dx * (y - mean_y);
         let syy = self.syy + dy * (y - mean_y);
-        if let Some(&value) = [mean_x, mean_y, sxx, sxy, syy]
-            .iter()
-            .find(|v| !v.is_finite())
-        {
-            return Err(IdentificationError::NonFinite {
-                field: "line fit sums",
-                value,
-            });
-        }
+        check_finite(
+            &[mean_x, mean_y, sxx, sxy, syy],
+            non_finite("line fit sums"),
+        )?;
         self.count = count;
         self.mean_x = mean_x;
         self.mean_y = mean_y;
@@ -820,16 +769,13 @@ impl LineFit {
         let var_b1 = s2 / self.sxx;
         let var_b0 = s2 * (1.0 / n + self.mean_x * self.mean_x / self.sxx);
         let cov_b0_b1 = -self.mean_x * s2 / self.sxx;
-        finite(b0, "b0")?;
+        check_finite(&[b0], non_finite("b0"))?;
         if b0 <= 0.0 {
             return Err(IdentificationError::NonPositiveMass {
                 mass_kg: b0 / self.gravity_norm_mps2,
             });
         }
         let com_m = -b1 / b0;
-        // c = -b1 / b0: dc/db1 = -1/b0, dc/db0 = b1/b0^2.
-        let (d_b1, d_b0) = (-1.0 / b0, b1 / (b0 * b0));
-        let com_var = d_b1 * d_b1 * var_b1 + d_b0 * d_b0 * var_b0 + 2.0 * d_b1 * d_b0 * cov_b0_b1;
         let result = LineFitResult {
             b0_n: b0,
             b0_std_n: ComplexField::sqrt(var_b0),
@@ -838,7 +784,9 @@ impl LineFit {
             mass_kg: b0 / self.gravity_norm_mps2,
             mass_std_kg: ComplexField::sqrt(var_b0) / self.gravity_norm_mps2,
             com_m,
-            com_std_m: ComplexField::sqrt(non_negative(com_var)),
+            // c = (-b1) / b0 = M / m: the ratio of (m, M) scaled by |g|, which
+            // does not change it, nor its first-order standard error.
+            com_std_m: com_std_m(b0, -b1, var_b0, var_b1, -cov_b0_b1),
             residual_rms_n: ComplexField::sqrt(ssr / n),
             condition,
             poses: self.count,
@@ -853,12 +801,7 @@ impl LineFit {
             result.com_std_m,
             result.residual_rms_n,
         ];
-        match values.iter().find(|x| !x.is_finite()) {
-            Some(&value) => Err(IdentificationError::NonFinite {
-                field: "line fit result",
-                value,
-            }),
-            None => Ok(result),
-        }
+        check_finite(&values, non_finite("line fit result"))?;
+        Ok(result)
     }
 }

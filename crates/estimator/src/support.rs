@@ -21,15 +21,14 @@
 //!
 //! Fixed capacity ([`SUPPORT_CAPACITY`] poses), no allocation, no panics.
 
-use crate::{Calibration, Mat3, SensorNoise, SettingError, StaticPose, Vec3, ujoint_force_n};
+use crate::{
+    Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, SettingError,
+    StaticPose, Vec3, check_finite, com_std_m, non_negative, ujoint_force_n,
+};
 use nalgebra::{Cholesky, ComplexField, SMatrix, SVector};
 
 /// How many static poses a [`SupportCalibration`] holds at most.
 pub const SUPPORT_CAPACITY: usize = 64;
-
-/// Smallest accepted distance a = |B - A| between the U-joint centre and the
-/// support, m. The model's 1/a and 1/a^2 terms make closer poses meaningless.
-pub const MIN_SUPPORT_DISTANCE_M: f64 = 0.005;
 
 /// Largest accepted distance between the fitted and the configured support
 /// point, m (B is measured by hand to a few millimetres). Trial steps beyond it
@@ -109,12 +108,6 @@ fn below_or_nan(x: f64, limit: f64) -> bool {
     x.is_nan() || x < limit
 }
 
-/// A round-off negative variance as 0; NaN stays NaN (`f64::max(NaN, 0.0)` would
-/// give 0: a standard error of zero).
-fn non_negative(x: f64) -> f64 {
-    if x < 0.0 { 0.0 } else { x }
-}
-
 /// Why a support calibration could not be set up or did not give a result.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -128,29 +121,13 @@ pub enum SupportError {
         /// The capacity.
         capacity: usize,
     },
-    /// A pose has a NaN or infinite value.
-    #[error("pose {pose}: {field} is not a finite number")]
-    NonFinite {
+    /// A pose's own values are invalid ([`StaticPose::check`]).
+    #[error("pose {pose}: {error}")]
+    Pose {
         /// Index of the pose (the one being pushed: the current length).
         pose: usize,
-        /// Which value.
-        field: &'static str,
-    },
-    /// A pose averages no samples.
-    #[error("pose {pose}: samples must be >= 1, got {samples}")]
-    NoSamples {
-        /// Index of the pose.
-        pose: usize,
-        /// The value given.
-        samples: u32,
-    },
-    /// A pose's slide sign is not -1, 0 or +1.
-    #[error("pose {pose}: slide_sign must be -1, 0 or +1, got {slide_sign}")]
-    BadSlideSign {
-        /// Index of the pose.
-        pose: usize,
-        /// The value given.
-        slide_sign: f64,
+        /// What is wrong with it.
+        error: PoseInputError,
     },
     /// Fewer equations (3 per pose) than free unknowns plus one.
     #[error("{poses} poses give {equations} equations for {unknowns} unknowns: too few")]
@@ -573,16 +550,11 @@ impl SupportCalibration {
         bias_n: Vec3,
         options: SupportOptions,
     ) -> Result<Self, SupportError> {
-        for &value in bias_n.iter() {
-            if !value.is_finite() {
-                return Err(SettingError::Invalid {
-                    field: "bias_n",
-                    value,
-                    why: "each tare component must be finite",
-                }
-                .into());
-            }
-        }
+        check_finite(&bias_n, |value| SettingError::Invalid {
+            field: "bias_n",
+            value,
+            why: "each tare component must be finite",
+        })?;
         if !(options.max_support_std_m.is_finite() && options.max_support_std_m > 0.0) {
             return Err(SettingError::Invalid {
                 field: "max_support_std_m",
@@ -636,36 +608,8 @@ impl SupportCalibration {
                 capacity: SUPPORT_CAPACITY,
             });
         }
-        if !pose.ujoint_m.iter().all(|x| x.is_finite()) {
-            return Err(SupportError::NonFinite {
-                pose: index,
-                field: "ujoint_m",
-            });
-        }
-        if !pose.mean_reading_n.iter().all(|x| x.is_finite()) {
-            return Err(SupportError::NonFinite {
-                pose: index,
-                field: "mean_reading_n",
-            });
-        }
-        if !pose.slide_sign.is_finite() {
-            return Err(SupportError::NonFinite {
-                pose: index,
-                field: "slide_sign",
-            });
-        }
-        if pose.samples == 0 {
-            return Err(SupportError::NoSamples {
-                pose: index,
-                samples: 0,
-            });
-        }
-        if !(pose.slide_sign == -1.0 || pose.slide_sign == 0.0 || pose.slide_sign == 1.0) {
-            return Err(SupportError::BadSlideSign {
-                pose: index,
-                slide_sign: pose.slide_sign,
-            });
-        }
+        pose.check()
+            .map_err(|error| SupportError::Pose { pose: index, error })?;
         let Some(slot) = self.poses.get_mut(index) else {
             return Err(SupportError::Full {
                 capacity: SUPPORT_CAPACITY,
@@ -958,12 +902,7 @@ impl SupportCalibration {
         // Never claim more than the noise model, nor less than the scatter shows.
         let inflation = chi2_dof.max(1.0);
         let std = |k: usize| sqrt(non_negative(at(&cov, k, k) * inflation));
-        // c = M / m: gradient (-M/m^2, 1/m).
-        let (dm, d_moment) = (-moment / (mass * mass), 1.0 / mass);
-        let var_c = (dm * dm * at(&cov, I_MASS, I_MASS)
-            + d_moment * d_moment * at(&cov, I_MOMENT, I_MOMENT)
-            + 2.0 * dm * d_moment * at(&cov, I_MASS, I_MOMENT))
-            * inflation;
+        let var = |i: usize, j: usize| at(&cov, i, j) * inflation;
         let mut held = [true; 3];
         let mut support_std = [None; 3];
         for k in 0..3 {
@@ -981,7 +920,13 @@ impl SupportCalibration {
             mass_kg: mass,
             mass_std_kg: std(I_MASS),
             com_m: moment / mass,
-            com_std_m: sqrt(non_negative(var_c)),
+            com_std_m: com_std_m(
+                mass,
+                moment,
+                var(I_MASS, I_MASS),
+                var(I_MOMENT, I_MOMENT),
+                var(I_MASS, I_MOMENT),
+            ),
             moment_kgm: moment,
             moment_std_kgm: std(I_MOMENT),
             support_m: support,
@@ -995,14 +940,14 @@ impl SupportCalibration {
             iterations,
             poses: u32::try_from(self.len).unwrap_or(u32::MAX),
         };
-        check_finite(&fit)?;
+        check_result(&fit)?;
         Ok(fit)
     }
 }
 
 /// Every number of a fit is finite: finite but huge readings can overflow the
 /// cost (then chi2_dof and the standard errors are infinite, or NaN).
-fn check_finite(fit: &SupportFit) -> Result<(), SupportError> {
+fn check_result(fit: &SupportFit) -> Result<(), SupportError> {
     let [sx, sy, sz] = fit.support_std_m.map(|s| s.unwrap_or(0.0));
     let values = [
         ("mass_kg", fit.mass_kg),

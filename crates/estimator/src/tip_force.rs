@@ -11,7 +11,7 @@
 //! support) the estimate is dominated by noise, and "no force" must never be
 //! reported there.
 
-use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3};
+use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, check_finite};
 use nalgebra::{ComplexField, Matrix6, SMatrix};
 
 /// How far |u|^2 (and |w|^2, u . w) of a pose may stray from 1 (and 0).
@@ -35,10 +35,12 @@ pub struct TipForceConfig {
 #[non_exhaustive]
 pub enum TipForceError {
     /// An input is NaN or infinite.
-    #[error("{input} is not a finite number (NaN or infinite)")]
+    #[error("{input} is not a finite number ({value})")]
     NonFinite {
         /// Which input.
         input: &'static str,
+        /// The offending value (the first non-finite component of a vector).
+        value: f64,
     },
     /// The tip force is not observable here: its standard deviation exceeds the
     /// limit, or the system is singular (then `std_max_n` is infinite).
@@ -99,25 +101,6 @@ pub struct TipForceEstimator {
     com_m: f64,
     offset_m: f64,
     max_std_n: f64,
-}
-
-fn finite3(v: &Vec3) -> bool {
-    v.iter().all(|x| x.is_finite())
-}
-
-/// x > 0 (false for NaN).
-fn positive(x: f64) -> bool {
-    x > 0.0
-}
-
-/// |x| <= tolerance (false for NaN).
-fn within(x: f64, tolerance: f64) -> bool {
-    x.abs() <= tolerance
-}
-
-/// x >= limit (false for NaN).
-fn at_least(x: f64, limit: f64) -> bool {
-    x >= limit
 }
 
 /// sqrt(variance); a round-off negative variance gives 0, NaN gives infinity
@@ -188,20 +171,22 @@ impl TipForceEstimator {
         reading_n: &Vec3,
         bias_n: &Vec3,
     ) -> Result<TipForceEstimate, TipForceError> {
-        if !finite3(reading_n) {
-            return Err(TipForceError::NonFinite { input: "reading_n" });
-        }
-        if !finite3(bias_n) {
-            return Err(TipForceError::NonFinite { input: "bias_n" });
-        }
+        check_finite(reading_n, |value| TipForceError::NonFinite {
+            input: "reading_n",
+            value,
+        })?;
+        check_finite(bias_n, |value| TipForceError::NonFinite {
+            input: "bias_n",
+            value,
+        })?;
         let u = pose.rod_dir;
-        if !finite3(&u) {
-            return Err(TipForceError::NonFinite {
-                input: "pose.rod_dir",
-            });
-        }
+        check_finite(&u, |value| TipForceError::NonFinite {
+            input: "pose.rod_dir",
+            value,
+        })?;
         let unit_error = u.norm_squared() - 1.0;
-        if !within(unit_error, POSE_UNIT_TOLERANCE) {
+        // `contains` is false for NaN.
+        if !(-POSE_UNIT_TOLERANCE..=POSE_UNIT_TOLERANCE).contains(&unit_error) {
             return Err(TipForceError::InvalidPose {
                 quantity: "|rod_dir|^2 - 1",
                 value: unit_error,
@@ -233,7 +218,8 @@ impl TipForceEstimator {
                 std_max_n: worst(&std_n),
             });
         }
-        if !(finite3(&force_n) && torsion_nm.is_finite()) {
+        check_finite(&force_n, |_| TipForceError::NonFiniteResult)?;
+        if !torsion_nm.is_finite() {
             return Err(TipForceError::NonFiniteResult);
         }
         let axial_n = force_n.dot(u);
@@ -259,19 +245,19 @@ impl TipForceEstimator {
         f_a: &Vec3,
     ) -> Result<TipForceEstimate, TipForceError> {
         let a = pose.support_distance_m;
-        if !a.is_finite() {
-            return Err(TipForceError::NonFinite {
-                input: "pose.support_distance_m",
-            });
-        }
-        if !positive(a) {
+        check_finite(&[a], |value| TipForceError::NonFinite {
+            input: "pose.support_distance_m",
+            value,
+        })?;
+        // a and L are finite from here, so are L - a and the comparisons.
+        if a <= 0.0 {
             return Err(TipForceError::InvalidPose {
                 quantity: "support_distance_m",
                 value: a,
             });
         }
         let lever_m = self.length_m - a;
-        if !positive(lever_m) {
+        if lever_m <= 0.0 {
             return Err(TipForceError::NotObservable {
                 lever_m,
                 std_max_n: f64::INFINITY,
@@ -305,31 +291,31 @@ impl TipForceEstimator {
     ) -> Result<TipForceEstimate, TipForceError> {
         let w = pose.rod_normal;
         let s = pose.support_along_rod_m;
-        if !finite3(&w) {
-            return Err(TipForceError::NonFinite {
-                input: "pose.rod_normal",
-            });
-        }
-        if !s.is_finite() {
-            return Err(TipForceError::NonFinite {
-                input: "pose.support_along_rod_m",
-            });
-        }
+        check_finite(&w, |value| TipForceError::NonFinite {
+            input: "pose.rod_normal",
+            value,
+        })?;
+        check_finite(&[s], |value| TipForceError::NonFinite {
+            input: "pose.support_along_rod_m",
+            value,
+        })?;
+        let tolerance = -POSE_UNIT_TOLERANCE..=POSE_UNIT_TOLERANCE;
         let unit_error = w.norm_squared() - 1.0;
-        if !within(unit_error, POSE_UNIT_TOLERANCE) {
+        if !tolerance.contains(&unit_error) {
             return Err(TipForceError::InvalidPose {
                 quantity: "|rod_normal|^2 - 1",
                 value: unit_error,
             });
         }
         let cross = u.dot(&w);
-        if !within(cross, POSE_UNIT_TOLERANCE) {
+        if !tolerance.contains(&cross) {
             return Err(TipForceError::InvalidPose {
                 quantity: "rod_dir . rod_normal",
                 value: cross,
             });
         }
-        if !positive(s) {
+        // s and L are finite here, so are L - s and the comparisons.
+        if s <= 0.0 {
             return Err(TipForceError::InvalidPose {
                 quantity: "support_along_rod_m",
                 value: s,
@@ -341,7 +327,7 @@ impl TipForceEstimator {
             lever_m,
             std_max_n: f64::INFINITY,
         };
-        if !positive(lever_m) {
+        if lever_m <= 0.0 {
             return Err(singular);
         }
         // Torsion axis n = -(s4, 0, c4) (MODEL.md 4): u x w = (c4, 0, -s4) is the
@@ -381,12 +367,13 @@ impl TipForceEstimator {
             .copy_from(&Mat3::identity());
 
         let lu = k.lu();
+        // Never NaN (f64::min drops a NaN operand), so `<` is the whole test.
         let smallest_pivot = lu
             .u()
             .diagonal()
             .iter()
             .fold(f64::INFINITY, |acc: f64, p| acc.min(p.abs()));
-        if !at_least(smallest_pivot, MIN_RELATIVE_PIVOT) {
+        if smallest_pivot < MIN_RELATIVE_PIVOT {
             return Err(singular);
         }
         let Some(x) = lu.solve(&rhs) else {

@@ -15,10 +15,11 @@ use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
 use sar_estimator::support::{
-    MIN_SUPPORT_DISTANCE_M, SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportFit,
-    SupportOptions,
+    SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportFit, SupportOptions,
 };
-use sar_estimator::{Calibration, SensorNoise, SettingError, StaticPose};
+use sar_estimator::{
+    Calibration, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, SettingError, StaticPose,
+};
 
 const LENGTH_M: f64 = 0.35;
 
@@ -453,40 +454,55 @@ fn nan_and_bad_input_are_refused() {
     bad.ujoint_m.y = f64::NAN;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NonFinite {
-            field: "ujoint_m",
-            ..
+        Err(SupportError::Pose {
+            pose: 0,
+            error: PoseInputError::NonFinite {
+                field: "ujoint_m",
+                ..
+            }
         })
     ));
     let mut bad = some_pose();
     bad.mean_reading_n.z = f64::INFINITY;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NonFinite {
-            field: "mean_reading_n",
-            ..
+        Err(SupportError::Pose {
+            pose: 0,
+            error: PoseInputError::NonFinite {
+                field: "mean_reading_n",
+                ..
+            }
         })
     ));
     let mut bad = some_pose();
     bad.slide_sign = f64::NAN;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NonFinite {
-            field: "slide_sign",
-            ..
+        Err(SupportError::Pose {
+            pose: 0,
+            error: PoseInputError::NonFinite {
+                field: "slide_sign",
+                ..
+            }
         })
     ));
     let mut bad = some_pose();
     bad.slide_sign = 0.5;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::BadSlideSign { .. })
+        Err(SupportError::Pose {
+            error: PoseInputError::BadSlideSign { slide_sign: 0.5 },
+            ..
+        })
     ));
     let mut bad = some_pose();
     bad.samples = 0;
     assert!(matches!(
         support.push(&bad),
-        Err(SupportError::NoSamples { .. })
+        Err(SupportError::Pose {
+            error: PoseInputError::NoSamples { samples: 0 },
+            ..
+        })
     ));
     assert!(support.is_empty());
 

