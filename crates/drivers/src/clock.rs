@@ -13,10 +13,33 @@ pub trait Clock {
 }
 
 /// The host's `CLOCK_MONOTONIC`, the time base of every stamp and recording.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct MonotonicClock;
+///
+/// Made by [`MonotonicClock::new`], which reads the clock once: a host without
+/// a readable monotonic clock is refused at start, not discovered mid-run.
+#[derive(Debug, Clone, Copy)]
+pub struct MonotonicClock {
+    _readable: (),
+}
+
+/// The host's monotonic clock cannot be read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("CLOCK_MONOTONIC cannot be read on this host")]
+pub struct ClockError;
+
+impl crate::Error for ClockError {
+    fn kind(&self) -> crate::ErrorKind {
+        crate::ErrorKind::Unsupported
+    }
+}
 
 impl MonotonicClock {
+    /// The monotonic clock, after one successful read.
+    pub fn new() -> Result<Self, ClockError> {
+        Self::read_ns()
+            .map(|_| Self { _readable: () })
+            .ok_or(ClockError)
+    }
+
     /// `CLOCK_MONOTONIC` in ns, or `None` when the clock cannot be read.
     fn read_ns() -> Option<u64> {
         let mut ts = libc::timespec {
@@ -39,9 +62,17 @@ impl MonotonicClock {
 }
 
 impl Clock for MonotonicClock {
-    /// Now, ns (0 if the clock cannot be read: every stamp then looks stale).
+    /// Now, ns.
+    ///
+    /// Once [`MonotonicClock::new`] has read the clock, `clock_gettime` cannot
+    /// fail (its errors are a bad clock id or a bad pointer, both excluded
+    /// here). Should it fail all the same, this returns `u64::MAX`: every stamp
+    /// taken before then is older than any age limit, and a clock stuck there
+    /// no longer advances, which the estimator's cycle refuses (both inputs
+    /// invalid: a Fault). A reading of 0, the obvious fallback, would have made
+    /// every age 0, i.e. every stamp fresh.
     fn now_ns(&self) -> u64 {
-        Self::read_ns().unwrap_or(0)
+        Self::read_ns().unwrap_or(u64::MAX)
     }
 
     fn sleep_until_ns(&self, deadline_ns: u64) {
@@ -97,7 +128,7 @@ mod tests {
 
     #[test]
     fn monotonic_clock_reads_never_go_back_and_sleep_reaches_the_deadline() {
-        let clock = MonotonicClock;
+        let clock = MonotonicClock::new().unwrap();
         let first = clock.now_ns();
         assert!(first > 0, "CLOCK_MONOTONIC read as 0");
         let deadline = first + 2_000_000;

@@ -19,7 +19,7 @@ pub mod scenario;
 pub mod sensor;
 pub mod sim;
 
-pub use clock::{Clock, MonotonicClock, SimClock};
+pub use clock::{Clock, ClockError, MonotonicClock, SimClock};
 pub use drives::{AxisDrives, DriveState, JointPositions};
 pub use error::{Error, ErrorKind};
 pub use sensor::{ForceSensor, SensorStatus, WrenchSample};

@@ -118,6 +118,8 @@ pub struct Estimator {
     guard: Guard,
     bias_n: Vec3,
     last: CycleOutput,
+    /// `now_ns` of the previous cycle: time must advance from cycle to cycle.
+    last_now_ns: Option<u64>,
 }
 
 impl Estimator {
@@ -149,6 +151,7 @@ impl Estimator {
             guard,
             bias_n,
             last,
+            last_now_ns: None,
         })
     }
 
@@ -158,12 +161,18 @@ impl Estimator {
     pub fn cycle(&mut self, input: &CycleInput) -> &CycleOutput {
         let sensor_age_ns = input.now_ns.saturating_sub(input.sensor.stamp_ns);
         let joints_age_ns = input.now_ns.saturating_sub(input.joints.stamp_ns);
+        // A clock that does not advance (stuck, or gone back) makes every age
+        // meaningless: no input is trusted in such a cycle.
+        let clock_advances = self.last_now_ns.is_none_or(|last| input.now_ns > last);
+        self.last_now_ns = Some(input.now_ns);
         // A sample stamped in the future, or with a non-finite force, is invalid
         // whatever the driver said.
-        let sensor_valid = input.sensor.valid
+        let sensor_valid = clock_advances
+            && input.sensor.valid
             && input.sensor.stamp_ns <= input.now_ns
             && input.sensor.force_n.iter().all(|x| x.is_finite());
-        let joints_valid = input.joints.valid && input.joints.stamp_ns <= input.now_ns;
+        let joints_valid =
+            clock_advances && input.joints.valid && input.joints.stamp_ns <= input.now_ns;
         let out = &mut self.last;
         out.cycle = input.cycle;
         out.sensor_age_ns = sensor_age_ns;

@@ -257,6 +257,28 @@ fn bad_inputs_fault_the_guard() {
     let out = *rig.estimator.cycle(&input);
     assert!(matches!(out.guard_reason, Reason::JointsStale { .. }));
 
+    // A clock that does not advance (stuck, as a failed clock read would leave
+    // it): every input is invalid, even freshly stamped ones.
+    let mut rig = Rig::armed();
+    let first = rig.input(
+        NOMINAL_Q,
+        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
+    );
+    let mut stuck = rig.input(
+        NOMINAL_Q,
+        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
+    );
+    stuck.now_ns = first.now_ns;
+    stuck.sensor.stamp_ns = first.now_ns;
+    stuck.joints.stamp_ns = first.now_ns;
+    assert_eq!(rig.estimator.cycle(&first).guard_state, GuardState::Ok);
+    let out = *rig.estimator.cycle(&stuck);
+    assert_eq!((out.sensor_age_ns, out.joints_age_ns), (0, 0));
+    assert_eq!(
+        (out.guard_state, out.guard_reason),
+        (GuardState::Fault, Reason::SensorInvalid)
+    );
+
     // Joints the drives mark invalid: no pose, no estimate, a Fault.
     let mut rig = Rig::armed();
     let mut input = rig.input(
