@@ -151,12 +151,7 @@ fn identification(c: &mut Criterion) {
             .unwrap(),
         &SensorNoise::hex6(),
         bias_n,
-        SupportOptions {
-            friction: true,
-            calibrate_support: true,
-            max_support_std_m: 1e-3,
-            max_iterations: 50,
-        },
+        SupportOptions::default(),
     )
     .unwrap();
     for p in &poses {

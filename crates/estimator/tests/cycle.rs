@@ -66,6 +66,12 @@ impl Rig {
         *self.estimator.cycle(&input)
     }
 
+    /// The next input at the nominal pose with nothing at the tip.
+    fn at_rest(&mut self) -> CycleInput {
+        let reading = example_reading(NOMINAL_Q, &Vector3::zeros(), &self.bias_n);
+        self.input(NOMINAL_Q, reading)
+    }
+
     /// Steps once with no force, then arms the guard.
     fn armed() -> Self {
         let mut rig = Self::new();
@@ -218,10 +224,7 @@ fn bad_inputs_fault_the_guard() {
 
     // A sample stamped in the future.
     let mut rig = Rig::armed();
-    let mut input = rig.input(
-        NOMINAL_Q,
-        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
-    );
+    let mut input = rig.at_rest();
     input.sensor.stamp_ns = input.now_ns + 1;
     let out = *rig.estimator.cycle(&input);
     assert_eq!(
@@ -231,10 +234,7 @@ fn bad_inputs_fault_the_guard() {
 
     // A stale sensor sample: 6 ms old against a 5 ms limit.
     let mut rig = Rig::armed();
-    let mut input = rig.input(
-        NOMINAL_Q,
-        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
-    );
+    let mut input = rig.at_rest();
     input.sensor.stamp_ns = input.now_ns - 6_000_000;
     let out = *rig.estimator.cycle(&input);
     assert_eq!(out.sensor_age_ns, 6_000_000);
@@ -249,10 +249,7 @@ fn bad_inputs_fault_the_guard() {
 
     // Stale joints.
     let mut rig = Rig::armed();
-    let mut input = rig.input(
-        NOMINAL_Q,
-        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
-    );
+    let mut input = rig.at_rest();
     input.joints.stamp_ns = input.now_ns - 5_000_001;
     let out = *rig.estimator.cycle(&input);
     assert!(matches!(out.guard_reason, Reason::JointsStale { .. }));
@@ -260,14 +257,8 @@ fn bad_inputs_fault_the_guard() {
     // A clock that does not advance (stuck, as a failed clock read would leave
     // it): every input is invalid, even freshly stamped ones.
     let mut rig = Rig::armed();
-    let first = rig.input(
-        NOMINAL_Q,
-        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
-    );
-    let mut stuck = rig.input(
-        NOMINAL_Q,
-        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
-    );
+    let first = rig.at_rest();
+    let mut stuck = rig.at_rest();
     stuck.now_ns = first.now_ns;
     stuck.sensor.stamp_ns = first.now_ns;
     stuck.joints.stamp_ns = first.now_ns;
@@ -281,10 +272,7 @@ fn bad_inputs_fault_the_guard() {
 
     // Joints the drives mark invalid: no pose, no estimate, a Fault.
     let mut rig = Rig::armed();
-    let mut input = rig.input(
-        NOMINAL_Q,
-        example_reading(NOMINAL_Q, &Vector3::zeros(), &rig.bias_n),
-    );
+    let mut input = rig.at_rest();
     input.joints.valid = false;
     let out = *rig.estimator.cycle(&input);
     assert!(out.pose.is_none());

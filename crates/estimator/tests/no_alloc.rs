@@ -182,12 +182,7 @@ fn identification_and_support_fit_allocate_nothing() {
         &cal,
         &SensorNoise::hex6(),
         bias_n,
-        SupportOptions {
-            friction: true,
-            calibrate_support: true,
-            max_support_std_m: 1e-3,
-            max_iterations: 50,
-        },
+        SupportOptions::default(),
     )
     .unwrap();
     let ((m_ident, m_support), allocations) = allocations_in(|| {

@@ -82,12 +82,7 @@ pub extern "C" fn sar_nostd_identify(ax_m: f64, ay_m: f64, az_m: f64) -> f64 {
     else {
         return f64::NAN;
     };
-    let support_options = SupportOptions {
-        friction: true,
-        calibrate_support: true,
-        max_support_std_m: 1e-3,
-        max_iterations: 50,
-    };
+    let support_options = SupportOptions::default();
     let Ok(mut support) =
         SupportCalibration::new(&config.calibration, &config.noise, Vec3::zeros(), support_options)
     else {
