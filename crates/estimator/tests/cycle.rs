@@ -299,8 +299,18 @@ fn bad_inputs_fault_the_guard() {
     let mut rig = Rig::armed();
     let q_far = [0.0, 0.28, 0.101];
     let out = rig.push(q_far, &Vector3::zeros());
-    assert!(matches!(out.tip, TipOutcome::Refused(_)), "{:?}", out.tip);
+    // The number is kept, flagged not observable; the guard faults on it.
+    assert!(
+        matches!(out.tip, TipOutcome::Estimate(e) if !e.observable),
+        "{:?}",
+        out.tip
+    );
     assert_eq!(out.guard_state, GuardState::Fault);
+    assert!(
+        matches!(out.guard_reason, Reason::NotObservable { .. }),
+        "{:?}",
+        out.guard_reason
+    );
     // And the Fault stays after the inputs are good again, until a reset.
     let out = rig.push(NOMINAL_Q, &Vector3::zeros());
     assert_eq!(out.guard_state, GuardState::Fault);
