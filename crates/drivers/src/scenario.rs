@@ -21,8 +21,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use raw::{AxisName, FaultKind, FaultToml, FileToml, MotionToml};
 use sar_kinematics::{
-    ActiveJoints, Calibration, ConfigError, MIN_DISTANCE_M, Mat3, PoseError, Profile, forward,
-    inverse,
+    ActiveJoints, Calibration, CalibrationSpec, ConfigError, MIN_DISTANCE_M, Mat3, PoseError,
+    Profile, ProfileSpec, forward, inverse,
 };
 use std::path::Path;
 
@@ -513,18 +513,23 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ScenarioError> {
     let [r0, r1, r2] = r.sensor_rotation;
     let [[m00, m01, m02], [m10, m11, m12], [m20, m21, m22]] = [r0, r1, r2];
     let rotation = Mat3::new(m00, m01, m02, m10, m11, m12, m20, m21, m22);
-    let calibration = Calibration::new(
-        Vec3::from(r.p_home),
-        Vec3::from(r.ujoint_offset),
-        Vec3::from(r.sensor_offset),
-        rotation,
-        Vec3::from(r.support),
-        Vec3::from(r.gravity),
-    )
+    let calibration = Calibration::new(&CalibrationSpec {
+        p_home_m: Vec3::from(r.p_home),
+        ujoint_offset_m: Vec3::from(r.ujoint_offset),
+        sensor_offset_m: Vec3::from(r.sensor_offset),
+        sensor_rotation: rotation,
+        support_m: Vec3::from(r.support),
+        gravity_mps2: Vec3::from(r.gravity),
+    })
     .map_err(|e| ctx.err(&calibration_error_key(&e), e.to_string()))?;
     let m = &file.manipulator;
-    let profile = Profile::new(m.length_m, m.offset_m, m.mass_kg, m.com_m)
-        .map_err(|e| ctx.err(&profile_error_key(&e), e.to_string()))?;
+    let profile = Profile::new(&ProfileSpec {
+        length_m: m.length_m,
+        offset_m: m.offset_m,
+        mass_kg: m.mass_kg,
+        com_m: m.com_m,
+    })
+    .map_err(|e| ctx.err(&profile_error_key(&e), e.to_string()))?;
     if m.name.as_deref().is_some_and(|n| n.trim().is_empty()) {
         return Err(ctx.err("manipulator.name", "must not be empty when given"));
     }

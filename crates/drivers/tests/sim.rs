@@ -19,7 +19,7 @@ use sar_drivers::{
     AxisDrives, Clock, DriveState, Error, ErrorKind, ForceSensor, JointPositions, SimClock,
     WrenchSample,
 };
-use sar_kinematics::{ActiveJoints, Calibration, Profile};
+use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Profile, ProfileSpec};
 
 type Vec3 = Vector3<f64>;
 
@@ -40,14 +40,14 @@ fn calibration() -> Calibration {
 }
 
 fn calibration_rotated(rotation: Matrix3<f64>) -> Calibration {
-    Calibration::new(
-        Vec3::zeros(),
-        Vec3::new(0.0, -0.08, 0.0),
-        Vec3::new(0.0, -0.03, 0.0),
-        rotation,
-        Vec3::new(0.45, 0.20, 0.0),
-        gravity(),
-    )
+    Calibration::new(&CalibrationSpec {
+        p_home_m: Vec3::zeros(),
+        ujoint_offset_m: Vec3::new(0.0, -0.08, 0.0),
+        sensor_offset_m: Vec3::new(0.0, -0.03, 0.0),
+        sensor_rotation: rotation,
+        support_m: Vec3::new(0.45, 0.20, 0.0),
+        gravity_mps2: gravity(),
+    })
     .unwrap()
 }
 
@@ -57,7 +57,13 @@ const COM_M: f64 = 0.103;
 const LENGTH_M: f64 = 0.35;
 
 fn profile() -> Profile {
-    Profile::new(LENGTH_M, 0.0, MASS_KG, COM_M).unwrap()
+    Profile::new(&ProfileSpec {
+        length_m: LENGTH_M,
+        offset_m: 0.0,
+        mass_kg: MASS_KG,
+        com_m: COM_M,
+    })
+    .unwrap()
 }
 
 /// Active joints with the rod horizontal at the support's height, A at a
@@ -964,7 +970,13 @@ fn contact_keyframes_ramp_hold_and_push_above_the_stop_limit() {
 #[test]
 fn rod_offset_statics_agree_with_the_estimator_and_show_the_torsion() {
     let mut spec = quiet_spec();
-    spec.profile = Profile::new(LENGTH_M, 0.01, MASS_KG, COM_M).unwrap();
+    spec.profile = Profile::new(&ProfileSpec {
+        length_m: LENGTH_M,
+        offset_m: 0.01,
+        mass_kg: MASS_KG,
+        com_m: COM_M,
+    })
+    .unwrap();
     spec.axes.start = ActiveJoints {
         q1_m: 0.04,
         q2_m: 0.31,

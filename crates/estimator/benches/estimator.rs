@@ -18,7 +18,7 @@ use sar_estimator::guard::{Guard, GuardConfig, GuardInput, TipInput};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
-use sar_estimator::{Profile, SensorNoise};
+use sar_estimator::{Profile, ProfileSpec, SensorNoise};
 use sar_kinematics::{ActiveJoints, forward};
 use std::hint::black_box;
 
@@ -76,7 +76,13 @@ fn per_cycle(c: &mut Criterion) {
     c.bench_function("cycle/part: tip force, d = 0", |b| {
         b.iter(|| black_box(tip.estimate(black_box(&pose), black_box(&reading), &bias_n)))
     });
-    let offset_profile = Profile::new(0.35, 0.004, 2.593, 0.103).unwrap();
+    let offset_profile = Profile::new(&ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.004,
+        mass_kg: 2.593,
+        com_m: 0.103,
+    })
+    .unwrap();
     let offset_pose = forward(&cal, &offset_profile, &joints()).unwrap();
     let offset_tip = TipForceEstimator::new(
         &cal,

@@ -12,12 +12,13 @@
 pub mod article;
 pub mod cycle;
 pub mod error_measure;
+pub mod filter;
 pub mod guard;
 pub mod identification;
 pub mod support;
 pub mod tip_force;
 
-pub use sar_kinematics::{Calibration, Mat3, Pose, Profile, Vec3};
+pub use sar_kinematics::{Calibration, CalibrationSpec, Mat3, Pose, Profile, ProfileSpec, Vec3};
 
 /// Smallest accepted distance a = |B - A| between the U-joint centre and the
 /// support, m: identification and support calibration refuse a pose closer

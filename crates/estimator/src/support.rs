@@ -996,14 +996,14 @@ mod tests {
     /// The analytic Jacobian agrees with central differences.
     #[test]
     fn jacobian_matches_finite_differences() {
-        let cal = Calibration::new(
-            Vec3::zeros(),
-            Vec3::zeros(),
-            Vec3::zeros(),
-            Mat3::identity(),
-            Vec3::new(0.45, 0.2, 0.0),
-            Vec3::new(0.0, -9.80665, 0.0),
-        )
+        let cal = Calibration::new(&crate::CalibrationSpec {
+            p_home_m: Vec3::zeros(),
+            ujoint_offset_m: Vec3::zeros(),
+            sensor_offset_m: Vec3::zeros(),
+            sensor_rotation: Mat3::identity(),
+            support_m: Vec3::new(0.45, 0.2, 0.0),
+            gravity_mps2: Vec3::new(0.0, -9.80665, 0.0),
+        })
         .unwrap();
         let whitening = Mat3::identity();
         let tare = Vec3::zeros();

@@ -19,7 +19,9 @@ use sar_estimator::article::{
     ArticleError, MAX_CONDITION, tip_force_article, tip_force_article_lsq,
 };
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
-use sar_kinematics::{ActiveJoints, Calibration, Pose, Profile, forward};
+use sar_kinematics::{
+    ActiveJoints, Calibration, CalibrationSpec, Pose, Profile, ProfileSpec, forward,
+};
 use std::cell::Cell;
 
 const NOMINAL_Q4: f64 = core::f64::consts::FRAC_PI_2;
@@ -113,17 +115,23 @@ fn build(p: &Params) -> Case {
     let rotation = Rotation3::from_euler_angles(p.euler[0], p.euler[1], p.euler[2]).into_inner();
     let g = Vector3::new(p.gravity_tilt[0], -1.0, p.gravity_tilt[1]).normalize() * 9.80665;
     let support = v3(p.support) + Vector3::new(0.6, 0.0, 0.0);
-    let cal = Calibration::new(
-        v3(p.p_home),
-        v3(p.ujoint_offset),
-        Vector3::zeros(),
-        rotation,
-        support,
-        g,
-    )
+    let cal = Calibration::new(&CalibrationSpec {
+        p_home_m: v3(p.p_home),
+        ujoint_offset_m: v3(p.ujoint_offset),
+        sensor_offset_m: Vector3::zeros(),
+        sensor_rotation: rotation,
+        support_m: support,
+        gravity_mps2: g,
+    })
     .unwrap();
     let com_m = p.com_frac * p.length_m;
-    let profile = Profile::new(p.length_m, 0.0, p.mass_kg, com_m).unwrap();
+    let profile = Profile::new(&ProfileSpec {
+        length_m: p.length_m,
+        offset_m: 0.0,
+        mass_kg: p.mass_kg,
+        com_m,
+    })
+    .unwrap();
     let a = p.support_frac * p.length_m;
     let (u, w) = rod_frame(p.q4, p.q5);
     let a_m = support - u * a;

@@ -23,7 +23,9 @@ use sar_estimator::identification::{
     Identification, IdentificationError, IdentificationOptions, IdentificationResult, LineFit,
     MAX_CONDITION, bias_across_gravity_basis,
 };
-use sar_estimator::{Calibration, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, StaticPose};
+use sar_estimator::{
+    Calibration, CalibrationSpec, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, StaticPose,
+};
 
 type V3 = Vector3<f64>;
 type M3 = Matrix3<f64>;
@@ -68,14 +70,14 @@ fn mounted_rotation() -> M3 {
 }
 
 fn calibration(support_m: V3, rotation: M3, gravity_mps2: V3) -> Calibration {
-    Calibration::new(
-        V3::zeros(),
-        V3::zeros(),
-        V3::zeros(),
-        rotation,
+    Calibration::new(&CalibrationSpec {
+        p_home_m: V3::zeros(),
+        ujoint_offset_m: V3::zeros(),
+        sensor_offset_m: V3::zeros(),
+        sensor_rotation: rotation,
         support_m,
         gravity_mps2,
-    )
+    })
     .unwrap()
 }
 

@@ -18,7 +18,8 @@ use sar_estimator::support::{
     SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportFit, SupportOptions,
 };
 use sar_estimator::{
-    Calibration, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, SettingError, StaticPose,
+    Calibration, CalibrationSpec, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise,
+    SettingError, StaticPose,
 };
 
 const LENGTH_M: f64 = 0.35;
@@ -50,14 +51,14 @@ fn truth(manipulator: usize, friction_n: f64) -> Truth {
 }
 
 fn calibration(rotation: Matrix3<f64>, support_m: Vector3<f64>) -> Calibration {
-    Calibration::new(
-        Vector3::zeros(),
-        Vector3::new(0.0, -0.08, 0.0),
-        Vector3::new(0.0, -0.03, 0.0),
-        rotation,
+    Calibration::new(&CalibrationSpec {
+        p_home_m: Vector3::zeros(),
+        ujoint_offset_m: Vector3::new(0.0, -0.08, 0.0),
+        sensor_offset_m: Vector3::new(0.0, -0.03, 0.0),
+        sensor_rotation: rotation,
         support_m,
-        gravity(),
-    )
+        gravity_mps2: gravity(),
+    })
     .unwrap()
 }
 

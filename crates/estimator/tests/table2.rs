@@ -19,7 +19,7 @@ mod common;
 use common::*;
 use nalgebra::{Matrix3, Vector3};
 use sar_estimator::support::{SupportCalibration, SupportFit, SupportOptions};
-use sar_estimator::{Calibration, SensorNoise};
+use sar_estimator::{Calibration, CalibrationSpec, SensorNoise};
 
 const LENGTH_M: f64 = 0.35;
 const FRICTION_N: f64 = 0.3;
@@ -101,14 +101,14 @@ fn poses(manipulator: usize, protocol: Protocol, samples: u32) -> Vec<sar_estima
 }
 
 fn fit(poses: &[sar_estimator::StaticPose], configured: Vector3<f64>, case: Case) -> SupportFit {
-    let cal = Calibration::new(
-        Vector3::zeros(),
-        Vector3::new(0.0, -0.08, 0.0),
-        Vector3::new(0.0, -0.03, 0.0),
-        Matrix3::identity(),
-        configured,
-        gravity(),
-    )
+    let cal = Calibration::new(&CalibrationSpec {
+        p_home_m: Vector3::zeros(),
+        ujoint_offset_m: Vector3::new(0.0, -0.08, 0.0),
+        sensor_offset_m: Vector3::new(0.0, -0.03, 0.0),
+        sensor_rotation: Matrix3::identity(),
+        support_m: configured,
+        gravity_mps2: gravity(),
+    })
     .unwrap();
     let options = SupportOptions {
         friction: case.friction,

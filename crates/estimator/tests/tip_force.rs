@@ -19,7 +19,9 @@ use sar_estimator::tip_force::{
     TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator,
 };
 use sar_estimator::{SensorNoise, SettingError};
-use sar_kinematics::{ActiveJoints, Calibration, Pose, Profile, forward};
+use sar_kinematics::{
+    ActiveJoints, Calibration, CalibrationSpec, Pose, Profile, ProfileSpec, forward,
+};
 use std::cell::Cell;
 
 const HEX6: [f64; 3] = SensorNoise::HEX6_STD_N;
@@ -130,17 +132,23 @@ fn build(p: &Params) -> Case {
     let rotation = Rotation3::from_euler_angles(p.euler[0], p.euler[1], p.euler[2]).into_inner();
     let g_dir = Vector3::new(p.gravity_tilt[0], -1.0, p.gravity_tilt[1]).normalize();
     let support = v3(p.support) + Vector3::new(0.6, 0.0, 0.0);
-    let cal = Calibration::new(
-        v3(p.p_home),
-        v3(p.ujoint_offset),
-        v3(p.sensor_offset),
-        rotation,
-        support,
-        g_dir * 9.80665,
-    )
+    let cal = Calibration::new(&CalibrationSpec {
+        p_home_m: v3(p.p_home),
+        ujoint_offset_m: v3(p.ujoint_offset),
+        sensor_offset_m: v3(p.sensor_offset),
+        sensor_rotation: rotation,
+        support_m: support,
+        gravity_mps2: g_dir * 9.80665,
+    })
     .unwrap();
     let com_m = p.com_frac * p.length_m;
-    let profile = Profile::new(p.length_m, p.offset_m, p.mass_kg, com_m).unwrap();
+    let profile = Profile::new(&ProfileSpec {
+        length_m: p.length_m,
+        offset_m: p.offset_m,
+        mass_kg: p.mass_kg,
+        com_m,
+    })
+    .unwrap();
     let s = p.support_frac * p.length_m;
     let (u, w) = rod_frame(p.q4, p.q5);
     let a_m = support - w * p.offset_m - u * s;
@@ -876,14 +884,14 @@ fn torsion_follows_the_model_axis_when_c5_is_negative() {
 fn signs_by_hand_on_a_horizontal_rod() {
     let g = 9.80665;
     let support = Vector3::new(0.45, 0.2, 0.0);
-    let cal = Calibration::new(
-        Vector3::zeros(),
-        Vector3::zeros(),
-        Vector3::zeros(),
-        Matrix3::identity(),
-        support,
-        Vector3::new(0.0, -g, 0.0),
-    )
+    let cal = Calibration::new(&CalibrationSpec {
+        p_home_m: Vector3::zeros(),
+        ujoint_offset_m: Vector3::zeros(),
+        sensor_offset_m: Vector3::zeros(),
+        sensor_rotation: Matrix3::identity(),
+        support_m: support,
+        gravity_mps2: Vector3::new(0.0, -g, 0.0),
+    })
     .unwrap();
     let joints = ActiveJoints {
         q1_m: 0.0,
@@ -907,7 +915,13 @@ fn signs_by_hand_on_a_horizontal_rod() {
             Vector3::zeros(),
         ),
     ] {
-        let profile = Profile::new(0.35, 0.0, mass_kg, 0.1).unwrap();
+        let profile = Profile::new(&ProfileSpec {
+            length_m: 0.35,
+            offset_m: 0.0,
+            mass_kg,
+            com_m: 0.1,
+        })
+        .unwrap();
         let pose = forward(&cal, &profile, &joints).unwrap();
         assert!((pose.rod_dir - Vector3::x()).norm() < 1e-15);
         assert!((pose.support_distance_m - 0.15).abs() < 1e-15);

@@ -73,21 +73,40 @@ pub struct Calibration {
     gravity_mps2: Vec3,
 }
 
+/// The named fields of a [`Calibration`], as a configuration file gives them.
+///
+/// A plain struct so that every value is named where it is written: a loader
+/// cannot swap two vectors without the swap showing. Turned into a checked
+/// [`Calibration`] by [`Calibration::new`] (or `TryFrom`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationSpec {
+    /// P at q = 0, {0}, m.
+    pub p_home_m: Vec3,
+    /// a_off = A - P, {0}, m.
+    pub ujoint_offset_m: Vec3,
+    /// s_off = S - P, {0}, m.
+    pub sensor_offset_m: Vec3,
+    /// R_0s, whose columns are the sensor's axes in {0}.
+    pub sensor_rotation: Mat3,
+    /// B, the support point, {0}, m.
+    pub support_m: Vec3,
+    /// g in {0}, m/s^2.
+    pub gravity_mps2: Vec3,
+}
+
 impl Calibration {
-    /// Checks and builds a calibration.
-    ///
-    /// - `p_home_m`: P at q = 0; `ujoint_offset_m`: a_off = A - P;
-    ///   `sensor_offset_m`: s_off = S - P; `support_m`: B; all in {0}, metres.
-    /// - `sensor_rotation`: R_0s, whose columns are the sensor's axes in {0}.
-    /// - `gravity_mps2`: g in {0}.
-    pub fn new(
-        p_home_m: Vec3,
-        ujoint_offset_m: Vec3,
-        sensor_offset_m: Vec3,
-        sensor_rotation: Mat3,
-        support_m: Vec3,
-        gravity_mps2: Vec3,
-    ) -> Result<Self, ConfigError> {
+    /// Checks and builds a calibration from its named fields (see
+    /// [`CalibrationSpec`]): every value finite, R_0s a proper rotation within
+    /// [`ORTHONORMAL_TOLERANCE`], |g| within [`GRAVITY_RANGE_MPS2`].
+    pub fn new(spec: &CalibrationSpec) -> Result<Self, ConfigError> {
+        let CalibrationSpec {
+            p_home_m,
+            ujoint_offset_m,
+            sensor_offset_m,
+            sensor_rotation,
+            support_m,
+            gravity_mps2,
+        } = *spec;
         for (field, v) in [
             ("p_home", &p_home_m),
             ("ujoint_offset", &ujoint_offset_m),
@@ -121,6 +140,18 @@ impl Calibration {
             support_m,
             gravity_mps2,
         })
+    }
+
+    /// The named fields this calibration was built from.
+    pub fn spec(&self) -> CalibrationSpec {
+        CalibrationSpec {
+            p_home_m: self.p_home_m,
+            ujoint_offset_m: self.ujoint_offset_m,
+            sensor_offset_m: self.sensor_offset_m,
+            sensor_rotation: self.sensor_rotation,
+            support_m: self.support_m,
+            gravity_mps2: self.gravity_mps2,
+        }
     }
 
     /// The same calibration with another support point B (used by support
@@ -168,16 +199,31 @@ pub struct Profile {
     com_m: f64,
 }
 
+/// The named fields of a [`Profile`], as a configuration file gives them.
+/// Turned into a checked [`Profile`] by [`Profile::new`] (or `TryFrom`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProfileSpec {
+    /// L > 0: A to the tip along the rod, m.
+    pub length_m: f64,
+    /// d, |d| < L: the rod axis from A along w, m.
+    pub offset_m: f64,
+    /// m >= 0, kg.
+    pub mass_kg: f64,
+    /// c: A to the centre of mass along the rod (any finite value), m.
+    pub com_m: f64,
+}
+
 impl Profile {
-    /// Checks and builds a profile: `length_m` L > 0 (A to tip along the rod),
-    /// `offset_m` d with |d| < L (rod axis from A along w), `mass_kg` m >= 0,
-    /// `com_m` c (A to the centre of mass along the rod; any finite value).
-    pub fn new(
-        length_m: f64,
-        offset_m: f64,
-        mass_kg: f64,
-        com_m: f64,
-    ) -> Result<Self, ConfigError> {
+    /// Checks and builds a profile from its named fields (see [`ProfileSpec`]):
+    /// `length_m` L > 0, `offset_m` d with |d| < L, `mass_kg` m >= 0, `com_m` c
+    /// finite.
+    pub fn new(spec: &ProfileSpec) -> Result<Self, ConfigError> {
+        let ProfileSpec {
+            length_m,
+            offset_m,
+            mass_kg,
+            com_m,
+        } = *spec;
         for (field, x) in [
             ("length_m", length_m),
             ("offset_m", offset_m),
@@ -203,6 +249,16 @@ impl Profile {
         })
     }
 
+    /// The named fields this profile was built from.
+    pub fn spec(&self) -> ProfileSpec {
+        ProfileSpec {
+            length_m: self.length_m,
+            offset_m: self.offset_m,
+            mass_kg: self.mass_kg,
+            com_m: self.com_m,
+        }
+    }
+
     /// L, m.
     pub fn length_m(&self) -> f64 {
         self.length_m
@@ -218,5 +274,33 @@ impl Profile {
     /// c, m.
     pub fn com_m(&self) -> f64 {
         self.com_m
+    }
+}
+
+impl TryFrom<&CalibrationSpec> for Calibration {
+    type Error = ConfigError;
+    fn try_from(spec: &CalibrationSpec) -> Result<Self, ConfigError> {
+        Self::new(spec)
+    }
+}
+
+impl TryFrom<CalibrationSpec> for Calibration {
+    type Error = ConfigError;
+    fn try_from(spec: CalibrationSpec) -> Result<Self, ConfigError> {
+        Self::new(&spec)
+    }
+}
+
+impl TryFrom<&ProfileSpec> for Profile {
+    type Error = ConfigError;
+    fn try_from(spec: &ProfileSpec) -> Result<Self, ConfigError> {
+        Self::new(spec)
+    }
+}
+
+impl TryFrom<ProfileSpec> for Profile {
+    type Error = ConfigError;
+    fn try_from(spec: ProfileSpec) -> Result<Self, ConfigError> {
+        Self::new(&spec)
     }
 }

@@ -17,7 +17,7 @@ pub mod calibration;
 pub mod dh;
 pub mod pose;
 
-pub use calibration::{Calibration, ConfigError, Profile};
+pub use calibration::{Calibration, CalibrationSpec, ConfigError, Profile, ProfileSpec};
 pub use pose::{ActiveJoints, Pose, PoseError, forward, inverse, rod_frame};
 
 /// A 3-vector of `f64` in some named frame (the name of the variable says which).

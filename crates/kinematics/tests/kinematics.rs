@@ -13,7 +13,8 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 use sar_kinematics::dh::{axis, origin, sar_chain};
 use sar_kinematics::{
-    ActiveJoints, Calibration, ConfigError, PoseError, Profile, Vec3, forward, inverse, rod_frame,
+    ActiveJoints, Calibration, CalibrationSpec, ConfigError, PoseError, Profile, ProfileSpec, Vec3,
+    forward, inverse, rod_frame,
 };
 
 fn config(cases: u32, seed: u64) -> Config {
@@ -30,14 +31,14 @@ fn gravity() -> Vec3 {
 }
 
 fn calibration(p_home: Vec3, a_off: Vec3, support: Vec3) -> Calibration {
-    Calibration::new(
-        p_home,
-        a_off,
-        Vec3::new(0.0, -0.03, 0.0),
-        Matrix3::identity(),
-        support,
-        gravity(),
-    )
+    Calibration::new(&CalibrationSpec {
+        p_home_m: p_home,
+        ujoint_offset_m: a_off,
+        sensor_offset_m: Vec3::new(0.0, -0.03, 0.0),
+        sensor_rotation: Matrix3::identity(),
+        support_m: support,
+        gravity_mps2: gravity(),
+    })
     .unwrap()
 }
 
@@ -75,7 +76,7 @@ proptest! {
         s_frac in 0.0f64..1.0,
         com_m in -0.05f64..0.3,
     ) {
-        let profile = Profile::new(length_m, offset_m, 2.0, com_m).unwrap();
+        let profile = Profile::new(&ProfileSpec { length_m, offset_m, mass_kg: 2.0, com_m }).unwrap();
         let provisional = calibration(p_home, a_off, Vec3::zeros());
         let chain = sar_chain(&provisional, &profile);
         let joints = [q123.x, q123.y, q123.z, q4, q5];
@@ -120,7 +121,7 @@ proptest! {
         length_m in 0.2f64..0.5,
         offset_m in prop_oneof![Just(0.0), -0.01f64..0.01],
     ) {
-        let profile = Profile::new(length_m, offset_m, 2.0, 0.1).unwrap();
+        let profile = Profile::new(&ProfileSpec { length_m, offset_m, mass_kg: 2.0, com_m: 0.1 }).unwrap();
         let cal = calibration(p_home, a_off, support);
         let (u, _) = rod_frame(q4, q5);
         let tip = support + u * (beyond_frac * length_m);
@@ -144,7 +145,7 @@ proptest! {
         offset_m in prop_oneof![-0.02f64..-0.001, 0.001f64..0.02],
     ) {
         let length_m = 0.35;
-        let profile = Profile::new(length_m, offset_m, 2.0, 0.1).unwrap();
+        let profile = Profile::new(&ProfileSpec { length_m, offset_m, mass_kg: 2.0, com_m: 0.1 }).unwrap();
         let cal = calibration(Vec3::zeros(), Vec3::zeros(), support);
         let q5 = if down { tilt - FRAC_PI_2 } else { FRAC_PI_2 - tilt };
         let (u, _) = rod_frame(q4, q5);
@@ -175,7 +176,7 @@ proptest! {
         length_m in 1e-3f64..3.0,
         offset_frac in -0.99f64..0.99,
     ) {
-        let profile = Profile::new(length_m, offset_frac * length_m, 1.0, 0.1).unwrap();
+        let profile = Profile::new(&ProfileSpec { length_m, offset_m: offset_frac * length_m, mass_kg: 1.0, com_m: 0.1 }).unwrap();
         let cal = calibration(Vec3::zeros(), Vec3::zeros(), support);
         let q = ActiveJoints { q3_m: q123.x, q2_m: q123.y, q1_m: q123.z };
         if let Ok(pose) = forward(&cal, &profile, &q) {
@@ -205,7 +206,13 @@ fn article_equations_8_to_10() {
         Vec3::new(-0.1, -0.2, -0.3),
         support,
     );
-    let profile = Profile::new(l, d, 1.0, 0.1).unwrap();
+    let profile = Profile::new(&ProfileSpec {
+        length_m: l,
+        offset_m: d,
+        mass_kg: 1.0,
+        com_m: 0.1,
+    })
+    .unwrap();
     let pose = forward(
         &cal,
         &profile,
@@ -234,7 +241,13 @@ fn article_equations_8_to_10() {
 fn zero_offset_is_the_plain_direction_to_the_support() {
     let support = Vec3::new(0.45, 0.2, 0.0);
     let cal = calibration(Vec3::zeros(), Vec3::new(0.0, -0.08, 0.0), support);
-    let profile = Profile::new(0.35, 0.0, 2.593, 0.103).unwrap();
+    let profile = Profile::new(&ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.0,
+        mass_kg: 2.593,
+        com_m: 0.103,
+    })
+    .unwrap();
     let nominal = forward(
         &cal,
         &profile,
@@ -264,8 +277,20 @@ fn zero_offset_is_the_plain_direction_to_the_support() {
 fn degenerate_poses_are_typed_errors() {
     let support = Vec3::new(0.45, 0.2, 0.0);
     let cal = calibration(Vec3::zeros(), Vec3::zeros(), support);
-    let rod = Profile::new(0.35, 0.0, 2.0, 0.1).unwrap();
-    let offset_rod = Profile::new(0.35, 0.02, 2.0, 0.1).unwrap();
+    let rod = Profile::new(&ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.0,
+        mass_kg: 2.0,
+        com_m: 0.1,
+    })
+    .unwrap();
+    let offset_rod = Profile::new(&ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.02,
+        mass_kg: 2.0,
+        com_m: 0.1,
+    })
+    .unwrap();
     let at = |x: f64, y: f64, z: f64| ActiveJoints {
         q3_m: x,
         q2_m: y,
@@ -326,13 +351,26 @@ fn degenerate_poses_are_typed_errors() {
 }
 
 fn offset_rod_10mm() -> Profile {
-    Profile::new(0.35, 0.01, 2.0, 0.1).unwrap()
+    Profile::new(&ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.01,
+        mass_kg: 2.0,
+        com_m: 0.1,
+    })
+    .unwrap()
 }
 
 #[test]
 fn invalid_calibrations_and_profiles_are_refused() {
     let ok = |r: Matrix3<f64>, g: Vec3| {
-        Calibration::new(Vec3::zeros(), Vec3::zeros(), Vec3::zeros(), r, Vec3::x(), g)
+        Calibration::new(&CalibrationSpec {
+            p_home_m: Vec3::zeros(),
+            ujoint_offset_m: Vec3::zeros(),
+            sensor_offset_m: Vec3::zeros(),
+            sensor_rotation: r,
+            support_m: Vec3::x(),
+            gravity_mps2: g,
+        })
     };
     let rotation = Rotation3::from_euler_angles(0.3, -0.2, 1.1).into_inner();
     assert!(ok(rotation, gravity()).is_ok());
@@ -359,33 +397,41 @@ fn invalid_calibrations_and_profiles_are_refused() {
         Err(ConfigError::GravityOutOfRange { .. })
     ));
     assert!(matches!(
-        Calibration::new(
-            Vec3::new(f64::NAN, 0.0, 0.0),
-            Vec3::zeros(),
-            Vec3::zeros(),
-            Matrix3::identity(),
-            Vec3::x(),
-            gravity()
-        ),
+        Calibration::new(&CalibrationSpec { p_home_m: Vec3::new(f64::NAN, 0.0, 0.0), ujoint_offset_m: Vec3::zeros(), sensor_offset_m: Vec3::zeros(), sensor_rotation: Matrix3::identity(), support_m: Vec3::x(), gravity_mps2: gravity() }),
         Err(ConfigError::NonFinite {
             field: "p_home",
             value
         }) if value.is_nan()
     ));
     assert!(matches!(
-        Profile::new(0.0, 0.0, 1.0, 0.1),
+        Profile::new(&ProfileSpec {
+            length_m: 0.0,
+            offset_m: 0.0,
+            mass_kg: 1.0,
+            com_m: 0.1
+        }),
         Err(ConfigError::NonPositiveLength { .. })
     ));
     assert!(matches!(
-        Profile::new(0.3, 0.3, 1.0, 0.1),
+        Profile::new(&ProfileSpec {
+            length_m: 0.3,
+            offset_m: 0.3,
+            mass_kg: 1.0,
+            com_m: 0.1
+        }),
         Err(ConfigError::OffsetTooLarge { .. })
     ));
     assert!(matches!(
-        Profile::new(0.3, 0.0, -1.0, 0.1),
+        Profile::new(&ProfileSpec {
+            length_m: 0.3,
+            offset_m: 0.0,
+            mass_kg: -1.0,
+            com_m: 0.1
+        }),
         Err(ConfigError::NegativeMass { .. })
     ));
     assert!(matches!(
-        Profile::new(0.3, 0.0, 1.0, f64::NAN),
+        Profile::new(&ProfileSpec { length_m: 0.3, offset_m: 0.0, mass_kg: 1.0, com_m: f64::NAN }),
         Err(ConfigError::NonFinite {
             field: "com_m",
             value

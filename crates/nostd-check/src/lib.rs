@@ -9,17 +9,10 @@ use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::{SensorNoise, StaticPose};
-use sar_kinematics::{ActiveJoints, Calibration, Mat3, Profile, Vec3};
+use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3};
 
 fn config() -> Option<EstimatorConfig> {
-    let calibration = Calibration::new(
-        Vec3::zeros(),
-        Vec3::new(0.0, -0.08, 0.0),
-        Vec3::new(0.0, -0.03, 0.0),
-        Mat3::identity(),
-        Vec3::new(0.45, 0.2, 0.0),
-        Vec3::new(0.0, -9.80665, 0.0),
-    )
+    let calibration = Calibration::new(&CalibrationSpec { p_home_m: Vec3::zeros(), ujoint_offset_m: Vec3::new(0.0, -0.08, 0.0), sensor_offset_m: Vec3::new(0.0, -0.03, 0.0), sensor_rotation: Mat3::identity(), support_m: Vec3::new(0.45, 0.2, 0.0), gravity_mps2: Vec3::new(0.0, -9.80665, 0.0) })
     .ok()?;
     let guard = GuardConfig::new(GuardLimits {
         warn_total_n: 10.0,
@@ -38,7 +31,7 @@ fn config() -> Option<EstimatorConfig> {
     .ok()?;
     Some(EstimatorConfig {
         calibration,
-        profile: Profile::new(0.35, 0.0, 2.593, 0.103).ok()?,
+        profile: Profile::new(&ProfileSpec { length_m: 0.35, offset_m: 0.0, mass_kg: 2.593, com_m: 0.103 }).ok()?,
         noise: SensorNoise::hex6(),
         guard,
     })

@@ -253,20 +253,26 @@ pub fn simulate_static_poses(
 
 /// The calibration of INTERFACES.md 2's example file (R_0s = I).
 pub fn example_calibration() -> sar_estimator::Calibration {
-    sar_estimator::Calibration::new(
-        Vector3::zeros(),
-        Vector3::new(0.0, -0.08, 0.0),
-        Vector3::new(0.0, -0.03, 0.0),
-        Matrix3::identity(),
-        Vector3::new(0.45, 0.20, 0.0),
-        gravity(),
-    )
+    sar_estimator::Calibration::new(&sar_estimator::CalibrationSpec {
+        p_home_m: Vector3::zeros(),
+        ujoint_offset_m: Vector3::new(0.0, -0.08, 0.0),
+        sensor_offset_m: Vector3::new(0.0, -0.03, 0.0),
+        sensor_rotation: Matrix3::identity(),
+        support_m: Vector3::new(0.45, 0.20, 0.0),
+        gravity_mps2: gravity(),
+    })
     .unwrap()
 }
 
 /// Manipulator 2 of Table 2 (L = 0.35 m, d = 0).
 pub fn manipulator2() -> sar_estimator::Profile {
-    sar_estimator::Profile::new(0.35, 0.0, 2.593, 0.103).unwrap()
+    sar_estimator::Profile::new(&sar_estimator::ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.0,
+        mass_kg: 2.593,
+        com_m: 0.103,
+    })
+    .unwrap()
 }
 
 /// The truth behind `example_calibration` and `manipulator2`, frictionless.
