@@ -1176,6 +1176,45 @@ fn silent_sensor_times_out_and_comes_back_with_a_counter_gap() {
     }
 }
 
+/// `wait(u64::MAX)` on a sensor silenced for good, or for centuries, does not
+/// step the physics through centuries: it returns `Timeout` (with the timeout
+/// asked for) after `SimSensor::MAX_WAIT_NS` of simulated time. (On the
+/// original code this test never ended.)
+#[test]
+fn a_huge_wait_on_a_silenced_sensor_times_out_after_the_cap() {
+    let cap = SimSensor::<SimClock>::MAX_WAIT_NS;
+    for until_ns in [None, Some(u64::MAX / 2)] {
+        let mut spec = base_spec();
+        spec.faults = vec![Fault::SensorSilent {
+            from_ns: 100 * MS,
+            until_ns,
+        }];
+        let mut rig = Rig::new(spec);
+        rig.run_until(100 * MS);
+        let _ = rig.sensor.poll().unwrap();
+        for _ in 0..2 {
+            let before = rig.elapsed();
+            assert_eq!(
+                rig.sensor.wait(u64::MAX).unwrap_err(),
+                SimError::Timeout {
+                    timeout_ns: u64::MAX
+                },
+                "{until_ns:?}"
+            );
+            assert_eq!(rig.elapsed() - before, cap, "{until_ns:?}");
+        }
+        // The world is still usable: a poll finds nothing, the drives answer.
+        assert_eq!(rig.sensor.poll().unwrap(), None);
+        assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+    }
+    // A sensor in normal operation still answers a huge wait with its next
+    // sample.
+    let mut rig = Rig::new(base_spec());
+    let s = rig.sensor.wait(u64::MAX).unwrap();
+    assert!(s.is_valid());
+    assert!(rig.elapsed() <= 3 * MS);
+}
+
 #[test]
 fn nan_sample_is_one_invalid_sample() {
     let mut spec = base_spec();

@@ -187,6 +187,17 @@ pub struct SimSensor<C: Clock> {
     world: Shared<C>,
 }
 
+impl<C: Clock> SimSensor<C> {
+    /// The longest one [`ForceSensor::wait`] sleeps the simulated clock, ns
+    /// (60 s). The world steps its physics through every instant the clock
+    /// passes, so an unbounded wait on a sensor silenced for good (or for
+    /// centuries) would step physics for centuries: a wait asked for longer
+    /// returns `Timeout` after 60 s of simulated time, as a driver that gives
+    /// up on a dead device would. No sample period of a real sensor comes
+    /// close to it.
+    pub const MAX_WAIT_NS: u64 = 60_000_000_000;
+}
+
 impl<C: Clock> ForceSensor for SimSensor<C> {
     type Error = SimError;
 
@@ -195,10 +206,15 @@ impl<C: Clock> ForceSensor for SimSensor<C> {
     }
 
     /// Sleeps on the clock (a [`crate::SimClock`] jumps) until the next sample
-    /// arrives or the wait ends, whichever is first.
+    /// arrives or the wait ends, whichever is first. The wait is capped at
+    /// [`SimSensor::MAX_WAIT_NS`] of simulated time: a longer timeout returns
+    /// `Timeout` (with the timeout asked for) once the cap has passed.
     fn wait(&mut self, timeout_ns: u64) -> Result<WrenchSample, SimError> {
         with_world(&self.world, |w| {
-            let deadline_ns = w.clock().now_ns().saturating_add(timeout_ns);
+            let deadline_ns = w
+                .clock()
+                .now_ns()
+                .saturating_add(timeout_ns.min(SimSensor::<C>::MAX_WAIT_NS));
             // Each pass moves the clock to the next reception or the deadline.
             loop {
                 w.advance();
