@@ -9,7 +9,7 @@
 
 mod conformance;
 
-use conformance::{DrivesHarness, SensorHarness};
+use conformance::{Capability, DrivesHarness, SensorHarness, TareCheck};
 use nalgebra::{Matrix3, Vector3};
 use sar_drivers::sim::{
     AxesSpec, ContactKey, Fault, SensorSpec, SimDrives, SimError, SimSensor, SimSpec, Simulator,
@@ -138,13 +138,16 @@ struct Rig {
     sim: Simulator<SimClock>,
     sensor: SimSensor<SimClock>,
     drives: SimDrives<SimClock>,
+    has_tare: bool,
 }
 
 impl Rig {
     fn new(spec: SimSpec) -> Self {
         let clock = SimClock::new(CLOCK_START_NS);
+        let has_tare = spec.sensor.has_tare;
         let sim = Simulator::new(spec, clock.clone()).unwrap();
         Self {
+            has_tare,
             sensor: sim.sensor(),
             drives: sim.drives(),
             sim,
@@ -220,8 +223,12 @@ struct SimSensorHarness {
 
 impl SimSensorHarness {
     fn new() -> Self {
+        Self::with_spec(base_spec())
+    }
+
+    fn with_spec(spec: SimSpec) -> Self {
         Self {
-            rig: Rig::new(base_spec()),
+            rig: Rig::new(spec),
         }
     }
 }
@@ -246,16 +253,35 @@ impl SensorHarness for SimSensorHarness {
     fn call_slack_ns(&self) -> u64 {
         0
     }
+    fn tare_check(&self) -> Capability<TareCheck> {
+        if !self.rig.has_tare {
+            return Capability::NotApplicable {
+                why: "the simulated device is configured without a tare command",
+            };
+        }
+        // At rest, no contact: a steady load. 100 samples of HEX-6 noise
+        // (0.8 N on z, 0.02 N m) average to 0.08 N and 0.002 N m.
+        Capability::Ready(TareCheck {
+            takes_effect_ns: 2 * MS + MS / 2,
+            samples: 100,
+            tolerance_n: 0.4,
+            tolerance_nm: 0.01,
+        })
+    }
 }
 
 struct SimDrivesHarness {
     rig: Rig,
+    /// false: the harness says it is `Unable` to provoke a fault (to show
+    /// that the fault check then fails).
+    can_fault: bool,
 }
 
 impl SimDrivesHarness {
     fn new() -> Self {
         Self {
             rig: Rig::new(base_spec()),
+            can_fault: true,
         }
     }
 }
@@ -278,8 +304,8 @@ impl DrivesHarness for SimDrivesHarness {
             q3_m: 0.35,
         }
     }
-    fn out_of_travel_target(&self) -> Option<ActiveJoints> {
-        Some(ActiveJoints {
+    fn out_of_travel_target(&self) -> Capability<ActiveJoints> {
+        Capability::Ready(ActiveJoints {
             q1_m: 0.0,
             q2_m: 0.28,
             q3_m: 0.43,
@@ -300,7 +326,12 @@ impl DrivesHarness for SimDrivesHarness {
     fn transition_bound_ns(&self) -> u64 {
         0
     }
-    fn provoke_fault(&mut self) -> bool {
+    fn provoke_fault(&mut self) -> Capability<()> {
+        if !self.can_fault {
+            return Capability::Unable {
+                why: "this test harness is told it cannot inject a fault",
+            };
+        }
         let at_ns = self.rig.elapsed() + 1;
         self.rig
             .sim
@@ -310,7 +341,7 @@ impl DrivesHarness for SimDrivesHarness {
             })
             .unwrap();
         self.rig.clock.advance_ns(1);
-        true
+        Capability::Ready(())
     }
 }
 
@@ -340,6 +371,7 @@ conformance_tests!(
         wait_times_out_within_its_timeout,
         poll_after_wait_does_not_repeat,
         tare_and_clear_tare_are_ok_or_unsupported,
+        tare_takes_effect_and_clear_tare_undoes_it,
         samples_are_valid_and_finite_in_normal_operation,
     ]
 );
@@ -359,6 +391,102 @@ conformance_tests!(
         transient_fault_is_reported_and_reset,
     ]
 );
+
+/// The simulator's harnesses run every check: nothing is declared not
+/// applicable or out of reach.
+#[test]
+fn the_simulator_harnesses_run_every_check() {
+    let mut d = SimDrivesHarness::new();
+    assert!(d.out_of_travel_target().is_ready());
+    assert!(d.provoke_fault().is_ready());
+    assert!(SimSensorHarness::new().tare_check().is_ready());
+}
+
+/// A harness unable to provoke a fault fails the fault check (it used to
+/// pass it silently).
+#[test]
+#[should_panic(expected = "the harness cannot run this check")]
+fn a_harness_unable_to_provoke_a_fault_fails_the_fault_check() {
+    let mut h = SimDrivesHarness::new();
+    h.can_fault = false;
+    conformance::drives::transient_fault_is_reported_and_reset(&mut h);
+}
+
+/// A device without a tare: the harness declares the tare check not
+/// applicable, and both tare checks pass (`tare` is `Unsupported`).
+#[test]
+fn a_device_without_tare_passes_the_tare_checks_as_not_applicable() {
+    let mut spec = base_spec();
+    spec.sensor.has_tare = false;
+    let mut h = SimSensorHarness::with_spec(spec.clone());
+    assert!(matches!(h.tare_check(), Capability::NotApplicable { .. }));
+    conformance::sensor::tare_and_clear_tare_are_ok_or_unsupported(&mut h);
+    conformance::sensor::tare_takes_effect_and_clear_tare_undoes_it(
+        &mut SimSensorHarness::with_spec(spec),
+    );
+}
+
+/// A sensor whose `tare` answers Ok but does nothing.
+struct NoOpTare(SimSensor<SimClock>);
+
+impl ForceSensor for NoOpTare {
+    type Error = SimError;
+    fn poll(&mut self) -> Result<Option<WrenchSample>, SimError> {
+        self.0.poll()
+    }
+    fn wait(&mut self, timeout_ns: u64) -> Result<WrenchSample, SimError> {
+        self.0.wait(timeout_ns)
+    }
+    fn tare(&mut self) -> Result<(), SimError> {
+        Ok(())
+    }
+    fn clear_tare(&mut self) -> Result<(), SimError> {
+        Ok(())
+    }
+}
+
+struct NoOpTareHarness {
+    inner: SimSensorHarness,
+    sensor: NoOpTare,
+}
+
+impl SensorHarness for NoOpTareHarness {
+    type Sensor = NoOpTare;
+    fn sensor(&mut self) -> &mut NoOpTare {
+        &mut self.sensor
+    }
+    fn let_time_pass(&mut self, ns: u64) {
+        self.inner.let_time_pass(ns);
+    }
+    fn now_ns(&self) -> u64 {
+        self.inner.now_ns()
+    }
+    fn period_ns(&self) -> u64 {
+        self.inner.period_ns()
+    }
+    fn arrival_bound_ns(&self) -> u64 {
+        self.inner.arrival_bound_ns()
+    }
+    fn call_slack_ns(&self) -> u64 {
+        self.inner.call_slack_ns()
+    }
+    fn tare_check(&self) -> Capability<TareCheck> {
+        self.inner.tare_check()
+    }
+}
+
+/// A tare that answers Ok and does nothing fails the tare check (the old
+/// check only looked at the answer).
+#[test]
+#[should_panic(expected = "force after tare")]
+fn a_tare_without_effect_fails_the_tare_check() {
+    let inner = SimSensorHarness::new();
+    let sensor = NoOpTare(inner.rig.sensor.clone());
+    let mut h = NoOpTareHarness { inner, sensor };
+    // The old check passes it.
+    conformance::sensor::tare_and_clear_tare_are_ok_or_unsupported(&mut h);
+    conformance::sensor::tare_takes_effect_and_clear_tare_undoes_it(&mut h);
+}
 
 // ---------------------------------------------------------------------------
 // Specification checks

@@ -1,7 +1,7 @@
 //! The [`ForceSensor`] conformance checks. Each takes a fresh harness.
 
-use super::SensorHarness;
-use sar_drivers::{Error, ErrorKind, ForceSensor, WrenchSample};
+use super::{SensorHarness, TareCheck};
+use sar_drivers::{Error, ErrorKind, ForceSensor, Vec3, WrenchSample};
 
 /// `next` comes after `prev`: its counter moved forward (by less than half the
 /// counter's range, allowing the wrap) and it was not received earlier.
@@ -130,19 +130,88 @@ pub fn poll_after_wait_does_not_repeat<H: SensorHarness>(h: &mut H) {
     }
 }
 
-/// `tare` and `clear_tare` succeed or say `Unsupported`; samples keep coming.
+/// `tare` and `clear_tare` succeed when the harness declares a tare, and are
+/// `Unsupported` when it declares the tare not applicable; samples keep coming.
 pub fn tare_and_clear_tare_are_ok_or_unsupported<H: SensorHarness>(h: &mut H) {
     let _ = wait_ok(h);
+    let has_tare = h.tare_check().is_ready();
     for (name, result) in [
         ("tare", h.sensor().tare()),
         ("clear_tare", h.sensor().clear_tare()),
     ] {
-        if let Err(e) = result {
-            assert_eq!(e.kind(), ErrorKind::Unsupported, "{name}: {e}");
+        match result {
+            Ok(()) => assert!(
+                has_tare,
+                "{name} succeeded on a device declared without a tare"
+            ),
+            Err(e) => {
+                assert_eq!(e.kind(), ErrorKind::Unsupported, "{name}: {e}");
+                assert!(!has_tare, "{name}: {e}, but the harness declares a tare");
+            }
         }
     }
     let s = wait_ok(h);
     assert!(s.is_valid());
+}
+
+/// The mean force and torque of `n` samples received from now on (the
+/// pending one dropped, and `skip_ns` let pass first).
+fn mean_reading<H: SensorHarness>(h: &mut H, skip_ns: u64, n: usize) -> (Vec3, Vec3) {
+    h.let_time_pass(skip_ns);
+    let _ = h.sensor().poll().unwrap();
+    let (mut f, mut t) = (Vec3::zeros(), Vec3::zeros());
+    for _ in 0..n {
+        let s = wait_ok(h);
+        assert!(s.is_valid(), "{s:?}");
+        f += s.force_n;
+        t += s.torque_nm;
+    }
+    (f / n as f64, t / n as f64)
+}
+
+fn assert_near(what: &str, got: &Vec3, want: &Vec3, tolerance: f64) {
+    let off = (got - want).amax();
+    assert!(
+        off <= tolerance,
+        "{what}: {got:?}, wanted {want:?} within {tolerance} (off by {off})"
+    );
+}
+
+/// A tare takes effect: under a steady load, the readings after `tare` are
+/// zero (force and torque, within the harness's tolerance), and after
+/// `clear_tare` they are back to what they were. The load must read farther
+/// from zero than the tolerance, or the check could not tell a tare from none.
+pub fn tare_takes_effect_and_clear_tare_undoes_it<H: SensorHarness>(h: &mut H) {
+    let Some(TareCheck {
+        takes_effect_ns,
+        samples,
+        tolerance_n,
+        tolerance_nm,
+    }) = h
+        .tare_check()
+        .require("tare_takes_effect_and_clear_tare_undoes_it")
+    else {
+        return;
+    };
+    assert!(samples > 0 && tolerance_n > 0.0 && tolerance_nm > 0.0);
+    let (before_n, before_nm) = mean_reading(h, 0, samples);
+    assert!(
+        before_n.amax() > 2.0 * tolerance_n,
+        "the load reads {before_n:?} N: too close to zero to see a tare (tolerance {tolerance_n} N)"
+    );
+    h.sensor().tare().unwrap();
+    let (tared_n, tared_nm) = mean_reading(h, takes_effect_ns, samples);
+    assert_near("force after tare", &tared_n, &Vec3::zeros(), tolerance_n);
+    assert_near("torque after tare", &tared_nm, &Vec3::zeros(), tolerance_nm);
+    h.sensor().clear_tare().unwrap();
+    let (cleared_n, cleared_nm) = mean_reading(h, takes_effect_ns, samples);
+    assert_near("force after clear_tare", &cleared_n, &before_n, tolerance_n);
+    assert_near(
+        "torque after clear_tare",
+        &cleared_nm,
+        &before_nm,
+        tolerance_nm,
+    );
 }
 
 /// In normal operation samples are valid, and valid means finite.
