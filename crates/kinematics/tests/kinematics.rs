@@ -360,6 +360,56 @@ fn offset_rod_10mm() -> Profile {
     .unwrap()
 }
 
+/// The named-field specs: `new`, `TryFrom` and `spec()` agree, and a spec
+/// read back is the one given (each field lands where it is named).
+#[test]
+fn calibration_and_profile_come_from_named_fields() {
+    let spec = CalibrationSpec {
+        p_home_m: Vec3::new(0.01, 0.02, 0.03),
+        ujoint_offset_m: Vec3::new(0.0, -0.08, 0.0),
+        sensor_offset_m: Vec3::new(0.0, -0.03, 0.001),
+        sensor_rotation: Rotation3::from_euler_angles(0.3, -0.2, 1.1).into_inner(),
+        support_m: Vec3::new(0.45, 0.2, 0.0),
+        gravity_mps2: gravity(),
+    };
+    let cal = Calibration::new(&spec).unwrap();
+    assert_eq!(cal.spec(), spec);
+    assert_eq!(Calibration::try_from(spec), Ok(cal));
+    assert_eq!(Calibration::try_from(&spec), Ok(cal));
+    assert_eq!(cal.p_home_m(), spec.p_home_m);
+    assert_eq!(cal.ujoint_offset_m(), spec.ujoint_offset_m);
+    assert_eq!(cal.sensor_offset_m(), spec.sensor_offset_m);
+    assert_eq!(cal.sensor_rotation(), spec.sensor_rotation);
+    assert_eq!(cal.support_m(), spec.support_m);
+    assert_eq!(cal.gravity_mps2(), spec.gravity_mps2);
+    let spec = ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.004,
+        mass_kg: 2.593,
+        com_m: 0.103,
+    };
+    let profile = Profile::new(&spec).unwrap();
+    assert_eq!(profile.spec(), spec);
+    assert_eq!(Profile::try_from(spec), Ok(profile));
+    assert_eq!(
+        (
+            profile.length_m(),
+            profile.offset_m(),
+            profile.mass_kg(),
+            profile.com_m()
+        ),
+        (0.35, 0.004, 2.593, 0.103)
+    );
+    // The field names carry into the errors.
+    assert!(matches!(
+        Profile::try_from(ProfileSpec {
+            mass_kg: -1.0,
+            ..spec
+        }),
+        Err(ConfigError::NegativeMass { mass_kg }) if mass_kg == -1.0
+    ));
+}
+
 #[test]
 fn invalid_calibrations_and_profiles_are_refused() {
     let ok = |r: Matrix3<f64>, g: Vec3| {

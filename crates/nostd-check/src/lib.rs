@@ -9,10 +9,20 @@ use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::{SensorNoise, StaticPose};
-use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3};
+use sar_estimator::filter::{FilterConfig, TipFilter};
+use sar_kinematics::{
+    ActiveJoints, Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3,
+};
 
 fn config() -> Option<EstimatorConfig> {
-    let calibration = Calibration::new(&CalibrationSpec { p_home_m: Vec3::zeros(), ujoint_offset_m: Vec3::new(0.0, -0.08, 0.0), sensor_offset_m: Vec3::new(0.0, -0.03, 0.0), sensor_rotation: Mat3::identity(), support_m: Vec3::new(0.45, 0.2, 0.0), gravity_mps2: Vec3::new(0.0, -9.80665, 0.0) })
+    let calibration = Calibration::new(&CalibrationSpec {
+        p_home_m: Vec3::zeros(),
+        ujoint_offset_m: Vec3::new(0.0, -0.08, 0.0),
+        sensor_offset_m: Vec3::new(0.0, -0.03, 0.0),
+        sensor_rotation: Mat3::identity(),
+        support_m: Vec3::new(0.45, 0.2, 0.0),
+        gravity_mps2: Vec3::new(0.0, -9.80665, 0.0),
+    })
     .ok()?;
     let guard = GuardConfig::new(GuardLimits {
         warn_total_n: 10.0,
@@ -31,7 +41,13 @@ fn config() -> Option<EstimatorConfig> {
     .ok()?;
     Some(EstimatorConfig {
         calibration,
-        profile: Profile::new(&ProfileSpec { length_m: 0.35, offset_m: 0.0, mass_kg: 2.593, com_m: 0.103 }).ok()?,
+        profile: Profile::new(&ProfileSpec {
+            length_m: 0.35,
+            offset_m: 0.0,
+            mass_kg: 2.593,
+            com_m: 0.103,
+        })
+        .ok()?,
         noise: SensorNoise::hex6(),
         guard,
     })
@@ -88,6 +104,26 @@ pub extern "C" fn sar_nostd_identify(ax_m: f64, ay_m: f64, az_m: f64) -> f64 {
         (Ok(a), Ok(b)) => a.mass_kg + b.mass_kg,
         _ => f64::NAN,
     }
+}
+
+/// The tip-force filter through a C ABI: steps a 5 Hz filter (500 Hz samples)
+/// `n` times with the same force and returns its x component, or NaN.
+#[unsafe(no_mangle)]
+pub extern "C" fn sar_nostd_filter(fx_n: f64, std_n: f64, n: u32) -> f64 {
+    let Ok(mut filter) = TipFilter::new(FilterConfig {
+        cutoff_hz: 5.0,
+        sample_period_s: 0.002,
+    }) else {
+        return f64::NAN;
+    };
+    let mut out = f64::NAN;
+    for _ in 0..n {
+        match filter.update(&Vec3::new(fx_n, 0.0, 0.0), &Vec3::repeat(std_n)) {
+            Ok(f) => out = f.force_n.x,
+            Err(_) => return f64::NAN,
+        }
+    }
+    out
 }
 
 #[panic_handler]
