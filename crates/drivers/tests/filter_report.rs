@@ -205,6 +205,10 @@ fn centred_average(x: &[Vec3]) -> Vec<Vec3> {
         .collect()
 }
 
+/// One row of the table: its name, the estimate, the same operation on the
+/// truth, and the filter when it is one.
+type Row<'a> = (&'a str, &'a [Vec3], &'a [Vec3], Option<&'a TipFilter>);
+
 /// Figures of one estimate over the indices `range`, per axis.
 #[derive(Debug, Clone, Copy)]
 struct Figures {
@@ -282,7 +286,7 @@ fn the_filtered_tip_force_against_the_truth_on_the_contact_scenario() {
     let (_, truth5, _) = filtered(&series.truth, &series.std, cutoffs[0], period_s);
     let (_, truth20, _) = filtered(&series.truth, &series.std, cutoffs[1], period_s);
     let truth_average = centred_average(&series.truth);
-    let rows: [(&str, &[Vec3], &[Vec3], Option<&TipFilter>); 4] = [
+    let rows: [Row; 4] = [
         ("unfiltered", &series.estimate, &series.truth, None),
         ("Butterworth 5 Hz", &out5, &truth5, Some(&f5)),
         ("Butterworth 20 Hz", &out20, &truth20, Some(&f20)),
