@@ -68,4 +68,33 @@ pub trait ForceSensor {
 
     /// Undoes the device-side tare. `ErrorKind::Unsupported` likewise.
     fn clear_tare(&mut self) -> Result<(), Self::Error>;
+
+    /// The draining read, for the recorder: hands every sample received since
+    /// the last `drain` into `out`, oldest first, and says how many
+    /// ([`Drained::count`]). Never blocks.
+    ///
+    /// - Independent of `poll` and `wait`: those return the newest sample to
+    ///   the control loop, this returns all of them to the recorder; neither
+    ///   consumes the other's samples (a loop may call both every cycle).
+    /// - Samples that do not fit in `out` stay for the next call
+    ///   ([`Drained::remaining`] says how many wait); none is lost for that.
+    /// - Bounded: an implementation keeps a fixed number of undrained samples.
+    ///   Samples it had to drop because that store was full (a caller that
+    ///   drains too rarely) are counted in [`Drained::lost`] of the next call,
+    ///   never silently; which ones it drops is the implementation's (it says).
+    /// - Samples lost before the driver received them show, as ever, as a
+    ///   gap in `counter`.
+    fn drain(&mut self, out: &mut [WrenchSample]) -> Result<Drained, Self::Error>;
+}
+
+/// What one [`ForceSensor::drain`] handed over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Drained {
+    /// Samples written at the start of the caller's buffer, oldest first.
+    pub count: usize,
+    /// Samples received but dropped since the previous `drain` because the
+    /// driver's store of undrained samples was full.
+    pub lost: u64,
+    /// Samples still waiting after this call (the buffer was too small).
+    pub remaining: usize,
 }
