@@ -335,6 +335,7 @@ conformance_tests!(
         poll_after_wait_does_not_repeat,
         tare_and_clear_tare_are_ok_or_unsupported,
         samples_are_valid_and_finite_in_normal_operation,
+        drain_hands_over_every_sample_once_in_order,
     ]
 );
 

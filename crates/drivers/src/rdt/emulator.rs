@@ -38,6 +38,9 @@ pub enum Action {
     SwapWithNext,
     /// Sent with this status word (non-zero: a fault).
     Status(u32),
+    /// The device restarts its stream on its own: this packet's RDT
+    /// sequence is 1 again (the sample counter goes on); sent normally.
+    RestartStream,
     /// Not sent, and the stream ends: the device stays mute until it gets a
     /// new start request (as after a reboot or a lost stream).
     Mute,
@@ -112,9 +115,12 @@ impl State {
         };
         let index = self.produced;
         self.produced += 1;
+        let action = self.script.get(&index).copied();
+        if action == Some(Action::RestartStream) {
+            self.rdt_sequence = 0;
+        }
         self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
         self.counter = self.counter.wrapping_add(1);
-        let action = self.script.get(&index).copied();
         let bias = self.bias.unwrap_or([0; 6]);
         let mut counts = self.counts;
         for (c, b) in counts.iter_mut().zip(bias) {
@@ -149,7 +155,7 @@ impl State {
                 }
                 return true;
             }
-            Some(Action::Status(_)) | None => send(&bytes),
+            Some(Action::Status(_) | Action::RestartStream) | None => send(&bytes),
         }
         if let Some(held) = self.held.take() {
             send(&held);
@@ -379,30 +385,30 @@ impl Drop for Emulator {
     }
 }
 
-/// The emulator's thread: requests, and packets when periodic.
+/// The emulator's thread: requests, and packets when periodic. The socket is
+/// non-blocking and the thread sleeps between looks (at most 1 ms, less when
+/// a packet is due): a socket timeout would be rounded up to the kernel's
+/// tick (4 ms at 250 Hz), too coarse for a 1 kHz device.
 fn serve(socket: &UdpSocket, shared: &Shared) {
-    let idle = Duration::from_millis(5);
+    let idle = Duration::from_millis(1);
     let mut buf = [0u8; 64];
+    if socket.set_nonblocking(true).is_err() {
+        return;
+    }
     while !shared.stop.load(Ordering::Acquire) {
-        let wait = {
-            let state = shared.lock();
-            match state.period_ns {
-                Some(_) if state.streaming => state
-                    .next_send
-                    .saturating_duration_since(Instant::now())
-                    .clamp(Duration::from_micros(1), idle),
-                _ => idle,
-            }
-        };
-        let _ = socket.set_read_timeout(Some(wait));
-        if let Ok((n, from)) = socket.recv_from(&mut buf) {
+        // Bounded: at most 64 requests per look.
+        for _ in 0..64 {
+            let Ok((n, from)) = socket.recv_from(&mut buf) else {
+                break;
+            };
             shared.lock().handle(buf.get(..n).unwrap_or(&[]), from);
             shared.changed.notify_all();
         }
         let mut state = shared.lock();
-        if let Some(period_ns) = state.period_ns {
+        let mut sleep = idle;
+        if let Some(period_ns) = state.period_ns.filter(|_| state.streaming) {
             let now = Instant::now();
-            if state.streaming && now >= state.next_send {
+            if now >= state.next_send {
                 state.produce(socket);
                 let period = Duration::from_nanos(period_ns);
                 state.next_send += period;
@@ -410,9 +416,11 @@ fn serve(socket: &UdpSocket, shared: &Shared) {
                 if state.next_send + 10 * period < now {
                     state.next_send = now + period;
                 }
-                drop(state);
                 shared.changed.notify_all();
             }
+            sleep = state.next_send.saturating_duration_since(now).min(idle);
         }
+        drop(state);
+        std::thread::sleep(sleep);
     }
 }
