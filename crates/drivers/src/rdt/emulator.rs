@@ -192,10 +192,8 @@ impl State {
             }
             CMD_BIAS => self.bias = Some(self.counts),
             CMD_FILTER if onrobot && request.data <= 6 => self.filter_code = Some(request.data),
-            CMD_RATE if onrobot && request.data > 0 => {
-                if self.period_ns.is_some() {
-                    self.period_ns = Some(u64::from(request.data) * 1_000_000);
-                }
+            CMD_RATE if onrobot && request.data > 0 && self.period_ns.is_some() => {
+                self.period_ns = Some(u64::from(request.data) * 1_000_000);
             }
             _ => {}
         }

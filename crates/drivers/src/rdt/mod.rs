@@ -143,13 +143,13 @@ impl RdtConfig {
                 value: self.ring_capacity as f64,
             });
         }
-        if let Some(rate) = self.rate_hz {
-            if !(1..=1000).contains(&rate) {
-                return Err(RdtError::InvalidConfig {
-                    field: "rate_hz",
-                    value: f64::from(rate),
-                });
-            }
+        if let Some(rate) = self.rate_hz
+            && !(1..=1000).contains(&rate)
+        {
+            return Err(RdtError::InvalidConfig {
+                field: "rate_hz",
+                value: f64::from(rate),
+            });
         }
         if self.flavour == Flavour::Ati {
             if self.rate_hz.is_some() {
