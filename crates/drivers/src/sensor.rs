@@ -55,7 +55,10 @@ pub trait ForceSensor {
 
     /// The newest sample received since the last `poll` or `wait`, or `None`
     /// when nothing new arrived. Never blocks. Older unreturned samples are
-    /// dropped (their loss shows as a gap in `counter`).
+    /// dropped (their loss shows as a gap in `counter`). An error means the
+    /// sensor is known to be failing now (e.g. the RDT driver's silence
+    /// beyond its limit, kind `Disconnected`): the caller must treat its last
+    /// sample as invalid.
     fn poll(&mut self) -> Result<Option<WrenchSample>, Self::Error>;
 
     /// Waits at most `timeout_ns` for a sample newer than the last one returned,

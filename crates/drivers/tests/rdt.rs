@@ -323,6 +323,25 @@ fn a_stream_restarted_by_the_device_is_followed() {
 }
 
 #[test]
+fn counters_wrap_without_a_gap_or_a_drop() {
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            first_counter: u32::MAX - 2,
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    );
+    emulator.step(5);
+    let got = collect_until(&mut sensor, 2);
+    assert_eq!(counters(&got), [u32::MAX - 1, u32::MAX, 0, 1, 2]);
+    let stats = sensor.stats();
+    assert_eq!(
+        (stats.accepted, stats.lost, stats.reordered, stats.resyncs),
+        (5, 0, 0, 0)
+    );
+}
+
+#[test]
 fn a_sample_count_stops_the_stream() {
     let (emulator, _sensor) = manual(vec![]);
     let client = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();

@@ -34,7 +34,7 @@ pub enum Action {
     Drop,
     /// Sent twice.
     Duplicate,
-    /// Held back and sent after the next packet (a reordering).
+    /// Held back and sent after the next packet produced (a reordering).
     SwapWithNext,
     /// Sent with this status word (non-zero: a fault).
     Status(u32),
