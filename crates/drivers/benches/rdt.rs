@@ -23,13 +23,18 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
+/// Host time, ns: the one place this file reads the clock.
+fn now_ns(clock: &MonotonicClock) -> u64 {
+    clock.now_ns()
+}
+
 const ROUNDS: usize = 5000;
 
 /// Spins until `done`, at most 1 s (a lost packet must not hang the bench).
 fn spin_until(clock: &MonotonicClock, mut done: impl FnMut() -> bool) -> bool {
-    let deadline = clock.now_ns() + 1_000_000_000;
+    let deadline = now_ns(clock) + 1_000_000_000;
     while !done() {
-        if clock.now_ns() > deadline {
+        if now_ns(clock) > deadline {
             return false;
         }
         std::hint::spin_loop();
@@ -61,11 +66,11 @@ impl Rig {
 
     /// One packet: emulator send to `poll` returning it, ns.
     fn round(&mut self) -> Option<u64> {
-        let t0 = self.clock.now_ns();
+        let t0 = now_ns(&self.clock);
         self.emulator.step(1);
         let sensor = &mut self.sensor;
         let got = spin_until(&self.clock, || matches!(sensor.poll(), Ok(Some(_))));
-        got.then(|| self.clock.now_ns() - t0)
+        got.then(|| now_ns(&self.clock) - t0)
     }
 }
 
@@ -90,10 +95,10 @@ impl Bare {
 
     fn round(&mut self) -> Option<u64> {
         let mut buf = [0u8; 64];
-        let t0 = self.clock.now_ns();
+        let t0 = now_ns(&self.clock);
         self.tx.send(&[0u8; 36]).unwrap();
         self.rx.recv(&mut buf).ok()?;
-        Some(self.clock.now_ns() - t0)
+        Some(now_ns(&self.clock) - t0)
     }
 }
 
@@ -129,13 +134,13 @@ impl Threaded {
     }
 
     fn round(&mut self) -> Option<u64> {
-        let t0 = self.clock.now_ns();
+        let t0 = now_ns(&self.clock);
         self.tx.send(&[0u8; 36]).unwrap();
         let target = self.seen + 1;
         let received = &self.received;
         let got = spin_until(&self.clock, || received.load(Ordering::Acquire) >= target);
         self.seen = received.load(Ordering::Acquire);
-        got.then(|| self.clock.now_ns() - t0)
+        got.then(|| now_ns(&self.clock) - t0)
     }
 }
 

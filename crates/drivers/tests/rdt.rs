@@ -23,6 +23,11 @@ use sar_drivers::rdt::{Filter, Flavour, RdtConfig, RdtSensor};
 use sar_drivers::{Clock, Error, ErrorKind, ForceSensor, MonotonicClock, WrenchSample};
 use std::time::Duration;
 
+/// Host time, ns: the one place this file reads the clock.
+fn now_ns(clock: &MonotonicClock) -> u64 {
+    clock.now_ns()
+}
+
 const MS: u64 = 1_000_000;
 /// The bound of every wait that only a broken driver reaches.
 const PATIENCE: Duration = Duration::from_secs(10);
@@ -126,7 +131,7 @@ impl SensorHarness for RdtHarness {
         std::thread::sleep(Duration::from_nanos(ns));
     }
     fn now_ns(&self) -> u64 {
-        self.clock.now_ns()
+        now_ns(&self.clock)
     }
     fn period_ns(&self) -> u64 {
         MS
@@ -174,10 +179,10 @@ fn counts_are_scaled_and_stamped_with_the_host_clock() {
     let (emulator, mut sensor) = manual(vec![]);
     emulator.set_counts([10_000, -25_000, 3, 100_000, -50_000, 7]);
     let clock = MonotonicClock::new().unwrap();
-    let before = clock.now_ns();
+    let before = now_ns(&clock);
     assert_eq!(emulator.step(1), 1);
     let s = sensor.wait(PATIENCE_NS).unwrap();
-    let after = clock.now_ns();
+    let after = now_ns(&clock);
     assert_eq!(s.force_n.as_slice(), &[1.0, -2.5, 3e-4]);
     assert_eq!(s.torque_nm.as_slice(), &[1.0, -0.5, 7e-5]);
     assert_eq!(s.counter, 1001);
@@ -271,14 +276,14 @@ fn silence_fails_poll_and_the_stream_is_restarted() {
     assert!(!emulator.is_streaming());
     // Bounded: polls until the driver declares the silence.
     let clock = MonotonicClock::new().unwrap();
-    let deadline = clock.now_ns() + PATIENCE_NS;
+    let deadline = now_ns(&clock) + PATIENCE_NS;
     let error = loop {
         match sensor.poll() {
             Ok(None) => {}
             Ok(Some(s)) => panic!("a sample from a mute device: {s:?}"),
             Err(e) => break e,
         }
-        assert!(clock.now_ns() < deadline, "silence never declared");
+        assert!(now_ns(&clock) < deadline, "silence never declared");
         std::thread::sleep(Duration::from_millis(1));
     };
     assert_eq!(error.kind(), ErrorKind::Disconnected, "{error}");
