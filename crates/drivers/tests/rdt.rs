@@ -17,7 +17,7 @@
 mod conformance;
 
 use conformance::SensorHarness;
-use sar_drivers::rdt::codec::{CMD_BIAS, CMD_FILTER, CMD_RATE, CMD_START, CMD_STOP, Request};
+use sar_drivers::rdt::codec::{CMD_BIAS, CMD_FILTER, CMD_RATE, Request, Response};
 use sar_drivers::rdt::emulator::{Action, Emulator, EmulatorConfig, Pacing};
 use sar_drivers::rdt::{Filter, Flavour, RdtConfig, RdtSensor};
 use sar_drivers::{Clock, Error, ErrorKind, ForceSensor, MonotonicClock, WrenchSample};
@@ -346,6 +346,34 @@ fn counters_wrap_without_a_gap_or_a_drop() {
     );
 }
 
+/// The socket is connected to the sensor: a well-formed packet from any
+/// other address never becomes a sample.
+#[test]
+fn packets_from_another_address_are_ignored() {
+    let (emulator, mut sensor) = manual(vec![]);
+    emulator.step(1);
+    collect_until(&mut sensor, 1001);
+    let stranger = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let forged = Response {
+        rdt_sequence: 2,
+        sample_counter: 1002,
+        status: 0,
+        counts: [1_000_000; 6],
+    };
+    stranger
+        .send_to(&forged.encode(), sensor.local_address().unwrap())
+        .unwrap();
+    emulator.step(2);
+    let got = collect_until(&mut sensor, 1003);
+    assert_eq!(counters(&got), [1002, 1003]);
+    assert!(got.iter().all(|s| s.force_n.x == 1.25), "{got:?}");
+    let stats = sensor.stats();
+    assert_eq!(
+        (stats.accepted, stats.duplicates, stats.malformed),
+        (3, 0, 0)
+    );
+}
+
 #[test]
 fn a_sample_count_stops_the_stream() {
     let (emulator, _sensor) = manual(vec![]);
@@ -484,7 +512,6 @@ fn ati_has_a_one_shot_bias_and_no_filter_rate_or_clear_tare() {
         RdtSensor::connect(bad).unwrap_err().kind(),
         ErrorKind::Unsupported
     );
-    let _ = (CMD_START, CMD_STOP);
 }
 
 #[test]
