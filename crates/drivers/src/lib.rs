@@ -14,6 +14,7 @@ mod convert;
 pub mod drives;
 pub mod error;
 pub mod motion;
+pub mod rdt;
 pub mod runner;
 pub mod scenario;
 pub mod sensor;
@@ -22,7 +23,7 @@ pub mod sim;
 pub use clock::{Clock, ClockError, MonotonicClock, SimClock};
 pub use drives::{AxisDrives, DriveState, JointPositions};
 pub use error::{Error, ErrorKind};
-pub use sensor::{ForceSensor, SensorStatus, WrenchSample};
+pub use sensor::{Drained, ForceSensor, SensorStatus, WrenchSample};
 
 /// A 3-vector of `f64` (frame given by the name or doc).
 pub type Vec3 = nalgebra::Vector3<f64>;

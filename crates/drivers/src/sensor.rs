@@ -55,7 +55,10 @@ pub trait ForceSensor {
 
     /// The newest sample received since the last `poll` or `wait`, or `None`
     /// when nothing new arrived. Never blocks. Older unreturned samples are
-    /// dropped (their loss shows as a gap in `counter`).
+    /// dropped (their loss shows as a gap in `counter`). An error means the
+    /// sensor is known to be failing now (e.g. the RDT driver's silence
+    /// beyond its limit, kind `Disconnected`): the caller must treat its last
+    /// sample as invalid.
     fn poll(&mut self) -> Result<Option<WrenchSample>, Self::Error>;
 
     /// Waits at most `timeout_ns` for a sample newer than the last one returned,
@@ -68,4 +71,33 @@ pub trait ForceSensor {
 
     /// Undoes the device-side tare. `ErrorKind::Unsupported` likewise.
     fn clear_tare(&mut self) -> Result<(), Self::Error>;
+
+    /// The draining read, for the recorder: hands every sample received since
+    /// the last `drain` into `out`, oldest first, and says how many
+    /// ([`Drained::count`]). Never blocks.
+    ///
+    /// - Independent of `poll` and `wait`: those return the newest sample to
+    ///   the control loop, this returns all of them to the recorder; neither
+    ///   consumes the other's samples (a loop may call both every cycle).
+    /// - Samples that do not fit in `out` stay for the next call
+    ///   ([`Drained::remaining`] says how many wait); none is lost for that.
+    /// - Bounded: an implementation keeps a fixed number of undrained samples.
+    ///   Samples it had to drop because that store was full (a caller that
+    ///   drains too rarely) are counted in [`Drained::lost`] of the next call,
+    ///   never silently; which ones it drops is the implementation's (it says).
+    /// - Samples lost before the driver received them show, as ever, as a
+    ///   gap in `counter`.
+    fn drain(&mut self, out: &mut [WrenchSample]) -> Result<Drained, Self::Error>;
+}
+
+/// What one [`ForceSensor::drain`] handed over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Drained {
+    /// Samples written at the start of the caller's buffer, oldest first.
+    pub count: usize,
+    /// Samples received but dropped since the previous `drain` because the
+    /// driver's store of undrained samples was full.
+    pub lost: u64,
+    /// Samples still waiting after this call (the buffer was too small).
+    pub remaining: usize,
 }

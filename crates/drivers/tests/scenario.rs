@@ -1057,6 +1057,10 @@ impl ForceSensor for FakeSensor {
     fn clear_tare(&mut self) -> Result<(), FakeError> {
         Err(FakeError(ErrorKind::Unsupported))
     }
+
+    fn drain(&mut self, _out: &mut [WrenchSample]) -> Result<sar_drivers::Drained, FakeError> {
+        Err(FakeError(ErrorKind::Unsupported))
+    }
 }
 
 fn fakes(s: &Scenario) -> (SimClock, FakeSensor, FakeDrives) {

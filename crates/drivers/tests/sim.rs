@@ -373,6 +373,7 @@ conformance_tests!(
         tare_and_clear_tare_are_ok_or_unsupported,
         tare_takes_effect_and_clear_tare_undoes_it,
         samples_are_valid_and_finite_in_normal_operation,
+        drain_hands_over_every_sample_once_in_order,
     ]
 );
 

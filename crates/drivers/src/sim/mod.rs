@@ -41,7 +41,7 @@ mod world;
 
 pub use error::SimError;
 pub use spec::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec};
-pub use world::{MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS};
+pub use world::{DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS};
 
 use crate::{
     AxisDrives, Clock, DriveState, ForceSensor, JointPositions, SensorStatus, Vec3, WrenchSample,
@@ -256,6 +256,12 @@ impl<C: Clock> ForceSensor for SimSensor<C> {
                 })
             }
         })
+    }
+
+    /// Every sample received since the last drain; at most
+    /// [`DRAIN_CAPACITY`] wait, the newest beyond are dropped and counted.
+    fn drain(&mut self, out: &mut [WrenchSample]) -> Result<crate::Drained, SimError> {
+        with_world(&self.world, |w| Ok(w.drain(out)))
     }
 }
 

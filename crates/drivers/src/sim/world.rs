@@ -32,6 +32,10 @@ use std::collections::VecDeque;
 pub const MIN_PERIOD_NS: u64 = 1_000;
 /// Longest accepted physics step, ns.
 pub const MAX_PHYSICS_STEP_NS: u64 = 10_000_000;
+/// Most received samples kept for [`crate::ForceSensor::drain`]; the newest
+/// beyond are dropped and counted.
+pub const DRAIN_CAPACITY: usize = 4096;
+
 /// Most sensor samples that may be in flight (measured, not yet received).
 pub const MAX_IN_FLIGHT: u64 = 65_536;
 
@@ -258,6 +262,10 @@ pub(crate) struct World<C> {
     /// Measured, not yet received: (receive time from start, sample).
     in_flight: VecDeque<(u64, WrenchSample)>,
     newest: Option<WrenchSample>,
+    /// Received, not yet drained (at most [`DRAIN_CAPACITY`]), and how many
+    /// were dropped since the last drain because it was full.
+    undrained: VecDeque<WrenchSample>,
+    drain_lost: u64,
     /// The device-side tare (force, torque), sensor frame.
     tare: Option<(Vec3, Vec3)>,
     positions: JointPositions,
@@ -292,6 +300,8 @@ impl<C: Clock> World<C> {
             rng: ChaCha8Rng::seed_from_u64(spec.seed),
             in_flight: VecDeque::with_capacity(capacity),
             newest: None,
+            undrained: VecDeque::with_capacity(DRAIN_CAPACITY),
+            drain_lost: 0,
             tare: None,
             positions: JointPositions {
                 joints: spec.axes.start,
@@ -364,6 +374,11 @@ impl<C: Clock> World<C> {
             } else if t_receive == Some(t) {
                 if let Some((_, sample)) = self.in_flight.pop_front() {
                     self.newest = Some(sample);
+                    if self.undrained.len() < DRAIN_CAPACITY {
+                        self.undrained.push_back(sample);
+                    } else {
+                        self.drain_lost = self.drain_lost.saturating_add(1);
+                    }
                 }
             } else {
                 self.report(t);
@@ -562,6 +577,23 @@ impl<C: Clock> World<C> {
     /// Takes the newest received sample not yet returned.
     pub fn take_newest(&mut self) -> Option<WrenchSample> {
         self.newest.take()
+    }
+
+    /// Moves the undrained samples, oldest first, into `out` (as many as fit).
+    pub fn drain(&mut self, out: &mut [WrenchSample]) -> crate::Drained {
+        let mut count = 0;
+        for slot in out.iter_mut() {
+            let Some(sample) = self.undrained.pop_front() else {
+                break;
+            };
+            *slot = sample;
+            count += 1;
+        }
+        crate::Drained {
+            count,
+            lost: core::mem::take(&mut self.drain_lost),
+            remaining: self.undrained.len(),
+        }
     }
 
     /// The clock time at which the next sample will be received, if any will.

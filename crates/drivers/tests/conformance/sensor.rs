@@ -227,3 +227,52 @@ pub fn samples_are_valid_and_finite_in_normal_operation<H: SensorHarness>(h: &mu
         );
     }
 }
+
+/// `drain` hands over every sample received, once, oldest first, whatever
+/// the buffer's size (the rest waits for the next call), and includes every
+/// sample `wait` returned meanwhile; nothing is lost in normal operation.
+pub fn drain_hands_over_every_sample_once_in_order<H: SensorHarness>(h: &mut H) {
+    let filler = wait_ok(h);
+    let mut drained = Vec::new();
+    // A buffer of 2: most calls leave samples for the next one.
+    let mut buf = [filler; 2];
+    let mut drain_all = |h: &mut H, drained: &mut Vec<WrenchSample>| {
+        for _ in 0..10_000 {
+            let d = h.sensor().drain(&mut buf).unwrap();
+            assert!(d.count <= buf.len(), "{d:?}");
+            assert_eq!(d.lost, 0, "samples lost in normal operation: {d:?}");
+            drained.extend_from_slice(&buf[..d.count]);
+            if d.remaining == 0 {
+                return;
+            }
+        }
+        panic!("drain never emptied");
+    };
+    drain_all(h, &mut drained);
+    let mut waited = Vec::new();
+    for _ in 0..6 {
+        waited.push(wait_ok(h));
+        drain_all(h, &mut drained);
+    }
+    for pair in drained.windows(2) {
+        assert!(
+            is_newer(&pair[0], &pair[1]),
+            "{:?} then {:?}",
+            pair[0],
+            pair[1]
+        );
+    }
+    for w in &waited {
+        assert!(
+            drained.iter().any(|d| d == w),
+            "waited sample {} not drained",
+            w.counter
+        );
+    }
+    assert!(drained.len() >= waited.len());
+    // Nothing more without time passing beyond one arrival.
+    let d = h.sensor().drain(&mut buf).unwrap();
+    if d.count > 0 {
+        assert!(is_newer(drained.last().unwrap(), &buf[0]));
+    }
+}

@@ -1,0 +1,620 @@
+//! The RDT driver over real loopback sockets (127.0.0.1 only) against the
+//! device emulator: the sensor conformance suite, then loss, reordering,
+//! duplicates, status faults, silence and restart, the commands and their
+//! packing, and the draining read's bounds.
+//!
+//! No sleep decides a result: the emulator's manual pacing makes exactly the
+//! packets a test wants, and the test waits for them with bounded waits
+//! (`wait`, the emulator's condition variable) whose generous timeouts only
+//! matter when something is broken.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
+
+mod conformance;
+
+use conformance::SensorHarness;
+use sar_drivers::rdt::codec::{CMD_BIAS, CMD_FILTER, CMD_RATE, Request, Response};
+use sar_drivers::rdt::emulator::{Action, Emulator, EmulatorConfig, Pacing};
+use sar_drivers::rdt::{Filter, Flavour, RdtConfig, RdtSensor};
+use sar_drivers::{Clock, Error, ErrorKind, ForceSensor, MonotonicClock, WrenchSample};
+use std::time::Duration;
+
+/// Host time, ns: the one place this file reads the clock.
+fn now_ns(clock: &MonotonicClock) -> u64 {
+    clock.now_ns()
+}
+
+const MS: u64 = 1_000_000;
+/// The bound of every wait that only a broken driver reaches.
+const PATIENCE: Duration = Duration::from_secs(10);
+const PATIENCE_NS: u64 = 10_000_000_000;
+
+fn config(emulator: &Emulator) -> RdtConfig {
+    RdtConfig {
+        // Generous: a loaded test machine must not look silent.
+        silence_limit_ns: 2_000 * MS,
+        restart_interval_ns: 50 * MS,
+        ..RdtConfig::new(emulator.address(), 10_000.0, 100_000.0)
+    }
+}
+
+/// A manual emulator with `script`, a driver connected to it, its stream started.
+fn manual(script: Vec<(u64, Action)>) -> (Emulator, RdtSensor) {
+    manual_with(
+        EmulatorConfig {
+            script,
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    )
+}
+
+fn manual_with(
+    emulator: EmulatorConfig,
+    make: impl Fn(&Emulator) -> RdtConfig,
+) -> (Emulator, RdtSensor) {
+    let emulator = Emulator::start(emulator).unwrap();
+    let sensor = RdtSensor::connect(make(&emulator)).unwrap();
+    assert!(emulator.wait_for_starts(1, PATIENCE), "no start request");
+    (emulator, sensor)
+}
+
+fn filler() -> WrenchSample {
+    WrenchSample {
+        force_n: Default::default(),
+        torque_nm: Default::default(),
+        counter: 0,
+        status: Default::default(),
+        received_ns: 0,
+    }
+}
+
+/// Waits (bounded) until the newest sample has counter `counter`, then
+/// drains everything: the drained samples.
+fn collect_until(sensor: &mut RdtSensor, counter: u32) -> Vec<WrenchSample> {
+    let mut newest = None;
+    while newest != Some(counter) {
+        let s = sensor
+            .wait(PATIENCE_NS)
+            .unwrap_or_else(|e| panic!("waiting for counter {counter}: {e}"));
+        newest = Some(s.counter);
+    }
+    let mut buf = [filler(); 256];
+    let d = sensor.drain(&mut buf).unwrap();
+    assert_eq!((d.lost, d.remaining), (0, 0), "{d:?}");
+    buf[..d.count].to_vec()
+}
+
+fn counters(samples: &[WrenchSample]) -> Vec<u32> {
+    samples.iter().map(|s| s.counter).collect()
+}
+
+// ---------------------------------------------------------------------------
+// Conformance, against a periodic emulator at 1 kHz
+
+struct RdtHarness {
+    // Field order: the driver drops (and stops its stream) before the device.
+    sensor: RdtSensor,
+    _emulator: Emulator,
+    clock: MonotonicClock,
+}
+
+impl RdtHarness {
+    fn new() -> Self {
+        let emulator =
+            Emulator::start(EmulatorConfig::new(Pacing::Periodic { period_ns: MS })).unwrap();
+        let sensor = RdtSensor::connect(RdtConfig {
+            // The driver asks for 1 kHz: the emulator honours the rate command.
+            rate_hz: Some(1000),
+            ..config(&emulator)
+        })
+        .unwrap();
+        assert!(emulator.wait_for_starts(1, PATIENCE));
+        Self {
+            sensor,
+            _emulator: emulator,
+            clock: MonotonicClock::new().unwrap(),
+        }
+    }
+}
+
+impl SensorHarness for RdtHarness {
+    type Sensor = RdtSensor;
+    fn sensor(&mut self) -> &mut RdtSensor {
+        &mut self.sensor
+    }
+    fn let_time_pass(&mut self, ns: u64) {
+        std::thread::sleep(Duration::from_nanos(ns));
+    }
+    fn now_ns(&self) -> u64 {
+        now_ns(&self.clock)
+    }
+    fn period_ns(&self) -> u64 {
+        MS
+    }
+    /// Real time on a shared 2-core machine: generous.
+    fn arrival_bound_ns(&self) -> u64 {
+        500 * MS
+    }
+    fn call_slack_ns(&self) -> u64 {
+        100 * MS
+    }
+}
+
+macro_rules! conformance_tests {
+    ($($check:ident),* $(,)?) => {
+        mod sensor_conformance {
+            use super::*;
+            $(
+                #[test]
+                fn $check() {
+                    conformance::sensor::$check(&mut RdtHarness::new());
+                }
+            )*
+        }
+    };
+}
+
+conformance_tests!(
+    poll_does_not_block_and_returns_each_sample_once,
+    polled_samples_are_in_order_and_not_from_the_future,
+    poll_after_a_pause_returns_the_newest,
+    wait_returns_a_newer_sample_within_the_bound,
+    wait_times_out_within_its_timeout,
+    poll_after_wait_does_not_repeat,
+    tare_and_clear_tare_are_ok_or_unsupported,
+    samples_are_valid_and_finite_in_normal_operation,
+    drain_hands_over_every_sample_once_in_order,
+);
+
+// ---------------------------------------------------------------------------
+// Stream behaviour, with manual pacing
+
+#[test]
+fn counts_are_scaled_and_stamped_with_the_host_clock() {
+    let (emulator, mut sensor) = manual(vec![]);
+    emulator.set_counts([10_000, -25_000, 3, 100_000, -50_000, 7]);
+    let clock = MonotonicClock::new().unwrap();
+    let before = now_ns(&clock);
+    assert_eq!(emulator.step(1), 1);
+    let s = sensor.wait(PATIENCE_NS).unwrap();
+    let after = now_ns(&clock);
+    assert_eq!(s.force_n.as_slice(), &[1.0, -2.5, 3e-4]);
+    assert_eq!(s.torque_nm.as_slice(), &[1.0, -0.5, 7e-5]);
+    assert_eq!(s.counter, 1001);
+    assert!(s.is_valid());
+    assert!(
+        (before..=after).contains(&s.received_ns),
+        "{before} {s:?} {after}"
+    );
+    assert_eq!(sensor.poll().unwrap(), None, "the same sample twice");
+}
+
+#[test]
+fn duplicates_are_dropped() {
+    let (emulator, mut sensor) = manual(vec![(1, Action::Duplicate), (3, Action::Duplicate)]);
+    emulator.step(5);
+    let got = collect_until(&mut sensor, 1005);
+    assert_eq!(counters(&got), [1001, 1002, 1003, 1004, 1005]);
+    let stats = sensor.stats();
+    assert_eq!((stats.duplicates, stats.lost, stats.accepted), (2, 0, 5));
+}
+
+#[test]
+fn a_reordered_packet_is_dropped_and_its_gap_counted() {
+    // Packet 2 comes after packet 3: 1001, 1002, 1004, (1003 late), 1005.
+    let (emulator, mut sensor) = manual(vec![(2, Action::SwapWithNext)]);
+    emulator.step(5);
+    let got = collect_until(&mut sensor, 1005);
+    assert_eq!(counters(&got), [1001, 1002, 1004, 1005]);
+    let stats = sensor.stats();
+    assert_eq!((stats.reordered, stats.lost), (1, 1), "{stats:?}");
+}
+
+#[test]
+fn losses_are_counted_and_show_as_counter_gaps() {
+    let (emulator, mut sensor) = manual(vec![
+        (1, Action::Drop),
+        (4, Action::Drop),
+        (5, Action::Drop),
+    ]);
+    emulator.step(8);
+    let got = collect_until(&mut sensor, 1008);
+    assert_eq!(counters(&got), [1001, 1003, 1004, 1007, 1008]);
+    assert_eq!(sensor.stats().lost, 3);
+}
+
+#[test]
+fn a_fault_status_makes_that_sample_invalid() {
+    let (emulator, mut sensor) = manual(vec![(1, Action::Status(0x8000_0004))]);
+    emulator.step(3);
+    let got = collect_until(&mut sensor, 1003);
+    assert_eq!(counters(&got), [1001, 1002, 1003]);
+    assert!(got[0].is_valid());
+    assert!(!got[1].is_valid());
+    assert_eq!(got[1].status.0, 0x8000_0004);
+    assert!(got[2].is_valid());
+    assert_eq!(sensor.stats().faults, 1);
+}
+
+#[test]
+fn malformed_datagrams_are_counted_and_skipped() {
+    let (emulator, mut sensor) = manual(vec![]);
+    emulator.step(1);
+    collect_until(&mut sensor, 1001);
+    assert!(emulator.send_raw(&[0u8; 35]));
+    assert!(emulator.send_raw(&[0u8; 37]));
+    assert!(emulator.send_raw(&[]));
+    emulator.step(1);
+    let got = collect_until(&mut sensor, 1002);
+    assert_eq!(counters(&got), [1002]);
+    assert_eq!(sensor.stats().malformed, 3);
+}
+
+/// The device goes mute (its stream ends): past the silence limit, `poll`
+/// fails with kind Disconnected, the driver sends start again, and once the
+/// device streams again the samples are valid and `poll` succeeds.
+#[test]
+fn silence_fails_poll_and_the_stream_is_restarted() {
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            script: vec![(2, Action::Mute)],
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        |e| RdtConfig {
+            silence_limit_ns: 30 * MS,
+            restart_interval_ns: 30 * MS,
+            ..config(e)
+        },
+    );
+    emulator.step(3);
+    assert_eq!(counters(&collect_until(&mut sensor, 1002)), [1001, 1002]);
+    assert!(!emulator.is_streaming());
+    // Bounded: polls until the driver declares the silence.
+    let clock = MonotonicClock::new().unwrap();
+    let deadline = now_ns(&clock) + PATIENCE_NS;
+    let error = loop {
+        match sensor.poll() {
+            Ok(None) => {}
+            Ok(Some(s)) => panic!("a sample from a mute device: {s:?}"),
+            Err(e) => break e,
+        }
+        assert!(now_ns(&clock) < deadline, "silence never declared");
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    assert_eq!(error.kind(), ErrorKind::Disconnected, "{error}");
+    assert!(sensor.is_silent());
+    assert_eq!(sensor.wait(0).unwrap_err().kind(), ErrorKind::Disconnected);
+    // The driver restarts the stream; the device answers.
+    assert!(emulator.wait_for_starts(2, PATIENCE), "no restart");
+    assert!(emulator.is_streaming());
+    emulator.step(2);
+    // Packet 2 was the mute one: the new stream carries 1004 and 1005.
+    let got = collect_until(&mut sensor, 1005);
+    assert_eq!(counters(&got), [1004, 1005]);
+    assert!(got.iter().all(WrenchSample::is_valid));
+    assert_eq!(sensor.poll().unwrap(), None);
+    assert!(!sensor.is_silent());
+    let stats = sensor.stats();
+    assert!(stats.restarts >= 1 && stats.silences >= 1, "{stats:?}");
+    // The new stream's RDT sequence restarted at 1: not taken as late.
+    assert_eq!(
+        (stats.reordered, stats.duplicates, stats.resyncs),
+        (0, 0, 0)
+    );
+}
+
+/// The device restarts its stream on its own (sequence back to 1, counter
+/// going on): the jump back beyond the reorder window is a resync, not a
+/// flood of late packets. (A restart within the first `REORDER_WINDOW`
+/// packets of a stream would drop that many: the driver cannot tell it
+/// from reordering.)
+#[test]
+fn a_stream_restarted_by_the_device_is_followed() {
+    let (emulator, mut sensor) = manual(vec![(100, Action::RestartStream)]);
+    emulator.step(103);
+    let got = collect_until(&mut sensor, 1103);
+    assert_eq!(counters(&got), (1001..=1103).collect::<Vec<_>>());
+    let stats = sensor.stats();
+    assert_eq!(
+        (stats.resyncs, stats.reordered, stats.lost),
+        (1, 0, 0),
+        "{stats:?}"
+    );
+}
+
+#[test]
+fn counters_wrap_without_a_gap_or_a_drop() {
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            first_counter: u32::MAX - 2,
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    );
+    emulator.step(5);
+    let got = collect_until(&mut sensor, 2);
+    assert_eq!(counters(&got), [u32::MAX - 1, u32::MAX, 0, 1, 2]);
+    let stats = sensor.stats();
+    assert_eq!(
+        (stats.accepted, stats.lost, stats.reordered, stats.resyncs),
+        (5, 0, 0, 0)
+    );
+}
+
+/// The socket is connected to the sensor: a well-formed packet from any
+/// other address never becomes a sample.
+#[test]
+fn packets_from_another_address_are_ignored() {
+    let (emulator, mut sensor) = manual(vec![]);
+    emulator.step(1);
+    collect_until(&mut sensor, 1001);
+    let stranger = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let forged = Response {
+        rdt_sequence: 2,
+        sample_counter: 1002,
+        status: 0,
+        counts: [1_000_000; 6],
+    };
+    stranger
+        .send_to(&forged.encode(), sensor.local_address().unwrap())
+        .unwrap();
+    emulator.step(2);
+    let got = collect_until(&mut sensor, 1003);
+    assert_eq!(counters(&got), [1002, 1003]);
+    assert!(got.iter().all(|s| s.force_n.x == 1.25), "{got:?}");
+    let stats = sensor.stats();
+    assert_eq!(
+        (stats.accepted, stats.duplicates, stats.malformed),
+        (3, 0, 0)
+    );
+}
+
+#[test]
+fn a_sample_count_stops_the_stream() {
+    let (emulator, _sensor) = manual(vec![]);
+    let client = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    client.connect(emulator.address()).unwrap();
+    client.send(&Request::start(3).encode()).unwrap();
+    assert!(emulator.wait_for_starts(2, PATIENCE));
+    assert_eq!(emulator.step(5), 3);
+    assert!(!emulator.is_streaming());
+}
+
+// ---------------------------------------------------------------------------
+// Commands
+
+/// The requests the emulator received after the start-up ones.
+fn requests_after_startup(emulator: &Emulator, startup: usize, expect: usize) -> Vec<Request> {
+    assert!(emulator.wait_for_datagrams(startup + expect, PATIENCE));
+    emulator.requests()[startup..].to_vec()
+}
+
+#[test]
+fn start_up_sends_rate_filter_and_start_packed_as_big_endian_u32() {
+    let (emulator, sensor) = manual_with(EmulatorConfig::new(Pacing::Manual), |e| RdtConfig {
+        filter: Some(Filter::Hz15),
+        rate_hz: Some(1),
+        ..config(e)
+    });
+    let datagrams = emulator.datagrams();
+    assert_eq!(
+        datagrams,
+        [
+            vec![0x12, 0x34, 0x00, 0x81, 0, 0, 0, 4],
+            // 1 Hz: data 1000 = 0x03E8 in the low bytes (not 03 E8 03 E8).
+            vec![0x12, 0x34, 0x00, 0x82, 0, 0, 0x03, 0xE8],
+            vec![0x12, 0x34, 0x00, 0x02, 0, 0, 0, 0],
+        ]
+    );
+    assert_eq!(emulator.filter_code(), Some(4));
+    drop(sensor);
+    // Dropping the driver stops the stream.
+    assert!(emulator.wait_for_datagrams(4, PATIENCE));
+    assert_eq!(emulator.requests()[3], Request::stop());
+    assert!(!emulator.is_streaming());
+}
+
+#[test]
+fn onrobot_bias_filter_and_rate_commands() {
+    let (emulator, mut sensor) = manual(vec![]);
+    let startup = emulator.datagrams().len();
+    sensor.tare().unwrap();
+    sensor.clear_tare().unwrap();
+    sensor.set_filter(Filter::Hz1_5).unwrap();
+    sensor.set_rate_hz(250).unwrap();
+    assert_eq!(
+        sensor.set_rate_hz(1001).unwrap_err().kind(),
+        ErrorKind::InvalidArgument
+    );
+    let got = requests_after_startup(&emulator, startup, 4);
+    assert_eq!(
+        got,
+        [
+            Request {
+                command: CMD_BIAS,
+                data: 0xFF
+            },
+            Request {
+                command: CMD_BIAS,
+                data: 0x00
+            },
+            Request {
+                command: CMD_FILTER,
+                data: 6
+            },
+            Request {
+                command: CMD_RATE,
+                data: 4
+            },
+        ]
+    );
+    assert_eq!(sensor.config().rate_hz, Some(250));
+}
+
+#[test]
+fn onrobot_tare_zeroes_the_reading_and_clear_tare_restores_it() {
+    let (emulator, mut sensor) = manual(vec![]);
+    emulator.step(1);
+    let raw = sensor.wait(PATIENCE_NS).unwrap();
+    assert!(raw.force_n.norm() > 1.0);
+    let sent = emulator.datagrams().len();
+    sensor.tare().unwrap();
+    assert!(emulator.wait_for_datagrams(sent + 1, PATIENCE));
+    emulator.step(1);
+    let tared = sensor.wait(PATIENCE_NS).unwrap();
+    assert_eq!(tared.force_n.norm() + tared.torque_nm.norm(), 0.0);
+    sensor.clear_tare().unwrap();
+    assert!(emulator.wait_for_datagrams(sent + 2, PATIENCE));
+    emulator.step(1);
+    let back = sensor.wait(PATIENCE_NS).unwrap();
+    assert_eq!((back.force_n, back.torque_nm), (raw.force_n, raw.torque_nm));
+}
+
+#[test]
+fn ati_has_a_one_shot_bias_and_no_filter_rate_or_clear_tare() {
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            flavour: Flavour::Ati,
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        |e| RdtConfig::ati(e.address(), 1_000_000.0, 1_000_000.0),
+    );
+    // ATI start-up: the start request alone.
+    assert_eq!(emulator.requests(), [Request::start(0)]);
+    sensor.tare().unwrap();
+    for e in [
+        sensor.clear_tare().unwrap_err(),
+        sensor.set_filter(Filter::Hz50).unwrap_err(),
+        sensor.set_rate_hz(100).unwrap_err(),
+    ] {
+        assert_eq!(e.kind(), ErrorKind::Unsupported, "{e}");
+    }
+    let got = requests_after_startup(&emulator, 1, 1);
+    assert_eq!(
+        got,
+        [Request {
+            command: CMD_BIAS,
+            data: 0
+        }]
+    );
+    assert!(emulator.bias().is_some());
+    // An ATI configuration with OnRobot settings is refused.
+    let bad = RdtConfig {
+        filter: Some(Filter::Hz5),
+        ..RdtConfig::ati(emulator.address(), 1e6, 1e6)
+    };
+    assert_eq!(
+        RdtSensor::connect(bad).unwrap_err().kind(),
+        ErrorKind::Unsupported
+    );
+}
+
+#[test]
+fn invalid_configurations_are_refused_with_the_value() {
+    let address = "127.0.0.1:9".parse().unwrap();
+    let base = RdtConfig::new(address, 10_000.0, 100_000.0);
+    for bad in [
+        RdtConfig {
+            counts_per_n: 0.0,
+            ..base
+        },
+        RdtConfig {
+            counts_per_nm: f64::NAN,
+            ..base
+        },
+        RdtConfig {
+            silence_limit_ns: 0,
+            ..base
+        },
+        RdtConfig {
+            ring_capacity: 0,
+            ..base
+        },
+        RdtConfig {
+            rate_hz: Some(0),
+            ..base
+        },
+        RdtConfig {
+            rate_hz: Some(2000),
+            ..base
+        },
+    ] {
+        let e = bad.validate().unwrap_err();
+        assert_eq!(e.kind(), ErrorKind::InvalidArgument, "{e}");
+    }
+    assert!(base.validate().is_ok());
+}
+
+// ---------------------------------------------------------------------------
+// The draining read
+
+#[test]
+fn drain_in_parts_loses_nothing() {
+    let (emulator, mut sensor) = manual(vec![]);
+    emulator.step(10);
+    // Wait for the newest through `wait` (its own cursor).
+    while sensor.wait(PATIENCE_NS).unwrap().counter != 1010 {}
+    let mut buf = [filler(); 4];
+    let mut got = Vec::new();
+    for expect_remaining in [6, 2, 0] {
+        let d = sensor.drain(&mut buf).unwrap();
+        assert_eq!((d.lost, d.remaining), (0, expect_remaining), "{d:?}");
+        got.extend_from_slice(&buf[..d.count]);
+    }
+    assert_eq!(counters(&got), (1001..=1010).collect::<Vec<_>>());
+    assert_eq!(sensor.drain(&mut buf).unwrap().count, 0);
+}
+
+#[test]
+fn a_full_ring_drops_the_newest_and_says_how_many() {
+    let (emulator, mut sensor) = manual_with(EmulatorConfig::new(Pacing::Manual), |e| RdtConfig {
+        ring_capacity: 8,
+        ..config(e)
+    });
+    emulator.step(20);
+    while sensor.wait(PATIENCE_NS).unwrap().counter != 1020 {}
+    let mut buf = [filler(); 32];
+    let d = sensor.drain(&mut buf).unwrap();
+    assert_eq!((d.count, d.lost, d.remaining), (8, 12, 0));
+    assert_eq!(counters(&buf[..8]), (1001..=1008).collect::<Vec<_>>());
+    assert_eq!(sensor.stats().ring_overflows, 12);
+    // Counted once: the next drain starts afresh.
+    emulator.step(1);
+    while sensor.wait(PATIENCE_NS).unwrap().counter != 1021 {}
+    let d = sensor.drain(&mut buf).unwrap();
+    assert_eq!((d.count, d.lost, buf[0].counter), (1, 0, 1021));
+}
+
+/// A sensor faster than the loop: the emulator streams at 1 kHz while the
+/// "loop" polls every 5 ms; the drained samples are complete (consecutive
+/// counters, since the emulator loses none) although `poll` saw few.
+#[test]
+fn a_sensor_faster_than_the_loop_loses_nothing_for_the_recorder() {
+    let emulator =
+        Emulator::start(EmulatorConfig::new(Pacing::Periodic { period_ns: MS })).unwrap();
+    let mut sensor = RdtSensor::connect(RdtConfig {
+        rate_hz: Some(1000),
+        ..config(&emulator)
+    })
+    .unwrap();
+    let mut buf = [filler(); 64];
+    let mut drained = Vec::new();
+    let mut polled = 0;
+    while drained.len() < 200 {
+        std::thread::sleep(Duration::from_millis(5));
+        polled += usize::from(sensor.poll().unwrap().is_some());
+        let d = sensor.drain(&mut buf).unwrap();
+        assert_eq!(d.lost, 0);
+        drained.extend_from_slice(&buf[..d.count]);
+    }
+    assert!(polled > 0);
+    for pair in drained.windows(2) {
+        assert_eq!(pair[1].counter, pair[0].counter + 1, "a gap");
+    }
+    assert_eq!(sensor.stats().lost, 0);
+}
