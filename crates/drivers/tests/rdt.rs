@@ -16,7 +16,7 @@
 
 mod conformance;
 
-use conformance::SensorHarness;
+use conformance::{Capability, SensorHarness, TareCheck};
 use sar_drivers::rdt::codec::{CMD_BIAS, CMD_FILTER, CMD_RATE, Request, Response};
 use sar_drivers::rdt::emulator::{Action, Emulator, EmulatorConfig, Pacing};
 use sar_drivers::rdt::{Filter, Flavour, RdtConfig, RdtSensor};
@@ -143,6 +143,19 @@ impl SensorHarness for RdtHarness {
     fn call_slack_ns(&self) -> u64 {
         100 * MS
     }
+    /// The emulator's default reading (1.25, -2.5, 9.8 N; 0.01, -0.02, 0.03 N m)
+    /// is noise-free and its OnRobot bias is exact in counts: a tare must read
+    /// zero to the count, and a clear_tare give the reading back.
+    fn tare_check(&self) -> Capability<TareCheck> {
+        Capability::Ready(TareCheck {
+            // The command crosses the socket before the next samples: a few
+            // periods, generous for a loaded machine.
+            takes_effect_ns: 50 * MS,
+            samples: 5,
+            tolerance_n: 1e-3,
+            tolerance_nm: 1e-4,
+        })
+    }
 }
 
 macro_rules! conformance_tests {
@@ -167,6 +180,7 @@ conformance_tests!(
     wait_times_out_within_its_timeout,
     poll_after_wait_does_not_repeat,
     tare_and_clear_tare_are_ok_or_unsupported,
+    tare_takes_effect_and_clear_tare_undoes_it,
     samples_are_valid_and_finite_in_normal_operation,
     drain_hands_over_every_sample_once_in_order,
 );
