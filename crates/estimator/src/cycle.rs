@@ -723,26 +723,13 @@ impl Estimator {
             let e = self.tip.estimate(pose, reading, &(b + unit)).ok()?;
             Some(e.force_n - estimate.force_n)
         };
-        let j = Mat3::from_columns(&[
-            column(Vec3::x())?,
-            column(Vec3::y())?,
-            column(Vec3::z())?,
-        ]);
+        let j = Mat3::from_columns(&[column(Vec3::x())?, column(Vec3::y())?, column(Vec3::z())?]);
         let step = j.try_inverse()? * (-estimate.force_n);
         let force_n = b + step;
         let tared = self.tip.estimate(pose, reading, &force_n).ok()?;
         let torque_nm = sensor.torque_nm
-            - predicted_torque_nm(
-                &self.calibration,
-                pose,
-                reading,
-                &force_n,
-                tared.torsion_nm,
-            );
-        let bias = Bias {
-            force_n,
-            torque_nm,
-        };
+            - predicted_torque_nm(&self.calibration, pose, reading, &force_n, tared.torsion_nm);
+        let bias = Bias { force_n, torque_nm };
         bias.check().ok()?;
         Some(bias)
     }

@@ -12,8 +12,8 @@ use common::*;
 use nalgebra::Vector3;
 use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
-    EstimatorConfig, JointSample, PlausibilityConfig, PlausibilityLimits, SensorSample,
-    TipOutcome, TorqueLimits,
+    EstimatorConfig, JointSample, PlausibilityConfig, PlausibilityLimits, SensorSample, TipOutcome,
+    TorqueLimits,
 };
 use sar_estimator::guard::{Axis, ForcePart, GuardState, Reason};
 use sar_kinematics::ActiveJoints;
@@ -28,7 +28,11 @@ const LEVER_S_M: [f64; 3] = [0.0, -0.05, 0.0];
 /// The sensor torque of the example robot (d = 0: no torsion) for a force
 /// reading with force bias `bias_n` and torque bias `bias_nm`:
 /// t = (A - S) x (f - b_f) + b_t (MODEL.md 4, R_0s = I).
-fn ideal_torque(reading_n: &Vector3<f64>, bias_n: &Vector3<f64>, bias_nm: &Vector3<f64>) -> Vector3<f64> {
+fn ideal_torque(
+    reading_n: &Vector3<f64>,
+    bias_n: &Vector3<f64>,
+    bias_nm: &Vector3<f64>,
+) -> Vector3<f64> {
     let [x, y, z] = LEVER_S_M;
     Vector3::new(x, y, z).cross(&(reading_n - bias_n)) + bias_nm
 }
@@ -333,8 +337,11 @@ fn bad_inputs_fault_the_guard() {
         out = *rig.estimator.cycle(&input);
     }
     assert_eq!(out.joints_age_ns, Some(5_100_000));
-    assert!(matches!(out.guard_reason, Reason::JointsStale { .. }), "{:?}", out.guard_reason);
-
+    assert!(
+        matches!(out.guard_reason, Reason::JointsStale { .. }),
+        "{:?}",
+        out.guard_reason
+    );
 
     // Joints the drives mark invalid: no pose, no estimate, a Fault.
     let mut rig = Rig::armed();
@@ -431,7 +438,10 @@ fn a_non_finite_bias_is_refused() {
     ));
     let mut rig = Rig::armed();
     for (bias, bad) in [
-        (Bias::force_only(Vector3::new(f64::INFINITY, 0.0, 0.0)), f64::INFINITY),
+        (
+            Bias::force_only(Vector3::new(f64::INFINITY, 0.0, 0.0)),
+            f64::INFINITY,
+        ),
         (
             Bias {
                 force_n: Vector3::zeros(),
@@ -498,7 +508,12 @@ fn debounce_counts_new_samples_not_loop_cycles() {
                 command: None,
             };
             let out = *rig.estimator.cycle(&input);
-            assert_eq!(out.guard_state, GuardState::Ok, "sample {sample}: {:?}", out.guard_reason);
+            assert_eq!(
+                out.guard_state,
+                GuardState::Ok,
+                "sample {sample}: {:?}",
+                out.guard_reason
+            );
         }
     }
 }
@@ -575,7 +590,10 @@ fn a_tare_is_refused_above_warn_and_outside_ok() {
     let before = rig.estimator.bias();
     let warn_push = Vector3::x() * 9.0; // axial warn 8 N, stop 12 N
     // Ok, but this sample is above the warn limit.
-    for command in [Command::Tare, Command::SetBias(Bias::force_only(Vector3::zeros()))] {
+    for command in [
+        Command::Tare,
+        Command::SetBias(Bias::force_only(Vector3::zeros())),
+    ] {
         let out = rig.push_command(NOMINAL_Q, &warn_push, Some(command));
         assert_eq!(out.guard_state, GuardState::Ok);
         assert!(
@@ -670,7 +688,10 @@ fn a_reset_is_judged_on_the_input_of_its_own_cycle() {
     let out = rig.reset();
     assert_eq!(out.guard_state, GuardState::Ok);
     let out = rig.reset();
-    assert_eq!(out.command.unwrap().result, Ok(CommandAccepted::NothingToReset));
+    assert_eq!(
+        out.command.unwrap().result,
+        Ok(CommandAccepted::NothingToReset)
+    );
     assert_eq!(out.transition, None);
 
     // The guard itself: a reset that names a later cycle than the one just
@@ -774,7 +795,10 @@ fn a_joint_jump_is_a_fault() {
     back.joints.stamp_ns = first.joints.stamp_ns - 1;
     rig.estimator.cycle(&first);
     let out = *rig.estimator.cycle(&back);
-    assert!(matches!(out.guard_reason, Reason::JointsStampBackwards { .. }));
+    assert!(matches!(
+        out.guard_reason,
+        Reason::JointsStampBackwards { .. }
+    ));
 }
 
 /// The sensor counter: a gap beyond the limit is a Fault; a wrap from
@@ -785,8 +809,14 @@ fn the_sensor_counter_and_status_are_checked() {
     let mut rig = Rig::new();
     rig.counter = u32::MAX - 2;
     let mut rig = Rig::armed_with(rig);
-    assert_eq!(rig.push(NOMINAL_Q, &Vector3::zeros()).guard_state, GuardState::Ok);
-    assert_eq!(rig.push(NOMINAL_Q, &Vector3::zeros()).guard_state, GuardState::Ok);
+    assert_eq!(
+        rig.push(NOMINAL_Q, &Vector3::zeros()).guard_state,
+        GuardState::Ok
+    );
+    assert_eq!(
+        rig.push(NOMINAL_Q, &Vector3::zeros()).guard_state,
+        GuardState::Ok
+    );
     assert_eq!(rig.counter, 0);
     // 4 samples lost against a gap of 3.
     rig.counter += 3;

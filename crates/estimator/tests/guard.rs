@@ -945,7 +945,10 @@ fn reset_judges_the_most_recent_input_without_debounce() {
         }
     ));
     rig.hold(low(), 1);
-    assert_eq!(rig.guard.reset(rig.cycle).unwrap().unwrap().to, GuardState::Ok);
+    assert_eq!(
+        rig.guard.reset(rig.cycle).unwrap().unwrap().to,
+        GuardState::Ok
+    );
 }
 
 #[test]

@@ -111,7 +111,11 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
                 0 => Some(Command::Reset),
                 1 => Some(Command::Tare),
                 2 => Some(Command::SetBias(Bias::force_only(bias_n))),
-                3 => Some(Command::SetBias(Bias::force_only(Vector3::new(f64::NAN, 0.0, 0.0)))),
+                3 => Some(Command::SetBias(Bias::force_only(Vector3::new(
+                    f64::NAN,
+                    0.0,
+                    0.0,
+                )))),
                 _ => None,
             };
             match phase {
@@ -121,8 +125,8 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
                 800 => q = [0.0, 0.28, 0.1005], // tip almost at the support
                 850 => now = None,
                 860 => now = Some(now_ns - 2_000_000), // the clock went back
-                870 => counter += 10,                   // a counter gap
-                880..=883 => counter = 880,             // a repeated sample
+                870 => counter += 10,                  // a counter gap
+                880..=883 => counter = 880,            // a repeated sample
                 890 => status = 4,
                 900 => q[2] += 0.01, // a joint jump
                 910 => torque_error_nm = 1.0,

@@ -198,14 +198,14 @@ impl<C: Clock> ForceSensor for SimSensor<C> {
     /// arrives or the wait ends, whichever is first.
     fn wait(&mut self, timeout_ns: u64) -> Result<WrenchSample, SimError> {
         with_world(&self.world, |w| {
-            let deadline_ns = w.clock().now_ns().saturating_add(timeout_ns);
+            let deadline_ns = w.clock().now_ns()?.saturating_add(timeout_ns);
             // Each pass moves the clock to the next reception or the deadline.
             loop {
                 w.advance();
                 if let Some(sample) = w.take_newest() {
                     return Ok(sample);
                 }
-                let now_ns = w.clock().now_ns();
+                let now_ns = w.clock().now_ns()?;
                 if now_ns >= deadline_ns {
                     return Err(SimError::Timeout { timeout_ns });
                 }
