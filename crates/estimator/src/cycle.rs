@@ -299,8 +299,9 @@ impl Default for PlausibilityLimits {
     }
 }
 
-/// Checked plausibility limits. Exists only if valid.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Checked plausibility limits. Exists only if valid (the default is
+/// [`PlausibilityLimits::default`], which is valid).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PlausibilityConfig {
     limits: PlausibilityLimits,
 }
@@ -341,14 +342,6 @@ impl PlausibilityConfig {
     /// The checked limits.
     pub fn limits(&self) -> PlausibilityLimits {
         self.limits
-    }
-}
-
-impl Default for PlausibilityConfig {
-    fn default() -> Self {
-        Self {
-            limits: PlausibilityLimits::default(),
-        }
     }
 }
 
@@ -394,7 +387,7 @@ impl TorqueCheck {
         let var = torque_var + cross.component_mul(&cross) * force_var;
         Self {
             lever_s_m,
-            std_nm: var.map(|v| nalgebra::ComplexField::sqrt(v)),
+            std_nm: var.map(nalgebra::ComplexField::sqrt),
             max_sigma: limits.max_sigma,
         }
     }

@@ -475,10 +475,10 @@ fn debounce_counts_new_samples_not_loop_cycles() {
     let mut rig = Rig::armed();
     let spike = Vector3::x() * 20.0;
     let reading = |rig: &Rig, f: &Vector3<f64>| example_reading(NOMINAL_Q, f, &rig.bias_n);
-    let mut counter = rig.counter;
+    let first_counter = rig.counter;
     let mut now_ns = 1_000_000_000 + rig.cycle * PERIOD_NS;
     for sample in 0..6u32 {
-        counter += 1;
+        let counter = first_counter + sample + 1;
         let f = if sample == 1 { spike } else { Vector3::zeros() };
         let r = reading(&rig, &f);
         let stamp_ns = now_ns + 100_000;

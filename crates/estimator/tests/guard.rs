@@ -1656,12 +1656,17 @@ impl Model {
         let clear_count = self.count(self.clear_from, |c| {
             matches!(c, Class::Force { clear: true, .. })
         });
-        if stop.is_some() && stop_count >= d {
-            return self.go(GuardState::Stop, stop.unwrap(), i.cycle);
+        if let Some(reason) = stop
+            && stop_count >= d
+        {
+            return self.go(GuardState::Stop, reason, i.cycle);
         }
-        if self.state == GuardState::Ok && warn.is_some() && warn_count >= d {
+        if let Some(reason) = warn
+            && self.state == GuardState::Ok
+            && warn_count >= d
+        {
             self.clear_from = self.history.len();
-            return self.go(GuardState::Warn, warn.unwrap(), i.cycle);
+            return self.go(GuardState::Warn, reason, i.cycle);
         }
         if self.state == GuardState::Warn && clear && clear_count >= d {
             self.warn_from = self.history.len();

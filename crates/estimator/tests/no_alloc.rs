@@ -173,16 +173,15 @@ fn the_per_cycle_path_allocates_nothing() {
     let mut seen = [false; 4];
     let mut commands = [0usize; 2];
     let (_, allocations) = allocations_in(|| {
-        for k in 0..inputs.len() {
+        for input in inputs.iter_mut() {
             // After a Stop or Fault the next cycle carries a reset.
             if matches!(
                 estimator.last().guard_state,
                 GuardState::Stop | GuardState::Fault
-            ) && inputs[k].command.is_none()
+            ) && input.command.is_none()
             {
-                inputs[k].command = Some(Command::Reset);
+                input.command = Some(Command::Reset);
             }
-            let input = &inputs[k];
             let out = estimator.cycle(input);
             if let Some(event) = out.command {
                 commands[usize::from(event.result.is_ok())] += 1;
