@@ -641,6 +641,127 @@ impl TorqueStats {
     }
 }
 
+/// The estimator of [`estimator_for`] without its check that the bias does
+/// not drift (no shipped scenario drifts; a drift would show in the mean).
+fn estimator_for_torque(s: &Scenario) -> Estimator {
+    let config = EstimatorConfig {
+        calibration: s.spec.calibration,
+        profile: s.spec.profile,
+        noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
+        tip: TipForceConfig { max_std_n: 3.0 },
+        guard: GuardConfig::new(guard_limits()).unwrap(),
+        plausibility: PlausibilityConfig::new(PlausibilityLimits {
+            max_joint_speed_mps: s.spec.axes.max_speed_mps,
+            torque: Some(TorqueLimits {
+                noise_nm: s.spec.sensor.noise_nm,
+                max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
+            }),
+            ..PlausibilityLimits::default()
+        })
+        .unwrap(),
+    };
+    let bias = Bias {
+        force_n: s.spec.sensor.bias_n,
+        torque_nm: s.spec.sensor.bias_nm,
+    };
+    Estimator::with_bias(&config, bias).unwrap()
+}
+
+/// The normalised torque residuals of a daemon loop over `s` (one per new
+/// sensor sample with an estimate, after the first cycle, joint jumps left out).
+fn torque_stats(s: &Scenario) -> TorqueStats {
+    let run = simulate(s, false).run;
+    let mut est = estimator_for_torque(s);
+    let mut stats = TorqueStats::default();
+    let mut latest: Option<&WrenchSample> = None;
+    let mut next = 0;
+    for (i, p) in run.positions.iter().enumerate() {
+        while let Some(x) = run.sensor_samples.get(next) {
+            if x.received_ns > p.stamp_ns {
+                break;
+            }
+            latest = Some(x);
+            next += 1;
+        }
+        let Some(sample) = latest else { continue };
+        let out = *est.cycle(&CycleInput {
+            cycle: i as u64 + 1,
+            now_ns: Some(p.stamp_ns),
+            sensor: sensor_input(sample),
+            joints: JointSample {
+                joints: p.joints,
+                stamp_ns: p.stamp_ns,
+                valid: p.valid,
+            },
+            command: None,
+        });
+        if out.new_sample
+            && let Some(t) = out.torque
+            && !matches!(out.guard_reason, Reason::JointJump { .. })
+            && i > 0
+        {
+            stats.add(&t.residual_nm.component_div(&t.std_nm));
+        }
+    }
+    stats
+}
+
+/// The sensor torque against the model's prediction over the simulator's
+/// scenarios (every new sample with an estimate): its normalised residual has
+/// mean ~0 and std ~1 on each axis, and stays within the 7-std limit (the
+/// simulator's torque, `sim::statics::ideal_wrench`, is MODEL.md 4's
+/// `R_0s^T ((A - S) x (-F_A) - M_T n)` plus bias and noise). Printed with
+/// --nocapture.
+#[test]
+fn the_torque_residual_follows_its_noise_on_every_scenario() {
+    for file in shipped() {
+        let s = load(&file).unwrap();
+        let stats = torque_stats(&s);
+        assert!(stats.n > 900, "{}: {} samples", s.name, stats.n);
+        let (mean, std, max) = stats.report(&s.name);
+        for k in 0..3 {
+            assert!(mean[k].abs() < 0.1, "{}: axis {k} mean {}", s.name, mean[k]);
+            assert!(
+                (0.9..1.1).contains(&std[k]),
+                "{}: axis {k} std {}",
+                s.name,
+                std[k]
+            );
+            assert!(
+                max[k] < TorqueLimits::DEFAULT_MAX_SIGMA,
+                "{}: axis {k}",
+                s.name
+            );
+        }
+    }
+}
+
+/// With d = +-4 mm the U-joint's torsion M_T enters the prediction (its sign
+/// convention, n = -(s4, 0, c4), must agree between the simulator's forward
+/// statics and the estimator's inverse). The residual's std leaves out the
+/// torsion's own noise (a documented simplification), so only its mean and
+/// the Fault limit are asserted; the std is printed.
+#[test]
+fn the_torque_residual_with_a_rod_offset() {
+    let text =
+        std::fs::read_to_string(scenarios_dir().join("random_contact_manipulator_2.toml")).unwrap();
+    for d in ["0.004", "-0.004"] {
+        let name = format!("random-contact-manipulator-2, d = {d} m");
+        let s = parse(
+            &text.replace("offset_m = 0.0", &format!("offset_m = {d}")),
+            &name,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_ne!(s.spec.profile.offset_m(), 0.0);
+        let stats = torque_stats(&s);
+        let (mean, _, max) = stats.report(&name);
+        for k in 0..3 {
+            assert!(mean[k].abs() < 0.1, "{name}: axis {k} mean {}", mean[k]);
+            assert!(max[k] < TorqueLimits::DEFAULT_MAX_SIGMA, "{name}: axis {k}");
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------
 // Identification.
 
@@ -980,125 +1101,4 @@ fn an_encoder_jump_ends_in_a_fault_within_one_cycle() {
         delay as f64 * 1e-6,
         fault.2
     );
-}
-
-/// The normalised torque residuals of a daemon loop over `s` (one per new
-/// sensor sample with an estimate, after the first cycle, joint jumps left out).
-fn torque_stats(s: &Scenario) -> TorqueStats {
-    let run = simulate(s, false).run;
-    let mut est = estimator_for_torque(s);
-    let mut stats = TorqueStats::default();
-    let mut latest: Option<&WrenchSample> = None;
-    let mut next = 0;
-    for (i, p) in run.positions.iter().enumerate() {
-        while let Some(x) = run.sensor_samples.get(next) {
-            if x.received_ns > p.stamp_ns {
-                break;
-            }
-            latest = Some(x);
-            next += 1;
-        }
-        let Some(sample) = latest else { continue };
-        let out = *est.cycle(&CycleInput {
-            cycle: i as u64 + 1,
-            now_ns: Some(p.stamp_ns),
-            sensor: sensor_input(sample),
-            joints: JointSample {
-                joints: p.joints,
-                stamp_ns: p.stamp_ns,
-                valid: p.valid,
-            },
-            command: None,
-        });
-        if out.new_sample
-            && let Some(t) = out.torque
-            && !matches!(out.guard_reason, Reason::JointJump { .. })
-            && i > 0
-        {
-            stats.add(&t.residual_nm.component_div(&t.std_nm));
-        }
-    }
-    stats
-}
-
-/// The sensor torque against the model's prediction over the simulator's
-/// scenarios (every new sample with an estimate): its normalised residual has
-/// mean ~0 and std ~1 on each axis, and stays within the 7-std limit (the
-/// simulator's torque, `sim::statics::ideal_wrench`, is MODEL.md 4's
-/// `R_0s^T ((A - S) x (-F_A) - M_T n)` plus bias and noise). Printed with
-/// --nocapture.
-#[test]
-fn the_torque_residual_follows_its_noise_on_every_scenario() {
-    for file in shipped() {
-        let s = load(&file).unwrap();
-        let stats = torque_stats(&s);
-        assert!(stats.n > 900, "{}: {} samples", s.name, stats.n);
-        let (mean, std, max) = stats.report(&s.name);
-        for k in 0..3 {
-            assert!(mean[k].abs() < 0.1, "{}: axis {k} mean {}", s.name, mean[k]);
-            assert!(
-                (0.9..1.1).contains(&std[k]),
-                "{}: axis {k} std {}",
-                s.name,
-                std[k]
-            );
-            assert!(
-                max[k] < TorqueLimits::DEFAULT_MAX_SIGMA,
-                "{}: axis {k}",
-                s.name
-            );
-        }
-    }
-}
-
-/// With d = +-4 mm the U-joint's torsion M_T enters the prediction (its sign
-/// convention, n = -(s4, 0, c4), must agree between the simulator's forward
-/// statics and the estimator's inverse). The residual's std leaves out the
-/// torsion's own noise (a documented simplification), so only its mean and
-/// the Fault limit are asserted; the std is printed.
-#[test]
-fn the_torque_residual_with_a_rod_offset() {
-    let text =
-        std::fs::read_to_string(scenarios_dir().join("random_contact_manipulator_2.toml")).unwrap();
-    for d in ["0.004", "-0.004"] {
-        let name = format!("random-contact-manipulator-2, d = {d} m");
-        let s = parse(
-            &text.replace("offset_m = 0.0", &format!("offset_m = {d}")),
-            &name,
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-        assert_ne!(s.spec.profile.offset_m(), 0.0);
-        let stats = torque_stats(&s);
-        let (mean, _, max) = stats.report(&name);
-        for k in 0..3 {
-            assert!(mean[k].abs() < 0.1, "{name}: axis {k} mean {}", mean[k]);
-            assert!(max[k] < TorqueLimits::DEFAULT_MAX_SIGMA, "{name}: axis {k}");
-        }
-    }
-}
-
-/// The estimator of [`estimator_for`] without its check that the bias does
-/// not drift (no shipped scenario drifts; a drift would show in the mean).
-fn estimator_for_torque(s: &Scenario) -> Estimator {
-    let config = EstimatorConfig {
-        calibration: s.spec.calibration,
-        profile: s.spec.profile,
-        noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
-        tip: TipForceConfig { max_std_n: 3.0 },
-        guard: GuardConfig::new(guard_limits()).unwrap(),
-        plausibility: PlausibilityConfig::new(PlausibilityLimits {
-            max_joint_speed_mps: s.spec.axes.max_speed_mps,
-            torque: Some(TorqueLimits {
-                noise_nm: s.spec.sensor.noise_nm,
-                max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
-            }),
-            ..PlausibilityLimits::default()
-        })
-        .unwrap(),
-    };
-    let bias = Bias {
-        force_n: s.spec.sensor.bias_n,
-        torque_nm: s.spec.sensor.bias_nm,
-    };
-    Estimator::with_bias(&config, bias).unwrap()
 }
