@@ -519,6 +519,11 @@ fn fault_cases() -> Vec<(&'static str, Edit, Reason)> {
     let s = V::new(0.3, 0.4, 0.5);
     vec![
         (
+            "input fault (found by the caller: the clock)",
+            Box::new(|i: &mut GuardInput| i.input_fault = Some(Reason::ClockFailed)),
+            Reason::ClockFailed,
+        ),
+        (
             "sensor invalid",
             Box::new(|i: &mut GuardInput| i.sensor_valid = false),
             Reason::SensorInvalid,
