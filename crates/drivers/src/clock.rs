@@ -6,8 +6,8 @@ use std::rc::Rc;
 
 /// A monotonic clock in nanoseconds.
 pub trait Clock {
-    /// Now, ns.
-    fn now_ns(&self) -> u64;
+    /// Now, ns, or why the clock could not be read (never a made-up time).
+    fn now_ns(&self) -> Result<u64, ClockError>;
     /// Returns once `now_ns() >= deadline_ns` (at once if already past).
     fn sleep_until_ns(&self, deadline_ns: u64);
 }
@@ -66,13 +66,12 @@ impl Clock for MonotonicClock {
     ///
     /// Once [`MonotonicClock::new`] has read the clock, `clock_gettime` cannot
     /// fail (its errors are a bad clock id or a bad pointer, both excluded
-    /// here). Should it fail all the same, this returns `u64::MAX`: every stamp
-    /// taken before then is older than any age limit, and a clock stuck there
-    /// no longer advances, which the estimator's cycle refuses (both inputs
-    /// invalid: a Fault). A reading of 0, the obvious fallback, would have made
-    /// every age 0, i.e. every stamp fresh.
-    fn now_ns(&self) -> u64 {
-        Self::read_ns().unwrap_or(u64::MAX)
+    /// here). Should it fail all the same, this is [`ClockError`], never a
+    /// sentinel time: the loop passes "no time" to the estimator's cycle
+    /// (`CycleInput::now_ns = None`), which is a Fault of its own
+    /// (`Reason::ClockFailed`).
+    fn now_ns(&self) -> Result<u64, ClockError> {
+        Self::read_ns().ok_or(ClockError)
     }
 
     fn sleep_until_ns(&self, deadline_ns: u64) {
@@ -107,11 +106,17 @@ impl SimClock {
     pub fn advance_ns(&self, dt_ns: u64) {
         self.now_ns.set(self.now_ns.get().saturating_add(dt_ns));
     }
+
+    /// Now, ns: a simulated clock is always readable (the [`Clock`] trait's
+    /// `now_ns` gives the same time as `Ok`).
+    pub fn now_ns(&self) -> u64 {
+        self.now_ns.get()
+    }
 }
 
 impl Clock for SimClock {
-    fn now_ns(&self) -> u64 {
-        self.now_ns.get()
+    fn now_ns(&self) -> Result<u64, ClockError> {
+        Ok(self.now_ns.get())
     }
 
     /// Simulated sleep: jumps to the deadline (never backwards).
@@ -129,15 +134,15 @@ mod tests {
     #[test]
     fn monotonic_clock_reads_never_go_back_and_sleep_reaches_the_deadline() {
         let clock = MonotonicClock::new().unwrap();
-        let first = clock.now_ns();
+        let first = clock.now_ns().unwrap();
         assert!(first > 0, "CLOCK_MONOTONIC read as 0");
         let deadline = first + 2_000_000;
         clock.sleep_until_ns(deadline);
-        let after = clock.now_ns();
+        let after = clock.now_ns().unwrap();
         assert!(after >= deadline, "woke at {after}, before {deadline}");
         // A deadline in the past returns without sleeping into the future.
         clock.sleep_until_ns(first);
-        assert!(clock.now_ns() >= after);
+        assert!(clock.now_ns().unwrap() >= after);
     }
 
     #[test]
@@ -152,5 +157,6 @@ mod tests {
         assert_eq!(a.now_ns(), 400);
         a.advance_ns(u64::MAX);
         assert_eq!(b.now_ns(), u64::MAX);
+        assert_eq!(Clock::now_ns(&b), Ok(u64::MAX));
     }
 }

@@ -12,7 +12,8 @@
 use crate::motion::{SlideTracker, move_time_s};
 use crate::scenario::MotionScript;
 use crate::{
-    AxisDrives, Clock, DriveState, Error, ErrorKind, ForceSensor, JointPositions, WrenchSample,
+    AxisDrives, Clock, ClockError, DriveState, Error, ErrorKind, ForceSensor, JointPositions,
+    WrenchSample,
 };
 use sar_kinematics::ActiveJoints;
 
@@ -208,6 +209,9 @@ pub enum RunError {
         /// What it must be.
         why: &'static str,
     },
+    /// The clock could not be read: the run stops (no made-up time).
+    #[error("the clock could not be read: {0}")]
+    Clock(#[from] ClockError),
     /// The drives could not be enabled at the start.
     #[error("the drives could not be enabled ({kind}): {message}")]
     Enable {
@@ -279,8 +283,8 @@ enum Wait {
 
 impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
     /// Reads whatever is new from the sensor and the drives.
-    fn poll(&mut self) {
-        let now = self.clock.now_ns();
+    fn poll(&mut self) -> Result<(), ClockError> {
+        let now = self.clock.now_ns()?;
         match self.sensor.poll() {
             Ok(Some(sample)) => self.run.sensor_samples.push(sample),
             Ok(None) => {}
@@ -325,13 +329,14 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
                 message: e.to_string(),
             }),
         }
+        Ok(())
     }
 
     /// One period: sleep to the next tick, then poll.
-    fn tick(&mut self) {
+    fn tick(&mut self) -> Result<(), ClockError> {
         self.next_tick_ns = self.next_tick_ns.saturating_add(self.options.period_ns);
         self.clock.sleep_until_ns(self.next_tick_ns);
-        self.poll();
+        self.poll()
     }
 
     fn arrived(&self, target: &ActiveJoints) -> bool {
@@ -346,47 +351,47 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
 
     /// Ticks until `done` holds, `until_ns` passes, the deadline passes or the
     /// drives fault. Returns `Done` for both `done` and `until_ns`.
-    fn wait(&mut self, until_ns: u64, done: impl Fn(&Self) -> bool) -> Wait {
+    fn wait(&mut self, until_ns: u64, done: impl Fn(&Self) -> bool) -> Result<Wait, ClockError> {
         loop {
             if let Some(code) = self.fault {
-                return Wait::Fault(code);
+                return Ok(Wait::Fault(code));
             }
-            let now = self.clock.now_ns();
+            let now = self.clock.now_ns()?;
             if done(self) || now >= until_ns {
-                return Wait::Done;
+                return Ok(Wait::Done);
             }
             if now >= self.deadline_ns {
-                return Wait::Deadline;
+                return Ok(Wait::Deadline);
             }
-            self.tick();
+            self.tick()?;
         }
     }
 
     /// Records `linger_after_fault_ns` more (bounded by the deadline) and ends.
-    fn end_after_fault(mut self, code: u16) -> Run {
+    fn end_after_fault(mut self, code: u16) -> Result<Run, ClockError> {
         let until = self
             .clock
-            .now_ns()
+            .now_ns()?
             .saturating_add(self.options.linger_after_fault_ns)
             .min(self.deadline_ns);
-        while self.clock.now_ns() < until {
-            self.tick();
+        while self.clock.now_ns()? < until {
+            self.tick()?;
         }
         self.finish(EndReason::DriveFault { code })
     }
 
-    fn finish(mut self, end: EndReason) -> Run {
+    fn finish(mut self, end: EndReason) -> Result<Run, ClockError> {
         self.run.end = end;
-        self.run.end_ns = self.clock.now_ns();
-        self.run
+        self.run.end_ns = self.clock.now_ns()?;
+        Ok(self.run)
     }
 
     fn execute(mut self) -> Result<Run, RunError> {
-        self.poll();
+        self.poll()?;
         let steps = self.script.steps.iter().enumerate();
         for (index, step) in steps {
             if let Some(code) = self.fault {
-                return Ok(self.end_after_fault(code));
+                return Ok(self.end_after_fault(code)?);
             }
             if let Err(e) = self.drives.set_targets(step.target) {
                 // A fault that the drives report only now still ends the run
@@ -394,10 +399,10 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
                 if let Ok(DriveState::Fault { code, .. }) = self.drives.state() {
                     if self.fault.is_none() {
                         self.fault = Some(code);
-                        let at_ns = self.clock.now_ns();
+                        let at_ns = self.clock.now_ns()?;
                         self.run.events.push(RunEvent::DriveFault { at_ns, code });
                     }
-                    return Ok(self.end_after_fault(code));
+                    return Ok(self.end_after_fault(code)?);
                 }
                 return Err(RunError::Target {
                     step: index,
@@ -406,7 +411,7 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
                     message: e.to_string(),
                 });
             }
-            let commanded_ns = self.clock.now_ns();
+            let commanded_ns = self.clock.now_ns()?;
             let from = self.latest.map_or(self.script.start, |p| p.joints);
             let move_s = move_time_s(
                 &from,
@@ -418,9 +423,9 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
             let target = step.target;
             let arrival = self.wait(commanded_ns.saturating_add(timeout_ns), |r| {
                 r.arrived(&target)
-            });
+            })?;
             let arrived = self.arrived(&target);
-            let now = self.clock.now_ns();
+            let now = self.clock.now_ns()?;
             self.run.steps.push(StepRecord {
                 step: index,
                 commanded_ns,
@@ -428,8 +433,8 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
             });
             match arrival {
                 Wait::Done => {}
-                Wait::Deadline => return Ok(self.finish(EndReason::MaxDuration)),
-                Wait::Fault(code) => return Ok(self.end_after_fault(code)),
+                Wait::Deadline => return Ok(self.finish(EndReason::MaxDuration)?),
+                Wait::Fault(code) => return Ok(self.end_after_fault(code)?),
             }
             if !arrived {
                 self.run.events.push(RunEvent::ArrivalTimeout {
@@ -440,22 +445,22 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
             let start_ns = now;
             let end_ns = start_ns.saturating_add(step.hold_ns);
             let slide_sign = self.tracker.sign();
-            match self.wait(end_ns, |_| false) {
+            match self.wait(end_ns, |_| false)? {
                 Wait::Done => {}
-                Wait::Deadline => return Ok(self.finish(EndReason::MaxDuration)),
-                Wait::Fault(code) => return Ok(self.end_after_fault(code)),
+                Wait::Deadline => return Ok(self.finish(EndReason::MaxDuration)?),
+                Wait::Fault(code) => return Ok(self.end_after_fault(code)?),
             }
             if step.hold_ns > 0 {
                 self.run.holds.push(HoldSegment {
                     step: index,
                     start_ns,
-                    end_ns: self.clock.now_ns(),
+                    end_ns: self.clock.now_ns()?,
                     slide_sign,
                     arrived,
                 });
             }
         }
-        Ok(self.finish(EndReason::ScriptDone))
+        Ok(self.finish(EndReason::ScriptDone)?)
     }
 }
 
@@ -469,7 +474,8 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
 /// holds for the step's hold time. Errors of the sensor and of the position
 /// reads are recorded as events; a drive fault ends the run
 /// `linger_after_fault_ns` later. Errors: options out of range, drives that
-/// cannot be enabled, a target refused by drives that are not in fault.
+/// cannot be enabled, a target refused by drives that are not in fault, a
+/// clock that cannot be read.
 pub fn run<S: ForceSensor, D: AxisDrives, C: Clock>(
     script: &MotionScript,
     sensor: &mut S,
@@ -478,7 +484,7 @@ pub fn run<S: ForceSensor, D: AxisDrives, C: Clock>(
     options: &RunOptions,
 ) -> Result<Run, RunError> {
     valid_options(options)?;
-    let start_ns = clock.now_ns();
+    let start_ns = clock.now_ns()?;
     match drives.state() {
         Ok(DriveState::Enabled) => {}
         _ => drives.enable().map_err(|e| RunError::Enable {

@@ -10,9 +10,9 @@
 //! - Identification: the article's protocol gives back each Table 2
 //!   manipulator's m and c; Table 3's hung masses come back; the cone protocol
 //!   calibrates a support given 2.7 mm off.
-//! - Faults: the guard goes to Fault for a silent sensor, a NaN sample and a
-//!   drive fault; an encoder jump is silent (its effect on the estimate is
-//!   measured).
+//! - Faults: the guard goes to Fault for a silent sensor, a NaN sample, a
+//!   drive fault and an encoder jump (within one cycle).
+//! - The sensor torque follows the model within its noise on every scenario.
 //!
 //! Run with `--nocapture` to see the figures.
 #![allow(
@@ -30,11 +30,13 @@ use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3, Wrench
 use sar_estimator::SensorNoise;
 use sar_estimator::StaticPose;
 use sar_estimator::cycle::{
-    CycleInput, Estimator, EstimatorConfig, JointSample, SensorSample, TipOutcome,
+    Bias, Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig,
+    PlausibilityLimits, SensorSample, TipOutcome, TorqueLimits,
 };
 use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState, Reason};
 use sar_estimator::identification::{Identification, IdentificationOptions, IdentificationResult};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
+use sar_estimator::tip_force::TipForceConfig;
 use sar_kinematics::{ActiveJoints, forward};
 use std::path::{Path, PathBuf};
 
@@ -398,8 +400,7 @@ fn a_reversal_below_the_pre_sliding_threshold_flips_neither_the_runner_nor_the_f
 // Tip force.
 
 /// Guard limits for the closed-loop tests: total 10/15 N, axial 8/12 N, lateral
-/// 6/10 N, hysteresis 1 N, debounce 3 cycles, inputs at most 5 ms old, std at
-/// most 3 N.
+/// 6/10 N, hysteresis 1 N, debounce 3 samples, inputs at most 5 ms old.
 fn guard_limits() -> GuardLimits {
     GuardLimits {
         warn_total_n: 10.0,
@@ -409,16 +410,16 @@ fn guard_limits() -> GuardLimits {
         warn_lateral_n: 6.0,
         stop_lateral_n: 10.0,
         hysteresis_n: 1.0,
-        debounce_cycles: 3,
+        debounce_samples: 3,
         max_sensor_age_ns: 5_000_000,
         max_joints_age_ns: 5_000_000,
-        max_std_n: 3.0,
         std_margin: 0.0,
     }
 }
 
 /// The estimator with the scenario's TRUE geometry and profile, its sensor
-/// noise, and its (constant) simulated bias as the tare.
+/// noise (force and torque), its axes' speed limit, and its (constant)
+/// simulated bias (force and torque) as the tare; observability limit 3 N.
 fn estimator_for(s: &Scenario) -> Estimator {
     assert_eq!(
         s.spec.sensor.drift_n_per_s,
@@ -429,9 +430,23 @@ fn estimator_for(s: &Scenario) -> Estimator {
         calibration: s.spec.calibration,
         profile: s.spec.profile,
         noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
+        tip: TipForceConfig { max_std_n: 3.0 },
         guard: GuardConfig::new(guard_limits()).unwrap(),
+        plausibility: PlausibilityConfig::new(PlausibilityLimits {
+            max_joint_speed_mps: s.spec.axes.max_speed_mps,
+            torque: Some(TorqueLimits {
+                noise_nm: s.spec.sensor.noise_nm,
+                max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
+            }),
+            ..PlausibilityLimits::default()
+        })
+        .unwrap(),
     };
-    Estimator::new(&config, s.spec.sensor.bias_n).unwrap()
+    let bias = Bias {
+        force_n: s.spec.sensor.bias_n,
+        torque_nm: s.spec.sensor.bias_nm,
+    };
+    Estimator::with_bias(&config, bias).unwrap()
 }
 
 /// The positions at host time `t_ns`, linear between the two reports around it.
@@ -458,6 +473,8 @@ fn sensor_input(sample: &WrenchSample) -> SensorSample {
     SensorSample {
         force_n: sample.force_n,
         torque_nm: sample.torque_nm,
+        counter: sample.counter,
+        status: sample.status.0,
         stamp_ns: sample.received_ns,
         valid: sample.is_valid(),
     }
@@ -477,6 +494,7 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
     let (mut n, mut beyond_4_std, mut sum_std) = (0usize, 0usize, Vec3::zeros());
     let mut max_err = Vec3::zeros();
     let mut transitions = Vec::new();
+    let mut torque_stats = TorqueStats::default();
     let mut cycle = 0;
     for sample in &run.sensor_samples {
         // The sample measures 1 latency before it is received; take the
@@ -488,21 +506,22 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
         cycle += 1;
         let input = CycleInput {
             cycle,
-            now_ns: sample.received_ns,
+            now_ns: Some(sample.received_ns),
             sensor: sensor_input(sample),
             joints: JointSample {
                 joints: joints.joints,
                 stamp_ns: joints.stamp_ns,
                 valid: joints.valid,
             },
+            // Leave the initial Fault (no input yet) with the first good input.
+            command: (cycle == 1).then_some(Command::Reset),
         };
         let out = *est.cycle(&input);
-        if cycle == 1 {
-            // Leave the initial Fault (no input yet) once a good input is in.
-            let t = est.reset_guard(cycle).unwrap().unwrap();
+        if let Some(t) = out.transition {
             transitions.push((measured_ns, t.to, t.reason));
-        } else if let Some(t) = out.transition {
-            transitions.push((measured_ns, t.to, t.reason));
+        }
+        if let Some(t) = out.torque {
+            torque_stats.add(&t.residual_nm.component_div(&t.std_nm));
         }
         let truth = sim
             .truth_at(measured_ns)
@@ -568,6 +587,7 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
         (beyond_4_std as f64) < 1e-3 * nf,
         "{beyond_4_std} of {n} samples beyond 4 std"
     );
+    torque_stats.report("random-contact-manipulator-2");
     // The guard: Ok from the first cycle, never Fault, Stop during the push
     // (17.2 to 17.6 s at 17.5 N; ramps from 16.9 s, released at 17.8 s).
     println!("guard transitions: {transitions:?}");
@@ -588,6 +608,158 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
     println!("guard Stop at {stop_s:.3} s: {}", stops[0].2);
     assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
     assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+}
+
+/// Mean, standard deviation and largest magnitude of the normalised torque
+/// residual (measured - predicted) / std per sensor axis.
+#[derive(Default)]
+struct TorqueStats {
+    n: usize,
+    sum: Vec3,
+    sum2: Vec3,
+    max: Vec3,
+}
+
+impl TorqueStats {
+    fn add(&mut self, z: &Vec3) {
+        self.n += 1;
+        self.sum += z;
+        self.sum2 += z.component_mul(z);
+        self.max = self.max.zip_map(z, |m, x| m.max(x.abs()));
+    }
+
+    fn report(&self, name: &str) -> (Vec3, Vec3, Vec3) {
+        let n = self.n as f64;
+        let mean = self.sum / n;
+        let std = (self.sum2 / n - mean.component_mul(&mean)).map(f64::sqrt);
+        println!(
+            "{name}: torque residual / std over {} samples: mean ({:.3}, {:.3}, {:.3}), std \
+             ({:.3}, {:.3}, {:.3}), max |.| ({:.2}, {:.2}, {:.2})",
+            self.n, mean.x, mean.y, mean.z, std.x, std.y, std.z, self.max.x, self.max.y, self.max.z
+        );
+        (mean, std, self.max)
+    }
+}
+
+/// The estimator of [`estimator_for`] without its check that the bias does
+/// not drift (no shipped scenario drifts; a drift would show in the mean).
+fn estimator_for_torque(s: &Scenario) -> Estimator {
+    let config = EstimatorConfig {
+        calibration: s.spec.calibration,
+        profile: s.spec.profile,
+        noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
+        tip: TipForceConfig { max_std_n: 3.0 },
+        guard: GuardConfig::new(guard_limits()).unwrap(),
+        plausibility: PlausibilityConfig::new(PlausibilityLimits {
+            max_joint_speed_mps: s.spec.axes.max_speed_mps,
+            torque: Some(TorqueLimits {
+                noise_nm: s.spec.sensor.noise_nm,
+                max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
+            }),
+            ..PlausibilityLimits::default()
+        })
+        .unwrap(),
+    };
+    let bias = Bias {
+        force_n: s.spec.sensor.bias_n,
+        torque_nm: s.spec.sensor.bias_nm,
+    };
+    Estimator::with_bias(&config, bias).unwrap()
+}
+
+/// The normalised torque residuals of a daemon loop over `s` (one per new
+/// sensor sample with an estimate, after the first cycle, joint jumps left out).
+fn torque_stats(s: &Scenario) -> TorqueStats {
+    let run = simulate(s, false).run;
+    let mut est = estimator_for_torque(s);
+    let mut stats = TorqueStats::default();
+    let mut latest: Option<&WrenchSample> = None;
+    let mut next = 0;
+    for (i, p) in run.positions.iter().enumerate() {
+        while let Some(x) = run.sensor_samples.get(next) {
+            if x.received_ns > p.stamp_ns {
+                break;
+            }
+            latest = Some(x);
+            next += 1;
+        }
+        let Some(sample) = latest else { continue };
+        let out = *est.cycle(&CycleInput {
+            cycle: i as u64 + 1,
+            now_ns: Some(p.stamp_ns),
+            sensor: sensor_input(sample),
+            joints: JointSample {
+                joints: p.joints,
+                stamp_ns: p.stamp_ns,
+                valid: p.valid,
+            },
+            command: None,
+        });
+        if out.new_sample
+            && let Some(t) = out.torque
+            && !matches!(out.guard_reason, Reason::JointJump { .. })
+            && i > 0
+        {
+            stats.add(&t.residual_nm.component_div(&t.std_nm));
+        }
+    }
+    stats
+}
+
+/// The sensor torque against the model's prediction over the simulator's
+/// scenarios (every new sample with an estimate): its normalised residual has
+/// mean ~0 and std ~1 on each axis, and stays within the 7-std limit (the
+/// simulator's torque, `sim::statics::ideal_wrench`, is MODEL.md 4's
+/// `R_0s^T ((A - S) x (-F_A) - M_T n)` plus bias and noise). Printed with
+/// --nocapture.
+#[test]
+fn the_torque_residual_follows_its_noise_on_every_scenario() {
+    for file in shipped() {
+        let s = load(&file).unwrap();
+        let stats = torque_stats(&s);
+        assert!(stats.n > 900, "{}: {} samples", s.name, stats.n);
+        let (mean, std, max) = stats.report(&s.name);
+        for k in 0..3 {
+            assert!(mean[k].abs() < 0.1, "{}: axis {k} mean {}", s.name, mean[k]);
+            assert!(
+                (0.9..1.1).contains(&std[k]),
+                "{}: axis {k} std {}",
+                s.name,
+                std[k]
+            );
+            assert!(
+                max[k] < TorqueLimits::DEFAULT_MAX_SIGMA,
+                "{}: axis {k}",
+                s.name
+            );
+        }
+    }
+}
+
+/// With d = +-4 mm the U-joint's torsion M_T enters the prediction (its sign
+/// convention, n = -(s4, 0, c4), must agree between the simulator's forward
+/// statics and the estimator's inverse). The residual's std leaves out the
+/// torsion's own noise (a documented simplification), so only its mean and
+/// the Fault limit are asserted; the std is printed.
+#[test]
+fn the_torque_residual_with_a_rod_offset() {
+    let text =
+        std::fs::read_to_string(scenarios_dir().join("random_contact_manipulator_2.toml")).unwrap();
+    for d in ["0.004", "-0.004"] {
+        let name = format!("random-contact-manipulator-2, d = {d} m");
+        let s = parse(
+            &text.replace("offset_m = 0.0", &format!("offset_m = {d}")),
+            &name,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_ne!(s.spec.profile.offset_m(), 0.0);
+        let stats = torque_stats(&s);
+        let (mean, _, max) = stats.report(&name);
+        for k in 0..3 {
+            assert!(mean[k].abs() < 0.1, "{name}: axis {k} mean {}", mean[k]);
+            assert!(max[k] < TorqueLimits::DEFAULT_MAX_SIGMA, "{name}: axis {k}");
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -805,18 +977,16 @@ fn daemon_loop(s: &Scenario, run: &Run) -> (Vec<GuardEvent>, Vec<(u64, Vec3)>) {
         let cycle = i as u64 + 1;
         let out = *est.cycle(&CycleInput {
             cycle,
-            now_ns: now,
+            now_ns: Some(now),
             sensor: sensor_input(sample),
             joints: JointSample {
                 joints: p.joints,
                 stamp_ns: p.stamp_ns,
                 valid: p.valid,
             },
+            command: transitions.is_empty().then_some(Command::Reset),
         });
-        if transitions.is_empty() {
-            let t = est.reset_guard(cycle).unwrap().unwrap();
-            transitions.push((now, t.to, t.reason));
-        } else if let Some(t) = out.transition {
+        if let Some(t) = out.transition {
             transitions.push((now, t.to, t.reason));
         }
         if let TipOutcome::Estimate(e) = out.tip {
@@ -910,70 +1080,25 @@ fn the_guard_faults_for_a_silent_sensor_a_nan_sample_and_a_drive_fault() {
     );
 }
 
+/// The encoder of q3 jumps by 2 mm at 2.0 s (the axis itself does not move):
+/// far more than the axes' 0.05 m/s allow in one 1 ms position period, so
+/// the guard faults (JointJump on q3) at the first position report after the
+/// jump, within one cycle.
 #[test]
-fn an_encoder_jump_is_silent_and_shifts_the_estimate() {
+fn an_encoder_jump_ends_in_a_fault_within_one_cycle() {
     let s = scenario("fault_encoder_jump.toml");
     let run = simulate(&s, false).run;
-    let (transitions, estimates) = daemon_loop(&s, &run);
-    // Silent: the guard never leaves Ok.
-    assert_eq!(transitions.len(), 1, "{transitions:?}");
-    assert_eq!(transitions[0].1, GuardState::Ok);
-    // The same hold (the second), before and after the jump at 2.0 s.
-    let hold = run.holds.iter().find(|h| h.step == 1).unwrap();
-    let jump_ns = HOST_START_NS + 2_000_000_000;
-    assert!(hold.start_ns + SETTLE_NS < jump_ns && jump_ns + 500_000_000 < hold.end_ns);
-    let mean = |from: u64, to: u64| {
-        let v: Vec<Vec3> = estimates
-            .iter()
-            .filter(|(t, _)| (from..to).contains(t))
-            .map(|(_, f)| *f)
-            .collect();
-        v.iter().sum::<Vec3>() / v.len() as f64
-    };
-    let before = mean(hold.start_ns + SETTLE_NS, jump_ns);
-    let after = mean(jump_ns + 5_000_000, hold.end_ns);
-    let truth = s.spec.contact[0].force_n;
-    let shift = after - before;
+    let (transitions, _) = daemon_loop(&s, &run);
+    let delay = assert_fault_after_2s(&s.name, &transitions, PERIOD_NS + 1, |r| {
+        matches!(r, Reason::JointJump { axis: 3, .. })
+    });
+    let fault = transitions
+        .iter()
+        .find(|t| t.1 == GuardState::Fault)
+        .unwrap();
     println!(
-        "encoder jump of 2 mm on q3 at 2.0 s: silent (guard stays Ok); mean F_tip before ({:.3}, \
-         {:.3}, {:.3}) N, after ({:.3}, {:.3}, {:.3}) N, shift ({:.3}, {:.3}, {:.3}) N (|{:.3}| N; \
-         truth ({}, {}, {}) N); later arrivals time out: {} events",
-        before.x,
-        before.y,
-        before.z,
-        after.x,
-        after.y,
-        after.z,
-        shift.x,
-        shift.y,
-        shift.z,
-        shift.norm(),
-        truth.x,
-        truth.y,
-        truth.z,
-        run.events
-            .iter()
-            .filter(|e| matches!(e, RunEvent::ArrivalTimeout { .. }))
-            .count()
+        "encoder jump of 2 mm on q3 at 2.0 s: guard Fault {:.1} ms later: {}",
+        delay as f64 * 1e-6,
+        fault.2
     );
-    // Before the jump the estimate is the truth (minus the friction) within
-    // the noise of the mean; the jump moves it by far more than that noise.
-    let rod = forward(
-        &s.spec.calibration,
-        &s.spec.profile,
-        &s.script.steps[1].target,
-    )
-    .unwrap()
-    .rod_dir;
-    let expected = truth + rod * s.spec.friction_n * hold.slide_sign;
-    assert!(
-        (before - expected).norm() < 0.1,
-        "before: {before:?} vs {expected:?}"
-    );
-    assert!(shift.norm() > 0.1, "shift {shift:?}");
-    // The reported position is off by the jump: the next target is never "reached".
-    let after_jump = run.positions_at(jump_ns + 10_000_000).unwrap();
-    let true_q3 = s.script.steps[1].target.q3_m;
-    assert!((after_jump.joints.q3_m - true_q3 - 0.002).abs() < 2e-6);
-    assert!(after_jump.valid);
 }

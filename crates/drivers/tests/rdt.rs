@@ -25,7 +25,7 @@ use std::time::Duration;
 
 /// Host time, ns: the one place this file reads the clock.
 fn now_ns(clock: &MonotonicClock) -> u64 {
-    clock.now_ns()
+    clock.now_ns().unwrap()
 }
 
 const MS: u64 = 1_000_000;

@@ -19,8 +19,8 @@ use sar_drivers::runner::{EndReason, RunError, RunEvent, RunOptions, run};
 use sar_drivers::scenario::{Scenario, ScenarioError, load, parse};
 use sar_drivers::sim::{Fault, Simulator};
 use sar_drivers::{
-    AxisDrives, Clock, DriveState, ErrorKind, ForceSensor, JointPositions, SensorStatus, SimClock,
-    Vec3, WrenchSample,
+    AxisDrives, DriveState, ErrorKind, ForceSensor, JointPositions, SensorStatus, SimClock, Vec3,
+    WrenchSample,
 };
 use sar_kinematics::{ActiveJoints, forward};
 use std::cell::RefCell;

@@ -16,8 +16,8 @@ use sar_drivers::sim::{
     Truth,
 };
 use sar_drivers::{
-    AxisDrives, Clock, DriveState, Error, ErrorKind, ForceSensor, JointPositions, SimClock,
-    WrenchSample,
+    AxisDrives, Clock, DriveState, Drained, Error, ErrorKind, ForceSensor, JointPositions,
+    SimClock, WrenchSample,
 };
 use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Profile, ProfileSpec};
 
@@ -443,6 +443,9 @@ impl ForceSensor for NoOpTare {
     }
     fn clear_tare(&mut self) -> Result<(), SimError> {
         Ok(())
+    }
+    fn drain(&mut self, out: &mut [WrenchSample]) -> Result<Drained, SimError> {
+        self.0.drain(out)
     }
 }
 

@@ -35,7 +35,13 @@ fn joints() -> ActiveJoints {
 fn per_cycle(c: &mut Criterion) {
     let bias_n = Vector3::new(0.4, -1.1, 0.25);
     let reading = example_reading(Q, &Vector3::new(1.0, -0.5, 0.5), &bias_n);
-    let mut estimator = Estimator::new(&example_estimator_config(), bias_n).unwrap();
+    // Every plausibility check on, the torque check included (the example
+    // robot's torque: (A - S) x (f - b_f) with A - S = (0, -0.05, 0), R_0s = I).
+    let mut config = example_estimator_config();
+    config.plausibility =
+        sar_estimator::cycle::PlausibilityConfig::new(Default::default()).unwrap();
+    let torque_nm = Vector3::new(0.0, -0.05, 0.0).cross(&(reading - bias_n));
+    let mut estimator = Estimator::new(&config, bias_n).unwrap();
     let mut cycle = 0u64;
     c.bench_function("cycle/full (kinematics + tip force + guard)", |b| {
         b.iter(|| {
@@ -43,10 +49,12 @@ fn per_cycle(c: &mut Criterion) {
             let now_ns = 1_000_000 * cycle;
             let input = CycleInput {
                 cycle,
-                now_ns,
+                now_ns: Some(now_ns),
                 sensor: SensorSample {
                     force_n: reading,
-                    torque_nm: Vector3::zeros(),
+                    torque_nm,
+                    counter: cycle as u32,
+                    status: 0,
                     stamp_ns: now_ns,
                     valid: true,
                 },
@@ -55,6 +63,7 @@ fn per_cycle(c: &mut Criterion) {
                     stamp_ns: now_ns,
                     valid: true,
                 },
+                command: None,
             };
             black_box(estimator.cycle(black_box(&input)).guard_state)
         })
@@ -103,6 +112,8 @@ fn per_cycle(c: &mut Criterion) {
             cycle += 1;
             black_box(guard.step(black_box(&GuardInput {
                 cycle,
+                input_fault: None,
+                new_sample: true,
                 sensor_age_ns: 300_000,
                 sensor_valid: true,
                 joints_age_ns: 100_000,
@@ -111,6 +122,8 @@ fn per_cycle(c: &mut Criterion) {
                     force_n: Vector3::new(1.0, -0.5, 0.5),
                     std_n: Vector3::new(0.2, 0.15, 0.6),
                     rod_dir: pose.rod_dir,
+                    observable: true,
+                    max_std_n: 2.0,
                 },
             })))
         })

@@ -1,15 +1,34 @@
-//! The per-cycle path: kinematics, tip force and the force-limit guard, once per
-//! control cycle, with no allocation, no panic and no I/O.
+//! The per-cycle path: input plausibility, kinematics, tip force, the
+//! force-limit guard and the operator's commands, once per control cycle, with
+//! no allocation, no panic and no I/O.
 //!
-//! [`Estimator::cycle`] is what the daemon's fixed-rate loop calls every
-//! millisecond with the latest sensor and joint samples; everything it needs is
-//! fixed at construction.
+//! Design rule: everything [`Estimator::cycle`] decides is a pure function of
+//! the recorded inputs ([`CycleInput`]: the clock reading, the sensor sample
+//! with its counter and status, the joint sample and the command of that
+//! cycle) and of the estimator's state, which is itself built only from
+//! earlier inputs. A recording of the inputs therefore replays to the same
+//! decisions bit for bit. There is no other way to change the estimator's
+//! state: a reset, a tare and a new bias are [`Command`]s of a cycle, judged on
+//! that cycle's fresh input after it has been evaluated, and reported in its
+//! [`CycleOutput::command`] as accepted or refused with a typed reason.
+//!
+//! Plausibility, decided from the inputs alone, each a latched Fault of its own
+//! reason (limits in [`PlausibilityLimits`]): a clock that cannot be read or
+//! does not advance; a sensor counter that jumps by more than
+//! `max_counter_gap`; a sample whose counter has not changed for longer than
+//! the guard's `max_sensor_age_ns` (the age runs from the stamp of the sample
+//! that first carried the counter); a device status other than 0; a joint
+//! that moves between two joint samples by more than `max_joint_speed_mps`
+//! allows over their stamp difference plus `joint_margin_m`; a sensor torque
+//! that disagrees with the model's prediction (MODEL.md 4)
+//! `t = R_0s^T ((A - S) x (-F_A) - M_T n) + b_t` by more than `max_sigma`
+//! standard deviations on any sensor axis.
 
 use crate::guard::{
-    Guard, GuardConfig, GuardInput, GuardState, Reason, ResetRefused, TipInput, Transition,
+    Axis, Guard, GuardConfig, GuardInput, GuardState, Reason, TipInput, Transition,
 };
 use crate::tip_force::{TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator};
-use crate::{Calibration, Pose, Profile, SensorNoise, SettingError, Vec3};
+use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3};
 use sar_kinematics::{ActiveJoints, PoseError, forward};
 
 /// One force/torque sample as the sensor driver delivers it.
@@ -17,11 +36,16 @@ use sar_kinematics::{ActiveJoints, PoseError, forward};
 pub struct SensorSample {
     /// Force, sensor frame, N, after count scaling, before bias removal.
     pub force_n: Vec3,
-    /// Torque, sensor frame, N m.
+    /// Torque, sensor frame, N m, before bias removal.
     pub torque_nm: Vec3,
+    /// The device's own sample counter (wraps at `u32::MAX`). A new sample is
+    /// one whose counter differs from the previous cycle's.
+    pub counter: u32,
+    /// The device's status word; 0 is all good, anything else is a Fault.
+    pub status: u32,
     /// Host monotonic time the sample was received, ns.
     pub stamp_ns: u64,
-    /// The driver's word that the sample is good (device status, counter continuity).
+    /// The driver's word that the sample is good (transport, framing).
     pub valid: bool,
 }
 
@@ -36,33 +60,161 @@ pub struct JointSample {
     pub valid: bool,
 }
 
-/// What one cycle consumes.
+/// The sensor's bias (tare), sensor frame: what the sensor reads beyond the
+/// model's wrench (MODEL.md 4: `f_s = R_0s^T (-F_A) + b_f`,
+/// `t_s = R_0s^T (...) + b_t`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bias {
+    /// b_f, N.
+    pub force_n: Vec3,
+    /// b_t, N m.
+    pub torque_nm: Vec3,
+}
+
+impl Bias {
+    /// A force bias with no torque bias.
+    pub fn force_only(force_n: Vec3) -> Self {
+        Self {
+            force_n,
+            torque_nm: Vec3::zeros(),
+        }
+    }
+
+    /// `Err` with the first NaN or infinite component.
+    fn check(&self) -> Result<(), f64> {
+        crate::check_finite(self.force_n.iter().chain(self.torque_nm.iter()), |v| v)
+    }
+}
+
+/// An operator command, applied in the cycle whose input carries it, after
+/// that cycle's input has been evaluated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    /// Leave `Stop` or `Fault` for `Ok`: accepted only when nothing in this
+    /// cycle's input would fault or stop (see [`Guard::reset`]).
+    Reset,
+    /// Model-based tare of force and torque: the bias becomes such that this
+    /// cycle's reading gives zero tip force at this pose (the rod's weight
+    /// stays in the model) and the measured torque equals the predicted one.
+    /// Accepted only in `Ok`, with a valid, fresh, observable estimate whose
+    /// every part (with the guard's margin) is below its warn limit: a tare
+    /// cannot hide more than a warn-level force, and never acts on stale,
+    /// invalid or unobservable input.
+    Tare,
+    /// Sets the bias to values measured otherwise (e.g. with the rod
+    /// detached). Same rules as [`Command::Tare`], and the values must be
+    /// finite.
+    SetBias(Bias),
+}
+
+/// What one cycle consumes: everything that the cycle decides from.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CycleInput {
     /// The cycle number; strictly increasing.
     pub cycle: u64,
-    /// Host monotonic time now, ns.
-    pub now_ns: u64,
+    /// Host monotonic time now, ns; `None` when the clock could not be read
+    /// (a Fault, [`Reason::ClockFailed`]).
+    pub now_ns: Option<u64>,
     /// Latest sensor sample.
     pub sensor: SensorSample,
     /// Latest joint positions.
     pub joints: JointSample,
+    /// The operator command applied in this cycle, if any.
+    pub command: Option<Command>,
 }
 
 /// The tip force of one cycle, or why there is none.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum TipOutcome {
-    /// A number, with its standard deviation.
+    /// A number, with its standard deviation and observability flag.
     Estimate(TipForceEstimate),
-    /// The estimator could not give a trustworthy number.
+    /// The estimator could not give a number.
     Refused(TipForceError),
     /// The kinematics refused the pose.
     PoseInvalid(PoseError),
-    /// The sensor sample was marked invalid, stamped in the future, or not finite.
+    /// The sensor sample was marked invalid, stamped in the future, not
+    /// finite, or the clock failed.
     SensorInvalid,
-    /// The joint positions were marked invalid or stamped in the future: no
-    /// pose, no estimate.
+    /// The joint positions were marked invalid or stamped in the future, or
+    /// the clock failed: no pose, no estimate.
     JointsInvalid,
+}
+
+/// A command accepted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CommandAccepted {
+    /// The guard left `Stop` or `Fault` for `Ok` (the transition is in
+    /// [`CycleOutput::transition`]).
+    Reset,
+    /// A reset in `Ok` or `Warn`: nothing to do.
+    NothingToReset,
+    /// The bias was replaced (by [`Command::Tare`] or [`Command::SetBias`]);
+    /// it applies from the next cycle.
+    BiasSet {
+        /// The bias before.
+        previous: Bias,
+        /// The bias now.
+        bias: Bias,
+    },
+}
+
+/// Why a command was refused.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CommandRefused {
+    /// The reset's cause persists in this cycle's input.
+    #[error("reset refused: {reason}")]
+    Reset {
+        /// The cause.
+        reason: Reason,
+    },
+    /// A tare or bias change outside `Ok`.
+    #[error("tare refused: the guard is {state} ({reason})")]
+    NotOk {
+        /// The guard's state.
+        state: GuardState,
+        /// Why it is in that state.
+        reason: Reason,
+    },
+    /// A tare or bias change while a part of the tip force is at or above
+    /// its warn limit.
+    #[error("tare refused: {reason}")]
+    AboveWarn {
+        /// The part, its value and its limit.
+        reason: Reason,
+    },
+    /// No tip-force estimate this cycle (cannot happen in `Ok`; kept so that
+    /// the rule never depends on that).
+    #[error("tare refused: no tip-force estimate this cycle")]
+    NoEstimate,
+    /// The tare's linear solve failed (a singular or non-finite system).
+    #[error("tare refused: the bias for zero tip force cannot be solved")]
+    Unsolvable,
+    /// A bias component is NaN or infinite.
+    #[error("bias refused: {value} is not finite")]
+    BiasNonFinite {
+        /// The offending value.
+        value: f64,
+    },
+}
+
+/// A command of this cycle and what became of it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommandEvent {
+    /// The command.
+    pub command: Command,
+    /// Accepted, or refused with the reason.
+    pub result: Result<CommandAccepted, CommandRefused>,
+}
+
+/// The sensor torque against the model's prediction, sensor frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TorqueResidual {
+    /// Measured minus predicted torque, N m.
+    pub residual_nm: Vec3,
+    /// Its standard deviation per axis (torque noise and force noise through
+    /// the lever; the torsion's own noise for d != 0 is left out), N m.
+    pub std_nm: Vec3,
 }
 
 /// What one cycle produces.
@@ -74,16 +226,123 @@ pub struct CycleOutput {
     pub pose: Option<Pose>,
     /// The tip force.
     pub tip: TipOutcome,
-    /// now - sensor stamp, ns (0 for a stamp in the future, which is also invalid).
-    pub sensor_age_ns: u64,
-    /// now - joints stamp, ns.
-    pub joints_age_ns: u64,
-    /// The guard's state after this cycle.
+    /// now - stamp of the sample that first carried the current counter, ns
+    /// (0 for a stamp in the future, which is also invalid); `None` when the
+    /// clock failed or did not advance.
+    pub sensor_age_ns: Option<u64>,
+    /// now - joints stamp, ns; `None` likewise.
+    pub joints_age_ns: Option<u64>,
+    /// Whether the sensor sample is a new one (its counter changed).
+    pub new_sample: bool,
+    /// The torque check, when it is configured and there was an estimate.
+    pub torque: Option<TorqueResidual>,
+    /// The guard's state after this cycle (and its command).
     pub guard_state: GuardState,
     /// Why the guard is in that state.
     pub guard_reason: Reason,
     /// The guard's transition in this cycle, if any.
     pub transition: Option<Transition>,
+    /// The command of this cycle and its result.
+    pub command: Option<CommandEvent>,
+}
+
+/// The torque check's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TorqueLimits {
+    /// Torque noise, one standard deviation per sensor axis, N m (finite, > 0).
+    pub noise_nm: Vec3,
+    /// A residual beyond this many standard deviations on any axis is a
+    /// Fault (finite, >= 1).
+    pub max_sigma: f64,
+}
+
+impl TorqueLimits {
+    /// Default torque noise, N m: the simulator's HEX-6 figures (0.01, 0.01,
+    /// 0.002); set the real sensor's.
+    pub const DEFAULT_NOISE_NM: [f64; 3] = [0.01, 0.01, 0.002];
+    /// Default multiple: 7 standard deviations, i.e. about one false Fault in
+    /// 10^11 samples per axis for Gaussian noise (years at 500 Hz).
+    pub const DEFAULT_MAX_SIGMA: f64 = 7.0;
+}
+
+/// The limits of the input plausibility checks, as the caller fills them.
+/// [`PlausibilityConfig::new`] checks them; [`PlausibilityLimits::default`]
+/// gives the documented defaults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlausibilityLimits {
+    /// The axes' speed limit, m/s (finite, > 0). Default 0.05 m/s (the
+    /// simulator's axes); set the drives' configured limit.
+    pub max_joint_speed_mps: f64,
+    /// Added to the distance the speed allows between two joint samples, m
+    /// (finite, >= 0): quantisation, stamp jitter. Default 0.2 mm.
+    pub joint_margin_m: f64,
+    /// The largest accepted step of the sensor counter between two new
+    /// samples (1 = no sample lost; >= 1). Default 3.
+    pub max_counter_gap: u32,
+    /// The torque check; `None` switches it off (a sensor without torque).
+    /// Default on, with [`TorqueLimits`]' defaults.
+    pub torque: Option<TorqueLimits>,
+}
+
+impl Default for PlausibilityLimits {
+    fn default() -> Self {
+        let [x, y, z] = TorqueLimits::DEFAULT_NOISE_NM;
+        Self {
+            max_joint_speed_mps: 0.05,
+            joint_margin_m: 2e-4,
+            max_counter_gap: 3,
+            torque: Some(TorqueLimits {
+                noise_nm: Vec3::new(x, y, z),
+                max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
+            }),
+        }
+    }
+}
+
+/// Checked plausibility limits. Exists only if valid (the default is
+/// [`PlausibilityLimits::default`], which is valid).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PlausibilityConfig {
+    limits: PlausibilityLimits,
+}
+
+impl PlausibilityConfig {
+    /// Checks: speed finite and > 0; margin finite and >= 0; counter gap >= 1;
+    /// torque noise finite and > 0 per axis; max_sigma finite and >= 1.
+    pub fn new(limits: PlausibilityLimits) -> Result<Self, SettingError> {
+        let invalid = |field, value, why| SettingError::Invalid { field, value, why };
+        let v = limits.max_joint_speed_mps;
+        if !(v.is_finite() && v > 0.0) {
+            return Err(invalid("max_joint_speed_mps", v, "must be finite and > 0"));
+        }
+        let m = limits.joint_margin_m;
+        if !(m.is_finite() && m >= 0.0) {
+            return Err(invalid("joint_margin_m", m, "must be finite and >= 0"));
+        }
+        if limits.max_counter_gap == 0 {
+            return Err(invalid("max_counter_gap", 0.0, "must be >= 1"));
+        }
+        if let Some(t) = limits.torque {
+            for &n in t.noise_nm.iter() {
+                if !(n.is_finite() && n > 0.0) {
+                    return Err(invalid("torque.noise_nm", n, "must be finite and > 0"));
+                }
+            }
+            if !(t.max_sigma.is_finite() && t.max_sigma >= 1.0) {
+                return Err(invalid(
+                    "torque.max_sigma",
+                    t.max_sigma,
+                    "must be finite and >= 1",
+                ));
+            }
+        }
+        Ok(Self { limits })
+    }
+
+    /// The checked limits.
+    pub fn limits(&self) -> PlausibilityLimits {
+        self.limits
+    }
 }
 
 /// Everything fixed at start for the per-cycle path.
@@ -93,49 +352,109 @@ pub struct EstimatorConfig {
     pub calibration: Calibration,
     /// The manipulator in use.
     pub profile: Profile,
-    /// The sensor's noise.
+    /// The sensor's force noise.
     pub noise: SensorNoise,
-    /// The force-limit guard. Its `max_std_n` is also the tip-force
-    /// estimator's limit of observability (one setting, one place).
+    /// The tip-force estimator's settings (its observability limit; default
+    /// [`TipForceConfig::DEFAULT_MAX_STD_N`]). The guard acts on its flag.
+    pub tip: TipForceConfig,
+    /// The force-limit guard.
     pub guard: GuardConfig,
+    /// The input plausibility checks.
+    pub plausibility: PlausibilityConfig,
 }
 
-/// Refuses a tare with a NaN or infinite component, reporting that component.
-fn check_tare(bias_n: &Vec3) -> Result<(), SettingError> {
-    crate::check_finite(bias_n, |value| SettingError::Invalid {
-        field: "bias_n",
-        value,
-        why: "the tare must be finite",
-    })
+/// The torque check, fixed at construction.
+#[derive(Debug, Clone, Copy)]
+struct TorqueCheck {
+    /// R_0s^T (A - S): the lever from S to A in the sensor frame (constant:
+    /// both are fixed offsets of the carriage), m.
+    lever_s_m: Vec3,
+    /// The residual's standard deviation per sensor axis, N m.
+    std_nm: Vec3,
+    /// The configured multiple.
+    max_sigma: f64,
 }
 
-/// The per-cycle estimator: owns the tip-force estimator, the tare and the guard.
+impl TorqueCheck {
+    fn new(cal: &Calibration, noise: &SensorNoise, limits: &TorqueLimits) -> Self {
+        let lever_s_m =
+            cal.sensor_rotation().transpose() * (cal.ujoint_offset_m() - cal.sensor_offset_m());
+        // The prediction l x (f - b) carries the force noise through [l]x:
+        // var_i = sigma_t,i^2 + sum_j [l]x_ij^2 sigma_f,j^2.
+        let cross = lever_s_m.cross_matrix();
+        let force_var = noise.std_n().component_mul(&noise.std_n());
+        let torque_var = limits.noise_nm.component_mul(&limits.noise_nm);
+        let var = torque_var + cross.component_mul(&cross) * force_var;
+        Self {
+            lever_s_m,
+            std_nm: var.map(nalgebra::ComplexField::sqrt),
+            max_sigma: limits.max_sigma,
+        }
+    }
+}
+
+/// The per-cycle estimator: owns the tip-force estimator, the bias, the
+/// guard and what the plausibility checks remember of earlier cycles.
 #[derive(Debug, Clone)]
 pub struct Estimator {
     calibration: Calibration,
     profile: Profile,
     tip: TipForceEstimator,
     guard: Guard,
-    bias_n: Vec3,
+    limits: PlausibilityLimits,
+    torque: Option<TorqueCheck>,
+    bias: Bias,
     last: CycleOutput,
-    /// `now_ns` of the previous cycle: time must advance from cycle to cycle.
+    /// The largest `now_ns` seen: time must advance from cycle to cycle.
     last_now_ns: Option<u64>,
+    /// The sensor counter of the previous cycle.
+    last_counter: Option<u32>,
+    /// The stamp of the sample that first carried `last_counter`, ns.
+    counter_stamp_ns: u64,
+    /// The previous valid, finite joint sample and its stamp.
+    last_joints: Option<(ActiveJoints, u64)>,
+}
+
+/// The largest |dq| over the three axes, with its axis (1, 2, 3).
+fn largest_move(a: &ActiveJoints, b: &ActiveJoints) -> (u8, f64) {
+    let moves = [
+        (1, (a.q1_m - b.q1_m).abs()),
+        (2, (a.q2_m - b.q2_m).abs()),
+        (3, (a.q3_m - b.q3_m).abs()),
+    ];
+    moves
+        .into_iter()
+        .fold((1, 0.0), |acc, m| if m.1 > acc.1 { m } else { acc })
 }
 
 impl Estimator {
-    /// Builds the estimator; `bias_n` is the sensor's tare (sensor frame, N).
+    /// Builds the estimator with a force bias `bias_n` (sensor frame, N) and
+    /// no torque bias.
     pub fn new(config: &EstimatorConfig, bias_n: Vec3) -> Result<Self, SettingError> {
-        check_tare(&bias_n)?;
+        Self::with_bias(config, Bias::force_only(bias_n))
+    }
+
+    /// Builds the estimator with the sensor's bias (sensor frame).
+    pub fn with_bias(config: &EstimatorConfig, bias: Bias) -> Result<Self, SettingError> {
+        bias.check().map_err(|value| SettingError::Invalid {
+            field: "bias",
+            value,
+            why: "the tare must be finite",
+        })?;
         let guard = Guard::new(config.guard);
+        let limits = config.plausibility.limits();
         let last = CycleOutput {
             cycle: 0,
             pose: None,
             tip: TipOutcome::SensorInvalid,
-            sensor_age_ns: u64::MAX,
-            joints_age_ns: u64::MAX,
+            sensor_age_ns: None,
+            joints_age_ns: None,
+            new_sample: false,
+            torque: None,
             guard_state: guard.state(),
             guard_reason: guard.reason(),
             transition: None,
+            command: None,
         };
         Ok(Self {
             calibration: config.calibration,
@@ -144,14 +463,19 @@ impl Estimator {
                 &config.calibration,
                 &config.profile,
                 &config.noise,
-                TipForceConfig {
-                    max_std_n: config.guard.limits().max_std_n,
-                },
+                config.tip,
             )?,
             guard,
-            bias_n,
+            limits,
+            torque: limits
+                .torque
+                .map(|t| TorqueCheck::new(&config.calibration, &config.noise, &t)),
+            bias,
             last,
             last_now_ns: None,
+            last_counter: None,
+            counter_stamp_ns: 0,
+            last_joints: None,
         })
     }
 
@@ -159,33 +483,103 @@ impl Estimator {
     /// [`Estimator::last`] until the next cycle (written in place: no copy of
     /// the large output on the loop's path).
     pub fn cycle(&mut self, input: &CycleInput) -> &CycleOutput {
-        let sensor_age_ns = input.now_ns.saturating_sub(input.sensor.stamp_ns);
-        let joints_age_ns = input.now_ns.saturating_sub(input.joints.stamp_ns);
-        // A clock that does not advance (stuck, or gone back) makes every age
-        // meaningless: no input is trusted in such a cycle.
-        let clock_advances = self.last_now_ns.is_none_or(|last| input.now_ns > last);
-        self.last_now_ns = Some(input.now_ns);
-        // A sample stamped in the future, or with a non-finite force, is invalid
-        // whatever the driver said.
-        let sensor_valid = clock_advances
-            && input.sensor.valid
-            && input.sensor.stamp_ns <= input.now_ns
-            && input.sensor.force_n.iter().all(|x| x.is_finite());
-        let joints_valid =
-            clock_advances && input.joints.valid && input.joints.stamp_ns <= input.now_ns;
+        // The clock: no reading, or one that does not advance, trusts nothing.
+        let (now_ns, clock_fault) = match input.now_ns {
+            None => (None, Some(Reason::ClockFailed)),
+            Some(now_ns) => match self.last_now_ns {
+                Some(previous_ns) if now_ns <= previous_ns => (
+                    None,
+                    Some(Reason::ClockNotAdvancing {
+                        previous_ns,
+                        now_ns,
+                    }),
+                ),
+                _ => {
+                    self.last_now_ns = Some(now_ns);
+                    (Some(now_ns), None)
+                }
+            },
+        };
+
+        // The sensor counter: a new sample, a gap, or the same sample again
+        // (whose age runs from its first stamp, however it was re-stamped).
+        let sensor = &input.sensor;
+        let new_sample = self.last_counter != Some(sensor.counter);
+        let mut counter_fault = None;
+        if new_sample {
+            if let Some(previous) = self.last_counter {
+                let max_gap = self.limits.max_counter_gap;
+                if sensor.counter.wrapping_sub(previous) > max_gap {
+                    counter_fault = Some(Reason::SensorCounterGap {
+                        previous,
+                        got: sensor.counter,
+                        max_gap,
+                    });
+                }
+            }
+            self.last_counter = Some(sensor.counter);
+            self.counter_stamp_ns = sensor.stamp_ns;
+        }
+        let status_fault = (sensor.status != 0).then_some(Reason::SensorStatus {
+            status: sensor.status,
+        });
+
+        // The joints: no faster than the axes can move.
+        let joints = &input.joints;
+        let mut joint_fault = None;
+        let q = &joints.joints;
+        if joints.valid && q.q1_m.is_finite() && q.q2_m.is_finite() && q.q3_m.is_finite() {
+            if let Some((previous, previous_ns)) = self.last_joints {
+                if joints.stamp_ns < previous_ns {
+                    joint_fault = Some(Reason::JointsStampBackwards {
+                        previous_ns,
+                        got_ns: joints.stamp_ns,
+                    });
+                } else {
+                    let dt_s = (joints.stamp_ns - previous_ns) as f64 * 1e-9;
+                    let allowed_m =
+                        self.limits.max_joint_speed_mps * dt_s + self.limits.joint_margin_m;
+                    let (axis, moved_m) = largest_move(q, &previous);
+                    if moved_m > allowed_m {
+                        joint_fault = Some(Reason::JointJump {
+                            axis,
+                            moved_m,
+                            allowed_m,
+                        });
+                    }
+                }
+            }
+            self.last_joints = Some((*q, joints.stamp_ns));
+        }
+
+        let (sensor_age_ns, joints_age_ns, sensor_valid, joints_valid) = match now_ns {
+            Some(now) => (
+                Some(now.saturating_sub(self.counter_stamp_ns)),
+                Some(now.saturating_sub(joints.stamp_ns)),
+                // A sample stamped in the future, or not finite, is invalid
+                // whatever the driver said.
+                sensor.valid
+                    && self.counter_stamp_ns <= now
+                    && sensor.force_n.iter().all(|x| x.is_finite())
+                    && sensor.torque_nm.iter().all(|x| x.is_finite()),
+                joints.valid && joints.stamp_ns <= now,
+            ),
+            None => (None, None, false, false),
+        };
+
         let out = &mut self.last;
         out.cycle = input.cycle;
         out.sensor_age_ns = sensor_age_ns;
         out.joints_age_ns = joints_age_ns;
+        out.new_sample = new_sample;
+        out.torque = None;
+        out.command = None;
         let pose = if joints_valid {
-            Some(forward(
-                &self.calibration,
-                &self.profile,
-                &input.joints.joints,
-            ))
+            Some(forward(&self.calibration, &self.profile, q))
         } else {
             None
         };
+        let mut torque_fault = None;
         let tip_input = match pose {
             None => {
                 out.pose = None;
@@ -203,13 +597,27 @@ impl Estimator {
                     out.tip = TipOutcome::SensorInvalid;
                     TipInput::NotObservable
                 } else {
-                    match self.tip.estimate(pose, &input.sensor.force_n, &self.bias_n) {
+                    match self.tip.estimate(pose, &sensor.force_n, &self.bias.force_n) {
                         Ok(estimate) => {
                             out.tip = TipOutcome::Estimate(estimate);
+                            if let Some(check) = &self.torque {
+                                let residual = torque_residual(
+                                    check,
+                                    &self.calibration,
+                                    pose,
+                                    sensor,
+                                    &self.bias,
+                                    estimate.torsion_nm,
+                                );
+                                torque_fault = torque_verdict(check, &residual);
+                                out.torque = Some(residual);
+                            }
                             TipInput::Estimate {
                                 force_n: estimate.force_n,
                                 std_n: estimate.std_n,
                                 rod_dir: pose.rod_dir,
+                                observable: estimate.observable,
+                                max_std_n: self.tip.max_std_n(),
                             }
                         }
                         Err(e) => {
@@ -220,17 +628,103 @@ impl Estimator {
                 }
             }
         };
+        let input_fault = clock_fault
+            .or(counter_fault)
+            .or(status_fault)
+            .or(joint_fault)
+            .or(torque_fault);
         out.transition = self.guard.step(&GuardInput {
             cycle: input.cycle,
-            sensor_age_ns,
+            input_fault,
+            new_sample,
+            sensor_age_ns: sensor_age_ns.unwrap_or(0),
             sensor_valid,
-            joints_age_ns,
+            joints_age_ns: joints_age_ns.unwrap_or(0),
             joints_valid,
             tip: tip_input,
         });
-        out.guard_state = self.guard.state();
-        out.guard_reason = self.guard.reason();
+        if let Some(command) = input.command {
+            let result = self.apply(command, input);
+            self.last.command = Some(CommandEvent { command, result });
+        }
+        self.last.guard_state = self.guard.state();
+        self.last.guard_reason = self.guard.reason();
         &self.last
+    }
+
+    /// Applies `command` after this cycle's step (whose output is in
+    /// `self.last`).
+    fn apply(
+        &mut self,
+        command: Command,
+        input: &CycleInput,
+    ) -> Result<CommandAccepted, CommandRefused> {
+        if let Command::SetBias(bias) = command {
+            bias.check()
+                .map_err(|value| CommandRefused::BiasNonFinite { value })?;
+        }
+        if command == Command::Reset {
+            return match self.guard.reset(input.cycle) {
+                Ok(Some(t)) => {
+                    self.last.transition = Some(t);
+                    Ok(CommandAccepted::Reset)
+                }
+                Ok(None) => Ok(CommandAccepted::NothingToReset),
+                Err(e) => Err(CommandRefused::Reset { reason: e.reason }),
+            };
+        }
+        // Tare or bias: only in Ok, below every warn limit, on this cycle's
+        // estimate.
+        let state = self.guard.state();
+        if state != GuardState::Ok {
+            return Err(CommandRefused::NotOk {
+                state,
+                reason: self.guard.reason(),
+            });
+        }
+        if let Some(reason) = self.guard.warn_blocker() {
+            return Err(CommandRefused::AboveWarn { reason });
+        }
+        let (TipOutcome::Estimate(estimate), Some(pose)) = (self.last.tip, self.last.pose) else {
+            return Err(CommandRefused::NoEstimate);
+        };
+        let bias = match command {
+            Command::SetBias(bias) => bias,
+            _ => self
+                .tare(&pose, &input.sensor, &estimate)
+                .ok_or(CommandRefused::Unsolvable)?,
+        };
+        let previous = self.bias;
+        self.bias = bias;
+        Ok(CommandAccepted::BiasSet { previous, bias })
+    }
+
+    /// The bias for which this reading gives zero tip force at this pose, and
+    /// the torque bias for which the measured torque is the predicted one.
+    /// The estimate is affine in the force bias, F_tip(b + x) = F_tip(b) + J x:
+    /// J from three unit steps, then x = -J^-1 F_tip(b). `None` when J is
+    /// singular or a result is not finite.
+    fn tare(
+        &self,
+        pose: &Pose,
+        sensor: &SensorSample,
+        estimate: &TipForceEstimate,
+    ) -> Option<Bias> {
+        let b = self.bias.force_n;
+        let reading = &sensor.force_n;
+        let column = |unit: Vec3| -> Option<Vec3> {
+            let e = self.tip.estimate(pose, reading, &(b + unit)).ok()?;
+            Some(e.force_n - estimate.force_n)
+        };
+        let j = Mat3::from_columns(&[column(Vec3::x())?, column(Vec3::y())?, column(Vec3::z())?]);
+        let step = j.try_inverse()? * (-estimate.force_n);
+        let force_n = b + step;
+        let tared = self.tip.estimate(pose, reading, &force_n).ok()?;
+        let torque_nm = sensor.torque_nm
+            - predicted_torque_nm(&self.calibration, pose, reading, &force_n, tared.torsion_nm);
+        let bias = Bias { force_n, torque_nm };
+        bias.check().ok()?;
+        Some(bias)
     }
 
     /// The result of the last cycle (before the first: no pose, no input, the
@@ -239,20 +733,84 @@ impl Estimator {
         &self.last
     }
 
-    /// Asks the guard to leave Stop or Fault; refused while the cause persists.
-    pub fn reset_guard(&mut self, cycle: u64) -> Result<Option<Transition>, ResetRefused> {
-        self.guard.reset(cycle)
-    }
-
-    /// Replaces the tare (sensor frame, N). Refuses a non-finite one.
-    pub fn set_bias(&mut self, bias_n: Vec3) -> Result<(), SettingError> {
-        check_tare(&bias_n)?;
-        self.bias_n = bias_n;
-        Ok(())
+    /// The bias in use (sensor frame).
+    pub fn bias(&self) -> Bias {
+        self.bias
     }
 
     /// The guard's state.
     pub fn guard_state(&self) -> GuardState {
         self.guard.state()
     }
+
+    /// The guard's configuration (its worst-case stop time:
+    /// [`GuardConfig::stop_within_ns`]).
+    pub fn guard_config(&self) -> &GuardConfig {
+        self.guard.config()
+    }
+}
+
+/// The model's sensor torque without the torque bias, sensor frame:
+/// `R_0s^T ((A - S) x (-F_A) - M_T n)` with `-F_A = R_0s (f - b_f)`, i.e.
+/// `(R_0s^T (A - S)) x (f - b_f) - R_0s^T n M_T` (MODEL.md 4), N m.
+fn predicted_torque_nm(
+    cal: &Calibration,
+    pose: &Pose,
+    reading_n: &Vec3,
+    bias_n: &Vec3,
+    torsion_nm: f64,
+) -> Vec3 {
+    let r_t = cal.sensor_rotation().transpose();
+    let lever_s_m = r_t * (pose.ujoint_m - pose.sensor_m);
+    let wrench = lever_s_m.cross(&(reading_n - bias_n));
+    if torsion_nm == 0.0 {
+        wrench
+    } else {
+        wrench - r_t * torsion_axis(pose) * torsion_nm
+    }
+}
+
+/// n = -(s4, 0, c4), written as Y0 x (u x w) as the tip-force estimator does.
+fn torsion_axis(pose: &Pose) -> Vec3 {
+    Vec3::y().cross(&pose.rod_dir.cross(&pose.rod_normal))
+}
+
+/// Measured minus predicted torque, with its standard deviation.
+fn torque_residual(
+    check: &TorqueCheck,
+    cal: &Calibration,
+    pose: &Pose,
+    sensor: &SensorSample,
+    bias: &Bias,
+    torsion_nm: f64,
+) -> TorqueResidual {
+    let mut predicted = check.lever_s_m.cross(&(sensor.force_n - bias.force_n)) + bias.torque_nm;
+    if torsion_nm != 0.0 {
+        predicted -= cal.sensor_rotation().transpose() * torsion_axis(pose) * torsion_nm;
+    }
+    TorqueResidual {
+        residual_nm: sensor.torque_nm - predicted,
+        std_nm: check.std_nm,
+    }
+}
+
+/// A Fault for the first sensor axis whose residual is beyond `max_sigma`
+/// standard deviations (NaN counts as beyond).
+fn torque_verdict(check: &TorqueCheck, r: &TorqueResidual) -> Option<Reason> {
+    for ((axis, residual_nm), std_nm) in Axis::ALL
+        .iter()
+        .zip(r.residual_nm.iter())
+        .zip(r.std_nm.iter())
+    {
+        let within = residual_nm.abs() <= check.max_sigma * std_nm;
+        if !within {
+            return Some(Reason::TorqueImplausible {
+                axis: *axis,
+                residual_nm: *residual_nm,
+                std_nm: *std_nm,
+                max_sigma: check.max_sigma,
+            });
+        }
+    }
+    None
 }

@@ -6,14 +6,32 @@
 //! [`GuardState::Stop`] (latched), [`GuardState::Fault`] (latched).
 //!
 //! Each [`Guard::step`] first looks for a fault condition in a fixed order
-//! (cycle order, sensor validity, sensor age, joints validity, joints age, pose,
-//! invalid numbers, observability). Any fault condition sends the guard to
-//! `Fault` at once, without debounce: NaN, infinite, stale or unobservable input
-//! is never `Ok` or `Warn`. Otherwise the tip force is split into three parts,
-//! total |F|, axial |F . u| and lateral |F - (F . u) u|, each compared with its
-//! own warn and stop limits; entering `Warn` or `Stop` and leaving `Warn` are
-//! debounced over consecutive cycles. `Stop` and `Fault` are left only through an
-//! accepted [`Guard::reset`].
+//! (cycle order, a fault the caller found in the cycle's inputs (clock, sensor
+//! counter and status, joint jump, sensor torque), sensor validity, sensor age,
+//! joints validity, joints age, pose, invalid numbers, observability flag). Any
+//! fault condition sends the guard to `Fault` at once, without debounce: NaN,
+//! infinite, stale or unobservable input is never `Ok` or `Warn`. Otherwise the
+//! tip force is split into three parts, total |F|, axial |F . u| and lateral
+//! |F - (F . u) u|, each compared with its own warn and stop limits.
+//!
+//! Debounce: entering `Warn` or `Stop` and leaving `Warn` are decided by
+//! up/down counts over NEW sensor samples (a cycle that repeats the previous
+//! sample, [`GuardInput::new_sample`] false, counts nothing: a 500 Hz sensor
+//! read by a 4 kHz loop gives one vote per sample, not eight). Each new sample
+//! moves a count up by one when its condition holds and down by one when it
+//! does not, within `0..=debounce_samples`; the state changes when the count
+//! reaches `debounce_samples`. So a force that is above a limit in more than
+//! half of the samples trips it (30, 30, 11 N repeating against a 12 N limit
+//! stops on the fifth sample), where a count that restarted at 0 never would.
+//! Worst case: a force continuously at or above a stop limit stops within
+//! `debounce_samples` new samples, i.e. within
+//! [`GuardConfig::stop_within_ns`] = `debounce_samples * max_sensor_age_ns`
+//! (a sample older than `max_sensor_age_ns`, measured from when its counter
+//! changed, is a Fault).
+//!
+//! `Stop` and `Fault` are left only through an accepted [`Guard::reset`], which
+//! must name the cycle just stepped: it is judged on that cycle's input, never
+//! on an older one.
 //!
 //! Real-time path: no allocation, no panic, O(1) per step, fixed-size state.
 
@@ -51,16 +69,16 @@ pub struct GuardLimits {
     pub stop_lateral_n: f64,
     /// `Warn` clears only when every part is below its warn limit minus this, N.
     pub hysteresis_n: f64,
-    /// Consecutive cycles a condition must hold before `Warn` or `Stop` is
-    /// entered, and before `Warn` is left.
-    pub debounce_cycles: u32,
-    /// Largest accepted age of the force sensor reading, ns.
+    /// The up/down count over new sensor samples at which `Warn` or `Stop` is
+    /// entered and `Warn` left (see the module documentation), 1..=100.
+    pub debounce_samples: u32,
+    /// Largest accepted age of the force sensor reading, measured from the
+    /// stamp of the sample whose counter is the current one (a re-stamped
+    /// copy of an old sample does not make it younger), ns. Also the longest
+    /// accepted interval between two new samples.
     pub max_sensor_age_ns: u64,
     /// Largest accepted age of the joint positions, ns.
     pub max_joints_age_ns: u64,
-    /// Any per-axis standard deviation of F_tip above this means the force is
-    /// not observable: a fault, N.
-    pub max_std_n: f64,
     /// k: each part is compared with its limits after adding `k |std_n|`
     /// (|std_n| bounds the standard deviation of every part), so that a force
     /// that may be above a limit counts as above it. 0 compares the estimate
@@ -69,9 +87,9 @@ pub struct GuardLimits {
     pub std_margin: f64,
 }
 
-/// Largest accepted `debounce_cycles` (0.1 s at 1 kHz): a larger debounce would
-/// in effect disable Stop.
-pub const MAX_DEBOUNCE_CYCLES: u32 = 100;
+/// Largest accepted `debounce_samples` (0.2 s at 500 Hz): a larger debounce
+/// would in effect disable Stop.
+pub const MAX_DEBOUNCE_SAMPLES: u32 = 100;
 
 /// Largest accepted `std_margin`.
 pub const MAX_STD_MARGIN: f64 = 10.0;
@@ -94,9 +112,8 @@ fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
 
 impl GuardConfig {
     /// Checks the limits: all finite; for each of total, axial and lateral
-    /// 0 < warn < stop; 0 <= hysteresis < every warn limit; debounce >= 1;
-    /// both maximum ages > 0; max_std_n > 0; 1 <= debounce <= 100;
-    /// 0 <= std_margin <= 10.
+    /// 0 < warn < stop; 0 <= hysteresis < every warn limit; both maximum ages
+    /// > 0; 1 <= debounce <= 100; 0 <= std_margin <= 10.
     pub fn new(limits: GuardLimits) -> Result<Self, SettingError> {
         let pairs = [
             (
@@ -142,10 +159,10 @@ impl GuardConfig {
                 "must be finite, >= 0 and < every warn limit",
             ));
         }
-        if !(1..=MAX_DEBOUNCE_CYCLES).contains(&limits.debounce_cycles) {
+        if !(1..=MAX_DEBOUNCE_SAMPLES).contains(&limits.debounce_samples) {
             return Err(invalid(
-                "debounce_cycles",
-                f64::from(limits.debounce_cycles),
+                "debounce_samples",
+                f64::from(limits.debounce_samples),
                 "must be >= 1 and <= 100",
             ));
         }
@@ -158,13 +175,6 @@ impl GuardConfig {
         }
         if limits.max_joints_age_ns == 0 {
             return Err(invalid("max_joints_age_ns", 0.0, "must be > 0"));
-        }
-        if !(limits.max_std_n.is_finite() && limits.max_std_n > 0.0) {
-            return Err(invalid(
-                "max_std_n",
-                limits.max_std_n,
-                "must be finite and > 0",
-            ));
         }
         let warn_n = [
             limits.warn_total_n,
@@ -189,6 +199,14 @@ impl GuardConfig {
     pub fn limits(&self) -> GuardLimits {
         self.limits
     }
+
+    /// Worst-case time from the first new sample of a force continuously at
+    /// or above a stop limit to `Stop`, ns: `debounce_samples` new samples,
+    /// each at most `max_sensor_age_ns` after the previous one (a longer gap
+    /// is a Fault). Saturates at `u64::MAX`. The sensor's latency comes on top.
+    pub fn stop_within_ns(&self) -> u64 {
+        u64::from(self.limits.debounce_samples).saturating_mul(self.limits.max_sensor_age_ns)
+    }
 }
 
 /// What the tip-force estimator delivered this cycle.
@@ -202,6 +220,13 @@ pub enum TipInput {
         std_n: Vec3,
         /// u, the unit rod direction, {0}.
         rod_dir: Vec3,
+        /// The estimator's observability flag
+        /// ([`crate::tip_force::TipForceEstimate::observable`]): false is a
+        /// Fault ([`Reason::NotObservable`]).
+        observable: bool,
+        /// The observability limit the estimator applied, N (reported in the
+        /// reason).
+        max_std_n: f64,
     },
     /// The estimator said the force is not observable (near the singularity
     /// a -> L).
@@ -215,6 +240,13 @@ pub enum TipInput {
 pub struct GuardInput {
     /// Control cycle number; must strictly increase from step to step.
     pub cycle: u64,
+    /// A fault the caller found in this cycle's inputs before the estimate
+    /// (clock, sensor counter and status, joint jump, sensor torque): checked
+    /// right after the cycle order.
+    pub input_fault: Option<Reason>,
+    /// Whether the sensor sample of this cycle is a new one (its counter
+    /// changed). Only new samples move the debounce counts.
+    pub new_sample: bool,
     /// Age of the force sensor reading, ns.
     pub sensor_age_ns: u64,
     /// Whether the force sensor reported its reading valid.
@@ -339,6 +371,71 @@ pub enum Reason {
         /// The cycle received.
         got: u64,
     },
+    /// The clock could not be read this cycle (no time, no age, no trust).
+    ClockFailed,
+    /// The clock did not advance since the previous cycle (stuck, or gone
+    /// back): every age would be meaningless.
+    ClockNotAdvancing {
+        /// The largest time seen before, ns.
+        previous_ns: u64,
+        /// The time of this cycle, ns.
+        now_ns: u64,
+    },
+    /// The sensor's counter jumped by more than the accepted gap (samples
+    /// lost, or the counter went back, which wraps to a huge gap).
+    SensorCounterGap {
+        /// The previous counter.
+        previous: u32,
+        /// This cycle's counter.
+        got: u32,
+        /// The largest accepted step.
+        max_gap: u32,
+    },
+    /// The sensor's device status word is not 0 (all good).
+    SensorStatus {
+        /// The status word.
+        status: u32,
+    },
+    /// A joint moved between two joint samples by more than the axes' speed
+    /// limit allows over their stamp difference plus the margin (an encoder
+    /// jump, a slipping axis), or the joint stamp went back.
+    JointJump {
+        /// 1, 2 or 3 (q1, q2, q3).
+        axis: u8,
+        /// How far it moved, m (absolute value).
+        moved_m: f64,
+        /// How far it may move, m.
+        allowed_m: f64,
+    },
+    /// The joint sample's stamp is older than the previous joint sample's.
+    JointsStampBackwards {
+        /// The previous stamp, ns.
+        previous_ns: u64,
+        /// This cycle's stamp, ns.
+        got_ns: u64,
+    },
+    /// The sensor torque differs from the model's prediction by more than the
+    /// configured multiple of its standard deviation (an untared or faulty
+    /// sensor, a wrong geometry; with d != 0 also a wrong support or contact
+    /// along the shaft).
+    TorqueImplausible {
+        /// Which sensor-frame axis (the first beyond the limit).
+        axis: Axis,
+        /// Measured minus predicted torque on that axis, N m.
+        residual_nm: f64,
+        /// Its standard deviation, N m.
+        std_nm: f64,
+        /// The configured multiple.
+        max_sigma: f64,
+    },
+    /// A reset named another cycle than the one just stepped (it must be
+    /// judged on the input of the current cycle).
+    ResetNotCurrent {
+        /// The cycle last stepped.
+        last: u64,
+        /// The cycle the reset named.
+        got: u64,
+    },
     /// The force sensor flagged its reading invalid.
     SensorInvalid,
     /// The force sensor reading is too old.
@@ -381,11 +478,12 @@ pub enum Reason {
     },
     /// The estimator said the tip force is not observable.
     EstimatorNotObservable,
-    /// The tip force is not observable: its standard deviation is too large.
+    /// The tip force is not observable: the estimator flagged it (a standard
+    /// deviation above its observability limit).
     NotObservable {
         /// The largest per-axis standard deviation, N.
         std_max_n: f64,
-        /// The configured maximum, N.
+        /// The estimator's observability limit, N.
         max_std_n: f64,
     },
     /// A part of the tip force is at or above its stop limit.
@@ -422,6 +520,54 @@ impl fmt::Display for Reason {
             Self::CycleOutOfOrder { previous, got } => {
                 write!(f, "cycle {got} does not follow cycle {previous}")
             }
+            Self::ClockFailed => f.write_str("the clock could not be read"),
+            Self::ClockNotAdvancing {
+                previous_ns,
+                now_ns,
+            } => write!(
+                f,
+                "the clock did not advance: {now_ns} ns after {previous_ns} ns"
+            ),
+            Self::SensorCounterGap {
+                previous,
+                got,
+                max_gap,
+            } => write!(
+                f,
+                "the sensor counter went from {previous} to {got} (max step {max_gap})"
+            ),
+            Self::SensorStatus { status } => {
+                write!(f, "the force sensor reports status {status:#x}")
+            }
+            Self::JointJump {
+                axis,
+                moved_m,
+                allowed_m,
+            } => write!(
+                f,
+                "q{axis} moved {moved_m:.6} m between two samples (max {allowed_m:.6} m)"
+            ),
+            Self::JointsStampBackwards {
+                previous_ns,
+                got_ns,
+            } => write!(
+                f,
+                "the joint stamp went back from {previous_ns} ns to {got_ns} ns"
+            ),
+            Self::TorqueImplausible {
+                axis,
+                residual_nm,
+                std_nm,
+                max_sigma,
+            } => write!(
+                f,
+                "sensor torque {axis} is {residual_nm:.4} N m off the model (std {std_nm:.4} N m, \
+                 max {max_sigma} std)"
+            ),
+            Self::ResetNotCurrent { last, got } => write!(
+                f,
+                "a reset for cycle {got} is not a reset of the current cycle {last}"
+            ),
             Self::SensorInvalid => f.write_str("the force sensor reading is invalid"),
             Self::SensorStale { age_ns, max_age_ns } => write!(
                 f,
@@ -450,7 +596,7 @@ impl fmt::Display for Reason {
                 max_std_n,
             } => write!(
                 f,
-                "the tip force is not observable: std {std_max_n:.3} N > max {max_std_n:.3} N"
+                "the tip force is not observable: std {std_max_n:.3} N > limit {max_std_n:.3} N"
             ),
             Self::AboveStop {
                 part,
@@ -509,11 +655,14 @@ pub struct Guard {
     /// What in the most recent input would refuse a reset (a fault condition,
     /// a part at or above its stop limit, or no input yet).
     blocker: Option<Reason>,
-    /// Consecutive cycles with a part at or above its stop limit.
+    /// What in the most recent input is at or above a warn limit (or a fault
+    /// condition, or no input yet): what refuses a tare.
+    above_warn: Option<Reason>,
+    /// Up/down count over new samples of a part at or above its stop limit.
     stop_count: u32,
-    /// Consecutive cycles with a part at or above its warn limit.
+    /// Up/down count over new samples of a part at or above its warn limit.
     warn_count: u32,
-    /// Consecutive cycles with every part below warn minus hysteresis.
+    /// Up/down count over new samples of every part below warn minus hysteresis.
     clear_count: u32,
 }
 
@@ -556,6 +705,7 @@ impl Guard {
             reason: Reason::NoInputYet,
             last_cycle: None,
             blocker: Some(Reason::NoInputYet),
+            above_warn: Some(Reason::NoInputYet),
             stop_count: 0,
             warn_count: 0,
             clear_count: 0,
@@ -586,6 +736,13 @@ impl Guard {
         self.blocker
     }
 
+    /// What in the most recent input is at or above a warn limit (with the
+    /// margin), or a fault condition, or [`Reason::NoInputYet`]; `None` when
+    /// every part was below its warn limit.
+    pub fn warn_blocker(&self) -> Option<Reason> {
+        self.above_warn
+    }
+
     /// Feeds one control cycle. Returns `Some` only when the state changed.
     #[inline]
     pub fn step(&mut self, input: &GuardInput) -> Option<Transition> {
@@ -593,6 +750,7 @@ impl Guard {
         let parts_n = match self.evaluate(input) {
             Err(fault) => {
                 self.blocker = Some(fault);
+                self.above_warn = Some(fault);
                 self.stop_count = 0;
                 self.warn_count = 0;
                 self.clear_count = 0;
@@ -607,24 +765,26 @@ impl Guard {
             .iter()
             .zip(cfg.clear_n.iter())
             .all(|(value, limit)| *value < *limit);
-        let debounce = cfg.limits.debounce_cycles;
+        let debounce = cfg.limits.debounce_samples;
 
-        self.stop_count = if stop_hit.is_some() {
-            self.stop_count.saturating_add(1)
-        } else {
-            0
-        };
-        self.warn_count = if warn_hit.is_some() {
-            self.warn_count.saturating_add(1)
-        } else {
-            0
-        };
-        self.clear_count = if clear {
-            self.clear_count.saturating_add(1)
-        } else {
-            0
-        };
+        if input.new_sample {
+            let vote = |count: u32, holds: bool| {
+                if holds {
+                    count.saturating_add(1).min(debounce)
+                } else {
+                    count.saturating_sub(1)
+                }
+            };
+            self.stop_count = vote(self.stop_count, stop_hit.is_some());
+            self.warn_count = vote(self.warn_count, warn_hit.is_some());
+            self.clear_count = vote(self.clear_count, clear);
+        }
         self.blocker = stop_hit.map(|(part, force_n, limit_n)| Reason::AboveStop {
+            part,
+            force_n,
+            limit_n,
+        });
+        self.above_warn = warn_hit.map(|(part, force_n, limit_n)| Reason::AboveWarn {
             part,
             force_n,
             limit_n,
@@ -652,9 +812,13 @@ impl Guard {
                             force_n,
                             limit_n,
                         };
+                        // Leaving Warn needs a fresh run of clear samples.
+                        self.clear_count = 0;
                         return self.enter(GuardState::Warn, reason, cycle);
                     }
                 } else if clear && self.clear_count >= debounce {
+                    // Re-entering Warn needs a fresh run of warn samples.
+                    self.warn_count = 0;
                     return self.enter(GuardState::Ok, Reason::BelowWarn, cycle);
                 }
                 None
@@ -662,15 +826,29 @@ impl Guard {
         }
     }
 
-    /// Asks to leave `Stop` or `Fault` for `Ok`. In `Ok` or `Warn` it does
-    /// nothing (`Ok(None)`). Refused while the cause persists in the most
-    /// recent input: any fault condition, any part at or above its stop limit
-    /// (not debounced), or no input stepped yet. An accepted reset clears the
-    /// debounce counters; `cycle` is only recorded in the transition.
+    /// Asks to leave `Stop` or `Fault` for `Ok`, judged on the input of
+    /// `cycle`, which must be the cycle just stepped (else refused with
+    /// [`Reason::ResetNotCurrent`]; before any step with
+    /// [`Reason::NoInputYet`]): call it right after [`Guard::step`] of the same
+    /// cycle (as [`crate::cycle::Estimator::cycle`] does for a reset command).
+    /// In `Ok` or `Warn` it does nothing (`Ok(None)`). Refused while the cause
+    /// persists in that input: any fault condition, any part at or above its
+    /// stop limit (not debounced). An accepted reset clears the debounce
+    /// counts.
     pub fn reset(&mut self, cycle: u64) -> Result<Option<Transition>, ResetRefused> {
         match self.state {
             GuardState::Ok | GuardState::Warn => Ok(None),
             GuardState::Stop | GuardState::Fault => {
+                let Some(last) = self.last_cycle else {
+                    return Err(ResetRefused {
+                        reason: Reason::NoInputYet,
+                    });
+                };
+                if cycle != last {
+                    return Err(ResetRefused {
+                        reason: Reason::ResetNotCurrent { last, got: cycle },
+                    });
+                }
                 if let Some(reason) = self.blocker {
                     return Err(ResetRefused { reason });
                 }
@@ -713,6 +891,9 @@ impl Guard {
         }
         self.last_cycle = Some(input.cycle);
 
+        if let Some(fault) = input.input_fault {
+            return Err(fault);
+        }
         let limits = &self.config.limits;
         if !input.sensor_valid {
             return Err(Reason::SensorInvalid);
@@ -732,14 +913,16 @@ impl Guard {
                 max_age_ns: limits.max_joints_age_ns,
             });
         }
-        let (force_n, std_n, rod_dir) = match input.tip {
+        let (force_n, std_n, rod_dir, observable, max_std_n) = match input.tip {
             TipInput::PoseInvalid => return Err(Reason::PoseInvalid),
             TipInput::NotObservable => return Err(Reason::EstimatorNotObservable),
             TipInput::Estimate {
                 force_n,
                 std_n,
                 rod_dir,
-            } => (force_n, std_n, rod_dir),
+                observable,
+                max_std_n,
+            } => (force_n, std_n, rod_dir, observable, max_std_n),
         };
         for (field, vector) in [
             (TipField::Force, &force_n),
@@ -766,11 +949,10 @@ impl Guard {
                 norm: rod_dir.norm(),
             });
         }
-        let std_max_n = std_n.x.max(std_n.y).max(std_n.z);
-        if std_max_n > limits.max_std_n {
+        if !observable {
             return Err(Reason::NotObservable {
-                std_max_n,
-                max_std_n: limits.max_std_n,
+                std_max_n: std_n.x.max(std_n.y).max(std_n.z),
+                max_std_n,
             });
         }
         // The margin: k |std| bounds k standard deviations of every part.
@@ -787,7 +969,7 @@ impl Guard {
 mod tests {
     use super::*;
 
-    fn limits(debounce_cycles: u32) -> GuardLimits {
+    fn limits(debounce_samples: u32) -> GuardLimits {
         GuardLimits {
             warn_total_n: 9.0,
             stop_total_n: 17.0,
@@ -796,10 +978,9 @@ mod tests {
             warn_lateral_n: 6.0,
             stop_lateral_n: 10.0,
             hysteresis_n: 1.0,
-            debounce_cycles,
+            debounce_samples,
             max_sensor_age_ns: 1_000_000,
             max_joints_age_ns: 1_000_000,
-            max_std_n: 2.0,
             std_margin: 0.0,
         }
     }
@@ -807,6 +988,8 @@ mod tests {
     fn input(cycle: u64, force_n: Vec3) -> GuardInput {
         GuardInput {
             cycle,
+            input_fault: None,
+            new_sample: true,
             sensor_age_ns: 0,
             sensor_valid: true,
             joints_age_ns: 0,
@@ -815,29 +998,32 @@ mod tests {
                 force_n,
                 std_n: Vec3::zeros(),
                 rod_dir: Vec3::x(),
+                observable: true,
+                max_std_n: 2.0,
             },
         }
     }
 
     #[test]
-    fn counters_saturate_at_u32_max() {
-        let mut g = Guard::new(GuardConfig::new(limits(MAX_DEBOUNCE_CYCLES)).unwrap());
+    fn counts_stay_within_the_debounce_and_repeats_do_not_count() {
+        let mut g = Guard::new(GuardConfig::new(limits(MAX_DEBOUNCE_SAMPLES)).unwrap());
         g.step(&input(0, Vec3::zeros()));
         g.reset(0).unwrap();
         let high = Vec3::new(20.0, 0.0, 0.0);
-        // Counters near the top, in Stop (latched), keep counting without overflow.
+        // In Stop (latched) the counts keep voting but never pass the debounce.
         g.state = GuardState::Stop;
-        g.stop_count = u32::MAX - 2;
-        g.warn_count = u32::MAX - 2;
-        for c in 1..10 {
+        for c in 1..300 {
             assert_eq!(g.step(&input(c, high)), None);
         }
-        assert_eq!((g.stop_count, g.warn_count), (u32::MAX, u32::MAX));
-
-        g.clear_count = u32::MAX;
-        g.step(&input(10, Vec3::zeros()));
-        assert_eq!(g.clear_count, u32::MAX);
-        assert_eq!((g.stop_count, g.warn_count), (0, 0));
+        assert_eq!((g.stop_count, g.warn_count), (100, 100));
+        assert_eq!(g.clear_count, 0);
+        // A repeated sample (no new counter) moves nothing.
+        let mut repeat = input(300, Vec3::zeros());
+        repeat.new_sample = false;
+        g.step(&repeat);
+        assert_eq!((g.stop_count, g.warn_count, g.clear_count), (100, 100, 0));
+        g.step(&input(301, Vec3::zeros()));
+        assert_eq!((g.stop_count, g.warn_count, g.clear_count), (99, 99, 1));
     }
 
     #[test]

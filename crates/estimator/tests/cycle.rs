@@ -11,40 +11,94 @@ mod common;
 use common::*;
 use nalgebra::Vector3;
 use sar_estimator::cycle::{
-    CycleInput, CycleOutput, Estimator, JointSample, SensorSample, TipOutcome,
+    Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
+    EstimatorConfig, JointSample, PlausibilityConfig, PlausibilityLimits, SensorSample, TipOutcome,
+    TorqueLimits,
 };
-use sar_estimator::guard::{ForcePart, GuardState, Reason};
+use sar_estimator::guard::{Axis, ForcePart, GuardState, Reason};
 use sar_kinematics::ActiveJoints;
 
 const PERIOD_NS: u64 = 1_000_000;
 /// A: (0.30, 0.20, 0.0): rod horizontal along +X0, a = 0.15 m.
 const NOMINAL_Q: [f64; 3] = [0.0, 0.28, 0.30];
+/// The example robot's lever from S to A, sensor frame (R_0s = I): the U-joint
+/// offset (0, -0.08, 0) less the sensor offset (0, -0.03, 0), m.
+const LEVER_S_M: [f64; 3] = [0.0, -0.05, 0.0];
+
+/// The sensor torque of the example robot (d = 0: no torsion) for a force
+/// reading with force bias `bias_n` and torque bias `bias_nm`:
+/// t = (A - S) x (f - b_f) + b_t (MODEL.md 4, R_0s = I).
+fn ideal_torque(
+    reading_n: &Vector3<f64>,
+    bias_n: &Vector3<f64>,
+    bias_nm: &Vector3<f64>,
+) -> Vector3<f64> {
+    let [x, y, z] = LEVER_S_M;
+    Vector3::new(x, y, z).cross(&(reading_n - bias_n)) + bias_nm
+}
+
+/// The example configuration with every plausibility check on (the torque
+/// check with its defaults) and the given joint speed limit.
+fn config_with_speed(max_joint_speed_mps: f64) -> EstimatorConfig {
+    let mut config = example_estimator_config();
+    config.plausibility = PlausibilityConfig::new(PlausibilityLimits {
+        max_joint_speed_mps,
+        ..PlausibilityLimits::default()
+    })
+    .unwrap();
+    config
+}
 
 struct Rig {
     estimator: Estimator,
     cycle: u64,
+    counter: u32,
+    /// The sensor's true force bias (what the readings carry).
     bias_n: Vector3<f64>,
+    /// The sensor's true torque bias.
+    bias_nm: Vector3<f64>,
 }
 
 impl Rig {
+    /// Tests that jump between poses from one cycle to the next: the joint
+    /// speed check is set far above their jumps (it has its own tests).
     fn new() -> Self {
+        Self::with_config(&config_with_speed(1e3))
+    }
+
+    fn with_config(config: &EstimatorConfig) -> Self {
         let bias_n = Vector3::new(0.4, -1.1, 0.25);
+        let bias_nm = Vector3::new(0.02, -0.01, 0.005);
         Self {
-            estimator: Estimator::new(&example_estimator_config(), bias_n).unwrap(),
+            estimator: Estimator::with_bias(
+                config,
+                Bias {
+                    force_n: bias_n,
+                    torque_nm: bias_nm,
+                },
+            )
+            .unwrap(),
             cycle: 0,
+            counter: 0,
             bias_n,
+            bias_nm,
         }
     }
 
+    /// The next input: a new sample (counter + 1), stamps 0.3 ms (sensor) and
+    /// 0.1 ms (joints) before now, the model's torque, no command.
     fn input(&mut self, q: [f64; 3], reading_n: Vector3<f64>) -> CycleInput {
         self.cycle += 1;
+        self.counter = self.counter.wrapping_add(1);
         let now_ns = 1_000_000_000 + self.cycle * PERIOD_NS;
         CycleInput {
             cycle: self.cycle,
-            now_ns,
+            now_ns: Some(now_ns),
             sensor: SensorSample {
                 force_n: reading_n,
-                torque_nm: Vector3::zeros(),
+                torque_nm: ideal_torque(&reading_n, &self.bias_n, &self.bias_nm),
+                counter: self.counter,
+                status: 0,
                 stamp_ns: now_ns - 300_000,
                 valid: true,
             },
@@ -57,12 +111,23 @@ impl Rig {
                 stamp_ns: now_ns - 100_000,
                 valid: true,
             },
+            command: None,
         }
     }
 
     fn push(&mut self, q: [f64; 3], tip_force_n: &Vector3<f64>) -> CycleOutput {
+        self.push_command(q, tip_force_n, None)
+    }
+
+    fn push_command(
+        &mut self,
+        q: [f64; 3],
+        tip_force_n: &Vector3<f64>,
+        command: Option<Command>,
+    ) -> CycleOutput {
         let reading = example_reading(q, tip_force_n, &self.bias_n);
-        let input = self.input(q, reading);
+        let mut input = self.input(q, reading);
+        input.command = command;
         *self.estimator.cycle(&input)
     }
 
@@ -72,17 +137,25 @@ impl Rig {
         self.input(NOMINAL_Q, reading)
     }
 
-    /// Steps once with no force, then arms the guard.
+    /// A cycle at rest carrying a reset.
+    fn reset(&mut self) -> CycleOutput {
+        self.push_command(NOMINAL_Q, &Vector3::zeros(), Some(Command::Reset))
+    }
+
+    /// A rig whose first cycle, at rest, carries the reset that arms the guard.
     fn armed() -> Self {
-        let mut rig = Self::new();
-        let out = rig.push(NOMINAL_Q, &Vector3::zeros());
-        assert_eq!(out.guard_state, GuardState::Fault);
-        assert_eq!(out.guard_reason, Reason::NoInputYet);
-        let t = rig.estimator.reset_guard(rig.cycle).unwrap().unwrap();
+        Self::armed_with(Self::new())
+    }
+
+    fn armed_with(mut rig: Self) -> Self {
+        let out = rig.reset();
+        let t = out.transition.unwrap();
         assert_eq!(
-            (t.from, t.to, t.reason),
-            (GuardState::Fault, GuardState::Ok, Reason::Reset)
+            (t.from, t.to, t.reason, t.cycle),
+            (GuardState::Fault, GuardState::Ok, Reason::Reset, 1)
         );
+        assert_eq!(out.command.unwrap().result, Ok(CommandAccepted::Reset));
+        assert_eq!(out.guard_state, GuardState::Ok);
         rig
     }
 }
@@ -172,13 +245,19 @@ fn a_push_ramp_warns_then_stops_and_latches() {
         "{reason:?}"
     );
     // Still pushing: the reset is refused.
-    assert!(rig.estimator.reset_guard(rig.cycle).is_err());
+    let out = rig.push_command(NOMINAL_Q, &(u * 20.0), Some(Command::Reset));
+    assert!(matches!(
+        out.command.unwrap().result,
+        Err(CommandRefused::Reset {
+            reason: Reason::AboveStop { .. }
+        })
+    ));
     // The push goes away: Stop stays latched until a reset.
     for _ in 0..10 {
         let out = rig.push(NOMINAL_Q, &Vector3::zeros());
         assert_eq!(out.guard_state, GuardState::Stop);
     }
-    let t = rig.estimator.reset_guard(rig.cycle).unwrap().unwrap();
+    let t = rig.reset().transition.unwrap();
     assert_eq!(t.to, GuardState::Ok);
 }
 
@@ -225,7 +304,7 @@ fn bad_inputs_fault_the_guard() {
     // A sample stamped in the future.
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
-    input.sensor.stamp_ns = input.now_ns + 1;
+    input.sensor.stamp_ns = input.now_ns.unwrap() + 1;
     let out = *rig.estimator.cycle(&input);
     assert_eq!(
         (out.guard_state, out.guard_reason),
@@ -235,9 +314,9 @@ fn bad_inputs_fault_the_guard() {
     // A stale sensor sample: 6 ms old against a 5 ms limit.
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
-    input.sensor.stamp_ns = input.now_ns - 6_000_000;
+    input.sensor.stamp_ns = input.now_ns.unwrap() - 6_000_000;
     let out = *rig.estimator.cycle(&input);
-    assert_eq!(out.sensor_age_ns, 6_000_000);
+    assert_eq!(out.sensor_age_ns, Some(6_000_000));
     assert_eq!(out.guard_state, GuardState::Fault);
     assert!(matches!(
         out.guard_reason,
@@ -247,27 +326,21 @@ fn bad_inputs_fault_the_guard() {
         }
     ));
 
-    // Stale joints.
-    let mut rig = Rig::armed();
-    let mut input = rig.at_rest();
-    input.joints.stamp_ns = input.now_ns - 5_000_001;
-    let out = *rig.estimator.cycle(&input);
-    assert!(matches!(out.guard_reason, Reason::JointsStale { .. }));
-
-    // A clock that does not advance (stuck, as a failed clock read would leave
-    // it): every input is invalid, even freshly stamped ones.
+    // Stale joints: the drives keep delivering the same old sample.
     let mut rig = Rig::armed();
     let first = rig.at_rest();
-    let mut stuck = rig.at_rest();
-    stuck.now_ns = first.now_ns;
-    stuck.sensor.stamp_ns = first.now_ns;
-    stuck.joints.stamp_ns = first.now_ns;
-    assert_eq!(rig.estimator.cycle(&first).guard_state, GuardState::Ok);
-    let out = *rig.estimator.cycle(&stuck);
-    assert_eq!((out.sensor_age_ns, out.joints_age_ns), (0, 0));
-    assert_eq!(
-        (out.guard_state, out.guard_reason),
-        (GuardState::Fault, Reason::SensorInvalid)
+    rig.estimator.cycle(&first);
+    let mut out = *rig.estimator.last();
+    for _ in 0..5 {
+        let mut input = rig.at_rest();
+        input.joints.stamp_ns = first.joints.stamp_ns;
+        out = *rig.estimator.cycle(&input);
+    }
+    assert_eq!(out.joints_age_ns, Some(5_100_000));
+    assert!(
+        matches!(out.guard_reason, Reason::JointsStale { .. }),
+        "{:?}",
+        out.guard_reason
     );
 
     // Joints the drives mark invalid: no pose, no estimate, a Fault.
@@ -314,7 +387,7 @@ fn bad_inputs_fault_the_guard() {
     // And the Fault stays after the inputs are good again, until a reset.
     let out = rig.push(NOMINAL_Q, &Vector3::zeros());
     assert_eq!(out.guard_state, GuardState::Fault);
-    assert!(rig.estimator.reset_guard(rig.cycle).unwrap().is_some());
+    assert!(rig.reset().transition.is_some());
 }
 
 /// With HEX-6 noise on every sample, the estimate's scatter around the scripted
@@ -350,36 +423,499 @@ fn reported_std_matches_the_scatter_with_sensor_noise() {
     }
 }
 
-/// A tare with a NaN or infinite component is refused, at construction and
-/// when replaced, with the offending value; a refused tare leaves the old one.
+/// A bias with a NaN or infinite component is refused, at construction and
+/// as a command, with the offending value; a refused bias leaves the old one.
 #[test]
-fn a_non_finite_tare_is_refused() {
+fn a_non_finite_bias_is_refused() {
     let bad = Estimator::new(
         &example_estimator_config(),
         Vector3::new(0.0, f64::NEG_INFINITY, 0.0),
     );
     assert!(matches!(
         bad,
-        Err(sar_estimator::SettingError::Invalid { field: "bias_n", value, .. })
+        Err(sar_estimator::SettingError::Invalid { field: "bias", value, .. })
             if value == f64::NEG_INFINITY
     ));
     let mut rig = Rig::armed();
-    let e = rig
-        .estimator
-        .set_bias(Vector3::new(f64::INFINITY, 0.0, 0.0))
-        .unwrap_err();
-    assert!(matches!(
-        e,
-        sar_estimator::SettingError::Invalid { field: "bias_n", value, .. }
-            if value == f64::INFINITY
-    ));
-    assert!(
-        rig.estimator
-            .set_bias(Vector3::new(0.0, f64::NAN, 0.0))
-            .is_err()
-    );
-    // The old tare is still in use: the scripted force comes back.
+    for (bias, bad) in [
+        (
+            Bias::force_only(Vector3::new(f64::INFINITY, 0.0, 0.0)),
+            f64::INFINITY,
+        ),
+        (
+            Bias {
+                force_n: Vector3::zeros(),
+                torque_nm: Vector3::new(0.0, 0.0, f64::NAN),
+            },
+            f64::NAN,
+        ),
+    ] {
+        let out = rig.push_command(NOMINAL_Q, &Vector3::zeros(), Some(Command::SetBias(bias)));
+        match out.command.unwrap().result {
+            Err(CommandRefused::BiasNonFinite { value }) => {
+                assert_eq!(value.to_bits(), bad.to_bits());
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+    // The old bias is still in use: the scripted force comes back.
     let f = Vector3::new(1.0, -2.0, 0.5);
     let out = rig.push(NOMINAL_Q, &f);
     assert!((estimate(&out).force_n - f).norm() < 1e-9);
+    assert_eq!(out.guard_state, GuardState::Ok);
+}
+
+// ------------------------------------------------------------- debounce (hole 1)
+
+/// A 4 kHz loop reading a 500 Hz sensor: each sample is seen in 8 cycles. One
+/// stop-level sample (a spike) seen 8 times is ONE vote, not 8: no Stop with a
+/// debounce of 3 samples. (The old guard counted cycles and stopped.)
+#[test]
+fn debounce_counts_new_samples_not_loop_cycles() {
+    let mut rig = Rig::armed();
+    let spike = Vector3::x() * 20.0;
+    let reading = |rig: &Rig, f: &Vector3<f64>| example_reading(NOMINAL_Q, f, &rig.bias_n);
+    let first_counter = rig.counter;
+    let mut now_ns = 1_000_000_000 + rig.cycle * PERIOD_NS;
+    for sample in 0..6u32 {
+        let counter = first_counter + sample + 1;
+        let f = if sample == 1 { spike } else { Vector3::zeros() };
+        let r = reading(&rig, &f);
+        let stamp_ns = now_ns + 100_000;
+        for _ in 0..8 {
+            rig.cycle += 1;
+            now_ns += 250_000;
+            let input = CycleInput {
+                cycle: rig.cycle,
+                now_ns: Some(now_ns),
+                sensor: SensorSample {
+                    force_n: r,
+                    torque_nm: ideal_torque(&r, &rig.bias_n, &rig.bias_nm),
+                    counter,
+                    status: 0,
+                    stamp_ns,
+                    valid: true,
+                },
+                joints: JointSample {
+                    joints: ActiveJoints {
+                        q1_m: NOMINAL_Q[0],
+                        q2_m: NOMINAL_Q[1],
+                        q3_m: NOMINAL_Q[2],
+                    },
+                    stamp_ns: now_ns - 50_000,
+                    valid: true,
+                },
+                command: None,
+            };
+            let out = *rig.estimator.cycle(&input);
+            assert_eq!(
+                out.guard_state,
+                GuardState::Ok,
+                "sample {sample}: {:?}",
+                out.guard_reason
+            );
+        }
+    }
+}
+
+/// An axial force of 30, 30, 11 N repeating (mean 23.7 N) against a 12 N
+/// axial stop limit and a debounce of 3: the up/down count reaches 3 on the
+/// fifth sample (1, 2, 1, 2, 3). A count that restarts at 0 after a sample
+/// below the limit never stopped.
+#[test]
+fn a_dip_below_the_limit_does_not_defeat_the_debounce() {
+    let mut rig = Rig::armed();
+    let u = Vector3::x();
+    let mut stop_at = None;
+    for k in 0..30 {
+        let f = if k % 3 == 2 { 11.0 } else { 30.0 };
+        let out = rig.push(NOMINAL_Q, &(u * f));
+        if out.guard_state == GuardState::Stop {
+            stop_at = Some(k);
+            break;
+        }
+    }
+    assert_eq!(stop_at, Some(4));
+    // The worst-case time to Stop is exposed: 3 samples of at most 5 ms.
+    assert_eq!(rig.estimator.guard_config().stop_within_ns(), 15_000_000);
+}
+
+// ---------------------------------------------------------------- tare (hole 2)
+
+/// A model-based tare: the bias drifted since the configured tare, so at rest
+/// the estimate shows a force; the tare command makes this pose's reading
+/// give zero tip force (the rod's weight stays in the model), and the torque
+/// bias follows. It is reported as an event with the old and new bias.
+#[test]
+fn a_tare_at_rest_zeroes_the_tip_force_and_is_reported() {
+    let mut rig = Rig::armed();
+    // The true bias drifts by (0.3, -0.2, 0.4) N and the torque bias too.
+    let configured = Bias {
+        force_n: rig.bias_n,
+        torque_nm: rig.bias_nm,
+    };
+    rig.bias_n += Vector3::new(0.3, -0.2, 0.4);
+    rig.bias_nm += Vector3::new(0.001, 0.002, -0.001);
+    let q = [0.02, 0.25, 0.31];
+    let out = rig.push(q, &Vector3::zeros());
+    assert!(estimate(&out).force_n.norm() > 0.3);
+    let out = rig.push_command(q, &Vector3::zeros(), Some(Command::Tare));
+    let Ok(CommandAccepted::BiasSet { previous, bias }) = out.command.unwrap().result else {
+        panic!("{:?}", out.command);
+    };
+    assert_eq!(previous, configured);
+    assert!((bias.force_n - rig.bias_n).norm() < 1e-9, "{bias:?}");
+    assert!((bias.torque_nm - rig.bias_nm).norm() < 1e-9, "{bias:?}");
+    assert_eq!(rig.estimator.bias(), bias);
+    // From the next cycle: the scripted forces come back at every pose, and
+    // the torque agrees with the model.
+    for (q, f) in [
+        (q, Vector3::zeros()),
+        (NOMINAL_Q, Vector3::new(1.0, -0.5, 0.3)),
+    ] {
+        let out = rig.push(q, &f);
+        assert!((estimate(&out).force_n - f).norm() < 1e-9);
+        assert!(out.torque.unwrap().residual_nm.norm() < 1e-9);
+        assert_eq!(out.guard_state, GuardState::Ok);
+    }
+}
+
+/// A tare can never hide a real force: refused while a part is at or above
+/// its warn limit (even before the debounce has entered Warn), in Warn, Stop
+/// and Fault, and on invalid input; each refusal is reported with its reason
+/// and leaves the bias unchanged. The same rules hold for an explicit bias.
+#[test]
+fn a_tare_is_refused_above_warn_and_outside_ok() {
+    let mut rig = Rig::armed();
+    let before = rig.estimator.bias();
+    let warn_push = Vector3::x() * 9.0; // axial warn 8 N, stop 12 N
+    // Ok, but this sample is above the warn limit.
+    for command in [
+        Command::Tare,
+        Command::SetBias(Bias::force_only(Vector3::zeros())),
+    ] {
+        let out = rig.push_command(NOMINAL_Q, &warn_push, Some(command));
+        assert_eq!(out.guard_state, GuardState::Ok);
+        assert!(
+            matches!(
+                out.command.unwrap().result,
+                Err(CommandRefused::AboveWarn {
+                    reason: Reason::AboveWarn {
+                        part: ForcePart::Axial,
+                        ..
+                    }
+                })
+            ),
+            "{:?}",
+            out.command
+        );
+    }
+    // In Warn.
+    let out = rig.push_command(NOMINAL_Q, &warn_push, Some(Command::Tare));
+    assert_eq!(out.guard_state, GuardState::Warn);
+    assert!(matches!(
+        out.command.unwrap().result,
+        Err(CommandRefused::NotOk {
+            state: GuardState::Warn,
+            ..
+        })
+    ));
+    // In Stop, even once the force is gone.
+    for _ in 0..3 {
+        rig.push(NOMINAL_Q, &(Vector3::x() * 20.0));
+    }
+    let out = rig.push_command(NOMINAL_Q, &Vector3::zeros(), Some(Command::Tare));
+    assert!(matches!(
+        out.command.unwrap().result,
+        Err(CommandRefused::NotOk {
+            state: GuardState::Stop,
+            ..
+        })
+    ));
+    // On invalid input (a NaN sample): Fault, refused.
+    let mut rig = Rig::armed();
+    let mut input = rig.at_rest();
+    input.sensor.force_n.y = f64::NAN;
+    input.command = Some(Command::Tare);
+    let out = *rig.estimator.cycle(&input);
+    assert!(matches!(
+        out.command.unwrap().result,
+        Err(CommandRefused::NotOk {
+            state: GuardState::Fault,
+            reason: Reason::SensorInvalid
+        })
+    ));
+    assert_eq!(rig.estimator.bias(), before);
+    // An explicit bias in Ok below warn is accepted.
+    let mut rig = Rig::armed();
+    let new = Bias {
+        force_n: Vector3::new(0.1, 0.2, 0.3),
+        torque_nm: Vector3::new(0.0, 0.01, 0.0),
+    };
+    let out = rig.push_command(NOMINAL_Q, &Vector3::zeros(), Some(Command::SetBias(new)));
+    assert_eq!(
+        out.command.unwrap().result,
+        Ok(CommandAccepted::BiasSet {
+            previous: before,
+            bias: new
+        })
+    );
+}
+
+// ---------------------------------------------------------------- reset (hole 3)
+
+/// A reset is judged on the input of the cycle that carries it: the force
+/// had gone in the previous cycle, but it is back at stop level in this one,
+/// so the reset is refused (the old `reset_guard` judged the last stepped
+/// input, however old). And a guard reset must name the cycle just stepped.
+#[test]
+fn a_reset_is_judged_on_the_input_of_its_own_cycle() {
+    let mut rig = Rig::armed();
+    for _ in 0..3 {
+        rig.push(NOMINAL_Q, &(Vector3::x() * 20.0));
+    }
+    assert_eq!(rig.estimator.guard_state(), GuardState::Stop);
+    rig.push(NOMINAL_Q, &Vector3::zeros());
+    let out = rig.push_command(NOMINAL_Q, &(Vector3::x() * 20.0), Some(Command::Reset));
+    assert!(matches!(
+        out.command.unwrap().result,
+        Err(CommandRefused::Reset {
+            reason: Reason::AboveStop { .. }
+        })
+    ));
+    assert_eq!(out.guard_state, GuardState::Stop);
+    // In Ok a reset is a no-op, reported as such.
+    let out = rig.reset();
+    assert_eq!(out.guard_state, GuardState::Ok);
+    let out = rig.reset();
+    assert_eq!(
+        out.command.unwrap().result,
+        Ok(CommandAccepted::NothingToReset)
+    );
+    assert_eq!(out.transition, None);
+
+    // The guard itself: a reset that names a later cycle than the one just
+    // stepped is refused.
+    use sar_estimator::guard::{Guard, GuardConfig, GuardInput, TipInput};
+    let mut g = Guard::new(GuardConfig::new(test_guard_limits()).unwrap());
+    let input = GuardInput {
+        cycle: 10,
+        input_fault: None,
+        new_sample: true,
+        sensor_age_ns: 0,
+        sensor_valid: true,
+        joints_age_ns: 0,
+        joints_valid: true,
+        tip: TipInput::Estimate {
+            force_n: Vector3::zeros(),
+            std_n: Vector3::zeros(),
+            rod_dir: Vector3::x(),
+            observable: true,
+            max_std_n: 2.0,
+        },
+    };
+    g.step(&input);
+    assert_eq!(
+        g.reset(11).unwrap_err().reason,
+        Reason::ResetNotCurrent { last: 10, got: 11 }
+    );
+    assert_eq!(g.reset(10).unwrap().unwrap().to, GuardState::Ok);
+}
+
+// ---------------------------------------------------------------- clock (hole 4)
+
+/// A clock that cannot be read, or one that does not advance, is a Fault with
+/// a clock reason of its own, and no age (no sentinel time) is reported.
+#[test]
+fn clock_failures_are_faults_with_their_own_reason() {
+    let mut rig = Rig::armed();
+    let mut input = rig.at_rest();
+    input.now_ns = None;
+    let out = *rig.estimator.cycle(&input);
+    assert_eq!((out.sensor_age_ns, out.joints_age_ns), (None, None));
+    assert_eq!(
+        (out.guard_state, out.guard_reason),
+        (GuardState::Fault, Reason::ClockFailed)
+    );
+
+    // Stuck: the same time twice, every stamp fresh.
+    let mut rig = Rig::armed();
+    let first = rig.at_rest();
+    let mut stuck = rig.at_rest();
+    let t = first.now_ns.unwrap();
+    stuck.now_ns = Some(t);
+    stuck.sensor.stamp_ns = t;
+    stuck.joints.stamp_ns = t;
+    assert_eq!(rig.estimator.cycle(&first).guard_state, GuardState::Ok);
+    let out = *rig.estimator.cycle(&stuck);
+    assert_eq!((out.sensor_age_ns, out.joints_age_ns), (None, None));
+    assert_eq!(
+        (out.guard_state, out.guard_reason),
+        (
+            GuardState::Fault,
+            Reason::ClockNotAdvancing {
+                previous_ns: t,
+                now_ns: t
+            }
+        )
+    );
+}
+
+// ------------------------------------------------------------ input plausibility
+
+/// A joint that moves faster than the axes can between two joint samples is
+/// a Fault (an encoder jump); a move within the speed limit is not.
+#[test]
+fn a_joint_jump_is_a_fault() {
+    let mut rig = Rig::armed_with(Rig::with_config(&config_with_speed(0.05)));
+    // 0.05 m/s over 1 ms is 50 um, plus the 0.2 mm margin: 0.24 mm is fine.
+    let mut q = NOMINAL_Q;
+    q[2] += 0.000_24;
+    assert_eq!(rig.push(q, &Vector3::zeros()).guard_state, GuardState::Ok);
+    // A 2 mm jump of q3.
+    q[2] += 0.002;
+    let out = rig.push(q, &Vector3::zeros());
+    assert_eq!(out.guard_state, GuardState::Fault);
+    match out.guard_reason {
+        Reason::JointJump {
+            axis,
+            moved_m,
+            allowed_m,
+        } => {
+            assert_eq!(axis, 3);
+            assert!((moved_m - 0.002).abs() < 1e-12);
+            assert!((allowed_m - 0.000_25).abs() < 1e-12);
+        }
+        other => panic!("{other:?}"),
+    }
+    // A joint stamp that goes back.
+    let mut rig = Rig::armed_with(Rig::with_config(&config_with_speed(0.05)));
+    let first = rig.at_rest();
+    let mut back = rig.at_rest();
+    back.joints.stamp_ns = first.joints.stamp_ns - 1;
+    rig.estimator.cycle(&first);
+    let out = *rig.estimator.cycle(&back);
+    assert!(matches!(
+        out.guard_reason,
+        Reason::JointsStampBackwards { .. }
+    ));
+}
+
+/// The sensor counter: a gap beyond the limit is a Fault; a wrap from
+/// u32::MAX to 0 is not; the same counter re-stamped every cycle goes stale
+/// 5 ms after its first stamp; a status other than 0 is a Fault.
+#[test]
+fn the_sensor_counter_and_status_are_checked() {
+    let mut rig = Rig::new();
+    rig.counter = u32::MAX - 2;
+    let mut rig = Rig::armed_with(rig);
+    assert_eq!(
+        rig.push(NOMINAL_Q, &Vector3::zeros()).guard_state,
+        GuardState::Ok
+    );
+    assert_eq!(
+        rig.push(NOMINAL_Q, &Vector3::zeros()).guard_state,
+        GuardState::Ok
+    );
+    assert_eq!(rig.counter, 0);
+    // 4 samples lost against a gap of 3.
+    rig.counter += 3;
+    let out = rig.push(NOMINAL_Q, &Vector3::zeros());
+    assert_eq!(
+        out.guard_reason,
+        Reason::SensorCounterGap {
+            previous: 0,
+            got: 4,
+            max_gap: 3
+        }
+    );
+
+    // The same sample, re-stamped fresh every cycle by a broken driver.
+    let mut rig = Rig::armed();
+    let first = rig.at_rest();
+    let counter = first.sensor.counter;
+    rig.estimator.cycle(&first);
+    let mut last = None;
+    for _ in 0..6 {
+        let mut input = rig.at_rest();
+        input.sensor.counter = counter;
+        rig.counter = counter;
+        let out = *rig.estimator.cycle(&input);
+        assert!(!out.new_sample);
+        last = Some(out);
+    }
+    let out = last.unwrap();
+    assert_eq!(out.sensor_age_ns, Some(6_300_000));
+    // Latched at the first cycle beyond 5 ms.
+    assert!(matches!(
+        out.guard_reason,
+        Reason::SensorStale {
+            age_ns: 5_300_000,
+            ..
+        }
+    ));
+
+    let mut rig = Rig::armed();
+    let mut input = rig.at_rest();
+    input.sensor.status = 0x10;
+    let out = *rig.estimator.cycle(&input);
+    assert_eq!(out.guard_reason, Reason::SensorStatus { status: 0x10 });
+}
+
+/// The torque check: the model's torque passes (residual ~0); an untared
+/// torque bias, or a torque on its own (a contact that the force model does
+/// not explain), beyond 7 standard deviations is a Fault that names the axis.
+#[test]
+fn an_implausible_sensor_torque_is_a_fault() {
+    let mut rig = Rig::armed();
+    let out = rig.push(NOMINAL_Q, &Vector3::new(1.0, 2.0, -1.0));
+    let t = out.torque.unwrap();
+    assert!(t.residual_nm.norm() < 1e-12);
+    // std: z axis sqrt(0.002^2 + 0.05^2 0.2^2) = 0.01020 N m.
+    assert!((t.std_nm.z - (0.002f64.powi(2) + (0.05f64 * 0.2).powi(2)).sqrt()).abs() < 1e-12);
+    let mut input = rig.at_rest();
+    input.sensor.torque_nm.z += 8.0 * t.std_nm.z;
+    let out = *rig.estimator.cycle(&input);
+    match out.guard_reason {
+        Reason::TorqueImplausible {
+            axis: Axis::Z,
+            residual_nm,
+            max_sigma,
+            ..
+        } => {
+            assert!((residual_nm - 8.0 * t.std_nm.z).abs() < 1e-12);
+            assert_eq!(max_sigma, TorqueLimits::DEFAULT_MAX_SIGMA);
+        }
+        other => panic!("{other:?}"),
+    }
+    // 6 standard deviations pass.
+    let mut rig = Rig::armed();
+    let mut input = rig.at_rest();
+    input.sensor.torque_nm.x -= 6.0 * t.std_nm.x;
+    assert_eq!(rig.estimator.cycle(&input).guard_state, GuardState::Ok);
+}
+
+/// The guard acts on the estimator's observability flag, with the
+/// estimator's own limit in the reason; the number is kept in the output.
+#[test]
+fn the_guard_faults_on_the_observability_flag() {
+    let mut config = config_with_speed(1e3);
+    config.tip.max_std_n = 0.1; // below the nominal pose's std
+    let mut rig = Rig::with_config(&config);
+    let out = rig.reset();
+    let TipOutcome::Estimate(e) = out.tip else {
+        panic!("{:?}", out.tip)
+    };
+    assert!(!e.observable);
+    assert_eq!(out.guard_state, GuardState::Fault);
+    assert!(
+        matches!(
+            out.command.unwrap().result,
+            Err(CommandRefused::Reset {
+                reason: Reason::NotObservable { max_std_n, std_max_n }
+            }) if max_std_n == 0.1 && std_max_n == e.std_n.max()
+        ),
+        "{:?}",
+        out.command
+    );
 }

@@ -13,7 +13,7 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
 use sar_estimator::SettingError;
 use sar_estimator::guard::{
-    Axis, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState, MAX_DEBOUNCE_CYCLES,
+    Axis, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState, MAX_DEBOUNCE_SAMPLES,
     MAX_STD_MARGIN, Reason, TipField, TipInput, Transition,
 };
 
@@ -34,12 +34,20 @@ fn limits() -> GuardLimits {
         warn_lateral_n: 6.0,
         stop_lateral_n: 10.0,
         hysteresis_n: 1.0,
-        debounce_cycles: 3,
+        debounce_samples: 3,
         max_sensor_age_ns: 2 * MS_NS,
         max_joints_age_ns: 3 * MS_NS,
-        max_std_n: 2.0,
         std_margin: 0.0,
     }
+}
+
+/// The estimator's observability limit in these tests, N.
+const MAX_STD_N: f64 = 2.0;
+
+/// The estimator's flag: every standard deviation within [`MAX_STD_N`]
+/// (NaN is not).
+fn observable(std_n: &V) -> bool {
+    std_n.iter().all(|s| *s <= MAX_STD_N)
 }
 
 /// A tilted, turned rod direction (unit) and two unit vectors across it.
@@ -69,6 +77,8 @@ fn parts(f: &V, u: &V) -> [f64; 3] {
 fn input(cycle: u64, force_n: V) -> GuardInput {
     GuardInput {
         cycle,
+        input_fault: None,
+        new_sample: true,
         sensor_age_ns: 500_000,
         sensor_valid: true,
         joints_age_ns: 700_000,
@@ -77,6 +87,8 @@ fn input(cycle: u64, force_n: V) -> GuardInput {
             force_n,
             std_n: V::new(0.3, 0.4, 0.5),
             rod_dir: rod_basis().0,
+            observable: observable(&(V::new(0.3, 0.4, 0.5))),
+            max_std_n: MAX_STD_N,
         },
     }
 }
@@ -241,7 +253,7 @@ fn starts_in_fault_and_a_reset_after_a_good_input_gives_ok() {
     assert_eq!(rig.guard.reason(), Reason::NoInputYet);
 
     // Refused before any input.
-    let refused = rig.guard.reset(7).unwrap_err();
+    let refused = rig.guard.reset(rig.cycle).unwrap_err();
     assert_eq!(refused.reason, Reason::NoInputYet);
     assert_eq!(rig.state(), GuardState::Fault);
 
@@ -252,11 +264,19 @@ fn starts_in_fault_and_a_reset_after_a_good_input_gives_ok() {
     assert_eq!(rig.state(), GuardState::Fault);
     assert_eq!(rig.guard.reason(), Reason::NoInputYet);
 
-    let t = rig.guard.reset(1234).unwrap().unwrap();
+    // A reset must name the cycle just stepped (10).
+    assert_eq!(
+        rig.guard.reset(1234).unwrap_err().reason,
+        Reason::ResetNotCurrent {
+            last: 10,
+            got: 1234
+        }
+    );
+    let t = rig.guard.reset(rig.cycle).unwrap().unwrap();
     assert_eq!(
         t,
         Transition {
-            cycle: 1234,
+            cycle: 10,
             from: GuardState::Fault,
             to: GuardState::Ok,
             reason: Reason::Reset
@@ -270,14 +290,14 @@ fn starts_in_fault_and_a_reset_after_a_good_input_gives_ok() {
 fn reset_in_ok_or_warn_is_a_no_op() {
     let mut rig = Rig::ok();
     rig.hold(warn_axial(), 1);
-    assert_eq!(rig.guard.reset(99), Ok(None));
+    assert_eq!(rig.guard.reset(rig.cycle), Ok(None));
     assert_eq!(rig.state(), GuardState::Ok);
     // The reset did not clear the warn count: two more cycles enter Warn.
     rig.hold(warn_axial(), 1);
     let t = rig.push(warn_axial()).unwrap();
     assert_eq!(t.to, GuardState::Warn);
     let reason = rig.guard.reason();
-    assert_eq!(rig.guard.reset(100), Ok(None));
+    assert_eq!(rig.guard.reset(rig.cycle), Ok(None));
     assert_eq!(rig.state(), GuardState::Warn);
     assert_eq!(rig.guard.reason(), reason);
 }
@@ -311,11 +331,11 @@ fn ok_to_warn_after_debounce_for_each_part() {
 }
 
 #[test]
-fn a_dip_restarts_the_warn_debounce() {
+fn a_dip_steps_the_warn_count_down_by_one() {
     let mut rig = Rig::ok();
     rig.hold(warn_axial(), 2);
-    rig.hold(low(), 1); // the dip
-    rig.hold(warn_axial(), 2);
+    rig.hold(low(), 1); // the dip: 2 -> 1
+    rig.hold(warn_axial(), 1);
     assert_eq!(rig.state(), GuardState::Ok);
     let t = rig.push(warn_axial()).unwrap();
     assert_eq!(t.to, GuardState::Warn);
@@ -325,7 +345,7 @@ fn a_dip_restarts_the_warn_debounce() {
 #[test]
 fn debounce_one_switches_in_a_single_cycle() {
     let mut rig = Rig::ok_with(GuardLimits {
-        debounce_cycles: 1,
+        debounce_samples: 1,
         ..limits()
     });
     assert_eq!(rig.push(warn_lateral()).unwrap().to, GuardState::Warn);
@@ -359,10 +379,11 @@ fn warn_clears_only_below_warn_minus_hysteresis_after_debounce() {
         // In the band: stays Warn however long.
         rig.hold(band, 50);
         assert_eq!(rig.state(), GuardState::Warn);
-        // Below: two cycles are not enough, a band cycle restarts the count.
+        // Below: two samples are not enough, a band sample steps the count
+        // down by one.
         rig.hold(low(), 2);
         rig.hold(band, 1);
-        rig.hold(low(), 2);
+        rig.hold(low(), 1);
         assert_eq!(rig.state(), GuardState::Warn);
         let t = rig.push(low()).unwrap();
         assert_eq!(
@@ -437,12 +458,13 @@ fn warn_to_stop_for_each_part_alone() {
 }
 
 #[test]
-fn a_dip_restarts_the_stop_debounce() {
+fn a_dip_steps_the_stop_count_down_by_one() {
     let mut rig = Rig::ok();
     rig.hold(stop_axial(), 2);
-    // Below stop, still above warn: the third warn-level cycle enters Warn.
+    // Below stop, still above warn: the third warn-level sample enters Warn;
+    // the stop count goes from 2 to 1.
     assert_eq!(rig.push(warn_axial()).unwrap().to, GuardState::Warn);
-    rig.hold(stop_axial(), 2);
+    rig.hold(stop_axial(), 1);
     assert_eq!(rig.state(), GuardState::Warn);
     assert_eq!(rig.push(stop_axial()).unwrap().to, GuardState::Stop);
 }
@@ -490,10 +512,17 @@ fn fault_cases() -> Vec<(&'static str, Edit, Reason)> {
         force_n: f,
         std_n: s,
         rod_dir: u,
+        observable: observable(&(s)),
+        max_std_n: MAX_STD_N,
     };
     let u = rod_basis().0;
     let s = V::new(0.3, 0.4, 0.5);
     vec![
+        (
+            "input fault (found by the caller: the clock)",
+            Box::new(|i: &mut GuardInput| i.input_fault = Some(Reason::ClockFailed)),
+            Reason::ClockFailed,
+        ),
         (
             "sensor invalid",
             Box::new(|i: &mut GuardInput| i.sensor_valid = false),
@@ -700,6 +729,8 @@ fn fault_conditions_are_checked_in_the_documented_order() {
                 force_n: V::new(0.0, 0.0, f64::NAN),
                 std_n: V::new(f64::NAN, -1.0, 9.0),
                 rod_dir: u * 2.0,
+                observable: observable(&(V::new(f64::NAN, -1.0, 9.0))),
+                max_std_n: MAX_STD_N,
             },
             Reason::NonFinite {
                 field: TipField::Force,
@@ -711,6 +742,8 @@ fn fault_conditions_are_checked_in_the_documented_order() {
                 force_n: V::zeros(),
                 std_n: V::new(9.0, -1.0, 9.0),
                 rod_dir: V::new(f64::INFINITY, 0.0, 0.0),
+                observable: observable(&(V::new(9.0, -1.0, 9.0))),
+                max_std_n: MAX_STD_N,
             },
             Reason::NonFinite {
                 field: TipField::RodDir,
@@ -722,6 +755,8 @@ fn fault_conditions_are_checked_in_the_documented_order() {
                 force_n: V::zeros(),
                 std_n: V::new(9.0, -1.0, 9.0),
                 rod_dir: u * 2.0,
+                observable: observable(&(V::new(9.0, -1.0, 9.0))),
+                max_std_n: MAX_STD_N,
             },
             Reason::NegativeStd {
                 axis: Axis::Y,
@@ -733,6 +768,8 @@ fn fault_conditions_are_checked_in_the_documented_order() {
                 force_n: V::zeros(),
                 std_n: V::new(9.0, 1.0, 9.5),
                 rod_dir: u * 0.5,
+                observable: observable(&(V::new(9.0, 1.0, 9.5))),
+                max_std_n: MAX_STD_N,
             },
             Reason::RodDirNotUnit { norm: 0.5 },
         ),
@@ -741,6 +778,8 @@ fn fault_conditions_are_checked_in_the_documented_order() {
                 force_n: V::zeros(),
                 std_n: V::new(9.0, 1.0, 9.5),
                 rod_dir: u,
+                observable: observable(&(V::new(9.0, 1.0, 9.5))),
+                max_std_n: MAX_STD_N,
             },
             Reason::NotObservable {
                 std_max_n: 9.5,
@@ -772,6 +811,8 @@ fn values_at_the_fault_limits_are_accepted() {
                 force_n: V::zeros(),
                 std_n: V::new(2.0, 0.0, 2.0),
                 rod_dir: u * (1.0 + 5e-7),
+                observable: observable(&(V::new(2.0, 0.0, 2.0))),
+                max_std_n: MAX_STD_N,
             };
         }),
         None
@@ -797,10 +838,15 @@ fn a_repeated_or_earlier_cycle_is_a_fault_and_the_largest_cycle_is_kept() {
             }
         )
     );
-    // An earlier cycle: still compared with 10, and the reset is refused.
+    // An earlier cycle: still compared with 10, and the reset is refused
+    // (naming cycle 4 is not naming the current cycle either).
     assert_eq!(g.step(&input(4, V::zeros())), None);
     assert_eq!(
         g.reset(4).unwrap_err().reason,
+        Reason::ResetNotCurrent { last: 10, got: 4 }
+    );
+    assert_eq!(
+        g.reset(10).unwrap_err().reason,
         Reason::CycleOutOfOrder {
             previous: 10,
             got: 4
@@ -844,11 +890,11 @@ fn reset_is_refused_while_the_force_is_at_or_above_stop() {
         assert_eq!(rig.state(), GuardState::Stop);
         // Below stop but above warn: accepted; then Warn comes back after the debounce.
         rig.hold(warn_force(part), 1);
-        let t = rig.guard.reset(rig.cycle + 1000).unwrap().unwrap();
+        let t = rig.guard.reset(rig.cycle).unwrap().unwrap();
         assert_eq!(
             t,
             Transition {
-                cycle: rig.cycle + 1000,
+                cycle: rig.cycle,
                 from: GuardState::Stop,
                 to: GuardState::Ok,
                 reason: Reason::Reset
@@ -869,6 +915,8 @@ fn reset_is_refused_exactly_at_the_stop_limit() {
                 force_n: V::new(f, 0.0, 0.0),
                 std_n: V::zeros(),
                 rod_dir: V::x(),
+                observable: observable(&(V::zeros())),
+                max_std_n: MAX_STD_N,
             }
         }
     };
@@ -884,9 +932,9 @@ fn reset_is_refused_exactly_at_the_stop_limit() {
             limit_n: 15.0
         }
     );
-    assert!(rig.guard.reset(0).is_err());
+    assert!(rig.guard.reset(rig.cycle).is_err());
     rig.push_with(along_x(14.999));
-    assert!(rig.guard.reset(0).is_ok());
+    assert!(rig.guard.reset(rig.cycle).is_ok());
 }
 
 #[test]
@@ -895,14 +943,17 @@ fn reset_judges_the_most_recent_input_without_debounce() {
     rig.hold(low(), 5);
     rig.hold(stop_lateral(), 1);
     assert!(matches!(
-        rig.guard.reset(0).unwrap_err().reason,
+        rig.guard.reset(rig.cycle).unwrap_err().reason,
         Reason::AboveStop {
             part: ForcePart::Lateral,
             ..
         }
     ));
     rig.hold(low(), 1);
-    assert_eq!(rig.guard.reset(0).unwrap().unwrap().to, GuardState::Ok);
+    assert_eq!(
+        rig.guard.reset(rig.cycle).unwrap().unwrap().to,
+        GuardState::Ok
+    );
 }
 
 #[test]
@@ -914,13 +965,13 @@ fn reset_is_refused_while_a_fault_persists() {
         age_ns: 5 * MS_NS,
         max_age_ns: 2 * MS_NS,
     };
-    assert_eq!(rig.guard.reset(0).unwrap_err().reason, want);
+    assert_eq!(rig.guard.reset(rig.cycle).unwrap_err().reason, want);
     rig.push_with(stale);
-    assert_eq!(rig.guard.reset(0).unwrap_err().reason, want);
+    assert_eq!(rig.guard.reset(rig.cycle).unwrap_err().reason, want);
     // The most recent input decides: now the joints.
     rig.push_with(|i| i.joints_valid = false);
     assert_eq!(
-        rig.guard.reset(0).unwrap_err().reason,
+        rig.guard.reset(rig.cycle).unwrap_err().reason,
         Reason::JointsInvalid
     );
     assert_eq!(rig.state(), GuardState::Fault);
@@ -928,10 +979,10 @@ fn reset_is_refused_while_a_fault_persists() {
     // Cause gone: accepted.
     rig.hold(low(), 1);
     assert_eq!(rig.guard.reset_blocker(), None);
-    let t = rig.guard.reset(77).unwrap().unwrap();
+    let t = rig.guard.reset(rig.cycle).unwrap().unwrap();
     assert_eq!(
         (t.cycle, t.from, t.to, t.reason),
-        (77, GuardState::Fault, GuardState::Ok, Reason::Reset)
+        (rig.cycle, GuardState::Fault, GuardState::Ok, Reason::Reset)
     );
 }
 
@@ -940,7 +991,7 @@ fn an_accepted_reset_clears_the_debounce_counters() {
     // Warn count: two warn-level cycles before the reset do not count after it.
     let mut rig = Rig::in_state(GuardState::Stop);
     rig.hold(warn_axial(), 2);
-    rig.guard.reset(0).unwrap().unwrap();
+    rig.guard.reset(rig.cycle).unwrap().unwrap();
     rig.hold(warn_axial(), 2);
     assert_eq!(rig.state(), GuardState::Ok);
     assert_eq!(rig.push(warn_axial()).unwrap().to, GuardState::Warn);
@@ -950,7 +1001,7 @@ fn an_accepted_reset_clears_the_debounce_counters() {
     rig.push_with(|i| i.sensor_valid = false).unwrap();
     rig.hold(stop_axial(), 2);
     rig.hold(warn_axial(), 1);
-    rig.guard.reset(0).unwrap().unwrap();
+    rig.guard.reset(rig.cycle).unwrap().unwrap();
     rig.hold(stop_axial(), 2);
     assert_eq!(rig.state(), GuardState::Ok);
     assert_eq!(rig.push(stop_axial()).unwrap().to, GuardState::Stop);
@@ -978,13 +1029,9 @@ fn invalid_configurations_are_refused() {
         ("hysteresis_n", |l| l.hysteresis_n = l.warn_lateral_n),
         ("hysteresis_n", |l| l.hysteresis_n = 7.0),
         ("hysteresis_n", |l| l.hysteresis_n = f64::INFINITY),
-        ("debounce_cycles", |l| l.debounce_cycles = 0),
+        ("debounce_samples", |l| l.debounce_samples = 0),
         ("max_sensor_age_ns", |l| l.max_sensor_age_ns = 0),
         ("max_joints_age_ns", |l| l.max_joints_age_ns = 0),
-        ("max_std_n", |l| l.max_std_n = 0.0),
-        ("max_std_n", |l| l.max_std_n = -2.0),
-        ("max_std_n", |l| l.max_std_n = f64::NAN),
-        ("max_std_n", |l| l.max_std_n = f64::INFINITY),
     ];
     for (field, edit) in cases {
         let mut l = limits();
@@ -1006,10 +1053,9 @@ fn invalid_configurations_are_refused() {
 fn edge_valid_configurations_are_accepted() {
     let l = GuardLimits {
         hysteresis_n: 0.0,
-        debounce_cycles: MAX_DEBOUNCE_CYCLES,
+        debounce_samples: MAX_DEBOUNCE_SAMPLES,
         max_sensor_age_ns: u64::MAX,
         max_joints_age_ns: 1,
-        max_std_n: f64::MAX,
         std_margin: 0.0,
         ..limits()
     };
@@ -1059,6 +1105,8 @@ fn huge_forces_stop_with_a_number_not_nan() {
                 force_n: f,
                 std_n: V::zeros(),
                 rod_dir: V::x(),
+                observable: observable(&(V::zeros())),
+                max_std_n: MAX_STD_N,
             }
         });
         assert!(matches!(
@@ -1071,6 +1119,8 @@ fn huge_forces_stop_with_a_number_not_nan() {
                     force_n: f,
                     std_n: V::zeros(),
                     rod_dir: V::x(),
+                    observable: observable(&(V::zeros())),
+                    max_std_n: MAX_STD_N,
                 }
             });
         }
@@ -1095,10 +1145,10 @@ fn huge_forces_stop_with_a_number_not_nan() {
 #[test]
 fn the_largest_debounce_transitions_exactly_when_it_ends() {
     let mut rig = Rig::ok_with(GuardLimits {
-        debounce_cycles: MAX_DEBOUNCE_CYCLES,
+        debounce_samples: MAX_DEBOUNCE_SAMPLES,
         ..limits()
     });
-    rig.hold(stop_total(), MAX_DEBOUNCE_CYCLES - 1);
+    rig.hold(stop_total(), MAX_DEBOUNCE_SAMPLES - 1);
     assert_eq!(rig.state(), GuardState::Ok);
     let t = rig.push(stop_total()).unwrap();
     assert_eq!(t.to, GuardState::Stop);
@@ -1106,13 +1156,13 @@ fn the_largest_debounce_transitions_exactly_when_it_ends() {
 
 #[test]
 fn a_debounce_that_would_disable_stop_is_refused() {
-    for debounce_cycles in [MAX_DEBOUNCE_CYCLES + 1, u32::MAX] {
+    for debounce_samples in [MAX_DEBOUNCE_SAMPLES + 1, u32::MAX] {
         let err = GuardConfig::new(GuardLimits {
-            debounce_cycles,
+            debounce_samples,
             ..limits()
         })
         .unwrap_err();
-        assert!(err.to_string().contains("debounce_cycles"), "{err}");
+        assert!(err.to_string().contains("debounce_samples"), "{err}");
     }
 }
 
@@ -1148,12 +1198,14 @@ fn std_margin_stops_a_force_that_may_be_above_the_limit() {
         let mut g = Guard::new(GuardConfig::new(GuardLimits { std_margin, ..l }).unwrap());
         g.step(&input(1, V::zeros()));
         g.reset(1).unwrap();
-        for cycle in 2..=u64::from(l.debounce_cycles) + 1 {
+        for cycle in 2..=u64::from(l.debounce_samples) + 1 {
             g.step(&GuardInput {
                 tip: TipInput::Estimate {
                     force_n,
                     std_n,
                     rod_dir: u,
+                    observable: observable(&(std_n)),
+                    max_std_n: MAX_STD_N,
                 },
                 ..input(cycle, force_n)
             });
@@ -1263,6 +1315,8 @@ enum Kind {
     NegativeStd(usize),
     RodNotUnit,
     StdHigh,
+    /// A fault found by the caller in the inputs (here: the clock).
+    InputFault,
     /// A cycle this far at or behind the largest one so far.
     CycleBack(u64),
 }
@@ -1277,6 +1331,8 @@ enum Op {
         angles: (f64, f64, f64),
         std_n: (f64, f64, f64),
         dcycle: u64,
+        /// Whether the sensor sample is a new one.
+        new_sample: bool,
     },
     Reset,
 }
@@ -1296,6 +1352,7 @@ fn kind_strategy() -> impl Strategy<Value = Kind> {
         1 => (0..3usize).prop_map(Kind::NegativeStd),
         1 => Just(Kind::RodNotUnit),
         1 => Just(Kind::StdHigh),
+        1 => Just(Kind::InputFault),
         1 => (0..4u64).prop_map(Kind::CycleBack),
     ]
 }
@@ -1311,15 +1368,17 @@ fn op_strategy() -> impl Strategy<Value = Op> {
         (0.0..6.3_f64, -1.3..1.3_f64, 0.0..6.3_f64),
         (0.0..1.9_f64, 0.0..1.9_f64, 0.0..1.9_f64),
         1..4u64,
+        prop::bool::weighted(0.75),
     )
         .prop_map(
-            |(kind, axial_n, negative, lateral_n, angles, std_n, dcycle)| Op::Step {
+            |(kind, axial_n, negative, lateral_n, angles, std_n, dcycle, new_sample)| Op::Step {
                 kind,
                 axial_n: if negative { -axial_n } else { axial_n },
                 lateral_n,
                 angles,
                 std_n,
                 dcycle,
+                new_sample,
             },
         );
     prop_oneof![12 => step, 1 => Just(Op::Reset)]
@@ -1334,6 +1393,7 @@ fn make_input(op: &Op, largest_cycle: &mut u64) -> GuardInput {
         angles: (heading, tilt, around),
         std_n: (sx, sy, sz),
         dcycle,
+        new_sample,
     } = *op
     else {
         unreachable!()
@@ -1357,6 +1417,8 @@ fn make_input(op: &Op, largest_cycle: &mut u64) -> GuardInput {
     };
     let mut i = GuardInput {
         cycle,
+        input_fault: None,
+        new_sample,
         sensor_age_ns: 1_000_000,
         sensor_valid: true,
         joints_age_ns: 1_500_000,
@@ -1365,6 +1427,7 @@ fn make_input(op: &Op, largest_cycle: &mut u64) -> GuardInput {
     };
     match kind {
         Kind::SensorInvalid => i.sensor_valid = false,
+        Kind::InputFault => i.input_fault = Some(Reason::ClockFailed),
         Kind::SensorStale => i.sensor_age_ns = 2 * MS_NS + dcycle,
         Kind::JointsInvalid => i.joints_valid = false,
         Kind::JointsStale => i.joints_age_ns = u64::MAX - dcycle,
@@ -1383,6 +1446,8 @@ fn make_input(op: &Op, largest_cycle: &mut u64) -> GuardInput {
             force_n,
             std_n,
             rod_dir,
+            observable: observable(&(std_n)),
+            max_std_n: MAX_STD_N,
         },
     };
     i
@@ -1399,15 +1464,24 @@ enum Class {
     },
 }
 
-/// An independent reference model: the state machine written with a window
-/// over the inputs since the last accepted reset instead of counters.
+/// An independent reference model: the state machine written with the
+/// history of new samples since the last fault or accepted reset, its up/down
+/// counts recomputed from that history at every step, instead of counters.
 struct Model {
     l: GuardLimits,
     state: GuardState,
     reason: Reason,
     largest_cycle: Option<u64>,
     last: Option<Class>,
-    since_reset: Vec<Class>,
+    /// The largest cycle stepped.
+    last_cycle: Option<u64>,
+    /// The classes of the new samples since the last fault or accepted reset.
+    history: Vec<Class>,
+    /// Where each count starts in `history` (entering Warn restarts the clear
+    /// count, leaving it the warn count).
+    stop_from: usize,
+    warn_from: usize,
+    clear_from: usize,
 }
 
 impl Model {
@@ -1418,7 +1492,11 @@ impl Model {
             reason: Reason::NoInputYet,
             largest_cycle: None,
             last: None,
-            since_reset: Vec::new(),
+            last_cycle: None,
+            history: Vec::new(),
+            stop_from: 0,
+            warn_from: 0,
+            clear_from: 0,
         }
     }
 
@@ -1433,6 +1511,9 @@ impl Model {
             });
         }
         self.largest_cycle = Some(i.cycle);
+        if let Some(r) = i.input_fault {
+            return Class::Fault(r);
+        }
         if !i.sensor_valid {
             return Class::Fault(Reason::SensorInvalid);
         }
@@ -1451,14 +1532,16 @@ impl Model {
                 max_age_ns: l.max_joints_age_ns,
             });
         }
-        let (f, s, u) = match i.tip {
+        let (f, s, u, observable, max_std_n) = match i.tip {
             TipInput::PoseInvalid => return Class::Fault(Reason::PoseInvalid),
             TipInput::NotObservable => return Class::Fault(Reason::EstimatorNotObservable),
             TipInput::Estimate {
                 force_n,
                 std_n,
                 rod_dir,
-            } => (force_n, std_n, rod_dir),
+                observable,
+                max_std_n,
+            } => (force_n, std_n, rod_dir, observable, max_std_n),
         };
         let axes = [Axis::X, Axis::Y, Axis::Z];
         for (field, v) in [
@@ -1488,10 +1571,10 @@ impl Model {
             return Class::Fault(Reason::RodDirNotUnit { norm });
         }
         let std_max_n = s.iter().cloned().fold(f64::MIN, f64::max);
-        if std_max_n > l.max_std_n {
+        if !observable {
             return Class::Fault(Reason::NotObservable {
                 std_max_n,
-                max_std_n: l.max_std_n,
+                max_std_n,
             });
         }
         let margin = l.std_margin * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
@@ -1537,34 +1620,61 @@ impl Model {
         Some(t)
     }
 
+    /// The up/down count of `pred` over the new samples from `from` on,
+    /// within 0..=debounce.
+    fn count(&self, from: usize, pred: impl Fn(&Class) -> bool) -> u32 {
+        let d = self.l.debounce_samples;
+        self.history[from..].iter().fold(0, |c, x| {
+            if pred(x) {
+                (c + 1).min(d)
+            } else {
+                c.saturating_sub(1)
+            }
+        })
+    }
+
     fn step(&mut self, i: &GuardInput) -> Option<Transition> {
         let class = self.classify(i);
         self.last = Some(class);
+        self.last_cycle = Some(i.cycle.max(self.last_cycle.unwrap_or(0)));
         if let Class::Fault(reason) = class {
+            self.history.clear();
+            (self.stop_from, self.warn_from, self.clear_from) = (0, 0, 0);
             return self.go(GuardState::Fault, reason, i.cycle);
         }
-        self.since_reset.push(class);
+        if i.new_sample {
+            self.history.push(class);
+        }
         if !matches!(self.state, GuardState::Ok | GuardState::Warn) {
             return None;
         }
-        let n = self.l.debounce_cycles as usize;
-        if self.since_reset.len() < n {
-            return None;
-        }
-        let window = &self.since_reset[self.since_reset.len() - n..];
-        let all = |pred: &dyn Fn(&Class) -> bool| window.iter().all(pred);
-        let Class::Force { stop, warn, .. } = class else {
+        let d = self.l.debounce_samples;
+        let Class::Force { stop, warn, clear } = class else {
             unreachable!()
         };
-        if all(&|c| matches!(c, Class::Force { stop: Some(_), .. })) {
-            return self.go(GuardState::Stop, stop.unwrap(), i.cycle);
-        }
-        if self.state == GuardState::Ok && all(&|c| matches!(c, Class::Force { warn: Some(_), .. }))
+        let stop_count = self.count(self.stop_from, |c| {
+            matches!(c, Class::Force { stop: Some(_), .. })
+        });
+        let warn_count = self.count(self.warn_from, |c| {
+            matches!(c, Class::Force { warn: Some(_), .. })
+        });
+        let clear_count = self.count(self.clear_from, |c| {
+            matches!(c, Class::Force { clear: true, .. })
+        });
+        if let Some(reason) = stop
+            && stop_count >= d
         {
-            return self.go(GuardState::Warn, warn.unwrap(), i.cycle);
+            return self.go(GuardState::Stop, reason, i.cycle);
         }
-        if self.state == GuardState::Warn && all(&|c| matches!(c, Class::Force { clear: true, .. }))
+        if let Some(reason) = warn
+            && self.state == GuardState::Ok
+            && warn_count >= d
         {
+            self.clear_from = self.history.len();
+            return self.go(GuardState::Warn, reason, i.cycle);
+        }
+        if self.state == GuardState::Warn && clear && clear_count >= d {
+            self.warn_from = self.history.len();
             return self.go(GuardState::Ok, Reason::BelowWarn, i.cycle);
         }
         None
@@ -1574,12 +1684,20 @@ impl Model {
         if matches!(self.state, GuardState::Ok | GuardState::Warn) {
             return Ok(None);
         }
+        match self.last_cycle {
+            None => return Err(Reason::NoInputYet),
+            Some(last) if last != cycle => {
+                return Err(Reason::ResetNotCurrent { last, got: cycle });
+            }
+            _ => {}
+        }
         match self.last {
             None => Err(Reason::NoInputYet),
             Some(Class::Fault(r)) => Err(r),
             Some(Class::Force { stop: Some(r), .. }) => Err(r),
             Some(Class::Force { stop: None, .. }) => {
-                self.since_reset.clear();
+                self.history.clear();
+                (self.stop_from, self.warn_from, self.clear_from) = (0, 0, 0);
                 Ok(self.go(GuardState::Ok, Reason::Reset, cycle))
             }
         }
@@ -1664,7 +1782,7 @@ fn the_generator_reaches_every_transition() {
     for _ in 0..CASES {
         let (debounce, hysteresis_n, ops) = strategy.new_tree(&mut runner).unwrap().current();
         let l = GuardLimits {
-            debounce_cycles: debounce,
+            debounce_samples: debounce,
             hysteresis_n,
             ..limits()
         };
@@ -1728,7 +1846,7 @@ proptest! {
     ) {
         // Half the sequences compare with a margin of 1.5 standard deviations.
         let std_margin = if debounce % 2 == 0 { 1.5 } else { 0.0 };
-        let l = GuardLimits { debounce_cycles: debounce, hysteresis_n, std_margin, ..limits() };
+        let l = GuardLimits { debounce_samples: debounce, hysteresis_n, std_margin, ..limits() };
         let mut guard = Guard::new(GuardConfig::new(l).unwrap());
         let mut model = Model::new(l);
         let mut largest_cycle = 0u64;

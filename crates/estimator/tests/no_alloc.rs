@@ -73,7 +73,10 @@ mod common;
 use common::*;
 use nalgebra::Vector3;
 use sar_estimator::SensorNoise;
-use sar_estimator::cycle::{CycleInput, Estimator, JointSample, SensorSample};
+use sar_estimator::cycle::{
+    Bias, Command, CycleInput, Estimator, JointSample, PlausibilityConfig, PlausibilityLimits,
+    SensorSample,
+};
 use sar_estimator::guard::GuardState;
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
@@ -81,7 +84,9 @@ use sar_kinematics::ActiveJoints;
 
 /// Builds a scripted run (before counting): moving poses, pushes through Warn
 /// and Stop, a NaN sample, a stale sample, a degenerate pose, an unobservable
-/// pose, so that every branch of the path is taken.
+/// pose, a failed and a stuck clock, a counter gap, a repeated sample, a bad
+/// status, a joint jump, a wrong torque, and reset, tare and set-bias
+/// commands, so that every branch of the path is taken.
 fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
     let bias_n = Vector3::new(0.4, -1.1, 0.25);
     let mut sensor = NoisySensor::new(SensorNoise::HEX6_STD_N, 0x5eed_0a11);
@@ -97,20 +102,47 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
             let tip = Vector3::new(f64::from(phase as u32 % 400) * 0.05, 0.5, -0.3);
             let mut reading = sensor.sample(&example_reading(q, &tip, &bias_n));
             let now_ns = 1_000_000_000 + cycle * 1_000_000;
+            let mut now = Some(now_ns);
             let mut sensor_stamp_ns = now_ns - 200_000;
+            let mut counter = cycle as u32;
+            let mut status = 0;
+            let mut torque_error_nm = 0.0;
+            let mut command = match phase % 97 {
+                0 => Some(Command::Reset),
+                1 => Some(Command::Tare),
+                2 => Some(Command::SetBias(Bias::force_only(bias_n))),
+                3 => Some(Command::SetBias(Bias::force_only(Vector3::new(
+                    f64::NAN,
+                    0.0,
+                    0.0,
+                )))),
+                _ => None,
+            };
             match phase {
                 500 => reading.x = f64::NAN,
                 600 => sensor_stamp_ns = now_ns - 50_000_000,
                 700 => q = [0.0, 0.28, 0.45], // U-joint at the support
                 800 => q = [0.0, 0.28, 0.1005], // tip almost at the support
+                850 => now = None,
+                860 => now = Some(now_ns - 2_000_000), // the clock went back
+                870 => counter += 10,                  // a counter gap
+                880..=883 => counter = 880,            // a repeated sample
+                890 => status = 4,
+                900 => q[2] += 0.01, // a joint jump
+                910 => torque_error_nm = 1.0,
+                920 => command = Some(Command::Reset),
                 _ => {}
             }
             CycleInput {
                 cycle,
-                now_ns,
+                now_ns: now,
                 sensor: SensorSample {
                     force_n: reading,
-                    torque_nm: Vector3::zeros(),
+                    // t = (A - S) x (f - b_f), A - S = (0, -0.05, 0) (R_0s = I).
+                    torque_nm: Vector3::new(0.0, -0.05, 0.0).cross(&(reading - bias_n))
+                        + Vector3::x() * torque_error_nm,
+                    counter,
+                    status,
                     stamp_ns: sensor_stamp_ns,
                     valid: true,
                 },
@@ -123,22 +155,37 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
                     stamp_ns: now_ns - 100_000,
                     valid: true,
                 },
+                command,
             }
         })
         .collect()
 }
 
-/// 20 000 cycles of the whole per-cycle path (kinematics, tip force, guard,
-/// resets) allocate nothing; and the run did visit Warn, Stop and Fault.
+/// 20 000 cycles of the whole per-cycle path (plausibility with the torque
+/// check on, kinematics, tip force, guard, commands) allocate nothing; and the
+/// run did visit Warn, Stop and Fault, and accepted and refused commands.
 #[test]
 fn the_per_cycle_path_allocates_nothing() {
-    let inputs = scripted_inputs(20_000);
-    let mut estimator =
-        Estimator::new(&example_estimator_config(), Vector3::new(0.4, -1.1, 0.25)).unwrap();
+    let mut inputs = scripted_inputs(20_000);
+    let mut config = example_estimator_config();
+    config.plausibility = PlausibilityConfig::new(PlausibilityLimits::default()).unwrap();
+    let mut estimator = Estimator::new(&config, Vector3::new(0.4, -1.1, 0.25)).unwrap();
     let mut seen = [false; 4];
+    let mut commands = [0usize; 2];
     let (_, allocations) = allocations_in(|| {
-        for input in &inputs {
+        for input in inputs.iter_mut() {
+            // After a Stop or Fault the next cycle carries a reset.
+            if matches!(
+                estimator.last().guard_state,
+                GuardState::Stop | GuardState::Fault
+            ) && input.command.is_none()
+            {
+                input.command = Some(Command::Reset);
+            }
             let out = estimator.cycle(input);
+            if let Some(event) = out.command {
+                commands[usize::from(event.result.is_ok())] += 1;
+            }
             let k = match out.guard_state {
                 GuardState::Ok => 0,
                 GuardState::Warn => 1,
@@ -146,13 +193,14 @@ fn the_per_cycle_path_allocates_nothing() {
                 GuardState::Fault => 3,
             };
             seen[k] = true;
-            if matches!(out.guard_state, GuardState::Stop | GuardState::Fault) {
-                let _ = estimator.reset_guard(input.cycle);
-            }
         }
     });
     assert_eq!(allocations, 0, "the per-cycle path allocated");
     assert_eq!(seen, [true; 4], "the script must visit every guard state");
+    assert!(
+        commands[0] > 10 && commands[1] > 10,
+        "refused, accepted: {commands:?}"
+    );
 }
 
 /// Identification updates and solves, and a support fit, allocate nothing either.

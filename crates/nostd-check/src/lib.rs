@@ -4,7 +4,10 @@
 //! own `#[panic_handler]` then collides with std's.
 #![no_std]
 
-use sar_estimator::cycle::{CycleInput, Estimator, EstimatorConfig, JointSample, SensorSample};
+use sar_estimator::cycle::{
+    Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig, SensorSample,
+};
+use sar_estimator::tip_force::TipForceConfig;
 use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
@@ -32,10 +35,9 @@ fn config() -> Option<EstimatorConfig> {
         warn_lateral_n: 6.0,
         stop_lateral_n: 10.0,
         hysteresis_n: 1.0,
-        debounce_cycles: 3,
+        debounce_samples: 3,
         max_sensor_age_ns: 5_000_000,
         max_joints_age_ns: 5_000_000,
-        max_std_n: 2.0,
         std_margin: 0.0,
     })
     .ok()?;
@@ -49,7 +51,9 @@ fn config() -> Option<EstimatorConfig> {
         })
         .ok()?,
         noise: SensorNoise::hex6(),
+        tip: TipForceConfig::default(),
         guard,
+        plausibility: PlausibilityConfig::default(),
     })
 }
 
@@ -61,16 +65,21 @@ pub extern "C" fn sar_nostd_cycle(q1_m: f64, q2_m: f64, q3_m: f64, fx_n: f64, fy
     let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
         return -1;
     };
+    // The torque the model predicts: (A - S) x f with A - S = (0, -0.05, 0).
+    let force_n = Vec3::new(fx_n, fy_n, fz_n);
     let out = estimator.cycle(&CycleInput {
         cycle: 1,
-        now_ns: 1_000,
+        now_ns: Some(1_000),
         sensor: SensorSample {
-            force_n: Vec3::new(fx_n, fy_n, fz_n),
-            torque_nm: Vec3::zeros(),
+            force_n,
+            torque_nm: Vec3::new(0.0, -0.05, 0.0).cross(&force_n),
+            counter: 1,
+            status: 0,
             stamp_ns: 1_000,
             valid: true,
         },
         joints: JointSample { joints: ActiveJoints { q1_m, q2_m, q3_m }, stamp_ns: 1_000, valid: true },
+        command: Some(Command::Reset),
     });
     out.guard_state as i32
 }

@@ -47,9 +47,10 @@ const MAX_RECV_TIMEOUT_NS: u64 = 50_000_000;
 /// "No filter or rate to send" in the shared settings.
 const UNSET: u32 = u32::MAX;
 
-/// Host time, ns; the one place the driver reads the clock.
-fn host_now_ns(clock: &MonotonicClock) -> u64 {
-    clock.now_ns()
+/// Host time, ns; the one place the driver reads the clock. A failed read is
+/// [`RdtError::Clock`], never a made-up time.
+fn host_now_ns(clock: &MonotonicClock) -> Result<u64, RdtError> {
+    clock.now_ns().map_err(|_| RdtError::Clock)
 }
 
 fn io(op: &'static str) -> impl FnOnce(std::io::Error) -> RdtError {
@@ -69,6 +70,7 @@ struct Counters {
     silences: AtomicU64,
     restarts: AtomicU64,
     io_errors: AtomicU64,
+    clock_errors: AtomicU64,
 }
 
 fn bump(counter: &AtomicU64, by: u64) {
@@ -154,7 +156,7 @@ impl RdtSensor {
             rate_period_ms: AtomicU32::new(config.rate_hz.map_or(UNSET, |hz| 1000 / hz.max(1))),
         });
         send_start(&socket, &shared)?;
-        let started_ns = host_now_ns(&clock);
+        let started_ns = host_now_ns(&clock)?;
         shared.last_received_ns.store(started_ns, Ordering::Relaxed);
         let mut receiver = Receiver {
             socket: socket.try_clone().map_err(io("try_clone"))?,
@@ -209,6 +211,7 @@ impl RdtSensor {
             restarts: get(&c.restarts),
             ring_overflows: self.shared.ring.overflows(),
             io_errors: get(&c.io_errors),
+            clock_errors: get(&c.clock_errors),
         }
     }
 
@@ -308,13 +311,13 @@ impl ForceSensor for RdtSensor {
     /// the deadline; at the deadline, [`RdtError::Silent`] if the sensor is
     /// silent, else [`RdtError::Timeout`].
     fn wait(&mut self, timeout_ns: u64) -> Result<WrenchSample, RdtError> {
-        let deadline_ns = host_now_ns(&self.clock).saturating_add(timeout_ns);
+        let deadline_ns = host_now_ns(&self.clock)?.saturating_add(timeout_ns);
         loop {
             if let Some(sample) = self.take_new() {
                 return Ok(sample);
             }
             self.check_alive()?;
-            let now_ns = host_now_ns(&self.clock);
+            let now_ns = host_now_ns(&self.clock)?;
             if now_ns >= deadline_ns {
                 return Err(if self.is_silent() {
                     self.silent_error()
@@ -453,10 +456,11 @@ impl Receiver {
         let mut buf = [0u8; RESPONSE_LEN + 1];
         while !self.shared.stop.load(Ordering::Acquire) {
             match self.socket.recv(&mut buf) {
-                Ok(n) => {
-                    let now_ns = host_now_ns(&self.clock);
-                    self.handle(buf.get(..n).unwrap_or(&[]), now_ns);
-                }
+                Ok(n) => match host_now_ns(&self.clock) {
+                    Ok(now_ns) => self.handle(buf.get(..n).unwrap_or(&[]), now_ns),
+                    // No time to stamp it with: dropped and counted.
+                    Err(_) => bump(&self.shared.counters.clock_errors, 1),
+                },
                 Err(e)
                     if matches!(
                         e.kind(),
@@ -469,7 +473,9 @@ impl Receiver {
                     std::thread::sleep(Duration::from_nanos(MIN_RECV_TIMEOUT_NS));
                 }
             }
-            self.check_silence(host_now_ns(&self.clock));
+            if let Ok(now_ns) = host_now_ns(&self.clock) {
+                self.check_silence(now_ns);
+            }
         }
     }
 

@@ -197,6 +197,10 @@ pub struct RdtStats {
     pub ring_overflows: u64,
     /// Socket errors other than timeouts (e.g. ICMP port unreachable).
     pub io_errors: u64,
+    /// Packets dropped because the host's clock could not be read to stamp
+    /// them (never stamped with a made-up time); a clock that stays unreadable
+    /// makes the sensor silent.
+    pub clock_errors: u64,
 }
 
 /// An error of the RDT driver.

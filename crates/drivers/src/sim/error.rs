@@ -67,6 +67,9 @@ pub enum SimError {
         /// The present time, ns from start.
         elapsed_ns: u64,
     },
+    /// The clock could not be read.
+    #[error(transparent)]
+    Clock(#[from] crate::ClockError),
     /// No sample arrived within the wait.
     #[error("no sensor sample within {timeout_ns} ns")]
     Timeout {
@@ -126,6 +129,7 @@ impl Error for SimError {
     fn kind(&self) -> ErrorKind {
         match self {
             Self::Timeout { .. } => ErrorKind::Timeout,
+            Self::Clock(e) => crate::Error::kind(e),
             Self::InvalidState { .. } => ErrorKind::InvalidState,
             Self::Unsupported { .. } => ErrorKind::Unsupported,
             Self::InvalidSpec { .. }

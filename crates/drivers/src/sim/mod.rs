@@ -213,7 +213,7 @@ impl<C: Clock> ForceSensor for SimSensor<C> {
         with_world(&self.world, |w| {
             let deadline_ns = w
                 .clock()
-                .now_ns()
+                .now_ns()?
                 .saturating_add(timeout_ns.min(SimSensor::<C>::MAX_WAIT_NS));
             // Each pass moves the clock to the next reception or the deadline.
             loop {
@@ -221,7 +221,7 @@ impl<C: Clock> ForceSensor for SimSensor<C> {
                 if let Some(sample) = w.take_newest() {
                     return Ok(sample);
                 }
-                let now_ns = w.clock().now_ns();
+                let now_ns = w.clock().now_ns()?;
                 if now_ns >= deadline_ns {
                     return Err(SimError::Timeout { timeout_ns });
                 }

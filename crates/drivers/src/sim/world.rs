@@ -275,7 +275,7 @@ impl<C: Clock> World<C> {
     /// Checks `spec` and builds the world at the clock's present time.
     pub fn new(spec: SimSpec, clock: C) -> Result<Self, SimError> {
         validate(&spec)?;
-        let t0_ns = clock.now_ns();
+        let t0_ns = clock.now_ns()?;
         let start = joints_to_array(&spec.axes.start);
         let limits = Limits {
             max_speed_mps: spec.axes.max_speed_mps,
@@ -329,9 +329,13 @@ impl<C: Clock> World<C> {
         &self.clock
     }
 
-    /// Processes every event up to the clock's present time.
+    /// Processes every event up to the clock's present time (nothing when the
+    /// clock cannot be read: time does not move, samples go stale).
     pub fn advance(&mut self) {
-        let now = self.clock.now_ns().saturating_sub(self.t0_ns);
+        let Ok(now) = self.clock.now_ns() else {
+            return;
+        };
+        let now = now.saturating_sub(self.t0_ns);
         if now > self.done_ns {
             self.process_until(now);
         }

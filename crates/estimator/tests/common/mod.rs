@@ -289,7 +289,7 @@ pub fn manipulator2_truth() -> Truth {
 }
 
 /// Guard limits for tests: total 10/15 N, axial 8/12 N, lateral 6/10 N,
-/// hysteresis 1 N, debounce 3 cycles, inputs at most 5 ms old, std at most 2 N.
+/// hysteresis 1 N, debounce 3 new samples, inputs at most 5 ms old.
 pub fn test_guard_limits() -> sar_estimator::guard::GuardLimits {
     sar_estimator::guard::GuardLimits {
         warn_total_n: 10.0,
@@ -299,10 +299,9 @@ pub fn test_guard_limits() -> sar_estimator::guard::GuardLimits {
         warn_lateral_n: 6.0,
         stop_lateral_n: 10.0,
         hysteresis_n: 1.0,
-        debounce_cycles: 3,
+        debounce_samples: 3,
         max_sensor_age_ns: 5_000_000,
         max_joints_age_ns: 5_000_000,
-        max_std_n: 2.0,
         std_margin: 0.0,
     }
 }
@@ -313,7 +312,17 @@ pub fn example_estimator_config() -> sar_estimator::cycle::EstimatorConfig {
         calibration: example_calibration(),
         profile: manipulator2(),
         noise: sar_estimator::SensorNoise::hex6(),
+        tip: sar_estimator::tip_force::TipForceConfig::default(),
         guard: sar_estimator::guard::GuardConfig::new(test_guard_limits()).unwrap(),
+        // The default checks, without the torque check: `example_reading`
+        // gives no torque (the cycle tests add it where they check it).
+        plausibility: sar_estimator::cycle::PlausibilityConfig::new(
+            sar_estimator::cycle::PlausibilityLimits {
+                torque: None,
+                ..Default::default()
+            },
+        )
+        .unwrap(),
     }
 }
 
