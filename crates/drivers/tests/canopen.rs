@@ -106,10 +106,9 @@ impl Rig {
             }
             self.bus.tick();
             if self.now() >= self.next_cycle_ns {
-                if self.host_alive {
-                    if let Err(e) = self.drives.cycle() {
-                        self.errors.push(e);
-                    }
+                let result = self.host_alive.then(|| self.drives.cycle());
+                if let Some(Err(e)) = result {
+                    self.errors.push(e);
                 }
                 self.next_cycle_ns += MS;
             }
@@ -388,8 +387,8 @@ fn enable_walks_shutdown_switch_on_enable_operation() {
         assert_eq!(rig.cia402(axis), Cia402State::OperationEnabled);
     }
     // Enabling did not move the axes.
-    for axis in 0..3 {
-        assert!((rig.true_position(axis) - START_M[axis]).abs() <= count_m());
+    for (axis, start) in START_M.iter().enumerate() {
+        assert!((rig.true_position(axis) - start).abs() <= count_m());
     }
 }
 
