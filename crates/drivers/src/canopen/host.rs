@@ -553,8 +553,7 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
             let actual_m = self.m(a.counts);
             let streaming = self.fault.is_none()
                 && self.want == Want::Enabled
-                && state == Some(Cia402State::OperationEnabled)
-                && a.tpdo_sync == self.sync_count;
+                && state == Some(Cia402State::OperationEnabled);
             let cw = if self.fault.is_some() {
                 match (state, reset_phase) {
                     (Some(Cia402State::Fault), Some(0)) => control::DISABLE_VOLTAGE,
@@ -576,16 +575,15 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
                 }
             };
             let fresh = complete || a.tpdo_sync == self.sync_count;
-            let target_m = if streaming {
-                a.plan.at(next_ns).x_m
-            } else {
-                actual_m
-            };
+            // Not streaming: hold where the drive is (or, without a fresh
+            // position this SYNC, where the host last held it).
+            let mut target_m = a.plan.at(next_ns).x_m;
             if let Some(axis) = self.axes.get_mut(i) {
                 if streaming {
                     axis.was_enabled = true;
                 } else if fresh {
                     axis.plan = AxisPlan::hold(next_ns, actual_m);
+                    target_m = actual_m;
                 }
             }
             let counts = self.counts(target_m);

@@ -22,6 +22,8 @@ mod bus;
 pub mod frame;
 mod host;
 mod slave;
+#[cfg(all(feature = "socketcan", target_os = "linux"))]
+pub mod socketcan;
 
 pub use bus::{MemBus, MemBusError, MemCan};
 pub use host::{CanOpenDrives, CycleReport};
@@ -214,6 +216,14 @@ pub enum CanOpenError {
         /// The controller's own description.
         detail: String,
     },
+    /// The CAN interface could not be opened.
+    #[error("CAN interface {interface}: {detail}")]
+    Open {
+        /// The interface.
+        interface: String,
+        /// The system's reason.
+        detail: String,
+    },
     /// A frame could not be built or sent (queue full).
     #[error("CAN frame {cob_id:#05x} could not be sent")]
     Transmit {
@@ -256,7 +266,7 @@ impl Error for CanOpenError {
             Self::SdoAbort { .. } | Self::WrongMode { .. } | Self::FaultPersists { .. } => {
                 ErrorKind::DeviceFault
             }
-            Self::Bus { .. } | Self::Transmit { .. } => ErrorKind::Disconnected,
+            Self::Bus { .. } | Self::Transmit { .. } | Self::Open { .. } => ErrorKind::Disconnected,
             Self::InvalidState { .. } => ErrorKind::InvalidState,
         }
     }
