@@ -2,8 +2,9 @@
 //! an `embedded_can::nb::Can`) and simulated drives on the other. A frame the
 //! host sends reaches every drive at once (their replies are queued for the
 //! host in order); [`MemBus::tick`] lets the drives' time pass (heartbeats,
-//! watchdogs). Nothing runs on its own: a test steps the bus by hand, on the
-//! same simulated clock as the host. Error frames and bus-off are injected.
+//! watchdogs), as does every receive of the host once the clock has moved.
+//! Nothing runs on its own: a test steps the bus by hand, on the same
+//! simulated clock as the host. Error frames and bus-off are injected.
 
 use super::frame::RawFrame;
 use super::slave::SimCia402Drive;
@@ -52,9 +53,23 @@ struct Inner {
     overrun: bool,
     sent: Vec<RawFrame>,
     scratch: Vec<RawFrame>,
+    ticked_ns: u64,
 }
 
 impl Inner {
+    /// Lets the drives' time pass to the clock's now (once per instant).
+    fn tick(&mut self) {
+        let now = self.clock.now_ns();
+        if now == self.ticked_ns {
+            return;
+        }
+        self.ticked_ns = now;
+        for d in self.drives.iter_mut() {
+            d.tick(now, &mut self.scratch);
+        }
+        self.queue();
+    }
+
     fn queue(&mut self) {
         let frames: Vec<RawFrame> = self.scratch.drain(..).collect();
         for f in frames {
@@ -89,6 +104,7 @@ impl MemBus {
                 overrun: false,
                 sent: Vec::new(),
                 scratch: Vec::new(),
+                ticked_ns: u64::MAX,
             })),
         }
     }
@@ -107,15 +123,10 @@ impl MemBus {
         }
     }
 
-    /// Lets the drives' time pass to the clock's now.
+    /// Lets the drives' time pass to the clock's now (the host's receive
+    /// does the same whenever the clock has moved).
     pub fn tick(&self) {
-        let mut guard = self.inner.borrow_mut();
-        let inner = &mut *guard;
-        let now = inner.clock.now_ns();
-        for d in inner.drives.iter_mut() {
-            d.tick(now, &mut inner.scratch);
-        }
-        inner.queue();
+        self.inner.borrow_mut().tick();
     }
 
     /// Runs `f` on drive `index` (None if there is none); what the drive
@@ -186,6 +197,7 @@ impl embedded_can::nb::Can for MemCan {
 
     fn receive(&mut self) -> nb::Result<RawFrame, MemBusError> {
         let mut inner = self.inner.borrow_mut();
+        inner.tick();
         if inner.bus_off {
             return Err(nb::Error::Other(MemBusError::BusOff));
         }

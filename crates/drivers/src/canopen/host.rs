@@ -153,10 +153,23 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
         for node in ids {
             me.send(COB_NMT, &[nmt::START, node])?;
         }
-        let now = me.clock.now_ns();
+        // The start is confirmed by each drive's heartbeat saying operational.
         for a in &mut me.axes {
-            a.heartbeat_ns = now;
-            a.nmt_state = heartbeat::OPERATIONAL;
+            a.nmt_state = heartbeat::PRE_OPERATIONAL;
+        }
+        let timeout_ns = u64::from(me.config.drive_heartbeat_timeout_ms) * 1_000_000;
+        let operational = |me: &Self| {
+            me.axes
+                .iter()
+                .all(|a| a.nmt_state == heartbeat::OPERATIONAL)
+        };
+        if !operational(&me) && !me.wait(timeout_ns, |me, _| operational(me)) {
+            let node = me
+                .axes
+                .iter()
+                .find(|a| a.nmt_state != heartbeat::OPERATIONAL)
+                .map_or(0, |a| a.node);
+            return Err(CanOpenError::NotOperational { node, timeout_ns });
         }
         Ok(me)
     }

@@ -199,6 +199,14 @@ pub enum CanOpenError {
         /// The bound, ns.
         timeout_ns: u64,
     },
+    /// No heartbeat saying operational after the NMT start within the bound.
+    #[error("node {node}: not operational within {timeout_ns} ns of the NMT start")]
+    NotOperational {
+        /// Node id.
+        node: u8,
+        /// The bound, ns.
+        timeout_ns: u64,
+    },
     /// The drive did not take cyclic synchronous position mode.
     #[error("node {node}: mode of operation is {mode}, not 8 (CSP)")]
     WrongMode {
@@ -262,7 +270,9 @@ impl Error for CanOpenError {
     fn kind(&self) -> ErrorKind {
         match self {
             Self::InvalidConfig { .. } | Self::InvalidTarget { .. } => ErrorKind::InvalidArgument,
-            Self::SdoTimeout { .. } | Self::NoBootUp { .. } => ErrorKind::Timeout,
+            Self::SdoTimeout { .. } | Self::NoBootUp { .. } | Self::NotOperational { .. } => {
+                ErrorKind::Timeout
+            }
             Self::SdoAbort { .. } | Self::WrongMode { .. } | Self::FaultPersists { .. } => {
                 ErrorKind::DeviceFault
             }

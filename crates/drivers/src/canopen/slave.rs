@@ -8,8 +8,8 @@
 //! interpolator EXTRAPOLATES at the last set-point velocity (the worst case a
 //! real drive's interpolator may do: a host that stops sending leaves the axis
 //! moving until the drive's own watchdog acts). A set point further than 1.5
-//! times the speed limit allows since the last SYNC (at least 2 ms, for the
-//! host's jitter) is a following error (EMCY 0x8611, Fault).
+//! times the speed limit allows since the last SYNC (at least 10 ms worth, for
+//! the host's jitter) is a following error (EMCY 0x8611, Fault).
 //! Quick stop, halt, disable and fault reaction brake at the acceleration
 //! limit (the planner's `brake`) and hold.
 //!
@@ -471,9 +471,9 @@ impl SimCia402Drive {
         };
         let dt_s = crate::convert::ns_to_s(since_ns);
         let step_m = target_m - from_m;
-        // The check allows for a late or early SYNC (host jitter): never less
-        // than 2 ms worth of motion.
-        let allowed_m = 1.5 * self.spec.max_speed_mps * dt_s.max(0.002) + 2.0 * self.m_per_count();
+        // The check allows for a late or early SYNC and a lost RPDO (host
+        // jitter, a real-time bus): never less than 10 ms worth of motion.
+        let allowed_m = 1.5 * self.spec.max_speed_mps * dt_s.max(0.010) + 2.0 * self.m_per_count();
         if step_m.abs() > allowed_m {
             self.enter_fault(EMCY_FOLLOWING_ERROR, now_ns, out);
             return;
