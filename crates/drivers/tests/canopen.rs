@@ -629,3 +629,26 @@ fn bus_errors_are_reported_and_a_bus_off_becomes_a_fault() {
     );
     assert!(rig.drives.bus_errors() > 0);
 }
+
+#[test]
+fn a_set_point_jump_is_a_following_error_fault() {
+    let mut rig = Rig::new();
+    rig.enable();
+    // A set point 5 cm away, straight into drive 1, applied at the next SYNC.
+    let far = ((START_M[0] + 0.05) / count_m()).round() as i32;
+    let rpdo = RawFrame::new_data(COB_RPDO1 + 1, &frame::encode_rpdo(0x0F, far)).unwrap();
+    let sync = RawFrame::new_data(COB_SYNC, &[]).unwrap();
+    rig.drive(0, |d, now, out| {
+        d.on_frame(&rpdo, now, out);
+        d.on_frame(&sync, now, out);
+    });
+    rig.run(2 * MS);
+    assert_eq!(
+        rig.drives.state().unwrap(),
+        DriveState::Fault {
+            axis: Some(0),
+            code: 0x8611
+        }
+    );
+    assert!((rig.true_position(0) - START_M[0]).abs() <= count_m());
+}
