@@ -17,8 +17,8 @@ use sar_drivers::canopen::frame::{
     self, COB_RPDO1, COB_SDO_RX, COB_SYNC, Cia402State, RawFrame, Sdo, control, decode_rpdo,
 };
 use sar_drivers::canopen::{
-    CanOpenConfig, CanOpenDrives, CanOpenError, MemBus, MemBusError, MemCan, SimCia402Drive,
-    SimDriveSpec,
+    CanOpenConfig, CanOpenDrives, CanOpenError, FOLLOWING_WINDOW_M, MemBus, MemBusError, MemCan,
+    SimCia402Drive, SimDriveSpec,
 };
 use sar_drivers::{AxisDrives, Clock, DriveState, Error, ErrorKind, SimClock};
 use sar_kinematics::ActiveJoints;
@@ -53,6 +53,7 @@ fn drive_spec(axis: usize) -> SimDriveSpec {
         max_speed_mps: V_MAX,
         max_accel_mps2: A_MAX,
         start_m: START_M[axis],
+        following_window_m: FOLLOWING_WINDOW_M,
     }
 }
 

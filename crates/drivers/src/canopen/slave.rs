@@ -8,8 +8,8 @@
 //! interpolator EXTRAPOLATES at the last set-point velocity (the worst case a
 //! real drive's interpolator may do: a host that stops sending leaves the axis
 //! moving until the drive's own watchdog acts; the extrapolation speed is
-//! clamped to the speed limit). A set point further than
-//! [`FOLLOWING_WINDOW_M`] from the actual position is a following error (EMCY
+//! clamped to the speed limit). A set point further than the
+//! following window (default [`FOLLOWING_WINDOW_M`]) from the actual position is a following error (EMCY
 //! 0x8611, Fault).
 //! Quick stop, halt, disable and fault reaction brake at the acceleration
 //! limit (the planner's `brake`) and hold.
@@ -52,6 +52,10 @@ pub struct SimDriveSpec {
     pub max_accel_mps2: f64,
     /// Position at power-on, m.
     pub start_m: f64,
+    /// A set point further than this from the actual position is a
+    /// following error, m ([`FOLLOWING_WINDOW_M`] unless a test on a
+    /// non-real-time host needs more).
+    pub following_window_m: f64,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -471,7 +475,7 @@ impl SimCia402Drive {
         }
         let target_m = f64::from(self.target_counts) * self.m_per_count();
         let actual_m = self.axis_state(now_ns).x_m;
-        if (target_m - actual_m).abs() > FOLLOWING_WINDOW_M {
+        if (target_m - actual_m).abs() > self.spec.following_window_m {
             self.enter_fault(EMCY_FOLLOWING_ERROR, now_ns, out);
             return;
         }
