@@ -653,3 +653,42 @@ fn a_set_point_jump_is_a_following_error_fault() {
     );
     assert!((rig.true_position(0) - START_M[0]).abs() <= count_m());
 }
+
+// ---------------------------------------------------------------------------
+// Robustness: arbitrary frames never panic the decoders or the simulated drive
+
+use proptest::prelude::*;
+use proptest::test_runner::{Config as ProptestConfig, RngSeed};
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: 2000,
+        rng_seed: RngSeed::Fixed(0xca40_9e11),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+
+    #[test]
+    fn arbitrary_frames_never_panic(
+        frames in proptest::collection::vec(
+            (
+                // Any id, and often the drive's own NMT, SYNC, RPDO and SDO.
+                prop_oneof![0u16..0x800, Just(0u16), Just(0x80), Just(0x201), Just(0x601)],
+                proptest::collection::vec(any::<u8>(), 0..=8),
+            ),
+            1..40,
+        )
+    ) {
+        let mut drive = SimCia402Drive::new(drive_spec(0), 0);
+        let mut out = Vec::new();
+        for (k, (id, data)) in frames.iter().enumerate() {
+            let _ = Sdo::decode(data);
+            let _ = frame::Emcy::decode(data);
+            let _ = frame::decode_tpdo(data);
+            let f = RawFrame::new_data(*id, data).unwrap();
+            drive.on_frame(&f, k as u64 * MS, &mut out);
+            drive.tick(k as u64 * MS, &mut out);
+        }
+        prop_assert!(drive.position_m(40 * MS).is_finite());
+    }
+}
