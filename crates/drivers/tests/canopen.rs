@@ -692,3 +692,31 @@ proptest! {
         prop_assert!(drive.position_m(40 * MS).is_finite());
     }
 }
+
+#[test]
+fn halt_brakes_and_holds_in_operation_enabled_and_release_resumes_the_move() {
+    let mut rig = Rig::new();
+    assert_eq!(
+        rig.drives.set_halt(true).unwrap_err().kind(),
+        ErrorKind::InvalidState
+    );
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(300 * MS);
+    rig.drives.set_halt(true).unwrap();
+    rig.run(200 * MS);
+    let held = rig.true_position(2);
+    rig.run(300 * MS);
+    assert_eq!(rig.true_position(2), held);
+    assert_eq!(rig.drive(2, |d, now, _| d.velocity_mps(now)), 0.0);
+    assert!(held < 0.35 - 0.01, "{held}");
+    for axis in 0..3 {
+        assert_eq!(rig.cia402(axis), Cia402State::OperationEnabled);
+    }
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
+    rig.drives.set_halt(false).unwrap();
+    rig.run(2 * S);
+    let p = rig.drives.positions().unwrap();
+    assert!((p.joints.q3_m - 0.35).abs() <= count_m(), "{p:?}");
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
+}

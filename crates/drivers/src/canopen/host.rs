@@ -97,6 +97,8 @@ pub struct CanOpenDrives<C: Can, K: Clock> {
     positions: JointPositions,
     bus_error: Option<CanOpenError>,
     bus_errors: u64,
+    halted: bool,
+    goal_m: Option<[f64; 3]>,
 }
 
 impl<C: Can, K: Clock> CanOpenDrives<C, K> {
@@ -144,6 +146,8 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
             },
             bus_error: None,
             bus_errors: 0,
+            halted: false,
+            goal_m: None,
         };
         for node in ids {
             me.boot(node)?;
@@ -177,6 +181,39 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
     /// The configuration.
     pub fn config(&self) -> &CanOpenConfig {
         &self.config
+    }
+
+    /// Halt (control word bit 8) while `Enabled`: the drives brake at their
+    /// limit and hold, staying in Operation enabled; on release the move to
+    /// the last target resumes from where they stopped. Targets set while
+    /// halted are kept for the release. `ErrorKind::InvalidState` outside
+    /// `Enabled`.
+    pub fn set_halt(&mut self, halt: bool) -> Result<(), CanOpenError> {
+        let state = self.logical_state();
+        if state != DriveState::Enabled {
+            return Err(CanOpenError::InvalidState { state });
+        }
+        if self.halted
+            && !halt
+            && let Some(goal) = self.goal_m
+        {
+            self.plan_to(goal);
+        }
+        self.halted = halt;
+        Ok(())
+    }
+
+    /// Whether the drives are halted.
+    pub fn halted(&self) -> bool {
+        self.halted
+    }
+
+    fn plan_to(&mut self, goal: [f64; 3]) {
+        let start_ns = self.sync_ns.saturating_add(self.config.sync_period_ns);
+        for (a, target) in self.axes.iter_mut().zip(goal) {
+            let from = a.plan.at(start_ns);
+            a.plan = AxisPlan::to_target(start_ns, from, target, self.limits);
+        }
     }
 
     /// Bus errors seen since start.
@@ -545,6 +582,8 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
                 self.fault = None;
                 self.reset_cycles = None;
                 self.want = Want::Ready;
+                self.halted = false;
+                self.goal_m = None;
                 for a in &mut self.axes {
                     a.emcy_code = None;
                     a.was_enabled = false;
@@ -564,9 +603,10 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
             };
             let state = a.cia402();
             let actual_m = self.m(a.counts);
-            let streaming = self.fault.is_none()
+            let enabled = self.fault.is_none()
                 && self.want == Want::Enabled
                 && state == Some(Cia402State::OperationEnabled);
+            let streaming = enabled && !self.halted;
             let cw = if self.fault.is_some() {
                 match (state, reset_phase) {
                     (Some(Cia402State::Fault), Some(0)) => control::DISABLE_VOLTAGE,
@@ -580,6 +620,10 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
                     (_, Some(Cia402State::QuickStopActive)) => control::DISABLE_VOLTAGE,
                     (Want::Ready, _) => control::SHUTDOWN,
                     (Want::Enabled, Some(Cia402State::ReadyToSwitchOn)) => control::SWITCH_ON,
+                    (
+                        Want::Enabled,
+                        Some(Cia402State::SwitchedOn | Cia402State::OperationEnabled),
+                    ) if self.halted => control::ENABLE_OPERATION | control::HALT,
                     (
                         Want::Enabled,
                         Some(Cia402State::SwitchedOn | Cia402State::OperationEnabled),
@@ -667,6 +711,10 @@ impl<C: Can, K: Clock> AxisDrives for CanOpenDrives<C, K> {
                 Err(CanOpenError::InvalidState { state: s })
             }
             _ => {
+                if self.want != Want::Enabled {
+                    self.halted = false;
+                    self.goal_m = None;
+                }
                 self.want = Want::Enabled;
                 Ok(())
             }
@@ -678,6 +726,8 @@ impl<C: Can, K: Clock> AxisDrives for CanOpenDrives<C, K> {
             s @ DriveState::Fault { .. } => Err(CanOpenError::InvalidState { state: s }),
             _ => {
                 self.want = Want::Ready;
+                self.halted = false;
+                self.goal_m = None;
                 for a in &mut self.axes {
                     a.was_enabled = false;
                 }
@@ -692,10 +742,9 @@ impl<C: Can, K: Clock> AxisDrives for CanOpenDrives<C, K> {
             return Err(CanOpenError::InvalidState { state });
         }
         let q = self.check_target(&targets)?;
-        let start_ns = self.sync_ns.saturating_add(self.config.sync_period_ns);
-        for (a, target) in self.axes.iter_mut().zip(q) {
-            let from = a.plan.at(start_ns);
-            a.plan = AxisPlan::to_target(start_ns, from, target, self.limits);
+        self.goal_m = Some(q);
+        if !self.halted {
+            self.plan_to(q);
         }
         Ok(())
     }
@@ -703,6 +752,8 @@ impl<C: Can, K: Clock> AxisDrives for CanOpenDrives<C, K> {
     fn quick_stop(&mut self) -> Result<(), CanOpenError> {
         if self.fault.is_none() {
             self.want = Want::QuickStop;
+            self.halted = false;
+            self.goal_m = None;
             for a in &mut self.axes {
                 a.was_enabled = false;
             }
