@@ -46,6 +46,10 @@ pub struct JointPositions {
     /// drive: the receive time less the known transport delay), ns.
     pub stamp_ns: u64,
     /// The drives' word that the positions are good (encoders healthy, no fault).
+    /// A position is valid only once every drive reports its absolute encoder
+    /// referenced (the CANopen driver reads status word bit 15, see
+    /// [`crate::canopen::frame::STATUS_REFERENCED`]); before, `valid` is false
+    /// whatever the numbers say.
     pub valid: bool,
 }
 
@@ -54,7 +58,9 @@ pub struct JointPositions {
 /// Commands are requests: a real drive needs several exchanges (CiA 402
 /// controlword/statusword round trips) before its state changes, so a command
 /// may return before `state()` shows the result. No call blocks beyond the
-/// implementation's own bounded exchange time. Targets are positions the drives
+/// implementation's own bounded exchange time (a bus-based implementation such
+/// as [`crate::canopen::CanOpenDrives`] exchanges with the devices only in its
+/// own per-period `cycle`, which the caller runs). Targets are positions the drives
 /// plan a limited-speed, limited-acceleration move to (profile position mode),
 /// never set points they jump to.
 pub trait AxisDrives {

@@ -9,6 +9,7 @@
 //! the implementation. Every implementation passes the same conformance suite
 //! (`tests/conformance/`).
 
+pub mod canopen;
 pub mod clock;
 mod convert;
 pub mod drives;

@@ -1,0 +1,288 @@
+//! The axis drives over CANopen: three CiA 402 drives in cyclic synchronous
+//! position mode (CSP), driven by [`CanOpenDrives`], which implements
+//! [`crate::AxisDrives`] and is generic over the `embedded-can` non-blocking
+//! [`embedded_can::nb::Can`] trait: SocketCAN on the robot (feature
+//! `socketcan`, Linux), the in-memory [`MemBus`] in tests.
+//!
+//! - [`frame`]: the wire (COB-IDs, NMT, expedited SDO, PDO, EMCY, heartbeat,
+//!   control and status words).
+//! - [`MemBus`]: a deterministic in-memory bus stepped by hand, carrying
+//!   [`SimCia402Drive`]s, simulated CANopen slaves built on the simulator's
+//!   axis model (the motion planner and its limits).
+//! - [`CanOpenDrives`]: start-up, the per-cycle SYNC / TPDO / RPDO exchange,
+//!   the CiA 402 state machine, EMCY and heartbeat supervision.
+//!
+//! Positions: the encoders are absolute multiturn (12 bits per turn, 20 bits
+//! of turns, so a 32-bit count); metres = counts x `lead_m` / `counts_per_turn`.
+//! A position is valid only while the drive reports its encoder referenced,
+//! which this project reads in status word bit 15 (manufacturer specific,
+//! [`frame::STATUS_REFERENCED`]).
+
+mod bus;
+pub mod frame;
+mod host;
+mod slave;
+#[cfg(all(feature = "socketcan", target_os = "linux"))]
+pub mod socketcan;
+
+pub use bus::{MemBus, MemBusError, MemCan};
+pub use host::{CanOpenDrives, CycleReport};
+pub use slave::{FOLLOWING_WINDOW_M, SimCia402Drive, SimDriveSpec, serve};
+
+use crate::{Error, ErrorKind};
+
+/// The configuration of the CANopen axis drives (INTERFACES.md 2
+/// `[drivers.axes]`: `node_ids`, `lead_m`, `counts_per_turn`; the rest has
+/// defaults, see [`CanOpenConfig::new`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CanOpenConfig {
+    /// Node ids of q1, q2, q3 (1..=127, distinct).
+    pub node_ids: [u8; 3],
+    /// Carriage travel per motor turn, m.
+    pub lead_m: f64,
+    /// Encoder counts per turn (4096 for 12 bits).
+    pub counts_per_turn: u32,
+    /// The host's own node id, for its heartbeat (1..=127, not a drive's).
+    pub host_node_id: u8,
+    /// SYNC period = control loop period, ns.
+    pub sync_period_ns: u64,
+    /// Speed limit of the planned moves, m/s.
+    pub max_speed_mps: f64,
+    /// Acceleration limit of the planned moves, m/s^2.
+    pub max_accel_mps2: f64,
+    /// Travel of q1, q2, q3 (min, max), m; targets outside are refused.
+    pub travel_m: [(f64, f64); 3],
+    /// The host's heartbeat period, ms.
+    pub host_heartbeat_ms: u16,
+    /// The drives' consumer time for the host's heartbeat, ms: a host silent
+    /// longer than this makes every drive quick stop (0x6007 = 3).
+    pub host_heartbeat_timeout_ms: u16,
+    /// The drives' heartbeat period, ms.
+    pub drive_heartbeat_ms: u16,
+    /// A drive whose heartbeat is older than this is lost (a fault), ms.
+    pub drive_heartbeat_timeout_ms: u16,
+    /// Bound on one SDO exchange, ns.
+    pub sdo_timeout_ns: u64,
+    /// Bound on the wait for the TPDOs of a SYNC, ns.
+    pub pdo_wait_ns: u64,
+    /// Bound on the wait for a drive's boot-up after an NMT reset, ns.
+    pub boot_timeout_ns: u64,
+    /// How long the host sleeps between polls of the bus while waiting, ns.
+    pub poll_interval_ns: u64,
+}
+
+impl CanOpenConfig {
+    /// The configuration with the file's keys and defaults for the rest:
+    /// host node 127, 1 kHz SYNC, 0.05 m/s and 0.5 m/s^2, travel ±1 m, host
+    /// heartbeat 10 ms (consumer time 50 ms), drive heartbeat 10 ms (timeout
+    /// 50 ms), SDO 20 ms, PDO wait 0.5 ms, boot-up 2 s, polls every 20 µs.
+    pub fn new(node_ids: [u8; 3], lead_m: f64, counts_per_turn: u32) -> Self {
+        Self {
+            node_ids,
+            lead_m,
+            counts_per_turn,
+            host_node_id: 127,
+            sync_period_ns: 1_000_000,
+            max_speed_mps: 0.05,
+            max_accel_mps2: 0.5,
+            travel_m: [(-1.0, 1.0); 3],
+            host_heartbeat_ms: 10,
+            host_heartbeat_timeout_ms: 50,
+            drive_heartbeat_ms: 10,
+            drive_heartbeat_timeout_ms: 50,
+            sdo_timeout_ns: 20_000_000,
+            pdo_wait_ns: 500_000,
+            boot_timeout_ns: 2_000_000_000,
+            poll_interval_ns: 20_000,
+        }
+    }
+
+    /// Checks the values; the first bad one is named.
+    pub fn validate(&self) -> Result<(), CanOpenError> {
+        let bad =
+            |field: &'static str, value: String| Err(CanOpenError::InvalidConfig { field, value });
+        let ids = self.node_ids;
+        if ids.iter().any(|&n| n == 0 || n > 127)
+            || ids[0] == ids[1]
+            || ids[1] == ids[2]
+            || ids[0] == ids[2]
+        {
+            return bad("node_ids", format!("{ids:?}"));
+        }
+        if self.host_node_id == 0 || self.host_node_id > 127 || ids.contains(&self.host_node_id) {
+            return bad("host_node_id", self.host_node_id.to_string());
+        }
+        if !(self.lead_m.is_finite() && self.lead_m > 0.0) {
+            return bad("lead_m", self.lead_m.to_string());
+        }
+        if self.counts_per_turn == 0 {
+            return bad("counts_per_turn", "0".into());
+        }
+        if self.sync_period_ns < 100_000 {
+            return bad("sync_period_ns", self.sync_period_ns.to_string());
+        }
+        if !(self.max_speed_mps.is_finite() && self.max_speed_mps > 0.0) {
+            return bad("max_speed_mps", self.max_speed_mps.to_string());
+        }
+        if !(self.max_accel_mps2.is_finite() && self.max_accel_mps2 > 0.0) {
+            return bad("max_accel_mps2", self.max_accel_mps2.to_string());
+        }
+        for (lo, hi) in self.travel_m {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return bad("travel_m", format!("{:?}", self.travel_m));
+            }
+        }
+        if self.host_heartbeat_ms == 0 || self.host_heartbeat_timeout_ms <= self.host_heartbeat_ms {
+            return bad(
+                "host_heartbeat_timeout_ms",
+                self.host_heartbeat_timeout_ms.to_string(),
+            );
+        }
+        if self.drive_heartbeat_ms == 0
+            || self.drive_heartbeat_timeout_ms <= self.drive_heartbeat_ms
+        {
+            return bad(
+                "drive_heartbeat_timeout_ms",
+                self.drive_heartbeat_timeout_ms.to_string(),
+            );
+        }
+        Ok(())
+    }
+
+    /// Metres per encoder count.
+    pub fn m_per_count(&self) -> f64 {
+        self.lead_m / f64::from(self.counts_per_turn)
+    }
+}
+
+/// An error of the CANopen drives.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CanOpenError {
+    /// A configuration value is wrong.
+    #[error("CANopen configuration: {field} = {value} is not valid")]
+    InvalidConfig {
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: String,
+    },
+    /// No SDO response within the bound.
+    #[error("node {node}: no SDO response for {index:#06x}:{sub} within {timeout_ns} ns")]
+    SdoTimeout {
+        /// Node id.
+        node: u8,
+        /// Index.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// The bound, ns.
+        timeout_ns: u64,
+    },
+    /// The drive aborted an SDO transfer.
+    #[error("node {node}: SDO {index:#06x}:{sub} aborted with {code:#010x}")]
+    SdoAbort {
+        /// Node id.
+        node: u8,
+        /// Index.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// Abort code.
+        code: u32,
+    },
+    /// No boot-up after an NMT reset within the bound.
+    #[error("node {node}: no boot-up within {timeout_ns} ns")]
+    NoBootUp {
+        /// Node id.
+        node: u8,
+        /// The bound, ns.
+        timeout_ns: u64,
+    },
+    /// No heartbeat saying operational after the NMT start within the bound.
+    #[error("node {node}: not operational within {timeout_ns} ns of the NMT start")]
+    NotOperational {
+        /// Node id.
+        node: u8,
+        /// The bound, ns.
+        timeout_ns: u64,
+    },
+    /// The drive did not take cyclic synchronous position mode.
+    #[error("node {node}: mode of operation is {mode}, not 8 (CSP)")]
+    WrongMode {
+        /// Node id.
+        node: u8,
+        /// Mode read in 0x6061.
+        mode: i8,
+    },
+    /// The CAN controller reported an error (an error frame, bus-off,
+    /// overrun, ...): `kind` is embedded-can's.
+    #[error("CAN bus error ({kind:?}): {detail}")]
+    Bus {
+        /// embedded-can's kind.
+        kind: embedded_can::ErrorKind,
+        /// The controller's own description.
+        detail: String,
+    },
+    /// The host's monotonic clock cannot be read: no SYNC or position is
+    /// stamped with a made-up time.
+    #[error("the monotonic clock cannot be read")]
+    Clock,
+    /// The CAN interface could not be opened.
+    #[error("CAN interface {interface}: {detail}")]
+    Open {
+        /// The interface.
+        interface: String,
+        /// The system's reason.
+        detail: String,
+    },
+    /// A frame could not be built or sent (queue full).
+    #[error("CAN frame {cob_id:#05x} could not be sent")]
+    Transmit {
+        /// COB-ID.
+        cob_id: u16,
+    },
+    /// Not allowed in the present state.
+    #[error("not allowed in state {state:?}")]
+    InvalidState {
+        /// The state.
+        state: crate::DriveState,
+    },
+    /// A target is not finite or outside the travel.
+    #[error("target of axis {axis} = {value_m} m is not finite or outside [{min_m}, {max_m}]")]
+    InvalidTarget {
+        /// 0 = q1, 1 = q2, 2 = q3.
+        axis: u8,
+        /// The target, m.
+        value_m: f64,
+        /// Travel minimum, m.
+        min_m: f64,
+        /// Travel maximum, m.
+        max_m: f64,
+    },
+    /// A fault that a reset cannot clear now (a drive still lost).
+    #[error("axis {axis}: fault {code:#06x} persists")]
+    FaultPersists {
+        /// The axis.
+        axis: u8,
+        /// Its fault code.
+        code: u16,
+    },
+}
+
+impl Error for CanOpenError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            Self::InvalidConfig { .. } | Self::InvalidTarget { .. } => ErrorKind::InvalidArgument,
+            Self::SdoTimeout { .. } | Self::NoBootUp { .. } | Self::NotOperational { .. } => {
+                ErrorKind::Timeout
+            }
+            Self::SdoAbort { .. } | Self::WrongMode { .. } | Self::FaultPersists { .. } => {
+                ErrorKind::DeviceFault
+            }
+            Self::Bus { .. } | Self::Transmit { .. } | Self::Open { .. } => ErrorKind::Disconnected,
+            Self::InvalidState { .. } => ErrorKind::InvalidState,
+            Self::Clock => ErrorKind::Other,
+        }
+    }
+}

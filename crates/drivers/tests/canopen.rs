@@ -1,0 +1,722 @@
+//! The CANopen axis drives on the in-memory bus with simulated CiA 402
+//! drives: the drive conformance suite, start-up, the CiA 402 state machine,
+//! CSP streaming, EMCY, heartbeat loss, the drives' own watchdog when the host
+//! goes silent, and bus errors. Deterministic: one simulated clock, the bus
+//! stepped by hand.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
+
+mod conformance;
+
+use conformance::{Capability, DrivesHarness};
+use sar_drivers::canopen::frame::{
+    self, COB_RPDO1, COB_SDO_RX, COB_SYNC, Cia402State, RawFrame, Sdo, control, decode_rpdo,
+};
+use sar_drivers::canopen::{
+    CanOpenConfig, CanOpenDrives, CanOpenError, FOLLOWING_WINDOW_M, MemBus, MemBusError, MemCan,
+    SimCia402Drive, SimDriveSpec,
+};
+use sar_drivers::{AxisDrives, DriveState, Error, ErrorKind, SimClock};
+use sar_kinematics::ActiveJoints;
+
+const CLOCK_START_NS: u64 = 5_000_000_000_000;
+const MS: u64 = 1_000_000;
+const S: u64 = 1_000_000_000;
+const LEAD_M: f64 = 0.01;
+const COUNTS: u32 = 4096;
+const V_MAX: f64 = 0.05;
+const A_MAX: f64 = 0.5;
+const NODES: [u8; 3] = [1, 2, 3];
+const START_M: [f64; 3] = [0.0, 0.28, 0.30];
+
+fn count_m() -> f64 {
+    LEAD_M / f64::from(COUNTS)
+}
+
+fn config() -> CanOpenConfig {
+    let mut c = CanOpenConfig::new(NODES, LEAD_M, COUNTS);
+    c.max_speed_mps = V_MAX;
+    c.max_accel_mps2 = A_MAX;
+    c.travel_m = [(-0.1, 0.1), (0.2, 0.36), (0.12, 0.42)];
+    c
+}
+
+fn drive_spec(axis: usize) -> SimDriveSpec {
+    SimDriveSpec {
+        node_id: NODES[axis],
+        lead_m: LEAD_M,
+        counts_per_turn: COUNTS,
+        max_speed_mps: V_MAX,
+        max_accel_mps2: A_MAX,
+        start_m: START_M[axis],
+        following_window_m: FOLLOWING_WINDOW_M,
+    }
+}
+
+/// The host, the bus and three simulated drives on one simulated clock.
+struct Rig {
+    clock: SimClock,
+    bus: MemBus,
+    drives: CanOpenDrives<MemCan, SimClock>,
+    next_cycle_ns: u64,
+    /// The host runs its cycles (false: the host is stalled).
+    host_alive: bool,
+    errors: Vec<CanOpenError>,
+}
+
+impl Rig {
+    fn new() -> Self {
+        let clock = SimClock::new(CLOCK_START_NS);
+        let bus = MemBus::new(clock.clone());
+        for axis in 0..3 {
+            bus.add_drive(SimCia402Drive::new(drive_spec(axis), clock.now_ns()));
+        }
+        bus.tick();
+        let drives = CanOpenDrives::start(bus.can(), clock.clone(), config()).unwrap();
+        let next_cycle_ns = clock.now_ns();
+        let mut rig = Self {
+            clock,
+            bus,
+            drives,
+            next_cycle_ns,
+            host_alive: true,
+            errors: Vec::new(),
+        };
+        rig.run(20 * MS);
+        rig.errors.clear();
+        rig
+    }
+
+    fn now(&self) -> u64 {
+        self.clock.now_ns()
+    }
+
+    /// Lets `ns` pass: the drives tick every 100 µs, the host cycles every
+    /// SYNC period.
+    fn run(&mut self, ns: u64) {
+        let end = self.now() + ns;
+        loop {
+            let next_tick = (self.now() / (MS / 10) + 1) * (MS / 10);
+            let next = next_tick.min(self.next_cycle_ns).min(end);
+            if next > self.now() {
+                self.clock.advance_ns(next - self.now());
+            }
+            self.bus.tick();
+            if self.now() >= self.next_cycle_ns {
+                let result = self.host_alive.then(|| self.drives.cycle());
+                if let Some(Err(e)) = result {
+                    self.errors.push(e);
+                }
+                self.next_cycle_ns += MS;
+            }
+            if self.now() >= end {
+                break;
+            }
+        }
+    }
+
+    fn drive<R>(
+        &self,
+        axis: usize,
+        f: impl FnOnce(&mut SimCia402Drive, u64, &mut Vec<RawFrame>) -> R,
+    ) -> R {
+        self.bus.with_drive(axis, f).unwrap()
+    }
+
+    fn true_position(&self, axis: usize) -> f64 {
+        self.drive(axis, |d, now, _| d.position_m(now))
+    }
+
+    fn cia402(&self, axis: usize) -> Cia402State {
+        self.drive(axis, |d, _, _| d.state())
+    }
+
+    fn await_state(&mut self, want: DriveState) {
+        for _ in 0..200 {
+            if self.drives.state().unwrap() == want {
+                return;
+            }
+            self.run(MS);
+        }
+        panic!("{:?}, not {want:?}", self.drives.state().unwrap());
+    }
+
+    fn enable(&mut self) {
+        self.drives.enable().unwrap();
+        self.await_state(DriveState::Enabled);
+    }
+}
+
+fn target() -> ActiveJoints {
+    ActiveJoints {
+        q1_m: 0.01,
+        q2_m: 0.27,
+        q3_m: 0.35,
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The conformance suite
+
+struct Harness {
+    rig: Rig,
+}
+
+impl DrivesHarness for Harness {
+    type Drives = CanOpenDrives<MemCan, SimClock>;
+    fn drives(&mut self) -> &mut Self::Drives {
+        &mut self.rig.drives
+    }
+    fn let_time_pass(&mut self, ns: u64) {
+        self.rig.run(ns);
+    }
+    fn now_ns(&self) -> u64 {
+        self.rig.now()
+    }
+    fn reachable_target(&self) -> ActiveJoints {
+        target()
+    }
+    fn out_of_travel_target(&self) -> Capability<ActiveJoints> {
+        Capability::Ready(ActiveJoints {
+            q1_m: 0.0,
+            q2_m: 0.28,
+            q3_m: 0.43,
+        })
+    }
+    fn settle_bound_ns(&self) -> u64 {
+        2 * S
+    }
+    fn tolerance_m(&self) -> f64 {
+        count_m()
+    }
+    fn report_age_bound_ns(&self) -> u64 {
+        MS
+    }
+    fn call_slack_ns(&self) -> u64 {
+        0
+    }
+    fn transition_bound_ns(&self) -> u64 {
+        20 * MS
+    }
+    fn provoke_fault(&mut self) -> Capability<()> {
+        self.rig
+            .drive(1, |d, now, out| d.inject_fault(0x2310, false, now, out));
+        self.rig.run(2 * MS);
+        Capability::Ready(())
+    }
+}
+
+macro_rules! conformance_tests {
+    ($suite:ident, $harness:expr, [$($check:ident),* $(,)?]) => {
+        mod $suite {
+            use super::*;
+            $(
+                #[test]
+                fn $check() {
+                    conformance::$suite::$check(&mut $harness);
+                }
+            )*
+        }
+    };
+}
+
+conformance_tests!(
+    drives,
+    Harness { rig: Rig::new() },
+    [
+        starts_ready_and_refuses_targets,
+        enable_accepts_targets_and_disable_refuses_them,
+        invalid_targets_are_invalid_arguments,
+        quick_stop_from_ready_and_back,
+        quick_stop_while_moving_stops_and_holds,
+        fault_reset_outside_fault_is_invalid_state,
+        positions_are_stamped_fresh_and_in_order,
+        reaches_a_reachable_target_and_holds,
+        transient_fault_is_reported_and_reset,
+    ]
+);
+
+// ---------------------------------------------------------------------------
+// Start-up
+
+fn sdo_writes(sent: &[RawFrame], node: u8) -> Vec<(u16, u8, u32)> {
+    sent.iter()
+        .filter(|f| f.cob_id == COB_SDO_RX + u16::from(node))
+        .filter_map(|f| match Sdo::decode(f.payload()) {
+            Some(Sdo::Download {
+                index, sub, value, ..
+            }) => Some((index, sub, value)),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn start_up_maps_the_pdos_sets_csp_and_the_watchdog_and_starts_the_nodes() {
+    let rig = Rig::new();
+    let sent = rig.bus.take_sent();
+    // NMT reset of each node first, NMT start last.
+    let nmt: Vec<&[u8]> = sent
+        .iter()
+        .filter(|f| f.cob_id == 0)
+        .map(|f| f.payload())
+        .collect();
+    assert_eq!(
+        nmt,
+        [
+            &[0x81, 1][..],
+            &[0x81, 2],
+            &[0x81, 3],
+            &[0x01, 1],
+            &[0x01, 2],
+            &[0x01, 3]
+        ]
+    );
+    for (axis, node) in NODES.iter().enumerate() {
+        let w = sdo_writes(&sent, *node);
+        let n = u32::from(*node);
+        for expected in [
+            (0x1A00, 1, 0x6041_0010),
+            (0x1A00, 2, 0x6064_0020),
+            (0x1A00, 0, 2),
+            (0x1800, 1, 0x180 + n),
+            (0x1800, 2, 1),
+            (0x1600, 1, 0x6040_0010),
+            (0x1600, 2, 0x607A_0020),
+            (0x1600, 0, 2),
+            (0x1400, 1, 0x200 + n),
+            (0x6060, 0, 8),
+            (0x6007, 0, 3),
+            (0x1016, 1, (127 << 16) | 50),
+            (0x1017, 0, 10),
+        ] {
+            assert!(
+                w.contains(&expected),
+                "node {node}: {expected:x?} not in {w:x?}"
+            );
+        }
+        // The mapping is written with the PDO disabled (COB-ID bit 31).
+        let disable = w
+            .iter()
+            .position(|x| *x == (0x1800, 1, 0x8000_0000 | (0x180 + n)));
+        let map = w.iter().position(|x| *x == (0x1A00, 1, 0x6041_0010));
+        assert!(disable.unwrap() < map.unwrap());
+        rig.drive(axis, |d, _, _| {
+            assert_eq!(d.mode(), 8);
+            assert_eq!(d.nmt_state(), frame::heartbeat::OPERATIONAL);
+        });
+        // The first cycles brought the drives to Ready to switch on.
+        assert_eq!(rig.cia402(axis), Cia402State::ReadyToSwitchOn);
+    }
+}
+
+#[test]
+fn a_missing_drive_fails_the_start_up_within_the_bound() {
+    let clock = SimClock::new(CLOCK_START_NS);
+    let bus = MemBus::new(clock.clone());
+    bus.add_drive(SimCia402Drive::new(drive_spec(0), clock.now_ns()));
+    bus.add_drive(SimCia402Drive::new(drive_spec(1), clock.now_ns()));
+    let config = config();
+    let err = CanOpenDrives::start(bus.can(), clock.clone(), config.clone()).unwrap_err();
+    assert_eq!(
+        err,
+        CanOpenError::NoBootUp {
+            node: 3,
+            timeout_ns: config.boot_timeout_ns
+        }
+    );
+    assert_eq!(err.kind(), ErrorKind::Timeout);
+    let waited = clock.now_ns() - CLOCK_START_NS;
+    assert!(waited >= config.boot_timeout_ns && waited <= config.boot_timeout_ns + MS);
+}
+
+#[test]
+fn a_bad_configuration_is_refused() {
+    let clock = SimClock::new(0);
+    let bus = MemBus::new(clock.clone());
+    let mut c = config();
+    c.node_ids = [1, 2, 2];
+    let err = CanOpenDrives::start(bus.can(), clock.clone(), c).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            CanOpenError::InvalidConfig {
+                field: "node_ids",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let mut c = config();
+    c.lead_m = f64::NAN;
+    let err = CanOpenDrives::start(bus.can(), clock, c).unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::InvalidArgument);
+}
+
+// ---------------------------------------------------------------------------
+// The cycle and the state machine
+
+/// The (control word, target counts) of the RPDOs sent to `node`.
+fn rpdos(sent: &[RawFrame], node: u8) -> Vec<(u16, i32)> {
+    sent.iter()
+        .filter(|f| f.cob_id == COB_RPDO1 + u16::from(node))
+        .map(|f| decode_rpdo(f.payload()).unwrap())
+        .collect()
+}
+
+#[test]
+fn enable_walks_shutdown_switch_on_enable_operation() {
+    let mut rig = Rig::new();
+    rig.enable();
+    let words: Vec<u16> = rpdos(&rig.bus.take_sent(), 2).iter().map(|r| r.0).collect();
+    let mut distinct = words.clone();
+    distinct.dedup();
+    assert_eq!(
+        distinct,
+        [
+            control::SHUTDOWN,
+            control::SWITCH_ON,
+            control::ENABLE_OPERATION
+        ],
+        "{words:x?}"
+    );
+    for axis in 0..3 {
+        assert_eq!(rig.cia402(axis), Cia402State::OperationEnabled);
+    }
+    // Enabling did not move the axes.
+    for (axis, start) in START_M.iter().enumerate() {
+        assert!((rig.true_position(axis) - start).abs() <= count_m());
+    }
+}
+
+#[test]
+fn every_cycle_sends_one_sync_then_one_limited_set_point_per_axis() {
+    let mut rig = Rig::new();
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.bus.take_sent();
+    rig.run(1500 * MS);
+    let sent = rig.bus.take_sent();
+    let syncs = sent.iter().filter(|f| f.cob_id == COB_SYNC).count();
+    assert_eq!(syncs, 1500);
+    // After each SYNC, one RPDO per axis before the next SYNC.
+    let mut since_sync = 0;
+    for f in &sent {
+        if f.cob_id == COB_SYNC {
+            assert!(since_sync == 0 || since_sync == 3, "{since_sync}");
+            since_sync = 0;
+        } else if (0x201..=0x203).contains(&f.cob_id) {
+            since_sync += 1;
+        }
+    }
+    // Set points of q3 (0.30 -> 0.35 m): within the speed and acceleration
+    // limits, monotone, ending at the target.
+    let dt = 1e-3;
+    let q3: Vec<f64> = rpdos(&sent, 3)
+        .iter()
+        .map(|r| f64::from(r.1) * count_m())
+        .collect();
+    for w in q3.windows(3) {
+        let v1 = (w[1] - w[0]) / dt;
+        let v2 = (w[2] - w[1]) / dt;
+        assert!(v2 <= V_MAX + 2.0 * count_m() / dt && v2 >= -1e-12, "{v2}");
+        assert!(
+            (v2 - v1).abs() / dt <= A_MAX + 4.0 * count_m() / (dt * dt),
+            "{v1} {v2}"
+        );
+    }
+    assert!((q3.last().unwrap() - 0.35).abs() <= count_m());
+    let p = rig.drives.positions().unwrap();
+    assert!(p.valid);
+    assert!((p.joints.q3_m - 0.35).abs() <= count_m());
+    assert!((p.joints.q1_m - 0.01).abs() <= count_m());
+}
+
+#[test]
+fn quick_stop_puts_moving_drives_in_quick_stop_active_and_they_hold() {
+    let mut rig = Rig::new();
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(300 * MS);
+    rig.drives.quick_stop().unwrap();
+    rig.run(5 * MS);
+    for axis in 0..3 {
+        assert_eq!(rig.cia402(axis), Cia402State::QuickStopActive);
+    }
+    rig.run(200 * MS);
+    let stopped = rig.true_position(2);
+    rig.run(500 * MS);
+    assert_eq!(rig.true_position(2), stopped);
+    assert!(stopped < 0.35 - 0.005, "{stopped}");
+}
+
+#[test]
+fn positions_are_valid_only_while_the_encoders_are_referenced() {
+    let mut rig = Rig::new();
+    assert!(rig.drives.positions().unwrap().valid);
+    rig.drive(0, |d, _, _| d.set_referenced(false));
+    rig.run(2 * MS);
+    assert!(!rig.drives.positions().unwrap().valid);
+    rig.drive(0, |d, _, _| d.set_referenced(true));
+    rig.run(2 * MS);
+    assert!(rig.drives.positions().unwrap().valid);
+}
+
+// ---------------------------------------------------------------------------
+// Faults
+
+#[test]
+fn an_emcy_is_a_typed_fault_the_others_quick_stop_and_the_reset_needs_the_cause_gone() {
+    let mut rig = Rig::new();
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(200 * MS);
+    rig.drive(2, |d, now, out| d.inject_fault(0x7305, true, now, out));
+    rig.run(3 * MS);
+    let fault = DriveState::Fault {
+        axis: Some(2),
+        code: 0x7305,
+    };
+    assert_eq!(rig.drives.state().unwrap(), fault);
+    assert!(!rig.drives.positions().unwrap().valid);
+    for axis in 0..2 {
+        assert_eq!(
+            rig.cia402(axis),
+            Cia402State::QuickStopActive,
+            "axis {axis}"
+        );
+    }
+    // The cause persists: the reset's rising edge does not clear it.
+    rig.bus.take_sent();
+    rig.drives.fault_reset().unwrap();
+    rig.run(10 * MS);
+    assert_eq!(rig.drives.state().unwrap(), fault);
+    let words: Vec<u16> = rpdos(&rig.bus.take_sent(), 3).iter().map(|r| r.0).collect();
+    assert_eq!(words[0], control::DISABLE_VOLTAGE);
+    assert!(
+        words[1..].iter().all(|w| *w == control::FAULT_RESET),
+        "{words:x?}"
+    );
+    // Cause gone: nothing happens without a new rising edge...
+    rig.drive(2, |d, _, _| d.clear_fault_cause());
+    rig.run(10 * MS);
+    assert_eq!(rig.drives.state().unwrap(), fault, "no new edge yet");
+    // ... which a new reset makes.
+    rig.drives.fault_reset().unwrap();
+    rig.run(20 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+    rig.enable();
+}
+
+#[test]
+fn a_missed_heartbeat_is_a_fault_that_persists_while_the_drive_is_silent() {
+    let mut rig = Rig::new();
+    rig.enable();
+    rig.drive(1, |d, _, _| d.set_silent(true));
+    rig.run(40 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled, "not yet");
+    rig.run(20 * MS);
+    assert_eq!(
+        rig.drives.state().unwrap(),
+        DriveState::Fault {
+            axis: Some(1),
+            code: 0x8130
+        }
+    );
+    let err = rig.drives.fault_reset().unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::DeviceFault);
+    rig.drive(1, |d, _, _| d.set_silent(false));
+    rig.run(20 * MS);
+    rig.drives.fault_reset().unwrap();
+    rig.run(20 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+}
+
+/// Writes an SDO straight into a drive (a test's side door).
+fn sdo_into(rig: &Rig, axis: usize, index: u16, sub: u8, value: u32) {
+    let node = u16::from(NODES[axis]);
+    let req = Sdo::Download {
+        index,
+        sub,
+        value,
+        size: 4,
+    };
+    let f = RawFrame::new_data(COB_SDO_RX + node, &req.encode()).unwrap();
+    rig.drive(axis, |d, now, out| d.on_frame(&f, now, out));
+}
+
+/// Moves q3 at full speed, then stalls the host for `stall_ns`; returns the
+/// distance q3 travelled during the stall and its final velocity.
+fn stall_while_moving(watchdog: bool, stall_ns: u64) -> (f64, f64, Cia402State, Vec<u16>) {
+    let mut rig = Rig::new();
+    if !watchdog {
+        for axis in 0..3 {
+            sdo_into(&rig, axis, 0x1016, 1, 0);
+        }
+    }
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(400 * MS);
+    assert!((rig.drive(2, |d, now, _| d.velocity_mps(now)) - V_MAX).abs() < 0.01);
+    let at_stall = rig.true_position(2);
+    rig.host_alive = false;
+    rig.run(stall_ns);
+    let moved = rig.true_position(2) - at_stall;
+    let v = rig.drive(2, |d, now, _| d.velocity_mps(now));
+    let emcys = rig.drive(2, |d, _, _| d.emcys().to_vec());
+    (moved, v, rig.cia402(2), emcys)
+}
+
+#[test]
+fn a_silent_host_makes_the_drives_quick_stop_on_their_own() {
+    // 50 ms consumer time + 10 ms heartbeat period at 0.05 m/s, then a 0.1 s
+    // brake at 0.5 m/s^2: at most 3 mm + 2.5 mm.
+    let (moved, v, state, emcys) = stall_while_moving(true, S);
+    assert_eq!(v, 0.0);
+    assert_eq!(state, Cia402State::QuickStopActive);
+    assert!(moved > 0.0 && moved <= 0.0055 + 1e-9, "{moved}");
+    assert!(emcys.contains(&0x8130), "{emcys:x?}");
+    // Without the watchdog the same drive keeps going (its interpolator
+    // extrapolates): the test above can fail.
+    let (moved, v, state, _) = stall_while_moving(false, S);
+    assert_eq!(state, Cia402State::OperationEnabled);
+    assert!(v > 0.0 && moved > 0.04, "{moved}");
+}
+
+#[test]
+fn bus_errors_are_reported_and_a_bus_off_becomes_a_fault() {
+    let mut rig = Rig::new();
+    rig.bus
+        .inject_error(MemBusError::ErrorFrame(embedded_can::ErrorKind::Crc));
+    let err = rig.drives.cycle().unwrap_err();
+    assert!(
+        matches!(
+            err,
+            CanOpenError::Bus {
+                kind: embedded_can::ErrorKind::Crc,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert_eq!(err.kind(), ErrorKind::Disconnected);
+    rig.run(5 * MS);
+    assert!(rig.errors.is_empty(), "{:?}", rig.errors);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+    // Bus-off: every cycle reports it; positions go stale; the heartbeats are
+    // lost, a fault.
+    rig.bus.set_bus_off(true);
+    rig.run(10 * MS);
+    assert!(!rig.errors.is_empty());
+    assert!(rig.errors.iter().all(|e| matches!(
+        e,
+        CanOpenError::Bus {
+            kind: embedded_can::ErrorKind::Other,
+            ..
+        }
+    )));
+    assert!(!rig.drives.positions().unwrap().valid);
+    rig.run(60 * MS);
+    assert_eq!(
+        rig.drives.state().unwrap(),
+        DriveState::Fault {
+            axis: Some(0),
+            code: 0x8130
+        }
+    );
+    assert!(rig.drives.bus_errors() > 0);
+}
+
+#[test]
+fn a_set_point_jump_is_a_following_error_fault() {
+    let mut rig = Rig::new();
+    rig.enable();
+    // A set point 5 cm away, straight into drive 1, applied at the next SYNC.
+    let far = ((START_M[0] + 0.05) / count_m()).round() as i32;
+    let rpdo = RawFrame::new_data(COB_RPDO1 + 1, &frame::encode_rpdo(0x0F, far)).unwrap();
+    let sync = RawFrame::new_data(COB_SYNC, &[]).unwrap();
+    rig.drive(0, |d, now, out| {
+        d.on_frame(&rpdo, now, out);
+        d.on_frame(&sync, now, out);
+    });
+    rig.run(2 * MS);
+    assert_eq!(
+        rig.drives.state().unwrap(),
+        DriveState::Fault {
+            axis: Some(0),
+            code: 0x8611
+        }
+    );
+    assert!((rig.true_position(0) - START_M[0]).abs() <= count_m());
+}
+
+// ---------------------------------------------------------------------------
+// Robustness: arbitrary frames never panic the decoders or the simulated drive
+
+use proptest::prelude::*;
+use proptest::test_runner::{Config as ProptestConfig, RngSeed};
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: 2000,
+        rng_seed: RngSeed::Fixed(0xca40_9e11),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
+
+    #[test]
+    fn arbitrary_frames_never_panic(
+        frames in proptest::collection::vec(
+            (
+                // Any id, and often the drive's own NMT, SYNC, RPDO and SDO.
+                prop_oneof![0u16..0x800, Just(0u16), Just(0x80), Just(0x201), Just(0x601)],
+                proptest::collection::vec(any::<u8>(), 0..=8),
+            ),
+            1..40,
+        )
+    ) {
+        let mut drive = SimCia402Drive::new(drive_spec(0), 0);
+        let mut out = Vec::new();
+        for (k, (id, data)) in frames.iter().enumerate() {
+            let _ = Sdo::decode(data);
+            let _ = frame::Emcy::decode(data);
+            let _ = frame::decode_tpdo(data);
+            let f = RawFrame::new_data(*id, data).unwrap();
+            drive.on_frame(&f, k as u64 * MS, &mut out);
+            drive.tick(k as u64 * MS, &mut out);
+        }
+        prop_assert!(drive.position_m(40 * MS).is_finite());
+    }
+}
+
+#[test]
+fn halt_brakes_and_holds_in_operation_enabled_and_release_resumes_the_move() {
+    let mut rig = Rig::new();
+    assert_eq!(
+        rig.drives.set_halt(true).unwrap_err().kind(),
+        ErrorKind::InvalidState
+    );
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(300 * MS);
+    rig.drives.set_halt(true).unwrap();
+    rig.run(200 * MS);
+    let held = rig.true_position(2);
+    rig.run(300 * MS);
+    assert_eq!(rig.true_position(2), held);
+    assert_eq!(rig.drive(2, |d, now, _| d.velocity_mps(now)), 0.0);
+    assert!(held < 0.35 - 0.01, "{held}");
+    for axis in 0..3 {
+        assert_eq!(rig.cia402(axis), Cia402State::OperationEnabled);
+    }
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
+    rig.drives.set_halt(false).unwrap();
+    rig.run(2 * S);
+    let p = rig.drives.positions().unwrap();
+    assert!((p.joints.q3_m - 0.35).abs() <= count_m(), "{p:?}");
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
+}
