@@ -1,5 +1,8 @@
 //! Criterion benchmarks of the estimator: the full per-cycle path (the 1 kHz
-//! loop's budget), its parts, and the identification update, solve and support fit.
+//! loop's budget) with d = 0 and with d != 0, a floor (plain f64 code giving the
+//! same outputs with no validation, measured in the same run so that the
+//! cycle/floor ratio can be read off), the cycle's parts, and the
+//! identification update, solve and support fit.
 #![allow(
     missing_docs,
     clippy::unwrap_used,
@@ -13,16 +16,21 @@ mod common;
 use common::*;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
-use sar_estimator::cycle::{CycleInput, Estimator, JointSample, SensorSample};
-use sar_estimator::guard::{Guard, GuardConfig, GuardInput, TipInput};
+use sar_estimator::cycle::{
+    CycleInput, Estimator, EstimatorConfig, JointSample, SensorSample, TipOutcome,
+};
+use sar_estimator::guard::{Guard, GuardConfig, GuardInput, GuardLimits, TipInput};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
-use sar_estimator::{Profile, SensorNoise};
+use sar_estimator::{Calibration, Profile, SensorNoise};
 use sar_kinematics::{ActiveJoints, forward};
 use std::hint::black_box;
 
 const Q: [f64; 3] = [0.02, 0.25, 0.31];
+
+/// The offset d of the d != 0 benchmarks, m.
+const OFFSET_M: f64 = 0.004;
 
 fn joints() -> ActiveJoints {
     ActiveJoints {
@@ -32,64 +40,331 @@ fn joints() -> ActiveJoints {
     }
 }
 
+/// Manipulator 2 with the rod's axis `offset_m` from the U-joint centre.
+fn manipulator2_offset(offset_m: f64) -> Profile {
+    Profile::new(0.35, offset_m, 2.593, 0.103).unwrap()
+}
+
+/// The raw reading (R_0s = I) of the example robot with `profile` at the
+/// joints `Q`, from the independent simulator of `common`.
+fn reading_for(
+    profile: &Profile,
+    tip_force_n: &Vector3<f64>,
+    bias_n: &Vector3<f64>,
+) -> Vector3<f64> {
+    let cal = example_calibration();
+    let pose = forward(&cal, profile, &joints()).unwrap();
+    let truth = Truth {
+        offset_m: profile.offset_m(),
+        ..manipulator2_truth()
+    };
+    let (f_a, _) = ujoint_force(
+        &truth,
+        &pose.ujoint_m,
+        &pose.rod_dir,
+        &pose.rod_normal,
+        tip_force_n,
+        0.0,
+    );
+    ideal_reading(&cal.sensor_rotation(), &f_a, bias_n)
+}
+
+fn cycle_input(cycle: u64, reading: &Vector3<f64>) -> CycleInput {
+    let now_ns = 1_000_000 * cycle;
+    CycleInput {
+        cycle,
+        now_ns,
+        sensor: SensorSample {
+            force_n: *reading,
+            torque_nm: Vector3::zeros(),
+            stamp_ns: now_ns,
+            valid: true,
+        },
+        joints: JointSample {
+            joints: joints(),
+            stamp_ns: now_ns,
+            valid: true,
+        },
+    }
+}
+
+type V = [f64; 3];
+
+fn dot(a: &V, b: &V) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The floor: what the cycle computes, as plain f64 code with everything that
+/// does not change fixed beforehand, and no validation at all (no finiteness,
+/// no unit checks, no degenerate poses, no guard state).
+struct Floor {
+    /// P_home + a_off.
+    ujoint_home: V,
+    support: V,
+    /// R_0s, rows.
+    rotation: [V; 3],
+    /// C = R_0s diag(std^2) R_0s^T, rows.
+    covariance: [V; 3],
+    weight: V,
+    length: f64,
+    com: f64,
+    offset: f64,
+    bias: V,
+    /// Stop limits: total, axial, lateral.
+    limits: V,
+}
+
+/// The floor's outputs: F_tip, its per-axis deviation, and the three limit
+/// tests (total, axial, lateral at or above the stop limit).
+struct FloorOut {
+    force: V,
+    std: V,
+    above: [bool; 3],
+}
+
+impl Floor {
+    fn new(config: &EstimatorConfig, limits: &GuardLimits, bias: &Vector3<f64>) -> Self {
+        let cal: &Calibration = &config.calibration;
+        let a0 = cal.p_home_m() + cal.ujoint_offset_m();
+        let r = cal.sensor_rotation();
+        let c = config.noise.base_covariance_n2(&r);
+        let w = cal.gravity_mps2() * config.profile.mass_kg();
+        let row = |m: &nalgebra::Matrix3<f64>, i: usize| [m[(i, 0)], m[(i, 1)], m[(i, 2)]];
+        Self {
+            ujoint_home: [a0.x, a0.y, a0.z],
+            support: [cal.support_m().x, cal.support_m().y, cal.support_m().z],
+            rotation: [row(&r, 0), row(&r, 1), row(&r, 2)],
+            covariance: [row(&c, 0), row(&c, 1), row(&c, 2)],
+            weight: [w.x, w.y, w.z],
+            length: config.profile.length_m(),
+            com: config.profile.com_m(),
+            offset: config.profile.offset_m(),
+            bias: [bias.x, bias.y, bias.z],
+            limits: [
+                limits.stop_total_n,
+                limits.stop_axial_n,
+                limits.stop_lateral_n,
+            ],
+        }
+    }
+
+    /// F_A = -R_0s (reading - bias).
+    fn ujoint_force(&self, reading: &V) -> V {
+        let f = [
+            reading[0] - self.bias[0],
+            reading[1] - self.bias[1],
+            reading[2] - self.bias[2],
+        ];
+        [
+            -dot(&self.rotation[0], &f),
+            -dot(&self.rotation[1], &f),
+            -dot(&self.rotation[2], &f),
+        ]
+    }
+
+    /// B - A for the active joints q = (q1, q2, q3) (A = P_home + a_off + (q3, q2, q1)).
+    fn support_from_ujoint(&self, q: &V) -> V {
+        [
+            self.support[0] - self.ujoint_home[0] - q[2],
+            self.support[1] - self.ujoint_home[1] - q[1],
+            self.support[2] - self.ujoint_home[2] - q[0],
+        ]
+    }
+
+    /// var_i = row_i(J) C row_i(J)^T.
+    fn variance(&self, jac: &[V; 3]) -> V {
+        let c = &self.covariance;
+        let mut var = [0.0; 3];
+        for i in 0..3 {
+            let j = &jac[i];
+            let cj = [dot(&c[0], j), dot(&c[1], j), dot(&c[2], j)];
+            var[i] = dot(j, &cj);
+        }
+        var
+    }
+
+    fn finish(&self, u: &V, force: V, var: V) -> FloorOut {
+        let axial = dot(&force, u);
+        let lat = [
+            force[0] - axial * u[0],
+            force[1] - axial * u[1],
+            force[2] - axial * u[2],
+        ];
+        let total = dot(&force, &force).sqrt();
+        let lateral = dot(&lat, &lat).sqrt();
+        FloorOut {
+            force,
+            std: [var[0].sqrt(), var[1].sqrt(), var[2].sqrt()],
+            above: [
+                total >= self.limits[0],
+                axial.abs() >= self.limits[1],
+                lateral >= self.limits[2],
+            ],
+        }
+    }
+
+    /// d = 0: u = r / |r|, a = |r|, MODEL.md 4.1.
+    fn cycle_d0(&self, q: &V, reading: &V) -> FloorOut {
+        let r = self.support_from_ujoint(q);
+        let a = dot(&r, &r).sqrt();
+        let inv_a = 1.0 / a;
+        let u = [r[0] * inv_a, r[1] * inv_a, r[2] * inv_a];
+        let fa = self.ujoint_force(reading);
+        let g = &self.weight;
+        let inv_lever = 1.0 / (self.length - a);
+        let k = a * inv_lever;
+        let axial = dot(&fa, &u) + dot(g, &u);
+        // F_tip = (F_A + m g) . u u - (a F_A + (a - c) m g)_perp / (L - a)
+        let m = [
+            a * fa[0] + (a - self.com) * g[0],
+            a * fa[1] + (a - self.com) * g[1],
+            a * fa[2] + (a - self.com) * g[2],
+        ];
+        let mu = dot(&m, &u);
+        let force = [
+            u[0] * axial - (m[0] - u[0] * mu) * inv_lever,
+            u[1] * axial - (m[1] - u[1] * mu) * inv_lever,
+            u[2] * axial - (m[2] - u[2] * mu) * inv_lever,
+        ];
+        // J = (1 + k) u u^T - k I
+        let p = 1.0 + k;
+        let mut jac = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                jac[i][j] = p * u[i] * u[j] - if i == j { k } else { 0.0 };
+            }
+        }
+        self.finish(&u, force, self.variance(&jac))
+    }
+
+    /// d != 0: u, w from r without trigonometry (MODEL.md 3), then the closed
+    /// form of tip_force.rs in its (u, w, v = u x w) components.
+    fn cycle_offset(&self, q: &V, reading: &V) -> FloorOut {
+        let d = self.offset;
+        let r = self.support_from_ujoint(q);
+        let rho2 = dot(&r, &r);
+        let r_h = (r[0] * r[0] + r[2] * r[2]).sqrt();
+        let s = (rho2 - d * d).sqrt();
+        let inv_rho2 = 1.0 / rho2;
+        let inv_r_h = 1.0 / r_h;
+        let (s4, c4) = (r[0] * inv_r_h, r[2] * inv_r_h);
+        let c5 = (s * r_h - d * r[1]) * inv_rho2;
+        let s5 = (s * r[1] + d * r_h) * inv_rho2;
+        let u = [s4 * c5, s5, c4 * c5];
+        let w = [s4 * s5, -c5, c4 * s5];
+        let v = [c4, 0.0, -s4];
+        let fa = self.ujoint_force(reading);
+        let g = &self.weight;
+        let inv_lever = 1.0 / (self.length - s);
+        let (fu, fw, fv) = (dot(&fa, &u), dot(&fa, &w), dot(&fa, &v));
+        let (gu, gw, gv) = (dot(g, &u), dot(g, &w), dot(g, &v));
+        // tan q5 = -u_y / w_y
+        let tan5 = s5 / c5;
+        let alpha = d * inv_lever;
+        let beta = -s * inv_lever;
+        let gamma = -(s + d * tan5) * inv_lever;
+        let sc = (s - self.com) * inv_lever;
+        let tu = fu + gu;
+        let tw = alpha * fu + beta * fw - sc * gw;
+        let tv = gamma * fv - sc * gv;
+        let mut force = [0.0; 3];
+        let mut jac = [[0.0; 3]; 3];
+        for i in 0..3 {
+            force[i] = tu * u[i] + tw * w[i] + tv * v[i];
+            let (a, b, c) = (u[i] + alpha * w[i], beta * w[i], gamma * v[i]);
+            for j in 0..3 {
+                jac[i][j] = a * u[j] + b * w[j] + c * v[j];
+            }
+        }
+        self.finish(&u, force, self.variance(&jac))
+    }
+}
+
+/// The floor agrees with the cycle (checked once, before measuring).
+fn check_floor(out: &FloorOut, tip: &TipOutcome, limits: &GuardLimits) {
+    let TipOutcome::Estimate(e) = tip else {
+        panic!("no estimate: {tip:?}");
+    };
+    for i in 0..3 {
+        assert!((out.force[i] - e.force_n[i]).abs() < 1e-9 * (1.0 + e.force_n.norm()));
+        assert!((out.std[i] - e.std_n[i]).abs() < 1e-9 * e.std_n.norm());
+    }
+    let stop = [
+        e.force_n.norm() >= limits.stop_total_n,
+        e.axial_n.abs() >= limits.stop_axial_n,
+        e.lateral_n >= limits.stop_lateral_n,
+    ];
+    assert_eq!(out.above, stop);
+}
+
 fn per_cycle(c: &mut Criterion) {
     let bias_n = Vector3::new(0.4, -1.1, 0.25);
-    let reading = example_reading(Q, &Vector3::new(1.0, -0.5, 0.5), &bias_n);
-    let mut estimator = Estimator::new(&example_estimator_config(), bias_n).unwrap();
-    let mut cycle = 0u64;
-    c.bench_function("cycle/full (kinematics + tip force + guard)", |b| {
-        b.iter(|| {
-            cycle += 1;
-            let now_ns = 1_000_000 * cycle;
-            let input = CycleInput {
-                cycle,
-                now_ns,
-                sensor: SensorSample {
-                    force_n: reading,
-                    torque_nm: Vector3::zeros(),
-                    stamp_ns: now_ns,
-                    valid: true,
-                },
-                joints: JointSample {
-                    joints: joints(),
-                    stamp_ns: now_ns,
-                    valid: true,
-                },
-            };
-            black_box(estimator.cycle(black_box(&input)).guard_state)
-        })
-    });
+    let tip_n = Vector3::new(1.0, -0.5, 0.5);
+    let limits = test_guard_limits();
+    for (label, profile) in [
+        ("d = 0", manipulator2()),
+        ("d != 0", manipulator2_offset(OFFSET_M)),
+    ] {
+        let config = EstimatorConfig {
+            profile,
+            ..example_estimator_config()
+        };
+        let reading = reading_for(&profile, &tip_n, &bias_n);
+        let mut estimator = Estimator::new(&config, bias_n).unwrap();
+        let mut cycle = 0u64;
+        c.bench_function(
+            &format!("cycle/full, {label} (kinematics + tip force + guard)"),
+            |b| {
+                b.iter(|| {
+                    cycle += 1;
+                    let input = cycle_input(cycle, &reading);
+                    black_box(estimator.cycle(black_box(&input)).guard_state)
+                })
+            },
+        );
+        let floor = Floor::new(&config, &limits, &bias_n);
+        let reading_v: V = [reading.x, reading.y, reading.z];
+        let cycle_fn = if profile.offset_m() == 0.0 {
+            Floor::cycle_d0
+        } else {
+            Floor::cycle_offset
+        };
+        let out = cycle_fn(&floor, &Q, &reading_v);
+        let tip = estimator.cycle(&cycle_input(cycle + 1, &reading)).tip;
+        check_floor(&out, &tip, &limits);
+        c.bench_function(
+            &format!("cycle/floor, {label} (plain f64, no checks)"),
+            |b| {
+                b.iter(|| {
+                    let out = cycle_fn(black_box(&floor), black_box(&Q), black_box(&reading_v));
+                    black_box((out.force, out.std, out.above))
+                })
+            },
+        );
+    }
 
     let cal = example_calibration();
-    let profile = manipulator2();
-    c.bench_function("cycle/part: forward kinematics", |b| {
-        b.iter(|| black_box(forward(black_box(&cal), &profile, black_box(&joints()))))
-    });
-    let pose = forward(&cal, &profile, &joints()).unwrap();
-    let tip = TipForceEstimator::new(
-        &cal,
-        &profile,
-        &SensorNoise::hex6(),
-        TipForceConfig { max_std_n: 2.0 },
-    )
-    .unwrap();
-    c.bench_function("cycle/part: tip force, d = 0", |b| {
-        b.iter(|| black_box(tip.estimate(black_box(&pose), black_box(&reading), &bias_n)))
-    });
-    let offset_profile = Profile::new(0.35, 0.004, 2.593, 0.103).unwrap();
-    let offset_pose = forward(&cal, &offset_profile, &joints()).unwrap();
-    let offset_tip = TipForceEstimator::new(
-        &cal,
-        &offset_profile,
-        &SensorNoise::hex6(),
-        TipForceConfig { max_std_n: 2.0 },
-    )
-    .unwrap();
-    c.bench_function("cycle/part: tip force, d != 0 (6x6)", |b| {
-        b.iter(|| {
-            black_box(offset_tip.estimate(black_box(&offset_pose), black_box(&reading), &bias_n))
-        })
-    });
+    for (label, profile) in [
+        ("d = 0", manipulator2()),
+        ("d != 0", manipulator2_offset(OFFSET_M)),
+    ] {
+        c.bench_function(&format!("cycle/part: forward kinematics, {label}"), |b| {
+            b.iter(|| black_box(forward(black_box(&cal), &profile, black_box(&joints()))))
+        });
+        let reading = reading_for(&profile, &tip_n, &bias_n);
+        let pose = forward(&cal, &profile, &joints()).unwrap();
+        let tip = TipForceEstimator::new(
+            &cal,
+            &profile,
+            &SensorNoise::hex6(),
+            TipForceConfig { max_std_n: 2.0 },
+        )
+        .unwrap();
+        c.bench_function(&format!("cycle/part: tip force, {label}"), |b| {
+            b.iter(|| black_box(tip.estimate(black_box(&pose), black_box(&reading), &bias_n)))
+        });
+    }
+    let pose = forward(&cal, &manipulator2(), &joints()).unwrap();
     let mut guard = Guard::new(GuardConfig::new(test_guard_limits()).unwrap());
     let mut cycle = 0u64;
     c.bench_function("cycle/part: guard step", |b| {
