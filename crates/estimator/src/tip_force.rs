@@ -3,8 +3,9 @@
 //!
 //! - d = 0 (the default): the closed form of MODEL.md 4.1, no decomposition.
 //! - d != 0: the six equilibrium equations of MODEL.md 4.3 (unknowns F_D, the
-//!   support's reaction in a basis across u, and the U-joint torsion M_T), solved
-//!   on the stack by LU with a pivot check.
+//!   support's reaction in a basis across u, and the U-joint torsion M_T),
+//!   eliminated by hand into a closed form (derived at `with_offset`); the dense
+//!   6x6 solve is the tests' reference.
 //!
 //! Both return the number with its standard deviation, and flag it as not
 //! observable ([`TipForceEstimate::observable`] false) when a standard deviation
@@ -14,15 +15,10 @@
 //! the support, a singular system) is the answer [`TipForceError::NotObservable`].
 
 use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, check_finite};
-use nalgebra::{ComplexField, Matrix6, SMatrix};
+use nalgebra::ComplexField;
 
 /// How far |u|^2 (and |w|^2, u . w) of a pose may stray from 1 (and 0).
 pub const POSE_UNIT_TOLERANCE: f64 = 1e-6;
-
-/// With d != 0: a pivot of the (dimensionless, equilibrated) 6x6 system below
-/// this is treated as singular. This is only a backstop: the standard deviation
-/// check rejects such poses long before.
-pub const MIN_RELATIVE_PIVOT: f64 = 1e-12;
 
 /// Settings of the tip-force estimator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -307,9 +303,78 @@ impl TipForceEstimator {
         self.finish(u, force_n, &var_n2, lever_m, *f_a, 0.0)
     }
 
-    /// MODEL.md 4.3 (d != 0): the 6x6 system, equilibrated so that every entry
-    /// is dimensionless and of order one (moment rows divided by L, the torsion
-    /// unknown taken as M_T / L).
+    /// MODEL.md 4.3 (d != 0) in closed form: the six equilibrium equations
+    /// eliminated by hand.
+    ///
+    /// Write every vector in the orthonormal basis (u, w, v) of the rod, with
+    /// v = u x w the q5 axis (u x w = v, w x v = u, v x u = w); x_u = x . u and
+    /// so on. Relative to A: r_B = d w + s u, r_C = d w + c u, r_D = d w + L u.
+    /// Unknowns: F_D; the support's reaction across u, F_B = b1 w + b2 v; the
+    /// U-joint torsion M_T along n = Y0 x v = -(s4, 0, c4), whose components are
+    /// n_u = n . u = w_y (= -c5), n_w = n . w = -u_y (= -s5), n_v = 0. G = m g.
+    ///
+    /// Force balance, F_A + F_B + G + F_D = 0, by component:
+    ///
+    /// ```text
+    /// u:  F_Au + G_u + D_u = 0          =>  D_u = -(F_Au + G_u)
+    /// w:  F_Aw + b1 + G_w + D_w = 0     =>  b1  = -(F_Aw + G_w + D_w)
+    /// v:  F_Av + b2 + G_v + D_v = 0     =>  b2  = -(F_Av + G_v + D_v)
+    /// ```
+    ///
+    /// Moments about A (F_A acts at A), r_B x F_B + r_C x G + r_D x F_D + M_T n
+    /// = 0. For r = d w + l u and any F: r x F = d F_v u - l F_v w + (l F_w - d F_u) v,
+    /// and r_B x F_B = d b2 u - s b2 w + s b1 v. Projected:
+    ///
+    /// ```text
+    /// on u:      d (b2 + G_v + D_v) + n_u M_T = 0
+    /// on w:     -s b2 - c G_v - L D_v + n_w M_T = 0
+    /// on v:      s b1 + c G_w - d G_u + L D_w - d D_u = 0
+    /// ```
+    ///
+    /// The projection on v holds no torsion: with b1 and D_u from the force
+    /// balance (the G_u terms cancel),
+    ///
+    /// ```text
+    /// (L - s) D_w = s F_Aw + (s - c) G_w - d F_Au.
+    /// ```
+    ///
+    /// The projection on u is, with b2 from the force balance, -d F_Av + n_u M_T = 0:
+    ///
+    /// ```text
+    /// M_T = d F_Av / n_u,
+    /// ```
+    ///
+    /// and the projection on w, with b2 and this M_T,
+    ///
+    /// ```text
+    /// (L - s) D_v = (s + d n_w / n_u) F_Av + (s - c) G_v.
+    /// ```
+    ///
+    /// With F_tip = -F_D and 1 / (L - s) = 1 / lever:
+    ///
+    /// ```text
+    /// F_tip = T_u u + T_w w + T_v v,
+    /// T_u = F_Au + G_u
+    /// T_w = alpha F_Au + beta F_Aw - (s - c) / lever G_w
+    /// T_v = gamma F_Av - (s - c) / lever G_v
+    /// alpha = d / lever,  beta = -s / lever,  gamma = -(s - d u_y / w_y) / lever.
+    /// ```
+    ///
+    /// With d = 0 this is MODEL.md 4.1 (with a = s). F_tip is affine in F_A, so
+    /// its exact Jacobian is J = dF_tip/dF_A = (u + alpha w) u^T + beta w w^T +
+    /// gamma v v^T, and the per-axis variance is diag(J C J^T).
+    ///
+    /// The system is singular (no number: [`TipForceError::NotObservable`] with
+    /// an infinite deviation) exactly where lever <= 0 (the tip at or behind the
+    /// support) or n_u = w_y = 0 (a vertical rod: the torsion then has no part
+    /// along u, the moment about u says F_Av = 0, and M_T, D_v are free). Close
+    /// to either, the deviation grows without bound (1 / lever, 1 / w_y) and the
+    /// estimate is flagged by the observability limit; a deviation that
+    /// overflows is the singular case too.
+    ///
+    /// The basis is taken as orthonormal: u and w are checked unit and
+    /// perpendicular to [`POSE_UNIT_TOLERANCE`], which the forward kinematics
+    /// meet to round-off.
     fn with_offset(
         &self,
         pose: &Pose,
@@ -348,70 +413,35 @@ impl TipForceEstimator {
                 value: s,
             });
         }
-        let length = self.length_m;
-        let lever_m = length - s;
-        let singular = TipForceError::NotObservable {
-            lever_m,
-            std_max_n: f64::INFINITY,
-        };
-        if lever_m <= 0.0 {
-            return Err(singular);
+        let lever_m = self.length_m - s;
+        // n_u = n . u = w_y (n = Y0 x (u x w), MODEL.md 4: right also for the
+        // rods with c5 < 0 that the forward kinematics give with d != 0).
+        let n_u = w.y;
+        if lever_m <= 0.0 || n_u == 0.0 {
+            return Err(TipForceError::NotObservable {
+                lever_m,
+                std_max_n: f64::INFINITY,
+            });
         }
-        // Torsion axis n = -(s4, 0, c4) (MODEL.md 4): u x w = (c4, 0, -s4) is the
-        // q5 axis, whatever the sign of c5, and n = Y0 x (u x w) is unit and
-        // perpendicular to both joint axes. (-(ux, 0, uz) / |..| would flip n
-        // for the rods with c5 < 0 that the forward kinematics give with d != 0.)
-        let n = Vec3::y().cross(&u.cross(&w));
-        // Support basis across u: e1 = w, e2 = u x w.
-        let e1 = w;
-        let e2 = u.cross(&w);
+        let v = u.cross(&w);
         let d = self.offset_m;
-        let r_b = (w * d + u * s) / length;
-        let r_c = (w * d + u * self.com_m) / length;
-        let r_d = (w * d + u * length) / length;
-
-        // Unknowns x = (F_D, b1, b2, M_T / L).
-        // Force:  F_D + b1 e1 + b2 e2                         = -(F_A + m g)
-        // Moment: r_D x F_D + b1 r_B x e1 + b2 r_B x e2 + (M_T/L) n = -r_C x m g   (all / L)
-        let mut k = Matrix6::<f64>::zeros();
-        k.fixed_view_mut::<3, 3>(0, 0).copy_from(&Mat3::identity());
-        k.fixed_view_mut::<3, 3>(3, 0)
-            .copy_from(&r_d.cross_matrix());
-        k.fixed_view_mut::<3, 1>(0, 3).copy_from(&e1);
-        k.fixed_view_mut::<3, 1>(3, 3).copy_from(&r_b.cross(&e1));
-        k.fixed_view_mut::<3, 1>(0, 4).copy_from(&e2);
-        k.fixed_view_mut::<3, 1>(3, 4).copy_from(&r_b.cross(&e2));
-        k.fixed_view_mut::<3, 1>(3, 5).copy_from(&n);
-
-        // Column 0: the measurement; columns 1..4: [I; 0], whose solution's top
-        // block is K^-1[0..3, 0..3] = dF_tip/dF_A (rhs = -F_A - m g, F_tip = -F_D).
-        let mut rhs = SMatrix::<f64, 6, 4>::zeros();
-        rhs.fixed_view_mut::<3, 1>(0, 0)
-            .copy_from(&(-(f_a + self.weight_n)));
-        rhs.fixed_view_mut::<3, 1>(3, 0)
-            .copy_from(&(-r_c.cross(&self.weight_n)));
-        rhs.fixed_view_mut::<3, 3>(0, 1)
-            .copy_from(&Mat3::identity());
-
-        let lu = k.lu();
-        // Never NaN (f64::min drops a NaN operand), so `<` is the whole test.
-        let smallest_pivot = lu
-            .u()
-            .diagonal()
-            .iter()
-            .fold(f64::INFINITY, |acc: f64, p| acc.min(p.abs()));
-        if smallest_pivot < MIN_RELATIVE_PIVOT {
-            return Err(singular);
-        }
-        let Some(x) = lu.solve(&rhs) else {
-            return Err(singular);
-        };
-        let force_n: Vec3 = -x.fixed_view::<3, 1>(0, 0).clone_owned();
-        let Some(&torsion_scaled) = x.get((5, 0)) else {
-            return Err(singular);
-        };
-        let torsion_nm = torsion_scaled * length;
-        let jacobian: Mat3 = x.fixed_view::<3, 3>(0, 1).clone_owned();
+        let inv_lever = 1.0 / lever_m;
+        let inv_n_u = 1.0 / n_u;
+        let (fa_u, fa_w, fa_v) = (f_a.dot(u), f_a.dot(&w), f_a.dot(&v));
+        let g = &self.weight_n;
+        let (g_u, g_w, g_v) = (g.dot(u), g.dot(&w), g.dot(&v));
+        let alpha = d * inv_lever;
+        let beta = -s * inv_lever;
+        let gamma = (d * u.y * inv_n_u - s) * inv_lever;
+        let weight_arm = (s - self.com_m) * inv_lever;
+        let tip_u = fa_u + g_u;
+        let tip_w = alpha * fa_u + beta * fa_w - weight_arm * g_w;
+        let tip_v = gamma * fa_v - weight_arm * g_v;
+        let force_n = u * tip_u + w * tip_w + v * tip_v;
+        let torsion_nm = d * fa_v * inv_n_u;
+        let jacobian: Mat3 = (u + w * alpha) * u.transpose()
+            + (w * beta) * w.transpose()
+            + (v * gamma) * v.transpose();
         // diag(J C J^T)_i = sum_k (J C)_ik J_ik.
         let var_n2 = (jacobian * self.covariance_n2)
             .component_mul(&jacobian)
