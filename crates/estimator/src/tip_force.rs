@@ -113,7 +113,7 @@ pub struct TipForceEstimate {
 pub struct TipForceEstimator {
     calibration: Calibration,
     /// C = R_0s diag(std^2) R_0s^T: covariance of F_A in {0}, N^2.
-    covariance_n2: Mat3,
+    covariance_n2: Symmetric3,
     /// The diagonal of C, N^2.
     covariance_diag_n2: Vec3,
     /// m g, N.
@@ -122,6 +122,41 @@ pub struct TipForceEstimator {
     com_m: f64,
     offset_m: f64,
     max_std_n: f64,
+}
+
+/// A symmetric 3x3 matrix by its six entries: its product with a vector is
+/// written out, inline (nalgebra's 3x3 product is a call on the per-cycle path).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Symmetric3 {
+    xx: f64,
+    yy: f64,
+    zz: f64,
+    xy: f64,
+    xz: f64,
+    yz: f64,
+}
+
+impl Symmetric3 {
+    /// The upper triangle of `m` (symmetric by construction where it is used).
+    fn new(m: &Mat3) -> Self {
+        Self {
+            xx: m.m11,
+            yy: m.m22,
+            zz: m.m33,
+            xy: m.m12,
+            xz: m.m13,
+            yz: m.m23,
+        }
+    }
+
+    #[inline(always)]
+    fn mul(&self, v: &Vec3) -> Vec3 {
+        Vec3::new(
+            self.xx * v.x + self.xy * v.y + self.xz * v.z,
+            self.xy * v.x + self.yy * v.y + self.yz * v.z,
+            self.xz * v.x + self.yz * v.y + self.zz * v.z,
+        )
+    }
 }
 
 /// sqrt(variance); a round-off negative variance gives 0, NaN gives infinity
@@ -166,7 +201,7 @@ impl TipForceEstimator {
         let covariance_n2 = noise.base_covariance_n2(&cal.sensor_rotation());
         Ok(Self {
             calibration: *cal,
-            covariance_n2,
+            covariance_n2: Symmetric3::new(&covariance_n2),
             covariance_diag_n2: covariance_n2.diagonal(),
             weight_n: cal.gravity_mps2() * profile.mass_kg(),
             length_m: profile.length_m(),
@@ -295,7 +330,7 @@ impl TipForceEstimator {
         let force_n = u * axial - moment_perp / lever_m;
         // J = dF_tip/dF_A = u u^T - k (I - u u^T) = (1 + k) u u^T - k I, and
         // diag(J C J^T)_i = k^2 C_ii - 2 k (1 + k) u_i (C u)_i + (1 + k)^2 u_i^2 (u . C u).
-        let cu = self.covariance_n2 * u;
+        let cu = self.covariance_n2.mul(u);
         let ucu = u.dot(&cu);
         let p = 1.0 + k;
         let var_n2 = self.covariance_diag_n2 * (k * k) - u.component_mul(&cu) * (2.0 * k * p)
@@ -362,7 +397,18 @@ impl TipForceEstimator {
     ///
     /// With d = 0 this is MODEL.md 4.1 (with a = s). F_tip is affine in F_A, so
     /// its exact Jacobian is J = dF_tip/dF_A = (u + alpha w) u^T + beta w w^T +
-    /// gamma v v^T, and the per-axis variance is diag(J C J^T).
+    /// gamma v v^T, and the per-axis variance is diag(J C J^T). With
+    /// w w^T = I - u u^T - v v^T, J = beta I + p u^T + q v^T where
+    /// p = (1 - beta) u + alpha w and q = (gamma - beta) v, so that
+    ///
+    /// ```text
+    /// F_tip = J F_A + G_u u - (s - c) / lever (G - G_u u)
+    /// diag(J C J^T)_i = beta^2 C_ii + 2 beta (p_i (C u)_i + q_i (C v)_i)
+    ///                   + p_i^2 u.Cu + 2 p_i q_i u.Cv + q_i^2 v.Cv
+    /// ```
+    ///
+    /// (the d = 0 form of `closed_form` plus the terms in alpha and q, both of
+    /// order d): no 3x3 product.
     ///
     /// The system is singular (no number: [`TipForceError::NotObservable`] with
     /// an infinite deviation) exactly where lever <= 0 (the tip at or behind the
@@ -383,69 +429,121 @@ impl TipForceEstimator {
     ) -> Result<TipForceEstimate, TipForceError> {
         let w = pose.rod_normal;
         let s = pose.support_along_rod_m;
-        check_finite(&w, |value| TipForceError::NonFinite {
-            input: "pose.rod_normal",
-            value,
-        })?;
-        check_finite(&[s], |value| TipForceError::NonFinite {
-            input: "pose.support_along_rod_m",
-            value,
-        })?;
+        // One test each on the way of a good pose; which input is wrong, and
+        // how, is sorted out only when one fails (`contains` and `<` are false
+        // for NaN, and a NaN or infinite w fails the unit test).
         let tolerance = -POSE_UNIT_TOLERANCE..=POSE_UNIT_TOLERANCE;
         let unit_error = w.norm_squared() - 1.0;
-        if !tolerance.contains(&unit_error) {
-            return Err(TipForceError::InvalidPose {
-                quantity: "|rod_normal|^2 - 1",
-                value: unit_error,
-            });
-        }
         let cross = u.dot(&w);
-        if !tolerance.contains(&cross) {
-            return Err(TipForceError::InvalidPose {
-                quantity: "rod_dir . rod_normal",
-                value: cross,
-            });
+        if !(tolerance.contains(&unit_error) && tolerance.contains(&cross)) {
+            return Err(Self::bad_normal(w, unit_error, cross));
         }
-        // s and L are finite here, so are L - s and the comparisons.
-        if s <= 0.0 {
-            return Err(TipForceError::InvalidPose {
-                quantity: "support_along_rod_m",
-                value: s,
-            });
-        }
-        let lever_m = self.length_m - s;
+        let length = self.length_m;
+        let lever_m = length - s;
         // n_u = n . u = w_y (n = Y0 x (u x w), MODEL.md 4: right also for the
         // rods with c5 < 0 that the forward kinematics give with d != 0).
         let n_u = w.y;
-        if lever_m <= 0.0 || n_u == 0.0 {
-            return Err(TipForceError::NotObservable {
-                lever_m,
-                std_max_n: f64::INFINITY,
-            });
+        if !(s > 0.0 && s < length && n_u != 0.0) {
+            return Err(Self::bad_support(s, lever_m));
         }
-        let v = u.cross(&w);
+        let (ux, uy, uz) = (u.x, u.y, u.z);
+        let (wx, wy, wz) = (w.x, w.y, w.z);
+        // v = u x w
+        let (vx, vy, vz) = (uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx);
         let d = self.offset_m;
         let inv_lever = 1.0 / lever_m;
         let inv_n_u = 1.0 / n_u;
-        let (fa_u, fa_w, fa_v) = (f_a.dot(u), f_a.dot(&w), f_a.dot(&v));
-        let g = &self.weight_n;
-        let (g_u, g_w, g_v) = (g.dot(u), g.dot(&w), g.dot(&v));
-        let alpha = d * inv_lever;
         let beta = -s * inv_lever;
-        let gamma = (d * u.y * inv_n_u - s) * inv_lever;
+        let alpha = d * inv_lever;
+        // gamma - beta = d u_y / (w_y lever)
+        let delta = d * uy * inv_n_u * inv_lever;
         let weight_arm = (s - self.com_m) * inv_lever;
-        let tip_u = fa_u + g_u;
-        let tip_w = alpha * fa_u + beta * fa_w - weight_arm * g_w;
-        let tip_v = gamma * fa_v - weight_arm * g_v;
-        let force_n = u * tip_u + w * tip_w + v * tip_v;
+        // J = beta I + p u^T + q v^T
+        let one_beta = 1.0 - beta;
+        let (px, py, pz) = (
+            one_beta * ux + alpha * wx,
+            one_beta * uy + alpha * wy,
+            one_beta * uz + alpha * wz,
+        );
+        let (qx, qy, qz) = (delta * vx, delta * vy, delta * vz);
+        let (fx, fy, fz) = (f_a.x, f_a.y, f_a.z);
+        let g = &self.weight_n;
+        let fa_u = fx * ux + fy * uy + fz * uz;
+        let fa_v = fx * vx + fy * vy + fz * vz;
+        let g_u = g.x * ux + g.y * uy + g.z * uz;
+        // F_tip = J F_A + G_u u - (s - c) / lever (G - G_u u)
+        let g_along = g_u * (1.0 + weight_arm);
+        let force_n = Vec3::new(
+            beta * fx + px * fa_u + qx * fa_v + g_along * ux - weight_arm * g.x,
+            beta * fy + py * fa_u + qy * fa_v + g_along * uy - weight_arm * g.y,
+            beta * fz + pz * fa_u + qz * fa_v + g_along * uz - weight_arm * g.z,
+        );
         let torsion_nm = d * fa_v * inv_n_u;
-        let jacobian: Mat3 = (u + w * alpha) * u.transpose()
-            + (w * beta) * w.transpose()
-            + (v * gamma) * v.transpose();
-        // diag(J C J^T)_i = sum_k (J C)_ik J_ik.
-        let var_n2 = (jacobian * self.covariance_n2)
-            .component_mul(&jacobian)
-            .column_sum();
+        // diag(J C J^T)_i = beta^2 C_ii + 2 beta (p_i (C u)_i + q_i (C v)_i)
+        //   + p_i^2 (u . C u) + 2 p_i q_i (u . C v) + q_i^2 (v . C v)
+        let c = &self.covariance_n2;
+        let cu = c.mul(u);
+        let cv = c.mul(&Vec3::new(vx, vy, vz));
+        let ucu = ux * cu.x + uy * cu.y + uz * cu.z;
+        let ucv2 = 2.0 * (ux * cv.x + uy * cv.y + uz * cv.z);
+        let vcv = vx * cv.x + vy * cv.y + vz * cv.z;
+        let (beta2, beta_twice) = (beta * beta, 2.0 * beta);
+        let var = |c_ii: f64, p: f64, q: f64, cu: f64, cv: f64| {
+            beta2 * c_ii
+                + p * (beta_twice * cu + p * ucu + q * ucv2)
+                + q * (beta_twice * cv + q * vcv)
+        };
+        let var_n2 = Vec3::new(
+            var(c.xx, px, qx, cu.x, cv.x),
+            var(c.yy, py, qy, cu.y, cv.y),
+            var(c.zz, pz, qz, cu.z, cv.z),
+        );
         self.finish(u, force_n, &var_n2, lever_m, *f_a, torsion_nm)
+    }
+
+    /// Why w failed the unit tests of `with_offset` (`unit_error` = |w|^2 - 1,
+    /// `cross` = u . w): not finite, not unit, or not perpendicular to u.
+    #[cold]
+    fn bad_normal(w: Vec3, unit_error: f64, cross: f64) -> TipForceError {
+        if let Err(e) = check_finite(&w, |value| TipForceError::NonFinite {
+            input: "pose.rod_normal",
+            value,
+        }) {
+            return e;
+        }
+        if !(-POSE_UNIT_TOLERANCE..=POSE_UNIT_TOLERANCE).contains(&unit_error) {
+            TipForceError::InvalidPose {
+                quantity: "|rod_normal|^2 - 1",
+                value: unit_error,
+            }
+        } else {
+            TipForceError::InvalidPose {
+                quantity: "rod_dir . rod_normal",
+                value: cross,
+            }
+        }
+    }
+
+    /// Why s (with L - s = `lever_m`) or the pose failed `with_offset`'s
+    /// range test: s not finite, s <= 0, or singular (the tip at or behind the
+    /// support, or a vertical rod).
+    #[cold]
+    fn bad_support(s: f64, lever_m: f64) -> TipForceError {
+        if !s.is_finite() {
+            TipForceError::NonFinite {
+                input: "pose.support_along_rod_m",
+                value: s,
+            }
+        } else if s <= 0.0 {
+            TipForceError::InvalidPose {
+                quantity: "support_along_rod_m",
+                value: s,
+            }
+        } else {
+            TipForceError::NotObservable {
+                lever_m,
+                std_max_n: f64::INFINITY,
+            }
+        }
     }
 }
