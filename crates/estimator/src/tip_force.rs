@@ -116,6 +116,8 @@ pub struct TipForceEstimator {
     covariance_n2: Symmetric3,
     /// The diagonal of C, N^2.
     covariance_diag_n2: Vec3,
+    /// F = R_0s diag(std): C = F F^T (d != 0).
+    noise_factor: Mat3,
     /// m g, N.
     weight_n: Vec3,
     length_m: f64,
@@ -203,6 +205,7 @@ impl TipForceEstimator {
             calibration: *cal,
             covariance_n2: Symmetric3::new(&covariance_n2),
             covariance_diag_n2: covariance_n2.diagonal(),
+            noise_factor: cal.sensor_rotation() * Mat3::from_diagonal(&noise.std_n()),
             weight_n: cal.gravity_mps2() * profile.mass_kg(),
             length_m: profile.length_m(),
             com_m: profile.com_m(),
@@ -262,7 +265,7 @@ impl TipForceEstimator {
         &self,
         u: &Vec3,
         force_n: Vec3,
-        var_n2: &Vec3,
+        var_n2: Vec3,
         lever_m: f64,
         ujoint_force_n: Vec3,
         torsion_nm: f64,
@@ -335,7 +338,7 @@ impl TipForceEstimator {
         let p = 1.0 + k;
         let var_n2 = self.covariance_diag_n2 * (k * k) - u.component_mul(&cu) * (2.0 * k * p)
             + u.component_mul(u) * (p * p * ucu);
-        self.finish(u, force_n, &var_n2, lever_m, *f_a, 0.0)
+        self.finish(u, force_n, var_n2, lever_m, *f_a, 0.0)
     }
 
     /// MODEL.md 4.3 (d != 0) in closed form: the six equilibrium equations
@@ -479,26 +482,18 @@ impl TipForceEstimator {
             beta * fz + pz * fa_u + qz * fa_v + g_along * uz - weight_arm * g.z,
         );
         let torsion_nm = d * fa_v * inv_n_u;
-        // diag(J C J^T)_i = beta^2 C_ii + 2 beta (p_i (C u)_i + q_i (C v)_i)
-        //   + p_i^2 (u . C u) + 2 p_i q_i (u . C v) + q_i^2 (v . C v)
-        let c = &self.covariance_n2;
-        let cu = c.mul(u);
-        let cv = c.mul(&Vec3::new(vx, vy, vz));
-        let ucu = ux * cu.x + uy * cu.y + uz * cu.z;
-        let ucv2 = 2.0 * (ux * cv.x + uy * cv.y + uz * cv.z);
-        let vcv = vx * cv.x + vy * cv.y + vz * cv.z;
-        let (beta2, beta_twice) = (beta * beta, 2.0 * beta);
-        let var = |c_ii: f64, p: f64, q: f64, cu: f64, cv: f64| {
-            beta2 * c_ii
-                + p * (beta_twice * cu + p * ucu + q * ucv2)
-                + q * (beta_twice * cv + q * vcv)
-        };
+        // diag(J C J^T)_i = |F^T J^T e_i|^2 = |beta F_i + p_i a + q_i b|^2 with
+        // F_i the rows of F, a = F^T u, b = F^T v.
+        let f = &self.noise_factor;
+        let a = f.tr_mul(u);
+        let b = f.tr_mul(&Vec3::new(vx, vy, vz));
+        let row = |fi: Vec3, p: f64, q: f64| (fi * beta + a * p + b * q).norm_squared();
         let var_n2 = Vec3::new(
-            var(c.xx, px, qx, cu.x, cv.x),
-            var(c.yy, py, qy, cu.y, cv.y),
-            var(c.zz, pz, qz, cu.z, cv.z),
+            row(Vec3::new(f.m11, f.m12, f.m13), px, qx),
+            row(Vec3::new(f.m21, f.m22, f.m23), py, qy),
+            row(Vec3::new(f.m31, f.m32, f.m33), pz, qz),
         );
-        self.finish(u, force_n, &var_n2, lever_m, *f_a, torsion_nm)
+        self.finish(u, force_n, var_n2, lever_m, *f_a, torsion_nm)
     }
 
     /// Why w failed the unit tests of `with_offset` (`unit_error` = |w|^2 - 1,
