@@ -996,7 +996,8 @@ fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_t
     let latency_ns = s.spec.sensor.latency_ns;
     let rotation = s.spec.calibration.sensor_rotation();
     let noise = s.spec.sensor.noise_n;
-    let covariance = rotation * nalgebra::Matrix3::from_diagonal(&noise.component_mul(&noise))
+    let covariance = rotation
+        * nalgebra::Matrix3::from_diagonal(&noise.component_mul(&noise))
         * rotation.transpose();
     let mut est = estimator_for(&s);
     let (mut sum_z2, mut sum_e2, mut n, mut beyond_4_std) = (Vec3::zeros(), Vec3::zeros(), 0, 0);

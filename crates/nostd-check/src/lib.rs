@@ -97,6 +97,41 @@ pub extern "C" fn sar_nostd_identify(ax_m: f64, ay_m: f64, az_m: f64) -> f64 {
     }
 }
 
+/// One estimator cycle with the rod's axis `offset_m` from the U-joint centre
+/// (d != 0: the closed form of MODEL.md 4.3). Returns the guard state as a
+/// number, or -1.
+#[unsafe(no_mangle)]
+pub extern "C" fn sar_nostd_cycle_offset(
+    offset_m: f64,
+    q1_m: f64,
+    q2_m: f64,
+    q3_m: f64,
+    fx_n: f64,
+    fy_n: f64,
+    fz_n: f64,
+) -> i32 {
+    let Some(mut config) = config() else { return -1 };
+    let Ok(profile) = Profile::new(0.35, offset_m, 2.593, 0.103) else {
+        return -1;
+    };
+    config.profile = profile;
+    let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
+        return -1;
+    };
+    let out = estimator.cycle(&CycleInput {
+        cycle: 1,
+        now_ns: 1_000,
+        sensor: SensorSample {
+            force_n: Vec3::new(fx_n, fy_n, fz_n),
+            torque_nm: Vec3::zeros(),
+            stamp_ns: 1_000,
+            valid: true,
+        },
+        joints: JointSample { joints: ActiveJoints { q1_m, q2_m, q3_m }, stamp_ns: 1_000, valid: true },
+    });
+    out.guard_state as i32
+}
+
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
     loop {}
