@@ -402,16 +402,16 @@ impl TipForceEstimator {
     /// its exact Jacobian is J = dF_tip/dF_A = (u + alpha w) u^T + beta w w^T +
     /// gamma v v^T, and the per-axis variance is diag(J C J^T). With
     /// w w^T = I - u u^T - v v^T, J = beta I + p u^T + q v^T where
-    /// p = (1 - beta) u + alpha w and q = (gamma - beta) v, so that
+    /// p = (1 - beta) u + alpha w and q = (gamma - beta) v (alpha and q are of
+    /// order d: with d = 0 this is the J of `closed_form`, k = -beta). With
+    /// C = F F^T, F = R_0s diag(std) and F_i the rows of F:
     ///
     /// ```text
     /// F_tip = J F_A + G_u u - (s - c) / lever (G - G_u u)
-    /// diag(J C J^T)_i = beta^2 C_ii + 2 beta (p_i (C u)_i + q_i (C v)_i)
-    ///                   + p_i^2 u.Cu + 2 p_i q_i u.Cv + q_i^2 v.Cv
+    /// diag(J C J^T)_i = |F^T J^T e_i|^2 = |beta F_i + p_i F^T u + q_i F^T v|^2
     /// ```
     ///
-    /// (the d = 0 form of `closed_form` plus the terms in alpha and q, both of
-    /// order d): no 3x3 product.
+    /// (a sum of squares, never negative; no 3x3 product).
     ///
     /// The system is singular (no number: [`TipForceError::NotObservable`] with
     /// an infinite deviation) exactly where lever <= 0 (the tip at or behind the
