@@ -62,7 +62,8 @@ impl Drives {
             while !s.load(Ordering::Relaxed) {
                 {
                     let mut drives = d.lock().unwrap();
-                    let _ = canopen::serve(&mut socket, &mut drives, clock.now_ns().unwrap(), &mut out);
+                    let _ =
+                        canopen::serve(&mut socket, &mut drives, clock.now_ns().unwrap(), &mut out);
                 }
                 clock.sleep_until_ns(clock.now_ns().unwrap() + 20_000);
             }

@@ -1102,3 +1102,109 @@ fn an_encoder_jump_ends_in_a_fault_within_one_cycle() {
         fault.2
     );
 }
+
+/// d != 0 (MODEL.md 4.3) end to end: the contact scenario with the rod's axis
+/// 10 mm from the U-joint centre. The estimator's closed form for d != 0 gives
+/// back the simulator's tip force (minus the friction, which acts along the
+/// rod's axis exactly like an axial tip force, whatever d) within its reported
+/// standard deviation, and the U-joint torsion within the deviation that the
+/// sensor noise gives it, |d / w_y| sqrt(v^T C v) with v = u x w; the guard
+/// stops the push.
+#[test]
+fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_the_push() {
+    let s = scenario("random_contact_offset_manipulator_2.toml");
+    let d = s.spec.profile.offset_m();
+    assert!(d.abs() >= 0.005, "the scenario is for d != 0: {d}");
+    let sim = simulate(&s, true);
+    let run = &sim.run;
+    assert_eq!(run.end, EndReason::ScriptDone);
+    let latency_ns = s.spec.sensor.latency_ns;
+    let rotation = s.spec.calibration.sensor_rotation();
+    let noise = s.spec.sensor.noise_n;
+    let covariance = rotation
+        * nalgebra::Matrix3::from_diagonal(&noise.component_mul(&noise))
+        * rotation.transpose();
+    let mut est = estimator_for(&s);
+    let (mut sum_z2, mut sum_e2, mut n, mut beyond_4_std) = (Vec3::zeros(), Vec3::zeros(), 0, 0);
+    let (mut sum_torsion_z2, mut max_torsion_nm) = (0.0, 0.0_f64);
+    let mut transitions = Vec::new();
+    let mut cycle = 0;
+    for sample in &run.sensor_samples {
+        let measured_ns = sample.received_ns - latency_ns;
+        let Some(joints) = joints_at(run, measured_ns) else {
+            continue;
+        };
+        cycle += 1;
+        let input = CycleInput {
+            cycle,
+            now_ns: Some(sample.received_ns),
+            sensor: sensor_input(sample),
+            joints: JointSample {
+                joints: joints.joints,
+                stamp_ns: joints.stamp_ns,
+                valid: joints.valid,
+            },
+            // Leave the initial Fault (no input yet) with the first good input.
+            command: (cycle == 1).then_some(Command::Reset),
+        };
+        let out = *est.cycle(&input);
+        if let Some(t) = out.transition {
+            transitions.push((measured_ns, t.to, t.reason));
+        }
+        let truth = sim
+            .truth_at(measured_ns)
+            .expect("a truth at every measurement");
+        let TipOutcome::Estimate(e) = out.tip else {
+            panic!("no estimate at {measured_ns} ns: {:?}", out.tip);
+        };
+        assert!(e.observable, "{e:?}");
+        let err = e.force_n - (truth.tip_force_n - truth.friction_force_n);
+        let z = err.component_div(&e.std_n);
+        sum_z2 += z.component_mul(&z);
+        sum_e2 += err.component_mul(&err);
+        if z.amax() > 4.0 {
+            beyond_4_std += 1;
+        }
+        let pose = out.pose.expect("a pose with the estimate");
+        let v = pose.rod_dir.cross(&pose.rod_normal);
+        let torsion_std_nm = (d / pose.rod_normal.y).abs() * v.dot(&(covariance * v)).sqrt();
+        let torsion_z = (e.torsion_nm - truth.torsion_nm) / torsion_std_nm;
+        sum_torsion_z2 += torsion_z * torsion_z;
+        max_torsion_nm = max_torsion_nm.max(truth.torsion_nm.abs());
+        n += 1;
+    }
+    let nf = n as f64;
+    let rms_z = (sum_z2 / nf).map(f64::sqrt);
+    let rms_err = (sum_e2 / nf).map(f64::sqrt);
+    let rms_torsion_z = (sum_torsion_z2 / nf).sqrt();
+    println!(
+        "d = {d} m: tip force over {n} samples: RMS error ({:.3}, {:.3}, {:.3}) N, RMS error / \
+         std ({:.3}, {:.3}, {:.3}), {beyond_4_std} beyond 4 std; torsion: RMS error / std \
+         {rms_torsion_z:.3} (true |M_T| up to {max_torsion_nm:.4} N m)",
+        rms_err.x, rms_err.y, rms_err.z, rms_z.x, rms_z.y, rms_z.z
+    );
+    assert!(n + 5 >= run.sensor_samples.len());
+    for i in 0..3 {
+        assert!((0.9..1.1).contains(&rms_z[i]), "axis {i}: {}", rms_z[i]);
+    }
+    assert!((beyond_4_std as f64) < 1e-3 * nf, "{beyond_4_std} of {n}");
+    assert!(max_torsion_nm > 0.01, "the scenario must load the torsion");
+    assert!((0.9..1.1).contains(&rms_torsion_z), "{rms_torsion_z}");
+    println!("guard transitions: {transitions:?}");
+    assert!(matches!(
+        transitions.first(),
+        Some((_, GuardState::Ok, Reason::Reset))
+    ));
+    assert!(
+        transitions.iter().all(|t| t.1 != GuardState::Fault),
+        "{transitions:?}"
+    );
+    let stops: Vec<_> = transitions
+        .iter()
+        .filter(|t| t.1 == GuardState::Stop)
+        .collect();
+    assert_eq!(stops.len(), 1, "{transitions:?}");
+    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
+    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
+    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+}

@@ -1,10 +1,14 @@
 //! Criterion benchmarks of the estimator: the full per-cycle path (the 1 kHz
-//! loop's budget), its parts, and the identification update, solve and support fit.
+//! loop's budget) with d = 0 and with d != 0, a floor (plain f64 code giving the
+//! same outputs with no validation, measured in the same run so that the
+//! cycle/floor ratio can be read off), the cycle's parts, and the
+//! identification update, solve and support fit.
 #![allow(
     missing_docs,
     clippy::unwrap_used,
     clippy::expect_used,
-    clippy::indexing_slicing
+    clippy::indexing_slicing,
+    clippy::panic
 )]
 
 #[path = "../tests/common/mod.rs"]
@@ -13,16 +17,22 @@ mod common;
 use common::*;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
-use sar_estimator::cycle::{CycleInput, Estimator, JointSample, SensorSample};
-use sar_estimator::guard::{Guard, GuardConfig, GuardInput, TipInput};
+use sar_estimator::cycle::{
+    CycleInput, Estimator, EstimatorConfig, JointSample, SensorSample, TipOutcome,
+};
+use sar_estimator::guard::{Guard, GuardConfig, GuardInput, GuardLimits, TipInput};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
-use sar_estimator::{Profile, ProfileSpec, SensorNoise};
+use sar_estimator::{Calibration, Profile, ProfileSpec, SensorNoise};
 use sar_kinematics::{ActiveJoints, forward};
 use std::hint::black_box;
+use std::time::{Duration, Instant};
 
 const Q: [f64; 3] = [0.02, 0.25, 0.31];
+
+/// The offset d of the d != 0 benchmarks, m.
+const OFFSET_M: f64 = 0.004;
 
 fn joints() -> ActiveJoints {
     ActiveJoints {
@@ -32,79 +42,403 @@ fn joints() -> ActiveJoints {
     }
 }
 
-fn per_cycle(c: &mut Criterion) {
-    let bias_n = Vector3::new(0.4, -1.1, 0.25);
-    let reading = example_reading(Q, &Vector3::new(1.0, -0.5, 0.5), &bias_n);
-    // Every plausibility check on, the torque check included (the example
-    // robot's torque: (A - S) x (f - b_f) with A - S = (0, -0.05, 0), R_0s = I).
-    let mut config = example_estimator_config();
-    config.plausibility =
-        sar_estimator::cycle::PlausibilityConfig::new(Default::default()).unwrap();
-    let torque_nm = Vector3::new(0.0, -0.05, 0.0).cross(&(reading - bias_n));
-    let mut estimator = Estimator::new(&config, bias_n).unwrap();
-    let mut cycle = 0u64;
-    c.bench_function("cycle/full (kinematics + tip force + guard)", |b| {
-        b.iter(|| {
-            cycle += 1;
-            let now_ns = 1_000_000 * cycle;
-            let input = CycleInput {
-                cycle,
-                now_ns: Some(now_ns),
-                sensor: SensorSample {
-                    force_n: reading,
-                    torque_nm,
-                    counter: cycle as u32,
-                    status: 0,
-                    stamp_ns: now_ns,
-                    valid: true,
-                },
-                joints: JointSample {
-                    joints: joints(),
-                    stamp_ns: now_ns,
-                    valid: true,
-                },
-                command: None,
-            };
-            black_box(estimator.cycle(black_box(&input)).guard_state)
-        })
-    });
-
-    let cal = example_calibration();
-    let profile = manipulator2();
-    c.bench_function("cycle/part: forward kinematics", |b| {
-        b.iter(|| black_box(forward(black_box(&cal), &profile, black_box(&joints()))))
-    });
-    let pose = forward(&cal, &profile, &joints()).unwrap();
-    let tip = TipForceEstimator::new(
-        &cal,
-        &profile,
-        &SensorNoise::hex6(),
-        TipForceConfig { max_std_n: 2.0 },
-    )
-    .unwrap();
-    c.bench_function("cycle/part: tip force, d = 0", |b| {
-        b.iter(|| black_box(tip.estimate(black_box(&pose), black_box(&reading), &bias_n)))
-    });
-    let offset_profile = Profile::new(&ProfileSpec {
+/// Manipulator 2 with the rod's axis `offset_m` from the U-joint centre.
+fn manipulator2_offset(offset_m: f64) -> Profile {
+    Profile::new(&ProfileSpec {
         length_m: 0.35,
-        offset_m: 0.004,
+        offset_m,
         mass_kg: 2.593,
         com_m: 0.103,
     })
-    .unwrap();
-    let offset_pose = forward(&cal, &offset_profile, &joints()).unwrap();
-    let offset_tip = TipForceEstimator::new(
-        &cal,
-        &offset_profile,
-        &SensorNoise::hex6(),
-        TipForceConfig { max_std_n: 2.0 },
-    )
-    .unwrap();
-    c.bench_function("cycle/part: tip force, d != 0 (6x6)", |b| {
-        b.iter(|| {
-            black_box(offset_tip.estimate(black_box(&offset_pose), black_box(&reading), &bias_n))
+    .unwrap()
+}
+
+/// The raw torque reading (R_0s = I, no torque bias) that goes with `reading_for`:
+/// (A - S) x (-F_A) - M_T n, with A - S = (0, -0.05, 0) on the example robot.
+fn torque_for(profile: &Profile, tip_force_n: &Vector3<f64>) -> Vector3<f64> {
+    let cal = example_calibration();
+    let pose = forward(&cal, profile, &joints()).unwrap();
+    let truth = Truth {
+        offset_m: profile.offset_m(),
+        ..manipulator2_truth()
+    };
+    let (f_a, torsion_nm) = ujoint_force(
+        &truth,
+        &pose.ujoint_m,
+        &pose.rod_dir,
+        &pose.rod_normal,
+        tip_force_n,
+        0.0,
+    );
+    let n = Vector3::y().cross(&pose.rod_dir.cross(&pose.rod_normal));
+    Vector3::new(0.0, -0.05, 0.0).cross(&(-f_a)) - n * torsion_nm
+}
+
+/// The raw reading (R_0s = I) of the example robot with `profile` at the
+/// joints `Q`, from the independent simulator of `common`.
+fn reading_for(
+    profile: &Profile,
+    tip_force_n: &Vector3<f64>,
+    bias_n: &Vector3<f64>,
+) -> Vector3<f64> {
+    let cal = example_calibration();
+    let pose = forward(&cal, profile, &joints()).unwrap();
+    let truth = Truth {
+        offset_m: profile.offset_m(),
+        ..manipulator2_truth()
+    };
+    let (f_a, _) = ujoint_force(
+        &truth,
+        &pose.ujoint_m,
+        &pose.rod_dir,
+        &pose.rod_normal,
+        tip_force_n,
+        0.0,
+    );
+    ideal_reading(&cal.sensor_rotation(), &f_a, bias_n)
+}
+
+fn cycle_input(cycle: u64, reading: &Vector3<f64>, torque_nm: &Vector3<f64>) -> CycleInput {
+    let now_ns = 1_000_000 * cycle;
+    CycleInput {
+        cycle,
+        now_ns: Some(now_ns),
+        sensor: SensorSample {
+            force_n: *reading,
+            torque_nm: *torque_nm,
+            counter: cycle as u32,
+            status: 0,
+            stamp_ns: now_ns,
+            valid: true,
+        },
+        joints: JointSample {
+            joints: joints(),
+            stamp_ns: now_ns,
+            valid: true,
+        },
+        command: None,
+    }
+}
+
+type V = [f64; 3];
+
+fn dot(a: &V, b: &V) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The floor: what the cycle computes, as plain f64 code with everything that
+/// does not change fixed beforehand, and no validation at all (no finiteness,
+/// no unit checks, no degenerate poses, no guard state).
+struct Floor {
+    /// P_home + a_off.
+    ujoint_home: V,
+    support: V,
+    /// R_0s, rows.
+    rotation: [V; 3],
+    /// C = R_0s diag(std^2) R_0s^T, rows.
+    covariance: [V; 3],
+    /// F = R_0s diag(std) (C = F F^T), rows.
+    factor: [V; 3],
+    weight: V,
+    length: f64,
+    com: f64,
+    offset: f64,
+    bias: V,
+    /// Stop limits: total, axial, lateral.
+    limits: V,
+}
+
+/// The floor's outputs: F_tip, its per-axis deviation, and the three limit
+/// tests (total, axial, lateral at or above the stop limit).
+struct FloorOut {
+    force: V,
+    std: V,
+    above: [bool; 3],
+}
+
+impl Floor {
+    fn new(config: &EstimatorConfig, limits: &GuardLimits, bias: &Vector3<f64>) -> Self {
+        let cal: &Calibration = &config.calibration;
+        let a0 = cal.p_home_m() + cal.ujoint_offset_m();
+        let r = cal.sensor_rotation();
+        let c = config.noise.base_covariance_n2(&r);
+        let f = r * nalgebra::Matrix3::from_diagonal(&config.noise.std_n());
+        let w = cal.gravity_mps2() * config.profile.mass_kg();
+        let row = |m: &nalgebra::Matrix3<f64>, i: usize| [m[(i, 0)], m[(i, 1)], m[(i, 2)]];
+        Self {
+            ujoint_home: [a0.x, a0.y, a0.z],
+            support: [cal.support_m().x, cal.support_m().y, cal.support_m().z],
+            rotation: [row(&r, 0), row(&r, 1), row(&r, 2)],
+            covariance: [row(&c, 0), row(&c, 1), row(&c, 2)],
+            factor: [row(&f, 0), row(&f, 1), row(&f, 2)],
+            weight: [w.x, w.y, w.z],
+            length: config.profile.length_m(),
+            com: config.profile.com_m(),
+            offset: config.profile.offset_m(),
+            bias: [bias.x, bias.y, bias.z],
+            limits: [
+                limits.stop_total_n,
+                limits.stop_axial_n,
+                limits.stop_lateral_n,
+            ],
+        }
+    }
+
+    /// F_A = -R_0s (reading - bias).
+    fn ujoint_force(&self, reading: &V) -> V {
+        let f = [
+            reading[0] - self.bias[0],
+            reading[1] - self.bias[1],
+            reading[2] - self.bias[2],
+        ];
+        [
+            -dot(&self.rotation[0], &f),
+            -dot(&self.rotation[1], &f),
+            -dot(&self.rotation[2], &f),
+        ]
+    }
+
+    /// B - A for the active joints q = (q1, q2, q3) (A = P_home + a_off + (q3, q2, q1)).
+    fn support_from_ujoint(&self, q: &V) -> V {
+        [
+            self.support[0] - self.ujoint_home[0] - q[2],
+            self.support[1] - self.ujoint_home[1] - q[1],
+            self.support[2] - self.ujoint_home[2] - q[0],
+        ]
+    }
+
+    fn finish(&self, u: &V, force: V, var: V) -> FloorOut {
+        let axial = dot(&force, u);
+        let lat = [
+            force[0] - axial * u[0],
+            force[1] - axial * u[1],
+            force[2] - axial * u[2],
+        ];
+        let total = dot(&force, &force).sqrt();
+        let lateral = dot(&lat, &lat).sqrt();
+        FloorOut {
+            force,
+            std: [var[0].sqrt(), var[1].sqrt(), var[2].sqrt()],
+            above: [
+                total >= self.limits[0],
+                axial.abs() >= self.limits[1],
+                lateral >= self.limits[2],
+            ],
+        }
+    }
+
+    /// d = 0: u = r / |r|, a = |r|, MODEL.md 4.1.
+    fn cycle_d0(&self, q: &V, reading: &V) -> FloorOut {
+        let r = self.support_from_ujoint(q);
+        let a = dot(&r, &r).sqrt();
+        let inv_a = 1.0 / a;
+        let u = [r[0] * inv_a, r[1] * inv_a, r[2] * inv_a];
+        let fa = self.ujoint_force(reading);
+        let g = &self.weight;
+        let inv_lever = 1.0 / (self.length - a);
+        let k = a * inv_lever;
+        let axial = dot(&fa, &u) + dot(g, &u);
+        // F_tip = (F_A + m g) . u u - (a F_A + (a - c) m g)_perp / (L - a)
+        let m = [
+            a * fa[0] + (a - self.com) * g[0],
+            a * fa[1] + (a - self.com) * g[1],
+            a * fa[2] + (a - self.com) * g[2],
+        ];
+        let mu = dot(&m, &u);
+        let force = [
+            u[0] * axial - (m[0] - u[0] * mu) * inv_lever,
+            u[1] * axial - (m[1] - u[1] * mu) * inv_lever,
+            u[2] * axial - (m[2] - u[2] * mu) * inv_lever,
+        ];
+        // diag(J C J^T) with J = (1 + k) u u^T - k I
+        let c = &self.covariance;
+        let cu = [dot(&c[0], &u), dot(&c[1], &u), dot(&c[2], &u)];
+        let ucu = dot(&u, &cu);
+        let p = 1.0 + k;
+        let (k2, kp2, p2ucu) = (k * k, 2.0 * k * p, p * p * ucu);
+        let mut var = [0.0; 3];
+        for i in 0..3 {
+            var[i] = k2 * c[i][i] - kp2 * u[i] * cu[i] + p2ucu * u[i] * u[i];
+        }
+        self.finish(&u, force, var)
+    }
+
+    /// d != 0: u, w from r without trigonometry (MODEL.md 3), then the closed
+    /// form of tip_force.rs in its (u, w, v = u x w) components.
+    fn cycle_offset(&self, q: &V, reading: &V) -> FloorOut {
+        let d = self.offset;
+        let r = self.support_from_ujoint(q);
+        let rho2 = dot(&r, &r);
+        let r_h = (r[0] * r[0] + r[2] * r[2]).sqrt();
+        let s = (rho2 - d * d).sqrt();
+        let inv_rho2 = 1.0 / rho2;
+        let inv_r_h = 1.0 / r_h;
+        let (s4, c4) = (r[0] * inv_r_h, r[2] * inv_r_h);
+        let c5 = (s * r_h - d * r[1]) * inv_rho2;
+        let s5 = (s * r[1] + d * r_h) * inv_rho2;
+        let u = [s4 * c5, s5, c4 * c5];
+        let w = [s4 * s5, -c5, c4 * s5];
+        let v = [c4, 0.0, -s4];
+        let fa = self.ujoint_force(reading);
+        let g = &self.weight;
+        let inv_lever = 1.0 / (self.length - s);
+        let (fu, fv, gu) = (dot(&fa, &u), dot(&fa, &v), dot(g, &u));
+        // gamma - beta = d u_y / (w_y lever) = -d tan q5 / lever
+        let tan5 = s5 / c5;
+        let alpha = d * inv_lever;
+        let beta = -s * inv_lever;
+        let delta = -d * tan5 * inv_lever;
+        let sc = (s - self.com) * inv_lever;
+        let g_along = gu * (1.0 + sc);
+        // J = beta I + p u^T + q v^T; C = F F^T
+        let f = &self.factor;
+        let a = [
+            f[0][0] * u[0] + f[1][0] * u[1] + f[2][0] * u[2],
+            f[0][1] * u[0] + f[1][1] * u[1] + f[2][1] * u[2],
+            f[0][2] * u[0] + f[1][2] * u[1] + f[2][2] * u[2],
+        ];
+        let b = [
+            f[0][0] * v[0] + f[2][0] * v[2],
+            f[0][1] * v[0] + f[2][1] * v[2],
+            f[0][2] * v[0] + f[2][2] * v[2],
+        ];
+        let mut force = [0.0; 3];
+        let mut var = [0.0; 3];
+        for i in 0..3 {
+            let p = (1.0 - beta) * u[i] + alpha * w[i];
+            let q = delta * v[i];
+            force[i] = beta * fa[i] + p * fu + q * fv + g_along * u[i] - sc * g[i];
+            let x = [
+                beta * f[i][0] + p * a[0] + q * b[0],
+                beta * f[i][1] + p * a[1] + q * b[1],
+                beta * f[i][2] + p * a[2] + q * b[2],
+            ];
+            var[i] = dot(&x, &x);
+        }
+        self.finish(&u, force, var)
+    }
+}
+
+/// The floor agrees with the cycle (checked once, before measuring).
+fn check_floor(out: &FloorOut, tip: &TipOutcome, limits: &GuardLimits) {
+    let TipOutcome::Estimate(e) = tip else {
+        panic!("no estimate: {tip:?}");
+    };
+    for i in 0..3 {
+        assert!((out.force[i] - e.force_n[i]).abs() < 1e-9 * (1.0 + e.force_n.norm()));
+        assert!((out.std[i] - e.std_n[i]).abs() < 1e-9 * e.std_n.norm());
+    }
+    let stop = [
+        e.force_n.norm() >= limits.stop_total_n,
+        e.axial_n.abs() >= limits.stop_axial_n,
+        e.lateral_n >= limits.stop_lateral_n,
+    ];
+    assert_eq!(out.above, stop);
+}
+
+/// Registers `f` twice: as plain criterion `cycle/<name>` (the mean of each
+/// sample, which includes any time that other processes take the core), and
+/// as `cycle-min/<name>`: in each sample, the fastest of its batches of 200
+/// calls, per call. On a loaded machine the second is what the code itself
+/// costs; on an idle one the two agree.
+fn bench_both<O>(c: &mut Criterion, name: &str, mut f: impl FnMut() -> O) {
+    c.bench_function(&format!("cycle/{name}"), |b| b.iter(&mut f));
+    c.bench_function(&format!("cycle-min/{name}"), |b| {
+        b.iter_custom(|iters| {
+            const BATCH: u64 = 200;
+            let mut best_s = f64::INFINITY;
+            let mut done = 0;
+            while done < iters {
+                let n = BATCH.min(iters - done);
+                let start = Instant::now();
+                for _ in 0..n {
+                    black_box(f());
+                }
+                best_s = best_s.min(start.elapsed().as_secs_f64() / n as f64);
+                done += n;
+            }
+            Duration::from_secs_f64(best_s * iters as f64)
         })
     });
+}
+
+fn per_cycle(c: &mut Criterion) {
+    let bias_n = Vector3::new(0.4, -1.1, 0.25);
+    let tip_n = Vector3::new(1.0, -0.5, 0.5);
+    let limits = test_guard_limits();
+    for (label, profile) in [
+        ("d = 0", manipulator2()),
+        ("d != 0", manipulator2_offset(OFFSET_M)),
+    ] {
+        // Every plausibility check on, the torque check included.
+        let config = EstimatorConfig {
+            profile,
+            plausibility: sar_estimator::cycle::PlausibilityConfig::new(Default::default())
+                .unwrap(),
+            ..example_estimator_config()
+        };
+        let reading = reading_for(&profile, &tip_n, &bias_n);
+        let torque = torque_for(&profile, &tip_n);
+        let mut estimator = Estimator::new(&config, bias_n).unwrap();
+        // Leave the initial Fault (no input yet): the good path is measured.
+        let mut first = cycle_input(1, &reading, &torque);
+        first.command = Some(sar_estimator::cycle::Command::Reset);
+        estimator.cycle(&first);
+        let mut cycle = 1u64;
+        bench_both(
+            c,
+            &format!("full, {label} (kinematics + tip force + guard)"),
+            || {
+                cycle += 1;
+                let input = cycle_input(cycle, &reading, &torque);
+                black_box(estimator.cycle(black_box(&input)).guard_state)
+            },
+        );
+        let floor = Floor::new(&config, &limits, &bias_n);
+        let reading_v: V = [reading.x, reading.y, reading.z];
+        let cycle_fn = if profile.offset_m() == 0.0 {
+            Floor::cycle_d0
+        } else {
+            Floor::cycle_offset
+        };
+        let out = cycle_fn(&floor, &Q, &reading_v);
+        let full = estimator.cycle(&cycle_input(cycle + 1, &reading, &torque));
+        // Every check passed: the benchmark measures the good path.
+        assert_eq!(
+            full.guard_state,
+            sar_estimator::guard::GuardState::Ok,
+            "{full:?}"
+        );
+        let tip = full.tip;
+        check_floor(&out, &tip, &limits);
+        bench_both(c, &format!("floor, {label} (plain f64, no checks)"), || {
+            let out = cycle_fn(black_box(&floor), black_box(&Q), black_box(&reading_v));
+            black_box((out.force, out.std, out.above))
+        });
+    }
+
+    let cal = example_calibration();
+    for (label, profile) in [
+        ("d = 0", manipulator2()),
+        ("d != 0", manipulator2_offset(OFFSET_M)),
+    ] {
+        bench_both(c, &format!("part: forward kinematics, {label}"), || {
+            black_box(forward(black_box(&cal), &profile, black_box(&joints())))
+        });
+        let reading = reading_for(&profile, &tip_n, &bias_n);
+        let pose = forward(&cal, &profile, &joints()).unwrap();
+        let tip = TipForceEstimator::new(
+            &cal,
+            &profile,
+            &SensorNoise::hex6(),
+            TipForceConfig { max_std_n: 2.0 },
+        )
+        .unwrap();
+        bench_both(c, &format!("part: tip force, {label}"), || {
+            black_box(tip.estimate(black_box(&pose), black_box(&reading), &bias_n))
+        });
+    }
+    let pose = forward(&cal, &manipulator2(), &joints()).unwrap();
     let mut guard = Guard::new(GuardConfig::new(test_guard_limits()).unwrap());
     let mut cycle = 0u64;
     c.bench_function("cycle/part: guard step", |b| {
@@ -112,12 +446,12 @@ fn per_cycle(c: &mut Criterion) {
             cycle += 1;
             black_box(guard.step(black_box(&GuardInput {
                 cycle,
-                input_fault: None,
-                new_sample: true,
                 sensor_age_ns: 300_000,
                 sensor_valid: true,
                 joints_age_ns: 100_000,
                 joints_valid: true,
+                input_fault: None,
+                new_sample: true,
                 tip: TipInput::Estimate {
                     force_n: Vector3::new(1.0, -0.5, 0.5),
                     std_n: Vector3::new(0.2, 0.15, 0.6),

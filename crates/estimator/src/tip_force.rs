@@ -3,8 +3,9 @@
 //!
 //! - d = 0 (the default): the closed form of MODEL.md 4.1, no decomposition.
 //! - d != 0: the six equilibrium equations of MODEL.md 4.3 (unknowns F_D, the
-//!   support's reaction in a basis across u, and the U-joint torsion M_T), solved
-//!   on the stack by LU with a pivot check.
+//!   support's reaction in a basis across u, and the U-joint torsion M_T),
+//!   eliminated by hand into a closed form (derived at `with_offset`); the dense
+//!   6x6 solve is the tests' reference.
 //!
 //! Both return the number with its standard deviation, and flag it as not
 //! observable ([`TipForceEstimate::observable`] false) when a standard deviation
@@ -14,15 +15,10 @@
 //! the support, a singular system) is the answer [`TipForceError::NotObservable`].
 
 use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, check_finite};
-use nalgebra::{ComplexField, Matrix6, SMatrix};
+use nalgebra::ComplexField;
 
 /// How far |u|^2 (and |w|^2, u . w) of a pose may stray from 1 (and 0).
 pub const POSE_UNIT_TOLERANCE: f64 = 1e-6;
-
-/// With d != 0: a pivot of the (dimensionless, equilibrated) 6x6 system below
-/// this is treated as singular. This is only a backstop: the standard deviation
-/// check rejects such poses long before.
-pub const MIN_RELATIVE_PIVOT: f64 = 1e-12;
 
 /// Settings of the tip-force estimator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -117,15 +113,52 @@ pub struct TipForceEstimate {
 pub struct TipForceEstimator {
     calibration: Calibration,
     /// C = R_0s diag(std^2) R_0s^T: covariance of F_A in {0}, N^2.
-    covariance_n2: Mat3,
+    covariance_n2: Symmetric3,
     /// The diagonal of C, N^2.
     covariance_diag_n2: Vec3,
+    /// F = R_0s diag(std): C = F F^T (d != 0).
+    noise_factor: Mat3,
     /// m g, N.
     weight_n: Vec3,
     length_m: f64,
     com_m: f64,
     offset_m: f64,
     max_std_n: f64,
+}
+
+/// A symmetric 3x3 matrix by its six entries: its product with a vector is
+/// written out, inline (nalgebra's 3x3 product is a call on the per-cycle path).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Symmetric3 {
+    xx: f64,
+    yy: f64,
+    zz: f64,
+    xy: f64,
+    xz: f64,
+    yz: f64,
+}
+
+impl Symmetric3 {
+    /// The upper triangle of `m` (symmetric by construction where it is used).
+    fn new(m: &Mat3) -> Self {
+        Self {
+            xx: m.m11,
+            yy: m.m22,
+            zz: m.m33,
+            xy: m.m12,
+            xz: m.m13,
+            yz: m.m23,
+        }
+    }
+
+    #[inline(always)]
+    fn mul(&self, v: &Vec3) -> Vec3 {
+        Vec3::new(
+            self.xx * v.x + self.xy * v.y + self.xz * v.z,
+            self.xy * v.x + self.yy * v.y + self.yz * v.z,
+            self.xz * v.x + self.yz * v.y + self.zz * v.z,
+        )
+    }
 }
 
 /// sqrt(variance); a round-off negative variance gives 0, NaN gives infinity
@@ -170,8 +203,9 @@ impl TipForceEstimator {
         let covariance_n2 = noise.base_covariance_n2(&cal.sensor_rotation());
         Ok(Self {
             calibration: *cal,
-            covariance_n2,
+            covariance_n2: Symmetric3::new(&covariance_n2),
             covariance_diag_n2: covariance_n2.diagonal(),
+            noise_factor: cal.sensor_rotation() * Mat3::from_diagonal(&noise.std_n()),
             weight_n: cal.gravity_mps2() * profile.mass_kg(),
             length_m: profile.length_m(),
             com_m: profile.com_m(),
@@ -231,7 +265,7 @@ impl TipForceEstimator {
         &self,
         u: &Vec3,
         force_n: Vec3,
-        var_n2: &Vec3,
+        var_n2: Vec3,
         lever_m: f64,
         ujoint_force_n: Vec3,
         torsion_nm: f64,
@@ -299,17 +333,97 @@ impl TipForceEstimator {
         let force_n = u * axial - moment_perp / lever_m;
         // J = dF_tip/dF_A = u u^T - k (I - u u^T) = (1 + k) u u^T - k I, and
         // diag(J C J^T)_i = k^2 C_ii - 2 k (1 + k) u_i (C u)_i + (1 + k)^2 u_i^2 (u . C u).
-        let cu = self.covariance_n2 * u;
+        let cu = self.covariance_n2.mul(u);
         let ucu = u.dot(&cu);
         let p = 1.0 + k;
         let var_n2 = self.covariance_diag_n2 * (k * k) - u.component_mul(&cu) * (2.0 * k * p)
             + u.component_mul(u) * (p * p * ucu);
-        self.finish(u, force_n, &var_n2, lever_m, *f_a, 0.0)
+        self.finish(u, force_n, var_n2, lever_m, *f_a, 0.0)
     }
 
-    /// MODEL.md 4.3 (d != 0): the 6x6 system, equilibrated so that every entry
-    /// is dimensionless and of order one (moment rows divided by L, the torsion
-    /// unknown taken as M_T / L).
+    /// MODEL.md 4.3 (d != 0) in closed form: the six equilibrium equations
+    /// eliminated by hand.
+    ///
+    /// Write every vector in the orthonormal basis (u, w, v) of the rod, with
+    /// v = u x w the q5 axis (u x w = v, w x v = u, v x u = w); x_u = x . u and
+    /// so on. Relative to A: r_B = d w + s u, r_C = d w + c u, r_D = d w + L u.
+    /// Unknowns: F_D; the support's reaction across u, F_B = b1 w + b2 v; the
+    /// U-joint torsion M_T along n = Y0 x v = -(s4, 0, c4), whose components are
+    /// n_u = n . u = w_y (= -c5), n_w = n . w = -u_y (= -s5), n_v = 0. G = m g.
+    ///
+    /// Force balance, F_A + F_B + G + F_D = 0, by component:
+    ///
+    /// ```text
+    /// u:  F_Au + G_u + D_u = 0          =>  D_u = -(F_Au + G_u)
+    /// w:  F_Aw + b1 + G_w + D_w = 0     =>  b1  = -(F_Aw + G_w + D_w)
+    /// v:  F_Av + b2 + G_v + D_v = 0     =>  b2  = -(F_Av + G_v + D_v)
+    /// ```
+    ///
+    /// Moments about A (F_A acts at A), r_B x F_B + r_C x G + r_D x F_D + M_T n
+    /// = 0. For r = d w + l u and any F: r x F = d F_v u - l F_v w + (l F_w - d F_u) v,
+    /// and r_B x F_B = d b2 u - s b2 w + s b1 v. Projected:
+    ///
+    /// ```text
+    /// on u:      d (b2 + G_v + D_v) + n_u M_T = 0
+    /// on w:     -s b2 - c G_v - L D_v + n_w M_T = 0
+    /// on v:      s b1 + c G_w - d G_u + L D_w - d D_u = 0
+    /// ```
+    ///
+    /// The projection on v holds no torsion: with b1 and D_u from the force
+    /// balance (the G_u terms cancel),
+    ///
+    /// ```text
+    /// (L - s) D_w = s F_Aw + (s - c) G_w - d F_Au.
+    /// ```
+    ///
+    /// The projection on u is, with b2 from the force balance, -d F_Av + n_u M_T = 0:
+    ///
+    /// ```text
+    /// M_T = d F_Av / n_u,
+    /// ```
+    ///
+    /// and the projection on w, with b2 and this M_T,
+    ///
+    /// ```text
+    /// (L - s) D_v = (s + d n_w / n_u) F_Av + (s - c) G_v.
+    /// ```
+    ///
+    /// With F_tip = -F_D and 1 / (L - s) = 1 / lever:
+    ///
+    /// ```text
+    /// F_tip = T_u u + T_w w + T_v v,
+    /// T_u = F_Au + G_u
+    /// T_w = alpha F_Au + beta F_Aw - (s - c) / lever G_w
+    /// T_v = gamma F_Av - (s - c) / lever G_v
+    /// alpha = d / lever,  beta = -s / lever,  gamma = -(s - d u_y / w_y) / lever.
+    /// ```
+    ///
+    /// With d = 0 this is MODEL.md 4.1 (with a = s). F_tip is affine in F_A, so
+    /// its exact Jacobian is J = dF_tip/dF_A = (u + alpha w) u^T + beta w w^T +
+    /// gamma v v^T, and the per-axis variance is diag(J C J^T). With
+    /// w w^T = I - u u^T - v v^T, J = beta I + p u^T + q v^T where
+    /// p = (1 - beta) u + alpha w and q = (gamma - beta) v (alpha and q are of
+    /// order d: with d = 0 this is the J of `closed_form`, k = -beta). With
+    /// C = F F^T, F = R_0s diag(std) and F_i the rows of F:
+    ///
+    /// ```text
+    /// F_tip = J F_A + G_u u - (s - c) / lever (G - G_u u)
+    /// diag(J C J^T)_i = |F^T J^T e_i|^2 = |beta F_i + p_i F^T u + q_i F^T v|^2
+    /// ```
+    ///
+    /// (a sum of squares, never negative; no 3x3 product).
+    ///
+    /// The system is singular (no number: [`TipForceError::NotObservable`] with
+    /// an infinite deviation) exactly where lever <= 0 (the tip at or behind the
+    /// support) or n_u = w_y = 0 (a vertical rod: the torsion then has no part
+    /// along u, the moment about u says F_Av = 0, and M_T, D_v are free). Close
+    /// to either, the deviation grows without bound (1 / lever, 1 / w_y) and the
+    /// estimate is flagged by the observability limit; a deviation that
+    /// overflows is the singular case too.
+    ///
+    /// The basis is taken as orthonormal: u and w are checked unit and
+    /// perpendicular to [`POSE_UNIT_TOLERANCE`], which the forward kinematics
+    /// meet to round-off.
     fn with_offset(
         &self,
         pose: &Pose,
@@ -318,104 +432,113 @@ impl TipForceEstimator {
     ) -> Result<TipForceEstimate, TipForceError> {
         let w = pose.rod_normal;
         let s = pose.support_along_rod_m;
-        check_finite(&w, |value| TipForceError::NonFinite {
-            input: "pose.rod_normal",
-            value,
-        })?;
-        check_finite(&[s], |value| TipForceError::NonFinite {
-            input: "pose.support_along_rod_m",
-            value,
-        })?;
+        // One test each on the way of a good pose; which input is wrong, and
+        // how, is sorted out only when one fails (`contains` and `<` are false
+        // for NaN, and a NaN or infinite w fails the unit test).
         let tolerance = -POSE_UNIT_TOLERANCE..=POSE_UNIT_TOLERANCE;
         let unit_error = w.norm_squared() - 1.0;
-        if !tolerance.contains(&unit_error) {
-            return Err(TipForceError::InvalidPose {
-                quantity: "|rod_normal|^2 - 1",
-                value: unit_error,
-            });
-        }
         let cross = u.dot(&w);
-        if !tolerance.contains(&cross) {
-            return Err(TipForceError::InvalidPose {
-                quantity: "rod_dir . rod_normal",
-                value: cross,
-            });
-        }
-        // s and L are finite here, so are L - s and the comparisons.
-        if s <= 0.0 {
-            return Err(TipForceError::InvalidPose {
-                quantity: "support_along_rod_m",
-                value: s,
-            });
+        if !(tolerance.contains(&unit_error) && tolerance.contains(&cross)) {
+            return Err(Self::bad_normal(w, unit_error, cross));
         }
         let length = self.length_m;
         let lever_m = length - s;
-        let singular = TipForceError::NotObservable {
-            lever_m,
-            std_max_n: f64::INFINITY,
-        };
-        if lever_m <= 0.0 {
-            return Err(singular);
+        // n_u = n . u = w_y (n = Y0 x (u x w), MODEL.md 4: right also for the
+        // rods with c5 < 0 that the forward kinematics give with d != 0).
+        let n_u = w.y;
+        if !(s > 0.0 && s < length && n_u != 0.0) {
+            return Err(Self::bad_support(s, lever_m));
         }
-        // Torsion axis n = -(s4, 0, c4) (MODEL.md 4): u x w = (c4, 0, -s4) is the
-        // q5 axis, whatever the sign of c5, and n = Y0 x (u x w) is unit and
-        // perpendicular to both joint axes. (-(ux, 0, uz) / |..| would flip n
-        // for the rods with c5 < 0 that the forward kinematics give with d != 0.)
-        let n = Vec3::y().cross(&u.cross(&w));
-        // Support basis across u: e1 = w, e2 = u x w.
-        let e1 = w;
-        let e2 = u.cross(&w);
+        let (ux, uy, uz) = (u.x, u.y, u.z);
+        let (wx, wy, wz) = (w.x, w.y, w.z);
+        // v = u x w
+        let (vx, vy, vz) = (uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx);
         let d = self.offset_m;
-        let r_b = (w * d + u * s) / length;
-        let r_c = (w * d + u * self.com_m) / length;
-        let r_d = (w * d + u * length) / length;
+        let inv_lever = 1.0 / lever_m;
+        let inv_n_u = 1.0 / n_u;
+        let beta = -s * inv_lever;
+        let alpha = d * inv_lever;
+        // gamma - beta = d u_y / (w_y lever)
+        let delta = d * uy * inv_n_u * inv_lever;
+        let weight_arm = (s - self.com_m) * inv_lever;
+        // J = beta I + p u^T + q v^T
+        let one_beta = 1.0 - beta;
+        let (px, py, pz) = (
+            one_beta * ux + alpha * wx,
+            one_beta * uy + alpha * wy,
+            one_beta * uz + alpha * wz,
+        );
+        let (qx, qy, qz) = (delta * vx, delta * vy, delta * vz);
+        let (fx, fy, fz) = (f_a.x, f_a.y, f_a.z);
+        let g = &self.weight_n;
+        let fa_u = fx * ux + fy * uy + fz * uz;
+        let fa_v = fx * vx + fy * vy + fz * vz;
+        let g_u = g.x * ux + g.y * uy + g.z * uz;
+        // F_tip = J F_A + G_u u - (s - c) / lever (G - G_u u)
+        let g_along = g_u * (1.0 + weight_arm);
+        let force_n = Vec3::new(
+            beta * fx + px * fa_u + qx * fa_v + g_along * ux - weight_arm * g.x,
+            beta * fy + py * fa_u + qy * fa_v + g_along * uy - weight_arm * g.y,
+            beta * fz + pz * fa_u + qz * fa_v + g_along * uz - weight_arm * g.z,
+        );
+        let torsion_nm = d * fa_v * inv_n_u;
+        // diag(J C J^T)_i = |F^T J^T e_i|^2 = |beta F_i + p_i a + q_i b|^2 with
+        // F_i the rows of F, a = F^T u, b = F^T v.
+        let f = &self.noise_factor;
+        let a = f.tr_mul(u);
+        let b = f.tr_mul(&Vec3::new(vx, vy, vz));
+        let row = |fi: Vec3, p: f64, q: f64| (fi * beta + a * p + b * q).norm_squared();
+        let var_n2 = Vec3::new(
+            row(Vec3::new(f.m11, f.m12, f.m13), px, qx),
+            row(Vec3::new(f.m21, f.m22, f.m23), py, qy),
+            row(Vec3::new(f.m31, f.m32, f.m33), pz, qz),
+        );
+        self.finish(u, force_n, var_n2, lever_m, *f_a, torsion_nm)
+    }
 
-        // Unknowns x = (F_D, b1, b2, M_T / L).
-        // Force:  F_D + b1 e1 + b2 e2                         = -(F_A + m g)
-        // Moment: r_D x F_D + b1 r_B x e1 + b2 r_B x e2 + (M_T/L) n = -r_C x m g   (all / L)
-        let mut k = Matrix6::<f64>::zeros();
-        k.fixed_view_mut::<3, 3>(0, 0).copy_from(&Mat3::identity());
-        k.fixed_view_mut::<3, 3>(3, 0)
-            .copy_from(&r_d.cross_matrix());
-        k.fixed_view_mut::<3, 1>(0, 3).copy_from(&e1);
-        k.fixed_view_mut::<3, 1>(3, 3).copy_from(&r_b.cross(&e1));
-        k.fixed_view_mut::<3, 1>(0, 4).copy_from(&e2);
-        k.fixed_view_mut::<3, 1>(3, 4).copy_from(&r_b.cross(&e2));
-        k.fixed_view_mut::<3, 1>(3, 5).copy_from(&n);
-
-        // Column 0: the measurement; columns 1..4: [I; 0], whose solution's top
-        // block is K^-1[0..3, 0..3] = dF_tip/dF_A (rhs = -F_A - m g, F_tip = -F_D).
-        let mut rhs = SMatrix::<f64, 6, 4>::zeros();
-        rhs.fixed_view_mut::<3, 1>(0, 0)
-            .copy_from(&(-(f_a + self.weight_n)));
-        rhs.fixed_view_mut::<3, 1>(3, 0)
-            .copy_from(&(-r_c.cross(&self.weight_n)));
-        rhs.fixed_view_mut::<3, 3>(0, 1)
-            .copy_from(&Mat3::identity());
-
-        let lu = k.lu();
-        // Never NaN (f64::min drops a NaN operand), so `<` is the whole test.
-        let smallest_pivot = lu
-            .u()
-            .diagonal()
-            .iter()
-            .fold(f64::INFINITY, |acc: f64, p| acc.min(p.abs()));
-        if smallest_pivot < MIN_RELATIVE_PIVOT {
-            return Err(singular);
+    /// Why w failed the unit tests of `with_offset` (`unit_error` = |w|^2 - 1,
+    /// `cross` = u . w): not finite, not unit, or not perpendicular to u.
+    #[cold]
+    fn bad_normal(w: Vec3, unit_error: f64, cross: f64) -> TipForceError {
+        if let Err(e) = check_finite(&w, |value| TipForceError::NonFinite {
+            input: "pose.rod_normal",
+            value,
+        }) {
+            return e;
         }
-        let Some(x) = lu.solve(&rhs) else {
-            return Err(singular);
-        };
-        let force_n: Vec3 = -x.fixed_view::<3, 1>(0, 0).clone_owned();
-        let Some(&torsion_scaled) = x.get((5, 0)) else {
-            return Err(singular);
-        };
-        let torsion_nm = torsion_scaled * length;
-        let jacobian: Mat3 = x.fixed_view::<3, 3>(0, 1).clone_owned();
-        // diag(J C J^T)_i = sum_k (J C)_ik J_ik.
-        let var_n2 = (jacobian * self.covariance_n2)
-            .component_mul(&jacobian)
-            .column_sum();
-        self.finish(u, force_n, &var_n2, lever_m, *f_a, torsion_nm)
+        if !(-POSE_UNIT_TOLERANCE..=POSE_UNIT_TOLERANCE).contains(&unit_error) {
+            TipForceError::InvalidPose {
+                quantity: "|rod_normal|^2 - 1",
+                value: unit_error,
+            }
+        } else {
+            TipForceError::InvalidPose {
+                quantity: "rod_dir . rod_normal",
+                value: cross,
+            }
+        }
+    }
+
+    /// Why s (with L - s = `lever_m`) or the pose failed `with_offset`'s
+    /// range test: s not finite, s <= 0, or singular (the tip at or behind the
+    /// support, or a vertical rod).
+    #[cold]
+    fn bad_support(s: f64, lever_m: f64) -> TipForceError {
+        if !s.is_finite() {
+            TipForceError::NonFinite {
+                input: "pose.support_along_rod_m",
+                value: s,
+            }
+        } else if s <= 0.0 {
+            TipForceError::InvalidPose {
+                quantity: "support_along_rod_m",
+                value: s,
+            }
+        } else {
+            TipForceError::NotObservable {
+                lever_m,
+                std_max_n: f64::INFINITY,
+            }
+        }
     }
 }

@@ -12,7 +12,7 @@
 mod common;
 
 use common::{NoisySensor, Truth, ideal_reading, rod_frame, ujoint_force};
-use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, SMatrix, Vector3};
 use proptest::prelude::*;
 use proptest::test_runner::{RngSeed, TestRunner};
 use sar_estimator::tip_force::{
@@ -940,5 +940,179 @@ fn signs_by_hand_on_a_horizontal_rod() {
             est.force_n
         );
         assert!((est.axial_n - expected.x).abs() < 1e-12);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// d != 0: the closed form against the dense 6x6 solve it replaced.
+
+/// The dense reference of MODEL.md 4.3 (what the estimator computed before its
+/// closed form): the six equilibrium equations, equilibrated so that every
+/// entry is dimensionless (moment rows divided by L, the torsion unknown taken
+/// as M_T / L), solved by LU for the measurement and for [I; 0], whose
+/// solution's top block is dF_tip/dF_A. Returns (F_tip, per-axis std, M_T), or
+/// None where a pivot is below 1e-12 (singular).
+fn dense_reference(case: &Case) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+    let pose = &case.pose;
+    let (u, w, s) = (pose.rod_dir, pose.rod_normal, pose.support_along_rod_m);
+    let length = case.profile.length_m();
+    let d = case.profile.offset_m();
+    let weight = case.cal.gravity_mps2() * case.profile.mass_kg();
+    let rotation = case.cal.sensor_rotation();
+    let f_a = -(rotation * (case.reading_n - case.bias_n));
+    let n = Vector3::y().cross(&u.cross(&w));
+    let (e1, e2) = (w, u.cross(&w));
+    let r_b = (w * d + u * s) / length;
+    let r_c = (w * d + u * case.profile.com_m()) / length;
+    let r_d = (w * d + u * length) / length;
+    let mut k = Matrix6::<f64>::zeros();
+    k.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    k.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&r_d.cross_matrix());
+    k.fixed_view_mut::<3, 1>(0, 3).copy_from(&e1);
+    k.fixed_view_mut::<3, 1>(3, 3).copy_from(&r_b.cross(&e1));
+    k.fixed_view_mut::<3, 1>(0, 4).copy_from(&e2);
+    k.fixed_view_mut::<3, 1>(3, 4).copy_from(&r_b.cross(&e2));
+    k.fixed_view_mut::<3, 1>(3, 5).copy_from(&n);
+    let mut rhs = SMatrix::<f64, 6, 4>::zeros();
+    rhs.fixed_view_mut::<3, 1>(0, 0)
+        .copy_from(&(-(f_a + weight)));
+    rhs.fixed_view_mut::<3, 1>(3, 0)
+        .copy_from(&(-r_c.cross(&weight)));
+    rhs.fixed_view_mut::<3, 3>(0, 1)
+        .copy_from(&Matrix3::identity());
+    let lu = k.lu();
+    if lu.u().diagonal().amin() < 1e-12 {
+        return None;
+    }
+    let x = lu.solve(&rhs)?;
+    let force = -x.fixed_view::<3, 1>(0, 0).clone_owned();
+    let jacobian: Matrix3<f64> = x.fixed_view::<3, 3>(0, 1).clone_owned();
+    let covariance = SensorNoise::hex6().base_covariance_n2(&rotation);
+    let std = (jacobian * covariance * jacobian.transpose())
+        .diagonal()
+        .map(f64::sqrt);
+    Some((force, std, x[(5, 0)] * length))
+}
+
+/// d of either sign, |d| from 1 um up to 15 mm.
+fn offset_up_to_15_mm() -> BoxedStrategy<f64> {
+    (1e-6..0.015f64, any::<bool>())
+        .prop_map(|(d, neg)| if neg { -d } else { d })
+        .boxed()
+}
+
+/// The closed form of d != 0 gives the dense 6x6's tip force, per-axis std and
+/// torsion to 1e-9 relative, over random poses, calibrations and tip forces
+/// with |d| up to 15 mm of both signs; axial, lateral and the observability
+/// flag follow.
+#[test]
+fn offset_closed_form_matches_the_dense_6x6() {
+    // Worst relative differences: force, std (per axis), torsion.
+    let worst = Cell::new([0.0_f64; 3]);
+    let signs = Cell::new([0usize; 2]);
+    run_cases(3000, 0x7150_0010, cases(offset_up_to_15_mm()), |p| {
+        let case = build(&p);
+        let (force, std, torsion) = dense_reference(&case).expect("not singular");
+        let est = estimator(&case, 2.0)
+            .estimate(&case.pose, &case.reading_n, &case.bias_n)
+            .unwrap();
+        let scale = force_scale(&case);
+        let force_err = (est.force_n - force).norm() / scale;
+        let std_err = (est.std_n - std).component_div(&std).amax();
+        let torsion_err = (est.torsion_nm - torsion).abs() / (scale * case.truth.length_m);
+        assert!(force_err < 1e-9, "{:?} vs {force:?}", est.force_n);
+        assert!(std_err < 1e-9, "{:?} vs {std:?}", est.std_n);
+        assert!(torsion_err < 1e-9, "{} vs {torsion}", est.torsion_nm);
+        assert_eq!(est.observable, std.amax() <= 2.0, "{std:?}");
+        let axial = force.dot(&case.u);
+        assert!((est.axial_n - axial).abs() < 1e-9 * scale);
+        assert!((est.lateral_n - (force - case.u * axial).norm()).abs() < 1e-9 * scale);
+        let w = worst.get();
+        worst.set([
+            w[0].max(force_err),
+            w[1].max(std_err),
+            w[2].max(torsion_err),
+        ]);
+        let mut n = signs.get();
+        n[usize::from(case.truth.offset_m > 0.0)] += 1;
+        signs.set(n);
+    });
+    let [f, s, t] = worst.get();
+    let [neg, pos] = signs.get();
+    println!(
+        "closed form vs dense 6x6 over {neg} cases d < 0 and {pos} d > 0: worst relative \
+         difference force {f:.2e}, std {s:.2e}, torsion {t:.2e}"
+    );
+    assert!(neg > 500 && pos > 500);
+}
+
+/// The same range of d against the independent simulator of `common` (tip
+/// force, torsion, equilibrium residual) and its Jacobian (std).
+#[test]
+fn offset_up_to_15_mm_matches_the_simulator() {
+    accuracy(offset_up_to_15_mm(), 0x7150_0011, "|d| <= 15 mm");
+    run_cases(1000, 0x7150_0012, cases(offset_up_to_15_mm()), |p| {
+        check_std(&build(&p))
+    });
+}
+
+/// As d -> 0 the closed form of d != 0 becomes MODEL.md 4.1: at d = +-1e-9 m it
+/// gives the d = 0 estimate (its own code path) to 1e-8 relative.
+#[test]
+fn offset_closed_form_tends_to_the_d0_closed_form() {
+    for (q4, q5, euler) in [
+        (NOMINAL_Q4, 0.0, [0.0; 3]),
+        (1.2, 0.3, [0.3, -0.2, 0.1]),
+        (-2.0, -0.6, [2.0, 1.0, -0.4]),
+    ] {
+        let zero = typical(0.0, q4, q5, euler, [2.0, -3.0, 1.0]);
+        let at_zero = estimator(&zero, 5.0)
+            .estimate(&zero.pose, &zero.reading_n, &zero.bias_n)
+            .unwrap();
+        for d in [1e-9, -1e-9] {
+            let case = typical(d, q4, q5, euler, [2.0, -3.0, 1.0]);
+            let est = estimator(&case, 5.0)
+                .estimate(&case.pose, &case.reading_n, &case.bias_n)
+                .unwrap();
+            let scale = force_scale(&case);
+            assert!((est.force_n - at_zero.force_n).norm() < 1e-8 * scale);
+            assert!((est.std_n - at_zero.std_n).amax() < 1e-8 * at_zero.std_n.amax());
+            assert!(est.torsion_nm.abs() < 1e-8 * scale);
+        }
+    }
+}
+
+/// d != 0 and a vertical rod (u = Y0, n . u = w_y = 0): the torsion has no part
+/// along u, so the system is singular: no number, an infinite std. Rods a
+/// round-off (cos(pi/2) = 6e-17) or 1e-9 rad from vertical give a number with
+/// a huge std, flagged not observable.
+#[test]
+fn offset_vertical_rod_is_singular() {
+    let case = typical(0.005, 1.2, 0.3, [0.3, -0.2, 0.1], [2.0, -3.0, 1.0]);
+    let est = estimator(&case, 5.0);
+    for q4 in [1.2_f64, -0.4] {
+        let mut pose = case.pose;
+        pose.rod_dir = Vector3::y();
+        pose.rod_normal = Vector3::new(q4.sin(), 0.0, q4.cos());
+        let out = est.estimate(&pose, &case.reading_n, &case.bias_n);
+        assert!(
+            matches!(out, Err(TipForceError::NotObservable { std_max_n, .. })
+                if std_max_n == f64::INFINITY),
+            "{out:?}"
+        );
+        for (q5, least_std_n) in [
+            (core::f64::consts::FRAC_PI_2, 1e12),
+            (core::f64::consts::FRAC_PI_2 - 1e-9, 1e5),
+        ] {
+            let (u, w) = rod_frame(q4, q5);
+            assert!(w.y != 0.0);
+            pose.rod_dir = u;
+            pose.rod_normal = w;
+            let out = est.estimate(&pose, &case.reading_n, &case.bias_n).unwrap();
+            assert!(!out.observable);
+            assert!(out.std_n.amax() > least_std_n, "{:?}", out.std_n);
+        }
     }
 }

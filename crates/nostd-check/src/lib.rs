@@ -135,6 +135,50 @@ pub extern "C" fn sar_nostd_filter(fx_n: f64, std_n: f64, n: u32) -> f64 {
     out
 }
 
+/// One estimator cycle with the rod's axis `offset_m` from the U-joint centre
+/// (d != 0: the closed form of MODEL.md 4.3). Returns the guard state as a
+/// number, or -1.
+#[unsafe(no_mangle)]
+pub extern "C" fn sar_nostd_cycle_offset(
+    offset_m: f64,
+    q1_m: f64,
+    q2_m: f64,
+    q3_m: f64,
+    fx_n: f64,
+    fy_n: f64,
+    fz_n: f64,
+) -> i32 {
+    let Some(mut config) = config() else { return -1 };
+    let Ok(profile) = Profile::new(&ProfileSpec {
+        length_m: 0.35,
+        offset_m,
+        mass_kg: 2.593,
+        com_m: 0.103,
+    }) else {
+        return -1;
+    };
+    config.profile = profile;
+    let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
+        return -1;
+    };
+    let force_n = Vec3::new(fx_n, fy_n, fz_n);
+    let out = estimator.cycle(&CycleInput {
+        cycle: 1,
+        now_ns: Some(1_000),
+        sensor: SensorSample {
+            force_n,
+            torque_nm: Vec3::new(0.0, -0.05, 0.0).cross(&force_n),
+            counter: 1,
+            status: 0,
+            stamp_ns: 1_000,
+            valid: true,
+        },
+        joints: JointSample { joints: ActiveJoints { q1_m, q2_m, q3_m }, stamp_ns: 1_000, valid: true },
+        command: Some(Command::Reset),
+    });
+    out.guard_state as i32
+}
+
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
     loop {}
