@@ -441,6 +441,7 @@ fn estimator_for(s: &Scenario) -> Estimator {
             ..PlausibilityLimits::default()
         })
         .unwrap(),
+        filter: None,
     };
     let bias = Bias {
         force_n: s.spec.sensor.bias_n,
@@ -659,6 +660,7 @@ fn estimator_for_torque(s: &Scenario) -> Estimator {
             ..PlausibilityLimits::default()
         })
         .unwrap(),
+        filter: None,
     };
     let bias = Bias {
         force_n: s.spec.sensor.bias_n,

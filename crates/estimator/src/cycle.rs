@@ -24,6 +24,7 @@
 //! `t = R_0s^T ((A - S) x (-F_A) - M_T n) + b_t` by more than `max_sigma`
 //! standard deviations on any sensor axis.
 
+use crate::filter::{FilterConfig, Filtered, TipFilter};
 use crate::guard::{
     Axis, Guard, GuardConfig, GuardInput, GuardState, Reason, TipInput, Transition,
 };
@@ -213,7 +214,7 @@ pub struct TorqueResidual {
     /// Measured minus predicted torque, N m.
     pub residual_nm: Vec3,
     /// Its standard deviation per axis (torque noise and force noise through
-    /// the lever; the torsion's own noise for d != 0 is left out), N m.
+    /// the lever, and for d != 0 through the torsion's estimate as well), N m.
     pub std_nm: Vec3,
 }
 
@@ -244,6 +245,11 @@ pub struct CycleOutput {
     pub transition: Option<Transition>,
     /// The command of this cycle and its result.
     pub command: Option<CommandEvent>,
+    /// The causal low-passed tip force (when a filter is configured), stepped
+    /// once per new sensor sample; `None` while there is no observable
+    /// estimate (the filter is then reset, and restarts at the next one). The
+    /// guard never acts on it: it acts on the unfiltered estimate.
+    pub filtered: Option<Filtered>,
 }
 
 /// The torque check's settings.
@@ -361,6 +367,9 @@ pub struct EstimatorConfig {
     pub guard: GuardConfig,
     /// The input plausibility checks.
     pub plausibility: PlausibilityConfig,
+    /// The tip-force low-pass beside the unfiltered estimate (`None`: none).
+    /// Its `sample_period_s` is the sensor's sample period.
+    pub filter: Option<FilterConfig>,
 }
 
 /// The torque check, fixed at construction.
@@ -369,14 +378,27 @@ struct TorqueCheck {
     /// R_0s^T (A - S): the lever from S to A in the sensor frame (constant:
     /// both are fixed offsets of the carriage), m.
     lever_s_m: Vec3,
-    /// The residual's standard deviation per sensor axis, N m.
+    /// The residual's standard deviation per sensor axis with d = 0, N m.
     std_nm: Vec3,
+    /// The lever's cross-product matrix [l]x, sensor frame.
+    cross: Mat3,
+    /// The force noise's variance per sensor axis, N^2.
+    force_var_n2: Vec3,
+    /// The torque noise's variance per sensor axis, N^2 m^2.
+    torque_var_nm2: Vec3,
+    /// d, m: with d != 0 the torsion's estimate carries force noise too.
+    offset_m: f64,
     /// The configured multiple.
     max_sigma: f64,
 }
 
 impl TorqueCheck {
-    fn new(cal: &Calibration, noise: &SensorNoise, limits: &TorqueLimits) -> Self {
+    fn new(
+        cal: &Calibration,
+        profile: &Profile,
+        noise: &SensorNoise,
+        limits: &TorqueLimits,
+    ) -> Self {
         let lever_s_m =
             cal.sensor_rotation().transpose() * (cal.ujoint_offset_m() - cal.sensor_offset_m());
         // The prediction l x (f - b) carries the force noise through [l]x:
@@ -388,6 +410,10 @@ impl TorqueCheck {
         Self {
             lever_s_m,
             std_nm: var.map(nalgebra::ComplexField::sqrt),
+            cross,
+            force_var_n2: force_var,
+            torque_var_nm2: torque_var,
+            offset_m: profile.offset_m(),
             max_sigma: limits.max_sigma,
         }
     }
@@ -400,6 +426,7 @@ pub struct Estimator {
     calibration: Calibration,
     profile: Profile,
     tip: TipForceEstimator,
+    filter: Option<TipFilter>,
     guard: Guard,
     limits: PlausibilityLimits,
     torque: Option<TorqueCheck>,
@@ -455,6 +482,11 @@ impl Estimator {
             guard_reason: guard.reason(),
             transition: None,
             command: None,
+            filtered: None,
+        };
+        let filter = match config.filter {
+            Some(filter) => Some(TipFilter::new(filter)?),
+            None => None,
         };
         Ok(Self {
             calibration: config.calibration,
@@ -465,11 +497,12 @@ impl Estimator {
                 &config.noise,
                 config.tip,
             )?,
+            filter,
             guard,
             limits,
             torque: limits
                 .torque
-                .map(|t| TorqueCheck::new(&config.calibration, &config.noise, &t)),
+                .map(|t| TorqueCheck::new(&config.calibration, &config.profile, &config.noise, &t)),
             bias,
             last,
             last_now_ns: None,
@@ -628,6 +661,20 @@ impl Estimator {
                 }
             }
         };
+        // The filter: stepped with each new sample's observable estimate,
+        // reset when there is none (no stale state carried over a gap).
+        out.filtered = None;
+        if let Some(filter) = &mut self.filter {
+            match out.tip {
+                TipOutcome::Estimate(e) if e.observable => {
+                    // A refused input resets the filter: no output then.
+                    out.filtered = filter
+                        .update_counted(sensor.counter, &e.force_n, &e.std_n)
+                        .ok();
+                }
+                _ => filter.reset(),
+            }
+        }
         let input_fault = clock_fault
             .or(counter_fault)
             .or(status_fault)
@@ -785,12 +832,27 @@ fn torque_residual(
     torsion_nm: f64,
 ) -> TorqueResidual {
     let mut predicted = check.lever_s_m.cross(&(sensor.force_n - bias.force_n)) + bias.torque_nm;
-    if torsion_nm != 0.0 {
-        predicted -= cal.sensor_rotation().transpose() * torsion_axis(pose) * torsion_nm;
+    if check.offset_m == 0.0 {
+        return TorqueResidual {
+            residual_nm: sensor.torque_nm - predicted,
+            std_nm: check.std_nm,
+        };
     }
+    // d != 0: the prediction also holds -R_0s^T n M_T, with the torsion's
+    // estimate M_T = d (F_A . v) / w_y (v = u x w) and F_A = -R_0s (f - b_f),
+    // so its Jacobian in the reading f is
+    // J = [l]x + (d / w_y) (R_0s^T n) (R_0s^T v)^T, and
+    // var_i = sigma_t,i^2 + sum_j J_ij^2 sigma_f,j^2.
+    let r_t = cal.sensor_rotation().transpose();
+    let n_s = r_t * torsion_axis(pose);
+    predicted -= n_s * torsion_nm;
+    let v_s = r_t * pose.rod_dir.cross(&pose.rod_normal);
+    let k = check.offset_m / pose.rod_normal.y;
+    let jacobian = check.cross + n_s * v_s.transpose() * k;
+    let var = check.torque_var_nm2 + jacobian.component_mul(&jacobian) * check.force_var_n2;
     TorqueResidual {
         residual_nm: sensor.torque_nm - predicted,
-        std_nm: check.std_nm,
+        std_nm: var.map(nalgebra::ComplexField::sqrt),
     }
 }
 

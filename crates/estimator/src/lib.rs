@@ -39,6 +39,9 @@ pub enum SettingError {
         /// What it must be.
         why: &'static str,
     },
+    /// The tip-force filter's settings were refused.
+    #[error("filter: {0}")]
+    Filter(#[from] filter::FilterError),
 }
 
 /// The force sensor's noise: one standard deviation per sensor axis, N

@@ -15,6 +15,7 @@ use sar_estimator::cycle::{
     EstimatorConfig, JointSample, PlausibilityConfig, PlausibilityLimits, SensorSample, TipOutcome,
     TorqueLimits,
 };
+use sar_estimator::filter::TipFilter;
 use sar_estimator::guard::{Axis, ForcePart, GuardState, Reason};
 use sar_kinematics::ActiveJoints;
 
@@ -918,4 +919,55 @@ fn the_guard_faults_on_the_observability_flag() {
         "{:?}",
         out.command
     );
+}
+
+/// The filtered tip force beside the estimate: the cycle's `filtered` is a
+/// [`TipFilter`] stepped once per NEW sample with the observable estimate
+/// (a repeated counter does not step it), it is reset when there is no
+/// estimate, and restarts at the next one with no memory of before.
+#[test]
+fn the_filtered_tip_force_is_stepped_per_new_sample_and_reset_without_input() {
+    let config = config_with_speed(1e3);
+    let filter_config = config.filter.expect("the example config has a filter");
+    let mut reference = TipFilter::new(filter_config).unwrap();
+    let mut rig = Rig::with_config(&config);
+    let armed = rig.reset();
+    assert_eq!(armed.guard_state, GuardState::Ok);
+    let e = estimate(&armed);
+    let expected = reference.update(&e.force_n, &e.std_n).unwrap();
+    assert_eq!(armed.filtered, Some(expected));
+    // A ramp of the tip force: the cycle's filter is the reference filter,
+    // bit for bit, and it lags behind the estimate.
+    for k in 1..=50 {
+        let tip = Vector3::new(0.05 * f64::from(k), 0.0, 0.0);
+        let out = rig.push(NOMINAL_Q, &tip);
+        let e = estimate(&out);
+        let expected = reference.update(&e.force_n, &e.std_n).unwrap();
+        assert_eq!(out.filtered, Some(expected), "cycle {k}");
+    }
+    let out = *rig.estimator.last();
+    assert!(out.filtered.unwrap().force_n.x < estimate(&out).force_n.x - 0.1);
+    let filtered_before = out.filtered;
+    // The same sample again (a loop faster than the sensor): not stepped.
+    let mut repeat = rig.input(
+        NOMINAL_Q,
+        example_reading(NOMINAL_Q, &Vector3::new(2.5, 0.0, 0.0), &rig.bias_n),
+    );
+    rig.counter = rig.counter.wrapping_sub(1);
+    repeat.sensor.counter = rig.counter;
+    let out = *rig.estimator.cycle(&repeat);
+    assert!(!out.new_sample);
+    assert_eq!(out.filtered, filtered_before);
+    // No estimate (invalid joints): no filtered output, and the filter resets.
+    let mut bad = rig.at_rest();
+    bad.joints.valid = false;
+    let out = *rig.estimator.cycle(&bad);
+    assert_eq!(out.filtered, None);
+    assert_eq!(out.guard_state, GuardState::Fault);
+    // With the next estimate the filter restarts at it: no memory of the ramp.
+    let out = rig.reset();
+    assert_eq!(out.guard_state, GuardState::Ok);
+    let e = estimate(&out);
+    let restarted = out.filtered.unwrap();
+    assert_eq!((restarted.force_n, restarted.std_n), (e.force_n, e.std_n));
 }

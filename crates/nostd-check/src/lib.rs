@@ -54,6 +54,10 @@ fn config() -> Option<EstimatorConfig> {
         tip: TipForceConfig::default(),
         guard,
         plausibility: PlausibilityConfig::default(),
+        filter: Some(FilterConfig {
+            cutoff_hz: 5.0,
+            sample_period_s: 0.002,
+        }),
     })
 }
 

@@ -323,6 +323,12 @@ pub fn example_estimator_config() -> sar_estimator::cycle::EstimatorConfig {
             },
         )
         .unwrap(),
+        // A 20 Hz low-pass of 1 kHz samples beside the estimate: every cycle
+        // test runs the filter too.
+        filter: Some(sar_estimator::filter::FilterConfig {
+            cutoff_hz: 20.0,
+            sample_period_s: 0.001,
+        }),
     }
 }
 
