@@ -1322,3 +1322,56 @@ fn line_fit_refusals() {
         ));
     }
 }
+
+/// MODEL.md 5: a pose whose slide sign is unknown (the first pose of a
+/// procedure, before any slide) is left out of the friction fit. With friction
+/// estimated it adds only its two moment rows, so the friction that actually
+/// acts on it, either way, does not move the estimate; without the friction
+/// unknown it adds all three rows. (The old `slide_sign: 0.0` gave f the
+/// coefficient 0 in the axial row: the pose's real friction then went into m.)
+#[test]
+fn unknown_slide_sign_leaves_the_pose_out_of_the_friction_fit() {
+    let rotation = mounted_rotation();
+    let cal = calibration(support(), rotation, gravity());
+    let tare = V3::new(0.1, -0.2, 0.3);
+    let t = truth(2.593, 0.103, 0.3);
+    let cone = cone_protocol();
+    let mut results = Vec::new();
+    for physics_sigma in [1.0, -1.0] {
+        let mut protocol = cone.clone();
+        protocol[0].slide_sign = physics_sigma;
+        let mut poses = ideal_poses(&t, &rotation, &tare, &protocol);
+        poses[0].slide_sign = SlideSign::Unknown;
+        let mut ident =
+            Identification::new(&cal, &SensorNoise::hex6(), tare, FRICTION_ONLY).unwrap();
+        ident.add(&poses[0]).unwrap();
+        assert_eq!(ident.rows(), 2, "only the moment rows");
+        for pose in &poses[1..] {
+            ident.add(pose).unwrap();
+        }
+        assert_eq!(ident.rows(), 3 * 20 - 1);
+        let r = ident.solve().unwrap();
+        assert!((r.mass_kg - t.mass_kg).abs() < 1e-9 * t.mass_kg, "{r:?}");
+        assert!((r.com_m - t.com_m).abs() < 1e-9 * t.com_m, "{r:?}");
+        assert!((r.friction_n.unwrap() - 0.3).abs() < 1e-9, "{r:?}");
+        results.push(r);
+        // Without the friction unknown the pose gives its three rows.
+        let mut plain = Identification::new(&cal, &SensorNoise::hex6(), tare, NO_EXTRAS).unwrap();
+        plain.add(&poses[0]).unwrap();
+        assert_eq!(plain.rows(), 3);
+    }
+    assert!((results[0].mass_kg - results[1].mass_kg).abs() < 1e-12);
+    // Every sign unknown: f has no row at all.
+    let unknown: Vec<StaticPose> = ideal_poses(&t, &rotation, &tare, &cone)
+        .into_iter()
+        .map(|p| StaticPose {
+            slide_sign: SlideSign::Unknown,
+            ..p
+        })
+        .collect();
+    let e = identify(&cal, tare, FRICTION_ONLY, &unknown).unwrap_err();
+    assert!(
+        matches!(e, IdentificationError::IllConditioned { condition, .. } if condition == f64::INFINITY),
+        "{e:?}"
+    );
+}

@@ -476,6 +476,8 @@ impl SupportCalibration {
     /// the configured B; the lower minimum wins. Its chi-square per degree of
     /// freedom must be within `max_chi2_dof`.
     pub fn fit(&self) -> Result<SupportFit, SupportError> {
+        // len <= SUPPORT_CAPACITY is kept by push.
+        debug_assert!(self.len <= SUPPORT_CAPACITY);
         let poses = self.poses.get(..self.len).unwrap_or(&[]);
         let problem = Problem {
             poses,
