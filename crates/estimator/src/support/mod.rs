@@ -509,7 +509,7 @@ impl SupportCalibration {
             }
         }
         let solution = best?;
-        self.result(&problem, &solution, from_search)
+        self.result(&solution, from_search)
     }
 
     /// The fit from a start at support `start_m` (see [`Self::fit`]).
@@ -592,19 +592,13 @@ impl SupportCalibration {
         Ok(())
     }
 
-    fn result(
-        &self,
-        problem: &Problem<'_>,
-        solution: &Solution,
-        from_search: bool,
-    ) -> Result<SupportFit, SupportError> {
+    fn result(&self, solution: &Solution, from_search: bool) -> Result<SupportFit, SupportError> {
         let Solution {
             theta,
             free,
             normal,
             iterations,
         } = solution;
-        let _ = problem;
         let normal = normal.masked(free);
         let (cov, condition) = held::covariance_and_condition(&normal.matrix, free)?;
         let mass = theta.mass_kg;
