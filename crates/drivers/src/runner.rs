@@ -9,7 +9,7 @@
 //! bounded: the run ends at the end of the script, at `max_duration_ns`, or
 //! shortly after a drive fault, and says which.
 
-use crate::motion::{SlideTracker, move_time_s};
+use crate::motion::{SlideSign, SlideTracker, move_time_s};
 use crate::scenario::MotionScript;
 use crate::{
     AxisDrives, Clock, ClockError, DriveState, Error, ErrorKind, ForceSensor, JointPositions,
@@ -83,9 +83,10 @@ pub struct HoldSegment {
     /// End, host ns, exclusive.
     pub end_ns: u64,
     /// Sign of the last slide of the rod in the support before the hold, from
-    /// the measured positions: +1 when A last moved towards B (the rod slid
-    /// along u), -1 away, 0 when it has not slid since the start.
-    pub slide_sign: f64,
+    /// the measured positions: inserting when A last moved towards B (the rod
+    /// slid along u), retracting away, unknown when it has not slid since the
+    /// start (such a hold is left out of a friction fit, MODEL.md 5).
+    pub slide_sign: SlideSign,
     /// Whether the axes reached the target (false: the arrival timed out and
     /// the hold is where they were).
     pub arrived: bool,
@@ -182,12 +183,12 @@ impl Run {
         self.positions.get(lo..hi.max(lo)).unwrap_or(&[])
     }
 
-    /// The sign of the last slide as of `t_ns` (0 before any).
-    pub fn slide_sign_at(&self, t_ns: u64) -> f64 {
+    /// The sign of the last slide as of `t_ns` (unknown before any).
+    pub fn slide_sign_at(&self, t_ns: u64) -> SlideSign {
         let n = self.slides.partition_point(|s| s.at_ns <= t_ns);
         n.checked_sub(1)
             .and_then(|i| self.slides.get(i))
-            .map_or(0.0, |s| s.sign)
+            .map_or(SlideSign::Unknown, |s| s.sign)
     }
 
     /// The latest positions stamped at or before `t_ns`.
@@ -239,8 +240,8 @@ pub enum RunError {
 pub struct SlideChange {
     /// Stamp of the positions that showed it, host ns.
     pub at_ns: u64,
-    /// The new sign (see [`SlideTracker`]).
-    pub sign: f64,
+    /// The new sign (see [`SlideTracker`]; never unknown once it has changed).
+    pub sign: SlideSign,
 }
 
 fn valid_options(options: &RunOptions) -> Result<(), RunError> {

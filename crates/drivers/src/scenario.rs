@@ -14,7 +14,7 @@ mod raw;
 
 use crate::Vec3;
 use crate::convert::{joints_from_array, joints_from_displacement, joints_to_array};
-use crate::motion::{SlideTracker, axis_progress_m, move_time_s};
+use crate::motion::{SlideSign, SlideTracker, axis_progress_m, move_time_s};
 use crate::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimError, SimSpec};
 use locate::{Locator, join};
 use rand::{Rng, SeedableRng};
@@ -105,11 +105,11 @@ pub struct MotionStep {
     pub hold_ns: u64,
     /// The sign of the last slide of the rod in the support once the step is
     /// done, if each axis moves on its own time-optimal trapezoid from rest to
-    /// rest (as the simulator's do): +1 when A last moved towards B (the rod
-    /// slid along u), -1 away, the previous step's sign when the step does not
-    /// slide the rod, and 0 when nothing has slid yet. Followed with the same
-    /// [`SlideTracker`] as the runner's.
-    pub planned_slide_sign: f64,
+    /// rest (as the simulator's do): inserting when A last moved towards B (the
+    /// rod slid along u), retracting away, the previous step's sign when the
+    /// step does not slide the rod, and unknown when nothing has slid yet.
+    /// Followed with the same [`SlideTracker`] as the runner's.
+    pub planned_slide_sign: SlideSign,
 }
 
 impl MotionScript {

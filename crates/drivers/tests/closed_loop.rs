@@ -37,7 +37,7 @@ use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState, Reason};
 use sar_estimator::identification::{Identification, IdentificationOptions, IdentificationResult};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::TipForceConfig;
-use sar_kinematics::{ActiveJoints, forward};
+use sar_kinematics::{ActiveJoints, SlideSign, forward};
 use std::path::{Path, PathBuf};
 
 /// Host time at which every simulated run starts (not 0, so that host and
@@ -345,7 +345,10 @@ hold_s = 0.5
 /// 10 um (q1 ends at +0.002 m) flips both.
 #[test]
 fn a_reversal_below_the_pre_sliding_threshold_flips_neither_the_runner_nor_the_friction() {
-    for (end_q1_m, want_reversal_m, want_sign) in [(0.0001, 25e-9, 1.0), (0.002, 10e-6, -1.0)] {
+    for (end_q1_m, want_reversal_m, want_sign) in [
+        (0.0001, 25e-9, SlideSign::Inserting),
+        (0.002, 10e-6, SlideSign::Retracting),
+    ] {
         let s = lateral_sweep(end_q1_m);
         // The geometry is the one described: a is smallest at q1 = 0 and comes
         // back by the wanted amount, below or above the threshold.
@@ -366,7 +369,10 @@ fn a_reversal_below_the_pre_sliding_threshold_flips_neither_the_runner_nor_the_f
             (reversal_m / want_reversal_m - 1.0).abs() < 1e-3,
             "{reversal_m}"
         );
-        assert_eq!(reversal_m < SLIDE_THRESHOLD_M, want_sign > 0.0);
+        assert_eq!(
+            reversal_m < SLIDE_THRESHOLD_M,
+            want_sign == SlideSign::Inserting
+        );
 
         let sim = simulate(&s, true);
         let hold = sim.run.holds.first().expect("the hold");
@@ -386,7 +392,8 @@ fn a_reversal_below_the_pre_sliding_threshold_flips_neither_the_runner_nor_the_f
             // u . F_A = -m (u . g) + slide f, with the runner's slide sign.
             let u = truth.pose.rod_dir;
             let g = s.spec.calibration.gravity_mps2();
-            let row_n = -s.spec.profile.mass_kg() * u.dot(&g) + hold.slide_sign * f;
+            let sigma = hold.slide_sign.sigma().expect("a slide before the hold");
+            let row_n = -s.spec.profile.mass_kg() * u.dot(&g) + sigma * f;
             let axial_n = truth.ujoint_force_n.dot(&u);
             assert!(
                 (axial_n - row_n).abs() < 1e-9,

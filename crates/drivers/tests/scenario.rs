@@ -22,7 +22,7 @@ use sar_drivers::{
     AxisDrives, DriveState, ErrorKind, ForceSensor, JointPositions, SensorStatus, SimClock, Vec3,
     WrenchSample,
 };
-use sar_kinematics::{ActiveJoints, forward};
+use sar_kinematics::{ActiveJoints, SlideSign, forward};
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
@@ -82,7 +82,7 @@ fn every_shipped_scenario_loads_with_a_unique_name() {
 
 /// The held poses of a scenario: (A, u, a) from the forward kinematics, with the
 /// planned slide sign.
-fn held_poses(s: &Scenario) -> Vec<(Vec3, Vec3, f64, f64)> {
+fn held_poses(s: &Scenario) -> Vec<(Vec3, Vec3, f64, SlideSign)> {
     s.script
         .steps
         .iter()
@@ -120,7 +120,11 @@ fn identification_files_follow_the_articles_protocol() {
             assert!((a_m.y - 0.20).abs() < 1e-12);
             assert!((a - want_a).abs() < 1e-12, "pose {i}: a = {a}");
             // Outward first (the rod slides against u), then inward.
-            let want_slide = if i < 5 { -1.0 } else { 1.0 };
+            let want_slide = if i < 5 {
+                SlideSign::Retracting
+            } else {
+                SlideSign::Inserting
+            };
             assert_eq!(*slide, want_slide, "pose {i}");
         }
     }
@@ -165,7 +169,12 @@ fn cone_file_follows_model_5_1() {
             PROTOCOL_A_M[4 - j]
         };
         assert!((a - want_a).abs() < 1e-9, "pose {i}: a = {a}");
-        assert_eq!(*slide, if outward { -1.0 } else { 1.0 }, "pose {i}");
+        let want_slide = if outward {
+            SlideSign::Retracting
+        } else {
+            SlideSign::Inserting
+        };
+        assert_eq!(*slide, want_slide, "pose {i}");
         if directions.iter().all(|d| (d - u).norm() > 1e-6) {
             directions.push(*u);
         }
@@ -860,19 +869,19 @@ fn slide_tracker_follows_the_last_slide_with_hysteresis() {
         q3_m: q3,
     };
     t.update(&at(0.25));
-    assert_eq!(t.sign(), 0.0);
+    assert_eq!(t.sign(), SlideSign::Unknown);
     // Less than the threshold: nothing yet.
     t.update(&at(0.25 + 0.5 * SLIDE_THRESHOLD_M));
-    assert_eq!(t.sign(), 0.0);
+    assert_eq!(t.sign(), SlideSign::Unknown);
     // Towards B (a shrinks): the rod slides along u.
     assert!(t.update(&at(0.26)));
-    assert_eq!(t.sign(), 1.0);
+    assert_eq!(t.sign(), SlideSign::Inserting);
     // A back-step within the threshold (quantisation) does not flip it.
     assert!(!t.update(&at(0.26 - 0.5 * SLIDE_THRESHOLD_M)));
-    assert_eq!(t.sign(), 1.0);
+    assert_eq!(t.sign(), SlideSign::Inserting);
     // A real retreat does.
     assert!(t.update(&at(0.25)));
-    assert_eq!(t.sign(), -1.0);
+    assert_eq!(t.sign(), SlideSign::Retracting);
 }
 
 // ---------------------------------------------------------------------------

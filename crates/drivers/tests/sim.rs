@@ -19,7 +19,7 @@ use sar_drivers::{
     AxisDrives, Clock, Drained, DriveState, Error, ErrorKind, ForceSensor, JointPositions,
     SimClock, WrenchSample,
 };
-use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Profile, ProfileSpec};
+use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Profile, ProfileSpec, SlideSign};
 
 type Vec3 = Vector3<f64>;
 
@@ -1137,7 +1137,7 @@ fn rod_offset_statics_agree_with_the_estimator_and_show_the_torsion() {
     let e = estimator.estimate(&t.pose, &s.force_n, &t.bias_n).unwrap();
     // No slide yet (no friction); the estimator's profile has no tip mass, so
     // it sees the mass's weight as a tip force pulling down.
-    assert_eq!(t.slide_sign, 0.0);
+    assert_eq!(t.slide_sign, SlideSign::Unknown);
     let seen = t.tip_force_n - t.tip_weight_n;
     assert!((e.force_n - seen).amax() < 1e-9, "{} vs {seen}", e.force_n);
     assert!((e.torsion_nm - t.torsion_nm).abs() < 1e-9);
@@ -1156,7 +1156,7 @@ fn rod_offset_statics_agree_with_the_estimator_and_show_the_torsion() {
         q3_m: 0.33,
     });
     let t = rig.truth();
-    assert_eq!(t.slide_sign, 1.0);
+    assert_eq!(t.slide_sign, SlideSign::Inserting);
     let u = t.pose.rod_dir;
     assert!((t.friction_force_n + u * 0.3).amax() < 1e-15);
     let weight = gravity() * MASS_KG;
@@ -1196,7 +1196,7 @@ fn tip_mass_is_identified_back_as_in_table_3() {
             ujoint_m: t.pose.ujoint_m,
             mean_reading_n: mean_force(&samples),
             samples: samples.len() as u32,
-            slide_sign: 0.0,
+            slide_sign: SlideSign::Unknown,
         })
         .unwrap();
     }
@@ -1222,7 +1222,7 @@ fn friction_opposes_the_slide_and_locks_when_the_rod_stops() {
     let mut rig = Rig::new(spec);
     // Before any slide: none.
     let t = rig.truth();
-    assert_eq!(t.slide_sign, 0.0);
+    assert_eq!(t.slide_sign, SlideSign::Unknown);
     assert_eq!(t.friction_force_n, Vec3::zeros());
     assert!(t.ujoint_force_n.x.abs() < 1e-12);
     // Inserting: A moves towards B, s decreases, the rod slides along u.
@@ -1231,12 +1231,12 @@ fn friction_opposes_the_slide_and_locks_when_the_rod_stops() {
     rig.clock.advance_ns(300 * MS);
     let moving = rig.truth();
     assert!(moving.joint_speeds_mps[2] > 0.0);
-    assert_eq!(moving.slide_sign, 1.0);
+    assert_eq!(moving.slide_sign, SlideSign::Inserting);
     rig.move_to(horizontal(0.10));
     rig.clock.advance_ns(2 * S); // locked while at rest
     let t = rig.truth();
     let u = t.pose.rod_dir;
-    assert_eq!(t.slide_sign, 1.0);
+    assert_eq!(t.slide_sign, SlideSign::Inserting);
     assert!((t.friction_force_n - u * -0.3).amax() < 1e-15);
     // After an inserting move, F_A . u exceeds the frictionless value (0 for
     // a horizontal rod, nothing at the tip) by the friction.
@@ -1247,11 +1247,11 @@ fn friction_opposes_the_slide_and_locks_when_the_rod_stops() {
     rig.move_to(horizontal(0.20));
     rig.clock.advance_ns(2 * S);
     let t = rig.truth();
-    assert_eq!(t.slide_sign, -1.0);
+    assert_eq!(t.slide_sign, SlideSign::Retracting);
     assert!((t.ujoint_force_n.dot(&t.pose.rod_dir) + 0.3).abs() < 1e-12);
     // Inserting again: +1.
     rig.move_to(horizontal(0.15));
-    assert_eq!(rig.truth().slide_sign, 1.0);
+    assert_eq!(rig.truth().slide_sign, SlideSign::Inserting);
     // A purely vertical move of A also slides the rod (s changes): down from
     // the support's height, |B - A| grows: retracting; back up: inserting.
     let low = ActiveJoints {
@@ -1259,9 +1259,9 @@ fn friction_opposes_the_slide_and_locks_when_the_rod_stops() {
         ..horizontal(0.15)
     };
     rig.move_to(low);
-    assert_eq!(rig.truth().slide_sign, -1.0);
+    assert_eq!(rig.truth().slide_sign, SlideSign::Retracting);
     rig.move_to(horizontal(0.15));
-    assert_eq!(rig.truth().slide_sign, 1.0);
+    assert_eq!(rig.truth().slide_sign, SlideSign::Inserting);
 }
 
 // ---------------------------------------------------------------------------

@@ -513,6 +513,22 @@ fn identification(c: &mut Criterion) {
     c.bench_function("support/fit (20 poses, B 3.5 mm off)", |b| {
         b.iter(|| black_box(black_box(&support).fit()))
     });
+    // The global search's case: the configured B 50 mm off.
+    let mut far = SupportCalibration::new(
+        &cal.with_support(cal.support_m() + Vector3::new(-0.03, 0.03, 0.0283))
+            .unwrap(),
+        &SensorNoise::hex6(),
+        bias_n,
+        SupportOptions::default(),
+    )
+    .unwrap();
+    for p in &poses {
+        far.push(p).unwrap();
+    }
+    assert!(far.fit().is_ok(), "{:?}", far.fit());
+    c.bench_function("support/fit (20 poses, B 50 mm off)", |b| {
+        b.iter(|| black_box(black_box(&far).fit()))
+    });
 }
 
 criterion_group!(benches, per_cycle, identification);

@@ -1,14 +1,13 @@
 //! Identification of the manipulator's mass m and centre of mass c from static
-//! poses with nothing touching the tip (MODEL.md 5), and the article's
-//! simplified straight-line method (MODEL.md 5.2) for comparison.
+//! poses with nothing touching the tip (MODEL.md 5). The article's simplified
+//! straight-line method (MODEL.md 5.2) is [`crate::line_fit`] (re-exported here).
 //!
 //! [`Identification`] is a streaming weighted least-squares solver: each pose
 //! adds three rows (two moment rows about B and the force row along the rod),
 //! whitened by the inverse of their noise covariance, to a fixed-size upper
 //! triangular factor by Givens rotations (never normal equations). The estimate,
 //! its standard errors, the residuals and the condition number are available
-//! after every pose. [`LineFit`] is the article's ordinary least-squares line
-//! `F_A . up = b0 + b1 / a` on horizontal poses, with centred (Welford) sums.
+//! after every pose.
 //!
 //! Conventions (MODEL.md 4, 5): `F_A = -R_0s (f_s - b)` is what the robot
 //! applies to the rod at A, `a = |B - A|`, `u = (B - A) / a`; the unknowns are
@@ -16,7 +15,21 @@
 //! the last slide) and the force bias across gravity (two components in the
 //! sensor frame, basis [`bias_across_gravity_basis`]). The bias along gravity
 //! cannot be told from m: the sensor must be tared with the rod detached.
+//!
+//! A pose whose slide sign is unknown ([`crate::SlideSign::Unknown`]: no slide
+//! seen before it) has no friction coefficient. When friction is estimated it
+//! contributes only its two moment rows, which do not involve f; its axial row
+//! is left out (MODEL.md 5: never a coefficient of 0). Without the friction
+//! unknown all three rows are used (the axial row assumes no friction).
+//!
+//! Layout: the factor always has the five unknowns (m, M, f, bias e1, bias e2)
+//! and the right-hand side at fixed columns; an unknown that is not estimated
+//! gets the exact row "it is 0" at construction, which leaves it 0 and the
+//! others as if it did not exist (the factor stays block diagonal).
 
+pub use crate::line_fit::{LineFit, LineFitResult};
+
+use crate::linalg;
 use crate::{
     Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, StaticPose, Vec3,
     check_finite, com_std_m, non_negative,
@@ -35,14 +48,15 @@ pub const MAX_CONDITION: f64 = 1e8;
 const MAX_UNKNOWNS: usize = 5;
 /// Width of the augmented factor: the unknowns and the right-hand side.
 const WIDTH: usize = MAX_UNKNOWNS + 1;
-/// Iteration cap of the symmetric eigensolver on the (at most 5x5) scaled
-/// factor; it converges in a few dozen.
-const EIGEN_MAX_ITERATIONS: usize = 1000;
 
-/// One augmented row: coefficients of the unknowns, then the right-hand side.
+/// One augmented row: m, M, f, bias e1, bias e2, then the right-hand side.
 type Row = [f64; WIDTH];
 /// An upper triangular augmented factor T with |T z| = |[A y] z| for every z.
 type Factor = [Row; WIDTH];
+/// The unknowns' square block of the factor.
+type Square = SMatrix<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>;
+/// A vector over the unknowns (m, M, f, bias e1, bias e2).
+type Unknowns = SVector<f64, MAX_UNKNOWNS>;
 
 /// Why a setting, a pose or a solve was refused.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -218,12 +232,15 @@ fn basis_across(n: &Vec3) -> (Vec3, Vec3) {
 }
 
 /// The error for a non-finite `field`, for [`check_finite`].
-fn non_finite(field: &'static str) -> impl FnOnce(f64) -> IdentificationError {
+pub(crate) fn non_finite(field: &'static str) -> impl FnOnce(f64) -> IdentificationError {
     move |value| IdentificationError::NonFinite { field, value }
 }
 
 /// Checks a pose and returns (u, a) with a = |B - A|, u = (B - A) / a.
-fn pose_geometry(pose: &StaticPose, support_m: &Vec3) -> Result<(Vec3, f64), IdentificationError> {
+pub(crate) fn pose_geometry(
+    pose: &StaticPose,
+    support_m: &Vec3,
+) -> Result<(Vec3, f64), IdentificationError> {
     pose.check()?;
     let r = support_m - pose.ujoint_m;
     let a = r.norm();
@@ -237,23 +254,24 @@ fn pose_geometry(pose: &StaticPose, support_m: &Vec3) -> Result<(Vec3, f64), Ide
     Ok((r / a, a))
 }
 
-/// Adds one augmented row to an upper triangular factor by Givens rotations,
-/// over the first `width` columns. Keeps the diagonal >= 0.
-fn givens_add(factor: &mut Factor, width: usize, mut row: Row) {
-    for (k, factor_row) in factor.iter_mut().enumerate().take(width) {
-        let pivot = factor_row.get(k).copied().unwrap_or(0.0);
-        let incoming = row.get(k).copied().unwrap_or(0.0);
-        if incoming == 0.0 {
+/// Adds one augmented row to an upper triangular factor by Givens rotations.
+/// Keeps the diagonal >= 0. Index-free: the pivot of factor row k and the
+/// incoming entry k are the first pair after skipping k columns.
+fn givens_add(factor: &mut Factor, mut row: Row) {
+    for (k, factor_row) in factor.iter_mut().enumerate() {
+        let mut pairs = factor_row.iter_mut().zip(row.iter_mut()).skip(k);
+        // Every factor row has WIDTH columns and k < WIDTH: always a pair.
+        let Some((pivot, incoming)) = pairs.next() else {
+            break;
+        };
+        if *incoming == 0.0 {
             continue;
         }
-        let radius = ComplexField::hypot(pivot, incoming);
-        let (cos, sin) = (pivot / radius, incoming / radius);
-        for (kept, added) in factor_row
-            .iter_mut()
-            .zip(row.iter_mut())
-            .take(width)
-            .skip(k)
-        {
+        let radius = ComplexField::hypot(*pivot, *incoming);
+        let (cos, sin) = (*pivot / radius, *incoming / radius);
+        *pivot = radius;
+        *incoming = 0.0;
+        for (kept, added) in pairs {
             let (t, r) = (*kept, *added);
             *kept = cos * t + sin * r;
             *added = cos * r - sin * t;
@@ -261,12 +279,10 @@ fn givens_add(factor: &mut Factor, width: usize, mut row: Row) {
     }
 }
 
-fn entry(factor: &Factor, i: usize, j: usize) -> f64 {
-    factor.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0)
-}
-
-fn at<const N: usize>(v: &SVector<f64, N>, i: usize) -> f64 {
-    v.get(i).copied().unwrap_or(0.0)
+/// The factor as a matrix.
+fn as_matrix(factor: &Factor) -> SMatrix<f64, WIDTH, WIDTH> {
+    // Rows of the array are rows of the matrix.
+    SMatrix::<f64, WIDTH, WIDTH>::from_row_iterator(factor.iter().flatten().copied())
 }
 
 /// The streaming weighted least-squares identification of MODEL.md 5.
@@ -280,14 +296,26 @@ pub struct Identification {
     variance_n2: Vec3,
     bias_basis_s: [Vec3; 2],
     options: IdentificationOptions,
-    /// 2 to 5; column layout: m, M, [f], [bias e1, bias e2], then the rhs.
-    unknowns: usize,
-    friction_col: Option<usize>,
-    bias_col: Option<usize>,
+    /// Columns: m, M, f, bias e1, bias e2, rhs (see the module's layout).
     weighted: Factor,
     unweighted: Factor,
     poses: u32,
     rows: u32,
+}
+
+/// The factor with the exact row "this unknown is 0" for each unknown that is
+/// not estimated (f when `!friction`, the two bias components when `!bias`).
+fn initial_factor(friction: bool, bias: bool) -> Factor {
+    let held = |estimated: bool| if estimated { 0.0 } else { 1.0 };
+    let (f, b) = (held(friction), held(bias));
+    [
+        [0.0; WIDTH],
+        [0.0; WIDTH],
+        [0.0, 0.0, f, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, b, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0, b, 0.0],
+        [0.0; WIDTH],
+    ]
 }
 
 impl Identification {
@@ -309,19 +337,7 @@ impl Identification {
                 return Err(IdentificationError::NoiseOutOfRange { std_n: std });
             }
         }
-        let mut unknowns = 2;
-        let friction_col = if options.friction {
-            unknowns += 1;
-            Some(unknowns - 1)
-        } else {
-            None
-        };
-        let bias_col = if options.bias_across_gravity {
-            unknowns += 2;
-            Some(unknowns - 2)
-        } else {
-            None
-        };
+        let factor = initial_factor(options.friction, options.bias_across_gravity);
         Ok(Self {
             support_m: cal.support_m(),
             gravity_mps2: cal.gravity_mps2(),
@@ -330,11 +346,8 @@ impl Identification {
             variance_n2,
             bias_basis_s: bias_across_gravity_basis(cal),
             options,
-            unknowns,
-            friction_col,
-            bias_col,
-            weighted: [[0.0; WIDTH]; WIDTH],
-            unweighted: [[0.0; WIDTH]; WIDTH],
+            weighted: factor,
+            unweighted: factor,
             poses: 0,
             rows: 0,
         })
@@ -347,21 +360,29 @@ impl Identification {
 
     /// How many unknowns are estimated (2 to 5).
     pub fn unknowns(&self) -> u32 {
-        // At most MAX_UNKNOWNS = 5.
-        self.unknowns as u32
+        2 + u32::from(self.options.friction) + 2 * u32::from(self.options.bias_across_gravity)
     }
 
-    /// Adds one static pose. Validates it first; a refused pose leaves the
-    /// state unchanged.
+    /// Adds one static pose: its three rows, or (friction estimated and the
+    /// slide sign unknown) its two moment rows. Validates it first; a refused
+    /// pose leaves the state unchanged.
     pub fn add(&mut self, pose: &StaticPose) -> Result<(), IdentificationError> {
         let (u, a) = pose_geometry(pose, &self.support_m)?;
+        // The axial row carries f: with friction estimated it needs a known sign.
+        let (friction_coef, pose_rows) = match (self.options.friction, pose.slide_sign.sigma()) {
+            (true, Some(sigma)) => (sigma, 3u32),
+            // Unknown sign: the axial row is left out, its f entry never used.
+            (true, None) => (0.0, 2),
+            // f is not an unknown: its column stays zero.
+            (false, _) => (0.0, 3),
+        };
         let poses = self
             .poses
             .checked_add(1)
             .ok_or(IdentificationError::TooManyPoses { poses: self.poses })?;
         let rows = self
             .rows
-            .checked_add(3)
+            .checked_add(pose_rows)
             .ok_or(IdentificationError::TooManyPoses { poses: self.poses })?;
         let force_a_n =
             crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
@@ -374,38 +395,31 @@ impl Identification {
             p2.cross(&u).transpose(),
             u.transpose(),
         ]);
-        let measured: [f64; 3] = (g_rows * force_a_n).into();
-        let gravity_rows: [f64; 3] = (g_rows * self.gravity_mps2).into();
-        let moment_coef = [1.0 / a, 1.0 / a, 0.0];
-        let friction_coef = [0.0, 0.0, pose.slide_sign];
+        let measured = g_rows * force_a_n;
+        let gravity_rows = g_rows * self.gravity_mps2;
         let g_r = g_rows * self.calibration.sensor_rotation();
         let [e1, e2] = self.bias_basis_s;
-        let bias1: [f64; 3] = (-(g_r * e1)).into();
-        let bias2: [f64; 3] = (-(g_r * e2)).into();
-
-        let rhs_col = self.unknowns;
-        let mut design_rows = [[0.0; WIDTH]; 3];
-        for (i, row) in design_rows.iter_mut().enumerate() {
-            let pick = |v: &[f64; 3]| v.get(i).copied().unwrap_or(0.0);
-            let g_i = pick(&gravity_rows);
-            let mut set = |col: usize, value: f64| {
-                if let Some(slot) = row.get_mut(col) {
-                    *slot = value;
-                }
-            };
-            set(0, -g_i);
-            set(1, g_i * pick(&moment_coef));
-            if let Some(col) = self.friction_col {
-                set(col, pick(&friction_coef));
+        let bias = |e: &Vec3| {
+            if self.options.bias_across_gravity {
+                -(g_r * e)
+            } else {
+                Vec3::zeros()
             }
-            if let Some(col) = self.bias_col {
-                set(col, pick(&bias1));
-                set(col + 1, pick(&bias2));
-            }
-            set(rhs_col, pick(&measured));
-        }
+        };
+        // Columns m, M, f, bias e1, bias e2, rhs; the moment rows carry M / a,
+        // the axial row does not; only the axial row carries f.
+        let design = SMatrix::<f64, 3, WIDTH>::from_columns(&[
+            -gravity_rows,
+            Vec3::new(gravity_rows.x / a, gravity_rows.y / a, 0.0),
+            Vec3::new(0.0, 0.0, friction_coef),
+            bias(&e1),
+            bias(&e2),
+            measured,
+        ]);
 
-        // Whitening: covariance of the rows = G R diag(std^2 / K) R^T G^T.
+        // Whitening: covariance of the rows = G R diag(std^2 / K) R^T G^T. Its
+        // lower Cholesky factor is lower triangular, so the first two whitened
+        // rows do not depend on the third: dropping the axial row is exact.
         let per_sample = Mat3::from_diagonal(&(self.variance_n2 / f64::from(pose.samples)));
         let covariance = g_r * per_sample * g_r.transpose();
         let cholesky = covariance
@@ -413,29 +427,22 @@ impl Identification {
             .ok_or(IdentificationError::DegenerateNoise {
                 samples: pose.samples,
             })?;
-        let design = SMatrix::<f64, 3, WIDTH>::from_fn(|i, j| {
-            design_rows
-                .get(i)
-                .and_then(|r| r.get(j))
-                .copied()
-                .unwrap_or(0.0)
-        });
         let whitened = cholesky.l().solve_lower_triangular(&design).ok_or(
             IdentificationError::DegenerateNoise {
                 samples: pose.samples,
             },
         )?;
 
-        let width = self.unknowns + 1;
         let mut weighted = self.weighted;
         let mut unweighted = self.unweighted;
-        for (whitened_row, plain_row) in whitened.row_iter().zip(design_rows.iter()) {
-            let mut row = [0.0; WIDTH];
-            for (dst, src) in row.iter_mut().zip(whitened_row.iter()) {
-                *dst = *src;
-            }
-            givens_add(&mut weighted, width, row);
-            givens_add(&mut unweighted, width, *plain_row);
+        let as_row = |r: nalgebra::RowSVector<f64, WIDTH>| -> Row { r.transpose().into() };
+        for (whitened_row, plain_row) in whitened
+            .row_iter()
+            .zip(design.row_iter())
+            .take(pose_rows as usize)
+        {
+            givens_add(&mut weighted, as_row(whitened_row.into_owned()));
+            givens_add(&mut unweighted, as_row(plain_row.into_owned()));
         }
         check_finite(
             weighted.iter().chain(unweighted.iter()).flatten(),
@@ -453,14 +460,13 @@ impl Identification {
         self.poses
     }
 
-    /// Rows accumulated (3 per pose).
+    /// Rows accumulated (3 per pose, 2 for a pose whose axial row was left out).
     pub fn rows(&self) -> u32 {
         self.rows
     }
 
     /// The estimate from the poses so far.
     pub fn solve(&self) -> Result<IdentificationResult, IdentificationError> {
-        let p = self.unknowns;
         let needed = self.unknowns();
         if self.rows < needed {
             return Err(IdentificationError::TooFewRows {
@@ -473,103 +479,72 @@ impl Identification {
             condition,
             limit: MAX_CONDITION,
         };
-        // R (p x p), padded to 5x5 with the identity: block-diagonal, so the
-        // padding neither changes the solution nor (columns of unit norm have
-        // singular values around 1) the scaled condition number.
-        let r5 = SMatrix::<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>::from_fn(|i, j| {
-            if i < p && j < p {
-                entry(&self.weighted, i, j)
-            } else if i == j {
-                1.0
-            } else {
-                0.0
-            }
-        });
-        let norms = SVector::<f64, MAX_UNKNOWNS>::from_fn(|j, _| r5.column(j).norm());
+        let weighted = as_matrix(&self.weighted);
+        // R (5 x 5): the unknowns that are not estimated have an identity row
+        // and column, so they neither change the solution nor (columns of unit
+        // norm have singular values around 1) the scaled condition number.
+        let r5: Square = weighted
+            .fixed_view::<MAX_UNKNOWNS, MAX_UNKNOWNS>(0, 0)
+            .into_owned();
+        let rhs: Unknowns = weighted
+            .fixed_view::<MAX_UNKNOWNS, 1>(0, MAX_UNKNOWNS)
+            .into_owned();
+        let norms = Unknowns::from_iterator(r5.column_iter().map(|c| c.norm()));
         if norms.iter().any(|n| !(n.is_finite() && *n > 0.0)) {
             return Err(ill(f64::INFINITY));
         }
-        let scaled = SMatrix::<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>::from_fn(|i, j| {
-            r5.get((i, j)).copied().unwrap_or(0.0) / at(&norms, j)
-        });
-        // cond2(S) = sigma_max(S) sigma_max(S^-1), each from the LARGEST
-        // eigenvalue of a symmetric matrix (accurate, unlike the smallest).
-        // No SVD: nalgebra's SVD returned wrong decompositions for some 5x5
-        // triangular matrices (reconstruction errors up to 1e-2 in a test of
-        // 200 000 random ones); its symmetric eigensolver did not (5e-15).
-        let Some(scaled_inv) =
-            scaled.solve_upper_triangular(&SMatrix::<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>::identity())
-        else {
+        let scaled = r5 * Square::from_diagonal(&norms.map(|n| 1.0 / n));
+        let Some(scaled_inv) = scaled.solve_upper_triangular(&Square::identity()) else {
             return Err(ill(f64::INFINITY));
         };
-        let largest_eigenvalue = |m: SMatrix<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>| {
-            m.try_symmetric_eigen(f64::EPSILON, EIGEN_MAX_ITERATIONS)
-                .map_or(f64::INFINITY, |e| e.eigenvalues.max())
-        };
-        let condition = ComplexField::sqrt(
-            largest_eigenvalue(scaled.transpose() * scaled)
-                * largest_eigenvalue(scaled_inv.transpose() * scaled_inv),
+        let condition = linalg::condition_from_gram(
+            &(scaled.transpose() * scaled),
+            &(scaled_inv.transpose() * scaled_inv),
         );
         if condition.is_nan() || condition > MAX_CONDITION {
             return Err(ill(condition));
         }
 
-        let rhs = SVector::<f64, MAX_UNKNOWNS>::from_fn(|i, _| {
-            if i < p {
-                entry(&self.weighted, i, p)
-            } else {
-                0.0
-            }
-        });
         let theta = r5.solve_upper_triangular(&rhs).ok_or(ill(condition))?;
         let r_inv = r5
-            .solve_upper_triangular(&SMatrix::<f64, MAX_UNKNOWNS, MAX_UNKNOWNS>::identity())
+            .solve_upper_triangular(&Square::identity())
             .ok_or(ill(condition))?;
         let unit_covariance = r_inv * r_inv.transpose();
 
         // Residuals: |T (theta, -1)|^2 = |[A y] (theta, -1)|^2 = |A theta - y|^2.
-        let z = SVector::<f64, WIDTH>::from_fn(|i, _| {
-            if i < p {
-                at(&theta, i)
-            } else if i == p {
-                -1.0
-            } else {
-                0.0
-            }
-        });
-        let as_matrix =
-            |factor: &Factor| SMatrix::<f64, WIDTH, WIDTH>::from_fn(|i, j| entry(factor, i, j));
-        let chi2 = (as_matrix(&self.weighted) * z).norm_squared();
+        let [mass_kg, moment_kgm, friction_n, bias1_n, bias2_n]: [f64; MAX_UNKNOWNS] = theta.into();
+        let z = SVector::<f64, WIDTH>::new(mass_kg, moment_kgm, friction_n, bias1_n, bias2_n, -1.0);
+        let chi2 = (weighted * z).norm_squared();
         let unweighted_ss = (as_matrix(&self.unweighted) * z).norm_squared();
         let dof = self.rows - needed;
         let chi2_dof = if dof > 0 { chi2 / f64::from(dof) } else { 0.0 };
         // Never claim more than the noise model, nor less than the scatter shows.
         let scale = if dof > 0 { chi2_dof.max(1.0) } else { 1.0 };
         let covariance = unit_covariance * scale;
-        let var = |i: usize| non_negative(covariance.get((i, i)).copied().unwrap_or(0.0));
-        let std = |i: usize| ComplexField::sqrt(var(i));
+        let [var_m, var_mm, var_f, var_b1, var_b2]: [f64; MAX_UNKNOWNS] =
+            covariance.diagonal().map(non_negative).into();
+        // Column 0 of the covariance: (m, m), (M, m), ...
+        let [[_, cov_mass_moment, ..], ..]: [[f64; MAX_UNKNOWNS]; MAX_UNKNOWNS] = covariance.into();
+        let std = |v: f64| ComplexField::sqrt(v);
 
-        let mass_kg = at(&theta, 0);
-        let moment_kgm = at(&theta, 1);
         check_finite(&[mass_kg], non_finite("estimated mass"))?;
         if mass_kg <= 0.0 {
             return Err(IdentificationError::NonPositiveMass { mass_kg });
         }
         let com_m = moment_kgm / mass_kg;
-        let cov_mass_moment = covariance.get((0, 1)).copied().unwrap_or(0.0);
+        let bias = self.options.bias_across_gravity;
+        let friction = self.options.friction;
         let result = IdentificationResult {
             mass_kg,
-            mass_std_kg: std(0),
+            mass_std_kg: std(var_m),
             com_m,
-            com_std_m: com_std_m(mass_kg, moment_kgm, var(0), var(1), cov_mass_moment),
+            com_std_m: com_std_m(mass_kg, moment_kgm, var_m, var_mm, cov_mass_moment),
             moment_kgm,
-            moment_std_kgm: std(1),
-            bias_across_n: self
-                .bias_col
-                .map(|col| [at(&theta, col), at(&theta, col + 1)]),
-            bias_across_std_n: self.bias_col.map(|col| [std(col), std(col + 1)]),
-            friction_n: self.friction_col.map(|col| at(&theta, col)),
-            friction_std_n: self.friction_col.map(std),
+            moment_std_kgm: std(var_mm),
+            bias_across_n: bias.then_some([bias1_n, bias2_n]),
+            bias_across_std_n: bias.then(|| [std(var_b1), std(var_b2)]),
+            friction_n: friction.then_some(friction_n),
+            friction_std_n: friction.then(|| std(var_f)),
             residual_rms_n: ComplexField::sqrt(unweighted_ss / f64::from(self.rows)),
             chi2_dof,
             condition,
@@ -582,8 +557,6 @@ impl Identification {
 }
 
 fn check_result(r: &IdentificationResult) -> Result<(), IdentificationError> {
-    let [b1, b2] = r.bias_across_n.unwrap_or([0.0; 2]);
-    let [s1, s2] = r.bias_across_std_n.unwrap_or([0.0; 2]);
     let values = [
         r.mass_kg,
         r.mass_std_kg,
@@ -591,217 +564,20 @@ fn check_result(r: &IdentificationResult) -> Result<(), IdentificationError> {
         r.com_std_m,
         r.moment_kgm,
         r.moment_std_kgm,
-        b1,
-        b2,
-        s1,
-        s2,
-        r.friction_n.unwrap_or(0.0),
-        r.friction_std_n.unwrap_or(0.0),
         r.residual_rms_n,
         r.chi2_dof,
         r.condition,
     ];
-    check_finite(&values, non_finite("identification result"))
-}
-
-/// The article's simplified method (MODEL.md 5.2): with the rod horizontal and
-/// at the support's height, `Y = F_A . up = b0 + b1 X` with `X = 1/a`,
-/// `b0 = m |g|`, `b1 = -M |g|` (the article prints b1 without the minus sign).
-/// Ordinary (unweighted) least squares, streaming, with centred sums.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LineFit {
-    support_m: Vec3,
-    gravity_norm_mps2: f64,
-    /// Unit vector against gravity, {0}.
-    up: Vec3,
-    /// For F_A = [`crate::ujoint_force_n`].
-    calibration: Calibration,
-    bias_n: Vec3,
-    tolerance_rad: f64,
-    sin_tolerance: f64,
-    count: u32,
-    mean_x: f64,
-    mean_y: f64,
-    sxx: f64,
-    sxy: f64,
-    syy: f64,
-}
-
-/// The line fit's estimate.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LineFitResult {
-    /// b0 = m |g|, N.
-    pub b0_n: f64,
-    /// Standard error of b0, N.
-    pub b0_std_n: f64,
-    /// b1 = -M |g|, N m.
-    pub b1_nm: f64,
-    /// Standard error of b1, N m.
-    pub b1_std_nm: f64,
-    /// m = b0 / |g|, kg.
-    pub mass_kg: f64,
-    /// Standard error of m, kg.
-    pub mass_std_kg: f64,
-    /// c = -b1 / b0, m.
-    pub com_m: f64,
-    /// Standard error of c (first order, including the b0-b1 covariance), m.
-    pub com_std_m: f64,
-    /// RMS of the residuals of Y, N.
-    pub residual_rms_n: f64,
-    /// Condition number of the design [1, X] after scaling its columns to unit norm.
-    pub condition: f64,
-    /// Poses used.
-    pub poses: u32,
-}
-
-impl LineFit {
-    /// Starts an empty line fit. `bias_n` is the tare (sensor frame, N);
-    /// `horizontal_tolerance_rad` in [0, pi/2) is how far from horizontal a
-    /// rod may be.
-    pub fn new(
-        cal: &Calibration,
-        bias_n: Vec3,
-        horizontal_tolerance_rad: f64,
-    ) -> Result<Self, IdentificationError> {
-        check_finite(&bias_n, non_finite("bias_n"))?;
-        if !(0.0..core::f64::consts::FRAC_PI_2).contains(&horizontal_tolerance_rad) {
-            return Err(IdentificationError::InvalidTolerance {
-                tolerance_rad: horizontal_tolerance_rad,
-            });
-        }
-        let gravity = cal.gravity_mps2();
-        let gravity_norm_mps2 = gravity.norm();
-        Ok(Self {
-            support_m: cal.support_m(),
-            gravity_norm_mps2,
-            up: -gravity / gravity_norm_mps2,
-            calibration: *cal,
-            bias_n,
-            tolerance_rad: horizontal_tolerance_rad,
-            sin_tolerance: ComplexField::sin(horizontal_tolerance_rad),
-            count: 0,
-            mean_x: 0.0,
-            mean_y: 0.0,
-            sxx: 0.0,
-            sxy: 0.0,
-            syy: 0.0,
-        })
+    // Values not estimated are absent (None), not a 0 standing in for them.
+    let optional = r
+        .bias_across_n
+        .into_iter()
+        .chain(r.bias_across_std_n)
+        .flatten()
+        .chain(r.friction_n)
+        .chain(r.friction_std_n);
+    for value in values.into_iter().chain(optional) {
+        check_finite(&[value], non_finite("identification result"))?;
     }
-
-    /// Adds one pose; refuses (leaving the state unchanged) an invalid pose or
-    /// one whose rod is not horizontal: |u . g_hat| > sin(tolerance). With the
-    /// rod through B (d = 0) that is also the test that A is at the support's
-    /// height: (B - A) . g_hat = a (u . g_hat).
-    pub fn add(&mut self, pose: &StaticPose) -> Result<(), IdentificationError> {
-        let (u, a) = pose_geometry(pose, &self.support_m)?;
-        let tilt_sin = u.dot(&self.up).abs();
-        if tilt_sin > self.sin_tolerance {
-            return Err(IdentificationError::NotHorizontal {
-                tilt_rad: ComplexField::asin(tilt_sin.min(1.0)),
-                tolerance_rad: self.tolerance_rad,
-            });
-        }
-        let count = self
-            .count
-            .checked_add(1)
-            .ok_or(IdentificationError::TooManyPoses { poses: self.count })?;
-        let force_a_n =
-            crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
-        let x = 1.0 / a;
-        let y = force_a_n.dot(&self.up);
-        check_finite(&[y], non_finite("vertical force"))?;
-        let n = f64::from(count);
-        let dx = x - self.mean_x;
-        let dy = y - self.mean_y;
-        let mean_x = self.mean_x + dx / n;
-        let mean_y = self.mean_y + dy / n;
-        let sxx = self.sxx + dx * (x - mean_x);
-        let sxy = self.sxy + dx * (y - mean_y);
-        let syy = self.syy + dy * (y - mean_y);
-        check_finite(
-            &[mean_x, mean_y, sxx, sxy, syy],
-            non_finite("line fit sums"),
-        )?;
-        self.count = count;
-        self.mean_x = mean_x;
-        self.mean_y = mean_y;
-        self.sxx = sxx;
-        self.sxy = sxy;
-        self.syy = syy;
-        Ok(())
-    }
-
-    /// Poses accumulated.
-    pub fn poses(&self) -> u32 {
-        self.count
-    }
-
-    /// The line and m, c from it. Needs 3 poses (one degree of freedom for the
-    /// standard errors) at no fewer than 2 distinct distances.
-    pub fn solve(&self) -> Result<LineFitResult, IdentificationError> {
-        if self.count < 3 {
-            return Err(IdentificationError::TooFewRows {
-                rows: self.count,
-                poses: self.count,
-                needed: 3,
-            });
-        }
-        let n = f64::from(self.count);
-        let centre = n * self.mean_x * self.mean_x;
-        // Scaled design [1, X]: Gram matrix [[1, rho], [rho, 1]] with
-        // rho = n mean_x / sqrt(n sum X^2); condition = (1 + rho) / sqrt(1 - rho^2).
-        let condition = if self.sxx > 0.0 {
-            let rho = ComplexField::sqrt(centre / (self.sxx + centre));
-            (1.0 + rho) * ComplexField::sqrt((self.sxx + centre) / self.sxx)
-        } else {
-            f64::INFINITY
-        };
-        if condition.is_nan() || condition > MAX_CONDITION {
-            return Err(IdentificationError::IllConditioned {
-                condition,
-                limit: MAX_CONDITION,
-            });
-        }
-        let b1 = self.sxy / self.sxx;
-        let b0 = self.mean_y - b1 * self.mean_x;
-        let ssr = non_negative(self.syy - b1 * self.sxy);
-        let s2 = ssr / (n - 2.0);
-        let var_b1 = s2 / self.sxx;
-        let var_b0 = s2 * (1.0 / n + self.mean_x * self.mean_x / self.sxx);
-        let cov_b0_b1 = -self.mean_x * s2 / self.sxx;
-        check_finite(&[b0], non_finite("b0"))?;
-        if b0 <= 0.0 {
-            return Err(IdentificationError::NonPositiveMass {
-                mass_kg: b0 / self.gravity_norm_mps2,
-            });
-        }
-        let com_m = -b1 / b0;
-        let result = LineFitResult {
-            b0_n: b0,
-            b0_std_n: ComplexField::sqrt(var_b0),
-            b1_nm: b1,
-            b1_std_nm: ComplexField::sqrt(var_b1),
-            mass_kg: b0 / self.gravity_norm_mps2,
-            mass_std_kg: ComplexField::sqrt(var_b0) / self.gravity_norm_mps2,
-            com_m,
-            // c = (-b1) / b0 = M / m: the ratio of (m, M) scaled by |g|, which
-            // does not change it, nor its first-order standard error.
-            com_std_m: com_std_m(b0, -b1, var_b0, var_b1, -cov_b0_b1),
-            residual_rms_n: ComplexField::sqrt(ssr / n),
-            condition,
-            poses: self.count,
-        };
-        let values = [
-            result.b0_std_n,
-            result.b1_nm,
-            result.b1_std_nm,
-            result.mass_kg,
-            result.mass_std_kg,
-            result.com_m,
-            result.com_std_m,
-            result.residual_rms_n,
-        ];
-        check_finite(&values, non_finite("line fit result"))?;
-        Ok(result)
-    }
+    Ok(())
 }

@@ -15,10 +15,14 @@ pub mod error_measure;
 pub mod filter;
 pub mod guard;
 pub mod identification;
+mod linalg;
+pub mod line_fit;
 pub mod support;
 pub mod tip_force;
 
-pub use sar_kinematics::{Calibration, CalibrationSpec, Mat3, Pose, Profile, ProfileSpec, Vec3};
+pub use sar_kinematics::{
+    Calibration, CalibrationSpec, Mat3, Pose, Profile, ProfileSpec, SlideSign, Vec3,
+};
 
 /// Smallest accepted distance a = |B - A| between the U-joint centre and the
 /// support, m: identification and support calibration refuse a pose closer
@@ -106,10 +110,13 @@ pub struct StaticPose {
     pub mean_reading_n: Vec3,
     /// How many samples were averaged (>= 1).
     pub samples: u32,
-    /// Sign of the last slide of the rod in the support before this pose:
-    /// +1 (towards the tip, u), -1, or 0 when unknown/none. The coefficient of
-    /// the friction unknown.
-    pub slide_sign: f64,
+    /// The direction of the last slide of the rod in the support before this
+    /// pose (MODEL.md 5): its sigma is the coefficient of the friction unknown.
+    /// A pose whose sign is [`SlideSign::Unknown`] never enters a friction fit
+    /// with a coefficient: [`crate::identification`] drops its axial row (the
+    /// only one that involves f) and [`crate::support`] refuses it when friction
+    /// is estimated.
+    pub slide_sign: SlideSign,
 }
 
 /// Why a [`StaticPose`]'s own values were refused ([`StaticPose::check`]).
@@ -119,7 +126,7 @@ pub enum PoseInputError {
     /// A value of the pose is NaN or infinite.
     #[error("{field} is not finite ({value})")]
     NonFinite {
-        /// Which value: `"ujoint_m"`, `"mean_reading_n"` or `"slide_sign"`.
+        /// Which value: `"ujoint_m"` or `"mean_reading_n"`.
         field: &'static str,
         /// The offending value (the first non-finite component of a vector).
         value: f64,
@@ -130,32 +137,20 @@ pub enum PoseInputError {
         /// The value given.
         samples: u32,
     },
-    /// The slide sign is not -1, 0 or +1.
-    #[error("slide_sign = {slide_sign} is not one of -1, 0, +1")]
-    BadSlideSign {
-        /// The value given.
-        slide_sign: f64,
-    },
 }
 
 impl StaticPose {
-    /// Checks the pose's own values, in this order: `ujoint_m`,
-    /// `mean_reading_n` and `slide_sign` finite, `samples` >= 1, `slide_sign`
-    /// one of -1, 0, +1. Where A lies relative to the support
+    /// Checks the pose's own values, in this order: `ujoint_m` and
+    /// `mean_reading_n` finite, `samples` >= 1 (the slide sign is a type and
+    /// cannot be wrong). Where A lies relative to the support
     /// ([`MIN_SUPPORT_DISTANCE_M`]) is for the user of the pose to check.
     pub fn check(&self) -> Result<(), PoseInputError> {
         let non_finite = |field| move |value| PoseInputError::NonFinite { field, value };
         check_finite(&self.ujoint_m, non_finite("ujoint_m"))?;
         check_finite(&self.mean_reading_n, non_finite("mean_reading_n"))?;
-        check_finite(&[self.slide_sign], non_finite("slide_sign"))?;
         if self.samples == 0 {
             return Err(PoseInputError::NoSamples {
                 samples: self.samples,
-            });
-        }
-        if !(self.slide_sign == -1.0 || self.slide_sign == 0.0 || self.slide_sign == 1.0) {
-            return Err(PoseInputError::BadSlideSign {
-                slide_sign: self.slide_sign,
             });
         }
         Ok(())

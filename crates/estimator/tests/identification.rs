@@ -24,7 +24,8 @@ use sar_estimator::identification::{
     MAX_CONDITION, bias_across_gravity_basis,
 };
 use sar_estimator::{
-    Calibration, CalibrationSpec, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, StaticPose,
+    Calibration, CalibrationSpec, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, SlideSign,
+    StaticPose,
 };
 
 type V3 = Vector3<f64>;
@@ -125,7 +126,7 @@ fn ideal_poses(
                 ujoint_m: a_m,
                 mean_reading_n: ideal_reading(rotation, &f_a, bias_n),
                 samples: 1,
-                slide_sign: p.slide_sign,
+                slide_sign: slide_sign(p.slide_sign),
             }
         })
         .collect()
@@ -198,12 +199,24 @@ fn dense_fit(
     let r = cal.sensor_rotation();
     let [e1, e2] = documented_bias_basis(&r, &g);
     let p = 2 + usize::from(options.friction) + 2 * usize::from(options.bias_across_gravity);
-    let n = 3 * poses.len();
+    // A pose whose slide sign is unknown gives, with friction estimated, only
+    // the part of F_A across u (which f does not touch): 2 rows, whitened
+    // with the covariance of that projection. Any basis of the plane gives
+    // the same fit; this one is not the estimator's.
+    let rows_of = |pose: &StaticPose| {
+        if options.friction && !pose.slide_sign.is_known() {
+            2
+        } else {
+            3
+        }
+    };
+    let n: usize = poses.iter().map(rows_of).sum();
     let mut aw = DMatrix::<f64>::zeros(n, p);
     let mut yw = DVector::<f64>::zeros(n);
     let mut au = DMatrix::<f64>::zeros(n, p);
     let mut yu = DVector::<f64>::zeros(n);
-    for (k, pose) in poses.iter().enumerate() {
+    let mut row = 0;
+    for pose in poses {
         let rv = b - pose.ujoint_m;
         let a = rv.norm();
         let u = rv / a;
@@ -211,27 +224,56 @@ fn dense_fit(
         // F_A0 = -m g + M (g - (g.u) u) / a + sigma f u - R (b1 e1 + b2 e2).
         let mut cols = vec![-g, (g - u * g.dot(&u)) / a];
         if options.friction {
-            cols.push(u * pose.slide_sign);
+            cols.push(u * pose.slide_sign.sigma().unwrap_or(0.0));
         }
         if options.bias_across_gravity {
             cols.push(-(r * e1));
             cols.push(-(r * e2));
         }
         let ks = f64::from(pose.samples).sqrt();
-        let w = M3::from_diagonal(&V3::new(ks / std_n[0], ks / std_n[1], ks / std_n[2]))
-            * r.transpose();
+        let k = rows_of(pose);
+        // Rows of the observation (base frame) and their whitening.
+        let (obs, w): (DMatrix<f64>, DMatrix<f64>) = if k == 3 {
+            let w = M3::from_diagonal(&V3::new(ks / std_n[0], ks / std_n[1], ks / std_n[2]))
+                * r.transpose();
+            (
+                DMatrix::identity(3, 3),
+                DMatrix::from_column_slice(3, 3, w.as_slice()),
+            )
+        } else {
+            let helper = if u.x.abs() < 0.9 { V3::x() } else { V3::y() };
+            let q1 = u.cross(&helper).normalize();
+            let q2 = u.cross(&q1);
+            let q = DMatrix::from_row_slice(2, 3, &[q1.x, q1.y, q1.z, q2.x, q2.y, q2.z]);
+            let var = M3::from_diagonal(&V3::new(
+                std_n[0] * std_n[0],
+                std_n[1] * std_n[1],
+                std_n[2] * std_n[2],
+            )) / (ks * ks);
+            let cov3 = r * var * r.transpose();
+            let cov3 = DMatrix::from_column_slice(3, 3, cov3.as_slice());
+            let cov2 = &q * cov3 * q.transpose();
+            let l = cov2.cholesky().unwrap().l();
+            let w = l.solve_lower_triangular(&q).unwrap();
+            (q, w)
+        };
         for (j, col) in cols.iter().enumerate() {
-            let wc = w * col;
-            for i in 0..3 {
-                aw[(3 * k + i, j)] = wc[i];
-                au[(3 * k + i, j)] = col[i];
+            let col = DVector::from_column_slice(col.as_slice());
+            let wc = &w * &col;
+            let oc = &obs * &col;
+            for i in 0..k {
+                aw[(row + i, j)] = wc[i];
+                au[(row + i, j)] = oc[i];
             }
         }
-        let wy = w * f0;
-        for i in 0..3 {
-            yw[3 * k + i] = wy[i];
-            yu[3 * k + i] = f0[i];
+        let f0 = DVector::from_column_slice(f0.as_slice());
+        let wy = &w * &f0;
+        let oy = &obs * &f0;
+        for i in 0..k {
+            yw[row + i] = wy[i];
+            yu[row + i] = oy[i];
         }
+        row += k;
     }
     // Solved with the columns scaled to unit norm (then unscaled): the SVD is
     // norm-wise stable, so equilibrating keeps small columns accurate.
@@ -402,13 +444,22 @@ fn random_problem(seed: u64, options: IdentificationOptions, count: usize) -> Pr
             let u = random_unit(&mut rng);
             let a = rng.random_range(0.03..0.4);
             let samples = rng.random_range(1..50u32);
-            let slide_sign = match i {
-                0 => 1.0,
-                1 => -1.0,
-                _ => f64::from(rng.random_range(-1..=1i32)),
+            // A third of the poses (after the first two) have an unknown slide
+            // sign: the support's friction still acts, one way or the other.
+            let (slide_sign, sigma) = match i {
+                0 => (SlideSign::Inserting, 1.0),
+                1 => (SlideSign::Retracting, -1.0),
+                _ => match rng.random_range(-1..=1i32) {
+                    1 => (SlideSign::Inserting, 1.0),
+                    -1 => (SlideSign::Retracting, -1.0),
+                    _ => (
+                        SlideSign::Unknown,
+                        if rng.random_bool(0.5) { 1.0 } else { -1.0 },
+                    ),
+                },
             };
             let f_a =
-                -gravity * m + (gravity - u * gravity.dot(&u)) * (m * c / a) + u * (slide_sign * f);
+                -gravity * m + (gravity - u * gravity.dot(&u)) * (m * c / a) + u * (sigma * f);
             let ideal = rotation.transpose() * (-f_a) + tare + delta;
             let k = f64::from(samples).sqrt();
             let noise = V3::new(
@@ -460,7 +511,12 @@ proptest! {
         prop_assume!(dense.condition < 1e6);
         let result = ident.solve().unwrap();
         prop_assert_eq!(result.poses as usize, count);
-        prop_assert_eq!(result.rows as usize, 3 * count);
+        let rows: usize = problem
+            .poses
+            .iter()
+            .map(|p| if options.friction && !p.slide_sign.is_known() { 2 } else { 3 })
+            .sum();
+        prop_assert_eq!(result.rows as usize, rows);
         assert_matches_dense(&result, &dense, 1e-9, true);
     }
 }
@@ -790,7 +846,7 @@ fn badly_scaled_columns_match_the_dense_solve() {
                 ujoint_m: b - u * a,
                 mean_reading_n: rotation.transpose() * (-f_a) + tare + noise,
                 samples,
-                slide_sign: sigma,
+                slide_sign: slide_sign(sigma),
             }
         })
         .collect();
@@ -872,7 +928,7 @@ fn rank_deficient_sets_are_typed_errors() {
     let unsigned: Vec<StaticPose> = ideal_poses(&t, &rotation, &tare, &cone)
         .into_iter()
         .map(|p| StaticPose {
-            slide_sign: 0.0,
+            slide_sign: SlideSign::Unknown,
             ..p
         })
         .collect();
@@ -886,7 +942,7 @@ fn rank_deficient_sets_are_typed_errors() {
     let same_way: Vec<StaticPose> = article
         .iter()
         .map(|p| StaticPose {
-            slide_sign: 1.0,
+            slide_sign: SlideSign::Inserting,
             ..*p
         })
         .collect();
@@ -984,46 +1040,12 @@ fn refused_poses_leave_the_state_unchanged() {
                 )
             },
         ),
-        (
-            StaticPose {
-                slide_sign: nan,
-                ..good
-            },
-            |e| {
-                matches!(
-                    e,
-                    IdentificationError::Pose(PoseInputError::NonFinite {
-                        field: "slide_sign",
-                        ..
-                    })
-                )
-            },
-        ),
         (StaticPose { samples: 0, ..good }, |e| {
             matches!(
                 e,
                 IdentificationError::Pose(PoseInputError::NoSamples { samples: 0 })
             )
         }),
-        (
-            StaticPose {
-                slide_sign: 0.5,
-                ..good
-            },
-            |e| matches!(e, IdentificationError::Pose(PoseInputError::BadSlideSign { slide_sign }) if *slide_sign == 0.5),
-        ),
-        (
-            StaticPose {
-                slide_sign: -2.0,
-                ..good
-            },
-            |e| {
-                matches!(
-                    e,
-                    IdentificationError::Pose(PoseInputError::BadSlideSign { .. })
-                )
-            },
-        ),
         (
             StaticPose {
                 ujoint_m: support() - V3::x() * 0.5 * MIN_SUPPORT_DISTANCE_M,
@@ -1300,4 +1322,57 @@ fn line_fit_refusals() {
             Err(IdentificationError::InvalidTolerance { .. })
         ));
     }
+}
+
+/// MODEL.md 5: a pose whose slide sign is unknown (the first pose of a
+/// procedure, before any slide) is left out of the friction fit. With friction
+/// estimated it adds only its two moment rows, so the friction that actually
+/// acts on it, either way, does not move the estimate; without the friction
+/// unknown it adds all three rows. (The old `slide_sign: 0.0` gave f the
+/// coefficient 0 in the axial row: the pose's real friction then went into m.)
+#[test]
+fn unknown_slide_sign_leaves_the_pose_out_of_the_friction_fit() {
+    let rotation = mounted_rotation();
+    let cal = calibration(support(), rotation, gravity());
+    let tare = V3::new(0.1, -0.2, 0.3);
+    let t = truth(2.593, 0.103, 0.3);
+    let cone = cone_protocol();
+    let mut results = Vec::new();
+    for physics_sigma in [1.0, -1.0] {
+        let mut protocol = cone.clone();
+        protocol[0].slide_sign = physics_sigma;
+        let mut poses = ideal_poses(&t, &rotation, &tare, &protocol);
+        poses[0].slide_sign = SlideSign::Unknown;
+        let mut ident =
+            Identification::new(&cal, &SensorNoise::hex6(), tare, FRICTION_ONLY).unwrap();
+        ident.add(&poses[0]).unwrap();
+        assert_eq!(ident.rows(), 2, "only the moment rows");
+        for pose in &poses[1..] {
+            ident.add(pose).unwrap();
+        }
+        assert_eq!(ident.rows(), 3 * 20 - 1);
+        let r = ident.solve().unwrap();
+        assert!((r.mass_kg - t.mass_kg).abs() < 1e-9 * t.mass_kg, "{r:?}");
+        assert!((r.com_m - t.com_m).abs() < 1e-9 * t.com_m, "{r:?}");
+        assert!((r.friction_n.unwrap() - 0.3).abs() < 1e-9, "{r:?}");
+        results.push(r);
+        // Without the friction unknown the pose gives its three rows.
+        let mut plain = Identification::new(&cal, &SensorNoise::hex6(), tare, NO_EXTRAS).unwrap();
+        plain.add(&poses[0]).unwrap();
+        assert_eq!(plain.rows(), 3);
+    }
+    assert!((results[0].mass_kg - results[1].mass_kg).abs() < 1e-12);
+    // Every sign unknown: f has no row at all.
+    let unknown: Vec<StaticPose> = ideal_poses(&t, &rotation, &tare, &cone)
+        .into_iter()
+        .map(|p| StaticPose {
+            slide_sign: SlideSign::Unknown,
+            ..p
+        })
+        .collect();
+    let e = identify(&cal, tare, FRICTION_ONLY, &unknown).unwrap_err();
+    assert!(
+        matches!(e, IdentificationError::IllConditioned { condition, .. } if condition == f64::INFINITY),
+        "{e:?}"
+    );
 }

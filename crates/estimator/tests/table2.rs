@@ -110,11 +110,20 @@ fn fit(poses: &[sar_estimator::StaticPose], configured: Vector3<f64>, case: Case
         gravity_mps2: gravity(),
     })
     .unwrap();
+    // The comparison cases (B held, or friction left out) show how far off a
+    // fit without support calibration or friction is: their chi-square is far
+    // above the default bound, which would refuse them, so it is lifted for
+    // them. The full fit keeps every default.
+    let full = case.friction && case.calibrate_support;
     let options = SupportOptions {
         friction: case.friction,
         calibrate_support: case.calibrate_support,
-        max_support_std_m: 1e-3,
-        max_iterations: 50,
+        max_chi2_dof: if full {
+            SupportOptions::DEFAULT_MAX_CHI2_DOF
+        } else {
+            f64::INFINITY
+        },
+        ..SupportOptions::default()
     };
     let mut support = SupportCalibration::new(&cal, &SensorNoise::hex6(), tare(), options).unwrap();
     for pose in poses {

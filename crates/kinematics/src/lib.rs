@@ -16,9 +16,11 @@
 pub mod calibration;
 pub mod dh;
 pub mod pose;
+pub mod slide;
 
 pub use calibration::{Calibration, CalibrationSpec, ConfigError, Profile, ProfileSpec};
 pub use pose::{ActiveJoints, Pose, PoseError, forward, inverse, rod_frame};
+pub use slide::{SLIDE_THRESHOLD_M, SlideDirection, SlideSign, SlideTracker};
 
 /// A 3-vector of `f64` in some named frame (the name of the variable says which).
 pub type Vec3 = nalgebra::Vector3<f64>;

@@ -11,8 +11,8 @@ use sar_estimator::tip_force::TipForceConfig;
 use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
-use sar_estimator::{SensorNoise, StaticPose};
 use sar_estimator::filter::{FilterConfig, TipFilter};
+use sar_estimator::{SensorNoise, SlideSign, StaticPose};
 use sar_kinematics::{
     ActiveJoints, Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3,
 };
@@ -97,7 +97,7 @@ pub extern "C" fn sar_nostd_identify(ax_m: f64, ay_m: f64, az_m: f64) -> f64 {
         ujoint_m: Vec3::new(ax_m, ay_m, az_m),
         mean_reading_n: Vec3::new(0.0, -20.0, 0.0),
         samples: 10,
-        slide_sign: 1.0,
+        slide_sign: SlideSign::Inserting,
     };
     let options = IdentificationOptions { bias_across_gravity: false, friction: true };
     let Ok(mut ident) = Identification::new(&config.calibration, &config.noise, Vec3::zeros(), options)

@@ -79,10 +79,10 @@ pub struct Truth {
     pub support_reaction_n: Vec3,
     /// The support's friction on the rod, along u, N.
     pub friction_force_n: Vec3,
-    /// Sign of the last slide: +1 inserting (the rod moved along u through the
-    /// support), -1 retracting, 0 before any slide (a slide, or a reversal,
-    /// counts once the rod has gone [`crate::motion::SLIDE_THRESHOLD_M`]).
-    pub slide_sign: f64,
+    /// Sign of the last slide: inserting (the rod moved along u through the
+    /// support), retracting, or unknown before any slide (a slide, or a
+    /// reversal, counts once the rod has gone [`crate::motion::SLIDE_THRESHOLD_M`]).
+    pub slide_sign: crate::motion::SlideSign,
     /// F_tip from the contact script: what the tip applies to the tissue, N.
     pub tip_force_n: Vec3,
     /// The weight of the mass hung at the tip (acts on the rod at D), N.

@@ -20,7 +20,7 @@ use super::spec::{ContactKey, Fault, SimSpec};
 use super::statics::{self, Equilibrium, Loads};
 use super::{STATUS_OUT_OF_MODEL, SimError};
 use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
-use crate::motion::{AxisPlan, AxisState, Limits, SlideDirection};
+use crate::motion::{AxisPlan, AxisState, Limits, SlideDirection, SlideSign};
 use crate::{Clock, DriveState, JointPositions, SensorStatus, Vec3, WrenchSample};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -296,7 +296,7 @@ impl<C: Clock> World<C> {
             next_report: 0,
             plans: start.map(|x| AxisPlan::hold(0, x)),
             state: DriveState::Ready,
-            slide: SlideDirection::default(),
+            slide: SlideDirection::new(),
             rng: ChaCha8Rng::seed_from_u64(spec.seed),
             in_flight: VecDeque::with_capacity(capacity),
             newest: None,
@@ -467,7 +467,10 @@ impl<C: Clock> World<C> {
         let loads = Loads {
             tip_force_n: contact_at(&spec.contact, t_ns),
             tip_mass_kg: spec.tip_mass_kg,
-            friction_n: pose.rod_dir * (-self.slide.sign() * spec.friction_n),
+            // The support's friction on the rod opposes the last slide; before
+            // any slide there is none (physics, not an estimate: 0 is the truth).
+            friction_n: pose.rod_dir
+                * (-self.slide.sign().sigma().unwrap_or(0.0) * spec.friction_n),
         };
         let equilibrium = statics::equilibrium(&spec.calibration, &spec.profile, &pose, &loads)
             .ok_or(SimError::StaticsSingular)?;
@@ -649,8 +652,8 @@ impl<C: Clock> World<C> {
         self.tare
     }
 
-    /// The sign of the last slide (+1 inserting, -1 retracting, 0 none yet).
-    pub fn slide_sign(&self) -> f64 {
+    /// The sign of the last slide (unknown before any slide).
+    pub fn slide_sign(&self) -> SlideSign {
         self.slide.sign()
     }
 

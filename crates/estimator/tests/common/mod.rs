@@ -168,6 +168,23 @@ pub struct ProtocolPose {
     pub slide_sign: f64,
 }
 
+/// The estimator's slide sign for the physics' sigma (+1 inserting, -1
+/// retracting); any other value is a bug in the test.
+#[allow(clippy::panic)]
+pub fn slide_sign(sigma: f64) -> sar_estimator::SlideSign {
+    match sigma {
+        1.0 => sar_estimator::SlideSign::Inserting,
+        -1.0 => sar_estimator::SlideSign::Retracting,
+        other => panic!("sigma {other} is not +1 or -1"),
+    }
+}
+
+/// The physics' sigma of a known slide sign.
+#[allow(clippy::expect_used, dead_code)]
+pub fn sigma(sign: sar_estimator::SlideSign) -> f64 {
+    sign.sigma().expect("a known slide sign")
+}
+
 /// The distances of the identification protocols (MODEL.md 5.1).
 pub const PROTOCOL_DISTANCES_M: [f64; 5] = [0.04, 0.07, 0.12, 0.20, 0.30];
 
@@ -245,7 +262,7 @@ pub fn simulate_static_poses(
                 ujoint_m: a_m,
                 mean_reading_n: sensor.mean(&ideal, samples),
                 samples,
-                slide_sign: p.slide_sign,
+                slide_sign: slide_sign(p.slide_sign),
             }
         })
         .collect()
