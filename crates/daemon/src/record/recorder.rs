@@ -247,8 +247,10 @@ impl PendingWriter {
                     self.shared.dropped.fetch_add(1, Ordering::Relaxed);
                     continue;
                 }
-                last_ns = last_ns.max(msg.stamp_ns());
+                // The status of the file a rotation closes: up to the last
+                // message written, not this one.
                 let status = self.status(last_ns);
+                last_ns = last_ns.max(msg.stamp_ns());
                 if let Err(e) = self.files.write(&msg, &status) {
                     self.shared.dropped.fetch_add(1, Ordering::Relaxed);
                     error = Some(self.fail(e));
