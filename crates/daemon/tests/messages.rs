@@ -1,5 +1,11 @@
 //! Round trips of every message type, the exact CDR layout of one message,
 //! the schemas, and decoding of arbitrary or cut bytes (typed errors, no panic).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 mod common;
 
@@ -133,18 +139,30 @@ fn bad_values_are_typed_errors() {
     m.encode(&mut b).unwrap();
     assert!(CycleInput::decode(&b).is_ok());
     // The header.
-    assert_eq!(CycleInput::decode(&b[..3]), Err(CdrError::NoHeader { len: 3 }));
+    assert_eq!(
+        CycleInput::decode(&b[..3]),
+        Err(CdrError::NoHeader { len: 3 })
+    );
     let mut big_endian = b.clone();
     big_endian[1] = 0x00;
-    assert!(matches!(CycleInput::decode(&big_endian), Err(CdrError::BadHeader { .. })));
+    assert!(matches!(
+        CycleInput::decode(&big_endian),
+        Err(CdrError::BadHeader { .. })
+    ));
     // A stamp beyond i32 seconds cannot be written.
     m.stamp_ns = u64::MAX;
-    assert!(matches!(m.encode(&mut b), Err(CdrError::StampTooLarge { .. })));
+    assert!(matches!(
+        m.encode(&mut b),
+        Err(CdrError::StampTooLarge { .. })
+    ));
     // A negative time cannot be read.
     let w = WrenchStamped::sensor(0, [0.0; 3], [0.0; 3]);
     w.encode(&mut b).unwrap();
     b[4..8].copy_from_slice(&(-1i32).to_le_bytes());
-    assert!(matches!(WrenchStamped::decode(&b), Err(CdrError::BadTime { sec: -1, .. })));
+    assert!(matches!(
+        WrenchStamped::decode(&b),
+        Err(CdrError::BadTime { sec: -1, .. })
+    ));
     // A frame id longer than the field.
     let long = "x".repeat(40);
     let js = JointState {
@@ -154,7 +172,14 @@ fn bad_values_are_typed_errors() {
     js.encode(&mut b).unwrap();
     let mut r = CdrReader::new(&b).unwrap();
     r.time().unwrap();
-    assert!(matches!(r.fixed_str::<32>(), Err(CdrError::StringTooLong { len: 40, max: 32, .. })));
+    assert!(matches!(
+        r.fixed_str::<32>(),
+        Err(CdrError::StringTooLong {
+            len: 40,
+            max: 32,
+            ..
+        })
+    ));
 }
 
 #[test]

@@ -1,6 +1,12 @@
 //! A push onto the recorder's queue does not allocate, accepted or dropped:
 //! counted by a global allocator that counts each thread's allocations (the
 //! writer thread allocates as it likes; the loop's thread must not).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 mod common;
 
@@ -57,7 +63,10 @@ fn push_does_not_allocate() {
     }
     let during = allocations() - before;
     let _ = rec.dropped();
-    assert_eq!(during, 0, "{during} allocations in {accepted} accepted pushes");
+    assert_eq!(
+        during, 0,
+        "{during} allocations in {accepted} accepted pushes"
+    );
     assert!(accepted > 0);
     rec.stop().unwrap();
 

@@ -3,6 +3,12 @@
 //! the schemas the file carries, and every field must equal what was recorded,
 //! bit for bit. Fails when python3 or the packages are missing, unless
 //! `SAR_SKIP_PYTHON=1` (CI installs them: `.ci/run`).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 mod common;
 
@@ -27,7 +33,10 @@ fn python_read(file: &Path) -> Option<String> {
         ),
     };
     if out.status.code() == Some(3) && skip {
-        eprintln!("SAR_SKIP_PYTHON=1: {}", String::from_utf8_lossy(&out.stderr));
+        eprintln!(
+            "SAR_SKIP_PYTHON=1: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         return None;
     }
     assert!(
@@ -179,11 +188,7 @@ fn expected(msgs: &[Outgoing]) -> String {
         .map(|m| {
             let topic = m.topic().name();
             let s = seq.entry(topic).or_default();
-            let line = format!(
-                "msg {topic}|{s}|{t}|{t}|{}",
-                fields(m),
-                t = m.stamp_ns()
-            );
+            let line = format!("msg {topic}|{s}|{t}|{t}|{}", fields(m), t = m.stamp_ns());
             *s += 1;
             (topic, *s - 1, line)
         })

@@ -2,6 +2,12 @@
 //! many byte offsets (read up to the last complete chunk, never a panic) and
 //! recovered, rotated by size and by duration, and drops counted when the
 //! writer is stalled.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 mod common;
 
@@ -104,14 +110,20 @@ fn recording_reads_back_bit_for_bit() {
         .collect();
     assert_eq!(inputs.len(), 2000);
     for (k, (log, m)) in inputs.iter().enumerate() {
-        assert_eq!(Outgoing::CycleInput(*m), common::cycle_messages(k as u64)[0]);
+        assert_eq!(
+            Outgoing::CycleInput(*m),
+            common::cycle_messages(k as u64)[0]
+        );
         assert_eq!(*log, m.now_ns);
     }
     // The wrong type for a topic is refused.
     let mut wrong = McapReader::new(&bytes)
         .unwrap()
         .typed::<WrenchStamped>(Topic::CycleInput.name());
-    assert!(matches!(wrong.next(), Some(Err(ReadError::WrongType { .. }))));
+    assert!(matches!(
+        wrong.next(),
+        Some(Err(ReadError::WrongType { .. }))
+    ));
     // An independent reader (the mcap crate's summary) agrees.
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     assert_eq!(
@@ -266,7 +278,10 @@ fn rotation_by_size() {
     let want: Vec<_> = pushed.iter().map(encoded).collect();
     assert_eq!(pushed_in(&all), want);
     // Each closed file ends with its status message.
-    let statuses = all.iter().filter(|(t, _)| t == Topic::RecorderDrops.name()).count();
+    let statuses = all
+        .iter()
+        .filter(|(t, _)| t == Topic::RecorderDrops.name())
+        .count();
     assert!(statuses >= report.files.len());
 }
 
@@ -349,7 +364,13 @@ fn bad_settings_are_refused() {
     let dir = common::scratch("settings");
     let mut c = config(&dir, 64 * 1024);
     c.queue_capacity = 0;
-    assert!(matches!(Recorder::start(c), Err(RecorderError::Setting { field: "queue_capacity", .. })));
+    assert!(matches!(
+        Recorder::start(c),
+        Err(RecorderError::Setting {
+            field: "queue_capacity",
+            ..
+        })
+    ));
     let mut c = config(&dir, 0);
     c.queue_capacity = 10;
     assert!(Recorder::start(c).is_err());

@@ -239,10 +239,13 @@ impl<'a> CdrReader<'a> {
             offset: self.pos,
             needed: n,
         })?;
-        let s = self.data.get(self.pos..end).ok_or(CdrError::UnexpectedEnd {
-            offset: self.pos,
-            needed: n,
-        })?;
+        let s = self
+            .data
+            .get(self.pos..end)
+            .ok_or(CdrError::UnexpectedEnd {
+                offset: self.pos,
+                needed: n,
+            })?;
         self.pos = end;
         Ok(s)
     }

@@ -242,10 +242,11 @@ impl RotatingWriter {
             let path = path.to_path_buf();
             move |source| WriteError::Mcap { path, source }
         };
-        let (file, handle, position) = CountingFile::create(&path).map_err(|source| WriteError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        let (file, handle, position) =
+            CountingFile::create(&path).map_err(|source| WriteError::Io {
+                path: path.clone(),
+                source,
+            })?;
         let mut writer = mcap::Writer::with_options(file, self.options.mcap_options())
             .map_err(mcap_err(&path))?;
         let mut channel_ids = [0u16; Topic::ALL.len()];
@@ -271,9 +272,7 @@ impl RotatingWriter {
 
     fn must_rotate(&self, file: &OpenFile, log_ns: u64) -> bool {
         let r = self.options.rotation;
-        let by_size = r
-            .max_bytes
-            .is_some_and(|max| file.writer_position() >= max);
+        let by_size = r.max_bytes.is_some_and(|max| file.writer_position() >= max);
         let by_time = match (r.max_duration_ns, file.first_log_ns) {
             (Some(max), Some(first)) => log_ns.saturating_sub(first) >= max,
             _ => false,

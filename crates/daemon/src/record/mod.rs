@@ -16,7 +16,9 @@ pub mod msgs;
 pub mod reader;
 pub mod recorder;
 
-pub use file::{FileOptions, Rotation, RotatingWriter, WriteError};
+pub use file::{FileOptions, RotatingWriter, Rotation, WriteError};
 pub use msgs::{Outgoing, RosMessage, Topic};
-pub use reader::{McapReader, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover};
+pub use reader::{
+    McapReader, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,
+};
 pub use recorder::{Recorder, RecorderConfig, RecorderError, RecordingReport};

@@ -597,10 +597,8 @@ pub struct GuardEvent {
 
 impl RosMessage for GuardEvent {
     const TYPE_NAME: &'static str = "sar_msgs/msg/GuardEvent";
-    const SCHEMA: &'static str = concat!(
-        include_str!("../../msg/GuardEvent.msg"),
-        header_sections!()
-    );
+    const SCHEMA: &'static str =
+        concat!(include_str!("../../msg/GuardEvent.msg"), header_sections!());
     fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
         header_out(w, self.stamp_ns, FRAME_BASE)?;
         w.u64(self.cycle);
@@ -673,10 +671,8 @@ pub struct CycleInput {
 
 impl RosMessage for CycleInput {
     const TYPE_NAME: &'static str = "sar_msgs/msg/CycleInput";
-    const SCHEMA: &'static str = concat!(
-        include_str!("../../msg/CycleInput.msg"),
-        header_sections!()
-    );
+    const SCHEMA: &'static str =
+        concat!(include_str!("../../msg/CycleInput.msg"), header_sections!());
     fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
         header_out(w, self.stamp_ns, FRAME_BASE)?;
         w.u64(self.cycle);
@@ -856,6 +852,10 @@ impl Topic {
 }
 
 /// One message for the recorder: fixed-size, `Copy`, no heap data.
+///
+/// Every queue slot has the size of the largest variant (about 420 bytes);
+/// boxing the large ones would allocate on the loop's push, which it must not.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Outgoing {
     /// `/sar/sensor/wrench`.

@@ -322,13 +322,10 @@ impl<'a> McapReader<'a> {
 
     /// The messages of `topic` decoded as `M` (the topic's schema must be
     /// `M::TYPE_NAME`), with their log times. Other topics are skipped.
-    pub fn typed<M: RosMessage>(
+    pub fn typed<M: RosMessage + 'a>(
         self,
         topic: &'a str,
-    ) -> impl Iterator<Item = Result<(u64, M), ReadError>> + 'a
-    where
-        M: 'a,
-    {
+    ) -> impl Iterator<Item = Result<(u64, M), ReadError>> + 'a {
         let mut reader = self;
         let mut checked: Option<u16> = None;
         let mut failed = false;
@@ -494,11 +491,22 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
             && let Some(c) = reader.channels().get(&msg.channel_id)
         {
             if c.schema_id != 0 {
-                w.add_schema_with_id(c.schema_id, &c.schema_name, &c.schema_encoding, &c.schema_data)
-                    .map_err(mcap_err)?;
-            }
-            w.add_channel_with_id(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)
+                w.add_schema_with_id(
+                    c.schema_id,
+                    &c.schema_name,
+                    &c.schema_encoding,
+                    &c.schema_data,
+                )
                 .map_err(mcap_err)?;
+            }
+            w.add_channel_with_id(
+                c.id,
+                c.schema_id,
+                &c.topic,
+                &c.message_encoding,
+                &c.metadata,
+            )
+            .map_err(mcap_err)?;
             slot.insert(());
         }
         let header = mcap::records::MessageHeader {
@@ -525,11 +533,22 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
             continue;
         }
         if c.schema_id != 0 {
-            w.add_schema_with_id(c.schema_id, &c.schema_name, &c.schema_encoding, &c.schema_data)
-                .map_err(mcap_err)?;
-        }
-        w.add_channel_with_id(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)
+            w.add_schema_with_id(
+                c.schema_id,
+                &c.schema_name,
+                &c.schema_encoding,
+                &c.schema_data,
+            )
             .map_err(mcap_err)?;
+        }
+        w.add_channel_with_id(
+            c.id,
+            c.schema_id,
+            &c.topic,
+            &c.message_encoding,
+            &c.metadata,
+        )
+        .map_err(mcap_err)?;
     }
     for m in reader.metadata() {
         w.write_metadata(m).map_err(mcap_err)?;

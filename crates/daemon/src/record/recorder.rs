@@ -138,13 +138,12 @@ impl Recorder {
                 why: "must be positive",
             });
         }
-        let files = RotatingWriter::new(config.files.clone()).map_err(|source| {
-            RecorderError::Write {
+        let files =
+            RotatingWriter::new(config.files.clone()).map_err(|source| RecorderError::Write {
                 written: 0,
                 dropped: 0,
                 source,
-            }
-        })?;
+            })?;
         let (producer, consumer) = rtrb::RingBuffer::new(config.queue_capacity);
         let shared = Arc::new(Shared::default());
         Ok(Self {

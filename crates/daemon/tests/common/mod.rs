@@ -1,5 +1,11 @@
 //! Shared test helpers: deterministic messages of every topic, scratch dirs.
-#![allow(dead_code)]
+#![allow(
+    dead_code,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 use sar_daemon::record::cdr::FixedStr;
 use sar_daemon::record::msgs::*;
@@ -7,7 +13,9 @@ use std::path::PathBuf;
 
 /// A fresh scratch directory under the target's tmp dir.
 pub fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("sar-daemon").join(name);
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join("sar-daemon")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -49,15 +57,15 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             sensor_counter: (k as u32).wrapping_mul(7),
             sensor_status: (k % 5) as u32,
             sensor_stamp_ns: t - 90_000,
-            sensor_valid: k % 7 != 0,
+            sensor_valid: !k.is_multiple_of(7),
             joints_q_m: v3(k + 2),
             joints_stamp_ns: t - 120_000,
-            joints_valid: k % 11 != 0,
+            joints_valid: !k.is_multiple_of(11),
             drive_state: DriveStateCode::from_code((k % 4) as u8).unwrap(),
             drive_fault_axis: if k % 4 == 3 { (k % 3) as i8 } else { -1 },
             drive_fault_code: if k % 4 == 3 { 0x2310 } else { 0 },
             target_q_m: v3(k + 3),
-            target_valid: k % 2 == 0,
+            target_valid: k.is_multiple_of(2),
             command_kind: CommandKindCode::from_code((k % 9) as u8).unwrap(),
             command_values: v3(k + 4),
             command_arg: mix(k),
@@ -98,15 +106,17 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             flags: (mix(k) & 0x7f) as u32,
         }),
     ];
-    if k % 100 == 0 {
+    if k.is_multiple_of(100) {
         out.push(Outgoing::GuardEvent(GuardEvent {
             stamp_ns: t,
             cycle: k,
             from_state: GuardStateCode::Ok,
             to_state: GuardStateCode::Warn,
             reason_code: reason::ABOVE_WARN,
-            reason_text: FixedStr::new("total tip force 4.200 N is at or above the warn limit 4.000 N")
-                .unwrap(),
+            reason_text: FixedStr::new(
+                "total tip force 4.200 N is at or above the warn limit 4.000 N",
+            )
+            .unwrap(),
         }));
     }
     out
