@@ -116,6 +116,14 @@ fn recording_reads_back_bit_for_bit() {
         );
         assert_eq!(*log, m.now_ns);
     }
+    // Every SAR topic decoded, in file order.
+    let decoded: Vec<Outgoing> = McapReader::new(&bytes)
+        .unwrap()
+        .decoded()
+        .map(|r| r.unwrap().2)
+        .filter(|m| m.topic() != Topic::RecorderDrops)
+        .collect();
+    assert_eq!(decoded, pushed);
     // The wrong type for a topic is refused.
     let mut wrong = McapReader::new(&bytes)
         .unwrap()
@@ -357,6 +365,31 @@ fn status_messages_every_interval() {
     // message), plus the one at close.
     assert_eq!(stamps.len(), 10, "{stamps:?}");
     assert!(stamps.windows(2).all(|w| w[0] <= w[1]));
+}
+
+#[test]
+fn a_dropped_recorder_still_closes_its_file() {
+    let dir = common::scratch("dropped_recorder");
+    let mut rec = Recorder::start(config(&dir, 64 * 1024)).unwrap();
+    for m in common::cycle_messages(0) {
+        assert!(rec.push(m));
+    }
+    drop(rec);
+    // The writer thread finishes on its own; wait for the file's footer
+    // (bounded: 10 s).
+    let path = FileOptions::new(&dir, "rec").path(0);
+    for _ in 0..1000 {
+        if let Ok(bytes) = std::fs::read(&path)
+            && mcap::Summary::read(&bytes).is_ok_and(|s| s.is_some())
+        {
+            let (msgs, end, _) = read_all(&bytes);
+            assert!(end.is_none());
+            assert_eq!(msgs.len(), common::cycle_messages(0).len() + 1);
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    panic!("the file was not closed within 10 s");
 }
 
 #[test]

@@ -9,7 +9,7 @@
 
 use super::cdr::CdrError;
 use super::file::{CountingFile, FileOptions};
-use super::msgs::RosMessage;
+use super::msgs::{Outgoing, RosMessage, Topic};
 use mcap::records::{Record, op};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -318,6 +318,48 @@ impl<'a> McapReader<'a> {
         }
         self.pos += RECORD_PREFIX + body.len();
         Ok(true)
+    }
+
+    /// Every message of the SAR topics ([`Topic`]) decoded, with its topic and
+    /// log time; other topics are skipped.
+    pub fn decoded(self) -> impl Iterator<Item = Result<(Topic, u64, Outgoing), ReadError>> + 'a {
+        let mut reader = self;
+        let mut failed = false;
+        std::iter::from_fn(move || {
+            if failed {
+                return None;
+            }
+            loop {
+                let msg = match reader.next()? {
+                    Ok(m) => m,
+                    Err(e) => {
+                        failed = true;
+                        return Some(Err(e));
+                    }
+                };
+                let channel = reader.channels.get(&msg.channel_id)?;
+                let Some(topic) = Topic::from_name(&channel.topic) else {
+                    continue;
+                };
+                if channel.schema_name != topic.type_name() {
+                    failed = true;
+                    return Some(Err(ReadError::WrongType {
+                        topic: channel.topic.clone(),
+                        expected: topic.type_name(),
+                        found: channel.schema_name.clone(),
+                    }));
+                }
+                return Some(
+                    Outgoing::decode(topic, &msg.data)
+                        .map(|m| (topic, msg.log_time_ns, m))
+                        .map_err(|source| ReadError::Decode {
+                            topic: channel.topic.clone(),
+                            log_time_ns: msg.log_time_ns,
+                            source,
+                        }),
+                );
+            }
+        })
     }
 
     /// The messages of `topic` decoded as `M` (the topic's schema must be

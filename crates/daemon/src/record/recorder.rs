@@ -98,6 +98,9 @@ pub enum RecorderError {
 }
 
 /// The loop's side: push messages, read the drop count.
+///
+/// Dropping it without [`Recorder::stop`] lets the writer thread drain the
+/// queue and close the file on its own (the report is then lost).
 pub struct Recorder {
     producer: rtrb::Producer<Outgoing>,
     shared: Arc<Shared>,
@@ -206,7 +209,10 @@ impl Recorder {
         self.shared.stop.store(true, Ordering::Release);
         self.resume()?;
         match self.writer.take() {
-            Some(handle) => handle.join().map_err(|_| RecorderError::WriterPanicked)?,
+            Some(handle) => {
+                handle.thread().unpark();
+                handle.join().map_err(|_| RecorderError::WriterPanicked)?
+            }
             None => Err(RecorderError::WriterPanicked),
         }
     }
@@ -237,8 +243,9 @@ impl PendingWriter {
         let mut error: Option<RecorderError> = None;
         loop {
             // Read the flag before draining: whatever was pushed before stop()
-            // is drained in this pass.
-            let stopping = self.shared.stop.load(Ordering::Acquire);
+            // is drained in this pass. A recorder dropped without stop() ends
+            // the same way (its producer is gone).
+            let stopping = self.shared.stop.load(Ordering::Acquire) || self.consumer.is_abandoned();
             let mut drained = 0usize;
             while let Ok(msg) = self.consumer.pop() {
                 drained += 1;
