@@ -63,6 +63,28 @@ pub enum ReadError {
         /// The cause.
         source: mcap::McapError,
     },
+    /// A chunk claims more uncompressed bytes than [`MAX_CHUNK_BYTES`].
+    #[error(
+        "chunk at byte {offset} claims {uncompressed_size} uncompressed bytes (limit {limit}): corrupt"
+    )]
+    ChunkTooLarge {
+        /// Its offset.
+        offset: u64,
+        /// The size it claims.
+        uncompressed_size: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// A chunk's content is not what its header says.
+    #[error("chunk at byte {offset}: {why} (at byte {at} of its content)")]
+    BadChunkContent {
+        /// The chunk's offset.
+        offset: u64,
+        /// Offset within the uncompressed content.
+        at: u64,
+        /// What is wrong.
+        why: &'static str,
+    },
     /// A message names a channel not defined before it.
     #[error("message at byte {offset} names unknown channel {channel_id}")]
     UnknownChannel {
@@ -155,6 +177,10 @@ pub struct McapReader<'a> {
 }
 
 const RECORD_PREFIX: usize = 9;
+
+/// The largest uncompressed chunk read (the recorder writes 256 KiB chunks;
+/// other writers rarely exceed a few MiB). A larger size is taken as corrupt.
+pub const MAX_CHUNK_BYTES: u64 = 256 * 1024 * 1024;
 
 impl<'a> McapReader<'a> {
     /// Checks the magic.
@@ -301,13 +327,37 @@ impl<'a> McapReader<'a> {
                 else {
                     return Ok(true);
                 };
+                // A corrupt size must not make us allocate it.
+                if header.uncompressed_size > MAX_CHUNK_BYTES {
+                    return Err(ReadError::ChunkTooLarge {
+                        offset,
+                        uncompressed_size: header.uncompressed_size,
+                        limit: MAX_CHUNK_BYTES,
+                    });
+                }
                 // The whole chunk, checked, before any of it is given out.
-                let records = mcap::read::ChunkReader::new(header, &data)
-                    .map_err(corrupt)?
-                    .collect::<Result<Vec<_>, _>>()
-                    .map_err(corrupt)?;
-                for record in records {
-                    self.apply(record, offset)?;
+                let content = decompress(&header, &data, offset)?;
+                let mut at = 0usize;
+                while at < content.len() {
+                    let inner = content.get(at..).unwrap_or(&[]);
+                    let bad = |why: &'static str| ReadError::BadChunkContent {
+                        offset,
+                        at: at as u64,
+                        why,
+                    };
+                    let (prefix, after) = inner
+                        .split_first_chunk::<RECORD_PREFIX>()
+                        .ok_or(bad("a record prefix is cut"))?;
+                    let [inner_op, len_bytes @ ..] = *prefix;
+                    let body = usize::try_from(u64::from_le_bytes(len_bytes))
+                        .ok()
+                        .and_then(|n| after.get(..n))
+                        .ok_or(bad("a record is longer than the chunk"))?;
+                    if matches!(inner_op, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                        let record = mcap::parse_record(inner_op, body).map_err(corrupt)?;
+                        self.apply(record, offset)?;
+                    }
+                    at += RECORD_PREFIX + body.len();
                 }
             }
             op::HEADER | op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
@@ -434,6 +484,28 @@ impl Iterator for McapReader<'_> {
             }
         }
     }
+}
+
+/// The chunk's records, decompressed and checked against its CRC, or why not.
+fn decompress(
+    header: &mcap::records::ChunkHeader,
+    data: &[u8],
+    offset: u64,
+) -> Result<Vec<u8>, ReadError> {
+    let size = usize::try_from(header.uncompressed_size).unwrap_or(usize::MAX);
+    let bad = |why: &'static str| ReadError::BadChunkContent { offset, at: 0, why };
+    let content = match header.compression.as_str() {
+        "" => data.to_vec(),
+        "zstd" => zstd::bulk::decompress(data, size).map_err(|_| bad("zstd refused the data"))?,
+        _ => return Err(bad("compression other than zstd or none")),
+    };
+    if content.len() != size {
+        return Err(bad("the size differs from the chunk header's"));
+    }
+    if header.uncompressed_crc != 0 && crc32fast::hash(&content) != header.uncompressed_crc {
+        return Err(bad("the CRC differs from the chunk header's"));
+    }
+    Ok(content)
 }
 
 /// Reads a whole file into memory.
