@@ -393,6 +393,28 @@ fn a_dropped_recorder_still_closes_its_file() {
 }
 
 #[test]
+fn a_failed_writer_drops_and_counts_and_stop_reports_it() {
+    let dir = common::scratch("failed_writer");
+    let sub = dir.join("gone");
+    let mut rec = Recorder::new_paused(config(&sub, 64 * 1024)).unwrap();
+    // The disk goes away before the first file is created.
+    std::fs::remove_dir_all(&sub).unwrap();
+    let msgs = common::cycle_messages(0);
+    for m in &msgs {
+        assert!(rec.push(*m));
+    }
+    match rec.stop() {
+        Err(RecorderError::Write {
+            written, dropped, ..
+        }) => {
+            assert_eq!(written, 0);
+            assert_eq!(dropped, msgs.len() as u64);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
 fn bad_settings_are_refused() {
     let dir = common::scratch("settings");
     let mut c = config(&dir, 64 * 1024);

@@ -79,7 +79,8 @@ pub enum RecorderError {
         /// What is wrong.
         why: &'static str,
     },
-    /// Writing failed; every message from then on was dropped (and counted).
+    /// Writing failed; the message that failed and every one after it were
+    /// dropped (and counted: `dropped` is the final count).
     #[error("recording failed after {written} messages ({dropped} dropped): {source}")]
     Write {
         /// Messages written before.
@@ -289,6 +290,14 @@ impl PendingWriter {
             }
         }
         match error {
+            // The count at the end, not at the failure.
+            Some(RecorderError::Write {
+                written, source, ..
+            }) => Err(RecorderError::Write {
+                written,
+                dropped: self.shared.dropped.load(Ordering::Relaxed),
+                source,
+            }),
             Some(e) => Err(e),
             None => Ok(RecordingReport {
                 files: self.files.files().to_vec(),
