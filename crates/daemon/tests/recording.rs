@@ -139,6 +139,18 @@ fn recording_reads_back_bit_for_bit() {
         pushed.len() as u64 + 1
     );
     assert!(summary.chunk_indexes.len() > 1);
+    assert!(
+        summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.compression == "zstd")
+    );
+    assert!(
+        summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.compressed_size < c.uncompressed_size)
+    );
 }
 
 #[test]
