@@ -334,3 +334,13 @@ proptest! {
         }
     }
 }
+
+/// A queue slot stays small: 65536 slots (the default) are under 32 MiB.
+#[test]
+fn outgoing_is_small_and_copy() {
+    let size = std::mem::size_of::<Outgoing>();
+    println!("size_of::<Outgoing>() = {size} bytes");
+    assert!(size <= 512, "{size}");
+    fn copy<T: Copy + Send + 'static>() {}
+    copy::<Outgoing>();
+}
