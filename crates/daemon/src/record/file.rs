@@ -1,0 +1,391 @@
+//! MCAP files of the recorded topics: profile `ros2`, `ros2msg` schemas, `cdr`
+//! messages, zstd chunks written whole (a crash loses at most the chunk being
+//! filled), rotation by size or duration with every file self-contained (all
+//! schemas and channels at its start, summary and index at its end).
+
+use super::msgs::{Outgoing, RecorderDrops, Topic};
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Why a recording could not be written.
+#[non_exhaustive]
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// The file could not be created, written or synced.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The MCAP writer refused.
+    #[error("{path}: MCAP: {source}")]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: mcap::McapError,
+    },
+    /// A message could not be encoded (a stamp beyond 2^31 s).
+    #[error("{topic}: {source}")]
+    Encode {
+        /// The topic.
+        topic: &'static str,
+        /// The cause.
+        source: super::cdr::CdrError,
+    },
+    /// A setting is out of range.
+    #[error("recorder setting {field} = {value}: {why}")]
+    Setting {
+        /// The setting.
+        field: &'static str,
+        /// Its value.
+        value: u64,
+        /// What is wrong.
+        why: &'static str,
+    },
+}
+
+/// When to start a new file. A file is closed before the message that would
+/// take it past either limit (size is counted at chunk granularity: the bytes
+/// on disk, which grow a chunk at a time).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Rotation {
+    /// Bytes on disk after which the next chunk starts a new file.
+    pub max_bytes: Option<u64>,
+    /// Log-time span after which a new file starts, ns.
+    pub max_duration_ns: Option<u64>,
+}
+
+/// How files are written.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FileOptions {
+    /// The directory of the files.
+    pub directory: PathBuf,
+    /// File names are `{prefix}-{index:04}.mcap`.
+    pub prefix: String,
+    /// Uncompressed bytes per chunk (a crash loses at most one chunk).
+    pub chunk_size_bytes: u64,
+    /// zstd level (0: zstd's default, 3).
+    pub zstd_level: u32,
+    /// Compress chunks with zstd (false: uncompressed chunks, for comparison).
+    pub compress: bool,
+    /// When to rotate.
+    pub rotation: Rotation,
+}
+
+impl FileOptions {
+    /// zstd chunks of 256 KiB, no rotation.
+    pub fn new(directory: impl Into<PathBuf>, prefix: impl Into<String>) -> Self {
+        Self {
+            directory: directory.into(),
+            prefix: prefix.into(),
+            chunk_size_bytes: 256 * 1024,
+            zstd_level: 0,
+            compress: true,
+            rotation: Rotation::default(),
+        }
+    }
+
+    /// The path of file number `index`.
+    pub fn path(&self, index: u32) -> PathBuf {
+        self.directory
+            .join(format!("{}-{index:04}.mcap", self.prefix))
+    }
+
+    pub(crate) fn mcap_options(&self) -> mcap::WriteOptions {
+        mcap::WriteOptions::new()
+            .profile("ros2")
+            .library(concat!("sar-daemon/", env!("CARGO_PKG_VERSION")))
+            .compression(if self.compress {
+                Some(mcap::Compression::Zstd)
+            } else {
+                None
+            })
+            .compression_level(self.zstd_level)
+            // Compress in the writer thread itself: no extra threads on a
+            // two-core controller.
+            .compression_threads(0)
+            .chunk_size(Some(self.chunk_size_bytes))
+            // Chunks are built in memory and written whole: a file cut short
+            // ends with complete chunks and at most one partial record.
+            .disable_seeking(true)
+    }
+}
+
+/// A file that counts the bytes written to it (its position), shared with the
+/// rotation check.
+pub(crate) struct CountingFile {
+    inner: BufWriter<File>,
+    pos: u64,
+    shared_pos: Arc<AtomicU64>,
+}
+
+impl CountingFile {
+    /// The file, a handle to sync it and its shared position.
+    pub(crate) fn create(path: &Path) -> std::io::Result<(Self, File, Arc<AtomicU64>)> {
+        let file = File::create(path)?;
+        let handle = file.try_clone()?;
+        let shared_pos = Arc::new(AtomicU64::new(0));
+        Ok((
+            Self {
+                inner: BufWriter::with_capacity(1 << 20, file),
+                pos: 0,
+                shared_pos: Arc::clone(&shared_pos),
+            },
+            handle,
+            shared_pos,
+        ))
+    }
+}
+
+impl Write for CountingFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.pos += n as u64;
+        self.shared_pos.store(self.pos, Ordering::Relaxed);
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+impl Seek for CountingFile {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        // The writer only asks where it is (disable_seeking): answer without
+        // flushing the buffer.
+        if to == SeekFrom::Current(0) {
+            return Ok(self.pos);
+        }
+        self.pos = self.inner.seek(to)?;
+        self.shared_pos.store(self.pos, Ordering::Relaxed);
+        Ok(self.pos)
+    }
+}
+
+/// Writes the recorded topics into rotating MCAP files.
+pub struct RotatingWriter {
+    options: FileOptions,
+    current: Option<OpenFile>,
+    next_index: u32,
+    files: Vec<PathBuf>,
+    sequence: [u32; Topic::ALL.len()],
+    buf: Vec<u8>,
+    written: u64,
+}
+
+struct OpenFile {
+    path: PathBuf,
+    writer: mcap::Writer<CountingFile>,
+    handle: File,
+    position: Arc<AtomicU64>,
+    channel_ids: [u16; Topic::ALL.len()],
+    first_log_ns: Option<u64>,
+}
+
+fn topic_index(topic: Topic) -> usize {
+    Topic::ALL.iter().position(|t| *t == topic).unwrap_or(0)
+}
+
+impl RotatingWriter {
+    /// Checks the options; no file is created before the first message.
+    pub fn new(options: FileOptions) -> Result<Self, WriteError> {
+        if options.chunk_size_bytes == 0 {
+            return Err(WriteError::Setting {
+                field: "chunk_size_bytes",
+                value: 0,
+                why: "must be positive",
+            });
+        }
+        if options.rotation.max_duration_ns == Some(0) {
+            return Err(WriteError::Setting {
+                field: "max_duration_ns",
+                value: 0,
+                why: "must be positive",
+            });
+        }
+        std::fs::create_dir_all(&options.directory).map_err(|source| WriteError::Io {
+            path: options.directory.clone(),
+            source,
+        })?;
+        Ok(Self {
+            options,
+            current: None,
+            next_index: 0,
+            files: Vec::new(),
+            sequence: [0; Topic::ALL.len()],
+            buf: Vec::with_capacity(1024),
+            written: 0,
+        })
+    }
+
+    /// The files started so far (the last one may be open).
+    pub fn files(&self) -> &[PathBuf] {
+        &self.files
+    }
+
+    /// Messages written so far.
+    pub fn written(&self) -> u64 {
+        self.written
+    }
+
+    fn open(&mut self) -> Result<&mut OpenFile, WriteError> {
+        let path = self.options.path(self.next_index);
+        self.next_index += 1;
+        let mcap_err = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| WriteError::Mcap { path, source }
+        };
+        let (file, handle, position) =
+            CountingFile::create(&path).map_err(|source| WriteError::Io {
+                path: path.clone(),
+                source,
+            })?;
+        let mut writer = mcap::Writer::with_options(file, self.options.mcap_options())
+            .map_err(mcap_err(&path))?;
+        let mut channel_ids = [0u16; Topic::ALL.len()];
+        let none = BTreeMap::new();
+        for (id, topic) in channel_ids.iter_mut().zip(Topic::ALL) {
+            let schema = writer
+                .add_schema(topic.type_name(), "ros2msg", topic.schema().as_bytes())
+                .map_err(mcap_err(&path))?;
+            *id = writer
+                .add_channel(schema, topic.name(), "cdr", &none)
+                .map_err(mcap_err(&path))?;
+        }
+        self.files.push(path.clone());
+        Ok(self.current.insert(OpenFile {
+            path,
+            writer,
+            handle,
+            position,
+            channel_ids,
+            first_log_ns: None,
+        }))
+    }
+
+    fn must_rotate(&self, file: &OpenFile, log_ns: u64) -> bool {
+        let r = self.options.rotation;
+        let by_size = r.max_bytes.is_some_and(|max| file.writer_position() >= max);
+        let by_time = match (r.max_duration_ns, file.first_log_ns) {
+            (Some(max), Some(first)) => log_ns.saturating_sub(first) >= max,
+            _ => false,
+        };
+        by_size || by_time
+    }
+
+    /// Writes one message (log and publish time = its stamp), rotating first
+    /// if the current file is full; `status` is written into the file closed.
+    pub fn write(&mut self, msg: &Outgoing, status: &RecorderDrops) -> Result<(), WriteError> {
+        let log_ns = msg.stamp_ns();
+        if let Some(file) = &self.current
+            && self.must_rotate(file, log_ns)
+        {
+            self.close(status)?;
+        }
+        self.write_raw(msg)
+    }
+
+    fn write_raw(&mut self, msg: &Outgoing) -> Result<(), WriteError> {
+        let topic = msg.topic();
+        let log_ns = msg.stamp_ns();
+        msg.encode(&mut self.buf)
+            .map_err(|source| WriteError::Encode {
+                topic: topic.name(),
+                source,
+            })?;
+        let i = topic_index(topic);
+        let sequence = self.sequence.get(i).copied().unwrap_or(0);
+        if self.current.is_none() {
+            self.open()?;
+        }
+        let Some(file) = self.current.as_mut() else {
+            return Ok(());
+        };
+        file.first_log_ns.get_or_insert(log_ns);
+        let header = mcap::records::MessageHeader {
+            channel_id: file.channel_ids.get(i).copied().unwrap_or(0),
+            sequence,
+            log_time: log_ns,
+            publish_time: log_ns,
+        };
+        file.writer
+            .write_to_known_channel(&header, &self.buf)
+            .map_err(|source| WriteError::Mcap {
+                path: file.path.clone(),
+                source,
+            })?;
+        if let Some(s) = self.sequence.get_mut(i) {
+            *s = s.wrapping_add(1);
+        }
+        self.written += 1;
+        Ok(())
+    }
+
+    /// Ends the current chunk and hands the bytes to the disk (fsync): what was
+    /// written so far survives a power loss.
+    pub fn sync(&mut self) -> Result<(), WriteError> {
+        if let Some(file) = &mut self.current {
+            file.writer.flush().map_err(|source| WriteError::Mcap {
+                path: file.path.clone(),
+                source,
+            })?;
+            file.sync()?;
+        }
+        Ok(())
+    }
+
+    /// Closes the current file (if any): writes `status` as a
+    /// `/sar/recorder/drops` message and as metadata `sar_recorder`, then the
+    /// summary and index, and syncs it to disk.
+    pub fn close(&mut self, status: &RecorderDrops) -> Result<(), WriteError> {
+        if self.current.is_none() {
+            return Ok(());
+        }
+        let mut status = *status;
+        status.written = self.written + 1;
+        self.write_raw(&Outgoing::RecorderDrops(status))?;
+        let Some(mut file) = self.current.take() else {
+            return Ok(());
+        };
+        let path = file.path.clone();
+        let mcap_err = |source| WriteError::Mcap {
+            path: path.clone(),
+            source,
+        };
+        let metadata = mcap::records::Metadata {
+            name: "sar_recorder".into(),
+            metadata: BTreeMap::from([
+                ("dropped".into(), status.dropped.to_string()),
+                ("written".into(), status.written.to_string()),
+                ("queue_capacity".into(), status.queue_capacity.to_string()),
+                ("last_log_time_ns".into(), status.stamp_ns.to_string()),
+            ]),
+        };
+        file.writer.write_metadata(&metadata).map_err(mcap_err)?;
+        file.writer.finish().map_err(mcap_err)?;
+        drop(file.writer.into_inner());
+        file.handle.sync_all().map_err(|source| WriteError::Io {
+            path: path.clone(),
+            source,
+        })
+    }
+}
+
+impl OpenFile {
+    fn writer_position(&self) -> u64 {
+        self.position.load(Ordering::Relaxed)
+    }
+    fn sync(&mut self) -> Result<(), WriteError> {
+        self.handle.sync_data().map_err(|source| WriteError::Io {
+            path: self.path.clone(),
+            source,
+        })
+    }
+}

@@ -1,0 +1,24 @@
+//! Recording (INTERFACES.md 1): the ROS 2 messages of the daemon's topics in
+//! MCAP files (profile `ros2`, `ros2msg` schemas, `cdr` messages, zstd
+//! chunks), written by a recorder that never makes the control loop wait,
+//! rotated by size or duration, read back by topic, and recovered after a
+//! crash.
+//!
+//! - [`cdr`]: the CDR encoder and decoder.
+//! - [`msgs`]: the message structs, their schemas and the topics.
+//! - [`file`]: MCAP files and their rotation.
+//! - [`recorder`]: the bounded queue and the writer thread.
+//! - [`reader`]: reading (up to the last complete chunk) and [`recover`].
+
+pub mod cdr;
+pub mod file;
+pub mod msgs;
+pub mod reader;
+pub mod recorder;
+
+pub use file::{FileOptions, RotatingWriter, Rotation, WriteError};
+pub use msgs::{Outgoing, RosMessage, Topic};
+pub use reader::{
+    McapReader, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,
+};
+pub use recorder::{Recorder, RecorderConfig, RecorderError, RecordingReport};

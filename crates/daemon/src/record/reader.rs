@@ -1,0 +1,696 @@
+//! Reading a recording record by record, and recovering one cut short.
+//!
+//! [`McapReader`] walks the data section: each chunk is decompressed and
+//! checked (CRC) whole before any of its messages is given out, so a file cut
+//! short by a crash or a power loss yields every message of its complete
+//! chunks, then one [`ReadError::Truncated`] saying where it stopped. It never
+//! panics on a prefix of a valid file. [`recover`] rewrites such a file into a
+//! complete one (summary, chunk and message indexes).
+
+use super::cdr::CdrError;
+use super::file::{CountingFile, FileOptions};
+use super::msgs::{Outgoing, RosMessage, Topic};
+use mcap::records::{Record, op};
+use std::collections::{BTreeMap, VecDeque};
+use std::path::{Path, PathBuf};
+
+/// Why reading stopped or a message could not be decoded.
+#[non_exhaustive]
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file does not start with the MCAP magic.
+    #[error("not an MCAP file (the first {len} bytes are not the MCAP magic)")]
+    NotMcap {
+        /// Bytes in the file (up to 8 looked at).
+        len: usize,
+    },
+    /// The file ends inside a record: everything before `offset` was read.
+    #[error(
+        "the file ends inside a record at byte {offset} (opcode {opcode:?}, {needed} bytes needed, {available} available): read up to there"
+    )]
+    Truncated {
+        /// Offset of the incomplete record: the end of the last complete one.
+        offset: u64,
+        /// Its opcode, when the file holds it.
+        opcode: Option<u8>,
+        /// Bytes the record needs (opcode, length and body).
+        needed: u64,
+        /// Bytes left in the file.
+        available: u64,
+    },
+    /// The file ends after a complete record but before the data section's end
+    /// (no data-end record, no footer): all of it was read.
+    #[error("the file ends at byte {offset} without a data-end record or footer: read up to there")]
+    Unfinished {
+        /// The file's length.
+        offset: u64,
+    },
+    /// A complete record could not be parsed (bad CRC, bad compression, ...).
+    #[error("record at byte {offset} (opcode {opcode:#04x}) is corrupt: {source}")]
+    Corrupt {
+        /// Its offset.
+        offset: u64,
+        /// Its opcode.
+        opcode: u8,
+        /// The cause.
+        source: mcap::McapError,
+    },
+    /// A chunk claims more uncompressed bytes than [`MAX_CHUNK_BYTES`].
+    #[error(
+        "chunk at byte {offset} claims {uncompressed_size} uncompressed bytes (limit {limit}): corrupt"
+    )]
+    ChunkTooLarge {
+        /// Its offset.
+        offset: u64,
+        /// The size it claims.
+        uncompressed_size: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// A chunk's content is not what its header says.
+    #[error("chunk at byte {offset}: {why} (at byte {at} of its content)")]
+    BadChunkContent {
+        /// The chunk's offset.
+        offset: u64,
+        /// Offset within the uncompressed content.
+        at: u64,
+        /// What is wrong.
+        why: &'static str,
+    },
+    /// A message names a channel not defined before it.
+    #[error("message at byte {offset} names unknown channel {channel_id}")]
+    UnknownChannel {
+        /// Offset of the record (or its chunk).
+        offset: u64,
+        /// The channel.
+        channel_id: u16,
+    },
+    /// A topic's schema is not the type asked for.
+    #[error("topic {topic} has type {found}, not {expected}")]
+    WrongType {
+        /// The topic.
+        topic: String,
+        /// The type asked for.
+        expected: &'static str,
+        /// The schema's name.
+        found: String,
+    },
+    /// A message could not be decoded.
+    #[error("{topic} message at log time {log_time_ns} ns: {source}")]
+    Decode {
+        /// The topic.
+        topic: String,
+        /// Its log time.
+        log_time_ns: u64,
+        /// The cause.
+        source: CdrError,
+    },
+}
+
+/// A channel of the recording with its schema.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelInfo {
+    /// Channel id.
+    pub id: u16,
+    /// Topic.
+    pub topic: String,
+    /// Message encoding (`cdr`).
+    pub message_encoding: String,
+    /// Schema id (0: none).
+    pub schema_id: u16,
+    /// Schema name (the ROS 2 type), empty without schema.
+    pub schema_name: String,
+    /// Schema encoding (`ros2msg`).
+    pub schema_encoding: String,
+    /// Schema text.
+    pub schema_data: Vec<u8>,
+    /// Channel metadata.
+    pub metadata: BTreeMap<String, String>,
+}
+
+/// One message as recorded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RawMessage {
+    /// Channel id.
+    pub channel_id: u16,
+    /// Sequence number.
+    pub sequence: u32,
+    /// Log time, ns.
+    pub log_time_ns: u64,
+    /// Publish time, ns.
+    pub publish_time_ns: u64,
+    /// The CDR bytes.
+    pub data: Vec<u8>,
+}
+
+#[derive(Debug, Clone)]
+struct SchemaInfo {
+    name: String,
+    encoding: String,
+    data: Vec<u8>,
+}
+
+/// Iterates over the messages of an MCAP file held in memory, in file order.
+///
+/// Ends with `None` after the data section (or the footer); a file cut short
+/// ends with one `Err` (`Truncated`, `Unfinished` or `Corrupt`) after the last
+/// message of its last complete chunk.
+#[derive(Debug)]
+pub struct McapReader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    schemas: BTreeMap<u16, SchemaInfo>,
+    channels: BTreeMap<u16, ChannelInfo>,
+    metadata: Vec<mcap::records::Metadata>,
+    profile: Option<String>,
+    pending: VecDeque<RawMessage>,
+    done: bool,
+    complete: bool,
+}
+
+const RECORD_PREFIX: usize = 9;
+
+/// The largest uncompressed chunk read (the recorder writes 256 KiB chunks;
+/// other writers rarely exceed a few MiB). A larger size is taken as corrupt.
+pub const MAX_CHUNK_BYTES: u64 = 256 * 1024 * 1024;
+
+impl<'a> McapReader<'a> {
+    /// Checks the magic.
+    pub fn new(bytes: &'a [u8]) -> Result<Self, ReadError> {
+        if bytes.get(..mcap::MAGIC.len()) != Some(mcap::MAGIC) {
+            return Err(ReadError::NotMcap {
+                len: bytes.len().min(8),
+            });
+        }
+        Ok(Self {
+            bytes,
+            pos: mcap::MAGIC.len(),
+            schemas: BTreeMap::new(),
+            channels: BTreeMap::new(),
+            metadata: Vec::new(),
+            profile: None,
+            pending: VecDeque::new(),
+            done: false,
+            complete: false,
+        })
+    }
+
+    /// The channels seen so far (all of them once the iteration has ended).
+    pub fn channels(&self) -> &BTreeMap<u16, ChannelInfo> {
+        &self.channels
+    }
+
+    /// The channel of a topic, if seen.
+    pub fn channel_of(&self, topic: &str) -> Option<&ChannelInfo> {
+        self.channels.values().find(|c| c.topic == topic)
+    }
+
+    /// The metadata records seen so far.
+    pub fn metadata(&self) -> &[mcap::records::Metadata] {
+        &self.metadata
+    }
+
+    /// The header's profile.
+    pub fn profile(&self) -> Option<&str> {
+        self.profile.as_deref()
+    }
+
+    /// Whether the data section was read to its end (false for a file cut
+    /// short, or before the iteration ended).
+    pub fn is_complete(&self) -> bool {
+        self.complete
+    }
+
+    /// The offset up to which the file has been read (the end of the last
+    /// complete record).
+    pub fn offset(&self) -> u64 {
+        self.pos as u64
+    }
+
+    fn apply(&mut self, record: Record<'_>, offset: u64) -> Result<(), ReadError> {
+        match record {
+            Record::Header(h) => self.profile = Some(h.profile),
+            Record::Schema { header, data } => {
+                self.schemas.insert(
+                    header.id,
+                    SchemaInfo {
+                        name: header.name,
+                        encoding: header.encoding,
+                        data: data.into_owned(),
+                    },
+                );
+            }
+            Record::Channel(c) => {
+                let schema = self.schemas.get(&c.schema_id);
+                let info = ChannelInfo {
+                    id: c.id,
+                    topic: c.topic,
+                    message_encoding: c.message_encoding,
+                    schema_id: c.schema_id,
+                    schema_name: schema.map(|s| s.name.clone()).unwrap_or_default(),
+                    schema_encoding: schema.map(|s| s.encoding.clone()).unwrap_or_default(),
+                    schema_data: schema.map(|s| s.data.clone()).unwrap_or_default(),
+                    metadata: c.metadata,
+                };
+                self.channels.insert(c.id, info);
+            }
+            Record::Message { header, data } => {
+                if !self.channels.contains_key(&header.channel_id) {
+                    return Err(ReadError::UnknownChannel {
+                        offset,
+                        channel_id: header.channel_id,
+                    });
+                }
+                self.pending.push_back(RawMessage {
+                    channel_id: header.channel_id,
+                    sequence: header.sequence,
+                    log_time_ns: header.log_time,
+                    publish_time_ns: header.publish_time,
+                    data: data.into_owned(),
+                });
+            }
+            Record::Metadata(m) => self.metadata.push(m),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Reads the next record; Ok(false) at the end of the data section.
+    fn step(&mut self) -> Result<bool, ReadError> {
+        let offset = self.pos as u64;
+        let rest = self.bytes.get(self.pos..).unwrap_or(&[]);
+        if rest.is_empty() {
+            return Err(ReadError::Unfinished { offset });
+        }
+        let opcode = rest.first().copied();
+        let Some((prefix, after)) = rest.split_first_chunk::<RECORD_PREFIX>() else {
+            return Err(ReadError::Truncated {
+                offset,
+                opcode,
+                needed: RECORD_PREFIX as u64,
+                available: rest.len() as u64,
+            });
+        };
+        let [op_byte, len_bytes @ ..] = *prefix;
+        let len = u64::from_le_bytes(len_bytes);
+        let needed = len.saturating_add(RECORD_PREFIX as u64);
+        let body = usize::try_from(len)
+            .ok()
+            .and_then(|n| after.get(..n))
+            .ok_or(ReadError::Truncated {
+                offset,
+                opcode,
+                needed,
+                available: rest.len() as u64,
+            })?;
+        let corrupt = |source| ReadError::Corrupt {
+            offset,
+            opcode: op_byte,
+            source,
+        };
+        match op_byte {
+            op::FOOTER | op::DATA_END => {
+                self.pos += RECORD_PREFIX + body.len();
+                return Ok(false);
+            }
+            op::CHUNK => {
+                let Record::Chunk { header, data } =
+                    mcap::parse_record(op_byte, body).map_err(corrupt)?
+                else {
+                    return Ok(true);
+                };
+                // A corrupt size must not make us allocate it.
+                if header.uncompressed_size > MAX_CHUNK_BYTES {
+                    return Err(ReadError::ChunkTooLarge {
+                        offset,
+                        uncompressed_size: header.uncompressed_size,
+                        limit: MAX_CHUNK_BYTES,
+                    });
+                }
+                // The whole chunk, checked, before any of it is given out.
+                let content = decompress(&header, &data, offset)?;
+                let mut at = 0usize;
+                while at < content.len() {
+                    let inner = content.get(at..).unwrap_or(&[]);
+                    let bad = |why: &'static str| ReadError::BadChunkContent {
+                        offset,
+                        at: at as u64,
+                        why,
+                    };
+                    let (prefix, after) = inner
+                        .split_first_chunk::<RECORD_PREFIX>()
+                        .ok_or(bad("a record prefix is cut"))?;
+                    let [inner_op, len_bytes @ ..] = *prefix;
+                    let body = usize::try_from(u64::from_le_bytes(len_bytes))
+                        .ok()
+                        .and_then(|n| after.get(..n))
+                        .ok_or(bad("a record is longer than the chunk"))?;
+                    if matches!(inner_op, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                        let record = mcap::parse_record(inner_op, body).map_err(corrupt)?;
+                        self.apply(record, offset)?;
+                    }
+                    at += RECORD_PREFIX + body.len();
+                }
+            }
+            op::HEADER | op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
+                let record = mcap::parse_record(op_byte, body).map_err(corrupt)?;
+                self.apply(record, offset)?;
+            }
+            _ => {}
+        }
+        self.pos += RECORD_PREFIX + body.len();
+        Ok(true)
+    }
+
+    /// Every message of the SAR topics ([`Topic`]) decoded, with its topic and
+    /// log time; other topics are skipped.
+    pub fn decoded(self) -> impl Iterator<Item = Result<(Topic, u64, Outgoing), ReadError>> + 'a {
+        let mut reader = self;
+        let mut failed = false;
+        std::iter::from_fn(move || {
+            if failed {
+                return None;
+            }
+            loop {
+                let msg = match reader.next()? {
+                    Ok(m) => m,
+                    Err(e) => {
+                        failed = true;
+                        return Some(Err(e));
+                    }
+                };
+                let channel = reader.channels.get(&msg.channel_id)?;
+                let Some(topic) = Topic::from_name(&channel.topic) else {
+                    continue;
+                };
+                if channel.schema_name != topic.type_name() {
+                    failed = true;
+                    return Some(Err(ReadError::WrongType {
+                        topic: channel.topic.clone(),
+                        expected: topic.type_name(),
+                        found: channel.schema_name.clone(),
+                    }));
+                }
+                return Some(
+                    Outgoing::decode(topic, &msg.data)
+                        .map(|m| (topic, msg.log_time_ns, m))
+                        .map_err(|source| ReadError::Decode {
+                            topic: channel.topic.clone(),
+                            log_time_ns: msg.log_time_ns,
+                            source,
+                        }),
+                );
+            }
+        })
+    }
+
+    /// The messages of `topic` decoded as `M` (the topic's schema must be
+    /// `M::TYPE_NAME`), with their log times. Other topics are skipped.
+    pub fn typed<M: RosMessage + 'a>(
+        self,
+        topic: &'a str,
+    ) -> impl Iterator<Item = Result<(u64, M), ReadError>> + 'a {
+        let mut reader = self;
+        let mut checked: Option<u16> = None;
+        let mut failed = false;
+        std::iter::from_fn(move || {
+            if failed {
+                return None;
+            }
+            loop {
+                let msg = match reader.next()? {
+                    Ok(m) => m,
+                    Err(e) => {
+                        failed = true;
+                        return Some(Err(e));
+                    }
+                };
+                let channel = reader.channels.get(&msg.channel_id)?;
+                if channel.topic != topic {
+                    continue;
+                }
+                if checked != Some(msg.channel_id) {
+                    if channel.schema_name != M::TYPE_NAME {
+                        failed = true;
+                        return Some(Err(ReadError::WrongType {
+                            topic: topic.to_owned(),
+                            expected: M::TYPE_NAME,
+                            found: channel.schema_name.clone(),
+                        }));
+                    }
+                    checked = Some(msg.channel_id);
+                }
+                return Some(M::decode(&msg.data).map(|m| (msg.log_time_ns, m)).map_err(
+                    |source| ReadError::Decode {
+                        topic: topic.to_owned(),
+                        log_time_ns: msg.log_time_ns,
+                        source,
+                    },
+                ));
+            }
+        })
+    }
+}
+
+impl Iterator for McapReader<'_> {
+    type Item = Result<RawMessage, ReadError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(m) = self.pending.pop_front() {
+                return Some(Ok(m));
+            }
+            if self.done {
+                return None;
+            }
+            match self.step() {
+                Ok(true) => {}
+                Ok(false) => {
+                    self.done = true;
+                    self.complete = true;
+                }
+                Err(e) => {
+                    self.done = true;
+                    return Some(Err(e));
+                }
+            }
+        }
+    }
+}
+
+/// The chunk's records, decompressed and checked against its CRC, or why not.
+fn decompress(
+    header: &mcap::records::ChunkHeader,
+    data: &[u8],
+    offset: u64,
+) -> Result<Vec<u8>, ReadError> {
+    let size = usize::try_from(header.uncompressed_size).unwrap_or(usize::MAX);
+    let bad = |why: &'static str| ReadError::BadChunkContent { offset, at: 0, why };
+    let content = match header.compression.as_str() {
+        "" => data.to_vec(),
+        "zstd" => zstd::bulk::decompress(data, size).map_err(|_| bad("zstd refused the data"))?,
+        _ => return Err(bad("compression other than zstd or none")),
+    };
+    if content.len() != size {
+        return Err(bad("the size differs from the chunk header's"));
+    }
+    if header.uncompressed_crc != 0 && crc32fast::hash(&content) != header.uncompressed_crc {
+        return Err(bad("the CRC differs from the chunk header's"));
+    }
+    Ok(content)
+}
+
+/// Reads a whole file into memory.
+pub fn read_file(path: &Path) -> Result<Vec<u8>, ReadError> {
+    std::fs::read(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// What [`recover`] did.
+#[derive(Debug)]
+pub struct RecoverReport {
+    /// Messages copied.
+    pub messages: u64,
+    /// Channels copied.
+    pub channels: usize,
+    /// Whether the input was complete already.
+    pub input_complete: bool,
+    /// Where and why the input stopped, when it was cut short.
+    pub stopped: Option<ReadError>,
+}
+
+/// Why [`recover`] failed.
+#[non_exhaustive]
+#[derive(Debug, thiserror::Error)]
+pub enum RecoverError {
+    /// The input could not be read at all.
+    #[error("reading: {0}")]
+    Read(#[from] ReadError),
+    /// The output could not be written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The output.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The MCAP writer refused.
+    #[error("{path}: MCAP: {source}")]
+    Mcap {
+        /// The output.
+        path: PathBuf,
+        /// The cause.
+        source: mcap::McapError,
+    },
+    /// The output is the input.
+    #[error("the output {0} is the input: recover writes a new file")]
+    SamePath(PathBuf),
+}
+
+/// Rewrites `input` (complete or cut short) into `output`, a complete file
+/// with summary and indexes: every message of the input's complete chunks,
+/// with its channel, sequence and times, its metadata, and metadata
+/// `sar_recover` saying where and why the input stopped.
+pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
+    if input == output {
+        return Err(RecoverError::SamePath(output.to_path_buf()));
+    }
+    let bytes = read_file(input)?;
+    let mut reader = McapReader::new(&bytes)?;
+    let mcap_err = |source| RecoverError::Mcap {
+        path: output.to_path_buf(),
+        source,
+    };
+    let (file, handle, _) = CountingFile::create(output).map_err(|source| RecoverError::Io {
+        path: output.to_path_buf(),
+        source,
+    })?;
+    let options = FileOptions::new(".", "recovered").mcap_options();
+    let mut stopped = None;
+    let mut messages = 0u64;
+    let mut writer = None;
+    let mut file = Some(file);
+    let mut known = BTreeMap::new();
+    loop {
+        let msg = match reader.next() {
+            None => break,
+            Some(Ok(m)) => m,
+            Some(Err(e)) => {
+                stopped = Some(e);
+                break;
+            }
+        };
+        let w = match (&mut writer, file.take()) {
+            (Some(w), _) => w,
+            (None, Some(f)) => {
+                let profile = reader.profile().unwrap_or("").to_owned();
+                writer.insert(
+                    mcap::Writer::with_options(f, options.clone().profile(profile))
+                        .map_err(mcap_err)?,
+                )
+            }
+            (None, None) => break,
+        };
+        if let std::collections::btree_map::Entry::Vacant(slot) = known.entry(msg.channel_id)
+            && let Some(c) = reader.channels().get(&msg.channel_id)
+        {
+            if c.schema_id != 0 {
+                w.add_schema_with_id(
+                    c.schema_id,
+                    &c.schema_name,
+                    &c.schema_encoding,
+                    &c.schema_data,
+                )
+                .map_err(mcap_err)?;
+            }
+            w.add_channel_with_id(
+                c.id,
+                c.schema_id,
+                &c.topic,
+                &c.message_encoding,
+                &c.metadata,
+            )
+            .map_err(mcap_err)?;
+            slot.insert(());
+        }
+        let header = mcap::records::MessageHeader {
+            channel_id: msg.channel_id,
+            sequence: msg.sequence,
+            log_time: msg.log_time_ns,
+            publish_time: msg.publish_time_ns,
+        };
+        w.write_to_known_channel(&header, &msg.data)
+            .map_err(mcap_err)?;
+        messages += 1;
+    }
+    let mut w = match (writer, file) {
+        (Some(w), _) => w,
+        (None, Some(f)) => {
+            let profile = reader.profile().unwrap_or("").to_owned();
+            mcap::Writer::with_options(f, options.profile(profile)).map_err(mcap_err)?
+        }
+        (None, None) => return Err(RecoverError::SamePath(output.to_path_buf())),
+    };
+    // Channels without messages are kept too.
+    for c in reader.channels().values() {
+        if known.contains_key(&c.id) {
+            continue;
+        }
+        if c.schema_id != 0 {
+            w.add_schema_with_id(
+                c.schema_id,
+                &c.schema_name,
+                &c.schema_encoding,
+                &c.schema_data,
+            )
+            .map_err(mcap_err)?;
+        }
+        w.add_channel_with_id(
+            c.id,
+            c.schema_id,
+            &c.topic,
+            &c.message_encoding,
+            &c.metadata,
+        )
+        .map_err(mcap_err)?;
+    }
+    for m in reader.metadata() {
+        w.write_metadata(m).map_err(mcap_err)?;
+    }
+    let mut info = BTreeMap::from([
+        ("source".to_owned(), input.display().to_string()),
+        ("messages".to_owned(), messages.to_string()),
+        ("read_up_to_byte".to_owned(), reader.offset().to_string()),
+        ("input_bytes".to_owned(), bytes.len().to_string()),
+    ]);
+    if let Some(e) = &stopped {
+        info.insert("stopped".to_owned(), e.to_string());
+    }
+    w.write_metadata(&mcap::records::Metadata {
+        name: "sar_recover".into(),
+        metadata: info,
+    })
+    .map_err(mcap_err)?;
+    w.finish().map_err(mcap_err)?;
+    drop(w);
+    handle.sync_all().map_err(|source| RecoverError::Io {
+        path: output.to_path_buf(),
+        source,
+    })?;
+    Ok(RecoverReport {
+        messages,
+        channels: reader.channels().len(),
+        input_complete: reader.is_complete(),
+        stopped,
+    })
+}

@@ -1,0 +1,309 @@
+//! The recorder: the control loop pushes fixed-size messages into a bounded
+//! wait-free queue and never waits; a writer thread drains it into rotating
+//! MCAP files. When the queue is full the message is dropped and counted; the
+//! count is readable by the loop (to publish it) and written into the files
+//! (`/sar/recorder/drops` periodically and at each close, and metadata
+//! `sar_recorder` at each close).
+//!
+//! The queue is `rtrb`'s single-producer single-consumer ring: a push is a
+//! copy into a preallocated slot and two atomic operations, wait-free and
+//! allocation-free (the loop is the only producer, the writer the only
+//! consumer, so a multi-producer queue's compare-and-swap loops would buy
+//! nothing).
+
+use super::file::{FileOptions, RotatingWriter, WriteError};
+use super::msgs::{Outgoing, RecorderDrops};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// The recorder's settings.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecorderConfig {
+    /// The files.
+    pub files: FileOptions,
+    /// Messages the queue holds (at 4 kHz and about six messages a cycle,
+    /// 65536 is about 2.7 s of disk stall).
+    pub queue_capacity: usize,
+    /// Log-time interval of the `/sar/recorder/drops` messages and of the syncs
+    /// to disk (chunk ended, fsync), ns.
+    pub status_interval_ns: u64,
+    /// How long the writer sleeps when the queue is empty.
+    pub idle_wait: Duration,
+}
+
+impl RecorderConfig {
+    /// A 65536-message queue, status and sync every second, 1 ms idle wait.
+    pub fn new(files: FileOptions) -> Self {
+        Self {
+            files,
+            queue_capacity: 65536,
+            status_interval_ns: 1_000_000_000,
+            idle_wait: Duration::from_millis(1),
+        }
+    }
+}
+
+/// State shared by the loop's side and the writer thread.
+#[derive(Debug, Default)]
+struct Shared {
+    dropped: AtomicU64,
+    stop: AtomicBool,
+    failed: AtomicBool,
+}
+
+/// What a finished recording wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordingReport {
+    /// The files, in order.
+    pub files: Vec<PathBuf>,
+    /// Messages written (including the recorder's own status messages).
+    pub written: u64,
+    /// Messages dropped (queue full, or the writer failed).
+    pub dropped: u64,
+}
+
+/// Why a recording ended badly.
+#[non_exhaustive]
+#[derive(Debug, thiserror::Error)]
+pub enum RecorderError {
+    /// A setting is out of range.
+    #[error("recorder setting {field} = {value}: {why}")]
+    Setting {
+        /// The setting.
+        field: &'static str,
+        /// Its value.
+        value: u64,
+        /// What is wrong.
+        why: &'static str,
+    },
+    /// Writing failed; the message that failed and every one after it were
+    /// dropped (and counted: `dropped` is the final count).
+    #[error("recording failed after {written} messages ({dropped} dropped): {source}")]
+    Write {
+        /// Messages written before.
+        written: u64,
+        /// Messages dropped in all.
+        dropped: u64,
+        /// The cause.
+        source: WriteError,
+    },
+    /// The writer thread could not be started.
+    #[error("the writer thread could not start: {0}")]
+    Spawn(std::io::Error),
+    /// The writer thread panicked.
+    #[error("the writer thread panicked")]
+    WriterPanicked,
+}
+
+/// The loop's side: push messages, read the drop count.
+///
+/// Dropping it without [`Recorder::stop`] lets the writer thread drain the
+/// queue and close the file on its own (the report is then lost).
+pub struct Recorder {
+    producer: rtrb::Producer<Outgoing>,
+    shared: Arc<Shared>,
+    writer: Option<JoinHandle<Result<RecordingReport, RecorderError>>>,
+    pending: Option<PendingWriter>,
+}
+
+/// The writer side before its thread starts (a test can fill the queue first).
+pub struct PendingWriter {
+    consumer: rtrb::Consumer<Outgoing>,
+    shared: Arc<Shared>,
+    config: RecorderConfig,
+    files: RotatingWriter,
+}
+
+impl Recorder {
+    /// Creates the recorder and its writer thread.
+    pub fn start(config: RecorderConfig) -> Result<Self, RecorderError> {
+        let mut recorder = Self::new_paused(config)?;
+        recorder.resume()?;
+        Ok(recorder)
+    }
+
+    /// Creates the recorder with its writer not started: pushes fill the queue,
+    /// then drop. [`Recorder::resume`] starts the writer.
+    pub fn new_paused(config: RecorderConfig) -> Result<Self, RecorderError> {
+        if config.queue_capacity == 0 {
+            return Err(RecorderError::Setting {
+                field: "queue_capacity",
+                value: 0,
+                why: "must be positive",
+            });
+        }
+        if config.status_interval_ns == 0 {
+            return Err(RecorderError::Setting {
+                field: "status_interval_ns",
+                value: 0,
+                why: "must be positive",
+            });
+        }
+        let files =
+            RotatingWriter::new(config.files.clone()).map_err(|source| RecorderError::Write {
+                written: 0,
+                dropped: 0,
+                source,
+            })?;
+        let (producer, consumer) = rtrb::RingBuffer::new(config.queue_capacity);
+        let shared = Arc::new(Shared::default());
+        Ok(Self {
+            producer,
+            shared: Arc::clone(&shared),
+            writer: None,
+            pending: Some(PendingWriter {
+                consumer,
+                shared,
+                config,
+                files,
+            }),
+        })
+    }
+
+    /// Starts the writer thread (no effect once started).
+    pub fn resume(&mut self) -> Result<(), RecorderError> {
+        if let Some(pending) = self.pending.take() {
+            let handle = std::thread::Builder::new()
+                .name("sar-recorder".into())
+                .spawn(move || pending.run())
+                .map_err(RecorderError::Spawn)?;
+            self.writer = Some(handle);
+        }
+        Ok(())
+    }
+
+    /// Queues a message; never blocks, never allocates. Returns false when
+    /// the queue was full and the message was dropped (and counted).
+    #[inline]
+    pub fn push(&mut self, msg: Outgoing) -> bool {
+        match self.producer.push(msg) {
+            Ok(()) => true,
+            Err(_) => {
+                self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                false
+            }
+        }
+    }
+
+    /// Messages dropped so far.
+    pub fn dropped(&self) -> u64 {
+        self.shared.dropped.load(Ordering::Relaxed)
+    }
+
+    /// Whether the writer has failed (from then on every message is dropped).
+    pub fn failed(&self) -> bool {
+        self.shared.failed.load(Ordering::Relaxed)
+    }
+
+    /// Free slots in the queue now.
+    pub fn free_slots(&self) -> usize {
+        self.producer.slots()
+    }
+
+    /// Stops: the writer drains the queue, writes the final status and closes
+    /// the last file. A paused writer is started first, so nothing queued is
+    /// lost.
+    pub fn stop(mut self) -> Result<RecordingReport, RecorderError> {
+        self.shared.stop.store(true, Ordering::Release);
+        self.resume()?;
+        match self.writer.take() {
+            Some(handle) => {
+                handle.thread().unpark();
+                handle.join().map_err(|_| RecorderError::WriterPanicked)?
+            }
+            None => Err(RecorderError::WriterPanicked),
+        }
+    }
+}
+
+impl PendingWriter {
+    fn status(&self, stamp_ns: u64) -> RecorderDrops {
+        RecorderDrops {
+            stamp_ns,
+            dropped: self.shared.dropped.load(Ordering::Relaxed),
+            written: self.files.written(),
+            queue_capacity: self.config.queue_capacity as u64,
+        }
+    }
+
+    fn fail(&mut self, source: WriteError) -> RecorderError {
+        self.shared.failed.store(true, Ordering::Relaxed);
+        RecorderError::Write {
+            written: self.files.written(),
+            dropped: self.shared.dropped.load(Ordering::Relaxed),
+            source,
+        }
+    }
+
+    fn run(mut self) -> Result<RecordingReport, RecorderError> {
+        let mut last_ns = 0u64;
+        let mut next_status_ns: Option<u64> = None;
+        let mut error: Option<RecorderError> = None;
+        loop {
+            // Read the flag before draining: whatever was pushed before stop()
+            // is drained in this pass. A recorder dropped without stop() ends
+            // the same way (its producer is gone).
+            let stopping = self.shared.stop.load(Ordering::Acquire) || self.consumer.is_abandoned();
+            let mut drained = 0usize;
+            while let Ok(msg) = self.consumer.pop() {
+                drained += 1;
+                if error.is_some() {
+                    self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                    continue;
+                }
+                // The status of the file a rotation closes: up to the last
+                // message written, not this one.
+                let status = self.status(last_ns);
+                last_ns = last_ns.max(msg.stamp_ns());
+                if let Err(e) = self.files.write(&msg, &status) {
+                    self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                    error = Some(self.fail(e));
+                    continue;
+                }
+                let due = *next_status_ns.get_or_insert(last_ns + self.config.status_interval_ns);
+                if last_ns >= due {
+                    next_status_ns = Some(last_ns + self.config.status_interval_ns);
+                    let status = self.status(last_ns);
+                    let result = self
+                        .files
+                        .write(&Outgoing::RecorderDrops(status), &status)
+                        .and_then(|()| self.files.sync());
+                    if let Err(e) = result {
+                        error = Some(self.fail(e));
+                    }
+                }
+            }
+            if stopping {
+                break;
+            }
+            if drained == 0 {
+                std::thread::park_timeout(self.config.idle_wait);
+            }
+        }
+        if error.is_none() {
+            let status = self.status(last_ns);
+            if let Err(e) = self.files.close(&status) {
+                error = Some(self.fail(e));
+            }
+        }
+        match error {
+            // The count at the end, not at the failure.
+            Some(RecorderError::Write {
+                written, source, ..
+            }) => Err(RecorderError::Write {
+                written,
+                dropped: self.shared.dropped.load(Ordering::Relaxed),
+                source,
+            }),
+            Some(e) => Err(e),
+            None => Ok(RecordingReport {
+                files: self.files.files().to_vec(),
+                written: self.files.written(),
+                dropped: self.shared.dropped.load(Ordering::Relaxed),
+            }),
+        }
+    }
+}

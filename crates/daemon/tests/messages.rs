@@ -1,0 +1,346 @@
+//! Round trips of every message type, the exact CDR layout of one message,
+//! the schemas, and decoding of arbitrary or cut bytes (typed errors, no panic).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use proptest::prelude::*;
+use proptest::test_runner::{Config, RngSeed};
+use sar_daemon::record::cdr::{CdrError, CdrReader, FixedStr};
+use sar_daemon::record::msgs::*;
+
+fn config() -> Config {
+    Config {
+        cases: 512,
+        rng_seed: RngSeed::Fixed(0x5a_2026),
+        failure_persistence: None,
+        ..Config::default()
+    }
+}
+
+fn roundtrip(msg: &Outgoing) {
+    let mut bytes = Vec::new();
+    msg.encode(&mut bytes).unwrap();
+    let back = Outgoing::decode(msg.topic(), &bytes).unwrap();
+    let mut again = Vec::new();
+    back.encode(&mut again).unwrap();
+    assert_eq!(bytes, again, "{:?}", msg.topic());
+    // Every test message is finite: equality by value too.
+    assert_eq!(&back, msg);
+}
+
+#[test]
+fn every_message_type_round_trips() {
+    let mut seen = std::collections::BTreeSet::new();
+    for k in 0..300 {
+        for m in common::cycle_messages(k) {
+            seen.insert(m.topic());
+            roundtrip(&m);
+        }
+    }
+    let drops = Outgoing::RecorderDrops(RecorderDrops {
+        stamp_ns: 5,
+        dropped: 7,
+        written: 11,
+        queue_capacity: 13,
+    });
+    roundtrip(&drops);
+    seen.insert(drops.topic());
+    assert_eq!(seen.len(), Topic::ALL.len());
+}
+
+#[test]
+fn wrench_stamped_layout_is_ros2_cdr() {
+    let m = WrenchStamped::sensor(3_000_000_007, [1.0, 2.0, 3.0], [4.0, 5.0, 6.0]);
+    let mut b = Vec::new();
+    m.encode(&mut b).unwrap();
+    let mut want = vec![0x00, 0x01, 0x00, 0x00];
+    want.extend_from_slice(&3i32.to_le_bytes()); // sec
+    want.extend_from_slice(&7u32.to_le_bytes()); // nanosec
+    want.extend_from_slice(&7u32.to_le_bytes()); // "sensor" + NUL
+    want.extend_from_slice(b"sensor\0");
+    // 19 bytes after the header: pad to 24 for the first f64.
+    want.extend_from_slice(&[0; 5]);
+    for x in [1.0f64, 2.0, 3.0, 4.0, 5.0, 6.0] {
+        want.extend_from_slice(&x.to_le_bytes());
+    }
+    assert_eq!(b, want);
+}
+
+#[test]
+fn joint_state_layout_and_foreign_order() {
+    let m = ActiveJointState {
+        stamp_ns: 1,
+        q_m: [0.1, 0.2, 0.3],
+    };
+    let mut b = Vec::new();
+    m.encode(&mut b).unwrap();
+    let js = JointState::decode(&b).unwrap();
+    assert_eq!(js.name, ["q1", "q2", "q3"]);
+    assert_eq!(js.position, [0.1, 0.2, 0.3]);
+    assert!(js.velocity.is_empty() && js.effort.is_empty());
+    // Another program's message: other order, extra joint, velocities.
+    let foreign = JointState {
+        stamp_ns: 9,
+        frame_id: "world".into(),
+        name: vec!["q3".into(), "gripper".into(), "q1".into(), "q2".into()],
+        position: vec![3.0, 9.0, 1.0, 2.0],
+        velocity: vec![0.0; 4],
+        effort: vec![],
+    };
+    foreign.encode(&mut b).unwrap();
+    let got = ActiveJointState::decode(&b).unwrap();
+    assert_eq!(got.q_m, [1.0, 2.0, 3.0]);
+    assert_eq!(got.stamp_ns, 9);
+    let missing = JointState {
+        name: vec!["q1".into(), "q2".into()],
+        position: vec![1.0, 2.0],
+        ..foreign
+    };
+    missing.encode(&mut b).unwrap();
+    assert_eq!(
+        ActiveJointState::decode(&b),
+        Err(CdrError::MissingJoint { name: "q3" })
+    );
+}
+
+#[test]
+fn schemas_name_every_nested_type() {
+    let ws = Topic::SensorWrench.schema();
+    for section in [
+        "MSG: std_msgs/msg/Header\n",
+        "MSG: builtin_interfaces/msg/Time\n",
+        "MSG: geometry_msgs/msg/Wrench\n",
+        "MSG: geometry_msgs/msg/Vector3\n",
+    ] {
+        assert!(ws.contains(section), "{section}");
+    }
+    for t in Topic::ALL {
+        let s = t.schema();
+        assert!(s.contains("std_msgs/Header header"), "{t:?}");
+        assert!(s.contains("MSG: builtin_interfaces/msg/Time"), "{t:?}");
+        assert_eq!(Topic::from_name(t.name()), Some(t));
+    }
+    assert_eq!(Topic::CycleInput.type_name(), "sar_msgs/msg/CycleInput");
+}
+
+#[test]
+fn bad_values_are_typed_errors() {
+    let mut b = Vec::new();
+    let mut m = match common::cycle_messages(1)[0] {
+        Outgoing::CycleInput(m) => m,
+        _ => unreachable!(),
+    };
+    m.encode(&mut b).unwrap();
+    assert!(CycleInput::decode(&b).is_ok());
+    // The header.
+    assert_eq!(
+        CycleInput::decode(&b[..3]),
+        Err(CdrError::NoHeader { len: 3 })
+    );
+    let mut big_endian = b.clone();
+    big_endian[1] = 0x00;
+    assert!(matches!(
+        CycleInput::decode(&big_endian),
+        Err(CdrError::BadHeader { .. })
+    ));
+    // A stamp beyond i32 seconds cannot be written.
+    m.stamp_ns = u64::MAX;
+    assert!(matches!(
+        m.encode(&mut b),
+        Err(CdrError::StampTooLarge { .. })
+    ));
+    // A negative time cannot be read.
+    let w = WrenchStamped::sensor(0, [0.0; 3], [0.0; 3]);
+    w.encode(&mut b).unwrap();
+    b[4..8].copy_from_slice(&(-1i32).to_le_bytes());
+    assert!(matches!(
+        WrenchStamped::decode(&b),
+        Err(CdrError::BadTime { sec: -1, .. })
+    ));
+    // A frame id longer than the field.
+    let long = "x".repeat(40);
+    let js = JointState {
+        frame_id: long,
+        ..JointState::default()
+    };
+    js.encode(&mut b).unwrap();
+    let mut r = CdrReader::new(&b).unwrap();
+    r.time().unwrap();
+    assert!(matches!(
+        r.fixed_str::<32>(),
+        Err(CdrError::StringTooLong {
+            len: 40,
+            max: 32,
+            ..
+        })
+    ));
+}
+
+#[test]
+fn fixed_str_cuts_at_char_boundaries() {
+    use std::fmt::Write;
+    let mut t = FixedStr::<5>::EMPTY;
+    write!(t, "abcü€").unwrap();
+    assert_eq!(t.as_str(), "abcü");
+    assert_eq!(FixedStr::<3>::truncating("aü€").as_str(), "aü");
+    assert!(FixedStr::<3>::new("abcd").is_none());
+}
+
+fn f3() -> impl Strategy<Value = [f64; 3]> {
+    prop::array::uniform3(any::<u64>().prop_map(f64::from_bits))
+}
+
+prop_compose! {
+    fn cycle_input()(
+        stamp_ns in 0u64..(i32::MAX as u64 * 1_000_000_000),
+        ints in prop::array::uniform8(any::<u64>()),
+        f in prop::array::uniform5(f3()),
+        bools in prop::array::uniform3(any::<bool>()),
+        codes in (0u8..3, 0u8..4, 0u8..9),
+        axis in any::<i8>(),
+    ) -> CycleInput {
+        CycleInput {
+            stamp_ns,
+            cycle: ints[0],
+            now_ns: ints[1],
+            clock_status: ClockStatusCode::from_code(codes.0).unwrap(),
+            sensor_force_n: f[0],
+            sensor_torque_nm: f[1],
+            sensor_counter: ints[2] as u32,
+            sensor_status: ints[3] as u32,
+            sensor_stamp_ns: ints[4],
+            sensor_valid: bools[0],
+            joints_q_m: f[2],
+            joints_stamp_ns: ints[5],
+            joints_valid: bools[1],
+            drive_state: DriveStateCode::from_code(codes.1).unwrap(),
+            drive_fault_axis: axis,
+            drive_fault_code: ints[6] as u16,
+            target_q_m: f[3],
+            target_valid: bools[2],
+            command_kind: CommandKindCode::from_code(codes.2).unwrap(),
+            command_values: f[4],
+            command_arg: ints[7],
+        }
+    }
+}
+
+prop_compose! {
+    fn estimator_state()(
+        stamp_ns in 0u64..(i32::MAX as u64 * 1_000_000_000),
+        ints in prop::array::uniform6(any::<u64>()),
+        f in prop::array::uniform6(f3()),
+        s in prop::array::uniform4(any::<u64>().prop_map(f64::from_bits)),
+        codes in (0u8..5, 0u8..4, any::<u8>(), any::<u32>()),
+        text in "\\PC{0,40}",
+    ) -> EstimatorState {
+        EstimatorState {
+            stamp_ns,
+            cycle: ints[0],
+            now_ns: ints[1],
+            sensor_stamp_ns: ints[2],
+            joints_stamp_ns: ints[3],
+            sensor_age_ns: ints[4],
+            joints_age_ns: ints[5],
+            tip_outcome: TipOutcomeCode::from_code(codes.0).unwrap(),
+            ujoint_m: f[0],
+            tip_m: f[1],
+            support_distance_m: s[0],
+            ujoint_force_n: f[2],
+            tip_force_n: f[3],
+            tip_force_std_n: f[4],
+            axial_n: s[1],
+            lateral_n: s[2],
+            torsion_nm: s[3],
+            tip_force_filtered_n: f[5],
+            guard_state: GuardStateCode::from_code(codes.1).unwrap(),
+            guard_reason_code: codes.2,
+            guard_reason_text: ReasonText::truncating(&text),
+            flags: codes.3,
+        }
+    }
+}
+
+/// Encoding, decoding and encoding again gives the same bytes: every field,
+/// NaN payloads included, survives bit for bit.
+fn bit_exact(msg: Outgoing) -> Result<(), TestCaseError> {
+    let mut a = Vec::new();
+    msg.encode(&mut a).unwrap();
+    let back = Outgoing::decode(msg.topic(), &a).unwrap();
+    let mut b = Vec::new();
+    back.encode(&mut b).unwrap();
+    prop_assert_eq!(a, b);
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    #[test]
+    fn cycle_input_bit_exact(m in cycle_input()) {
+        bit_exact(Outgoing::CycleInput(m))?;
+    }
+
+    #[test]
+    fn estimator_state_bit_exact(m in estimator_state()) {
+        bit_exact(Outgoing::EstimatorState(m))?;
+    }
+
+    #[test]
+    fn wrench_and_joints_bit_exact(
+        t in 0u64..(i32::MAX as u64 * 1_000_000_000), f in f3(), g in f3(), frame in "[a-z_/]{0,32}",
+    ) {
+        bit_exact(Outgoing::SensorWrench(WrenchStamped {
+            stamp_ns: t, frame_id: FrameId::new(&frame).unwrap(), force_n: f, torque_nm: g,
+        }))?;
+        bit_exact(Outgoing::Joints(ActiveJointState { stamp_ns: t, q_m: f }))?;
+        bit_exact(Outgoing::PassiveJoints(PassiveJointState { stamp_ns: t, q_rad: [g[0], g[1]] }))?;
+        bit_exact(Outgoing::GuardEvent(GuardEvent {
+            stamp_ns: t, cycle: t ^ 3, from_state: GuardStateCode::Stop,
+            to_state: GuardStateCode::Fault, reason_code: 7,
+            reason_text: ReasonText::truncating(&frame),
+        }))?;
+    }
+
+    /// Arbitrary bytes never panic the decoder, for every topic.
+    #[test]
+    fn arbitrary_bytes_are_errors_not_panics(
+        mut bytes in prop::collection::vec(any::<u8>(), 0..400), header in any::<bool>(),
+    ) {
+        if header && bytes.len() >= 4 {
+            bytes[..4].copy_from_slice(&[0, 1, 0, 0]);
+        }
+        for t in Topic::ALL {
+            let _ = Outgoing::decode(t, &bytes);
+        }
+        let _ = JointState::decode(&bytes);
+    }
+
+    /// Every strict prefix of a valid message is a typed error.
+    #[test]
+    fn cut_messages_are_errors(k in 0u64..1000) {
+        for m in common::cycle_messages(k) {
+            let mut b = Vec::new();
+            m.encode(&mut b).unwrap();
+            for cut in 0..b.len() {
+                prop_assert!(Outgoing::decode(m.topic(), &b[..cut]).is_err(), "{:?} cut at {}", m.topic(), cut);
+            }
+        }
+    }
+}
+
+/// A queue slot stays small: 65536 slots (the default) are under 32 MiB.
+#[test]
+fn outgoing_is_small_and_copy() {
+    let size = std::mem::size_of::<Outgoing>();
+    println!("size_of::<Outgoing>() = {size} bytes");
+    assert!(size <= 512, "{size}");
+    fn copy<T: Copy + Send + 'static>() {}
+    copy::<Outgoing>();
+}

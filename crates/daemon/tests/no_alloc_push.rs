@@ -1,0 +1,91 @@
+//! A push onto the recorder's queue does not allocate, accepted or dropped:
+//! counted by a global allocator that counts each thread's allocations (the
+//! writer thread allocates as it likes; the loop's thread must not).
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use sar_daemon::record::msgs::Outgoing;
+use sar_daemon::record::{FileOptions, Recorder, RecorderConfig};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: forwards the caller's layout to the system allocator.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: ptr was allocated by System with this layout.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: as for realloc's contract.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations() -> u64 {
+    ALLOCATIONS.with(|c| c.get())
+}
+
+#[test]
+fn push_does_not_allocate() {
+    let dir = common::scratch("no_alloc");
+    let mut config = RecorderConfig::new(FileOptions::new(&dir, "rec"));
+    config.queue_capacity = 4096;
+    // Prepared before counting: the messages of 2000 cycles.
+    let msgs: Vec<Outgoing> = (0..2000).flat_map(common::cycle_messages).collect();
+
+    // Writer running: pushes accepted.
+    let mut rec = Recorder::start(config.clone()).unwrap();
+    let before = allocations();
+    let mut accepted = 0u64;
+    for m in &msgs[..1000] {
+        accepted += u64::from(rec.push(*m));
+    }
+    let during = allocations() - before;
+    let _ = rec.dropped();
+    assert_eq!(
+        during, 0,
+        "{during} allocations in {accepted} accepted pushes"
+    );
+    assert!(accepted > 0);
+    rec.stop().unwrap();
+
+    // Writer stalled: most pushes dropped, counted, still no allocation.
+    let mut rec = Recorder::new_paused(config).unwrap();
+    let before = allocations();
+    let mut dropped = 0u64;
+    for m in &msgs {
+        dropped += u64::from(!rec.push(*m));
+    }
+    let count = rec.dropped();
+    let during = allocations() - before;
+    assert_eq!(during, 0, "{during} allocations in {} pushes", msgs.len());
+    assert_eq!(dropped, msgs.len() as u64 - 4096);
+    assert_eq!(count, dropped);
+    rec.stop().unwrap();
+
+    // The counter counts: an allocation on this thread is seen.
+    let before = allocations();
+    let v = std::hint::black_box(vec![1u8; 10]);
+    assert!(allocations() > before, "{v:?}");
+}

@@ -1,0 +1,489 @@
+//! Recordings written by the recorder and read back: bit for bit, cut short at
+//! many byte offsets (read up to the last complete chunk, never a panic) and
+//! recovered, rotated by size and by duration, and drops counted when the
+//! writer is stalled.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use sar_daemon::record::msgs::*;
+use sar_daemon::record::reader::ReadError;
+use sar_daemon::record::*;
+use std::path::Path;
+
+fn config(dir: &Path, chunk: u64) -> RecorderConfig {
+    let mut files = FileOptions::new(dir, "rec");
+    files.chunk_size_bytes = chunk;
+    let mut c = RecorderConfig::new(files);
+    c.queue_capacity = 1 << 16;
+    c
+}
+
+/// Records cycles 0..n; the queue holds them all, so nothing may drop.
+fn record(config: RecorderConfig, n: u64) -> (RecordingReport, Vec<Outgoing>) {
+    let mut rec = Recorder::start(config).unwrap();
+    let mut pushed = Vec::new();
+    for k in 0..n {
+        for m in common::cycle_messages(k) {
+            assert!(rec.push(m));
+            pushed.push(m);
+        }
+    }
+    let report = rec.stop().unwrap();
+    assert_eq!(report.dropped, 0);
+    (report, pushed)
+}
+
+fn encoded(m: &Outgoing) -> Vec<u8> {
+    let mut b = Vec::new();
+    m.encode(&mut b).unwrap();
+    b
+}
+
+/// All messages of a file (topic, raw) and how the read ended.
+fn read_all(bytes: &[u8]) -> (Vec<(String, RawMessage)>, Option<ReadError>, McapReader<'_>) {
+    let mut reader = McapReader::new(bytes).unwrap();
+    let mut out = Vec::new();
+    let mut end = None;
+    for item in reader.by_ref() {
+        match item {
+            Ok(m) => out.push((String::new(), m)),
+            Err(e) => end = Some(e),
+        }
+    }
+    for (topic, m) in &mut out {
+        *topic = reader.channels()[&m.channel_id].topic.clone();
+    }
+    (out, end, reader)
+}
+
+#[test]
+fn recording_reads_back_bit_for_bit() {
+    let dir = common::scratch("bit_for_bit");
+    let (report, pushed) = record(config(&dir, 64 * 1024), 2000);
+    assert_eq!(report.files.len(), 1);
+    let bytes = read_file(&report.files[0]).unwrap();
+    let (msgs, end, reader) = read_all(&bytes);
+    assert!(end.is_none(), "{end:?}");
+    assert!(reader.is_complete());
+    assert_eq!(reader.profile(), Some("ros2"));
+    // Every topic has its channel, with its schema, in every file.
+    assert_eq!(reader.channels().len(), Topic::ALL.len());
+    for t in Topic::ALL {
+        let c = reader.channel_of(t.name()).unwrap();
+        assert_eq!(c.message_encoding, "cdr");
+        assert_eq!(c.schema_encoding, "ros2msg");
+        assert_eq!(c.schema_name, t.type_name());
+        assert_eq!(c.schema_data, t.schema().as_bytes());
+    }
+    // The pushed messages, in order, byte for byte; then the final status.
+    let (data, status) = msgs.split_at(pushed.len());
+    for (m, (topic, raw)) in pushed.iter().zip(data) {
+        assert_eq!(topic, m.topic().name());
+        assert_eq!(raw.data, encoded(m));
+        assert_eq!(raw.log_time_ns, m.stamp_ns());
+        assert_eq!(raw.publish_time_ns, m.stamp_ns());
+    }
+    // Status messages: one a second of log time (2000 cycles = 0.5 s: none)
+    // and one at close.
+    assert_eq!(status.len(), 1);
+    let drops = RecorderDrops::decode(&status[0].1.data).unwrap();
+    assert_eq!(drops.dropped, 0);
+    assert_eq!(drops.written, pushed.len() as u64 + 1);
+    assert_eq!(drops.stamp_ns, common::now_ns(1999));
+    let meta = reader
+        .metadata()
+        .iter()
+        .find(|m| m.name == "sar_recorder")
+        .unwrap();
+    assert_eq!(meta.metadata["dropped"], "0");
+    // Typed reading by topic.
+    let inputs: Vec<_> = McapReader::new(&bytes)
+        .unwrap()
+        .typed::<CycleInput>(Topic::CycleInput.name())
+        .map(|r| r.unwrap())
+        .collect();
+    assert_eq!(inputs.len(), 2000);
+    for (k, (log, m)) in inputs.iter().enumerate() {
+        assert_eq!(
+            Outgoing::CycleInput(*m),
+            common::cycle_messages(k as u64)[0]
+        );
+        assert_eq!(*log, m.now_ns);
+    }
+    // Every SAR topic decoded, in file order.
+    let decoded: Vec<Outgoing> = McapReader::new(&bytes)
+        .unwrap()
+        .decoded()
+        .map(|r| r.unwrap().2)
+        .filter(|m| m.topic() != Topic::RecorderDrops)
+        .collect();
+    assert_eq!(decoded, pushed);
+    // The wrong type for a topic is refused.
+    let mut wrong = McapReader::new(&bytes)
+        .unwrap()
+        .typed::<WrenchStamped>(Topic::CycleInput.name());
+    assert!(matches!(
+        wrong.next(),
+        Some(Err(ReadError::WrongType { .. }))
+    ));
+    // An independent reader (the mcap crate's summary) agrees.
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    assert_eq!(
+        summary.stats.unwrap().message_count,
+        pushed.len() as u64 + 1
+    );
+    assert!(summary.chunk_indexes.len() > 1);
+    assert!(
+        summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.compression == "zstd")
+    );
+    assert!(
+        summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.compressed_size < c.uncompressed_size)
+    );
+}
+
+#[test]
+fn truncated_files_read_to_last_complete_chunk_and_recover() {
+    let dir = common::scratch("truncated");
+    let (report, pushed) = record(config(&dir, 16 * 1024), 1500);
+    let full = read_file(&report.files[0]).unwrap();
+    let summary = mcap::Summary::read(&full).unwrap().unwrap();
+    // Message count of each chunk, from the mcap crate's own index reader.
+    let chunks: Vec<(u64, usize)> = summary
+        .chunk_indexes
+        .iter()
+        .map(|ci| {
+            let n = summary.stream_chunk(&full, ci).unwrap().count();
+            (ci.chunk_start_offset + ci.chunk_length, n)
+        })
+        .collect();
+    assert!(chunks.len() > 10, "{} chunks", chunks.len());
+    let all: Vec<Vec<u8>> = pushed.iter().map(encoded).collect();
+
+    let mut cuts: Vec<usize> = (0..full.len()).step_by(full.len() / 150).collect();
+    for &(end, _) in &chunks {
+        let end = end as usize;
+        cuts.extend([end - 1, end, end + 1, end + 9]);
+    }
+    cuts.extend([0, 1, 7, 8, 9, 20, full.len() - 1]);
+    cuts.retain(|&c| c < full.len());
+    let mut recovered_checked = 0;
+    for (i, &cut) in cuts.iter().enumerate() {
+        let bytes = &full[..cut];
+        let Ok(reader) = McapReader::new(bytes) else {
+            assert!(cut < 8, "cut {cut}: magic refused");
+            continue;
+        };
+        let mut got = Vec::new();
+        let mut end = None;
+        for item in reader {
+            match item {
+                Ok(m) => got.push(m),
+                Err(e) => end = Some(e),
+            }
+        }
+        // Exactly the messages of the chunks that end at or before the cut.
+        let expected: usize = chunks
+            .iter()
+            .filter(|(e, _)| *e as usize <= cut)
+            .map(|(_, n)| n)
+            .sum();
+        assert_eq!(got.len(), expected, "cut at {cut}");
+        for (m, want) in got.iter().zip(&all) {
+            assert_eq!(&m.data, want, "cut at {cut}");
+        }
+        match end {
+            Some(ReadError::Truncated { offset, .. }) | Some(ReadError::Unfinished { offset }) => {
+                assert!(offset as usize <= cut, "cut at {cut}: stopped at {offset}");
+            }
+            // A cut inside the summary: the data section is whole.
+            None => assert_eq!(expected, all.len() + 1, "cut at {cut}: ended with None"),
+            other => panic!("cut at {cut}: ended with {other:?}"),
+        }
+        // Recover some of them (every 8th cut, and all cuts at chunk ends).
+        if i % 8 == 0 || chunks.iter().any(|(e, _)| *e as usize == cut) {
+            let input = dir.join("cut.mcap");
+            let output = dir.join("recovered.mcap");
+            std::fs::write(&input, bytes).unwrap();
+            let r = recover(&input, &output).unwrap();
+            assert_eq!(r.messages as usize, expected);
+            assert_eq!(r.input_complete, r.stopped.is_none());
+            let out = read_file(&output).unwrap();
+            let (msgs, end, reader) = read_all(&out);
+            assert!(end.is_none(), "recovered cut {cut}: {end:?}");
+            assert_eq!(msgs.len(), expected);
+            if expected > 0 {
+                assert_eq!(reader.profile(), Some("ros2"));
+            }
+            for ((_, m), want) in msgs.iter().zip(&all) {
+                assert_eq!(&m.data, want);
+            }
+            // Fully indexed: summary, statistics, chunk indexes.
+            let s = mcap::Summary::read(&out).unwrap().unwrap();
+            assert_eq!(s.stats.as_ref().unwrap().message_count as usize, expected);
+            if expected > 0 {
+                assert!(!s.chunk_indexes.is_empty());
+                // Every message reachable through the index.
+                let indexed: usize = s
+                    .chunk_indexes
+                    .iter()
+                    .map(|ci| s.stream_chunk(&out, ci).unwrap().count())
+                    .sum();
+                assert_eq!(indexed, expected);
+            }
+            assert!(reader.metadata().iter().any(|m| m.name == "sar_recover"));
+            recovered_checked += 1;
+        }
+    }
+    assert!(recovered_checked > 20);
+}
+
+#[test]
+fn recover_refuses_to_overwrite_its_input_and_non_mcap() {
+    let dir = common::scratch("recover_refuses");
+    let p = dir.join("x.mcap");
+    std::fs::write(&p, b"not an mcap file").unwrap();
+    assert!(matches!(recover(&p, &p), Err(RecoverError::SamePath(_))));
+    assert!(matches!(
+        recover(&p, &dir.join("y.mcap")),
+        Err(RecoverError::Read(ReadError::NotMcap { .. }))
+    ));
+}
+
+/// All messages of the files in order, each file complete and self-contained.
+fn read_files(files: &[std::path::PathBuf]) -> Vec<(String, RawMessage)> {
+    let mut all = Vec::new();
+    for f in files {
+        let bytes = read_file(f).unwrap();
+        let (msgs, end, reader) = read_all(&bytes);
+        assert!(end.is_none(), "{}: {end:?}", f.display());
+        assert_eq!(reader.channels().len(), Topic::ALL.len(), "{}", f.display());
+        assert!(mcap::Summary::read(&bytes).unwrap().is_some());
+        all.extend(msgs);
+    }
+    all
+}
+
+fn pushed_in(all: &[(String, RawMessage)]) -> Vec<Vec<u8>> {
+    all.iter()
+        .filter(|(t, _)| t != Topic::RecorderDrops.name())
+        .map(|(_, m)| m.data.clone())
+        .collect()
+}
+
+#[test]
+fn rotation_by_size() {
+    let dir = common::scratch("rotation_size");
+    let mut c = config(&dir, 8 * 1024);
+    c.files.rotation.max_bytes = Some(24 * 1024);
+    let (report, pushed) = record(c, 3000);
+    assert!(report.files.len() >= 3, "{:?}", report.files);
+    for f in &report.files[..report.files.len() - 1] {
+        let len = std::fs::metadata(f).unwrap().len();
+        // Closed before the chunk that passed the limit, plus the summary.
+        assert!(len < 24 * 1024 + 16 * 1024, "{}: {len}", f.display());
+    }
+    let all = read_files(&report.files);
+    let want: Vec<_> = pushed.iter().map(encoded).collect();
+    assert_eq!(pushed_in(&all), want);
+    // Each closed file ends with its status message.
+    let statuses = all
+        .iter()
+        .filter(|(t, _)| t == Topic::RecorderDrops.name())
+        .count();
+    assert!(statuses >= report.files.len());
+}
+
+#[test]
+fn rotation_by_duration() {
+    let dir = common::scratch("rotation_duration");
+    let mut c = config(&dir, 64 * 1024);
+    c.files.rotation.max_duration_ns = Some(100_000_000);
+    // 2000 cycles at 4 kHz: 0.5 s, five files of 0.1 s.
+    let (report, pushed) = record(c, 2000);
+    assert_eq!(report.files.len(), 5, "{:?}", report.files);
+    for (i, f) in report.files.iter().enumerate() {
+        let bytes = read_file(f).unwrap();
+        let (msgs, _, _) = read_all(&bytes);
+        let first = msgs.first().unwrap().1.log_time_ns;
+        let min = msgs.iter().map(|m| m.1.log_time_ns).min().unwrap();
+        let max = msgs.iter().map(|m| m.1.log_time_ns).max().unwrap();
+        assert!(max - min < 100_000_000, "{}: {min}..{max}", f.display());
+        // A file starts with the cycle that reached the limit.
+        assert_eq!(first, common::now_ns(400 * i as u64));
+    }
+    let all = read_files(&report.files);
+    let want: Vec<_> = pushed.iter().map(encoded).collect();
+    assert_eq!(pushed_in(&all), want);
+}
+
+#[test]
+fn drops_are_counted_when_the_writer_is_stalled() {
+    let dir = common::scratch("drops");
+    let mut c = config(&dir, 64 * 1024);
+    c.queue_capacity = 100;
+    // The writer not started: a stalled disk, deterministically.
+    let mut rec = Recorder::new_paused(c).unwrap();
+    let msgs: Vec<Outgoing> = (0..30).flat_map(common::cycle_messages).collect();
+    assert!(msgs.len() > 150);
+    let accepted = msgs.iter().filter(|m| rec.push(**m)).count();
+    assert_eq!(accepted, 100);
+    assert_eq!(rec.dropped(), msgs.len() as u64 - 100);
+    assert_eq!(rec.free_slots(), 0);
+    let report = rec.stop().unwrap();
+    assert_eq!(report.dropped, msgs.len() as u64 - 100);
+    let bytes = read_file(&report.files[0]).unwrap();
+    let (all, end, reader) = read_all(&bytes);
+    assert!(end.is_none());
+    // The first 100 messages were written, then the final status.
+    let want: Vec<_> = msgs[..100].iter().map(encoded).collect();
+    assert_eq!(pushed_in(&all), want);
+    let (_, last) = all.last().unwrap();
+    let status = RecorderDrops::decode(&last.data).unwrap();
+    assert_eq!(status.dropped, msgs.len() as u64 - 100);
+    assert_eq!(status.queue_capacity, 100);
+    let meta = reader
+        .metadata()
+        .iter()
+        .find(|m| m.name == "sar_recorder")
+        .unwrap();
+    assert_eq!(meta.metadata["dropped"], (msgs.len() - 100).to_string());
+}
+
+#[test]
+fn status_messages_every_interval() {
+    let dir = common::scratch("status");
+    let mut c = config(&dir, 64 * 1024);
+    c.status_interval_ns = 50_000_000;
+    let (report, _) = record(c, 2000);
+    let all = read_files(&report.files);
+    let stamps: Vec<u64> = all
+        .iter()
+        .filter(|(t, _)| t == Topic::RecorderDrops.name())
+        .map(|(_, m)| m.log_time_ns)
+        .collect();
+    // 0.5 s of log time at one per 50 ms (the first due 50 ms after the first
+    // message), plus the one at close.
+    assert_eq!(stamps.len(), 10, "{stamps:?}");
+    assert!(stamps.windows(2).all(|w| w[0] <= w[1]));
+}
+
+#[test]
+fn a_dropped_recorder_still_closes_its_file() {
+    let dir = common::scratch("dropped_recorder");
+    let mut rec = Recorder::start(config(&dir, 64 * 1024)).unwrap();
+    for m in common::cycle_messages(0) {
+        assert!(rec.push(m));
+    }
+    drop(rec);
+    // The writer thread finishes on its own; wait for the file's footer
+    // (bounded: 10 s).
+    let path = FileOptions::new(&dir, "rec").path(0);
+    for _ in 0..1000 {
+        if let Ok(bytes) = std::fs::read(&path)
+            && mcap::Summary::read(&bytes).is_ok_and(|s| s.is_some())
+        {
+            let (msgs, end, _) = read_all(&bytes);
+            assert!(end.is_none());
+            assert_eq!(msgs.len(), common::cycle_messages(0).len() + 1);
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    panic!("the file was not closed within 10 s");
+}
+
+#[test]
+fn a_failed_writer_drops_and_counts_and_stop_reports_it() {
+    let dir = common::scratch("failed_writer");
+    let sub = dir.join("gone");
+    let mut rec = Recorder::new_paused(config(&sub, 64 * 1024)).unwrap();
+    // The disk goes away before the first file is created.
+    std::fs::remove_dir_all(&sub).unwrap();
+    let msgs = common::cycle_messages(0);
+    for m in &msgs {
+        assert!(rec.push(*m));
+    }
+    match rec.stop() {
+        Err(RecorderError::Write {
+            written, dropped, ..
+        }) => {
+            assert_eq!(written, 0);
+            assert_eq!(dropped, msgs.len() as u64);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn bad_settings_are_refused() {
+    let dir = common::scratch("settings");
+    let mut c = config(&dir, 64 * 1024);
+    c.queue_capacity = 0;
+    assert!(matches!(
+        Recorder::start(c),
+        Err(RecorderError::Setting {
+            field: "queue_capacity",
+            ..
+        })
+    ));
+    let mut c = config(&dir, 0);
+    c.queue_capacity = 10;
+    assert!(Recorder::start(c).is_err());
+}
+
+mod corrupted {
+    use super::*;
+    use proptest::prelude::*;
+    use proptest::test_runner::{Config, RngSeed};
+
+    fn small_recording() -> Vec<u8> {
+        static FILE: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+        FILE.get_or_init(|| {
+            let dir = common::scratch("corrupted");
+            let (report, _) = record(config(&dir, 2 * 1024), 60);
+            read_file(&report.files[0]).unwrap()
+        })
+        .clone()
+    }
+
+    proptest! {
+        #![proptest_config(Config {
+            cases: 256,
+            rng_seed: RngSeed::Fixed(0xc0_44),
+            failure_persistence: None,
+            ..Config::default()
+        })]
+
+        /// Bytes changed anywhere (bit rot, a torn write): reading and
+        /// recovering end with messages and/or a typed error, never a panic.
+        #[test]
+        fn corrupted_files_never_panic(
+            edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..8),
+            cut in any::<prop::sample::Index>(),
+        ) {
+            let mut bytes = small_recording();
+            for (at, value) in edits {
+                let i = at.index(bytes.len());
+                bytes[i] = value;
+            }
+            bytes.truncate(cut.index(bytes.len()) + 1);
+            if let Ok(reader) = McapReader::new(&bytes) {
+                for item in reader.decoded() {
+                    let _ = item;
+                }
+            }
+        }
+    }
+}
