@@ -1,0 +1,5 @@
+//! The SAR daemon's library: configuration, the fixed-rate loop and its parts.
+//! The binaries `sard` and `sarctl` are thin shells over it.
+
+pub mod config;
+pub mod locate;
