@@ -2,4 +2,9 @@
 //! The binaries `sard` and `sarctl` are thin shells over it.
 
 pub mod config;
+pub mod control;
 pub mod locate;
+pub mod logq;
+pub mod rt;
+pub mod sim;
+pub mod stats;
