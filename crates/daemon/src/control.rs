@@ -304,8 +304,10 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         self.log.send(LogEvent::Reply(reply));
     }
 
-    /// Runs one cycle at `now_ns` (`None`: the clock could not be read).
-    pub fn step(&mut self, cycle: u64, now_ns: Option<u64>) -> &CycleOutput {
+    /// Runs one cycle. `now` reads the clock (`None`: it could not be read);
+    /// it is called once, after the inputs are gathered, so that no input is
+    /// stamped after the cycle's time.
+    pub fn step(&mut self, cycle: u64, now: impl FnOnce() -> Option<u64>) -> &CycleOutput {
         // Gather.
         match self.sensor.poll() {
             Ok(Some(s)) => self.sensor_sample = sensor_sample(&s),
@@ -330,9 +332,20 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             Err(_) => {
                 self.joints.valid = false;
                 self.counts.drive_errors += 1;
+                self.log.send(LogEvent::DeviceError {
+                    cycle,
+                    what: "drive positions",
+                });
             }
         }
-        self.drive_state = self.drives.state().ok();
+        let drive_state = self.drives.state().ok();
+        if drive_state != self.drive_state {
+            self.log.send(LogEvent::DriveState {
+                cycle,
+                state: drive_state,
+            });
+        }
+        self.drive_state = drive_state;
         let request = self.operator.requests.pop();
         let command = match request.map(|e| e.request) {
             Some(Request::Reset) => Some(Command::Reset),
@@ -343,7 +356,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         };
         let input = CycleInput {
             cycle,
-            now_ns,
+            now_ns: now(),
             sensor: self.sensor_sample,
             joints: self.joints,
             command,
@@ -400,10 +413,12 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 self.reply(env, status, reason);
             }
         }
-        if let Some(env @ Envelope {
-            request: Request::MoveTip { tip_m },
-            ..
-        }) = request
+        if let Some(
+            env @ Envelope {
+                request: Request::MoveTip { tip_m },
+                ..
+            },
+        ) = request
         {
             let (status, reason) = self.move_tip(&out, &tip_m);
             self.reply(env, status, reason);
@@ -438,8 +453,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             return (ReplyStatus::Unreachable, 0);
         };
         let q = [target.q1_m, target.q2_m, target.q3_m];
-        if q
-            .iter()
+        if q.iter()
             .zip(self.travel_m.iter())
             .any(|(v, (lo, hi))| !(v >= lo && v <= hi))
         {
@@ -460,5 +474,4 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             Err(_) => (ReplyStatus::DrivesRefused, 0),
         }
     }
-
 }

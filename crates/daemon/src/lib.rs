@@ -5,6 +5,8 @@ pub mod config;
 pub mod control;
 pub mod locate;
 pub mod logq;
+pub mod notify;
 pub mod rt;
+pub mod runloop;
 pub mod sim;
 pub mod stats;

@@ -39,6 +39,13 @@ pub enum LogEvent {
         /// Which call.
         what: &'static str,
     },
+    /// The drives' state changed (`None`: it could not be read).
+    DriveState {
+        /// The cycle.
+        cycle: u64,
+        /// The new state.
+        state: Option<sar_drivers::DriveState>,
+    },
     /// A cycle ended after the next deadline.
     Overrun {
         /// The cycle.
@@ -135,9 +142,21 @@ pub fn write(event: &LogEvent) {
                 t.to,
                 sar_estimator::guard::GuardState::Stop | sar_estimator::guard::GuardState::Fault
             ) {
-                tracing::error!(cycle = t.cycle, "guard {} -> {}: {}", t.from, t.to, t.reason);
+                tracing::error!(
+                    cycle = t.cycle,
+                    "guard {} -> {}: {}",
+                    t.from,
+                    t.to,
+                    t.reason
+                );
             } else {
-                tracing::warn!(cycle = t.cycle, "guard {} -> {}: {}", t.from, t.to, t.reason);
+                tracing::warn!(
+                    cycle = t.cycle,
+                    "guard {} -> {}: {}",
+                    t.from,
+                    t.to,
+                    t.reason
+                );
             }
         }
         LogEvent::Command(c) => match &c.result {
@@ -159,6 +178,7 @@ pub fn write(event: &LogEvent) {
             }
         }
         LogEvent::DeviceError { cycle, what } => tracing::error!(cycle, "{what} failed"),
+        LogEvent::DriveState { cycle, state } => tracing::info!(cycle, "drives: {state:?}"),
         LogEvent::Overrun { cycle, late_ns } => {
             tracing::warn!(cycle, "cycle overran its period by {late_ns} ns")
         }

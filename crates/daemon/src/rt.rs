@@ -55,13 +55,17 @@ pub fn sleep_until_ns(deadline_ns: u64) {
 #[non_exhaustive]
 pub enum RtError {
     /// `mlockall` failed.
-    #[error("cannot lock memory (mlockall): errno {errno} (needs CAP_IPC_LOCK or LimitMEMLOCK=infinity)")]
+    #[error(
+        "cannot lock memory (mlockall): errno {errno} (needs CAP_IPC_LOCK or LimitMEMLOCK=infinity)"
+    )]
     Mlock {
         /// The errno.
         errno: i32,
     },
     /// `sched_setscheduler(SCHED_FIFO)` failed.
-    #[error("cannot run at SCHED_FIFO priority {priority}: errno {errno} (needs CAP_SYS_NICE or LimitRTPRIO)")]
+    #[error(
+        "cannot run at SCHED_FIFO priority {priority}: errno {errno} (needs CAP_SYS_NICE or LimitRTPRIO)"
+    )]
     Fifo {
         /// The priority asked for.
         priority: i32,

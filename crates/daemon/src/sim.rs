@@ -5,7 +5,7 @@
 
 use sar_drivers::Clock;
 use sar_drivers::scenario::{self, Scenario, ScenarioError};
-use sar_drivers::sim::{SimError, SimSensor, SimDrives, Simulator};
+use sar_drivers::sim::{SimDrives, SimError, SimSensor, Simulator};
 use sar_estimator::cycle::Bias;
 
 /// The built-in demo scenario (a tip contact rising into Warn).
@@ -16,13 +16,16 @@ pub fn demo_scenario() -> Result<Scenario, ScenarioError> {
     scenario::parse(DEMO_SCENARIO_TOML, "(built-in demo scenario)")
 }
 
+/// The simulator, its sensor and drives, and the starting bias.
+pub type Simulated<C> = (Simulator<C>, SimSensor<C>, SimDrives<C>, Bias);
+
 /// The simulated sensor and drives of `scenario` on `clock`, and the bias the
 /// estimator starts with: the simulated sensor's initial bias, as if it had
 /// been measured beforehand with the rod detached.
 pub fn simulated<C: Clock + Clone>(
     scenario: &Scenario,
     clock: C,
-) -> Result<(Simulator<C>, SimSensor<C>, SimDrives<C>, Bias), SimError> {
+) -> Result<Simulated<C>, SimError> {
     let sim = Simulator::new(scenario.spec.clone(), clock)?;
     let bias = Bias {
         force_n: scenario.spec.sensor.bias_n,

@@ -26,7 +26,9 @@ impl Default for Histogram {
 impl Histogram {
     /// Counts one duration.
     pub fn record(&mut self, ns: u64) {
-        let bucket = usize::try_from(ns / 1000).unwrap_or(usize::MAX).min(BUCKETS - 1);
+        let bucket = usize::try_from(ns / 1000)
+            .unwrap_or(usize::MAX)
+            .min(BUCKETS - 1);
         if let Some(c) = self.counts.get_mut(bucket) {
             *c = c.saturating_add(1);
         }
@@ -77,6 +79,27 @@ pub struct LoopStats {
     pub overruns: u64,
     /// Cycles run.
     pub cycles: u64,
+    /// The cycle of the last overrun.
+    pub last_overrun_cycle: Option<u64>,
+}
+
+/// An overrun within this many cycles makes the loop unhealthy for the
+/// watchdog.
+pub const RECENT_CYCLES: u64 = 1000;
+
+impl LoopStats {
+    /// Notes an overrun in `cycle`.
+    pub fn note_overrun(&mut self, cycle: u64) {
+        self.last_overrun_cycle = Some(cycle);
+    }
+
+    /// 1 when an overrun happened in the last [`RECENT_CYCLES`] cycles.
+    pub fn overruns_recent(&self) -> u64 {
+        match self.last_overrun_cycle {
+            Some(c) if self.cycles.saturating_sub(c) < RECENT_CYCLES => 1,
+            _ => 0,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1,7 +1,6 @@
 //! The configuration file: the minimum of INTERFACES.md 2 works, defaults are
 //! as documented, and every bad file is refused naming the file, key and line.
 
-
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 use sar_daemon::config::{self, AxesDriver, ConfigError, SensorDriver};
 

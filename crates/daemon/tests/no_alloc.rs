@@ -43,10 +43,22 @@ fn a_cycle_allocates_nothing() {
     let mut scenario = sim::demo_scenario().unwrap();
     // Push on to the stop limit: 20 N along the rod at 12 s, then release at 20 s.
     scenario.spec.contact = vec![
-        sar_drivers::sim::ContactKey { t_ns: 2_000_000_000, force_n: Vec3::zeros() },
-        sar_drivers::sim::ContactKey { t_ns: 12_000_000_000, force_n: Vec3::new(20.0, 0.0, 0.0) },
-        sar_drivers::sim::ContactKey { t_ns: 14_000_000_000, force_n: Vec3::new(20.0, 0.0, 0.0) },
-        sar_drivers::sim::ContactKey { t_ns: 15_000_000_000, force_n: Vec3::zeros() },
+        sar_drivers::sim::ContactKey {
+            t_ns: 2_000_000_000,
+            force_n: Vec3::zeros(),
+        },
+        sar_drivers::sim::ContactKey {
+            t_ns: 12_000_000_000,
+            force_n: Vec3::new(20.0, 0.0, 0.0),
+        },
+        sar_drivers::sim::ContactKey {
+            t_ns: 14_000_000_000,
+            force_n: Vec3::new(20.0, 0.0, 0.0),
+        },
+        sar_drivers::sim::ContactKey {
+            t_ns: 15_000_000_000,
+            force_n: Vec3::zeros(),
+        },
     ];
     let clock = SimClock::new(1_000_000_000);
     let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
@@ -70,7 +82,7 @@ fn a_cycle_allocates_nothing() {
         cycle += 1;
         clock.advance_ns(1_000_000);
         let now = clock.now_ns();
-        let out = *c.step(cycle, Some(now));
+        let out = *c.step(cycle, || Some(now));
         while queue.pop().is_some() {}
         while operator.replies.pop().is_some() {}
         out
@@ -78,7 +90,12 @@ fn a_cycle_allocates_nothing() {
     for _ in 0..500 {
         step(&mut c);
     }
-    assert_eq!(c.output().guard_state, GuardState::Ok, "{:?}", c.output().guard_reason);
+    assert_eq!(
+        c.output().guard_state,
+        GuardState::Ok,
+        "{:?}",
+        c.output().guard_reason
+    );
 
     let before = ALLOCATIONS.load(Ordering::SeqCst);
     let mut seen_warn = false;
@@ -88,7 +105,9 @@ fn a_cycle_allocates_nothing() {
             let request = match (i / 1000) % 3 {
                 0 => Request::Reset,
                 1 => Request::Tare,
-                _ => Request::MoveTip { tip_m: Vec3::new(0.6, 0.2, 0.001) },
+                _ => Request::MoveTip {
+                    tip_m: Vec3::new(0.6, 0.2, 0.001),
+                },
             };
             operator.requests.push(Envelope { id: i, request }).unwrap();
         }
@@ -99,5 +118,10 @@ fn a_cycle_allocates_nothing() {
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
     assert!(c.counts().quick_stops >= 1);
-    assert_eq!(after - before, 0, "the cycles allocated {} times", after - before);
+    assert_eq!(
+        after - before,
+        0,
+        "the cycles allocated {} times",
+        after - before
+    );
 }
