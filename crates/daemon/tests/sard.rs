@@ -3,7 +3,12 @@
 //! `NOTIFY_SOCKET` (READY=1, WATCHDOG=1 from the loop, STATUS=, STOPPING=1;
 //! no WATCHDOG=1 once the loop is stalled on purpose).
 
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 use std::io::Read;
 use std::os::unix::net::UnixDatagram;
