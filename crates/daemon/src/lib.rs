@@ -8,5 +8,7 @@ pub mod logq;
 pub mod notify;
 pub mod rt;
 pub mod runloop;
+pub mod shm;
 pub mod sim;
 pub mod stats;
+pub mod wire;

@@ -15,15 +15,35 @@ use crate::stats::LoopStats;
 use sar_drivers::{AxisDrives, ForceSensor};
 use sar_estimator::cycle::{CycleInput, CycleOutput, TipOutcome};
 
-/// What the loop hands to publishers after each cycle.
+/// One cycle as the loop hands it to publishers.
+#[derive(Debug, Clone, Copy)]
+pub struct Published<'a> {
+    /// The cycle's input.
+    pub input: &'a CycleInput,
+    /// The cycle's output.
+    pub output: &'a CycleOutput,
+    /// The loop's measurements.
+    pub stats: &'a LoopStats,
+    /// The drives' state as read in the cycle.
+    pub drive_state: Option<sar_drivers::DriveState>,
+    /// Whether the drives are halted.
+    pub halted: bool,
+    /// Quick stops so far.
+    pub quick_stops: u64,
+}
+
+/// What the loop talks to around each cycle (shared memory).
 pub trait Publish {
-    /// Called on the loop thread after every cycle; must not block or allocate.
-    fn publish(&mut self, input: &CycleInput, output: &CycleOutput, stats: &LoopStats);
+    /// Called on the loop thread before every cycle (take operator commands);
+    /// must not block.
+    fn before_cycle(&mut self) {}
+    /// Called on the loop thread after every cycle; must not block.
+    fn publish(&mut self, cycle: &Published<'_>);
 }
 
 /// No publisher.
 impl Publish for () {
-    fn publish(&mut self, _: &CycleInput, _: &CycleOutput, _: &LoopStats) {}
+    fn publish(&mut self, _: &Published<'_>) {}
 }
 
 /// Options of a run.
@@ -66,8 +86,16 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
         let woke_ns = woke.unwrap_or(next_ns);
         stats.wakeup.record(woke_ns.saturating_sub(next_ns));
         cycle += 1;
+        publisher.before_cycle();
         let out = *controller.step(cycle, rt::monotonic_ns);
-        publisher.publish(controller.input(), &out, stats);
+        publisher.publish(&Published {
+            input: controller.input(),
+            output: &out,
+            stats,
+            drive_state: controller.drive_state(),
+            halted: controller.halted(),
+            quick_stops: controller.counts().quick_stops,
+        });
         // The watchdog is fed from here, the loop itself: a stuck loop stops
         // feeding it.
         let estimate = matches!(out.tip, TipOutcome::Estimate(_));

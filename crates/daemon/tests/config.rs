@@ -72,13 +72,20 @@ fn the_minimum_file_works_with_the_documented_defaults() {
 }
 
 #[test]
-fn the_builtin_configuration_equals_the_minimum_with_defaults() {
-    let b = config::builtin().unwrap();
+fn the_builtin_configuration_equals_the_minimum_with_defaults_but_the_demo_keys() {
+    let text = config::DEFAULT_TOML
+        .lines()
+        .filter(|l| !l.contains("# DEMO"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let b = config::parse(&text, "builtin without the DEMO lines").unwrap();
     let m = config::parse(MINIMUM, "m").unwrap();
     assert_eq!(b.loop_, m.loop_);
     assert_eq!(b.axes, m.axes);
     assert_eq!(b.estimator.guard, m.estimator.guard);
     assert_eq!(b.estimator.plausibility, m.estimator.plausibility);
+    let demo = config::builtin().unwrap();
+    assert_eq!(demo.estimator.plausibility.limits().max_counter_gap, 25);
 }
 
 #[test]

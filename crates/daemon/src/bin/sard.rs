@@ -5,7 +5,9 @@ use clap::Parser;
 use sar_daemon::control::{Controller, Operator};
 use sar_daemon::notify::{Notifier, Watchdog};
 use sar_daemon::runloop::{self, RunLimits};
+use sar_daemon::shm::DaemonShm;
 use sar_daemon::stats::LoopStats;
+use sar_daemon::wire::limits_array;
 use sar_daemon::{config, logq, rt, sim};
 use sar_drivers::MonotonicClock;
 use std::path::PathBuf;
@@ -33,6 +35,9 @@ struct Args {
     /// Check a configuration file and exit (0 when valid).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["sim", "config", "scenario"])]
     check_config: Option<PathBuf>,
+    /// Prefix of the shared-memory service names (one daemon per prefix).
+    #[arg(long, env = "SAR_SERVICE_PREFIX", default_value = sar_daemon::shm::DEFAULT_PREFIX)]
+    prefix: String,
     /// Stop after this many cycles (tests and benchmarks).
     #[arg(long, hide = true)]
     max_cycles: Option<u64>,
@@ -43,6 +48,8 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_target(false)
@@ -98,9 +105,18 @@ fn run(args: &Args) -> Result<(), String> {
     }
 
     let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
-    let (_sim, sensor, drives, bias) =
+    let (simulator, sensor, drives, bias) =
         sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
     let operator = Operator::new();
+    let truth_sim = simulator.clone();
+    let mut shm = DaemonShm::create(
+        &args.prefix,
+        operator.clone(),
+        limits_array(&cfg.estimator.guard.limits()),
+        Some(Box::new(move || {
+            truth_sim.truth().ok().map(|t| t.tip_force_n)
+        })),
+    )?;
     let (log, log_thread, _queue) = logq::channel(true);
     let mut controller = Controller::new(
         &cfg.estimator,
@@ -133,7 +149,7 @@ fn run(args: &Args) -> Result<(), String> {
             stall_after_cycles: args.stall_after_cycles,
         },
         &mut stats,
-        &mut (),
+        &mut shm,
         &mut watchdog,
         &log,
     );
