@@ -22,6 +22,11 @@ fn temp_path(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("sard-test-{}-{name}", std::process::id()))
 }
 
+/// A service prefix no other test (or test run) uses.
+fn prefix(name: &str) -> String {
+    format!("sar-test-{}-{name}", std::process::id())
+}
+
 fn signal(child: &Child, sig: &str) {
     let ok = Command::new("kill")
         .args([sig, &child.id().to_string()])
@@ -101,6 +106,7 @@ fn sigterm_and_sigint_stop_the_loop_cleanly_with_the_drives_halted() {
         let child = Command::new(SARD)
             .arg("--sim")
             .env("NOTIFY_SOCKET", &sock_path)
+            .env("SAR_SERVICE_PREFIX", prefix(&format!("sig{sig}")))
             .stderr(Stdio::piped())
             .stdout(Stdio::null())
             .spawn()
@@ -135,6 +141,7 @@ fn a_stalled_loop_stops_feeding_the_watchdog() {
     let child = Command::new(SARD)
         .args(["--sim", "--stall-after-cycles", "300"])
         .env("NOTIFY_SOCKET", &sock_path)
+        .env("SAR_SERVICE_PREFIX", prefix("stall"))
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
         .spawn()
