@@ -209,3 +209,57 @@ fn sard_sim_end_to_end() {
     drop(daemon);
     let _ = std::fs::remove_file(path);
 }
+
+#[test]
+fn after_sigkill_a_new_daemon_starts_on_the_same_prefix() {
+    let prefix = format!("sar-kill-{}", std::process::id());
+    let client = Client::new(&prefix).unwrap();
+    let spawn = || {
+        Command::new(SARD)
+            .arg("--sim")
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // A state published after `after_ns` (monotonic): a living daemon's.
+    let wait_state = |after_ns: u64| {
+        let start = Instant::now();
+        loop {
+            if let Ok(sub) = client.subscribe() {
+                let mut fresh = false;
+                let t = Instant::now();
+                while !fresh && t.elapsed() < Duration::from_secs(2) {
+                    sub.wait(Duration::from_millis(50), |s| fresh |= s.now_ns > after_ns);
+                }
+                if fresh {
+                    return;
+                }
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(30),
+                "no state published"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    let mut first = spawn();
+    wait_state(sar_daemon::rt::monotonic_ns().unwrap());
+    let ok = Command::new("kill")
+        .args(["-KILL", &first.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok);
+    let _ = first.wait();
+    let killed_ns = sar_daemon::rt::monotonic_ns().unwrap();
+    // The killed daemon's services are stale; the new one cleans them.
+    let mut second = Daemon(spawn());
+    wait_state(killed_ns);
+    assert!(
+        second.0.try_wait().unwrap().is_none(),
+        "the new daemon exited"
+    );
+    drop(second);
+}

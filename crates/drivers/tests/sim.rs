@@ -16,7 +16,7 @@ use sar_drivers::sim::{
     Truth,
 };
 use sar_drivers::{
-    AxisDrives, Clock, DriveState, Drained, Error, ErrorKind, ForceSensor, JointPositions,
+    AxisDrives, Clock, Drained, DriveState, Error, ErrorKind, ForceSensor, JointPositions,
     SimClock, WrenchSample,
 };
 use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Profile, ProfileSpec};
