@@ -37,8 +37,12 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// The count is process-wide: the tests of this file run one at a time.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn a_cycle_allocates_nothing() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
     // Push on to the stop limit: 20 N along the rod at 12 s, then release at 20 s.
@@ -122,6 +126,86 @@ fn a_cycle_allocates_nothing() {
         after - before,
         0,
         "the cycles allocated {} times",
+        after - before
+    );
+}
+
+/// Publishing through iceoryx2 0.10 is NOT allocation-free: its
+/// `Publisher::loan_uninit` (and `send_copy`, which uses it) puts each
+/// sample's shared state in a new `SingleThreaded` Arc (48 bytes,
+/// `ChunkMutSharedState::new`), one heap allocation per published sample.
+/// Taking commands (an idle `Server::receive`), the event's `notify` and the
+/// daemon's own code allocate nothing. This test pins that: exactly one
+/// allocation per cycle, so that any other allocation on the path fails it.
+#[test]
+fn publishing_allocates_only_iceoryx2s_one_per_sample() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    use sar_daemon::runloop::{Publish, Published};
+    use sar_daemon::shm::{Client, DaemonShm};
+    use sar_daemon::stats::LoopStats;
+    use sar_daemon::wire::limits_array;
+
+    let cfg = config::builtin().unwrap();
+    let scenario = sim::demo_scenario().unwrap();
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _thread, queue) = logq::channel(false);
+    let prefix = format!("sar-noalloc-{}", std::process::id());
+    let mut shm = DaemonShm::create(
+        &prefix,
+        operator.clone(),
+        limits_array(&cfg.estimator.guard.limits()),
+        None,
+    )
+    .unwrap();
+    let client = Client::new(&prefix).unwrap();
+    let sub = client.subscribe().unwrap();
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.axes.travel_m,
+        sensor,
+        drives,
+        operator,
+        log,
+        true,
+    )
+    .unwrap();
+    let stats = LoopStats::default();
+    let mut cycle = 0;
+    let mut run = |c: &mut Controller<_, _>, shm: &mut DaemonShm, n: u64| {
+        for _ in 0..n {
+            cycle += 1;
+            clock.advance_ns(1_000_000);
+            shm.before_cycle();
+            let out = *c.step(cycle, || Some(clock.now_ns()));
+            shm.publish(&Published {
+                input: c.input(),
+                output: &out,
+                stats: &stats,
+                drive_state: c.drive_state(),
+                halted: c.halted(),
+                quick_stops: c.counts().quick_stops,
+            });
+            while queue.pop().is_some() {}
+        }
+    };
+    run(&mut c, &mut shm, 200);
+    let mut received = 0;
+    sub.drain(|_| received += 1);
+    assert!(received > 0);
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    run(&mut c, &mut shm, 2000);
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    // The subscriber is slow (it reads nothing meanwhile): the loop goes on.
+    let mut late = 0;
+    sub.drain(|_| late += 1);
+    assert_eq!(late, sar_daemon::shm::STATE_BUFFER);
+    assert_eq!(
+        after - before,
+        2000,
+        "2000 published cycles allocated {} times (iceoryx2's loan: 2000)",
         after - before
     );
 }
