@@ -158,6 +158,8 @@ pub struct ActionCounts {
     pub stops_in_same_cycle: u64,
     /// Guard entries into Stop or Fault.
     pub halting_transitions: u64,
+    /// Quick stops repeated because the drives were still enabled.
+    pub quick_stop_retries: u64,
 }
 
 /// The per-cycle controller.
@@ -383,6 +385,14 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 self.counts.stops_in_same_cycle += 1;
             }
             self.log.send(LogEvent::QuickStop { cycle, ok });
+        } else if self.halted && matches!(self.drive_state, Some(DriveState::Enabled)) {
+            // The drives still follow targets after a quick stop (refused, or
+            // lost): repeat it every cycle until they stop.
+            let ok = self.drives.quick_stop().is_ok();
+            self.counts.quick_stop_retries += 1;
+            if !ok {
+                self.log.send(LogEvent::QuickStop { cycle, ok });
+            }
         }
         if let Some(ev) = out.command {
             if request.is_some() {
