@@ -1,4 +1,16 @@
-//! The SAR daemon's library: the recording (MCAP files of ROS 2 messages,
-//! INTERFACES.md 1). The binaries `sard` and `sarctl` build on it.
+//! The SAR daemon's library: configuration, the fixed-rate loop and its parts,
+//! and the recording (MCAP files of ROS 2 messages, INTERFACES.md 1). The
+//! binaries `sard` and `sarctl` are thin shells over it.
 
+pub mod config;
+pub mod control;
+pub mod locate;
+pub mod logq;
+pub mod notify;
 pub mod record;
+pub mod rt;
+pub mod runloop;
+pub mod shm;
+pub mod sim;
+pub mod stats;
+pub mod wire;

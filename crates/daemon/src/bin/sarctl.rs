@@ -1,0 +1,288 @@
+//! `sarctl`, the operator's tool: the daemon's state (`status`, `monitor`)
+//! and its commands (`reset`, `tare`, `move-tip`, `limits`), over iceoryx2.
+//! Every command fails with a one-line reason when no daemon runs.
+
+use clap::{Parser, Subcommand, ValueEnum};
+use sar_daemon::shm::{Client, DEFAULT_PREFIX};
+use sar_daemon::wire::{
+    self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name,
+    status_name,
+};
+use serde_json::json;
+use std::io::{IsTerminal, Write};
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// The SAR operator's tool.
+#[derive(Debug, Parser)]
+#[command(name = "sarctl", version, about = "Operator's tool of the SAR daemon")]
+struct Args {
+    /// Prefix of the daemon's shared-memory services.
+    #[arg(long, global = true, env = "SAR_SERVICE_PREFIX", default_value = DEFAULT_PREFIX)]
+    prefix: String,
+    /// Output format.
+    #[arg(long, global = true, value_enum, default_value_t = Format::Text)]
+    format: Format,
+    /// The robot's configuration (checked when given).
+    #[arg(long, global = true, value_name = "FILE")]
+    config: Option<std::path::PathBuf>,
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Format {
+    Text,
+    Json,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// The daemon's latest state.
+    Status,
+    /// The live state (`--format json`: one JSON line per sample).
+    Monitor {
+        /// Stop after this many samples (default: until interrupted).
+        #[arg(long)]
+        count: Option<u64>,
+    },
+    /// Leave Stop or Fault (refused while the cause persists).
+    Reset,
+    /// Model-based tare of the force sensor.
+    Tare,
+    /// Move the tip to (X, Y, Z), base frame, m.
+    MoveTip {
+        /// X, m.
+        #[arg(allow_hyphen_values = true)]
+        x: f64,
+        /// Y, m.
+        #[arg(allow_hyphen_values = true)]
+        y: f64,
+        /// Z, m.
+        #[arg(allow_hyphen_values = true)]
+        z: f64,
+    },
+    /// The guard's force limits.
+    Limits,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sarctl: {}", e.replace('\n', " "));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn state_json(s: &StateMsg) -> serde_json::Value {
+    json!({
+        "cycle": s.cycle,
+        "now_ns": s.now_ns,
+        "sensor_age_ns": (s.sensor_age_ns != u64::MAX).then_some(s.sensor_age_ns),
+        "joints_age_ns": (s.joints_age_ns != u64::MAX).then_some(s.joints_age_ns),
+        "q_m": s.q_m,
+        "q45_rad": (s.flags & flags::POSE != 0).then_some(s.q45_rad),
+        "ujoint_m": (s.flags & flags::POSE != 0).then_some(s.ujoint_m),
+        "tip_m": (s.flags & flags::POSE != 0).then_some(s.tip_m),
+        "support_distance_m": (s.flags & flags::POSE != 0).then_some(s.support_distance_m),
+        "ujoint_force_n": (s.flags & flags::ESTIMATE != 0).then_some(s.ujoint_force_n),
+        "tip_force_n": (s.flags & flags::ESTIMATE != 0).then_some(s.tip_force_n),
+        "tip_std_n": (s.flags & flags::ESTIMATE != 0).then_some(s.tip_std_n),
+        "observable": s.flags & flags::OBSERVABLE != 0,
+        "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
+        "guard": guard_state_name(s.guard_state),
+        "reason": reason_name(s.guard_reason),
+        "reason_code": s.guard_reason,
+        "halted": s.flags & flags::HALTED != 0,
+        "drive_state": s.drive_state,
+        "limits_n": s.limits_n,
+        "wakeup_ns": {"p50": s.wakeup_ns[0], "p99": s.wakeup_ns[1], "max": s.wakeup_ns[2]},
+        "compute_ns": {"p50": s.compute_ns[0], "p99": s.compute_ns[1], "max": s.compute_ns[2]},
+        "overruns": s.overruns,
+        "quick_stops": s.quick_stops,
+    })
+}
+
+fn state_line(s: &StateMsg) -> String {
+    let f = s.tip_force_n;
+    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+    let force = if s.flags & flags::ESTIMATE != 0 {
+        format!(
+            "F_tip [{:+7.2} {:+7.2} {:+7.2}] N |F| {:6.2} N (std {:.2})",
+            f[0],
+            f[1],
+            f[2],
+            norm,
+            s.tip_std_n.iter().fold(0.0f64, |a, b| a.max(*b))
+        )
+    } else {
+        "F_tip -- (no estimate)".to_owned()
+    };
+    format!(
+        "cycle {:>8}  {force}  guard {:5} ({})  latency p99 {} us, {} overruns",
+        s.cycle,
+        guard_state_name(s.guard_state),
+        reason_name(s.guard_reason),
+        s.wakeup_ns[1] / 1000,
+        s.overruns
+    )
+}
+
+/// A bar of |F| against the stop limit, for the terminal view.
+fn bar(s: &StateMsg) -> String {
+    let f = s.tip_force_n;
+    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+    let stop = s.limits_n[1].max(1e-9);
+    let width = 40usize;
+    let filled = ((norm / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
+    let warn_at = ((s.limits_n[0] / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
+    (0..width)
+        .map(|i| {
+            if i < filled {
+                '#'
+            } else if i == warn_at {
+                '|'
+            } else {
+                '.'
+            }
+        })
+        .collect()
+}
+
+fn run(args: &Args) -> Result<(), String> {
+    if let Some(path) = &args.config {
+        sar_daemon::config::load(path).map_err(|e| e.to_string())?;
+    }
+    let client = Client::new(&args.prefix)?;
+    let command = |kind: u32, tip_m: [f64; 3]| -> Result<ReplyMsg, String> {
+        client.command(
+            CommandMsg {
+                kind,
+                reserved: 0,
+                id: u64::from(std::process::id()),
+                tip_m,
+            },
+            Duration::from_secs(2),
+        )
+    };
+    let report = |what: &str, r: &ReplyMsg| -> Result<(), String> {
+        let accepted = r.status == 0 || r.status == 1;
+        if args.format == Format::Json {
+            println!(
+                "{}",
+                json!({"command": what, "accepted": accepted, "status": status_name(r.status),
+                       "status_code": r.status, "reason": reason_name(r.reason),
+                       "reason_code": r.reason, "cycle": r.cycle})
+            );
+        } else if accepted {
+            println!("{what}: {} (cycle {})", status_name(r.status), r.cycle);
+        }
+        if accepted {
+            Ok(())
+        } else {
+            Err(format!(
+                "{what}: {} ({})",
+                status_name(r.status),
+                reason_name(r.reason)
+            ))
+        }
+    };
+    match args.command {
+        Cmd::Status => {
+            let sub = client.subscribe()?;
+            let s = sub
+                .latest(Duration::from_secs(2))
+                .ok_or("the daemon published nothing within 2 s")?;
+            if args.format == Format::Json {
+                println!("{}", state_json(&s));
+            } else {
+                println!("{}", state_line(&s));
+            }
+            Ok(())
+        }
+        Cmd::Monitor { count } => {
+            let sub = client.subscribe()?;
+            let live = args.format == Format::Text && std::io::stdout().is_terminal();
+            let mut seen = 0u64;
+            let mut history: Vec<char> = Vec::new();
+            let mut stdout = std::io::stdout().lock();
+            let mut last_print = std::time::Instant::now();
+            let mut idle = std::time::Instant::now();
+            loop {
+                let mut batch: Vec<StateMsg> = Vec::new();
+                sub.wait(Duration::from_millis(200), |s| batch.push(*s));
+                if batch.is_empty() {
+                    if idle.elapsed() > Duration::from_secs(2) {
+                        return Err("the daemon stopped publishing".to_owned());
+                    }
+                    continue;
+                }
+                idle = std::time::Instant::now();
+                for s in &batch {
+                    seen += 1;
+                    if args.format == Format::Json {
+                        writeln!(stdout, "{}", state_json(s)).map_err(|e| e.to_string())?;
+                    } else if !live {
+                        writeln!(stdout, "{}", state_line(s)).map_err(|e| e.to_string())?;
+                    }
+                    if count.is_some_and(|c| seen >= c) {
+                        return Ok(());
+                    }
+                }
+                if live && last_print.elapsed() > Duration::from_millis(100) {
+                    last_print = std::time::Instant::now();
+                    if let Some(s) = batch.last() {
+                        let f = s.tip_force_n;
+                        let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+                        let glyphs = [' ', '.', ':', '-', '=', '+', '*', '#', '%', '@'];
+                        let level =
+                            ((norm / s.limits_n[1].max(1e-9)) * 9.0).clamp(0.0, 9.0) as usize;
+                        history.push(glyphs.get(level).copied().unwrap_or('@'));
+                        if history.len() > 60 {
+                            history.remove(0);
+                        }
+                        let h: String = history.iter().collect();
+                        write!(
+                            stdout,
+                            "\x1b[2J\x1b[H{}\n|F_tip| {:6.2} N [{}] stop {:.1} N\nhistory (10 s) [{h}]\n",
+                            state_line(s),
+                            norm,
+                            bar(s),
+                            s.limits_n[1]
+                        )
+                        .map_err(|e| e.to_string())?;
+                        stdout.flush().map_err(|e| e.to_string())?;
+                    }
+                }
+            }
+        }
+        Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
+        Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
+        Cmd::MoveTip { x, y, z } => {
+            report("move-tip", &command(command_kind::MOVE_TIP, [x, y, z])?)
+        }
+        Cmd::Limits => {
+            let r = command(command_kind::LIMITS, [0.0; 3])?;
+            let l = r.limits_n;
+            if args.format == Format::Json {
+                println!(
+                    "{}",
+                    json!({"warn_total_n": l[0], "stop_total_n": l[1], "warn_axial_n": l[2],
+                           "stop_axial_n": l[3], "warn_lateral_n": l[4], "stop_lateral_n": l[5]})
+                );
+            } else {
+                println!(
+                    "warn/stop total {}/{} N, axial {}/{} N, lateral {}/{} N",
+                    l[0], l[1], l[2], l[3], l[4], l[5]
+                );
+            }
+            let _ = wire::guard_code::OK;
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,872 @@
+//! The daemon's configuration file (TOML, INTERFACES.md 2): parsed with serde,
+//! unknown keys refused, then checked into the estimator's validated types.
+//!
+//! Only `[geometry]`, `[manipulator]` and `[sensor]` are required. Every other
+//! section has documented defaults ([`DEFAULT_TOML`] shows them all):
+//!
+//! - `[loop]`: `rate_hz` (1000; 100..=10000), `priority` (SCHED_FIFO priority,
+//!   80; 1..=99), `cpu` (the CPU the loop thread is pinned to; absent: none).
+//! - `[guard]`: warn/stop limits in N on the total (10/15), axial (8/12) and
+//!   lateral (6/10) parts of the tip force, `hysteresis_n` (1), `debounce_samples`
+//!   (3), `max_sensor_age_s` and `max_joints_age_s` (0.01), `std_margin` (2).
+//! - `[plausibility]`: `max_joint_speed_mps` (0.05), `joint_margin_m` (0.0002),
+//!   `max_counter_gap` (3), `torque_noise_nm` ([0.01, 0.01, 0.002]),
+//!   `torque_max_sigma` (7; 0 switches the torque check off).
+//! - `[tip]`: `max_std_n`, the observability limit (2 N); `filter_cutoff_hz`,
+//!   the cutoff of the filtered tip force beside the estimate (5 Hz; 0 switches
+//!   it off), stepped once per sensor sample at `sample_rate_hz` (500, the
+//!   HEX-6's rate).
+//! - `[axes]`: `travel_m`, (min, max) of q1, q2, q3 ([[-0.3, 0.3], [0, 0.6], [0, 0.6]]),
+//!   `max_speed_mps` for moves the daemon plans (0.02).
+//! - `[drivers.sensor]` and `[drivers.axes]`: `kind = "sim"` (default) or a real
+//!   device (`rdt`, `canopen`) with its keys (INTERFACES.md 2).
+//!
+//! Every error names the file, the dotted key, the line where the file has it,
+//! and the problem ([`ConfigError`]).
+
+use crate::locate::{Locator, join};
+use sar_estimator::SensorNoise;
+use sar_estimator::cycle::{EstimatorConfig, PlausibilityConfig, PlausibilityLimits, TorqueLimits};
+use sar_estimator::filter::{FilterConfig, TipFilter};
+use sar_estimator::guard::{GuardConfig, GuardLimits};
+use sar_estimator::tip_force::TipForceConfig;
+use sar_kinematics::{Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3};
+use serde::Deserialize;
+use std::net::SocketAddr;
+use std::path::Path;
+
+/// The configuration of the built-in demo (`sard --sim` without `--config`):
+/// the example robot of INTERFACES.md 2, every optional section written out
+/// with its default.
+pub const DEFAULT_TOML: &str = include_str!("default_config.toml");
+
+/// A configuration that cannot be used. The message names the file, the key
+/// (dotted, e.g. `guard.stop_total_n`), the line when the file writes the key,
+/// and what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{origin}: cannot read the file: {reason}")]
+    Read {
+        /// The file.
+        origin: String,
+        /// The system's reason.
+        reason: String,
+    },
+    /// The file is not valid TOML (toml's message, with line and column).
+    #[error("{origin}: not valid TOML: {message}")]
+    Syntax {
+        /// The file.
+        origin: String,
+        /// toml's message.
+        message: String,
+    },
+    /// A key is missing, unknown, of the wrong type, or has a value that is
+    /// not allowed.
+    #[error("{origin}: {}{}: {problem}", key_or_top(key), line_suffix(*line))]
+    Invalid {
+        /// The file.
+        origin: String,
+        /// The dotted key ("" for the file as a whole).
+        key: String,
+        /// The 1-based line where the key (or its table) is written.
+        line: Option<usize>,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+impl ConfigError {
+    /// The dotted key, for [`ConfigError::Invalid`].
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            Self::Invalid { key, .. } => Some(key),
+            _ => None,
+        }
+    }
+
+    /// The line, for [`ConfigError::Invalid`] when the file writes the key.
+    pub fn line(&self) -> Option<usize> {
+        match self {
+            Self::Invalid { line, .. } => *line,
+            _ => None,
+        }
+    }
+}
+
+fn key_or_top(key: &str) -> &str {
+    if key.is_empty() { "(top level)" } else { key }
+}
+
+fn line_suffix(line: Option<usize>) -> String {
+    line.map(|l| format!(" (line {l})")).unwrap_or_default()
+}
+
+// ---------------------------------------------------------------------------
+// The file as written.
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileToml {
+    geometry: GeometryToml,
+    manipulator: ManipulatorToml,
+    sensor: SensorToml,
+    #[serde(default, rename = "loop")]
+    loop_: LoopToml,
+    #[serde(default)]
+    guard: GuardToml,
+    #[serde(default)]
+    plausibility: PlausibilityToml,
+    #[serde(default)]
+    tip: TipToml,
+    #[serde(default)]
+    axes: AxesToml,
+    #[serde(default)]
+    drivers: DriversToml,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GeometryToml {
+    gravity: [f64; 3],
+    support: [f64; 3],
+    p_home: [f64; 3],
+    ujoint_offset: [f64; 3],
+    sensor_offset: [f64; 3],
+    sensor_rotation: [[f64; 3]; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ManipulatorToml {
+    name: String,
+    length_m: f64,
+    offset_m: f64,
+    mass_kg: f64,
+    com_m: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorToml {
+    noise_n: [f64; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct LoopToml {
+    rate_hz: f64,
+    priority: i64,
+    cpu: Option<i64>,
+}
+
+impl Default for LoopToml {
+    fn default() -> Self {
+        Self {
+            rate_hz: 1000.0,
+            priority: 80,
+            cpu: None,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct GuardToml {
+    warn_total_n: f64,
+    stop_total_n: f64,
+    warn_axial_n: f64,
+    stop_axial_n: f64,
+    warn_lateral_n: f64,
+    stop_lateral_n: f64,
+    hysteresis_n: f64,
+    debounce_samples: i64,
+    max_sensor_age_s: f64,
+    max_joints_age_s: f64,
+    std_margin: f64,
+}
+
+impl Default for GuardToml {
+    fn default() -> Self {
+        Self {
+            warn_total_n: 10.0,
+            stop_total_n: 15.0,
+            warn_axial_n: 8.0,
+            stop_axial_n: 12.0,
+            warn_lateral_n: 6.0,
+            stop_lateral_n: 10.0,
+            hysteresis_n: 1.0,
+            debounce_samples: 3,
+            max_sensor_age_s: 0.01,
+            max_joints_age_s: 0.01,
+            std_margin: 2.0,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct PlausibilityToml {
+    max_joint_speed_mps: f64,
+    joint_margin_m: f64,
+    max_counter_gap: i64,
+    torque_noise_nm: [f64; 3],
+    torque_max_sigma: f64,
+}
+
+impl Default for PlausibilityToml {
+    fn default() -> Self {
+        let d = PlausibilityLimits::default();
+        Self {
+            max_joint_speed_mps: d.max_joint_speed_mps,
+            joint_margin_m: d.joint_margin_m,
+            max_counter_gap: i64::from(d.max_counter_gap),
+            torque_noise_nm: TorqueLimits::DEFAULT_NOISE_NM,
+            torque_max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct TipToml {
+    max_std_n: f64,
+    filter_cutoff_hz: f64,
+    sample_rate_hz: f64,
+}
+
+impl Default for TipToml {
+    fn default() -> Self {
+        Self {
+            max_std_n: TipForceConfig::DEFAULT_MAX_STD_N,
+            filter_cutoff_hz: 5.0,
+            sample_rate_hz: 500.0,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct AxesToml {
+    travel_m: [[f64; 2]; 3],
+    max_speed_mps: f64,
+}
+
+impl Default for AxesToml {
+    fn default() -> Self {
+        Self {
+            travel_m: [[-0.3, 0.3], [0.0, 0.6], [0.0, 0.6]],
+            max_speed_mps: 0.02,
+        }
+    }
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DriversToml {
+    sensor: Option<SensorDriverToml>,
+    axes: Option<AxesDriverToml>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SensorDriverToml {
+    kind: String,
+    address: Option<String>,
+    counts_per_n: Option<f64>,
+    counts_per_nm: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AxesDriverToml {
+    kind: String,
+    interface: Option<String>,
+    node_ids: Option<Vec<i64>>,
+    lead_m: Option<f64>,
+    counts_per_turn: Option<i64>,
+}
+
+// ---------------------------------------------------------------------------
+// The checked configuration.
+
+/// The fixed-rate loop's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopConfig {
+    /// Cycles per second (100..=10000).
+    pub rate_hz: f64,
+    /// The cycle period, ns.
+    pub period_ns: u64,
+    /// SCHED_FIFO priority of the loop thread (1..=99).
+    pub priority: i32,
+    /// The CPU the loop thread is pinned to, if any.
+    pub cpu: Option<usize>,
+}
+
+/// The axes as the daemon plans moves on them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxesConfig {
+    /// (min, max) of q1, q2, q3, m.
+    pub travel_m: [(f64, f64); 3],
+    /// The speed of the moves the daemon plans, m/s (> 0, at most the
+    /// plausibility's `max_joint_speed_mps`).
+    pub max_speed_mps: f64,
+}
+
+/// The force/torque sensor's driver.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum SensorDriver {
+    /// The simulator.
+    Sim,
+    /// OnRobot HEX / ATI Net F/T over UDP (RDT).
+    Rdt {
+        /// The sensor's address.
+        address: SocketAddr,
+        /// Counts per newton.
+        counts_per_n: f64,
+        /// Counts per newton metre.
+        counts_per_nm: f64,
+    },
+}
+
+/// The axis drives' driver.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum AxesDriver {
+    /// The simulator.
+    Sim,
+    /// CiA 402 drives over CANopen (the daemon cannot run them yet).
+    Canopen {
+        /// The CAN interface, e.g. `can0`.
+        interface: String,
+        /// Node ids of q1, q2, q3 (1..=127, distinct).
+        node_ids: [u8; 3],
+        /// Carriage travel per motor turn, m.
+        lead_m: f64,
+        /// Encoder counts per motor turn.
+        counts_per_turn: u32,
+    },
+}
+
+/// A checked configuration.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Where it came from.
+    pub origin: String,
+    /// The manipulator's name.
+    pub manipulator_name: String,
+    /// Everything the per-cycle step needs.
+    pub estimator: EstimatorConfig,
+    /// The loop.
+    pub loop_: LoopConfig,
+    /// The axes.
+    pub axes: AxesConfig,
+    /// The sensor's driver.
+    pub sensor_driver: SensorDriver,
+    /// The axes' driver.
+    pub axes_driver: AxesDriver,
+}
+
+/// Reads and checks a configuration file; errors name `path`.
+pub fn load(path: &Path) -> Result<Config, ConfigError> {
+    let origin = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Read {
+        origin: origin.clone(),
+        reason: e.to_string(),
+    })?;
+    parse(&text, &origin)
+}
+
+/// The built-in configuration ([`DEFAULT_TOML`]).
+pub fn builtin() -> Result<Config, ConfigError> {
+    parse(DEFAULT_TOML, "(built-in configuration)")
+}
+
+/// Checks a configuration given as text; `origin` names it in errors.
+pub fn parse(text: &str, origin: &str) -> Result<Config, ConfigError> {
+    let root = toml::de::DeTable::parse(text).map_err(|e| {
+        let mut e = e;
+        e.set_input(Some(text));
+        ConfigError::Syntax {
+            origin: origin.to_owned(),
+            message: e.to_string().trim_end().to_owned(),
+        }
+    })?;
+    let ctx = Ctx {
+        origin,
+        locator: Locator::new(text, &root),
+    };
+    if let Some((key, line)) = ctx.locator.first_non_finite() {
+        return Err(ConfigError::Invalid {
+            origin: origin.to_owned(),
+            key,
+            line: Some(line),
+            problem: "not a finite number".to_owned(),
+        });
+    }
+    let file: FileToml = Deserialize::deserialize(toml::de::Deserializer::from(root))
+        .map_err(|e| ctx.serde_error(&e))?;
+    build(&ctx, file)
+}
+
+struct Ctx<'a> {
+    origin: &'a str,
+    locator: Locator<'a>,
+}
+
+impl Ctx<'_> {
+    fn err(&self, key: &str, problem: impl Into<String>) -> ConfigError {
+        // A key the file does not write (a defaulted one) takes the line of
+        // the nearest enclosing key.
+        let mut probe = key;
+        let mut line = None;
+        while !probe.is_empty() {
+            line = self.locator.line_of_key(probe);
+            if line.is_some() {
+                break;
+            }
+            probe = match probe.rfind(['.', '[']) {
+                Some(i) => probe.get(..i).unwrap_or(""),
+                None => "",
+            };
+        }
+        ConfigError::Invalid {
+            origin: self.origin.to_owned(),
+            key: key.to_owned(),
+            line,
+            problem: problem.into(),
+        }
+    }
+
+    fn serde_error(&self, e: &toml::de::Error) -> ConfigError {
+        let message = e.message().trim_end();
+        let mut key = e
+            .span()
+            .map(|span| self.locator.key_at(&span))
+            .unwrap_or_default();
+        let line = if key.is_empty() {
+            None
+        } else {
+            e.span().map(|span| self.locator.line_at(span.start))
+        };
+        let problem = if let Some(field) = message
+            .strip_prefix("missing field `")
+            .and_then(|rest| rest.split('`').next())
+        {
+            key = join(&key, field);
+            "missing key".to_owned()
+        } else if let Some(rest) = message.strip_prefix("unknown field") {
+            format!("unknown key{rest}")
+        } else {
+            message.to_owned()
+        };
+        ConfigError::Invalid {
+            origin: self.origin.to_owned(),
+            key,
+            line,
+            problem,
+        }
+    }
+
+    fn range_f(&self, key: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<f64, ConfigError> {
+        if (lo..=hi).contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.err(key, format!("must be within {lo}..={hi} {unit}, got {v}")))
+        }
+    }
+
+    fn range_i(&self, key: &str, v: i64, lo: i64, hi: i64) -> Result<i64, ConfigError> {
+        if (lo..=hi).contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.err(key, format!("must be within {lo}..={hi}, got {v}")))
+        }
+    }
+
+    /// Seconds (> 0, at most an hour) to ns.
+    fn seconds_ns(&self, key: &str, s: f64) -> Result<u64, ConfigError> {
+        let s = self.range_f(key, s, 0.0, 3600.0, "s")?;
+        let ns = (s * 1e9).round();
+        if ns < 1.0 {
+            return Err(self.err(key, format!("must be > 0 s, got {s}")));
+        }
+        // In range by the check above (at most 3.6e12).
+        Ok(ns as u64)
+    }
+}
+
+fn vec3(v: [f64; 3]) -> Vec3 {
+    Vec3::from(v)
+}
+
+fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
+    // Geometry and manipulator, through the kinematics' own checks.
+    let g = &f.geometry;
+    let r = g.sensor_rotation;
+    let rotation = Mat3::from_row_slice(&[
+        r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2],
+    ]);
+    let calibration = Calibration::new(&CalibrationSpec {
+        p_home_m: vec3(g.p_home),
+        ujoint_offset_m: vec3(g.ujoint_offset),
+        sensor_offset_m: vec3(g.sensor_offset),
+        sensor_rotation: rotation,
+        support_m: vec3(g.support),
+        gravity_mps2: vec3(g.gravity),
+    })
+    .map_err(|e| {
+        let text = e.to_string();
+        let field = [
+            "sensor_rotation",
+            "gravity",
+            "support",
+            "p_home",
+            "ujoint_offset",
+            "sensor_offset",
+        ]
+        .into_iter()
+        .find(|k| text.starts_with(k))
+        .unwrap_or("");
+        ctx.err(&join("geometry", field), text)
+    })?;
+    let m = &f.manipulator;
+    if m.name.trim().is_empty() {
+        return Err(ctx.err("manipulator.name", "must not be empty"));
+    }
+    let profile = Profile::new(&ProfileSpec {
+        length_m: m.length_m,
+        offset_m: m.offset_m,
+        mass_kg: m.mass_kg,
+        com_m: m.com_m,
+    })
+    .map_err(|e| {
+        let text = e.to_string();
+        let field = ["length_m", "offset_m", "mass_kg", "com_m"]
+            .into_iter()
+            .find(|k| text.contains(k))
+            .unwrap_or("");
+        ctx.err(&join("manipulator", field), text)
+    })?;
+    let noise = SensorNoise::new(vec3(f.sensor.noise_n))
+        .map_err(|e| ctx.err("sensor.noise_n", e.to_string()))?;
+
+    // The axes, and whether the support is within the rod's reach.
+    let mut travel_m = [(0.0, 0.0); 3];
+    for (i, (slot, [lo, hi])) in travel_m.iter_mut().zip(f.axes.travel_m).enumerate() {
+        if lo >= hi {
+            return Err(ctx.err(
+                &format!("axes.travel_m[{i}]"),
+                format!("min must be below max, got [{lo}, {hi}]"),
+            ));
+        }
+        *slot = (lo, hi);
+    }
+    let speed = f.axes.max_speed_mps;
+    if !(speed > 0.0 && speed <= f.plausibility.max_joint_speed_mps) {
+        return Err(ctx.err(
+            "axes.max_speed_mps",
+            format!(
+                "must be > 0 and at most plausibility.max_joint_speed_mps ({} m/s), got {speed}",
+                f.plausibility.max_joint_speed_mps
+            ),
+        ));
+    }
+    check_reach(ctx, &calibration, &profile, &travel_m)?;
+
+    // The guard.
+    let gt = &f.guard;
+    let debounce = ctx.range_i(
+        "guard.debounce_samples",
+        gt.debounce_samples,
+        1,
+        i64::from(sar_estimator::guard::MAX_DEBOUNCE_SAMPLES),
+    )?;
+    let limits = GuardLimits {
+        warn_total_n: gt.warn_total_n,
+        stop_total_n: gt.stop_total_n,
+        warn_axial_n: gt.warn_axial_n,
+        stop_axial_n: gt.stop_axial_n,
+        warn_lateral_n: gt.warn_lateral_n,
+        stop_lateral_n: gt.stop_lateral_n,
+        hysteresis_n: gt.hysteresis_n,
+        debounce_samples: u32::try_from(debounce).unwrap_or(1),
+        max_sensor_age_ns: ctx.seconds_ns("guard.max_sensor_age_s", gt.max_sensor_age_s)?,
+        max_joints_age_ns: ctx.seconds_ns("guard.max_joints_age_s", gt.max_joints_age_s)?,
+        std_margin: gt.std_margin,
+    };
+    let guard = GuardConfig::new(limits).map_err(|e| setting_error(ctx, "guard", &e))?;
+
+    // Plausibility and tip.
+    let p = &f.plausibility;
+    let gap = ctx.range_i(
+        "plausibility.max_counter_gap",
+        p.max_counter_gap,
+        1,
+        1_000_000,
+    )?;
+    let torque = if p.torque_max_sigma == 0.0 {
+        None
+    } else {
+        Some(TorqueLimits {
+            noise_nm: vec3(p.torque_noise_nm),
+            max_sigma: p.torque_max_sigma,
+        })
+    };
+    let plausibility = PlausibilityConfig::new(PlausibilityLimits {
+        max_joint_speed_mps: p.max_joint_speed_mps,
+        joint_margin_m: p.joint_margin_m,
+        max_counter_gap: u32::try_from(gap).unwrap_or(1),
+        torque,
+    })
+    .map_err(|e| setting_error(ctx, "plausibility", &e))?;
+    let max_std_n = f.tip.max_std_n;
+    if !(max_std_n.is_finite() && max_std_n > 0.0) {
+        return Err(ctx.err("tip.max_std_n", format!("must be > 0 N, got {max_std_n}")));
+    }
+    let sample_rate_hz = ctx.range_f(
+        "tip.sample_rate_hz",
+        f.tip.sample_rate_hz,
+        1.0,
+        100_000.0,
+        "Hz",
+    )?;
+    let cutoff_hz = f.tip.filter_cutoff_hz;
+    let filter = if cutoff_hz == 0.0 {
+        None
+    } else {
+        let filter = FilterConfig {
+            cutoff_hz,
+            sample_period_s: 1.0 / sample_rate_hz,
+        };
+        // Checked here so that the error names the key.
+        TipFilter::new(filter).map_err(|e| ctx.err("tip.filter_cutoff_hz", e.to_string()))?;
+        Some(filter)
+    };
+
+    // The loop.
+    let l = &f.loop_;
+    let rate_hz = ctx.range_f("loop.rate_hz", l.rate_hz, 100.0, 10_000.0, "Hz")?;
+    let priority = ctx.range_i("loop.priority", l.priority, 1, 99)?;
+    let cpu = match l.cpu {
+        None => None,
+        Some(c) => Some(ctx.range_i("loop.cpu", c, 0, 1023)?),
+    };
+
+    let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
+    let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
+
+    Ok(Config {
+        origin: ctx.origin.to_owned(),
+        manipulator_name: m.name.clone(),
+        estimator: EstimatorConfig {
+            calibration,
+            profile,
+            noise,
+            tip: TipForceConfig { max_std_n },
+            guard,
+            plausibility,
+            filter,
+        },
+        loop_: LoopConfig {
+            rate_hz,
+            // 100..=10000 Hz: 1e5..=1e7 ns.
+            period_ns: (1e9 / rate_hz).round() as u64,
+            priority: i32::try_from(priority).unwrap_or(1),
+            cpu: cpu.and_then(|c| usize::try_from(c).ok()),
+        },
+        axes: AxesConfig {
+            travel_m,
+            max_speed_mps: speed,
+        },
+        sensor_driver,
+        axes_driver,
+    })
+}
+
+/// Maps an estimator setting error to its key in `section`.
+fn setting_error(ctx: &Ctx<'_>, section: &str, e: &sar_estimator::SettingError) -> ConfigError {
+    let field = match e {
+        sar_estimator::SettingError::Invalid { field, .. } => *field,
+        _ => "",
+    };
+    let key = match field {
+        "max_sensor_age_ns" => "max_sensor_age_s",
+        "max_joints_age_ns" => "max_joints_age_s",
+        "torque.noise_nm" => "torque_noise_nm",
+        "torque.max_sigma" => "torque_max_sigma",
+        other => other,
+    };
+    ctx.err(&join(section, key), e.to_string())
+}
+
+/// The support must be reachable: some U-joint position A within the travel
+/// must be closer to B than the rod's length (the rod goes through B with
+/// its tip beyond it), and not at B itself.
+fn check_reach(
+    ctx: &Ctx<'_>,
+    cal: &Calibration,
+    profile: &Profile,
+    travel_m: &[(f64, f64); 3],
+) -> Result<(), ConfigError> {
+    // A = P_home + (q3, q2, q1) + a_off: a box in {0}.
+    let base = cal.p_home_m() + cal.ujoint_offset_m();
+    let (lo, hi) = (
+        base + Vec3::new(travel_m[2].0, travel_m[1].0, travel_m[0].0),
+        base + Vec3::new(travel_m[2].1, travel_m[1].1, travel_m[0].1),
+    );
+    let b = cal.support_m();
+    let nearest = Vec3::new(
+        b.x.clamp(lo.x, hi.x),
+        b.y.clamp(lo.y, hi.y),
+        b.z.clamp(lo.z, hi.z),
+    );
+    let distance_m = (b - nearest).norm();
+    if distance_m >= profile.length_m() {
+        return Err(ctx.err(
+            "geometry.support",
+            format!(
+                "the carriage cannot reach the support: it is at least {distance_m:.4} m from \
+                 every U-joint position in axes.travel_m, the rod is {:.4} m long",
+                profile.length_m()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn sensor_driver(ctx: &Ctx<'_>, s: Option<&SensorDriverToml>) -> Result<SensorDriver, ConfigError> {
+    let Some(s) = s else {
+        return Ok(SensorDriver::Sim);
+    };
+    match s.kind.as_str() {
+        "sim" => {
+            for (key, given) in [
+                ("address", s.address.is_some()),
+                ("counts_per_n", s.counts_per_n.is_some()),
+                ("counts_per_nm", s.counts_per_nm.is_some()),
+            ] {
+                if given {
+                    return Err(ctx.err(
+                        &format!("drivers.sensor.{key}"),
+                        "not a key of the simulated sensor (kind = \"sim\")",
+                    ));
+                }
+            }
+            Ok(SensorDriver::Sim)
+        }
+        "rdt" => {
+            let address = s
+                .address
+                .as_deref()
+                .ok_or_else(|| ctx.err("drivers.sensor.address", "missing key"))?;
+            let address: SocketAddr = address.parse().map_err(|_| {
+                ctx.err(
+                    "drivers.sensor.address",
+                    format!(
+                        "not an IP address with a port (e.g. \"192.168.1.1:49152\"): {address:?}"
+                    ),
+                )
+            })?;
+            let mut counts = [0.0; 2];
+            for (slot, (key, v)) in counts.iter_mut().zip([
+                ("counts_per_n", s.counts_per_n),
+                ("counts_per_nm", s.counts_per_nm),
+            ]) {
+                let key = format!("drivers.sensor.{key}");
+                let v = v.ok_or_else(|| ctx.err(&key, "missing key"))?;
+                if v <= 0.0 {
+                    return Err(ctx.err(&key, format!("must be > 0, got {v}")));
+                }
+                *slot = v;
+            }
+            Ok(SensorDriver::Rdt {
+                address,
+                counts_per_n: counts[0],
+                counts_per_nm: counts[1],
+            })
+        }
+        other => Err(ctx.err(
+            "drivers.sensor.kind",
+            format!("must be \"sim\" or \"rdt\", got {other:?}"),
+        )),
+    }
+}
+
+fn axes_driver(ctx: &Ctx<'_>, a: Option<&AxesDriverToml>) -> Result<AxesDriver, ConfigError> {
+    let Some(a) = a else {
+        return Ok(AxesDriver::Sim);
+    };
+    match a.kind.as_str() {
+        "sim" => {
+            for (key, given) in [
+                ("interface", a.interface.is_some()),
+                ("node_ids", a.node_ids.is_some()),
+                ("lead_m", a.lead_m.is_some()),
+                ("counts_per_turn", a.counts_per_turn.is_some()),
+            ] {
+                if given {
+                    return Err(ctx.err(
+                        &format!("drivers.axes.{key}"),
+                        "not a key of the simulated axes (kind = \"sim\")",
+                    ));
+                }
+            }
+            Ok(AxesDriver::Sim)
+        }
+        "canopen" => {
+            let interface = a
+                .interface
+                .clone()
+                .ok_or_else(|| ctx.err("drivers.axes.interface", "missing key"))?;
+            if interface.is_empty() || interface.len() > 15 {
+                return Err(ctx.err(
+                    "drivers.axes.interface",
+                    format!("must be a network interface name of 1 to 15 bytes, got {interface:?}"),
+                ));
+            }
+            let ids = a
+                .node_ids
+                .as_ref()
+                .ok_or_else(|| ctx.err("drivers.axes.node_ids", "missing key"))?;
+            let [q1, q2, q3] = ids.as_slice() else {
+                return Err(ctx.err(
+                    "drivers.axes.node_ids",
+                    format!("must name 3 nodes (q1, q2, q3), got {}", ids.len()),
+                ));
+            };
+            let mut node_ids = [0u8; 3];
+            for (i, (slot, &id)) in node_ids.iter_mut().zip([q1, q2, q3]).enumerate() {
+                let id = ctx.range_i(&format!("drivers.axes.node_ids[{i}]"), id, 1, 127)?;
+                *slot = u8::try_from(id).unwrap_or(1);
+            }
+            let [n1, n2, n3] = node_ids;
+            if n1 == n2 || n2 == n3 || n1 == n3 {
+                return Err(ctx.err(
+                    "drivers.axes.node_ids",
+                    format!("the three node ids must differ, got {node_ids:?}"),
+                ));
+            }
+            let lead_m = a
+                .lead_m
+                .ok_or_else(|| ctx.err("drivers.axes.lead_m", "missing key"))?;
+            let lead_m = ctx.range_f("drivers.axes.lead_m", lead_m, 1e-5, 1.0, "m")?;
+            let cpt = a
+                .counts_per_turn
+                .ok_or_else(|| ctx.err("drivers.axes.counts_per_turn", "missing key"))?;
+            let cpt = ctx.range_i("drivers.axes.counts_per_turn", cpt, 1, i64::from(u32::MAX))?;
+            Ok(AxesDriver::Canopen {
+                interface,
+                node_ids,
+                lead_m,
+                counts_per_turn: u32::try_from(cpt).unwrap_or(1),
+            })
+        }
+        other => Err(ctx.err(
+            "drivers.axes.kind",
+            format!("must be \"sim\" or \"canopen\", got {other:?}"),
+        )),
+    }
+}

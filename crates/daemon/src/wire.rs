@@ -1,0 +1,393 @@
+//! The shared-memory payloads, used by every process (`sard`, `sarctl`,
+//! tests): flat `#[repr(C)]` fixed-size types, numbers only (numeric codes
+//! for states and reasons, no enums with payloads, no references). The
+//! estimator's types are converted here, at the edge.
+
+use crate::control::{Reply, ReplyStatus, Request, reason_code};
+use crate::stats::LoopStats;
+use iceoryx2::prelude::ZeroCopySend;
+use sar_drivers::DriveState;
+use sar_estimator::Vec3;
+use sar_estimator::cycle::{CycleInput, CycleOutput, TipOutcome};
+use sar_estimator::guard::{GuardLimits, GuardState};
+
+/// The limits as published: warn, stop for total, axial, lateral, N.
+pub fn limits_array(l: &GuardLimits) -> [f64; 6] {
+    [
+        l.warn_total_n,
+        l.stop_total_n,
+        l.warn_axial_n,
+        l.stop_axial_n,
+        l.warn_lateral_n,
+        l.stop_lateral_n,
+    ]
+}
+
+/// Flag bits of [`StateMsg::flags`].
+pub mod flags {
+    /// The kinematics gave a pose (q4, q5, A, D, a are meaningful).
+    pub const POSE: u32 = 1;
+    /// The tip force is a number.
+    pub const ESTIMATE: u32 = 1 << 1;
+    /// The estimate is observable (its deviation below the limit).
+    pub const OBSERVABLE: u32 = 1 << 2;
+    /// The sensor sample is a new one.
+    pub const NEW_SAMPLE: u32 = 1 << 3;
+    /// The drives are halted (quick stop sent, no reset since).
+    pub const HALTED: u32 = 1 << 4;
+    /// `truth_tip_force_n` holds the simulator's truth.
+    pub const SIM_TRUTH: u32 = 1 << 5;
+}
+
+/// Guard state codes.
+pub mod guard_code {
+    /// Ok.
+    pub const OK: u32 = 0;
+    /// Warn.
+    pub const WARN: u32 = 1;
+    /// Stop (latched).
+    pub const STOP: u32 = 2;
+    /// Fault (latched).
+    pub const FAULT: u32 = 3;
+}
+
+/// The guard state's code.
+pub fn guard_state_code(s: GuardState) -> u32 {
+    match s {
+        GuardState::Ok => guard_code::OK,
+        GuardState::Warn => guard_code::WARN,
+        GuardState::Stop => guard_code::STOP,
+        GuardState::Fault => guard_code::FAULT,
+    }
+}
+
+/// The guard state's name for a code.
+pub fn guard_state_name(code: u32) -> &'static str {
+    match code {
+        guard_code::OK => "ok",
+        guard_code::WARN => "warn",
+        guard_code::STOP => "stop",
+        guard_code::FAULT => "fault",
+        _ => "unknown",
+    }
+}
+
+/// The reason code's short name (codes of [`reason_code`]).
+pub fn reason_name(code: u32) -> &'static str {
+    match code {
+        0 => "none",
+        1 => "no input yet",
+        2 => "cycle out of order",
+        3 => "clock failed",
+        4 => "clock not advancing",
+        5 => "sensor counter gap",
+        6 => "sensor status",
+        7 => "joint jump",
+        8 => "joint stamp backwards",
+        9 => "torque implausible",
+        10 => "reset not current",
+        11 => "sensor invalid",
+        12 => "sensor stale",
+        13 => "joints invalid",
+        14 => "joints stale",
+        15 => "pose invalid",
+        16 => "non-finite estimate",
+        17 => "negative std",
+        18 => "rod direction not unit",
+        19 => "estimator not observable",
+        20 => "not observable",
+        21 => "above stop limit",
+        22 => "above warn limit",
+        23 => "below warn",
+        24 => "reset",
+        _ => "other",
+    }
+}
+
+/// Drive state codes: 0 unknown, 1 ready, 2 enabled, 3 quick stop, 4 fault.
+pub fn drive_state_code(s: Option<DriveState>) -> u32 {
+    match s {
+        None => 0,
+        Some(DriveState::Ready) => 1,
+        Some(DriveState::Enabled) => 2,
+        Some(DriveState::QuickStop) => 3,
+        Some(DriveState::Fault { .. }) => 4,
+    }
+}
+
+/// The state of one control cycle, published once per cycle.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+pub struct StateMsg {
+    /// The cycle number.
+    pub cycle: u64,
+    /// The cycle's monotonic time, ns (0: the clock failed).
+    pub now_ns: u64,
+    /// The sensor sample's receive stamp, ns.
+    pub sensor_stamp_ns: u64,
+    /// The joint sample's stamp, ns.
+    pub joints_stamp_ns: u64,
+    /// Sensor age, ns (`u64::MAX`: unknown).
+    pub sensor_age_ns: u64,
+    /// Joints age, ns (`u64::MAX`: unknown).
+    pub joints_age_ns: u64,
+    /// q1, q2, q3, m.
+    pub q_m: [f64; 3],
+    /// q4, q5, rad.
+    pub q45_rad: [f64; 2],
+    /// A, the U-joint centre, base frame, m.
+    pub ujoint_m: [f64; 3],
+    /// D, the tip, base frame, m.
+    pub tip_m: [f64; 3],
+    /// a = |B - A|, m.
+    pub support_distance_m: f64,
+    /// F_A, N.
+    pub ujoint_force_n: [f64; 3],
+    /// F_tip, the force the tip applies to tissue, base frame, N.
+    pub tip_force_n: [f64; 3],
+    /// Its standard deviation per axis, N.
+    pub tip_std_n: [f64; 3],
+    /// Axial and lateral parts, N.
+    pub tip_axial_lateral_n: [f64; 2],
+    /// The simulator's true F_tip (with [`flags::SIM_TRUTH`]), N.
+    pub truth_tip_force_n: [f64; 3],
+    /// [`flags`] bits.
+    pub flags: u32,
+    /// [`guard_code`].
+    pub guard_state: u32,
+    /// The guard's reason code.
+    pub guard_reason: u32,
+    /// [`drive_state_code`].
+    pub drive_state: u32,
+    /// Warn and stop limits: total, axial, lateral (warn, stop each), N.
+    pub limits_n: [f64; 6],
+    /// Wake-up latency p50, p99, max, ns.
+    pub wakeup_ns: [u64; 3],
+    /// Compute time p50, p99, max, ns.
+    pub compute_ns: [u64; 3],
+    /// Overruns so far.
+    pub overruns: u64,
+    /// Quick stops sent so far.
+    pub quick_stops: u64,
+}
+
+impl Default for StateMsg {
+    fn default() -> Self {
+        Self {
+            cycle: 0,
+            now_ns: 0,
+            sensor_stamp_ns: 0,
+            joints_stamp_ns: 0,
+            sensor_age_ns: u64::MAX,
+            joints_age_ns: u64::MAX,
+            q_m: [0.0; 3],
+            q45_rad: [0.0; 2],
+            ujoint_m: [0.0; 3],
+            tip_m: [0.0; 3],
+            support_distance_m: 0.0,
+            ujoint_force_n: [0.0; 3],
+            tip_force_n: [0.0; 3],
+            tip_std_n: [0.0; 3],
+            tip_axial_lateral_n: [0.0; 2],
+            truth_tip_force_n: [0.0; 3],
+            flags: 0,
+            guard_state: guard_code::FAULT,
+            guard_reason: 0,
+            drive_state: 0,
+            limits_n: [0.0; 6],
+            wakeup_ns: [0; 3],
+            compute_ns: [0; 3],
+            overruns: 0,
+            quick_stops: 0,
+        }
+    }
+}
+
+fn arr(v: &Vec3) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Everything a [`StateMsg`] is made from.
+#[derive(Debug, Clone, Copy)]
+pub struct StateParts<'a> {
+    /// The cycle's input.
+    pub input: &'a CycleInput,
+    /// The cycle's output.
+    pub output: &'a CycleOutput,
+    /// The loop's measurements.
+    pub stats: &'a LoopStats,
+    /// The guard's limits: warn, stop for total, axial, lateral, N.
+    pub limits_n: [f64; 6],
+    /// The drives' state.
+    pub drive_state: Option<DriveState>,
+    /// Whether the drives are halted.
+    pub halted: bool,
+    /// Quick stops so far.
+    pub quick_stops: u64,
+    /// The simulator's truth, when simulated.
+    pub truth_tip_force_n: Option<Vec3>,
+}
+
+impl StateMsg {
+    /// Converts one cycle.
+    pub fn from_parts(p: &StateParts<'_>) -> Self {
+        let (i, o) = (p.input, p.output);
+        let mut m = Self {
+            cycle: o.cycle,
+            now_ns: i.now_ns.unwrap_or(0),
+            sensor_stamp_ns: i.sensor.stamp_ns,
+            joints_stamp_ns: i.joints.stamp_ns,
+            sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
+            joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
+            q_m: [
+                i.joints.joints.q1_m,
+                i.joints.joints.q2_m,
+                i.joints.joints.q3_m,
+            ],
+            guard_state: guard_state_code(o.guard_state),
+            guard_reason: u32::from(reason_code(&o.guard_reason)),
+            drive_state: drive_state_code(p.drive_state),
+            limits_n: p.limits_n,
+            wakeup_ns: [
+                p.stats.wakeup.quantile_ns(0.5),
+                p.stats.wakeup.quantile_ns(0.99),
+                p.stats.wakeup.max_ns(),
+            ],
+            compute_ns: [
+                p.stats.compute.quantile_ns(0.5),
+                p.stats.compute.quantile_ns(0.99),
+                p.stats.compute.max_ns(),
+            ],
+            overruns: p.stats.overruns,
+            quick_stops: p.quick_stops,
+            ..Self::default()
+        };
+        if let Some(pose) = o.pose {
+            m.flags |= flags::POSE;
+            m.q45_rad = [pose.q4_rad(), pose.q5_rad()];
+            m.ujoint_m = arr(&pose.ujoint_m);
+            m.tip_m = arr(&pose.tip_m);
+            m.support_distance_m = pose.support_distance_m;
+        }
+        if let TipOutcome::Estimate(e) = o.tip {
+            m.flags |= flags::ESTIMATE;
+            if e.observable {
+                m.flags |= flags::OBSERVABLE;
+            }
+            m.ujoint_force_n = arr(&e.ujoint_force_n);
+            m.tip_force_n = arr(&e.force_n);
+            m.tip_std_n = arr(&e.std_n);
+            m.tip_axial_lateral_n = [e.axial_n, e.lateral_n];
+        }
+        if o.new_sample {
+            m.flags |= flags::NEW_SAMPLE;
+        }
+        if p.halted {
+            m.flags |= flags::HALTED;
+        }
+        if let Some(t) = p.truth_tip_force_n {
+            m.flags |= flags::SIM_TRUTH;
+            m.truth_tip_force_n = arr(&t);
+        }
+        m
+    }
+}
+
+/// Command kinds of [`CommandMsg::kind`].
+pub mod command_kind {
+    /// Reset the guard.
+    pub const RESET: u32 = 1;
+    /// Tare.
+    pub const TARE: u32 = 2;
+    /// Move the tip to `tip_m`.
+    pub const MOVE_TIP: u32 = 3;
+    /// Read the guard's limits.
+    pub const LIMITS: u32 = 4;
+}
+
+/// An operator command.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct CommandMsg {
+    /// [`command_kind`].
+    pub kind: u32,
+    /// Padding, 0.
+    pub reserved: u32,
+    /// The caller's id, echoed.
+    pub id: u64,
+    /// For MOVE_TIP: the wanted tip, base frame, m.
+    pub tip_m: [f64; 3],
+}
+
+impl CommandMsg {
+    /// The loop's request, or `None` for a kind the loop does not take
+    /// (LIMITS is answered without the loop; unknown kinds are refused).
+    pub fn request(&self) -> Option<Request> {
+        match self.kind {
+            command_kind::RESET => Some(Request::Reset),
+            command_kind::TARE => Some(Request::Tare),
+            command_kind::MOVE_TIP => Some(Request::MoveTip {
+                tip_m: Vec3::new(self.tip_m[0], self.tip_m[1], self.tip_m[2]),
+            }),
+            _ => None,
+        }
+    }
+}
+
+/// Reply status codes beyond [`ReplyStatus`] (whose numbers are kept).
+pub mod reply_code {
+    /// The command kind is unknown.
+    pub const UNKNOWN_COMMAND: u32 = 100;
+    /// The loop's request queue is full.
+    pub const BUSY: u32 = 101;
+}
+
+/// The reply to a command.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct ReplyMsg {
+    /// The command's id.
+    pub id: u64,
+    /// The cycle that judged it.
+    pub cycle: u64,
+    /// [`ReplyStatus`] as a number, or a [`reply_code`].
+    pub status: u32,
+    /// The guard's reason code behind a refusal.
+    pub reason: u32,
+    /// The guard's limits (warn, stop for total, axial, lateral), N.
+    pub limits_n: [f64; 6],
+}
+
+impl ReplyMsg {
+    /// Converts the loop's reply.
+    pub fn from_reply(r: &Reply, limits_n: [f64; 6]) -> Self {
+        Self {
+            id: r.id,
+            cycle: r.cycle,
+            status: r.status as u32,
+            reason: u32::from(r.reason),
+            limits_n,
+        }
+    }
+}
+
+/// The name of a reply status code.
+pub fn status_name(code: u32) -> &'static str {
+    match code {
+        x if x == ReplyStatus::Accepted as u32 => "accepted",
+        x if x == ReplyStatus::NothingToReset as u32 => "nothing to reset",
+        x if x == ReplyStatus::ResetRefused as u32 => "reset refused: the cause persists",
+        x if x == ReplyStatus::NotOk as u32 => "refused: the guard is not ok",
+        x if x == ReplyStatus::AboveWarn as u32 => "refused: the tip force is above a warn limit",
+        x if x == ReplyStatus::NoEstimate as u32 => "refused: no tip-force estimate",
+        x if x == ReplyStatus::Halted as u32 => "refused: the drives are halted (reset first)",
+        x if x == ReplyStatus::Unreachable as u32 => "refused: the tip position cannot be reached",
+        x if x == ReplyStatus::TowardForce as u32 => {
+            "refused: the move pushes deeper along the tip force above the warn limit"
+        }
+        x if x == ReplyStatus::DrivesRefused as u32 => "refused by the drives",
+        reply_code::UNKNOWN_COMMAND => "unknown command",
+        reply_code::BUSY => "refused: the daemon's command queue is full",
+        _ => "refused",
+    }
+}

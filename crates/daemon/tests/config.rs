@@ -1,0 +1,291 @@
+//! The configuration file: the minimum of INTERFACES.md 2 works, defaults are
+//! as documented, and every bad file is refused naming the file, key and line.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+use sar_daemon::config::{self, AxesDriver, ConfigError, SensorDriver};
+
+const MINIMUM: &str = r#"
+[geometry]
+gravity = [0.0, -9.80665, 0.0]
+support = [0.45, 0.20, 0.0]
+p_home = [0.0, 0.0, 0.0]
+ujoint_offset = [0.0, -0.08, 0.0]
+sensor_offset = [0.0, -0.03, 0.0]
+sensor_rotation = [[1.0, 0.0, 0.0],
+                   [0.0, 1.0, 0.0],
+                   [0.0, 0.0, 1.0]]
+
+[manipulator]
+name = "manipulator-2"
+length_m = 0.35
+offset_m = 0.0
+mass_kg = 2.593
+com_m = 0.103
+
+[sensor]
+noise_n = [0.2, 0.2, 0.8]
+"#;
+
+fn bad(text: &str) -> ConfigError {
+    config::parse(text, "robot.toml").unwrap_err()
+}
+
+/// The 1-based line of the last line of `text` that contains `needle`.
+fn line_of(text: &str, needle: &str) -> Option<usize> {
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| l.contains(needle))
+        .map(|(i, _)| i + 1)
+        .last()
+}
+
+fn expect(text: &str, key: &str, at: Option<&str>, words: &str) {
+    let line = at.map(|needle| line_of(text, needle).unwrap());
+    let e = bad(text);
+    let msg = e.to_string();
+    assert_eq!(e.key(), Some(key), "{msg}");
+    assert_eq!(e.line(), line, "{msg}");
+    assert!(msg.starts_with("robot.toml: "), "{msg}");
+    assert!(msg.contains(words), "{msg} lacks {words:?}");
+}
+
+#[test]
+fn the_minimum_file_works_with_the_documented_defaults() {
+    let c = config::parse(MINIMUM, "robot.toml").unwrap();
+    assert_eq!(c.manipulator_name, "manipulator-2");
+    assert_eq!(c.loop_.rate_hz, 1000.0);
+    assert_eq!(c.loop_.period_ns, 1_000_000);
+    assert_eq!(c.loop_.priority, 80);
+    assert_eq!(c.loop_.cpu, None);
+    let g = c.estimator.guard.limits();
+    assert_eq!((g.warn_total_n, g.stop_total_n), (10.0, 15.0));
+    assert_eq!((g.warn_axial_n, g.stop_axial_n), (8.0, 12.0));
+    assert_eq!((g.warn_lateral_n, g.stop_lateral_n), (6.0, 10.0));
+    assert_eq!(g.debounce_samples, 3);
+    assert_eq!(g.max_sensor_age_ns, 10_000_000);
+    assert_eq!(c.estimator.tip.max_std_n, 2.0);
+    assert!(c.estimator.plausibility.limits().torque.is_some());
+    assert_eq!(c.sensor_driver, SensorDriver::Sim);
+    assert_eq!(c.axes_driver, AxesDriver::Sim);
+    assert_eq!(c.estimator.calibration.support_m().x, 0.45);
+    assert_eq!(c.estimator.profile.mass_kg(), 2.593);
+}
+
+#[test]
+fn the_builtin_configuration_equals_the_minimum_with_defaults_but_the_demo_keys() {
+    let text = config::DEFAULT_TOML
+        .lines()
+        .filter(|l| !l.contains("# DEMO"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let b = config::parse(&text, "builtin without the DEMO lines").unwrap();
+    let m = config::parse(MINIMUM, "m").unwrap();
+    assert_eq!(b.loop_, m.loop_);
+    assert_eq!(b.axes, m.axes);
+    assert_eq!(b.estimator.guard, m.estimator.guard);
+    assert_eq!(b.estimator.plausibility, m.estimator.plausibility);
+    let demo = config::builtin().unwrap();
+    assert_eq!(demo.estimator.plausibility.limits().max_counter_gap, 25);
+}
+
+#[test]
+fn every_section_can_be_set() {
+    let text = format!(
+        "{MINIMUM}
+[loop]
+rate_hz = 4000.0
+priority = 90
+cpu = 1
+[guard]
+warn_total_n = 5.0
+stop_total_n = 7.0
+[plausibility]
+torque_max_sigma = 0.0
+[tip]
+max_std_n = 3.0
+[drivers.sensor]
+kind = \"rdt\"
+address = \"192.168.1.1:49152\"
+counts_per_n = 10000.0
+counts_per_nm = 100000.0
+[drivers.axes]
+kind = \"canopen\"
+interface = \"can0\"
+node_ids = [1, 2, 3]
+lead_m = 0.01
+counts_per_turn = 4096
+"
+    );
+    let c = config::parse(&text, "robot.toml").unwrap();
+    assert_eq!(c.loop_.period_ns, 250_000);
+    assert_eq!(c.loop_.priority, 90);
+    assert_eq!(c.loop_.cpu, Some(1));
+    assert_eq!(c.estimator.guard.limits().stop_total_n, 7.0);
+    assert_eq!(c.estimator.guard.limits().stop_axial_n, 12.0);
+    assert!(c.estimator.plausibility.limits().torque.is_none());
+    assert_eq!(c.estimator.tip.max_std_n, 3.0);
+    assert_eq!(
+        c.sensor_driver,
+        SensorDriver::Rdt {
+            address: "192.168.1.1:49152".parse().unwrap(),
+            counts_per_n: 10000.0,
+            counts_per_nm: 100000.0
+        }
+    );
+    assert!(matches!(
+        c.axes_driver,
+        AxesDriver::Canopen {
+            node_ids: [1, 2, 3],
+            ..
+        }
+    ));
+}
+
+#[test]
+fn a_missing_key_is_named() {
+    let text = MINIMUM.replace("mass_kg = 2.593\n", "");
+    expect(
+        &text,
+        "manipulator.mass_kg",
+        Some("[manipulator]"),
+        "missing key",
+    );
+    let text = MINIMUM.replace("[sensor]\nnoise_n = [0.2, 0.2, 0.8]\n", "");
+    expect(&text, "sensor", None, "missing key");
+}
+
+#[test]
+fn an_unknown_key_is_refused_with_its_line() {
+    let text = format!("{MINIMUM}\n[guard]\nstop_totl_n = 12.0\n");
+    expect(
+        &text,
+        "guard.stop_totl_n",
+        Some("stop_totl_n"),
+        "unknown key",
+    );
+    let text = MINIMUM.replace("[sensor]\n", "[sensor]\nnoise = 1.0\n");
+    expect(&text, "sensor.noise", Some("noise = 1.0"), "unknown key");
+    let text = format!("{MINIMUM}\n[lop]\nrate_hz = 1000.0\n");
+    expect(&text, "lop", Some("[lop]"), "unknown key");
+}
+
+#[test]
+fn a_wrong_type_is_named() {
+    let text = MINIMUM.replace("length_m = 0.35", "length_m = \"0.35\"");
+    expect(
+        &text,
+        "manipulator.length_m",
+        Some("length_m"),
+        "invalid type",
+    );
+    let text = format!("{MINIMUM}\n[loop]\npriority = 80.5\n");
+    expect(&text, "loop.priority", Some("priority"), "invalid type");
+}
+
+#[test]
+fn non_finite_numbers_are_refused() {
+    let text = MINIMUM.replace("com_m = 0.103", "com_m = nan");
+    expect(
+        &text,
+        "manipulator.com_m",
+        Some("com_m"),
+        "not a finite number",
+    );
+    let text = MINIMUM.replace("support = [0.45, 0.20, 0.0]", "support = [0.45, inf, 0.0]");
+    expect(
+        &text,
+        "geometry.support[1]",
+        Some("support ="),
+        "not a finite number",
+    );
+}
+
+#[test]
+fn a_rotation_that_is_not_orthonormal_is_refused() {
+    let text = MINIMUM.replace("[[1.0, 0.0, 0.0],", "[[1.0, 0.1, 0.0],");
+    expect(
+        &text,
+        "geometry.sensor_rotation",
+        Some("sensor_rotation"),
+        "orthonormal",
+    );
+    let text = MINIMUM.replace("[0.0, 0.0, 1.0]]", "[0.0, 0.0, -1.0]]");
+    expect(
+        &text,
+        "geometry.sensor_rotation",
+        Some("sensor_rotation"),
+        "reflection",
+    );
+}
+
+#[test]
+fn a_support_the_carriage_cannot_reach_is_refused() {
+    let text = MINIMUM.replace("support = [0.45, 0.20, 0.0]", "support = [2.0, 0.20, 0.0]");
+    expect(
+        &text,
+        "geometry.support",
+        Some("support ="),
+        "cannot reach the support",
+    );
+}
+
+#[test]
+fn bad_limits_are_refused() {
+    let text = format!("{MINIMUM}\n[guard]\nwarn_total_n = 20.0\n");
+    expect(&text, "guard.stop_total_n", Some("[guard]"), "warn limit");
+    let text = format!("{MINIMUM}\n[loop]\nrate_hz = 50.0\n");
+    expect(&text, "loop.rate_hz", Some("rate_hz"), "100..=10000");
+    let text = format!("{MINIMUM}\n[guard]\ndebounce_samples = 0\n");
+    expect(&text, "guard.debounce_samples", Some("debounce"), "1..=100");
+    let text = MINIMUM.replace("length_m = 0.35", "length_m = -0.35");
+    expect(&text, "manipulator.length_m", Some("length_m"), "> 0");
+}
+
+#[test]
+fn driver_keys_are_checked() {
+    let text = format!(
+        "{MINIMUM}\n[drivers.sensor]\nkind = \"rdt\"\naddress = \"sensor\"\ncounts_per_n = 1.0\ncounts_per_nm = 1.0\n"
+    );
+    expect(
+        &text,
+        "drivers.sensor.address",
+        Some("address"),
+        "IP address",
+    );
+    let text =
+        format!("{MINIMUM}\n[drivers.sensor]\nkind = \"rdt\"\naddress = \"10.0.0.1:49152\"\n");
+    expect(
+        &text,
+        "drivers.sensor.counts_per_n",
+        Some("[drivers.sensor]"),
+        "missing key",
+    );
+    let text = format!(
+        "{MINIMUM}\n[drivers.axes]\nkind = \"canopen\"\ninterface = \"can0\"\nnode_ids = [1, 2, 2]\nlead_m = 0.01\ncounts_per_turn = 4096\n"
+    );
+    expect(&text, "drivers.axes.node_ids", Some("node_ids"), "differ");
+    let text = format!("{MINIMUM}\n[drivers.axes]\nkind = \"ethercat\"\n");
+    expect(&text, "drivers.axes.kind", Some("ethercat"), "canopen");
+    let text = format!("{MINIMUM}\n[drivers.sensor]\nkind = \"sim\"\naddress = \"10.0.0.1:1\"\n");
+    expect(
+        &text,
+        "drivers.sensor.address",
+        Some("address"),
+        "simulated",
+    );
+}
+
+#[test]
+fn a_syntax_error_and_a_missing_file_name_the_file() {
+    let e = bad("[geometry\n");
+    assert!(
+        e.to_string().starts_with("robot.toml: not valid TOML"),
+        "{e}"
+    );
+    let e = config::load(std::path::Path::new("/nonexistent/robot.toml")).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("/nonexistent/robot.toml: cannot read"),
+        "{e}"
+    );
+}

@@ -1,0 +1,163 @@
+//! Guard action on the drives: a quick stop that the drives refuse is
+//! repeated every cycle until they stop; moves are refused while halted and
+//! after a reset accepted again.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use sar_daemon::control::{Controller, Envelope, Operator, ReplyStatus, Request};
+use sar_daemon::{config, logq, sim};
+use sar_drivers::sim::{SimDrives, SimError};
+use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
+use sar_estimator::Vec3;
+use sar_estimator::guard::GuardState;
+use sar_kinematics::ActiveJoints;
+
+/// Simulated drives whose first `refuse` quick stops fail.
+struct Stubborn {
+    inner: SimDrives<SimClock>,
+    refuse: u32,
+}
+
+impl AxisDrives for Stubborn {
+    type Error = SimError;
+    fn positions(&mut self) -> Result<JointPositions, SimError> {
+        self.inner.positions()
+    }
+    fn state(&mut self) -> Result<DriveState, SimError> {
+        self.inner.state()
+    }
+    fn enable(&mut self) -> Result<(), SimError> {
+        self.inner.enable()
+    }
+    fn disable(&mut self) -> Result<(), SimError> {
+        self.inner.disable()
+    }
+    fn set_targets(&mut self, t: ActiveJoints) -> Result<(), SimError> {
+        self.inner.set_targets(t)
+    }
+    fn quick_stop(&mut self) -> Result<(), SimError> {
+        if self.refuse > 0 {
+            self.refuse -= 1;
+            return Err(SimError::Busy);
+        }
+        self.inner.quick_stop()
+    }
+    fn fault_reset(&mut self) -> Result<(), SimError> {
+        self.inner.fault_reset()
+    }
+}
+
+#[test]
+fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
+    let cfg = config::builtin().unwrap();
+    let mut scenario = sim::demo_scenario().unwrap();
+    // 20 N along the rod from 1 s to 3 s, then nothing.
+    scenario.spec.contact = vec![
+        sar_drivers::sim::ContactKey {
+            t_ns: 500_000_000,
+            force_n: Vec3::zeros(),
+        },
+        sar_drivers::sim::ContactKey {
+            t_ns: 1_000_000_000,
+            force_n: Vec3::new(20.0, 0.0, 0.0),
+        },
+        sar_drivers::sim::ContactKey {
+            t_ns: 3_000_000_000,
+            force_n: Vec3::new(20.0, 0.0, 0.0),
+        },
+        sar_drivers::sim::ContactKey {
+            t_ns: 3_100_000_000,
+            force_n: Vec3::zeros(),
+        },
+    ];
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _t, _q) = logq::channel(false);
+    let drives = Stubborn {
+        inner: drives,
+        refuse: 3,
+    };
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.axes.travel_m,
+        sensor,
+        drives,
+        operator.clone(),
+        log,
+        true,
+    )
+    .unwrap();
+    let mut cycle = 0u64;
+    let mut step = |c: &mut Controller<_, _>| {
+        cycle += 1;
+        clock.advance_ns(1_000_000);
+        *c.step(cycle, || Some(clock.now_ns()))
+    };
+    let mut stopped_at = None;
+    for _ in 0..2000 {
+        let out = step(&mut c);
+        if out.guard_state == GuardState::Stop {
+            stopped_at = Some(out.cycle);
+            break;
+        }
+    }
+    let stopped_at = stopped_at.expect("no Stop");
+    assert!(c.halted());
+    // The first quick stop and two repeats were refused; the third repeat works.
+    for _ in 0..5 {
+        step(&mut c);
+    }
+    assert_eq!(c.counts().quick_stops, 1);
+    assert_eq!(c.counts().quick_stop_retries, 3);
+    assert_eq!(
+        c.drive_state(),
+        Some(DriveState::QuickStop),
+        "stopped at {stopped_at}"
+    );
+
+    // A move while halted is refused.
+    operator
+        .requests
+        .push(Envelope {
+            id: 1,
+            request: Request::MoveTip {
+                tip_m: Vec3::new(0.59, 0.2, 0.0),
+            },
+        })
+        .unwrap();
+    step(&mut c);
+    let r = operator.replies.pop().unwrap();
+    assert_eq!(r.status, ReplyStatus::Halted);
+
+    // After the contact is gone (3.1 s), a reset is accepted and moves work again.
+    for _ in 0..2500 {
+        step(&mut c);
+    }
+    operator
+        .requests
+        .push(Envelope {
+            id: 2,
+            request: Request::Reset,
+        })
+        .unwrap();
+    step(&mut c);
+    let r = operator.replies.pop().unwrap();
+    assert_eq!(r.status, ReplyStatus::Accepted, "{r:?}");
+    assert!(!c.halted());
+    step(&mut c);
+    assert_eq!(c.drive_state(), Some(DriveState::Enabled));
+    operator
+        .requests
+        .push(Envelope {
+            id: 3,
+            request: Request::MoveTip {
+                tip_m: Vec3::new(0.59, 0.2, 0.0),
+            },
+        })
+        .unwrap();
+    step(&mut c);
+    let r = operator.replies.pop().unwrap();
+    assert_eq!(r.status, ReplyStatus::Accepted, "{r:?}");
+}
