@@ -370,11 +370,13 @@ fn per_cycle(c: &mut Criterion) {
         ("d = 0", manipulator2()),
         ("d != 0", manipulator2_offset(OFFSET_M)),
     ] {
-        // Every plausibility check on, the torque check included.
+        // Every plausibility check on, the torque check included; the filter
+        // (not a check: a display and recording output) is measured apart.
         let config = EstimatorConfig {
             profile,
             plausibility: sar_estimator::cycle::PlausibilityConfig::new(Default::default())
                 .unwrap(),
+            filter: None,
             ..example_estimator_config()
         };
         let reading = reading_for(&profile, &tip_n, &bias_n);
@@ -414,6 +416,20 @@ fn per_cycle(c: &mut Criterion) {
         bench_both(c, &format!("floor, {label} (plain f64, no checks)"), || {
             let out = cycle_fn(black_box(&floor), black_box(&Q), black_box(&reading_v));
             black_box((out.force, out.std, out.above))
+        });
+        // The same cycle with the filtered tip force on (a new sample every
+        // cycle: the filter steps every time).
+        let filtered = EstimatorConfig {
+            filter: example_estimator_config().filter,
+            ..config
+        };
+        let mut estimator = Estimator::new(&filtered, bias_n).unwrap();
+        estimator.cycle(&first);
+        let mut cycle = 1u64;
+        bench_both(c, &format!("full + filter, {label}"), || {
+            cycle += 1;
+            let input = cycle_input(cycle, &reading, &torque);
+            black_box(estimator.cycle(black_box(&input)).filtered)
         });
     }
 
