@@ -7,7 +7,7 @@
 use crate::config::{AxesDriver, Config, SensorDriver};
 use sar_drivers::canopen::{CanOpenConfig, CanOpenDrives};
 use sar_drivers::rdt::{RdtConfig, RdtSensor};
-use sar_drivers::{AxisDrives, Clock, DriveState};
+use sar_drivers::{AxisDrives, Clock, DriveState, ForceSensor};
 
 /// The RDT driver's configuration for `[drivers.sensor] kind = "rdt"` (an
 /// OnRobot sensor with the driver's defaults: 500 Hz, 20 ms silence limit);
@@ -26,6 +26,19 @@ pub fn rdt_config(config: &Config) -> Option<RdtConfig> {
 /// Connects the RDT sensor; the error names the sensor's address.
 pub fn connect_rdt(config: RdtConfig) -> Result<RdtSensor, String> {
     RdtSensor::connect(config).map_err(|e| format!("RDT sensor at {}: {e}", config.address))
+}
+
+/// Waits at most `timeout_ns` for the sensor's first sample: a sensor that is
+/// off, unplugged or streaming elsewhere is refused at start (the error
+/// names its address) rather than found by the guard.
+pub fn first_sample(sensor: &mut RdtSensor, timeout_ns: u64) -> Result<(), String> {
+    sensor.wait(timeout_ns).map(|_| ()).map_err(|e| {
+        format!(
+            "RDT sensor at {}: no sample within {} ms ({e}); is it on, and streaming to this host?",
+            sensor.config().address,
+            timeout_ns / 1_000_000
+        )
+    })
 }
 
 /// The CANopen drives' configuration for `[drivers.axes] kind = "canopen"`:

@@ -92,8 +92,10 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
     let mut rdt: RdtConfig = devices::rdt_config(&file).unwrap();
     assert_eq!(rdt.address, emulator.address());
     rdt.silence_limit_ns = 200 * MS;
-    let sensor = devices::connect_rdt(rdt).unwrap();
+    let mut sensor = devices::connect_rdt(rdt).unwrap();
     assert!(emulator.wait_for_starts(1, Duration::from_secs(10)));
+    emulator.step(1);
+    devices::first_sample(&mut sensor, 10_000 * MS).unwrap();
     let (log, _thread, _queue) = logq::channel(false);
     let controller = Controller::new(
         &cfg.estimator,

@@ -49,6 +49,9 @@ struct Args {
     stall_after_cycles: Option<u64>,
 }
 
+/// A real sensor must send its first sample within this at start, ns.
+const FIRST_SAMPLE_TIMEOUT_NS: u64 = 2_000_000_000;
+
 fn main() -> ExitCode {
     let args = Args::parse();
     // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
@@ -110,7 +113,11 @@ fn run(args: &Args) -> Result<(), String> {
 
     // The sensor first: its receive thread keeps the normal priority.
     let real_sensor = match rdt {
-        Some(c) => Some(devices::connect_rdt(c)?),
+        Some(c) => {
+            let mut sensor = devices::connect_rdt(c)?;
+            devices::first_sample(&mut sensor, FIRST_SAMPLE_TIMEOUT_NS)?;
+            Some(sensor)
+        }
         None => None,
     };
 
