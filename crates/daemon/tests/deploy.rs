@@ -95,6 +95,35 @@ fn canopen_drives_are_refused_in_one_line_without_socketcan() {
     assert!(err.contains("can0"), "{err}");
 }
 
+#[cfg(feature = "socketcan")]
+#[test]
+fn a_missing_can_interface_is_refused_in_one_line_naming_it() {
+    let cfg = temp_path("nocan.toml");
+    std::fs::write(
+        &cfg,
+        config::DEFAULT_TOML.replace(
+            "[drivers.axes]\nkind = \"sim\"",
+            "[drivers.axes]\nkind = \"canopen\"\ninterface = \"sarnocan0\"\nnode_ids = [1, 2, 3]\nlead_m = 0.01\ncounts_per_turn = 4096",
+        ),
+    )
+    .unwrap();
+    let out = Command::new(SARD)
+        .arg("--config")
+        .arg(&cfg)
+        .args(["--max-cycles", "50"])
+        .env(
+            "SAR_SERVICE_PREFIX",
+            format!("sar-deploy-{}-nocan", std::process::id()),
+        )
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("sarnocan0"), "{err}");
+    let _ = std::fs::remove_file(cfg);
+}
+
 #[test]
 fn a_silent_sensor_is_refused_at_start_in_one_line_naming_it() {
     // A loopback port where nothing listens: no sample ever comes.
