@@ -294,6 +294,11 @@ impl CanRig {
         let file = config::parse(&text, "(canopen configuration)").unwrap();
         let (interface, can_config) = devices::canopen_config(&file).unwrap();
         assert_eq!(interface, "can0");
+        // SYNC at the loop's rate, the daemon's travel and move speed.
+        assert_eq!(can_config.sync_period_ns, file.loop_.period_ns);
+        assert_eq!(can_config.travel_m, file.axes.travel_m);
+        assert_eq!(can_config.max_speed_mps, file.axes.max_speed_mps);
+        assert_eq!(can_config.node_ids, [1, 2, 3]);
         let bus = MemBus::new(clock.clone());
         let start = scenario.spec.axes.start;
         for (i, start_m) in [start.q1_m, start.q2_m, start.q3_m].into_iter().enumerate() {
