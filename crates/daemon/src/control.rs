@@ -183,7 +183,15 @@ pub struct Controller<S: ForceSensor, D: AxisDrives> {
     /// Reset automatically (the demo only) until the first accepted reset.
     auto_reset: bool,
     counts: ActionCounts,
+    /// Called once per cycle, in the gather phase, before the positions are
+    /// read (the CANopen drives' SYNC / PDO exchange); `None` for drives that
+    /// need nothing (the simulator).
+    drives_cycle: Option<DrivesCycle<D>>,
 }
+
+/// The per-cycle hook of drives that must be driven by the loop (see
+/// [`Controller::with_drives_cycle`]): `Err` names what failed, for the log.
+pub type DrivesCycle<D> = fn(&mut D) -> Result<(), &'static str>;
 
 fn sensor_sample(s: &WrenchSample) -> SensorSample {
     SensorSample {
@@ -253,7 +261,18 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             halted: false,
             auto_reset,
             counts: ActionCounts::default(),
+            drives_cycle: None,
         })
+    }
+
+    /// Calls `hook` on the drives once per cycle, in the gather phase before
+    /// their positions are read (e.g. [`crate::devices::canopen_cycle`]: a
+    /// CANopen host that stops cycling makes its drives quick-stop). A
+    /// failing hook counts as a drive error and is logged; the positions it
+    /// could not refresh go stale and the guard acts on that.
+    pub fn with_drives_cycle(mut self, hook: DrivesCycle<D>) -> Self {
+        self.drives_cycle = Some(hook);
+        self
     }
 
     /// The output of the last cycle.
@@ -322,6 +341,12 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                     what: "sensor poll",
                 });
             }
+        }
+        if let Some(hook) = self.drives_cycle
+            && let Err(what) = hook(&mut self.drives)
+        {
+            self.counts.drive_errors += 1;
+            self.log.send(LogEvent::DeviceError { cycle, what });
         }
         match self.drives.positions() {
             Ok(p) => {

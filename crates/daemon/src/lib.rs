@@ -4,6 +4,7 @@
 
 pub mod config;
 pub mod control;
+pub mod devices;
 pub mod locate;
 pub mod logq;
 pub mod notify;

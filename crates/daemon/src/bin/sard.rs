@@ -2,14 +2,16 @@
 //! the configuration, or on the simulated robot (`--sim`).
 
 use clap::Parser;
-use sar_daemon::control::{Controller, Operator};
+use sar_daemon::control::{Controller, DrivesCycle, Operator};
 use sar_daemon::notify::{Notifier, Watchdog};
 use sar_daemon::runloop::{self, RunLimits};
 use sar_daemon::shm::DaemonShm;
 use sar_daemon::stats::LoopStats;
 use sar_daemon::wire::limits_array;
-use sar_daemon::{config, logq, rt, sim};
-use sar_drivers::MonotonicClock;
+use sar_daemon::{config, devices, logq, rt, sim};
+use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
+use sar_estimator::Vec3;
+use sar_estimator::cycle::Bias;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -21,16 +23,17 @@ use std::process::ExitCode;
     about = "The SAR daemon: fixed-rate tip-force loop with the force-limit guard"
 )]
 struct Args {
-    /// The robot's configuration (TOML, INTERFACES.md 2). With --sim, the
-    /// built-in configuration when absent.
+    /// The robot's configuration (TOML, INTERFACES.md 2): runs on the devices
+    /// its [drivers] name. With --sim, the built-in configuration when absent.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Run on the simulated robot, in real time.
+    /// Run on the simulated robot, in real time (whatever [drivers] names).
     #[arg(long)]
     sim: bool,
-    /// With --sim: the scenario to simulate (default: the built-in demo, a
-    /// tip contact rising into Warn).
-    #[arg(long, value_name = "FILE", requires = "sim")]
+    /// The scenario of the simulated parts (with --sim, or the parts the
+    /// configuration leaves "sim"; default: the built-in demo, a tip contact
+    /// rising into Warn).
+    #[arg(long, value_name = "FILE")]
     scenario: Option<PathBuf>,
     /// Check a configuration file and exit (0 when valid).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["sim", "config", "scenario"])]
@@ -45,6 +48,9 @@ struct Args {
     #[arg(long, hide = true)]
     stall_after_cycles: Option<u64>,
 }
+
+/// A real sensor must send its first sample within this at start, ns.
+const FIRST_SAMPLE_TIMEOUT_NS: u64 = 2_000_000_000;
 
 fn main() -> ExitCode {
     let args = Args::parse();
@@ -79,10 +85,24 @@ fn run(args: &Args) -> Result<(), String> {
         None if args.sim => config::builtin().map_err(|e| e.to_string())?,
         None => return Err("give --config FILE, or --sim for the simulated robot".to_owned()),
     };
-    if !args.sim {
+    // With --sim everything is simulated; otherwise the devices the file names
+    // (a part it leaves "sim" is simulated: a bench set-up).
+    let rdt = if args.sim {
+        None
+    } else {
+        devices::rdt_config(&cfg)
+    };
+    let canopen = if args.sim {
+        None
+    } else {
+        devices::canopen_config(&cfg)
+    };
+    if let Some((interface, _)) = &canopen
+        && !cfg!(all(feature = "socketcan", target_os = "linux"))
+    {
         return Err(format!(
-            "{}: real devices ({:?} sensor, {:?} axes) are not supported by this build yet; run with --sim",
-            cfg.origin, cfg.sensor_driver, cfg.axes_driver
+            "{}: drivers.axes.kind = \"canopen\" (interface {interface}) needs sard built with the `socketcan` feature (Linux); this build has no SocketCAN",
+            cfg.origin
         ));
     }
     let scenario = match &args.scenario {
@@ -90,6 +110,16 @@ fn run(args: &Args) -> Result<(), String> {
         None => sim::demo_scenario().map_err(|e| e.to_string())?,
     };
     rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
+
+    // The sensor first: its receive thread keeps the normal priority.
+    let real_sensor = match rdt {
+        Some(c) => {
+            let mut sensor = devices::connect_rdt(c)?;
+            devices::first_sample(&mut sensor, FIRST_SAMPLE_TIMEOUT_NS)?;
+            Some(sensor)
+        }
+        None => None,
+    };
 
     // Real-time settings: said once, here, when they cannot be applied.
     if let Err(e) = rt::lock_memory() {
@@ -105,69 +135,176 @@ fn run(args: &Args) -> Result<(), String> {
     }
 
     let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
-    let (simulator, sensor, drives, bias) =
+    let (simulator, sim_sensor, sim_drives, sim_bias) =
         sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
     let operator = Operator::new();
-    let truth_sim = simulator.clone();
-    let mut shm = DaemonShm::create(
+    // The simulator's true tip force only where the sensor is simulated.
+    let truth: Option<Box<dyn FnMut() -> Option<Vec3>>> = if real_sensor.is_none() {
+        let truth_sim = simulator.clone();
+        Some(Box::new(move || {
+            truth_sim.truth().ok().map(|t| t.tip_force_n)
+        }))
+    } else {
+        None
+    };
+    let shm = DaemonShm::create(
         &args.prefix,
         operator.clone(),
         limits_array(&cfg.estimator.guard.limits()),
-        Some(Box::new(move || {
-            truth_sim.truth().ok().map(|t| t.tip_force_n)
-        })),
+        truth,
     )?;
-    let (log, log_thread, _queue) = logq::channel(true);
-    let mut controller = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.axes.travel_m,
-        sensor,
-        drives,
+    let sensor_what = match &real_sensor {
+        Some(s) => format!("the RDT sensor at {}", s.config().address),
+        None => format!("the simulated sensor of {:?}", scenario.name),
+    };
+    let run = Run {
+        args,
+        cfg: &cfg,
         operator,
-        log.clone(),
-        true,
-    )
-    .map_err(|e| format!("{}: {e}", cfg.origin))?;
-    // Ping systemd's watchdog ten times a second from the loop.
-    let every = (cfg.loop_.rate_hz / 10.0).round().max(1.0) as u64;
-    let mut watchdog = Watchdog::new(Notifier::from_env(), every);
-    let mut stats = LoopStats::default();
-    tracing::info!(
-        "sard: simulating {:?} ({}) at {} Hz with {} ({})",
-        scenario.name,
-        scenario.origin,
-        cfg.loop_.rate_hz,
-        cfg.manipulator_name,
-        cfg.origin
-    );
-    runloop::run(
-        &mut controller,
-        &cfg.loop_,
-        RunLimits {
-            max_cycles: args.max_cycles,
-            stall_after_cycles: args.stall_after_cycles,
-        },
-        &mut stats,
-        &mut shm,
-        &mut watchdog,
-        &log,
-    );
-    if let Some(t) = log_thread {
-        t.finish();
+        shm,
+        auto_reset: args.sim,
+    };
+    // A real sensor starts with no bias (the operator tares); the simulated
+    // one with the scenario's, as if measured beforehand.
+    let zero_bias = Bias::force_only(Vec3::zeros());
+    match (real_sensor, canopen) {
+        (None, None) => run.run(
+            sim_sensor,
+            sim_drives,
+            sim_bias,
+            None,
+            &format!("{sensor_what} and the simulated axes"),
+        ),
+        (Some(sensor), None) => run.run(
+            sensor,
+            sim_drives,
+            zero_bias,
+            None,
+            &format!("{sensor_what} and the simulated axes"),
+        ),
+        #[cfg(all(feature = "socketcan", target_os = "linux"))]
+        (sensor, Some((interface, c))) => {
+            let drives = start_canopen(&interface, c)?;
+            let axes_what = format!("the CANopen drives on {interface}");
+            match sensor {
+                Some(sensor) => run.run(
+                    sensor,
+                    drives,
+                    zero_bias,
+                    Some(devices::canopen_cycle),
+                    &format!("{sensor_what} and {axes_what}"),
+                ),
+                None => run.run(
+                    sim_sensor,
+                    drives,
+                    sim_bias,
+                    Some(devices::canopen_cycle),
+                    &format!("{sensor_what} and {axes_what}"),
+                ),
+            }
+        }
+        #[cfg(not(all(feature = "socketcan", target_os = "linux")))]
+        (_, Some((interface, _))) => Err(format!(
+            "{}: CANopen drives on {interface} need the `socketcan` feature",
+            cfg.origin
+        )),
     }
-    let out = controller.output();
-    tracing::info!(
-        "sard: stopped after {} cycles, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns; {} quick stops",
-        stats.cycles,
-        out.guard_state,
-        out.guard_reason,
-        stats.wakeup.quantile_ns(0.5) / 1000,
-        stats.wakeup.quantile_ns(0.99) / 1000,
-        stats.wakeup.max_ns() / 1000,
-        stats.compute.quantile_ns(0.99) / 1000,
-        stats.overruns,
-        controller.counts().quick_stops,
-    );
-    Ok(())
+}
+
+/// Opens the CAN interface, starts the drives and brings them to `Ready`.
+#[cfg(all(feature = "socketcan", target_os = "linux"))]
+fn start_canopen(
+    interface: &str,
+    config: sar_drivers::canopen::CanOpenConfig,
+) -> Result<
+    sar_drivers::canopen::CanOpenDrives<sar_drivers::canopen::socketcan::CanSocket, MonotonicClock>,
+    String,
+> {
+    let socket = sar_drivers::canopen::socketcan::open(interface).map_err(|e| e.to_string())?;
+    let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
+    let period_ns = config.sync_period_ns;
+    let mut drives = sar_drivers::canopen::CanOpenDrives::start(socket, clock, config)
+        .map_err(|e| format!("CANopen drives on {interface}: {e}"))?;
+    let mut next_ns = rt::monotonic_ns().unwrap_or(0);
+    devices::bring_up(&mut drives, interface, 200, || {
+        next_ns = next_ns.saturating_add(period_ns);
+        rt::sleep_until_ns(next_ns);
+    })?;
+    Ok(drives)
+}
+
+/// What every combination of devices runs with.
+struct Run<'a> {
+    args: &'a Args,
+    cfg: &'a config::Config,
+    operator: Operator,
+    shm: DaemonShm,
+    auto_reset: bool,
+}
+
+impl Run<'_> {
+    fn run<S: ForceSensor, D: AxisDrives>(
+        mut self,
+        sensor: S,
+        drives: D,
+        bias: Bias,
+        drives_cycle: Option<DrivesCycle<D>>,
+        what: &str,
+    ) -> Result<(), String> {
+        let cfg = self.cfg;
+        let (log, log_thread, _queue) = logq::channel(true);
+        let mut controller = Controller::new(
+            &cfg.estimator,
+            bias,
+            cfg.axes.travel_m,
+            sensor,
+            drives,
+            self.operator,
+            log.clone(),
+            self.auto_reset,
+        )
+        .map_err(|e| format!("{}: {e}", cfg.origin))?;
+        if let Some(hook) = drives_cycle {
+            controller = controller.with_drives_cycle(hook);
+        }
+        // Ping systemd's watchdog ten times a second from the loop.
+        let every = (cfg.loop_.rate_hz / 10.0).round().max(1.0) as u64;
+        let mut watchdog = Watchdog::new(Notifier::from_env(), every);
+        let mut stats = LoopStats::default();
+        tracing::info!(
+            "sard: running {} ({}) at {} Hz with {what}",
+            cfg.manipulator_name,
+            cfg.origin,
+            cfg.loop_.rate_hz,
+        );
+        runloop::run(
+            &mut controller,
+            &cfg.loop_,
+            RunLimits {
+                max_cycles: self.args.max_cycles,
+                stall_after_cycles: self.args.stall_after_cycles,
+            },
+            &mut stats,
+            &mut self.shm,
+            &mut watchdog,
+            &log,
+        );
+        if let Some(t) = log_thread {
+            t.finish();
+        }
+        let out = controller.output();
+        tracing::info!(
+            "sard: stopped after {} cycles, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns; {} quick stops",
+            stats.cycles,
+            out.guard_state,
+            out.guard_reason,
+            stats.wakeup.quantile_ns(0.5) / 1000,
+            stats.wakeup.quantile_ns(0.99) / 1000,
+            stats.wakeup.max_ns() / 1000,
+            stats.compute.quantile_ns(0.99) / 1000,
+            stats.overruns,
+            controller.counts().quick_stops,
+        );
+        Ok(())
+    }
 }

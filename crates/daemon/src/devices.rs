@@ -1,0 +1,98 @@
+//! The real devices the configuration names (`[drivers.sensor]`,
+//! `[drivers.axes]`, INTERFACES.md 2): their driver configurations made from
+//! the daemon's, their start with one-line reasons that name the device, and
+//! the per-cycle hook of the CANopen drives ([`canopen_cycle`]), which the
+//! controller calls once per period in its gather phase.
+
+use crate::config::{AxesDriver, Config, SensorDriver};
+use sar_drivers::canopen::{CanOpenConfig, CanOpenDrives};
+use sar_drivers::rdt::{RdtConfig, RdtSensor};
+use sar_drivers::{AxisDrives, Clock, DriveState, ForceSensor};
+
+/// The RDT driver's configuration for `[drivers.sensor] kind = "rdt"` (an
+/// OnRobot sensor with the driver's defaults: 500 Hz, 20 ms silence limit);
+/// `None` for another kind.
+pub fn rdt_config(config: &Config) -> Option<RdtConfig> {
+    match config.sensor_driver {
+        SensorDriver::Rdt {
+            address,
+            counts_per_n,
+            counts_per_nm,
+        } => Some(RdtConfig::new(address, counts_per_n, counts_per_nm)),
+        _ => None,
+    }
+}
+
+/// Connects the RDT sensor; the error names the sensor's address.
+pub fn connect_rdt(config: RdtConfig) -> Result<RdtSensor, String> {
+    RdtSensor::connect(config).map_err(|e| format!("RDT sensor at {}: {e}", config.address))
+}
+
+/// Waits at most `timeout_ns` for the sensor's first sample: a sensor that is
+/// off, unplugged or streaming elsewhere is refused at start (the error
+/// names its address) rather than found by the guard.
+pub fn first_sample(sensor: &mut RdtSensor, timeout_ns: u64) -> Result<(), String> {
+    sensor.wait(timeout_ns).map(|_| ()).map_err(|e| {
+        format!(
+            "RDT sensor at {}: no sample within {} ms ({e}); is it on, and streaming to this host?",
+            sensor.config().address,
+            timeout_ns / 1_000_000
+        )
+    })
+}
+
+/// The CANopen drives' configuration for `[drivers.axes] kind = "canopen"`:
+/// the file's node ids, lead and counts per turn, SYNC at the loop's rate,
+/// moves at `[axes] max_speed_mps` within `[axes] travel_m`, the driver's
+/// defaults for the rest. With the interface's name; `None` for another kind.
+pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
+    match &config.axes_driver {
+        AxesDriver::Canopen {
+            interface,
+            node_ids,
+            lead_m,
+            counts_per_turn,
+        } => {
+            let mut c = CanOpenConfig::new(*node_ids, *lead_m, *counts_per_turn);
+            c.sync_period_ns = config.loop_.period_ns;
+            c.max_speed_mps = config.axes.max_speed_mps;
+            c.travel_m = config.axes.travel_m;
+            Some((interface.clone(), c))
+        }
+        _ => None,
+    }
+}
+
+/// The CANopen drives' per-cycle exchange (SYNC, TPDOs, RPDOs, supervision),
+/// as the hook of [`crate::control::Controller::with_drives_cycle`].
+pub fn canopen_cycle<C: embedded_can::nb::Can, K: Clock>(
+    drives: &mut CanOpenDrives<C, K>,
+) -> Result<(), &'static str> {
+    drives
+        .cycle()
+        .map(|_| ())
+        .map_err(|_| "CANopen drives cycle")
+}
+
+/// After [`CanOpenDrives::start`]: runs the drives' cycle (calling `between`
+/// before each, which waits one period) until they report `Ready`, at most
+/// `max_cycles` times. The error names the interface and the state reached.
+pub fn bring_up<C: embedded_can::nb::Can, K: Clock>(
+    drives: &mut CanOpenDrives<C, K>,
+    interface: &str,
+    max_cycles: u32,
+    mut between: impl FnMut(),
+) -> Result<(), String> {
+    let mut state = None;
+    for _ in 0..max_cycles {
+        between();
+        let _ = drives.cycle();
+        state = drives.state().ok();
+        if matches!(state, Some(DriveState::Ready | DriveState::Enabled)) {
+            return Ok(());
+        }
+    }
+    Err(format!(
+        "CANopen drives on {interface}: not ready after {max_cycles} cycles (state {state:?})"
+    ))
+}
