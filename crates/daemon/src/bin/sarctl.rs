@@ -66,12 +66,26 @@ enum Cmd {
     Limits,
 }
 
+/// A write to stdout failed. A reader that went away (`sarctl monitor | head`)
+/// ends the command quietly; any other failure is reported.
+fn output_error(e: std::io::Error) -> String {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        OUTPUT_CLOSED.to_owned()
+    } else {
+        format!("cannot write the output: {e}")
+    }
+}
+
+/// The marker of a closed output (see [`output_error`]).
+const OUTPUT_CLOSED: &str = "output closed";
+
 fn main() -> ExitCode {
     let args = Args::parse();
     // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e == OUTPUT_CLOSED => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("sarctl: {}", e.replace('\n', " "));
             ExitCode::FAILURE
@@ -226,9 +240,9 @@ fn run(args: &Args) -> Result<(), String> {
                 for s in &batch {
                     seen += 1;
                     if args.format == Format::Json {
-                        writeln!(stdout, "{}", state_json(s)).map_err(|e| e.to_string())?;
+                        writeln!(stdout, "{}", state_json(s)).map_err(output_error)?;
                     } else if !live {
-                        writeln!(stdout, "{}", state_line(s)).map_err(|e| e.to_string())?;
+                        writeln!(stdout, "{}", state_line(s)).map_err(output_error)?;
                     }
                     if count.is_some_and(|c| seen >= c) {
                         return Ok(());
@@ -255,8 +269,8 @@ fn run(args: &Args) -> Result<(), String> {
                             bar(s),
                             s.limits_n[1]
                         )
-                        .map_err(|e| e.to_string())?;
-                        stdout.flush().map_err(|e| e.to_string())?;
+                        .map_err(output_error)?;
+                        stdout.flush().map_err(output_error)?;
                     }
                 }
             }

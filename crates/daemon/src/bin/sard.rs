@@ -56,8 +56,10 @@ fn main() -> ExitCode {
     let args = Args::parse();
     // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    // Colours only on a terminal: journald and log files get plain text.
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
         .init();
     match run(&args) {
