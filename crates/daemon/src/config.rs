@@ -24,7 +24,7 @@
 //! Every error names the file, the dotted key, the line where the file has it,
 //! and the problem ([`ConfigError`]).
 
-use crate::locate::{Locator, join};
+use sar_drivers::scenario::locate::{Locator, join};
 use sar_estimator::SensorNoise;
 use sar_estimator::cycle::{EstimatorConfig, PlausibilityConfig, PlausibilityLimits, TorqueLimits};
 use sar_estimator::filter::{FilterConfig, TipFilter};
@@ -418,50 +418,16 @@ struct Ctx<'a> {
 
 impl Ctx<'_> {
     fn err(&self, key: &str, problem: impl Into<String>) -> ConfigError {
-        // A key the file does not write (a defaulted one) takes the line of
-        // the nearest enclosing key.
-        let mut probe = key;
-        let mut line = None;
-        while !probe.is_empty() {
-            line = self.locator.line_of_key(probe);
-            if line.is_some() {
-                break;
-            }
-            probe = match probe.rfind(['.', '[']) {
-                Some(i) => probe.get(..i).unwrap_or(""),
-                None => "",
-            };
-        }
         ConfigError::Invalid {
             origin: self.origin.to_owned(),
             key: key.to_owned(),
-            line,
+            line: self.locator.line_near(key),
             problem: problem.into(),
         }
     }
 
     fn serde_error(&self, e: &toml::de::Error) -> ConfigError {
-        let message = e.message().trim_end();
-        let mut key = e
-            .span()
-            .map(|span| self.locator.key_at(&span))
-            .unwrap_or_default();
-        let line = if key.is_empty() {
-            None
-        } else {
-            e.span().map(|span| self.locator.line_at(span.start))
-        };
-        let problem = if let Some(field) = message
-            .strip_prefix("missing field `")
-            .and_then(|rest| rest.split('`').next())
-        {
-            key = join(&key, field);
-            "missing key".to_owned()
-        } else if let Some(rest) = message.strip_prefix("unknown field") {
-            format!("unknown key{rest}")
-        } else {
-            message.to_owned()
-        };
+        let (key, line, problem) = self.locator.serde_problem(e);
         ConfigError::Invalid {
             origin: self.origin.to_owned(),
             key,

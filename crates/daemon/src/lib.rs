@@ -5,7 +5,6 @@
 pub mod config;
 pub mod control;
 pub mod devices;
-pub mod locate;
 pub mod logq;
 pub mod notify;
 pub mod record;

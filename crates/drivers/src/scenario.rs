@@ -9,14 +9,14 @@
 //! e.g. `motion[3].hold_s`) and what is wrong; TOML syntax errors keep toml's
 //! line and column.
 
-mod locate;
+pub mod locate;
 mod raw;
 
 use crate::Vec3;
 use crate::convert::{joints_from_array, joints_from_displacement, joints_to_array};
 use crate::motion::{SlideSign, SlideTracker, axis_progress_m, move_time_s};
 use crate::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimError, SimSpec};
-use locate::{Locator, join};
+use locate::Locator;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use raw::{AxisName, FaultKind, FaultToml, FileToml, MotionToml};
@@ -246,50 +246,16 @@ struct Ctx<'a> {
 
 impl Ctx<'_> {
     fn err(&self, key: &str, problem: impl Into<String>) -> ScenarioError {
-        // A key the file does not write (a missing or defaulted one, or a
-        // generated step) takes the line of the nearest enclosing key.
-        let mut probe = key;
-        let mut line = None;
-        while !probe.is_empty() {
-            line = self.locator.line_of_key(probe);
-            if line.is_some() {
-                break;
-            }
-            probe = match probe.rfind(['.', '[']) {
-                Some(i) => probe.get(..i).unwrap_or(""),
-                None => "",
-            };
-        }
         ScenarioError::Invalid {
             origin: self.origin.to_owned(),
             key: key.to_owned(),
-            line,
+            line: self.locator.line_near(key),
             problem: problem.into(),
         }
     }
 
     fn serde_error(&self, e: &toml::de::Error) -> ScenarioError {
-        let message = e.message().trim_end();
-        let mut key = e
-            .span()
-            .map(|span| self.locator.key_at(&span))
-            .unwrap_or_default();
-        let line = if key.is_empty() {
-            None
-        } else {
-            e.span().map(|span| self.locator.line_at(span.start))
-        };
-        let problem = if let Some(field) = message
-            .strip_prefix("missing field `")
-            .and_then(|rest| rest.split('`').next())
-        {
-            key = join(&key, field);
-            "missing key".to_owned()
-        } else if let Some(rest) = message.strip_prefix("unknown field") {
-            format!("unknown key{rest}")
-        } else {
-            message.to_owned()
-        };
+        let (key, line, problem) = self.locator.serde_problem(e);
         ScenarioError::Invalid {
             origin: self.origin.to_owned(),
             key,

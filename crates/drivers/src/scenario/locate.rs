@@ -1,6 +1,7 @@
-//! Where a key is in the file: maps toml's byte spans to dotted keys
-//! (`motion[3].hold_s`) and dotted keys to line numbers, so that every error
-//! names the key and, where the file has it, the line.
+//! Where a key is in a TOML file: maps toml's byte spans to dotted keys
+//! (`motion[3].hold_s`, `guard.warn_total_n`) and dotted keys to line numbers,
+//! so that every error of the scenario loader and of the daemon's
+//! configuration names the key and, where the file has it, the line.
 
 use std::ops::Range;
 use toml::Spanned;
@@ -21,7 +22,7 @@ struct Node {
 
 /// Every key and array element of a parsed document, with its spans.
 #[derive(Debug, Clone)]
-pub(super) struct Locator<'a> {
+pub struct Locator<'a> {
     text: &'a str,
     nodes: Vec<Node>,
 }
@@ -31,7 +32,7 @@ fn contains(outer: &Range<usize>, inner: &Range<usize>) -> bool {
 }
 
 /// The dotted key of `key` inside `parent` ("" for the top level).
-pub(super) fn join(parent: &str, key: &str) -> String {
+pub fn join(parent: &str, key: &str) -> String {
     if parent.is_empty() {
         key.to_owned()
     } else {
@@ -51,7 +52,7 @@ fn is_non_finite(value: &DeValue<'_>) -> bool {
 
 impl<'a> Locator<'a> {
     /// Indexes a parsed document.
-    pub(super) fn new(text: &'a str, root: &Spanned<DeTable<'a>>) -> Self {
+    pub fn new(text: &'a str, root: &Spanned<DeTable<'a>>) -> Self {
         let mut nodes = Vec::new();
         collect_table(root.get_ref(), "", &mut nodes);
         Self { text, nodes }
@@ -60,7 +61,7 @@ impl<'a> Locator<'a> {
     /// The dotted key of the innermost key or value at `span` ("" for the whole
     /// document, and for an empty span). A span that is exactly a key's or a value's wins; otherwise
     /// the smallest value that contains it.
-    pub(super) fn key_at(&self, span: &Range<usize>) -> String {
+    pub fn key_at(&self, span: &Range<usize>) -> String {
         // toml gives the document itself (a missing top-level key) an empty span.
         if span.is_empty() {
             return String::new();
@@ -82,7 +83,7 @@ impl<'a> Locator<'a> {
     }
 
     /// The 1-based line where `key` is written, when the file writes it.
-    pub(super) fn line_of_key(&self, key: &str) -> Option<usize> {
+    pub fn line_of_key(&self, key: &str) -> Option<usize> {
         self.nodes
             .iter()
             .find(|n| n.key == key)
@@ -90,13 +91,54 @@ impl<'a> Locator<'a> {
     }
 
     /// The 1-based line of byte `offset`.
-    pub(super) fn line_at(&self, offset: usize) -> usize {
+    pub fn line_at(&self, offset: usize) -> usize {
         let end = offset.min(self.text.len());
         1 + self.text.bytes().take(end).filter(|&b| b == b'\n').count()
     }
 
+    /// The line of `key`, or where the file does not write it (a missing or
+    /// defaulted key, a generated one), of its nearest enclosing key.
+    pub fn line_near(&self, key: &str) -> Option<usize> {
+        let mut probe = key;
+        while !probe.is_empty() {
+            if let Some(line) = self.line_of_key(probe) {
+                return Some(line);
+            }
+            probe = match probe.rfind(['.', '[']) {
+                Some(i) => probe.get(..i).unwrap_or(""),
+                None => "",
+            };
+        }
+        None
+    }
+
+    /// A serde error of the file as (dotted key, line, problem): "missing
+    /// key" names the missing key, "unknown key" keeps serde's list of the
+    /// expected ones.
+    pub fn serde_problem(&self, e: &toml::de::Error) -> (String, Option<usize>, String) {
+        let message = e.message().trim_end();
+        let mut key = e.span().map(|span| self.key_at(&span)).unwrap_or_default();
+        let line = if key.is_empty() {
+            None
+        } else {
+            e.span().map(|span| self.line_at(span.start))
+        };
+        let problem = if let Some(field) = message
+            .strip_prefix("missing field `")
+            .and_then(|rest| rest.split('`').next())
+        {
+            key = join(&key, field);
+            "missing key".to_owned()
+        } else if let Some(rest) = message.strip_prefix("unknown field") {
+            format!("unknown key{rest}")
+        } else {
+            message.to_owned()
+        };
+        (key, line, problem)
+    }
+
     /// The first (in file order) float that is NaN or infinite: its key and line.
-    pub(super) fn first_non_finite(&self) -> Option<(String, usize)> {
+    pub fn first_non_finite(&self) -> Option<(String, usize)> {
         self.nodes
             .iter()
             .filter(|n| n.non_finite)
