@@ -4,6 +4,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod common;
 use sar_daemon::control::{Controller, Envelope, Operator, ReplyStatus, Request};
 use sar_daemon::{config, logq, sim};
 use sar_drivers::sim::{SimDrives, SimError};
@@ -52,24 +53,13 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
     // 20 N along the rod from 1 s to 3 s, then nothing.
-    scenario.spec.contact = vec![
-        sar_drivers::sim::ContactKey {
-            t_ns: 500_000_000,
-            force_n: Vec3::zeros(),
-        },
-        sar_drivers::sim::ContactKey {
-            t_ns: 1_000_000_000,
-            force_n: Vec3::new(20.0, 0.0, 0.0),
-        },
-        sar_drivers::sim::ContactKey {
-            t_ns: 3_000_000_000,
-            force_n: Vec3::new(20.0, 0.0, 0.0),
-        },
-        sar_drivers::sim::ContactKey {
-            t_ns: 3_100_000_000,
-            force_n: Vec3::zeros(),
-        },
-    ];
+    scenario.spec.contact = common::contact_pulse(
+        500_000_000,
+        1_000_000_000,
+        3_000_000_000,
+        3_100_000_000,
+        Vec3::new(20.0, 0.0, 0.0),
+    );
     let clock = SimClock::new(1_000_000_000);
     let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
     let operator = Operator::new();

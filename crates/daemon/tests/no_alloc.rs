@@ -4,6 +4,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod common;
 use sar_daemon::control::{Controller, Envelope, Operator, Request};
 use sar_daemon::{config, logq, sim};
 use sar_drivers::SimClock;
@@ -46,24 +47,13 @@ fn a_cycle_allocates_nothing() {
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
     // Push on to the stop limit: 20 N along the rod at 12 s, then release at 20 s.
-    scenario.spec.contact = vec![
-        sar_drivers::sim::ContactKey {
-            t_ns: 2_000_000_000,
-            force_n: Vec3::zeros(),
-        },
-        sar_drivers::sim::ContactKey {
-            t_ns: 12_000_000_000,
-            force_n: Vec3::new(20.0, 0.0, 0.0),
-        },
-        sar_drivers::sim::ContactKey {
-            t_ns: 14_000_000_000,
-            force_n: Vec3::new(20.0, 0.0, 0.0),
-        },
-        sar_drivers::sim::ContactKey {
-            t_ns: 15_000_000_000,
-            force_n: Vec3::zeros(),
-        },
-    ];
+    scenario.spec.contact = common::contact_pulse(
+        2_000_000_000,
+        12_000_000_000,
+        14_000_000_000,
+        15_000_000_000,
+        Vec3::new(20.0, 0.0, 0.0),
+    );
     let clock = SimClock::new(1_000_000_000);
     let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
     let operator = Operator::new();

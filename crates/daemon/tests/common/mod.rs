@@ -121,3 +121,24 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
     }
     out
 }
+
+/// A tip contact that ramps from nothing at `start_ns` to `force_n` at
+/// `on_ns`, holds it until `hold_ns` and is gone at `off_ns` (simulator keys).
+pub fn contact_pulse(
+    start_ns: u64,
+    on_ns: u64,
+    hold_ns: u64,
+    off_ns: u64,
+    force_n: sar_kinematics::Vec3,
+) -> Vec<sar_drivers::sim::ContactKey> {
+    let zero = sar_kinematics::Vec3::zeros();
+    [
+        (start_ns, zero),
+        (on_ns, force_n),
+        (hold_ns, force_n),
+        (off_ns, zero),
+    ]
+    .into_iter()
+    .map(|(t_ns, force_n)| sar_drivers::sim::ContactKey { t_ns, force_n })
+    .collect()
+}
