@@ -55,6 +55,10 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
         } => {
             let mut c = CanOpenConfig::new(*node_ids, *lead_m, *counts_per_turn);
             c.sync_period_ns = config.loop_.period_ns;
+            // The TPDOs are awaited within half the period (at 4 kHz the
+            // driver's 0.5 ms default would outlast the period).
+            c.pdo_wait_ns = c.pdo_wait_ns.min(c.sync_period_ns / 2);
+            c.poll_interval_ns = c.poll_interval_ns.min(c.pdo_wait_ns);
             c.max_speed_mps = config.axes.max_speed_mps;
             c.travel_m = config.axes.travel_m;
             Some((interface.clone(), c))

@@ -276,31 +276,3 @@ impl Profile {
         self.com_m
     }
 }
-
-impl TryFrom<&CalibrationSpec> for Calibration {
-    type Error = ConfigError;
-    fn try_from(spec: &CalibrationSpec) -> Result<Self, ConfigError> {
-        Self::new(spec)
-    }
-}
-
-impl TryFrom<CalibrationSpec> for Calibration {
-    type Error = ConfigError;
-    fn try_from(spec: CalibrationSpec) -> Result<Self, ConfigError> {
-        Self::new(&spec)
-    }
-}
-
-impl TryFrom<&ProfileSpec> for Profile {
-    type Error = ConfigError;
-    fn try_from(spec: &ProfileSpec) -> Result<Self, ConfigError> {
-        Self::new(spec)
-    }
-}
-
-impl TryFrom<ProfileSpec> for Profile {
-    type Error = ConfigError;
-    fn try_from(spec: ProfileSpec) -> Result<Self, ConfigError> {
-        Self::new(&spec)
-    }
-}

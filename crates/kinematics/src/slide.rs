@@ -52,15 +52,6 @@ impl SlideSign {
     pub const fn is_known(self) -> bool {
         !matches!(self, Self::Unknown)
     }
-
-    /// The other direction (unknown stays unknown).
-    pub const fn reversed(self) -> Self {
-        match self {
-            Self::Unknown => Self::Unknown,
-            Self::Inserting => Self::Retracting,
-            Self::Retracting => Self::Inserting,
-        }
-    }
 }
 
 /// The direction of the last slide from the distance between the U-joint and
@@ -191,7 +182,6 @@ mod tests {
         assert_eq!(SlideSign::Retracting.sigma(), Some(-1.0));
         assert_eq!(SlideSign::Unknown.sigma(), None);
         assert_eq!(SlideSign::default(), SlideSign::Unknown);
-        assert_eq!(SlideSign::Inserting.reversed(), SlideSign::Retracting);
         assert!(!SlideSign::Unknown.is_known());
     }
 }

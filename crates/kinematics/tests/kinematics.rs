@@ -360,7 +360,7 @@ fn offset_rod_10mm() -> Profile {
     .unwrap()
 }
 
-/// The named-field specs: `new`, `TryFrom` and `spec()` agree, and a spec
+/// The named-field specs: `new` and `spec()` agree, and a spec
 /// read back is the one given (each field lands where it is named).
 #[test]
 fn calibration_and_profile_come_from_named_fields() {
@@ -374,8 +374,6 @@ fn calibration_and_profile_come_from_named_fields() {
     };
     let cal = Calibration::new(&spec).unwrap();
     assert_eq!(cal.spec(), spec);
-    assert_eq!(Calibration::try_from(spec), Ok(cal));
-    assert_eq!(Calibration::try_from(&spec), Ok(cal));
     assert_eq!(cal.p_home_m(), spec.p_home_m);
     assert_eq!(cal.ujoint_offset_m(), spec.ujoint_offset_m);
     assert_eq!(cal.sensor_offset_m(), spec.sensor_offset_m);
@@ -390,7 +388,6 @@ fn calibration_and_profile_come_from_named_fields() {
     };
     let profile = Profile::new(&spec).unwrap();
     assert_eq!(profile.spec(), spec);
-    assert_eq!(Profile::try_from(spec), Ok(profile));
     assert_eq!(
         (
             profile.length_m(),
@@ -402,7 +399,7 @@ fn calibration_and_profile_come_from_named_fields() {
     );
     // The field names carry into the errors.
     assert!(matches!(
-        Profile::try_from(ProfileSpec {
+        Profile::new(&ProfileSpec {
             mass_kg: -1.0,
             ..spec
         }),

@@ -239,10 +239,7 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
 
     fn note_bus_error(&mut self, e: &C::Error) -> CanOpenError {
         self.bus_errors += 1;
-        let err = CanOpenError::Bus {
-            kind: e.kind(),
-            detail: format!("{e:?}"),
-        };
+        let err = CanOpenError::Bus { kind: e.kind() };
         self.bus_error = Some(err.clone());
         err
     }
@@ -718,7 +715,12 @@ impl<C: Can, K: Clock> AxisDrives for CanOpenDrives<C, K> {
         let age = self.now()?.saturating_sub(p.stamp_ns);
         p.valid = p.valid
             && self.fault.is_none()
-            && age <= 2 * self.config.sync_period_ns + self.config.pdo_wait_ns;
+            && age
+                <= self
+                    .config
+                    .sync_period_ns
+                    .saturating_mul(2)
+                    .saturating_add(self.config.pdo_wait_ns);
         Ok(p)
     }
 

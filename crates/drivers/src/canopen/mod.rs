@@ -118,8 +118,16 @@ impl CanOpenConfig {
         if self.counts_per_turn == 0 {
             return bad("counts_per_turn", "0".into());
         }
-        if self.sync_period_ns < 100_000 {
+        if !(100_000..=1_000_000_000).contains(&self.sync_period_ns) {
             return bad("sync_period_ns", self.sync_period_ns.to_string());
+        }
+        // The TPDOs of a SYNC are awaited within its period, or positions of
+        // two SYNCs could mix; the bus is polled at least once in that wait.
+        if !(1..self.sync_period_ns).contains(&self.pdo_wait_ns) {
+            return bad("pdo_wait_ns", self.pdo_wait_ns.to_string());
+        }
+        if !(1..=self.pdo_wait_ns).contains(&self.poll_interval_ns) {
+            return bad("poll_interval_ns", self.poll_interval_ns.to_string());
         }
         if !(self.max_speed_mps.is_finite() && self.max_speed_mps > 0.0) {
             return bad("max_speed_mps", self.max_speed_mps.to_string());
@@ -128,7 +136,11 @@ impl CanOpenConfig {
             return bad("max_accel_mps2", self.max_accel_mps2.to_string());
         }
         for (lo, hi) in self.travel_m {
-            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            // Every target in travel must fit the drives' i32 counts (a cast
+            // would saturate silently).
+            let widest_counts = lo.abs().max(hi.abs()) / self.m_per_count();
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) || widest_counts > f64::from(i32::MAX)
+            {
                 return bad("travel_m", format!("{:?}", self.travel_m));
             }
         }
@@ -217,12 +229,12 @@ pub enum CanOpenError {
     },
     /// The CAN controller reported an error (an error frame, bus-off,
     /// overrun, ...): `kind` is embedded-can's.
-    #[error("CAN bus error ({kind:?}): {detail}")]
+    /// (Only the kind: the error is noted on the loop's path, where no text is
+    /// formatted.)
+    #[error("CAN bus error ({kind:?})")]
     Bus {
         /// embedded-can's kind.
         kind: embedded_can::ErrorKind,
-        /// The controller's own description.
-        detail: String,
     },
     /// The host's monotonic clock cannot be read: no SYNC or position is
     /// stamped with a made-up time.

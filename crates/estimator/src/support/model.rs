@@ -192,7 +192,8 @@ impl Normal {
     }
 }
 
-fn below_or_nan(x: f64, limit: f64) -> bool {
+/// `x < limit`, or NaN.
+pub(super) fn below_or_nan(x: f64, limit: f64) -> bool {
     x.is_nan() || x < limit
 }
 

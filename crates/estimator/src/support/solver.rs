@@ -3,7 +3,7 @@
 //! test, then the damped one), and one pass over the poses per trial, whose
 //! normal equations become the next iteration's when the step is accepted.
 
-use super::model::{Free, Mat6, N_UNKNOWNS, Normal, Params, Problem, Unknown, Vec6};
+use super::model::{Free, Mat6, N_UNKNOWNS, Normal, Params, Problem, Unknown, Vec6, below_or_nan};
 use super::{MAX_SUPPORT_SHIFT_M, SupportError, check_shift};
 use crate::Vec3;
 use nalgebra::{Cholesky, ComplexField, Const};
@@ -26,10 +26,6 @@ const MIN_PIVOT: f64 = 1e-13;
 
 /// The Cholesky factor of a 6x6.
 pub(super) type Factor = Cholesky<f64, Const<N_UNKNOWNS>>;
-
-fn below_or_nan(x: f64, limit: f64) -> bool {
-    x.is_nan() || x < limit
-}
 
 /// `unknown` is not determined (its pivot in the scaled normal matrix).
 pub(super) fn undetermined(unknown: Unknown, pivot: f64) -> SupportError {
