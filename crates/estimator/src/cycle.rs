@@ -375,9 +375,6 @@ pub struct EstimatorConfig {
 /// The torque check, fixed at construction.
 #[derive(Debug, Clone, Copy)]
 struct TorqueCheck {
-    /// R_0s^T (A - S): the lever from S to A in the sensor frame (constant:
-    /// both are fixed offsets of the carriage), m.
-    lever_s_m: Vec3,
     /// The residual's standard deviation per sensor axis with d = 0, N m.
     std_nm: Vec3,
     /// The lever's cross-product matrix [l]x, sensor frame.
@@ -408,7 +405,6 @@ impl TorqueCheck {
         let torque_var = limits.noise_nm.component_mul(&limits.noise_nm);
         let var = torque_var + cross.component_mul(&cross) * force_var;
         Self {
-            lever_s_m,
             std_nm: var.map(nalgebra::ComplexField::sqrt),
             cross,
             force_var_n2: force_var,
@@ -538,6 +534,12 @@ impl Estimator {
         // (whose age runs from its first stamp, however it was re-stamped).
         let sensor = &input.sensor;
         let new_sample = self.last_counter != Some(sensor.counter);
+        // Samples were lost since the last one (the filter restarts: it
+        // steps once per sample and would lag by the lost ones).
+        let lost_samples = new_sample
+            && self
+                .last_counter
+                .is_some_and(|previous| sensor.counter.wrapping_sub(previous) != 1);
         let mut counter_fault = None;
         if new_sample {
             if let Some(previous) = self.last_counter {
@@ -665,6 +667,9 @@ impl Estimator {
         // reset when there is none (no stale state carried over a gap).
         out.filtered = None;
         if let Some(filter) = &mut self.filter {
+            if lost_samples {
+                filter.reset();
+            }
             match out.tip {
                 TipOutcome::Estimate(e) if e.observable => {
                     // A refused input resets the filter: no output then.
@@ -831,7 +836,9 @@ fn torque_residual(
     bias: &Bias,
     torsion_nm: f64,
 ) -> TorqueResidual {
-    let mut predicted = check.lever_s_m.cross(&(sensor.force_n - bias.force_n)) + bias.torque_nm;
+    // The same prediction as the tare's (one model of the sensor torque).
+    let predicted =
+        predicted_torque_nm(cal, pose, &sensor.force_n, &bias.force_n, torsion_nm) + bias.torque_nm;
     if check.offset_m == 0.0 {
         return TorqueResidual {
             residual_nm: sensor.torque_nm - predicted,
@@ -845,7 +852,6 @@ fn torque_residual(
     // var_i = sigma_t,i^2 + sum_j J_ij^2 sigma_f,j^2.
     let r_t = cal.sensor_rotation().transpose();
     let n_s = r_t * torsion_axis(pose);
-    predicted -= n_s * torsion_nm;
     let v_s = r_t * pose.rod_dir.cross(&pose.rod_normal);
     let k = check.offset_m / pose.rod_normal.y;
     let jacobian = check.cross + n_s * v_s.transpose() * k;

@@ -958,6 +958,12 @@ fn the_filtered_tip_force_is_stepped_per_new_sample_and_reset_without_input() {
     let out = *rig.estimator.cycle(&repeat);
     assert!(!out.new_sample);
     assert_eq!(out.filtered, filtered_before);
+    // A lost sample (counter + 2): the filter restarts at the new estimate
+    // rather than lag by the samples it never saw.
+    rig.counter = rig.counter.wrapping_add(1);
+    let out = rig.push(NOMINAL_Q, &Vector3::new(2.5, 0.0, 0.0));
+    let e = estimate(&out);
+    assert_eq!(out.filtered.unwrap().force_n, e.force_n);
     // No estimate (invalid joints): no filtered output, and the filter resets.
     let mut bad = rig.at_rest();
     bad.joints.valid = false;
@@ -970,4 +976,130 @@ fn the_filtered_tip_force_is_stepped_per_new_sample_and_reset_without_input() {
     let e = estimate(&out);
     let restarted = out.filtered.unwrap();
     assert_eq!((restarted.force_n, restarted.std_n), (e.force_n, e.std_n));
+}
+
+/// The torque check and the tare with d != 0 and a sensor turned against the
+/// base frame: the sensor torque of MODEL.md 4,
+/// t = R^T ((A - S) x (-F_A) - M_T n) + b_t with n = -(sin q4, 0, cos q4),
+/// built here from the independent statics of `common`, leaves a residual of
+/// round-off; a torsion of the wrong sign, or R where R^T belongs, does not;
+/// and a tare at rest zeroes the tip force.
+#[test]
+fn the_torque_check_and_the_tare_hold_with_a_rod_offset_and_a_turned_sensor() {
+    let rotation = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 1.1).into_inner();
+    let spec = sar_estimator::CalibrationSpec {
+        sensor_rotation: rotation,
+        ..example_calibration().spec()
+    };
+    let calibration = sar_estimator::Calibration::new(&spec).unwrap();
+    let offset_m = 0.004;
+    let profile = sar_estimator::Profile::new(&sar_estimator::ProfileSpec {
+        offset_m,
+        ..manipulator2().spec()
+    })
+    .unwrap();
+    let mut config = config_with_speed(1e3);
+    config.calibration = calibration;
+    config.profile = profile;
+    let truth = common::Truth {
+        offset_m,
+        ..manipulator2_truth()
+    };
+    let bias_n = Vector3::new(0.4, -1.1, 0.25);
+    let bias_nm = Vector3::new(0.02, -0.01, 0.005);
+    // The model's reading for a tip force, with a torsion sign `sign`
+    // (+1 right) and the rotation applied as R^T (`transpose` true, right).
+    let reading = |q: &ActiveJoints, tip_n: &Vector3<f64>, sign: f64, transpose: bool| {
+        let pose = sar_kinematics::forward(&calibration, &profile, q).unwrap();
+        let (f_a, torsion_nm) = ujoint_force(
+            &truth,
+            &pose.ujoint_m,
+            &pose.rod_dir,
+            &pose.rod_normal,
+            tip_n,
+            0.0,
+        );
+        let q4 = pose.rod_dir.x.atan2(pose.rod_dir.z);
+        let n = -Vector3::new(q4.sin(), 0.0, q4.cos());
+        let to_sensor = if transpose {
+            rotation.transpose()
+        } else {
+            rotation
+        };
+        let lever = pose.ujoint_m - pose.sensor_m;
+        let torque = to_sensor * (lever.cross(&(-f_a)) - n * (sign * torsion_nm)) + bias_nm;
+        (ideal_reading(&rotation, &f_a, &bias_n), torque)
+    };
+    let q = ActiveJoints {
+        q1_m: 0.02,
+        q2_m: 0.25,
+        q3_m: 0.31,
+    };
+    let tip_n = Vector3::new(1.5, -0.5, 2.0);
+    let mut estimator = Estimator::with_bias(
+        &config,
+        Bias {
+            force_n: bias_n,
+            torque_nm: bias_nm,
+        },
+    )
+    .unwrap();
+    let input = |cycle: u64, (force_n, torque_nm): (Vector3<f64>, Vector3<f64>)| CycleInput {
+        cycle,
+        now_ns: Some(1_000_000_000 + cycle * PERIOD_NS),
+        sensor: SensorSample {
+            force_n,
+            torque_nm,
+            counter: cycle as u32,
+            status: 0,
+            stamp_ns: 1_000_000_000 + cycle * PERIOD_NS,
+            valid: true,
+        },
+        joints: JointSample {
+            joints: q,
+            stamp_ns: 1_000_000_000 + cycle * PERIOD_NS,
+            valid: true,
+        },
+        command: Some(Command::Reset),
+    };
+    let out = *estimator.cycle(&input(1, reading(&q, &tip_n, 1.0, true)));
+    assert_eq!(out.guard_state, GuardState::Ok, "{:?}", out.guard_reason);
+    let e = estimate(&out);
+    assert!(e.torsion_nm.abs() > 1e-3, "the pose must load the torsion");
+    assert!((e.force_n - tip_n).norm() < 1e-9, "{:?}", e.force_n);
+    let residual = out.torque.unwrap().residual_nm;
+    assert!(residual.norm() < 1e-12, "{residual:?}");
+    // The torsion's sign and the rotation's direction are seen.
+    for (sign, transpose) in [(-1.0, true), (1.0, false)] {
+        let mut rig = Estimator::with_bias(
+            &config,
+            Bias {
+                force_n: bias_n,
+                torque_nm: bias_nm,
+            },
+        )
+        .unwrap();
+        let out = *rig.cycle(&input(1, reading(&q, &tip_n, sign, transpose)));
+        let r = out.torque.unwrap();
+        // Far from round-off (the model's error, not noise, is measured).
+        assert!(
+            r.residual_nm.norm() > 1e-3,
+            "sign {sign}, transpose {transpose}: {:?}",
+            r.residual_nm
+        );
+    }
+    // A tare at rest: the next reading at rest gives zero tip force.
+    let mut tare = input(2, reading(&q, &Vector3::zeros(), 1.0, true));
+    tare.command = Some(Command::Tare);
+    let out = *estimator.cycle(&tare);
+    assert!(
+        matches!(out.command.unwrap().result, Ok(_)),
+        "{:?}",
+        out.command
+    );
+    let mut after = input(3, reading(&q, &Vector3::zeros(), 1.0, true));
+    after.command = None;
+    let out = *estimator.cycle(&after);
+    assert!(estimate(&out).force_n.norm() < 1e-9);
+    assert!(out.torque.unwrap().residual_nm.norm() < 1e-12);
 }

@@ -265,6 +265,16 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
             com_m: 0.103,
         })
         .unwrap(),
+        // The torque check's d != 0 branch runs too (its limit far off: the
+        // script's readings carry no torque).
+        plausibility: PlausibilityConfig::new(PlausibilityLimits {
+            torque: Some(sar_estimator::cycle::TorqueLimits {
+                noise_nm: Vector3::new(0.01, 0.01, 0.002),
+                max_sigma: 1e9,
+            }),
+            ..PlausibilityLimits::default()
+        })
+        .unwrap(),
         ..example_estimator_config()
     };
     let mut estimator = Estimator::new(&config, Vector3::new(0.4, -1.1, 0.25)).unwrap();
@@ -283,6 +293,7 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
             let out = estimator.cycle(input);
             if let sar_estimator::cycle::TipOutcome::Estimate(e) = out.tip {
                 estimates += 1;
+                assert!(out.torque.is_some());
                 assert!(e.torsion_nm != 0.0 || e.ujoint_force_n.norm() == 0.0);
             }
             let k = match out.guard_state {
