@@ -214,15 +214,16 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         bias: sar_estimator::cycle::Bias,
         travel_m: [(f64, f64); 3],
         sensor: S,
-        mut drives: D,
+        drives: D,
         operator: Operator,
         log: LogSender,
         auto_reset: bool,
     ) -> Result<Self, SettingError> {
+        // The drives are not enabled here: the guard starts in Fault (no
+        // input yet), so the controller starts halted, and only an accepted
+        // reset enables them (`release_drives`). Drives that come up enabled
+        // get a quick stop in the first cycle.
         let estimator = Estimator::with_bias(config, bias)?;
-        if matches!(drives.state(), Ok(DriveState::Ready)) {
-            let _ = drives.enable();
-        }
         let sensor_sample = SensorSample {
             force_n: Vec3::zeros(),
             torque_nm: Vec3::zeros(),
@@ -258,7 +259,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             drive_state: None,
             last_input,
             output,
-            halted: false,
+            halted: true,
             auto_reset,
             counts: ActionCounts::default(),
             drives_cycle: None,
@@ -461,18 +462,19 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         &self.output
     }
 
-    /// After an accepted reset: bring the drives back to `Enabled`.
+    /// After an accepted reset: bring the drives back to `Enabled`, deciding
+    /// on the drive state gathered (and published) in this cycle.
     fn release_drives(&mut self) {
-        match self.drives.state() {
-            Ok(DriveState::QuickStop) => {
+        match self.drive_state {
+            Some(DriveState::QuickStop) => {
                 let _ = self.drives.disable();
                 let _ = self.drives.enable();
             }
-            Ok(DriveState::Fault { .. }) => {
+            Some(DriveState::Fault { .. }) => {
                 let _ = self.drives.fault_reset();
                 let _ = self.drives.enable();
             }
-            Ok(DriveState::Ready) => {
+            Some(DriveState::Ready) => {
                 let _ = self.drives.enable();
             }
             _ => {}

@@ -151,3 +151,53 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
     let r = operator.replies.pop().unwrap();
     assert_eq!(r.status, ReplyStatus::Accepted, "{r:?}");
 }
+
+/// The drives are enabled only by an accepted reset: before it (the guard
+/// starts in Fault, no input yet) they stay Ready however many cycles run.
+#[test]
+fn the_drives_are_enabled_only_after_an_accepted_reset() {
+    let cfg = config::builtin().unwrap();
+    let scenario = sim::demo_scenario().unwrap();
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _t, _q) = logq::channel(false);
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.axes.travel_m,
+        sensor,
+        drives,
+        operator.clone(),
+        log,
+        false,
+    )
+    .unwrap();
+    let mut cycle = 0u64;
+    for _ in 0..50 {
+        cycle += 1;
+        clock.advance_ns(1_000_000);
+        let out = *c.step(cycle, || Some(clock.now_ns()));
+        assert_eq!(out.guard_state, GuardState::Fault);
+        assert!(c.halted());
+        assert_eq!(c.drive_state(), Some(DriveState::Ready), "cycle {cycle}");
+    }
+    operator
+        .requests
+        .push(Envelope {
+            id: 1,
+            request: Request::Reset,
+        })
+        .unwrap();
+    for _ in 0..5 {
+        cycle += 1;
+        clock.advance_ns(1_000_000);
+        c.step(cycle, || Some(clock.now_ns()));
+    }
+    assert_eq!(
+        operator.replies.pop().unwrap().status,
+        ReplyStatus::Accepted
+    );
+    assert!(!c.halted());
+    assert_eq!(c.drive_state(), Some(DriveState::Enabled));
+}
