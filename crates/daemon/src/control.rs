@@ -119,6 +119,12 @@ pub fn reason_code(reason: &Reason) -> u16 {
     }
 }
 
+/// [`reason_code`] in a recording's `uint8` field (`sar_msgs` `REASON_*`: the
+/// same numbers; one unknown to the table is `REASON_OTHER`).
+pub fn recorded_reason_code(reason: &Reason) -> u8 {
+    u8::try_from(reason_code(reason)).unwrap_or(crate::record::msgs::reason::OTHER)
+}
+
 /// The operator's ends of the request and reply queues.
 #[derive(Debug, Clone)]
 pub struct Operator {

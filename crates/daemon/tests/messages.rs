@@ -202,7 +202,8 @@ prop_compose! {
         ints in prop::array::uniform8(any::<u64>()),
         f in prop::array::uniform5(f3()),
         bools in prop::array::uniform3(any::<bool>()),
-        codes in (0u8..3, 0u8..4, 0u8..9),
+        codes in (0u8..3, 0u8..5, 0u8..10),
+        bias in f3(),
         axis in any::<i8>(),
     ) -> CycleInput {
         CycleInput {
@@ -225,7 +226,7 @@ prop_compose! {
             target_q_m: f[3],
             target_valid: bools[2],
             command_kind: CommandKindCode::from_code(codes.2).unwrap(),
-            command_values: f[4],
+            command_values: [f[4][0], f[4][1], f[4][2], bias[0], bias[1], bias[2]],
             command_arg: ints[7],
         }
     }
@@ -343,4 +344,163 @@ fn outgoing_is_small_and_copy() {
     assert!(size <= 512, "{size}");
     fn copy<T: Copy + Send + 'static>() {}
     copy::<Outgoing>();
+}
+
+/// The recordings' reason codes (`REASON_*` of GuardEvent.msg) are the wire's
+/// (`control::reason_code`), reason by reason, and the .msg file lists them.
+#[test]
+fn recorded_reason_codes_are_the_wires() {
+    use sar_daemon::control::{reason_code, recorded_reason_code};
+    use sar_daemon::record::msgs::reason as r;
+    use sar_estimator::guard::{Axis, ForcePart, Reason, TipField};
+    let table = [
+        (Reason::NoInputYet, r::NO_INPUT_YET, "NO_INPUT_YET"),
+        (
+            Reason::CycleOutOfOrder {
+                previous: 2,
+                got: 1,
+            },
+            r::CYCLE_OUT_OF_ORDER,
+            "CYCLE_OUT_OF_ORDER",
+        ),
+        (Reason::ClockFailed, r::CLOCK_FAILED, "CLOCK_FAILED"),
+        (
+            Reason::ClockNotAdvancing {
+                previous_ns: 2,
+                now_ns: 1,
+            },
+            r::CLOCK_NOT_ADVANCING,
+            "CLOCK_NOT_ADVANCING",
+        ),
+        (
+            Reason::SensorCounterGap {
+                previous: 1,
+                got: 9,
+                max_gap: 3,
+            },
+            r::SENSOR_COUNTER_GAP,
+            "SENSOR_COUNTER_GAP",
+        ),
+        (
+            Reason::SensorStatus { status: 4 },
+            r::SENSOR_STATUS,
+            "SENSOR_STATUS",
+        ),
+        (
+            Reason::JointJump {
+                axis: 3,
+                moved_m: 0.002,
+                allowed_m: 0.0003,
+            },
+            r::JOINT_JUMP,
+            "JOINT_JUMP",
+        ),
+        (
+            Reason::JointsStampBackwards {
+                previous_ns: 2,
+                got_ns: 1,
+            },
+            r::JOINTS_STAMP_BACKWARDS,
+            "JOINTS_STAMP_BACKWARDS",
+        ),
+        (
+            Reason::TorqueImplausible {
+                axis: Axis::X,
+                residual_nm: 1.0,
+                std_nm: 0.01,
+                max_sigma: 7.0,
+            },
+            r::TORQUE_IMPLAUSIBLE,
+            "TORQUE_IMPLAUSIBLE",
+        ),
+        (
+            Reason::ResetNotCurrent { last: 2, got: 1 },
+            r::RESET_NOT_CURRENT,
+            "RESET_NOT_CURRENT",
+        ),
+        (Reason::SensorInvalid, r::SENSOR_INVALID, "SENSOR_INVALID"),
+        (
+            Reason::SensorStale {
+                age_ns: 9,
+                max_age_ns: 5,
+            },
+            r::SENSOR_STALE,
+            "SENSOR_STALE",
+        ),
+        (Reason::JointsInvalid, r::JOINTS_INVALID, "JOINTS_INVALID"),
+        (
+            Reason::JointsStale {
+                age_ns: 9,
+                max_age_ns: 5,
+            },
+            r::JOINTS_STALE,
+            "JOINTS_STALE",
+        ),
+        (Reason::PoseInvalid, r::POSE_INVALID, "POSE_INVALID"),
+        (
+            Reason::NonFinite {
+                field: TipField::Force,
+                axis: Axis::Y,
+            },
+            r::NON_FINITE,
+            "NON_FINITE",
+        ),
+        (
+            Reason::NegativeStd {
+                axis: Axis::Z,
+                std_n: -1.0,
+            },
+            r::NEGATIVE_STD,
+            "NEGATIVE_STD",
+        ),
+        (
+            Reason::RodDirNotUnit { norm: 2.0 },
+            r::ROD_DIR_NOT_UNIT,
+            "ROD_DIR_NOT_UNIT",
+        ),
+        (
+            Reason::EstimatorNotObservable,
+            r::ESTIMATOR_NOT_OBSERVABLE,
+            "ESTIMATOR_NOT_OBSERVABLE",
+        ),
+        (
+            Reason::NotObservable {
+                std_max_n: 3.0,
+                max_std_n: 2.0,
+            },
+            r::NOT_OBSERVABLE,
+            "NOT_OBSERVABLE",
+        ),
+        (
+            Reason::AboveStop {
+                part: ForcePart::Axial,
+                force_n: 13.0,
+                limit_n: 12.0,
+            },
+            r::ABOVE_STOP,
+            "ABOVE_STOP",
+        ),
+        (
+            Reason::AboveWarn {
+                part: ForcePart::Total,
+                force_n: 11.0,
+                limit_n: 10.0,
+            },
+            r::ABOVE_WARN,
+            "ABOVE_WARN",
+        ),
+        (Reason::BelowWarn, r::BELOW_WARN, "BELOW_WARN"),
+        (Reason::Reset, r::RESET, "RESET"),
+    ];
+    let msg = include_str!("../msg/GuardEvent.msg");
+    let mut seen = std::collections::BTreeSet::new();
+    for (reason, code, name) in table {
+        assert_eq!(u16::from(code), reason_code(&reason), "{name}");
+        assert_eq!(recorded_reason_code(&reason), code, "{name}");
+        assert!(
+            msg.contains(&format!("uint8 REASON_{name}={code}\n")),
+            "{name}"
+        );
+        assert!(seen.insert(code), "{name}: code {code} twice");
+    }
 }

@@ -385,6 +385,8 @@ code_enum!(
         QuickStop = 2,
         /// Fault (see the fault axis and code).
         Fault = 3,
+        /// Not read in this cycle (the drives' `state()` failed).
+        Unread = 4,
     }
 );
 
@@ -409,43 +411,64 @@ code_enum!(
         FaultReset = 7,
         /// Move to a target (values: q1..q3, m).
         MoveTo = 8,
+        /// Set the sensor's bias (values: force x, y, z in N, then torque
+        /// x, y, z in N m; sensor frame).
+        SetBias = 9,
     }
 );
 
-/// The guard reason codes (`REASON_*` of `GuardEvent.msg`).
+/// The guard reason codes (`REASON_*` of `GuardEvent.msg`): the same numbers
+/// as `crate::control::reason_code` (the wire), so recordings, `sarctl` and
+/// the shared memory agree (a test checks every reason).
 pub mod reason {
-    /// No input has been stepped yet.
-    pub const NO_INPUT_YET: u8 = 0;
-    /// The cycle number did not increase.
-    pub const CYCLE_OUT_OF_ORDER: u8 = 1;
-    /// Sensor invalid.
-    pub const SENSOR_INVALID: u8 = 2;
-    /// Sensor stale.
-    pub const SENSOR_STALE: u8 = 3;
-    /// Joints invalid.
-    pub const JOINTS_INVALID: u8 = 4;
-    /// Joints stale.
-    pub const JOINTS_STALE: u8 = 5;
-    /// Pose invalid.
-    pub const POSE_INVALID: u8 = 6;
-    /// A non-finite estimate.
-    pub const NON_FINITE: u8 = 7;
-    /// A negative standard deviation.
-    pub const NEGATIVE_STD: u8 = 8;
-    /// The rod direction is not unit.
-    pub const ROD_DIR_NOT_UNIT: u8 = 9;
-    /// The estimator said not observable.
-    pub const ESTIMATOR_NOT_OBSERVABLE: u8 = 10;
-    /// The deviation is above the limit.
-    pub const NOT_OBSERVABLE: u8 = 11;
-    /// At or above a stop limit.
-    pub const ABOVE_STOP: u8 = 12;
-    /// At or above a warn limit.
-    pub const ABOVE_WARN: u8 = 13;
-    /// Below warn minus hysteresis.
-    pub const BELOW_WARN: u8 = 14;
-    /// Reset accepted.
-    pub const RESET: u8 = 15;
+    /// `Reason::NoInputYet`.
+    pub const NO_INPUT_YET: u8 = 1;
+    /// `Reason::CycleOutOfOrder`.
+    pub const CYCLE_OUT_OF_ORDER: u8 = 2;
+    /// `Reason::ClockFailed`.
+    pub const CLOCK_FAILED: u8 = 3;
+    /// `Reason::ClockNotAdvancing`.
+    pub const CLOCK_NOT_ADVANCING: u8 = 4;
+    /// `Reason::SensorCounterGap`.
+    pub const SENSOR_COUNTER_GAP: u8 = 5;
+    /// `Reason::SensorStatus`.
+    pub const SENSOR_STATUS: u8 = 6;
+    /// `Reason::JointJump`.
+    pub const JOINT_JUMP: u8 = 7;
+    /// `Reason::JointsStampBackwards`.
+    pub const JOINTS_STAMP_BACKWARDS: u8 = 8;
+    /// `Reason::TorqueImplausible`.
+    pub const TORQUE_IMPLAUSIBLE: u8 = 9;
+    /// `Reason::ResetNotCurrent`.
+    pub const RESET_NOT_CURRENT: u8 = 10;
+    /// `Reason::SensorInvalid`.
+    pub const SENSOR_INVALID: u8 = 11;
+    /// `Reason::SensorStale`.
+    pub const SENSOR_STALE: u8 = 12;
+    /// `Reason::JointsInvalid`.
+    pub const JOINTS_INVALID: u8 = 13;
+    /// `Reason::JointsStale`.
+    pub const JOINTS_STALE: u8 = 14;
+    /// `Reason::PoseInvalid`.
+    pub const POSE_INVALID: u8 = 15;
+    /// `Reason::NonFinite`.
+    pub const NON_FINITE: u8 = 16;
+    /// `Reason::NegativeStd`.
+    pub const NEGATIVE_STD: u8 = 17;
+    /// `Reason::RodDirNotUnit`.
+    pub const ROD_DIR_NOT_UNIT: u8 = 18;
+    /// `Reason::EstimatorNotObservable`.
+    pub const ESTIMATOR_NOT_OBSERVABLE: u8 = 19;
+    /// `Reason::NotObservable`.
+    pub const NOT_OBSERVABLE: u8 = 20;
+    /// `Reason::AboveStop`.
+    pub const ABOVE_STOP: u8 = 21;
+    /// `Reason::AboveWarn`.
+    pub const ABOVE_WARN: u8 = 22;
+    /// `Reason::BelowWarn`.
+    pub const BELOW_WARN: u8 = 23;
+    /// `Reason::Reset`.
+    pub const RESET: u8 = 24;
     /// A reason this table does not know yet.
     pub const OTHER: u8 = 255;
 }
@@ -664,7 +687,7 @@ pub struct CycleInput {
     /// The operator command applied.
     pub command_kind: CommandKindCode,
     /// Its real arguments.
-    pub command_values: [f64; 3],
+    pub command_values: [f64; 6],
     /// Its integer argument.
     pub command_arg: u64,
 }

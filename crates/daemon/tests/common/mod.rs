@@ -61,13 +61,16 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             joints_q_m: v3(k + 2),
             joints_stamp_ns: t - 120_000,
             joints_valid: !k.is_multiple_of(11),
-            drive_state: DriveStateCode::from_code((k % 4) as u8).unwrap(),
+            drive_state: DriveStateCode::from_code((k % 5) as u8).unwrap(),
             drive_fault_axis: if k % 4 == 3 { (k % 3) as i8 } else { -1 },
             drive_fault_code: if k % 4 == 3 { 0x2310 } else { 0 },
             target_q_m: v3(k + 3),
             target_valid: k.is_multiple_of(2),
-            command_kind: CommandKindCode::from_code((k % 9) as u8).unwrap(),
-            command_values: v3(k + 4),
+            command_kind: CommandKindCode::from_code((k % 10) as u8).unwrap(),
+            command_values: {
+                let (a, b) = (v3(k + 4), v3(k + 5));
+                [a[0], a[1], a[2], b[0], b[1], b[2]]
+            },
             command_arg: mix(k),
         }),
         Outgoing::SensorWrench(WrenchStamped::sensor(t - 90_000, v3(k), v3(k + 1))),
