@@ -255,6 +255,13 @@ fn recover_refuses_to_overwrite_its_input_and_non_mcap() {
     let p = dir.join("x.mcap");
     std::fs::write(&p, b"not an mcap file").unwrap();
     assert!(matches!(recover(&p, &p), Err(RecoverError::SamePath(_))));
+    // The same file spelt another way is refused too, and left as it was.
+    let other_spelling = dir.join(".").join("x.mcap");
+    assert!(matches!(
+        recover(&p, &other_spelling),
+        Err(RecoverError::SamePath(_))
+    ));
+    assert_eq!(std::fs::read(&p).unwrap(), b"not an mcap file");
     assert!(matches!(
         recover(&p, &dir.join("y.mcap")),
         Err(RecoverError::Read(ReadError::NotMcap { .. }))
@@ -485,5 +492,37 @@ mod corrupted {
                 }
             }
         }
+    }
+}
+
+/// One message that cannot be encoded (a stamp beyond CDR's 2^31 s) is
+/// dropped and counted; the recording goes on with the next ones.
+#[test]
+fn an_unencodable_message_is_dropped_and_the_recording_goes_on() {
+    let dir = common::scratch("unencodable");
+    let mut rec = Recorder::start(config(&dir, 64 * 1024)).unwrap();
+    let good = common::cycle_messages(1);
+    let bad = Outgoing::SensorWrench(WrenchStamped::sensor(
+        u64::MAX,
+        [1.0, 2.0, 3.0],
+        [0.1, 0.2, 0.3],
+    ));
+    assert!(rec.push(bad));
+    for m in &good {
+        assert!(rec.push(*m));
+    }
+    let report = rec.stop().unwrap();
+    assert_eq!(report.dropped, 1);
+    let file = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .unwrap();
+    let bytes = std::fs::read(file).unwrap();
+    let (messages, end, _) = read_all(&bytes);
+    assert!(end.is_none(), "{end:?}");
+    let written: Vec<Vec<u8>> = messages.iter().map(|(_, m)| m.data.to_vec()).collect();
+    for m in &good {
+        assert!(written.contains(&encoded(m)), "{m:?} missing");
     }
 }

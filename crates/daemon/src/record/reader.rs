@@ -325,6 +325,9 @@ impl<'a> McapReader<'a> {
                 let Record::Chunk { header, data } =
                     mcap::parse_record(op_byte, body).map_err(corrupt)?
                 else {
+                    // Not a chunk after all: skip the record (never read the
+                    // same one again).
+                    self.pos += RECORD_PREFIX + body.len();
                     return Ok(true);
                 };
                 // A corrupt size must not make us allocate it.
@@ -562,7 +565,12 @@ pub enum RecoverError {
 /// with its channel, sequence and times, its metadata, and metadata
 /// `sar_recover` saying where and why the input stopped.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
-    if input == output {
+    // The same file by another spelling (./x.mcap, a link) counts too: the
+    // output is truncated first, which would lose the input.
+    let same_file = std::fs::canonicalize(output)
+        .ok()
+        .is_some_and(|o| std::fs::canonicalize(input).ok() == Some(o));
+    if input == output || same_file {
         return Err(RecoverError::SamePath(output.to_path_buf()));
     }
     let bytes = read_file(input)?;

@@ -257,12 +257,17 @@ impl PendingWriter {
                 // The status of the file a rotation closes: up to the last
                 // message written, not this one.
                 let status = self.status(last_ns);
-                last_ns = last_ns.max(msg.stamp_ns());
                 if let Err(e) = self.files.write(&msg, &status) {
                     self.shared.dropped.fetch_add(1, Ordering::Relaxed);
-                    error = Some(self.fail(e));
+                    // One message that cannot be encoded (a stamp beyond the
+                    // format's range) is dropped and counted; the recording
+                    // goes on. A failing file ends it.
+                    if !matches!(e, WriteError::Encode { .. }) {
+                        error = Some(self.fail(e));
+                    }
                     continue;
                 }
+                last_ns = last_ns.max(msg.stamp_ns());
                 let due = *next_status_ns.get_or_insert(last_ns + self.config.status_interval_ns);
                 if last_ns >= due {
                     next_status_ns = Some(last_ns + self.config.status_interval_ns);
