@@ -396,8 +396,7 @@ impl TorqueCheck {
         noise: &SensorNoise,
         limits: &TorqueLimits,
     ) -> Self {
-        let lever_s_m =
-            cal.sensor_rotation().transpose() * (cal.ujoint_offset_m() - cal.sensor_offset_m());
+        let lever_s_m = SensorFrame::new(cal).lever_s_m;
         // The prediction l x (f - b) carries the force noise through [l]x:
         // var_i = sigma_t,i^2 + sum_j [l]x_ij^2 sigma_f,j^2.
         let cross = lever_s_m.cross_matrix();
@@ -422,6 +421,7 @@ pub struct Estimator {
     calibration: Calibration,
     profile: Profile,
     tip: TipForceEstimator,
+    frame: SensorFrame,
     filter: Option<TipFilter>,
     guard: Guard,
     limits: PlausibilityLimits,
@@ -493,6 +493,7 @@ impl Estimator {
                 &config.noise,
                 config.tip,
             )?,
+            frame: SensorFrame::new(&config.calibration),
             filter,
             guard,
             limits,
@@ -638,7 +639,7 @@ impl Estimator {
                             if let Some(check) = &self.torque {
                                 let residual = torque_residual(
                                     check,
-                                    &self.calibration,
+                                    &self.frame,
                                     pose,
                                     sensor,
                                     &self.bias,
@@ -773,7 +774,7 @@ impl Estimator {
         let force_n = b + step;
         let tared = self.tip.estimate(pose, reading, &force_n).ok()?;
         let torque_nm = sensor.torque_nm
-            - predicted_torque_nm(&self.calibration, pose, reading, &force_n, tared.torsion_nm);
+            - predicted_torque_nm(&self.frame, pose, reading, &force_n, tared.torsion_nm);
         let bias = Bias { force_n, torque_nm };
         bias.check().ok()?;
         Some(bias)
@@ -806,19 +807,37 @@ impl Estimator {
 /// `R_0s^T ((A - S) x (-F_A) - M_T n)` with `-F_A = R_0s (f - b_f)`, i.e.
 /// `(R_0s^T (A - S)) x (f - b_f) - R_0s^T n M_T` (MODEL.md 4), N m.
 fn predicted_torque_nm(
-    cal: &Calibration,
+    frame: &SensorFrame,
     pose: &Pose,
     reading_n: &Vec3,
     bias_n: &Vec3,
     torsion_nm: f64,
 ) -> Vec3 {
-    let r_t = cal.sensor_rotation().transpose();
-    let lever_s_m = r_t * (pose.ujoint_m - pose.sensor_m);
-    let wrench = lever_s_m.cross(&(reading_n - bias_n));
+    let wrench = frame.lever_s_m.cross(&(reading_n - bias_n));
     if torsion_nm == 0.0 {
         wrench
     } else {
-        wrench - r_t * torsion_axis(pose) * torsion_nm
+        wrench - frame.r_t * torsion_axis(pose) * torsion_nm
+    }
+}
+
+/// What the torque model needs of the calibration, fixed at construction.
+#[derive(Debug, Clone, Copy)]
+struct SensorFrame {
+    /// R_0s^T.
+    r_t: Mat3,
+    /// R_0s^T (A - S): the lever from S to A in the sensor frame (constant:
+    /// both are fixed offsets of the carriage), m.
+    lever_s_m: Vec3,
+}
+
+impl SensorFrame {
+    fn new(cal: &Calibration) -> Self {
+        let r_t = cal.sensor_rotation().transpose();
+        Self {
+            r_t,
+            lever_s_m: r_t * (cal.ujoint_offset_m() - cal.sensor_offset_m()),
+        }
     }
 }
 
@@ -830,15 +849,15 @@ fn torsion_axis(pose: &Pose) -> Vec3 {
 /// Measured minus predicted torque, with its standard deviation.
 fn torque_residual(
     check: &TorqueCheck,
-    cal: &Calibration,
+    frame: &SensorFrame,
     pose: &Pose,
     sensor: &SensorSample,
     bias: &Bias,
     torsion_nm: f64,
 ) -> TorqueResidual {
     // The same prediction as the tare's (one model of the sensor torque).
-    let predicted =
-        predicted_torque_nm(cal, pose, &sensor.force_n, &bias.force_n, torsion_nm) + bias.torque_nm;
+    let predicted = predicted_torque_nm(frame, pose, &sensor.force_n, &bias.force_n, torsion_nm)
+        + bias.torque_nm;
     if check.offset_m == 0.0 {
         return TorqueResidual {
             residual_nm: sensor.torque_nm - predicted,
@@ -850,7 +869,7 @@ fn torque_residual(
     // so its Jacobian in the reading f is
     // J = [l]x + (d / w_y) (R_0s^T n) (R_0s^T v)^T, and
     // var_i = sigma_t,i^2 + sum_j J_ij^2 sigma_f,j^2.
-    let r_t = cal.sensor_rotation().transpose();
+    let r_t = &frame.r_t;
     let n_s = r_t * torsion_axis(pose);
     let v_s = r_t * pose.rod_dir.cross(&pose.rod_normal);
     let k = check.offset_m / pose.rod_normal.y;
