@@ -64,6 +64,15 @@ enum Cmd {
     },
     /// The guard's force limits.
     Limits,
+    /// The live view: serves the state to Foxglove (WebSocket) until stopped.
+    View {
+        /// Address to serve on, ADDR:PORT (port 0: any free port).
+        #[arg(long, default_value = sar_daemon::view::DEFAULT_BIND)]
+        bind: String,
+        /// Rate of the 3D scene, Hz.
+        #[arg(long, default_value_t = sar_daemon::view::DEFAULT_SCENE_HZ)]
+        scene_hz: f64,
+    },
 }
 
 /// A write to stdout failed. A reader that went away (`sarctl monitor | head`)
@@ -275,6 +284,7 @@ fn run(args: &Args) -> Result<(), String> {
                 }
             }
         }
+        Cmd::View { ref bind, scene_hz } => sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz),
         Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
         Cmd::MoveTip { x, y, z } => {
