@@ -224,7 +224,12 @@ impl Publisher {
         }
         // The scene and the status, decimated by the state's clock.
         if s.now_ns >= self.next_scene_ns {
-            self.next_scene_ns = s.now_ns.saturating_add(self.scene_period_ns);
+            // Keep the phase (30 Hz on a 1 ms loop is 30 Hz, not 1/34 ms);
+            // after a gap, start again from this state.
+            self.next_scene_ns = self.next_scene_ns.saturating_add(self.scene_period_ns);
+            if self.next_scene_ns <= s.now_ns {
+                self.next_scene_ns = s.now_ns.saturating_add(self.scene_period_ns);
+            }
             if self.scene.has_sinks() {
                 self.scene
                     .log_with_meta(&scene::scene(s, &self.geometry), meta());
