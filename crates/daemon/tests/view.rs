@@ -210,10 +210,8 @@ impl Fox {
             .set_read_timeout(Some(Duration::from_secs(20)))
             .unwrap();
         let mut req = format!("ws://{addr}/").into_client_request().unwrap();
-        req.headers_mut().insert(
-            "Sec-WebSocket-Protocol",
-            "foxglove.sdk.v1".parse().unwrap(),
-        );
+        req.headers_mut()
+            .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
         let (ws, resp) = tungstenite::client(req, stream).unwrap();
         assert_eq!(
             resp.headers()

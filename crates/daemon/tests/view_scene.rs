@@ -109,7 +109,11 @@ fn rod_ends_are_the_kinematics_with_and_without_offset() {
             let cube = &entity(&update, ids::CARRIAGE).cubes[0];
             let home = arr(cfg.calibration.p_home_m());
             let p_expected = [home[0] + q[2], home[1] + q[1], home[2] + q[0]];
-            assert!(close(v3(&cube.pose.unwrap().position.unwrap()), p_expected, 1e-12));
+            assert!(close(
+                v3(&cube.pose.unwrap().position.unwrap()),
+                p_expected,
+                1e-12
+            ));
             assert!(close(arr(pose.carriage_m), p_expected, 1e-12));
         }
     }
@@ -132,7 +136,10 @@ fn arrow_points_along_the_force_in_every_direction() {
         let arrow = &entity(&update, ids::TIP_FORCE).arrows[0];
         let dir = scene::rotate(&arrow.pose.unwrap().orientation.unwrap(), [1.0, 0.0, 0.0]);
         let n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-        assert!(close(dir, [f[0] / n, f[1] / n, f[2] / n], 1e-12), "{f:?}: {dir:?}");
+        assert!(
+            close(dir, [f[0] / n, f[1] / n, f[2] / n], 1e-12),
+            "{f:?}: {dir:?}"
+        );
         assert!((arrow.shaft_length + arrow.head_length - n * g.force_scale_m_per_n).abs() < 1e-12);
         assert!(arrow.shaft_length > 0.0);
         let c = arrow.color.unwrap();
@@ -266,4 +273,64 @@ fn the_scene_goes_into_an_mcap_file_and_back() {
         entity(&update, ids::ROD).timestamp.unwrap().total_nanos(),
         s.now_ns
     );
+}
+
+/// Every string of the layout that names a topic.
+fn topic_paths(v: &serde_json::Value, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::String(s) if s.starts_with("/sar/") => out.push(s.clone()),
+        serde_json::Value::Array(a) => a.iter().for_each(|x| topic_paths(x, out)),
+        serde_json::Value::Object(o) => o.iter().for_each(|(k, x)| {
+            if k.starts_with("/sar/") {
+                out.push(k.clone());
+            }
+            topic_paths(x, out)
+        }),
+        _ => {}
+    }
+}
+
+#[test]
+fn the_foxglove_layout_uses_only_what_the_view_serves() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../deploy/foxglove-layout.json"
+    );
+    let layout: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut paths = Vec::new();
+    topic_paths(&layout, &mut paths);
+    assert!(paths.len() > 10, "{paths:?}");
+    let served = sar_daemon::view::served_topics();
+    let schema_of = |topic: &str| -> &'static str {
+        use sar_daemon::record::msgs::Topic;
+        match Topic::from_name(topic) {
+            Some(t) => t.schema(),
+            None if topic == sar_daemon::view::STATUS_TOPIC => sar_daemon::view::STATUS_SCHEMA,
+            None => "",
+        }
+    };
+    for p in &paths {
+        let (topic, fields) = p.split_once('.').unwrap_or((p, ""));
+        assert!(served.contains(&topic), "{p}: {topic} is not served");
+        // Each field of a message path is a word of the topic's schema.
+        let schema = schema_of(topic);
+        for field in fields.split('.').filter(|f| !f.is_empty()) {
+            let name = field.split('[').next().unwrap();
+            let word = |w: &str| w.trim_matches(|c: char| !c.is_alphanumeric() && c != '_') == name;
+            assert!(
+                schema.split_whitespace().any(word),
+                "{p}: no field {name} in the schema of {topic}"
+            );
+        }
+    }
+    // The plot of F_tip per axis, the guard's state and the 3D scene.
+    for wanted in [
+        "/sar/estimate/tip_wrench.wrench.force.x",
+        "/sar/view/status.stop_total_n",
+        "/sar/view/status.guard_code",
+        sar_daemon::view::SCENE_TOPIC,
+    ] {
+        assert!(paths.iter().any(|p| p == wanted), "{wanted}");
+    }
 }

@@ -284,7 +284,9 @@ fn run(args: &Args) -> Result<(), String> {
                 }
             }
         }
-        Cmd::View { ref bind, scene_hz } => sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz),
+        Cmd::View { ref bind, scene_hz } => {
+            sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
+        }
         Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
         Cmd::MoveTip { x, y, z } => {

@@ -22,7 +22,7 @@
 pub mod scene;
 pub mod topics;
 
-use crate::record::msgs::Outgoing;
+use crate::record::msgs::{Outgoing, Topic};
 use crate::shm::Client;
 use crate::wire::{StateMsg, flags, guard_state_name, reason_name};
 use foxglove::messages::{FrameTransforms, SceneUpdate};
@@ -50,6 +50,22 @@ const BACKLOG: usize = 2048;
 /// Without a state for this long, the view subscribes again (a restarted
 /// daemon).
 const IDLE: Duration = Duration::from_secs(2);
+
+/// The recordings' topics the view serves (what the state holds, [`topics`]).
+pub const RECORD_TOPICS: [Topic; 5] = [
+    Topic::Joints,
+    Topic::TipWrench,
+    Topic::PassiveJoints,
+    Topic::EstimatorState,
+    Topic::GuardEvents,
+];
+
+/// Every topic the view serves.
+pub fn served_topics() -> Vec<&'static str> {
+    let mut t: Vec<&'static str> = RECORD_TOPICS.iter().map(|t| t.name()).collect();
+    t.extend([SCENE_TOPIC, TF_TOPIC, STATUS_TOPIC]);
+    t
+}
 
 /// What `sarctl view` is asked.
 #[derive(Debug, Clone)]
@@ -84,7 +100,8 @@ pub fn run_cli(
     if !(scene_hz.is_finite() && scene_hz > 0.0) {
         return Err(format!("--scene-hz {scene_hz}: must be a positive number"));
     }
-    crate::rt::install_stop_handler().map_err(|e| format!("cannot install signal handlers: {e}"))?;
+    crate::rt::install_stop_handler()
+        .map_err(|e| format!("cannot install signal handlers: {e}"))?;
     run(
         &ViewOptions {
             prefix: prefix.to_owned(),
@@ -98,20 +115,13 @@ pub fn run_cli(
 
 /// The channels of the recordings' topics this view serves.
 struct RecordChannels {
-    channels: Vec<(crate::record::msgs::Topic, Arc<RawChannel>)>,
+    channels: Vec<(Topic, Arc<RawChannel>)>,
 }
 
 impl RecordChannels {
     fn new(ctx: &Arc<Context>) -> Result<Self, String> {
-        use crate::record::msgs::Topic;
         let mut channels = Vec::new();
-        for topic in [
-            Topic::Joints,
-            Topic::TipWrench,
-            Topic::PassiveJoints,
-            Topic::EstimatorState,
-            Topic::GuardEvents,
-        ] {
+        for topic in RECORD_TOPICS {
             let channel = ChannelBuilder::new(topic.name())
                 .message_encoding("cdr")
                 .schema(Schema::new(
@@ -127,7 +137,7 @@ impl RecordChannels {
         Ok(Self { channels })
     }
 
-    fn get(&self, topic: crate::record::msgs::Topic) -> Option<&Arc<RawChannel>> {
+    fn get(&self, topic: Topic) -> Option<&Arc<RawChannel>> {
         self.channels
             .iter()
             .find(|(t, _)| *t == topic)
@@ -135,7 +145,8 @@ impl RecordChannels {
     }
 }
 
-const STATUS_SCHEMA: &str = r#"{
+/// The JSON schema of [`STATUS_TOPIC`].
+pub const STATUS_SCHEMA: &str = r#"{
   "type": "object",
   "properties": {
     "cycle": {"type": "integer"},

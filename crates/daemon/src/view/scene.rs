@@ -261,8 +261,10 @@ fn entity(id: &str, stamp: &Timestamp) -> SceneEntity {
 /// The scene of one published state.
 pub fn scene(s: &StateMsg, g: &SceneGeometry) -> SceneUpdate {
     let stamp = timestamp(s.now_ns);
-    let has_pose =
-        s.flags & flags::POSE != 0 && finite(s.ujoint_m) && finite(s.tip_m) && s.q45_rad.iter().all(|x| x.is_finite());
+    let has_pose = s.flags & flags::POSE != 0
+        && finite(s.ujoint_m)
+        && finite(s.tip_m)
+        && s.q45_rad.iter().all(|x| x.is_finite());
     let has_force = has_pose && s.flags & flags::ESTIMATE != 0 && finite(s.tip_force_n);
     let (u, w) = rod_frame(s.q45_rad);
     let (gr, gg, gb) = guard_color(s.guard_state);
@@ -331,7 +333,10 @@ pub fn scene(s: &StateMsg, g: &SceneGeometry) -> SceneUpdate {
         }
         let centre = add(foot, scale(u, 0.5 * g.length_m));
         rod.cylinders.push(CylinderPrimitive {
-            pose: pose(centre, rotation_between([0.0, 0.0, 1.0], u, [1.0, 0.0, 0.0])),
+            pose: pose(
+                centre,
+                rotation_between([0.0, 0.0, 1.0], u, [1.0, 0.0, 0.0]),
+            ),
             size: Some(vec3([g.rod_diameter_m, g.rod_diameter_m, g.length_m])),
             bottom_scale: 1.0,
             top_scale: 1.0,
