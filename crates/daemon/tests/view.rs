@@ -41,6 +41,27 @@ use tungstenite::{Message, WebSocket};
 
 const SARD: &str = env!("CARGO_BIN_EXE_sard");
 const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
+
+/// The binary `name`: this build's, or the one in `SAR_VIEW_BIN_DIR` (the
+/// measurement on release binaries: `SAR_VIEW_BIN_DIR=target/release`).
+fn bin(name: &str, built: &str) -> std::path::PathBuf {
+    match std::env::var_os("SAR_VIEW_BIN_DIR") {
+        Some(dir) => {
+            let dir = std::path::PathBuf::from(dir);
+            // Relative to the workspace (cargo runs tests in the crate's
+            // directory).
+            if dir.is_absolute() {
+                dir.join(name)
+            } else {
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("../..")
+                    .join(dir)
+                    .join(name)
+            }
+        }
+        None => built.into(),
+    }
+}
 const TIP_TOPIC: &str = "/sar/estimate/tip_wrench";
 
 /// A child process ended with SIGTERM (then waited for) when dropped.
@@ -81,7 +102,7 @@ force_n = [5.0, 1.0, -0.5]
 fn start_sard(prefix: &str) -> (Proc, Client) {
     let path = scenario(prefix);
     let daemon = Proc(
-        Command::new(SARD)
+        Command::new(bin("sard", SARD))
             .arg("--sim")
             .arg("--scenario")
             .arg(&path)
@@ -109,7 +130,7 @@ fn start_sard(prefix: &str) -> (Proc, Client) {
 
 /// Starts `sarctl view` on a free port; returns it and its address.
 fn start_view(prefix: &str) -> (Proc, String) {
-    let mut child = Command::new(SARCTL)
+    let mut child = Command::new(bin("sarctl", SARCTL))
         .args(["--prefix", prefix, "view", "--bind", "127.0.0.1:0"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
@@ -559,7 +580,8 @@ fn quantile(sorted: &[u64], q: f64) -> u64 {
 /// and the latency from the cycle's clock reading (`now_ns`, the stamp) to
 /// the WebSocket frame's arrival in this client, both CLOCK_MONOTONIC.
 #[test]
-#[ignore = "a measurement: cargo test -p sar-daemon --test view -- --ignored --nocapture"]
+#[ignore = "a measurement: cargo test -p sar-daemon --test view -- --ignored --nocapture \
+            (SAR_VIEW_BIN_DIR=target/release for the release binaries)"]
 fn view_latency_and_cpu() {
     let prefix = format!("sar-view-latency-{}", std::process::id());
     let (_daemon, _client) = start_sard(&prefix);

@@ -334,3 +334,82 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
         assert!(paths.iter().any(|p| p == wanted), "{wanted}");
     }
 }
+
+#[test]
+fn the_recorded_messages_of_a_cycle_draw_the_same_scene() {
+    use sar_daemon::record::msgs::Outgoing;
+    use sar_daemon::view::topics;
+    let cfg = config(0.01);
+    let g = SceneGeometry::from_config(&cfg);
+    for (k, q) in POSES.iter().enumerate() {
+        let mut s = state(&cfg, *q, [1.0, -2.0, 0.5], [0, 1, 2, 3][k]);
+        s.guard_reason = 21;
+        let mut out = Vec::new();
+        topics::messages(&s, None, &mut out);
+        let (mut est, mut joints, mut passive) = (None, None, None);
+        for m in &out {
+            match m {
+                Outgoing::EstimatorState(e) => est = Some(*e),
+                Outgoing::Joints(j) => joints = Some(*j),
+                Outgoing::PassiveJoints(p) => passive = Some(*p),
+                _ => {}
+            }
+        }
+        let back = topics::state_from_recorded(
+            &est.unwrap(),
+            &joints.unwrap(),
+            passive.as_ref(),
+            s.limits_n,
+        );
+        assert_eq!(scene::scene(&back, &g), scene::scene(&s, &g), "pose {k}");
+    }
+}
+
+#[test]
+fn topics_of_a_state_follow_its_flags_and_the_guards_transitions() {
+    use sar_daemon::record::msgs::{GuardStateCode, Outgoing, Topic};
+    use sar_daemon::view::topics;
+    let cfg = config(0.0);
+    let ok = state(&cfg, POSES[0], [1.0, 0.0, 0.0], guard_code::OK);
+    let mut warn = ok;
+    warn.cycle += 1;
+    warn.guard_state = guard_code::WARN;
+    warn.guard_reason = 22;
+    let mut out = Vec::new();
+    let names = |out: &[Outgoing]| out.iter().map(|m| m.topic()).collect::<Vec<_>>();
+
+    topics::messages(&ok, None, &mut out);
+    assert_eq!(
+        names(&out),
+        [
+            Topic::Joints,
+            Topic::TipWrench,
+            Topic::PassiveJoints,
+            Topic::EstimatorState
+        ]
+    );
+    topics::messages(&ok, Some(&ok), &mut out);
+    assert!(!names(&out).contains(&Topic::GuardEvents));
+    topics::messages(&warn, Some(&ok), &mut out);
+    let Some(Outgoing::GuardEvent(e)) = out.last() else {
+        panic!("{out:?}")
+    };
+    assert_eq!(
+        (e.from_state, e.to_state, e.reason_code, e.cycle),
+        (GuardStateCode::Ok, GuardStateCode::Warn, 22, warn.cycle)
+    );
+    assert_eq!(e.reason_text.as_str(), "above warn limit");
+
+    // No pose, no estimate: the joints and the state only.
+    let mut none = ok;
+    none.flags = 0;
+    topics::messages(&none, Some(&ok), &mut out);
+    assert_eq!(names(&out), [Topic::Joints, Topic::EstimatorState]);
+    let Some(Outgoing::EstimatorState(st)) = out.last() else {
+        panic!()
+    };
+    assert_eq!(
+        st.tip_outcome,
+        sar_daemon::record::msgs::TipOutcomeCode::PoseInvalid
+    );
+}

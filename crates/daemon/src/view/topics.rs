@@ -118,3 +118,52 @@ pub fn messages(s: &StateMsg, previous: Option<&StateMsg>, out: &mut Vec<Outgoin
         }));
     }
 }
+
+/// A state for [`super::scene::scene`] from the recorded messages of one
+/// cycle (the inverse of [`messages`] for what the scene needs): the
+/// recorder, which holds `EstimatorState`, the joints and the passive
+/// joints rather than the published state, draws the same scene with it.
+/// `limits_n` are the guard's (`wire::limits_array`), which the recordings
+/// do not carry per cycle.
+pub fn state_from_recorded(
+    est: &EstimatorState,
+    joints: &ActiveJointState,
+    passive: Option<&PassiveJointState>,
+    limits_n: [f64; 6],
+) -> StateMsg {
+    let mut f = 0;
+    for (wire, rec) in [
+        (flags::POSE, msgs::flags::POSE_VALID),
+        (flags::ESTIMATE, msgs::flags::TIP_VALID),
+        (flags::OBSERVABLE, msgs::flags::OBSERVABLE),
+    ] {
+        if est.flags & rec != 0 {
+            f |= wire;
+        }
+    }
+    if passive.is_none() {
+        f &= !flags::POSE;
+    }
+    StateMsg {
+        cycle: est.cycle,
+        now_ns: est.now_ns,
+        sensor_stamp_ns: est.sensor_stamp_ns,
+        joints_stamp_ns: est.joints_stamp_ns,
+        sensor_age_ns: est.sensor_age_ns,
+        joints_age_ns: est.joints_age_ns,
+        q_m: joints.q_m,
+        q45_rad: passive.map_or([0.0; 2], |p| p.q_rad),
+        ujoint_m: est.ujoint_m,
+        tip_m: est.tip_m,
+        support_distance_m: est.support_distance_m,
+        ujoint_force_n: est.ujoint_force_n,
+        tip_force_n: est.tip_force_n,
+        tip_std_n: est.tip_force_std_n,
+        tip_axial_lateral_n: [est.axial_n, est.lateral_n],
+        flags: f,
+        guard_state: u32::from(est.guard_state.code()),
+        guard_reason: u32::from(est.guard_reason_code),
+        limits_n,
+        ..StateMsg::default()
+    }
+}
