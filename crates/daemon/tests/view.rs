@@ -572,6 +572,22 @@ fn cpu_ticks(pid: u32) -> u64 {
     f[11].parse::<u64>().unwrap() + f[12].parse::<u64>().unwrap()
 }
 
+/// utime + stime per thread name of a process, clock ticks.
+fn thread_ticks(pid: u32) -> HashMap<String, u64> {
+    let mut by_name = HashMap::new();
+    for entry in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap() {
+        let Ok(stat) = std::fs::read_to_string(entry.unwrap().path().join("stat")) else {
+            continue;
+        };
+        let name = stat[stat.find('(').unwrap() + 1..stat.rfind(')').unwrap()].to_owned();
+        let rest = &stat[stat.rfind(')').unwrap() + 2..];
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        *by_name.entry(name).or_default() +=
+            f[11].parse::<u64>().unwrap() + f[12].parse::<u64>().unwrap();
+    }
+    by_name
+}
+
 fn quantile(sorted: &[u64], q: f64) -> u64 {
     sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
@@ -597,6 +613,7 @@ fn view_latency_and_cpu() {
     }
     let ticks_per_s = 100.0; // USER_HZ on Linux.
     let (t0, c0) = (Instant::now(), cpu_ticks(view.0.id()));
+    let threads0 = thread_ticks(view.0.id());
     let mut latencies = Vec::new();
     let mut counts: HashMap<String, u64> = HashMap::new();
     while t0.elapsed() < Duration::from_secs(10) {
@@ -608,7 +625,14 @@ fn view_latency_and_cpu() {
         }
     }
     let (secs, c1) = (t0.elapsed().as_secs_f64(), cpu_ticks(view.0.id()));
+    let threads1 = thread_ticks(view.0.id());
     latencies.sort_unstable();
+    let mut threads: Vec<_> = threads1
+        .iter()
+        .map(|(name, t)| (name.clone(), t - threads0.get(name).copied().unwrap_or(0)))
+        .collect();
+    threads.sort();
+    println!("view CPU by thread (ticks): {threads:?}");
     println!(
         "view CPU: {:.1} % of one core ({} ticks in {secs:.1} s)",
         100.0 * (c1 - c0) as f64 / ticks_per_s / secs,
