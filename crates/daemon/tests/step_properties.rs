@@ -73,7 +73,7 @@ fn contacts(seed: u64) -> Vec<ContactKey> {
     }];
     let mut t_ns = 1_100_000_000u64;
     for k in 0..4 {
-        let s = mix(seed ^ (k + 1) * 0x51);
+        let s = mix(seed ^ ((k + 1) * 0x51));
         let dir = Vec3::new(unit(s) - 0.5, unit(s ^ 1) - 0.5, unit(s ^ 2) - 0.5).normalize();
         let force_n = dir * 24.0 * unit(s ^ 3);
         let ramp_ns = 50_000_000 + (unit(s ^ 4) * 400e6) as u64;
