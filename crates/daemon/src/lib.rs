@@ -13,5 +13,6 @@ pub mod runloop;
 pub mod shm;
 pub mod sim;
 pub mod stats;
+pub mod step;
 pub mod view;
 pub mod wire;
