@@ -64,6 +64,14 @@ fn bin(name: &str, built: &str) -> std::path::PathBuf {
 }
 const TIP_TOPIC: &str = "/sar/estimate/tip_wrench";
 
+/// The tests that run a daemon take turns: each one's daemon, view and
+/// client would otherwise load the 2 cores under the others' loops.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// A child process ended with SIGTERM (then waited for) when dropped.
 struct Proc(Child);
 
@@ -337,6 +345,7 @@ fn v3(v: &foxglove::messages::Vector3) -> [f64; 3] {
 
 #[test]
 fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
+    let _serial = serial();
     let prefix = format!("sar-view-{}", std::process::id());
     let (_daemon, _client) = start_sard(&prefix);
     let states = States::collect(&prefix, true);
@@ -473,14 +482,17 @@ fn loop_over(states: &States, window: Duration) -> (u64, u64) {
 
 #[test]
 fn a_stalled_client_does_not_slow_the_daemon() {
+    let _serial = serial();
     let prefix = format!("sar-view-stall-{}", std::process::id());
     let (_daemon, _client) = start_sard(&prefix);
     let states = States::collect(&prefix, false);
     let window = Duration::from_secs(3);
 
     // Reference: the view running, no client.
-    let (_view, addr) = start_view(&prefix);
+    let (view, addr) = start_view(&prefix);
+    let ticks0 = cpu_ticks(view.0.id());
     let (ref_overruns, ref_cycles) = loop_over(&states, window);
+    let ticks_ref = cpu_ticks(view.0.id()) - ticks0;
 
     // A client that subscribes to everything and then reads nothing.
     let all: Vec<String> = {
@@ -495,6 +507,10 @@ fn a_stalled_client_does_not_slow_the_daemon() {
     let (overruns, cycles) = loop_over(&states, window);
     let (overruns2, cycles2) = loop_over(&states, window);
     let (overruns3, cycles3) = loop_over(&states, window);
+    let ticks_stall = cpu_ticks(view.0.id()) - ticks0 - ticks_ref;
+    eprintln!(
+        "view CPU: {ticks_ref} ticks in 3 s without a client, {ticks_stall} in 9 s with the stalled one"
+    );
     let (overruns2, cycles2) = (overruns2.max(overruns3), cycles2.min(cycles3));
     eprintln!(
         "no client: {ref_overruns} overruns in {ref_cycles} cycles; stalled client: \
@@ -503,14 +519,17 @@ fn a_stalled_client_does_not_slow_the_daemon() {
     );
     // Criterion: a loop that waited for the client would stop publishing
     // (cycles frozen) or overrun at every cycle once the client's buffers are
-    // full (thousands in 6 s). A loop that does not wait overruns only as
-    // the machine's noise makes it, as in the reference window: allow that
-    // plus a margin of 20 per window (the 2-core machine is shared). Three
-    // windows (9 s): long enough to fill the kernel's socket buffers (about
-    // 3 MB on loopback) and the view's queue for the client (2048
-    // messages), so that the view drops for it.
+    // full (about 3000 in a 3 s window). A loop that does not wait overruns
+    // only as the machine's noise makes it (other processes on the 2 shared
+    // cores: up to a few hundred in 3 s seen under a full workspace build),
+    // as in the reference window. Allowed per window: three times the
+    // reference plus 30, or a tenth of the window's cycles, whichever is
+    // larger; both far below one overrun per cycle. Three windows (9 s):
+    // long enough to fill the kernel's socket buffers (about 3 MB on
+    // loopback) and the view's queue for the client (2048 messages), so that
+    // the view drops for it.
     assert!(cycles > 0 && cycles2 > 0, "the loop stopped publishing");
-    let allowed = ref_overruns + 20;
+    let allowed = (3 * ref_overruns + 30).max(ref_cycles / 10);
     assert!(
         overruns <= allowed && overruns2 <= allowed,
         "overruns with a stalled client {overruns}, {overruns2}; without {ref_overruns}"
@@ -599,6 +618,7 @@ fn quantile(sorted: &[u64], q: f64) -> u64 {
 #[ignore = "a measurement: cargo test -p sar-daemon --test view -- --ignored --nocapture \
             (SAR_VIEW_BIN_DIR=target/release for the release binaries)"]
 fn view_latency_and_cpu() {
+    let _serial = serial();
     let prefix = format!("sar-view-latency-{}", std::process::id());
     let (_daemon, _client) = start_sard(&prefix);
     let (view, addr) = start_view(&prefix);
