@@ -229,6 +229,8 @@ struct Fox {
     channels: HashMap<String, u64>,
     /// Topic by subscription id.
     subscriptions: HashMap<u32, String>,
+    /// The server's capabilities (`serverInfo`).
+    capabilities: Vec<Value>,
 }
 
 impl Fox {
@@ -269,6 +271,7 @@ impl Fox {
             ws,
             channels: HashMap::new(),
             subscriptions: HashMap::new(),
+            capabilities: Vec::new(),
         };
         let mut info = false;
         let start = Instant::now();
@@ -281,7 +284,11 @@ impl Fox {
             if let Message::Text(t) = fox.ws.read().unwrap() {
                 let v: Value = serde_json::from_str(&t).unwrap();
                 match v["op"].as_str() {
-                    Some("serverInfo") => info = true,
+                    Some("serverInfo") => {
+                        info = true;
+                        fox.capabilities =
+                            v["capabilities"].as_array().cloned().unwrap_or_default();
+                    }
                     Some("advertise") => {
                         for c in v["channels"].as_array().unwrap() {
                             fox.channels.insert(
@@ -352,6 +359,8 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
     let (_view, addr) = start_view(&prefix);
     let topics = [TIP_TOPIC, sar_daemon::view::SCENE_TOPIC];
     let mut fox = Fox::connect(&addr, &topics);
+    // Read-only: no client publishing, services, parameters nor assets.
+    assert!(fox.capabilities.is_empty(), "{:?}", fox.capabilities);
     fox.subscribe(&topics);
 
     let cfg = sar_daemon::config::builtin().unwrap();
