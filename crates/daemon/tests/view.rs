@@ -73,14 +73,35 @@ fn serial() -> std::sync::MutexGuard<'static, ()> {
 }
 
 /// A child process ended with SIGTERM (then waited for) when dropped.
-struct Proc(Child);
+struct Proc(Option<Child>);
+
+impl Proc {
+    fn new(child: Child) -> Self {
+        Self(Some(child))
+    }
+
+    fn id(&self) -> u32 {
+        self.0.as_ref().map_or(0, Child::id)
+    }
+
+    /// SIGTERM, then its exit status.
+    fn stop(mut self) -> std::process::ExitStatus {
+        let mut child = self.0.take().unwrap();
+        let _ = Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status();
+        child.wait().unwrap()
+    }
+}
 
 impl Drop for Proc {
     fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let _ = self.0.wait();
+        if let Some(mut child) = self.0.take() {
+            let _ = Command::new("kill")
+                .args(["-TERM", &child.id().to_string()])
+                .status();
+            let _ = child.wait();
+        }
     }
 }
 
@@ -109,7 +130,7 @@ force_n = [5.0, 1.0, -0.5]
 
 fn start_sard(prefix: &str) -> (Proc, Client) {
     let path = scenario(prefix);
-    let daemon = Proc(
+    let daemon = Proc::new(
         Command::new(bin("sard", SARD))
             .arg("--sim")
             .arg("--scenario")
@@ -154,7 +175,7 @@ fn start_view(prefix: &str) -> (Proc, String) {
         .and_then(|r| r.split_whitespace().next())
         .unwrap_or_else(|| panic!("no address in {line:?}"))
         .to_owned();
-    (Proc(child), addr)
+    (Proc::new(child), addr)
 }
 
 /// The states the daemon publishes, collected by a thread of this test
@@ -356,7 +377,7 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
     let prefix = format!("sar-view-{}", std::process::id());
     let (_daemon, _client) = start_sard(&prefix);
     let states = States::collect(&prefix, true);
-    let (_view, addr) = start_view(&prefix);
+    let (view, addr) = start_view(&prefix);
     let topics = [TIP_TOPIC, sar_daemon::view::SCENE_TOPIC];
     let mut fox = Fox::connect(&addr, &topics);
     // Read-only: no client publishing, services, parameters nor assets.
@@ -479,6 +500,10 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
         checked += 1;
     }
     assert!(checked >= scenes.len() / 2, "{checked} of {}", scenes.len());
+
+    // SIGTERM ends the view cleanly, with a client connected.
+    let status = view.stop();
+    assert!(status.success(), "{status:?}");
 }
 
 /// Overruns and cycles of the daemon over `window`, from its published state.
@@ -499,9 +524,9 @@ fn a_stalled_client_does_not_slow_the_daemon() {
 
     // Reference: the view running, no client.
     let (view, addr) = start_view(&prefix);
-    let ticks0 = cpu_ticks(view.0.id());
+    let ticks0 = cpu_ticks(view.id());
     let (ref_overruns, ref_cycles) = loop_over(&states, window);
-    let ticks_ref = cpu_ticks(view.0.id()) - ticks0;
+    let ticks_ref = cpu_ticks(view.id()) - ticks0;
 
     // A client that subscribes to everything and then reads nothing.
     let all: Vec<String> = {
@@ -516,7 +541,7 @@ fn a_stalled_client_does_not_slow_the_daemon() {
     let (overruns, cycles) = loop_over(&states, window);
     let (overruns2, cycles2) = loop_over(&states, window);
     let (overruns3, cycles3) = loop_over(&states, window);
-    let ticks_stall = cpu_ticks(view.0.id()) - ticks0 - ticks_ref;
+    let ticks_stall = cpu_ticks(view.id()) - ticks0 - ticks_ref;
     eprintln!(
         "view CPU: {ticks_ref} ticks in 3 s without a client, {ticks_stall} in 9 s with the stalled one"
     );
@@ -641,8 +666,8 @@ fn view_latency_and_cpu() {
         fox.next();
     }
     let ticks_per_s = 100.0; // USER_HZ on Linux.
-    let (t0, c0) = (Instant::now(), cpu_ticks(view.0.id()));
-    let threads0 = thread_ticks(view.0.id());
+    let (t0, c0) = (Instant::now(), cpu_ticks(view.id()));
+    let threads0 = thread_ticks(view.id());
     let mut latencies = Vec::new();
     let mut counts: HashMap<String, u64> = HashMap::new();
     while t0.elapsed() < Duration::from_secs(10) {
@@ -653,8 +678,8 @@ fn view_latency_and_cpu() {
             latencies.push(now.saturating_sub(log_time));
         }
     }
-    let (secs, c1) = (t0.elapsed().as_secs_f64(), cpu_ticks(view.0.id()));
-    let threads1 = thread_ticks(view.0.id());
+    let (secs, c1) = (t0.elapsed().as_secs_f64(), cpu_ticks(view.id()));
+    let threads1 = thread_ticks(view.id());
     latencies.sort_unstable();
     let mut threads: Vec<_> = threads1
         .iter()
