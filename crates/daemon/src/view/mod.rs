@@ -219,7 +219,7 @@ struct Publisher {
 impl Publisher {
     fn on_state(&mut self, s: &StateMsg) {
         if let Some(p) = &self.previous
-            && s.cycle > p.cycle + 1
+            && s.cycle > p.cycle.saturating_add(1)
         {
             self.lost += s.cycle - p.cycle - 1;
         }
