@@ -1,0 +1,201 @@
+//! The loop's whole per-cycle path allocates nothing, publishing included:
+//! `Publish::before_cycle`, `Controller::step`, `Publish::publish` of the
+//! daemon's real shared memory (`DaemonShm`), with a subscriber reading and
+//! a client sending commands (reset, tare, a move, a limits query) that the
+//! loop judges and answers meanwhile.
+//!
+//! The counting allocator counts only on a thread that asked for it, and the
+//! loop thread asks only around the calls the real loop makes each cycle: the
+//! client, the subscriber and the daemon's own publishing thread may allocate
+//! (they are not on the loop's path); the loop may not.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use sar_daemon::control::{Controller, Operator};
+use sar_daemon::runloop::{Publish, Published};
+use sar_daemon::shm::{Client, DaemonShm};
+use sar_daemon::stats::LoopStats;
+use sar_daemon::wire::{CommandMsg, command_kind, limits_array};
+use sar_daemon::{config, logq, rt, sim};
+use sar_drivers::SimClock;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+struct Counting;
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    /// Whether this thread's allocations are counted (a const thread-local
+    /// without destructor: reading it never allocates).
+    static COUNTED: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count() {
+    if COUNTED.try_with(Cell::get).unwrap_or(false) {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
+// SAFETY: forwards to the system allocator, only counting.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Runs `f` with this thread's allocations counted.
+fn counted<T>(f: impl FnOnce() -> T) -> T {
+    COUNTED.with(|c| c.set(true));
+    let out = f();
+    COUNTED.with(|c| c.set(false));
+    out
+}
+
+#[test]
+fn the_counter_sees_an_allocation_on_the_loop_thread() {
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let v = counted(|| std::hint::black_box(vec![1u8; 48]));
+    assert_eq!(v.len(), 48);
+    assert!(ALLOCATIONS.load(Ordering::SeqCst) > before);
+}
+
+#[test]
+fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
+    let cfg = config::builtin().unwrap();
+    let scenario = sim::demo_scenario().unwrap();
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _thread, queue) = logq::channel(false);
+    let prefix = format!("sar-noalloc-pub-{}", std::process::id());
+    let mut shm = DaemonShm::create(
+        &prefix,
+        operator.clone(),
+        limits_array(&cfg.estimator.guard.limits()),
+        None,
+    )
+    .unwrap();
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.axes.travel_m,
+        sensor,
+        drives,
+        operator,
+        log,
+        true,
+    )
+    .unwrap();
+    let stats = LoopStats::default();
+    let mut cycle = 0u64;
+    // One cycle exactly as `runloop::run` makes it; only the calls of the
+    // loop's path are counted.
+    let mut one = |c: &mut Controller<_, _>, shm: &mut DaemonShm| {
+        cycle += 1;
+        clock.advance_ns(1_000_000);
+        counted(|| {
+            shm.before_cycle();
+            let out = *c.step(cycle, || Some(clock.now_ns()));
+            shm.publish(&Published {
+                input: c.input(),
+                output: &out,
+                stats: &stats,
+                drive_state: c.drive_state(),
+                halted: c.halted(),
+                quick_stops: c.counts().quick_stops,
+            });
+        });
+        while queue.pop().is_some() {}
+    };
+    // Warm-up (lazily made state in the simulator, the first samples).
+    for _ in 0..200 {
+        one(&mut c, &mut shm);
+    }
+
+    // A subscriber and a client in their own threads; the loop runs at 1 kHz
+    // of real time (absolute deadlines, as sard) until the client has its
+    // replies. Nothing here depends on the timing: the pacing only gives the
+    // other threads time to work.
+    let done = Arc::new(AtomicBool::new(false));
+    let received = Arc::new(AtomicU64::new(0));
+    let client_thread = {
+        let (prefix, done, received) = (prefix.clone(), done.clone(), received.clone());
+        std::thread::spawn(move || {
+            let client = Client::new(&prefix).unwrap();
+            let sub = client.subscribe().unwrap();
+            let mut replies = Vec::new();
+            for (id, kind) in [
+                command_kind::LIMITS,
+                command_kind::RESET,
+                command_kind::TARE,
+                command_kind::MOVE_TIP,
+                command_kind::RESET,
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let n = sub.wait(Duration::from_millis(100), |_| {});
+                received.fetch_add(n as u64, Ordering::SeqCst);
+                let reply = client
+                    .command(
+                        CommandMsg {
+                            kind,
+                            id: id as u64 + 1,
+                            tip_m: [0.6, 0.2, 0.001],
+                            ..CommandMsg::default()
+                        },
+                        Duration::from_secs(10),
+                    )
+                    .unwrap();
+                replies.push(reply);
+            }
+            let n = sub.wait(Duration::from_millis(100), |_| {});
+            received.fetch_add(n as u64, Ordering::SeqCst);
+            done.store(true, Ordering::SeqCst);
+            replies
+        })
+    };
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let mut next_ns = rt::monotonic_ns().unwrap();
+    let mut cycles = 0u64;
+    while !done.load(Ordering::SeqCst) {
+        assert!(cycles < 60_000, "the client got no replies in 60 000 cycles");
+        next_ns += 1_000_000;
+        rt::sleep_until_ns(next_ns);
+        one(&mut c, &mut shm);
+        cycles += 1;
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let replies = client_thread.join().unwrap();
+    assert_eq!(replies.len(), 5);
+    for (i, r) in replies.iter().enumerate() {
+        assert_eq!(r.id, i as u64 + 1, "{r:?}");
+    }
+    // Judged by the loop (a cycle number) except the limits query.
+    assert!(replies[1..].iter().all(|r| r.cycle > 0), "{replies:?}");
+    assert!(received.load(Ordering::SeqCst) > 0, "no state received");
+    assert_eq!(
+        after - before,
+        0,
+        "{cycles} published cycles with 5 commands allocated {} times on the loop thread",
+        after - before
+    );
+}
