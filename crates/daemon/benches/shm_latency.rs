@@ -5,9 +5,9 @@
 //!   notifies the event) to a subscriber thread blocked on the event as
 //!   `sarctl monitor` is (`StateSubscription::wait`) having the sample; the
 //!   monotonic stamp travels in the payload (`StateMsg::now_ns`).
-//! - `shm_latency/bare`: a bare iceoryx2 publisher + notifier and subscriber
-//!   + listener pair, same payload (`StateMsg`), the publisher on the
-//!   calling thread: the floor.
+//! - `shm_latency/bare`: a bare iceoryx2 pair (publisher and notifier,
+//!   subscriber and listener), same payload (`StateMsg`), the publisher on
+//!   the calling thread: the floor.
 //! - `shm_loop_side/*`: what a publish costs the loop thread: the push into
 //!   the queue (with and without waking the thread) against a direct
 //!   iceoryx2 publish (loan, write, send, notify).

@@ -177,7 +177,10 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
     let mut next_ns = rt::monotonic_ns().unwrap();
     let mut cycles = 0u64;
     while !done.load(Ordering::SeqCst) {
-        assert!(cycles < 60_000, "the client got no replies in 60 000 cycles");
+        assert!(
+            cycles < 60_000,
+            "the client got no replies in 60 000 cycles"
+        );
         next_ns += 1_000_000;
         rt::sleep_until_ns(next_ns);
         one(&mut c, &mut shm);

@@ -89,7 +89,10 @@ fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     assert!(s.cycle > CHILD_MARK);
     // While the child lives, a second daemon with its prefix is refused.
     let refused = DaemonShm::create(&prefix, Operator::new(), [1.0; 6], None);
-    assert!(refused.is_err(), "a second daemon started beside a living one");
+    assert!(
+        refused.is_err(),
+        "a second daemon started beside a living one"
+    );
 
     let ok = Command::new("kill")
         .args(["-KILL", &child.id().to_string()])

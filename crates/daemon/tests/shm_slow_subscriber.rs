@@ -11,7 +11,6 @@
     clippy::indexing_slicing
 )]
 
-use iceoryx2::prelude::*;
 use sar_daemon::control::Operator;
 use sar_daemon::shm::{
     Client, DaemonShm, Names, STATE_BORROWED, STATE_BUFFER, STATE_QUEUE, ShmWorker,
@@ -20,8 +19,7 @@ use sar_daemon::wire::StateMsg;
 
 fn daemon(name: &str) -> (String, DaemonShm, ShmWorker) {
     let prefix = format!("sar-slow-{name}-{}", std::process::id());
-    let (shm, worker) =
-        DaemonShm::create_manual(&prefix, Operator::new(), [1.0; 6], None).unwrap();
+    let (shm, worker) = DaemonShm::create_manual(&prefix, Operator::new(), [1.0; 6], None).unwrap();
     (prefix, shm, worker)
 }
 
