@@ -22,7 +22,7 @@
 //! or client killed with SIGKILL) and then creates the services; when they
 //! exist (a living daemon with the same prefix), it refuses to start.
 
-use crate::control::{Envelope, Operator};
+use crate::control::{Envelope, Operator, Reply};
 use crate::runloop::{Publish, Published};
 use crate::wire::{CommandMsg, ReplyMsg, StateMsg, StateParts, command_kind, reply_code};
 use iceoryx2::active_request::ActiveRequest;
@@ -174,6 +174,11 @@ pub struct ShmWorker {
     shared: Arc<Shared>,
     /// The command handed to the loop, waiting for its reply.
     in_flight: Option<CommandRequest>,
+    /// The loop's reply, waiting for the state of its cycle.
+    waiting: Option<Reply>,
+    /// The newest state's cycle.
+    last_cycle: u64,
+    /// The newest state's limits (the loop may change them), N.
     limits_n: [f64; 6],
 }
 
@@ -262,6 +267,8 @@ impl ShmWorker {
             states,
             shared,
             in_flight: None,
+            waiting: None,
+            last_cycle: 0,
             limits_n,
         })
     }
@@ -272,6 +279,9 @@ impl ShmWorker {
     pub fn pump(&mut self) -> usize {
         let mut sent = 0;
         while let Ok(mut state) = self.states.pop() {
+            // The limits of the newest cycle, for the replies.
+            self.limits_n = state.limits_n;
+            self.last_cycle = state.cycle;
             state.publish_errors = self.shared.publish_errors.load(Ordering::Relaxed);
             let ok = self
                 .publisher
@@ -290,15 +300,28 @@ impl ShmWorker {
                 .fetch_add(sent as u64, Ordering::Relaxed);
             let _ = self.notifier.notify();
         }
-        // The replies of the commands the loop judged (after the states of
-        // their cycles).
-        while let Some(reply) = self.operator.replies.pop() {
+        self.send_replies(false);
+        self.take_command();
+        sent
+    }
+
+    /// Sends the replies of the commands the loop judged, each after the
+    /// state of its cycle (so that it carries the limits that cycle left in
+    /// force, and a client that has its reply finds that state published);
+    /// `all`: without waiting for the state (at the end).
+    fn send_replies(&mut self, all: bool) {
+        loop {
+            let Some(reply) = self.waiting.take().or_else(|| self.operator.replies.pop()) else {
+                return;
+            };
+            if !all && reply.cycle > self.last_cycle {
+                self.waiting = Some(reply);
+                return;
+            }
             if let Some(active) = self.in_flight.take() {
                 let _ = active.send_copy(ReplyMsg::from_reply(&reply, self.limits_n));
             }
         }
-        self.take_command();
-        sent
     }
 
     /// Takes at most one command and hands it to the loop (answers LIMITS
@@ -348,6 +371,7 @@ impl ShmWorker {
             self.pump();
             if self.shared.stop.load(Ordering::Acquire) {
                 self.pump();
+                self.send_replies(true);
                 return;
             }
             std::thread::park_timeout(WORKER_WAIT);
@@ -475,6 +499,9 @@ impl Drop for DaemonShm {
 
 impl Publish for DaemonShm {
     fn publish(&mut self, c: &Published<'_>) {
+        // The limits in use (an operator may have changed them this cycle);
+        // they travel in the state to the publishing thread, for its replies.
+        self.limits_n = c.decision.limits.to_array();
         let truth_tip_force_n = self.truth.as_mut().and_then(|f| f());
         let mut state = StateMsg::from_parts(&StateParts {
             input: c.input,

@@ -491,6 +491,15 @@ fn recorded_reason_codes_are_the_wires() {
         ),
         (Reason::BelowWarn, r::BELOW_WARN, "BELOW_WARN"),
         (Reason::Reset, r::RESET, "RESET"),
+        (
+            Reason::FollowingError {
+                axis: 2,
+                error_m: 0.002,
+                tolerance_m: 0.001,
+            },
+            r::FOLLOWING_ERROR,
+            "FOLLOWING_ERROR",
+        ),
     ];
     let msg = include_str!("../msg/GuardEvent.msg");
     let mut seen = std::collections::BTreeSet::new();

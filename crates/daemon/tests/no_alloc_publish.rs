@@ -1,17 +1,22 @@
 //! The loop's whole per-cycle path allocates nothing, publishing included:
 //! `Publish::before_cycle`, `Controller::step`, `Publish::publish` of the
 //! daemon's real shared memory (`DaemonShm`), with a subscriber reading and
-//! a client sending commands (reset, tare, a move, a limits query) that the
-//! loop judges and answers meanwhile.
+//! a client sending commands (reset, tare, a move, limits set and queried)
+//! that the loop judges and answers meanwhile.
 //!
 //! The counting allocator counts only on a thread that asked for it, and the
 //! loop thread asks only around the calls the real loop makes each cycle: the
 //! client, the subscriber and the daemon's own publishing thread may allocate
 //! (they are not on the loop's path); the loop may not.
 
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
-use sar_daemon::control::{Controller, Operator};
+use sar_daemon::control::{Controller, Operator, ReplyStatus};
 use sar_daemon::runloop::{Publish, Published};
 use sar_daemon::shm::{Client, DaemonShm};
 use sar_daemon::stats::LoopStats;
@@ -96,7 +101,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         operator,
@@ -116,6 +121,8 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
             let out = *c.step(cycle, || Some(clock.now_ns()));
             shm.publish(&Published {
                 input: c.input(),
+                loop_input: c.loop_input(),
+                decision: c.decision(),
                 output: &out,
                 stats: &stats,
                 drive_state: c.drive_state(),
@@ -142,31 +149,37 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
             let client = Client::new(&prefix).unwrap();
             let sub = client.subscribe().unwrap();
             let mut replies = Vec::new();
-            for (id, kind) in [
-                command_kind::LIMITS,
-                command_kind::RESET,
-                command_kind::TARE,
-                command_kind::MOVE_TIP,
-                command_kind::RESET,
-            ]
-            .into_iter()
-            .enumerate()
-            {
+            let mut send = |kind: u32, limits_n: [f64; 6]| {
                 let n = sub.wait(Duration::from_millis(100), |_| {});
                 received.fetch_add(n as u64, Ordering::SeqCst);
                 let reply = client
                     .command(
                         CommandMsg {
                             kind,
-                            id: id as u64 + 1,
+                            id: replies.len() as u64 + 1,
                             tip_m: [0.6, 0.2, 0.001],
+                            limits_n,
                             ..CommandMsg::default()
                         },
                         Duration::from_secs(10),
                     )
                     .unwrap();
                 replies.push(reply);
+                reply
+            };
+            let limits = send(command_kind::LIMITS, [0.0; 6]).limits_n;
+            for kind in [
+                command_kind::RESET,
+                command_kind::TARE,
+                command_kind::MOVE_TIP,
+                command_kind::RESET,
+            ] {
+                send(kind, [0.0; 6]);
             }
+            // Lowered limits: the reply and the next query carry them.
+            let lowered = limits.map(|l| l * 0.9);
+            send(command_kind::SET_LIMITS, lowered);
+            send(command_kind::LIMITS, [0.0; 6]);
             let n = sub.wait(Duration::from_millis(100), |_| {});
             received.fetch_add(n as u64, Ordering::SeqCst);
             done.store(true, Ordering::SeqCst);
@@ -188,17 +201,25 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
     }
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     let replies = client_thread.join().unwrap();
-    assert_eq!(replies.len(), 5);
+    assert_eq!(replies.len(), 7);
     for (i, r) in replies.iter().enumerate() {
         assert_eq!(r.id, i as u64 + 1, "{r:?}");
     }
-    // Judged by the loop (a cycle number) except the limits query.
-    assert!(replies[1..].iter().all(|r| r.cycle > 0), "{replies:?}");
+    // Judged by the loop (a cycle number) except the limits queries.
+    assert!(replies[1..6].iter().all(|r| r.cycle > 0), "{replies:?}");
+    let lowered = replies[0].limits_n.map(|l| l * 0.9);
+    assert_eq!(
+        replies[5].status,
+        ReplyStatus::Accepted as u32,
+        "{replies:?}"
+    );
+    assert_eq!(replies[5].limits_n, lowered);
+    assert_eq!(replies[6].limits_n, lowered);
     assert!(received.load(Ordering::SeqCst) > 0, "no state received");
     assert_eq!(
         after - before,
         0,
-        "{cycles} published cycles with 5 commands allocated {} times on the loop thread",
+        "{cycles} published cycles with 7 commands allocated {} times on the loop thread",
         after - before
     );
 }

@@ -469,6 +469,8 @@ pub mod reason {
     pub const BELOW_WARN: u8 = 23;
     /// `Reason::Reset`.
     pub const RESET: u8 = 24;
+    /// `Reason::FollowingError`.
+    pub const FOLLOWING_ERROR: u8 = 25;
     /// A reason this table does not know yet.
     pub const OTHER: u8 = 255;
 }
