@@ -223,3 +223,118 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
         after - before
     );
 }
+
+/// The same through `runloop::run` itself, the whole of it counted from its
+/// first cycle to its return (stats, watchdog, overrun logging, the drives
+/// halted at the end): at the configured rate on the monotonic clock, the
+/// simulator on the same clock, a client's commands meanwhile; the client
+/// ends the run (as a signal would) once it has its replies.
+#[test]
+fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
+    use sar_daemon::notify::Watchdog;
+    use sar_daemon::runloop::{self, RunLimits};
+    use sar_drivers::MonotonicClock;
+
+    let cfg = config::builtin().unwrap();
+    let scenario = sim::demo_scenario().unwrap();
+    let (_sim, sensor, drives, bias) =
+        sim::simulated(&scenario, MonotonicClock::new().unwrap()).unwrap();
+    let operator = Operator::new();
+    let (log, log_thread, _queue) = logq::channel(true);
+    let prefix = format!("sar-noalloc-run-{}", std::process::id());
+    let mut shm = DaemonShm::create(
+        &prefix,
+        operator.clone(),
+        limits_array(&cfg.estimator.guard.limits()),
+        None,
+    )
+    .unwrap();
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.step_config(),
+        sensor,
+        drives,
+        operator,
+        log.clone(),
+        true,
+    )
+    .unwrap();
+    let client_thread = {
+        let prefix = prefix.clone();
+        std::thread::spawn(move || {
+            let client = Client::new(&prefix).unwrap();
+            let sub = client.subscribe().unwrap();
+            // The loop has run a while (start-up reset, first samples).
+            let mut last = 0;
+            let start = std::time::Instant::now();
+            while last < 300 {
+                if start.elapsed() > Duration::from_secs(60) {
+                    rt::request_stop();
+                    panic!("no state of cycle 300 within 60 s");
+                }
+                sub.wait(Duration::from_millis(100), |s| last = s.cycle);
+            }
+            let mut replies = Vec::new();
+            // (A failed command stops the loop too, then fails the test.)
+            for (id, kind) in [
+                command_kind::LIMITS,
+                command_kind::TARE,
+                command_kind::RESET,
+                command_kind::MOVE_TIP,
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let reply = client.command(
+                    CommandMsg {
+                        kind,
+                        id: id as u64 + 1,
+                        tip_m: [0.6, 0.2, 0.001],
+                        ..CommandMsg::default()
+                    },
+                    Duration::from_secs(10),
+                );
+                if reply.is_err() {
+                    rt::request_stop();
+                }
+                replies.push(reply.unwrap());
+            }
+            rt::request_stop();
+            replies
+        })
+    };
+    let mut stats = LoopStats::default();
+    let mut watchdog = Watchdog::new(None, 100);
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    counted(|| {
+        runloop::run(
+            &mut c,
+            &cfg.loop_,
+            RunLimits {
+                max_cycles: Some(120_000),
+                stall_after_cycles: None,
+            },
+            &mut stats,
+            &mut shm,
+            &mut watchdog,
+            &log,
+        );
+    });
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let replies = client_thread.join().unwrap();
+    if let Some(t) = log_thread {
+        t.finish();
+    }
+    assert_eq!(replies.len(), 4);
+    assert!(replies[1..].iter().all(|r| r.cycle > 0), "{replies:?}");
+    assert!(stats.cycles > 300);
+    assert_eq!(shm.queue_drops(), 0);
+    assert_eq!(
+        after - before,
+        0,
+        "runloop::run of {} cycles allocated {} times on its thread",
+        stats.cycles,
+        after - before
+    );
+}
