@@ -8,9 +8,11 @@
 //! - `shm_latency/bare`: a bare iceoryx2 pair (publisher and notifier,
 //!   subscriber and listener), same payload (`StateMsg`), the publisher on
 //!   the calling thread: the floor.
-//! - `shm_loop_side/*`: what a publish costs the loop thread: the push into
-//!   the queue (with and without waking the thread) against a direct
-//!   iceoryx2 publish (loan, write, send, notify).
+//! - `shm_loop_side/*`: what a publish costs the loop thread, back to back:
+//!   the push into the queue (no wake-up) against a direct iceoryx2 publish
+//!   (loan, write, send, notify). The push with the wake-up of a sleeping
+//!   publishing thread (the per-cycle case at 1 kHz) is the "publish call"
+//!   printed by the latency run.
 //!
 //! One sample at a time (the next after the previous arrived), so both
 //! threads sleep between samples as at 1 kHz. The publishing side (the
@@ -253,23 +255,6 @@ fn loop_side(c: &mut Criterion) {
                 total
             })
         });
-    }
-    // Push and wake the running publishing thread (back to back: the thread
-    // is mostly awake; the per-cycle case, with the thread asleep, is the
-    // "publish call" of the latency run).
-    {
-        let prefix = format!("sar-bench-wake-{}", std::process::id());
-        let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6], None).unwrap();
-        fifo(true);
-        g.bench_function("queue_push_and_wake", |b| {
-            b.iter(|| shm.push_state(std::hint::black_box(state)))
-        });
-        fifo(false);
-        println!(
-            "push and wake: {} published, {} dropped (full queue)",
-            shm.published(),
-            shm.queue_drops()
-        );
     }
     // Direct iceoryx2 publish with a subscriber and a listener connected.
     {
