@@ -169,6 +169,11 @@ pub struct StateMsg {
     pub overruns: u64,
     /// Quick stops sent so far.
     pub quick_stops: u64,
+    /// States the loop dropped so far because the publishing thread's queue
+    /// was full (those states were never published).
+    pub queue_drops: u64,
+    /// States the publishing thread failed to send so far.
+    pub publish_errors: u64,
 }
 
 impl Default for StateMsg {
@@ -199,6 +204,8 @@ impl Default for StateMsg {
             compute_ns: [0; 3],
             overruns: 0,
             quick_stops: 0,
+            queue_drops: 0,
+            publish_errors: 0,
         }
     }
 }

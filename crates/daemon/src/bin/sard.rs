@@ -123,19 +123,6 @@ fn run(args: &Args) -> Result<(), String> {
         None => None,
     };
 
-    // Real-time settings: said once, here, when they cannot be applied.
-    if let Err(e) = rt::lock_memory() {
-        tracing::warn!("{e}; running without locked memory");
-    }
-    if let Err(e) = rt::set_fifo(cfg.loop_.priority) {
-        tracing::warn!("{e}; running at normal priority");
-    }
-    if let Some(cpu) = cfg.loop_.cpu
-        && let Err(e) = rt::pin_to_cpu(cpu)
-    {
-        tracing::warn!("{e}; running unpinned");
-    }
-
     let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
     let (simulator, sim_sensor, sim_drives, sim_bias) =
         sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
@@ -155,6 +142,20 @@ fn run(args: &Args) -> Result<(), String> {
         limits_array(&cfg.estimator.guard.limits()),
         truth,
     )?;
+    // Real-time settings: said once, here, when they cannot be applied.
+    // After the publishing thread has started (DaemonShm::create), so that
+    // it keeps the normal priority and every CPU.
+    if let Err(e) = rt::lock_memory() {
+        tracing::warn!("{e}; running without locked memory");
+    }
+    if let Err(e) = rt::set_fifo(cfg.loop_.priority) {
+        tracing::warn!("{e}; running at normal priority");
+    }
+    if let Some(cpu) = cfg.loop_.cpu
+        && let Err(e) = rt::pin_to_cpu(cpu)
+    {
+        tracing::warn!("{e}; running unpinned");
+    }
     let sensor_what = match &real_sensor {
         Some(s) => format!("the RDT sensor at {}", s.config().address),
         None => format!("the simulated sensor of {:?}", scenario.name),
