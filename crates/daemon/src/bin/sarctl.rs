@@ -64,6 +64,8 @@ enum Cmd {
     },
     /// The guard's force limits.
     Limits,
+    /// Identify m and c (and calibrate the support) from a recording.
+    Identify(sar_daemon::cli::identify::IdentifyArgs),
 }
 
 /// A write to stdout failed. A reader that went away (`sarctl monitor | head`)
@@ -172,6 +174,13 @@ fn run(args: &Args) -> Result<(), String> {
     if let Some(path) = &args.config {
         sar_daemon::config::load(path).map_err(|e| e.to_string())?;
     }
+    if let Cmd::Identify(a) = &args.command {
+        return sar_daemon::cli::identify::run(
+            args.config.as_deref(),
+            args.format == Format::Json,
+            a,
+        );
+    }
     let client = Client::new(&args.prefix)?;
     let command = |kind: u32, tip_m: [f64; 3]| -> Result<ReplyMsg, String> {
         client.command(
@@ -275,6 +284,7 @@ fn run(args: &Args) -> Result<(), String> {
                 }
             }
         }
+        Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
         Cmd::MoveTip { x, y, z } => {
