@@ -356,6 +356,10 @@ pub fn identify_dwells(
             needed: needed.div_ceil(2) as usize,
             why: dwell_description(&options.dwell),
         },
+        IdentificationError::NonPositiveMass { mass_kg } => IdentifyError::Fit {
+            fit: "the linear identification",
+            reason: format!("it gives a mass of {mass_kg} kg: the poses cannot tell m from M"),
+        },
         other => IdentifyError::Fit {
             fit: "the linear identification",
             reason: other.to_string(),
