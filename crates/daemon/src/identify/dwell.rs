@@ -83,8 +83,9 @@ pub struct Dwell {
     pub joints: ActiveJoints,
     /// Joint samples averaged.
     pub joint_samples: u32,
-    /// The sign of the last slide of the rod in the support before the dwell
-    /// (from the joints and the configured support; unknown before any slide).
+    /// The sign of the last slide of the rod in the support as the window
+    /// starts (from the joints and the configured support; unknown before any
+    /// slide).
     pub slide_sign: SlideSign,
     /// Sum of the sensor's force readings in the window (sensor frame), N.
     pub force_sum_n: [f64; 3],
@@ -111,6 +112,8 @@ struct Stretch {
     hi: [f64; 3],
     sum: [f64; 3],
     n: u32,
+    /// The slide sign when the window started (the move before it done).
+    sign: SlideSign,
 }
 
 impl Stretch {
@@ -122,6 +125,7 @@ impl Stretch {
             hi: q,
             sum: [0.0; 3],
             n: 0,
+            sign: SlideSign::Unknown,
         }
     }
 }
@@ -177,12 +181,12 @@ impl DwellFinder {
             })
         });
         if !still {
-            // The sign as of the stretch's last sample, before this one moved.
             self.close();
             self.current = Some(Stretch::start(stamp_ns, q));
         }
         let [q1_m, q2_m, q3_m] = q;
         self.tracker.update(&ActiveJoints { q1_m, q2_m, q3_m });
+        let sign = self.tracker.sign();
         let settle_ns = self.options.settle_ns();
         if let Some(s) = self.current.as_mut() {
             s.last_ns = stamp_ns;
@@ -191,6 +195,12 @@ impl DwellFinder {
                 *hi = hi.max(x);
             }
             if stamp_ns >= s.first_ns.saturating_add(settle_ns) {
+                if s.n == 0 {
+                    // The sign as of the window's start: the next move may
+                    // begin within the tolerance (a slow start) and slide
+                    // the rod before the stretch ends.
+                    s.sign = sign;
+                }
                 for (sum, x) in s.sum.iter_mut().zip(q) {
                     *sum += x;
                 }
@@ -220,7 +230,7 @@ impl DwellFinder {
                 q3_m: q3,
             },
             joint_samples: s.n,
-            slide_sign: self.tracker.sign(),
+            slide_sign: s.sign,
             force_sum_n: [0.0; 3],
             sensor_samples: 0,
         });
@@ -333,6 +343,32 @@ mod tests {
         let d = avg.finish();
         assert_eq!(d[0].sensor_samples, 400);
         assert_eq!(d[0].mean_force_n(), Some([1.0, 2.0, 3.0]));
+    }
+
+    /// A dwell reached retracting, then a slow start towards B (3 um per
+    /// sample: the first 6 samples stay within the 20 um tolerance but slide
+    /// the rod by more than the 5 um threshold): the dwell keeps the sign of
+    /// the move that led to it.
+    #[test]
+    fn a_slow_start_of_the_next_move_leaves_the_dwell_sign() {
+        let mut f = DwellFinder::new(&cal(), DwellOptions::default());
+        let mut t = 0u64;
+        let mut push = |f: &mut DwellFinder, x: f64| {
+            f.push(t, [0.0, 0.28, x]);
+            t += 1_000_000;
+        };
+        for k in 0..100 {
+            push(&mut f, 0.41 - 1e-4 * f64::from(k));
+        }
+        for _ in 0..500 {
+            push(&mut f, 0.40);
+        }
+        for k in 1..100 {
+            push(&mut f, 0.40 + 3e-6 * f64::from(k));
+        }
+        let dwells = f.finish();
+        assert_eq!(dwells.len(), 1);
+        assert_eq!(dwells[0].slide_sign, SlideSign::Retracting);
     }
 
     #[test]
