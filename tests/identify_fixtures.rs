@@ -20,6 +20,14 @@
 //!
 //! Regenerate: `cargo run -p sar-tests --example make_identify_fixtures`
 //! (deterministic: the same files bit for bit).
+//!
+//! Test tooling, not product code: any failure stops it loudly.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 use sar_daemon::record::msgs::{ActiveJointState, RecorderDrops, WrenchStamped};
 use sar_daemon::record::{FileOptions, Outgoing, RotatingWriter};

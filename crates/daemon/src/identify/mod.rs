@@ -39,10 +39,10 @@ use serde_json::json;
 /// The poses to add, named in every refusal that more or other poses cure.
 pub const ADD_POSES: &str = "add static poses at support distances a from 0.04 to 0.30 m, with the rod tilted and turned (the cone set of MODEL.md 5.1: 4 rod directions on a 35 degree cone around X0 x a in {0.04, 0.07, 0.12, 0.20, 0.30} m, sweeping alternately outward and inward), each held still at least settle + minimum dwell";
 
-/// Default largest condition number of the support fit (column-scaled):
-/// the cone set gives about 10 to 100, the article's protocol with B_x
-/// fitted some hundreds; poses that cannot tell the unknowns apart give
-/// 1e6 and more.
+/// Default largest condition number (column-scaled) of the linear fit and of
+/// the support fit: on the fixtures the cone set gives 5.8 and the article's
+/// protocol (B_x, B_y fitted) 18; poses at one support distance give 1e14 or
+/// more (or a mass below zero, refused too).
 pub const DEFAULT_MAX_CONDITION: f64 = 1e5;
 
 /// How to identify.
