@@ -139,3 +139,37 @@ fn a_refused_fit_exits_non_zero_with_one_line() {
     assert_eq!(std::fs::read_to_string(&config).unwrap(), CONFIG);
     std::fs::remove_dir_all(config.parent().unwrap()).unwrap();
 }
+
+/// `--tare-n FX,FY,FZ` is subtracted from the readings: a tare of +0.2 N on
+/// the sensor's upward axis (R_0s = I) makes the robot seem to hold 0.2 N
+/// more, so m grows by 0.2 / |g| = 0.020 kg; a tare of two values is refused.
+#[test]
+fn a_tare_given_on_the_command_line() {
+    let config = temp_config("tare");
+    let mass = |extra: &[&str]| {
+        let mut args = vec!["--dry-run", "--format", "json"];
+        args.extend_from_slice(extra);
+        let out = sarctl(&config, &fixture("identify_manipulator_2"), &args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        json["mass_kg"].as_f64().unwrap()
+    };
+    let plain = mass(&[]);
+    let tared = mass(&["--tare-n", "0.0,0.2,-0.0"]);
+    let shift = tared - plain;
+    assert!((shift - 0.2 / 9.80665).abs() < 0.003, "m moved by {shift}");
+    let out = sarctl(
+        &config,
+        &fixture("identify_manipulator_2"),
+        &["--dry-run", "--tare-n", "0.1,0.2"],
+    );
+    assert!(!out.status.success());
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("--tare-n needs 3 values"), "{stderr}");
+    std::fs::remove_dir_all(config.parent().unwrap()).unwrap();
+}

@@ -27,7 +27,6 @@ pub struct IdentifyArgs {
         long,
         value_name = "FX,FY,FZ",
         value_delimiter = ',',
-        num_args = 3,
         allow_hyphen_values = true
     )]
     pub tare_n: Option<Vec<f64>>,
