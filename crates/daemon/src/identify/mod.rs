@@ -22,6 +22,7 @@
 
 pub mod dwell;
 pub mod plot;
+pub mod poses;
 pub mod writeback;
 
 use crate::config::Config;
