@@ -64,7 +64,7 @@ enum Cmd {
     },
     /// The guard's force limits.
     Limits,
-    /// Identify m and c (and calibrate the support) from a recording.
+    /// Identify m and c (and calibrate the support) from a recording or live.
     Identify(sar_daemon::cli::identify::IdentifyArgs),
 }
 
@@ -175,11 +175,8 @@ fn run(args: &Args) -> Result<(), String> {
         sar_daemon::config::load(path).map_err(|e| e.to_string())?;
     }
     if let Cmd::Identify(a) = &args.command {
-        return sar_daemon::cli::identify::run(
-            args.config.as_deref(),
-            args.format == Format::Json,
-            a,
-        );
+        let json = args.format == Format::Json;
+        return sar_daemon::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
     }
     let client = Client::new(&args.prefix)?;
     let command = |kind: u32, tip_m: [f64; 3]| -> Result<ReplyMsg, String> {

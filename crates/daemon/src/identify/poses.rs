@@ -3,10 +3,10 @@
 //! cone around X0, times a in {0.04, 0.07, 0.12, 0.20, 0.30} m, swept
 //! alternately outward and inward, each inward sweep entered by a turnaround
 //! 20 mm beyond its first pose so that it is reached sliding inward), shrunk
-//! until every target lies in the configured travel: first the distances by
-//! 10 % steps down to half (the tilt, which determines B across the rod, is
-//! kept as long as possible), then the cone angle by 5 degrees, down to 10
-//! degrees. The groundwork of `sarctl identify --live` (not built yet).
+//! until every target lies in the configured travel: first the distances
+//! beyond the shortest (0.04 m, kept) by 10 % steps down to half (the tilt,
+//! which determines B across the rod, is kept as long as possible), then the
+//! cone angle by 5 degrees, down to 10 degrees. The groundwork of `sarctl identify --live` (not built yet).
 
 use crate::config::Config;
 use sar_kinematics::{ActiveJoints, Vec3, forward};
@@ -79,7 +79,14 @@ fn attempt(config: &Config, angle_deg: f64, scale: f64) -> Option<Vec<PoseTarget
     };
     let mut out = Vec::new();
     for (k, u) in dirs.iter().enumerate() {
-        let mut sweep: Vec<f64> = DISTANCES_M.iter().map(|a| a * scale).collect();
+        // The shortest distance stays (most of B's information, MODEL.md
+        // 5.1; shorter ones load the sensor with M g / a): the others move
+        // towards it.
+        let nearest = DISTANCES_M[0];
+        let mut sweep: Vec<f64> = DISTANCES_M
+            .iter()
+            .map(|a| nearest + (a - nearest) * scale)
+            .collect();
         let inward = k % 2 == 1;
         if inward {
             sweep.reverse();
@@ -144,7 +151,8 @@ mod tests {
     fn a_small_travel_shrinks_the_set_or_is_refused() {
         let mut config = crate::config::builtin().unwrap();
         // q2 (height) within 0.1 m of the support's: the 35 degree cone at
-        // a = 0.30 needs 0.17 m; at half the distances it fits.
+        // a = 0.30 needs 0.17 m; with the distances beyond 0.04 m halved
+        // (0.17 m at most) it fits.
         config.axes.travel_m[1] = (0.18, 0.38);
         let set = cone_set(&config).unwrap();
         let far = set
