@@ -12,3 +12,5 @@ pub fn fixtures_dir() -> PathBuf {
 pub fn scenarios_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
 }
+
+pub mod identify_fixtures;

@@ -93,6 +93,8 @@ enum Cmd {
         #[arg(long, default_value_t = sar_daemon::view::DEFAULT_SCENE_HZ)]
         scene_hz: f64,
     },
+    /// Identify m and c (and calibrate the support) from a recording or live.
+    Identify(sar_daemon::cli::identify::IdentifyArgs),
 }
 
 /// A write to stdout failed. A reader that went away (`sarctl monitor | head`)
@@ -203,6 +205,10 @@ fn run(args: &Args) -> Result<(), String> {
     if let Some(path) = &args.config {
         sar_daemon::config::load(path).map_err(|e| e.to_string())?;
     }
+    if let Cmd::Identify(a) = &args.command {
+        let json = args.format == Format::Json;
+        return sar_daemon::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
+    }
     let client = Client::new(&args.prefix)?;
     let command_with = |kind: u32, tip_m: [f64; 3], limits_n: [f64; 6]| {
         client.command(
@@ -311,6 +317,7 @@ fn run(args: &Args) -> Result<(), String> {
         Cmd::View { ref bind, scene_hz } => {
             sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
         }
+        Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
         Cmd::MoveTip { x, y, z } => {
