@@ -193,12 +193,10 @@ fn run(seed: u64) {
             assert_eq!(d.action, DriveAction::QuickStop, "{ctx}");
         }
         if let DriveAction::Setpoint(q) = d.action {
-            {
-                assert!(!halting, "{ctx}");
-                assert_eq!(input.drive_state, Some(DriveState::Enabled), "{ctx}");
-                for (v, (lo, hi)) in [q.q1_m, q.q2_m, q.q3_m].iter().zip(step_config.travel_m) {
-                    assert!((lo..=hi).contains(v), "{ctx}");
-                }
+            assert!(!halting, "{ctx}");
+            assert_eq!(input.drive_state, Some(DriveState::Enabled), "{ctx}");
+            for (v, (lo, hi)) in [q.q1_m, q.q2_m, q.q3_m].iter().zip(step_config.travel_m) {
+                assert!((lo..=hi).contains(v), "{ctx}");
             }
         }
         // The trajectory (sampled at the joint stamps, 1 ms apart) moves at
