@@ -2,6 +2,7 @@
 //! and the recording (MCAP files of ROS 2 messages, INTERFACES.md 1). The
 //! binaries `sard` and `sarctl` are thin shells over it.
 
+pub mod cli;
 pub mod config;
 pub mod control;
 pub mod devices;

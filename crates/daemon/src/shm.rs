@@ -107,9 +107,20 @@ pub struct DaemonShm {
     /// The simulator's truth of F_tip, when simulated.
     truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
     publish_errors: u64,
+    /// Where `record start|stop` go (`None`: refused as unknown).
+    record_switch: Option<std::sync::Arc<crate::record::live::RecordSwitch>>,
 }
 
 impl DaemonShm {
+    /// Takes `record start|stop` commands into `switch`.
+    pub fn with_record_switch(
+        mut self,
+        switch: std::sync::Arc<crate::record::live::RecordSwitch>,
+    ) -> Self {
+        self.record_switch = Some(switch);
+        self
+    }
+
     /// Cleans dead nodes' resources, then creates the services under
     /// `prefix`; refuses when a living daemon has them.
     pub fn create(
@@ -187,6 +198,7 @@ impl DaemonShm {
             limits_n,
             truth,
             publish_errors: 0,
+            record_switch: None,
         })
     }
 
@@ -222,6 +234,20 @@ impl DaemonShm {
             None if command.kind == command_kind::LIMITS => {
                 let _ = active.send_copy(immediate(0));
             }
+            None if matches!(
+                command.kind,
+                command_kind::RECORD_START | command_kind::RECORD_STOP
+            ) && self.record_switch.is_some() =>
+            {
+                if let Some(s) = &self.record_switch {
+                    if command.kind == command_kind::RECORD_START {
+                        s.request_start();
+                    } else {
+                        s.request_stop();
+                    }
+                }
+                let _ = active.send_copy(immediate(0));
+            }
             None => {
                 let _ = active.send_copy(immediate(reply_code::UNKNOWN_COMMAND));
             }
@@ -255,6 +281,8 @@ impl Publish for DaemonShm {
             drive_state: c.drive_state,
             halted: c.halted,
             quick_stops: c.quick_stops,
+            recorder_drops: c.recorder_drops,
+            recording: c.recording,
             truth_tip_force_n,
         });
         let sent = self

@@ -169,6 +169,10 @@ pub struct StateMsg {
     pub overruns: u64,
     /// Quick stops sent so far.
     pub quick_stops: u64,
+    /// Messages the recorder dropped so far (queue full or disk failed).
+    pub recorder_drops: u64,
+    /// 1 while a recording runs, else 0.
+    pub recording: u64,
 }
 
 impl Default for StateMsg {
@@ -199,6 +203,8 @@ impl Default for StateMsg {
             compute_ns: [0; 3],
             overruns: 0,
             quick_stops: 0,
+            recorder_drops: 0,
+            recording: 0,
         }
     }
 }
@@ -224,6 +230,10 @@ pub struct StateParts<'a> {
     pub halted: bool,
     /// Quick stops so far.
     pub quick_stops: u64,
+    /// Messages the recorder dropped so far.
+    pub recorder_drops: u64,
+    /// Whether a recording runs.
+    pub recording: bool,
     /// The simulator's truth, when simulated.
     pub truth_tip_force_n: Option<Vec3>,
 }
@@ -260,6 +270,8 @@ impl StateMsg {
             ],
             overruns: p.stats.overruns,
             quick_stops: p.quick_stops,
+            recorder_drops: p.recorder_drops,
+            recording: u64::from(p.recording),
             ..Self::default()
         };
         if let Some(pose) = o.pose {
@@ -303,6 +315,10 @@ pub mod command_kind {
     pub const MOVE_TIP: u32 = 3;
     /// Read the guard's limits.
     pub const LIMITS: u32 = 4;
+    /// Start recording (`sarctl record start`).
+    pub const RECORD_START: u32 = 5;
+    /// Stop recording (`sarctl record stop`).
+    pub const RECORD_STOP: u32 = 6;
 }
 
 /// An operator command.

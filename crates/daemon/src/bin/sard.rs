@@ -246,7 +246,7 @@ struct Run<'a> {
 
 impl Run<'_> {
     fn run<S: ForceSensor, D: AxisDrives>(
-        mut self,
+        self,
         sensor: S,
         drives: D,
         bias: Bias,
@@ -279,6 +279,12 @@ impl Run<'_> {
             cfg.origin,
             cfg.loop_.rate_hz,
         );
+        // Recording: `[record]` and `sarctl record start|stop`; files are
+        // opened and closed on the manager's thread, never the loop's.
+        let switch = std::sync::Arc::new(sar_daemon::record::live::RecordSwitch::default());
+        let shm = self.shm.with_record_switch(std::sync::Arc::clone(&switch));
+        let (recording, mut publisher) =
+            sar_daemon::record::live::RecordManager::start(cfg.record.clone(), bias, switch, shm)?;
         runloop::run(
             &mut controller,
             &cfg.loop_,
@@ -287,10 +293,12 @@ impl Run<'_> {
                 stall_after_cycles: self.args.stall_after_cycles,
             },
             &mut stats,
-            &mut self.shm,
+            &mut publisher,
             &mut watchdog,
             &log,
         );
+        publisher.release();
+        recording.finish();
         if let Some(t) = log_thread {
             t.finish();
         }

@@ -809,11 +809,15 @@ pub enum Topic {
     CycleInput,
     /// `/sar/recorder/drops`, [`RecorderDrops`].
     RecorderDrops,
+    /// `/sar/sim/tip_wrench_truth`, [`WrenchStamped`] frame `base`: the
+    /// simulator's true F_tip (simulator-made recordings; the reference of
+    /// `sarctl replay --compare`).
+    SimTipWrenchTruth,
 }
 
 impl Topic {
     /// Every topic, in channel order.
-    pub const ALL: [Topic; 9] = [
+    pub const ALL: [Topic; 10] = [
         Topic::SensorWrench,
         Topic::Joints,
         Topic::TipWrench,
@@ -823,6 +827,7 @@ impl Topic {
         Topic::GuardEvents,
         Topic::CycleInput,
         Topic::RecorderDrops,
+        Topic::SimTipWrenchTruth,
     ];
 
     /// The topic name.
@@ -837,6 +842,7 @@ impl Topic {
             Topic::GuardEvents => "/sar/guard/events",
             Topic::CycleInput => "/sar/cycle/input",
             Topic::RecorderDrops => "/sar/recorder/drops",
+            Topic::SimTipWrenchTruth => "/sar/sim/tip_wrench_truth",
         }
     }
 
@@ -848,9 +854,10 @@ impl Topic {
     /// The ROS 2 type name (the schema's name).
     pub fn type_name(self) -> &'static str {
         match self {
-            Topic::SensorWrench | Topic::TipWrench | Topic::TipWrenchFiltered => {
-                WrenchStamped::TYPE_NAME
-            }
+            Topic::SensorWrench
+            | Topic::TipWrench
+            | Topic::TipWrenchFiltered
+            | Topic::SimTipWrenchTruth => WrenchStamped::TYPE_NAME,
             Topic::Joints | Topic::PassiveJoints => JointState::TYPE_NAME,
             Topic::EstimatorState => EstimatorState::TYPE_NAME,
             Topic::GuardEvents => GuardEvent::TYPE_NAME,
@@ -862,9 +869,10 @@ impl Topic {
     /// The `ros2msg` schema text.
     pub fn schema(self) -> &'static str {
         match self {
-            Topic::SensorWrench | Topic::TipWrench | Topic::TipWrenchFiltered => {
-                WrenchStamped::SCHEMA
-            }
+            Topic::SensorWrench
+            | Topic::TipWrench
+            | Topic::TipWrenchFiltered
+            | Topic::SimTipWrenchTruth => WrenchStamped::SCHEMA,
             Topic::Joints | Topic::PassiveJoints => JointState::SCHEMA,
             Topic::EstimatorState => EstimatorState::SCHEMA,
             Topic::GuardEvents => GuardEvent::SCHEMA,
@@ -899,6 +907,8 @@ pub enum Outgoing {
     CycleInput(CycleInput),
     /// `/sar/recorder/drops` (the recorder writes these itself).
     RecorderDrops(RecorderDrops),
+    /// `/sar/sim/tip_wrench_truth`.
+    SimTruth(WrenchStamped),
 }
 
 impl Outgoing {
@@ -914,15 +924,17 @@ impl Outgoing {
             Outgoing::GuardEvent(_) => Topic::GuardEvents,
             Outgoing::CycleInput(_) => Topic::CycleInput,
             Outgoing::RecorderDrops(_) => Topic::RecorderDrops,
+            Outgoing::SimTruth(_) => Topic::SimTipWrenchTruth,
         }
     }
 
     /// Its `header.stamp`, ns: the recording's `log_time` and `publish_time`.
     pub fn stamp_ns(&self) -> u64 {
         match self {
-            Outgoing::SensorWrench(m) | Outgoing::TipWrench(m) | Outgoing::TipWrenchFiltered(m) => {
-                m.stamp_ns
-            }
+            Outgoing::SensorWrench(m)
+            | Outgoing::TipWrench(m)
+            | Outgoing::TipWrenchFiltered(m)
+            | Outgoing::SimTruth(m) => m.stamp_ns,
             Outgoing::Joints(m) => m.stamp_ns,
             Outgoing::PassiveJoints(m) => m.stamp_ns,
             Outgoing::EstimatorState(m) => m.stamp_ns,
@@ -935,9 +947,10 @@ impl Outgoing {
     /// Encodes into `buf` (cleared first).
     pub fn encode(&self, buf: &mut Vec<u8>) -> Result<(), CdrError> {
         match self {
-            Outgoing::SensorWrench(m) | Outgoing::TipWrench(m) | Outgoing::TipWrenchFiltered(m) => {
-                m.encode(buf)
-            }
+            Outgoing::SensorWrench(m)
+            | Outgoing::TipWrench(m)
+            | Outgoing::TipWrenchFiltered(m)
+            | Outgoing::SimTruth(m) => m.encode(buf),
             Outgoing::Joints(m) => m.encode(buf),
             Outgoing::PassiveJoints(m) => m.encode(buf),
             Outgoing::EstimatorState(m) => m.encode(buf),
@@ -959,6 +972,7 @@ impl Outgoing {
             Topic::GuardEvents => Outgoing::GuardEvent(GuardEvent::decode(bytes)?),
             Topic::CycleInput => Outgoing::CycleInput(CycleInput::decode(bytes)?),
             Topic::RecorderDrops => Outgoing::RecorderDrops(RecorderDrops::decode(bytes)?),
+            Topic::SimTipWrenchTruth => Outgoing::SimTruth(WrenchStamped::decode(bytes)?),
         })
     }
 }
