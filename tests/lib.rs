@@ -12,3 +12,10 @@ pub fn fixtures_dir() -> PathBuf {
 pub fn scenarios_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
 }
+
+pub mod fixture_gen;
+
+/// The folder of the replay fixtures (`tests/fixtures/replay`).
+pub fn replay_dir() -> PathBuf {
+    fixtures_dir().join("replay")
+}

@@ -90,6 +90,27 @@ pub fn outputs(input: &CycleInput, output: &CycleOutput, mut emit: impl FnMut(Ou
     }
 }
 
+/// Every message of one cycle of a daemon recording, in the recorded order:
+/// `/sar/cycle/input`, `/sar/sensor/wrench` (a new sample), `/sar/joints`
+/// (when `joints_new`), then [`outputs`]. The recorder and the fixtures'
+/// generator both use it.
+pub fn cycle_record(
+    input: &CycleInput,
+    output: &CycleOutput,
+    drive_state: Option<DriveState>,
+    joints_new: bool,
+    mut emit: impl FnMut(Outgoing),
+) {
+    emit(Outgoing::CycleInput(cycle_input_msg(input, drive_state, None)));
+    if output.new_sample {
+        emit(Outgoing::SensorWrench(sensor_wrench(&input.sensor)));
+    }
+    if joints_new {
+        emit(Outgoing::Joints(joints_msg(&input.joints)));
+    }
+    outputs(input, output, emit);
+}
+
 /// `/sar/estimate/state` of one cycle.
 pub fn estimator_state(input: &CycleInput, o: &CycleOutput) -> EstimatorState {
     let mut reason_text = ReasonText::default();

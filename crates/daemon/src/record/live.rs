@@ -16,7 +16,6 @@
 
 use super::convert;
 use super::file::{FileOptions, Rotation};
-use super::msgs::Outgoing;
 use super::recorder::{Recorder, RecorderConfig};
 use crate::runloop::{Publish, Published};
 use crossbeam_queue::ArrayQueue;
@@ -123,21 +122,9 @@ impl<P: Publish> Publish for LiveRecorder<P> {
         let mut dropped = self.dropped_before;
         if let Some(rec) = &mut self.active {
             let input = c.input;
-            rec.push(Outgoing::CycleInput(convert::cycle_input_msg(
-                input,
-                c.drive_state,
-                None,
-            )));
-            if c.output.new_sample {
-                rec.push(Outgoing::SensorWrench(convert::sensor_wrench(
-                    &input.sensor,
-                )));
-            }
-            if self.last_joints_stamp_ns != Some(input.joints.stamp_ns) {
-                self.last_joints_stamp_ns = Some(input.joints.stamp_ns);
-                rec.push(Outgoing::Joints(convert::joints_msg(&input.joints)));
-            }
-            convert::outputs(input, c.output, |m| {
+            let joints_new = self.last_joints_stamp_ns != Some(input.joints.stamp_ns);
+            self.last_joints_stamp_ns = Some(input.joints.stamp_ns);
+            convert::cycle_record(input, c.output, c.drive_state, joints_new, |m| {
                 rec.push(m);
             });
             dropped += rec.dropped();

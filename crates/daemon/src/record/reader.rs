@@ -589,6 +589,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     let mut writer = None;
     let mut file = Some(file);
     let mut known = BTreeMap::new();
+    // Metadata records already copied: those before the first message are
+    // copied at the start (where readers such as replay look for them).
+    let mut metadata_copied = 0usize;
     loop {
         let msg = match reader.next() {
             None => break,
@@ -602,10 +605,15 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
             (Some(w), _) => w,
             (None, Some(f)) => {
                 let profile = reader.profile().unwrap_or("").to_owned();
-                writer.insert(
+                let w = writer.insert(
                     mcap::Writer::with_options(f, options.clone().profile(profile))
                         .map_err(mcap_err)?,
-                )
+                );
+                for m in reader.metadata() {
+                    w.write_metadata(m).map_err(mcap_err)?;
+                }
+                metadata_copied = reader.metadata().len();
+                w
             }
             (None, None) => break,
         };
@@ -672,7 +680,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
         )
         .map_err(mcap_err)?;
     }
-    for m in reader.metadata() {
+    for m in reader.metadata().iter().skip(metadata_copied) {
         w.write_metadata(m).map_err(mcap_err)?;
     }
     let mut info = BTreeMap::from([

@@ -219,6 +219,7 @@ struct Replayer {
     estimates: Vec<(u64, [f64; 3])>,
     references: Vec<(u64, [f64; 3])>,
     first_ns: Option<u64>,
+    last_cycle: u64,
     keep_estimates: bool,
     left_out: usize,
 }
@@ -231,6 +232,7 @@ impl Replayer {
     fn cycle(&mut self, input: &CycleInput) -> Result<(), ReplayError> {
         let out = *self.estimator.cycle(input);
         self.report.cycles += 1;
+        self.last_cycle = input.cycle;
         let stamp_ns = convert::cycle_stamp_ns(input);
         self.first_ns.get_or_insert(stamp_ns);
         if self.keep_estimates && out.new_sample {
@@ -318,19 +320,20 @@ impl Replayer {
         }
     }
 
-    fn finish_comparison(&mut self) {
+    /// `complete`: the recording was not cut short (a recovered file says
+    /// in its `sar_recover` metadata whether its input was).
+    fn finish_comparison(&mut self, complete: bool) {
         if !self.comparing {
             return;
         }
         self.match_pending();
-        let complete = self.report.input_complete;
-        let last_cycle = self.report.cycles;
+        let last_cycle = self.last_cycle;
         let mut leftovers = Vec::new();
         for topic in OUTPUT_TOPICS {
             if let Some(rep) = self.replayed.get(&topic) {
                 for (cycle, m, _) in rep {
-                    // A file cut short may lack its last cycles' outputs.
-                    if complete || *cycle + 1 < last_cycle {
+                    // A file cut short may lack its last cycle's outputs.
+                    if complete || *cycle < last_cycle {
                         leftovers.push(Difference {
                             cycle: *cycle,
                             topic: topic.name(),
@@ -484,6 +487,7 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
         estimates: Vec::new(),
         references: Vec::new(),
         first_ns: None,
+        last_cycle: 0,
         keep_estimates: options.compare.is_some() || options.keep_series,
         left_out: 0,
     };
@@ -555,7 +559,11 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
     }
     r.report.input_complete = reader.is_complete();
     if saw_cycle_input {
-        r.finish_comparison();
+        let recovered_from_cut = reader
+            .metadata()
+            .iter()
+            .any(|m| m.name == "sar_recover" && m.metadata.contains_key("stopped"));
+        r.finish_comparison(r.report.input_complete && !recovered_from_cut);
     } else {
         if sensors.is_empty() {
             return Err(ReplayError::NoInputs);
