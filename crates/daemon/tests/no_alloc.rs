@@ -177,6 +177,8 @@ fn publishing_allocates_only_iceoryx2s_one_per_sample() {
                 drive_state: c.drive_state(),
                 halted: c.halted(),
                 quick_stops: c.counts().quick_stops,
+                recorder_drops: 0,
+                recording: false,
             });
             while queue.pop().is_some() {}
         }
