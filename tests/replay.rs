@@ -75,11 +75,7 @@ fn regenerate_fixtures() {
     );
     let dir = replay_dir();
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(
-        dir.join("config.toml"),
-        sar_daemon::config::DEFAULT_TOML,
-    )
-    .unwrap();
+    std::fs::write(dir.join("config.toml"), sar_daemon::config::DEFAULT_TOML).unwrap();
     let contact = scenarios_dir().join("random_contact_manipulator_2.toml");
     let fault = scenarios_dir().join("fault_encoder_jump.toml");
     fixture_gen::daemon_recording(
@@ -89,8 +85,13 @@ fn regenerate_fixtures() {
         &dir.join(CONTACT_DAEMON),
     )
     .unwrap();
-    fixture_gen::daemon_recording(&fault, FAULT_CYCLES, FAULT_PERIOD_NS, &dir.join(FAULT_DAEMON))
-        .unwrap();
+    fixture_gen::daemon_recording(
+        &fault,
+        FAULT_CYCLES,
+        FAULT_PERIOD_NS,
+        &dir.join(FAULT_DAEMON),
+    )
+    .unwrap();
     fixture_gen::inputs_recording(&contact, &dir.join(CONTACT_INPUTS)).unwrap();
 }
 
@@ -142,7 +143,10 @@ fn guard_events(path: &Path) -> Vec<(u64, u8, u8)> {
 #[test]
 fn daemon_fixtures_replay_bit_for_bit_with_their_guard_transitions() {
     let dir = scratch("bit_for_bit");
-    for (name, cycles) in [(CONTACT_DAEMON, CONTACT_CYCLES), (FAULT_DAEMON, FAULT_CYCLES)] {
+    for (name, cycles) in [
+        (CONTACT_DAEMON, CONTACT_CYCLES),
+        (FAULT_DAEMON, FAULT_CYCLES),
+    ] {
         let out = dir.join(name);
         let r = replay_file(&fixture(name), &options(Some(out.clone()), None)).unwrap();
         assert_eq!(r.mode, Mode::CycleInput, "{name}");
@@ -238,7 +242,11 @@ fn an_inputs_only_recording_replays_one_cycle_per_sensor_message() {
     let recorded = counts(&fixture(CONTACT_INPUTS));
     let sensors = recorded["/sar/sensor/wrench"];
     // One cycle per sensor message that has a joint message at or before it.
-    assert!(r.cycles <= sensors && r.cycles + 2 >= sensors, "{} of {sensors}", r.cycles);
+    assert!(
+        r.cycles <= sensors && r.cycles + 2 >= sensors,
+        "{} of {sensors}",
+        r.cycles
+    );
     let written = counts(&out);
     assert_eq!(written["/sar/estimate/state"], r.cycles);
     // The final push goes above the stop limit: the guard stops.
@@ -246,9 +254,19 @@ fn an_inputs_only_recording_replays_one_cycle_per_sensor_message() {
     assert!(events.iter().any(|e| e.2 == 2), "{events:?}");
     // And the same outputs again: replay is deterministic.
     let again = dir.join("again.mcap");
-    replay_file(&fixture(CONTACT_INPUTS), &options(Some(again.clone()), None)).unwrap();
-    let a: Vec<_> = McapReader::new(&read_file(&out).unwrap()).unwrap().map(|m| m.unwrap().data).collect();
-    let b: Vec<_> = McapReader::new(&read_file(&again).unwrap()).unwrap().map(|m| m.unwrap().data).collect();
+    replay_file(
+        &fixture(CONTACT_INPUTS),
+        &options(Some(again.clone()), None),
+    )
+    .unwrap();
+    let a: Vec<_> = McapReader::new(&read_file(&out).unwrap())
+        .unwrap()
+        .map(|m| m.unwrap().data)
+        .collect();
+    let b: Vec<_> = McapReader::new(&read_file(&again).unwrap())
+        .unwrap()
+        .map(|m| m.unwrap().data)
+        .collect();
     assert!(a == b);
 }
 
@@ -329,7 +347,8 @@ fn a_file_cut_short_replays_to_its_last_chunk_and_is_recovered() {
 /// Messages per topic by the Python reader (`mcap` + `mcap-ros2-support`),
 /// or None when skipped (`SAR_SKIP_PYTHON=1`).
 fn python_counts(file: &Path) -> Option<BTreeMap<String, u64>> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/daemon/tests/read_recording.py");
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/daemon/tests/read_recording.py");
     let skip = std::env::var("SAR_SKIP_PYTHON").is_ok_and(|v| v == "1");
     let out = match Command::new("python3").arg(&script).arg(file).output() {
         Ok(out) => out,

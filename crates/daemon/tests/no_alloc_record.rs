@@ -155,7 +155,10 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
     COUNTED.with(|f| f.set(false));
     let allocations = ALLOCATIONS.load(Ordering::SeqCst);
     assert!(seen.0 && seen.1, "warn and stop: {seen:?}");
-    assert_eq!(allocations, 0, "the recorded cycles allocated {allocations} times");
+    assert_eq!(
+        allocations, 0,
+        "the recorded cycles allocated {allocations} times"
+    );
     assert_eq!(switch.dropped(), 0);
     publisher.release();
     manager.finish();

@@ -101,7 +101,11 @@ pub fn cycle_record(
     joints_new: bool,
     mut emit: impl FnMut(Outgoing),
 ) {
-    emit(Outgoing::CycleInput(cycle_input_msg(input, drive_state, None)));
+    emit(Outgoing::CycleInput(cycle_input_msg(
+        input,
+        drive_state,
+        None,
+    )));
     if output.new_sample {
         emit(Outgoing::SensorWrench(sensor_wrench(&input.sensor)));
     }
