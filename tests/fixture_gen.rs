@@ -14,7 +14,7 @@
 //!   runner: only `/sar/sensor/wrench` and `/sar/joints` (as another
 //!   program would record them) and the truth at each sample's measure time.
 
-use sar_daemon::control::{Controller, Operator};
+use sar_daemon::control::{Controller, Envelope, Operator, Request};
 use sar_daemon::record::convert;
 use sar_daemon::record::msgs::{Outgoing, RecorderDrops, WrenchStamped};
 use sar_daemon::record::{FileOptions, RotatingWriter};
@@ -48,12 +48,31 @@ fn writer(path: &Path, bias: &sar_estimator::cycle::Bias) -> Result<RotatingWrit
     RotatingWriter::new(o).map_err(|e| e.to_string())
 }
 
+/// The operator requests of the contact fixture: a tare before the contact,
+/// a small move (set points, the trajectory the joints are checked
+/// against), and limits set to the configured ones.
+pub fn contact_requests() -> Vec<(u64, Request)> {
+    let limits = sar_estimator::guard::ForceLimits::from_array([10.0, 15.0, 8.0, 12.0, 6.0, 10.0]);
+    vec![
+        (100, Request::Tare),
+        (
+            1000,
+            Request::MoveTip {
+                tip_m: Vec3::new(0.6, 0.2, 0.002),
+            },
+        ),
+        (3000, Request::SetLimits(limits)),
+    ]
+}
+
 /// Records `cycles` cycles of the daemon's controller over `scenario`, one
-/// every `period_ns`, into `path` (see the module documentation).
+/// every `period_ns`, with the operator `requests` (cycle, request), into
+/// `path` (see the module documentation).
 pub fn daemon_recording(
     scenario: &Path,
     cycles: u64,
     period_ns: u64,
+    requests: &[(u64, Request)],
     path: &Path,
 ) -> Result<u64, String> {
     let cfg = config::builtin().map_err(|e| e.to_string())?;
@@ -62,13 +81,14 @@ pub fn daemon_recording(
     let (simulator, sensor, drives, bias) =
         sim::simulated(&scenario, clock.clone()).map_err(|e| e.to_string())?;
     let (log, _thread, _queue) = logq::channel(false);
+    let operator = Operator::new();
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
-        Operator::new(),
+        operator.clone(),
         log,
         true,
     )
@@ -79,11 +99,21 @@ pub fn daemon_recording(
     let mut error = None;
     for cycle in 1..=cycles {
         clock.advance_ns(period_ns);
+        for (_, request) in requests.iter().filter(|(k, _)| *k == cycle) {
+            operator
+                .requests
+                .push(Envelope {
+                    id: cycle,
+                    request: *request,
+                })
+                .map_err(|_| "the request queue is full".to_owned())?;
+        }
+        while operator.replies.pop().is_some() {}
         let out = *c.step(cycle, || Some(clock.now_ns()));
-        let input = *c.input();
+        let (input, decision) = (*c.loop_input(), *c.decision());
         let joints_new = last_joints != Some(input.joints.stamp_ns);
         last_joints = Some(input.joints.stamp_ns);
-        convert::cycle_record(&input, &out, c.drive_state(), joints_new, |m| {
+        convert::cycle_record(&input, &decision, joints_new, |m| {
             status.stamp_ns = m.stamp_ns();
             if let Err(e) = w.write(&m, &status) {
                 error.get_or_insert(e.to_string());

@@ -24,7 +24,7 @@
 )]
 
 use sar_daemon::record::convert::REPLAY_METADATA;
-use sar_daemon::record::msgs::{Outgoing, RecorderDrops, Topic};
+use sar_daemon::record::msgs::{DriveActionCode, Outgoing, RecorderDrops, Topic};
 use sar_daemon::record::replay::{Mode, ReplayOptions, replay, replay_file};
 use sar_daemon::record::{FileOptions, McapReader, RotatingWriter, read_file};
 use sar_tests::{fixture_gen, replay_dir, scenarios_dir};
@@ -57,10 +57,9 @@ fn fixture(name: &str) -> PathBuf {
 fn options(output: Option<PathBuf>, compare: Option<&str>) -> ReplayOptions {
     let cfg = sar_daemon::config::load(&fixture("config.toml")).unwrap();
     ReplayOptions {
-        config: cfg.estimator,
         output,
         compare: compare.map(str::to_owned),
-        keep_series: false,
+        ..ReplayOptions::from_config(&cfg)
     }
 }
 
@@ -82,6 +81,7 @@ fn regenerate_fixtures() {
         &contact,
         CONTACT_CYCLES,
         CONTACT_PERIOD_NS,
+        &fixture_gen::contact_requests(),
         &dir.join(CONTACT_DAEMON),
     )
     .unwrap();
@@ -89,6 +89,7 @@ fn regenerate_fixtures() {
         &fault,
         FAULT_CYCLES,
         FAULT_PERIOD_NS,
+        &[],
         &dir.join(FAULT_DAEMON),
     )
     .unwrap();
@@ -117,6 +118,7 @@ fn the_fault_fixture_is_what_the_generator_makes() {
         &scenarios_dir().join("fault_encoder_jump.toml"),
         FAULT_CYCLES,
         FAULT_PERIOD_NS,
+        &[],
         &out,
     )
     .unwrap();
@@ -231,6 +233,46 @@ fn a_flipped_bit_in_one_input_is_reported_at_its_cycle() {
             "{d:?}"
         );
     }
+}
+
+#[test]
+fn a_changed_decision_is_reported_at_its_cycle_and_field() {
+    // The step's decision is recorded beside its input: a set point (of the
+    // contact fixture's move) or a drive action that differs is reported.
+    let dir = scratch("decision");
+    let setpoint = dir.join("setpoint.mcap");
+    let mut changed = None;
+    rewrite(&fixture(CONTACT_DAEMON), &setpoint, |m| {
+        if let Outgoing::CycleInput(c) = m
+            && c.drive_action == DriveActionCode::Setpoint
+            && changed.is_none()
+        {
+            c.setpoint_q_m[2] += 1e-9;
+            changed = Some(c.cycle);
+        }
+    });
+    let r = replay_file(&setpoint, &options(None, None)).unwrap();
+    let d = r.first_difference.unwrap();
+    assert_eq!(Some(d.cycle), changed, "{d:?}");
+    assert_eq!(
+        (d.topic, d.field.as_str()),
+        ("/sar/cycle/input", "setpoint_q_m")
+    );
+    assert_eq!(r.differences, 1);
+    let action = dir.join("action.mcap");
+    rewrite(&fixture(FAULT_DAEMON), &action, |m| {
+        if let Outgoing::CycleInput(c) = m
+            && c.drive_action == DriveActionCode::QuickStop
+        {
+            c.drive_action = DriveActionCode::None;
+        }
+    });
+    let r = replay_file(&action, &options(None, None)).unwrap();
+    let d = r.first_difference.unwrap();
+    assert_eq!(
+        (d.cycle, d.topic, d.field.as_str()),
+        (2000, "/sar/cycle/input", "drive_action")
+    );
 }
 
 #[test]

@@ -37,7 +37,7 @@ fn daemon() -> LoopStats {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         Operator::new(),

@@ -8,7 +8,10 @@
 //!   80; 1..=99), `cpu` (the CPU the loop thread is pinned to; absent: none).
 //! - `[guard]`: warn/stop limits in N on the total (10/15), axial (8/12) and
 //!   lateral (6/10) parts of the tip force, `hysteresis_n` (1), `debounce_samples`
-//!   (3), `max_sensor_age_s` and `max_joints_age_s` (0.01), `std_margin` (2).
+//!   (3), `max_sensor_age_s` and `max_joints_age_s` (0.01), `std_margin` (2),
+//!   and the ceilings that `sarctl limits --set` may raise the stop limits to,
+//!   `max_stop_total_n`, `max_stop_axial_n`, `max_stop_lateral_n` (default:
+//!   the stop limits: limits can only be lowered at run time).
 //! - `[plausibility]`: `max_joint_speed_mps` (0.05), `joint_margin_m` (0.0002),
 //!   `max_counter_gap` (3), `torque_noise_nm` ([0.01, 0.01, 0.002]),
 //!   `torque_max_sigma` (7; 0 switches the torque check off).
@@ -17,7 +20,9 @@
 //!   it off), stepped once per sensor sample at `sample_rate_hz` (500, the
 //!   HEX-6's rate).
 //! - `[axes]`: `travel_m`, (min, max) of q1, q2, q3 ([[-0.3, 0.3], [0, 0.6], [0, 0.6]]),
-//!   `max_speed_mps` for moves the daemon plans (0.02).
+//!   `max_speed_mps` (0.02) and `max_accel_mps2` (0.2) for moves the daemon
+//!   plans, `following_tolerance_m` (0.001: an axis farther than this from
+//!   the commanded trajectory is a Fault).
 //! - `[record]`: recording from the daemon's start (`sarctl record start|stop`
 //!   at any time): `enabled` (false), `directory` ("recordings", relative to
 //!   the working directory), `max_file_mb` (1024; 0: no size rotation),
@@ -214,6 +219,9 @@ struct GuardToml {
     max_sensor_age_s: f64,
     max_joints_age_s: f64,
     std_margin: f64,
+    max_stop_total_n: Option<f64>,
+    max_stop_axial_n: Option<f64>,
+    max_stop_lateral_n: Option<f64>,
 }
 
 impl Default for GuardToml {
@@ -230,6 +238,9 @@ impl Default for GuardToml {
             max_sensor_age_s: 0.01,
             max_joints_age_s: 0.01,
             std_margin: 2.0,
+            max_stop_total_n: None,
+            max_stop_axial_n: None,
+            max_stop_lateral_n: None,
         }
     }
 }
@@ -280,6 +291,8 @@ impl Default for TipToml {
 struct AxesToml {
     travel_m: [[f64; 2]; 3],
     max_speed_mps: f64,
+    max_accel_mps2: f64,
+    following_tolerance_m: f64,
 }
 
 impl Default for AxesToml {
@@ -287,6 +300,8 @@ impl Default for AxesToml {
         Self {
             travel_m: [[-0.3, 0.3], [0.0, 0.6], [0.0, 0.6]],
             max_speed_mps: 0.02,
+            max_accel_mps2: 0.2,
+            following_tolerance_m: 0.001,
         }
     }
 }
@@ -341,6 +356,11 @@ pub struct AxesConfig {
     /// The speed of the moves the daemon plans, m/s (> 0, at most the
     /// plausibility's `max_joint_speed_mps`).
     pub max_speed_mps: f64,
+    /// The acceleration of the moves the daemon plans, m/s^2 (> 0, <= 10).
+    pub max_accel_mps2: f64,
+    /// The accepted distance of each axis from the commanded trajectory, m
+    /// (beyond it: a Fault, `FollowingError`).
+    pub following_tolerance_m: f64,
 }
 
 /// The force/torque sensor's driver.
@@ -571,6 +591,20 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             ),
         ));
     }
+    let accel = ctx.range_f(
+        "axes.max_accel_mps2",
+        f.axes.max_accel_mps2,
+        1e-6,
+        10.0,
+        "m/s^2",
+    )?;
+    let following_tolerance_m = ctx.range_f(
+        "axes.following_tolerance_m",
+        f.axes.following_tolerance_m,
+        1e-5,
+        0.05,
+        "m",
+    )?;
     check_reach(ctx, &calibration, &profile, &travel_m)?;
 
     // The guard.
@@ -595,6 +629,13 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         std_margin: gt.std_margin,
     };
     let guard = GuardConfig::new(limits).map_err(|e| setting_error(ctx, "guard", &e))?;
+    let guard = guard
+        .with_ceiling([
+            gt.max_stop_total_n.unwrap_or(gt.stop_total_n),
+            gt.max_stop_axial_n.unwrap_or(gt.stop_axial_n),
+            gt.max_stop_lateral_n.unwrap_or(gt.stop_lateral_n),
+        ])
+        .map_err(|e| setting_error(ctx, "guard", &e))?;
 
     // Plausibility and tip.
     let p = &f.plausibility;
@@ -694,11 +735,29 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         axes: AxesConfig {
             travel_m,
             max_speed_mps: speed,
+            max_accel_mps2: accel,
+            following_tolerance_m,
         },
         sensor_driver,
         axes_driver,
         record,
     })
+}
+
+impl Config {
+    /// The loop step's settings: the axes' travel, the speed and
+    /// acceleration of planned moves, the following tolerance, the period.
+    pub fn step_config(&self) -> crate::step::StepConfig {
+        crate::step::StepConfig {
+            travel_m: self.axes.travel_m,
+            axis_limits: sar_drivers::motion::Limits {
+                max_speed_mps: self.axes.max_speed_mps,
+                max_accel_mps2: self.axes.max_accel_mps2,
+            },
+            following_tolerance_m: self.axes.following_tolerance_m,
+            period_ns: self.loop_.period_ns,
+        }
+    }
 }
 
 /// Maps an estimator setting error to its key in `section`.

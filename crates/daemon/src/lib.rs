@@ -14,4 +14,5 @@ pub mod runloop;
 pub mod shm;
 pub mod sim;
 pub mod stats;
+pub mod step;
 pub mod wire;

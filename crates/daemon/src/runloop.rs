@@ -12,14 +12,19 @@ use crate::logq::{LogEvent, LogSender};
 use crate::notify::Watchdog;
 use crate::rt;
 use crate::stats::LoopStats;
+use crate::step::{LoopInput, LoopOutput};
 use sar_drivers::{AxisDrives, ForceSensor};
 use sar_estimator::cycle::{CycleInput, CycleOutput, TipOutcome};
 
 /// One cycle as the loop hands it to publishers.
 #[derive(Debug, Clone, Copy)]
 pub struct Published<'a> {
-    /// The cycle's input.
+    /// The cycle's input (the estimator's part).
     pub input: &'a CycleInput,
+    /// The cycle's whole input (what `/sar/cycle/input` records).
+    pub loop_input: &'a LoopInput,
+    /// The cycle's whole decision.
+    pub decision: &'a LoopOutput,
     /// The cycle's output.
     pub output: &'a CycleOutput,
     /// The loop's measurements.
@@ -94,6 +99,8 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
         let out = *controller.step(cycle, rt::monotonic_ns);
         publisher.publish(&Published {
             input: controller.input(),
+            loop_input: controller.loop_input(),
+            decision: controller.decision(),
             output: &out,
             stats,
             drive_state: controller.drive_state(),

@@ -266,6 +266,8 @@ impl Publish for DaemonShm {
     }
 
     fn publish(&mut self, c: &Published<'_>) {
+        // The limits in use (an operator may have changed them this cycle).
+        self.limits_n = c.decision.limits.to_array();
         // The reply of the command judged in this cycle.
         while let Some(reply) = self.operator.replies.pop() {
             if let Some(active) = self.in_flight.take() {

@@ -315,10 +315,13 @@ pub mod command_kind {
     pub const MOVE_TIP: u32 = 3;
     /// Read the guard's limits.
     pub const LIMITS: u32 = 4;
+    /// Set the guard's force limits to `limits_n` (within the configured
+    /// ceilings).
+    pub const SET_LIMITS: u32 = 5;
     /// Start recording (`sarctl record start`).
-    pub const RECORD_START: u32 = 5;
+    pub const RECORD_START: u32 = 6;
     /// Stop recording (`sarctl record stop`).
-    pub const RECORD_STOP: u32 = 6;
+    pub const RECORD_STOP: u32 = 7;
 }
 
 /// An operator command.
@@ -333,6 +336,8 @@ pub struct CommandMsg {
     pub id: u64,
     /// For MOVE_TIP: the wanted tip, base frame, m.
     pub tip_m: [f64; 3],
+    /// For SET_LIMITS: warn, stop of total, axial, lateral, N.
+    pub limits_n: [f64; 6],
 }
 
 impl CommandMsg {
@@ -345,6 +350,9 @@ impl CommandMsg {
             command_kind::MOVE_TIP => Some(Request::MoveTip {
                 tip_m: Vec3::new(self.tip_m[0], self.tip_m[1], self.tip_m[2]),
             }),
+            command_kind::SET_LIMITS => Some(Request::SetLimits(
+                sar_estimator::guard::ForceLimits::from_array(self.limits_n),
+            )),
             _ => None,
         }
     }
@@ -401,7 +409,10 @@ pub fn status_name(code: u32) -> &'static str {
         x if x == ReplyStatus::TowardForce as u32 => {
             "refused: the move pushes deeper along the tip force above the warn limit"
         }
-        x if x == ReplyStatus::DrivesRefused as u32 => "refused by the drives",
+        x if x == ReplyStatus::DrivesRefused as u32 => "refused: the drives are not enabled",
+        x if x == ReplyStatus::LimitsRefused as u32 => {
+            "refused: limits invalid or above their configured ceiling"
+        }
         reply_code::UNKNOWN_COMMAND => "unknown command",
         reply_code::BUSY => "refused: the daemon's command queue is full",
         _ => "refused",

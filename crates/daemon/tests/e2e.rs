@@ -69,6 +69,7 @@ fn command(client: &Client, kind: u32) -> sar_daemon::wire::ReplyMsg {
                 reserved: 0,
                 id: 7,
                 tip_m: [0.0; 3],
+                limits_n: [0.0; 6],
             },
             Duration::from_secs(5),
         )

@@ -22,7 +22,7 @@ fn an_encoder_jump_is_a_fault_and_stops_the_drives() {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         Operator::new(),

@@ -71,7 +71,7 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         operator.clone(),
@@ -165,7 +165,7 @@ fn the_drives_are_enabled_only_after_an_accepted_reset() {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         operator.clone(),

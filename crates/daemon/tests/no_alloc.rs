@@ -61,7 +61,7 @@ fn a_cycle_allocates_nothing() {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         operator.clone(),
@@ -96,9 +96,10 @@ fn a_cycle_allocates_nothing() {
     let mut seen_stop = false;
     for i in 0..17_000u64 {
         if i % 1000 == 10 {
-            let request = match (i / 1000) % 3 {
+            let request = match (i / 1000) % 4 {
                 0 => Request::Reset,
                 1 => Request::Tare,
+                2 => Request::SetLimits(c.decision().limits),
                 _ => Request::MoveTip {
                     tip_m: Vec3::new(0.6, 0.2, 0.001),
                 },
@@ -154,7 +155,7 @@ fn publishing_allocates_only_iceoryx2s_one_per_sample() {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         operator,
@@ -172,6 +173,8 @@ fn publishing_allocates_only_iceoryx2s_one_per_sample() {
             let out = *c.step(cycle, || Some(clock.now_ns()));
             shm.publish(&Published {
                 input: c.input(),
+                loop_input: c.loop_input(),
+                decision: c.decision(),
                 output: &out,
                 stats: &stats,
                 drive_state: c.drive_state(),

@@ -85,7 +85,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
     let mut c = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         operator.clone(),
@@ -131,6 +131,8 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         let out = *c.step(cycle, || Some(clock.now_ns()));
         p.publish(&Published {
             input: c.input(),
+            loop_input: c.loop_input(),
+            decision: c.decision(),
             output: &out,
             stats: &stats,
             drive_state: c.drive_state(),
@@ -169,16 +171,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         .map(|e| e.unwrap().path())
         .collect();
     assert_eq!(files.len(), 1, "{files:?}");
-    let r = replay_file(
-        &files[0],
-        &ReplayOptions {
-            config: cfg.estimator,
-            output: None,
-            compare: None,
-            keep_series: false,
-        },
-    )
-    .unwrap();
+    let r = replay_file(&files[0], &ReplayOptions::from_config(&cfg)).unwrap();
     assert_eq!(r.mode, Mode::CycleInput);
     assert_eq!(r.cycles, 4500);
     assert_eq!(r.first_difference, None);

@@ -100,7 +100,7 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
     let controller = Controller::new(
         &cfg.estimator,
         bias,
-        cfg.axes.travel_m,
+        cfg.step_config(),
         sensor,
         drives,
         Operator::new(),
@@ -329,7 +329,7 @@ impl CanRig {
         let controller = Controller::new(
             &cfg.estimator,
             bias,
-            cfg.axes.travel_m,
+            cfg.step_config(),
             Switchable {
                 inner: sensor,
                 fault: Rc::clone(&fault),

@@ -91,10 +91,35 @@ fn monitor_json_limits_status_and_commands_with_a_daemon() {
     assert_eq!(v["stop_total_n"], 15.0);
     assert_eq!(v["warn_axial_n"], 8.0);
 
+    // Lowering a limit is accepted and shows at once; raising one above its
+    // ceiling (by default the configured limit) is refused in one line and
+    // changes nothing.
+    let out = sarctl(
+        &prefix,
+        &["limits", "--stop-axial", "11.5", "--format", "json"],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["stop_axial_n"], 11.5);
+    assert_eq!(v["warn_axial_n"], 8.0);
+    let out = sarctl(&prefix, &["limits", "--stop-axial", "30"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("ceiling"), "{err}");
+    let out = sarctl(&prefix, &["limits", "--format", "json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["stop_axial_n"], 11.5);
+
     let out = sarctl(&prefix, &["status", "--format", "json"]);
     assert!(out.status.success());
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["tip_m"][0], 0.6);
+    assert_eq!(v["limits_n"][3], 11.5);
 
     // A small move along +Z (the force is along +X): accepted in Ok.
     let out = sarctl(

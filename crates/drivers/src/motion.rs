@@ -16,7 +16,7 @@
 
 mod axes;
 
-pub(crate) use axes::{AxisPlan, AxisState, Limits};
+pub use axes::{AxisPlan, AxisState, Limits};
 pub use sar_kinematics::slide::{SLIDE_THRESHOLD_M, SlideDirection, SlideSign, SlideTracker};
 
 use sar_kinematics::ActiveJoints;

@@ -26,7 +26,7 @@
 
 use crate::filter::{FilterConfig, Filtered, TipFilter};
 use crate::guard::{
-    Axis, Guard, GuardConfig, GuardInput, GuardState, Reason, TipInput, Transition,
+    Axis, ForceLimits, Guard, GuardConfig, GuardInput, GuardState, Reason, TipInput, Transition,
 };
 use crate::tip_force::{TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator};
 use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3};
@@ -106,6 +106,11 @@ pub enum Command {
     /// detached). Same rules as [`Command::Tare`], and the values must be
     /// finite.
     SetBias(Bias),
+    /// Replaces the guard's six force limits, in any state: accepted when
+    /// they pass [`GuardConfig::with_force_limits`] (warn < stop, above the
+    /// hysteresis, each stop limit within the ceiling fixed at start). They
+    /// act from the next cycle.
+    SetLimits(ForceLimits),
 }
 
 /// What one cycle consumes: everything that the cycle decides from.
@@ -157,6 +162,14 @@ pub enum CommandAccepted {
         /// The bias now.
         bias: Bias,
     },
+    /// The force limits were replaced ([`Command::SetLimits`]); they apply
+    /// from the next cycle.
+    LimitsSet {
+        /// The limits before.
+        previous: ForceLimits,
+        /// The limits now.
+        limits: ForceLimits,
+    },
 }
 
 /// Why a command was refused.
@@ -197,6 +210,28 @@ pub enum CommandRefused {
         /// The offending value.
         value: f64,
     },
+    /// Force limits that are not valid, or above their ceiling.
+    #[error("limits refused: {field} = {value}: {why}")]
+    Limits {
+        /// The offending limit.
+        field: &'static str,
+        /// Its value, N.
+        value: f64,
+        /// What is wrong.
+        why: &'static str,
+    },
+}
+
+/// Where the commanded trajectory says the axes are at the joint sample's
+/// stamp, and how far they may be from it: the following-error check
+/// ([`Estimator::cycle_following`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowingReference {
+    /// The commanded joints at the joint sample's stamp, m.
+    pub joints: ActiveJoints,
+    /// The accepted |measured - commanded| per axis, m (finite, > 0; anything
+    /// else faults).
+    pub tolerance_m: f64,
 }
 
 /// A command of this cycle and what became of it.
@@ -438,6 +473,26 @@ pub struct Estimator {
     last_joints: Option<(ActiveJoints, u64)>,
 }
 
+/// The following-error verdict of finite joints `q` against `r`.
+fn following_fault(q: &ActiveJoints, r: &FollowingReference) -> Option<Reason> {
+    let errors = [
+        (1, (q.q1_m - r.joints.q1_m).abs()),
+        (2, (q.q2_m - r.joints.q2_m).abs()),
+        (3, (q.q3_m - r.joints.q3_m).abs()),
+    ];
+    let tolerance_m = r.tolerance_m;
+    let tolerance_ok = tolerance_m.is_finite() && tolerance_m > 0.0;
+    errors
+        .into_iter()
+        // NaN compares false: a non-finite reference faults.
+        .find(|(_, error_m)| !(tolerance_ok && *error_m <= tolerance_m))
+        .map(|(axis, error_m)| Reason::FollowingError {
+            axis,
+            error_m,
+            tolerance_m,
+        })
+}
+
 /// The largest |dq| over the three axes, with its axis (1, 2, 3).
 fn largest_move(a: &ActiveJoints, b: &ActiveJoints) -> (u8, f64) {
     let moves = [
@@ -513,6 +568,18 @@ impl Estimator {
     /// [`Estimator::last`] until the next cycle (written in place: no copy of
     /// the large output on the loop's path).
     pub fn cycle(&mut self, input: &CycleInput) -> &CycleOutput {
+        self.cycle_following(input, None)
+    }
+
+    /// [`Estimator::cycle`] with the following-error check: with a
+    /// `reference`, a valid joint sample farther than its tolerance from it
+    /// on any axis (or a reference that is not finite) is a Fault
+    /// ([`Reason::FollowingError`]).
+    pub fn cycle_following(
+        &mut self,
+        input: &CycleInput,
+        reference: Option<&FollowingReference>,
+    ) -> &CycleOutput {
         // The clock: no reading, or one that does not advance, trusts nothing.
         let (now_ns, clock_fault) = match input.now_ns {
             None => (None, Some(Reason::ClockFailed)),
@@ -586,6 +653,9 @@ impl Estimator {
                 }
             }
             self.last_joints = Some((*q, joints.stamp_ns));
+            if let Some(r) = reference {
+                joint_fault = joint_fault.or_else(|| following_fault(q, r));
+            }
         }
 
         let (sensor_age_ns, joints_age_ns, sensor_valid, joints_valid) = match now_ns {
@@ -715,6 +785,19 @@ impl Estimator {
         if let Command::SetBias(bias) = command {
             bias.check()
                 .map_err(|value| CommandRefused::BiasNonFinite { value })?;
+        }
+        if let Command::SetLimits(limits) = command {
+            return match self.guard.set_force_limits(&limits) {
+                Ok(previous) => Ok(CommandAccepted::LimitsSet { previous, limits }),
+                Err(SettingError::Invalid { field, value, why }) => {
+                    Err(CommandRefused::Limits { field, value, why })
+                }
+                Err(_) => Err(CommandRefused::Limits {
+                    field: "limits",
+                    value: f64::NAN,
+                    why: "refused",
+                }),
+            };
         }
         if command == Command::Reset {
             return match self.guard.reset(input.cycle) {

@@ -87,6 +87,59 @@ pub struct GuardLimits {
     pub std_margin: f64,
 }
 
+/// The six force limits alone: what an operator may change at run time
+/// ([`crate::cycle::Command::SetLimits`]), within the ceilings fixed at start
+/// ([`GuardConfig::with_ceiling`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForceLimits {
+    /// Warn limit on |F_tip|, N.
+    pub warn_total_n: f64,
+    /// Stop limit on |F_tip|, N.
+    pub stop_total_n: f64,
+    /// Warn limit on the axial part, N.
+    pub warn_axial_n: f64,
+    /// Stop limit on the axial part, N.
+    pub stop_axial_n: f64,
+    /// Warn limit on the lateral part, N.
+    pub warn_lateral_n: f64,
+    /// Stop limit on the lateral part, N.
+    pub stop_lateral_n: f64,
+}
+
+impl ForceLimits {
+    /// In the order (warn, stop) total, axial, lateral (the wire's order).
+    pub fn to_array(&self) -> [f64; 6] {
+        [
+            self.warn_total_n,
+            self.stop_total_n,
+            self.warn_axial_n,
+            self.stop_axial_n,
+            self.warn_lateral_n,
+            self.stop_lateral_n,
+        ]
+    }
+
+    /// From (warn, stop) total, axial, lateral.
+    pub fn from_array(v: [f64; 6]) -> Self {
+        let [
+            warn_total_n,
+            stop_total_n,
+            warn_axial_n,
+            stop_axial_n,
+            warn_lateral_n,
+            stop_lateral_n,
+        ] = v;
+        Self {
+            warn_total_n,
+            stop_total_n,
+            warn_axial_n,
+            stop_axial_n,
+            warn_lateral_n,
+            stop_lateral_n,
+        }
+    }
+}
+
 /// Largest accepted `debounce_samples` (0.2 s at 500 Hz): a larger debounce
 /// would in effect disable Stop.
 pub const MAX_DEBOUNCE_SAMPLES: u32 = 100;
@@ -104,6 +157,10 @@ pub struct GuardConfig {
     stop_n: [f64; 3],
     /// Warn limits minus the hysteresis, in [`ForcePart::ALL`] order, N.
     clear_n: [f64; 3],
+    /// The largest stop limit a run-time change may set, in
+    /// [`ForcePart::ALL`] order, N (default: the configured stop limits, so
+    /// that limits can only be lowered).
+    ceiling_n: [f64; 3],
 }
 
 fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
@@ -192,12 +249,80 @@ impl GuardConfig {
             warn_n,
             stop_n,
             clear_n,
+            ceiling_n: stop_n,
         })
     }
 
     /// The checked limits.
     pub fn limits(&self) -> GuardLimits {
         self.limits
+    }
+
+    /// The six force limits in use.
+    pub fn force_limits(&self) -> ForceLimits {
+        let l = &self.limits;
+        ForceLimits {
+            warn_total_n: l.warn_total_n,
+            stop_total_n: l.stop_total_n,
+            warn_axial_n: l.warn_axial_n,
+            stop_axial_n: l.stop_axial_n,
+            warn_lateral_n: l.warn_lateral_n,
+            stop_lateral_n: l.stop_lateral_n,
+        }
+    }
+
+    /// The ceilings of the stop limits (total, axial, lateral), N.
+    pub fn ceiling_n(&self) -> [f64; 3] {
+        self.ceiling_n
+    }
+
+    /// Sets the ceilings of the stop limits that a run-time change may set
+    /// (total, axial, lateral), N: each finite and at least the configured
+    /// stop limit.
+    pub fn with_ceiling(mut self, ceiling_n: [f64; 3]) -> Result<Self, SettingError> {
+        let fields = ["max_stop_total_n", "max_stop_axial_n", "max_stop_lateral_n"];
+        for ((field, c), stop) in fields.into_iter().zip(ceiling_n).zip(self.stop_n) {
+            if !(c.is_finite() && c >= stop) {
+                return Err(invalid(
+                    field,
+                    c,
+                    "must be finite and >= the configured stop limit",
+                ));
+            }
+        }
+        self.ceiling_n = ceiling_n;
+        Ok(self)
+    }
+
+    /// This configuration with other force limits, checked as
+    /// [`GuardConfig::new`] checks them and each stop limit at most its
+    /// ceiling; the other settings (hysteresis, debounce, ages, margin) and
+    /// the ceilings are kept.
+    pub fn with_force_limits(&self, force: &ForceLimits) -> Result<Self, SettingError> {
+        let limits = GuardLimits {
+            warn_total_n: force.warn_total_n,
+            stop_total_n: force.stop_total_n,
+            warn_axial_n: force.warn_axial_n,
+            stop_axial_n: force.stop_axial_n,
+            warn_lateral_n: force.warn_lateral_n,
+            stop_lateral_n: force.stop_lateral_n,
+            ..self.limits
+        };
+        let next = Self::new(limits)?;
+        let fields = ["stop_total_n", "stop_axial_n", "stop_lateral_n"];
+        for ((field, stop), ceiling) in fields.into_iter().zip(next.stop_n).zip(self.ceiling_n) {
+            if stop > ceiling {
+                return Err(invalid(
+                    field,
+                    stop,
+                    "must be at most its configured ceiling",
+                ));
+            }
+        }
+        Ok(Self {
+            ceiling_n: self.ceiling_n,
+            ..next
+        })
     }
 
     /// Worst-case time from the first new sample of a force continuously at
@@ -428,6 +553,17 @@ pub enum Reason {
         /// The configured multiple.
         max_sigma: f64,
     },
+    /// A joint left the commanded trajectory by more than the tolerance (a
+    /// jumping encoder, a slipping axis, a collision), or the reference it is
+    /// compared with is not finite.
+    FollowingError {
+        /// 1, 2 or 3 (q1, q2, q3).
+        axis: u8,
+        /// |measured - commanded|, m (NaN when a value is not finite).
+        error_m: f64,
+        /// The accepted error, m.
+        tolerance_m: f64,
+    },
     /// A reset named another cycle than the one just stepped (it must be
     /// judged on the input of the current cycle).
     ResetNotCurrent {
@@ -535,6 +671,16 @@ impl fmt::Display for Reason {
             } => write!(
                 f,
                 "the sensor counter went from {previous} to {got} (max step {max_gap})"
+            ),
+            Self::FollowingError {
+                axis,
+                error_m,
+                tolerance_m,
+            } => write!(
+                f,
+                "q{axis} is {:.3} mm off the commanded trajectory (tolerance {:.3} mm)",
+                error_m * 1e3,
+                tolerance_m * 1e3
             ),
             Self::SensorStatus { status } => {
                 write!(f, "the force sensor reports status {status:#x}")
@@ -727,6 +873,17 @@ impl Guard {
     /// The configuration.
     pub fn config(&self) -> &GuardConfig {
         &self.config
+    }
+
+    /// Replaces the six force limits (checked by
+    /// [`GuardConfig::with_force_limits`]: within the ceilings); returns the
+    /// previous ones. The state, its reason and the debounce counts are
+    /// kept: the new limits act from the next step.
+    pub fn set_force_limits(&mut self, limits: &ForceLimits) -> Result<ForceLimits, SettingError> {
+        let next = self.config.with_force_limits(limits)?;
+        let previous = self.config.force_limits();
+        self.config = next;
+        Ok(previous)
     }
 
     /// What in the most recent input would make [`Guard::reset`] refuse, if

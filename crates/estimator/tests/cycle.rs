@@ -1099,3 +1099,178 @@ fn the_torque_check_and_the_tare_hold_with_a_rod_offset_and_a_turned_sensor() {
     assert!(estimate(&out).force_n.norm() < 1e-9);
     assert!(out.torque.unwrap().residual_nm.norm() < 1e-12);
 }
+
+/// Following error: joints within the tolerance of the commanded reference
+/// are fine; one axis beyond it is a Fault with its own reason, axis and
+/// error; a reference that is not finite, or a tolerance that is not > 0,
+/// faults too; a reset is refused while the error lasts.
+#[test]
+fn leaving_the_commanded_trajectory_is_a_fault() {
+    use sar_estimator::cycle::FollowingReference;
+    let reference = |q: [f64; 3], tolerance_m: f64| FollowingReference {
+        joints: ActiveJoints {
+            q1_m: q[0],
+            q2_m: q[1],
+            q3_m: q[2],
+        },
+        tolerance_m,
+    };
+    let mut rig = Rig::armed();
+    let mut commanded = NOMINAL_Q;
+    commanded[1] += 0.000_9;
+    let input = rig.at_rest();
+    let out = *rig
+        .estimator
+        .cycle_following(&input, Some(&reference(commanded, 0.001)));
+    assert_eq!(out.guard_state, GuardState::Ok);
+    // 1.1 mm off on q2 with a 1 mm tolerance.
+    commanded[1] += 0.000_2;
+    let input = rig.at_rest();
+    let out = *rig
+        .estimator
+        .cycle_following(&input, Some(&reference(commanded, 0.001)));
+    assert_eq!(out.guard_state, GuardState::Fault);
+    match out.guard_reason {
+        Reason::FollowingError {
+            axis,
+            error_m,
+            tolerance_m,
+        } => {
+            assert_eq!(axis, 2);
+            assert!((error_m - 0.0011).abs() < 1e-12, "{error_m}");
+            assert_eq!(tolerance_m, 0.001);
+        }
+        other => panic!("{other:?}"),
+    }
+    // The reset is judged with the same reference: refused while it lasts.
+    let mut input = rig.at_rest();
+    input.command = Some(Command::Reset);
+    let out = *rig
+        .estimator
+        .cycle_following(&input, Some(&reference(commanded, 0.001)));
+    assert!(matches!(
+        out.command.unwrap().result,
+        Err(CommandRefused::Reset {
+            reason: Reason::FollowingError { axis: 2, .. }
+        })
+    ));
+    // Without the error it is accepted.
+    let mut input = rig.at_rest();
+    input.command = Some(Command::Reset);
+    let out = *rig
+        .estimator
+        .cycle_following(&input, Some(&reference(NOMINAL_Q, 0.001)));
+    assert_eq!(out.guard_state, GuardState::Ok);
+    // A NaN reference and a zero tolerance fault.
+    for (q, tol) in [
+        ([f64::NAN, NOMINAL_Q[1], NOMINAL_Q[2]], 0.001),
+        (NOMINAL_Q, 0.0),
+        (NOMINAL_Q, f64::NAN),
+    ] {
+        let mut rig = Rig::armed();
+        let input = rig.at_rest();
+        let out = *rig
+            .estimator
+            .cycle_following(&input, Some(&reference(q, tol)));
+        assert!(
+            matches!(out.guard_reason, Reason::FollowingError { axis: 1, .. }),
+            "{q:?} {tol}: {:?}",
+            out.guard_reason
+        );
+    }
+}
+
+/// Limit changes: lowered limits act from the next cycle (a force between the
+/// old and new warn limits now warns); a stop limit above its ceiling (by
+/// default the configured stop limit), warn >= stop, or NaN are refused and
+/// change nothing; a raised ceiling lets the limits go up to it.
+#[test]
+fn force_limits_change_at_run_time_within_their_ceiling() {
+    use sar_estimator::guard::ForceLimits;
+    let mut rig = Rig::armed();
+    let configured = rig.estimator.guard_config().force_limits();
+    let u = Vector3::x();
+    // 6 N along the rod: below the 8 N axial warn limit.
+    for _ in 0..5 {
+        assert_eq!(rig.push(NOMINAL_Q, &(u * 6.0)).guard_state, GuardState::Ok);
+    }
+    let lowered = ForceLimits {
+        warn_axial_n: 4.0,
+        stop_axial_n: 9.0,
+        ..configured
+    };
+    let out = rig.push_command(NOMINAL_Q, &(u * 6.0), Some(Command::SetLimits(lowered)));
+    assert_eq!(
+        out.command.unwrap().result,
+        Ok(CommandAccepted::LimitsSet {
+            previous: configured,
+            limits: lowered
+        })
+    );
+    assert_eq!(rig.estimator.guard_config().force_limits(), lowered);
+    let mut warned = false;
+    for _ in 0..5 {
+        warned |= rig.push(NOMINAL_Q, &(u * 6.0)).guard_state == GuardState::Warn;
+    }
+    assert!(warned, "6 N did not warn under a 4 N warn limit");
+    // Refused: above the ceiling, warn >= stop, NaN. Nothing changes.
+    for bad in [
+        ForceLimits {
+            stop_axial_n: configured.stop_axial_n + 0.1,
+            ..lowered
+        },
+        ForceLimits {
+            warn_total_n: 9.0,
+            stop_total_n: 9.0,
+            ..lowered
+        },
+        ForceLimits {
+            warn_lateral_n: f64::NAN,
+            ..lowered
+        },
+    ] {
+        let out = rig.push_command(NOMINAL_Q, &Vector3::zeros(), Some(Command::SetLimits(bad)));
+        assert!(
+            matches!(
+                out.command.unwrap().result,
+                Err(CommandRefused::Limits { .. })
+            ),
+            "{bad:?}"
+        );
+        assert_eq!(rig.estimator.guard_config().force_limits(), lowered);
+    }
+    // A configuration with raised ceilings accepts up to them.
+    let mut config = config_with_speed(1e3);
+    config.guard = config.guard.with_ceiling([30.0, 20.0, 15.0]).unwrap();
+    assert!(config.guard.with_ceiling([1.0, 20.0, 15.0]).is_err());
+    let mut rig = Rig::armed_with(Rig::with_config(&config));
+    let raised = ForceLimits {
+        stop_axial_n: 20.0,
+        ..configured
+    };
+    let out = rig.push_command(
+        NOMINAL_Q,
+        &Vector3::zeros(),
+        Some(Command::SetLimits(raised)),
+    );
+    assert!(matches!(
+        out.command.unwrap().result,
+        Ok(CommandAccepted::LimitsSet { .. })
+    ));
+    let too_high = ForceLimits {
+        stop_axial_n: 20.5,
+        ..configured
+    };
+    let out = rig.push_command(
+        NOMINAL_Q,
+        &Vector3::zeros(),
+        Some(Command::SetLimits(too_high)),
+    );
+    assert!(matches!(
+        out.command.unwrap().result,
+        Err(CommandRefused::Limits {
+            field: "stop_axial_n",
+            ..
+        })
+    ));
+}

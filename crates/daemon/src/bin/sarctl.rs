@@ -62,8 +62,28 @@ enum Cmd {
         #[arg(allow_hyphen_values = true)]
         z: f64,
     },
-    /// The guard's force limits.
-    Limits,
+    /// The guard's force limits; with any `--warn-*`/`--stop-*` option, sets
+    /// them (the others kept; within the ceilings of the configuration).
+    Limits {
+        /// Warn limit on |F_tip|, N.
+        #[arg(long)]
+        warn_total: Option<f64>,
+        /// Stop limit on |F_tip|, N.
+        #[arg(long)]
+        stop_total: Option<f64>,
+        /// Warn limit on the axial part, N.
+        #[arg(long)]
+        warn_axial: Option<f64>,
+        /// Stop limit on the axial part, N.
+        #[arg(long)]
+        stop_axial: Option<f64>,
+        /// Warn limit on the lateral part, N.
+        #[arg(long)]
+        warn_lateral: Option<f64>,
+        /// Stop limit on the lateral part, N.
+        #[arg(long)]
+        stop_lateral: Option<f64>,
+    },
     /// Run the estimator over a recording's inputs, write and compare the outputs.
     Replay {
         /// The recording.
@@ -242,17 +262,19 @@ fn run(args: &Args) -> Result<(), String> {
         sar_daemon::config::load(path).map_err(|e| e.to_string())?;
     }
     let client = Client::new(&args.prefix)?;
-    let command = |kind: u32, tip_m: [f64; 3]| -> Result<ReplyMsg, String> {
+    let command_with = |kind: u32, tip_m: [f64; 3], limits_n: [f64; 6]| {
         client.command(
             CommandMsg {
                 kind,
                 reserved: 0,
                 id: u64::from(std::process::id()),
                 tip_m,
+                limits_n,
             },
             Duration::from_secs(2),
         )
     };
+    let command = |kind: u32, tip_m: [f64; 3]| command_with(kind, tip_m, [0.0; 6]);
     let report = |what: &str, r: &ReplyMsg| -> Result<(), String> {
         let accepted = r.status == 0 || r.status == 1;
         if args.format == Format::Json {
@@ -353,8 +375,36 @@ fn run(args: &Args) -> Result<(), String> {
         Cmd::MoveTip { x, y, z } => {
             report("move-tip", &command(command_kind::MOVE_TIP, [x, y, z])?)
         }
-        Cmd::Limits => {
-            let r = command(command_kind::LIMITS, [0.0; 3])?;
+        Cmd::Limits {
+            warn_total,
+            stop_total,
+            warn_axial,
+            stop_axial,
+            warn_lateral,
+            stop_lateral,
+        } => {
+            let mut r = command(command_kind::LIMITS, [0.0; 3])?;
+            let wanted = [
+                warn_total,
+                stop_total,
+                warn_axial,
+                stop_axial,
+                warn_lateral,
+                stop_lateral,
+            ];
+            if wanted.iter().any(Option::is_some) {
+                let mut limits_n = r.limits_n;
+                for (slot, value) in limits_n.iter_mut().zip(wanted) {
+                    if let Some(v) = value {
+                        *slot = v;
+                    }
+                }
+                r = command_with(command_kind::SET_LIMITS, [0.0; 3], limits_n)?;
+                if r.status != 0 {
+                    return Err(format!("limits: {}", status_name(r.status)));
+                }
+                r = command(command_kind::LIMITS, [0.0; 3])?;
+            }
             let l = r.limits_n;
             if args.format == Format::Json {
                 println!(

@@ -258,7 +258,7 @@ impl Run<'_> {
         let mut controller = Controller::new(
             &cfg.estimator,
             bias,
-            cfg.axes.travel_m,
+            cfg.step_config(),
             sensor,
             drives,
             self.operator,

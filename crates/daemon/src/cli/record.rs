@@ -21,6 +21,7 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
             reserved: 0,
             id: u64::from(std::process::id()),
             tip_m: [0.0; 3],
+            limits_n: [0.0; 6],
         },
         Duration::from_secs(2),
     )?;

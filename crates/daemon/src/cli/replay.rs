@@ -58,10 +58,10 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
 pub fn run(a: &Args<'_>) -> Result<(), String> {
     let cfg = crate::config::load(a.config).map_err(|e| e.to_string())?;
     let options = ReplayOptions {
-        config: cfg.estimator,
         output: a.output.map(Path::to_path_buf),
         compare: a.compare.map(str::to_owned),
         keep_series: a.plot.is_some(),
+        ..ReplayOptions::from_config(&cfg)
     };
     let r = replay_file(a.input, &options).map_err(|e| format!("{}: {e}", a.input.display()))?;
     if let Some(plot) = a.plot {

@@ -5,25 +5,23 @@
 //! - [`outputs`]: `CycleOutput` (+ the cycle's input) -> `/sar/estimate/tip_wrench`
 //!   (every cycle with a number, observable or not), `.../tip_wrench_filtered`,
 //!   `.../passive_joints`, `/sar/estimate/state`, `/sar/guard/events`.
-//! - [`cycle_input_msg`] and [`estimator_input`]: the estimator's
-//!   `CycleInput` to `/sar/cycle/input` and back, losslessly for every field
-//!   the step reads.
+//! - [`cycle_input_msg`] and [`loop_input`]: the loop step's `LoopInput`
+//!   (and its decision: reference, drive action, reply, limits) to
+//!   `/sar/cycle/input` and back, losslessly for every field the step reads.
 //!
 //! Every message of a cycle is stamped with the cycle's `now` ([`cycle_stamp_ns`]).
 //! Nothing here allocates (the recorder's push side calls it every cycle).
 
 use super::msgs::{
     ActiveJointState, ClockStatusCode, CommandKindCode, CycleInput as CycleInputMsg,
-    DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing, PassiveJointState,
-    ReasonText, TipOutcomeCode, WrenchStamped, flags,
+    DriveActionCode, DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
+    PassiveJointState, REPLY_NONE, ReasonText, TipOutcomeCode, WrenchStamped, flags,
 };
-use crate::control::recorded_reason_code;
+use crate::step::{DriveAction, LoopInput, LoopOutput, Release, Request, recorded_reason_code};
 use sar_drivers::DriveState;
 use sar_estimator::Vec3;
-use sar_estimator::cycle::{
-    Bias, Command, CycleInput, CycleOutput, JointSample, SensorSample, TipOutcome,
-};
-use sar_estimator::guard::GuardState;
+use sar_estimator::cycle::{Bias, CycleInput, CycleOutput, JointSample, SensorSample, TipOutcome};
+use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_kinematics::ActiveJoints;
 use std::fmt::Write as _;
 
@@ -95,24 +93,20 @@ pub fn outputs(input: &CycleInput, output: &CycleOutput, mut emit: impl FnMut(Ou
 /// (when `joints_new`), then [`outputs`]. The recorder and the fixtures'
 /// generator both use it.
 pub fn cycle_record(
-    input: &CycleInput,
-    output: &CycleOutput,
-    drive_state: Option<DriveState>,
+    input: &LoopInput,
+    decision: &LoopOutput,
     joints_new: bool,
     mut emit: impl FnMut(Outgoing),
 ) {
-    emit(Outgoing::CycleInput(cycle_input_msg(
-        input,
-        drive_state,
-        None,
-    )));
+    emit(Outgoing::CycleInput(cycle_input_msg(input, decision)));
+    let output = &decision.estimate;
     if output.new_sample {
         emit(Outgoing::SensorWrench(sensor_wrench(&input.sensor)));
     }
     if joints_new {
         emit(Outgoing::Joints(joints_msg(&input.joints)));
     }
-    outputs(input, output, emit);
+    outputs(&input.cycle_input(), output, emit);
 }
 
 /// `/sar/estimate/state` of one cycle.
@@ -189,34 +183,35 @@ pub fn drive_state_fields(s: Option<DriveState>) -> (DriveStateCode, i8, u16) {
     }
 }
 
-/// `/sar/cycle/input` of one cycle: the estimator's input, the drive state
-/// read in the cycle and the commanded targets (when known).
-pub fn cycle_input_msg(
-    input: &CycleInput,
-    drive_state: Option<DriveState>,
-    target_q_m: Option<[f64; 3]>,
-) -> CycleInputMsg {
-    let (drive_state, drive_fault_axis, drive_fault_code) = drive_state_fields(drive_state);
-    let (command_kind, command_values, command_arg) = match input.command {
-        None => (CommandKindCode::None, [0.0; 6], 0),
-        Some(Command::Reset) => (CommandKindCode::GuardReset, [0.0; 6], input.cycle),
-        Some(Command::Tare) => (CommandKindCode::Tare, [0.0; 6], 0),
-        Some(Command::SetBias(b)) => (
-            CommandKindCode::SetBias,
-            [
-                b.force_n.x,
-                b.force_n.y,
-                b.force_n.z,
-                b.torque_nm.x,
-                b.torque_nm.y,
-                b.torque_nm.z,
-            ],
-            0,
-        ),
-    };
-    let j = &input.joints.joints;
-    CycleInputMsg {
-        stamp_ns: cycle_stamp_ns(input),
+/// The drive state of its recorded fields (the inverse of
+/// [`drive_state_fields`]).
+pub fn drive_state_of(code: DriveStateCode, axis: i8, fault: u16) -> Option<DriveState> {
+    match code {
+        DriveStateCode::Unread => None,
+        DriveStateCode::Ready => Some(DriveState::Ready),
+        DriveStateCode::Enabled => Some(DriveState::Enabled),
+        DriveStateCode::QuickStop => Some(DriveState::QuickStop),
+        DriveStateCode::Fault => Some(DriveState::Fault {
+            axis: u8::try_from(axis).ok(),
+            code: fault,
+        }),
+    }
+}
+
+fn joints_arr(q: &ActiveJoints) -> [f64; 3] {
+    [q.q1_m, q.q2_m, q.q3_m]
+}
+
+fn joints_of(&[q1_m, q2_m, q3_m]: &[f64; 3]) -> ActiveJoints {
+    ActiveJoints { q1_m, q2_m, q3_m }
+}
+
+/// `/sar/cycle/input` of one cycle: the loop step's input and its decision
+/// (see `msg/CycleInput.msg`).
+pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMsg {
+    let (drive_state, drive_fault_axis, drive_fault_code) = drive_state_fields(input.drive_state);
+    let mut m = CycleInputMsg {
+        stamp_ns: cycle_stamp_ns(&input.cycle_input()),
         cycle: input.cycle,
         now_ns: input.now_ns.unwrap_or(0),
         clock_status: if input.now_ns.is_some() {
@@ -230,36 +225,67 @@ pub fn cycle_input_msg(
         sensor_status: input.sensor.status,
         sensor_stamp_ns: input.sensor.stamp_ns,
         sensor_valid: input.sensor.valid,
-        joints_q_m: [j.q1_m, j.q2_m, j.q3_m],
+        joints_q_m: joints_arr(&input.joints.joints),
         joints_stamp_ns: input.joints.stamp_ns,
         joints_valid: input.joints.valid,
         drive_state,
         drive_fault_axis,
         drive_fault_code,
-        target_q_m: target_q_m.unwrap_or([0.0; 3]),
-        target_valid: target_q_m.is_some(),
-        command_kind,
-        command_values,
-        command_arg,
+        target_q_m: decision.reference.as_ref().map_or([0.0; 3], joints_arr),
+        target_valid: decision.reference.is_some(),
+        limits_in_use_n: decision.limits.to_array(),
+        reply_status: REPLY_NONE,
+        ..CycleInputMsg::default()
+    };
+    match input.request {
+        None => {}
+        Some(Request::Reset) => {
+            m.command_kind = CommandKindCode::GuardReset;
+            m.command_arg = input.cycle;
+        }
+        Some(Request::Tare) => m.command_kind = CommandKindCode::Tare,
+        Some(Request::MoveTip { tip_m }) => {
+            m.command_kind = CommandKindCode::MoveTip;
+            m.move_tip_m = arr(&tip_m);
+        }
+        Some(Request::SetLimits(l)) => {
+            m.command_kind = CommandKindCode::SetLimits;
+            m.limits_n = l.to_array();
+        }
     }
+    (m.drive_action, m.setpoint_q_m) = match decision.action {
+        DriveAction::None => (DriveActionCode::None, [0.0; 3]),
+        DriveAction::QuickStop => (DriveActionCode::QuickStop, [0.0; 3]),
+        DriveAction::Release(Release::Enable) => (DriveActionCode::ReleaseEnable, [0.0; 3]),
+        DriveAction::Release(Release::DisableEnable) => {
+            (DriveActionCode::ReleaseDisableEnable, [0.0; 3])
+        }
+        DriveAction::Release(Release::FaultResetEnable) => {
+            (DriveActionCode::ReleaseFaultResetEnable, [0.0; 3])
+        }
+        DriveAction::Setpoint(q) => (DriveActionCode::Setpoint, joints_arr(&q)),
+    };
+    if let Some((status, reason)) = decision.reply {
+        m.reply_status = u8::try_from(status as u16).unwrap_or(REPLY_NONE);
+        m.reply_reason = reason;
+    }
+    m
 }
 
-/// The estimator's input recorded in a `/sar/cycle/input` message (the
-/// inverse of [`cycle_input_msg`] for every field the step reads). Commands
-/// that are not the estimator's (drive commands, moves) give `None`.
-pub fn estimator_input(m: &CycleInputMsg) -> CycleInput {
-    let [fx, fy, fz, tx, ty, tz] = m.command_values;
-    let command = match m.command_kind {
-        CommandKindCode::GuardReset => Some(Command::Reset),
-        CommandKindCode::Tare => Some(Command::Tare),
-        CommandKindCode::SetBias => Some(Command::SetBias(Bias {
-            force_n: Vec3::new(fx, fy, fz),
-            torque_nm: Vec3::new(tx, ty, tz),
-        })),
+/// The loop step's input recorded in a `/sar/cycle/input` message (the
+/// inverse of [`cycle_input_msg`] for every field the step reads). A command
+/// the step does not take (drive commands, a set bias) gives no request.
+pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
+    let request = match m.command_kind {
+        CommandKindCode::GuardReset => Some(Request::Reset),
+        CommandKindCode::Tare => Some(Request::Tare),
+        CommandKindCode::MoveTip => Some(Request::MoveTip {
+            tip_m: vec3(&m.move_tip_m),
+        }),
+        CommandKindCode::SetLimits => Some(Request::SetLimits(ForceLimits::from_array(m.limits_n))),
         _ => None,
     };
-    let [q1_m, q2_m, q3_m] = m.joints_q_m;
-    CycleInput {
+    LoopInput {
         cycle: m.cycle,
         now_ns: (m.clock_status != ClockStatusCode::ReadFailed).then_some(m.now_ns),
         sensor: SensorSample {
@@ -271,11 +297,12 @@ pub fn estimator_input(m: &CycleInputMsg) -> CycleInput {
             valid: m.sensor_valid,
         },
         joints: JointSample {
-            joints: ActiveJoints { q1_m, q2_m, q3_m },
+            joints: joints_of(&m.joints_q_m),
             stamp_ns: m.joints_stamp_ns,
             valid: m.joints_valid,
         },
-        command,
+        drive_state: drive_state_of(m.drive_state, m.drive_fault_axis, m.drive_fault_code),
+        request,
     }
 }
 

@@ -124,7 +124,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             let input = c.input;
             let joints_new = self.last_joints_stamp_ns != Some(input.joints.stamp_ns);
             self.last_joints_stamp_ns = Some(input.joints.stamp_ns);
-            convert::cycle_record(input, c.output, c.drive_state, joints_new, |m| {
+            convert::cycle_record(c.loop_input, c.decision, joints_new, |m| {
                 rec.push(m);
             });
             dropped += rec.dropped();

@@ -414,8 +414,33 @@ code_enum!(
         /// Set the sensor's bias (values: force x, y, z in N, then torque
         /// x, y, z in N m; sensor frame).
         SetBias = 9,
+        /// Move the tip (`move_tip_m`, base frame, m).
+        MoveTip = 10,
+        /// Set the force limits (`limits_n`).
+        SetLimits = 11,
     }
 );
+
+code_enum!(
+    /// What the step told the drives (`ACTION_*`).
+    DriveActionCode, "drive_action" {
+        /// Nothing.
+        None = 0,
+        /// Quick stop.
+        QuickStop = 1,
+        /// Release after a reset: enable.
+        ReleaseEnable = 2,
+        /// Release after a reset: disable, then enable.
+        ReleaseDisableEnable = 3,
+        /// Release after a reset: fault reset, then enable.
+        ReleaseFaultResetEnable = 4,
+        /// A set point (`setpoint_q_m`).
+        Setpoint = 5,
+    }
+);
+
+/// `CycleInput::reply_status` without a reply (`REPLY_NONE`).
+pub const REPLY_NONE: u8 = 255;
 
 /// The guard reason codes (`REASON_*` of `GuardEvent.msg`): the same numbers
 /// as `crate::control::reason_code` (the wire), so recordings, `sarctl` and
@@ -469,6 +494,8 @@ pub mod reason {
     pub const BELOW_WARN: u8 = 23;
     /// `Reason::Reset`.
     pub const RESET: u8 = 24;
+    /// `Reason::FollowingError`.
+    pub const FOLLOWING_ERROR: u8 = 25;
     /// A reason this table does not know yet.
     pub const OTHER: u8 = 255;
 }
@@ -690,6 +717,20 @@ pub struct CycleInput {
     pub command_values: [f64; 6],
     /// Its integer argument.
     pub command_arg: u64,
+    /// MOVE_TIP: the wanted tip, base frame, m.
+    pub move_tip_m: [f64; 3],
+    /// SET_LIMITS: warn, stop of total, axial, lateral, N.
+    pub limits_n: [f64; 6],
+    /// The step's decision: what the drives were told.
+    pub drive_action: DriveActionCode,
+    /// With `Setpoint`: q1..q3 one period ahead, m.
+    pub setpoint_q_m: [f64; 3],
+    /// The reply's status code, [`REPLY_NONE`] without a request.
+    pub reply_status: u8,
+    /// The guard's reason code behind a refusal.
+    pub reply_reason: u16,
+    /// The force limits in use after the cycle, N.
+    pub limits_in_use_n: [f64; 6],
 }
 
 impl RosMessage for CycleInput {
@@ -718,6 +759,13 @@ impl RosMessage for CycleInput {
         w.u8(self.command_kind.code());
         w.f64_array(&self.command_values);
         w.u64(self.command_arg);
+        w.f64_array(&self.move_tip_m);
+        w.f64_array(&self.limits_n);
+        w.u8(self.drive_action.code());
+        w.f64_array(&self.setpoint_q_m);
+        w.u8(self.reply_status);
+        w.u16(self.reply_reason);
+        w.f64_array(&self.limits_in_use_n);
         Ok(())
     }
     fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
@@ -745,6 +793,13 @@ impl RosMessage for CycleInput {
             command_kind: CommandKindCode::from_code(r.u8()?)?,
             command_values: r.f64_array()?,
             command_arg: r.u64()?,
+            move_tip_m: r.f64_array()?,
+            limits_n: r.f64_array()?,
+            drive_action: DriveActionCode::from_code(r.u8()?)?,
+            setpoint_q_m: r.f64_array()?,
+            reply_status: r.u8()?,
+            reply_reason: r.u16()?,
+            limits_in_use_n: r.f64_array()?,
         })
     }
 }

@@ -25,17 +25,21 @@ use super::msgs::{
     ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage, Topic,
 };
 use super::reader::{McapReader, ReadError};
+use crate::step::{LoopInput, LoopStep, StepConfig};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
-    Bias, Command, CommandAccepted, CycleInput, Estimator, EstimatorConfig, JointSample,
-    SensorSample, TipOutcome,
+    Bias, Command, CommandAccepted, CycleInput, CycleOutput, Estimator, EstimatorConfig,
+    JointSample, SensorSample, TipOutcome,
 };
 use sar_kinematics::ActiveJoints;
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
 
-/// The output topics compared and written.
-pub const OUTPUT_TOPICS: [Topic; 5] = [
+/// The output topics compared and written (`/sar/cycle/input` of a daemon
+/// recording is recomputed from its input and the step's decision, so that
+/// the reference, the drive action and the reply are compared too).
+pub const OUTPUT_TOPICS: [Topic; 6] = [
+    Topic::CycleInput,
     Topic::EstimatorState,
     Topic::TipWrench,
     Topic::TipWrenchFiltered,
@@ -51,14 +55,30 @@ pub const MAX_PENDING: usize = 4096;
 /// How to replay.
 #[derive(Debug, Clone)]
 pub struct ReplayOptions {
-    /// The step's configuration.
+    /// The estimator's configuration.
     pub config: EstimatorConfig,
+    /// The loop step's (daemon recordings).
+    pub step: StepConfig,
     /// Where to write the outputs (`None`: not written).
     pub output: Option<PathBuf>,
     /// The reference topic of the error figures.
     pub compare: Option<String>,
     /// Keep the tip force series (time, estimate, reference) for a plot.
     pub keep_series: bool,
+}
+
+impl ReplayOptions {
+    /// The options of a daemon configuration: nothing written, no
+    /// comparison, no series.
+    pub fn from_config(config: &crate::config::Config) -> Self {
+        Self {
+            config: config.estimator.clone(),
+            step: config.step_config(),
+            output: None,
+            compare: None,
+            keep_series: false,
+        }
+    }
 }
 
 /// How the recording was replayed.
@@ -206,7 +226,9 @@ impl Sink {
 }
 
 struct Replayer {
+    scratch: Vec<Outgoing>,
     estimator: Estimator,
+    step: LoopStep,
     sink: Sink,
     report: ReplayReport,
     /// Per output topic: the replayed messages (cycle, message, bytes) not
@@ -229,8 +251,37 @@ fn arr(v: &Vec3) -> [f64; 3] {
 }
 
 impl Replayer {
-    fn cycle(&mut self, input: &CycleInput) -> Result<(), ReplayError> {
+    /// One cycle of a daemon recording: the loop step.
+    fn loop_cycle(&mut self, input: &LoopInput) -> Result<(), ReplayError> {
+        let out = *self.step.step(input);
+        let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
+        self.emit(input.cycle, m)?;
+        self.emit_outputs(&input.cycle_input(), &out.estimate)
+    }
+
+    /// One cycle of an inputs-only recording: the estimator alone.
+    fn estimator_cycle(&mut self, input: &CycleInput) -> Result<(), ReplayError> {
         let out = *self.estimator.cycle(input);
+        self.emit_outputs(input, &out)
+    }
+
+    fn emit(&mut self, cycle: u64, m: Outgoing) -> Result<(), ReplayError> {
+        self.report.outputs += 1;
+        self.sink.write(&m)?;
+        if self.comparing && !self.lacking.contains(&m.topic()) {
+            let mut bytes = Vec::with_capacity(256);
+            if m.encode(&mut bytes).is_ok() {
+                self.replayed
+                    .entry(m.topic())
+                    .or_default()
+                    .push_back((cycle, m, bytes));
+            }
+        }
+        Ok(())
+    }
+
+    fn emit_outputs(&mut self, input: &CycleInput, out: &CycleOutput) -> Result<(), ReplayError> {
+        let out = *out;
         self.report.cycles += 1;
         self.last_cycle = input.cycle;
         let stamp_ns = convert::cycle_stamp_ns(input);
@@ -243,24 +294,17 @@ impl Replayer {
                 _ => self.left_out += 1,
             }
         }
-        let mut result = Ok(());
         let cycle = input.cycle;
-        convert::outputs(input, &out, |m| {
-            if result.is_err() {
-                return;
+        let mut msgs = std::mem::take(&mut self.scratch);
+        msgs.clear();
+        convert::outputs(input, &out, |m| msgs.push(m));
+        let mut result = Ok(());
+        for m in msgs.drain(..) {
+            if result.is_ok() {
+                result = self.emit(cycle, m);
             }
-            self.report.outputs += 1;
-            result = self.sink.write(&m);
-            if self.comparing && !self.lacking.contains(&m.topic()) {
-                let mut bytes = Vec::with_capacity(128);
-                if m.encode(&mut bytes).is_ok() {
-                    self.replayed
-                        .entry(m.topic())
-                        .or_default()
-                        .push_back((cycle, m, bytes));
-                }
-            }
-        });
+        }
+        self.scratch = msgs;
         result?;
         if self.comparing {
             self.match_pending();
@@ -452,6 +496,8 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
         .map(|m| (m.name.clone(), m.metadata.clone()));
     let estimator = Estimator::with_bias(&options.config, bias)
         .map_err(|e| ReplayError::Setting(e.to_string()))?;
+    let step = LoopStep::new(&options.config, bias, options.step)
+        .map_err(|e| ReplayError::Setting(e.to_string()))?;
     let writer = match &options.output {
         Some(path) => {
             let mut o = FileOptions::single(path);
@@ -461,7 +507,9 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
         None => None,
     };
     let mut r = Replayer {
+        scratch: Vec::with_capacity(8),
         estimator,
+        step,
         sink: Sink {
             writer,
             status: RecorderDrops::default(),
@@ -539,7 +587,10 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
                     joints = Vec::new();
                 }
                 let m = CycleInputMsg::decode(&msg.data).map_err(decode_err)?;
-                r.cycle(&convert::estimator_input(&m))?;
+                // The recorded message is compared with the one rebuilt from
+                // its input and the replayed decision.
+                r.recorded_output(Topic::CycleInput, msg.data);
+                r.loop_cycle(&convert::loop_input(&m))?;
             }
             Some(Topic::SensorWrench) if !saw_cycle_input => {
                 let w = super::msgs::WrenchStamped::decode(&msg.data).map_err(decode_err)?;
@@ -642,7 +693,7 @@ fn inputs_only(
             },
             command: reset_pending.then_some(Command::Reset),
         };
-        r.cycle(&input)?;
+        r.estimator_cycle(&input)?;
         if let Some(ev) = r.estimator.last().command
             && matches!(ev.result, Ok(CommandAccepted::Reset))
         {

@@ -21,7 +21,7 @@ struct Phase {
 /// A planned motion: phases of constant acceleration from `(x0_m, v0_mps)` at
 /// `start_ns`, then a hold at `end_m`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct AxisPlan {
+pub struct AxisPlan {
     start_ns: u64,
     x0_m: f64,
     v0_mps: f64,
@@ -31,7 +31,7 @@ pub(crate) struct AxisPlan {
 
 /// Position and velocity of an axis at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct AxisState {
+pub struct AxisState {
     /// m.
     pub x_m: f64,
     /// m/s.
@@ -40,8 +40,10 @@ pub(crate) struct AxisState {
 
 /// The limits of an axis (both finite and > 0, checked by the simulator).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Limits {
+pub struct Limits {
+    /// m/s.
     pub max_speed_mps: f64,
+    /// m/s^2.
     pub max_accel_mps2: f64,
 }
 

@@ -1,0 +1,349 @@
+//! The loop's pure step with the simulator: a planned move follows the
+//! time-optimal plan within the speed limit and arrives; an axis that stops
+//! following is a Fault of its own reason with the quick stop in the same
+//! cycle; limit changes within their ceilings; a move under way that pushes
+//! along a force above the warn limit is braked; and the recorded inputs of a
+//! run replay through a fresh step to the same decisions, bit for bit.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod common;
+use sar_daemon::control::{Controller, Envelope, Operator, ReplyStatus, Request};
+use sar_daemon::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
+use sar_daemon::{config, logq, sim};
+use sar_drivers::sim::{SimDrives, SimError};
+use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
+use sar_estimator::Vec3;
+use sar_estimator::guard::{ForceLimits, GuardState, Reason};
+use sar_kinematics::{ActiveJoints, inverse};
+
+/// Simulated drives that can be blocked: from `block_after` setpoints on,
+/// further setpoints are ignored (a collision, a slipping axis: the axes
+/// stop where they are while the loop's trajectory goes on).
+struct Blockable {
+    inner: SimDrives<SimClock>,
+    setpoints: u32,
+    block_after: Option<u32>,
+}
+
+impl AxisDrives for Blockable {
+    type Error = SimError;
+    fn positions(&mut self) -> Result<JointPositions, SimError> {
+        self.inner.positions()
+    }
+    fn state(&mut self) -> Result<DriveState, SimError> {
+        self.inner.state()
+    }
+    fn enable(&mut self) -> Result<(), SimError> {
+        self.inner.enable()
+    }
+    fn disable(&mut self) -> Result<(), SimError> {
+        self.inner.disable()
+    }
+    fn set_targets(&mut self, t: ActiveJoints) -> Result<(), SimError> {
+        self.setpoints += 1;
+        if self.block_after.is_some_and(|n| self.setpoints > n) {
+            return Ok(());
+        }
+        self.inner.set_targets(t)
+    }
+    fn quick_stop(&mut self) -> Result<(), SimError> {
+        self.inner.quick_stop()
+    }
+    fn fault_reset(&mut self) -> Result<(), SimError> {
+        self.inner.fault_reset()
+    }
+}
+
+struct Rig {
+    c: Controller<sar_drivers::sim::SimSensor<SimClock>, Blockable>,
+    clock: SimClock,
+    operator: Operator,
+    cycle: u64,
+    /// Every cycle's input and decision, for the replay check.
+    log: Vec<(LoopInput, LoopOutput)>,
+}
+
+impl Rig {
+    fn new(contact: Vec<sar_drivers::sim::ContactKey>, block_after: Option<u32>) -> Self {
+        let cfg = config::builtin().unwrap();
+        let mut scenario = sim::demo_scenario().unwrap();
+        scenario.spec.contact = contact;
+        let clock = SimClock::new(1_000_000_000);
+        let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+        let operator = Operator::new();
+        let (log, _t, _q) = logq::channel(false);
+        let drives = Blockable {
+            inner: drives,
+            setpoints: 0,
+            block_after,
+        };
+        let c = Controller::new(
+            &cfg.estimator,
+            bias,
+            cfg.step_config(),
+            sensor,
+            drives,
+            operator.clone(),
+            log,
+            true,
+        )
+        .unwrap();
+        let mut rig = Self {
+            c,
+            clock,
+            operator,
+            cycle: 0,
+            log: Vec::new(),
+        };
+        // The automatic reset, then the drives come up.
+        for _ in 0..20 {
+            rig.step();
+        }
+        assert_eq!(rig.c.drive_state(), Some(DriveState::Enabled));
+        assert_eq!(rig.c.output().guard_state, GuardState::Ok);
+        rig
+    }
+
+    fn step(&mut self) -> LoopOutput {
+        self.cycle += 1;
+        self.clock.advance_ns(1_000_000);
+        let clock = self.clock.clone();
+        self.c.step(self.cycle, || Some(clock.now_ns()));
+        let d = *self.c.decision();
+        self.log.push((*self.c.loop_input(), d));
+        d
+    }
+
+    fn request(&mut self, id: u64, request: Request) -> ReplyStatus {
+        self.operator
+            .requests
+            .push(Envelope { id, request })
+            .unwrap();
+        self.step();
+        let r = self.operator.replies.pop().unwrap();
+        assert_eq!(r.id, id);
+        r.status
+    }
+
+    fn joints(&self) -> [f64; 3] {
+        let q = self.c.loop_input().joints.joints;
+        [q.q1_m, q.q2_m, q.q3_m]
+    }
+}
+
+fn quiet() -> Vec<sar_drivers::sim::ContactKey> {
+    common::contact_pulse(0, 1, 2, 3, Vec3::zeros())
+}
+
+/// A move is planned by the loop: setpoints one period ahead, the axes within
+/// the configured speed (plus the simulator's tracking), within a fraction of
+/// the tolerance of the trajectory all along, and at the target in the end.
+#[test]
+fn a_planned_move_follows_its_trajectory_and_arrives() {
+    let cfg = config::builtin().unwrap();
+    let mut rig = Rig::new(quiet(), None);
+    let target_tip = Vec3::new(0.58, 0.21, 0.01);
+    let target = inverse(
+        &cfg.estimator.calibration,
+        &cfg.estimator.profile,
+        &target_tip,
+    )
+    .unwrap();
+    assert_eq!(
+        rig.request(1, Request::MoveTip { tip_m: target_tip }),
+        ReplyStatus::Accepted
+    );
+    let mut worst_error_m: f64 = 0.0;
+    let mut fastest_mps: f64 = 0.0;
+    let mut previous = rig.joints();
+    let mut setpoints = 0;
+    for _ in 0..4000 {
+        let d = rig.step();
+        assert_eq!(d.estimate.guard_state, GuardState::Ok, "{:?}", d.estimate);
+        if let DriveAction::Setpoint(_) = d.action {
+            setpoints += 1;
+        }
+        let q = rig.joints();
+        let r = d.reference.expect("a trajectory while released");
+        for (m, c) in q.iter().zip([r.q1_m, r.q2_m, r.q3_m]) {
+            worst_error_m = worst_error_m.max((m - c).abs());
+        }
+
+        for (a, b) in q.iter().zip(previous) {
+            fastest_mps = fastest_mps.max((a - b).abs() / 1e-3);
+        }
+        previous = q;
+    }
+    let end = rig.joints();
+    for (m, t) in end.iter().zip([target.q1_m, target.q2_m, target.q3_m]) {
+        assert!((m - t).abs() < 2e-6, "ended at {end:?}, target {target:?}");
+    }
+    // The simulator's drives position to rest at each setpoint (a profile
+    // position drive, not a cyclic synchronous one), so while cruising they
+    // trail the setpoint by their stopping distance v^2 / (2 a): 0.4 mm at
+    // 0.02 m/s and 0.5 m/s^2. Within that (plus the encoder's step), and
+    // under the tolerance.
+    let v = cfg.axes.max_speed_mps;
+    let a = sar_drivers::scenario::DEFAULT_MAX_ACCEL_MPS2;
+    let trail_m = v * v / (2.0 * a);
+    assert!(
+        worst_error_m < trail_m + 2e-5 && worst_error_m < cfg.axes.following_tolerance_m,
+        "worst following error {worst_error_m} m (trail {trail_m} m)"
+    );
+    // The speed limit of planned moves (0.02 m/s) with the encoder's
+    // quantisation over one period.
+    assert!(
+        fastest_mps < cfg.axes.max_speed_mps * 1.1,
+        "{fastest_mps} m/s"
+    );
+    assert!(setpoints > 100, "{setpoints} setpoints");
+    println!(
+        "planned move: worst following error {:.1} um, fastest {:.4} m/s, {setpoints} setpoints",
+        worst_error_m * 1e6,
+        fastest_mps
+    );
+}
+
+/// Axes that stop following (blocked after a few setpoints): a Fault with the
+/// following-error reason, the quick stop in the same cycle, moves refused
+/// until a reset.
+#[test]
+fn an_axis_that_stops_following_is_a_fault_with_its_own_reason() {
+    let mut rig = Rig::new(quiet(), Some(100));
+    assert_eq!(
+        rig.request(
+            1,
+            Request::MoveTip {
+                tip_m: Vec3::new(0.56, 0.22, 0.02),
+            }
+        ),
+        ReplyStatus::Accepted
+    );
+    let mut fault = None;
+    for _ in 0..3000 {
+        let d = rig.step();
+        if d.estimate.guard_state == GuardState::Fault {
+            fault = Some(d);
+            break;
+        }
+    }
+    let d = fault.expect("no fault");
+    assert!(
+        matches!(d.estimate.guard_reason, Reason::FollowingError { .. }),
+        "{:?}",
+        d.estimate.guard_reason
+    );
+    assert_eq!(d.action, DriveAction::QuickStop);
+    assert_eq!(rig.c.counts().stops_in_same_cycle, 1);
+    assert_eq!(
+        rig.request(
+            2,
+            Request::MoveTip {
+                tip_m: Vec3::new(0.6, 0.2, 0.0),
+            }
+        ),
+        ReplyStatus::Halted
+    );
+}
+
+/// Limits change within their ceilings; the published limits follow; a stop
+/// limit above its ceiling is refused and changes nothing.
+#[test]
+fn limits_change_within_their_ceilings() {
+    let mut rig = Rig::new(quiet(), None);
+    let configured = rig.c.decision().limits;
+    let lowered = ForceLimits {
+        warn_axial_n: 5.0,
+        stop_axial_n: 7.0,
+        ..configured
+    };
+    assert_eq!(
+        rig.request(1, Request::SetLimits(lowered)),
+        ReplyStatus::Accepted
+    );
+    assert_eq!(rig.c.decision().limits, lowered);
+    let above = ForceLimits {
+        stop_axial_n: configured.stop_axial_n + 1.0,
+        ..configured
+    };
+    assert_eq!(
+        rig.request(2, Request::SetLimits(above)),
+        ReplyStatus::LimitsRefused
+    );
+    assert_eq!(rig.c.decision().limits, lowered);
+}
+
+/// A push along the rod (the demo's contact, 9 N) reaches Warn while the tip
+/// is moving deeper along it: the move is braked, a further move along the
+/// force is refused, and a move back out is accepted. Then the run's recorded
+/// inputs replay through a fresh step to the same decisions, bit for bit.
+#[test]
+fn a_move_into_a_warning_force_is_braked_and_a_run_replays_bit_for_bit() {
+    let cfg = config::builtin().unwrap();
+    // 9 N along +x (the rod's direction at the start) from 1.02 s to 1.52 s.
+    let contact = common::contact_pulse(
+        1_020_000_000,
+        1_520_000_000,
+        60_000_000_000,
+        60_100_000_000,
+        Vec3::new(9.0, 0.0, 0.0),
+    );
+    let mut rig = Rig::new(contact, None);
+    // Deeper along +x by 4 cm: 2 s at 0.02 m/s, so Warn comes mid-move.
+    let deeper = Vec3::new(0.64, 0.2, 0.0);
+    assert_eq!(
+        rig.request(1, Request::MoveTip { tip_m: deeper }),
+        ReplyStatus::Accepted
+    );
+    let mut warned_at = None;
+    for _ in 0..3000 {
+        let d = rig.step();
+        if warned_at.is_none() && d.estimate.guard_state == GuardState::Warn {
+            warned_at = Some(d.estimate.cycle);
+        }
+        assert_ne!(d.estimate.guard_state, GuardState::Stop);
+    }
+    assert!(warned_at.is_some(), "no Warn");
+    let tip_now = rig.c.output().pose.unwrap().tip_m;
+    assert!(
+        tip_now.x < deeper.x - 0.005,
+        "the move was not braked: tip at {tip_now:?}"
+    );
+    // Still in Warn: further along the force is refused, back out accepted.
+    assert_eq!(rig.c.output().guard_state, GuardState::Warn);
+    assert_eq!(
+        rig.request(2, Request::MoveTip { tip_m: deeper }),
+        ReplyStatus::TowardForce
+    );
+    assert_eq!(
+        rig.request(
+            3,
+            Request::MoveTip {
+                tip_m: Vec3::new(0.59, 0.2, 0.0),
+            }
+        ),
+        ReplyStatus::Accepted
+    );
+    for _ in 0..200 {
+        rig.step();
+    }
+
+    // Replay: the same inputs through a fresh step.
+    let scenario = sim::demo_scenario().unwrap();
+    let bias = sar_estimator::cycle::Bias {
+        force_n: scenario.spec.sensor.bias_n,
+        torque_nm: scenario.spec.sensor.bias_nm,
+    };
+    let mut step = LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap();
+    assert!(rig.log.len() > 3000);
+    for (k, (input, recorded)) in rig.log.iter().enumerate() {
+        let again = step.step(input);
+        // Debug prints every f64 exactly (shortest round trip).
+        assert_eq!(
+            format!("{again:?}"),
+            format!("{recorded:?}"),
+            "cycle {k} differs"
+        );
+    }
+}
