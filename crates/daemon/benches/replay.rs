@@ -5,7 +5,9 @@
 //! `/sar/joints`; zstd chunks; made once and kept under the target's tmp
 //! dir), held in memory:
 //! - `read` (the baseline): every message read (chunks decompressed and
-//!   CRC-checked) and every `/sar/cycle/input` decoded;
+//!   CRC-checked) and every `/sar/cycle/input` decoded, through the
+//!   iterator (a copy of each message); `read_visit`: the same through
+//!   `McapReader::visit` (no copy), which replay uses;
 //! - `read_step`: that and the daemon's loop step (estimator, guard, drive
 //!   decision) per cycle: what `sarctl replay` does without an output file
 //!   and without comparing;
@@ -172,6 +174,30 @@ fn replay_bench(c: &mut Criterion) {
                     count += 1;
                 }
             }
+            assert_eq!(count, n);
+        })
+    });
+    g.bench_function("read_visit", |b| {
+        b.iter(|| {
+            let mut reader = McapReader::new(&bytes).unwrap();
+            let mut id = None;
+            let mut count = 0u64;
+            let stopped = reader
+                .visit::<()>(&mut |channels, m| {
+                    let input = *id.get_or_insert_with(|| {
+                        channels
+                            .values()
+                            .find(|c| c.topic == Topic::CycleInput.name())
+                            .map(|c| c.id)
+                    });
+                    if Some(m.channel_id) == input {
+                        black_box(CycleInput::decode(m.data).unwrap());
+                        count += 1;
+                    }
+                    Ok(())
+                })
+                .unwrap();
+            assert!(stopped.is_none());
             assert_eq!(count, n);
         })
     });

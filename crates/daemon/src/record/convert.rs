@@ -109,6 +109,14 @@ pub fn cycle_record(
     outputs(&input.cycle_input(), output, emit);
 }
 
+/// How many messages [`outputs`] gives for `output`.
+pub fn output_count(output: &CycleOutput) -> u64 {
+    1 + u64::from(matches!(output.tip, TipOutcome::Estimate(_)))
+        + u64::from(output.filtered.is_some())
+        + u64::from(output.pose.is_some())
+        + u64::from(output.transition.is_some())
+}
+
 /// `/sar/estimate/state` of one cycle.
 pub fn estimator_state(input: &CycleInput, o: &CycleOutput) -> EstimatorState {
     let mut reason_text = ReasonText::default();

@@ -22,6 +22,6 @@ pub mod replay;
 pub use file::{FileOptions, RotatingWriter, Rotation, WriteError};
 pub use msgs::{Outgoing, RosMessage, Topic};
 pub use reader::{
-    McapReader, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,
+    McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,
 };
 pub use recorder::{Recorder, RecorderConfig, RecorderError, RecordingReport};

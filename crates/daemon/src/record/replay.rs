@@ -24,7 +24,7 @@ use super::file::{FileOptions, RotatingWriter, WriteError};
 use super::msgs::{
     ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage, Topic,
 };
-use super::reader::{McapReader, ReadError};
+use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
 use crate::step::{LoopInput, LoopStep, StepConfig};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
@@ -257,8 +257,12 @@ impl Replayer {
     /// One cycle of a daemon recording: the loop step.
     fn loop_cycle(&mut self, input: &LoopInput) -> Result<(), ReplayError> {
         let out = *self.step.step(input);
-        let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
-        self.emit(input.cycle, m)?;
+        if self.needs_messages() {
+            let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
+            self.emit(input.cycle, m)?;
+        } else {
+            self.report.outputs += 1;
+        }
         self.emit_outputs(&input.cycle_input(), &out.estimate)
     }
 
@@ -298,6 +302,12 @@ impl Replayer {
             }
         }
         let cycle = input.cycle;
+        if !self.needs_messages() {
+            // Nothing written or compared: only counted (the messages'
+            // text and encoding are most of a cycle's cost).
+            self.report.outputs += convert::output_count(&out);
+            return Ok(());
+        }
         let mut msgs = std::mem::take(&mut self.scratch);
         msgs.clear();
         convert::outputs(input, &out, |m| msgs.push(m));
@@ -313,6 +323,11 @@ impl Replayer {
             self.match_pending();
         }
         Ok(())
+    }
+
+    /// Whether the output messages are written or compared.
+    fn needs_messages(&self) -> bool {
+        self.comparing || self.sink.writer.is_some()
     }
 
     fn differ(&mut self, d: Difference) {
@@ -362,9 +377,9 @@ impl Replayer {
         }
     }
 
-    fn recorded_output(&mut self, topic: Topic, data: Vec<u8>) {
-        if self.comparing {
-            self.recorded.entry(topic).or_default().push_back(data);
+    fn recorded_output(&mut self, topic: Topic, data: &[u8]) {
+        if self.comparing && !self.lacking.contains(&topic) {
+            self.recorded.entry(topic).or_default().push_back(data.to_vec());
         }
     }
 
@@ -550,19 +565,14 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
     let mut saw_cycle_input = false;
     let mut sensors: Vec<(u64, super::msgs::WrenchStamped)> = Vec::new();
     let mut joints: Vec<(u64, ActiveJointState)> = Vec::new();
-    while let Some(item) = reader.next() {
-        let msg = match item {
-            Ok(m) => m,
-            Err(e) => {
-                r.report.stopped = Some(e.to_string());
-                break;
-            }
-        };
+    let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
+                       msg: MessageRef<'_>|
+     -> Result<(), ReplayError> {
         let id = msg.channel_id;
         let topic = match topics.get(&id) {
             Some(t) => *t,
             None => {
-                let channel = reader.channels().get(&id);
+                let channel = channels.get(&id);
                 let topic = channel.and_then(|c| Topic::from_name(&c.topic));
                 if let (Some(c), Some(reference)) = (channel, &options.compare)
                     && &c.topic == reference
@@ -579,9 +589,9 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
             source,
         };
         if reference_channel == Some(id) {
-            let w = super::msgs::WrenchStamped::decode(&msg.data).map_err(decode_err)?;
+            let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
             r.references.push((w.stamp_ns, w.force_n));
-            continue;
+            return Ok(());
         }
         match topic {
             Some(Topic::CycleInput) => {
@@ -590,27 +600,31 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
                     sensors = Vec::new();
                     joints = Vec::new();
                 }
-                let m = CycleInputMsg::decode(&msg.data).map_err(decode_err)?;
+                let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
                 // The recorded message is compared with the one rebuilt from
                 // its input and the replayed decision.
                 r.recorded_output(Topic::CycleInput, msg.data);
                 r.loop_cycle(&convert::loop_input(&m))?;
             }
             Some(Topic::SensorWrench) if !saw_cycle_input => {
-                let w = super::msgs::WrenchStamped::decode(&msg.data).map_err(decode_err)?;
+                let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
                 sensors.push((msg.log_time_ns, w));
             }
             Some(Topic::Joints) if !saw_cycle_input => {
-                let j = ActiveJointState::decode(&msg.data).map_err(decode_err)?;
+                let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
                 joints.push((msg.log_time_ns, j));
             }
             Some(Topic::RecorderDrops) => {
-                let d = RecorderDrops::decode(&msg.data).map_err(decode_err)?;
+                let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
                 r.report.recorder_dropped = r.report.recorder_dropped.max(d.dropped);
             }
             Some(t) if OUTPUT_TOPICS.contains(&t) => r.recorded_output(t, msg.data),
             _ => {}
         }
+        Ok(())
+    };
+    if let Some(e) = reader.visit(&mut visitor)? {
+        r.report.stopped = Some(e.to_string());
     }
     r.report.input_complete = reader.is_complete();
     if saw_cycle_input {
