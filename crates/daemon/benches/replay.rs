@@ -119,7 +119,9 @@ fn make_recording(path: &Path, n: u64) {
             &input, &decision,
         )));
         if decision.estimate.new_sample {
-            write(Outgoing::SensorWrench(convert::sensor_wrench(&input.sensor)));
+            write(Outgoing::SensorWrench(convert::sensor_wrench(
+                &input.sensor,
+            )));
         }
         if last_joints != Some(input.joints.stamp_ns) {
             last_joints = Some(input.joints.stamp_ns);
@@ -221,7 +223,11 @@ fn replay_bench(c: &mut Criterion) {
         b.iter(|| {
             let r = replay(&bytes, &o).unwrap();
             assert_eq!(r.cycles, n);
-            assert!(r.first_difference.as_ref().is_none_or(|d| d.topic != "/sar/cycle/input"));
+            assert!(
+                r.first_difference
+                    .as_ref()
+                    .is_none_or(|d| d.topic != "/sar/cycle/input")
+            );
             black_box(r);
         })
     });
@@ -266,10 +272,8 @@ fn recorder_4khz(c: &mut Criterion) {
         b.iter_custom(|iters| {
             let mut cpu = Duration::ZERO;
             for _ in 0..iters {
-                let mut rec = Recorder::start(RecorderConfig::new(FileOptions::new(
-                    &dir, "rt4k",
-                )))
-                .unwrap();
+                let mut rec =
+                    Recorder::start(RecorderConfig::new(FileOptions::new(&dir, "rt4k"))).unwrap();
                 let before = other_threads_cpu_ns();
                 let start = Instant::now();
                 for (k, msgs) in per_cycle.iter().enumerate() {

@@ -182,7 +182,8 @@ impl MessageRef<'_> {
 
 /// The callback of [`McapReader::visit`]: the channels known so far and one
 /// message.
-pub type Visitor<'v, E> = dyn FnMut(&BTreeMap<u16, ChannelInfo>, MessageRef<'_>) -> Result<(), E> + 'v;
+pub type Visitor<'v, E> =
+    dyn FnMut(&BTreeMap<u16, ChannelInfo>, MessageRef<'_>) -> Result<(), E> + 'v;
 
 #[derive(Debug, Clone)]
 struct SchemaInfo {

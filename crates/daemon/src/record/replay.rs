@@ -74,7 +74,7 @@ impl ReplayOptions {
     /// comparison, no series.
     pub fn from_config(config: &crate::config::Config) -> Self {
         Self {
-            config: config.estimator.clone(),
+            config: config.estimator,
             step: config.step_config(),
             output: None,
             compare: None,
@@ -379,7 +379,10 @@ impl Replayer {
 
     fn recorded_output(&mut self, topic: Topic, data: &[u8]) {
         if self.comparing && !self.lacking.contains(&topic) {
-            self.recorded.entry(topic).or_default().push_back(data.to_vec());
+            self.recorded
+                .entry(topic)
+                .or_default()
+                .push_back(data.to_vec());
         }
     }
 
@@ -565,64 +568,63 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
     let mut saw_cycle_input = false;
     let mut sensors: Vec<(u64, super::msgs::WrenchStamped)> = Vec::new();
     let mut joints: Vec<(u64, ActiveJointState)> = Vec::new();
-    let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
-                       msg: MessageRef<'_>|
-     -> Result<(), ReplayError> {
-        let id = msg.channel_id;
-        let topic = match topics.get(&id) {
-            Some(t) => *t,
-            None => {
-                let channel = channels.get(&id);
-                let topic = channel.and_then(|c| Topic::from_name(&c.topic));
-                if let (Some(c), Some(reference)) = (channel, &options.compare)
-                    && &c.topic == reference
-                {
-                    reference_channel = Some(id);
+    let mut visitor =
+        |channels: &BTreeMap<u16, ChannelInfo>, msg: MessageRef<'_>| -> Result<(), ReplayError> {
+            let id = msg.channel_id;
+            let topic = match topics.get(&id) {
+                Some(t) => *t,
+                None => {
+                    let channel = channels.get(&id);
+                    let topic = channel.and_then(|c| Topic::from_name(&c.topic));
+                    if let (Some(c), Some(reference)) = (channel, &options.compare)
+                        && &c.topic == reference
+                    {
+                        reference_channel = Some(id);
+                    }
+                    topics.insert(id, topic);
+                    topic
                 }
-                topics.insert(id, topic);
-                topic
-            }
-        };
-        let decode_err = |source| ReadError::Decode {
-            topic: topic.map_or("?", |t| t.name()).to_owned(),
-            log_time_ns: msg.log_time_ns,
-            source,
-        };
-        if reference_channel == Some(id) {
-            let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
-            r.references.push((w.stamp_ns, w.force_n));
-            return Ok(());
-        }
-        match topic {
-            Some(Topic::CycleInput) => {
-                if !saw_cycle_input {
-                    saw_cycle_input = true;
-                    sensors = Vec::new();
-                    joints = Vec::new();
-                }
-                let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
-                // The recorded message is compared with the one rebuilt from
-                // its input and the replayed decision.
-                r.recorded_output(Topic::CycleInput, msg.data);
-                r.loop_cycle(&convert::loop_input(&m))?;
-            }
-            Some(Topic::SensorWrench) if !saw_cycle_input => {
+            };
+            let decode_err = |source| ReadError::Decode {
+                topic: topic.map_or("?", |t| t.name()).to_owned(),
+                log_time_ns: msg.log_time_ns,
+                source,
+            };
+            if reference_channel == Some(id) {
                 let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
-                sensors.push((msg.log_time_ns, w));
+                r.references.push((w.stamp_ns, w.force_n));
+                return Ok(());
             }
-            Some(Topic::Joints) if !saw_cycle_input => {
-                let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
-                joints.push((msg.log_time_ns, j));
+            match topic {
+                Some(Topic::CycleInput) => {
+                    if !saw_cycle_input {
+                        saw_cycle_input = true;
+                        sensors = Vec::new();
+                        joints = Vec::new();
+                    }
+                    let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
+                    // The recorded message is compared with the one rebuilt from
+                    // its input and the replayed decision.
+                    r.recorded_output(Topic::CycleInput, msg.data);
+                    r.loop_cycle(&convert::loop_input(&m))?;
+                }
+                Some(Topic::SensorWrench) if !saw_cycle_input => {
+                    let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                    sensors.push((msg.log_time_ns, w));
+                }
+                Some(Topic::Joints) if !saw_cycle_input => {
+                    let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
+                    joints.push((msg.log_time_ns, j));
+                }
+                Some(Topic::RecorderDrops) => {
+                    let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
+                    r.report.recorder_dropped = r.report.recorder_dropped.max(d.dropped);
+                }
+                Some(t) if OUTPUT_TOPICS.contains(&t) => r.recorded_output(t, msg.data),
+                _ => {}
             }
-            Some(Topic::RecorderDrops) => {
-                let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
-                r.report.recorder_dropped = r.report.recorder_dropped.max(d.dropped);
-            }
-            Some(t) if OUTPUT_TOPICS.contains(&t) => r.recorded_output(t, msg.data),
-            _ => {}
-        }
-        Ok(())
-    };
+            Ok(())
+        };
     if let Some(e) = reader.visit(&mut visitor)? {
         r.report.stopped = Some(e.to_string());
     }

@@ -79,7 +79,7 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             },
             drive_action: DriveActionCode::from_code((k % 6) as u8).unwrap(),
             setpoint_q_m: v3(k + 20),
-            reply_status: if k % 3 == 0 {
+            reply_status: if k.is_multiple_of(3) {
                 REPLY_NONE
             } else {
                 (k % 12) as u8
