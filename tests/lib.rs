@@ -13,6 +13,8 @@ pub fn scenarios_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
 }
 
+pub mod identify_fixtures;
+
 pub mod fixture_gen;
 
 /// The folder of the replay fixtures (`tests/fixtures/replay`).

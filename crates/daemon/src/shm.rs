@@ -3,27 +3,36 @@
 //! Services, under a prefix (default [`DEFAULT_PREFIX`]; tests use unique
 //! ones so that they run in parallel):
 //! - `PREFIX/state`: publish-subscribe of [`StateMsg`], once per cycle. One
-//!   publisher (the daemon), safe overflow (a slow or dead subscriber loses
-//!   its oldest samples; the loop never waits), subscriber buffer
-//!   [`STATE_BUFFER`], history [`STATE_HISTORY`].
-//! - `PREFIX/state_event`: an event notified after each publish, so that a
-//!   subscriber blocks on its listener instead of spinning.
+//!   publisher (the daemon), safe overflow and a discarding backpressure
+//!   strategy (a slow or dead subscriber loses its oldest samples; nothing
+//!   waits for it), subscriber buffer [`STATE_BUFFER`], borrowed samples
+//!   [`STATE_BORROWED`], history [`STATE_HISTORY`].
+//! - `PREFIX/state_event`: an event notified after each batch of states, so
+//!   that a subscriber blocks on its listener instead of spinning.
 //! - `PREFIX/command`: request-response of [`CommandMsg`] to [`ReplyMsg`]
 //!   (reset, tare, move-tip, limits). The loop takes at most one command per
 //!   cycle and replies from the cycle that judged it.
+//!
+//! No iceoryx2 call runs on the loop thread (iceoryx2 allocates per sample
+//! and per request): the loop hands each cycle's state to the publishing
+//! thread through a bounded wait-free queue ([`DaemonShm`]); that thread owns
+//! the ports ([`ShmWorker`]).
 //!
 //! At start the daemon removes the stale resources of dead nodes (a daemon
 //! or client killed with SIGKILL) and then creates the services; when they
 //! exist (a living daemon with the same prefix), it refuses to start.
 
-use crate::control::{Envelope, Operator};
+use crate::control::{Envelope, Operator, Reply};
 use crate::runloop::{Publish, Published};
 use crate::wire::{CommandMsg, ReplyMsg, StateMsg, StateParts, command_kind, reply_code};
 use iceoryx2::active_request::ActiveRequest;
+use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 /// The default service prefix.
@@ -36,6 +45,13 @@ pub const STATE_HISTORY: usize = 1;
 pub const MAX_SUBSCRIBERS: usize = 16;
 /// Command clients at most.
 pub const MAX_CLIENTS: usize = 8;
+/// Samples a state subscriber may hold at once (borrowed, not yet released).
+pub const STATE_BORROWED: usize = 2;
+/// States queued from the loop to the publishing thread at most (cycles of
+/// slack: 256 ms at 1 kHz); beyond, the loop drops and counts.
+pub const STATE_QUEUE: usize = 256;
+/// The publishing thread's longest sleep when the loop does not wake it.
+pub const WORKER_WAIT: Duration = Duration::from_millis(10);
 
 /// The service names under `prefix`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -93,41 +109,105 @@ type StatePublisher = Publisher<ipc::Service, StateMsg, ()>;
 type CommandServer = Server<ipc::Service, CommandMsg, (), ReplyMsg, ()>;
 type CommandRequest = ActiveRequest<ipc::Service, CommandMsg, (), ReplyMsg, ()>;
 
-/// The daemon's side: publishes the state, serves commands.
+/// What the loop side and the publishing thread share.
+#[derive(Debug, Default)]
+struct Shared {
+    /// Set when the daemon side is dropped: the thread publishes what is
+    /// queued and ends.
+    stop: AtomicBool,
+    /// States the thread failed to send (no free sample: should not happen
+    /// with the sizes above; counted, never waited for).
+    publish_errors: AtomicU64,
+    /// States the thread sent.
+    published: AtomicU64,
+    /// Where `record start|stop` go (unset: refused as unknown).
+    record_switch: std::sync::OnceLock<Arc<crate::record::live::RecordSwitch>>,
+}
+
+/// The daemon's loop side: implements [`Publish`] for the loop.
+///
+/// iceoryx2 0.10 allocates on the heap for every sample it loans (an `Rc` of
+/// the sample's shared state in `Publisher::loan_uninit`, also behind
+/// `send_copy`), for every request a server receives and for every response
+/// it sends (and more when a new client connects): none of that may run on
+/// the loop thread. So the loop only copies its [`StateMsg`] into a bounded
+/// wait-free single-producer single-consumer ring ([`STATE_QUEUE`] entries,
+/// allocated here, once) and wakes the publishing thread (`unpark`: an atomic
+/// swap, and a futex wake only when the thread sleeps); a full ring drops the
+/// state and counts it ([`StateMsg::queue_drops`]). The publishing thread
+/// (`sard-shm`, see [`ShmWorker`]) owns every iceoryx2 port: it sends the
+/// states, notifies the event, takes operator commands into the controller's
+/// bounded request queue and sends the replies the loop leaves in its reply
+/// queue. The loop never waits for it.
 pub struct DaemonShm {
+    states: rtrb::Producer<StateMsg>,
+    /// The publishing thread to wake (`None` with a worker driven by hand).
+    wake: Option<std::thread::Thread>,
+    thread: Option<std::thread::JoinHandle<()>>,
+    shared: Arc<Shared>,
+    /// The guard's limits, N (warn, stop for total, axial, lateral).
+    limits_n: [f64; 6],
+    /// The simulator's truth of F_tip, when simulated.
+    truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
+    queue_drops: u64,
+}
+
+impl std::fmt::Debug for DaemonShm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DaemonShm")
+            .field("queue_drops", &self.queue_drops)
+            .field("shared", &self.shared)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The publishing thread's side: every iceoryx2 port of the daemon. Made and
+/// used on one thread (iceoryx2's `ipc` ports are not `Send`): the
+/// `sard-shm` thread that [`DaemonShm::create`] starts, or a test's own
+/// thread with [`DaemonShm::create_manual`], which then calls
+/// [`ShmWorker::pump`] when it likes (deterministic tests).
+pub struct ShmWorker {
     _node: Node<ipc::Service>,
     publisher: StatePublisher,
     notifier: Notifier<ipc::Service>,
     server: CommandServer,
     operator: Operator,
+    states: rtrb::Consumer<StateMsg>,
+    shared: Arc<Shared>,
     /// The command handed to the loop, waiting for its reply.
     in_flight: Option<CommandRequest>,
-    /// The guard's limits, N (warn, stop for total, axial, lateral).
+    /// The loop's reply, waiting for the state of its cycle.
+    waiting: Option<Reply>,
+    /// The newest state's cycle.
+    last_cycle: u64,
+    /// The newest state's limits (the loop may change them), N.
     limits_n: [f64; 6],
-    /// The simulator's truth of F_tip, when simulated.
-    truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
-    publish_errors: u64,
-    /// Where `record start|stop` go (`None`: refused as unknown).
-    record_switch: Option<std::sync::Arc<crate::record::live::RecordSwitch>>,
 }
 
-impl DaemonShm {
-    /// Takes `record start|stop` commands into `switch`.
-    pub fn with_record_switch(
-        mut self,
-        switch: std::sync::Arc<crate::record::live::RecordSwitch>,
-    ) -> Self {
-        self.record_switch = Some(switch);
-        self
+impl std::fmt::Debug for ShmWorker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ShmWorker")
+            .field("in_flight", &self.in_flight.is_some())
+            .field("shared", &self.shared)
+            .finish_non_exhaustive()
     }
+}
 
+fn exists(prefix: &str, service: &str, e: impl std::fmt::Debug) -> String {
+    format!(
+        "cannot create the service {service:?} ({e:?}): another sard runs with the prefix {prefix:?}"
+    )
+}
+
+impl ShmWorker {
     /// Cleans dead nodes' resources, then creates the services under
     /// `prefix`; refuses when a living daemon has them.
-    pub fn create(
+    fn create(
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
-        truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
+        states: rtrb::Consumer<StateMsg>,
+        shared: Arc<Shared>,
     ) -> Result<Self, String> {
         let cleaned = clean_dead_nodes();
         if cleaned > 0 {
@@ -141,29 +221,26 @@ impl DaemonShm {
             .max_publishers(1)
             .max_subscribers(MAX_SUBSCRIBERS)
             .subscriber_max_buffer_size(STATE_BUFFER)
+            .subscriber_max_borrowed_samples(STATE_BORROWED)
             .history_size(STATE_HISTORY)
             .enable_safe_overflow(true)
             .create()
-            .map_err(|e| {
-                format!(
-                    "cannot create the service {:?} ({e:?}): another sard runs with the prefix {prefix:?}",
-                    names.state
-                )
-            })?;
+            .map_err(|e| exists(prefix, &names.state, e))?;
         let publisher = state
             .publisher_builder()
+            .max_loaned_samples(1)
+            // Never retry towards a full subscriber (with safe overflow its
+            // oldest sample is replaced anyway).
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(|e| msg("cannot create the state publisher", e))?;
         let event = node
             .service_builder(&service_name(&names.event)?)
             .event()
+            .max_notifiers(1)
+            .max_listeners(MAX_SUBSCRIBERS)
             .create()
-            .map_err(|e| {
-                format!(
-                    "cannot create the service {:?} ({e:?}): another sard runs with the prefix {prefix:?}",
-                    names.event
-                )
-            })?;
+            .map_err(|e| exists(prefix, &names.event, e))?;
         let notifier = event
             .notifier_builder()
             .create()
@@ -178,12 +255,7 @@ impl DaemonShm {
             .enable_safe_overflow_for_requests(true)
             .enable_safe_overflow_for_responses(true)
             .create()
-            .map_err(|e| {
-                format!(
-                    "cannot create the service {:?} ({e:?}): another sard runs with the prefix {prefix:?}",
-                    names.command
-                )
-            })?;
+            .map_err(|e| exists(prefix, &names.command, e))?;
         let server = command
             .server_builder()
             .create()
@@ -194,16 +266,68 @@ impl DaemonShm {
             notifier,
             server,
             operator,
+            states,
+            shared,
             in_flight: None,
+            waiting: None,
+            last_cycle: 0,
             limits_n,
-            truth,
-            publish_errors: 0,
-            record_switch: None,
         })
     }
 
-    /// Before a cycle: takes at most one command and hands it to the loop
-    /// (answers LIMITS and unknown kinds at once).
+    /// One round: sends every queued state (then notifies the event once),
+    /// sends the replies the loop left, takes at most one command. Never
+    /// waits. Returns the states sent.
+    pub fn pump(&mut self) -> usize {
+        let mut sent = 0;
+        while let Ok(mut state) = self.states.pop() {
+            // The limits of the newest cycle, for the replies.
+            self.limits_n = state.limits_n;
+            self.last_cycle = state.cycle;
+            state.publish_errors = self.shared.publish_errors.load(Ordering::Relaxed);
+            let ok = self
+                .publisher
+                .loan_uninit()
+                .map_err(|_| ())
+                .and_then(|s| s.write_payload(state).send().map_err(|_| ()));
+            if ok.is_ok() {
+                sent += 1;
+            } else {
+                self.shared.publish_errors.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if sent > 0 {
+            self.shared
+                .published
+                .fetch_add(sent as u64, Ordering::Relaxed);
+            let _ = self.notifier.notify();
+        }
+        self.send_replies(false);
+        self.take_command();
+        sent
+    }
+
+    /// Sends the replies of the commands the loop judged, each after the
+    /// state of its cycle (so that it carries the limits that cycle left in
+    /// force, and a client that has its reply finds that state published);
+    /// `all`: without waiting for the state (at the end).
+    fn send_replies(&mut self, all: bool) {
+        loop {
+            let Some(reply) = self.waiting.take().or_else(|| self.operator.replies.pop()) else {
+                return;
+            };
+            if !all && reply.cycle > self.last_cycle {
+                self.waiting = Some(reply);
+                return;
+            }
+            if let Some(active) = self.in_flight.take() {
+                let _ = active.send_copy(ReplyMsg::from_reply(&reply, self.limits_n));
+            }
+        }
+    }
+
+    /// Takes at most one command and hands it to the loop (answers LIMITS
+    /// and unknown kinds at once).
     fn take_command(&mut self) {
         if self.in_flight.is_some() {
             return;
@@ -237,9 +361,9 @@ impl DaemonShm {
             None if matches!(
                 command.kind,
                 command_kind::RECORD_START | command_kind::RECORD_STOP
-            ) && self.record_switch.is_some() =>
+            ) && self.shared.record_switch.get().is_some() =>
             {
-                if let Some(s) = &self.record_switch {
+                if let Some(s) = self.shared.record_switch.get() {
                     if command.kind == command_kind::RECORD_START {
                         s.request_start();
                     } else {
@@ -254,28 +378,155 @@ impl DaemonShm {
         }
     }
 
-    /// Publish errors so far.
+    /// The thread's body: pumps, then sleeps until woken by the loop or for
+    /// at most [`WORKER_WAIT`] (commands arrive without the loop; a stalled
+    /// loop still gets its LIMITS queries answered). Ends when the daemon
+    /// side is dropped, after sending what is queued.
+    fn run(mut self) {
+        loop {
+            self.pump();
+            if self.shared.stop.load(Ordering::Acquire) {
+                self.pump();
+                self.send_replies(true);
+                return;
+            }
+            std::thread::park_timeout(WORKER_WAIT);
+        }
+    }
+}
+
+impl DaemonShm {
+    /// Starts the publishing thread `sard-shm`, which cleans dead nodes'
+    /// resources and then creates the services under `prefix`; refuses
+    /// when a living daemon has them.
+    ///
+    /// The thread takes the scheduling policy and CPU set of the caller at
+    /// this moment: `sard` calls this before the loop thread switches to
+    /// SCHED_FIFO and pins itself, so the publishing thread runs at normal
+    /// priority and never competes with the loop.
+    pub fn create(
+        prefix: &str,
+        operator: Operator,
+        limits_n: [f64; 6],
+        truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
+    ) -> Result<Self, String> {
+        let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
+        let shared = Arc::new(Shared::default());
+        let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), String>>(1);
+        let thread = {
+            let (prefix, shared) = (prefix.to_owned(), shared.clone());
+            std::thread::Builder::new()
+                .name("sard-shm".into())
+                .spawn(move || {
+                    match ShmWorker::create(&prefix, operator, limits_n, consumer, shared) {
+                        Ok(worker) => {
+                            let _ = ready_tx.send(Ok(()));
+                            worker.run();
+                        }
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(e));
+                        }
+                    }
+                })
+                .map_err(|e| format!("cannot start the publishing thread: {e}"))?
+        };
+        let started = ready_rx
+            .recv()
+            .unwrap_or_else(|_| Err("the publishing thread ended at start".into()));
+        if let Err(e) = started {
+            let _ = thread.join();
+            return Err(e);
+        }
+        Ok(Self {
+            states: producer,
+            wake: Some(thread.thread().clone()),
+            thread: Some(thread),
+            shared,
+            limits_n,
+            truth,
+            queue_drops: 0,
+        })
+    }
+
+    /// As [`DaemonShm::create`] but without a thread: the caller drives the
+    /// returned worker on its own thread ([`ShmWorker::pump`]). For
+    /// deterministic tests and benchmarks.
+    pub fn create_manual(
+        prefix: &str,
+        operator: Operator,
+        limits_n: [f64; 6],
+        truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
+    ) -> Result<(Self, ShmWorker), String> {
+        let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
+        let shared = Arc::new(Shared::default());
+        let worker = ShmWorker::create(prefix, operator, limits_n, consumer, shared.clone())?;
+        Ok((
+            Self {
+                states: producer,
+                wake: None,
+                thread: None,
+                shared,
+                limits_n,
+                truth,
+                queue_drops: 0,
+            },
+            worker,
+        ))
+    }
+
+    /// Takes `record start|stop` commands into `switch` (on the publishing
+    /// thread; the loop and the recording's manager thread act on it).
+    pub fn with_record_switch(self, switch: Arc<crate::record::live::RecordSwitch>) -> Self {
+        let _ = self.shared.record_switch.set(switch);
+        self
+    }
+
+    /// States the publishing thread failed to send so far.
     pub fn publish_errors(&self) -> u64 {
-        self.publish_errors
+        self.shared.publish_errors.load(Ordering::Relaxed)
+    }
+
+    /// States the publishing thread sent so far.
+    pub fn published(&self) -> u64 {
+        self.shared.published.load(Ordering::Relaxed)
+    }
+
+    /// States dropped so far because the publishing thread's queue was full.
+    pub fn queue_drops(&self) -> u64 {
+        self.queue_drops
+    }
+
+    /// Queues one state for the publishing thread and wakes it; a full queue
+    /// drops the state and counts it. Wait-free, allocation-free.
+    pub fn push_state(&mut self, state: StateMsg) {
+        if self.states.push(state).is_err() {
+            self.queue_drops = self.queue_drops.saturating_add(1);
+        }
+        if let Some(t) = &self.wake {
+            t.unpark();
+        }
+    }
+}
+
+impl Drop for DaemonShm {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Release);
+        if let Some(t) = &self.wake {
+            t.unpark();
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
     }
 }
 
 impl Publish for DaemonShm {
-    fn before_cycle(&mut self) {
-        self.take_command();
-    }
-
     fn publish(&mut self, c: &Published<'_>) {
-        // The limits in use (an operator may have changed them this cycle).
+        // The limits in use (an operator may have changed them this cycle);
+        // they travel in the state to the publishing thread, for its replies.
         self.limits_n = c.decision.limits.to_array();
-        // The reply of the command judged in this cycle.
-        while let Some(reply) = self.operator.replies.pop() {
-            if let Some(active) = self.in_flight.take() {
-                let _ = active.send_copy(ReplyMsg::from_reply(&reply, self.limits_n));
-            }
-        }
         let truth_tip_force_n = self.truth.as_mut().and_then(|f| f());
-        let state = StateMsg::from_parts(&StateParts {
+        let mut state = StateMsg::from_parts(&StateParts {
             input: c.input,
             output: c.output,
             stats: c.stats,
@@ -287,16 +538,8 @@ impl Publish for DaemonShm {
             recording: c.recording,
             truth_tip_force_n,
         });
-        let sent = self
-            .publisher
-            .loan_uninit()
-            .map(|s| s.write_payload(state))
-            .map_err(|_| ())
-            .and_then(|s| s.send().map_err(|_| ()));
-        if sent.is_err() {
-            self.publish_errors += 1;
-        }
-        let _ = self.notifier.notify();
+        state.queue_drops = self.queue_drops;
+        self.push_state(state);
     }
 }
 

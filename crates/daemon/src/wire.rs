@@ -169,6 +169,11 @@ pub struct StateMsg {
     pub overruns: u64,
     /// Quick stops sent so far.
     pub quick_stops: u64,
+    /// States the loop dropped so far because the publishing thread's queue
+    /// was full (those states were never published).
+    pub queue_drops: u64,
+    /// States the publishing thread failed to send so far.
+    pub publish_errors: u64,
     /// Messages the recorder dropped so far (queue full or disk failed).
     pub recorder_drops: u64,
     /// 1 while a recording runs, else 0.
@@ -203,6 +208,8 @@ impl Default for StateMsg {
             compute_ns: [0; 3],
             overruns: 0,
             quick_stops: 0,
+            queue_drops: 0,
+            publish_errors: 0,
             recorder_drops: 0,
             recording: 0,
         }

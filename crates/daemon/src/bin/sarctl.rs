@@ -84,6 +84,17 @@ enum Cmd {
         #[arg(long)]
         stop_lateral: Option<f64>,
     },
+    /// The live view: serves the state to Foxglove (WebSocket) until stopped.
+    View {
+        /// Address to serve on, ADDR:PORT (port 0: any free port).
+        #[arg(long, default_value = sar_daemon::view::DEFAULT_BIND)]
+        bind: String,
+        /// Rate of the 3D scene, Hz.
+        #[arg(long, default_value_t = sar_daemon::view::DEFAULT_SCENE_HZ)]
+        scene_hz: f64,
+    },
+    /// Identify m and c (and calibrate the support) from a recording or live.
+    Identify(sar_daemon::cli::identify::IdentifyArgs),
     /// Run the estimator over a recording's inputs, write and compare the outputs.
     Replay {
         /// The recording.
@@ -174,6 +185,8 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "compute_ns": {"p50": s.compute_ns[0], "p99": s.compute_ns[1], "max": s.compute_ns[2]},
         "overruns": s.overruns,
         "quick_stops": s.quick_stops,
+        "publish_queue_drops": s.queue_drops,
+        "publish_errors": s.publish_errors,
         "recording": s.recording != 0,
         "recorder_drops": s.recorder_drops,
     })
@@ -260,6 +273,10 @@ fn run(args: &Args) -> Result<(), String> {
     }
     if let Some(path) = &args.config {
         sar_daemon::config::load(path).map_err(|e| e.to_string())?;
+    }
+    if let Cmd::Identify(a) = &args.command {
+        let json = args.format == Format::Json;
+        return sar_daemon::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
     }
     let client = Client::new(&args.prefix)?;
     let command_with = |kind: u32, tip_m: [f64; 3], limits_n: [f64; 6]| {
@@ -370,6 +387,10 @@ fn run(args: &Args) -> Result<(), String> {
                 }
             }
         }
+        Cmd::View { ref bind, scene_hz } => {
+            sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
+        }
+        Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
         Cmd::MoveTip { x, y, z } => {

@@ -4,6 +4,7 @@
 use clap::Parser;
 use sar_daemon::control::{Controller, DrivesCycle, Operator};
 use sar_daemon::notify::{Notifier, Watchdog};
+use sar_daemon::record::live::{LiveRecorder, RecordManager};
 use sar_daemon::runloop::{self, RunLimits};
 use sar_daemon::shm::DaemonShm;
 use sar_daemon::stats::LoopStats;
@@ -123,19 +124,6 @@ fn run(args: &Args) -> Result<(), String> {
         None => None,
     };
 
-    // Real-time settings: said once, here, when they cannot be applied.
-    if let Err(e) = rt::lock_memory() {
-        tracing::warn!("{e}; running without locked memory");
-    }
-    if let Err(e) = rt::set_fifo(cfg.loop_.priority) {
-        tracing::warn!("{e}; running at normal priority");
-    }
-    if let Some(cpu) = cfg.loop_.cpu
-        && let Err(e) = rt::pin_to_cpu(cpu)
-    {
-        tracing::warn!("{e}; running unpinned");
-    }
-
     let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
     let (simulator, sim_sensor, sim_drives, sim_bias) =
         sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
@@ -155,6 +143,37 @@ fn run(args: &Args) -> Result<(), String> {
         limits_array(&cfg.estimator.guard.limits()),
         truth,
     )?;
+    // Recording (`[record]`, `sarctl record start|stop`): its manager thread
+    // (which opens and closes the files, never the loop) starts here, before
+    // the real-time settings, so that it and the writer threads it starts
+    // keep the normal priority and every CPU. Its start bias is the one the
+    // estimator starts with (below).
+    let start_bias = if real_sensor.is_some() {
+        Bias::force_only(Vec3::zeros())
+    } else {
+        sim_bias
+    };
+    let switch = std::sync::Arc::new(sar_daemon::record::live::RecordSwitch::default());
+    let (recording, shm) = sar_daemon::record::live::RecordManager::start(
+        cfg.record.clone(),
+        start_bias,
+        std::sync::Arc::clone(&switch),
+        shm.with_record_switch(switch),
+    )?;
+    // Real-time settings: said once, here, when they cannot be applied.
+    // After the publishing thread has started (DaemonShm::create), so that
+    // it keeps the normal priority and every CPU.
+    if let Err(e) = rt::lock_memory() {
+        tracing::warn!("{e}; running without locked memory");
+    }
+    if let Err(e) = rt::set_fifo(cfg.loop_.priority) {
+        tracing::warn!("{e}; running at normal priority");
+    }
+    if let Some(cpu) = cfg.loop_.cpu
+        && let Err(e) = rt::pin_to_cpu(cpu)
+    {
+        tracing::warn!("{e}; running unpinned");
+    }
     let sensor_what = match &real_sensor {
         Some(s) => format!("the RDT sensor at {}", s.config().address),
         None => format!("the simulated sensor of {:?}", scenario.name),
@@ -164,6 +183,7 @@ fn run(args: &Args) -> Result<(), String> {
         cfg: &cfg,
         operator,
         shm,
+        recording,
         auto_reset: args.sim,
     };
     // A real sensor starts with no bias (the operator tares); the simulated
@@ -240,13 +260,14 @@ struct Run<'a> {
     args: &'a Args,
     cfg: &'a config::Config,
     operator: Operator,
-    shm: DaemonShm,
+    shm: LiveRecorder<DaemonShm>,
+    recording: RecordManager,
     auto_reset: bool,
 }
 
 impl Run<'_> {
     fn run<S: ForceSensor, D: AxisDrives>(
-        self,
+        mut self,
         sensor: S,
         drives: D,
         bias: Bias,
@@ -279,12 +300,6 @@ impl Run<'_> {
             cfg.origin,
             cfg.loop_.rate_hz,
         );
-        // Recording: `[record]` and `sarctl record start|stop`; files are
-        // opened and closed on the manager's thread, never the loop's.
-        let switch = std::sync::Arc::new(sar_daemon::record::live::RecordSwitch::default());
-        let shm = self.shm.with_record_switch(std::sync::Arc::clone(&switch));
-        let (recording, mut publisher) =
-            sar_daemon::record::live::RecordManager::start(cfg.record.clone(), bias, switch, shm)?;
         runloop::run(
             &mut controller,
             &cfg.loop_,
@@ -293,12 +308,13 @@ impl Run<'_> {
                 stall_after_cycles: self.args.stall_after_cycles,
             },
             &mut stats,
-            &mut publisher,
+            &mut self.shm,
             &mut watchdog,
             &log,
         );
-        publisher.release();
-        recording.finish();
+        // The last recording closed (its writer drains the queue first).
+        self.shm.release();
+        self.recording.finish();
         if let Some(t) = log_thread {
             t.finish();
         }

@@ -1,0 +1,137 @@
+//! The figure of an identification (`sarctl identify --plot FILE.svg`): the
+//! vertical force at A against X = 1/a, with the fitted straight line
+//! F = m |g| - M |g| X of the article's Figure 6 (exact for a horizontal rod at
+//! the support's height, MODEL.md 5), the full model's value at each pose, and
+//! below the residuals (measured - model) of the vertical force. SVG only
+//! (plotters' SVG backend writes text as SVG `<text>`: no font files needed).
+
+use super::Identified;
+use plotters::prelude::*;
+
+fn err(e: impl std::fmt::Display) -> String {
+    format!("the figure could not be drawn: {e}")
+}
+
+/// (min, max) widened by 5 % of the span on each side (and never empty).
+fn range(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let lo = values.clone().fold(f64::INFINITY, f64::min);
+    let hi = values.fold(f64::NEG_INFINITY, f64::max);
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-6);
+    (lo - pad, hi + pad)
+}
+
+/// The SVG text of the figure.
+pub fn svg(result: &Identified) -> Result<String, String> {
+    let g = nalgebra::Vector3::from(result.gravity_mps2);
+    let g_norm = g.norm();
+    let up = -g / g_norm;
+    // (X, measured, model) per pose.
+    let pts: Vec<(f64, f64, f64)> = result
+        .used
+        .iter()
+        .map(|p| {
+            (
+                1.0 / p.support_distance_m,
+                p.measured_n.dot(&up),
+                p.model_n.dot(&up),
+            )
+        })
+        .collect();
+    let (x0, x1) = range(pts.iter().map(|p| p.0).chain([0.0]));
+    let line = |x: f64| result.mass_kg * g_norm - result.moment_kgm * g_norm * x;
+    let (y0, y1) = range(
+        pts.iter()
+            .flat_map(|p| [p.1, p.2])
+            .chain([line(x0), line(x1)]),
+    );
+    let residuals: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1 - p.2)).collect();
+    let (r0, r1) = range(residuals.iter().map(|r| r.1).chain([0.0]));
+
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, (900, 820)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let (upper, lower) = root.split_vertically(520);
+        let mut chart = ChartBuilder::on(&upper)
+            .caption(
+                format!(
+                    "vertical force at A against 1/a: m = {:.4} kg, c = {:.5} m",
+                    result.mass_kg, result.com_m
+                ),
+                ("sans-serif", 20),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("X = 1/a (1/m)")
+            .y_desc("F_A up (N)")
+            .draw()
+            .map_err(err)?;
+        chart
+            .draw_series(LineSeries::new(
+                [(x0, line(x0)), (x1, line(x1))],
+                RED.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label("m|g| - M|g| X (fitted line)")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
+        chart
+            .draw_series(
+                pts.iter()
+                    .map(|&(x, _, model)| Cross::new((x, model), 5, GREEN.stroke_width(2))),
+            )
+            .map_err(err)?
+            .label("full model at each pose")
+            .legend(|(x, y)| Cross::new((x + 10, y), 5, GREEN.stroke_width(2)));
+        chart
+            .draw_series(
+                pts.iter()
+                    .map(|&(x, measured, _)| Circle::new((x, measured), 4, BLUE.filled())),
+            )
+            .map_err(err)?
+            .label("measured (dwell mean)")
+            .legend(|(x, y)| Circle::new((x + 10, y), 4, BLUE.filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err)?;
+
+        let mut res = ChartBuilder::on(&lower)
+            .caption(
+                format!(
+                    "residuals (measured - model), RMS {:.3} N, chi2/dof {:.2}",
+                    result.residual_rms_n, result.chi2_dof
+                ),
+                ("sans-serif", 18),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, r0..r1)
+            .map_err(err)?;
+        res.configure_mesh()
+            .x_desc("X = 1/a (1/m)")
+            .y_desc("residual (N)")
+            .draw()
+            .map_err(err)?;
+        res.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], BLACK))
+            .map_err(err)?;
+        res.draw_series(
+            residuals
+                .iter()
+                .map(|&(x, r)| Circle::new((x, r), 4, BLUE.filled())),
+        )
+        .map_err(err)?;
+        root.present().map_err(err)?;
+    }
+    Ok(out)
+}

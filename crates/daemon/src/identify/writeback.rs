@@ -1,0 +1,97 @@
+//! Writes the identified values back into the configuration's text
+//! (INTERFACES.md 3): `[manipulator] mass_kg`, `com_m` and `[geometry]
+//! support`, with `toml_edit`, so that everything else (comments, key order,
+//! spacing, the other values) stays as it was. Each replaced value keeps its
+//! own decoration (the comment after it, the spaces around it).
+
+use toml_edit::{DocumentMut, Item, Value};
+
+/// Rounding of the written values: 0.01 g for m, 1 um for c and B (far below
+/// their standard errors).
+const MASS_STEP_KG: f64 = 1e-5;
+const LENGTH_STEP_M: f64 = 1e-6;
+
+fn rounded(x: f64, step: f64) -> f64 {
+    let r = (x / step).round() * step;
+    // Shortest decimal that reads back as the rounded value.
+    format!("{r:.9}").parse().unwrap_or(r)
+}
+
+/// Replaces `old` by the float `x`, keeping `old`'s decoration.
+fn replace(old: &mut Value, x: f64) {
+    let decor = old.decor().clone();
+    let mut new = Value::from(x);
+    *new.decor_mut() = decor;
+    *old = new;
+}
+
+/// Sets `table.key` to `x`, keeping the old value's decoration when there is one.
+fn set_float(doc: &mut DocumentMut, table: &str, key: &str, x: f64) -> Result<(), String> {
+    let t = doc
+        .get_mut(table)
+        .and_then(Item::as_table_like_mut)
+        .ok_or_else(|| format!("the configuration has no [{table}] table"))?;
+    match t.get_mut(key).and_then(Item::as_value_mut) {
+        Some(v) => replace(v, x),
+        None => {
+            t.insert(key, toml_edit::value(x));
+        }
+    }
+    Ok(())
+}
+
+/// The configuration text with m, c and B replaced.
+pub fn write_back(
+    text: &str,
+    mass_kg: f64,
+    com_m: f64,
+    support_m: [f64; 3],
+) -> Result<String, String> {
+    let mut doc: DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| format!("not valid TOML: {}", e.message()))?;
+    set_float(
+        &mut doc,
+        "manipulator",
+        "mass_kg",
+        rounded(mass_kg, MASS_STEP_KG),
+    )?;
+    set_float(
+        &mut doc,
+        "manipulator",
+        "com_m",
+        rounded(com_m, LENGTH_STEP_M),
+    )?;
+    let geometry = doc
+        .get_mut("geometry")
+        .and_then(Item::as_table_like_mut)
+        .ok_or("the configuration has no [geometry] table")?;
+    let support = geometry
+        .get_mut("support")
+        .and_then(Item::as_value_mut)
+        .and_then(Value::as_array_mut)
+        .filter(|a| a.len() == 3)
+        .ok_or("geometry.support is not an array of 3 numbers")?;
+    for (i, x) in support_m.into_iter().enumerate() {
+        if let Some(v) = support.get_mut(i) {
+            replace(v, rounded(x, LENGTH_STEP_M));
+        }
+    }
+    Ok(doc.to_string())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keeps_comments_order_and_spacing() {
+        let text = "# robot\n[geometry]\nsupport = [0.45, 0.20, 0.0]   # B, measured by hand\ngravity = [0.0, -9.80665, 0.0]\n\n[manipulator]\nname = \"m2\"\nmass_kg = 2.593                        # m\ncom_m = 0.103 # c\n";
+        let out = write_back(text, 2.6012345678, 0.10412345, [0.4512345, 0.1987654, 0.0]).unwrap();
+        assert_eq!(
+            out,
+            "# robot\n[geometry]\nsupport = [0.451235, 0.198765, 0.0]   # B, measured by hand\ngravity = [0.0, -9.80665, 0.0]\n\n[manipulator]\nname = \"m2\"\nmass_kg = 2.60123                        # m\ncom_m = 0.104123 # c\n"
+        );
+    }
+}

@@ -1,0 +1,119 @@
+//! `sarctl identify --live` end to end: `sard --sim` on a scenario whose
+//! manipulator (Table 2's manipulator 2: m = 2.593 kg, c = 0.103 m, support
+//! at (0.45, 0.20, 0)) differs from the configured one (2.5 kg, 0.100 m, B
+//! 1 mm too high). The travel of the configuration shrinks the cone set to
+//! half its distances (a shorter test). `sarctl` drives the daemon through
+//! it with move-tip, identifies from the published state and writes the
+//! right values back.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const SARD: &str = env!("CARGO_BIN_EXE_sard");
+const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
+
+struct Daemon(Child);
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        let _ = self.0.wait();
+    }
+}
+
+const CONFIG: &str = r#"# identify --live test
+[geometry]
+gravity = [0.0, -9.80665, 0.0]
+support = [0.45, 0.201, 0.0]             # B, 1 mm too high
+p_home = [0.0, 0.0, 0.0]
+ujoint_offset = [0.0, -0.08, 0.0]
+sensor_offset = [0.0, -0.03, 0.0]
+sensor_rotation = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+
+[manipulator]
+name = "manipulator-2"
+length_m = 0.35
+offset_m = 0.0
+mass_kg = 2.5                            # m (written by `sarctl identify`)
+com_m = 0.100                            # c (written by `sarctl identify`)
+
+[sensor]
+noise_n = [0.2, 0.2, 0.8]
+
+[axes]
+travel_m = [[-0.3, 0.3], [0.18, 0.38], [0.0, 0.6]]
+max_speed_mps = 0.05
+
+[guard]
+max_sensor_age_s = 0.05
+max_joints_age_s = 0.05
+
+[plausibility]
+max_counter_gap = 25
+"#;
+
+fn scenario() -> String {
+    let demo = sar_daemon::sim::DEMO_SCENARIO_TOML;
+    // No tip contact: nothing may touch the tip during identification.
+    demo.split("[[contact]]").next().unwrap().to_owned()
+}
+
+#[test]
+fn identify_live_writes_back_the_simulated_manipulator() {
+    let prefix = format!("sar-idlive-{}", std::process::id());
+    let dir = std::env::temp_dir().join(&prefix);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenario_path = dir.join("scenario.toml");
+    std::fs::write(&scenario_path, scenario()).unwrap();
+    let config_path = dir.join("robot.toml");
+    std::fs::write(&config_path, CONFIG).unwrap();
+    let _daemon = Daemon(
+        Command::new(SARD)
+            .arg("--sim")
+            .arg("--config")
+            .arg(&config_path)
+            .arg("--scenario")
+            .arg(&scenario_path)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let client = sar_daemon::shm::Client::new(&prefix).unwrap();
+    let start = Instant::now();
+    while client.subscribe().is_err() {
+        assert!(start.elapsed() < Duration::from_secs(30), "no daemon");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = Command::new(SARCTL)
+        .arg("--config")
+        .arg(&config_path)
+        .args(["--format", "json", "identify", "--live", "--yes"])
+        .env("SAR_SERVICE_PREFIX", &prefix)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    println!("{json}");
+    let m = json["mass_kg"].as_f64().unwrap();
+    let c = json["com_m"].as_f64().unwrap();
+    let b = json["support_m"][1].as_f64().unwrap();
+    assert!((m - 2.593).abs() < 0.01 * 2.593, "m {m}");
+    assert!((c - 0.103).abs() < 0.01 * 0.103, "c {c}");
+    assert!((b - 0.20).abs() < 0.3e-3, "B_y {b}");
+    let written = sar_daemon::config::load(&config_path).unwrap();
+    assert!((written.estimator.profile.mass_kg() - m).abs() < 1e-5);
+    let text = std::fs::read_to_string(&config_path).unwrap();
+    assert!(text.contains("# m (written by `sarctl identify`)"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,342 @@
+//! The loop's whole per-cycle path allocates nothing, publishing included:
+//! `Publish::before_cycle`, `Controller::step`, `Publish::publish` of the
+//! daemon's real shared memory (`DaemonShm`), with a subscriber reading and
+//! a client sending commands (reset, tare, a move, limits set and queried)
+//! that the loop judges and answers meanwhile.
+//!
+//! The counting allocator counts only on a thread that asked for it, and the
+//! loop thread asks only around the calls the real loop makes each cycle: the
+//! client, the subscriber and the daemon's own publishing thread may allocate
+//! (they are not on the loop's path); the loop may not.
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use sar_daemon::control::{Controller, Operator, ReplyStatus};
+use sar_daemon::runloop::{Publish, Published};
+use sar_daemon::shm::{Client, DaemonShm};
+use sar_daemon::stats::LoopStats;
+use sar_daemon::wire::{CommandMsg, command_kind, limits_array};
+use sar_daemon::{config, logq, rt, sim};
+use sar_drivers::SimClock;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+struct Counting;
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    /// Whether this thread's allocations are counted (a const thread-local
+    /// without destructor: reading it never allocates).
+    static COUNTED: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count() {
+    if COUNTED.try_with(Cell::get).unwrap_or(false) {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
+// SAFETY: forwards to the system allocator, only counting.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Runs `f` with this thread's allocations counted.
+fn counted<T>(f: impl FnOnce() -> T) -> T {
+    COUNTED.with(|c| c.set(true));
+    let out = f();
+    COUNTED.with(|c| c.set(false));
+    out
+}
+
+#[test]
+fn the_counter_sees_an_allocation_on_the_loop_thread() {
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let v = counted(|| std::hint::black_box(vec![1u8; 48]));
+    assert_eq!(v.len(), 48);
+    assert!(ALLOCATIONS.load(Ordering::SeqCst) > before);
+}
+
+#[test]
+fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
+    let cfg = config::builtin().unwrap();
+    let scenario = sim::demo_scenario().unwrap();
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _thread, queue) = logq::channel(false);
+    let prefix = format!("sar-noalloc-pub-{}", std::process::id());
+    let mut shm = DaemonShm::create(
+        &prefix,
+        operator.clone(),
+        limits_array(&cfg.estimator.guard.limits()),
+        None,
+    )
+    .unwrap();
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.step_config(),
+        sensor,
+        drives,
+        operator,
+        log,
+        true,
+    )
+    .unwrap();
+    let stats = LoopStats::default();
+    let mut cycle = 0u64;
+    // One cycle exactly as `runloop::run` makes it; only the calls of the
+    // loop's path are counted.
+    let mut one = |c: &mut Controller<_, _>, shm: &mut DaemonShm| {
+        cycle += 1;
+        clock.advance_ns(1_000_000);
+        counted(|| {
+            shm.before_cycle();
+            let out = *c.step(cycle, || Some(clock.now_ns()));
+            shm.publish(&Published {
+                input: c.input(),
+                loop_input: c.loop_input(),
+                decision: c.decision(),
+                output: &out,
+                stats: &stats,
+                drive_state: c.drive_state(),
+                halted: c.halted(),
+                quick_stops: c.counts().quick_stops,
+                recorder_drops: 0,
+                recording: false,
+            });
+        });
+        while queue.pop().is_some() {}
+    };
+    // Warm-up (lazily made state in the simulator, the first samples).
+    for _ in 0..200 {
+        one(&mut c, &mut shm);
+    }
+
+    // A subscriber and a client in their own threads; the loop runs at 1 kHz
+    // of real time (absolute deadlines, as sard) until the client has its
+    // replies. Nothing here depends on the timing: the pacing only gives the
+    // other threads time to work.
+    let done = Arc::new(AtomicBool::new(false));
+    let received = Arc::new(AtomicU64::new(0));
+    let client_thread = {
+        let (prefix, done, received) = (prefix.clone(), done.clone(), received.clone());
+        std::thread::spawn(move || {
+            let client = Client::new(&prefix).unwrap();
+            let sub = client.subscribe().unwrap();
+            let mut replies = Vec::new();
+            let mut send = |kind: u32, limits_n: [f64; 6]| {
+                let n = sub.wait(Duration::from_millis(100), |_| {});
+                received.fetch_add(n as u64, Ordering::SeqCst);
+                let reply = client
+                    .command(
+                        CommandMsg {
+                            kind,
+                            id: replies.len() as u64 + 1,
+                            tip_m: [0.6, 0.2, 0.001],
+                            limits_n,
+                            ..CommandMsg::default()
+                        },
+                        Duration::from_secs(10),
+                    )
+                    .unwrap();
+                replies.push(reply);
+                reply
+            };
+            let limits = send(command_kind::LIMITS, [0.0; 6]).limits_n;
+            for kind in [
+                command_kind::RESET,
+                command_kind::TARE,
+                command_kind::MOVE_TIP,
+                command_kind::RESET,
+            ] {
+                send(kind, [0.0; 6]);
+            }
+            // Lowered limits: the reply and the next query carry them.
+            let lowered = limits.map(|l| l * 0.9);
+            send(command_kind::SET_LIMITS, lowered);
+            send(command_kind::LIMITS, [0.0; 6]);
+            let n = sub.wait(Duration::from_millis(100), |_| {});
+            received.fetch_add(n as u64, Ordering::SeqCst);
+            done.store(true, Ordering::SeqCst);
+            replies
+        })
+    };
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let mut next_ns = rt::monotonic_ns().unwrap();
+    let mut cycles = 0u64;
+    while !done.load(Ordering::SeqCst) {
+        assert!(
+            cycles < 60_000,
+            "the client got no replies in 60 000 cycles"
+        );
+        next_ns += 1_000_000;
+        rt::sleep_until_ns(next_ns);
+        one(&mut c, &mut shm);
+        cycles += 1;
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let replies = client_thread.join().unwrap();
+    assert_eq!(replies.len(), 7);
+    for (i, r) in replies.iter().enumerate() {
+        assert_eq!(r.id, i as u64 + 1, "{r:?}");
+    }
+    // Judged by the loop (a cycle number) except the limits queries.
+    assert!(replies[1..6].iter().all(|r| r.cycle > 0), "{replies:?}");
+    let lowered = replies[0].limits_n.map(|l| l * 0.9);
+    assert_eq!(
+        replies[5].status,
+        ReplyStatus::Accepted as u32,
+        "{replies:?}"
+    );
+    assert_eq!(replies[5].limits_n, lowered);
+    assert_eq!(replies[6].limits_n, lowered);
+    assert!(received.load(Ordering::SeqCst) > 0, "no state received");
+    assert_eq!(
+        after - before,
+        0,
+        "{cycles} published cycles with 7 commands allocated {} times on the loop thread",
+        after - before
+    );
+}
+
+/// The same through `runloop::run` itself, the whole of it counted from its
+/// first cycle to its return (stats, watchdog, overrun logging, the drives
+/// halted at the end): at the configured rate on the monotonic clock, the
+/// simulator on the same clock, a client's commands meanwhile; the client
+/// ends the run (as a signal would) once it has its replies.
+#[test]
+fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
+    use sar_daemon::notify::Watchdog;
+    use sar_daemon::runloop::{self, RunLimits};
+    use sar_drivers::MonotonicClock;
+
+    let cfg = config::builtin().unwrap();
+    let scenario = sim::demo_scenario().unwrap();
+    let (_sim, sensor, drives, bias) =
+        sim::simulated(&scenario, MonotonicClock::new().unwrap()).unwrap();
+    let operator = Operator::new();
+    let (log, log_thread, _queue) = logq::channel(true);
+    let prefix = format!("sar-noalloc-run-{}", std::process::id());
+    let mut shm = DaemonShm::create(
+        &prefix,
+        operator.clone(),
+        limits_array(&cfg.estimator.guard.limits()),
+        None,
+    )
+    .unwrap();
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.step_config(),
+        sensor,
+        drives,
+        operator,
+        log.clone(),
+        true,
+    )
+    .unwrap();
+    let client_thread = {
+        let prefix = prefix.clone();
+        std::thread::spawn(move || {
+            let client = Client::new(&prefix).unwrap();
+            let sub = client.subscribe().unwrap();
+            // The loop has run a while (start-up reset, first samples).
+            let mut last = 0;
+            let start = std::time::Instant::now();
+            while last < 300 {
+                if start.elapsed() > Duration::from_secs(60) {
+                    rt::request_stop();
+                    panic!("no state of cycle 300 within 60 s");
+                }
+                sub.wait(Duration::from_millis(100), |s| last = s.cycle);
+            }
+            let mut replies = Vec::new();
+            // (A failed command stops the loop too, then fails the test.)
+            for (id, kind) in [
+                command_kind::LIMITS,
+                command_kind::TARE,
+                command_kind::RESET,
+                command_kind::MOVE_TIP,
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let reply = client.command(
+                    CommandMsg {
+                        kind,
+                        id: id as u64 + 1,
+                        tip_m: [0.6, 0.2, 0.001],
+                        ..CommandMsg::default()
+                    },
+                    Duration::from_secs(10),
+                );
+                if reply.is_err() {
+                    rt::request_stop();
+                }
+                replies.push(reply.unwrap());
+            }
+            rt::request_stop();
+            replies
+        })
+    };
+    let mut stats = LoopStats::default();
+    let mut watchdog = Watchdog::new(None, 100);
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    counted(|| {
+        runloop::run(
+            &mut c,
+            &cfg.loop_,
+            RunLimits {
+                max_cycles: Some(120_000),
+                stall_after_cycles: None,
+            },
+            &mut stats,
+            &mut shm,
+            &mut watchdog,
+            &log,
+        );
+    });
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let replies = client_thread.join().unwrap();
+    if let Some(t) = log_thread {
+        t.finish();
+    }
+    assert_eq!(replies.len(), 4);
+    assert!(replies[1..].iter().all(|r| r.cycle > 0), "{replies:?}");
+    assert!(stats.cycles > 300);
+    assert_eq!(shm.queue_drops(), 0);
+    assert_eq!(
+        after - before,
+        0,
+        "runloop::run of {} cycles allocated {} times on its thread",
+        stats.cycles,
+        after - before
+    );
+}
