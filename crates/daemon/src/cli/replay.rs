@@ -117,8 +117,8 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
     }
 }
 
-/// The tip force over time (X, Y, Z) with the reference when there is one,
-/// as an SVG.
+/// The tip force over time (X, Y, Z, one panel each) with the reference
+/// when there is one, as an SVG.
 pub fn plot_svg(
     path: &Path,
     series: &[SeriesPoint],
@@ -144,13 +144,27 @@ pub fn plot_svg(
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let panels = root.split_evenly((3, 1));
     let colours = [RED, GREEN, BLUE];
+    let axes = ["X", "Y", "Z"];
     for (k, area) in panels.iter().enumerate() {
+        let axis = axes.get(k).copied().unwrap_or("?");
         let mut chart = ChartBuilder::on(area)
-            .margin(10)
+            .caption(
+                format!("tip force F_tip {axis}, base frame (the article's Figure 9)"),
+                ("sans-serif", 16),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
             .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))
             .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .y_desc(format!("F_{axis} (N)"))
+            .draw()
+            .map_err(|e| err(&e))?;
         let colour = colours.get(k).copied().unwrap_or(BLACK);
-        if reference.is_some() {
+        if let Some(topic) = reference {
             chart
                 .draw_series(LineSeries::new(
                     series
@@ -158,7 +172,9 @@ pub fn plot_svg(
                         .filter_map(|p| Some((p.t_s, *p.reference_n?.get(k)?))),
                     BLACK.stroke_width(2),
                 ))
-                .map_err(|e| err(&e))?;
+                .map_err(|e| err(&e))?
+                .label(format!("reference {topic}"))
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
         }
         chart
             .draw_series(LineSeries::new(
@@ -167,17 +183,15 @@ pub fn plot_svg(
                     .filter_map(|p| Some((p.t_s, *p.estimate_n.get(k)?))),
                 colour.mix(0.7),
             ))
-            .map_err(|e| err(&e))?;
-        // The zero line and the frame (no text: the SVG backend has no fonts
-        // in this build; the axes are X, Y, Z from the top, time in s).
+            .map_err(|e| err(&e))?
+            .label("estimate (unfiltered, observable)")
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
         chart
-            .draw_series(LineSeries::new([(0.0, 0.0), (t_max, 0.0)], BLACK.mix(0.3)))
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
             .map_err(|e| err(&e))?;
-        area.draw(&Rectangle::new(
-            [(0, 0), (1199, 299)],
-            BLACK.mix(0.5).stroke_width(1),
-        ))
-        .map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))?;
     Ok(())
