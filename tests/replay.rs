@@ -152,6 +152,7 @@ fn daemon_fixtures_replay_bit_for_bit_with_their_guard_transitions() {
         let out = dir.join(name);
         let r = replay_file(&fixture(name), &options(Some(out.clone()), None)).unwrap();
         assert_eq!(r.mode, Mode::CycleInput, "{name}");
+        assert_eq!(r.from_first_cycle, Some(true), "{name}");
         assert_eq!(r.cycles, cycles, "{name}");
         assert!(r.input_complete, "{name}");
         assert_eq!(r.first_difference, None, "{name}");

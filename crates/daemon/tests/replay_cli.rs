@@ -140,12 +140,22 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["identical"], true, "{v}");
+    assert_eq!(v["from_first_cycle"], true, "{v}");
     assert_eq!(v["mode"], "cycle_input", "{v}");
     assert_eq!(v["recorder_dropped"], 0, "{v}");
     assert!(v["cycles"].as_u64().unwrap() > 100, "{v}");
     assert_eq!(v["compared"], v["outputs"], "{v}");
     assert!(out_file.exists());
-    // The one started on request is a complete, readable recording too.
+    // The one started on request is a complete, readable recording too; it
+    // says that it starts after the daemon's first cycle.
+    let cfg = sar_daemon::config::load(&config).unwrap();
+    let r = sar_daemon::record::replay::replay_file(
+        &files[1],
+        &sar_daemon::record::replay::ReplayOptions::from_config(&cfg),
+    )
+    .unwrap();
+    assert_eq!(r.from_first_cycle, Some(false));
+    assert!(r.cycles > 10, "{}", r.cycles);
     let bytes = sar_daemon::record::read_file(&files[1]).unwrap();
     let mut reader = sar_daemon::record::McapReader::new(&bytes).unwrap();
     assert!(reader.by_ref().all(|m| m.is_ok()));

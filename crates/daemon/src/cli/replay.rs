@@ -43,6 +43,7 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
         "input_complete": r.input_complete,
         "stopped": r.stopped,
         "output": r.output.as_ref().map(|p| p.display().to_string()),
+        "from_first_cycle": r.from_first_cycle,
         "comparison": r.comparison.as_ref().map(|c| json!({
             "topic": c.topic,
             "pairs": c.pairs,
@@ -110,8 +111,18 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
     }
     match &r.first_difference {
         Some(d) => Err(format!(
-            "replay differs from the recording: {} messages; first at cycle {} on {} field {} (recorded {}, replayed {})",
-            r.differences, d.cycle, d.topic, d.field, d.recorded, d.replayed
+            "replay differs from the recording: {} messages; first at cycle {} on {} field {} (recorded {}, replayed {}){}",
+            r.differences,
+            d.cycle,
+            d.topic,
+            d.field,
+            d.recorded,
+            d.replayed,
+            if r.from_first_cycle == Some(false) {
+                "; the recording starts after the daemon's first cycle (sarctl record start, or a later file of a rotation), so the estimator's earlier state is not in it"
+            } else {
+                ""
+            }
         )),
         None => Ok(()),
     }

@@ -283,11 +283,16 @@ impl RotatingWriter {
                 .add_channel(schema, topic.name(), "cdr", &none)
                 .map_err(mcap_err(&path))?;
         }
+        // Each file says which of the rotation it is (`file_index`, 0 for
+        // the first): a reader can tell a file that starts mid-recording.
+        let index = self.next_index.saturating_sub(1);
         for (name, metadata) in &self.options.metadata {
+            let mut metadata = metadata.clone();
+            metadata.insert("file_index".to_owned(), index.to_string());
             writer
                 .write_metadata(&mcap::records::Metadata {
                     name: name.clone(),
-                    metadata: metadata.clone(),
+                    metadata,
                 })
                 .map_err(mcap_err(&path))?;
         }

@@ -182,6 +182,12 @@ pub struct ReplayReport {
     pub series: Vec<SeriesPoint>,
     /// The output file, when written.
     pub output: Option<PathBuf>,
+    /// Whether the recording holds the daemon's first cycle (its `sar_replay`
+    /// metadata: recorded from the start, first file of a rotation); `None`
+    /// without that metadata. A recording that does not lacks the
+    /// estimator's earlier state (guard, filter, bias after tares): its
+    /// replay may differ.
+    pub from_first_cycle: Option<bool>,
 }
 
 /// Why a replay could not run.
@@ -523,7 +529,8 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
     let writer = match &options.output {
         Some(path) => {
             let mut o = FileOptions::single(path);
-            o.metadata = metadata.into_iter().collect();
+            // The replayed file holds every cycle of its input.
+            o.metadata = metadata.clone().into_iter().collect();
             Some(RotatingWriter::new(o)?)
         }
         None => None,
@@ -549,6 +556,10 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
             comparison: None,
             series: Vec::new(),
             output: options.output.clone(),
+            from_first_cycle: metadata.as_ref().map(|(_, m)| {
+                m.get("from_first_cycle").is_some_and(|v| v == "true")
+                    && m.get("file_index").is_none_or(|i| i == "0")
+            }),
         },
         replayed: BTreeMap::new(),
         recorded: BTreeMap::new(),
