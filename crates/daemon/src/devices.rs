@@ -60,6 +60,9 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
             c.pdo_wait_ns = c.pdo_wait_ns.min(c.sync_period_ns / 2);
             c.poll_interval_ns = c.poll_interval_ns.min(c.pdo_wait_ns);
             c.max_speed_mps = config.axes.max_speed_mps;
+            // The same profile as the loop's plan (its following-error
+            // reference).
+            c.max_accel_mps2 = config.axes.max_accel_mps2;
             c.travel_m = config.axes.travel_m;
             Some((interface.clone(), c))
         }

@@ -17,8 +17,12 @@
 //!   state) and holds the axes where they were measured.
 //! - A move is planned here, with the time-optimal axis planner of
 //!   [`sar_drivers::motion`] under the configured speed and acceleration,
-//!   from where the trajectory is now; each cycle the drives get the plan's
-//!   position one period ahead. A move is refused while halted, while the
+//!   from where the trajectory is now. The drives get the plan's end point
+//!   once, when it is planned (or braked), and run the same planner under the
+//!   same limits (the simulator's axes and the CANopen host take theirs from
+//!   `[axes]`), so that the loop's plan is the trajectory they follow within a
+//!   period; drives that do otherwise (other limits, a blocked or slipping
+//!   axis) leave it and fault. A move is refused while halted, while the
 //!   drives are not enabled, outside the travel or the kinematics, and,
 //!   above the warn limit, when it pushes the tip further along its force; a
 //!   move under way that would push further along the force once the force
@@ -84,7 +88,16 @@ pub enum ReplyStatus {
     Refused = 10,
     /// Force limits that are invalid or above their configured ceiling.
     LimitsRefused = 11,
+    /// A reset while the axes still move (braking after a quick stop, or
+    /// drives that have not stopped): the trajectory to hold would not be
+    /// theirs. Wait until they are at rest.
+    AxesMoving = 12,
 }
+
+/// Below this speed (on every axis, between two joint samples) the axes are
+/// at rest for a reset, m/s (well above the encoders' quantisation over one
+/// period, well below any planned move).
+pub const REST_SPEED_MPS: f64 = 0.002;
 
 /// The numeric code of a guard reason (stable: recordings and `sarctl` use it).
 pub fn reason_code(reason: &Reason) -> u16 {
@@ -180,7 +193,8 @@ pub enum DriveAction {
     QuickStop,
     /// Bring them back after an accepted reset.
     Release(Release),
-    /// The position to be at one period from now, m.
+    /// Move to this end point, m (the end of the trajectory just planned or
+    /// braked: the drives run the same time-optimal profile to it).
     Setpoint(ActiveJoints),
 }
 
@@ -211,7 +225,7 @@ pub struct StepConfig {
     pub axis_limits: Limits,
     /// The accepted following error per axis, m.
     pub following_tolerance_m: f64,
-    /// The loop's period, ns (the setpoint is the plan one period ahead).
+    /// The loop's period, ns.
     pub period_ns: u64,
 }
 
@@ -289,6 +303,10 @@ pub struct LoopStep {
     profile: Profile,
     config: StepConfig,
     trajectory: Option<Trajectory>,
+    /// The last valid joint sample (for the axes' speed).
+    last_joints: Option<(ActiveJoints, u64)>,
+    /// The largest axis speed between the last two joint samples, m/s.
+    speed_mps: f64,
     out: LoopOutput,
 }
 
@@ -348,6 +366,8 @@ impl LoopStep {
             estimator,
             config,
             trajectory: None,
+            last_joints: None,
+            speed_mps: 0.0,
             out,
         })
     }
@@ -379,11 +399,31 @@ impl LoopStep {
                     joints: t.position(input.joints.stamp_ns),
                     tolerance_m,
                 });
+        // The axes' speed, from the joint samples.
+        let q = &input.joints.joints;
+        if input.joints.valid && [q.q1_m, q.q2_m, q.q3_m].iter().all(|v| v.is_finite()) {
+            if let Some((p, stamp_ns)) = self.last_joints
+                && input.joints.stamp_ns > stamp_ns
+            {
+                let dt_s = (input.joints.stamp_ns - stamp_ns) as f64 * 1e-9;
+                self.speed_mps = [q.q1_m - p.q1_m, q.q2_m - p.q2_m, q.q3_m - p.q3_m]
+                    .iter()
+                    .fold(0.0, |m: f64, d| m.max(d.abs() / dt_s));
+            }
+            self.last_joints = Some((*q, input.joints.stamp_ns));
+        }
+        // A reset waits until the axes are at rest: it is not passed on.
+        let mut cycle_input = input.cycle_input();
+        let reset_while_moving =
+            input.request == Some(Request::Reset) && self.speed_mps > REST_SPEED_MPS;
+        if reset_while_moving {
+            cycle_input.command = None;
+        }
         let estimate = *self
             .estimator
-            .cycle_following(&input.cycle_input(), reference.as_ref());
+            .cycle_following(&cycle_input, reference.as_ref());
         let mut action = DriveAction::None;
-        let mut reply = None;
+        let mut reply = reset_while_moving.then_some((ReplyStatus::AxesMoving, 0));
 
         let halting = matches!(estimate.guard_state, GuardState::Stop | GuardState::Fault);
         let entered_halt = estimate
@@ -415,8 +455,11 @@ impl LoopStep {
             }
         }
 
+        let mut planned = false;
         if let Some(Request::MoveTip { tip_m }) = input.request {
-            reply = Some(self.plan_move(input, &estimate, &tip_m));
+            let r = self.plan_move(input, &estimate, &tip_m);
+            planned = r.0 == ReplyStatus::Accepted;
+            reply = Some(r);
         }
 
         // A move under way that pushes further along a force above the warn
@@ -432,18 +475,18 @@ impl LoopStep {
             let states = t.at(now_ns);
             let axes = states.map(|s| AxisPlan::brake(now_ns, s, limits));
             self.trajectory = Some(Trajectory::from_plans(now_ns, axes, None));
+            planned = true;
         }
 
-        // The setpoint: the plan one period ahead, while it moves (and once
-        // more after its end, so that the drives get its exact end).
-        if !halting
+        // A new plan: its end point to the drives.
+        if planned
+            && !halting
             && action == DriveAction::None
             && input.drive_state == Some(DriveState::Enabled)
-            && let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
-            && now_ns <= t.end_ns.saturating_add(self.config.period_ns)
+            && let Some(t) = self.trajectory
         {
-            action =
-                DriveAction::Setpoint(t.position(now_ns.saturating_add(self.config.period_ns)));
+            let [q1_m, q2_m, q3_m] = t.axes.map(|p| p.end_m());
+            action = DriveAction::Setpoint(ActiveJoints { q1_m, q2_m, q3_m });
         }
 
         self.out = LoopOutput {

@@ -100,6 +100,7 @@ pub fn reason_name(code: u32) -> &'static str {
         22 => "above warn limit",
         23 => "below warn",
         24 => "reset",
+        25 => "following error",
         _ => "other",
     }
 }
@@ -419,6 +420,9 @@ pub fn status_name(code: u32) -> &'static str {
         x if x == ReplyStatus::DrivesRefused as u32 => "refused: the drives are not enabled",
         x if x == ReplyStatus::LimitsRefused as u32 => {
             "refused: limits invalid or above their configured ceiling"
+        }
+        x if x == ReplyStatus::AxesMoving as u32 => {
+            "reset refused: the axes are still moving (wait until they stop)"
         }
         reply_code::UNKNOWN_COMMAND => "unknown command",
         reply_code::BUSY => "refused: the daemon's command queue is full",

@@ -5,8 +5,9 @@
 //! every cycle:
 //! - in Stop or Fault, the drives get nothing but a quick stop, and the cycle
 //!   that enters Stop or Fault sends one;
-//! - a setpoint goes only to enabled drives, in Ok or Warn, within the travel,
-//!   and consecutive setpoints are at most the planned speed apart;
+//! - a setpoint goes only to enabled drives, in Ok or Warn, within the travel;
+//!   the commanded trajectory moves at most the planned speed, and the
+//!   drives follow it (no following-error fault without a blocked axis);
 //! - every request gets exactly one reply; an accepted move was judged with
 //!   enabled drives, outside Stop/Fault, and in Warn not along the force;
 //! - the run's recorded inputs replay through a fresh step bit for bit.
@@ -191,25 +192,48 @@ fn run(seed: u64) {
         if halting && input.drive_state == Some(DriveState::Enabled) {
             assert_eq!(d.action, DriveAction::QuickStop, "{ctx}");
         }
-        let setpoint = match d.action {
-            DriveAction::Setpoint(q) => {
-                assert!(!halting, "{ctx}");
-                assert_eq!(input.drive_state, Some(DriveState::Enabled), "{ctx}");
-                for (v, (lo, hi)) in [q.q1_m, q.q2_m, q.q3_m].iter().zip(step_config.travel_m) {
-                    assert!((lo..=hi).contains(v), "{ctx}");
-                }
-                if let Some((_, Some(p))) = previous {
-                    for (a, b) in [q.q1_m, q.q2_m, q.q3_m]
-                        .iter()
-                        .zip([p.q1_m, p.q2_m, p.q3_m])
-                    {
-                        assert!((a - b).abs() <= step_m * (1.0 + 1e-9) + 1e-15, "{ctx}");
-                    }
-                }
-                Some(q)
+        if let DriveAction::Setpoint(q) = d.action {
+            assert!(!halting, "{ctx}");
+            assert_eq!(input.drive_state, Some(DriveState::Enabled), "{ctx}");
+            for (v, (lo, hi)) in [q.q1_m, q.q2_m, q.q3_m].iter().zip(step_config.travel_m) {
+                assert!((lo..=hi).contains(v), "{ctx}");
             }
-            _ => None,
-        };
+        }
+        // The trajectory (sampled at the joint stamps, 1 ms apart) moves at
+        // most at the planned speed, and the drives follow it.
+        if let (Some(r), Some((_, Some(p)))) = (d.reference, previous) {
+            for (a, b) in [r.q1_m, r.q2_m, r.q3_m]
+                .iter()
+                .zip([p.q1_m, p.q2_m, p.q3_m])
+            {
+                assert!((a - b).abs() <= step_m * (1.0 + 1e-9) + 1e-12, "{ctx}");
+            }
+        }
+        assert!(
+            !matches!(
+                out.guard_reason,
+                sar_estimator::guard::Reason::FollowingError { .. }
+            ),
+            "{ctx}"
+        );
+        // A reset is accepted only with the axes at rest (the hold it starts
+        // must be where they stay).
+        if out
+            .transition
+            .is_some_and(|t| t.reason == sar_estimator::guard::Reason::Reset)
+            && let Some((p, _)) = recorded.iter().rev().nth(1)
+        {
+            let (a, b) = (&input.joints, &p.joints);
+            if a.valid && b.valid && a.stamp_ns > b.stamp_ns {
+                let dt_s = (a.stamp_ns - b.stamp_ns) as f64 * 1e-9;
+                let v = (a.joints.q1_m - b.joints.q1_m)
+                    .abs()
+                    .max((a.joints.q2_m - b.joints.q2_m).abs())
+                    .max((a.joints.q3_m - b.joints.q3_m).abs())
+                    / dt_s;
+                assert!(v <= sar_daemon::step::REST_SPEED_MPS, "{ctx}: {v} m/s");
+            }
+        }
         // Replies: one per request, none without.
         let reply = operator.replies.pop();
         assert_eq!(reply.is_some(), pending, "{ctx}");
@@ -229,7 +253,7 @@ fn run(seed: u64) {
                 }
             }
         }
-        previous = Some((out.guard_state, setpoint));
+        previous = Some((out.guard_state, d.reference));
     }
     // The run did something worth checking.
     assert!(

@@ -108,10 +108,14 @@ fn run(args: &Args) -> Result<(), String> {
             cfg.origin
         ));
     }
-    let scenario = match &args.scenario {
+    let mut scenario = match &args.scenario {
         Some(path) => sar_drivers::scenario::load(path).map_err(|e| e.to_string())?,
         None => sim::demo_scenario().map_err(|e| e.to_string())?,
     };
+    // The simulated drives run the configured profile, as configured drives
+    // would: the loop's plan is then the trajectory they follow.
+    scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
+    scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
     rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
 
     // The sensor first: its receive thread keeps the normal priority.
