@@ -76,7 +76,10 @@ pub fn daemon_recording(
     path: &Path,
 ) -> Result<u64, String> {
     let cfg = config::builtin().map_err(|e| e.to_string())?;
-    let scenario = sar_drivers::scenario::load(scenario).map_err(|e| e.to_string())?;
+    let mut scenario = sar_drivers::scenario::load(scenario).map_err(|e| e.to_string())?;
+    // As `sard --sim`: the simulated drives run the configured profile.
+    scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
+    scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
     let clock = SimClock::new(HOST_START_NS);
     let (simulator, sensor, drives, bias) =
         sim::simulated(&scenario, clock.clone()).map_err(|e| e.to_string())?;
