@@ -23,6 +23,11 @@
 //!   `max_speed_mps` (0.02) and `max_accel_mps2` (0.2) for moves the daemon
 //!   plans, `following_tolerance_m` (0.001: an axis farther than this from
 //!   the commanded trajectory is a Fault).
+//! - `[record]`: recording from the daemon's start (`sarctl record start|stop`
+//!   at any time): `enabled` (false), `directory` ("recordings", relative to
+//!   the working directory), `max_file_mb` (1024; 0: no size rotation),
+//!   `max_file_s` (600; 0: no time rotation), `queue_capacity` (65536
+//!   messages, about 2.7 s of disk stall at 4 kHz; 1024..=16777216).
 //! - `[drivers.sensor]` and `[drivers.axes]`: `kind = "sim"` (default) or a real
 //!   device (`rdt`, `canopen`) with its keys (INTERFACES.md 2).
 //!
@@ -129,6 +134,30 @@ struct FileToml {
     axes: AxesToml,
     #[serde(default)]
     drivers: DriversToml,
+    #[serde(default)]
+    record: RecordToml,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct RecordToml {
+    enabled: bool,
+    directory: String,
+    max_file_mb: f64,
+    max_file_s: f64,
+    queue_capacity: i64,
+}
+
+impl Default for RecordToml {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            directory: "recordings".to_owned(),
+            max_file_mb: 1024.0,
+            max_file_s: 600.0,
+            queue_capacity: 65536,
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -387,6 +416,8 @@ pub struct Config {
     pub sensor_driver: SensorDriver,
     /// The axes' driver.
     pub axes_driver: AxesDriver,
+    /// The recording (`[record]`).
+    pub record: crate::record::live::RecordSettings,
 }
 
 /// Reads and checks a configuration file; errors name `path`.
@@ -662,6 +693,23 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         Some(c) => Some(ctx.range_i("loop.cpu", c, 0, 1023)?),
     };
 
+    let rec = &f.record;
+    if rec.directory.is_empty() {
+        return Err(ctx.err("record.directory", "must not be empty"));
+    }
+    let max_mb = ctx.range_f("record.max_file_mb", rec.max_file_mb, 0.0, 1e6, "MB")?;
+    let max_s = ctx.range_f("record.max_file_s", rec.max_file_s, 0.0, 86_400.0, "s")?;
+    let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
+    let record = crate::record::live::RecordSettings {
+        enabled: rec.enabled,
+        directory: std::path::PathBuf::from(&rec.directory),
+        rotation: crate::record::Rotation {
+            max_bytes: (max_mb > 0.0).then(|| (max_mb * 1e6).round() as u64),
+            max_duration_ns: (max_s > 0.0).then(|| (max_s * 1e9).round() as u64),
+        },
+        queue_capacity: usize::try_from(queue_capacity).unwrap_or(65536),
+    };
+
     let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
 
@@ -692,6 +740,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         },
         sensor_driver,
         axes_driver,
+        record,
     })
 }
 

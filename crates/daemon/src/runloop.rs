@@ -35,6 +35,10 @@ pub struct Published<'a> {
     pub halted: bool,
     /// Quick stops so far.
     pub quick_stops: u64,
+    /// Messages the recorder dropped so far (set by `record::live`).
+    pub recorder_drops: u64,
+    /// Whether a recording runs (set by `record::live`).
+    pub recording: bool,
 }
 
 /// What the loop talks to around each cycle (shared memory).
@@ -102,6 +106,8 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
             drive_state: controller.drive_state(),
             halted: controller.halted(),
             quick_stops: controller.counts().quick_stops,
+            recorder_drops: 0,
+            recording: false,
         });
         // The watchdog is fed from here, the loop itself: a stuck loop stops
         // feeding it.

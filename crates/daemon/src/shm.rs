@@ -120,6 +120,8 @@ struct Shared {
     publish_errors: AtomicU64,
     /// States the thread sent.
     published: AtomicU64,
+    /// Where `record start|stop` go (unset: refused as unknown).
+    record_switch: std::sync::OnceLock<Arc<crate::record::live::RecordSwitch>>,
 }
 
 /// The daemon's loop side: implements [`Publish`] for the loop.
@@ -356,6 +358,20 @@ impl ShmWorker {
             None if command.kind == command_kind::LIMITS => {
                 let _ = active.send_copy(immediate(0));
             }
+            None if matches!(
+                command.kind,
+                command_kind::RECORD_START | command_kind::RECORD_STOP
+            ) && self.shared.record_switch.get().is_some() =>
+            {
+                if let Some(s) = self.shared.record_switch.get() {
+                    if command.kind == command_kind::RECORD_START {
+                        s.request_start();
+                    } else {
+                        s.request_stop();
+                    }
+                }
+                let _ = active.send_copy(immediate(0));
+            }
             None => {
                 let _ = active.send_copy(immediate(reply_code::UNKNOWN_COMMAND));
             }
@@ -458,6 +474,13 @@ impl DaemonShm {
         ))
     }
 
+    /// Takes `record start|stop` commands into `switch` (on the publishing
+    /// thread; the loop and the recording's manager thread act on it).
+    pub fn with_record_switch(self, switch: Arc<crate::record::live::RecordSwitch>) -> Self {
+        let _ = self.shared.record_switch.set(switch);
+        self
+    }
+
     /// States the publishing thread failed to send so far.
     pub fn publish_errors(&self) -> u64 {
         self.shared.publish_errors.load(Ordering::Relaxed)
@@ -511,6 +534,8 @@ impl Publish for DaemonShm {
             drive_state: c.drive_state,
             halted: c.halted,
             quick_stops: c.quick_stops,
+            recorder_drops: c.recorder_drops,
+            recording: c.recording,
             truth_tip_force_n,
         });
         state.queue_drops = self.queue_drops;

@@ -175,6 +175,10 @@ pub struct StateMsg {
     pub queue_drops: u64,
     /// States the publishing thread failed to send so far.
     pub publish_errors: u64,
+    /// Messages the recorder dropped so far (queue full or disk failed).
+    pub recorder_drops: u64,
+    /// 1 while a recording runs, else 0.
+    pub recording: u64,
 }
 
 impl Default for StateMsg {
@@ -207,6 +211,8 @@ impl Default for StateMsg {
             quick_stops: 0,
             queue_drops: 0,
             publish_errors: 0,
+            recorder_drops: 0,
+            recording: 0,
         }
     }
 }
@@ -232,6 +238,10 @@ pub struct StateParts<'a> {
     pub halted: bool,
     /// Quick stops so far.
     pub quick_stops: u64,
+    /// Messages the recorder dropped so far.
+    pub recorder_drops: u64,
+    /// Whether a recording runs.
+    pub recording: bool,
     /// The simulator's truth, when simulated.
     pub truth_tip_force_n: Option<Vec3>,
 }
@@ -268,6 +278,8 @@ impl StateMsg {
             ],
             overruns: p.stats.overruns,
             quick_stops: p.quick_stops,
+            recorder_drops: p.recorder_drops,
+            recording: u64::from(p.recording),
             ..Self::default()
         };
         if let Some(pose) = o.pose {
@@ -314,6 +326,10 @@ pub mod command_kind {
     /// Set the guard's force limits to `limits_n` (within the configured
     /// ceilings).
     pub const SET_LIMITS: u32 = 5;
+    /// Start recording (`sarctl record start`).
+    pub const RECORD_START: u32 = 6;
+    /// Stop recording (`sarctl record stop`).
+    pub const RECORD_STOP: u32 = 7;
 }
 
 /// An operator command.

@@ -51,6 +51,9 @@ fn every_message_type_round_trips() {
     });
     roundtrip(&drops);
     seen.insert(drops.topic());
+    let truth = Outgoing::SimTruth(WrenchStamped::base_force(17, [1.5, -2.25, 0.125]));
+    roundtrip(&truth);
+    seen.insert(truth.topic());
     assert_eq!(seen.len(), Topic::ALL.len());
 }
 
@@ -202,9 +205,11 @@ prop_compose! {
         ints in prop::array::uniform8(any::<u64>()),
         f in prop::array::uniform5(f3()),
         bools in prop::array::uniform3(any::<bool>()),
-        codes in (0u8..3, 0u8..5, 0u8..10),
+        codes in (0u8..3, 0u8..5, 0u8..12),
         bias in f3(),
         axis in any::<i8>(),
+        more in prop::array::uniform6(f3()),
+        decision in (0u8..6, any::<u8>(), any::<u16>()),
     ) -> CycleInput {
         CycleInput {
             stamp_ns,
@@ -228,6 +233,13 @@ prop_compose! {
             command_kind: CommandKindCode::from_code(codes.2).unwrap(),
             command_values: [f[4][0], f[4][1], f[4][2], bias[0], bias[1], bias[2]],
             command_arg: ints[7],
+            move_tip_m: more[0],
+            limits_n: [more[1][0], more[1][1], more[1][2], more[2][0], more[2][1], more[2][2]],
+            drive_action: DriveActionCode::from_code(decision.0).unwrap(),
+            setpoint_q_m: more[3],
+            reply_status: decision.1,
+            reply_reason: decision.2,
+            limits_in_use_n: [more[4][0], more[4][1], more[4][2], more[5][0], more[5][1], more[5][2]],
         }
     }
 }

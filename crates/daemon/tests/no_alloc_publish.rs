@@ -128,6 +128,8 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
                 drive_state: c.drive_state(),
                 halted: c.halted(),
                 quick_stops: c.counts().quick_stops,
+                recorder_drops: 0,
+                recording: false,
             });
         });
         while queue.pop().is_some() {}

@@ -96,7 +96,10 @@ impl Line {
 fn fields(m: &Outgoing) -> String {
     let mut l = Line::default();
     match m {
-        Outgoing::SensorWrench(w) | Outgoing::TipWrench(w) | Outgoing::TipWrenchFiltered(w) => {
+        Outgoing::SensorWrench(w)
+        | Outgoing::TipWrench(w)
+        | Outgoing::TipWrenchFiltered(w)
+        | Outgoing::SimTruth(w) => {
             l.header(w.stamp_ns, w.frame_id.as_str())
                 .f("wrench.force.x", w.force_n[0])
                 .f("wrench.force.y", w.force_n[1])
@@ -164,7 +167,14 @@ fn fields(m: &Outgoing) -> String {
                 .b("target_valid", c.target_valid)
                 .i("command_kind", c.command_kind.code())
                 .fa("command_values", &c.command_values)
-                .i("command_arg", c.command_arg);
+                .i("command_arg", c.command_arg)
+                .fa("move_tip_m", &c.move_tip_m)
+                .fa("limits_n", &c.limits_n)
+                .i("drive_action", c.drive_action.code())
+                .fa("setpoint_q_m", &c.setpoint_q_m)
+                .i("reply_status", c.reply_status)
+                .i("reply_reason", c.reply_reason)
+                .fa("limits_in_use_n", &c.limits_in_use_n);
         }
         Outgoing::RecorderDrops(d) => {
             l.header(d.stamp_ns, "")

@@ -95,6 +95,41 @@ enum Cmd {
     },
     /// Identify m and c (and calibrate the support) from a recording or live.
     Identify(sar_daemon::cli::identify::IdentifyArgs),
+    /// Run the estimator over a recording's inputs, write and compare the outputs.
+    Replay {
+        /// The recording.
+        #[arg(long, value_name = "REC.mcap")]
+        input: std::path::PathBuf,
+        /// Where to write the outputs.
+        #[arg(long, value_name = "OUT.mcap")]
+        output: Option<std::path::PathBuf>,
+        /// A reference topic (WrenchStamped, e.g. /sar/sim/tip_wrench_truth): error figures.
+        #[arg(long, value_name = "TOPIC")]
+        compare: Option<String>,
+        /// Draw the tip force over time (with the reference) into an SVG.
+        #[arg(long, value_name = "FILE.svg")]
+        plot: Option<std::path::PathBuf>,
+    },
+    /// Rewrite a recording cut short with its summary and index.
+    Recover {
+        /// The recording.
+        file: std::path::PathBuf,
+        /// The output (default: FILE.recovered.mcap; never the input).
+        #[arg(long, value_name = "OUT")]
+        output: Option<std::path::PathBuf>,
+    },
+    /// Start or stop the daemon's recording.
+    Record {
+        /// start or stop.
+        #[arg(value_enum)]
+        action: RecordAction,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum RecordAction {
+    Start,
+    Stop,
 }
 
 /// A write to stdout failed. A reader that went away (`sarctl monitor | head`)
@@ -152,6 +187,8 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "quick_stops": s.quick_stops,
         "publish_queue_drops": s.queue_drops,
         "publish_errors": s.publish_errors,
+        "recording": s.recording != 0,
+        "recorder_drops": s.recorder_drops,
     })
 }
 
@@ -171,12 +208,21 @@ fn state_line(s: &StateMsg) -> String {
         "F_tip -- (no estimate)".to_owned()
     };
     format!(
-        "cycle {:>8}  {force}  guard {:5} ({})  latency p99 {} us, {} overruns",
+        "cycle {:>8}  {force}  guard {:5} ({})  latency p99 {} us, {} overruns{}",
         s.cycle,
         guard_state_name(s.guard_state),
         reason_name(s.guard_reason),
         s.wakeup_ns[1] / 1000,
-        s.overruns
+        s.overruns,
+        if s.recording != 0 || s.recorder_drops != 0 {
+            format!(
+                ", recording {}, {} dropped",
+                if s.recording != 0 { "on" } else { "off" },
+                s.recorder_drops
+            )
+        } else {
+            String::new()
+        }
     )
 }
 
@@ -202,6 +248,29 @@ fn bar(s: &StateMsg) -> String {
 }
 
 fn run(args: &Args) -> Result<(), String> {
+    let json = args.format == Format::Json;
+    match &args.command {
+        Cmd::Replay {
+            input,
+            output,
+            compare,
+            plot,
+        } => {
+            let config = args.config.as_deref().ok_or("replay needs --config FILE")?;
+            return sar_daemon::cli::replay::run(&sar_daemon::cli::replay::Args {
+                config,
+                input,
+                output: output.as_deref(),
+                compare: compare.as_deref(),
+                json,
+                plot: plot.as_deref(),
+            });
+        }
+        Cmd::Recover { file, output } => {
+            return sar_daemon::cli::recover::run(file, output.as_deref(), json);
+        }
+        _ => {}
+    }
     if let Some(path) = &args.config {
         sar_daemon::config::load(path).map_err(|e| e.to_string())?;
     }
@@ -246,6 +315,10 @@ fn run(args: &Args) -> Result<(), String> {
         }
     };
     match args.command {
+        Cmd::Replay { .. } | Cmd::Recover { .. } => Ok(()),
+        Cmd::Record { action } => {
+            sar_daemon::cli::record::run(&client, action == RecordAction::Start, json)
+        }
         Cmd::Status => {
             let sub = client.subscribe()?;
             let s = sub

@@ -4,6 +4,7 @@
 use clap::Parser;
 use sar_daemon::control::{Controller, DrivesCycle, Operator};
 use sar_daemon::notify::{Notifier, Watchdog};
+use sar_daemon::record::live::{LiveRecorder, RecordManager};
 use sar_daemon::runloop::{self, RunLimits};
 use sar_daemon::shm::DaemonShm;
 use sar_daemon::stats::LoopStats;
@@ -146,6 +147,23 @@ fn run(args: &Args) -> Result<(), String> {
         limits_array(&cfg.estimator.guard.limits()),
         truth,
     )?;
+    // Recording (`[record]`, `sarctl record start|stop`): its manager thread
+    // (which opens and closes the files, never the loop) starts here, before
+    // the real-time settings, so that it and the writer threads it starts
+    // keep the normal priority and every CPU. Its start bias is the one the
+    // estimator starts with (below).
+    let start_bias = if real_sensor.is_some() {
+        Bias::force_only(Vec3::zeros())
+    } else {
+        sim_bias
+    };
+    let switch = std::sync::Arc::new(sar_daemon::record::live::RecordSwitch::default());
+    let (recording, shm) = sar_daemon::record::live::RecordManager::start(
+        cfg.record.clone(),
+        start_bias,
+        std::sync::Arc::clone(&switch),
+        shm.with_record_switch(switch),
+    )?;
     // Real-time settings: said once, here, when they cannot be applied.
     // After the publishing thread has started (DaemonShm::create), so that
     // it keeps the normal priority and every CPU.
@@ -169,6 +187,7 @@ fn run(args: &Args) -> Result<(), String> {
         cfg: &cfg,
         operator,
         shm,
+        recording,
         auto_reset: args.sim,
     };
     // A real sensor starts with no bias (the operator tares); the simulated
@@ -245,7 +264,8 @@ struct Run<'a> {
     args: &'a Args,
     cfg: &'a config::Config,
     operator: Operator,
-    shm: DaemonShm,
+    shm: LiveRecorder<DaemonShm>,
+    recording: RecordManager,
     auto_reset: bool,
 }
 
@@ -296,6 +316,9 @@ impl Run<'_> {
             &mut watchdog,
             &log,
         );
+        // The last recording closed (its writer drains the queue first).
+        self.shm.release();
+        self.recording.finish();
         if let Some(t) = log_thread {
             t.finish();
         }

@@ -77,6 +77,12 @@ pub struct FileOptions {
     pub compress: bool,
     /// When to rotate.
     pub rotation: Rotation,
+    /// Metadata records written at the start of every file (name, key-value
+    /// pairs): e.g. `sar_replay`, what replay needs beyond the messages.
+    pub metadata: Vec<(String, BTreeMap<String, String>)>,
+    /// The exact path of the first file (instead of `{prefix}-0000.mcap`;
+    /// later files of a rotation keep the numbered names).
+    pub first_path: Option<PathBuf>,
 }
 
 impl FileOptions {
@@ -89,11 +95,29 @@ impl FileOptions {
             zstd_level: 0,
             compress: true,
             rotation: Rotation::default(),
+            metadata: Vec::new(),
+            first_path: None,
         }
+    }
+
+    /// One file at `path` (no rotation).
+    pub fn single(path: &Path) -> Self {
+        let directory = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let mut options = Self::new(directory, "replay");
+        options.first_path = Some(path.to_path_buf());
+        options
     }
 
     /// The path of file number `index`.
     pub fn path(&self, index: u32) -> PathBuf {
+        if index == 0
+            && let Some(p) = &self.first_path
+        {
+            return p.clone();
+        }
         self.directory
             .join(format!("{}-{index:04}.mcap", self.prefix))
     }
@@ -257,6 +281,19 @@ impl RotatingWriter {
                 .map_err(mcap_err(&path))?;
             *id = writer
                 .add_channel(schema, topic.name(), "cdr", &none)
+                .map_err(mcap_err(&path))?;
+        }
+        // Each file says which of the rotation it is (`file_index`, 0 for
+        // the first): a reader can tell a file that starts mid-recording.
+        let index = self.next_index.saturating_sub(1);
+        for (name, metadata) in &self.options.metadata {
+            let mut metadata = metadata.clone();
+            metadata.insert("file_index".to_owned(), index.to_string());
+            writer
+                .write_metadata(&mcap::records::Metadata {
+                    name: name.clone(),
+                    metadata,
+                })
                 .map_err(mcap_err(&path))?;
         }
         self.files.push(path.clone());

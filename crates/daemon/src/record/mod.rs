@@ -11,14 +11,17 @@
 //! - [`reader`]: reading (up to the last complete chunk) and [`recover`].
 
 pub mod cdr;
+pub mod convert;
 pub mod file;
+pub mod live;
 pub mod msgs;
 pub mod reader;
 pub mod recorder;
+pub mod replay;
 
 pub use file::{FileOptions, RotatingWriter, Rotation, WriteError};
 pub use msgs::{Outgoing, RosMessage, Topic};
 pub use reader::{
-    McapReader, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,
+    McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,
 };
 pub use recorder::{Recorder, RecorderConfig, RecorderError, RecordingReport};

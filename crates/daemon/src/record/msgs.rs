@@ -414,8 +414,33 @@ code_enum!(
         /// Set the sensor's bias (values: force x, y, z in N, then torque
         /// x, y, z in N m; sensor frame).
         SetBias = 9,
+        /// Move the tip (`move_tip_m`, base frame, m).
+        MoveTip = 10,
+        /// Set the force limits (`limits_n`).
+        SetLimits = 11,
     }
 );
+
+code_enum!(
+    /// What the step told the drives (`ACTION_*`).
+    DriveActionCode, "drive_action" {
+        /// Nothing.
+        None = 0,
+        /// Quick stop.
+        QuickStop = 1,
+        /// Release after a reset: enable.
+        ReleaseEnable = 2,
+        /// Release after a reset: disable, then enable.
+        ReleaseDisableEnable = 3,
+        /// Release after a reset: fault reset, then enable.
+        ReleaseFaultResetEnable = 4,
+        /// A set point (`setpoint_q_m`).
+        Setpoint = 5,
+    }
+);
+
+/// `CycleInput::reply_status` without a reply (`REPLY_NONE`).
+pub const REPLY_NONE: u8 = 255;
 
 /// The guard reason codes (`REASON_*` of `GuardEvent.msg`): the same numbers
 /// as `crate::control::reason_code` (the wire), so recordings, `sarctl` and
@@ -692,6 +717,20 @@ pub struct CycleInput {
     pub command_values: [f64; 6],
     /// Its integer argument.
     pub command_arg: u64,
+    /// MOVE_TIP: the wanted tip, base frame, m.
+    pub move_tip_m: [f64; 3],
+    /// SET_LIMITS: warn, stop of total, axial, lateral, N.
+    pub limits_n: [f64; 6],
+    /// The step's decision: what the drives were told.
+    pub drive_action: DriveActionCode,
+    /// With `Setpoint`: q1..q3 one period ahead, m.
+    pub setpoint_q_m: [f64; 3],
+    /// The reply's status code, [`REPLY_NONE`] without a request.
+    pub reply_status: u8,
+    /// The guard's reason code behind a refusal.
+    pub reply_reason: u16,
+    /// The force limits in use after the cycle, N.
+    pub limits_in_use_n: [f64; 6],
 }
 
 impl RosMessage for CycleInput {
@@ -720,6 +759,13 @@ impl RosMessage for CycleInput {
         w.u8(self.command_kind.code());
         w.f64_array(&self.command_values);
         w.u64(self.command_arg);
+        w.f64_array(&self.move_tip_m);
+        w.f64_array(&self.limits_n);
+        w.u8(self.drive_action.code());
+        w.f64_array(&self.setpoint_q_m);
+        w.u8(self.reply_status);
+        w.u16(self.reply_reason);
+        w.f64_array(&self.limits_in_use_n);
         Ok(())
     }
     fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
@@ -747,6 +793,13 @@ impl RosMessage for CycleInput {
             command_kind: CommandKindCode::from_code(r.u8()?)?,
             command_values: r.f64_array()?,
             command_arg: r.u64()?,
+            move_tip_m: r.f64_array()?,
+            limits_n: r.f64_array()?,
+            drive_action: DriveActionCode::from_code(r.u8()?)?,
+            setpoint_q_m: r.f64_array()?,
+            reply_status: r.u8()?,
+            reply_reason: r.u16()?,
+            limits_in_use_n: r.f64_array()?,
         })
     }
 }
@@ -811,11 +864,15 @@ pub enum Topic {
     CycleInput,
     /// `/sar/recorder/drops`, [`RecorderDrops`].
     RecorderDrops,
+    /// `/sar/sim/tip_wrench_truth`, [`WrenchStamped`] frame `base`: the
+    /// simulator's true F_tip (simulator-made recordings; the reference of
+    /// `sarctl replay --compare`).
+    SimTipWrenchTruth,
 }
 
 impl Topic {
     /// Every topic, in channel order.
-    pub const ALL: [Topic; 9] = [
+    pub const ALL: [Topic; 10] = [
         Topic::SensorWrench,
         Topic::Joints,
         Topic::TipWrench,
@@ -825,6 +882,7 @@ impl Topic {
         Topic::GuardEvents,
         Topic::CycleInput,
         Topic::RecorderDrops,
+        Topic::SimTipWrenchTruth,
     ];
 
     /// The topic name.
@@ -839,6 +897,7 @@ impl Topic {
             Topic::GuardEvents => "/sar/guard/events",
             Topic::CycleInput => "/sar/cycle/input",
             Topic::RecorderDrops => "/sar/recorder/drops",
+            Topic::SimTipWrenchTruth => "/sar/sim/tip_wrench_truth",
         }
     }
 
@@ -850,9 +909,10 @@ impl Topic {
     /// The ROS 2 type name (the schema's name).
     pub fn type_name(self) -> &'static str {
         match self {
-            Topic::SensorWrench | Topic::TipWrench | Topic::TipWrenchFiltered => {
-                WrenchStamped::TYPE_NAME
-            }
+            Topic::SensorWrench
+            | Topic::TipWrench
+            | Topic::TipWrenchFiltered
+            | Topic::SimTipWrenchTruth => WrenchStamped::TYPE_NAME,
             Topic::Joints | Topic::PassiveJoints => JointState::TYPE_NAME,
             Topic::EstimatorState => EstimatorState::TYPE_NAME,
             Topic::GuardEvents => GuardEvent::TYPE_NAME,
@@ -864,9 +924,10 @@ impl Topic {
     /// The `ros2msg` schema text.
     pub fn schema(self) -> &'static str {
         match self {
-            Topic::SensorWrench | Topic::TipWrench | Topic::TipWrenchFiltered => {
-                WrenchStamped::SCHEMA
-            }
+            Topic::SensorWrench
+            | Topic::TipWrench
+            | Topic::TipWrenchFiltered
+            | Topic::SimTipWrenchTruth => WrenchStamped::SCHEMA,
             Topic::Joints | Topic::PassiveJoints => JointState::SCHEMA,
             Topic::EstimatorState => EstimatorState::SCHEMA,
             Topic::GuardEvents => GuardEvent::SCHEMA,
@@ -901,6 +962,8 @@ pub enum Outgoing {
     CycleInput(CycleInput),
     /// `/sar/recorder/drops` (the recorder writes these itself).
     RecorderDrops(RecorderDrops),
+    /// `/sar/sim/tip_wrench_truth`.
+    SimTruth(WrenchStamped),
 }
 
 impl Outgoing {
@@ -916,15 +979,17 @@ impl Outgoing {
             Outgoing::GuardEvent(_) => Topic::GuardEvents,
             Outgoing::CycleInput(_) => Topic::CycleInput,
             Outgoing::RecorderDrops(_) => Topic::RecorderDrops,
+            Outgoing::SimTruth(_) => Topic::SimTipWrenchTruth,
         }
     }
 
     /// Its `header.stamp`, ns: the recording's `log_time` and `publish_time`.
     pub fn stamp_ns(&self) -> u64 {
         match self {
-            Outgoing::SensorWrench(m) | Outgoing::TipWrench(m) | Outgoing::TipWrenchFiltered(m) => {
-                m.stamp_ns
-            }
+            Outgoing::SensorWrench(m)
+            | Outgoing::TipWrench(m)
+            | Outgoing::TipWrenchFiltered(m)
+            | Outgoing::SimTruth(m) => m.stamp_ns,
             Outgoing::Joints(m) => m.stamp_ns,
             Outgoing::PassiveJoints(m) => m.stamp_ns,
             Outgoing::EstimatorState(m) => m.stamp_ns,
@@ -937,9 +1002,10 @@ impl Outgoing {
     /// Encodes into `buf` (cleared first).
     pub fn encode(&self, buf: &mut Vec<u8>) -> Result<(), CdrError> {
         match self {
-            Outgoing::SensorWrench(m) | Outgoing::TipWrench(m) | Outgoing::TipWrenchFiltered(m) => {
-                m.encode(buf)
-            }
+            Outgoing::SensorWrench(m)
+            | Outgoing::TipWrench(m)
+            | Outgoing::TipWrenchFiltered(m)
+            | Outgoing::SimTruth(m) => m.encode(buf),
             Outgoing::Joints(m) => m.encode(buf),
             Outgoing::PassiveJoints(m) => m.encode(buf),
             Outgoing::EstimatorState(m) => m.encode(buf),
@@ -961,6 +1027,7 @@ impl Outgoing {
             Topic::GuardEvents => Outgoing::GuardEvent(GuardEvent::decode(bytes)?),
             Topic::CycleInput => Outgoing::CycleInput(CycleInput::decode(bytes)?),
             Topic::RecorderDrops => Outgoing::RecorderDrops(RecorderDrops::decode(bytes)?),
+            Topic::SimTipWrenchTruth => Outgoing::SimTruth(WrenchStamped::decode(bytes)?),
         })
     }
 }

@@ -151,6 +151,40 @@ pub struct RawMessage {
     pub data: Vec<u8>,
 }
 
+/// One message as recorded, borrowed from the reader's current chunk (see
+/// [`McapReader::visit`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MessageRef<'m> {
+    /// Channel id.
+    pub channel_id: u16,
+    /// Sequence number.
+    pub sequence: u32,
+    /// Log time, ns.
+    pub log_time_ns: u64,
+    /// Publish time, ns.
+    pub publish_time_ns: u64,
+    /// The CDR bytes.
+    pub data: &'m [u8],
+}
+
+impl MessageRef<'_> {
+    /// An owned copy.
+    pub fn to_owned_message(&self) -> RawMessage {
+        RawMessage {
+            channel_id: self.channel_id,
+            sequence: self.sequence,
+            log_time_ns: self.log_time_ns,
+            publish_time_ns: self.publish_time_ns,
+            data: self.data.to_vec(),
+        }
+    }
+}
+
+/// The callback of [`McapReader::visit`]: the channels known so far and one
+/// message.
+pub type Visitor<'v, E> =
+    dyn FnMut(&BTreeMap<u16, ChannelInfo>, MessageRef<'_>) -> Result<(), E> + 'v;
+
 #[derive(Debug, Clone)]
 struct SchemaInfo {
     name: String,
@@ -235,7 +269,7 @@ impl<'a> McapReader<'a> {
         self.pos as u64
     }
 
-    fn apply(&mut self, record: Record<'_>, offset: u64) -> Result<(), ReadError> {
+    fn apply(&mut self, record: Record<'_>) {
         match record {
             Record::Header(h) => self.profile = Some(h.profile),
             Record::Schema { header, data } => {
@@ -262,29 +296,106 @@ impl<'a> McapReader<'a> {
                 };
                 self.channels.insert(c.id, info);
             }
-            Record::Message { header, data } => {
-                if !self.channels.contains_key(&header.channel_id) {
-                    return Err(ReadError::UnknownChannel {
-                        offset,
-                        channel_id: header.channel_id,
-                    });
-                }
-                self.pending.push_back(RawMessage {
-                    channel_id: header.channel_id,
-                    sequence: header.sequence,
-                    log_time_ns: header.log_time,
-                    publish_time_ns: header.publish_time,
-                    data: data.into_owned(),
-                });
-            }
             Record::Metadata(m) => self.metadata.push(m),
             _ => {}
         }
-        Ok(())
     }
 
-    /// Reads the next record; Ok(false) at the end of the data section.
+    /// Hands one message record's body to `on_msg` (its channel must be
+    /// known).
+    fn message<E>(
+        &self,
+        body: &[u8],
+        offset: u64,
+        opcode: u8,
+        on_msg: &mut Visitor<'_, E>,
+    ) -> Result<Result<(), E>, ReadError> {
+        let record = mcap::parse_record(opcode, body).map_err(|source| ReadError::Corrupt {
+            offset,
+            opcode,
+            source,
+        })?;
+        let Record::Message { header, data } = record else {
+            return Ok(Ok(()));
+        };
+        if !self.channels.contains_key(&header.channel_id) {
+            return Err(ReadError::UnknownChannel {
+                offset,
+                channel_id: header.channel_id,
+            });
+        }
+        Ok(on_msg(
+            &self.channels,
+            MessageRef {
+                channel_id: header.channel_id,
+                sequence: header.sequence,
+                log_time_ns: header.log_time,
+                publish_time_ns: header.publish_time,
+                data: &data,
+            },
+        ))
+    }
+
+    /// Reads the next record for the iterator (its messages queued).
     fn step(&mut self) -> Result<bool, ReadError> {
+        let mut queued = std::mem::take(&mut self.pending);
+        let result = self.step_with::<std::convert::Infallible>(&mut |_, m| {
+            queued.push_back(m.to_owned_message());
+            Ok(())
+        });
+        self.pending = queued;
+        match result {
+            Ok(r) => r,
+            Err(never) => match never {},
+        }
+    }
+
+    /// Every message, in file order, handed to `f` without a copy (the
+    /// iterator's way with no allocation per message). Returns `Ok(None)` at
+    /// the end of the data section, `Ok(Some(e))` where a file cut short or
+    /// corrupt stops (after the messages of its last complete chunk;
+    /// [`McapReader::is_complete`] tells), and `Err` when `f` fails.
+    pub fn visit<E>(&mut self, f: &mut Visitor<'_, E>) -> Result<Option<ReadError>, E> {
+        // Queued by an earlier iteration first.
+        while let Some(m) = self.pending.pop_front() {
+            f(
+                &self.channels,
+                MessageRef {
+                    channel_id: m.channel_id,
+                    sequence: m.sequence,
+                    log_time_ns: m.log_time_ns,
+                    publish_time_ns: m.publish_time_ns,
+                    data: &m.data,
+                },
+            )?;
+        }
+        while !self.done {
+            match self.step_with(f)? {
+                Ok(true) => {}
+                Ok(false) => {
+                    self.done = true;
+                    self.complete = true;
+                }
+                Err(e) => {
+                    self.done = true;
+                    return Ok(Some(e));
+                }
+            }
+        }
+        Ok(None)
+    }
+
+    /// Reads the next record, handing its messages to `on_msg`; Ok(Ok(false))
+    /// at the end of the data section.
+    fn step_with<E>(&mut self, on_msg: &mut Visitor<'_, E>) -> Result<Result<bool, ReadError>, E> {
+        match self.step_inner(on_msg) {
+            Ok(Ok(more)) => Ok(Ok(more)),
+            Ok(Err(e)) => Err(e),
+            Err(e) => Ok(Err(e)),
+        }
+    }
+
+    fn step_inner<E>(&mut self, on_msg: &mut Visitor<'_, E>) -> Result<Result<bool, E>, ReadError> {
         let offset = self.pos as u64;
         let rest = self.bytes.get(self.pos..).unwrap_or(&[]);
         if rest.is_empty() {
@@ -319,7 +430,7 @@ impl<'a> McapReader<'a> {
         match op_byte {
             op::FOOTER | op::DATA_END => {
                 self.pos += RECORD_PREFIX + body.len();
-                return Ok(false);
+                return Ok(Ok(false));
             }
             op::CHUNK => {
                 let Record::Chunk { header, data } =
@@ -328,7 +439,7 @@ impl<'a> McapReader<'a> {
                     // Not a chunk after all: skip the record (never read the
                     // same one again).
                     self.pos += RECORD_PREFIX + body.len();
-                    return Ok(true);
+                    return Ok(Ok(true));
                 };
                 // A corrupt size must not make us allocate it.
                 if header.uncompressed_size > MAX_CHUNK_BYTES {
@@ -340,6 +451,7 @@ impl<'a> McapReader<'a> {
                 }
                 // The whole chunk, checked, before any of it is given out.
                 let content = decompress(&header, &data, offset)?;
+                let chunk_len = body.len();
                 let mut at = 0usize;
                 while at < content.len() {
                     let inner = content.get(at..).unwrap_or(&[]);
@@ -356,21 +468,32 @@ impl<'a> McapReader<'a> {
                         .ok()
                         .and_then(|n| after.get(..n))
                         .ok_or(bad("a record is longer than the chunk"))?;
-                    if matches!(inner_op, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                    if inner_op == op::MESSAGE {
+                        if let Err(e) = self.message(body, offset, inner_op, on_msg)? {
+                            // The callback failed: stop after this record.
+                            self.pos += RECORD_PREFIX + chunk_len;
+                            return Ok(Err(e));
+                        }
+                    } else if matches!(inner_op, op::SCHEMA | op::CHANNEL) {
                         let record = mcap::parse_record(inner_op, body).map_err(corrupt)?;
-                        self.apply(record, offset)?;
+                        self.apply(record);
                     }
                     at += RECORD_PREFIX + body.len();
                 }
             }
-            op::HEADER | op::SCHEMA | op::CHANNEL | op::MESSAGE | op::METADATA => {
+            op::MESSAGE => {
+                let sent = self.message(body, offset, op_byte, on_msg)?;
+                self.pos += RECORD_PREFIX + body.len();
+                return Ok(sent.map(|()| true));
+            }
+            op::HEADER | op::SCHEMA | op::CHANNEL | op::METADATA => {
                 let record = mcap::parse_record(op_byte, body).map_err(corrupt)?;
-                self.apply(record, offset)?;
+                self.apply(record);
             }
             _ => {}
         }
         self.pos += RECORD_PREFIX + body.len();
-        Ok(true)
+        Ok(Ok(true))
     }
 
     /// Every message of the SAR topics ([`Topic`]) decoded, with its topic and
@@ -589,6 +712,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     let mut writer = None;
     let mut file = Some(file);
     let mut known = BTreeMap::new();
+    // Metadata records already copied: those before the first message are
+    // copied at the start (where readers such as replay look for them).
+    let mut metadata_copied = 0usize;
     loop {
         let msg = match reader.next() {
             None => break,
@@ -602,10 +728,15 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
             (Some(w), _) => w,
             (None, Some(f)) => {
                 let profile = reader.profile().unwrap_or("").to_owned();
-                writer.insert(
+                let w = writer.insert(
                     mcap::Writer::with_options(f, options.clone().profile(profile))
                         .map_err(mcap_err)?,
-                )
+                );
+                for m in reader.metadata() {
+                    w.write_metadata(m).map_err(mcap_err)?;
+                }
+                metadata_copied = reader.metadata().len();
+                w
             }
             (None, None) => break,
         };
@@ -672,7 +803,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
         )
         .map_err(mcap_err)?;
     }
-    for m in reader.metadata() {
+    for m in reader.metadata().iter().skip(metadata_copied) {
         w.write_metadata(m).map_err(mcap_err)?;
     }
     let mut info = BTreeMap::from([

@@ -1,0 +1,64 @@
+//! `sarctl record start|stop`: starts or stops the daemon's recording (over
+//! the command service), then waits until the daemon's published state says
+//! it records (or no longer does), at most 2 s.
+
+use crate::shm::Client;
+use crate::wire::{CommandMsg, command_kind, status_name};
+use serde_json::json;
+use std::time::{Duration, Instant};
+
+/// Runs the command; `start` false stops.
+pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
+    let kind = if start {
+        command_kind::RECORD_START
+    } else {
+        command_kind::RECORD_STOP
+    };
+    let what = if start { "record start" } else { "record stop" };
+    let reply = client.command(
+        CommandMsg {
+            kind,
+            reserved: 0,
+            id: u64::from(std::process::id()),
+            tip_m: [0.0; 3],
+            limits_n: [0.0; 6],
+        },
+        Duration::from_secs(2),
+    )?;
+    if reply.status != 0 {
+        return Err(format!("{what}: {}", status_name(reply.status)));
+    }
+    let sub = client.subscribe()?;
+    let deadline = Instant::now() + Duration::from_secs(2);
+    let mut last = None;
+    while Instant::now() < deadline {
+        sub.wait(Duration::from_millis(20), |s| last = Some(*s));
+        if let Some(s) = last
+            && (s.recording != 0) == start
+        {
+            if json {
+                println!(
+                    "{}",
+                    json!({"command": what, "recording": start, "cycle": s.cycle,
+                           "recorder_drops": s.recorder_drops})
+                );
+            } else {
+                println!(
+                    "{what}: {} (cycle {}, {} messages dropped so far)",
+                    if start { "recording" } else { "stopped" },
+                    s.cycle,
+                    s.recorder_drops
+                );
+            }
+            return Ok(());
+        }
+    }
+    Err(format!(
+        "{what}: the daemon did not {} within 2 s (see its log)",
+        if start {
+            "start recording"
+        } else {
+            "stop recording"
+        }
+    ))
+}

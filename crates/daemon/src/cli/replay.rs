@@ -1,0 +1,209 @@
+//! `sarctl replay --config FILE --input REC.mcap --output OUT.mcap
+//! [--compare TOPIC] [--format json] [--plot FILE.svg]`: the per-cycle step
+//! over a recording's inputs ([`crate::record::replay`]), its outputs
+//! written, the recorded outputs compared bit for bit (a difference exits
+//! non-zero naming the first cycle, topic and field), the error figures
+//! against a reference topic, and the tip force over time as an SVG (the
+//! article's Figure 9).
+
+use crate::record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_file};
+use serde_json::json;
+use std::path::Path;
+
+/// The command's arguments.
+#[derive(Debug, Clone, Copy)]
+pub struct Args<'a> {
+    /// The configuration.
+    pub config: &'a Path,
+    /// The recording.
+    pub input: &'a Path,
+    /// The outputs.
+    pub output: Option<&'a Path>,
+    /// The reference topic.
+    pub compare: Option<&'a str>,
+    /// One JSON object on stdout.
+    pub json: bool,
+    /// The SVG plot.
+    pub plot: Option<&'a Path>,
+}
+
+/// The report as JSON.
+pub fn report_json(r: &ReplayReport) -> serde_json::Value {
+    json!({
+        "mode": r.mode.name(),
+        "cycles": r.cycles,
+        "outputs": r.outputs,
+        "compared": r.compared,
+        "identical": r.differences == 0,
+        "differences": r.differences,
+        "first_difference": r.first_difference.as_ref().map(|d| json!({
+            "cycle": d.cycle, "topic": d.topic, "field": d.field,
+            "recorded": d.recorded, "replayed": d.replayed})),
+        "recorder_dropped": r.recorder_dropped,
+        "input_complete": r.input_complete,
+        "stopped": r.stopped,
+        "output": r.output.as_ref().map(|p| p.display().to_string()),
+        "from_first_cycle": r.from_first_cycle,
+        "comparison": r.comparison.as_ref().map(|c| json!({
+            "topic": c.topic,
+            "pairs": c.pairs,
+            "left_out": c.left_out,
+            "e_ra": c.axes.iter().map(|a| a.e_ra).collect::<Vec<_>>(),
+            "rms_n": c.axes.iter().map(|a| a.rms_n).collect::<Vec<_>>(),
+            "max_n": c.axes.iter().map(|a| a.max_n).collect::<Vec<_>>(),
+        })),
+    })
+}
+
+/// Runs the command.
+pub fn run(a: &Args<'_>) -> Result<(), String> {
+    let cfg = crate::config::load(a.config).map_err(|e| e.to_string())?;
+    let options = ReplayOptions {
+        output: a.output.map(Path::to_path_buf),
+        compare: a.compare.map(str::to_owned),
+        keep_series: a.plot.is_some(),
+        ..ReplayOptions::from_config(&cfg)
+    };
+    let r = replay_file(a.input, &options).map_err(|e| format!("{}: {e}", a.input.display()))?;
+    if let Some(plot) = a.plot {
+        plot_svg(plot, &r.series, a.compare)?;
+    }
+    if a.json {
+        println!("{}", report_json(&r));
+    } else {
+        println!(
+            "{}: {} cycles replayed ({}), {} outputs{}",
+            a.input.display(),
+            r.cycles,
+            r.mode.name(),
+            r.outputs,
+            r.output
+                .as_ref()
+                .map(|p| format!(" written to {}", p.display()))
+                .unwrap_or_default()
+        );
+        if r.compared > 0 || r.differences > 0 {
+            println!(
+                "compared with the recorded outputs: {} messages, {} differ",
+                r.compared, r.differences
+            );
+        }
+        if let Some(c) = &r.comparison {
+            println!(
+                "against {} ({} pairs, {} left out): e_ra {:.4} {:.4} {:.4}, RMS {:.3} {:.3} {:.3} N, max {:.3} {:.3} {:.3} N (X Y Z)",
+                c.topic,
+                c.pairs,
+                c.left_out,
+                c.axes[0].e_ra,
+                c.axes[1].e_ra,
+                c.axes[2].e_ra,
+                c.axes[0].rms_n,
+                c.axes[1].rms_n,
+                c.axes[2].rms_n,
+                c.axes[0].max_n,
+                c.axes[1].max_n,
+                c.axes[2].max_n
+            );
+        }
+        if let Some(e) = &r.stopped {
+            println!("the input is cut short: replayed up to its last complete chunk ({e})");
+        }
+    }
+    match &r.first_difference {
+        Some(d) => Err(format!(
+            "replay differs from the recording: {} messages; first at cycle {} on {} field {} (recorded {}, replayed {}){}",
+            r.differences,
+            d.cycle,
+            d.topic,
+            d.field,
+            d.recorded,
+            d.replayed,
+            if r.from_first_cycle == Some(false) {
+                "; the recording starts after the daemon's first cycle (sarctl record start, or a later file of a rotation), so the estimator's earlier state is not in it"
+            } else {
+                ""
+            }
+        )),
+        None => Ok(()),
+    }
+}
+
+/// The tip force over time (X, Y, Z, one panel each) with the reference
+/// when there is one, as an SVG.
+pub fn plot_svg(
+    path: &Path,
+    series: &[SeriesPoint],
+    reference: Option<&str>,
+) -> Result<(), String> {
+    use plotters::prelude::*;
+    let err = |e: &dyn std::fmt::Display| format!("{}: cannot draw the plot: {e}", path.display());
+    let t_max = series.last().map_or(1.0, |p| p.t_s).max(1e-3);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for p in series {
+        for v in p.estimate_n.iter().chain(p.reference_n.iter().flatten()) {
+            if v.is_finite() {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+        }
+    }
+    if !lo.is_finite() {
+        (lo, hi) = (-1.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(0.1);
+    let root = SVGBackend::new(path, (1200, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let panels = root.split_evenly((3, 1));
+    let colours = [RED, GREEN, BLUE];
+    let axes = ["X", "Y", "Z"];
+    for (k, area) in panels.iter().enumerate() {
+        let axis = axes.get(k).copied().unwrap_or("?");
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                format!("tip force F_tip {axis}, base frame (the article's Figure 9)"),
+                ("sans-serif", 16),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
+            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .y_desc(format!("F_{axis} (N)"))
+            .draw()
+            .map_err(|e| err(&e))?;
+        let colour = colours.get(k).copied().unwrap_or(BLACK);
+        if let Some(topic) = reference {
+            chart
+                .draw_series(LineSeries::new(
+                    series
+                        .iter()
+                        .filter_map(|p| Some((p.t_s, *p.reference_n?.get(k)?))),
+                    BLACK.stroke_width(2),
+                ))
+                .map_err(|e| err(&e))?
+                .label(format!("reference {topic}"))
+                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
+        }
+        chart
+            .draw_series(LineSeries::new(
+                series
+                    .iter()
+                    .filter_map(|p| Some((p.t_s, *p.estimate_n.get(k)?))),
+                colour.mix(0.7),
+            ))
+            .map_err(|e| err(&e))?
+            .label("estimate (unfiltered, observable)")
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(&e))?;
+    }
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}

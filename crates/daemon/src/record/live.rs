@@ -1,0 +1,286 @@
+//! Recording from `sard`: the loop's publisher wrapped by [`LiveRecorder`],
+//! which pushes each cycle's messages into the active [`Recorder`]'s bounded
+//! queue (no wait, no allocation: a full queue drops and counts), and a
+//! manager thread ([`RecordManager`]) that opens and closes recordings on
+//! request (`sarctl record start|stop`, through [`RecordSwitch`]) or by
+//! configuration (`[record] enabled`), so that no file is created, no thread
+//! started and no writer joined on the loop's thread.
+//!
+//! Per cycle: `/sar/cycle/input`, `/sar/sensor/wrench` (a new sample: its
+//! counter changed), `/sar/joints` (a new stamp), then the outputs of
+//! [`super::convert::outputs`]. A recording started with the daemon holds
+//! every cycle from the first and replays bit for bit; one started later
+//! (`sarctl record start`) lacks the estimator's earlier history (guard,
+//! filter, bias after tares) and says so in its `sar_replay` metadata
+//! (`from_first_cycle = false`).
+
+use super::convert;
+use super::file::{FileOptions, Rotation};
+use super::recorder::{Recorder, RecorderConfig};
+use crate::runloop::{Publish, Published};
+use crossbeam_queue::ArrayQueue;
+use sar_estimator::cycle::Bias;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// The recording's settings (`[record]` of the configuration).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordSettings {
+    /// Record from the daemon's start.
+    pub enabled: bool,
+    /// The directory of the files.
+    pub directory: PathBuf,
+    /// When to start a new file.
+    pub rotation: Rotation,
+    /// Messages the queue holds.
+    pub queue_capacity: usize,
+}
+
+const WANT_NONE: u8 = 0;
+const WANT_START: u8 = 1;
+const WANT_STOP: u8 = 2;
+
+/// Requests to start or stop recording, and what the loop reports back;
+/// shared by the command server, the loop and the manager thread.
+#[derive(Debug, Default)]
+pub struct RecordSwitch {
+    want: AtomicU8,
+    recording: AtomicBool,
+    dropped: AtomicU64,
+}
+
+impl RecordSwitch {
+    /// Asks for a recording to start (no effect while one runs).
+    pub fn request_start(&self) {
+        self.want.store(WANT_START, Ordering::Release);
+    }
+    /// Asks for the recording to stop.
+    pub fn request_stop(&self) {
+        self.want.store(WANT_STOP, Ordering::Release);
+    }
+    /// Whether the loop records now.
+    pub fn recording(&self) -> bool {
+        self.recording.load(Ordering::Acquire)
+    }
+    /// Messages dropped by every recording so far.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+/// The loop's publisher with recording: pushes every cycle into the active
+/// recorder, then publishes through `inner` with the drop count.
+pub struct LiveRecorder<P> {
+    inner: P,
+    switch: Arc<RecordSwitch>,
+    incoming: Arc<ArrayQueue<Recorder>>,
+    outgoing: Arc<ArrayQueue<Recorder>>,
+    active: Option<Recorder>,
+    /// Drops of the recordings already handed back.
+    dropped_before: u64,
+    last_joints_stamp_ns: Option<u64>,
+}
+
+impl<P> LiveRecorder<P> {
+    /// Hands the active recorder back to the manager (at shutdown).
+    pub fn release(&mut self) {
+        if let Some(rec) = self.active.take() {
+            self.dropped_before += rec.dropped();
+            self.switch.recording.store(false, Ordering::Release);
+            if let Err(rec) = self.outgoing.push(rec) {
+                drop(rec);
+            }
+        }
+    }
+
+    /// The wrapped publisher.
+    pub fn inner(&self) -> &P {
+        &self.inner
+    }
+}
+
+impl<P: Publish> Publish for LiveRecorder<P> {
+    fn before_cycle(&mut self) {
+        self.inner.before_cycle();
+    }
+
+    fn publish(&mut self, c: &Published<'_>) {
+        if self.switch.want.load(Ordering::Acquire) == WANT_STOP {
+            self.switch.want.store(WANT_NONE, Ordering::Release);
+            self.release();
+        }
+        if self.active.is_none()
+            && let Some(rec) = self.incoming.pop()
+        {
+            self.active = Some(rec);
+            self.last_joints_stamp_ns = None;
+            self.switch.recording.store(true, Ordering::Release);
+        }
+        let mut dropped = self.dropped_before;
+        if let Some(rec) = &mut self.active {
+            let input = c.input;
+            let joints_new = self.last_joints_stamp_ns != Some(input.joints.stamp_ns);
+            self.last_joints_stamp_ns = Some(input.joints.stamp_ns);
+            convert::cycle_record(c.loop_input, c.decision, joints_new, |m| {
+                rec.push(m);
+            });
+            dropped += rec.dropped();
+        }
+        self.switch.dropped.store(dropped, Ordering::Relaxed);
+        self.inner.publish(&Published {
+            recorder_drops: dropped,
+            recording: self.active.is_some(),
+            ..*c
+        });
+    }
+}
+
+/// Opens recordings for the loop and closes the ones it hands back, on its
+/// own thread.
+pub struct RecordManager {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// The recorder's file options under `settings` for a recording named `name`.
+fn recorder_config(
+    settings: &RecordSettings,
+    name: &str,
+    bias: &Bias,
+    first: bool,
+) -> RecorderConfig {
+    let mut files = FileOptions::new(settings.directory.clone(), name);
+    files.rotation = settings.rotation;
+    files.metadata = vec![convert::replay_metadata(bias, first)];
+    let mut c = RecorderConfig::new(files);
+    c.queue_capacity = settings.queue_capacity;
+    c
+}
+
+fn recording_name() -> String {
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    format!("sar-{}-{:03}", now.as_secs(), now.subsec_millis())
+}
+
+impl RecordManager {
+    /// Wraps `inner`; with `settings.enabled`, the first recording is open
+    /// before this returns (it holds the daemon's first cycle).
+    pub fn start<P: Publish>(
+        settings: RecordSettings,
+        bias: Bias,
+        switch: Arc<RecordSwitch>,
+        inner: P,
+    ) -> Result<(Self, LiveRecorder<P>), String> {
+        let incoming = Arc::new(ArrayQueue::new(1));
+        let outgoing = Arc::new(ArrayQueue::new(4));
+        if settings.enabled {
+            let name = recording_name();
+            let rec =
+                Recorder::start(recorder_config(&settings, &name, &bias, true)).map_err(|e| {
+                    format!(
+                        "cannot start recording into {}: {e}",
+                        settings.directory.display()
+                    )
+                })?;
+            tracing::info!(
+                "recording into {}/{name}-*.mcap",
+                settings.directory.display()
+            );
+            let _ = incoming.push(rec);
+        }
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (incoming, outgoing, switch, stop) = (
+                Arc::clone(&incoming),
+                Arc::clone(&outgoing),
+                Arc::clone(&switch),
+                Arc::clone(&stop),
+            );
+            std::thread::Builder::new()
+                .name("sar-record-mgr".into())
+                .spawn(move || manage(&settings, &bias, &switch, &incoming, &outgoing, &stop))
+                .map_err(|e| format!("cannot start the recording thread: {e}"))?
+        };
+        Ok((
+            Self {
+                stop,
+                thread: Some(thread),
+            },
+            LiveRecorder {
+                inner,
+                switch,
+                incoming,
+                outgoing,
+                active: None,
+                dropped_before: 0,
+                last_joints_stamp_ns: None,
+            },
+        ))
+    }
+
+    /// After the loop: closes every recording (call after
+    /// [`LiveRecorder::release`]).
+    pub fn finish(mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn close(rec: Recorder) {
+    match rec.stop() {
+        Ok(r) => tracing::info!(
+            "recording closed: {} messages written, {} dropped, files {:?}",
+            r.written,
+            r.dropped,
+            r.files
+        ),
+        Err(e) => tracing::error!("recording failed: {e}"),
+    }
+}
+
+fn manage(
+    settings: &RecordSettings,
+    bias: &Bias,
+    switch: &RecordSwitch,
+    incoming: &ArrayQueue<Recorder>,
+    outgoing: &ArrayQueue<Recorder>,
+    stop: &AtomicBool,
+) {
+    loop {
+        let stopping = stop.load(Ordering::Acquire);
+        while let Some(rec) = outgoing.pop() {
+            close(rec);
+        }
+        if stopping {
+            // Never handed to the loop: close it too.
+            while let Some(rec) = incoming.pop() {
+                close(rec);
+            }
+            return;
+        }
+        if switch.want.load(Ordering::Acquire) == WANT_START {
+            switch.want.store(WANT_NONE, Ordering::Release);
+            if !switch.recording() && incoming.is_empty() {
+                let name = recording_name();
+                match Recorder::start(recorder_config(settings, &name, bias, false)) {
+                    Ok(rec) => {
+                        tracing::info!(
+                            "recording into {}/{name}-*.mcap",
+                            settings.directory.display()
+                        );
+                        let _ = incoming.push(rec);
+                    }
+                    Err(e) => tracing::error!("cannot start recording: {e}"),
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}

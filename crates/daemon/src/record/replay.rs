@@ -1,0 +1,815 @@
+//! Replay (`sarctl replay`): the per-cycle step run over a recording's
+//! inputs as fast as the machine allows, its outputs written and compared.
+//!
+//! - A daemon recording (one `/sar/cycle/input` per cycle) replays cycle by
+//!   cycle; every output message is compared, as CDR bytes, with the one the
+//!   daemon recorded on the same topic in the same order: the first that
+//!   differs is reported with its cycle, topic and field.
+//! - A recording of the inputs alone (`/sar/sensor/wrench` and `/sar/joints`,
+//!   another program's or a simulated one) replays one cycle per sensor
+//!   message with the newest joint message at or before it (by log time);
+//!   the sensor counter is the message's index, `now` its log time, and a
+//!   reset is given every cycle until one is accepted (as an operator would).
+//! - `compare`: the unfiltered tip force of every cycle with a new sample and
+//!   an observable estimate against a reference channel (e.g.
+//!   `/sar/sim/tip_wrench_truth`), paired by stamp (the newest reference at or
+//!   before the estimate's): the absolute relative error of MODEL.md 6, RMS
+//!   and maximum error per axis.
+//!
+//! The estimator starts with the bias of the recording's `sar_replay`
+//! metadata (zero when absent).
+
+use super::convert::{self, REPLAY_METADATA, bias_from_metadata};
+use super::file::{FileOptions, RotatingWriter, WriteError};
+use super::msgs::{
+    ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage, Topic,
+};
+use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
+use crate::step::{LoopInput, LoopStep, StepConfig};
+use sar_estimator::Vec3;
+use sar_estimator::cycle::{
+    Bias, Command, CommandAccepted, CycleInput, CycleOutput, Estimator, EstimatorConfig,
+    JointSample, SensorSample, TipOutcome,
+};
+use sar_kinematics::ActiveJoints;
+use std::collections::{BTreeMap, VecDeque};
+use std::path::{Path, PathBuf};
+
+/// The output topics compared and written (`/sar/cycle/input` of a daemon
+/// recording is recomputed from its input and the step's decision, so that
+/// the reference, the drive action and the reply are compared too).
+pub const OUTPUT_TOPICS: [Topic; 6] = [
+    Topic::CycleInput,
+    Topic::EstimatorState,
+    Topic::TipWrench,
+    Topic::TipWrenchFiltered,
+    Topic::PassiveJoints,
+    Topic::GuardEvents,
+];
+
+/// The most replayed messages of one topic waiting for their recorded
+/// counterpart; beyond it the recording is taken to lack that topic's
+/// outputs (a difference).
+pub const MAX_PENDING: usize = 4096;
+
+/// How to replay.
+#[derive(Debug, Clone)]
+pub struct ReplayOptions {
+    /// The estimator's configuration.
+    pub config: EstimatorConfig,
+    /// The loop step's (daemon recordings).
+    pub step: StepConfig,
+    /// Where to write the outputs (`None`: not written).
+    pub output: Option<PathBuf>,
+    /// The reference topic of the error figures.
+    pub compare: Option<String>,
+    /// Keep the tip force series (time, estimate, reference) for a plot.
+    pub keep_series: bool,
+    /// Compare with the recorded outputs (daemon recordings; on by default).
+    pub check_recorded: bool,
+}
+
+impl ReplayOptions {
+    /// The options of a daemon configuration: nothing written, no
+    /// comparison, no series.
+    pub fn from_config(config: &crate::config::Config) -> Self {
+        Self {
+            config: config.estimator,
+            step: config.step_config(),
+            output: None,
+            compare: None,
+            keep_series: false,
+            check_recorded: true,
+        }
+    }
+}
+
+/// How the recording was replayed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// From `/sar/cycle/input`.
+    CycleInput,
+    /// From `/sar/sensor/wrench` and `/sar/joints`.
+    InputsOnly,
+}
+
+impl Mode {
+    /// Its name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::CycleInput => "cycle_input",
+            Mode::InputsOnly => "inputs_only",
+        }
+    }
+}
+
+/// The first replayed output that differs from the recorded one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Difference {
+    /// The cycle.
+    pub cycle: u64,
+    /// The topic.
+    pub topic: &'static str,
+    /// The first field that differs (`message` when the messages cannot be
+    /// told apart field by field, e.g. one is missing).
+    pub field: String,
+    /// The recorded value.
+    pub recorded: String,
+    /// The replayed value.
+    pub replayed: String,
+}
+
+/// Error figures of one axis (MODEL.md 6).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisError {
+    /// Absolute relative error e_ra (a fraction).
+    pub e_ra: f64,
+    /// RMS of estimate - reference, N.
+    pub rms_n: f64,
+    /// Largest |estimate - reference|, N.
+    pub max_n: f64,
+}
+
+/// The estimate against a reference channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Comparison {
+    /// The reference topic.
+    pub topic: String,
+    /// Pairs compared.
+    pub pairs: usize,
+    /// Estimates left out: not observable, or no reference at or before them.
+    pub left_out: usize,
+    /// X, Y, Z.
+    pub axes: [AxisError; 3],
+}
+
+/// One point of the tip-force series.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeriesPoint {
+    /// Time from the first cycle, s.
+    pub t_s: f64,
+    /// The unfiltered estimate, N.
+    pub estimate_n: [f64; 3],
+    /// The reference, N.
+    pub reference_n: Option<[f64; 3]>,
+}
+
+/// What a replay found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReplayReport {
+    /// How the inputs were read.
+    pub mode: Mode,
+    /// Cycles run.
+    pub cycles: u64,
+    /// Output messages produced.
+    pub outputs: u64,
+    /// Output messages compared with recorded ones (daemon recordings).
+    pub compared: u64,
+    /// Output messages that differ (or are missing on one side).
+    pub differences: u64,
+    /// The first difference.
+    pub first_difference: Option<Difference>,
+    /// Messages the recorder reported dropped (`/sar/recorder/drops`).
+    pub recorder_dropped: u64,
+    /// Whether the input was read to its end (false: cut short, replayed up
+    /// to its last complete chunk).
+    pub input_complete: bool,
+    /// Why reading stopped early.
+    pub stopped: Option<String>,
+    /// The error figures, with `compare`.
+    pub comparison: Option<Comparison>,
+    /// The tip-force series, with `keep_series`.
+    pub series: Vec<SeriesPoint>,
+    /// The output file, when written.
+    pub output: Option<PathBuf>,
+    /// Whether the recording holds the daemon's first cycle (its `sar_replay`
+    /// metadata: recorded from the start, first file of a rotation); `None`
+    /// without that metadata. A recording that does not lacks the
+    /// estimator's earlier state (guard, filter, bias after tares): its
+    /// replay may differ.
+    pub from_first_cycle: Option<bool>,
+}
+
+/// Why a replay could not run.
+#[non_exhaustive]
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// The input is not an MCAP file, or a message cannot be decoded.
+    #[error("{0}")]
+    Read(#[from] ReadError),
+    /// The output could not be written.
+    #[error("{0}")]
+    Write(#[from] WriteError),
+    /// The estimator refused the configuration.
+    #[error("the configuration: {0}")]
+    Setting(String),
+    /// Neither `/sar/cycle/input` nor `/sar/sensor/wrench` messages.
+    #[error("no inputs: the recording has no /sar/cycle/input and no /sar/sensor/wrench messages")]
+    NoInputs,
+    /// The comparison's reference topic has no usable message.
+    #[error("--compare {topic}: {why}")]
+    Compare {
+        /// The topic.
+        topic: String,
+        /// What is wrong.
+        why: &'static str,
+    },
+    /// The output would overwrite the input.
+    #[error("the output {0} is the input")]
+    OutputIsInput(PathBuf),
+}
+
+struct Sink {
+    writer: Option<RotatingWriter>,
+    status: RecorderDrops,
+}
+
+impl Sink {
+    fn write(&mut self, m: &Outgoing) -> Result<(), WriteError> {
+        if let Some(w) = &mut self.writer {
+            self.status.stamp_ns = self.status.stamp_ns.max(m.stamp_ns());
+            w.write(m, &self.status)?;
+        }
+        Ok(())
+    }
+}
+
+struct Replayer {
+    scratch: Vec<Outgoing>,
+    estimator: Estimator,
+    step: LoopStep,
+    sink: Sink,
+    report: ReplayReport,
+    /// Per output topic: the replayed messages (cycle, message, bytes) not
+    /// yet matched, and the recorded ones (bytes) not yet matched.
+    replayed: BTreeMap<Topic, VecDeque<(u64, Outgoing, Vec<u8>)>>,
+    recorded: BTreeMap<Topic, VecDeque<Vec<u8>>>,
+    comparing: bool,
+    /// Topics whose recorded outputs are missing (no longer compared).
+    lacking: Vec<Topic>,
+    estimates: Vec<(u64, [f64; 3])>,
+    references: Vec<(u64, [f64; 3])>,
+    first_ns: Option<u64>,
+    last_cycle: u64,
+    keep_estimates: bool,
+    left_out: usize,
+}
+
+fn arr(v: &Vec3) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+impl Replayer {
+    /// One cycle of a daemon recording: the loop step.
+    fn loop_cycle(&mut self, input: &LoopInput) -> Result<(), ReplayError> {
+        let out = *self.step.step(input);
+        if self.needs_messages() {
+            let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
+            self.emit(input.cycle, m)?;
+        } else {
+            self.report.outputs += 1;
+        }
+        self.emit_outputs(&input.cycle_input(), &out.estimate)
+    }
+
+    /// One cycle of an inputs-only recording: the estimator alone.
+    fn estimator_cycle(&mut self, input: &CycleInput) -> Result<(), ReplayError> {
+        let out = *self.estimator.cycle(input);
+        self.emit_outputs(input, &out)
+    }
+
+    fn emit(&mut self, cycle: u64, m: Outgoing) -> Result<(), ReplayError> {
+        self.report.outputs += 1;
+        self.sink.write(&m)?;
+        if self.comparing && !self.lacking.contains(&m.topic()) {
+            let mut bytes = Vec::with_capacity(256);
+            if m.encode(&mut bytes).is_ok() {
+                self.replayed
+                    .entry(m.topic())
+                    .or_default()
+                    .push_back((cycle, m, bytes));
+            }
+        }
+        Ok(())
+    }
+
+    fn emit_outputs(&mut self, input: &CycleInput, out: &CycleOutput) -> Result<(), ReplayError> {
+        let out = *out;
+        self.report.cycles += 1;
+        self.last_cycle = input.cycle;
+        let stamp_ns = convert::cycle_stamp_ns(input);
+        self.first_ns.get_or_insert(stamp_ns);
+        if self.keep_estimates && out.new_sample {
+            match out.tip {
+                TipOutcome::Estimate(e) if e.observable => {
+                    self.estimates.push((stamp_ns, arr(&e.force_n)));
+                }
+                _ => self.left_out += 1,
+            }
+        }
+        let cycle = input.cycle;
+        if !self.needs_messages() {
+            // Nothing written or compared: only counted (the messages'
+            // text and encoding are most of a cycle's cost).
+            self.report.outputs += convert::output_count(&out);
+            return Ok(());
+        }
+        let mut msgs = std::mem::take(&mut self.scratch);
+        msgs.clear();
+        convert::outputs(input, &out, |m| msgs.push(m));
+        let mut result = Ok(());
+        for m in msgs.drain(..) {
+            if result.is_ok() {
+                result = self.emit(cycle, m);
+            }
+        }
+        self.scratch = msgs;
+        result?;
+        if self.comparing {
+            self.match_pending();
+        }
+        Ok(())
+    }
+
+    /// Whether the output messages are written or compared.
+    fn needs_messages(&self) -> bool {
+        self.comparing || self.sink.writer.is_some()
+    }
+
+    fn differ(&mut self, d: Difference) {
+        // (leftovers at the end)
+        self.report.differences += 1;
+        if self.report.first_difference.is_none() {
+            self.report.first_difference = Some(d);
+        }
+    }
+
+    fn match_pending(&mut self) {
+        for topic in OUTPUT_TOPICS {
+            if self.lacking.contains(&topic) {
+                continue;
+            }
+            let rep = self.replayed.entry(topic).or_default();
+            let rec = self.recorded.entry(topic).or_default();
+            while !rep.is_empty() && !rec.is_empty() {
+                let (Some((cycle, m, bytes)), Some(recorded)) = (rep.pop_front(), rec.pop_front())
+                else {
+                    break;
+                };
+                self.report.compared += 1;
+                if bytes != recorded {
+                    self.report.differences += 1;
+                    if self.report.first_difference.is_none() {
+                        self.report.first_difference = Some(describe(topic, cycle, &m, &recorded));
+                    }
+                }
+            }
+            if rep.len() > MAX_PENDING {
+                // The recording lacks these outputs: one difference, then
+                // this topic is no longer compared.
+                if let Some((cycle, m, _)) = rep.pop_front() {
+                    self.report.differences += 1;
+                    self.report.first_difference.get_or_insert(Difference {
+                        cycle,
+                        topic: topic.name(),
+                        field: "message".into(),
+                        recorded: "(none)".into(),
+                        replayed: format!("{m:?}"),
+                    });
+                }
+                rep.clear();
+                self.lacking.push(topic);
+            }
+        }
+    }
+
+    fn recorded_output(&mut self, topic: Topic, data: &[u8]) {
+        if self.comparing && !self.lacking.contains(&topic) {
+            self.recorded
+                .entry(topic)
+                .or_default()
+                .push_back(data.to_vec());
+        }
+    }
+
+    /// `complete`: the recording was not cut short (a recovered file says
+    /// in its `sar_recover` metadata whether its input was).
+    fn finish_comparison(&mut self, complete: bool) {
+        if !self.comparing {
+            return;
+        }
+        self.match_pending();
+        let last_cycle = self.last_cycle;
+        let mut leftovers = Vec::new();
+        for topic in OUTPUT_TOPICS {
+            if let Some(rep) = self.replayed.get(&topic) {
+                for (cycle, m, _) in rep {
+                    // A file cut short may lack its last cycle's outputs.
+                    if complete || *cycle < last_cycle {
+                        leftovers.push(Difference {
+                            cycle: *cycle,
+                            topic: topic.name(),
+                            field: "message".into(),
+                            recorded: "(none)".into(),
+                            replayed: format!("{m:?}"),
+                        });
+                    }
+                }
+            }
+            if let Some(rec) = self.recorded.get(&topic) {
+                for bytes in rec {
+                    leftovers.push(Difference {
+                        cycle: last_cycle,
+                        topic: topic.name(),
+                        field: "message".into(),
+                        recorded: format!("{:?}", Outgoing::decode(topic, bytes)),
+                        replayed: "(none)".into(),
+                    });
+                }
+            }
+        }
+        leftovers.sort_by_key(|d| d.cycle);
+        for d in leftovers {
+            self.differ(d);
+        }
+    }
+}
+
+/// The first field in which two messages differ, from their `Debug` forms
+/// (`Name { a: 1, b: [1.0, 2.0], .. }`): top-level fields are split at the
+/// commas outside brackets.
+fn fields(debug: &str) -> Vec<(String, String)> {
+    let inner = debug
+        .find('{')
+        .and_then(|i| debug.get(i + 1..debug.len().saturating_sub(1)))
+        .unwrap_or(debug);
+    let mut out = Vec::new();
+    let mut depth = 0i32;
+    let mut start = 0usize;
+    let push = |s: &str, out: &mut Vec<(String, String)>| {
+        let s = s.trim();
+        if s.is_empty() {
+            return;
+        }
+        match s.split_once(':') {
+            Some((k, v)) => out.push((k.trim().to_owned(), v.trim().to_owned())),
+            None => out.push((String::new(), s.to_owned())),
+        }
+    };
+    for (i, c) in inner.char_indices() {
+        match c {
+            '[' | '{' | '(' => depth += 1,
+            ']' | '}' | ')' => depth -= 1,
+            ',' if depth == 0 => {
+                push(inner.get(start..i).unwrap_or(""), &mut out);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    push(inner.get(start..).unwrap_or(""), &mut out);
+    out
+}
+
+fn describe(topic: Topic, cycle: u64, replayed: &Outgoing, recorded: &[u8]) -> Difference {
+    let rec = Outgoing::decode(topic, recorded);
+    let (field, rec_v, rep_v) = match &rec {
+        Ok(r) => {
+            let a = fields(&format!("{r:?}"));
+            let b = fields(&format!("{replayed:?}"));
+            a.iter()
+                .zip(b.iter())
+                .find(|(x, y)| x != y)
+                .map(|((k, v), (_, w))| (k.clone(), v.clone(), w.clone()))
+                // Same Debug text, different bits (e.g. -0.0 and 0.0 print
+                // alike; NaN payloads).
+                .unwrap_or_else(|| ("bits".into(), format!("{r:?}"), format!("{replayed:?}")))
+        }
+        Err(e) => (
+            "message".into(),
+            format!("undecodable: {e}"),
+            format!("{replayed:?}"),
+        ),
+    };
+    Difference {
+        cycle,
+        topic: topic.name(),
+        field,
+        recorded: rec_v,
+        replayed: rep_v,
+    }
+}
+
+/// The `sar_replay` bias of a recording (zero when absent).
+fn start_bias(reader: &McapReader<'_>) -> Bias {
+    reader
+        .metadata()
+        .iter()
+        .find(|m| m.name == REPLAY_METADATA)
+        .and_then(|m| bias_from_metadata(&m.metadata))
+        .unwrap_or(Bias::force_only(Vec3::zeros()))
+}
+
+/// Replays the recording held in `bytes` (see the module documentation).
+pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
+    // The metadata is written at the start of a file: read up to the first
+    // message to find it.
+    let mut probe = McapReader::new(bytes)?;
+    let _ = probe.next();
+    let bias = start_bias(&probe);
+    let metadata = probe
+        .metadata()
+        .iter()
+        .find(|m| m.name == REPLAY_METADATA)
+        .map(|m| (m.name.clone(), m.metadata.clone()));
+    let estimator = Estimator::with_bias(&options.config, bias)
+        .map_err(|e| ReplayError::Setting(e.to_string()))?;
+    let step = LoopStep::new(&options.config, bias, options.step)
+        .map_err(|e| ReplayError::Setting(e.to_string()))?;
+    let writer = match &options.output {
+        Some(path) => {
+            let mut o = FileOptions::single(path);
+            // The replayed file holds every cycle of its input.
+            o.metadata = metadata.clone().into_iter().collect();
+            Some(RotatingWriter::new(o)?)
+        }
+        None => None,
+    };
+    let mut r = Replayer {
+        scratch: Vec::with_capacity(8),
+        estimator,
+        step,
+        sink: Sink {
+            writer,
+            status: RecorderDrops::default(),
+        },
+        report: ReplayReport {
+            mode: Mode::CycleInput,
+            cycles: 0,
+            outputs: 0,
+            compared: 0,
+            differences: 0,
+            first_difference: None,
+            recorder_dropped: 0,
+            input_complete: false,
+            stopped: None,
+            comparison: None,
+            series: Vec::new(),
+            output: options.output.clone(),
+            from_first_cycle: metadata.as_ref().map(|(_, m)| {
+                m.get("from_first_cycle").is_some_and(|v| v == "true")
+                    && m.get("file_index").is_none_or(|i| i == "0")
+            }),
+        },
+        replayed: BTreeMap::new(),
+        recorded: BTreeMap::new(),
+        comparing: options.check_recorded,
+        lacking: Vec::new(),
+        estimates: Vec::new(),
+        references: Vec::new(),
+        first_ns: None,
+        last_cycle: 0,
+        keep_estimates: options.compare.is_some() || options.keep_series,
+        left_out: 0,
+    };
+    let mut reader = McapReader::new(bytes)?;
+    // Topic per channel id, looked up once per channel.
+    let mut topics: BTreeMap<u16, Option<Topic>> = BTreeMap::new();
+    let mut reference_channel: Option<u16> = None;
+    let mut saw_cycle_input = false;
+    let mut sensors: Vec<(u64, super::msgs::WrenchStamped)> = Vec::new();
+    let mut joints: Vec<(u64, ActiveJointState)> = Vec::new();
+    let mut visitor =
+        |channels: &BTreeMap<u16, ChannelInfo>, msg: MessageRef<'_>| -> Result<(), ReplayError> {
+            let id = msg.channel_id;
+            let topic = match topics.get(&id) {
+                Some(t) => *t,
+                None => {
+                    let channel = channels.get(&id);
+                    let topic = channel.and_then(|c| Topic::from_name(&c.topic));
+                    if let (Some(c), Some(reference)) = (channel, &options.compare)
+                        && &c.topic == reference
+                    {
+                        reference_channel = Some(id);
+                    }
+                    topics.insert(id, topic);
+                    topic
+                }
+            };
+            let decode_err = |source| ReadError::Decode {
+                topic: topic.map_or("?", |t| t.name()).to_owned(),
+                log_time_ns: msg.log_time_ns,
+                source,
+            };
+            if reference_channel == Some(id) {
+                let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                r.references.push((w.stamp_ns, w.force_n));
+                return Ok(());
+            }
+            match topic {
+                Some(Topic::CycleInput) => {
+                    if !saw_cycle_input {
+                        saw_cycle_input = true;
+                        sensors = Vec::new();
+                        joints = Vec::new();
+                    }
+                    let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
+                    // The recorded message is compared with the one rebuilt from
+                    // its input and the replayed decision.
+                    r.recorded_output(Topic::CycleInput, msg.data);
+                    r.loop_cycle(&convert::loop_input(&m))?;
+                }
+                Some(Topic::SensorWrench) if !saw_cycle_input => {
+                    let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                    sensors.push((msg.log_time_ns, w));
+                }
+                Some(Topic::Joints) if !saw_cycle_input => {
+                    let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
+                    joints.push((msg.log_time_ns, j));
+                }
+                Some(Topic::RecorderDrops) => {
+                    let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
+                    r.report.recorder_dropped = r.report.recorder_dropped.max(d.dropped);
+                }
+                Some(t) if OUTPUT_TOPICS.contains(&t) => r.recorded_output(t, msg.data),
+                _ => {}
+            }
+            Ok(())
+        };
+    if let Some(e) = reader.visit(&mut visitor)? {
+        r.report.stopped = Some(e.to_string());
+    }
+    r.report.input_complete = reader.is_complete();
+    if saw_cycle_input {
+        let recovered_from_cut = reader
+            .metadata()
+            .iter()
+            .any(|m| m.name == "sar_recover" && m.metadata.contains_key("stopped"));
+        r.finish_comparison(r.report.input_complete && !recovered_from_cut);
+    } else {
+        if sensors.is_empty() {
+            return Err(ReplayError::NoInputs);
+        }
+        r.report.mode = Mode::InputsOnly;
+        r.comparing = false;
+        r.replayed.clear();
+        r.recorded.clear();
+        inputs_only(&mut r, &mut sensors, &mut joints)?;
+    }
+    if let Some(topic) = &options.compare {
+        r.report.comparison = Some(compare(&mut r, topic)?);
+    }
+    if options.keep_series {
+        let t0 = r.first_ns.unwrap_or(0);
+        let refs = &r.references;
+        r.report.series = r
+            .estimates
+            .iter()
+            .map(|(t, e)| SeriesPoint {
+                t_s: t.saturating_sub(t0) as f64 * 1e-9,
+                estimate_n: *e,
+                reference_n: reference_at(refs, *t),
+            })
+            .collect();
+    }
+    if let Some(w) = &mut r.sink.writer {
+        w.close(&r.sink.status)?;
+    }
+    Ok(r.report)
+}
+
+fn inputs_only(
+    r: &mut Replayer,
+    sensors: &mut [(u64, super::msgs::WrenchStamped)],
+    joints: &mut [(u64, ActiveJointState)],
+) -> Result<(), ReplayError> {
+    sensors.sort_by_key(|(t, _)| *t);
+    joints.sort_by_key(|(t, _)| *t);
+    let mut j = 0usize;
+    let mut latest: Option<&ActiveJointState> = None;
+    let mut reset_pending = true;
+    let mut cycle = 0u64;
+    for (i, (t, w)) in sensors.iter().enumerate() {
+        while let Some((tj, js)) = joints.get(j) {
+            if tj > t {
+                break;
+            }
+            latest = Some(js);
+            j += 1;
+        }
+        let Some(js) = latest else {
+            continue;
+        };
+        cycle += 1;
+        let finite = w.force_n.iter().chain(&w.torque_nm).all(|v| v.is_finite());
+        let [fx, fy, fz] = w.force_n;
+        let [tx, ty, tz] = w.torque_nm;
+        let [q1_m, q2_m, q3_m] = js.q_m;
+        let input = CycleInput {
+            cycle,
+            now_ns: Some(*t),
+            sensor: SensorSample {
+                force_n: Vec3::new(fx, fy, fz),
+                torque_nm: Vec3::new(tx, ty, tz),
+                // The index: every message a new sample, no gap.
+                counter: (i as u32).wrapping_add(1),
+                status: 0,
+                stamp_ns: w.stamp_ns,
+                valid: finite,
+            },
+            joints: JointSample {
+                joints: ActiveJoints { q1_m, q2_m, q3_m },
+                stamp_ns: js.stamp_ns,
+                valid: js.q_m.iter().all(|v| v.is_finite()),
+            },
+            command: reset_pending.then_some(Command::Reset),
+        };
+        r.estimator_cycle(&input)?;
+        if let Some(ev) = r.estimator.last().command
+            && matches!(ev.result, Ok(CommandAccepted::Reset))
+        {
+            reset_pending = false;
+        }
+    }
+    Ok(())
+}
+
+fn reference_at(refs: &[(u64, [f64; 3])], t: u64) -> Option<[f64; 3]> {
+    let i = refs.partition_point(|(s, _)| *s <= t);
+    refs.get(i.checked_sub(1)?).map(|(_, f)| *f)
+}
+
+fn compare(r: &mut Replayer, topic: &str) -> Result<Comparison, ReplayError> {
+    if r.references.is_empty() {
+        return Err(ReplayError::Compare {
+            topic: topic.to_owned(),
+            why: "no message on this topic (it must be a geometry_msgs/msg/WrenchStamped)",
+        });
+    }
+    r.references.sort_by_key(|(t, _)| *t);
+    let mut est: [Vec<f64>; 3] = Default::default();
+    let mut refv: [Vec<f64>; 3] = Default::default();
+    let mut left_out = r.left_out;
+    for (t, e) in &r.estimates {
+        let Some(f) = reference_at(&r.references, *t) else {
+            left_out += 1;
+            continue;
+        };
+        for k in 0..3 {
+            if let (Some(a), Some(b), Some(x), Some(y)) =
+                (est.get_mut(k), refv.get_mut(k), e.get(k), f.get(k))
+            {
+                a.push(*x);
+                b.push(*y);
+            }
+        }
+    }
+    let pairs = est.first().map_or(0, Vec::len);
+    if pairs == 0 {
+        return Err(ReplayError::Compare {
+            topic: topic.to_owned(),
+            why: "no observable estimate has a reference at or before it",
+        });
+    }
+    let axis = |x: &[f64], y: &[f64]| {
+        let e_ra = sar_estimator::error_measure::absolute_relative_error(x, y).unwrap_or(f64::NAN);
+        let (mut sq, mut max) = (0.0f64, 0.0f64);
+        for (a, b) in x.iter().zip(y) {
+            let d = a - b;
+            sq += d * d;
+            max = max.max(d.abs());
+        }
+        AxisError {
+            e_ra,
+            rms_n: (sq / x.len() as f64).sqrt(),
+            max_n: max,
+        }
+    };
+    let [ex, ey, ez] = &est;
+    let [rx, ry, rz] = &refv;
+    Ok(Comparison {
+        topic: topic.to_owned(),
+        pairs,
+        left_out,
+        axes: [axis(ex, rx), axis(ey, ry), axis(ez, rz)],
+    })
+}
+
+/// Replays the file at `input` (refuses an `output` that is the input).
+pub fn replay_file(input: &Path, options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
+    if let Some(out) = &options.output
+        && same_file(input, out)
+    {
+        return Err(ReplayError::OutputIsInput(out.clone()));
+    }
+    let bytes = super::reader::read_file(input)?;
+    replay(&bytes, options)
+}
+
+/// Whether two paths name the same existing file.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => false,
+    }
+}

@@ -1,0 +1,186 @@
+//! Recording on: the loop's side of the recorder (`record::live::LiveRecorder`,
+//! the conversion of a cycle into its messages and the queue push) allocates
+//! nothing on the loop's thread, through a Warn, a Stop with its quick stop
+//! and operator requests; the writer thread (which may allocate) is not
+//! counted. The file it writes replays bit for bit, guard transitions
+//! included.
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+use sar_daemon::control::{Controller, Envelope, Operator, Request};
+use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
+use sar_daemon::record::msgs::Outgoing;
+use sar_daemon::record::replay::{Mode, ReplayOptions, replay_file};
+use sar_daemon::record::{McapReader, Rotation, read_file};
+use sar_daemon::runloop::{Publish, Published};
+use sar_daemon::stats::LoopStats;
+use sar_daemon::{config, logq, sim};
+use sar_drivers::SimClock;
+use sar_estimator::Vec3;
+use sar_estimator::guard::GuardState;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+struct Counting;
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+thread_local! {
+    /// Counted on this thread (the test's, standing for the loop's) only.
+    static COUNTED: Cell<bool> = const { Cell::new(false) };
+}
+
+fn count() {
+    if COUNTED.with(Cell::get) {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
+// SAFETY: forwards to the system allocator, only counting.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
+    let dir = common::scratch("no_alloc_record");
+    let cfg = config::builtin().unwrap();
+    let mut scenario = sim::demo_scenario().unwrap();
+    // 20 N along the rod from 1.5 s to 3 s: Warn, then Stop.
+    scenario.spec.contact = common::contact_pulse(
+        500_000_000,
+        2_500_000_000,
+        3_000_000_000,
+        3_500_000_000,
+        Vec3::new(20.0, 0.0, 0.0),
+    );
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _thread, queue) = logq::channel(false);
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.step_config(),
+        sensor,
+        drives,
+        operator.clone(),
+        log,
+        true,
+    )
+    .unwrap();
+    let switch = Arc::new(RecordSwitch::default());
+    let (manager, mut publisher) = RecordManager::start(
+        RecordSettings {
+            enabled: true,
+            directory: dir.clone(),
+            rotation: Rotation::default(),
+            // 4500 cycles of at most 8 messages: never full, whatever the
+            // writer's speed.
+            queue_capacity: 65536,
+        },
+        bias,
+        Arc::clone(&switch),
+        (),
+    )
+    .unwrap();
+    let stats = LoopStats::default();
+    let mut cycle = 0u64;
+    let mut seen = (false, false);
+    let mut step = |c: &mut Controller<_, _>, p: &mut dyn Publish| {
+        cycle += 1;
+        clock.advance_ns(1_000_000);
+        if cycle % 1000 == 10 {
+            let request = match (cycle / 1000) % 3 {
+                0 => Request::Reset,
+                1 => Request::Tare,
+                _ => Request::MoveTip {
+                    tip_m: Vec3::new(0.6, 0.2, 0.001),
+                },
+            };
+            operator
+                .requests
+                .push(Envelope { id: cycle, request })
+                .unwrap();
+        }
+        p.before_cycle();
+        let out = *c.step(cycle, || Some(clock.now_ns()));
+        p.publish(&Published {
+            input: c.input(),
+            loop_input: c.loop_input(),
+            decision: c.decision(),
+            output: &out,
+            stats: &stats,
+            drive_state: c.drive_state(),
+            halted: c.halted(),
+            quick_stops: c.counts().quick_stops,
+            recorder_drops: 0,
+            recording: false,
+        });
+        while queue.pop().is_some() {}
+        while operator.replies.pop().is_some() {}
+        seen.0 |= out.guard_state == GuardState::Warn;
+        seen.1 |= out.guard_state == GuardState::Stop;
+    };
+    for _ in 0..500 {
+        step(&mut c, &mut publisher);
+    }
+    assert!(switch.recording());
+    COUNTED.with(|f| f.set(true));
+    for _ in 0..4000 {
+        step(&mut c, &mut publisher);
+    }
+    COUNTED.with(|f| f.set(false));
+    let allocations = ALLOCATIONS.load(Ordering::SeqCst);
+    assert!(seen.0 && seen.1, "warn and stop: {seen:?}");
+    assert_eq!(
+        allocations, 0,
+        "the recorded cycles allocated {allocations} times"
+    );
+    assert_eq!(switch.dropped(), 0);
+    publisher.release();
+    manager.finish();
+
+    // One file, every cycle in it, replayed bit for bit.
+    let files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let r = replay_file(&files[0], &ReplayOptions::from_config(&cfg)).unwrap();
+    assert_eq!(r.mode, Mode::CycleInput);
+    assert_eq!(r.cycles, 4500);
+    assert_eq!(r.first_difference, None);
+    assert_eq!(r.compared, r.outputs);
+    let bytes = read_file(&files[0]).unwrap();
+    let events = McapReader::new(&bytes)
+        .unwrap()
+        .decoded()
+        .filter(|m| matches!(m, Ok((_, _, Outgoing::GuardEvent(_)))))
+        .count();
+    assert!(events >= 3, "{events} guard events");
+}

@@ -1,0 +1,268 @@
+//! `sarctl replay`, `recover` and `record` as processes:
+//! - `sard --sim` with `[record] enabled`: `sarctl record stop` closes the
+//!   recording, `record start` opens another; the first (from the daemon's
+//!   first cycle) replays bit for bit with `sarctl replay` (exit 0), the
+//!   status shows the recorder's drops;
+//! - a replay that differs (another configuration) exits non-zero with one
+//!   line naming the first cycle, topic and field;
+//! - `--compare`, `--format json` and `--plot` on the contact fixture;
+//! - `recover` refuses to overwrite its input.
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const SARD: &str = env!("CARGO_BIN_EXE_sard");
+const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/replay")
+}
+
+fn sarctl(prefix: &str, args: &[&str]) -> Output {
+    Command::new(SARCTL)
+        .args(args)
+        .env("SAR_SERVICE_PREFIX", prefix)
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+struct Daemon(std::process::Child);
+
+impl Daemon {
+    fn stop(mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        let status = self.0.wait().unwrap();
+        assert!(status.success(), "sard ended with {status}");
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        let _ = self.0.wait();
+    }
+}
+
+fn status_json(prefix: &str) -> serde_json::Value {
+    let out = sarctl(prefix, &["status", "--format", "json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
+    let dir = common::scratch("replay_cli_e2e");
+    let rec_dir = dir.join("rec");
+    let config = dir.join("sim.toml");
+    let toml = sar_daemon::config::DEFAULT_TOML
+        .replace("[record]\nenabled = false", "[record]\nenabled = true")
+        .replace(
+            "directory = \"recordings\"",
+            &format!("directory = {:?}", rec_dir.display().to_string()),
+        );
+    assert_ne!(toml, sar_daemon::config::DEFAULT_TOML);
+    std::fs::write(&config, toml).unwrap();
+    let prefix = format!("sar-rec-{}", std::process::id());
+    let daemon = Daemon(
+        Command::new(SARD)
+            .args(["--sim", "--config"])
+            .arg(&config)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let start = Instant::now();
+    while !sarctl(&prefix, &["status"]).status.success() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "sard did not come up"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let s = status_json(&prefix);
+    assert_eq!(s["recording"], true, "{s}");
+    assert!(s["recorder_drops"].is_u64(), "{s}");
+    std::thread::sleep(Duration::from_millis(500));
+    let out = sarctl(&prefix, &["record", "stop", "--format", "json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["recording"], false, "{v}");
+    assert_eq!(status_json(&prefix)["recording"], false);
+    let out = sarctl(&prefix, &["record", "start"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("recording"),
+        "{}",
+        text(&out.stdout)
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    let out = sarctl(&prefix, &["record", "stop"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    daemon.stop();
+
+    let mut files: Vec<_> = std::fs::read_dir(&rec_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 2, "{files:?}");
+    // The recording from the first cycle replays bit for bit.
+    let out_file = dir.join("replayed.mcap");
+    let out = Command::new(SARCTL)
+        .args(["replay", "--format", "json", "--config"])
+        .arg(&config)
+        .arg("--input")
+        .arg(&files[0])
+        .arg("--output")
+        .arg(&out_file)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    assert_eq!(v["from_first_cycle"], true, "{v}");
+    assert_eq!(v["mode"], "cycle_input", "{v}");
+    assert_eq!(v["recorder_dropped"], 0, "{v}");
+    assert!(v["cycles"].as_u64().unwrap() > 100, "{v}");
+    assert_eq!(v["compared"], v["outputs"], "{v}");
+    assert!(out_file.exists());
+    // The one started on request is a complete, readable recording too; it
+    // says that it starts after the daemon's first cycle.
+    let cfg = sar_daemon::config::load(&config).unwrap();
+    let r = sar_daemon::record::replay::replay_file(
+        &files[1],
+        &sar_daemon::record::replay::ReplayOptions::from_config(&cfg),
+    )
+    .unwrap();
+    assert_eq!(r.from_first_cycle, Some(false));
+    assert!(r.cycles > 10, "{}", r.cycles);
+    let bytes = sar_daemon::record::read_file(&files[1]).unwrap();
+    let mut reader = sar_daemon::record::McapReader::new(&bytes).unwrap();
+    assert!(reader.by_ref().all(|m| m.is_ok()));
+    assert!(reader.is_complete());
+}
+
+#[test]
+fn a_replay_that_differs_exits_non_zero_naming_the_first_cycle_and_field() {
+    let dir = common::scratch("replay_cli_differs");
+    // Another sensor noise: the deviation differs from the first estimate on.
+    let config = dir.join("other.toml");
+    let toml = std::fs::read_to_string(fixtures().join("config.toml"))
+        .unwrap()
+        .replace("noise_n = [0.2, 0.2, 0.8]", "noise_n = [0.3, 0.2, 0.8]");
+    std::fs::write(&config, toml).unwrap();
+    let out = Command::new(SARCTL)
+        .args(["replay", "--config"])
+        .arg(&config)
+        .arg("--input")
+        .arg(fixtures().join("fault_daemon.mcap"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("first at cycle"), "{err}");
+    assert!(err.contains("tip_force_std_n"), "{err}");
+    // The fixture's own configuration: identical, exit 0.
+    let out = Command::new(SARCTL)
+        .args(["replay", "--config"])
+        .arg(fixtures().join("config.toml"))
+        .arg("--input")
+        .arg(fixtures().join("fault_daemon.mcap"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("0 differ"),
+        "{}",
+        text(&out.stdout)
+    );
+}
+
+#[test]
+fn compare_json_and_plot_on_the_contact_fixture() {
+    let dir = common::scratch("replay_cli_compare");
+    let svg = dir.join("fig9.svg");
+    let out = Command::new(SARCTL)
+        .args([
+            "replay",
+            "--format",
+            "json",
+            "--compare",
+            "/sar/sim/tip_wrench_truth",
+            "--config",
+        ])
+        .arg(fixtures().join("config.toml"))
+        .arg("--input")
+        .arg(fixtures().join("contact_inputs.mcap"))
+        .arg("--output")
+        .arg(dir.join("out.mcap"))
+        .arg("--plot")
+        .arg(&svg)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["mode"], "inputs_only", "{v}");
+    let c = &v["comparison"];
+    assert_eq!(c["topic"], "/sar/sim/tip_wrench_truth");
+    for key in ["e_ra", "rms_n", "max_n"] {
+        assert_eq!(c[key].as_array().unwrap().len(), 3, "{c}");
+    }
+    let plot = std::fs::read_to_string(&svg).unwrap();
+    assert!(plot.starts_with("<svg"), "{}", &plot[..plot.len().min(80)]);
+    assert!(
+        plot.matches("<polyline").count() >= 6,
+        "estimate and truth, 3 axes"
+    );
+}
+
+#[test]
+fn recover_refuses_to_overwrite_its_input() {
+    let dir = common::scratch("replay_cli_recover");
+    let cut = dir.join("cut.mcap");
+    let bytes = std::fs::read(fixtures().join("fault_daemon.mcap")).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out = Command::new(SARCTL)
+        .arg("recover")
+        .arg(&cut)
+        .arg("--output")
+        .arg(&cut)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("overwrite"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = Command::new(SARCTL)
+        .args(["recover", "--format", "json"])
+        .arg(&cut)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["input_complete"], false, "{v}");
+    assert!(dir.join("cut.recovered.mcap").exists());
+}
