@@ -146,6 +146,7 @@ struct RecordToml {
     max_file_mb: f64,
     max_file_s: f64,
     queue_capacity: i64,
+    scene_hz: f64,
 }
 
 impl Default for RecordToml {
@@ -156,6 +157,7 @@ impl Default for RecordToml {
             max_file_mb: 1024.0,
             max_file_s: 600.0,
             queue_capacity: 65536,
+            scene_hz: 30.0,
         }
     }
 }
@@ -700,6 +702,20 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let max_mb = ctx.range_f("record.max_file_mb", rec.max_file_mb, 0.0, 1e6, "MB")?;
     let max_s = ctx.range_f("record.max_file_s", rec.max_file_s, 0.0, 86_400.0, "s")?;
     let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
+    let scene_hz = ctx.range_f("record.scene_hz", rec.scene_hz, 0.0, 1000.0, "Hz")?;
+    let scene = (scene_hz > 0.0).then(|| crate::record::SceneOptions {
+        geometry: crate::view::scene::SceneGeometry::from_config(&EstimatorConfig {
+            calibration,
+            profile,
+            noise,
+            tip: TipForceConfig { max_std_n },
+            guard,
+            plausibility,
+            filter,
+        }),
+        limits_n: guard.force_limits().to_array(),
+        period_ns: (1e9 / scene_hz).round() as u64,
+    });
     let record = crate::record::live::RecordSettings {
         enabled: rec.enabled,
         directory: std::path::PathBuf::from(&rec.directory),
@@ -708,6 +724,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             max_duration_ns: (max_s > 0.0).then(|| (max_s * 1e9).round() as u64),
         },
         queue_capacity: usize::try_from(queue_capacity).unwrap_or(65536),
+        scene,
     };
 
     let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;

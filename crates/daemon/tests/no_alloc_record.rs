@@ -102,6 +102,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             // 4500 cycles of at most 8 messages: never full, whatever the
             // writer's speed.
             queue_capacity: 65536,
+            scene: None,
         },
         bias,
         Arc::clone(&switch),

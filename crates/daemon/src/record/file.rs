@@ -2,8 +2,13 @@
 //! messages, zstd chunks written whole (a crash loses at most the chunk being
 //! filled), rotation by size or duration with every file self-contained (all
 //! schemas and channels at its start, summary and index at its end).
+//! With [`FileOptions::scene`], the live view's 3D scene (`/sar/scene`,
+//! `foxglove.SceneUpdate`, and `/sar/scene/tf`) is drawn from the recorded
+//! messages of a cycle and written beside them, decimated, on the writer's
+//! thread: a recording looks in Foxglove as the live view does.
 
-use super::msgs::{Outgoing, RecorderDrops, Topic};
+use super::msgs::{EstimatorState, Outgoing, PassiveJointState, RecorderDrops, Topic};
+use crate::view::scene::{self, SceneGeometry};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -62,8 +67,20 @@ pub struct Rotation {
     pub max_duration_ns: Option<u64>,
 }
 
+/// The 3D scene written beside the recorded topics.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneOptions {
+    /// The robot and manipulator as drawn (from the configuration).
+    pub geometry: SceneGeometry,
+    /// The force limits drawn until a cycle records others (warn, stop of
+    /// total, axial, lateral), N.
+    pub limits_n: [f64; 6],
+    /// At most one scene per this much log time, ns (33 333 333: 30 Hz).
+    pub period_ns: u64,
+}
+
 /// How files are written.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FileOptions {
     /// The directory of the files.
     pub directory: PathBuf,
@@ -83,6 +100,8 @@ pub struct FileOptions {
     /// The exact path of the first file (instead of `{prefix}-0000.mcap`;
     /// later files of a rotation keep the numbered names).
     pub first_path: Option<PathBuf>,
+    /// The live view's 3D scene beside the topics (`None`: not written).
+    pub scene: Option<SceneOptions>,
 }
 
 impl FileOptions {
@@ -97,6 +116,7 @@ impl FileOptions {
             rotation: Rotation::default(),
             metadata: Vec::new(),
             first_path: None,
+            scene: None,
         }
     }
 
@@ -202,6 +222,37 @@ pub struct RotatingWriter {
     sequence: [u32; Topic::ALL.len()],
     buf: Vec<u8>,
     written: u64,
+    scene: Option<SceneState>,
+}
+
+/// What the scene is drawn from: the messages of one cycle (all stamped with
+/// the cycle's `now`), gathered until a message of a later cycle (or the
+/// file's end) closes it, whatever their order.
+struct SceneState {
+    options: SceneOptions,
+    next_ns: Option<u64>,
+    cycle: Option<SceneCycle>,
+    /// The limits in use (the last `/sar/cycle/input`'s).
+    limits_n: [f64; 6],
+    /// The last joints (`/sar/cycle/input` or `/sar/joints`).
+    q_m: [f64; 3],
+    buf: Vec<u8>,
+}
+
+/// One cycle's messages as the scene needs them.
+#[derive(Debug, Clone, Copy)]
+struct SceneCycle {
+    stamp_ns: u64,
+    estimator: Option<EstimatorState>,
+    passive: Option<PassiveJointState>,
+}
+
+/// The channels of the scene in one file.
+#[derive(Debug, Clone, Copy)]
+struct SceneChannels {
+    scene: u16,
+    tf: u16,
+    sequence: u32,
 }
 
 struct OpenFile {
@@ -210,6 +261,7 @@ struct OpenFile {
     handle: File,
     position: Arc<AtomicU64>,
     channel_ids: [u16; Topic::ALL.len()],
+    scene: Option<SceneChannels>,
     first_log_ns: Option<u64>,
 }
 
@@ -239,13 +291,21 @@ impl RotatingWriter {
             source,
         })?;
         Ok(Self {
-            options,
             current: None,
             next_index: 0,
             files: Vec::new(),
             sequence: [0; Topic::ALL.len()],
             buf: Vec::with_capacity(1024),
             written: 0,
+            scene: options.scene.map(|o| SceneState {
+                options: o,
+                next_ns: None,
+                cycle: None,
+                limits_n: o.limits_n,
+                q_m: [0.0; 3],
+                buf: Vec::with_capacity(4096),
+            }),
+            options,
         })
     }
 
@@ -283,6 +343,30 @@ impl RotatingWriter {
                 .add_channel(schema, topic.name(), "cdr", &none)
                 .map_err(mcap_err(&path))?;
         }
+        let scene = match &self.scene {
+            Some(_) => {
+                let s = scene::schema();
+                let schema = writer
+                    .add_schema(&s.name, &s.encoding, &s.data)
+                    .map_err(mcap_err(&path))?;
+                let scene = writer
+                    .add_channel(schema, crate::view::SCENE_TOPIC, &s.message_encoding, &none)
+                    .map_err(mcap_err(&path))?;
+                let t = scene::tf_schema();
+                let schema = writer
+                    .add_schema(&t.name, &t.encoding, &t.data)
+                    .map_err(mcap_err(&path))?;
+                let tf = writer
+                    .add_channel(schema, crate::view::TF_TOPIC, &t.message_encoding, &none)
+                    .map_err(mcap_err(&path))?;
+                Some(SceneChannels {
+                    scene,
+                    tf,
+                    sequence: 0,
+                })
+            }
+            None => None,
+        };
         // Each file says which of the rotation it is (`file_index`, 0 for
         // the first): a reader can tell a file that starts mid-recording.
         let index = self.next_index.saturating_sub(1);
@@ -303,6 +387,7 @@ impl RotatingWriter {
             handle,
             position,
             channel_ids,
+            scene,
             first_log_ns: None,
         }))
     }
@@ -362,6 +447,101 @@ impl RotatingWriter {
             *s = s.wrapping_add(1);
         }
         self.written += 1;
+        self.write_scene(msg)
+    }
+
+    /// Follows the cycles' messages: a message of a later cycle closes the
+    /// one gathered, whose scene is then written if one is due.
+    fn write_scene(&mut self, msg: &Outgoing) -> Result<(), WriteError> {
+        let Some(state) = self.scene.as_mut() else {
+            return Ok(());
+        };
+        let stamp_ns = msg.stamp_ns();
+        if state.cycle.is_some_and(|c| c.stamp_ns != stamp_ns) {
+            self.flush_scene()?;
+        }
+        let Some(state) = self.scene.as_mut() else {
+            return Ok(());
+        };
+        let cycle = state.cycle.get_or_insert(SceneCycle {
+            stamp_ns,
+            estimator: None,
+            passive: None,
+        });
+        match msg {
+            Outgoing::EstimatorState(e) => cycle.estimator = Some(*e),
+            Outgoing::PassiveJoints(p) => cycle.passive = Some(*p),
+            Outgoing::CycleInput(c) => {
+                if c.limits_in_use_n.iter().all(|v| v.is_finite() && *v > 0.0) {
+                    state.limits_n = c.limits_in_use_n;
+                }
+                state.q_m = c.joints_q_m;
+            }
+            Outgoing::Joints(j) => state.q_m = j.q_m,
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Closes the cycle gathered: writes its scene when one is due (at most
+    /// one per period of log time, keeping the phase).
+    fn flush_scene(&mut self) -> Result<(), WriteError> {
+        let (Some(state), Some(file)) = (self.scene.as_mut(), self.current.as_mut()) else {
+            return Ok(());
+        };
+        let Some(SceneCycle {
+            stamp_ns: log_ns,
+            estimator: Some(estimator),
+            passive,
+        }) = state.cycle.take()
+        else {
+            return Ok(());
+        };
+        if state.next_ns.is_some_and(|next| log_ns < next) {
+            return Ok(());
+        }
+        let period = state.options.period_ns.max(1);
+        state.next_ns = Some(match state.next_ns {
+            Some(next) => next + (log_ns - next) / period * period + period,
+            None => log_ns + period,
+        });
+        let Some(channels) = file.scene.as_mut() else {
+            return Ok(());
+        };
+        let joints = super::msgs::ActiveJointState {
+            stamp_ns: estimator.joints_stamp_ns,
+            q_m: state.q_m,
+        };
+        let published = crate::view::topics::state_from_recorded(
+            &estimator,
+            &joints,
+            passive.as_ref(),
+            state.limits_n,
+        );
+        let update = scene::scene(&published, &state.options.geometry);
+        let mut write = |channel_id: u16, bytes: &[u8]| {
+            let header = mcap::records::MessageHeader {
+                channel_id,
+                sequence: channels.sequence,
+                log_time: log_ns,
+                publish_time: log_ns,
+            };
+            file.writer
+                .write_to_known_channel(&header, bytes)
+                .map_err(|source| WriteError::Mcap {
+                    path: file.path.clone(),
+                    source,
+                })
+        };
+        // Encoding into a Vec does not fail; a scene that did would be
+        // skipped, not end the recording.
+        if scene::encode(&update, &mut state.buf).is_ok() {
+            write(channels.scene, &state.buf)?;
+        }
+        if scene::encode_tf(&scene::frame_transforms(log_ns), &mut state.buf).is_ok() {
+            write(channels.tf, &state.buf)?;
+        }
+        channels.sequence = channels.sequence.wrapping_add(1);
         Ok(())
     }
 
@@ -385,6 +565,7 @@ impl RotatingWriter {
         if self.current.is_none() {
             return Ok(());
         }
+        self.flush_scene()?;
         let mut status = *status;
         status.written = self.written + 1;
         self.write_raw(&Outgoing::RecorderDrops(status))?;

@@ -27,7 +27,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 /// The recording's settings (`[record]` of the configuration).
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RecordSettings {
     /// Record from the daemon's start.
     pub enabled: bool,
@@ -37,6 +37,8 @@ pub struct RecordSettings {
     pub rotation: Rotation,
     /// Messages the queue holds.
     pub queue_capacity: usize,
+    /// The live view's 3D scene beside the topics (`[record] scene_hz`).
+    pub scene: Option<super::file::SceneOptions>,
 }
 
 const WANT_NONE: u8 = 0;
@@ -155,6 +157,7 @@ fn recorder_config(
     let mut files = FileOptions::new(settings.directory.clone(), name);
     files.rotation = settings.rotation;
     files.metadata = vec![convert::replay_metadata(bias, first)];
+    files.scene = settings.scene;
     let mut c = RecorderConfig::new(files);
     c.queue_capacity = settings.queue_capacity;
     c

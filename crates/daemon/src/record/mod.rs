@@ -19,7 +19,7 @@ pub mod reader;
 pub mod recorder;
 pub mod replay;
 
-pub use file::{FileOptions, RotatingWriter, Rotation, WriteError};
+pub use file::{FileOptions, RotatingWriter, Rotation, SceneOptions, WriteError};
 pub use msgs::{Outgoing, RosMessage, Topic};
 pub use reader::{
     McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,

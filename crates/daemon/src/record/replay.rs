@@ -84,6 +84,10 @@ impl ReplayOptions {
     }
 }
 
+/// The scene's period in replay outputs, ns (30 Hz, as the recorder's
+/// default).
+pub const SCENE_PERIOD_NS: u64 = 33_333_333;
+
 /// How the recording was replayed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
@@ -531,6 +535,12 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
             let mut o = FileOptions::single(path);
             // The replayed file holds every cycle of its input.
             o.metadata = metadata.clone().into_iter().collect();
+            // The live view's scene, as the daemon's recorder writes it.
+            o.scene = Some(super::SceneOptions {
+                geometry: crate::view::scene::SceneGeometry::from_config(&options.config),
+                limits_n: options.config.guard.force_limits().to_array(),
+                period_ns: SCENE_PERIOD_NS,
+            });
             Some(RotatingWriter::new(o)?)
         }
         None => None,

@@ -487,3 +487,27 @@ pub fn encode(update: &SceneUpdate, buf: &mut Vec<u8>) -> Result<(), EncodeError
 
 /// Why a scene could not be encoded (into a `Vec`: never in practice).
 pub type EncodeError = <SceneUpdate as Encode>::Error;
+
+/// The MCAP schema of the scene's frame transform topic.
+pub fn tf_schema() -> McapSchema {
+    let (name, encoding, data) = match FrameTransforms::get_schema() {
+        Some(s) => (s.name, s.encoding, s.data.into_owned()),
+        None => (String::new(), String::new(), Vec::new()),
+    };
+    McapSchema {
+        name,
+        encoding,
+        data,
+        message_encoding: FrameTransforms::get_message_encoding(),
+    }
+}
+
+/// Encodes the frame transforms for an MCAP message (protobuf) into `buf`
+/// (cleared first).
+pub fn encode_tf(
+    tf: &FrameTransforms,
+    buf: &mut Vec<u8>,
+) -> Result<(), <FrameTransforms as Encode>::Error> {
+    buf.clear();
+    Encode::encode(tf, buf)
+}
