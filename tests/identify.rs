@@ -448,7 +448,7 @@ fn the_fixtures_decode_with_the_python_reader() {
     }
     assert!(
         out.status.success(),
-        "the Python reader failed: {}\n(install: python3 -m pip install mcap mcap-ros2-support, or set SAR_SKIP_PYTHON=1)",
+        "the Python reader failed: {}\n(install: python3 -m pip install mcap mcap-ros2-support mcap-protobuf-support, or set SAR_SKIP_PYTHON=1)",
         String::from_utf8_lossy(&out.stderr)
     );
     let stdout = String::from_utf8(out.stdout).unwrap();

@@ -29,7 +29,7 @@ fn python_read(file: &Path) -> Option<String> {
             return None;
         }
         Err(e) => panic!(
-            "python3 could not be run ({e}): install python3 and `python3 -m pip install mcap mcap-ros2-support`, or set SAR_SKIP_PYTHON=1"
+            "python3 could not be run ({e}): install python3 and `python3 -m pip install mcap mcap-ros2-support mcap-protobuf-support`, or set SAR_SKIP_PYTHON=1"
         ),
     };
     if out.status.code() == Some(3) && skip {
@@ -41,7 +41,7 @@ fn python_read(file: &Path) -> Option<String> {
     }
     assert!(
         out.status.success(),
-        "the Python reader failed ({}): {}\n(missing packages: `python3 -m pip install mcap mcap-ros2-support`, or set SAR_SKIP_PYTHON=1)",
+        "the Python reader failed ({}): {}\n(missing packages: `python3 -m pip install mcap mcap-ros2-support mcap-protobuf-support`, or set SAR_SKIP_PYTHON=1)",
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );

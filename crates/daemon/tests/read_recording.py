@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""An independent reader of a SAR recording: the `mcap` and `mcap-ros2-support`
-packages decode every message with the ROS 2 decoder (from the schemas the file
-carries) and print one canonical line per message, which the Rust test compares
-with what it recorded.
+"""An independent reader of a SAR recording: the `mcap`, `mcap-ros2-support` and
+`mcap-protobuf-support` packages decode every message with the ROS 2 decoder
+(cdr topics) or the protobuf decoder (the 3D scene), from the schemas the file
+carries, and print one canonical line per message, which the Rust tests compare
+with what they recorded.
 
 Usage: read_recording.py FILE.mcap
 Output:
@@ -19,8 +20,12 @@ import sys
 try:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 except ImportError as e:  # pragma: no cover
-    print(f"missing Python package: {e}; pip install mcap mcap-ros2-support", file=sys.stderr)
+    print(
+        f"missing Python package: {e}; pip install mcap mcap-ros2-support mcap-protobuf-support",
+        file=sys.stderr,
+    )
     sys.exit(3)
 
 
@@ -37,6 +42,16 @@ def flatten(prefix, value, out):
         items = value.tolist() if hasattr(value, "tolist") else value
         for i, v in enumerate(items):
             flatten(f"{prefix}[{i}]", v, out)
+    elif hasattr(value, "ListFields"):
+        # A protobuf message: its set fields, by name.
+        for field, v in value.ListFields():
+            flatten(f"{prefix}.{field.name}" if prefix else field.name, v, out)
+    elif hasattr(value, "__len__") and hasattr(value, "__getitem__") and not isinstance(
+        value, (str, bytes)
+    ):
+        # A protobuf repeated field.
+        for i in range(len(value)):
+            flatten(f"{prefix}[{i}]", value[i], out)
     elif hasattr(value, "__slots__"):
         for name in value.__slots__:
             flatten(f"{prefix}.{name}" if prefix else name, getattr(value, name), out)
@@ -48,7 +63,7 @@ def main():
     path = sys.argv[1]
     lines = []
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        reader = make_reader(f, decoder_factories=[DecoderFactory(), ProtobufDecoderFactory()])
         header = reader.get_header()
         print(f"profile {header.profile}")
         summary = reader.get_summary()
