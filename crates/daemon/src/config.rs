@@ -763,7 +763,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
 
 impl Config {
     /// The loop step's settings: the axes' travel, the speed and
-    /// acceleration of planned moves, the following tolerance, the period.
+    /// acceleration of planned moves, the following tolerance.
     pub fn step_config(&self) -> crate::step::StepConfig {
         crate::step::StepConfig {
             travel_m: self.axes.travel_m,
@@ -772,7 +772,6 @@ impl Config {
                 max_accel_mps2: self.axes.max_accel_mps2,
             },
             following_tolerance_m: self.axes.following_tolerance_m,
-            period_ns: self.loop_.period_ns,
         }
     }
 }

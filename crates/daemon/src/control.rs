@@ -100,12 +100,9 @@ pub struct Controller<S: ForceSensor, D: AxisDrives> {
     drives: D,
     operator: Operator,
     log: LogSender,
-    sensor_sample: SensorSample,
-    joints: JointSample,
-    drive_state: Option<DriveState>,
+    /// The last cycle's input; its sensor and joint samples are kept until
+    /// the devices report newer ones.
     last_input: LoopInput,
-    /// Its estimator part.
-    last_cycle_input: CycleInput,
     /// Reset automatically (the demo only) until the first accepted reset:
     /// the reset is a request of the cycle's input like an operator's.
     auto_reset: bool,
@@ -171,17 +168,12 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             drive_state: None,
             request: None,
         };
-        let last_cycle_input = last_input.cycle_input();
         Ok(Self {
-            last_cycle_input,
             step,
             sensor,
             drives,
             operator,
             log,
-            sensor_sample,
-            joints,
-            drive_state: None,
             last_input,
             auto_reset,
             counts: ActionCounts::default(),
@@ -210,8 +202,8 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     }
 
     /// The estimator's input of the last cycle.
-    pub fn input(&self) -> &CycleInput {
-        &self.last_cycle_input
+    pub fn input(&self) -> CycleInput {
+        self.last_input.cycle_input()
     }
 
     /// The whole input of the last cycle (what a recording holds).
@@ -226,7 +218,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
 
     /// The drives' state as read in the last cycle.
     pub fn drive_state(&self) -> Option<DriveState> {
-        self.drive_state
+        self.last_input.drive_state
     }
 
     /// Whether the drives are halted: the guard is in Stop or Fault (they
@@ -261,10 +253,10 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     pub fn step(&mut self, cycle: u64, now: impl FnOnce() -> Option<u64>) -> &CycleOutput {
         // Gather.
         match self.sensor.poll() {
-            Ok(Some(s)) => self.sensor_sample = sensor_sample(&s),
+            Ok(Some(s)) => self.last_input.sensor = sensor_sample(&s),
             Ok(None) => {}
             Err(_) => {
-                self.sensor_sample.valid = false;
+                self.last_input.sensor.valid = false;
                 self.counts.sensor_errors += 1;
                 self.log.send(LogEvent::DeviceError {
                     cycle,
@@ -280,14 +272,14 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         }
         match self.drives.positions() {
             Ok(p) => {
-                self.joints = JointSample {
+                self.last_input.joints = JointSample {
                     joints: p.joints,
                     stamp_ns: p.stamp_ns,
                     valid: p.valid,
                 }
             }
             Err(_) => {
-                self.joints.valid = false;
+                self.last_input.joints.valid = false;
                 self.counts.drive_errors += 1;
                 self.log.send(LogEvent::DeviceError {
                     cycle,
@@ -296,13 +288,12 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             }
         }
         let drive_state = self.drives.state().ok();
-        if drive_state != self.drive_state {
+        if drive_state != self.last_input.drive_state {
             self.log.send(LogEvent::DriveState {
                 cycle,
                 state: drive_state,
             });
         }
-        self.drive_state = drive_state;
         let envelope = self.operator.requests.pop();
         let request = match envelope {
             Some(e) => Some(e.request),
@@ -311,16 +302,15 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         let input = LoopInput {
             cycle,
             now_ns: now(),
-            sensor: self.sensor_sample,
-            joints: self.joints,
+            sensor: self.last_input.sensor,
+            joints: self.last_input.joints,
             drive_state,
             request,
         };
         self.last_input = input;
-        self.last_cycle_input = input.cycle_input();
 
         // Decide.
-        let decision = *self.step.step(&input);
+        let decision = self.step.step(&input);
         let out = &decision.estimate;
 
         // Act: a halting state stops the drives in this very cycle.

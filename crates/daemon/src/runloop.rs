@@ -14,25 +14,18 @@ use crate::rt;
 use crate::stats::LoopStats;
 use crate::step::{LoopInput, LoopOutput};
 use sar_drivers::{AxisDrives, ForceSensor};
-use sar_estimator::cycle::{CycleInput, CycleOutput, TipOutcome};
+use sar_estimator::cycle::TipOutcome;
 
 /// One cycle as the loop hands it to publishers.
 #[derive(Debug, Clone, Copy)]
 pub struct Published<'a> {
-    /// The cycle's input (the estimator's part).
-    pub input: &'a CycleInput,
-    /// The cycle's whole input (what `/sar/cycle/input` records).
+    /// The cycle's whole input (what `/sar/cycle/input` records; the drive
+    /// state as read in the cycle).
     pub loop_input: &'a LoopInput,
-    /// The cycle's whole decision.
+    /// The cycle's whole decision (the estimator's output in `estimate`).
     pub decision: &'a LoopOutput,
-    /// The cycle's output.
-    pub output: &'a CycleOutput,
     /// The loop's measurements.
     pub stats: &'a LoopStats,
-    /// The drives' state as read in the cycle.
-    pub drive_state: Option<sar_drivers::DriveState>,
-    /// Whether the drives are halted.
-    pub halted: bool,
     /// Quick stops so far.
     pub quick_stops: u64,
     /// Messages the recorder dropped so far (set by `record::live`).
@@ -98,13 +91,9 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
         publisher.before_cycle();
         let out = *controller.step(cycle, rt::monotonic_ns);
         publisher.publish(&Published {
-            input: controller.input(),
             loop_input: controller.loop_input(),
             decision: controller.decision(),
-            output: &out,
             stats,
-            drive_state: controller.drive_state(),
-            halted: controller.halted(),
             quick_stops: controller.counts().quick_stops,
             recorder_drops: 0,
             recording: false,

@@ -145,8 +145,6 @@ pub struct DaemonShm {
     wake: Option<std::thread::Thread>,
     thread: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Shared>,
-    /// The guard's limits, N (warn, stop for total, axial, lateral).
-    limits_n: [f64; 6],
     /// The simulator's truth of F_tip, when simulated.
     truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
     queue_drops: u64,
@@ -442,7 +440,6 @@ impl DaemonShm {
             wake: Some(thread.thread().clone()),
             thread: Some(thread),
             shared,
-            limits_n,
             truth,
             queue_drops: 0,
         })
@@ -466,7 +463,6 @@ impl DaemonShm {
                 wake: None,
                 thread: None,
                 shared,
-                limits_n,
                 truth,
                 queue_drops: 0,
             },
@@ -522,17 +518,13 @@ impl Drop for DaemonShm {
 
 impl Publish for DaemonShm {
     fn publish(&mut self, c: &Published<'_>) {
-        // The limits in use (an operator may have changed them this cycle);
-        // they travel in the state to the publishing thread, for its replies.
-        self.limits_n = c.decision.limits.to_array();
+        // The limits in use (an operator may have changed them this cycle)
+        // travel in the state to the publishing thread, for its replies.
         let truth_tip_force_n = self.truth.as_mut().and_then(|f| f());
         let mut state = StateMsg::from_parts(&StateParts {
-            input: c.input,
-            output: c.output,
+            input: c.loop_input,
+            decision: c.decision,
             stats: c.stats,
-            limits_n: self.limits_n,
-            drive_state: c.drive_state,
-            halted: c.halted,
             quick_stops: c.quick_stops,
             recorder_drops: c.recorder_drops,
             recording: c.recording,

@@ -225,8 +225,6 @@ pub struct StepConfig {
     pub axis_limits: Limits,
     /// The accepted following error per axis, m.
     pub following_tolerance_m: f64,
-    /// The loop's period, ns.
-    pub period_ns: u64,
 }
 
 /// Why a [`StepConfig`] cannot be used.
@@ -342,9 +340,6 @@ impl LoopStep {
                 t,
                 "must be finite and > 0",
             ));
-        }
-        if config.period_ns == 0 {
-            return Err(invalid("period_ns", 0.0, "must be > 0"));
         }
         for &(lo, hi) in &config.travel_m {
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {

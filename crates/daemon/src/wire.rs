@@ -5,10 +5,11 @@
 
 use crate::control::{Reply, ReplyStatus, Request, reason_code};
 use crate::stats::LoopStats;
+use crate::step::{LoopInput, LoopOutput};
 use iceoryx2::prelude::ZeroCopySend;
 use sar_drivers::DriveState;
 use sar_estimator::Vec3;
-use sar_estimator::cycle::{CycleInput, CycleOutput, TipOutcome};
+use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{GuardLimits, GuardState};
 
 /// The limits as published: warn, stop for total, axial, lateral, N.
@@ -224,18 +225,12 @@ fn arr(v: &Vec3) -> [f64; 3] {
 /// Everything a [`StateMsg`] is made from.
 #[derive(Debug, Clone, Copy)]
 pub struct StateParts<'a> {
-    /// The cycle's input.
-    pub input: &'a CycleInput,
-    /// The cycle's output.
-    pub output: &'a CycleOutput,
+    /// The cycle's input (stamps, joints, the drives' state).
+    pub input: &'a LoopInput,
+    /// The cycle's decision (the estimator's output, the limits in use).
+    pub decision: &'a LoopOutput,
     /// The loop's measurements.
     pub stats: &'a LoopStats,
-    /// The guard's limits: warn, stop for total, axial, lateral, N.
-    pub limits_n: [f64; 6],
-    /// The drives' state.
-    pub drive_state: Option<DriveState>,
-    /// Whether the drives are halted.
-    pub halted: bool,
     /// Quick stops so far.
     pub quick_stops: u64,
     /// Messages the recorder dropped so far.
@@ -249,7 +244,9 @@ pub struct StateParts<'a> {
 impl StateMsg {
     /// Converts one cycle.
     pub fn from_parts(p: &StateParts<'_>) -> Self {
-        let (i, o) = (p.input, p.output);
+        let (i, o) = (p.input, &p.decision.estimate);
+        // Halted: the guard's Stop or Fault (quick-stopped or never released).
+        let halted = matches!(o.guard_state, GuardState::Stop | GuardState::Fault);
         let mut m = Self {
             cycle: o.cycle,
             now_ns: i.now_ns.unwrap_or(0),
@@ -264,8 +261,8 @@ impl StateMsg {
             ],
             guard_state: guard_state_code(o.guard_state),
             guard_reason: u32::from(reason_code(&o.guard_reason)),
-            drive_state: drive_state_code(p.drive_state),
-            limits_n: p.limits_n,
+            drive_state: drive_state_code(i.drive_state),
+            limits_n: p.decision.limits.to_array(),
             wakeup_ns: [
                 p.stats.wakeup.quantile_ns(0.5),
                 p.stats.wakeup.quantile_ns(0.99),
@@ -302,7 +299,7 @@ impl StateMsg {
         if o.new_sample {
             m.flags |= flags::NEW_SAMPLE;
         }
-        if p.halted {
+        if halted {
             m.flags |= flags::HALTED;
         }
         if let Some(t) = p.truth_tip_force_n {

@@ -23,63 +23,23 @@ use sar_daemon::stats::LoopStats;
 use sar_daemon::wire::{CommandMsg, command_kind, limits_array};
 use sar_daemon::{config, logq, rt, sim};
 use sar_drivers::SimClock;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
-struct Counting;
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    /// Whether this thread's allocations are counted (a const thread-local
-    /// without destructor: reading it never allocates).
-    static COUNTED: Cell<bool> = const { Cell::new(false) };
-}
-
-fn count() {
-    if COUNTED.try_with(Cell::get).unwrap_or(false) {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-    }
-}
-
-// SAFETY: forwards to the system allocator, only counting.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+#[path = "common/counting.rs"]
+mod counting;
+use counting::{allocations, counted};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// Runs `f` with this thread's allocations counted.
-fn counted<T>(f: impl FnOnce() -> T) -> T {
-    COUNTED.with(|c| c.set(true));
-    let out = f();
-    COUNTED.with(|c| c.set(false));
-    out
-}
+static GLOBAL: counting::Counting = counting::Counting;
 
 #[test]
 fn the_counter_sees_an_allocation_on_the_loop_thread() {
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocations();
     let v = counted(|| std::hint::black_box(vec![1u8; 48]));
     assert_eq!(v.len(), 48);
-    assert!(ALLOCATIONS.load(Ordering::SeqCst) > before);
+    assert!(allocations() > before);
 }
 
 #[test]
@@ -118,15 +78,11 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
         clock.advance_ns(1_000_000);
         counted(|| {
             shm.before_cycle();
-            let out = *c.step(cycle, || Some(clock.now_ns()));
+            c.step(cycle, || Some(clock.now_ns()));
             shm.publish(&Published {
-                input: c.input(),
                 loop_input: c.loop_input(),
                 decision: c.decision(),
-                output: &out,
                 stats: &stats,
-                drive_state: c.drive_state(),
-                halted: c.halted(),
                 quick_stops: c.counts().quick_stops,
                 recorder_drops: 0,
                 recording: false,
@@ -188,7 +144,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
             replies
         })
     };
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocations();
     let mut next_ns = rt::monotonic_ns().unwrap();
     let mut cycles = 0u64;
     while !done.load(Ordering::SeqCst) {
@@ -201,7 +157,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
         one(&mut c, &mut shm);
         cycles += 1;
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = allocations();
     let replies = client_thread.join().unwrap();
     assert_eq!(replies.len(), 7);
     for (i, r) in replies.iter().enumerate() {
@@ -308,7 +264,7 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
     };
     let mut stats = LoopStats::default();
     let mut watchdog = Watchdog::new(None, 100);
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocations();
     counted(|| {
         runloop::run(
             &mut c,
@@ -323,7 +279,7 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
             &log,
         );
     });
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = allocations();
     let replies = client_thread.join().unwrap();
     if let Some(t) = log_thread {
         t.finish();

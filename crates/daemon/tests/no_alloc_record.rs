@@ -24,46 +24,14 @@ use sar_daemon::{config, logq, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 
-struct Counting;
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    /// Counted on this thread (the test's, standing for the loop's) only.
-    static COUNTED: Cell<bool> = const { Cell::new(false) };
-}
-
-fn count() {
-    if COUNTED.with(Cell::get) {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-    }
-}
-
-// SAFETY: forwards to the system allocator, only counting.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+#[path = "common/counting.rs"]
+mod counting;
+use counting::{allocations, counted};
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: counting::Counting = counting::Counting;
 
 #[test]
 fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
@@ -131,13 +99,9 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         p.before_cycle();
         let out = *c.step(cycle, || Some(clock.now_ns()));
         p.publish(&Published {
-            input: c.input(),
             loop_input: c.loop_input(),
             decision: c.decision(),
-            output: &out,
             stats: &stats,
-            drive_state: c.drive_state(),
-            halted: c.halted(),
             quick_stops: c.counts().quick_stops,
             recorder_drops: 0,
             recording: false,
@@ -151,12 +115,13 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         step(&mut c, &mut publisher);
     }
     assert!(switch.recording());
-    COUNTED.with(|f| f.set(true));
-    for _ in 0..4000 {
-        step(&mut c, &mut publisher);
-    }
-    COUNTED.with(|f| f.set(false));
-    let allocations = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocations();
+    counted(|| {
+        for _ in 0..4000 {
+            step(&mut c, &mut publisher);
+        }
+    });
+    let allocations = allocations() - before;
     assert!(seen.0 && seen.1, "warn and stop: {seen:?}");
     assert_eq!(
         allocations, 0,

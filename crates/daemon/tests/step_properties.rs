@@ -145,7 +145,8 @@ fn run(seed: u64) {
     let mut recorded: Vec<(LoopInput, LoopOutput)> = Vec::new();
     let mut previous: Option<(GuardState, Option<ActiveJoints>)> = None;
     let (mut moves, mut stops, mut warns, mut warn_moves) = (0, 0, 0, 0);
-    let step_m = step_config.axis_limits.max_speed_mps * step_config.period_ns as f64 * 1e-9;
+    // The simulated clock advances 1 ms per cycle.
+    let step_m = step_config.axis_limits.max_speed_mps * 1e-3;
     for cycle in 1..=6000u64 {
         let pending = cycle % 37 == 0;
         if pending {

@@ -123,7 +123,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
         }
         let mut dropped = self.dropped_before;
         if let Some(rec) = &mut self.active {
-            let input = c.input;
+            let input = c.loop_input;
             let joints_new = self.last_joints_stamp_ns != Some(input.joints.stamp_ns);
             self.last_joints_stamp_ns = Some(input.joints.stamp_ns);
             convert::cycle_record(c.loop_input, c.decision, joints_new, |m| {

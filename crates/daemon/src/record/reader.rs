@@ -688,6 +688,29 @@ pub enum RecoverError {
 /// with its channel, sequence and times, its metadata, and metadata
 /// `sar_recover` saying where and why the input stopped.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
+    /// The channel `c` (and its schema) under the same ids.
+    fn copy_channel<W: std::io::Write + std::io::Seek>(
+        w: &mut mcap::Writer<W>,
+        c: &ChannelInfo,
+    ) -> Result<(), mcap::McapError> {
+        if c.schema_id != 0 {
+            w.add_schema_with_id(
+                c.schema_id,
+                &c.schema_name,
+                &c.schema_encoding,
+                &c.schema_data,
+            )?;
+        }
+        w.add_channel_with_id(
+            c.id,
+            c.schema_id,
+            &c.topic,
+            &c.message_encoding,
+            &c.metadata,
+        )?;
+        Ok(())
+    }
+
     // The same file by another spelling (./x.mcap, a link) counts too: the
     // output is truncated first, which would lose the input.
     let same_file = std::fs::canonicalize(output)
@@ -743,23 +766,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
         if let std::collections::btree_map::Entry::Vacant(slot) = known.entry(msg.channel_id)
             && let Some(c) = reader.channels().get(&msg.channel_id)
         {
-            if c.schema_id != 0 {
-                w.add_schema_with_id(
-                    c.schema_id,
-                    &c.schema_name,
-                    &c.schema_encoding,
-                    &c.schema_data,
-                )
-                .map_err(mcap_err)?;
-            }
-            w.add_channel_with_id(
-                c.id,
-                c.schema_id,
-                &c.topic,
-                &c.message_encoding,
-                &c.metadata,
-            )
-            .map_err(mcap_err)?;
+            copy_channel(w, c).map_err(mcap_err)?;
             slot.insert(());
         }
         let header = mcap::records::MessageHeader {
@@ -782,26 +789,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     };
     // Channels without messages are kept too.
     for c in reader.channels().values() {
-        if known.contains_key(&c.id) {
-            continue;
+        if !known.contains_key(&c.id) {
+            copy_channel(&mut w, c).map_err(mcap_err)?;
         }
-        if c.schema_id != 0 {
-            w.add_schema_with_id(
-                c.schema_id,
-                &c.schema_name,
-                &c.schema_encoding,
-                &c.schema_data,
-            )
-            .map_err(mcap_err)?;
-        }
-        w.add_channel_with_id(
-            c.id,
-            c.schema_id,
-            &c.topic,
-            &c.message_encoding,
-            &c.metadata,
-        )
-        .map_err(mcap_err)?;
     }
     for m in reader.metadata().iter().skip(metadata_copied) {
         w.write_metadata(m).map_err(mcap_err)?;
