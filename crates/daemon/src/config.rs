@@ -36,7 +36,10 @@
 
 use sar_drivers::scenario::locate::{Locator, join};
 use sar_estimator::SensorNoise;
-use sar_estimator::cycle::{EstimatorConfig, PlausibilityConfig, PlausibilityLimits, TorqueLimits};
+use sar_estimator::cycle::{
+    EstimatorConfig, FrozenCheck, MountingLimits, PlausibilityConfig, PlausibilityLimits,
+    SensorRange, SpikeLimits, TareLimits, TorqueLimits, frozen_repeats,
+};
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::tip_force::TipForceConfig;
@@ -187,6 +190,32 @@ struct ManipulatorToml {
 #[serde(deny_unknown_fields)]
 struct SensorToml {
     noise_n: [f64; 3],
+    #[serde(default = "default_range_n")]
+    range_n: [f64; 3],
+    #[serde(default = "default_range_nm")]
+    range_nm: [f64; 3],
+    #[serde(default = "default_drift_n_per_s")]
+    drift_n_per_s: f64,
+    #[serde(default = "default_max_tare_age_s")]
+    max_tare_age_s: f64,
+}
+
+fn default_range_n() -> [f64; 3] {
+    SensorRange::HEX6.force_n.into()
+}
+
+fn default_range_nm() -> [f64; 3] {
+    SensorRange::HEX6.torque_nm.into()
+}
+
+fn default_drift_n_per_s() -> f64 {
+    TareLimits::default().drift_n_per_s
+}
+
+fn default_max_tare_age_s() -> f64 {
+    TareLimits::default()
+        .max_age_ns
+        .map_or(0.0, |ns| ns as f64 * 1e-9)
 }
 
 #[derive(Debug, Deserialize)]
@@ -195,6 +224,7 @@ struct LoopToml {
     rate_hz: f64,
     priority: i64,
     cpu: Option<i64>,
+    publisher_stall_s: f64,
 }
 
 impl Default for LoopToml {
@@ -203,6 +233,7 @@ impl Default for LoopToml {
             rate_hz: 1000.0,
             priority: 80,
             cpu: None,
+            publisher_stall_s: 0.5,
         }
     }
 }
@@ -224,6 +255,7 @@ struct GuardToml {
     max_stop_total_n: Option<f64>,
     max_stop_axial_n: Option<f64>,
     max_stop_lateral_n: Option<f64>,
+    retreat_rise_n: f64,
 }
 
 impl Default for GuardToml {
@@ -243,6 +275,7 @@ impl Default for GuardToml {
             max_stop_total_n: None,
             max_stop_axial_n: None,
             max_stop_lateral_n: None,
+            retreat_rise_n: sar_estimator::guard::DEFAULT_RETREAT_RISE_N,
         }
     }
 }
@@ -255,17 +288,43 @@ struct PlausibilityToml {
     max_counter_gap: i64,
     torque_noise_nm: [f64; 3],
     torque_max_sigma: f64,
+    frozen_check: bool,
+    frozen_repeats: Option<i64>,
+    spike_check: bool,
+    spike_sigma: f64,
+    spike_max: i64,
+    spike_window_samples: i64,
+    rest_check: bool,
+    rest_sigma: f64,
+    rest_tolerance_n: f64,
+    rest_tolerance_nm: f64,
+    rest_samples: i64,
+    support_friction_n: f64,
 }
 
 impl Default for PlausibilityToml {
     fn default() -> Self {
         let d = PlausibilityLimits::default();
+        let spikes = SpikeLimits::default();
+        let rest = MountingLimits::default();
         Self {
             max_joint_speed_mps: d.max_joint_speed_mps,
             joint_margin_m: d.joint_margin_m,
             max_counter_gap: i64::from(d.max_counter_gap),
             torque_noise_nm: TorqueLimits::DEFAULT_NOISE_NM,
             torque_max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
+            frozen_check: true,
+            frozen_repeats: None,
+            spike_check: true,
+            spike_sigma: spikes.jump_sigma,
+            spike_max: i64::from(spikes.max_spikes),
+            spike_window_samples: i64::from(spikes.window_samples),
+            rest_check: true,
+            rest_sigma: rest.sigma,
+            rest_tolerance_n: rest.tolerance_n,
+            rest_tolerance_nm: rest.tolerance_nm,
+            rest_samples: i64::from(rest.rest_samples),
+            support_friction_n: rest.friction_n,
         }
     }
 }
@@ -295,6 +354,7 @@ struct AxesToml {
     max_speed_mps: f64,
     max_accel_mps2: f64,
     following_tolerance_m: f64,
+    retreat_speed_mps: f64,
 }
 
 impl Default for AxesToml {
@@ -304,6 +364,7 @@ impl Default for AxesToml {
             max_speed_mps: 0.02,
             max_accel_mps2: 0.2,
             following_tolerance_m: 0.001,
+            retreat_speed_mps: 0.005,
         }
     }
 }
@@ -348,6 +409,10 @@ pub struct LoopConfig {
     pub priority: i32,
     /// The CPU the loop thread is pinned to, if any.
     pub cpu: Option<usize>,
+    /// The publishing thread (the operator's commands and the published
+    /// state) making no progress for this long while the loop hands it
+    /// states is a Fault (`PublisherStalled`), ns.
+    pub publisher_stall_ns: u64,
 }
 
 /// The axes as the daemon plans moves on them.
@@ -363,6 +428,9 @@ pub struct AxesConfig {
     /// The accepted distance of each axis from the commanded trajectory, m
     /// (beyond it: a Fault, `FollowingError`).
     pub following_tolerance_m: f64,
+    /// The speed of the moves in `Retreat` (only motions that reduce the
+    /// tip force), m/s (> 0, at most `max_speed_mps`).
+    pub retreat_speed_mps: f64,
 }
 
 /// The force/torque sensor's driver.
@@ -517,6 +585,72 @@ impl Ctx<'_> {
     }
 }
 
+/// A vector whose every component is finite and > 0.
+fn positive_vec3(ctx: &Ctx<'_>, key: &str, v: [f64; 3]) -> Result<Vec3, ConfigError> {
+    for (i, x) in v.iter().enumerate() {
+        if !(x.is_finite() && *x > 0.0) {
+            return Err(ctx.err(&format!("{key}[{i}]"), format!("must be > 0, got {x}")));
+        }
+    }
+    Ok(vec3(v))
+}
+
+/// The frozen-sensor check: off only when the file says so; otherwise the
+/// count given, or derived from the noise and the sensor's resolution
+/// (`frozen_repeats`: fewer than one false alarm in ten years of 1 kHz); a
+/// sensor that would repeat by itself is refused with what to change.
+fn frozen_check(
+    ctx: &Ctx<'_>,
+    p: &PlausibilityToml,
+    sensor: &SensorToml,
+    torque: Option<&TorqueLimits>,
+    driver: &SensorDriver,
+) -> Result<FrozenCheck, ConfigError> {
+    if !p.frozen_check {
+        if p.frozen_repeats.is_some() {
+            return Err(ctx.err(
+                "plausibility.frozen_repeats",
+                "given while plausibility.frozen_check = false",
+            ));
+        }
+        return Ok(FrozenCheck::Off);
+    }
+    if let Some(n) = p.frozen_repeats {
+        let n = ctx.range_i(
+            "plausibility.frozen_repeats",
+            n,
+            1,
+            i64::from(FrozenCheck::MAX_REPEATS),
+        )?;
+        return Ok(FrozenCheck::On {
+            repeats: u32::try_from(n).unwrap_or(FrozenCheck::DEFAULT_REPEATS),
+        });
+    }
+    let (resolution_n, resolution_nm) = match driver {
+        SensorDriver::Rdt {
+            counts_per_n,
+            counts_per_nm,
+            ..
+        } => (1.0 / counts_per_n, 1.0 / counts_per_nm),
+        SensorDriver::Sim => (0.0, 0.0),
+    };
+    let noise_nm = torque.map(|t| t.noise_nm);
+    match frozen_repeats(
+        &vec3(sensor.noise_n),
+        noise_nm.as_ref(),
+        resolution_n,
+        resolution_nm,
+    ) {
+        Some(repeats) => Ok(FrozenCheck::On { repeats }),
+        None => Err(ctx.err(
+            "plausibility.frozen_check",
+            "the sensor's noise is too small for its resolution to tell a frozen sensor from \
+             a live one; set plausibility.frozen_repeats, or frozen_check = false to switch \
+             the check off",
+        )),
+    }
+}
+
 fn vec3(v: [f64; 3]) -> Vec3 {
     Vec3::from(v)
 }
@@ -607,6 +741,15 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         0.05,
         "m",
     )?;
+    let retreat_speed_mps = f.axes.retreat_speed_mps;
+    if !(retreat_speed_mps > 0.0 && retreat_speed_mps <= speed) {
+        return Err(ctx.err(
+            "axes.retreat_speed_mps",
+            format!(
+                "must be > 0 and at most axes.max_speed_mps ({speed} m/s), got {retreat_speed_mps}"
+            ),
+        ));
+    }
     check_reach(ctx, &calibration, &profile, &travel_m)?;
 
     // The guard.
@@ -638,6 +781,9 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             gt.max_stop_lateral_n.unwrap_or(gt.stop_lateral_n),
         ])
         .map_err(|e| setting_error(ctx, "guard", &e))?;
+    let guard = guard
+        .with_retreat_rise_n(gt.retreat_rise_n)
+        .map_err(|e| setting_error(ctx, "guard", &e))?;
 
     // Plausibility and tip.
     let p = &f.plausibility;
@@ -655,11 +801,92 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             max_sigma: p.torque_max_sigma,
         })
     };
+    let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
     let plausibility = PlausibilityConfig::new(PlausibilityLimits {
         max_joint_speed_mps: p.max_joint_speed_mps,
         joint_margin_m: p.joint_margin_m,
         max_counter_gap: u32::try_from(gap).unwrap_or(1),
         torque,
+        frozen: frozen_check(ctx, p, &f.sensor, torque.as_ref(), &sensor_driver)?,
+        range: Some(SensorRange {
+            force_n: positive_vec3(ctx, "sensor.range_n", f.sensor.range_n)?,
+            torque_nm: positive_vec3(ctx, "sensor.range_nm", f.sensor.range_nm)?,
+        }),
+        spikes: if p.spike_check {
+            Some(SpikeLimits {
+                jump_sigma: ctx.range_f("plausibility.spike_sigma", p.spike_sigma, 3.0, 1e3, "")?,
+                max_spikes: u32::try_from(ctx.range_i(
+                    "plausibility.spike_max",
+                    p.spike_max,
+                    2,
+                    100_000,
+                )?)
+                .unwrap_or(2),
+                window_samples: u32::try_from(ctx.range_i(
+                    "plausibility.spike_window_samples",
+                    p.spike_window_samples,
+                    1,
+                    10_000_000,
+                )?)
+                .unwrap_or(1),
+            })
+        } else {
+            None
+        },
+        tare: TareLimits {
+            max_age_ns: {
+                let s = ctx.range_f(
+                    "sensor.max_tare_age_s",
+                    f.sensor.max_tare_age_s,
+                    0.0,
+                    7.0 * 86_400.0,
+                    "s (0: never)",
+                )?;
+                (s > 0.0).then(|| (s * 1e9).round() as u64)
+            },
+            drift_n_per_s: ctx.range_f(
+                "sensor.drift_n_per_s",
+                f.sensor.drift_n_per_s,
+                0.0,
+                10.0,
+                "N/s",
+            )?,
+        },
+        mounting: if p.rest_check {
+            Some(MountingLimits {
+                sigma: ctx.range_f("plausibility.rest_sigma", p.rest_sigma, 0.0, 100.0, "")?,
+                friction_n: ctx.range_f(
+                    "plausibility.support_friction_n",
+                    p.support_friction_n,
+                    0.0,
+                    100.0,
+                    "N",
+                )?,
+                tolerance_n: ctx.range_f(
+                    "plausibility.rest_tolerance_n",
+                    p.rest_tolerance_n,
+                    1e-3,
+                    100.0,
+                    "N",
+                )?,
+                tolerance_nm: ctx.range_f(
+                    "plausibility.rest_tolerance_nm",
+                    p.rest_tolerance_nm,
+                    1e-4,
+                    10.0,
+                    "N m",
+                )?,
+                rest_samples: u32::try_from(ctx.range_i(
+                    "plausibility.rest_samples",
+                    p.rest_samples,
+                    1,
+                    100_000,
+                )?)
+                .unwrap_or(1),
+            })
+        } else {
+            None
+        },
     })
     .map_err(|e| setting_error(ctx, "plausibility", &e))?;
     let max_std_n = f.tip.max_std_n;
@@ -727,7 +954,6 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         scene,
     };
 
-    let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
 
     Ok(Config {
@@ -748,12 +974,21 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             period_ns: (1e9 / rate_hz).round() as u64,
             priority: i32::try_from(priority).unwrap_or(1),
             cpu: cpu.and_then(|c| usize::try_from(c).ok()),
+            publisher_stall_ns: (ctx.range_f(
+                "loop.publisher_stall_s",
+                l.publisher_stall_s,
+                0.01,
+                60.0,
+                "s",
+            )? * 1e9)
+                .round() as u64,
         },
         axes: AxesConfig {
             travel_m,
             max_speed_mps: speed,
             max_accel_mps2: accel,
             following_tolerance_m,
+            retreat_speed_mps,
         },
         sensor_driver,
         axes_driver,

@@ -61,6 +61,9 @@ pub fn status_message(state: GuardState) -> &'static str {
         GuardState::Warn => "STATUS=guard WARN: tip force near a stop limit",
         GuardState::Stop => "STATUS=guard STOP: drives quick-stopped, reset needed",
         GuardState::Fault => "STATUS=guard FAULT: drives quick-stopped, reset needed",
+        GuardState::Retreat => {
+            "STATUS=guard RETREAT: only motions that reduce the tip force are accepted"
+        }
     }
 }
 

@@ -99,42 +99,16 @@ pub enum ReplyStatus {
 /// period, well below any planned move).
 pub const REST_SPEED_MPS: f64 = 0.002;
 
-/// The numeric code of a guard reason (stable: recordings and `sarctl` use it).
+/// The numeric code of a guard reason (stable: recordings and `sarctl` use
+/// it): the estimator's one table, `Reason::code`.
 pub fn reason_code(reason: &Reason) -> u16 {
-    match reason {
-        Reason::NoInputYet => 1,
-        Reason::CycleOutOfOrder { .. } => 2,
-        Reason::ClockFailed => 3,
-        Reason::ClockNotAdvancing { .. } => 4,
-        Reason::SensorCounterGap { .. } => 5,
-        Reason::SensorStatus { .. } => 6,
-        Reason::JointJump { .. } => 7,
-        Reason::JointsStampBackwards { .. } => 8,
-        Reason::TorqueImplausible { .. } => 9,
-        Reason::ResetNotCurrent { .. } => 10,
-        Reason::SensorInvalid => 11,
-        Reason::SensorStale { .. } => 12,
-        Reason::JointsInvalid => 13,
-        Reason::JointsStale { .. } => 14,
-        Reason::PoseInvalid => 15,
-        Reason::NonFinite { .. } => 16,
-        Reason::NegativeStd { .. } => 17,
-        Reason::RodDirNotUnit { .. } => 18,
-        Reason::EstimatorNotObservable => 19,
-        Reason::NotObservable { .. } => 20,
-        Reason::AboveStop { .. } => 21,
-        Reason::AboveWarn { .. } => 22,
-        Reason::BelowWarn => 23,
-        Reason::Reset => 24,
-        Reason::FollowingError { .. } => 25,
-        _ => 0xffff,
-    }
+    reason.code()
 }
 
-/// [`reason_code`] in a recording's `uint8` field (`sar_msgs` `REASON_*`: the
-/// same numbers; one unknown to the table is `REASON_OTHER`).
+/// [`reason_code`] in a recording's `uint8` field (`sar_msgs` `REASON_*`:
+/// the same numbers; a code beyond 254 would be `REASON_OTHER`, 255).
 pub fn recorded_reason_code(reason: &Reason) -> u8 {
-    u8::try_from(reason_code(reason)).unwrap_or(crate::record::msgs::reason::OTHER)
+    u8::try_from(reason.code()).unwrap_or(u8::MAX)
 }
 
 /// Everything one cycle decides from.

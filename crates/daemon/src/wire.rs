@@ -40,69 +40,46 @@ pub mod flags {
     pub const SIM_TRUTH: u32 = 1 << 5;
 }
 
-/// Guard state codes.
+/// Guard state codes: `GuardState::code` (Ok 0, Warn 1, Stop 2, Fault 3,
+/// Retreat 4).
 pub mod guard_code {
+    use sar_estimator::guard::GuardState;
     /// Ok.
-    pub const OK: u32 = 0;
+    pub const OK: u32 = GuardState::Ok.code() as u32;
     /// Warn.
-    pub const WARN: u32 = 1;
+    pub const WARN: u32 = GuardState::Warn.code() as u32;
     /// Stop (latched).
-    pub const STOP: u32 = 2;
+    pub const STOP: u32 = GuardState::Stop.code() as u32;
     /// Fault (latched).
-    pub const FAULT: u32 = 3;
+    pub const FAULT: u32 = GuardState::Fault.code() as u32;
+    /// Retreat.
+    pub const RETREAT: u32 = GuardState::Retreat.code() as u32;
 }
 
 /// The guard state's code.
 pub fn guard_state_code(s: GuardState) -> u32 {
-    match s {
-        GuardState::Ok => guard_code::OK,
-        GuardState::Warn => guard_code::WARN,
-        GuardState::Stop => guard_code::STOP,
-        GuardState::Fault => guard_code::FAULT,
-    }
+    u32::from(s.code())
 }
 
 /// The guard state's name for a code.
 pub fn guard_state_name(code: u32) -> &'static str {
-    match code {
-        guard_code::OK => "ok",
-        guard_code::WARN => "warn",
-        guard_code::STOP => "stop",
-        guard_code::FAULT => "fault",
-        _ => "unknown",
+    match u8::try_from(code).ok().and_then(GuardState::from_code) {
+        Some(GuardState::Ok) => "ok",
+        Some(GuardState::Warn) => "warn",
+        Some(GuardState::Stop) => "stop",
+        Some(GuardState::Fault) => "fault",
+        Some(GuardState::Retreat) => "retreat",
+        None => "unknown",
     }
 }
 
-/// The reason code's short name (codes of [`reason_code`]).
+/// The reason code's name (the estimator's table,
+/// `sar_estimator::guard::REASONS`; 0 is "none").
 pub fn reason_name(code: u32) -> &'static str {
-    match code {
-        0 => "none",
-        1 => "no input yet",
-        2 => "cycle out of order",
-        3 => "clock failed",
-        4 => "clock not advancing",
-        5 => "sensor counter gap",
-        6 => "sensor status",
-        7 => "joint jump",
-        8 => "joint stamp backwards",
-        9 => "torque implausible",
-        10 => "reset not current",
-        11 => "sensor invalid",
-        12 => "sensor stale",
-        13 => "joints invalid",
-        14 => "joints stale",
-        15 => "pose invalid",
-        16 => "non-finite estimate",
-        17 => "negative std",
-        18 => "rod direction not unit",
-        19 => "estimator not observable",
-        20 => "not observable",
-        21 => "above stop limit",
-        22 => "above warn limit",
-        23 => "below warn",
-        24 => "reset",
-        25 => "following error",
-        _ => "other",
+    match u16::try_from(code) {
+        Ok(0) => "none",
+        Ok(code) => sar_estimator::guard::reason_name(code),
+        Err(_) => "unknown",
     }
 }
 

@@ -358,170 +358,55 @@ fn outgoing_is_small_and_copy() {
     copy::<Outgoing>();
 }
 
-/// The recordings' reason codes (`REASON_*` of GuardEvent.msg) are the wire's
-/// (`control::reason_code`), reason by reason, and the .msg file lists them.
+/// The recordings' reason and state codes (`REASON_*`, `GUARD_*` of
+/// GuardEvent.msg) are the estimator's one table (`REASONS`,
+/// `Reason::code`, `GuardState::code`): every row of the table is a
+/// constant of the .msg file with the same number, and the file has no
+/// other (besides `REASON_OTHER`).
 #[test]
-fn recorded_reason_codes_are_the_wires() {
-    use sar_daemon::control::{reason_code, recorded_reason_code};
-    use sar_daemon::record::msgs::reason as r;
-    use sar_estimator::guard::{Axis, ForcePart, Reason, TipField};
-    let table = [
-        (Reason::NoInputYet, r::NO_INPUT_YET, "NO_INPUT_YET"),
-        (
-            Reason::CycleOutOfOrder {
-                previous: 2,
-                got: 1,
-            },
-            r::CYCLE_OUT_OF_ORDER,
-            "CYCLE_OUT_OF_ORDER",
-        ),
-        (Reason::ClockFailed, r::CLOCK_FAILED, "CLOCK_FAILED"),
-        (
-            Reason::ClockNotAdvancing {
-                previous_ns: 2,
-                now_ns: 1,
-            },
-            r::CLOCK_NOT_ADVANCING,
-            "CLOCK_NOT_ADVANCING",
-        ),
-        (
-            Reason::SensorCounterGap {
-                previous: 1,
-                got: 9,
-                max_gap: 3,
-            },
-            r::SENSOR_COUNTER_GAP,
-            "SENSOR_COUNTER_GAP",
-        ),
-        (
-            Reason::SensorStatus { status: 4 },
-            r::SENSOR_STATUS,
-            "SENSOR_STATUS",
-        ),
-        (
-            Reason::JointJump {
-                axis: 3,
-                moved_m: 0.002,
-                allowed_m: 0.0003,
-            },
-            r::JOINT_JUMP,
-            "JOINT_JUMP",
-        ),
-        (
-            Reason::JointsStampBackwards {
-                previous_ns: 2,
-                got_ns: 1,
-            },
-            r::JOINTS_STAMP_BACKWARDS,
-            "JOINTS_STAMP_BACKWARDS",
-        ),
-        (
-            Reason::TorqueImplausible {
-                axis: Axis::X,
-                residual_nm: 1.0,
-                std_nm: 0.01,
-                max_sigma: 7.0,
-            },
-            r::TORQUE_IMPLAUSIBLE,
-            "TORQUE_IMPLAUSIBLE",
-        ),
-        (
-            Reason::ResetNotCurrent { last: 2, got: 1 },
-            r::RESET_NOT_CURRENT,
-            "RESET_NOT_CURRENT",
-        ),
-        (Reason::SensorInvalid, r::SENSOR_INVALID, "SENSOR_INVALID"),
-        (
-            Reason::SensorStale {
-                age_ns: 9,
-                max_age_ns: 5,
-            },
-            r::SENSOR_STALE,
-            "SENSOR_STALE",
-        ),
-        (Reason::JointsInvalid, r::JOINTS_INVALID, "JOINTS_INVALID"),
-        (
-            Reason::JointsStale {
-                age_ns: 9,
-                max_age_ns: 5,
-            },
-            r::JOINTS_STALE,
-            "JOINTS_STALE",
-        ),
-        (Reason::PoseInvalid, r::POSE_INVALID, "POSE_INVALID"),
-        (
-            Reason::NonFinite {
-                field: TipField::Force,
-                axis: Axis::Y,
-            },
-            r::NON_FINITE,
-            "NON_FINITE",
-        ),
-        (
-            Reason::NegativeStd {
-                axis: Axis::Z,
-                std_n: -1.0,
-            },
-            r::NEGATIVE_STD,
-            "NEGATIVE_STD",
-        ),
-        (
-            Reason::RodDirNotUnit { norm: 2.0 },
-            r::ROD_DIR_NOT_UNIT,
-            "ROD_DIR_NOT_UNIT",
-        ),
-        (
-            Reason::EstimatorNotObservable,
-            r::ESTIMATOR_NOT_OBSERVABLE,
-            "ESTIMATOR_NOT_OBSERVABLE",
-        ),
-        (
-            Reason::NotObservable {
-                std_max_n: 3.0,
-                max_std_n: 2.0,
-            },
-            r::NOT_OBSERVABLE,
-            "NOT_OBSERVABLE",
-        ),
-        (
-            Reason::AboveStop {
-                part: ForcePart::Axial,
-                force_n: 13.0,
-                limit_n: 12.0,
-            },
-            r::ABOVE_STOP,
-            "ABOVE_STOP",
-        ),
-        (
-            Reason::AboveWarn {
-                part: ForcePart::Total,
-                force_n: 11.0,
-                limit_n: 10.0,
-            },
-            r::ABOVE_WARN,
-            "ABOVE_WARN",
-        ),
-        (Reason::BelowWarn, r::BELOW_WARN, "BELOW_WARN"),
-        (Reason::Reset, r::RESET, "RESET"),
-        (
-            Reason::FollowingError {
-                axis: 2,
-                error_m: 0.002,
-                tolerance_m: 0.001,
-            },
-            r::FOLLOWING_ERROR,
-            "FOLLOWING_ERROR",
-        ),
-    ];
+fn the_msg_constants_are_the_reason_table() {
+    use sar_daemon::control::recorded_reason_code;
+    use sar_estimator::guard::{GuardState, REASONS, Reason};
     let msg = include_str!("../msg/GuardEvent.msg");
-    let mut seen = std::collections::BTreeSet::new();
-    for (reason, code, name) in table {
-        assert_eq!(u16::from(code), reason_code(&reason), "{name}");
-        assert_eq!(recorded_reason_code(&reason), code, "{name}");
-        assert!(
-            msg.contains(&format!("uint8 REASON_{name}={code}\n")),
-            "{name}"
-        );
-        assert!(seen.insert(code), "{name}: code {code} twice");
+    let constants: std::collections::BTreeMap<String, u16> = msg
+        .lines()
+        .filter_map(|l| l.strip_prefix("uint8 "))
+        .filter_map(|l| l.split_once('='))
+        .map(|(k, v)| (k.trim().to_owned(), v.trim().parse().unwrap()))
+        .collect();
+    let mut reasons = 0;
+    for (code, name) in REASONS {
+        let key = format!("REASON_{}", name.to_uppercase());
+        assert_eq!(constants.get(&key), Some(&code), "{key}");
+        reasons += 1;
     }
+    assert_eq!(constants.get("REASON_OTHER"), Some(&255));
+    let in_file = constants
+        .keys()
+        .filter(|k| k.starts_with("REASON_"))
+        .count();
+    assert_eq!(
+        in_file,
+        reasons + 1,
+        "the .msg lists a reason the table has not"
+    );
+    for state in GuardState::ALL {
+        let key = format!("GUARD_{}", state.to_string().to_uppercase());
+        assert_eq!(constants.get(&key), Some(&u16::from(state.code())), "{key}");
+    }
+    let states = constants.keys().filter(|k| k.starts_with("GUARD_")).count();
+    assert_eq!(states, GuardState::ALL.len());
+    // The recording's uint8 carries the code itself.
+    assert_eq!(
+        recorded_reason_code(&Reason::FollowingError {
+            axis: 1,
+            error_m: 0.0,
+            tolerance_m: 0.0
+        }),
+        25
+    );
+    assert_eq!(
+        recorded_reason_code(&Reason::PublisherStalled { stalled_ms: 1 }),
+        35
+    );
 }

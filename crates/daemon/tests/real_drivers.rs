@@ -68,7 +68,9 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
     let (_sim, mut sim_sensor, drives, bias) = sim::simulated(&scenario, clock).unwrap();
     let reading = sim_sensor.wait(1_000 * MS).unwrap();
     let counts = |v: f64, per: f64| (v * per).round() as i32;
-    let mut emu_config = EmulatorConfig::new(Pacing::Manual);
+    // A live device: seeded noise on every reading (a noiseless one is a
+    // frozen one to the loop).
+    let mut emu_config = EmulatorConfig::live(Pacing::Manual, 0x4d7);
     emu_config.counts = [
         counts(reading.force_n.x, COUNTS_PER_N),
         counts(reading.force_n.y, COUNTS_PER_N),

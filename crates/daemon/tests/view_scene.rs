@@ -398,7 +398,7 @@ fn topics_of_a_state_follow_its_flags_and_the_guards_transitions() {
         (e.from_state, e.to_state, e.reason_code, e.cycle),
         (GuardStateCode::Ok, GuardStateCode::Warn, 22, warn.cycle)
     );
-    assert_eq!(e.reason_text.as_str(), "above warn limit");
+    assert_eq!(e.reason_text.as_str(), "above_warn");
 
     // No pose, no estimate: the joints and the state only.
     let mut none = ok;

@@ -475,6 +475,9 @@ fn per_cycle(c: &mut Criterion) {
                     observable: true,
                     max_std_n: 2.0,
                 },
+                extra_margin_n: 0.0,
+                tare_due: None,
+                smoothed_force_n: None,
             })))
         })
     });

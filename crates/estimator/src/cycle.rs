@@ -26,7 +26,8 @@
 
 use crate::filter::{FilterConfig, Filtered, TipFilter};
 use crate::guard::{
-    Axis, ForceLimits, Guard, GuardConfig, GuardInput, GuardState, Reason, TipInput, Transition,
+    Axis, ForceLimits, Guard, GuardConfig, GuardInput, GuardState, Reason, RestResidual,
+    SensorChannel, TipInput, Transition,
 };
 use crate::tip_force::{TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator};
 use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3};
@@ -283,8 +284,14 @@ pub struct CycleOutput {
     /// The causal low-passed tip force (when a filter is configured), stepped
     /// once per new sensor sample; `None` while there is no observable
     /// estimate (the filter is then reset, and restarts at the next one). The
-    /// guard never acts on it: it acts on the unfiltered estimate.
+    /// guard never acts on it: it acts on the unfiltered estimate (except
+    /// `Retreat`, which watches the filtered force for a rise).
     pub filtered: Option<Filtered>,
+    /// Whether this cycle's new sample was a spike ([`SpikeLimits`]).
+    pub spike: bool,
+    /// Time since the last accepted tare (or the start bias, from the first
+    /// cycle with a clock), ns; `None` before the first such cycle.
+    pub tare_age_ns: Option<u64>,
 }
 
 /// The torque check's settings.
@@ -323,6 +330,21 @@ pub struct PlausibilityLimits {
     /// The torque check; `None` switches it off (a sensor without torque).
     /// Default on, with [`TorqueLimits`]' defaults.
     pub torque: Option<TorqueLimits>,
+    /// The frozen-sensor check. Default on with
+    /// [`FrozenCheck::DEFAULT_REPEATS`]; [`frozen_repeats`] derives the
+    /// count from the sensor's noise and resolution.
+    pub frozen: FrozenCheck,
+    /// The sensor's measuring range (saturation check); `None` switches it
+    /// off. Default the HEX-6 ([`SensorRange::HEX6`]).
+    pub range: Option<SensorRange>,
+    /// The spike check; `None` switches it off. Default on
+    /// ([`SpikeLimits::default`]).
+    pub spikes: Option<SpikeLimits>,
+    /// The tare's age and the bias drift ([`TareLimits::default`]).
+    pub tare: TareLimits,
+    /// The first reset's check of the wrench at rest against the model;
+    /// `None` switches it off. Default on ([`MountingLimits::default`]).
+    pub mounting: Option<MountingLimits>,
 }
 
 impl Default for PlausibilityLimits {
@@ -336,8 +358,270 @@ impl Default for PlausibilityLimits {
                 noise_nm: Vec3::new(x, y, z),
                 max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
             }),
+            frozen: FrozenCheck::On {
+                repeats: FrozenCheck::DEFAULT_REPEATS,
+            },
+            range: Some(SensorRange::HEX6),
+            spikes: Some(SpikeLimits::default()),
+            tare: TareLimits::default(),
+            mounting: Some(MountingLimits::default()),
         }
     }
+}
+
+/// The frozen-sensor (stuck-at) check: N new samples in a row whose six
+/// values repeat the previous new sample's bit for bit, while the counter
+/// advances, are a Fault ([`Reason::SensorFrozen`]). A live sensor always
+/// shows noise, so that a repeat of all six quantised channels is rare; how
+/// rare is [`frozen_repeat_probability`], and [`frozen_repeats`] picks N.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrozenCheck {
+    /// Fault after `repeats` (>= 1) identical new samples in a row.
+    On {
+        /// N.
+        repeats: u32,
+    },
+    /// Off: said explicitly, because a sensor whose configured noise is 0,
+    /// or whose resolution is far coarser than its noise, repeats by
+    /// itself, and then the check cannot tell a frozen sensor from a live
+    /// one. The daemon logs it at start.
+    Off,
+}
+
+impl FrozenCheck {
+    /// The default and smallest N that [`frozen_repeats`] returns: a device
+    /// that sends a sample twice (an output rate above its converter's)
+    /// must not trip it; 3 new samples are 6 ms at 500 Hz.
+    pub const DEFAULT_REPEATS: u32 = 3;
+    /// The largest accepted N (a larger one would in effect switch it off).
+    pub const MAX_REPEATS: u32 = 1000;
+}
+
+/// The fraction of the configured noise assumed for the difference of two
+/// consecutive samples in [`frozen_repeat_probability`]: a device's internal
+/// low-pass correlates consecutive samples (the difference of two samples
+/// with correlation rho has std sigma sqrt(2 (1 - rho))); 1/4 is rho ~ 0.97,
+/// and also covers a sensor quieter than configured.
+pub const FROZEN_NOISE_FRACTION: f64 = 0.25;
+
+/// New samples in ten years of 1 kHz operation: the false-alarm budget of
+/// [`frozen_repeats`] is less than one alarm in that many samples.
+pub const SAMPLES_IN_TEN_YEARS_1KHZ: f64 = 1000.0 * 3600.0 * 24.0 * 365.25 * 10.0;
+
+/// The probability that one new sample repeats the previous one bit for bit
+/// on every channel, for a live sensor at rest. Per channel with noise
+/// sigma and resolution r (one count; 0 for a continuous reading, as the
+/// simulator's), the difference of two samples has std
+/// `sd = FROZEN_NOISE_FRACTION * sqrt(2) * sigma` and rounds to zero counts
+/// with probability about `r / (sqrt(2 pi) sd)` (its density at 0 times one
+/// count; capped at 1, and 1 when `sd < r / 2`); the channels are
+/// independent, so the probabilities multiply. `noise_nm` `None` (no torque
+/// channels configured) uses the three force channels only.
+pub fn frozen_repeat_probability(
+    noise_n: &Vec3,
+    noise_nm: Option<&Vec3>,
+    resolution_n: f64,
+    resolution_nm: f64,
+) -> f64 {
+    let channel = |sigma: f64, resolution: f64| -> f64 {
+        if resolution <= 0.0 {
+            return 0.0;
+        }
+        let sd = FROZEN_NOISE_FRACTION * core::f64::consts::SQRT_2 * sigma;
+        if sd.is_nan() || sd < resolution / 2.0 {
+            return 1.0;
+        }
+        let density = 1.0 / (libm::sqrt(2.0 * core::f64::consts::PI) * sd);
+        (density * resolution).min(1.0)
+    };
+    let mut p = 1.0;
+    for sigma in noise_n.iter() {
+        p *= channel(*sigma, resolution_n);
+    }
+    if let Some(nm) = noise_nm {
+        for sigma in nm.iter() {
+            p *= channel(*sigma, resolution_nm);
+        }
+    }
+    p
+}
+
+/// Expected false alarms of the frozen check with N = `repeats` over ten
+/// years of 1 kHz operation: `SAMPLES_IN_TEN_YEARS_1KHZ * p^repeats` for the
+/// per-sample repeat probability `p` ([`frozen_repeat_probability`]).
+pub fn frozen_false_alarms_in_ten_years(p: f64, repeats: u32) -> f64 {
+    SAMPLES_IN_TEN_YEARS_1KHZ * libm::pow(p, f64::from(repeats))
+}
+
+/// N for the frozen check: the smallest N >= [`FrozenCheck::DEFAULT_REPEATS`]
+/// with fewer than one expected false alarm in ten years of 1 kHz operation
+/// ([`frozen_false_alarms_in_ten_years`] < 1); `None` when no N up to
+/// [`FrozenCheck::MAX_REPEATS`] does (a sensor that repeats by itself: the
+/// check cannot work and must be switched off explicitly).
+///
+/// Example, the HEX-6 over RDT (noise 0.2/0.2/0.8 N, 0.01/0.01/0.002 N m;
+/// resolution 1e-4 N, 1e-5 N m, i.e. 10000 counts/N and 100000 counts/N m):
+/// per channel 8e-4, 8e-4, 2e-4, 1.6e-3, 1.6e-3, 8e-3; p = 2.6e-18; with
+/// N = 3 the expected false alarms in ten years are 5e-42.
+pub fn frozen_repeats(
+    noise_n: &Vec3,
+    noise_nm: Option<&Vec3>,
+    resolution_n: f64,
+    resolution_nm: f64,
+) -> Option<u32> {
+    let p = frozen_repeat_probability(noise_n, noise_nm, resolution_n, resolution_nm);
+    (FrozenCheck::DEFAULT_REPEATS..=FrozenCheck::MAX_REPEATS)
+        .find(|n| frozen_false_alarms_in_ten_years(p, *n) < 1.0)
+}
+
+/// The sensor's measuring range per channel (sensor frame): a raw reading at
+/// or beyond it (either sign) is a Fault ([`Reason::SensorSaturated`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorRange {
+    /// Fx, Fy, Fz range, N (finite, > 0).
+    pub force_n: Vec3,
+    /// Tx, Ty, Tz range, N m (finite, > 0).
+    pub torque_nm: Vec3,
+}
+
+impl SensorRange {
+    /// OnRobot HEX-E / HEX-H QC (the article's sensor): nominal capacity
+    /// Fxy 200 N, Fz 200 N, Txy 10 N m, Tz 6.5 N m (OnRobot HEX-E/H QC
+    /// datasheet, "Nominal capacity (N.C)").
+    pub const HEX6: SensorRange = SensorRange {
+        force_n: Vec3::new(200.0, 200.0, 200.0),
+        torque_nm: Vec3::new(10.0, 10.0, 6.5),
+    };
+    /// ATI Mini45 SI-145-5 on a Net F/T box: Fxy 145 N, Fz 290 N, Txy 5 N m,
+    /// Tz 5 N m (ATI Mini45 calibration table, SI-145-5).
+    pub const ATI_MINI45_SI_145_5: SensorRange = SensorRange {
+        force_n: Vec3::new(145.0, 145.0, 290.0),
+        torque_nm: Vec3::new(5.0, 5.0, 5.0),
+    };
+}
+
+/// The spike check: a new sample whose force jumps from the previous new
+/// sample's by more than `jump_sigma * sqrt(2) * noise` on any sensor axis
+/// is a spike. One spike changes no state: the guard's debounce is by design
+/// the filter of single-sample noise, and a force that persists still stops
+/// within the debounce time; it is counted and reported
+/// ([`CycleOutput::spike`]). `max_spikes` spikes within `window_samples` new
+/// samples of the first are a Fault ([`Reason::SensorSpikes`]): a sensor
+/// that keeps jumping is not to be trusted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpikeLimits {
+    /// The jump threshold in standard deviations of the difference of two
+    /// samples (finite, >= 3).
+    pub jump_sigma: f64,
+    /// Spikes within the window that fault (>= 2).
+    pub max_spikes: u32,
+    /// The window, new samples (>= 1).
+    pub window_samples: u32,
+}
+
+impl Default for SpikeLimits {
+    /// 10 sigma (a Gaussian difference beyond it: 1.5e-23 per sample and
+    /// axis), 10 spikes within 500 new samples (1 s at 500 Hz).
+    fn default() -> Self {
+        Self {
+            jump_sigma: 10.0,
+            max_spikes: 10,
+            window_samples: 500,
+        }
+    }
+}
+
+/// The tare's age and the bias drift since the tare.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TareLimits {
+    /// After this long since the last tare (or the start bias), the guard
+    /// warns that a tare is due ([`Reason::TareDue`]), ns; `None`: never.
+    pub max_age_ns: Option<u64>,
+    /// The sensor's bias drift bound, N/s (finite, >= 0): every part is
+    /// compared with its limits after adding `drift_n_per_s * age_s` besides
+    /// the standard-deviation margin, so that a bias that drifted by up to
+    /// that much since the tare cannot hide a force above a limit.
+    pub drift_n_per_s: f64,
+}
+
+impl Default for TareLimits {
+    /// A tare due after one hour; a drift bound of 1e-4 N/s (0.36 N after
+    /// the hour). The HEX-6's datasheet gives no drift over time: this is an
+    /// assumption to replace by the sensor's measured drift (a recording at
+    /// rest over an hour after warm-up).
+    fn default() -> Self {
+        Self {
+            max_age_ns: Some(3_600_000_000_000),
+            drift_n_per_s: 1e-4,
+        }
+    }
+}
+
+/// The first reset's check of the wrench at rest: with the tip free, the
+/// model predicts the whole sensor wrench, so the estimated F_tip and the
+/// torque residual are the residuals of the model. Both are averaged over
+/// the new samples since the joints last moved (at most `rest_samples`;
+/// beyond, an exponential mean of that length), so that the noise of the
+/// mean is small and the tolerances decide. The mean F_tip across the rod
+/// must be within `sigma std/sqrt(n) + tolerance_n`, along the rod within
+/// `sigma std/sqrt(n) + friction_n + tolerance_n` (the support's friction
+/// acts along the rod, like an axial tip force), the mean torque residual on
+/// each sensor axis within `sigma std/sqrt(n) + tolerance_nm`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MountingLimits {
+    /// Multiple of the mean's standard deviation (finite, >= 0).
+    pub sigma: f64,
+    /// The largest static friction of the support along the rod, N (finite,
+    /// >= 0).
+    pub friction_n: f64,
+    /// What the force model may be off beyond noise and friction, N (finite,
+    /// > 0).
+    pub tolerance_n: f64,
+    /// What the torque model may be off beyond noise, N m (finite, > 0).
+    pub tolerance_nm: f64,
+    /// The length of the mean, new samples (1..=100000).
+    pub rest_samples: u32,
+}
+
+impl Default for MountingLimits {
+    /// 4 sigma, 0.5 N friction, 1 N and 0.02 N m tolerance, a mean of 500
+    /// samples (1 s at 500 Hz).
+    fn default() -> Self {
+        Self {
+            sigma: 4.0,
+            friction_n: 0.5,
+            tolerance_n: 1.0,
+            tolerance_nm: 0.02,
+            rest_samples: 500,
+        }
+    }
+}
+
+/// The means at rest for the first reset's check ([`MountingLimits`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RestMean {
+    /// New samples in the mean (at most `rest_samples`).
+    count: u32,
+    /// Mean F_tip, {0}, N.
+    force_n: Vec3,
+    /// Mean torque residual, sensor frame, N m (zero without the torque check).
+    torque_nm: Vec3,
+    /// The latest per-sample standard deviations.
+    std_n: Vec3,
+    std_nm: Vec3,
+    /// The joints the mean was taken at.
+    joints: Option<ActiveJoints>,
+}
+
+impl RestMean {
+    const EMPTY: RestMean = RestMean {
+        count: 0,
+        force_n: Vec3::new(0.0, 0.0, 0.0),
+        torque_nm: Vec3::new(0.0, 0.0, 0.0),
+        std_n: Vec3::new(0.0, 0.0, 0.0),
+        std_nm: Vec3::new(0.0, 0.0, 0.0),
+        joints: None,
+    };
 }
 
 /// Checked plausibility limits. Exists only if valid (the default is
@@ -374,6 +658,85 @@ impl PlausibilityConfig {
                     "torque.max_sigma",
                     t.max_sigma,
                     "must be finite and >= 1",
+                ));
+            }
+        }
+        if let FrozenCheck::On { repeats } = limits.frozen
+            && !(1..=FrozenCheck::MAX_REPEATS).contains(&repeats)
+        {
+            return Err(invalid(
+                "frozen.repeats",
+                f64::from(repeats),
+                "must be 1..=1000",
+            ));
+        }
+        if let Some(r) = limits.range {
+            for &v in r.force_n.iter().chain(r.torque_nm.iter()) {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(invalid("range", v, "must be finite and > 0"));
+                }
+            }
+        }
+        if let Some(sp) = limits.spikes {
+            if !(sp.jump_sigma.is_finite() && sp.jump_sigma >= 3.0) {
+                return Err(invalid(
+                    "spikes.jump_sigma",
+                    sp.jump_sigma,
+                    "must be finite and >= 3",
+                ));
+            }
+            if sp.max_spikes < 2 {
+                return Err(invalid(
+                    "spikes.max_spikes",
+                    f64::from(sp.max_spikes),
+                    "must be >= 2",
+                ));
+            }
+            if sp.window_samples == 0 {
+                return Err(invalid("spikes.window_samples", 0.0, "must be >= 1"));
+            }
+        }
+        let d = limits.tare.drift_n_per_s;
+        if !(d.is_finite() && d >= 0.0) {
+            return Err(invalid("tare.drift_n_per_s", d, "must be finite and >= 0"));
+        }
+        if limits.tare.max_age_ns == Some(0) {
+            return Err(invalid("tare.max_age", 0.0, "must be > 0"));
+        }
+        if let Some(m) = limits.mounting {
+            if !(m.sigma.is_finite() && m.sigma >= 0.0) {
+                return Err(invalid(
+                    "mounting.sigma",
+                    m.sigma,
+                    "must be finite and >= 0",
+                ));
+            }
+            if !(m.friction_n.is_finite() && m.friction_n >= 0.0) {
+                return Err(invalid(
+                    "mounting.friction_n",
+                    m.friction_n,
+                    "must be finite and >= 0",
+                ));
+            }
+            if !(m.tolerance_n.is_finite() && m.tolerance_n > 0.0) {
+                return Err(invalid(
+                    "mounting.tolerance_n",
+                    m.tolerance_n,
+                    "must be finite and > 0",
+                ));
+            }
+            if !(m.tolerance_nm.is_finite() && m.tolerance_nm > 0.0) {
+                return Err(invalid(
+                    "mounting.tolerance_nm",
+                    m.tolerance_nm,
+                    "must be finite and > 0",
+                ));
+            }
+            if !(1..=100_000).contains(&m.rest_samples) {
+                return Err(invalid(
+                    "mounting.rest_samples",
+                    f64::from(m.rest_samples),
+                    "must be 1..=100000",
                 ));
             }
         }
@@ -471,6 +834,34 @@ pub struct Estimator {
     counter_stamp_ns: u64,
     /// The previous valid, finite joint sample and its stamp.
     last_joints: Option<(ActiveJoints, u64)>,
+    /// The force noise per sensor axis, N (the spike threshold's unit).
+    noise_n: Vec3,
+    /// The six values of the previous new sample, as bits (frozen check).
+    last_values: Option<[u64; 6]>,
+    /// New samples in a row identical to the one before them.
+    repeats: u32,
+    /// The force of the previous new finite sample, sensor frame, N (spikes).
+    last_force_n: Option<Vec3>,
+    /// Spikes in the current window.
+    spikes: u32,
+    /// New samples left in the current spike window (0: no window open).
+    spike_window_left: u32,
+    /// `now_ns` of the cycle whose tare (or start bias) is in use.
+    tare_ns: Option<u64>,
+    /// The means at rest, kept until the first reset is accepted.
+    rest: RestMean,
+}
+
+/// What the checks of the sensor's own values found in one new sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SampleVerdict {
+    fault: Option<Reason>,
+    spike: bool,
+}
+
+/// ns to s.
+fn ns_to_s(ns: u64) -> f64 {
+    ns as f64 * 1e-9
 }
 
 /// The following-error verdict of finite joints `q` against `r`.
@@ -534,6 +925,8 @@ impl Estimator {
             transition: None,
             command: None,
             filtered: None,
+            spike: false,
+            tare_age_ns: None,
         };
         let filter = match config.filter {
             Some(filter) => Some(TipFilter::new(filter)?),
@@ -561,6 +954,14 @@ impl Estimator {
             last_counter: None,
             counter_stamp_ns: 0,
             last_joints: None,
+            noise_n: config.noise.std_n(),
+            last_values: None,
+            repeats: 0,
+            last_force_n: None,
+            spikes: 0,
+            spike_window_left: 0,
+            tare_ns: None,
+            rest: RestMean::EMPTY,
         })
     }
 
@@ -580,84 +981,29 @@ impl Estimator {
         input: &CycleInput,
         reference: Option<&FollowingReference>,
     ) -> &CycleOutput {
-        // The clock: no reading, or one that does not advance, trusts nothing.
-        let (now_ns, clock_fault) = match input.now_ns {
-            None => (None, Some(Reason::ClockFailed)),
-            Some(now_ns) => match self.last_now_ns {
-                Some(previous_ns) if now_ns <= previous_ns => (
-                    None,
-                    Some(Reason::ClockNotAdvancing {
-                        previous_ns,
-                        now_ns,
-                    }),
-                ),
-                _ => {
-                    self.last_now_ns = Some(now_ns);
-                    (Some(now_ns), None)
-                }
-            },
-        };
+        self.cycle_checked(input, reference, None)
+    }
 
-        // The sensor counter: a new sample, a gap, or the same sample again
-        // (whose age runs from its first stamp, however it was re-stamped).
+    /// [`Estimator::cycle_following`] with a fault of the host that runs the
+    /// loop (e.g. [`Reason::PublisherStalled`]), which the caller derives
+    /// from inputs it records: a Fault like any input fault, checked after
+    /// the clock and the sensor's own checks.
+    pub fn cycle_checked(
+        &mut self,
+        input: &CycleInput,
+        reference: Option<&FollowingReference>,
+        host_fault: Option<Reason>,
+    ) -> &CycleOutput {
+        let (now_ns, clock_fault) = self.check_clock(input.now_ns);
         let sensor = &input.sensor;
-        let new_sample = self.last_counter != Some(sensor.counter);
-        // Samples were lost since the last one (the filter restarts: it
-        // steps once per sample and would lag by the lost ones).
-        let lost_samples = new_sample
-            && self
-                .last_counter
-                .is_some_and(|previous| sensor.counter.wrapping_sub(previous) != 1);
-        let mut counter_fault = None;
-        if new_sample {
-            if let Some(previous) = self.last_counter {
-                let max_gap = self.limits.max_counter_gap;
-                if sensor.counter.wrapping_sub(previous) > max_gap {
-                    counter_fault = Some(Reason::SensorCounterGap {
-                        previous,
-                        got: sensor.counter,
-                        max_gap,
-                    });
-                }
-            }
-            self.last_counter = Some(sensor.counter);
-            self.counter_stamp_ns = sensor.stamp_ns;
-        }
+        let (new_sample, lost_samples, counter_fault) = self.check_counter(sensor);
         let status_fault = (sensor.status != 0).then_some(Reason::SensorStatus {
             status: sensor.status,
         });
+        let values = self.check_values(sensor, new_sample);
+        let joint_fault = self.check_joints(&input.joints, reference);
 
-        // The joints: no faster than the axes can move.
         let joints = &input.joints;
-        let mut joint_fault = None;
-        let q = &joints.joints;
-        if joints.valid && q.q1_m.is_finite() && q.q2_m.is_finite() && q.q3_m.is_finite() {
-            if let Some((previous, previous_ns)) = self.last_joints {
-                if joints.stamp_ns < previous_ns {
-                    joint_fault = Some(Reason::JointsStampBackwards {
-                        previous_ns,
-                        got_ns: joints.stamp_ns,
-                    });
-                } else {
-                    let dt_s = (joints.stamp_ns - previous_ns) as f64 * 1e-9;
-                    let allowed_m =
-                        self.limits.max_joint_speed_mps * dt_s + self.limits.joint_margin_m;
-                    let (axis, moved_m) = largest_move(q, &previous);
-                    if moved_m > allowed_m {
-                        joint_fault = Some(Reason::JointJump {
-                            axis,
-                            moved_m,
-                            allowed_m,
-                        });
-                    }
-                }
-            }
-            self.last_joints = Some((*q, joints.stamp_ns));
-            if let Some(r) = reference {
-                joint_fault = joint_fault.or_else(|| following_fault(q, r));
-            }
-        }
-
         let (sensor_age_ns, joints_age_ns, sensor_valid, joints_valid) = match now_ns {
             Some(now) => (
                 Some(now.saturating_sub(self.counter_stamp_ns)),
@@ -673,6 +1019,23 @@ impl Estimator {
             None => (None, None, false, false),
         };
 
+        // The tare's age and the drift bound since it.
+        if let (Some(now), None) = (now_ns, self.tare_ns) {
+            self.tare_ns = Some(now);
+        }
+        let tare_age_ns = now_ns
+            .zip(self.tare_ns)
+            .map(|(now, tare)| now.saturating_sub(tare));
+        let tare = self.limits.tare;
+        let extra_margin_n = tare_age_ns.map_or(0.0, |age| tare.drift_n_per_s * ns_to_s(age));
+        let tare_due = match (tare.max_age_ns, tare_age_ns) {
+            (Some(max_ns), Some(age_ns)) if age_ns > max_ns => Some(Reason::TareDue {
+                age_s: ns_to_s(age_ns),
+                max_age_s: ns_to_s(max_ns),
+            }),
+            _ => None,
+        };
+
         let out = &mut self.last;
         out.cycle = input.cycle;
         out.sensor_age_ns = sensor_age_ns;
@@ -680,83 +1043,23 @@ impl Estimator {
         out.new_sample = new_sample;
         out.torque = None;
         out.command = None;
-        let pose = if joints_valid {
-            Some(forward(&self.calibration, &self.profile, q))
-        } else {
-            None
-        };
-        let mut torque_fault = None;
-        let tip_input = match pose {
-            None => {
-                out.pose = None;
-                out.tip = TipOutcome::JointsInvalid;
-                TipInput::NotObservable
-            }
-            Some(Err(e)) => {
-                out.pose = None;
-                out.tip = TipOutcome::PoseInvalid(e);
-                TipInput::PoseInvalid
-            }
-            Some(Ok(pose)) => {
-                let pose = out.pose.insert(pose);
-                if !sensor_valid {
-                    out.tip = TipOutcome::SensorInvalid;
-                    TipInput::NotObservable
-                } else {
-                    match self.tip.estimate(pose, &sensor.force_n, &self.bias.force_n) {
-                        Ok(estimate) => {
-                            out.tip = TipOutcome::Estimate(estimate);
-                            if let Some(check) = &self.torque {
-                                let residual = torque_residual(
-                                    check,
-                                    &self.frame,
-                                    pose,
-                                    sensor,
-                                    &self.bias,
-                                    estimate.torsion_nm,
-                                );
-                                torque_fault = torque_verdict(check, &residual);
-                                out.torque = Some(residual);
-                            }
-                            TipInput::Estimate {
-                                force_n: estimate.force_n,
-                                std_n: estimate.std_n,
-                                rod_dir: pose.rod_dir,
-                                observable: estimate.observable,
-                                max_std_n: self.tip.max_std_n(),
-                            }
-                        }
-                        Err(e) => {
-                            out.tip = TipOutcome::Refused(e);
-                            TipInput::NotObservable
-                        }
-                    }
-                }
-            }
-        };
-        // The filter: stepped with each new sample's observable estimate,
-        // reset when there is none (no stale state carried over a gap).
-        out.filtered = None;
-        if let Some(filter) = &mut self.filter {
-            if lost_samples {
-                filter.reset();
-            }
-            match out.tip {
-                TipOutcome::Estimate(e) if e.observable => {
-                    // A refused input resets the filter: no output then.
-                    out.filtered = filter
-                        .update_counted(sensor.counter, &e.force_n, &e.std_n)
-                        .ok();
-                }
-                _ => filter.reset(),
-            }
+        out.spike = values.spike;
+        out.tare_age_ns = tare_age_ns;
+        let (tip_input, torque_fault) =
+            self.estimate_tip(&joints.joints, joints_valid, sensor_valid, sensor);
+        self.step_filter(lost_samples, sensor.counter);
+        if new_sample && self.guard.awaiting_first_reset() {
+            self.update_rest_mean(&joints.joints);
         }
         let input_fault = clock_fault
             .or(counter_fault)
             .or(status_fault)
+            .or(values.fault)
+            .or(host_fault)
             .or(joint_fault)
             .or(torque_fault);
-        out.transition = self.guard.step(&GuardInput {
+        let smoothed_force_n = self.last.filtered.map(|f| f.force_n);
+        self.last.transition = self.guard.step(&GuardInput {
             cycle: input.cycle,
             input_fault,
             new_sample,
@@ -765,14 +1068,369 @@ impl Estimator {
             joints_age_ns: joints_age_ns.unwrap_or(0),
             joints_valid,
             tip: tip_input,
+            extra_margin_n,
+            tare_due,
+            smoothed_force_n,
         });
         if let Some(command) = input.command {
-            let result = self.apply(command, input);
+            let result = self.apply(command, input, now_ns);
             self.last.command = Some(CommandEvent { command, result });
         }
         self.last.guard_state = self.guard.state();
         self.last.guard_reason = self.guard.reason();
         &self.last
+    }
+
+    /// The clock: no reading, or one that does not advance, trusts nothing.
+    fn check_clock(&mut self, now_ns: Option<u64>) -> (Option<u64>, Option<Reason>) {
+        match now_ns {
+            None => (None, Some(Reason::ClockFailed)),
+            Some(now_ns) => match self.last_now_ns {
+                Some(previous_ns) if now_ns <= previous_ns => (
+                    None,
+                    Some(Reason::ClockNotAdvancing {
+                        previous_ns,
+                        now_ns,
+                    }),
+                ),
+                _ => {
+                    self.last_now_ns = Some(now_ns);
+                    (Some(now_ns), None)
+                }
+            },
+        }
+    }
+
+    /// The sensor counter: a new sample, a gap, or the same sample again
+    /// (whose age runs from its first stamp, however it was re-stamped).
+    /// Returns (new sample, samples lost since the last one, fault).
+    fn check_counter(&mut self, sensor: &SensorSample) -> (bool, bool, Option<Reason>) {
+        let new_sample = self.last_counter != Some(sensor.counter);
+        // Samples were lost since the last one (the filter restarts: it
+        // steps once per sample and would lag by the lost ones).
+        let lost_samples = new_sample
+            && self
+                .last_counter
+                .is_some_and(|previous| sensor.counter.wrapping_sub(previous) != 1);
+        let mut fault = None;
+        if new_sample {
+            if let Some(previous) = self.last_counter {
+                let max_gap = self.limits.max_counter_gap;
+                if sensor.counter.wrapping_sub(previous) > max_gap {
+                    fault = Some(Reason::SensorCounterGap {
+                        previous,
+                        got: sensor.counter,
+                        max_gap,
+                    });
+                }
+            }
+            self.last_counter = Some(sensor.counter);
+            self.counter_stamp_ns = sensor.stamp_ns;
+        }
+        (new_sample, lost_samples, fault)
+    }
+
+    /// The sensor's own values: saturation (this cycle's sample), frozen
+    /// (identical new samples in a row), spikes (jumps far beyond the noise
+    /// between new samples). The frozen and spike memories move only with
+    /// new samples; their faults hold as long as their cause does, so that a
+    /// reset is judged on them in every cycle.
+    fn check_values(&mut self, sensor: &SensorSample, new_sample: bool) -> SampleVerdict {
+        let f = &sensor.force_n;
+        let t = &sensor.torque_nm;
+        let finite = f.iter().chain(t.iter()).all(|v| v.is_finite());
+        let mut fault = None;
+        if finite && let Some(range) = self.limits.range {
+            let values = [f.x, f.y, f.z, t.x, t.y, t.z];
+            let ranges = [
+                range.force_n.x,
+                range.force_n.y,
+                range.force_n.z,
+                range.torque_nm.x,
+                range.torque_nm.y,
+                range.torque_nm.z,
+            ];
+            fault = SensorChannel::ALL
+                .iter()
+                .zip(values.iter().zip(ranges.iter()))
+                .find(|(_, (value, range))| value.abs() >= **range)
+                .map(|(channel, (value, range))| Reason::SensorSaturated {
+                    channel: *channel,
+                    value: *value,
+                    range: *range,
+                });
+        }
+        let mut spike = false;
+        if new_sample {
+            if finite {
+                let bits = [f.x, f.y, f.z, t.x, t.y, t.z].map(f64::to_bits);
+                self.repeats = if self.last_values == Some(bits) {
+                    self.repeats.saturating_add(1)
+                } else {
+                    0
+                };
+                self.last_values = Some(bits);
+                if let Some(limits) = self.limits.spikes {
+                    spike = self.count_spike(&limits, f);
+                }
+                self.last_force_n = Some(*f);
+            } else {
+                // NaN is a fault of its own; the memories restart after it.
+                self.last_values = None;
+                self.repeats = 0;
+                self.last_force_n = None;
+            }
+        }
+        if let FrozenCheck::On { repeats } = self.limits.frozen
+            && self.repeats >= repeats
+        {
+            fault = fault.or(Some(Reason::SensorFrozen {
+                repeats: self.repeats,
+            }));
+        }
+        if let Some(limits) = self.limits.spikes
+            && self.spike_window_left > 0
+            && self.spikes >= limits.max_spikes
+        {
+            fault = fault.or(Some(Reason::SensorSpikes {
+                spikes: self.spikes,
+                window: limits.window_samples,
+            }));
+        }
+        SampleVerdict { fault, spike }
+    }
+
+    /// One new finite sample for the spike check: whether it is a spike.
+    fn count_spike(&mut self, limits: &SpikeLimits, force_n: &Vec3) -> bool {
+        if self.spike_window_left > 0 {
+            self.spike_window_left -= 1;
+            if self.spike_window_left == 0 {
+                self.spikes = 0;
+            }
+        }
+        let Some(previous) = self.last_force_n else {
+            return false;
+        };
+        let threshold_n = self.noise_n * (limits.jump_sigma * core::f64::consts::SQRT_2);
+        let jump = (force_n - previous).abs();
+        let spike = jump.iter().zip(threshold_n.iter()).any(|(j, t)| j > t);
+        if spike {
+            if self.spike_window_left == 0 {
+                self.spike_window_left = limits.window_samples;
+                self.spikes = 0;
+            }
+            self.spikes = self.spikes.saturating_add(1);
+        }
+        debug_assert!(self.spike_window_left <= limits.window_samples);
+        spike
+    }
+
+    /// The joints: no faster than the axes can move, the stamp not going
+    /// back, and (with a reference) within the following tolerance.
+    fn check_joints(
+        &mut self,
+        joints: &JointSample,
+        reference: Option<&FollowingReference>,
+    ) -> Option<Reason> {
+        let q = &joints.joints;
+        if !(joints.valid && q.q1_m.is_finite() && q.q2_m.is_finite() && q.q3_m.is_finite()) {
+            return None;
+        }
+        let mut fault = None;
+        if let Some((previous, previous_ns)) = self.last_joints {
+            if joints.stamp_ns < previous_ns {
+                fault = Some(Reason::JointsStampBackwards {
+                    previous_ns,
+                    got_ns: joints.stamp_ns,
+                });
+            } else {
+                let dt_s = (joints.stamp_ns - previous_ns) as f64 * 1e-9;
+                let allowed_m = self.limits.max_joint_speed_mps * dt_s + self.limits.joint_margin_m;
+                let (axis, moved_m) = largest_move(q, &previous);
+                if moved_m > allowed_m {
+                    fault = Some(Reason::JointJump {
+                        axis,
+                        moved_m,
+                        allowed_m,
+                    });
+                }
+            }
+        }
+        self.last_joints = Some((*q, joints.stamp_ns));
+        fault.or_else(|| reference.and_then(|r| following_fault(q, r)))
+    }
+
+    /// The pose, the tip force and the torque check, written into
+    /// `self.last`; returns what the guard gets and the torque's verdict.
+    fn estimate_tip(
+        &mut self,
+        q: &ActiveJoints,
+        joints_valid: bool,
+        sensor_valid: bool,
+        sensor: &SensorSample,
+    ) -> (TipInput, Option<Reason>) {
+        let out = &mut self.last;
+        let pose = if joints_valid {
+            Some(forward(&self.calibration, &self.profile, q))
+        } else {
+            None
+        };
+        let mut torque_fault = None;
+        let out_pose = match pose {
+            None => {
+                out.pose = None;
+                out.tip = TipOutcome::JointsInvalid;
+                return (TipInput::NotObservable, None);
+            }
+            Some(Err(e)) => {
+                out.pose = None;
+                out.tip = TipOutcome::PoseInvalid(e);
+                return (TipInput::PoseInvalid, None);
+            }
+            Some(Ok(pose)) => out.pose.insert(pose),
+        };
+        if !sensor_valid {
+            out.tip = TipOutcome::SensorInvalid;
+            return (TipInput::NotObservable, None);
+        }
+        match self
+            .tip
+            .estimate(out_pose, &sensor.force_n, &self.bias.force_n)
+        {
+            Ok(estimate) => {
+                out.tip = TipOutcome::Estimate(estimate);
+                if let Some(check) = &self.torque {
+                    let residual = torque_residual(
+                        check,
+                        &self.frame,
+                        out_pose,
+                        sensor,
+                        &self.bias,
+                        estimate.torsion_nm,
+                    );
+                    torque_fault = torque_verdict(check, &residual);
+                    out.torque = Some(residual);
+                }
+                let tip_input = TipInput::Estimate {
+                    force_n: estimate.force_n,
+                    std_n: estimate.std_n,
+                    rod_dir: out_pose.rod_dir,
+                    observable: estimate.observable,
+                    max_std_n: self.tip.max_std_n(),
+                };
+                (tip_input, torque_fault)
+            }
+            Err(e) => {
+                out.tip = TipOutcome::Refused(e);
+                (TipInput::NotObservable, None)
+            }
+        }
+    }
+
+    /// The filter: stepped with each new sample's observable estimate,
+    /// reset when there is none (no stale state carried over a gap).
+    fn step_filter(&mut self, lost_samples: bool, counter: u32) {
+        let out = &mut self.last;
+        out.filtered = None;
+        if let Some(filter) = &mut self.filter {
+            if lost_samples {
+                filter.reset();
+            }
+            match out.tip {
+                TipOutcome::Estimate(e) if e.observable => {
+                    // A refused input resets the filter: no output then.
+                    out.filtered = filter.update_counted(counter, &e.force_n, &e.std_n).ok();
+                }
+                _ => filter.reset(),
+            }
+        }
+    }
+
+    /// The means at rest: one new sample's estimate and torque residual
+    /// into them; joints that moved (beyond the joint margin) restart them,
+    /// and so does a sample without an estimate.
+    fn update_rest_mean(&mut self, q: &ActiveJoints) {
+        let Some(limits) = self.limits.mounting else {
+            return;
+        };
+        let rest = &mut self.rest;
+        let TipOutcome::Estimate(e) = self.last.tip else {
+            *rest = RestMean::EMPTY;
+            return;
+        };
+        let moved = rest
+            .joints
+            .is_some_and(|p| largest_move(q, &p).1 > self.limits.joint_margin_m);
+        if moved || rest.joints.is_none() {
+            *rest = RestMean {
+                joints: Some(*q),
+                ..RestMean::EMPTY
+            };
+        }
+        rest.count = rest.count.saturating_add(1).min(limits.rest_samples);
+        debug_assert!(rest.count >= 1 && rest.count <= limits.rest_samples);
+        let k = 1.0 / f64::from(rest.count);
+        rest.force_n += (e.force_n - rest.force_n) * k;
+        rest.std_n = e.std_n;
+        if let Some(t) = self.last.torque {
+            rest.torque_nm += (t.residual_nm - rest.torque_nm) * k;
+            rest.std_nm = t.std_nm;
+        }
+    }
+
+    /// The first reset's check of the wrench at rest ([`MountingLimits`]):
+    /// the refusal's reason, or `None` when the residuals are within bounds
+    /// (or there is no estimate: the guard's own blocker then refuses).
+    fn mounting_verdict(&self, limits: &MountingLimits) -> Option<Reason> {
+        let (TipOutcome::Estimate(_), Some(pose)) = (self.last.tip, self.last.pose) else {
+            return None;
+        };
+        let rest = &self.rest;
+        if rest.count == 0 {
+            return None;
+        }
+        let root_n = libm::sqrt(f64::from(rest.count));
+        let u = pose.rod_dir;
+        let f = rest.force_n;
+        let axial_n = f.dot(&u).abs();
+        let lateral_n = (f - u * f.dot(&u)).norm();
+        let noise_n = limits.sigma * rest.std_n.norm() / root_n;
+        let checks = [
+            (
+                RestResidual::Lateral,
+                lateral_n,
+                noise_n + limits.tolerance_n,
+            ),
+            (
+                RestResidual::Axial,
+                axial_n,
+                noise_n + limits.friction_n + limits.tolerance_n,
+            ),
+            (
+                RestResidual::Torque(Axis::X),
+                rest.torque_nm.x.abs(),
+                limits.sigma * rest.std_nm.x / root_n + limits.tolerance_nm,
+            ),
+            (
+                RestResidual::Torque(Axis::Y),
+                rest.torque_nm.y.abs(),
+                limits.sigma * rest.std_nm.y / root_n + limits.tolerance_nm,
+            ),
+            (
+                RestResidual::Torque(Axis::Z),
+                rest.torque_nm.z.abs(),
+                limits.sigma * rest.std_nm.z / root_n + limits.tolerance_nm,
+            ),
+        ];
+        // NaN counts as beyond (conservative).
+        checks
+            .into_iter()
+            .find(|(_, value, allowed)| value.is_nan() || value > allowed)
+            .map(|(residual, value, allowed)| Reason::MountingMismatch {
+                residual,
+                value,
+                allowed,
+            })
     }
 
     /// Applies `command` after this cycle's step (whose output is in
@@ -781,6 +1439,7 @@ impl Estimator {
         &mut self,
         command: Command,
         input: &CycleInput,
+        now_ns: Option<u64>,
     ) -> Result<CommandAccepted, CommandRefused> {
         if let Command::SetBias(bias) = command {
             bias.check()
@@ -800,6 +1459,20 @@ impl Estimator {
             };
         }
         if command == Command::Reset {
+            // The first reset: the wrench at rest must match the model,
+            // unless a fault blocks it anyway (the guard then names it).
+            let fault_blocks = self
+                .guard
+                .reset_blocker()
+                .is_some_and(|r| !matches!(r, Reason::AboveStop { .. }));
+            if self.guard.awaiting_first_reset()
+                && self.guard.state().is_halting()
+                && !fault_blocks
+                && let Some(limits) = self.limits.mounting
+                && let Some(reason) = self.mounting_verdict(&limits)
+            {
+                return Err(CommandRefused::Reset { reason });
+            }
             return match self.guard.reset(input.cycle) {
                 Ok(Some(t)) => {
                     self.last.transition = Some(t);
@@ -809,10 +1482,12 @@ impl Estimator {
                 Err(e) => Err(CommandRefused::Reset { reason: e.reason }),
             };
         }
-        // Tare or bias: only in Ok, below every warn limit, on this cycle's
-        // estimate.
+        // Tare or bias: only in Ok (or the Warn of a due tare), below every
+        // warn limit, on this cycle's estimate.
         let state = self.guard.state();
-        if state != GuardState::Ok {
+        let tare_warn =
+            state == GuardState::Warn && matches!(self.guard.reason(), Reason::TareDue { .. });
+        if state != GuardState::Ok && !tare_warn {
             return Err(CommandRefused::NotOk {
                 state,
                 reason: self.guard.reason(),
@@ -832,6 +1507,9 @@ impl Estimator {
         };
         let previous = self.bias;
         self.bias = bias;
+        // The tare's age restarts (a clock is known: the guard is not Ok
+        // without one).
+        self.tare_ns = now_ns.or(self.tare_ns);
         Ok(CommandAccepted::BiasSet { previous, bias })
     }
 

@@ -161,7 +161,17 @@ pub struct GuardConfig {
     /// [`ForcePart::ALL`] order, N (default: the configured stop limits, so
     /// that limits can only be lowered).
     ceiling_n: [f64; 3],
+    /// In `Retreat`, how far a part's filtered value may rise above the
+    /// lowest value it had since the retreat began before the guard stops
+    /// again, N ([`GuardConfig::with_retreat_rise_n`]).
+    retreat_rise_n: f64,
 }
+
+/// Default rise allowance in `Retreat`, N: well above the excursions of the
+/// filtered tip force's noise (its standard deviation is about 0.1-0.3 N with
+/// the HEX-6 and a 5 Hz filter at the nominal pose), so that a still, noisy
+/// retreat never stops by itself, and well below any stop limit.
+pub const DEFAULT_RETREAT_RISE_N: f64 = 2.0;
 
 fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
     SettingError::Invalid { field, value, why }
@@ -250,7 +260,28 @@ impl GuardConfig {
             stop_n,
             clear_n,
             ceiling_n: stop_n,
+            retreat_rise_n: DEFAULT_RETREAT_RISE_N,
         })
+    }
+
+    /// Sets the rise allowance of `Retreat` (finite, >= 0, below the smallest
+    /// stop limit).
+    pub fn with_retreat_rise_n(mut self, rise_n: f64) -> Result<Self, SettingError> {
+        let smallest_stop_n = self.stop_n.iter().fold(f64::INFINITY, |a, b| a.min(*b));
+        if !(rise_n.is_finite() && rise_n >= 0.0 && rise_n < smallest_stop_n) {
+            return Err(invalid(
+                "retreat_rise_n",
+                rise_n,
+                "must be finite, >= 0 and below every stop limit",
+            ));
+        }
+        self.retreat_rise_n = rise_n;
+        Ok(self)
+    }
+
+    /// The rise allowance of `Retreat`, N.
+    pub fn retreat_rise_n(&self) -> f64 {
+        self.retreat_rise_n
     }
 
     /// The checked limits.
@@ -321,6 +352,7 @@ impl GuardConfig {
         }
         Ok(Self {
             ceiling_n: self.ceiling_n,
+            retreat_rise_n: self.retreat_rise_n,
             ..next
         })
     }
@@ -382,19 +414,67 @@ pub struct GuardInput {
     pub joints_valid: bool,
     /// The tip-force estimate.
     pub tip: TipInput,
+    /// Added to every part before it is compared with its limits, beside the
+    /// standard-deviation margin, N (finite, >= 0; else it counts as
+    /// infinite): the bound on the bias drift since the last tare
+    /// (`drift_n_per_s * age_s`).
+    pub extra_margin_n: f64,
+    /// `Some(Reason::TareDue { .. })` when a tare is due: Ok becomes Warn.
+    pub tare_due: Option<Reason>,
+    /// The low-passed F_tip of this cycle ({0}, N), when there is one: what
+    /// `Retreat` watches for a rising force (the unfiltered estimate's noise
+    /// would make its lowest value drift down and stop a still retreat).
+    /// Without it a reset above the stop limit is refused, as without
+    /// `Retreat`.
+    pub smoothed_force_n: Option<Vec3>,
 }
 
-/// The guard's decision.
+/// The guard's decision. Deliberately not `#[non_exhaustive]` (see
+/// [`Reason`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GuardState {
     /// The robot may move.
     Ok,
-    /// The robot may move; the tip force is near a stop limit.
+    /// The robot may move; the tip force is near a stop limit (or a tare is
+    /// due).
     Warn,
     /// A stop limit was exceeded: the robot must stop. Latched until reset.
     Stop,
     /// The force cannot be trusted: the robot must stop. Latched until reset.
     Fault,
+    /// The way back from a Stop whose force persists: the drives are
+    /// released, but only motions that reduce the tip force are accepted
+    /// (the loop's rule, [`reduces_force`]); a new fault is a Fault, a
+    /// rising force a Stop; below the warn limits it is Ok again.
+    Retreat,
+}
+
+impl GuardState {
+    /// Every state, in code order.
+    pub const ALL: [GuardState; 5] = [Self::Ok, Self::Warn, Self::Stop, Self::Fault, Self::Retreat];
+
+    /// Whether the drives must be halted (Stop or Fault): a quick stop, no
+    /// motion until an accepted reset.
+    pub fn is_halting(self) -> bool {
+        matches!(self, GuardState::Stop | GuardState::Fault)
+    }
+
+    /// The stable numeric code (wire, recordings): Ok 0, Warn 1, Stop 2,
+    /// Fault 3, Retreat 4.
+    pub const fn code(self) -> u8 {
+        match self {
+            Self::Ok => 0,
+            Self::Warn => 1,
+            Self::Stop => 2,
+            Self::Fault => 3,
+            Self::Retreat => 4,
+        }
+    }
+
+    /// The state of a code, if any.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|s| s.code() == code)
+    }
 }
 
 impl fmt::Display for GuardState {
@@ -404,8 +484,44 @@ impl fmt::Display for GuardState {
             Self::Warn => "warn",
             Self::Stop => "stop",
             Self::Fault => "fault",
+            Self::Retreat => "retreat",
         })
     }
+}
+
+/// Whether a wanted tip displacement `step_m` (base frame, m) reduces the
+/// tip force `force_n` (F_tip: what the tip applies to the tissue, {0}) with
+/// the rod along the unit `rod_dir` u: the rule of motion in
+/// [`GuardState::Retreat`].
+///
+/// Sign convention: the tissue is pushed by F_tip, so moving the tip along
+/// +F_tip pushes deeper and raises the force; moving against it relieves
+/// it. Accepted: a step within 60 degrees of -F_tip (`step . F_tip <=
+/// -cos 60 |step| |F_tip|`: mostly against the force, not a drag across
+/// the tissue), or backing out along the rod (`step` within 8 degrees of
+/// -u) whatever the force's direction: it withdraws the tip from the
+/// tissue, which a lateral force (perpendicular to u) alone would not
+/// allow. A zero step, a zero force (no direction to retreat from) or a
+/// non-finite input is refused.
+pub fn reduces_force(force_n: &Vec3, rod_dir: &Vec3, step_m: &Vec3) -> bool {
+    /// cos(8 degrees): how close to -u a step must point to count as backing
+    /// out along the rod.
+    const BACK_OUT_COS: f64 = 0.990_268_068_741_570_3;
+    /// cos(60 degrees).
+    const AGAINST_COS: f64 = 0.5;
+    let len = step_m.norm();
+    let force = force_n.norm();
+    let usable = len.is_finite()
+        && len > 0.0
+        && force.is_finite()
+        && force > 0.0
+        && rod_dir.iter().all(|v| v.is_finite());
+    if !usable {
+        return false;
+    }
+    let against_force = step_m.dot(force_n) <= -AGAINST_COS * len * force;
+    let backing_out = -step_m.dot(rod_dir) / len >= BACK_OUT_COS;
+    against_force || backing_out
 }
 
 /// One of the three parts of the tip force that have their own limits.
@@ -484,7 +600,11 @@ impl fmt::Display for Axis {
 
 /// Why the guard is in its state, or why a reset was refused. Carries the facts
 /// (values, limits, which part or field); its `Display` is a short sentence.
-#[non_exhaustive]
+///
+/// Deliberately not `#[non_exhaustive]`: every crate that turns a reason into
+/// a code, a name or a sentence matches it exhaustively, so a new reason
+/// fails to compile until it is given a code ([`Reason::code`]) and a row in
+/// [`REASONS`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Reason {
     /// No input has been stepped yet (the initial state).
@@ -647,6 +767,242 @@ pub enum Reason {
     BelowWarn,
     /// An accepted reset.
     Reset,
+    /// The initial latch after good input: nothing faults, the guard waits
+    /// for the operator's first reset (`sarctl reset`) before the robot may
+    /// move.
+    AwaitingFirstReset,
+    /// The sensor's six readings repeated bit for bit over `repeats` new
+    /// samples while its counter advanced (a frozen, stuck-at sensor: a live
+    /// one always shows noise).
+    SensorFrozen {
+        /// Consecutive new samples identical to the one before them.
+        repeats: u32,
+    },
+    /// A raw reading (before bias removal) is at or beyond the sensor's
+    /// measuring range: the true force is unknown.
+    SensorSaturated {
+        /// Which sensor channel.
+        channel: SensorChannel,
+        /// The reading, N or N m.
+        value: f64,
+        /// The range of that channel, N or N m.
+        range: f64,
+    },
+    /// Too many single-sample jumps far beyond the noise within a window of
+    /// new samples (an unreliable sensor: interference, a loose connector).
+    SensorSpikes {
+        /// Spikes counted in the window.
+        spikes: u32,
+        /// The window, new samples.
+        window: u32,
+    },
+    /// The last tare is older than the configured age: the bias may have
+    /// drifted; a tare is due (a Warn).
+    TareDue {
+        /// Time since the last tare, s.
+        age_s: f64,
+        /// The configured largest age, s.
+        max_age_s: f64,
+    },
+    /// A tare was accepted while a tare was due: back to Ok.
+    Tared,
+    /// The first reset was refused: at rest, with the tip free, the measured
+    /// wrench differs from the model (the mean estimated tip force and the
+    /// mean torque residual over the samples at rest are the residuals): a
+    /// sensor mounted or scaled otherwise than configured, an untared
+    /// sensor, another manipulator than the configured one, or something
+    /// touching the tip.
+    MountingMismatch {
+        /// Which residual.
+        residual: RestResidual,
+        /// Its magnitude (mean over the samples at rest), N or N m.
+        value: f64,
+        /// What is accepted (noise of the mean, friction, tolerance), N or N m.
+        allowed: f64,
+    },
+    /// A reset accepted while a part is still at or above its stop limit:
+    /// the guard enters `Retreat` (only motions that reduce the force).
+    RetreatEntered {
+        /// The part at or above its stop limit.
+        part: ForcePart,
+        /// Its value with the margin, N.
+        force_n: f64,
+        /// Its stop limit, N.
+        limit_n: f64,
+    },
+    /// In `Retreat` the (filtered) force rose above the bound: back to Stop.
+    ForceRising {
+        /// Which part.
+        part: ForcePart,
+        /// Its filtered value, N.
+        force_n: f64,
+        /// The bound it passed: max(stop limit, lowest since entry + rise
+        /// allowance), N.
+        bound_n: f64,
+    },
+    /// A host fault that the daemon passes in (its publishing thread, which
+    /// carries the operator's commands and the published state, has made no
+    /// progress for too long).
+    PublisherStalled {
+        /// How long without progress, ms.
+        stalled_ms: u32,
+    },
+}
+
+/// A residual of the wrench at rest against the model (the first reset's
+/// check).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RestResidual {
+    /// The tip force along the rod, N.
+    Axial,
+    /// The tip force across the rod, N.
+    Lateral,
+    /// The sensor torque on one sensor axis, N m.
+    Torque(Axis),
+}
+
+impl fmt::Display for RestResidual {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Axial => f.write_str("axial force"),
+            Self::Lateral => f.write_str("lateral force"),
+            Self::Torque(axis) => write!(f, "torque {axis}"),
+        }
+    }
+}
+
+/// A channel of the force/torque sensor, sensor frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SensorChannel {
+    /// Force x.
+    Fx,
+    /// Force y.
+    Fy,
+    /// Force z.
+    Fz,
+    /// Torque x.
+    Tx,
+    /// Torque y.
+    Ty,
+    /// Torque z.
+    Tz,
+}
+
+impl SensorChannel {
+    /// Fx, Fy, Fz, Tx, Ty, Tz.
+    pub const ALL: [SensorChannel; 6] =
+        [Self::Fx, Self::Fy, Self::Fz, Self::Tx, Self::Ty, Self::Tz];
+}
+
+impl fmt::Display for SensorChannel {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Fx => "Fx",
+            Self::Fy => "Fy",
+            Self::Fz => "Fz",
+            Self::Tx => "Tx",
+            Self::Ty => "Ty",
+            Self::Tz => "Tz",
+        })
+    }
+}
+
+/// Every reason's stable code and name, in code order (recordings, the wire
+/// and `sarctl` use the codes; SAFETY.md names every reason). Codes never
+/// change meaning; a new reason gets the next free code.
+pub const REASONS: [(u16, &str); 35] = [
+    (1, "no_input_yet"),
+    (2, "cycle_out_of_order"),
+    (3, "clock_failed"),
+    (4, "clock_not_advancing"),
+    (5, "sensor_counter_gap"),
+    (6, "sensor_status"),
+    (7, "joint_jump"),
+    (8, "joints_stamp_backwards"),
+    (9, "torque_implausible"),
+    (10, "reset_not_current"),
+    (11, "sensor_invalid"),
+    (12, "sensor_stale"),
+    (13, "joints_invalid"),
+    (14, "joints_stale"),
+    (15, "pose_invalid"),
+    (16, "non_finite"),
+    (17, "negative_std"),
+    (18, "rod_dir_not_unit"),
+    (19, "estimator_not_observable"),
+    (20, "not_observable"),
+    (21, "above_stop"),
+    (22, "above_warn"),
+    (23, "below_warn"),
+    (24, "reset"),
+    (25, "following_error"),
+    (26, "awaiting_first_reset"),
+    (27, "sensor_frozen"),
+    (28, "sensor_saturated"),
+    (29, "sensor_spikes"),
+    (30, "tare_due"),
+    (31, "tared"),
+    (32, "mounting_mismatch"),
+    (33, "retreat_entered"),
+    (34, "force_rising"),
+    (35, "publisher_stalled"),
+];
+
+impl Reason {
+    /// The stable numeric code (see [`REASONS`]). Exhaustive: a new variant
+    /// does not compile until it has one.
+    pub const fn code(&self) -> u16 {
+        match self {
+            Self::NoInputYet => 1,
+            Self::CycleOutOfOrder { .. } => 2,
+            Self::ClockFailed => 3,
+            Self::ClockNotAdvancing { .. } => 4,
+            Self::SensorCounterGap { .. } => 5,
+            Self::SensorStatus { .. } => 6,
+            Self::JointJump { .. } => 7,
+            Self::JointsStampBackwards { .. } => 8,
+            Self::TorqueImplausible { .. } => 9,
+            Self::ResetNotCurrent { .. } => 10,
+            Self::SensorInvalid => 11,
+            Self::SensorStale { .. } => 12,
+            Self::JointsInvalid => 13,
+            Self::JointsStale { .. } => 14,
+            Self::PoseInvalid => 15,
+            Self::NonFinite { .. } => 16,
+            Self::NegativeStd { .. } => 17,
+            Self::RodDirNotUnit { .. } => 18,
+            Self::EstimatorNotObservable => 19,
+            Self::NotObservable { .. } => 20,
+            Self::AboveStop { .. } => 21,
+            Self::AboveWarn { .. } => 22,
+            Self::BelowWarn => 23,
+            Self::Reset => 24,
+            Self::FollowingError { .. } => 25,
+            Self::AwaitingFirstReset => 26,
+            Self::SensorFrozen { .. } => 27,
+            Self::SensorSaturated { .. } => 28,
+            Self::SensorSpikes { .. } => 29,
+            Self::TareDue { .. } => 30,
+            Self::Tared => 31,
+            Self::MountingMismatch { .. } => 32,
+            Self::RetreatEntered { .. } => 33,
+            Self::ForceRising { .. } => 34,
+            Self::PublisherStalled { .. } => 35,
+        }
+    }
+
+    /// The stable name of the reason (snake case, as in [`REASONS`]).
+    pub fn name(&self) -> &'static str {
+        reason_name(self.code())
+    }
+}
+
+/// The name of a reason code ([`REASONS`]), or `"unknown"`.
+pub fn reason_name(code: u16) -> &'static str {
+    REASONS
+        .iter()
+        .find(|(c, _)| *c == code)
+        .map_or("unknown", |(_, name)| name)
 }
 
 impl fmt::Display for Reason {
@@ -764,6 +1120,61 @@ impl fmt::Display for Reason {
                 f.write_str("every tip force part is below its warn limit minus the hysteresis")
             }
             Self::Reset => f.write_str("reset accepted"),
+            Self::AwaitingFirstReset => f.write_str(
+                "waiting for the first reset: check that the tip is free, then reset (sarctl reset)",
+            ),
+            Self::SensorFrozen { repeats } => write!(
+                f,
+                "the force sensor is frozen: {repeats} new samples repeated the same six values"
+            ),
+            Self::SensorSaturated {
+                channel,
+                value,
+                range,
+            } => write!(
+                f,
+                "the force sensor is saturated: {channel} reads {value:.3}, range {range:.3}"
+            ),
+            Self::SensorSpikes { spikes, window } => write!(
+                f,
+                "the force sensor is unreliable: {spikes} spikes within {window} samples"
+            ),
+            Self::TareDue { age_s, max_age_s } => write!(
+                f,
+                "a tare is due: the last one is {age_s:.0} s old (max {max_age_s:.0} s)"
+            ),
+            Self::Tared => f.write_str("tare accepted"),
+            Self::MountingMismatch {
+                residual,
+                value,
+                allowed,
+            } => write!(
+                f,
+                "at rest the {residual} differs from the model by {value:.3} (allowed \
+                 {allowed:.3}): free the tip, tare the sensor with the rod detached, check \
+                 sensor_rotation, counts_per_n and the manipulator profile"
+            ),
+            Self::RetreatEntered {
+                part,
+                force_n,
+                limit_n,
+            } => write!(
+                f,
+                "retreat: {part} tip force {force_n:.2} N is above the stop limit {limit_n:.2} N; \
+                 only motions that reduce it are accepted"
+            ),
+            Self::ForceRising {
+                part,
+                force_n,
+                bound_n,
+            } => write!(
+                f,
+                "the {part} tip force rose to {force_n:.2} N during the retreat (bound {bound_n:.2} N)"
+            ),
+            Self::PublisherStalled { stalled_ms } => write!(
+                f,
+                "the publishing thread made no progress for {stalled_ms} ms: no commands, no state"
+            ),
         }
     }
 }
@@ -810,6 +1221,12 @@ pub struct Guard {
     warn_count: u32,
     /// Up/down count over new samples of every part below warn minus hysteresis.
     clear_count: u32,
+    /// Still in the initial latch (no reset accepted yet).
+    initial: bool,
+    /// The filtered parts of the most recent input (no margin), N.
+    smoothed_parts_n: Option<[f64; 3]>,
+    /// In `Retreat`: the lowest filtered value of each part since it began, N.
+    retreat_min_n: [f64; 3],
 }
 
 /// Magnitudes of the total, axial and lateral parts of `force_n` for the unit
@@ -843,7 +1260,8 @@ fn first_at_or_above(parts_n: &[f64; 3], limits_n: &[f64; 3]) -> Option<(ForcePa
 
 impl Guard {
     /// A guard in `Fault` with [`Reason::NoInputYet`]: a reset after a good
-    /// input is needed before the robot may move.
+    /// input is needed before the robot may move (while it waits, with good
+    /// input, its reason is [`Reason::AwaitingFirstReset`]).
     pub fn new(config: GuardConfig) -> Self {
         Self {
             config,
@@ -855,6 +1273,9 @@ impl Guard {
             stop_count: 0,
             warn_count: 0,
             clear_count: 0,
+            initial: true,
+            smoothed_parts_n: None,
+            retreat_min_n: [0.0; 3],
         }
     }
 
@@ -864,10 +1285,16 @@ impl Guard {
     }
 
     /// Why the guard is in its current state (the latched first reason for
-    /// `Stop` and `Fault`; the entering reason for `Warn`; `Reset` or
-    /// `BelowWarn` for `Ok`).
+    /// `Stop` and `Fault`, except in the initial latch, which shows this
+    /// cycle's fault or [`Reason::AwaitingFirstReset`]; the entering reason
+    /// for `Warn` and `Retreat`; `Reset`, `BelowWarn` or `Tared` for `Ok`).
     pub fn reason(&self) -> Reason {
         self.reason
+    }
+
+    /// Whether no reset has been accepted yet (the initial latch).
+    pub fn awaiting_first_reset(&self) -> bool {
+        self.initial
     }
 
     /// The configuration.
@@ -887,7 +1314,8 @@ impl Guard {
     }
 
     /// What in the most recent input would make [`Guard::reset`] refuse, if
-    /// anything: a fault condition, a part at or above its stop limit, or
+    /// anything: a fault condition, a part at or above its stop limit (which
+    /// a reset turns into `Retreat` when a filtered force is available), or
     /// [`Reason::NoInputYet`].
     pub fn reset_blocker(&self) -> Option<Reason> {
         self.blocker
@@ -900,7 +1328,8 @@ impl Guard {
         self.above_warn
     }
 
-    /// Feeds one control cycle. Returns `Some` only when the state changed.
+    /// Feeds one control cycle. Returns `Some` only when the state (or, in
+    /// `Warn`, its reason) changed.
     #[inline]
     pub fn step(&mut self, input: &GuardInput) -> Option<Transition> {
         let cycle = input.cycle;
@@ -908,12 +1337,27 @@ impl Guard {
             Err(fault) => {
                 self.blocker = Some(fault);
                 self.above_warn = Some(fault);
+                self.smoothed_parts_n = None;
                 self.stop_count = 0;
                 self.warn_count = 0;
                 self.clear_count = 0;
+                if self.initial && self.state == GuardState::Fault {
+                    // The initial latch shows what blocks the first reset now.
+                    self.reason = fault;
+                    return None;
+                }
                 return self.enter(GuardState::Fault, fault, cycle);
             }
             Ok(parts_n) => parts_n,
+        };
+        if self.initial && self.state == GuardState::Fault {
+            self.reason = Reason::AwaitingFirstReset;
+        }
+        self.smoothed_parts_n = match (input.smoothed_force_n, input.tip) {
+            (Some(f), TipInput::Estimate { rod_dir, .. }) if f.iter().all(|v| v.is_finite()) => {
+                Some(force_parts_n(&f, &rod_dir))
+            }
+            _ => None,
         };
         let cfg = &self.config;
         let stop_hit = first_at_or_above(&parts_n, &cfg.stop_n);
@@ -936,6 +1380,9 @@ impl Guard {
             self.warn_count = vote(self.warn_count, warn_hit.is_some());
             self.clear_count = vote(self.clear_count, clear);
         }
+        debug_assert!(self.stop_count <= debounce);
+        debug_assert!(self.warn_count <= debounce);
+        debug_assert!(self.clear_count <= debounce);
         self.blocker = stop_hit.map(|(part, force_n, limit_n)| Reason::AboveStop {
             part,
             force_n,
@@ -949,6 +1396,7 @@ impl Guard {
 
         match self.state {
             GuardState::Stop | GuardState::Fault => None,
+            GuardState::Retreat => self.step_retreat(&parts_n, clear, cycle),
             GuardState::Ok | GuardState::Warn => {
                 if let Some((part, force_n, limit_n)) = stop_hit
                     && self.stop_count >= debounce
@@ -960,10 +1408,10 @@ impl Guard {
                     };
                     return self.enter(GuardState::Stop, reason, cycle);
                 }
-                if self.state == GuardState::Ok {
-                    if let Some((part, force_n, limit_n)) = warn_hit
-                        && self.warn_count >= debounce
-                    {
+                let warn_due = warn_hit.filter(|_| self.warn_count >= debounce);
+                let tare_warn = matches!(self.reason, Reason::TareDue { .. });
+                if self.state == GuardState::Ok || tare_warn {
+                    if let Some((part, force_n, limit_n)) = warn_due {
                         let reason = Reason::AboveWarn {
                             part,
                             force_n,
@@ -971,9 +1419,18 @@ impl Guard {
                         };
                         // Leaving Warn needs a fresh run of clear samples.
                         self.clear_count = 0;
-                        return self.enter(GuardState::Warn, reason, cycle);
+                        return self.enter_reason(GuardState::Warn, reason, cycle);
                     }
-                } else if clear && self.clear_count >= debounce {
+                    return match (self.state, input.tare_due) {
+                        (GuardState::Ok, Some(due)) => self.enter(GuardState::Warn, due, cycle),
+                        // The tare was done: the tare warning is over.
+                        (GuardState::Warn, None) => {
+                            self.enter(GuardState::Ok, Reason::Tared, cycle)
+                        }
+                        _ => None,
+                    };
+                }
+                if clear && self.clear_count >= debounce {
                     // Re-entering Warn needs a fresh run of warn samples.
                     self.warn_count = 0;
                     return self.enter(GuardState::Ok, Reason::BelowWarn, cycle);
@@ -983,18 +1440,58 @@ impl Guard {
         }
     }
 
-    /// Asks to leave `Stop` or `Fault` for `Ok`, judged on the input of
-    /// `cycle`, which must be the cycle just stepped (else refused with
+    /// `Retreat`: Stop when a filtered part rises above
+    /// max(stop limit, its lowest value since the retreat began + the rise
+    /// allowance); Ok when every part has been below its warn limit minus
+    /// the hysteresis for the debounce.
+    fn step_retreat(&mut self, parts_n: &[f64; 3], clear: bool, cycle: u64) -> Option<Transition> {
+        // Without a filtered value (the filter restarting after lost
+        // samples) the unfiltered parts, margin included, stand in.
+        let watched = self.smoothed_parts_n.unwrap_or(*parts_n);
+        let rise_n = self.config.retreat_rise_n;
+        let mut rising = None;
+        for (((part, value), lowest), stop) in ForcePart::ALL
+            .iter()
+            .zip(watched.iter())
+            .zip(self.retreat_min_n.iter_mut())
+            .zip(self.config.stop_n.iter())
+        {
+            *lowest = lowest.min(*value);
+            let bound_n = stop.max(*lowest + rise_n);
+            // NaN counts as rising (conservative).
+            if rising.is_none() && (value.is_nan() || *value > bound_n) {
+                rising = Some(Reason::ForceRising {
+                    part: *part,
+                    force_n: *value,
+                    bound_n,
+                });
+            }
+        }
+        if let Some(reason) = rising {
+            return self.enter(GuardState::Stop, reason, cycle);
+        }
+        if clear && self.clear_count >= self.config.limits.debounce_samples {
+            self.warn_count = 0;
+            self.stop_count = 0;
+            return self.enter(GuardState::Ok, Reason::BelowWarn, cycle);
+        }
+        None
+    }
+
+    /// Asks to leave `Stop` or `Fault`, judged on the input of `cycle`, which
+    /// must be the cycle just stepped (else refused with
     /// [`Reason::ResetNotCurrent`]; before any step with
     /// [`Reason::NoInputYet`]): call it right after [`Guard::step`] of the same
     /// cycle (as [`crate::cycle::Estimator::cycle`] does for a reset command).
-    /// In `Ok` or `Warn` it does nothing (`Ok(None)`). Refused while the cause
-    /// persists in that input: any fault condition, any part at or above its
-    /// stop limit (not debounced). An accepted reset clears the debounce
-    /// counts.
+    /// In `Ok`, `Warn` or `Retreat` it does nothing (`Ok(None)`). Refused
+    /// while a fault condition persists in that input. With every part below
+    /// its stop limit it goes to `Ok`; with a part still at or above its
+    /// stop limit (not debounced) it goes to `Retreat` when a filtered force
+    /// was given this cycle, and is refused otherwise. An accepted reset
+    /// clears the debounce counts.
     pub fn reset(&mut self, cycle: u64) -> Result<Option<Transition>, ResetRefused> {
         match self.state {
-            GuardState::Ok | GuardState::Warn => Ok(None),
+            GuardState::Ok | GuardState::Warn | GuardState::Retreat => Ok(None),
             GuardState::Stop | GuardState::Fault => {
                 let Some(last) = self.last_cycle else {
                     return Err(ResetRefused {
@@ -1006,15 +1503,51 @@ impl Guard {
                         reason: Reason::ResetNotCurrent { last, got: cycle },
                     });
                 }
-                if let Some(reason) = self.blocker {
-                    return Err(ResetRefused { reason });
-                }
+                let (to, reason) = match (self.blocker, self.smoothed_parts_n) {
+                    (None, _) => (GuardState::Ok, Reason::Reset),
+                    (
+                        Some(Reason::AboveStop {
+                            part,
+                            force_n,
+                            limit_n,
+                        }),
+                        Some(smoothed),
+                    ) => {
+                        self.retreat_min_n = smoothed;
+                        (
+                            GuardState::Retreat,
+                            Reason::RetreatEntered {
+                                part,
+                                force_n,
+                                limit_n,
+                            },
+                        )
+                    }
+                    (Some(reason), _) => return Err(ResetRefused { reason }),
+                };
                 self.stop_count = 0;
                 self.warn_count = 0;
                 self.clear_count = 0;
-                Ok(self.enter(GuardState::Ok, Reason::Reset, cycle))
+                self.initial = false;
+                Ok(self.enter(to, reason, cycle))
             }
         }
+    }
+
+    /// Like [`Guard::enter`], but a change of reason within the same state
+    /// is a transition too (Warn for a due tare becoming Warn for a force).
+    fn enter_reason(&mut self, to: GuardState, reason: Reason, cycle: u64) -> Option<Transition> {
+        if self.state == to {
+            let from = self.state;
+            self.reason = reason;
+            return Some(Transition {
+                cycle,
+                from,
+                to,
+                reason,
+            });
+        }
+        self.enter(to, reason, cycle)
     }
 
     /// Moves to `to` with `reason` unless already there (a latched state keeps
@@ -1113,10 +1646,16 @@ impl Guard {
             });
         }
         // The margin: k |std| bounds k standard deviations of every part.
-        let margin_n = if limits.std_margin > 0.0 {
+        let mut margin_n = if limits.std_margin > 0.0 {
             limits.std_margin * std_n.norm()
         } else {
             0.0
+        };
+        // The drift bound: a negative or NaN one counts as unbounded.
+        margin_n += if input.extra_margin_n >= 0.0 {
+            input.extra_margin_n
+        } else {
+            f64::INFINITY
         };
         Ok(force_parts_n(&force_n, &rod_dir).map(|part_n| part_n + margin_n))
     }
@@ -1158,6 +1697,9 @@ mod tests {
                 observable: true,
                 max_std_n: 2.0,
             },
+            extra_margin_n: 0.0,
+            tare_due: None,
+            smoothed_force_n: None,
         }
     }
 

@@ -44,7 +44,7 @@ fn config_with_speed(max_joint_speed_mps: f64) -> EstimatorConfig {
     let mut config = example_estimator_config();
     config.plausibility = PlausibilityConfig::new(PlausibilityLimits {
         max_joint_speed_mps,
-        ..PlausibilityLimits::default()
+        ..scripted_checks_only()
     })
     .unwrap();
     config
@@ -245,14 +245,42 @@ fn a_push_ramp_warns_then_stops_and_latches() {
         ),
         "{reason:?}"
     );
-    // Still pushing: the reset is refused.
+    // Still pushing: the reset does not give Ok; it enters Retreat (only
+    // motions that reduce the force, issue 14's way back from a Stop).
     let out = rig.push_command(NOMINAL_Q, &(u * 20.0), Some(Command::Reset));
-    assert!(matches!(
-        out.command.unwrap().result,
-        Err(CommandRefused::Reset {
-            reason: Reason::AboveStop { .. }
-        })
-    ));
+    assert_eq!(out.command.unwrap().result, Ok(CommandAccepted::Reset));
+    assert_eq!(out.guard_state, GuardState::Retreat);
+    assert!(
+        matches!(
+            out.guard_reason,
+            Reason::RetreatEntered {
+                part: ForcePart::Total,
+                ..
+            }
+        ),
+        "{:?}",
+        out.guard_reason
+    );
+    // Pushing harder during the retreat stops again.
+    let mut stopped = None;
+    for _ in 0..100 {
+        let out = rig.push(NOMINAL_Q, &(u * 24.0));
+        if out.guard_state == GuardState::Stop {
+            stopped = Some(out.guard_reason);
+            break;
+        }
+        assert_eq!(out.guard_state, GuardState::Retreat);
+    }
+    assert!(
+        matches!(
+            stopped,
+            Some(Reason::ForceRising {
+                part: ForcePart::Total,
+                ..
+            })
+        ),
+        "{stopped:?}"
+    );
     // The push goes away: Stop stays latched until a reset.
     for _ in 0..10 {
         let out = rig.push(NOMINAL_Q, &Vector3::zeros());
@@ -678,13 +706,19 @@ fn a_reset_is_judged_on_the_input_of_its_own_cycle() {
     assert_eq!(rig.estimator.guard_state(), GuardState::Stop);
     rig.push(NOMINAL_Q, &Vector3::zeros());
     let out = rig.push_command(NOMINAL_Q, &(Vector3::x() * 20.0), Some(Command::Reset));
-    assert!(matches!(
+    // Judged on this cycle's force (at stop level): not Ok, but Retreat.
+    assert_eq!(out.command.unwrap().result, Ok(CommandAccepted::Reset));
+    assert_eq!(out.guard_state, GuardState::Retreat);
+    // In Retreat a reset is a no-op; the force gone, Retreat ends in Ok.
+    let out = rig.reset();
+    assert_eq!(
         out.command.unwrap().result,
-        Err(CommandRefused::Reset {
-            reason: Reason::AboveStop { .. }
-        })
-    ));
-    assert_eq!(out.guard_state, GuardState::Stop);
+        Ok(CommandAccepted::NothingToReset)
+    );
+    for _ in 0..3 {
+        rig.push(NOMINAL_Q, &Vector3::zeros());
+    }
+    assert_eq!(rig.estimator.guard_state(), GuardState::Ok);
     // In Ok a reset is a no-op, reported as such.
     let out = rig.reset();
     assert_eq!(out.guard_state, GuardState::Ok);
@@ -714,6 +748,9 @@ fn a_reset_is_judged_on_the_input_of_its_own_cycle() {
             observable: true,
             max_std_n: 2.0,
         },
+        extra_margin_n: 0.0,
+        tare_due: None,
+        smoothed_force_n: None,
     };
     g.step(&input);
     assert_eq!(

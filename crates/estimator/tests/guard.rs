@@ -90,6 +90,9 @@ fn input(cycle: u64, force_n: V) -> GuardInput {
             observable: observable(&(V::new(0.3, 0.4, 0.5))),
             max_std_n: MAX_STD_N,
         },
+        extra_margin_n: 0.0,
+        tare_due: None,
+        smoothed_force_n: None,
     }
 }
 
@@ -163,7 +166,7 @@ impl Rig {
             GuardState::Ok => return rig,
             GuardState::Warn => warn_axial(),
             GuardState::Stop => stop_axial(),
-            GuardState::Fault => unreachable!(),
+            GuardState::Fault | GuardState::Retreat => unreachable!(),
         };
         rig.hold(f, 2);
         assert_eq!(rig.push(f).unwrap().to, state);
@@ -257,12 +260,14 @@ fn starts_in_fault_and_a_reset_after_a_good_input_gives_ok() {
     assert_eq!(refused.reason, Reason::NoInputYet);
     assert_eq!(rig.state(), GuardState::Fault);
 
-    // A good input does not leave the latched Fault by itself.
+    // A good input does not leave the latched Fault by itself; the reason
+    // then says what the operator must do.
     for _ in 0..10 {
         assert_eq!(rig.push(V::zeros()), None);
     }
     assert_eq!(rig.state(), GuardState::Fault);
-    assert_eq!(rig.guard.reason(), Reason::NoInputYet);
+    assert_eq!(rig.guard.reason(), Reason::AwaitingFirstReset);
+    assert!(rig.guard.awaiting_first_reset());
 
     // A reset must name the cycle just stepped (10).
     assert_eq!(
@@ -668,13 +673,19 @@ fn fault_is_latched_and_keeps_its_first_reason() {
     }
 }
 
+/// The initial latch emits no transition for faults; its reason is the
+/// fault of the latest input (what blocks the first reset now), and with a
+/// good input again it says that it waits for the first reset.
 #[test]
-fn the_initial_fault_keeps_no_input_yet() {
+fn the_initial_fault_shows_what_blocks_the_first_reset() {
     let mut rig = Rig::with(limits());
-    for (name, edit, _) in fault_cases() {
+    for (name, edit, reason) in fault_cases() {
         assert_eq!(rig.push_with(&edit), None, "{name}");
+        assert!(same_reason(&rig.guard.reason(), &reason), "{name}");
     }
-    assert_eq!(rig.guard.reason(), Reason::NoInputYet);
+    assert_eq!(rig.push(V::zeros()), None);
+    assert_eq!(rig.guard.reason(), Reason::AwaitingFirstReset);
+    assert_eq!(rig.state(), GuardState::Fault);
 }
 
 type InputEdit = fn(&mut GuardInput);
@@ -1424,6 +1435,9 @@ fn make_input(op: &Op, largest_cycle: &mut u64) -> GuardInput {
         joints_age_ns: 1_500_000,
         joints_valid: true,
         tip: TipInput::NotObservable,
+        extra_margin_n: 0.0,
+        tare_due: None,
+        smoothed_force_n: None,
     };
     match kind {
         Kind::SensorInvalid => i.sensor_valid = false,
@@ -1482,6 +1496,8 @@ struct Model {
     stop_from: usize,
     warn_from: usize,
     clear_from: usize,
+    /// No reset accepted yet: the initial latch shows the current blocker.
+    initial: bool,
 }
 
 impl Model {
@@ -1497,6 +1513,7 @@ impl Model {
             stop_from: 0,
             warn_from: 0,
             clear_from: 0,
+            initial: true,
         }
     }
 
@@ -1637,10 +1654,18 @@ impl Model {
         let class = self.classify(i);
         self.last = Some(class);
         self.last_cycle = Some(i.cycle.max(self.last_cycle.unwrap_or(0)));
+        let awaiting = self.initial && self.state == GuardState::Fault;
         if let Class::Fault(reason) = class {
             self.history.clear();
             (self.stop_from, self.warn_from, self.clear_from) = (0, 0, 0);
+            if awaiting {
+                self.reason = reason;
+                return None;
+            }
             return self.go(GuardState::Fault, reason, i.cycle);
+        }
+        if awaiting {
+            self.reason = Reason::AwaitingFirstReset;
         }
         if i.new_sample {
             self.history.push(class);
@@ -1698,6 +1723,7 @@ impl Model {
             Some(Class::Force { stop: None, .. }) => {
                 self.history.clear();
                 (self.stop_from, self.warn_from, self.clear_from) = (0, 0, 0);
+                self.initial = false;
                 Ok(self.go(GuardState::Ok, Reason::Reset, cycle))
             }
         }

@@ -77,7 +77,12 @@ use sar_estimator::cycle::{
     Bias, Command, CycleInput, Estimator, JointSample, PlausibilityConfig, PlausibilityLimits,
     SensorSample,
 };
-use sar_estimator::guard::GuardState;
+use sar_estimator::guard::{GuardState, Reason};
+
+thread_local! {
+    /// Which reason codes the allocation-free loop saw (no allocation to record).
+    static SEEN_REASONS: [Cell<bool>; 64] = const { [const { Cell::new(false) }; 64] };
+}
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_kinematics::ActiveJoints;
@@ -131,6 +136,11 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
                 900 => q[2] += 0.01, // a joint jump
                 910 => torque_error_nm = 1.0,
                 920 => command = Some(Command::Reset),
+                // Issue 14's checks: a frozen sensor, saturation, a burst
+                // of spikes.
+                930..=934 => reading = Vector3::new(1.0, -9.0, 0.5),
+                940 => reading.x = 250.0,
+                950..=972 if phase % 2 == 0 => reading.y += 30.0,
                 _ => {}
             }
             CycleInput {
@@ -162,16 +172,27 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
 }
 
 /// 20 000 cycles of the whole per-cycle path (plausibility with the torque
-/// check on, kinematics, tip force, guard, commands) allocate nothing; and the
-/// run did visit Warn, Stop and Fault, and accepted and refused commands.
+/// check and every check of issue 14 on: frozen, saturation, spikes, a tare
+/// falling due 50 ms after each tare, the first reset's check at rest; kinematics, tip
+/// force, guard with Retreat, commands) allocate nothing; and the run did
+/// visit every guard state (Retreat too: resets above the stop limit), and
+/// accepted and refused commands.
 #[test]
 fn the_per_cycle_path_allocates_nothing() {
     let mut inputs = scripted_inputs(20_000);
     let mut config = example_estimator_config();
-    config.plausibility = PlausibilityConfig::new(PlausibilityLimits::default()).unwrap();
+    config.plausibility = PlausibilityConfig::new(PlausibilityLimits {
+        tare: sar_estimator::cycle::TareLimits {
+            max_age_ns: Some(50_000_000),
+            drift_n_per_s: 1e-3,
+        },
+        ..PlausibilityLimits::default()
+    })
+    .unwrap();
     let mut estimator = Estimator::new(&config, Vector3::new(0.4, -1.1, 0.25)).unwrap();
-    let mut seen = [false; 4];
+    let mut seen = [false; 5];
     let mut commands = [0usize; 2];
+    let mut reasons = std::collections::BTreeSet::new();
     let (_, allocations) = allocations_in(|| {
         for input in inputs.iter_mut() {
             // After a Stop or Fault the next cycle carries a reset.
@@ -186,17 +207,52 @@ fn the_per_cycle_path_allocates_nothing() {
             if let Some(event) = out.command {
                 commands[usize::from(event.result.is_ok())] += 1;
             }
-            let k = match out.guard_state {
-                GuardState::Ok => 0,
-                GuardState::Warn => 1,
-                GuardState::Stop => 2,
-                GuardState::Fault => 3,
-            };
-            seen[k] = true;
+            seen[usize::from(out.guard_state.code())] = true;
+            // A plain array: no allocation while counting.
+            let code = out.guard_reason.code();
+            SEEN_REASONS.with(|r| {
+                if let Some(slot) = r.get(usize::from(code)) {
+                    slot.set(true);
+                }
+            });
+        }
+    });
+    SEEN_REASONS.with(|r| {
+        for (code, seen) in r.iter().enumerate() {
+            if seen.get() {
+                reasons.insert(code);
+            }
         }
     });
     assert_eq!(allocations, 0, "the per-cycle path allocated");
-    assert_eq!(seen, [true; 4], "the script must visit every guard state");
+    assert_eq!(seen, [true; 5], "the script must visit every guard state");
+    for reason in [
+        Reason::SensorFrozen { repeats: 0 },
+        Reason::SensorSaturated {
+            channel: sar_estimator::guard::SensorChannel::Fx,
+            value: 0.0,
+            range: 0.0,
+        },
+        Reason::SensorSpikes {
+            spikes: 0,
+            window: 0,
+        },
+        Reason::TareDue {
+            age_s: 0.0,
+            max_age_s: 0.0,
+        },
+        Reason::RetreatEntered {
+            part: sar_estimator::guard::ForcePart::Total,
+            force_n: 0.0,
+            limit_n: 0.0,
+        },
+    ] {
+        assert!(
+            reasons.contains(&usize::from(reason.code())),
+            "the script must reach {}: {reasons:?}",
+            reason.name()
+        );
+    }
     assert!(
         commands[0] > 10 && commands[1] > 10,
         "refused, accepted: {commands:?}"
@@ -278,7 +334,7 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
         ..example_estimator_config()
     };
     let mut estimator = Estimator::new(&config, Vector3::new(0.4, -1.1, 0.25)).unwrap();
-    let mut seen = [false; 4];
+    let mut seen = [false; 5];
     let mut estimates = 0u32;
     let (_, allocations) = allocations_in(|| {
         for input in inputs.iter_mut() {
@@ -296,16 +352,14 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
                 assert!(out.torque.is_some());
                 assert!(e.torsion_nm != 0.0 || e.ujoint_force_n.norm() == 0.0);
             }
-            let k = match out.guard_state {
-                GuardState::Ok => 0,
-                GuardState::Warn => 1,
-                GuardState::Stop => 2,
-                GuardState::Fault => 3,
-            };
-            seen[k] = true;
+            seen[usize::from(out.guard_state.code())] = true;
         }
     });
     assert_eq!(allocations, 0, "the per-cycle path allocated");
-    assert_eq!(seen, [true; 4], "the script must visit every guard state");
+    assert_eq!(
+        seen[..4],
+        [true; 4],
+        "the script must visit every guard state"
+    );
     assert!(estimates > 19_000, "{estimates} estimates");
 }

@@ -40,6 +40,7 @@ pub fn guard_code(s: GuardState) -> GuardStateCode {
         GuardState::Warn => GuardStateCode::Warn,
         GuardState::Stop => GuardStateCode::Stop,
         GuardState::Fault => GuardStateCode::Fault,
+        GuardState::Retreat => GuardStateCode::Retreat,
     }
 }
 

@@ -343,6 +343,8 @@ code_enum!(
         Stop = 2,
         /// Faulted, latched.
         Fault = 3,
+        /// Retreating from a Stop whose force persists.
+        Retreat = 4,
     }
 );
 
@@ -442,62 +444,17 @@ code_enum!(
 /// `CycleInput::reply_status` without a reply (`REPLY_NONE`).
 pub const REPLY_NONE: u8 = 255;
 
-/// The guard reason codes (`REASON_*` of `GuardEvent.msg`): the same numbers
-/// as `crate::control::reason_code` (the wire), so recordings, `sarctl` and
-/// the shared memory agree (a test checks every reason).
+/// The guard reason codes (`REASON_*` of `GuardEvent.msg`): the estimator's
+/// one table (`sar_estimator::guard::REASONS`, `Reason::code`), which the
+/// wire and `sarctl` use too; the `.msg` constants are checked against it by
+/// a test (`tests/messages.rs`). Here only what the table has not.
 pub mod reason {
-    /// `Reason::NoInputYet`.
-    pub const NO_INPUT_YET: u8 = 1;
-    /// `Reason::CycleOutOfOrder`.
-    pub const CYCLE_OUT_OF_ORDER: u8 = 2;
-    /// `Reason::ClockFailed`.
-    pub const CLOCK_FAILED: u8 = 3;
-    /// `Reason::ClockNotAdvancing`.
-    pub const CLOCK_NOT_ADVANCING: u8 = 4;
-    /// `Reason::SensorCounterGap`.
-    pub const SENSOR_COUNTER_GAP: u8 = 5;
-    /// `Reason::SensorStatus`.
-    pub const SENSOR_STATUS: u8 = 6;
-    /// `Reason::JointJump`.
-    pub const JOINT_JUMP: u8 = 7;
-    /// `Reason::JointsStampBackwards`.
-    pub const JOINTS_STAMP_BACKWARDS: u8 = 8;
-    /// `Reason::TorqueImplausible`.
-    pub const TORQUE_IMPLAUSIBLE: u8 = 9;
-    /// `Reason::ResetNotCurrent`.
-    pub const RESET_NOT_CURRENT: u8 = 10;
-    /// `Reason::SensorInvalid`.
-    pub const SENSOR_INVALID: u8 = 11;
-    /// `Reason::SensorStale`.
-    pub const SENSOR_STALE: u8 = 12;
-    /// `Reason::JointsInvalid`.
-    pub const JOINTS_INVALID: u8 = 13;
-    /// `Reason::JointsStale`.
-    pub const JOINTS_STALE: u8 = 14;
-    /// `Reason::PoseInvalid`.
-    pub const POSE_INVALID: u8 = 15;
-    /// `Reason::NonFinite`.
-    pub const NON_FINITE: u8 = 16;
-    /// `Reason::NegativeStd`.
-    pub const NEGATIVE_STD: u8 = 17;
-    /// `Reason::RodDirNotUnit`.
-    pub const ROD_DIR_NOT_UNIT: u8 = 18;
-    /// `Reason::EstimatorNotObservable`.
-    pub const ESTIMATOR_NOT_OBSERVABLE: u8 = 19;
-    /// `Reason::NotObservable`.
-    pub const NOT_OBSERVABLE: u8 = 20;
-    /// `Reason::AboveStop`.
-    pub const ABOVE_STOP: u8 = 21;
-    /// `Reason::AboveWarn`.
-    pub const ABOVE_WARN: u8 = 22;
-    /// `Reason::BelowWarn`.
-    pub const BELOW_WARN: u8 = 23;
-    /// `Reason::Reset`.
-    pub const RESET: u8 = 24;
-    /// `Reason::FollowingError`.
-    pub const FOLLOWING_ERROR: u8 = 25;
-    /// A reason this table does not know yet.
+    /// A code too large for the recording's `uint8` (none today).
     pub const OTHER: u8 = 255;
+    /// A code of the table.
+    pub fn code(reason: &sar_estimator::guard::Reason) -> u8 {
+        u8::try_from(reason.code()).unwrap_or(OTHER)
+    }
 }
 
 /// Bits of `EstimatorState::flags` (`FLAG_*`).

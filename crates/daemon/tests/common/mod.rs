@@ -132,7 +132,7 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             cycle: k,
             from_state: GuardStateCode::Ok,
             to_state: GuardStateCode::Warn,
-            reason_code: reason::ABOVE_WARN,
+            reason_code: 22, // above_warn
             reason_text: FixedStr::new(
                 "total tip force 4.200 N is at or above the warn limit 4.000 N",
             )

@@ -1,7 +1,12 @@
 //! A device emulator for tests: serves the RDT protocol on a loopback UDP
 //! port, honours start (with its sample count), stop, bias, filter and rate,
 //! and follows a deterministic script of faults keyed by packet index (loss,
-//! duplicates, reordering, status faults, going mute until restarted).
+//! duplicates, reordering, status faults, going mute until restarted), and
+//! of the sensor's own failure modes (a frozen reading, saturation, a spike,
+//! a drifting bias). Its readings carry seeded Gaussian noise in counts
+//! ([`EmulatorConfig::noise_counts`]) as a live sensor's do; with no noise
+//! the device is, in effect, frozen (every reading the same), which the
+//! daemon's frozen-sensor check rightly faults on.
 //!
 //! Two pacings: [`Pacing::Periodic`] sends a packet every period from its
 //! own thread (like a device; OnRobot's rate command changes the period), and
@@ -19,6 +24,9 @@ use super::Flavour;
 use super::codec::{
     BIAS_ON, CMD_BIAS, CMD_FILTER, CMD_RATE, CMD_START, CMD_STOP, Request, Response,
 };
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use std::collections::BTreeMap;
 use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -44,6 +52,27 @@ pub enum Action {
     /// Not sent, and the stream ends: the device stays mute until it gets a
     /// new start request (as after a reboot or a lost stream).
     Mute,
+    /// From this packet on the reading is frozen: every packet repeats the
+    /// previous packet's six counts bit for bit while the RDT sequence and
+    /// the sample counter go on (a stuck converter), until [`Action::Thaw`].
+    Freeze,
+    /// From this packet on the reading is live again (ends `Freeze` and
+    /// `Saturate`).
+    Thaw,
+    /// From this packet on one channel (0..=5: Fx, Fy, Fz, Tx, Ty, Tz) reads
+    /// this many counts (an amplifier at its rail: the configured range times
+    /// counts per unit), until [`Action::Thaw`].
+    Saturate {
+        /// 0..=5.
+        channel: usize,
+        /// The counts it reads.
+        counts: i32,
+    },
+    /// This packet alone carries these counts added to its reading.
+    Spike([i32; 6]),
+    /// From this packet on the bias drifts: each channel gains this many
+    /// counts per 1000 packets (linear in the packet index).
+    Drift([i32; 6]),
 }
 
 /// How packets are paced.
@@ -71,10 +100,16 @@ pub struct EmulatorConfig {
     pub first_counter: u32,
     /// Faults by packet index (0-based over all packets produced).
     pub script: Vec<(u64, Action)>,
+    /// Standard deviation of each channel's noise, counts (0: an exact,
+    /// noiseless reading: for protocol tests; a live device is never so).
+    pub noise_counts: [u32; 6],
+    /// Seed of the noise: the same seed gives the same packets.
+    pub seed: u64,
 }
 
 impl EmulatorConfig {
-    /// An OnRobot device with a fixed reading and no faults.
+    /// An OnRobot device with a fixed, noiseless reading and no faults (for
+    /// tests of the protocol, where every count is checked).
     pub fn new(pacing: Pacing) -> Self {
         Self {
             flavour: Flavour::OnRobot,
@@ -82,8 +117,33 @@ impl EmulatorConfig {
             counts: [12_500, -25_000, 98_066, 1_000, -2_000, 3_000],
             first_counter: 1000,
             script: Vec::new(),
+            noise_counts: [0; 6],
+            seed: 0,
         }
     }
+
+    /// A live OnRobot HEX-6 at 10000 counts/N and 100000 counts/N m: the
+    /// article's noise (0.2, 0.2, 0.8 N; 0.01, 0.01, 0.002 N m) on the reading.
+    pub fn live(pacing: Pacing, seed: u64) -> Self {
+        Self {
+            noise_counts: [2_000, 2_000, 8_000, 1_000, 1_000, 200],
+            seed,
+            ..Self::new(pacing)
+        }
+    }
+}
+
+/// The sensor's own state of failure in the emulator.
+#[derive(Debug, Clone, Copy, Default)]
+struct SensorModes {
+    /// The counts every packet repeats.
+    frozen: Option<[i32; 6]>,
+    /// A channel pinned at a value.
+    pinned: Option<(usize, i32)>,
+    /// From which packet index, and how many counts per 1000 packets.
+    drift: Option<(u64, [i32; 6])>,
+    /// The previous packet's counts (before the bias).
+    last: Option<[i32; 6]>,
 }
 
 #[derive(Debug)]
@@ -105,9 +165,58 @@ struct State {
     requests: Vec<Request>,
     raw: Vec<Vec<u8>>,
     starts: u64,
+    noise_counts: [u32; 6],
+    rng: ChaCha8Rng,
+    modes: SensorModes,
 }
 
 impl State {
+    /// The raw counts of packet `index` (before the bias): the reading,
+    /// the noise (drawn for every packet, so that a packet's noise depends
+    /// only on the seed and its index), and the sensor's failure modes.
+    fn reading(&mut self, index: u64, action: Option<Action>) -> [i32; 6] {
+        let mut counts = self.counts;
+        for (c, std) in counts.iter_mut().zip(self.noise_counts) {
+            let z: f64 = self.rng.sample(StandardNormal);
+            // Within i32 by far for any realistic std.
+            *c = c.saturating_add((z * f64::from(std)).round() as i32);
+        }
+        match action {
+            Some(Action::Freeze) => self.modes.frozen = self.modes.last.or(Some(counts)),
+            Some(Action::Thaw) => {
+                self.modes.frozen = None;
+                self.modes.pinned = None;
+            }
+            Some(Action::Saturate { channel, counts }) => {
+                self.modes.pinned = Some((channel, counts));
+            }
+            Some(Action::Drift(rate)) => self.modes.drift = Some((index, rate)),
+            _ => {}
+        }
+        if let Some((from, rate)) = self.modes.drift {
+            let k = index.saturating_sub(from);
+            for (c, r) in counts.iter_mut().zip(rate) {
+                let add = i64::from(r).saturating_mul(i64::try_from(k).unwrap_or(i64::MAX)) / 1000;
+                *c = c.saturating_add(i32::try_from(add).unwrap_or(i32::MAX));
+            }
+        }
+        if let Some(Action::Spike(spike)) = action {
+            for (c, s) in counts.iter_mut().zip(spike) {
+                *c = c.saturating_add(s);
+            }
+        }
+        if let Some((channel, value)) = self.modes.pinned
+            && let Some(c) = counts.get_mut(channel)
+        {
+            *c = value;
+        }
+        if let Some(frozen) = self.modes.frozen {
+            counts = frozen;
+        }
+        self.modes.last = Some(counts);
+        counts
+    }
+
     /// Produces one packet (if streaming) and sends what the script says.
     fn produce(&mut self, socket: &UdpSocket) -> bool {
         let Some(client) = self.client.filter(|_| self.streaming) else {
@@ -122,7 +231,7 @@ impl State {
         self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
         self.counter = self.counter.wrapping_add(1);
         let bias = self.bias.unwrap_or([0; 6]);
-        let mut counts = self.counts;
+        let mut counts = self.reading(index, action);
         for (c, b) in counts.iter_mut().zip(bias) {
             *c = c.wrapping_sub(b);
         }
@@ -155,7 +264,16 @@ impl State {
                 }
                 return true;
             }
-            Some(Action::Status(_) | Action::RestartStream) | None => send(&bytes),
+            Some(
+                Action::Status(_)
+                | Action::RestartStream
+                | Action::Freeze
+                | Action::Thaw
+                | Action::Saturate { .. }
+                | Action::Spike(_)
+                | Action::Drift(_),
+            )
+            | None => send(&bytes),
         }
         if let Some(held) = self.held.take() {
             send(&held);
@@ -253,6 +371,9 @@ impl Emulator {
                 requests: Vec::new(),
                 raw: Vec::new(),
                 starts: 0,
+                noise_counts: config.noise_counts,
+                rng: ChaCha8Rng::seed_from_u64(config.seed),
+                modes: SensorModes::default(),
             }),
             changed: Condvar::new(),
             stop: AtomicBool::new(false),

@@ -332,11 +332,13 @@ pub fn example_estimator_config() -> sar_estimator::cycle::EstimatorConfig {
         tip: sar_estimator::tip_force::TipForceConfig::default(),
         guard: sar_estimator::guard::GuardConfig::new(test_guard_limits()).unwrap(),
         // The default checks, without the torque check: `example_reading`
-        // gives no torque (the cycle tests add it where they check it).
+        // gives no torque (the cycle tests add it where they check it), and
+        // without the checks that need a live, noisy sensor (see
+        // `scripted_checks_only`).
         plausibility: sar_estimator::cycle::PlausibilityConfig::new(
             sar_estimator::cycle::PlausibilityLimits {
                 torque: None,
-                ..Default::default()
+                ..scripted_checks_only()
             },
         )
         .unwrap(),
@@ -346,6 +348,25 @@ pub fn example_estimator_config() -> sar_estimator::cycle::EstimatorConfig {
             cutoff_hz: 20.0,
             sample_period_s: 0.001,
         }),
+    }
+}
+
+/// The default plausibility limits without the checks that a scripted,
+/// noiseless or exactly repeated reading would trip by design: the frozen
+/// sensor, the spikes (scripted steps of the tip force), the first reset's
+/// wrench at rest (scripted contacts at start), the tare's age and drift
+/// margin (exact thresholds). `tests/failure_modes.rs` tests those with a
+/// live, noisy sensor.
+pub fn scripted_checks_only() -> sar_estimator::cycle::PlausibilityLimits {
+    sar_estimator::cycle::PlausibilityLimits {
+        frozen: sar_estimator::cycle::FrozenCheck::Off,
+        spikes: None,
+        mounting: None,
+        tare: sar_estimator::cycle::TareLimits {
+            max_age_ns: None,
+            drift_n_per_s: 0.0,
+        },
+        ..Default::default()
     }
 }
 
