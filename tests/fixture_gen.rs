@@ -165,6 +165,9 @@ impl AxisDrives for TruthTap {
     fn disable(&mut self) -> Result<(), SimError> {
         self.drives.disable()
     }
+    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
+        self.drives.stream(targets, period_ns)
+    }
     fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), SimError> {
         self.drives.set_targets(targets)
     }

@@ -1007,6 +1007,9 @@ impl Config {
                 max_accel_mps2: self.axes.max_accel_mps2,
             },
             following_tolerance_m: self.axes.following_tolerance_m,
+            retreat_speed_mps: self.axes.retreat_speed_mps,
+            period_ns: self.loop_.period_ns,
+            publisher_stall_ns: self.loop_.publisher_stall_ns,
         }
     }
 }

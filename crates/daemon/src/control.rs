@@ -18,7 +18,6 @@ use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     CommandAccepted, CycleInput, CycleOutput, EstimatorConfig, JointSample, SensorSample,
 };
-use sar_estimator::guard::GuardState;
 use sar_kinematics::ActiveJoints;
 use std::sync::Arc;
 
@@ -47,6 +46,8 @@ pub struct Reply {
     pub status: ReplyStatus,
     /// The guard's reason code ([`reason_code`]) behind a refusal, 0 otherwise.
     pub reason: u16,
+    /// The exact cause (what `sarctl` prints).
+    pub detail: crate::step::ReplyDetail,
 }
 
 /// The operator's ends of the request and reply queues.
@@ -56,6 +57,9 @@ pub struct Operator {
     pub requests: Arc<ArrayQueue<Envelope>>,
     /// Replies out (bounded; the oldest is dropped when full).
     pub replies: Arc<ArrayQueue<Reply>>,
+    /// The publishing thread's heartbeat (it carries the commands and the
+    /// state; its silence is a Fault: `Reason::PublisherStalled`).
+    pub publisher: Arc<Heartbeat>,
 }
 
 impl Operator {
@@ -64,7 +68,37 @@ impl Operator {
         Self {
             requests: Arc::new(ArrayQueue::new(QUEUE_CAPACITY)),
             replies: Arc::new(ArrayQueue::new(QUEUE_CAPACITY)),
+            publisher: Arc::new(Heartbeat::default()),
         }
+    }
+}
+
+/// A thread's sign of life, read by the loop (wait-free): the publishing
+/// thread beats once per wake-up (it is woken every cycle).
+#[derive(Debug, Default)]
+pub struct Heartbeat {
+    beats: std::sync::atomic::AtomicU64,
+    monitored: std::sync::atomic::AtomicBool,
+}
+
+impl Heartbeat {
+    /// Marks the thread as watched (from its start on, its silence counts).
+    pub fn watch(&self) {
+        self.monitored
+            .store(true, std::sync::atomic::Ordering::Release);
+    }
+
+    /// One sign of life.
+    pub fn beat(&self) {
+        self.beats
+            .fetch_add(1, std::sync::atomic::Ordering::Release);
+    }
+
+    /// The beats so far, or `None` when nobody beats (no such thread).
+    pub fn read(&self) -> Option<u64> {
+        self.monitored
+            .load(std::sync::atomic::Ordering::Acquire)
+            .then(|| self.beats.load(std::sync::atomic::Ordering::Acquire))
     }
 }
 
@@ -111,6 +145,9 @@ pub struct Controller<S: ForceSensor, D: AxisDrives> {
     /// read (the CANopen drives' SYNC / PDO exchange); `None` for drives that
     /// need nothing (the simulator).
     drives_cycle: Option<DrivesCycle<D>>,
+    /// The publishing thread's last beat count and when it changed (ns of
+    /// the cycle clock).
+    publisher_beat: Option<(u64, u64)>,
 }
 
 /// The per-cycle hook of drives that must be driven by the loop (see
@@ -167,6 +204,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             joints,
             drive_state: None,
             request: None,
+            publisher_idle_ns: 0,
         };
         Ok(Self {
             step,
@@ -178,6 +216,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             auto_reset,
             counts: ActionCounts::default(),
             drives_cycle: None,
+            publisher_beat: None,
         })
     }
 
@@ -225,10 +264,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     /// were quick-stopped, or never released), so moves are refused until a
     /// reset is accepted.
     pub fn halted(&self) -> bool {
-        matches!(
-            self.step.last().estimate.guard_state,
-            GuardState::Stop | GuardState::Fault
-        )
+        self.step.last().estimate.guard_state.is_halting()
     }
 
     /// What the controller did so far.
@@ -239,6 +275,21 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     /// The drives (for the shutdown's halt, and tests).
     pub fn drives_mut(&mut self) -> &mut D {
         &mut self.drives
+    }
+
+    /// How long the publishing thread's heartbeat has not changed, ns (0
+    /// when nobody beats, or the clock failed).
+    fn publisher_idle_ns(&mut self, beats: Option<u64>, now_ns: Option<u64>) -> u64 {
+        let (Some(beats), Some(now_ns)) = (beats, now_ns) else {
+            return 0;
+        };
+        match self.publisher_beat {
+            Some((last, since_ns)) if last == beats => now_ns.saturating_sub(since_ns),
+            _ => {
+                self.publisher_beat = Some((beats, now_ns));
+                0
+            }
+        }
     }
 
     /// Halts the drives (shutdown): quick stop, then disable.
@@ -299,24 +350,27 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             Some(e) => Some(e.request),
             None => self.auto_reset.then_some(Request::Reset),
         };
+        let beats = self.operator.publisher.read();
+        let now_ns = now();
+        let publisher_idle_ns = self.publisher_idle_ns(beats, now_ns);
         let input = LoopInput {
             cycle,
-            now_ns: now(),
+            now_ns,
             sensor: self.last_input.sensor,
             joints: self.last_input.joints,
             drive_state,
             request,
+            publisher_idle_ns,
         };
         self.last_input = input;
 
         // Decide.
+        let period_ns = self.step.config().period_ns;
         let decision = self.step.step(&input);
         let out = &decision.estimate;
 
         // Act: a halting state stops the drives in this very cycle.
-        let entered_halt = out
-            .transition
-            .is_some_and(|t| matches!(t.to, GuardState::Stop | GuardState::Fault));
+        let entered_halt = out.transition.is_some_and(|t| t.to.is_halting());
         if let Some(t) = out.transition {
             self.log.send(LogEvent::Transition(t));
             if entered_halt {
@@ -368,6 +422,15 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                     });
                 }
             }
+            DriveAction::Stream(q) => {
+                if self.drives.stream(q, period_ns).is_err() {
+                    self.counts.drive_errors += 1;
+                    self.log.send(LogEvent::DeviceError {
+                        cycle,
+                        what: "drive stream set point",
+                    });
+                }
+            }
         }
         if let Some(ev) = out.command {
             if envelope.is_some() {
@@ -384,6 +447,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 cycle,
                 status,
                 reason,
+                detail: decision.reply_detail,
             };
             // A full reply queue loses its oldest reply, never blocks the loop.
             let _ = self.operator.replies.force_push(reply);

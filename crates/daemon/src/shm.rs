@@ -340,6 +340,7 @@ impl ShmWorker {
             status,
             reason: 0,
             limits_n: self.limits_n,
+            ..ReplyMsg::default()
         };
         match command.request() {
             Some(request) => {
@@ -381,7 +382,11 @@ impl ShmWorker {
     /// loop still gets its LIMITS queries answered). Ends when the daemon
     /// side is dropped, after sending what is queued.
     fn run(mut self) {
+        self.operator.publisher.watch();
         loop {
+            // A sign of life per wake-up (the loop wakes it every cycle):
+            // the loop faults when it stops (`Reason::PublisherStalled`).
+            self.operator.publisher.beat();
             self.pump();
             if self.shared.stop.load(Ordering::Acquire) {
                 self.pump();

@@ -29,6 +29,21 @@
 //!   is above the warn limit is braked.
 //! - Following error: the measured joints against the trajectory at their
 //!   stamp, beyond the tolerance, is a Fault ([`Reason::FollowingError`]).
+//! - Retreat (issue 14: the way back from a Stop whose force persists): a
+//!   reset above the stop limit puts the guard in `Retreat`; then a move is
+//!   accepted only when it reduces the tip force
+//!   ([`sar_estimator::guard::reduces_force`]: against the force, or backing
+//!   out along the rod, [`Request::BackOut`]), planned at `[axes]
+//!   retreat_speed_mps` and streamed to the drives one set point per period
+//!   ([`DriveAction::Stream`], cyclic synchronous position), so that they
+//!   move at that speed. The guard stops again if the force rises.
+//! - A host fault: the publishing thread (the operator's commands and the
+//!   published state) without progress for longer than the configured
+//!   stall time is a Fault ([`Reason::PublisherStalled`]), from the
+//!   recorded `LoopInput::publisher_idle_ns`.
+//! - A move reply says accepted only when the move goes to the drives in
+//!   the same cycle; every refusal carries its exact cause
+//!   ([`ReplyDetail`]).
 //!
 //! Fixed-size state; no allocation, no panic.
 
@@ -38,9 +53,9 @@ use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
     EstimatorConfig, FollowingReference, JointSample, SensorSample, TipOutcome,
 };
-use sar_estimator::guard::{ForceLimits, GuardState, Reason};
+use sar_estimator::guard::{ForceLimits, GuardState, Reason, reduces_force};
 use sar_estimator::{SettingError, Vec3};
-use sar_kinematics::{ActiveJoints, Calibration, Profile, inverse};
+use sar_kinematics::{ActiveJoints, Calibration, PoseError, Profile, inverse};
 
 /// An operator request, applied in the cycle whose input carries it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,6 +72,12 @@ pub enum Request {
     },
     /// Replace the guard's force limits (within the configured ceilings).
     SetLimits(ForceLimits),
+    /// Back the tip out along the rod by this distance, m (0 < d <= 0.1):
+    /// a move to `tip - d u`, accepted in Retreat too (it reduces the force).
+    BackOut {
+        /// How far, m.
+        distance_m: f64,
+    },
 }
 
 /// What became of a request. The numbers are the wire codes.
@@ -92,12 +113,127 @@ pub enum ReplyStatus {
     /// drives that have not stopped): the trajectory to hold would not be
     /// theirs. Wait until they are at rest.
     AxesMoving = 12,
+    /// A move in Retreat that does not reduce the tip force.
+    NotReducing = 13,
+    /// A move that was judged acceptable but could not be given to the
+    /// drives in the same cycle (it was not carried out).
+    NotCarriedOut = 14,
+    /// A request whose argument is not valid (e.g. a back-out distance).
+    BadArgument = 15,
+}
+
+/// The exact cause behind a reply: what `sarctl` prints (its `Display`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ReplyDetail {
+    /// Nothing to add.
+    None,
+    /// The guard's reason (a refused reset, a halted or warned move).
+    Reason(Reason),
+    /// Force limits refused: which limit, its value, why.
+    Limits {
+        /// The limit.
+        field: &'static str,
+        /// Its value, N.
+        value: f64,
+        /// What is wrong.
+        why: &'static str,
+    },
+    /// A target outside an axis's travel.
+    OutsideTravel {
+        /// 1, 2 or 3 (q1, q2, q3).
+        axis: u8,
+        /// The axis position the target needs, m.
+        value_m: f64,
+        /// The travel, m.
+        min_m: f64,
+        /// The travel, m.
+        max_m: f64,
+    },
+    /// The kinematics cannot reach the target.
+    NoPose(PoseError),
+    /// In Retreat, a move that does not reduce the force.
+    NotReducing {
+        /// The tip displacement asked for, base frame, m.
+        step_m: Vec3,
+        /// The tip force, base frame, N.
+        force_n: Vec3,
+    },
+    /// The drives are not enabled (their state, if read).
+    DrivesNotEnabled(Option<DriveState>),
+    /// The axes still move, m/s.
+    AxesMoving {
+        /// The largest axis speed, m/s.
+        speed_mps: f64,
+    },
+    /// A back-out distance that is not within 0 < d <= 0.1 m.
+    BadDistance {
+        /// The distance given, m.
+        distance_m: f64,
+    },
+    /// No tip-force estimate or pose this cycle.
+    NoEstimate,
+    /// Judged acceptable but not given to the drives.
+    NotCarriedOut,
+}
+
+impl ReplyDetail {
+    /// The guard's reason code behind it (0 when it is not a guard reason).
+    pub fn reason_code(&self) -> u16 {
+        match self {
+            Self::Reason(r) => r.code(),
+            _ => 0,
+        }
+    }
+}
+
+impl core::fmt::Display for ReplyDetail {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::None => Ok(()),
+            Self::Reason(r) => write!(f, "{r}"),
+            Self::Limits { field, value, why } => write!(f, "{field} = {value} N: {why}"),
+            Self::OutsideTravel {
+                axis,
+                value_m,
+                min_m,
+                max_m,
+            } => write!(
+                f,
+                "q{axis} would be {value_m:.4} m, outside its travel {min_m:.4}..{max_m:.4} m"
+            ),
+            Self::NoPose(e) => write!(f, "no pose reaches it: {e}"),
+            Self::NotReducing { step_m, force_n } => write!(
+                f,
+                "in retreat only motions against the tip force ({:.2}, {:.2}, {:.2}) N or back \
+                 along the rod are accepted; this one moves the tip by ({:.4}, {:.4}, {:.4}) m",
+                force_n.x, force_n.y, force_n.z, step_m.x, step_m.y, step_m.z
+            ),
+            Self::DrivesNotEnabled(state) => match state {
+                Some(s) => write!(f, "the drives are {s:?}, not enabled"),
+                None => f.write_str("the drives' state could not be read"),
+            },
+            Self::AxesMoving { speed_mps } => write!(
+                f,
+                "the axes still move at {:.1} mm/s (wait until they are at rest)",
+                speed_mps * 1e3
+            ),
+            Self::BadDistance { distance_m } => write!(
+                f,
+                "the back-out distance must be within 0 < d <= 0.1 m, got {distance_m} m"
+            ),
+            Self::NoEstimate => f.write_str("no tip-force estimate or pose in this cycle"),
+            Self::NotCarriedOut => f.write_str("the move could not be given to the drives"),
+        }
+    }
 }
 
 /// Below this speed (on every axis, between two joint samples) the axes are
 /// at rest for a reset, m/s (well above the encoders' quantisation over one
 /// period, well below any planned move).
 pub const REST_SPEED_MPS: f64 = 0.002;
+
+/// The longest back-out a single request may ask for, m.
+pub const MAX_BACK_OUT_M: f64 = 0.1;
 
 /// The numeric code of a guard reason (stable: recordings and `sarctl` use
 /// it): the estimator's one table, `Reason::code`.
@@ -127,6 +263,9 @@ pub struct LoopInput {
     pub drive_state: Option<DriveState>,
     /// The operator request applied in this cycle.
     pub request: Option<Request>,
+    /// How long the publishing thread had made no progress when this cycle's
+    /// inputs were gathered, ns (0: it keeps up, or there is none).
+    pub publisher_idle_ns: u64,
 }
 
 impl LoopInput {
@@ -141,7 +280,7 @@ impl LoopInput {
                 Some(Request::Reset) => Some(Command::Reset),
                 Some(Request::Tare) => Some(Command::Tare),
                 Some(Request::SetLimits(l)) => Some(Command::SetLimits(l)),
-                Some(Request::MoveTip { .. }) | None => None,
+                Some(Request::MoveTip { .. } | Request::BackOut { .. }) | None => None,
             },
         }
     }
@@ -170,6 +309,9 @@ pub enum DriveAction {
     /// Move to this end point, m (the end of the trajectory just planned or
     /// braked: the drives run the same time-optimal profile to it).
     Setpoint(ActiveJoints),
+    /// A streamed set point: the trajectory one period ahead, m (cyclic
+    /// synchronous position: the drives reach it in one period).
+    Stream(ActiveJoints),
 }
 
 /// The decision of one cycle.
@@ -186,6 +328,8 @@ pub struct LoopOutput {
     /// The reply to the cycle's request, with the guard's reason code behind
     /// a refusal (0 otherwise); `None` without a request.
     pub reply: Option<(ReplyStatus, u16)>,
+    /// The exact cause behind the reply (what `sarctl` prints).
+    pub reply_detail: ReplyDetail,
     /// The force limits in use after this cycle.
     pub limits: ForceLimits,
 }
@@ -199,6 +343,13 @@ pub struct StepConfig {
     pub axis_limits: Limits,
     /// The accepted following error per axis, m.
     pub following_tolerance_m: f64,
+    /// The speed of moves in Retreat, m/s (> 0, at most the axes' speed).
+    pub retreat_speed_mps: f64,
+    /// The loop's period, ns: streamed set points are one period ahead.
+    pub period_ns: u64,
+    /// The publishing thread without progress for longer than this is a
+    /// Fault, ns.
+    pub publisher_stall_ns: u64,
 }
 
 /// Why a [`StepConfig`] cannot be used.
@@ -227,6 +378,9 @@ struct Trajectory {
     axes: [AxisPlan; 3],
     target_tip_m: Option<Vec3>,
     end_ns: u64,
+    /// Streamed to the drives one set point per period (retreat moves at a
+    /// reduced speed) rather than given as an end point.
+    streamed: bool,
 }
 
 impl Trajectory {
@@ -235,6 +389,7 @@ impl Trajectory {
             axes: joints_array(q).map(|x| AxisPlan::hold(now_ns, x)),
             target_tip_m: None,
             end_ns: now_ns,
+            streamed: false,
         }
     }
 
@@ -259,6 +414,7 @@ impl Trajectory {
             axes,
             target_tip_m,
             end_ns,
+            streamed: false,
         }
     }
 }
@@ -320,6 +476,20 @@ impl LoopStep {
                 return Err(invalid("travel_m", lo, "must be finite with min < max"));
             }
         }
+        let r = config.retreat_speed_mps;
+        if !(r.is_finite() && r > 0.0 && r <= l.max_speed_mps) {
+            return Err(invalid(
+                "retreat_speed_mps",
+                r,
+                "must be finite, > 0 and at most max_speed_mps",
+            ));
+        }
+        if config.period_ns == 0 {
+            return Err(invalid("period_ns", 0.0, "must be > 0"));
+        }
+        if config.publisher_stall_ns == 0 {
+            return Err(invalid("publisher_stall_ns", 0.0, "must be > 0"));
+        }
         let (calibration, profile) = (estimator.calibration, estimator.profile);
         let estimator = Estimator::with_bias(estimator, bias)?;
         let out = LoopOutput {
@@ -327,6 +497,7 @@ impl LoopStep {
             reference: None,
             action: DriveAction::None,
             reply: None,
+            reply_detail: ReplyDetail::None,
             limits: estimator.guard_config().force_limits(),
         };
         Ok(Self {
@@ -388,16 +559,25 @@ impl LoopStep {
         if reset_while_moving {
             cycle_input.command = None;
         }
+        // The host's own fault: the publishing thread stalled.
+        let host_fault = (input.publisher_idle_ns > self.config.publisher_stall_ns).then(|| {
+            Reason::PublisherStalled {
+                stalled_ms: u32::try_from(input.publisher_idle_ns / 1_000_000).unwrap_or(u32::MAX),
+            }
+        });
         let estimate = *self
             .estimator
-            .cycle_following(&cycle_input, reference.as_ref());
+            .cycle_checked(&cycle_input, reference.as_ref(), host_fault);
         let mut action = DriveAction::None;
-        let mut reply = reset_while_moving.then_some((ReplyStatus::AxesMoving, 0));
+        let mut reply = reset_while_moving.then_some((
+            ReplyStatus::AxesMoving,
+            ReplyDetail::AxesMoving {
+                speed_mps: self.speed_mps,
+            },
+        ));
 
-        let halting = matches!(estimate.guard_state, GuardState::Stop | GuardState::Fault);
-        let entered_halt = estimate
-            .transition
-            .is_some_and(|t| matches!(t.to, GuardState::Stop | GuardState::Fault));
+        let halting = estimate.guard_state.is_halting();
+        let entered_halt = estimate.transition.is_some_and(|t| t.to.is_halting());
         if halting {
             self.trajectory = None;
             if entered_halt || input.drive_state == Some(DriveState::Enabled) {
@@ -424,16 +604,25 @@ impl LoopStep {
             }
         }
 
+        let before_move = self.trajectory;
         let mut planned = false;
-        if let Some(Request::MoveTip { tip_m }) = input.request {
-            let r = self.plan_move(input, &estimate, &tip_m);
-            planned = r.0 == ReplyStatus::Accepted;
+        let move_target = match input.request {
+            Some(Request::MoveTip { tip_m }) => Some(MoveTarget::Tip(tip_m)),
+            Some(Request::BackOut { distance_m }) => Some(MoveTarget::BackOut(distance_m)),
+            _ => None,
+        };
+        let mut move_accepted = false;
+        if let Some(target) = move_target {
+            let r = self.plan_move(input, &estimate, target);
+            move_accepted = r.0 == ReplyStatus::Accepted;
+            planned = move_accepted;
             reply = Some(r);
         }
 
         // A move under way that pushes further along a force above the warn
-        // limit is braked.
+        // limit is braked (a Warn for a due tare has no force to push along).
         if estimate.guard_state == GuardState::Warn
+            && !matches!(estimate.guard_reason, Reason::TareDue { .. })
             && let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
             && let (Some(target), Some(pose), TipOutcome::Estimate(e)) =
                 (t.target_tip_m, estimate.pose, estimate.tip)
@@ -443,96 +632,192 @@ impl LoopStep {
             let limits = self.config.axis_limits;
             let states = t.at(now_ns);
             let axes = states.map(|s| AxisPlan::brake(now_ns, s, limits));
-            self.trajectory = Some(Trajectory::from_plans(now_ns, axes, None));
+            let mut braked = Trajectory::from_plans(now_ns, axes, None);
+            braked.streamed = t.streamed;
+            self.trajectory = Some(braked);
             planned = true;
         }
 
-        // A new plan: its end point to the drives.
-        if planned
-            && !halting
+        let enabled = input.drive_state == Some(DriveState::Enabled);
+        if !halting
             && action == DriveAction::None
-            && input.drive_state == Some(DriveState::Enabled)
-            && let Some(t) = self.trajectory
+            && enabled
+            && let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
         {
-            let [q1_m, q2_m, q3_m] = t.axes.map(|p| p.end_m());
-            action = DriveAction::Setpoint(ActiveJoints { q1_m, q2_m, q3_m });
+            if t.streamed {
+                // Streamed: the trajectory one period ahead, every cycle
+                // until the period after its end.
+                let ahead_ns = now_ns.saturating_add(self.config.period_ns);
+                if now_ns <= t.end_ns.saturating_add(self.config.period_ns) {
+                    action = DriveAction::Stream(t.position(ahead_ns));
+                }
+            } else if planned {
+                // A new plan: its end point to the drives.
+                let [q1_m, q2_m, q3_m] = t.axes.map(|p| p.end_m());
+                action = DriveAction::Setpoint(ActiveJoints { q1_m, q2_m, q3_m });
+            }
+        }
+        // "Accepted" only for a move that goes to the drives now.
+        if move_accepted && !matches!(action, DriveAction::Setpoint(_) | DriveAction::Stream(_)) {
+            self.trajectory = before_move;
+            reply = Some((ReplyStatus::NotCarriedOut, ReplyDetail::NotCarriedOut));
         }
 
+        let (reply, reply_detail) = match reply {
+            Some((status, detail)) => (Some((status, detail.reason_code())), detail),
+            None => (None, ReplyDetail::None),
+        };
         self.out = LoopOutput {
             estimate,
             reference: reference.map(|r| r.joints),
             action,
             reply,
+            reply_detail,
             limits: self.estimator.guard_config().force_limits(),
         };
         &self.out
     }
 
     /// Judges a move and, if accepted, plans it from where the trajectory is
-    /// now.
+    /// now (in Retreat: only a move that reduces the force, at the retreat
+    /// speed, streamed).
     fn plan_move(
         &mut self,
         input: &LoopInput,
         estimate: &CycleOutput,
-        tip_m: &Vec3,
-    ) -> (ReplyStatus, u16) {
-        let halted = matches!(estimate.guard_state, GuardState::Stop | GuardState::Fault);
+        target: MoveTarget,
+    ) -> (ReplyStatus, ReplyDetail) {
+        let halted = estimate.guard_state.is_halting();
         let (Some(trajectory), Some(now_ns), false) = (self.trajectory, input.now_ns, halted)
         else {
-            return (ReplyStatus::Halted, reason_code(&estimate.guard_reason));
+            return (
+                ReplyStatus::Halted,
+                ReplyDetail::Reason(estimate.guard_reason),
+            );
         };
         if input.drive_state != Some(DriveState::Enabled) {
-            return (ReplyStatus::DrivesRefused, 0);
+            return (
+                ReplyStatus::DrivesRefused,
+                ReplyDetail::DrivesNotEnabled(input.drive_state),
+            );
         }
-        let Ok(target) = inverse(&self.calibration, &self.profile, tip_m) else {
-            return (ReplyStatus::Unreachable, 0);
+        let tip_m = match target {
+            MoveTarget::Tip(tip_m) => tip_m,
+            MoveTarget::BackOut(distance_m) => {
+                if !(distance_m > 0.0 && distance_m <= MAX_BACK_OUT_M) {
+                    return (
+                        ReplyStatus::BadArgument,
+                        ReplyDetail::BadDistance { distance_m },
+                    );
+                }
+                let Some(pose) = estimate.pose else {
+                    return (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate);
+                };
+                pose.tip_m - pose.rod_dir * distance_m
+            }
+        };
+        let target = match inverse(&self.calibration, &self.profile, &tip_m) {
+            Ok(q) => q,
+            Err(e) => return (ReplyStatus::Unreachable, ReplyDetail::NoPose(e)),
         };
         let q = [target.q1_m, target.q2_m, target.q3_m];
-        if q.iter()
-            .zip(self.config.travel_m.iter())
-            .any(|(v, (lo, hi))| !(v >= lo && v <= hi))
-        {
-            return (ReplyStatus::Unreachable, 0);
-        }
-        // Above the warn limit, only moves that do not push the tip further
-        // along its force are allowed.
-        if estimate.guard_state == GuardState::Warn {
-            let (TipOutcome::Estimate(e), Some(pose)) = (estimate.tip, estimate.pose) else {
+        for (i, (v, (lo, hi))) in q.iter().zip(self.config.travel_m.iter()).enumerate() {
+            if !(v >= lo && v <= hi) {
                 return (
-                    ReplyStatus::TowardForce,
-                    reason_code(&estimate.guard_reason),
-                );
-            };
-            if (tip_m - pose.tip_m).dot(&e.force_n) > 0.0 {
-                return (
-                    ReplyStatus::TowardForce,
-                    reason_code(&estimate.guard_reason),
+                    ReplyStatus::Unreachable,
+                    ReplyDetail::OutsideTravel {
+                        axis: u8::try_from(i + 1).unwrap_or(0),
+                        value_m: *v,
+                        min_m: *lo,
+                        max_m: *hi,
+                    },
                 );
             }
         }
-        let limits = self.config.axis_limits;
+        let retreat = estimate.guard_state == GuardState::Retreat;
+        // Above the warn limit, only moves that do not push the tip further
+        // along its force are allowed; in Retreat only those that reduce it.
+        let warn = estimate.guard_state == GuardState::Warn
+            && !matches!(estimate.guard_reason, Reason::TareDue { .. });
+        if warn || retreat {
+            let (TipOutcome::Estimate(e), Some(pose)) = (estimate.tip, estimate.pose) else {
+                return (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate);
+            };
+            let step_m = tip_m - pose.tip_m;
+            if warn && step_m.dot(&e.force_n) > 0.0 {
+                return (
+                    ReplyStatus::TowardForce,
+                    ReplyDetail::Reason(estimate.guard_reason),
+                );
+            }
+            if retreat && !reduces_force(&e.force_n, &pose.rod_dir, &step_m) {
+                return (
+                    ReplyStatus::NotReducing,
+                    ReplyDetail::NotReducing {
+                        step_m,
+                        force_n: e.force_n,
+                    },
+                );
+            }
+        }
+        let mut limits = self.config.axis_limits;
+        if retreat {
+            limits.max_speed_mps = self.config.retreat_speed_mps;
+        }
         let states = trajectory.at(now_ns);
         let mut axes = [AxisPlan::hold(now_ns, 0.0); 3];
         for ((plan, state), target_m) in axes.iter_mut().zip(states).zip(q) {
             *plan = AxisPlan::to_target(now_ns, state, target_m, limits);
         }
-        self.trajectory = Some(Trajectory::from_plans(now_ns, axes, Some(*tip_m)));
-        (ReplyStatus::Accepted, 0)
+        let mut planned = Trajectory::from_plans(now_ns, axes, Some(tip_m));
+        // A retreat move, or any move while a streamed one runs, streams.
+        planned.streamed = retreat || trajectory.streamed && now_ns <= trajectory.end_ns;
+        self.trajectory = Some(planned);
+        (ReplyStatus::Accepted, ReplyDetail::None)
     }
 }
 
-/// The reply to an estimator command.
-fn command_reply(result: &Result<CommandAccepted, CommandRefused>) -> (ReplyStatus, u16) {
+/// Where a move goes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum MoveTarget {
+    /// The tip to this point, base frame, m.
+    Tip(Vec3),
+    /// The tip back along the rod by this distance, m.
+    BackOut(f64),
+}
+
+/// The reply to an estimator command, with its exact cause.
+fn command_reply(result: &Result<CommandAccepted, CommandRefused>) -> (ReplyStatus, ReplyDetail) {
     match result {
-        Ok(CommandAccepted::NothingToReset) => (ReplyStatus::NothingToReset, 0),
-        Ok(_) => (ReplyStatus::Accepted, 0),
-        Err(CommandRefused::Reset { reason }) => (ReplyStatus::ResetRefused, reason_code(reason)),
-        Err(CommandRefused::NotOk { reason, .. }) => (ReplyStatus::NotOk, reason_code(reason)),
-        Err(CommandRefused::AboveWarn { reason }) => (ReplyStatus::AboveWarn, reason_code(reason)),
-        Err(CommandRefused::NoEstimate | CommandRefused::Unsolvable) => {
-            (ReplyStatus::NoEstimate, 0)
+        Ok(CommandAccepted::NothingToReset) => (ReplyStatus::NothingToReset, ReplyDetail::None),
+        Ok(_) => (ReplyStatus::Accepted, ReplyDetail::None),
+        Err(CommandRefused::Reset { reason }) => {
+            (ReplyStatus::ResetRefused, ReplyDetail::Reason(*reason))
         }
-        Err(CommandRefused::Limits { .. }) => (ReplyStatus::LimitsRefused, 0),
-        Err(_) => (ReplyStatus::Refused, 0),
+        Err(CommandRefused::NotOk { reason, .. }) => {
+            (ReplyStatus::NotOk, ReplyDetail::Reason(*reason))
+        }
+        Err(CommandRefused::AboveWarn { reason }) => {
+            (ReplyStatus::AboveWarn, ReplyDetail::Reason(*reason))
+        }
+        Err(CommandRefused::NoEstimate | CommandRefused::Unsolvable) => {
+            (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate)
+        }
+        Err(CommandRefused::Limits { field, value, why }) => (
+            ReplyStatus::LimitsRefused,
+            ReplyDetail::Limits {
+                field,
+                value: *value,
+                why,
+            },
+        ),
+        Err(CommandRefused::BiasNonFinite { value }) => (
+            ReplyStatus::Refused,
+            ReplyDetail::Limits {
+                field: "bias",
+                value: *value,
+                why: "not finite",
+            },
+        ),
     }
 }

@@ -304,6 +304,9 @@ pub mod command_kind {
     pub const RECORD_START: u32 = 6;
     /// Stop recording (`sarctl record stop`).
     pub const RECORD_STOP: u32 = 7;
+    /// Back the tip out along the rod by `tip_m[0]` metres (`sarctl
+    /// retreat`).
+    pub const BACK_OUT: u32 = 8;
 }
 
 /// An operator command.
@@ -335,6 +338,9 @@ impl CommandMsg {
             command_kind::SET_LIMITS => Some(Request::SetLimits(
                 sar_estimator::guard::ForceLimits::from_array(self.limits_n),
             )),
+            command_kind::BACK_OUT => Some(Request::BackOut {
+                distance_m: self.tip_m[0],
+            }),
             _ => None,
         }
     }
@@ -349,7 +355,7 @@ pub mod reply_code {
 }
 
 /// The reply to a command.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
 pub struct ReplyMsg {
     /// The command's id.
@@ -362,18 +368,78 @@ pub struct ReplyMsg {
     pub reason: u32,
     /// The guard's limits (warn, stop for total, axial, lateral), N.
     pub limits_n: [f64; 6],
+    /// The exact cause, UTF-8, zero-padded (cut at a character boundary).
+    pub detail: [u8; DETAIL_LEN],
+}
+
+/// Bytes of [`ReplyMsg::detail`].
+pub const DETAIL_LEN: usize = 256;
+
+impl Default for ReplyMsg {
+    fn default() -> Self {
+        Self {
+            id: 0,
+            cycle: 0,
+            status: 0,
+            reason: 0,
+            limits_n: [0.0; 6],
+            detail: [0; DETAIL_LEN],
+        }
+    }
+}
+
+/// Writes text into a fixed buffer, cutting at a character boundary (no
+/// allocation).
+struct FixedText<'a> {
+    buf: &'a mut [u8],
+    len: usize,
+}
+
+impl std::fmt::Write for FixedText<'_> {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        for c in s.chars() {
+            let mut tmp = [0u8; 4];
+            let bytes = c.encode_utf8(&mut tmp).as_bytes();
+            let end = self.len + bytes.len();
+            let Some(slot) = self.buf.get_mut(self.len..end) else {
+                return Err(std::fmt::Error);
+            };
+            slot.copy_from_slice(bytes);
+            self.len = end;
+        }
+        Ok(())
+    }
 }
 
 impl ReplyMsg {
     /// Converts the loop's reply.
     pub fn from_reply(r: &Reply, limits_n: [f64; 6]) -> Self {
+        let mut detail = [0u8; DETAIL_LEN];
+        let mut w = FixedText {
+            buf: &mut detail,
+            len: 0,
+        };
+        // A cut detail is fine: what fits is kept.
+        let _ = std::fmt::Write::write_fmt(&mut w, format_args!("{}", r.detail));
         Self {
             id: r.id,
             cycle: r.cycle,
             status: r.status as u32,
             reason: u32::from(r.reason),
             limits_n,
+            detail,
         }
+    }
+
+    /// The exact cause as text ("" when none).
+    pub fn detail_text(&self) -> &str {
+        let end = self
+            .detail
+            .iter()
+            .position(|b| *b == 0)
+            .unwrap_or(DETAIL_LEN);
+        let bytes = self.detail.get(..end).unwrap_or(&[]);
+        std::str::from_utf8(bytes).unwrap_or("")
     }
 }
 
@@ -398,6 +464,11 @@ pub fn status_name(code: u32) -> &'static str {
         x if x == ReplyStatus::AxesMoving as u32 => {
             "reset refused: the axes are still moving (wait until they stop)"
         }
+        x if x == ReplyStatus::NotReducing as u32 => {
+            "refused: in retreat only motions that reduce the tip force are accepted"
+        }
+        x if x == ReplyStatus::NotCarriedOut as u32 => "refused: the move was not carried out",
+        x if x == ReplyStatus::BadArgument as u32 => "refused: invalid argument",
         reply_code::UNKNOWN_COMMAND => "unknown command",
         reply_code::BUSY => "refused: the daemon's command queue is full",
         _ => "refused",

@@ -33,6 +33,9 @@ impl AxisDrives for Stubborn {
     fn disable(&mut self) -> Result<(), SimError> {
         self.inner.disable()
     }
+    fn stream(&mut self, t: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
+        self.inner.stream(t, period_ns)
+    }
     fn set_targets(&mut self, t: ActiveJoints) -> Result<(), SimError> {
         self.inner.set_targets(t)
     }

@@ -205,11 +205,12 @@ prop_compose! {
         ints in prop::array::uniform8(any::<u64>()),
         f in prop::array::uniform5(f3()),
         bools in prop::array::uniform3(any::<bool>()),
-        codes in (0u8..3, 0u8..5, 0u8..12),
+        codes in (0u8..3, 0u8..5, 0u8..13),
         bias in f3(),
         axis in any::<i8>(),
         more in prop::array::uniform6(f3()),
-        decision in (0u8..6, any::<u8>(), any::<u16>()),
+        decision in (0u8..7, any::<u8>(), any::<u16>()),
+        host in (any::<u64>(), any::<u64>().prop_map(f64::from_bits)),
     ) -> CycleInput {
         CycleInput {
             stamp_ns,
@@ -240,6 +241,8 @@ prop_compose! {
             reply_status: decision.1,
             reply_reason: decision.2,
             limits_in_use_n: [more[4][0], more[4][1], more[4][2], more[5][0], more[5][1], more[5][2]],
+            publisher_idle_ns: host.0,
+            back_out_m: host.1,
         }
     }
 }
@@ -335,14 +338,22 @@ proptest! {
         let _ = JointState::decode(&bytes);
     }
 
-    /// Every strict prefix of a valid message is a typed error.
+    /// Every strict prefix of a valid message is a typed error, except a
+    /// `/sar/cycle/input` cut exactly where older recordings end (before the
+    /// fields added with issue 14: `an_older_cycle_input_without_the_new_fields_decodes`).
     #[test]
     fn cut_messages_are_errors(k in 0u64..1000) {
         for m in common::cycle_messages(k) {
             let mut b = Vec::new();
             m.encode(&mut b).unwrap();
+            let older_end = (m.topic() == Topic::CycleInput).then(|| b.len() - 16);
             for cut in 0..b.len() {
-                prop_assert!(Outgoing::decode(m.topic(), &b[..cut]).is_err(), "{:?} cut at {}", m.topic(), cut);
+                let decoded = Outgoing::decode(m.topic(), &b[..cut]);
+                if Some(cut) == older_end {
+                    prop_assert!(decoded.is_ok(), "the older CycleInput must decode");
+                } else {
+                    prop_assert!(decoded.is_err(), "{:?} cut at {}", m.topic(), cut);
+                }
             }
         }
     }
@@ -409,4 +420,30 @@ fn the_msg_constants_are_the_reason_table() {
         recorded_reason_code(&Reason::PublisherStalled { stalled_ms: 1 }),
         35
     );
+}
+
+/// A `/sar/cycle/input` message of a recording made before the fields added
+/// with issue 14 (it ends after `limits_in_use_n`) still decodes: the new
+/// fields read as 0.
+#[test]
+fn an_older_cycle_input_without_the_new_fields_decodes() {
+    use sar_daemon::record::msgs::{CycleInput, RosMessage};
+    let m = CycleInput {
+        cycle: 7,
+        publisher_idle_ns: 123,
+        back_out_m: 0.01,
+        limits_in_use_n: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        ..CycleInput::default()
+    };
+    let mut bytes = Vec::new();
+    m.encode(&mut bytes).unwrap();
+    let full = CycleInput::decode(&bytes).unwrap();
+    assert_eq!(full, m);
+    // The two trailing 8-byte fields removed: an older message.
+    bytes.truncate(bytes.len() - 16);
+    let old = CycleInput::decode(&bytes).unwrap();
+    assert_eq!(old.publisher_idle_ns, 0);
+    assert_eq!(old.back_out_m, 0.0);
+    assert_eq!(old.limits_in_use_n, m.limits_in_use_n);
+    assert_eq!(old.cycle, 7);
 }

@@ -174,7 +174,9 @@ fn fields(m: &Outgoing) -> String {
                 .fa("setpoint_q_m", &c.setpoint_q_m)
                 .i("reply_status", c.reply_status)
                 .i("reply_reason", c.reply_reason)
-                .fa("limits_in_use_n", &c.limits_in_use_n);
+                .fa("limits_in_use_n", &c.limits_in_use_n)
+                .i("publisher_idle_ns", c.publisher_idle_ns)
+                .f("back_out_m", c.back_out_m);
         }
         Outgoing::RecorderDrops(d) => {
             l.header(d.stamp_ns, "")

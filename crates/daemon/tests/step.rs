@@ -40,6 +40,9 @@ impl AxisDrives for Blockable {
     fn disable(&mut self) -> Result<(), SimError> {
         self.inner.disable()
     }
+    fn stream(&mut self, t: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
+        self.inner.stream(t, period_ns)
+    }
     fn set_targets(&mut self, t: ActiveJoints) -> Result<(), SimError> {
         self.setpoints += 1;
         if self.block_after.is_some_and(|n| self.setpoints > n) {

@@ -85,6 +85,16 @@ pub trait AxisDrives {
     /// targets are `ErrorKind::InvalidArgument`.
     fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), Self::Error>;
 
+    /// Cyclic synchronous position (CiA 402 CSP): the axes are to be at
+    /// `targets` `period_ns` from now, moving at constant speed, and hold
+    /// there until the next set point; the caller streams one set point per
+    /// period (force control, retreat moves at a reduced speed). Only while
+    /// `Enabled`; non-finite or out-of-travel set points are
+    /// `ErrorKind::InvalidArgument`, and so is a set point farther than an
+    /// axis's speed limit allows in the period (a real drive would lose it
+    /// and fault on its following error).
+    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), Self::Error>;
+
     /// Quick stop: decelerate at the limit and hold. Accepted in every state;
     /// in `Fault` the state stays `Fault`.
     fn quick_stop(&mut self) -> Result<(), Self::Error>;

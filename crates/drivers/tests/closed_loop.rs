@@ -97,6 +97,10 @@ impl AxisDrives for TruthTap {
         self.drives.disable()
     }
 
+    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
+        self.drives.stream(targets, period_ns)
+    }
+
     fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), SimError> {
         self.drives.set_targets(targets)
     }

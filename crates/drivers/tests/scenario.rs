@@ -1000,6 +1000,12 @@ impl AxisDrives for FakeDrives {
         Ok(())
     }
 
+    fn stream(&mut self, _targets: ActiveJoints, _period_ns: u64) -> Result<(), FakeError> {
+        // The runner never streams.
+
+        Err(FakeError(ErrorKind::Unsupported))
+    }
+
     fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), FakeError> {
         self.update_fault();
         if self.state != DriveState::Enabled {

@@ -173,9 +173,9 @@ pub enum CommandAccepted {
     },
 }
 
-/// Why a command was refused.
+/// Why a command was refused. Not `#[non_exhaustive]`: the daemon turns
+/// each into its exact reply, and a new one must not fall into "other".
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
-#[non_exhaustive]
 pub enum CommandRefused {
     /// The reset's cause persists in this cycle's input.
     #[error("reset refused: {reason}")]

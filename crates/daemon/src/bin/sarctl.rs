@@ -46,8 +46,18 @@ enum Cmd {
         #[arg(long)]
         count: Option<u64>,
     },
-    /// Leave Stop or Fault (refused while the cause persists).
+    /// Leave Stop or Fault (refused while a fault persists; with a force
+    /// still above the stop limit it enters Retreat: only motions that
+    /// reduce the force).
     Reset,
+    /// The way back from a Stop: reset (into Retreat while the force
+    /// persists), wait for the drives, then back the tip out along the rod
+    /// at the retreat speed.
+    Retreat {
+        /// How far to back out along the rod, m (0 < d <= 0.1).
+        #[arg(long, default_value_t = 0.01)]
+        distance: f64,
+    },
     /// Model-based tare of the force sensor.
     Tare,
     /// Move the tip to (X, Y, Z), base frame, m.
@@ -299,7 +309,7 @@ fn run(args: &Args) -> Result<(), String> {
                 "{}",
                 json!({"command": what, "accepted": accepted, "status": status_name(r.status),
                        "status_code": r.status, "reason": reason_name(r.reason),
-                       "reason_code": r.reason, "cycle": r.cycle})
+                       "reason_code": r.reason, "detail": r.detail_text(), "cycle": r.cycle})
             );
         } else if accepted {
             println!("{what}: {} (cycle {})", status_name(r.status), r.cycle);
@@ -307,11 +317,12 @@ fn run(args: &Args) -> Result<(), String> {
         if accepted {
             Ok(())
         } else {
-            Err(format!(
-                "{what}: {} ({})",
-                status_name(r.status),
-                reason_name(r.reason)
-            ))
+            // The daemon's exact cause when it gave one, else the reason's name.
+            let detail = match r.detail_text() {
+                "" => reason_name(r.reason).to_owned(),
+                d => d.to_owned(),
+            };
+            Err(format!("{what}: {}: {detail}", status_name(r.status)))
         }
     };
     match args.command {
@@ -392,6 +403,46 @@ fn run(args: &Args) -> Result<(), String> {
         }
         Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
+        Cmd::Retreat { distance } => {
+            let sub = client.subscribe()?;
+            let latest = |what: &str| {
+                sub.latest(Duration::from_secs(2)).ok_or_else(|| {
+                    format!("retreat: the daemon published nothing within 2 s ({what})")
+                })
+            };
+            let s = latest("start")?;
+            if s.flags & flags::HALTED != 0 {
+                let r = command(command_kind::RESET, [0.0; 3])?;
+                report("retreat: reset", &r)?;
+            }
+            // The drives come back within a few cycles after the reset.
+            let deadline = std::time::Instant::now() + Duration::from_secs(5);
+            let s = loop {
+                let s = latest("waiting for the drives")?;
+                if s.drive_state == 2 && s.flags & flags::HALTED == 0 {
+                    break s;
+                }
+                if std::time::Instant::now() > deadline {
+                    return Err(format!(
+                        "retreat: the drives are not enabled after 5 s (guard {}: {})",
+                        guard_state_name(s.guard_state),
+                        reason_name(s.guard_reason)
+                    ));
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            };
+            if !json {
+                println!(
+                    "retreat: guard {} ({}), backing out {distance} m along the rod",
+                    guard_state_name(s.guard_state),
+                    reason_name(s.guard_reason)
+                );
+            }
+            report(
+                "retreat: back out",
+                &command(command_kind::BACK_OUT, [distance, 0.0, 0.0])?,
+            )
+        }
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
         Cmd::MoveTip { x, y, z } => {
             report("move-tip", &command(command_kind::MOVE_TIP, [x, y, z])?)
@@ -422,7 +473,11 @@ fn run(args: &Args) -> Result<(), String> {
                 }
                 r = command_with(command_kind::SET_LIMITS, [0.0; 3], limits_n)?;
                 if r.status != 0 {
-                    return Err(format!("limits: {}", status_name(r.status)));
+                    return Err(format!(
+                        "limits: {}: {}",
+                        status_name(r.status),
+                        r.detail_text()
+                    ));
                 }
                 r = command(command_kind::LIMITS, [0.0; 3])?;
             }

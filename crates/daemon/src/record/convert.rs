@@ -261,7 +261,12 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
             m.command_kind = CommandKindCode::SetLimits;
             m.limits_n = l.to_array();
         }
+        Some(Request::BackOut { distance_m }) => {
+            m.command_kind = CommandKindCode::BackOut;
+            m.back_out_m = distance_m;
+        }
     }
+    m.publisher_idle_ns = input.publisher_idle_ns;
     (m.drive_action, m.setpoint_q_m) = match decision.action {
         DriveAction::None => (DriveActionCode::None, [0.0; 3]),
         DriveAction::QuickStop => (DriveActionCode::QuickStop, [0.0; 3]),
@@ -273,6 +278,7 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
             (DriveActionCode::ReleaseFaultResetEnable, [0.0; 3])
         }
         DriveAction::Setpoint(q) => (DriveActionCode::Setpoint, joints_arr(&q)),
+        DriveAction::Stream(q) => (DriveActionCode::Stream, joints_arr(&q)),
     };
     if let Some((status, reason)) = decision.reply {
         m.reply_status = u8::try_from(status as u16).unwrap_or(REPLY_NONE);
@@ -292,6 +298,9 @@ pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
             tip_m: vec3(&m.move_tip_m),
         }),
         CommandKindCode::SetLimits => Some(Request::SetLimits(ForceLimits::from_array(m.limits_n))),
+        CommandKindCode::BackOut => Some(Request::BackOut {
+            distance_m: m.back_out_m,
+        }),
         _ => None,
     };
     LoopInput {
@@ -312,6 +321,7 @@ pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
         },
         drive_state: drive_state_of(m.drive_state, m.drive_fault_axis, m.drive_fault_code),
         request,
+        publisher_idle_ns: m.publisher_idle_ns,
     }
 }
 

@@ -71,6 +71,21 @@ impl RecordSwitch {
     pub fn dropped(&self) -> u64 {
         self.dropped.load(Ordering::Relaxed)
     }
+    /// Takes a pending start request: whether there was one. Atomic
+    /// (compare-exchange): a stop asked for at the same moment stays
+    /// pending instead of being overwritten.
+    pub fn take_start(&self) -> bool {
+        self.take(WANT_START)
+    }
+    /// Takes a pending stop request (see [`RecordSwitch::take_start`]).
+    pub fn take_stop(&self) -> bool {
+        self.take(WANT_STOP)
+    }
+    fn take(&self, want: u8) -> bool {
+        self.want
+            .compare_exchange(want, WANT_NONE, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
 }
 
 /// The loop's publisher with recording: pushes every cycle into the active
@@ -110,8 +125,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
     }
 
     fn publish(&mut self, c: &Published<'_>) {
-        if self.switch.want.load(Ordering::Acquire) == WANT_STOP {
-            self.switch.want.store(WANT_NONE, Ordering::Release);
+        if self.switch.take_stop() {
             self.release();
         }
         if self.active.is_none()
@@ -268,20 +282,18 @@ fn manage(
             }
             return;
         }
-        if switch.want.load(Ordering::Acquire) == WANT_START {
-            switch.want.store(WANT_NONE, Ordering::Release);
-            if !switch.recording() && incoming.is_empty() {
-                let name = recording_name();
-                match Recorder::start(recorder_config(settings, &name, bias, false)) {
-                    Ok(rec) => {
-                        tracing::info!(
-                            "recording into {}/{name}-*.mcap",
-                            settings.directory.display()
-                        );
-                        let _ = incoming.push(rec);
-                    }
-                    Err(e) => tracing::error!("cannot start recording: {e}"),
+        // The request is taken first (atomically), then judged.
+        if switch.take_start() && !switch.recording() && incoming.is_empty() {
+            let name = recording_name();
+            match Recorder::start(recorder_config(settings, &name, bias, false)) {
+                Ok(rec) => {
+                    tracing::info!(
+                        "recording into {}/{name}-*.mcap",
+                        settings.directory.display()
+                    );
+                    let _ = incoming.push(rec);
                 }
+                Err(e) => tracing::error!("cannot start recording: {e}"),
             }
         }
         std::thread::sleep(Duration::from_millis(5));

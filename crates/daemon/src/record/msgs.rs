@@ -420,6 +420,8 @@ code_enum!(
         MoveTip = 10,
         /// Set the force limits (`limits_n`).
         SetLimits = 11,
+        /// Back the tip out along the rod (`back_out_m`).
+        BackOut = 12,
     }
 );
 
@@ -436,8 +438,10 @@ code_enum!(
         ReleaseDisableEnable = 3,
         /// Release after a reset: fault reset, then enable.
         ReleaseFaultResetEnable = 4,
-        /// A set point (`setpoint_q_m`).
+        /// A move's end point (`setpoint_q_m`).
         Setpoint = 5,
+        /// A streamed set point one period ahead (`setpoint_q_m`).
+        Stream = 6,
     }
 );
 
@@ -688,6 +692,11 @@ pub struct CycleInput {
     pub reply_reason: u16,
     /// The force limits in use after the cycle, N.
     pub limits_in_use_n: [f64; 6],
+    /// How long the publishing thread had made no progress, ns (0 in
+    /// recordings older than this field).
+    pub publisher_idle_ns: u64,
+    /// BACK_OUT: how far to back the tip out along the rod, m.
+    pub back_out_m: f64,
 }
 
 impl RosMessage for CycleInput {
@@ -723,12 +732,14 @@ impl RosMessage for CycleInput {
         w.u8(self.reply_status);
         w.u16(self.reply_reason);
         w.f64_array(&self.limits_in_use_n);
+        w.u64(self.publisher_idle_ns);
+        w.f64(self.back_out_m);
         Ok(())
     }
     fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
         let stamp_ns = r.time()?;
         let _frame: FrameId = r.fixed_str()?;
-        Ok(Self {
+        let mut m = Self {
             stamp_ns,
             cycle: r.u64()?,
             now_ns: r.u64()?,
@@ -757,7 +768,16 @@ impl RosMessage for CycleInput {
             reply_status: r.u8()?,
             reply_reason: r.u16()?,
             limits_in_use_n: r.f64_array()?,
-        })
+            publisher_idle_ns: 0,
+            back_out_m: 0.0,
+        };
+        // The fields added with issue 14, all or none: an older recording
+        // ends before them (they read as 0); part of them is a cut message.
+        if r.remaining() > 0 {
+            m.publisher_idle_ns = r.u64()?;
+            m.back_out_m = r.f64()?;
+        }
+        Ok(m)
     }
 }
 

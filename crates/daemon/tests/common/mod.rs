@@ -66,7 +66,7 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             drive_fault_code: if k % 4 == 3 { 0x2310 } else { 0 },
             target_q_m: v3(k + 3),
             target_valid: k.is_multiple_of(2),
-            command_kind: CommandKindCode::from_code((k % 12) as u8).unwrap(),
+            command_kind: CommandKindCode::from_code((k % 13) as u8).unwrap(),
             command_values: {
                 let (a, b) = (v3(k + 4), v3(k + 5));
                 [a[0], a[1], a[2], b[0], b[1], b[2]]
@@ -77,7 +77,7 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
                 let (a, b) = (v3(k + 18), v3(k + 19));
                 [a[0], a[1], a[2], b[0], b[1], b[2]]
             },
-            drive_action: DriveActionCode::from_code((k % 6) as u8).unwrap(),
+            drive_action: DriveActionCode::from_code((k % 7) as u8).unwrap(),
             setpoint_q_m: v3(k + 20),
             reply_status: if k.is_multiple_of(3) {
                 REPLY_NONE
@@ -89,6 +89,8 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
                 let (a, b) = (v3(k + 21), v3(k + 22));
                 [a[0], a[1], a[2], b[0], b[1], b[2]]
             },
+            publisher_idle_ns: mix(k + 23) % 1_000_000_000,
+            back_out_m: v3(k + 24)[0],
         }),
         Outgoing::SensorWrench(WrenchStamped::sensor(t - 90_000, v3(k), v3(k + 1))),
         Outgoing::Joints(ActiveJointState {

@@ -772,6 +772,37 @@ impl<C: Can, K: Clock> AxisDrives for CanOpenDrives<C, K> {
         Ok(())
     }
 
+    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), CanOpenError> {
+        let state = self.logical_state();
+        if state != DriveState::Enabled {
+            return Err(CanOpenError::InvalidState { state });
+        }
+        let q = self.check_target(&targets)?;
+        // The set point of the next SYNC: each axis at constant speed from
+        // its commanded position there, held until the next set point.
+        let start_ns = self.sync_ns.saturating_add(self.config.sync_period_ns);
+        let reach_m = self.limits.max_speed_mps * (period_ns.max(1) as f64 * 1e-9) * (1.0 + 1e-9);
+        for (i, (a, target)) in self.axes.iter().zip(q).enumerate() {
+            let from = a.plan.at(start_ns).x_m;
+            if (target - from).abs() > reach_m {
+                return Err(CanOpenError::InvalidTarget {
+                    axis: u8::try_from(i).unwrap_or(0),
+                    value_m: target,
+                    min_m: from - reach_m,
+                    max_m: from + reach_m,
+                });
+            }
+        }
+        self.goal_m = Some(q);
+        if !self.halted {
+            for (a, target) in self.axes.iter_mut().zip(q) {
+                let from = a.plan.at(start_ns).x_m;
+                a.plan = AxisPlan::segment(start_ns, from, target, period_ns);
+            }
+        }
+        Ok(())
+    }
+
     fn quick_stop(&mut self) -> Result<(), CanOpenError> {
         if self.fault.is_none() {
             self.want = Want::QuickStop;

@@ -79,6 +79,30 @@ impl AxisPlan {
         }
     }
 
+    /// One period of cyclic synchronous position (a set point streamed per
+    /// period, CiA 402 CSP): from `from_m` at `start_ns` at constant speed
+    /// to `to_m` after `period_ns` (> 0), then a hold there until the next
+    /// set point. The speed jumps from period to period, as an ideal servo's
+    /// interpolated reference does; a set point farther than the axis's
+    /// speed allows is the caller's to refuse.
+    pub fn segment(start_ns: u64, from_m: f64, to_m: f64, period_ns: u64) -> Self {
+        let duration_s = ns_to_s(period_ns.max(1));
+        Self {
+            start_ns,
+            x0_m: from_m,
+            v0_mps: (to_m - from_m) / duration_s,
+            phases: [
+                Phase {
+                    duration_s,
+                    accel_mps2: 0.0,
+                },
+                Phase::default(),
+                Phase::default(),
+            ],
+            end_m: to_m,
+        }
+    }
+
     /// The time-optimal motion from `state` at `start_ns` to rest at `target_m`.
     ///
     /// When the target lies closer than the stopping distance, the axis brakes,

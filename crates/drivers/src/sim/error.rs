@@ -107,6 +107,19 @@ pub enum SimError {
     /// The targets put the rod in a pose that has no kinematic solution.
     #[error("the targets give no valid pose: {0}")]
     TargetPose(PoseError),
+    /// A streamed set point is farther than the axis can go in one period.
+    #[error(
+        "set point of axis {axis} is {distance_m} m away, more than the {reach_m} m the speed \
+         limit allows in one period"
+    )]
+    SetPointTooFar {
+        /// 0 = q1, 1 = q2, 2 = q3.
+        axis: usize,
+        /// How far, m.
+        distance_m: f64,
+        /// How far it may be, m.
+        reach_m: f64,
+    },
     /// The simulated device has no such command.
     #[error("{command} is not supported by the simulated sensor")]
     Unsupported {
@@ -141,6 +154,7 @@ impl Error for SimError {
             | Self::FaultNotInFuture { .. }
             | Self::TargetNonFinite { .. }
             | Self::TargetOutOfTravel { .. }
+            | Self::SetPointTooFar { .. }
             | Self::TargetPose(_) => ErrorKind::InvalidArgument,
             Self::PoseOutOfModel(_) | Self::StaticsSingular | Self::Busy => ErrorKind::Other,
         }

@@ -294,6 +294,10 @@ impl<C: Clock> AxisDrives for SimDrives<C> {
         with_world(&self.world, |w| w.set_targets(&targets))
     }
 
+    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
+        with_world(&self.world, |w| w.stream(&targets, period_ns))
+    }
+
     fn quick_stop(&mut self) -> Result<(), SimError> {
         with_world(&self.world, World::quick_stop)
     }

@@ -717,9 +717,50 @@ impl<C: Clock> World<C> {
 
     /// New targets (only while `Enabled`).
     pub fn set_targets(&mut self, targets: &ActiveJoints) -> Result<(), SimError> {
+        let wanted = self.check_targets("set_targets", targets)?;
+        let now = self.done_ns;
+        let limits = self.limits;
+        let states = self.axes_at(now);
+        for ((plan, state), target) in self.plans.iter_mut().zip(states).zip(wanted) {
+            *plan = AxisPlan::to_target(now, state, target, limits);
+        }
+        Ok(())
+    }
+
+    /// A cyclic set point (only while `Enabled`): each axis moves at constant
+    /// speed from where it is to its set point in `period_ns` and holds
+    /// there (an ideal CSP servo). A set point beyond the speed limit over
+    /// the period is refused.
+    pub fn stream(&mut self, targets: &ActiveJoints, period_ns: u64) -> Result<(), SimError> {
+        let wanted = self.check_targets("stream", targets)?;
+        let now = self.done_ns;
+        let states = self.axes_at(now);
+        let reach_m = self.limits.max_speed_mps * ns_to_s(period_ns.max(1)) * (1.0 + 1e-9);
+        for (axis, (state, target)) in states.iter().zip(wanted).enumerate() {
+            if (target - state.x_m).abs() > reach_m {
+                return Err(SimError::SetPointTooFar {
+                    axis,
+                    distance_m: (target - state.x_m).abs(),
+                    reach_m,
+                });
+            }
+        }
+        for ((plan, state), target) in self.plans.iter_mut().zip(states).zip(wanted) {
+            *plan = AxisPlan::segment(now, state.x_m, target, period_ns);
+        }
+        Ok(())
+    }
+
+    /// Checks targets for `command`: Enabled, finite, within the travel, a
+    /// pose the kinematics accepts.
+    fn check_targets(
+        &self,
+        command: &'static str,
+        targets: &ActiveJoints,
+    ) -> Result<[f64; 3], SimError> {
         if self.state != DriveState::Enabled {
             return Err(SimError::InvalidState {
-                command: "set_targets",
+                command,
                 state: self.state,
             });
         }
@@ -743,13 +784,7 @@ impl<C: Clock> World<C> {
         }
         forward(&self.spec.calibration, &self.spec.profile, targets)
             .map_err(SimError::TargetPose)?;
-        let now = self.done_ns;
-        let limits = self.limits;
-        let states = self.axes_at(now);
-        for ((plan, state), target) in self.plans.iter_mut().zip(states).zip(wanted) {
-            *plan = AxisPlan::to_target(now, state, target, limits);
-        }
-        Ok(())
+        Ok(wanted)
     }
 
     /// Quick stop: brake at the limit and hold (a fault stays a fault).
