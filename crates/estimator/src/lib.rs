@@ -13,6 +13,7 @@ pub mod article;
 pub mod cycle;
 pub mod error_measure;
 pub mod filter;
+pub mod force_control;
 pub mod guard;
 pub mod identification;
 mod linalg;

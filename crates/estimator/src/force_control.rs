@@ -1,0 +1,422 @@
+//! Force control on the estimated tip force (issue 15): the control law of
+//! the compliant hold and of the axial force regulation, in the tip frame
+//! (axial: along the rod direction u; lateral: across it), as a pure,
+//! fixed-size, allocation-free step per control period. The loop's step owns
+//! one [`ForceController`], feeds it the cycle's tip-force estimate and the
+//! rod direction, and turns the commanded tip it returns into joint set
+//! points through the inverse kinematics at the fulcrum (MODEL.md 3), which
+//! it streams to the drives. FORCE_CONTROL.md derives the law, its signs and
+//! its stability bounds.
+//!
+//! Signs (MODEL.md 4): F_tip is what the tip applies to the tissue, in {0}.
+//! Moving the tip along +F_tip pushes deeper and raises the force; along
+//! -F_tip relieves it. The axial force is `F_tip . u`, positive when the tip
+//! pushes along the rod (inserting).
+//!
+//! The law: a commanded tip `x_ref + x` with an admittance per tip-frame
+//! part (axial, lateral): `M a = e - D v - K x` (K: the hold's return
+//! stiffness, 0 in a push), where `e` is the force error the mode asks to
+//! remove:
+//! - [`ForceMode::Push`] (axial regulation to `N`): `e = (N - F . u) u`
+//!   (below N the tip moves along +u, deeper); the lateral part is held
+//!   (x and v across u are kept at zero: the lateral position is held);
+//! - [`ForceMode::Hold`] (compliant hold below `N`): `e = -(|F| - N) F/|F|`
+//!   when `|F| > N`, else 0 (the tip yields along -F by as much as the
+//!   force exceeds N, and the stiffness K brings it back to the held point
+//!   when the tissue lets go).
+//!
+//! With M small this is an integral force controller `v = e / D`: zero
+//! steady error on a still tissue, a force error of `D v` while it follows a
+//! tissue moving at v. The acceleration, the speed and the excursion from
+//! the reference are bounded (no wind-up: the state is the commanded motion
+//! itself, and it stops at its bounds). The force is low-passed by the
+//! controller's own filter (`filter_cutoff_hz`), whose delay is part of the
+//! stability bound ([`ForceControlConfig::phase_margin_deg`]).
+
+use crate::filter::{FilterConfig, TipFilter};
+use crate::{SettingError, Vec3};
+
+/// The admittance of one tip-frame part.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Admittance {
+    /// Virtual mass M, kg (finite, > 0).
+    pub mass_kg: f64,
+    /// Virtual damping D, N s/m (finite, > 0): the force error per speed.
+    pub damping_n_s_per_m: f64,
+}
+
+/// The force controller's settings, as the caller fills them
+/// (`[force_control]` of the configuration). [`ForceControlConfig::new`]
+/// checks them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForceControlLimits {
+    /// Along the rod.
+    pub axial: Admittance,
+    /// Across the rod.
+    pub lateral: Admittance,
+    /// The largest speed of the commanded tip, m/s (finite, > 0).
+    pub max_speed_mps: f64,
+    /// The largest acceleration of the commanded tip, m/s^2 (finite, > 0).
+    pub max_accel_mps2: f64,
+    /// The largest distance of the commanded tip from the reference, m
+    /// (finite, > 0): the bound of a push into nothing.
+    pub max_excursion_m: f64,
+    /// In the compliant hold, the virtual stiffness K back to the held
+    /// point, N/m (finite, >= 0): it brings the tip back when the tissue
+    /// lets go, and adds `K x` to the force the hold settles at (a push has
+    /// none: it must settle at its setpoint exactly).
+    pub hold_return_n_per_m: f64,
+    /// The cutoff of the controller's low-pass of F_tip, Hz.
+    pub filter_cutoff_hz: f64,
+    /// The sensor's sample period, s (the filter's step).
+    pub sample_period_s: f64,
+    /// The control period, s (the loop's).
+    pub period_s: f64,
+    /// Delays of the loop besides the filter's (sensor latency, half a
+    /// sample, one control period, the drive's interpolation), s (>= 0).
+    pub other_delay_s: f64,
+    /// The stiffest tissue the loop must stay stable on, N/m (> 0).
+    pub max_stiffness_n_per_m: f64,
+    /// The smallest accepted phase margin at that stiffness, degrees.
+    pub min_phase_margin_deg: f64,
+}
+
+impl Default for ForceControlLimits {
+    /// The defaults of FORCE_CONTROL.md: axial D 80 N s/m, M 0.2 kg;
+    /// lateral D 150 N s/m, M 0.4 kg; the hold's return 50 N/m; 6 mm/s,
+    /// 0.2 m/s^2, 40 mm; a 20 Hz filter of 500 Hz samples; 1 kHz; 3 ms of
+    /// other delays; stable to 5000 N/m with at least 25 degrees of phase
+    /// margin.
+    fn default() -> Self {
+        Self {
+            axial: Admittance {
+                mass_kg: 0.2,
+                damping_n_s_per_m: 80.0,
+            },
+            lateral: Admittance {
+                mass_kg: 0.4,
+                damping_n_s_per_m: 150.0,
+            },
+            max_speed_mps: 0.006,
+            max_accel_mps2: 0.2,
+            max_excursion_m: 0.04,
+            hold_return_n_per_m: 50.0,
+            filter_cutoff_hz: 20.0,
+            sample_period_s: 0.002,
+            period_s: 0.001,
+            other_delay_s: 0.003,
+            max_stiffness_n_per_m: 5000.0,
+            min_phase_margin_deg: 25.0,
+        }
+    }
+}
+
+/// Checked force-control settings. Exists only if valid, which includes a
+/// phase margin of at least `min_phase_margin_deg` on both parts at
+/// `max_stiffness_n_per_m`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForceControlConfig {
+    limits: ForceControlLimits,
+    filter: FilterConfig,
+    /// The filter's low-frequency group delay, s.
+    filter_delay_s: f64,
+}
+
+fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
+    SettingError::Invalid { field, value, why }
+}
+
+fn positive(field: &'static str, value: f64) -> Result<(), SettingError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, value, "must be finite and > 0"))
+    }
+}
+
+impl ForceControlConfig {
+    /// Checks every setting, and the stability bound.
+    pub fn new(limits: ForceControlLimits) -> Result<Self, SettingError> {
+        for a in [&limits.axial, &limits.lateral] {
+            positive("mass_kg", a.mass_kg)?;
+            positive("damping_n_s_per_m", a.damping_n_s_per_m)?;
+        }
+        let k = limits.hold_return_n_per_m;
+        if !(k.is_finite() && k >= 0.0) {
+            return Err(invalid("hold_return_n_per_m", k, "must be finite and >= 0"));
+        }
+        positive("max_speed_mps", limits.max_speed_mps)?;
+        positive("max_accel_mps2", limits.max_accel_mps2)?;
+        positive("max_excursion_m", limits.max_excursion_m)?;
+        positive("period_s", limits.period_s)?;
+        positive("max_stiffness_n_per_m", limits.max_stiffness_n_per_m)?;
+        if !(limits.other_delay_s.is_finite() && limits.other_delay_s >= 0.0) {
+            return Err(invalid(
+                "other_delay_s",
+                limits.other_delay_s,
+                "must be finite and >= 0",
+            ));
+        }
+        let pm = limits.min_phase_margin_deg;
+        if !(pm.is_finite() && (0.0..90.0).contains(&pm)) {
+            return Err(invalid("min_phase_margin_deg", pm, "must be within 0..90"));
+        }
+        let filter = FilterConfig {
+            cutoff_hz: limits.filter_cutoff_hz,
+            sample_period_s: limits.sample_period_s,
+        };
+        let filter_delay_s = TipFilter::new(filter)?.group_delay_s();
+        let config = Self {
+            limits,
+            filter,
+            filter_delay_s,
+        };
+        for (field, a) in [
+            ("axial.damping_n_s_per_m", &limits.axial),
+            ("lateral.damping_n_s_per_m", &limits.lateral),
+        ] {
+            if config.phase_margin_deg(a, limits.max_stiffness_n_per_m) < pm {
+                return Err(invalid(
+                    field,
+                    a.damping_n_s_per_m,
+                    "too small for the stiffest tissue: the loop would not keep its phase \
+                     margin (raise the damping, or the filter's cutoff)",
+                ));
+            }
+        }
+        Ok(config)
+    }
+
+    /// The checked settings.
+    pub fn limits(&self) -> &ForceControlLimits {
+        &self.limits
+    }
+
+    /// The delay of the loop: the filter's group delay plus the other
+    /// delays, s.
+    pub fn loop_delay_s(&self) -> f64 {
+        self.filter_delay_s + self.limits.other_delay_s
+    }
+
+    /// The phase margin, degrees, of the force loop of part `a` on a tissue
+    /// of stiffness `k` (N/m): the loop `k / (s (M s + D)) e^(-s T)` crosses
+    /// over near `w = k / D` (where M w << D), with the phase
+    /// `-90 - atan(w M / D) - w T` degrees there (T: [`Self::loop_delay_s`]).
+    pub fn phase_margin_deg(&self, a: &Admittance, k: f64) -> f64 {
+        let w = k / a.damping_n_s_per_m;
+        let lag_rad = libm::atan(w * a.mass_kg / a.damping_n_s_per_m) + w * self.loop_delay_s();
+        90.0 - lag_rad.to_degrees()
+    }
+
+    /// The low-pass of the controller.
+    pub fn filter(&self) -> FilterConfig {
+        self.filter
+    }
+}
+
+/// What the controller regulates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ForceMode {
+    /// Hold the tip while |F_tip| is below `max_force_n`; above, yield along
+    /// -F_tip so that it stays near it; come back when the tissue lets go.
+    Hold {
+        /// N (finite, > 0).
+        max_force_n: f64,
+    },
+    /// Regulate the axial force F_tip . u to `axial_n`, the lateral position
+    /// held.
+    Push {
+        /// N (finite).
+        axial_n: f64,
+    },
+}
+
+/// What one step did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControlOutput {
+    /// The commanded tip, {0}, m.
+    pub tip_m: Vec3,
+    /// Its velocity, m/s.
+    pub velocity_mps: Vec3,
+    /// The filtered F_tip the law acted on, {0}, N.
+    pub force_n: Vec3,
+    /// The commanded tip is at its largest excursion from the reference.
+    pub at_excursion_limit: bool,
+}
+
+/// Why the controller did not step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum ControlError {
+    /// No mode is active.
+    #[error("no force-control mode is active")]
+    Idle,
+    /// There is no filtered force yet (no observable estimate).
+    #[error("no filtered tip force to act on")]
+    NoForce,
+    /// The rod direction is not a finite unit vector.
+    #[error("the rod direction is not a finite unit vector")]
+    BadRodDirection,
+}
+
+/// The force controller: fixed-size state, set at construction.
+#[derive(Debug, Clone)]
+pub struct ForceController {
+    config: ForceControlConfig,
+    filter: TipFilter,
+    /// The last filtered force.
+    force_n: Option<Vec3>,
+    mode: Option<ForceMode>,
+    /// The reference tip (where the mode started), {0}, m.
+    reference_m: Vec3,
+    /// The commanded tip's offset from the reference, m.
+    offset_m: Vec3,
+    /// Its velocity, m/s.
+    velocity_mps: Vec3,
+}
+
+/// `v` split into its part along the unit `u` and the rest.
+fn split(v: &Vec3, u: &Vec3) -> (Vec3, Vec3) {
+    let along = u * v.dot(u);
+    (along, v - along)
+}
+
+impl ForceController {
+    /// A controller with no mode active.
+    pub fn new(config: ForceControlConfig) -> Result<Self, SettingError> {
+        Ok(Self {
+            config,
+            filter: TipFilter::new(config.filter)?,
+            force_n: None,
+            mode: None,
+            reference_m: Vec3::zeros(),
+            offset_m: Vec3::zeros(),
+            velocity_mps: Vec3::zeros(),
+        })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &ForceControlConfig {
+        &self.config
+    }
+
+    /// Feeds the cycle's tip-force estimate to the filter (every cycle, in
+    /// every mode: a repeated sample is skipped by its counter); `None`
+    /// (no observable estimate) resets it.
+    pub fn observe(&mut self, sample: Option<(u32, &Vec3, &Vec3)>) {
+        self.force_n = match sample {
+            Some((counter, force_n, std_n)) => self
+                .filter
+                .update_counted(counter, force_n, std_n)
+                .ok()
+                .map(|f| f.force_n),
+            None => {
+                self.filter.reset();
+                None
+            }
+        };
+    }
+
+    /// The filtered F_tip of the last observation, {0}, N.
+    pub fn filtered_force_n(&self) -> Option<Vec3> {
+        self.force_n
+    }
+
+    /// Starts `mode` with the commanded tip at `tip_m` at rest.
+    pub fn start(&mut self, mode: ForceMode, tip_m: Vec3) {
+        self.mode = Some(mode);
+        self.reference_m = tip_m;
+        self.offset_m = Vec3::zeros();
+        self.velocity_mps = Vec3::zeros();
+    }
+
+    /// Ends the mode (position control again).
+    pub fn stop(&mut self) {
+        self.mode = None;
+        self.velocity_mps = Vec3::zeros();
+    }
+
+    /// The active mode.
+    pub fn mode(&self) -> Option<ForceMode> {
+        self.mode
+    }
+
+    /// One control period: the commanded tip after it. `no_deeper` (the
+    /// guard's Warn) removes any velocity along the filtered force (no
+    /// motion deeper along it).
+    pub fn step(&mut self, rod_dir: &Vec3, no_deeper: bool) -> Result<ControlOutput, ControlError> {
+        let mode = self.mode.ok_or(ControlError::Idle)?;
+        let f = self.force_n.ok_or(ControlError::NoForce)?;
+        let norm = rod_dir.norm();
+        if !(norm.is_finite() && (norm - 1.0).abs() < 1e-6) {
+            return Err(ControlError::BadRodDirection);
+        }
+        let u = rod_dir;
+        let l = &self.config.limits;
+        let error = match mode {
+            ForceMode::Push { axial_n } => u * (axial_n - f.dot(u)),
+            ForceMode::Hold { max_force_n } => {
+                let m = f.norm();
+                if m > max_force_n {
+                    -f * ((m - max_force_n) / m)
+                } else {
+                    Vec3::zeros()
+                }
+            }
+        };
+        let (ea, el) = split(&error, u);
+        let (xa, xl) = split(&self.offset_m, u);
+        let (va, vl) = split(&self.velocity_mps, u);
+        let part = |a: &Admittance, e: Vec3, x: Vec3, v: Vec3, k: f64| {
+            (e - v * a.damping_n_s_per_m - x * k) / a.mass_kg
+        };
+        let accel = match mode {
+            // No return stiffness (it must settle at its setpoint), and the
+            // lateral position is held: no lateral motion at all.
+            ForceMode::Push { .. } => {
+                self.offset_m = xa;
+                self.velocity_mps = va;
+                part(&l.axial, ea, xa, va, 0.0)
+            }
+            ForceMode::Hold { .. } => {
+                let k = l.hold_return_n_per_m;
+                part(&l.axial, ea, xa, va, k) + part(&l.lateral, el, xl, vl, k)
+            }
+        };
+        let dt = l.period_s;
+        let accel = clamp_norm(&accel, l.max_accel_mps2);
+        let mut v = clamp_norm(&(self.velocity_mps + accel * dt), l.max_speed_mps);
+        if no_deeper {
+            let along = v.dot(&f);
+            if along > 0.0 {
+                v -= f * (along / f.norm_squared());
+            }
+        }
+        let mut x = self.offset_m + v * dt;
+        let reach = x.norm();
+        let at_limit = reach >= l.max_excursion_m;
+        if at_limit {
+            // At the bound: back onto it, and no speed outward.
+            x *= l.max_excursion_m / reach;
+            let outward = v.dot(&x);
+            if outward > 0.0 {
+                v -= x * (outward / x.norm_squared());
+            }
+        }
+        debug_assert!(x.norm() <= l.max_excursion_m * (1.0 + 1e-9));
+        debug_assert!(v.norm() <= l.max_speed_mps * (1.0 + 1e-9));
+        self.offset_m = x;
+        self.velocity_mps = v;
+        Ok(ControlOutput {
+            tip_m: self.reference_m + x,
+            velocity_mps: v,
+            force_n: f,
+            at_excursion_limit: at_limit,
+        })
+    }
+}
+
+/// `v` scaled down to norm `max` if longer (a NaN stays NaN).
+fn clamp_norm(v: &Vec3, max: f64) -> Vec3 {
+    let n = v.norm();
+    if n > max { v * (max / n) } else { *v }
+}
