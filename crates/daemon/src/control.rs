@@ -422,6 +422,15 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                     });
                 }
             }
+            DriveAction::FaultReset => {
+                if self.drives.fault_reset().is_err() {
+                    self.counts.drive_errors += 1;
+                    self.log.send(LogEvent::DeviceError {
+                        cycle,
+                        what: "drive fault reset",
+                    });
+                }
+            }
             DriveAction::Stream(q) => {
                 if self.drives.stream(q, period_ns).is_err() {
                     self.counts.drive_errors += 1;

@@ -120,6 +120,10 @@ pub enum ReplyStatus {
     NotCarriedOut = 14,
     /// A request whose argument is not valid (e.g. a back-out distance).
     BadArgument = 15,
+    /// A reset while the drives are in Fault: their fault was reset (their
+    /// positions are invalid while they are faulted, so the guard could not
+    /// judge the reset); reset again once they report Ready.
+    DrivesFaultReset = 16,
 }
 
 /// The exact cause behind a reply: what `sarctl` prints (its `Display`).
@@ -312,6 +316,9 @@ pub enum DriveAction {
     /// A streamed set point: the trajectory one period ahead, m (cyclic
     /// synchronous position: the drives reach it in one period).
     Stream(ActiveJoints),
+    /// Reset the drives' fault only (they go to Ready; the guard's reset
+    /// comes with the next request).
+    FaultReset,
 }
 
 /// The decision of one cycle.
@@ -435,6 +442,9 @@ pub struct LoopStep {
     last_joints: Option<(ActiveJoints, u64)>,
     /// The largest axis speed between the last two joint samples, m/s.
     speed_mps: f64,
+    /// The drives' state in the previous cycle (a new drive fault is a
+    /// guard Fault in the cycle it appears).
+    last_drive_state: Option<DriveState>,
     out: LoopOutput,
 }
 
@@ -508,6 +518,7 @@ impl LoopStep {
             trajectory: None,
             last_joints: None,
             speed_mps: 0.0,
+            last_drive_state: None,
             out,
         })
     }
@@ -553,28 +564,50 @@ impl LoopStep {
             self.last_joints = Some((*q, input.joints.stamp_ns));
         }
         // A reset waits until the axes are at rest: it is not passed on.
+        // With the drives in Fault it resets their fault first (their
+        // positions are invalid until then, so the guard cannot judge it).
         let mut cycle_input = input.cycle_input();
         let reset_while_moving =
             input.request == Some(Request::Reset) && self.speed_mps > REST_SPEED_MPS;
-        if reset_while_moving {
+        let drives_faulted = matches!(input.drive_state, Some(DriveState::Fault { .. }));
+        let reset_drives_first = input.request == Some(Request::Reset) && drives_faulted;
+        if reset_while_moving || reset_drives_first {
             cycle_input.command = None;
         }
-        // The host's own fault: the publishing thread stalled.
-        let host_fault = (input.publisher_idle_ns > self.config.publisher_stall_ns).then(|| {
-            Reason::PublisherStalled {
+        // The host's own faults: the publishing thread stalled; the drives
+        // entering Fault (latched by the guard in that cycle only: the
+        // reset that leaves it is what resets the drives).
+        let drive_fault = match (self.last_drive_state, input.drive_state) {
+            (Some(DriveState::Fault { .. }), _) => None,
+            (_, Some(DriveState::Fault { axis, code })) => Some(Reason::DriveFault {
+                axis: axis.map_or(0, |a| a.saturating_add(1)),
+                code,
+            }),
+            _ => None,
+        };
+        self.last_drive_state = input.drive_state;
+        let host_fault = (input.publisher_idle_ns > self.config.publisher_stall_ns)
+            .then(|| Reason::PublisherStalled {
                 stalled_ms: u32::try_from(input.publisher_idle_ns / 1_000_000).unwrap_or(u32::MAX),
-            }
-        });
+            })
+            .or(drive_fault);
         let estimate = *self
             .estimator
             .cycle_checked(&cycle_input, reference.as_ref(), host_fault);
         let mut action = DriveAction::None;
-        let mut reply = reset_while_moving.then_some((
-            ReplyStatus::AxesMoving,
-            ReplyDetail::AxesMoving {
-                speed_mps: self.speed_mps,
-            },
-        ));
+        let mut reply = if reset_drives_first {
+            Some((
+                ReplyStatus::DrivesFaultReset,
+                ReplyDetail::DrivesNotEnabled(input.drive_state),
+            ))
+        } else {
+            reset_while_moving.then_some((
+                ReplyStatus::AxesMoving,
+                ReplyDetail::AxesMoving {
+                    speed_mps: self.speed_mps,
+                },
+            ))
+        };
 
         let halting = estimate.guard_state.is_halting();
         let entered_halt = estimate.transition.is_some_and(|t| t.to.is_halting());
@@ -582,6 +615,8 @@ impl LoopStep {
             self.trajectory = None;
             if entered_halt || input.drive_state == Some(DriveState::Enabled) {
                 action = DriveAction::QuickStop;
+            } else if reset_drives_first {
+                action = DriveAction::FaultReset;
             }
         }
 

@@ -469,6 +469,9 @@ pub fn status_name(code: u32) -> &'static str {
         }
         x if x == ReplyStatus::NotCarriedOut as u32 => "refused: the move was not carried out",
         x if x == ReplyStatus::BadArgument as u32 => "refused: invalid argument",
+        x if x == ReplyStatus::DrivesFaultReset as u32 => {
+            "the drives' fault was reset: reset again once they are ready"
+        }
         reply_code::UNKNOWN_COMMAND => "unknown command",
         reply_code::BUSY => "refused: the daemon's command queue is full",
         _ => "refused",

@@ -209,7 +209,7 @@ prop_compose! {
         bias in f3(),
         axis in any::<i8>(),
         more in prop::array::uniform6(f3()),
-        decision in (0u8..7, any::<u8>(), any::<u16>()),
+        decision in (0u8..8, any::<u8>(), any::<u16>()),
         host in (any::<u64>(), any::<u64>().prop_map(f64::from_bits)),
     ) -> CycleInput {
         CycleInput {

@@ -30,9 +30,15 @@ struct Rig {
 impl Rig {
     /// The demo robot with `contact` (simulator keys), reset at the start.
     fn new(contact: Vec<ContactKey>) -> Self {
+        Self::with_faults(contact, Vec::new())
+    }
+
+    /// [`Rig::new`] with faults on demand.
+    fn with_faults(contact: Vec<ContactKey>, faults: Vec<sar_drivers::sim::Fault>) -> Self {
         let cfg = config::builtin().unwrap();
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = contact;
+        scenario.spec.faults = faults;
         let clock = SimClock::new(1_000_000_000);
         let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
         let operator = Operator::new();
@@ -386,4 +392,49 @@ fn the_record_switch_loses_no_request() {
         );
         assert!(!s.take_start() && !s.take_stop());
     }
+}
+
+/// A drive fault (on the CANopen path: an EMCY or a lost heartbeat) is a
+/// guard Fault of its own in the cycle the drives report it, with a quick
+/// stop; the cause gone, a reset brings the drives back (fault reset, enable).
+#[test]
+fn a_drive_fault_is_a_guard_fault_and_a_reset_brings_the_drives_back() {
+    let mut rig = Rig::with_faults(
+        Vec::new(),
+        vec![sar_drivers::sim::Fault::DriveFault {
+            at_ns: 1_500_000_000,
+            code: 0x8130,
+        }],
+    );
+    let fault = rig
+        .until(2000, |d| d.estimate.guard_state == GuardState::Fault)
+        .expect("no fault");
+    assert_eq!(
+        fault.estimate.guard_reason,
+        Reason::DriveFault {
+            axis: 0,
+            code: 0x8130
+        }
+    );
+    assert_eq!(fault.action, DriveAction::QuickStop);
+    for _ in 0..300 {
+        rig.step();
+    }
+    // Their positions are invalid while they are faulted: the first reset
+    // resets the drives, the second (once they are Ready) the guard.
+    let r = rig.request(1, Request::Reset);
+    assert_eq!(r.status, ReplyStatus::DrivesFaultReset, "{}", r.detail);
+    assert_eq!(rig.c.decision().action, DriveAction::FaultReset);
+    rig.until(20, |_| false);
+    assert_eq!(rig.c.drive_state(), Some(DriveState::Ready));
+    let r = rig.request(2, Request::Reset);
+    assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+    assert_eq!(
+        rig.c.decision().action,
+        DriveAction::Release(sar_daemon::step::Release::Enable)
+    );
+    rig.until(20, |_| false);
+    assert_eq!(rig.c.drive_state(), Some(DriveState::Enabled));
+    assert_eq!(rig.c.output().guard_state, GuardState::Ok);
+    rig.replays_bit_for_bit();
 }

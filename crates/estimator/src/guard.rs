@@ -847,6 +847,16 @@ pub enum Reason {
         /// How long without progress, ms.
         stalled_ms: u32,
     },
+    /// The drives reported a fault (a drive's own fault, an EMCY, a lost
+    /// heartbeat on the CANopen path): the guard latches Fault in the cycle
+    /// the drives enter it; an accepted reset brings them back (fault reset,
+    /// enable).
+    DriveFault {
+        /// 1, 2 or 3 (q1, q2, q3); 0 when the drives cannot tell.
+        axis: u8,
+        /// The device's fault code.
+        code: u16,
+    },
 }
 
 /// A residual of the wrench at rest against the model (the first reset's
@@ -910,7 +920,7 @@ impl fmt::Display for SensorChannel {
 /// Every reason's stable code and name, in code order (recordings, the wire
 /// and `sarctl` use the codes; SAFETY.md names every reason). Codes never
 /// change meaning; a new reason gets the next free code.
-pub const REASONS: [(u16, &str); 35] = [
+pub const REASONS: [(u16, &str); 36] = [
     (1, "no_input_yet"),
     (2, "cycle_out_of_order"),
     (3, "clock_failed"),
@@ -946,6 +956,7 @@ pub const REASONS: [(u16, &str); 35] = [
     (33, "retreat_entered"),
     (34, "force_rising"),
     (35, "publisher_stalled"),
+    (36, "drive_fault"),
 ];
 
 impl Reason {
@@ -988,6 +999,7 @@ impl Reason {
             Self::RetreatEntered { .. } => 33,
             Self::ForceRising { .. } => 34,
             Self::PublisherStalled { .. } => 35,
+            Self::DriveFault { .. } => 36,
         }
     }
 
@@ -1175,6 +1187,13 @@ impl fmt::Display for Reason {
                 f,
                 "the publishing thread made no progress for {stalled_ms} ms: no commands, no state"
             ),
+            Self::DriveFault { axis, code } => {
+                if axis == 0 {
+                    write!(f, "the drives faulted (code {code:#06x})")
+                } else {
+                    write!(f, "the drive of q{axis} faulted (code {code:#06x})")
+                }
+            }
         }
     }
 }

@@ -1040,6 +1040,10 @@ fn every_reason() -> Vec<Reason> {
             bound_n: 22.0,
         },
         Reason::PublisherStalled { stalled_ms: 500 },
+        Reason::DriveFault {
+            axis: 2,
+            code: 0x8130,
+        },
     ];
     for r in &all {
         match r {
@@ -1077,7 +1081,8 @@ fn every_reason() -> Vec<Reason> {
             | Reason::MountingMismatch { .. }
             | Reason::RetreatEntered { .. }
             | Reason::ForceRising { .. }
-            | Reason::PublisherStalled { .. } => {}
+            | Reason::PublisherStalled { .. }
+            | Reason::DriveFault { .. } => {}
         }
     }
     all

@@ -402,7 +402,18 @@ fn run(args: &Args) -> Result<(), String> {
             sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
         }
         Cmd::Identify(_) => Ok(()), // run above, without a daemon
-        Cmd::Reset => report("reset", &command(command_kind::RESET, [0.0; 3])?),
+        Cmd::Reset => {
+            // Faulted drives are reset first: then the guard's reset.
+            let mut r = command(command_kind::RESET, [0.0; 3])?;
+            for _ in 0..10 {
+                if r.status != sar_daemon::control::ReplyStatus::DrivesFaultReset as u32 {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(100));
+                r = command(command_kind::RESET, [0.0; 3])?;
+            }
+            report("reset", &r)
+        }
         Cmd::Retreat { distance } => {
             let sub = client.subscribe()?;
             let latest = |what: &str| {

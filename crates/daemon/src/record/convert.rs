@@ -279,6 +279,7 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
         }
         DriveAction::Setpoint(q) => (DriveActionCode::Setpoint, joints_arr(&q)),
         DriveAction::Stream(q) => (DriveActionCode::Stream, joints_arr(&q)),
+        DriveAction::FaultReset => (DriveActionCode::FaultReset, [0.0; 3]),
     };
     if let Some((status, reason)) = decision.reply {
         m.reply_status = u8::try_from(status as u16).unwrap_or(REPLY_NONE);

@@ -442,6 +442,8 @@ code_enum!(
         Setpoint = 5,
         /// A streamed set point one period ahead (`setpoint_q_m`).
         Stream = 6,
+        /// The drives' fault reset alone (a reset while they are faulted).
+        FaultReset = 7,
     }
 );
 

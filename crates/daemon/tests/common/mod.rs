@@ -77,7 +77,7 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
                 let (a, b) = (v3(k + 18), v3(k + 19));
                 [a[0], a[1], a[2], b[0], b[1], b[2]]
             },
-            drive_action: DriveActionCode::from_code((k % 7) as u8).unwrap(),
+            drive_action: DriveActionCode::from_code((k % 8) as u8).unwrap(),
             setpoint_q_m: v3(k + 20),
             reply_status: if k.is_multiple_of(3) {
                 REPLY_NONE
