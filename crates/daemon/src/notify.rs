@@ -4,7 +4,7 @@
 //! formatting, no allocation on the loop); the socket is non-blocking, so a
 //! full or missing receiver never slows the loop.
 
-use sar_estimator::guard::GuardState;
+use sar_estimator::guard::{GuardState, Reason};
 use std::os::linux::net::SocketAddrExt;
 use std::os::unix::net::{SocketAddr, UnixDatagram};
 
@@ -67,6 +67,16 @@ pub fn status_message(state: GuardState) -> &'static str {
     }
 }
 
+/// Whether the loop keeps feeding systemd's watchdog. Not while the guard
+/// holds a Fault for a stalled publishing thread: the guard has already
+/// stopped the drives, but that thread carries every operator command and
+/// the published state, so the operator can neither see nor command the
+/// robot; without pings systemd restarts `sard` after `WatchdogSec` (the
+/// new daemon starts in Fault, waiting for its first reset).
+pub fn watchdog_fed(reason: &Reason) -> bool {
+    !matches!(reason, Reason::PublisherStalled { .. })
+}
+
 /// What the loop tells systemd, decided from its health.
 #[derive(Debug)]
 pub struct Watchdog {
@@ -89,9 +99,9 @@ impl Watchdog {
 
     /// After each cycle, from the loop thread itself (so a stuck loop stops
     /// the pings): READY=1 after the first good cycle (`good`: it gave a
-    /// tip-force estimate), then WATCHDOG=1 every `every_cycles` cycles,
-    /// STATUS= on every guard state change.
-    pub fn after_cycle(&mut self, cycle: u64, state: GuardState, good: bool) {
+    /// tip-force estimate), then WATCHDOG=1 every `every_cycles` cycles
+    /// while [`watchdog_fed`] says so, STATUS= on every guard state change.
+    pub fn after_cycle(&mut self, cycle: u64, state: GuardState, reason: &Reason, good: bool) {
         let Some(n) = self.notifier.as_mut() else {
             return;
         };
@@ -103,7 +113,7 @@ impl Watchdog {
             n.send("READY=1");
             self.ready = true;
         }
-        if self.ready && cycle.is_multiple_of(self.every_cycles) {
+        if self.ready && cycle.is_multiple_of(self.every_cycles) && watchdog_fed(reason) {
             n.send("WATCHDOG=1");
         }
     }

@@ -101,7 +101,7 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
         // The watchdog is fed from here, the loop itself: a stuck loop stops
         // feeding it.
         let estimate = matches!(out.tip, TipOutcome::Estimate(_));
-        watchdog.after_cycle(cycle, out.guard_state, estimate);
+        watchdog.after_cycle(cycle, out.guard_state, &out.guard_reason, estimate);
         let end_ns = rt::monotonic_ns().unwrap_or(woke_ns);
         stats.compute.record(end_ns.saturating_sub(woke_ns));
         stats.cycles = cycle;

@@ -281,6 +281,10 @@ fn a_silent_publishing_thread_is_a_fault_after_the_stall_time() {
         Reason::PublisherStalled { .. }
     ));
     assert_eq!(d.action, DriveAction::QuickStop);
+    // systemd's watchdog is no longer fed (it restarts sard); any other
+    // fault keeps it fed (the loop itself is alive).
+    assert!(!sar_daemon::notify::watchdog_fed(&d.estimate.guard_reason));
+    assert!(sar_daemon::notify::watchdog_fed(&Reason::SensorInvalid));
     // A reset is refused while it stays silent.
     rig.operator
         .requests

@@ -270,7 +270,18 @@ fn manage(
     outgoing: &ArrayQueue<Recorder>,
     stop: &AtomicBool,
 ) {
+    // The drops the log has told of, and when (at most one line a second).
+    let mut told = (0u64, std::time::Instant::now());
     loop {
+        let dropped = switch.dropped();
+        if dropped > told.0 && told.1.elapsed() >= Duration::from_secs(1) {
+            tracing::warn!(
+                "the recorder dropped {} messages ({dropped} so far): its writer does not keep \
+                 up (disk stalled or full); the loop goes on, the recording has gaps",
+                dropped - told.0
+            );
+            told = (dropped, std::time::Instant::now());
+        }
         let stopping = stop.load(Ordering::Acquire);
         while let Some(rec) = outgoing.pop() {
             close(rec);
