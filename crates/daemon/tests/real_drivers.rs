@@ -70,7 +70,9 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
     let counts = |v: f64, per: f64| (v * per).round() as i32;
     // A live device: seeded noise on every reading (a noiseless one is a
     // frozen one to the loop).
-    let mut emu_config = EmulatorConfig::live(Pacing::Manual, 0x4d7);
+    let mut emu_config = EmulatorConfig::new(Pacing::Manual);
+    emu_config.noise_counts = [2_000.0, 2_000.0, 8_000.0, 1_000.0, 1_000.0, 200.0];
+    emu_config.seed = 0x4d7;
     emu_config.counts = [
         counts(reading.force_n.x, COUNTS_PER_N),
         counts(reading.force_n.y, COUNTS_PER_N),

@@ -24,7 +24,7 @@ pub mod sim;
 pub use clock::{Clock, ClockError, MonotonicClock, SimClock};
 pub use drives::{AxisDrives, DriveState, JointPositions};
 pub use error::{Error, ErrorKind};
-pub use sensor::{Drained, ForceSensor, SensorStatus, WrenchSample};
+pub use sensor::{Channels, Drained, ForceSensor, Rail, SensorStatus, WrenchSample};
 
 /// A 3-vector of `f64` (frame given by the name or doc).
 pub type Vec3 = nalgebra::Vector3<f64>;

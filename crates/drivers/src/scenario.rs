@@ -1,5 +1,5 @@
 //! Scenario files: a simulated robot (true geometry, manipulator, support,
-//! axes, sensor, tip contact, faults) and the motion script to run on it, as a
+//! axes, sensor, tip contact, tissues, faults) and the motion script to run on it, as a
 //! TOML file under version control (the format is described in
 //! `scenarios/README.md`).
 //!
@@ -9,21 +9,22 @@
 //! e.g. `motion[3].hold_s`) and what is wrong; TOML syntax errors keep toml's
 //! line and column.
 
+mod contact;
+mod ctx;
+mod devices;
+mod fault;
 pub mod locate;
 mod raw;
+mod robot;
+mod script;
 
-use crate::Vec3;
-use crate::convert::{joints_from_array, joints_from_displacement, joints_to_array};
-use crate::motion::{SlideSign, SlideTracker, axis_progress_m, move_time_s};
-use crate::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimError, SimSpec};
+use crate::motion::{SlideSign, move_time_s};
+use crate::sim::{AxesSpec, SimError, SimSpec};
+use ctx::{Ctx, seconds_to_ns_saturating};
 use locate::Locator;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use raw::{AxisName, FaultKind, FaultToml, FileToml, MotionToml};
-use sar_kinematics::{
-    ActiveJoints, Calibration, CalibrationSpec, ConfigError, MIN_DISTANCE_M, Mat3, PoseError,
-    Profile, ProfileSpec, forward, inverse,
-};
+use raw::FileToml;
+use sar_kinematics::{ActiveJoints, Calibration};
+use script::{Machine, MotionFile};
 use std::path::Path;
 
 /// Default speed limit of each axis, m/s (the article's axes).
@@ -46,6 +47,14 @@ pub const DEFAULT_SENSOR_LATENCY_S: f64 = 0.001;
 pub const DEFAULT_NOISE_N: [f64; 3] = [0.2, 0.2, 0.8];
 /// Default torque noise std per sensor axis, N m.
 pub const DEFAULT_NOISE_NM: [f64; 3] = [0.01, 0.01, 0.002];
+/// Default measuring range of the force channels (x, y, z), N: the nominal
+/// capacity of the OnRobot HEX-E QC, Fxy 200 N and Fz 200 N (OnRobot, HEX-E
+/// QC datasheet, "Nominal capacity"; its noise-free resolution, 0.2 / 0.2 /
+/// 0.8 N, is [`DEFAULT_NOISE_N`]).
+pub const DEFAULT_RANGE_N: [f64; 3] = [200.0, 200.0, 200.0];
+/// Default measuring range of the torque channels (x, y, z), N m: the HEX-E
+/// QC's nominal capacity, Txy 10 N m and Tz 13 N m (same datasheet).
+pub const DEFAULT_RANGE_NM: [f64; 3] = [10.0, 10.0, 13.0];
 /// Default step of the physics integration, s.
 pub const DEFAULT_PHYSICS_STEP_S: f64 = 1e-4;
 /// Longest time a file may name, s (about 11.6 days): keeps ns in range.
@@ -126,15 +135,6 @@ impl MotionScript {
             from = step.target;
         }
         total_ns
-    }
-}
-
-fn seconds_to_ns_saturating(s: f64) -> u64 {
-    if s.is_finite() && s > 0.0 {
-        // Saturating float-to-int cast; times here are far below u64::MAX ns.
-        (s * 1e9).round() as u64
-    } else {
-        0
     }
 }
 
@@ -238,96 +238,6 @@ pub fn parse(text: &str, origin: &str) -> Result<Scenario, ScenarioError> {
     build(&ctx, file)
 }
 
-/// The file being checked: makes errors that name it, the key and the line.
-struct Ctx<'a> {
-    origin: &'a str,
-    locator: Locator<'a>,
-}
-
-impl Ctx<'_> {
-    fn err(&self, key: &str, problem: impl Into<String>) -> ScenarioError {
-        ScenarioError::Invalid {
-            origin: self.origin.to_owned(),
-            key: key.to_owned(),
-            line: self.locator.line_near(key),
-            problem: problem.into(),
-        }
-    }
-
-    fn serde_error(&self, e: &toml::de::Error) -> ScenarioError {
-        let (key, line, problem) = self.locator.serde_problem(e);
-        ScenarioError::Invalid {
-            origin: self.origin.to_owned(),
-            key,
-            line,
-            problem,
-        }
-    }
-
-    fn non_negative(&self, key: &str, value: f64, unit: &str) -> Result<f64, ScenarioError> {
-        if value >= 0.0 {
-            Ok(value)
-        } else {
-            Err(self.err(key, format!("must be >= 0, got {value} {unit}")))
-        }
-    }
-
-    fn positive(&self, key: &str, value: f64, unit: &str) -> Result<f64, ScenarioError> {
-        if value > 0.0 {
-            Ok(value)
-        } else {
-            Err(self.err(key, format!("must be > 0, got {value} {unit}")))
-        }
-    }
-
-    fn non_negative3(&self, key: &str, v: [f64; 3], unit: &str) -> Result<Vec3, ScenarioError> {
-        for (i, x) in v.iter().enumerate() {
-            self.non_negative(&format!("{key}[{i}]"), *x, unit)?;
-        }
-        Ok(Vec3::from(v))
-    }
-
-    /// A time in seconds (>= 0, at most [`MAX_TIME_S`]) as ns.
-    fn time_ns(&self, key: &str, s: f64) -> Result<u64, ScenarioError> {
-        if s < 0.0 {
-            return Err(self.err(key, format!("must be >= 0, got {s} s")));
-        }
-        if s > MAX_TIME_S {
-            return Err(self.err(key, format!("must be at most {MAX_TIME_S} s, got {s} s")));
-        }
-        Ok(seconds_to_ns_saturating(s))
-    }
-
-    /// A rate in Hz as a period in ns (>= 1 us).
-    fn period_ns(&self, key: &str, rate_hz: f64) -> Result<u64, ScenarioError> {
-        if !(rate_hz > 0.0 && rate_hz <= 1e6) {
-            return Err(self.err(key, format!("must be in (0, 1e6] Hz, got {rate_hz} Hz")));
-        }
-        Ok(seconds_to_ns_saturating(1.0 / rate_hz).max(1))
-    }
-}
-
-fn calibration_error_key(e: &ConfigError) -> String {
-    match e {
-        ConfigError::NonFinite { field, .. } => format!("robot.{field}"),
-        ConfigError::RotationNotOrthonormal { .. } | ConfigError::RotationNotProper { .. } => {
-            "robot.sensor_rotation".to_owned()
-        }
-        ConfigError::GravityOutOfRange { .. } => "robot.gravity".to_owned(),
-        _ => "robot".to_owned(),
-    }
-}
-
-fn profile_error_key(e: &ConfigError) -> String {
-    match e {
-        ConfigError::NonFinite { field, .. } => format!("manipulator.{field}"),
-        ConfigError::NonPositiveLength { .. } => "manipulator.length_m".to_owned(),
-        ConfigError::OffsetTooLarge { .. } => "manipulator.offset_m".to_owned(),
-        ConfigError::NegativeMass { .. } => "manipulator.mass_kg".to_owned(),
-        _ => "manipulator".to_owned(),
-    }
-}
-
 /// The file's key for a refusal of the simulator's checks.
 fn sim_error_key(e: &SimError) -> String {
     match e {
@@ -338,6 +248,7 @@ fn sim_error_key(e: &SimError) -> String {
             "axes.position_period_ns" => "axes.position_rate_hz",
             "sensor.period_ns" => "sensor.rate_hz",
             "contact.force_n" => "contact",
+            f if f.starts_with("tissue.") => "tissue",
             f if f.starts_with("faults.") => "fault",
             other => other,
         }
@@ -350,155 +261,14 @@ fn sim_error_key(e: &SimError) -> String {
     }
 }
 
-/// The active joints that put A at `ujoint_m`.
-fn joints_for_ujoint(cal: &Calibration, ujoint_m: &Vec3) -> ActiveJoints {
-    joints_from_displacement(&(ujoint_m - cal.ujoint_offset_m() - cal.p_home_m()))
-}
-
-/// The geometry a script is checked against.
-struct Machine {
-    calibration: Calibration,
-    profile: Profile,
-    travel_m: [(f64, f64); 3],
-}
-
-impl Machine {
-    /// Checks that `q` is inside the travel and a pose the kinematics accepts.
-    fn check_pose(&self, ctx: &Ctx<'_>, key: &str, q: &ActiveJoints) -> Result<(), ScenarioError> {
-        let values = joints_to_array(q);
-        for ((name, value), (min, max)) in ["q1", "q2", "q3"].iter().zip(values).zip(self.travel_m)
-        {
-            if !(min..=max).contains(&value) {
-                return Err(ctx.err(
-                    key,
-                    format!(
-                        "{name} = {value:.6} m is outside the travel {min}..{max} m of that axis"
-                    ),
-                ));
-            }
-        }
-        forward(&self.calibration, &self.profile, q)
-            .map(|_| ())
-            .map_err(|e| ctx.err(key, format!("the kinematics refuses this pose: {e}")))
-    }
-
-    /// Checks the path from `from` to `to`, each axis on its own trapezoid,
-    /// and follows the slide of the rod along it. The kinematics checks the
-    /// path at [`PATH_CHECK_POINTS`] instants at least, [`PATH_CHECK_INTERVAL_S`]
-    /// apart at most (up to [`PATH_CHECK_MAX_POINTS`]); the conditions that hold
-    /// at single points (the U-joint at the support or within the rod offset of
-    /// it, a vertical rod) are checked on the chords between those instants too.
-    fn check_path(
-        &self,
-        ctx: &Ctx<'_>,
-        key: &str,
-        from: &ActiveJoints,
-        to: &ActiveJoints,
-        limits: (f64, f64),
-        tracker: &mut SlideTracker,
-    ) -> Result<(), ScenarioError> {
-        let (max_speed_mps, max_accel_mps2) = limits;
-        let start = from.displacement_m();
-        let delta = to.displacement_m() - start;
-        let total_s = move_time_s(from, to, max_speed_mps, max_accel_mps2);
-        let points = (total_s / PATH_CHECK_INTERVAL_S).ceil().clamp(
-            f64::from(PATH_CHECK_POINTS),
-            f64::from(PATH_CHECK_MAX_POINTS),
-        ) as u32;
-        let b = self.calibration.support_m();
-        let a_at_zero = self.calibration.p_home_m() + self.calibration.ujoint_offset_m();
-        let min_distance_m = self.profile.offset_m().abs() + MIN_DISTANCE_M;
-        let mut previous_a = a_at_zero + start;
-        for k in 1..=points {
-            let t_s = total_s * f64::from(k) / f64::from(points);
-            let progress = |d: f64| axis_progress_m(d, max_speed_mps, max_accel_mps2, t_s);
-            let p = start + Vec3::new(progress(delta.x), progress(delta.y), progress(delta.z));
-            let a = a_at_zero + p;
-            let percent = t_s / total_s * 100.0;
-            let distance_m = distance_to_segment(&b, &previous_a, &a);
-            if distance_m <= min_distance_m {
-                return Err(ctx.err(
-                    key,
-                    format!(
-                        "the path from the previous position takes the U-joint {distance_m:.2e} m \
-                         from the support (around {percent:.0} % of the move's time), a pose the \
-                         kinematics refuses"
-                    ),
-                ));
-            }
-            let flat = |v: Vec3| Vec3::new(v.x, 0.0, v.z);
-            let horizontal_m = distance_to_segment(&flat(b), &flat(previous_a), &flat(a));
-            if horizontal_m <= VERTICAL_CLEARANCE_M {
-                return Err(ctx.err(
-                    key,
-                    format!(
-                        "the path from the previous position puts the rod vertical (the U-joint \
-                         passes {horizontal_m:.2e} m from the vertical through the support, \
-                         around {percent:.0} % of the move's time), a pose the kinematics refuses"
-                    ),
-                ));
-            }
-            previous_a = a;
-            let q = joints_from_displacement(&p);
-            if k < points
-                && let Err(e) = forward(&self.calibration, &self.profile, &q)
-            {
-                return Err(ctx.err(
-                    key,
-                    format!(
-                        "the path from the previous position crosses a pose the kinematics \
-                         refuses ({percent:.0} % of the move's time): {e}"
-                    ),
-                ));
-            }
-            tracker.update(&q);
-        }
-        Ok(())
-    }
-}
-
-/// Distance from `p` to the segment from `a` to `b`.
-fn distance_to_segment(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
-    let ab = b - a;
-    let len2 = ab.norm_squared();
-    let t = if len2 > 0.0 {
-        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (a + ab * t - p).norm()
-}
-
+/// Checks every table of the file, in file order (so that the first problem
+/// in the file is the one reported), and builds the scenario.
 fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ScenarioError> {
     if file.name.trim().is_empty() {
         return Err(ctx.err("name", "must not be empty"));
     }
-
-    // The true geometry and manipulator.
-    let r = &file.robot;
-    let [r0, r1, r2] = r.sensor_rotation;
-    let [[m00, m01, m02], [m10, m11, m12], [m20, m21, m22]] = [r0, r1, r2];
-    let rotation = Mat3::new(m00, m01, m02, m10, m11, m12, m20, m21, m22);
-    let calibration = Calibration::new(&CalibrationSpec {
-        p_home_m: Vec3::from(r.p_home),
-        ujoint_offset_m: Vec3::from(r.ujoint_offset),
-        sensor_offset_m: Vec3::from(r.sensor_offset),
-        sensor_rotation: rotation,
-        support_m: Vec3::from(r.support),
-        gravity_mps2: Vec3::from(r.gravity),
-    })
-    .map_err(|e| ctx.err(&calibration_error_key(&e), e.to_string()))?;
-    let m = &file.manipulator;
-    let profile = Profile::new(&ProfileSpec {
-        length_m: m.length_m,
-        offset_m: m.offset_m,
-        mass_kg: m.mass_kg,
-        com_m: m.com_m,
-    })
-    .map_err(|e| ctx.err(&profile_error_key(&e), e.to_string()))?;
-    if m.name.as_deref().is_some_and(|n| n.trim().is_empty()) {
-        return Err(ctx.err("manipulator.name", "must not be empty when given"));
-    }
+    let calibration = robot::calibration(ctx, &file.robot)?;
+    let profile = robot::profile(ctx, &file.manipulator)?;
     let friction_n = match &file.support {
         Some(s) => ctx.non_negative("support.friction_n", s.friction_n, "N")?,
         None => 0.0,
@@ -507,184 +277,49 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ScenarioError> {
         Some(t) => ctx.non_negative("tip_mass.mass_kg", t.mass_kg, "kg")?,
         None => 0.0,
     };
-    let physics_step_s = file.physics_step_s.unwrap_or(DEFAULT_PHYSICS_STEP_S);
-    if !(1e-6..=0.01).contains(&physics_step_s) {
-        return Err(ctx.err(
-            "physics_step_s",
-            format!("must be in 1e-6..=0.01 s, got {physics_step_s} s"),
-        ));
-    }
-    let physics_step_ns = seconds_to_ns_saturating(physics_step_s).max(1);
-
-    // Axes.
-    let axes = file.axes.unwrap_or_default();
-    let max_speed_mps = ctx.positive(
-        "axes.max_speed_mps",
-        axes.max_speed_mps.unwrap_or(DEFAULT_MAX_SPEED_MPS),
-        "m/s",
-    )?;
-    let max_accel_mps2 = ctx.positive(
-        "axes.max_accel_mps2",
-        axes.max_accel_mps2.unwrap_or(DEFAULT_MAX_ACCEL_MPS2),
-        "m/s^2",
-    )?;
-    let lead_m_per_turn = ctx.positive(
-        "axes.lead_m_per_turn",
-        axes.lead_m_per_turn.unwrap_or(DEFAULT_LEAD_M_PER_TURN),
-        "m",
-    )?;
-    let counts_per_turn = axes.counts_per_turn.unwrap_or(DEFAULT_COUNTS_PER_TURN);
-    if counts_per_turn == 0 {
-        return Err(ctx.err("axes.counts_per_turn", "must be >= 1, got 0"));
-    }
-    let position_period_ns = ctx.period_ns(
-        "axes.position_rate_hz",
-        axes.position_rate_hz.unwrap_or(DEFAULT_POSITION_RATE_HZ),
-    )?;
-    let mut travel_m = [(0.0, 0.0); 3];
-    for (i, (slot, [min, max])) in travel_m
-        .iter_mut()
-        .zip(axes.travel_m.unwrap_or(DEFAULT_TRAVEL_M))
-        .enumerate()
-    {
-        if min >= max {
-            return Err(ctx.err(
-                &format!("axes.travel_m[{i}]"),
-                format!("min must be below max, got [{min}, {max}] m"),
-            ));
-        }
-        *slot = (min, max);
-    }
+    let physics_step_ns = physics_step_ns(ctx, file.physics_step_s)?;
+    let axes = devices::axes(ctx, &file.axes.unwrap_or_default())?;
     let machine = Machine {
         calibration,
         profile,
-        travel_m,
+        travel_m: axes.travel_m,
     };
-
-    // Sensor.
-    let sensor = file.sensor.unwrap_or_default();
-    let period_ns = ctx.period_ns(
-        "sensor.rate_hz",
-        sensor.rate_hz.unwrap_or(DEFAULT_SENSOR_RATE_HZ),
+    let sensor = devices::sensor(ctx, &file.sensor.unwrap_or_default())?;
+    let (start, steps) = script::steps(
+        ctx,
+        &machine,
+        &MotionFile {
+            motion: &file.motion,
+            random: file.random_motion.as_ref(),
+            seed: file.seed,
+            start: axes.start,
+            limits: (axes.max_speed_mps, axes.max_accel_mps2),
+        },
     )?;
-    let latency_ns = ctx.time_ns(
-        "sensor.latency_s",
-        sensor.latency_s.unwrap_or(DEFAULT_SENSOR_LATENCY_S),
+    let contact = contact::keys(ctx, &file.contact)?;
+    let tissue = contact::tissues(ctx, &file.tissue)?;
+    let faults = fault::faults(
+        ctx,
+        &file.fault,
+        axes.lead_m_per_turn / f64::from(axes.counts_per_turn),
     )?;
-    let sensor_spec = SensorSpec {
-        period_ns,
-        latency_ns,
-        noise_n: ctx.non_negative3(
-            "sensor.noise_n",
-            sensor.noise_n.unwrap_or(DEFAULT_NOISE_N),
-            "N",
-        )?,
-        noise_nm: ctx.non_negative3(
-            "sensor.noise_nm",
-            sensor.noise_nm.unwrap_or(DEFAULT_NOISE_NM),
-            "N m",
-        )?,
-        bias_n: Vec3::from(sensor.bias_n.unwrap_or_default()),
-        bias_nm: Vec3::from(sensor.bias_nm.unwrap_or_default()),
-        drift_n_per_s: Vec3::from(sensor.drift_n_per_s.unwrap_or_default()),
-        has_tare: sensor.has_tare.unwrap_or(true),
-    };
-
-    // Motion.
-    let mut targets: Vec<(String, ActiveJoints, u64)> = Vec::new();
-    for (i, step) in file.motion.iter().enumerate() {
-        let key = format!("motion[{i}]");
-        let (target_key, q) = resolve_step(ctx, &machine, &key, step)?;
-        machine.check_pose(ctx, &target_key, &q)?;
-        let hold_ns = ctx.time_ns(&format!("{key}.hold_s"), step.hold_s.unwrap_or(0.0))?;
-        targets.push((key, q, hold_ns));
-    }
-    if let Some(random) = &file.random_motion {
-        targets.extend(random_steps(ctx, &machine, random, file.seed)?);
-    }
-    if targets.is_empty() {
-        return Err(ctx.err(
-            "motion",
-            "the script has no steps: give at least one [[motion]] or a [random_motion]",
-        ));
-    }
-    let start = match axes.start {
-        Some(q) => {
-            let q = joints_from_array(q);
-            machine.check_pose(ctx, "axes.start", &q)?;
-            q
-        }
-        None => targets.first().map(|t| t.1).unwrap_or_default(),
-    };
-    let mut steps = Vec::with_capacity(targets.len());
-    let mut from = start;
-    let mut tracker = SlideTracker::new(&calibration);
-    tracker.update(&start);
-    for (key, target, hold_ns) in targets {
-        machine.check_path(
-            ctx,
-            &key,
-            &from,
-            &target,
-            (max_speed_mps, max_accel_mps2),
-            &mut tracker,
-        )?;
-        steps.push(MotionStep {
-            key,
-            target,
-            hold_ns,
-            planned_slide_sign: tracker.sign(),
-        });
-        from = target;
-    }
-
-    // Contact.
-    let mut contact = Vec::with_capacity(file.contact.len());
-    let mut last_t: Option<(f64, usize)> = None;
-    for (i, key) in file.contact.iter().enumerate() {
-        let t_key = format!("contact[{i}].t_s");
-        let t_ns = ctx.time_ns(&t_key, key.t_s)?;
-        if let Some((t, j)) = last_t
-            && key.t_s < t
-        {
-            return Err(ctx.err(
-                &t_key,
-                format!(
-                    "contact keyframes must be sorted by time: {} s is before \
-                     contact[{j}].t_s = {t} s",
-                    key.t_s
-                ),
-            ));
-        }
-        last_t = Some((key.t_s, i));
-        contact.push(ContactKey {
-            t_ns,
-            force_n: Vec3::from(key.force_n),
-        });
-    }
-
-    // Faults.
-    let mut faults = Vec::with_capacity(file.fault.len());
-    for (i, f) in file.fault.iter().enumerate() {
-        faults.push(resolve_fault(ctx, &format!("fault[{i}]"), f)?);
-    }
-
     let spec = SimSpec {
         seed: file.seed,
         calibration,
         profile,
         friction_n,
         axes: AxesSpec {
-            max_speed_mps,
-            max_accel_mps2,
-            lead_m_per_turn,
-            counts_per_turn,
-            position_period_ns,
-            travel_m,
+            max_speed_mps: axes.max_speed_mps,
+            max_accel_mps2: axes.max_accel_mps2,
+            lead_m_per_turn: axes.lead_m_per_turn,
+            counts_per_turn: axes.counts_per_turn,
+            position_period_ns: axes.position_period_ns,
+            travel_m: axes.travel_m,
             start,
         },
-        sensor: sensor_spec,
+        sensor,
         contact,
+        tissue,
         tip_mass_kg,
         faults,
         physics_step_ns,
@@ -703,230 +338,20 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ScenarioError> {
             start,
             steps,
             calibration,
-            max_speed_mps,
-            max_accel_mps2,
+            max_speed_mps: axes.max_speed_mps,
+            max_accel_mps2: axes.max_accel_mps2,
         },
     })
 }
 
-/// The target of one `[[motion]]` step as active joints, with the key of the
-/// target that the file gave.
-fn resolve_step(
-    ctx: &Ctx<'_>,
-    machine: &Machine,
-    key: &str,
-    step: &MotionToml,
-) -> Result<(String, ActiveJoints), ScenarioError> {
-    let given: Vec<&str> = [
-        ("joints", step.joints.is_some()),
-        ("ujoint", step.ujoint.is_some()),
-        ("tip", step.tip.is_some()),
-        ("rod_dir", step.rod_dir.is_some()),
-    ]
-    .iter()
-    .filter(|(_, present)| *present)
-    .map(|(name, _)| *name)
-    .collect();
-    match given.as_slice() {
-        [] => {
-            return Err(ctx.err(
-                key,
-                "no target: give exactly one of joints, ujoint, tip, rod_dir (with \
-                 support_distance_m)",
-            ));
-        }
-        [_] => {}
-        several => {
-            return Err(ctx.err(
-                key,
-                format!(
-                    "{} targets ({}): give exactly one of joints, ujoint, tip, rod_dir",
-                    several.len(),
-                    several.join(", ")
-                ),
-            ));
-        }
-    }
-    if step.support_distance_m.is_some() && step.rod_dir.is_none() {
+/// `physics_step_s` (default [`DEFAULT_PHYSICS_STEP_S`]) as ns.
+fn physics_step_ns(ctx: &Ctx<'_>, physics_step_s: Option<f64>) -> Result<u64, ScenarioError> {
+    let physics_step_s = physics_step_s.unwrap_or(DEFAULT_PHYSICS_STEP_S);
+    if !(1e-6..=0.01).contains(&physics_step_s) {
         return Err(ctx.err(
-            &format!("{key}.support_distance_m"),
-            "only allowed with rod_dir",
+            "physics_step_s",
+            format!("must be in 1e-6..=0.01 s, got {physics_step_s} s"),
         ));
     }
-    let cal = &machine.calibration;
-    if let Some(q) = step.joints {
-        return Ok((format!("{key}.joints"), joints_from_array(q)));
-    }
-    if let Some(a) = step.ujoint {
-        return Ok((
-            format!("{key}.ujoint"),
-            joints_for_ujoint(cal, &Vec3::from(a)),
-        ));
-    }
-    if let Some(d) = step.tip {
-        let tip_key = format!("{key}.tip");
-        let q = inverse(cal, &machine.profile, &Vec3::from(d)).map_err(|e| {
-            ctx.err(
-                &tip_key,
-                format!("the kinematics cannot put the tip there: {e}"),
-            )
-        })?;
-        return Ok((tip_key, q));
-    }
-    let dir_key = format!("{key}.rod_dir");
-    let u = Vec3::from(step.rod_dir.unwrap_or_default());
-    let norm = u.norm();
-    if norm < 1e-9 {
-        return Err(ctx.err(&dir_key, "must not be the zero vector"));
-    }
-    let Some(a) = step.support_distance_m else {
-        return Err(ctx.err(
-            &format!("{key}.support_distance_m"),
-            "missing key (rod_dir needs it)",
-        ));
-    };
-    ctx.positive(&format!("{key}.support_distance_m"), a, "m")?;
-    let ujoint_m = cal.support_m() - u * (a / norm);
-    Ok((dir_key, joints_for_ujoint(cal, &ujoint_m)))
-}
-
-/// Stream of the random motion: the seed mixed with a constant, so that it
-/// differs from the simulator's noise streams made from the same seed.
-const RANDOM_MOTION_STREAM: u64 = 0x6d6f_7469_6f6e_0001;
-
-/// The `[random_motion]` steps: tip targets with the rod within
-/// `max_angle_deg` of +X0 (uniform over the cap) and the tip `beyond_m` past
-/// the support.
-fn random_steps(
-    ctx: &Ctx<'_>,
-    machine: &Machine,
-    random: &raw::RandomMotionToml,
-    seed: u64,
-) -> Result<Vec<(String, ActiveJoints, u64)>, ScenarioError> {
-    if random.count == 0 || random.count > 10_000 {
-        return Err(ctx.err(
-            "random_motion.count",
-            format!("must be in 1..=10000, got {}", random.count),
-        ));
-    }
-    if !(0.0..=80.0).contains(&random.max_angle_deg) {
-        return Err(ctx.err(
-            "random_motion.max_angle_deg",
-            format!("must be in 0..=80 deg, got {}", random.max_angle_deg),
-        ));
-    }
-    let [min_m, max_m] = random.beyond_m;
-    let length_m = machine.profile.length_m();
-    if !(min_m > 0.0 && min_m <= max_m && max_m < length_m) {
-        return Err(ctx.err(
-            "random_motion.beyond_m",
-            format!("must satisfy 0 < min <= max < L = {length_m} m, got [{min_m}, {max_m}] m"),
-        ));
-    }
-    let hold_ns = ctx.time_ns("random_motion.hold_s", random.hold_s)?;
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ RANDOM_MOTION_STREAM);
-    let cos_max = random.max_angle_deg.to_radians().cos();
-    let mut steps = Vec::new();
-    for i in 0..random.count {
-        let key = format!("random_motion[{i}]");
-        // Uniform over the spherical cap: cos(theta) uniform in [cos_max, 1].
-        let cos_theta = 1.0 - rng.random::<f64>() * (1.0 - cos_max);
-        let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
-        let phi = rng.random::<f64>() * std::f64::consts::TAU;
-        let beyond = min_m + rng.random::<f64>() * (max_m - min_m);
-        let u = Vec3::new(cos_theta, sin_theta * phi.cos(), sin_theta * phi.sin());
-        let tip_m = machine.calibration.support_m() + u * beyond;
-        let q =
-            inverse(&machine.calibration, &machine.profile, &tip_m).map_err(|e: PoseError| {
-                ctx.err(
-                    &key,
-                    format!("the kinematics cannot reach tip {tip_m:?}: {e}"),
-                )
-            })?;
-        machine.check_pose(ctx, &key, &q)?;
-        steps.push((key, q, hold_ns));
-    }
-    Ok(steps)
-}
-
-/// Checks that a `[[fault]]` gives exactly the keys its kind takes.
-fn resolve_fault(ctx: &Ctx<'_>, key: &str, f: &FaultToml) -> Result<Fault, ScenarioError> {
-    let present = [
-        ("from_s", f.from_s.is_some()),
-        ("until_s", f.until_s.is_some()),
-        ("at_s", f.at_s.is_some()),
-        ("axis", f.axis.is_some()),
-        ("jump_m", f.jump_m.is_some()),
-        ("code", f.code.is_some()),
-    ];
-    let (kind_name, takes): (&str, &[&str]) = match f.kind {
-        FaultKind::SensorSilent => ("sensor_silent", &["from_s", "until_s"]),
-        FaultKind::NanSample => ("nan_sample", &["at_s"]),
-        FaultKind::EncoderJump => ("encoder_jump", &["at_s", "axis", "jump_m"]),
-        FaultKind::DriveFault => ("drive_fault", &["at_s", "code"]),
-    };
-    if let Some((name, _)) = present
-        .iter()
-        .find(|(name, is)| *is && !takes.contains(name))
-    {
-        return Err(ctx.err(
-            &format!("{key}.{name}"),
-            format!(
-                "not a key of a {kind_name} fault (it takes: {})",
-                takes.join(", ")
-            ),
-        ));
-    }
-    let missing = |name: &str| ctx.err(&format!("{key}.{name}"), "missing key");
-    let at_ns = |ctx: &Ctx<'_>| -> Result<u64, ScenarioError> {
-        let at_s = f.at_s.ok_or_else(|| missing("at_s"))?;
-        ctx.time_ns(&format!("{key}.at_s"), at_s)
-    };
-    Ok(match f.kind {
-        FaultKind::SensorSilent => {
-            let from_s = f.from_s.ok_or_else(|| missing("from_s"))?;
-            let from_ns = ctx.time_ns(&format!("{key}.from_s"), from_s)?;
-            let until_ns = match f.until_s {
-                None => None,
-                Some(until_s) => {
-                    let until_key = format!("{key}.until_s");
-                    let until_ns = ctx.time_ns(&until_key, until_s)?;
-                    if until_s <= from_s {
-                        return Err(ctx.err(
-                            &until_key,
-                            format!("must be after from_s = {from_s} s, got {until_s} s"),
-                        ));
-                    }
-                    Some(until_ns)
-                }
-            };
-            Fault::SensorSilent { from_ns, until_ns }
-        }
-        FaultKind::NanSample => Fault::NanSample { at_ns: at_ns(ctx)? },
-        FaultKind::EncoderJump => {
-            let at_ns = at_ns(ctx)?;
-            let axis = match f.axis.ok_or_else(|| missing("axis"))? {
-                AxisName::Q1 => 0,
-                AxisName::Q2 => 1,
-                AxisName::Q3 => 2,
-            };
-            let jump_m = f.jump_m.ok_or_else(|| missing("jump_m"))?;
-            if jump_m == 0.0 || jump_m.abs() > 1.0 {
-                return Err(ctx.err(
-                    &format!("{key}.jump_m"),
-                    format!("must be non-zero and at most 1 m in size, got {jump_m} m"),
-                ));
-            }
-            Fault::EncoderJump {
-                at_ns,
-                axis,
-                jump_m,
-            }
-        }
-        FaultKind::DriveFault => {
-            let at_ns = at_ns(ctx)?;
-            let code = f.code.ok_or_else(|| missing("code"))?;
-            Fault::DriveFault { at_ns, code }
-        }
-    })
+    Ok(seconds_to_ns_saturating(physics_step_s).max(1))
 }

@@ -17,6 +17,33 @@ impl SensorStatus {
     }
 }
 
+/// Where a saturated channel sits: an amplifier driven to its limit reads the
+/// end of the measuring range, on one side or the other.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Rail {
+    /// The positive end (+range).
+    Positive,
+    /// The negative end (-range).
+    Negative,
+}
+
+impl Rail {
+    /// +1.0 or -1.0.
+    pub fn sign(self) -> f64 {
+        match self {
+            Self::Positive => 1.0,
+            Self::Negative => -1.0,
+        }
+    }
+}
+
+/// The six channels of a force/torque sensor in their wire order: Fx, Fy, Fz,
+/// Tx, Ty, Tz (sensor frame); `true` selects a channel.
+pub type Channels = [bool; 6];
+
+/// The channels' names in wire order, as scenario files and messages write them.
+pub const CHANNEL_NAMES: [&str; 6] = ["fx", "fy", "fz", "tx", "ty", "tz"];
+
 /// One force/torque sample, as the driver received it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WrenchSample {

@@ -18,7 +18,7 @@ use sar_drivers::canopen::frame::{
 };
 use sar_drivers::canopen::{
     CanOpenConfig, CanOpenDrives, CanOpenError, FOLLOWING_WINDOW_M, MemBus, MemBusError, MemCan,
-    SimCia402Drive, SimDriveSpec,
+    SimCia402Drive, SimDriveFault, SimDriveSpec,
 };
 use sar_drivers::{AxisDrives, DriveState, Error, ErrorKind, SimClock};
 use sar_kinematics::ActiveJoints;
@@ -544,6 +544,167 @@ fn a_missed_heartbeat_is_a_fault_that_persists_while_the_drive_is_silent() {
     rig.drives.fault_reset().unwrap();
     rig.run(20 * MS);
     assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+}
+
+#[test]
+fn a_drive_whose_heartbeat_stops_is_lost_after_the_timeout_and_stays_lost() {
+    let mut rig = Rig::new();
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(50 * MS);
+    let at_ns = rig.now() + 10 * MS;
+    rig.drive(1, |d, _, _| {
+        d.schedule(SimDriveFault::HeartbeatLoss { at_ns })
+    });
+    // Its last heartbeat is at most one period (10 ms) before the loss; the
+    // host calls it lost 50 ms after that.
+    rig.run(10 * MS + 39 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled, "not yet");
+    assert!(rig.drive(1, |d, _, _| d.heartbeat_lost()));
+    rig.run(13 * MS);
+    assert_eq!(
+        rig.drives.state().unwrap(),
+        DriveState::Fault {
+            axis: Some(1),
+            code: 0x8130
+        }
+    );
+    // Only the heartbeat was missing: the drive sent no EMCY, its TPDOs came.
+    assert!(rig.drive(1, |d, _, _| d.emcys().is_empty()));
+    // The cause persists: a reset is refused while the heartbeat is missing.
+    let err = rig.drives.fault_reset().unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::DeviceFault);
+    rig.drive(1, |d, _, _| d.clear_fault_cause());
+    rig.run(20 * MS);
+    rig.drives.fault_reset().unwrap();
+    rig.run(20 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+}
+
+#[test]
+fn a_scheduled_emcy_latches_its_code_and_the_others_quick_stop() {
+    let mut rig = Rig::new();
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(100 * MS);
+    let at_ns = rig.now() + 5 * MS;
+    rig.drive(2, |d, _, _| {
+        d.schedule(SimDriveFault::Emcy {
+            at_ns,
+            code: 0x4310,
+            persistent: false,
+        })
+    });
+    rig.run(4 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled, "not yet");
+    rig.run(3 * MS);
+    assert_eq!(
+        rig.drives.state().unwrap(),
+        DriveState::Fault {
+            axis: Some(2),
+            code: 0x4310
+        }
+    );
+    assert_eq!(rig.drive(2, |d, _, _| d.emcys().to_vec()), [0x4310]);
+    assert_eq!(rig.cia402(2), Cia402State::Fault);
+    rig.run(5 * MS);
+    for axis in 0..2 {
+        assert_eq!(
+            rig.cia402(axis),
+            Cia402State::QuickStopActive,
+            "axis {axis}"
+        );
+    }
+    // A transient cause: the reset clears it, and the drives enable again.
+    rig.drives.fault_reset().unwrap();
+    rig.run(20 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+    rig.enable();
+    rig.run(50 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
+}
+
+/// A fault reset completes only on status words read after its rising edge:
+/// a TPDO late past its SYNC (a busy bus) leaves the host with the status
+/// word from before the fault, which must not clear it. (Seen in the vcan VM
+/// before the fix: the host said Ready while the drive was still in Fault,
+/// then latched it again as a generic fault, its EMCY code lost.)
+#[test]
+fn a_fault_reset_never_completes_on_a_status_word_from_before_the_fault() {
+    let mut rig = Rig::new();
+    rig.enable();
+    // The fault's TPDOs are late: the host hears the EMCY, not the state.
+    rig.drive(2, |d, now, out| {
+        d.skip_tpdos(6);
+        d.inject_fault(0x4310, false, now, out);
+    });
+    rig.run(MS);
+    let fault = DriveState::Fault {
+        axis: Some(2),
+        code: 0x4310,
+    };
+    assert_eq!(rig.drives.state().unwrap(), fault);
+    rig.drives.fault_reset().unwrap();
+    for _ in 0..5 {
+        rig.run(MS);
+        assert_eq!(
+            rig.drives.state().unwrap(),
+            fault,
+            "no fresh status word yet"
+        );
+    }
+    // The TPDOs come back: the reset's edge has reached the drive, which
+    // says so, and the reset completes with the code kept until then.
+    rig.run(5 * MS);
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+    assert_ne!(rig.cia402(2), Cia402State::Fault);
+    rig.enable();
+    assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
+}
+
+/// A scenario's drive faults give on the CANopen drives the fault the plain
+/// simulated axes give (the host sees a lost heartbeat a timeout later).
+#[test]
+fn scenario_drive_faults_latch_the_same_fault_on_the_canopen_drives() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
+    for (file, latency_ns) in [
+        ("fault_drive_emcy.toml", 2 * MS),
+        ("fault_drive_heartbeat_loss.toml", 62 * MS),
+    ] {
+        let scenario = sar_drivers::scenario::load(&dir.join(file)).unwrap();
+        let fault = scenario.spec.faults[0];
+        // The plain simulated axes.
+        let clock = SimClock::new(0);
+        let sim = sar_drivers::sim::Simulator::new(scenario.spec.clone(), clock.clone()).unwrap();
+        clock.advance_ns(2 * S);
+        let plain = sim.truth().unwrap().drive_state;
+        assert!(
+            matches!(plain, DriveState::Fault { axis: Some(_), .. }),
+            "{plain:?}"
+        );
+        // The CANopen drives, the scenario started now.
+        let mut rig = Rig::new();
+        rig.enable();
+        let start_ns = rig.now();
+        let (axis, drive_fault) = SimDriveFault::from_scenario(&fault, start_ns).unwrap();
+        assert_eq!(drive_fault.at_ns(), start_ns + 2 * S);
+        rig.drive(axis, |d, _, _| d.schedule(drive_fault));
+        rig.run(2 * S - 20 * MS);
+        assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled, "{file}");
+        rig.run(20 * MS + latency_ns);
+        assert_eq!(rig.drives.state().unwrap(), plain, "{file}");
+    }
+    // The other faults are not a drive's.
+    assert_eq!(
+        SimDriveFault::from_scenario(
+            &sar_drivers::sim::Fault::DriveFault {
+                at_ns: 0,
+                code: 0x2310
+            },
+            0
+        ),
+        None
+    );
 }
 
 /// Writes an SDO straight into a drive (a test's side door).

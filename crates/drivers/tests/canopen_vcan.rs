@@ -12,8 +12,12 @@
 )]
 
 use sar_drivers::canopen::frame::Cia402State;
-use sar_drivers::canopen::{self, CanOpenConfig, CanOpenDrives, SimCia402Drive, SimDriveSpec};
-use sar_drivers::{AxisDrives, Clock, DriveState, JointPositions, MonotonicClock};
+use sar_drivers::canopen::{
+    self, CanOpenConfig, CanOpenDrives, SimCia402Drive, SimDriveFault, SimDriveSpec,
+};
+use sar_drivers::{
+    AxisDrives, Clock, DriveState, Error, ErrorKind, JointPositions, MonotonicClock,
+};
 use sar_kinematics::ActiveJoints;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -192,6 +196,88 @@ fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
         "vcan0 test: {:.2} s, {} bus errors, {missed} of 700 cycles missed a TPDO",
         started.elapsed().as_secs_f64(),
         host.bus_errors()
+    );
+}
+
+/// Runs cycles until the host's state is `want` (at most `max` cycles); the
+/// state reached.
+fn cycles_until<C: embedded_can::nb::Can, K: Clock>(
+    host: &mut CanOpenDrives<C, K>,
+    clock: &MonotonicClock,
+    want: DriveState,
+    max: usize,
+) -> DriveState {
+    for _ in 0..max {
+        cycles(host, clock, 1);
+        if host.state().unwrap() == want {
+            break;
+        }
+    }
+    host.state().unwrap()
+}
+
+/// A drive's EMCY and a drive's lost heartbeat, each scheduled on the
+/// simulated drive, latch the host's typed fault over the kernel's SocketCAN.
+#[test]
+#[ignore = "needs SocketCAN with vcan0 up: run .ci/vcan-tests"]
+fn drive_faults_over_vcan0_latch_the_hosts_fault() {
+    let clock = MonotonicClock::new().unwrap();
+    let sim = Drives::spawn(clock);
+    let socket = canopen::socketcan::open(&interface()).unwrap();
+    let mut host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    cycles(&mut host, &clock, 50);
+    host.enable().unwrap();
+    let state = cycles_until(&mut host, &clock, DriveState::Enabled, 200);
+    assert_eq!(state, DriveState::Enabled);
+
+    // q3's drive faults with an EMCY.
+    let at_ns = clock.now_ns().unwrap() + 20 * MS;
+    sim.drives.lock().unwrap()[2].schedule(SimDriveFault::Emcy {
+        at_ns,
+        code: 0x4310,
+        persistent: false,
+    });
+    let emcy = DriveState::Fault {
+        axis: Some(2),
+        code: 0x4310,
+    };
+    assert_eq!(cycles_until(&mut host, &clock, emcy, 500), emcy);
+    host.fault_reset().unwrap();
+    assert_eq!(
+        cycles_until(&mut host, &clock, DriveState::Ready, 500),
+        DriveState::Ready
+    );
+
+    // q2's drive stops sending its heartbeat (its TPDOs go on).
+    host.enable().unwrap();
+    assert_eq!(
+        cycles_until(&mut host, &clock, DriveState::Enabled, 200),
+        DriveState::Enabled
+    );
+    let at_ns = clock.now_ns().unwrap() + 20 * MS;
+    sim.drives.lock().unwrap()[1].schedule(SimDriveFault::HeartbeatLoss { at_ns });
+    let lost = DriveState::Fault {
+        axis: Some(1),
+        code: 0x8130,
+    };
+    // The drives' heartbeat timeout here is 500 ms: give it 2 s of cycles.
+    assert_eq!(cycles_until(&mut host, &clock, lost, 1000), lost);
+    let since_loss_ns = clock.now_ns().unwrap().saturating_sub(at_ns);
+    assert!(
+        since_loss_ns >= 480 * MS,
+        "lost too early: {since_loss_ns} ns"
+    );
+    assert_eq!(
+        host.fault_reset().unwrap_err().kind(),
+        ErrorKind::DeviceFault,
+        "a reset is refused while the heartbeat is missing"
+    );
+    sim.drives.lock().unwrap()[1].clear_fault_cause();
+    cycles(&mut host, &clock, 50);
+    host.fault_reset().unwrap();
+    assert_eq!(
+        cycles_until(&mut host, &clock, DriveState::Ready, 500),
+        DriveState::Ready
     );
 }
 

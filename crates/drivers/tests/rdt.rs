@@ -18,9 +18,11 @@ mod conformance;
 
 use conformance::{Capability, SensorHarness, TareCheck};
 use sar_drivers::rdt::codec::{CMD_BIAS, CMD_FILTER, CMD_RATE, Request, Response};
-use sar_drivers::rdt::emulator::{Action, Emulator, EmulatorConfig, Pacing};
+use sar_drivers::rdt::emulator::{
+    Action, Emulator, EmulatorConfig, HEX_E_RANGE_COUNTS, Pacing, SensorFault, counts_for,
+};
 use sar_drivers::rdt::{Filter, Flavour, RdtConfig, RdtSensor};
-use sar_drivers::{Clock, Error, ErrorKind, ForceSensor, MonotonicClock, WrenchSample};
+use sar_drivers::{Clock, Error, ErrorKind, ForceSensor, MonotonicClock, Rail, WrenchSample};
 use std::time::Duration;
 
 /// Host time, ns: the one place this file reads the clock.
@@ -253,6 +255,213 @@ fn a_fault_status_makes_that_sample_invalid() {
     assert_eq!(got[1].status.0, 0x8000_0004);
     assert!(got[2].is_valid());
     assert_eq!(sensor.stats().faults, 1);
+}
+
+// ---------------------------------------------------------------------------
+// Failures of the sensor itself
+
+/// The HEX-E's noise at OnRobot's scale, counts.
+const HEX_NOISE_COUNTS: [f64; 6] = [2000.0, 2000.0, 8000.0, 1000.0, 1000.0, 200.0];
+
+/// A live (noisy) manual emulator with `faults`, a driver connected to it.
+fn live(faults: Vec<SensorFault>, seed: u64) -> (Emulator, RdtSensor) {
+    manual_with(
+        EmulatorConfig {
+            noise_counts: HEX_NOISE_COUNTS,
+            seed,
+            faults,
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    )
+}
+
+fn bits(s: &WrenchSample) -> Vec<u64> {
+    s.force_n
+        .iter()
+        .chain(s.torque_nm.iter())
+        .map(|x| x.to_bits())
+        .collect()
+}
+
+/// Packets `0..n` of a device, as samples (counters 1001..=1000 + n).
+fn packets(emulator: &Emulator, sensor: &mut RdtSensor, n: u64) -> Vec<WrenchSample> {
+    assert_eq!(emulator.step(n), n);
+    let got = collect_until(sensor, 1000 + u32::try_from(n).unwrap());
+    assert_eq!(got.len() as u64, n, "{:?}", counters(&got));
+    got
+}
+
+#[test]
+fn a_live_device_is_noisy_and_its_noise_is_seeded() {
+    let (emulator, mut sensor) = live(vec![], 7);
+    let a = packets(&emulator, &mut sensor, 50);
+    for w in a.windows(2) {
+        assert_ne!(
+            bits(&w[0]),
+            bits(&w[1]),
+            "a live sensor never repeats itself"
+        );
+    }
+    let std_fz = {
+        let mean = a.iter().map(|s| s.force_n.z).sum::<f64>() / 50.0;
+        (a.iter().map(|s| (s.force_n.z - mean).powi(2)).sum::<f64>() / 49.0).sqrt()
+    };
+    assert!(
+        (0.4..1.6).contains(&std_fz),
+        "Fz noise {std_fz} N (0.8 N specified)"
+    );
+    let (emulator, mut sensor) = live(vec![], 7);
+    let b = packets(&emulator, &mut sensor, 50);
+    let (emulator, mut sensor) = live(vec![], 8);
+    let c = packets(&emulator, &mut sensor, 50);
+    for ((x, y), z) in a.iter().zip(&b).zip(&c) {
+        assert_eq!(bits(x), bits(y), "same seed, same counts");
+        assert_ne!(bits(x), bits(z), "another seed, other counts");
+    }
+}
+
+#[test]
+fn a_frozen_device_repeats_its_counts_while_its_sequence_and_counter_run() {
+    let (emulator, mut sensor) = live(
+        vec![SensorFault::Frozen {
+            from: 5,
+            until: Some(15),
+        }],
+        1,
+    );
+    let got = packets(&emulator, &mut sensor, 20);
+    assert_eq!(counters(&got), (1001..=1020).collect::<Vec<_>>());
+    // The RDT sequence ran on too: nothing was lost or dropped as a duplicate.
+    let stats = sensor.stats();
+    assert_eq!((stats.lost, stats.duplicates, stats.accepted), (0, 0, 20));
+    for s in &got[5..15] {
+        assert_eq!(bits(s), bits(&got[4]), "packet {}", s.counter - 1001);
+        assert!(s.is_valid(), "a frozen sensor says all is well");
+    }
+    for w in got[..5].windows(2).chain(got[15..].windows(2)) {
+        assert_ne!(bits(&w[0]), bits(&w[1]));
+    }
+    assert_ne!(bits(&got[15]), bits(&got[4]));
+}
+
+#[test]
+fn the_range_clips_and_a_saturated_channel_reads_the_end_of_it() {
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            faults: vec![SensorFault::Saturated {
+                from: 2,
+                until: Some(4),
+                channels: [false, false, false, true, false, true],
+                rail: Some(Rail::Negative),
+            }],
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    );
+    // 250 N on Fz: beyond the HEX-E's 200 N.
+    emulator.set_counts([12_500, -25_000, 2_500_000, 1_000, -2_000, 3_000]);
+    let got = packets(&emulator, &mut sensor, 6);
+    assert_eq!(HEX_E_RANGE_COUNTS[2], 2_000_000);
+    for (i, s) in got.iter().enumerate() {
+        assert_eq!(s.force_n.z, 200.0, "clipped at the range");
+        assert_eq!((s.force_n.x, s.force_n.y), (1.25, -2.5));
+        if (2..4).contains(&i) {
+            assert_eq!(
+                (s.torque_nm.x, s.torque_nm.z),
+                (-10.0, -13.0),
+                "at the rail"
+            );
+        } else {
+            assert_eq!((s.torque_nm.x, s.torque_nm.z), (0.01, 0.03));
+        }
+        assert_eq!(s.torque_nm.y, -0.02);
+    }
+}
+
+#[test]
+fn a_spike_is_in_exactly_its_packets() {
+    let (emulator, mut sensor) = manual(vec![]);
+    // Added at run time, keyed on the packets produced so far.
+    emulator.add_fault(SensorFault::Spike {
+        at: emulator.produced() + 3,
+        counts: [0, 0, 300_000, 0, 5_000, 0],
+        packets: 2,
+    });
+    let got = packets(&emulator, &mut sensor, 7);
+    let spiked: Vec<u32> = got
+        .iter()
+        .filter(|s| s.force_n.z != 9.8066)
+        .map(|s| s.counter)
+        .collect();
+    assert_eq!(spiked, [1004, 1005]);
+    for s in &got[3..5] {
+        assert!((s.force_n.z - 39.8066).abs() < 1e-9);
+        assert!((s.torque_nm.y - 0.03).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn a_drift_grows_linearly_from_its_packet() {
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            faults: vec![SensorFault::Drift {
+                from: 2,
+                counts_per_packet: [100.0, 0.0, -50.0, 0.0, 0.0, 10.0],
+            }],
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    );
+    let got = packets(&emulator, &mut sensor, 10);
+    for (i, s) in got.iter().enumerate() {
+        let packets = i.saturating_sub(2) as f64;
+        assert!((s.force_n.x - (1.25 + 0.01 * packets)).abs() < 1e-9, "{i}");
+        assert!(
+            (s.force_n.z - (9.8066 - 0.005 * packets)).abs() < 1e-9,
+            "{i}"
+        );
+        assert!(
+            (s.torque_nm.z - (0.03 + 1e-4 * packets)).abs() < 1e-12,
+            "{i}"
+        );
+    }
+}
+
+#[test]
+fn a_gain_error_and_a_wrong_counts_per_newton_scale_the_reading() {
+    let wrench = ([3.0, -4.0, 12.0], [0.2, -0.1, 0.05]);
+    // A device with 10 % more counts per newton than the host's 10 000.
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            counts: counts_for(wrench.0, wrench.1, 11_000.0, 110_000.0),
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    );
+    let s = &packets(&emulator, &mut sensor, 1)[0];
+    assert!((s.force_n - nalgebra::Vector3::from(wrench.0) * 1.1).amax() < 1e-9);
+    assert!((s.torque_nm - nalgebra::Vector3::from(wrench.1) * 1.1).amax() < 1e-9);
+    // A gain error from packet 2 on.
+    let (emulator, mut sensor) = manual_with(
+        EmulatorConfig {
+            counts: counts_for(wrench.0, wrench.1, 10_000.0, 100_000.0),
+            faults: vec![SensorFault::Scale {
+                from: 2,
+                factor: 0.9,
+            }],
+            ..EmulatorConfig::new(Pacing::Manual)
+        },
+        config,
+    );
+    let got = packets(&emulator, &mut sensor, 4);
+    for (i, s) in got.iter().enumerate() {
+        let gain = if i < 2 { 1.0 } else { 0.9 };
+        assert!(
+            (s.force_n - nalgebra::Vector3::from(wrench.0) * gain).amax() < 1e-9,
+            "{i}: {s:?}"
+        );
+    }
 }
 
 #[test]

@@ -17,10 +17,10 @@ use sar_drivers::motion::{
 };
 use sar_drivers::runner::{EndReason, RunError, RunEvent, RunOptions, run};
 use sar_drivers::scenario::{Scenario, ScenarioError, load, parse};
-use sar_drivers::sim::{Fault, Simulator};
+use sar_drivers::sim::{Breathing, Fault, Simulator, Tissue, TissueModel, TissueShift};
 use sar_drivers::{
-    AxisDrives, DriveState, ErrorKind, ForceSensor, JointPositions, SensorStatus, SimClock, Vec3,
-    WrenchSample,
+    AxisDrives, DriveState, ErrorKind, ForceSensor, JointPositions, Rail, SensorStatus, SimClock,
+    Vec3, WrenchSample,
 };
 use sar_kinematics::{ActiveJoints, SlideSign, forward};
 use std::cell::RefCell;
@@ -237,7 +237,7 @@ fn contact_file_has_random_motion_and_a_push_above_15_n() {
 #[test]
 fn fault_files_have_one_fault_each() {
     type Check = fn(&Fault) -> bool;
-    let cases: [(&str, Check); 4] = [
+    let cases: [(&str, Check); 13] = [
         ("fault_sensor_silent.toml", |f| {
             matches!(
                 f,
@@ -268,12 +268,255 @@ fn fault_files_have_one_fault_each() {
                 }
             )
         }),
+        ("fault_sensor_frozen.toml", |f| {
+            matches!(
+                f,
+                Fault::SensorFrozen {
+                    from_ns: 2_000_000_000,
+                    until_ns: None
+                }
+            )
+        }),
+        ("fault_sensor_saturated.toml", |f| {
+            matches!(
+                f,
+                Fault::SensorSaturated {
+                    from_ns: 2_000_000_000,
+                    until_ns: Some(2_500_000_000),
+                    channels: [false, false, true, false, false, false],
+                    rail: None,
+                }
+            )
+        }),
+        (
+            "fault_sensor_spike.toml",
+            |f| matches!(f, Fault::SensorSpike { at_ns: 2_000_000_000, force_n, torque_nm, samples: 1 } if *force_n == Vec3::new(0.0, 0.0, 30.0) && *torque_nm == Vec3::zeros()),
+        ),
+        (
+            "fault_sensor_drift.toml",
+            |f| matches!(f, Fault::SensorDrift { from_ns: 2_000_000_000, drift_n_per_s, drift_nm_per_s } if *drift_n_per_s == Vec3::new(0.0, 0.0, 1.0) && *drift_nm_per_s == Vec3::zeros()),
+        ),
+        (
+            "fault_sensor_scale.toml",
+            |f| matches!(f, Fault::SensorScale { from_ns: 2_000_000_000, factor } if *factor == 1.1),
+        ),
+        ("fault_encoder_frozen.toml", |f| {
+            matches!(
+                f,
+                Fault::EncoderFrozen {
+                    at_ns: 1_200_000_000,
+                    axis: 2,
+                    until_ns: None
+                }
+            )
+        }),
+        ("fault_encoder_count_loss.toml", |f| {
+            matches!(
+                f,
+                Fault::EncoderCountLoss {
+                    at_ns: 2_000_000_000,
+                    axis: 2,
+                    counts: 820
+                }
+            )
+        }),
+        ("fault_drive_heartbeat_loss.toml", |f| {
+            matches!(
+                f,
+                Fault::DriveHeartbeatLoss {
+                    at_ns: 2_000_000_000,
+                    axis: 1
+                }
+            )
+        }),
+        ("fault_drive_emcy.toml", |f| {
+            matches!(
+                f,
+                Fault::DriveEmcy {
+                    at_ns: 2_000_000_000,
+                    axis: 2,
+                    code: 0x4310
+                }
+            )
+        }),
     ];
     for (file, check) in cases {
         let s = load_named(file);
         assert_eq!(s.spec.faults.len(), 1, "{file}");
         assert!(check(&s.spec.faults[0]), "{file}: {:?}", s.spec.faults);
     }
+}
+
+#[test]
+fn the_encoder_frozen_file_freezes_q3_while_it_moves() {
+    // The fault must come during a move, where only the following check can
+    // see it: the first move runs from 1.0 s for the slowest axis's time.
+    let s = load_named("fault_encoder_frozen.toml");
+    let first_move_s = sar_drivers::motion::move_time_s(
+        &s.script.start,
+        &s.script.steps[1].target,
+        s.script.max_speed_mps,
+        s.script.max_accel_mps2,
+    );
+    assert!(first_move_s > 0.4, "{first_move_s}");
+    let Fault::EncoderFrozen { at_ns, .. } = s.spec.faults[0] else {
+        panic!("{:?}", s.spec.faults)
+    };
+    let at_s = at_ns as f64 * 1e-9;
+    assert!(1.0 < at_s && at_s < 1.0 + first_move_s, "{at_s} s");
+    let dq3 = s.script.steps[1].target.q3_m - s.script.start.q3_m;
+    assert!(dq3.abs() > 0.01, "q3 moves {dq3} m");
+}
+
+/// The rotation by `angle` about the unit `axis` (Rodrigues).
+fn rotation(axis: Vec3, angle: f64) -> nalgebra::Matrix3<f64> {
+    *nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle).matrix()
+}
+
+#[test]
+fn mounting_files_differ_from_the_configured_robot_only_where_they_say() {
+    // The reference: the fault files' robot without contact or fault, which
+    // is the example configuration's robot (INTERFACES.md 2).
+    let reference = load_named("fault_nan_sample.toml");
+    let five = 5f64.to_radians();
+    for (file, axis) in [
+        ("mount_sensor_rotated_about_rod_5deg.toml", Vec3::x()),
+        ("mount_sensor_rotated_about_vertical_5deg.toml", Vec3::y()),
+    ] {
+        let s = load_named(file);
+        let r = s.spec.calibration.sensor_rotation();
+        assert!((r - rotation(axis, five)).amax() < 1e-15, "{file}: {r}");
+        // The rod at the nominal pose lies along X0.
+        let pose = forward(&s.spec.calibration, &s.spec.profile, &s.script.start).unwrap();
+        assert!((pose.rod_dir - Vec3::x()).norm() < 1e-12);
+        assert_eq!(s.spec.profile, reference.spec.profile, "{file}");
+        assert!(
+            s.spec.contact.is_empty() && s.spec.faults.is_empty(),
+            "{file}"
+        );
+        assert_eq!(s.script.steps, reference.script.steps, "{file}");
+    }
+    let s = load_named("mount_manipulator_mass_plus_10pct.toml");
+    assert!((s.spec.profile.mass_kg() - 1.1 * TABLE2[1].0).abs() < 1e-12);
+    assert_eq!(s.spec.profile.com_m(), TABLE2[1].1);
+    assert_eq!(s.spec.calibration, reference.spec.calibration);
+    assert!(s.spec.contact.is_empty() && s.spec.faults.is_empty());
+}
+
+#[test]
+fn the_tissue_file_is_a_breathing_tissue_at_the_tip() {
+    let s = load_named("tissue_breathing.toml");
+    assert_eq!(
+        s.spec.tissue,
+        vec![Tissue {
+            direction: Vec3::x(),
+            rest_m: Vec3::new(0.6, 0.2, 0.0),
+            model: TissueModel::Linear {
+                stiffness_n_per_m: 300.0
+            },
+            damping_n_s_per_m: 5.0,
+            breathing: Some(Breathing {
+                amplitude_m: 0.003,
+                hz: 0.25,
+                direction: Vec3::x(),
+            }),
+            shifts: vec![TissueShift {
+                t_ns: 12_000_000_000,
+                offset_m: -0.002,
+            }],
+        }]
+    );
+    assert!(s.spec.contact.is_empty());
+    // At the nominal pose the tip is at the surface at rest: the breathing
+    // alone makes the contact (the surface nearest at 3 s, 0.9 N).
+    let clock = SimClock::new(0);
+    let sim = Simulator::new(s.spec.clone(), clock.clone()).unwrap();
+    let t = sim.truth().unwrap();
+    assert!((t.pose.tip_m - Vec3::new(0.6, 0.2, 0.0)).norm() < 1e-12);
+    sar_drivers::Clock::sleep_until_ns(&clock, 1_000_000_000);
+    assert_eq!(sim.truth().unwrap().tissue_force_n, Vec3::zeros());
+    sar_drivers::Clock::sleep_until_ns(&clock, 3_000_000_000);
+    let f = sim.truth().unwrap().tissue_force_n;
+    assert!((f - Vec3::new(0.9, 0.0, 0.0)).norm() < 1e-9, "{f}");
+}
+
+#[test]
+fn every_tissue_key_is_read() {
+    let text = format!(
+        "{MINIMAL}
+[[tissue]]
+direction = [0.0, 0.0, -2.0]
+rest_m = [0.6, 0.2, 0.01]
+model = \"exponential\"
+stiffness_n_per_m = 500.0
+beta_per_m = 80.0
+damping_n_s_per_m = 3.0
+breathing_amplitude_m = 0.002
+breathing_hz = 0.2
+breathing_direction = [0.0, 3.0, -4.0]
+
+[[tissue.shift]]
+t_s = 1.0
+offset_m = 0.001
+
+[[tissue.shift]]
+t_s = 1.0
+offset_m = 0.002
+
+[[tissue]]
+direction = [1.0, 0.0, 0.0]
+rest_m = [0.7, 0.2, 0.0]
+stiffness_n_per_m = 100.0
+"
+    );
+    let s = parse(&text, ORIGIN).unwrap();
+    assert_eq!(s.spec.tissue.len(), 2);
+    let t = &s.spec.tissue[0];
+    // Directions are normalised.
+    assert_eq!(t.direction, Vec3::new(0.0, 0.0, -1.0));
+    assert_eq!(
+        t.model,
+        TissueModel::Exponential {
+            stiffness_n_per_m: 500.0,
+            beta_per_m: 80.0
+        }
+    );
+    assert_eq!(t.damping_n_s_per_m, 3.0);
+    let b = t.breathing.unwrap();
+    assert_eq!((b.amplitude_m, b.hz), (0.002, 0.2));
+    assert!((b.direction - Vec3::new(0.0, 0.6, -0.8)).norm() < 1e-15);
+    assert_eq!(t.shifts.len(), 2, "equal times: a step, the later key wins");
+    // The second: the defaults (linear, no damping, no breathing).
+    let u = &s.spec.tissue[1];
+    assert_eq!(
+        u.model,
+        TissueModel::Linear {
+            stiffness_n_per_m: 100.0
+        }
+    );
+    assert_eq!((u.damping_n_s_per_m, u.breathing), (0.0, None));
+    // The sensor's range: the HEX-E's by default, the file's when given.
+    assert_eq!(s.spec.sensor.range_n, Vec3::new(200.0, 200.0, 200.0));
+    assert_eq!(s.spec.sensor.range_nm, Vec3::new(10.0, 10.0, 13.0));
+    let ranged = replaced(
+        "noise_n = [0.2, 0.2, 0.8]",
+        "noise_n = [0.2, 0.2, 0.8]\nrange_n = [290.0, 290.0, 580.0]\nrange_nm = [10.0, 10.0, 10.0]",
+    );
+    let s = parse(&ranged, ORIGIN).unwrap();
+    assert_eq!(s.spec.sensor.range_n, Vec3::new(290.0, 290.0, 580.0));
+    // A saturation with its rail.
+    let railed = format!(
+        "{MINIMAL}\n[[fault]]\nkind = \"sensor_saturated\"\nfrom_s = 1.0\naxes = [\"tz\", \"fx\"]\nrail = \"negative\"\n"
+    );
+    assert_eq!(
+        parse(&railed, ORIGIN).unwrap().spec.faults,
+        vec![Fault::SensorSaturated {
+            from_ns: 1_000_000_000,
+            until_ns: None,
+            channels: [true, false, false, false, false, true],
+            rail: Some(Rail::Negative),
+        }]
+    );
 }
 
 // ---------------------------------------------------------------------------
@@ -327,6 +570,19 @@ force_n = [0.0, 0.0, 0.0]
 "#;
 
 const ORIGIN: &str = "scenarios/under_test.toml";
+
+/// The minimal file with a linear tissue, `from` replaced by `to` in the
+/// tissue's table.
+fn tissue(from: &str, to: &str) -> String {
+    let table = "\n[[tissue]]\ndirection = [1.0, 0.0, 0.0]\nrest_m = [0.6, 0.2, 0.0]\nstiffness_n_per_m = 300.0\n";
+    assert!(table.contains(from), "the tissue table has no {from:?}");
+    format!("{MINIMAL}{}", table.replacen(from, to, 1))
+}
+
+/// The minimal file with one `[[fault]]` table of `body`.
+fn fault(body: &str) -> String {
+    format!("{MINIMAL}\n[[fault]]\n{body}")
+}
 
 fn replaced(from: &str, to: &str) -> String {
     assert!(MINIMAL.contains(from), "the base file has no {from:?}");
@@ -697,6 +953,192 @@ fn bad_files() -> Vec<(&'static str, String, &'static str, &'static str)> {
             ),
             "sensor.latency_s",
             "in flight",
+        ),
+        (
+            "negative sensor range",
+            replaced(
+                "noise_n = [0.2, 0.2, 0.8]",
+                "noise_n = [0.2, 0.2, 0.8]\nrange_n = [200.0, -1.0, 200.0]",
+            ),
+            "sensor.range_n[1]",
+            "> 0",
+        ),
+        (
+            "zero tissue direction",
+            tissue("direction = [1.0, 0.0, 0.0]", "direction = [0.0, 0.0, 0.0]"),
+            "tissue[0].direction",
+            "zero vector",
+        ),
+        (
+            "tissue stiffness zero",
+            tissue("stiffness_n_per_m = 300.0", "stiffness_n_per_m = 0.0"),
+            "tissue[0].stiffness_n_per_m",
+            "N/m",
+        ),
+        (
+            "tissue key typo",
+            tissue("stiffness_n_per_m", "stifness_n_per_m"),
+            "tissue[0].stifness_n_per_m",
+            "unknown key",
+        ),
+        (
+            "unknown tissue model",
+            tissue("rest_m", "model = \"quadratic\"\nrest_m"),
+            "tissue[0].model",
+            "unknown variant",
+        ),
+        (
+            "NaN tissue rest point",
+            tissue("rest_m = [0.6,", "rest_m = [nan,"),
+            "tissue[0].rest_m[0]",
+            "not a finite number",
+        ),
+        (
+            "beta with a linear tissue",
+            tissue("rest_m", "beta_per_m = 10.0\nrest_m"),
+            "tissue[0].beta_per_m",
+            "only allowed with model = \"exponential\"",
+        ),
+        (
+            "exponential tissue without beta",
+            tissue("rest_m", "model = \"exponential\"\nrest_m"),
+            "tissue[0].beta_per_m",
+            "missing key",
+        ),
+        (
+            "negative damping",
+            tissue("rest_m", "damping_n_s_per_m = -1.0\nrest_m"),
+            "tissue[0].damping_n_s_per_m",
+            "must be in [0,",
+        ),
+        (
+            "breathing without amplitude",
+            tissue("rest_m", "breathing_hz = 0.25\nrest_m"),
+            "tissue[0].breathing_hz",
+            "only allowed with breathing_amplitude_m",
+        ),
+        (
+            "breathing without frequency",
+            tissue("rest_m", "breathing_amplitude_m = 0.003\nrest_m"),
+            "tissue[0].breathing_hz",
+            "missing key",
+        ),
+        (
+            "breathing too fast",
+            tissue(
+                "rest_m",
+                "breathing_amplitude_m = 0.003\nbreathing_hz = 25.0\nrest_m",
+            ),
+            "tissue[0].breathing_hz",
+            "Hz",
+        ),
+        (
+            "unsorted tissue shifts",
+            format!(
+                "{}\n[[tissue.shift]]\nt_s = 2.0\noffset_m = 0.001\n\n[[tissue.shift]]\nt_s = 1.0\noffset_m = 0.0\n",
+                tissue("", "")
+            ),
+            "tissue[0].shift[1].t_s",
+            "sorted",
+        ),
+        (
+            "tissue shift too far",
+            format!(
+                "{}\n[[tissue.shift]]\nt_s = 2.0\noffset_m = 1.5\n",
+                tissue("", "")
+            ),
+            "tissue[0].shift[0].offset_m",
+            "at most 1 m",
+        ),
+        (
+            "saturation without channels",
+            fault("kind = \"sensor_saturated\"\nfrom_s = 1.0\n"),
+            "fault[0].axes",
+            "missing key",
+        ),
+        (
+            "saturation of no channel",
+            fault("kind = \"sensor_saturated\"\nfrom_s = 1.0\naxes = []\n"),
+            "fault[0].axes",
+            "at least one channel",
+        ),
+        (
+            "a channel named twice",
+            fault("kind = \"sensor_saturated\"\nfrom_s = 1.0\naxes = [\"fz\", \"fz\"]\n"),
+            "fault[0].axes[1]",
+            "names fz twice",
+        ),
+        (
+            "unknown channel",
+            fault("kind = \"sensor_saturated\"\nfrom_s = 1.0\naxes = [\"fw\"]\n"),
+            "fault[0].axes[0]",
+            "unknown variant",
+        ),
+        (
+            "unknown rail",
+            fault("kind = \"sensor_saturated\"\nfrom_s = 1.0\naxes = [\"fz\"]\nrail = \"up\"\n"),
+            "fault[0].rail",
+            "unknown variant",
+        ),
+        (
+            "a spike of nothing",
+            fault("kind = \"sensor_spike\"\nat_s = 1.0\nforce_n = [0.0, 0.0, 0.0]\n"),
+            "fault[0].force_n",
+            "changes nothing",
+        ),
+        (
+            "a spike of no samples",
+            fault("kind = \"sensor_spike\"\nat_s = 1.0\nforce_n = [0.0, 0.0, 9.0]\nsamples = 0\n"),
+            "fault[0].samples",
+            ">= 1",
+        ),
+        (
+            "a drift without its rate",
+            fault("kind = \"sensor_drift\"\nfrom_s = 1.0\n"),
+            "fault[0].drift_n_per_s",
+            "missing key",
+        ),
+        (
+            "a zero gain",
+            fault("kind = \"sensor_scale\"\nfrom_s = 1.0\nfactor = 0.0\n"),
+            "fault[0].factor",
+            "must be in",
+        ),
+        (
+            "a frozen encoder thawing before it freezes",
+            fault("kind = \"encoder_frozen\"\nat_s = 2.0\naxis = \"q1\"\nuntil_s = 1.0\n"),
+            "fault[0].until_s",
+            "after at_s = 2 s",
+        ),
+        (
+            "no counts lost",
+            fault("kind = \"encoder_count_loss\"\nat_s = 1.0\naxis = \"q2\"\ncounts = 0\n"),
+            "fault[0].counts",
+            "non-zero",
+        ),
+        (
+            "more than a metre of counts lost",
+            fault("kind = \"encoder_count_loss\"\nat_s = 1.0\naxis = \"q2\"\ncounts = 1000000\n"),
+            "fault[0].counts",
+            "at most 1 m",
+        ),
+        (
+            "an EMCY with code 0",
+            fault("kind = \"drive_emcy\"\nat_s = 1.0\naxis = \"q2\"\ncode = 0\n"),
+            "fault[0].code",
+            "must not be 0",
+        ),
+        (
+            "a heartbeat loss with a code",
+            fault("kind = \"drive_heartbeat_loss\"\nat_s = 1.0\naxis = \"q2\"\ncode = 1\n"),
+            "fault[0].code",
+            "not a key of a drive_heartbeat_loss fault",
+        ),
+        (
+            "a heartbeat loss without its axis",
+            fault("kind = \"drive_heartbeat_loss\"\nat_s = 1.0\n"),
+            "fault[0].axis",
+            "missing key",
         ),
         (
             // Apart in seconds, equal once in ns.

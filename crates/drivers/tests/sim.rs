@@ -12,11 +12,11 @@ mod conformance;
 use conformance::{Capability, DrivesHarness, SensorHarness, TareCheck};
 use nalgebra::{Matrix3, Vector3};
 use sar_drivers::sim::{
-    AxesSpec, ContactKey, Fault, SensorSpec, SimDrives, SimError, SimSensor, SimSpec, Simulator,
-    Truth,
+    AxesSpec, Breathing, ContactKey, Fault, SensorSpec, SimDrives, SimError, SimSensor, SimSpec,
+    Simulator, Tissue, TissueModel, TissueShift, Truth,
 };
 use sar_drivers::{
-    AxisDrives, Clock, Drained, DriveState, Error, ErrorKind, ForceSensor, JointPositions,
+    AxisDrives, Clock, Drained, DriveState, Error, ErrorKind, ForceSensor, JointPositions, Rail,
     SimClock, WrenchSample,
 };
 use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Profile, ProfileSpec, SlideSign};
@@ -108,8 +108,11 @@ fn base_spec() -> SimSpec {
             bias_nm: Vec3::new(0.02, -0.01, 0.005),
             drift_n_per_s: Vec3::zeros(),
             has_tare: true,
+            range_n: Vec3::new(200.0, 200.0, 200.0),
+            range_nm: Vec3::new(10.0, 10.0, 13.0),
         },
         contact: Vec::new(),
+        tissue: Vec::new(),
         tip_mass_kg: 0.0,
         faults: Vec::new(),
         physics_step_ns: 100_000,
@@ -549,6 +552,173 @@ fn invalid_specs_are_refused_with_what_is_wrong() {
         until_ns: Some(S),
     }];
     assert_eq!(field(refused(s)), "faults.sensor_silent.until_ns");
+    let mut s = base_spec();
+    s.sensor.range_n.y = 0.0;
+    assert_eq!(field(refused(s)), "sensor.range_n");
+    let mut s = base_spec();
+    s.sensor.range_nm.z = f64::NAN;
+    assert_eq!(field(refused(s)), "sensor.range_nm");
+    // The new faults' own values.
+    for (fault, name) in [
+        (
+            Fault::SensorFrozen {
+                from_ns: S,
+                until_ns: Some(S),
+            },
+            "faults.sensor_frozen.until_ns",
+        ),
+        (
+            Fault::SensorSaturated {
+                from_ns: S,
+                until_ns: None,
+                channels: [false; 6],
+                rail: None,
+            },
+            "faults.sensor_saturated.channels",
+        ),
+        (
+            Fault::SensorSpike {
+                at_ns: S,
+                force_n: Vec3::x(),
+                torque_nm: Vec3::zeros(),
+                samples: 0,
+            },
+            "faults.sensor_spike.samples",
+        ),
+        (
+            Fault::SensorSpike {
+                at_ns: S,
+                force_n: Vec3::new(f64::NAN, 0.0, 0.0),
+                torque_nm: Vec3::zeros(),
+                samples: 1,
+            },
+            "faults.sensor_spike.force_n",
+        ),
+        (
+            Fault::SensorDrift {
+                from_ns: S,
+                drift_n_per_s: Vec3::zeros(),
+                drift_nm_per_s: Vec3::new(0.0, f64::INFINITY, 0.0),
+            },
+            "faults.sensor_drift.drift_nm_per_s",
+        ),
+        (
+            Fault::SensorScale {
+                from_ns: S,
+                factor: 0.0,
+            },
+            "faults.sensor_scale.factor",
+        ),
+        (
+            Fault::EncoderFrozen {
+                at_ns: S,
+                axis: 1,
+                until_ns: Some(S / 2),
+            },
+            "faults.encoder_frozen.until_ns",
+        ),
+        (
+            Fault::EncoderCountLoss {
+                at_ns: S,
+                axis: 0,
+                counts: 0,
+            },
+            "faults.encoder_count_loss.counts",
+        ),
+        (
+            Fault::DriveEmcy {
+                at_ns: S,
+                axis: 0,
+                code: 0,
+            },
+            "faults.drive_emcy.code",
+        ),
+    ] {
+        let mut s = base_spec();
+        s.faults = vec![fault];
+        assert_eq!(field(refused(s)), name);
+    }
+    for fault in [
+        Fault::EncoderFrozen {
+            at_ns: S,
+            axis: 3,
+            until_ns: None,
+        },
+        Fault::EncoderCountLoss {
+            at_ns: S,
+            axis: 4,
+            counts: 1,
+        },
+        Fault::DriveHeartbeatLoss { at_ns: S, axis: 3 },
+        Fault::DriveEmcy {
+            at_ns: S,
+            axis: 3,
+            code: 1,
+        },
+    ] {
+        let mut s = base_spec();
+        s.faults = vec![fault];
+        assert!(matches!(refused(s), SimError::FaultAxis { index: 0, .. }));
+    }
+    // The tissue's own values.
+    type Edit = fn(&mut Tissue);
+    let edits: [(Edit, &str); 7] = [
+        (
+            |t| t.direction = Vec3::new(1.0, 1.0, 0.0),
+            "tissue.direction",
+        ),
+        (|t| t.rest_m.x = f64::NAN, "tissue.rest_m"),
+        (
+            |t| {
+                t.model = TissueModel::Linear {
+                    stiffness_n_per_m: 0.0,
+                }
+            },
+            "tissue.stiffness_n_per_m",
+        ),
+        (
+            |t| {
+                t.model = TissueModel::Exponential {
+                    stiffness_n_per_m: 300.0,
+                    beta_per_m: -1.0,
+                }
+            },
+            "tissue.beta_per_m",
+        ),
+        (|t| t.damping_n_s_per_m = -1.0, "tissue.damping_n_s_per_m"),
+        (
+            |t| {
+                t.breathing = Some(Breathing {
+                    amplitude_m: 0.003,
+                    hz: 0.0,
+                    direction: Vec3::x(),
+                })
+            },
+            "tissue.breathing.hz",
+        ),
+        (
+            |t| {
+                t.shifts = vec![
+                    TissueShift {
+                        t_ns: 2 * S,
+                        offset_m: 0.0,
+                    },
+                    TissueShift {
+                        t_ns: S,
+                        offset_m: 0.0,
+                    },
+                ]
+            },
+            "tissue.shift.t_ns",
+        ),
+    ];
+    for (edit, name) in edits {
+        let mut s = base_spec();
+        let mut t = tissue_along_x(0.64, 300.0);
+        edit(&mut t);
+        s.tissue = vec![t];
+        assert_eq!(field(refused(s)), name);
+    }
 
     // The start pose: the tip short of the support (a = 0.36 > L).
     let mut s = base_spec();
@@ -1437,6 +1607,533 @@ fn drive_fault_stops_the_axes_and_reset_clears_it() {
     assert_eq!(rig.truth().joints, horizontal(0.1));
 }
 
+/// Samples of a quiet robot at rest for `duration_ns`, with `faults`.
+fn quiet_samples(faults: Vec<Fault>, duration_ns: u64) -> Vec<WrenchSample> {
+    let mut spec = quiet_spec();
+    spec.faults = faults;
+    Rig::new(spec).collect(duration_ns)
+}
+
+#[test]
+fn the_sensor_clips_at_its_measuring_range_as_a_real_one_does() {
+    let mut spec = quiet_spec();
+    // Ranges below the reading at rest on the force's y axis (about 9 N)
+    // and on the torque's x axis (its bias, 0.02 N m).
+    spec.sensor.range_n = Vec3::new(200.0, 5.0, 200.0);
+    spec.sensor.range_nm = Vec3::new(0.01, 10.0, 13.0);
+    let mut rig = Rig::new(spec);
+    let truth = rig.truth();
+    assert!(truth.reading_n.y.abs() > 5.0 && truth.reading_nm.x.abs() > 0.01);
+    let s = rig.sensor.wait(10 * MS).unwrap();
+    assert_eq!(s.force_n.y, 5.0f64.copysign(truth.reading_n.y));
+    assert_eq!(s.torque_nm.x, 0.01f64.copysign(truth.reading_nm.x));
+    // The other channels are untouched.
+    assert!((s.force_n.x - truth.reading_n.x).abs() < 1e-12);
+    assert!((s.torque_nm.z - truth.reading_nm.z).abs() < 1e-12);
+    assert!(
+        s.is_valid(),
+        "a clipped reading looks valid: the guard must know the range"
+    );
+}
+
+#[test]
+fn a_frozen_sensor_repeats_its_last_values_bit_for_bit_while_the_counter_runs() {
+    let mut spec = base_spec();
+    spec.faults = vec![Fault::SensorFrozen {
+        from_ns: 200 * MS,
+        until_ns: Some(400 * MS),
+    }];
+    let mut rig = Rig::new(spec);
+    rig.drives.enable().unwrap();
+    let mut samples = rig.collect(250 * MS);
+    // The world changes during the freeze: the axes move.
+    rig.drives.set_targets(horizontal(0.12)).unwrap();
+    samples.extend(rig.collect(350 * MS));
+    assert_eq!(samples.len(), 300, "the samples keep coming at the rate");
+    for (k, s) in samples.iter().enumerate() {
+        assert_eq!(s.counter as usize, k, "the counter advances");
+        assert_eq!(s.received_ns, CLOCK_START_NS + k as u64 * 2 * MS + MS / 2);
+        assert!(s.is_valid());
+    }
+    // The last sample measured before 200 ms is k = 99; 100..=199 repeat it.
+    let held = bits(&samples[99]);
+    for s in &samples[100..200] {
+        assert_eq!(bits(s), held, "sample {}", s.counter);
+    }
+    // A live sensor never repeats itself (noise), before or after.
+    for w in samples[..100].windows(2).chain(samples[200..].windows(2)) {
+        assert_ne!(bits(&w[0]), bits(&w[1]), "sample {}", w[1].counter);
+    }
+    // After the freeze the reading is live again: the new pose (a smaller a,
+    // so about 4 N more on the sensor's y axis) shows.
+    let before = mean_force(&samples[80..100]);
+    let after = mean_force(&samples[280..300]);
+    assert!((after.y - before.y).abs() > 1.0, "{before} vs {after}");
+}
+
+#[test]
+fn saturated_channels_sit_at_the_end_of_the_range() {
+    let range = Vec3::new(200.0, 200.0, 200.0);
+    let fz_tx = [false, false, true, true, false, false];
+    let window = |rail| Fault::SensorSaturated {
+        from_ns: 100 * MS,
+        until_ns: Some(200 * MS),
+        channels: fz_tx,
+        rail,
+    };
+    let clean = quiet_samples(vec![], 300 * MS);
+    for rail in [None, Some(Rail::Positive), Some(Rail::Negative)] {
+        let samples = quiet_samples(vec![window(rail)], 300 * MS);
+        for (s, c) in samples.iter().zip(&clean) {
+            let inside = (50..100).contains(&s.counter);
+            if !inside {
+                assert_eq!(bits(s), bits(c), "{rail:?} sample {}", s.counter);
+                continue;
+            }
+            let side =
+                |reading: f64| rail.map_or(if reading >= 0.0 { 1.0 } else { -1.0 }, Rail::sign);
+            assert_eq!(s.force_n.z, side(c.force_n.z) * range.z, "{rail:?}");
+            assert_eq!(s.torque_nm.x, side(c.torque_nm.x) * 10.0, "{rail:?}");
+            assert_eq!(
+                (s.force_n.x, s.force_n.y, s.torque_nm.y, s.torque_nm.z),
+                (c.force_n.x, c.force_n.y, c.torque_nm.y, c.torque_nm.z)
+            );
+            assert!(s.is_valid());
+        }
+    }
+}
+
+#[test]
+fn a_spike_is_added_to_exactly_its_samples_then_gone() {
+    let spike_n = Vec3::new(40.0, -3.0, 0.0);
+    let spike_nm = Vec3::new(0.0, 0.2, 0.0);
+    let spike = Fault::SensorSpike {
+        at_ns: 100 * MS + 1,
+        force_n: spike_n,
+        torque_nm: spike_nm,
+        samples: 3,
+    };
+    // With the noise: the same seed, so the same noise in both runs.
+    let run = |faults: Vec<Fault>| {
+        let mut spec = base_spec();
+        spec.faults = faults;
+        Rig::new(spec).collect(200 * MS)
+    };
+    let clean = run(vec![]);
+    let spiked = run(vec![spike]);
+    let mut hit = Vec::new();
+    for (s, c) in spiked.iter().zip(&clean) {
+        if bits(s) == bits(c) {
+            continue;
+        }
+        hit.push(s.counter);
+        assert!((s.force_n - c.force_n - spike_n).amax() < 1e-12);
+        assert!((s.torque_nm - c.torque_nm - spike_nm).amax() < 1e-12);
+    }
+    // The first sample measured at or after 100 ms + 1 ns is 102 ms, k = 51.
+    assert_eq!(hit, [51, 52, 53]);
+}
+
+#[test]
+fn a_drift_fault_drifts_the_bias_from_its_start() {
+    let drift_n = Vec3::new(0.2, -0.1, 0.05);
+    let drift_nm = Vec3::new(0.0, 0.01, 0.0);
+    let samples = quiet_samples(
+        vec![Fault::SensorDrift {
+            from_ns: 400 * MS,
+            drift_n_per_s: drift_n,
+            drift_nm_per_s: drift_nm,
+        }],
+        2 * S,
+    );
+    let reference = &samples[0];
+    for s in &samples {
+        let measured_s = f64::from(s.counter) * 2e-3;
+        let since_s = (measured_s - 0.4).max(0.0);
+        assert!(
+            (s.force_n - reference.force_n - drift_n * since_s).amax() < 1e-12,
+            "sample {}",
+            s.counter
+        );
+        assert!((s.torque_nm - reference.torque_nm - drift_nm * since_s).amax() < 1e-12);
+    }
+    // The truth's bias says the same.
+    let mut spec = quiet_spec();
+    spec.faults = vec![Fault::SensorDrift {
+        from_ns: 400 * MS,
+        drift_n_per_s: drift_n,
+        drift_nm_per_s: drift_nm,
+    }];
+    let rig = Rig::new(spec.clone());
+    rig.run_until(1400 * MS);
+    assert!((rig.truth().bias_n - spec.sensor.bias_n - drift_n).amax() < 1e-12);
+    assert!((rig.truth().bias_nm - spec.sensor.bias_nm - drift_nm).amax() < 1e-12);
+}
+
+#[test]
+fn a_scale_fault_multiplies_the_raw_reading_by_its_gain() {
+    let scale = |from_ns| Fault::SensorScale {
+        from_ns,
+        factor: 1.25,
+    };
+    let clean = quiet_samples(vec![], 200 * MS);
+    let scaled = quiet_samples(vec![scale(100 * MS)], 200 * MS);
+    for (s, c) in scaled.iter().zip(&clean) {
+        if s.counter < 50 {
+            assert_eq!(bits(s), bits(c));
+        } else {
+            assert!(
+                (s.force_n - c.force_n * 1.25).amax() < 1e-12,
+                "{}",
+                s.counter
+            );
+            assert!((s.torque_nm - c.torque_nm * 1.25).amax() < 1e-12);
+        }
+    }
+    // A tare taken under the wrong gain zeroes the scaled reading.
+    let mut spec = quiet_spec();
+    spec.faults = vec![scale(0)];
+    let mut rig = Rig::new(spec);
+    rig.run_until(10 * MS);
+    rig.sensor.tare().unwrap();
+    rig.run_until(20 * MS);
+    let s = rig.sensor.wait(10 * MS).unwrap();
+    assert!(
+        s.force_n.amax() < 1e-12 && s.torque_nm.amax() < 1e-12,
+        "{s:?}"
+    );
+}
+
+#[test]
+fn a_frozen_encoder_stops_reporting_while_its_axis_moves() {
+    let mut spec = quiet_spec();
+    spec.faults = vec![Fault::EncoderFrozen {
+        at_ns: 100 * MS,
+        axis: 2,
+        until_ns: Some(600 * MS),
+    }];
+    let mut rig = Rig::new(spec);
+    rig.drives.enable().unwrap();
+    rig.drives.set_targets(horizontal(0.13)).unwrap();
+    rig.run_until(99 * MS);
+    let before = rig.drives.positions().unwrap();
+    for t_ms in [100, 200, 400, 599] {
+        rig.run_until(t_ms * MS);
+        let p = rig.drives.positions().unwrap();
+        assert!(
+            p.valid,
+            "a frozen encoder is silent: the drive still says valid"
+        );
+        assert_eq!(p.joints.q3_m, before.joints.q3_m, "{t_ms} ms");
+        assert_eq!(
+            p.stamp_ns,
+            CLOCK_START_NS + t_ms * MS,
+            "reports keep coming"
+        );
+    }
+    // The axis itself moved as commanded.
+    let truth = rig.truth();
+    assert!(truth.joints.q3_m - before.joints.q3_m > 0.01, "{truth:?}");
+    rig.run_until(600 * MS);
+    let after = rig.drives.positions().unwrap();
+    assert!((after.joints.q3_m - rig.truth().joints.q3_m).abs() <= count_m());
+}
+
+#[test]
+fn lost_encoder_counts_offset_the_report_by_whole_counts() {
+    let mut spec = quiet_spec();
+    spec.faults = vec![Fault::EncoderCountLoss {
+        at_ns: 300 * MS,
+        axis: 0,
+        counts: 37,
+    }];
+    let mut rig = Rig::new(spec);
+    rig.run_until(299 * MS);
+    let before = rig.drives.positions().unwrap();
+    rig.run_until(300 * MS);
+    let after = rig.drives.positions().unwrap();
+    assert!(after.valid);
+    let lost = (before.joints.q1_m - after.joints.q1_m) / count_m();
+    assert!((lost - 37.0).abs() < 1e-6, "{lost} counts");
+    assert_eq!(after.joints.q2_m, before.joints.q2_m);
+    assert_eq!(after.joints.q3_m, before.joints.q3_m);
+    assert_eq!(rig.truth().joints, horizontal(0.15));
+}
+
+#[test]
+fn a_lost_heartbeat_or_an_emcy_is_a_drive_fault_of_its_axis_on_the_plain_axes() {
+    for (fault, axis, code) in [
+        (Fault::DriveHeartbeatLoss { at_ns: S, axis: 1 }, 1, 0x8130),
+        (
+            Fault::DriveEmcy {
+                at_ns: S,
+                axis: 2,
+                code: 0x7305,
+            },
+            2,
+            0x7305,
+        ),
+    ] {
+        let mut spec = quiet_spec();
+        spec.faults = vec![fault];
+        let mut rig = Rig::new(spec);
+        rig.drives.enable().unwrap();
+        rig.drives.set_targets(horizontal(0.04)).unwrap();
+        rig.run_until(S - 1);
+        assert_eq!(rig.truth().drive_state, DriveState::Enabled);
+        rig.run_until(S);
+        let at_fault = rig.truth();
+        assert_eq!(
+            at_fault.drive_state,
+            DriveState::Fault {
+                axis: Some(axis),
+                code
+            }
+        );
+        // The axes brake at the limit, as for a drive fault.
+        rig.clock.advance_ns(300 * MS);
+        assert_eq!(rig.truth().joint_speeds_mps, [0.0; 3]);
+        assert!(!rig.drives.positions().unwrap().valid);
+        rig.drives.fault_reset().unwrap();
+        assert_eq!(rig.drives.state().unwrap(), DriveState::Ready);
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The tissue
+
+/// A linear tissue along +X0 (the rod's direction at the nominal poses)
+/// whose surface is the plane x = `surface_x_m`.
+fn tissue_along_x(surface_x_m: f64, stiffness_n_per_m: f64) -> Tissue {
+    Tissue {
+        direction: Vec3::x(),
+        rest_m: Vec3::new(surface_x_m, 0.2, 0.0),
+        model: TissueModel::Linear { stiffness_n_per_m },
+        damping_n_s_per_m: 0.0,
+        breathing: None,
+        shifts: Vec::new(),
+    }
+}
+
+#[test]
+fn the_tissue_force_follows_its_spring_law() {
+    let still = Vec3::zeros();
+    let at = |x: f64| Vec3::new(x, 0.2, 0.0);
+    let linear = tissue_along_x(0.64, 300.0);
+    // Zero outside (and on the surface), k delta inside, along +direction.
+    assert_eq!(linear.force_n(0, &at(0.62), &still), Vec3::zeros());
+    assert_eq!(linear.force_n(0, &at(0.64), &still), Vec3::zeros());
+    let f = linear.force_n(0, &at(0.65), &still);
+    assert!((f - Vec3::new(3.0, 0.0, 0.0)).amax() < 1e-12, "{f}");
+    // Only the part along the direction counts (the surface is a plane).
+    assert_eq!(linear.force_n(0, &Vec3::new(0.65, 0.3, 0.1), &still), f);
+    // A tissue facing another way pushes along its own direction.
+    let mut lateral = linear.clone();
+    lateral.direction = Vec3::new(0.0, 0.0, -1.0);
+    lateral.rest_m = Vec3::new(0.0, 0.0, 0.01);
+    let f = lateral.force_n(0, &Vec3::new(0.6, 0.2, 0.005), &still);
+    assert!((f - Vec3::new(0.0, 0.0, -1.5)).amax() < 1e-12, "{f}");
+
+    // Exponential: (k0 / beta)(exp(beta delta) - 1), stiffness k0 at the surface.
+    let mut exponential = linear.clone();
+    exponential.model = TissueModel::Exponential {
+        stiffness_n_per_m: 300.0,
+        beta_per_m: 200.0,
+    };
+    for delta in [1e-4f64, 0.005, 0.01, 0.02] {
+        let want = 300.0 / 200.0 * ((200.0 * delta).exp() - 1.0);
+        let got = exponential.force_n(0, &at(0.64 + delta), &still).x;
+        assert!(
+            (got - want).abs() < 1e-9 * want.max(1.0),
+            "{delta}: {got} vs {want}"
+        );
+    }
+    let slope = exponential.force_n(0, &at(0.64 + 1e-7), &still).x / 1e-7;
+    assert!(
+        (slope - 300.0).abs() < 0.01,
+        "stiffness at the surface {slope}"
+    );
+    let stiffer = (exponential.spring_n(0.02001) - exponential.spring_n(0.01999)) / 2e-5;
+    assert!(
+        (stiffer - 300.0 * (200.0f64 * 0.02).exp()).abs() < 1.0,
+        "{stiffer}"
+    );
+
+    // Damping: c times the penetration's rate, never pulling.
+    let mut damped = linear.clone();
+    damped.damping_n_s_per_m = 50.0;
+    let pushing_in = damped.force_n(0, &at(0.65), &Vec3::new(0.02, 0.0, 0.0));
+    assert!((pushing_in.x - (3.0 + 50.0 * 0.02)).abs() < 1e-12);
+    let pulling_out = damped.force_n(0, &at(0.65), &Vec3::new(-0.04, 0.0, 0.0));
+    assert!((pulling_out.x - (3.0 - 2.0)).abs() < 1e-12);
+    let fast_out = damped.force_n(0, &at(0.65), &Vec3::new(-0.2, 0.0, 0.0));
+    assert_eq!(fast_out, Vec3::zeros(), "the damping never pulls");
+    // Outside, no damping force either.
+    assert_eq!(
+        damped.force_n(0, &at(0.63), &Vec3::new(0.05, 0.0, 0.0)),
+        Vec3::zeros()
+    );
+}
+
+#[test]
+fn the_tissue_breathes_with_its_period_and_shifts_at_its_keys() {
+    let mut t = tissue_along_x(0.64, 300.0);
+    t.breathing = Some(Breathing {
+        amplitude_m: 0.003,
+        hz: 0.25,
+        direction: Vec3::x(),
+    });
+    t.shifts = vec![
+        TissueShift {
+            t_ns: 10 * S,
+            offset_m: 0.004,
+        },
+        TissueShift {
+            t_ns: 20 * S,
+            offset_m: -0.002,
+        },
+    ];
+    let x = |t_ns| t.rest_at(t_ns).0.x;
+    // Period 4 s, amplitude 3 mm, at the rest point at t = 0.
+    assert!((x(0) - 0.64).abs() < 1e-15);
+    assert!((x(S) - 0.643).abs() < 1e-12);
+    assert!((x(3 * S) - 0.637).abs() < 1e-12);
+    for k in 0..8u64 {
+        let t0 = k * 250 * MS;
+        assert!((x(t0) - x(t0 + 4 * S)).abs() < 1e-12);
+    }
+    // Its velocity: amplitude * 2 pi f at the rest point.
+    let v0 = t.rest_at(0).1.x;
+    assert!((v0 - 0.003 * std::f64::consts::TAU * 0.25).abs() < 1e-15);
+    // The shifts: none before the first key, each from its key on.
+    assert!((x(10 * S - 1) - (0.64 + 0.003 * (2.5 * std::f64::consts::TAU).sin())).abs() < 1e-9);
+    assert!((x(12 * S) - 0.644).abs() < 1e-12);
+    assert!((x(20 * S) - 0.638).abs() < 1e-12);
+    // A tip held still: the force follows the breathing, and is zero when
+    // the surface breathes away from it.
+    let tip = Vec3::new(0.641, 0.2, 0.0);
+    let f = |t_ns| t.force_n(t_ns, &tip, &Vec3::zeros()).x;
+    assert!((f(0) - 0.3).abs() < 1e-9);
+    assert_eq!(f(S), 0.0);
+    assert!((f(3 * S) - 300.0 * 0.004).abs() < 1e-9);
+}
+
+#[test]
+fn the_tissue_pushes_back_on_the_tip_where_the_scripted_contact_does() {
+    // The tip at the nominal pose is at x = 0.65; the tissue 1 cm before it.
+    let mut spec = quiet_spec();
+    spec.tissue = vec![tissue_along_x(0.64, 300.0)];
+    let rig = Rig::new(spec);
+    let t = rig.truth();
+    assert!((t.pose.tip_m.x - 0.65).abs() < 1e-12);
+    assert!((t.tissue_force_n - Vec3::new(3.0, 0.0, 0.0)).amax() < 1e-9);
+    assert_eq!(t.tip_force_n, t.tissue_force_n, "no scripted contact");
+    // The same force as a scripted contact gives the same world.
+    let mut scripted = quiet_spec();
+    scripted.contact = vec![ContactKey {
+        t_ns: 0,
+        force_n: t.tissue_force_n,
+    }];
+    let s = Rig::new(scripted).truth();
+    assert!((s.ujoint_force_n - t.ujoint_force_n).amax() < 1e-12);
+    assert!((s.reading_n - t.reading_n).amax() < 1e-12);
+    assert!((s.reading_nm - t.reading_nm).amax() < 1e-12);
+    // Both present: they add.
+    let mut both = quiet_spec();
+    both.tissue = vec![tissue_along_x(0.64, 300.0)];
+    both.contact = vec![ContactKey {
+        t_ns: 0,
+        force_n: Vec3::new(0.0, 1.0, 0.0),
+    }];
+    let b = Rig::new(both).truth();
+    assert!((b.tip_force_n - Vec3::new(3.0, 1.0, 0.0)).amax() < 1e-9);
+    // The estimator's closed form (MODEL.md 4.1) finds it back from F_A.
+    let back = tip_force_closed_form(&b, MASS_KG, COM_M);
+    assert!((back - b.tip_force_n).amax() < 1e-9, "{back}");
+}
+
+/// The tissue force along a move into a stiff, damped, breathing tissue,
+/// sampled by the sensor, with physics step `step_ns`.
+fn stiff_tissue_run(step_ns: u64) -> (Vec<WrenchSample>, Vec<(Truth, Tissue)>) {
+    let mut spec = quiet_spec();
+    spec.physics_step_ns = step_ns;
+    let mut tissue = tissue_along_x(0.648, 5000.0);
+    tissue.damping_n_s_per_m = 20.0;
+    tissue.breathing = Some(Breathing {
+        amplitude_m: 0.001,
+        hz: 0.3,
+        direction: Vec3::x(),
+    });
+    spec.tissue = vec![tissue.clone()];
+    let mut rig = Rig::new(spec);
+    rig.drives.enable().unwrap();
+    rig.drives.set_targets(horizontal(0.145)).unwrap();
+    let mut samples = Vec::new();
+    let mut truths = Vec::new();
+    for k in 1..=400 {
+        rig.run_until(k * MS);
+        truths.push((rig.truth(), tissue.clone()));
+        if let Some(s) = rig.sensor.poll().unwrap() {
+            samples.push(s);
+        }
+    }
+    (samples, truths)
+}
+
+#[test]
+fn a_stiff_tissue_is_evaluated_not_integrated_so_every_physics_step_is_stable() {
+    let (fine, truths) = stiff_tissue_run(10_000);
+    // At every instant the force is the law at the tip the axes put there.
+    let mut peak_n = 0.0f64;
+    for (t, tissue) in &truths {
+        let v = rig_tip_velocity(t);
+        let want = tissue.force_n(t.elapsed_ns, &t.pose.tip_m, &v);
+        assert!((t.tissue_force_n - want).amax() < 1e-6, "{t:?}");
+        assert!(t.tissue_force_n.x >= 0.0 && t.tissue_force_n.x.is_finite());
+        peak_n = peak_n.max(t.tissue_force_n.x);
+    }
+    // 5 mm into 5000 N/m (less the breathing): about 25 N, never more than
+    // the spring at the deepest point and the damping at full speed.
+    assert!(
+        peak_n > 15.0 && peak_n < 5000.0 * 0.0085 + 20.0 * 0.05,
+        "{peak_n}"
+    );
+    // Coarser physics steps give the same samples: nothing is integrated.
+    // (Equal values, not bits: the support is frictionless here, and when the
+    // step grid sees the first slide decides only the sign of its zero friction.)
+    for step_ns in [100_000, MS, 10 * MS] {
+        let (coarse, _) = stiff_tissue_run(step_ns);
+        assert_eq!(coarse.len(), fine.len());
+        for (a, b) in coarse.iter().zip(&fine) {
+            assert_eq!(
+                (a.force_n, a.torque_nm),
+                (b.force_n, b.torque_nm),
+                "step {step_ns} ns, sample {}",
+                a.counter
+            );
+        }
+    }
+}
+
+/// The tip's velocity from the truth's joint speeds, by a central
+/// difference of the forward kinematics (the same derivative the simulator
+/// takes, written again here).
+fn rig_tip_velocity(t: &Truth) -> Vec3 {
+    let h = 1e-6;
+    let [v1, v2, v3] = t.joint_speeds_mps;
+    let at = |sign: f64| {
+        let q = ActiveJoints {
+            q1_m: t.joints.q1_m + sign * h * v1,
+            q2_m: t.joints.q2_m + sign * h * v2,
+            q3_m: t.joints.q3_m + sign * h * v3,
+        };
+        sar_kinematics::forward(&calibration(), &profile(), &q)
+            .unwrap()
+            .tip_m
+    };
+    (at(1.0) - at(-1.0)) / (2.0 * h)
+}
+
 // ---------------------------------------------------------------------------
 // Determinism
 
@@ -1469,7 +2166,59 @@ fn busy_spec(seed: u64) -> SimSpec {
             axis: 2,
             jump_m: -0.0005,
         },
+        Fault::SensorFrozen {
+            from_ns: 130 * MS,
+            until_ns: Some(160 * MS),
+        },
+        Fault::SensorSpike {
+            at_ns: 170 * MS,
+            force_n: Vec3::new(30.0, 0.0, -5.0),
+            torque_nm: Vec3::new(0.0, 0.5, 0.0),
+            samples: 3,
+        },
+        Fault::SensorDrift {
+            from_ns: 180 * MS,
+            drift_n_per_s: Vec3::new(0.5, 0.0, 0.0),
+            drift_nm_per_s: Vec3::new(0.0, 0.0, 0.01),
+        },
+        Fault::SensorScale {
+            from_ns: 450 * MS,
+            factor: 1.1,
+        },
+        Fault::SensorSaturated {
+            from_ns: 500 * MS,
+            until_ns: Some(520 * MS),
+            channels: [false, false, true, false, false, false],
+            rail: None,
+        },
+        Fault::EncoderFrozen {
+            at_ns: 90 * MS,
+            axis: 2,
+            until_ns: Some(120 * MS),
+        },
+        Fault::EncoderCountLoss {
+            at_ns: 380 * MS,
+            axis: 0,
+            counts: 7,
+        },
     ];
+    // A breathing, shifting, damped tissue the rod's tip moves into.
+    let mut tissue = tissue_along_x(0.66, 800.0);
+    tissue.model = TissueModel::Exponential {
+        stiffness_n_per_m: 800.0,
+        beta_per_m: 30.0,
+    };
+    tissue.damping_n_s_per_m = 40.0;
+    tissue.breathing = Some(Breathing {
+        amplitude_m: 0.003,
+        hz: 3.0,
+        direction: Vec3::x(),
+    });
+    tissue.shifts = vec![TissueShift {
+        t_ns: 330 * MS,
+        offset_m: -0.002,
+    }];
+    spec.tissue = vec![tissue];
     spec
 }
 

@@ -21,7 +21,10 @@
 //! Faults: a drive in Fault, an EMCY with a non-zero code, a drive's heartbeat
 //! missing for `drive_heartbeat_timeout_ms` or a drive leaving Operation
 //! enabled on its own latch `DriveState::Fault { axis, code }` (the EMCY's
-//! code; 0x8130 for a lost drive) and quick-stop the other axes. Bus errors
+//! code; 0x8130 for a lost drive) and quick-stop the other axes. A fault
+//! reset completes only on the TPDOs of one SYNC read after its rising edge
+//! reached the drives, each saying no Fault (a TPDO late on a busy bus leaves
+//! an older status word, which never completes it). Bus errors
 //! (error frames, bus-off, overrun) are returned by `cycle` as
 //! `CanOpenError::Bus`; a bus that stays off loses the heartbeats, a Fault.
 
@@ -41,6 +44,11 @@ use sar_kinematics::ActiveJoints;
 
 /// Frames taken in one drain of the receive queue, at most.
 const DRAIN_MAX: usize = 512;
+
+/// The cycles of a fault reset before its result can show: the first sends
+/// disable voltage, the second the rising edge of fault reset, which the
+/// drives apply at the next SYNC, whose TPDOs the third cycle reads.
+const RESET_CYCLES_TO_COMPLETE: u8 = 2;
 
 /// What the host wants of the drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -587,10 +595,20 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
                 _ => {}
             }
         }
-        // A fault reset completes once no axis is in Fault or lost.
-        if self.fault.is_some() && self.reset_cycles.is_some() {
+        // A fault reset completes once no axis is in Fault or lost, as the
+        // TPDOs of this SYNC say, and only once the reset's rising edge has
+        // reached the drives (sent in the reset's second cycle, applied at
+        // the next SYNC): a status word from before (a TPDO late on a busy
+        // bus) never completes it.
+        if self.fault.is_some()
+            && self
+                .reset_cycles
+                .is_some_and(|c| c >= RESET_CYCLES_TO_COMPLETE)
+        {
+            let sync = self.sync_count;
             let clear = self.axes.iter().all(|a| {
-                !self.lost(a)
+                a.tpdo_sync == sync
+                    && !self.lost(a)
                     && !matches!(
                         a.cia402(),
                         Some(Cia402State::Fault | Cia402State::FaultReactionActive) | None

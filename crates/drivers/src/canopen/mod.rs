@@ -27,7 +27,7 @@ pub mod socketcan;
 
 pub use bus::{MemBus, MemBusError, MemCan};
 pub use host::{CanOpenDrives, CycleReport};
-pub use slave::{FOLLOWING_WINDOW_M, SimCia402Drive, SimDriveSpec, serve};
+pub use slave::{FOLLOWING_WINDOW_M, SimCia402Drive, SimDriveFault, SimDriveSpec, serve};
 
 use crate::{Error, ErrorKind};
 

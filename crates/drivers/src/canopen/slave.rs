@@ -22,6 +22,14 @@
 //! The encoder is absolute and multiturn; the drive reports it referenced in
 //! status word bit 15 ([`STATUS_REFERENCED`]), cleared by
 //! [`SimCia402Drive::set_referenced`] in tests.
+//!
+//! Faults on demand: besides the test hooks that act at once
+//! ([`SimCia402Drive::inject_fault`], [`SimCia402Drive::set_silent`]), faults
+//! scheduled at a time of the drive's clock ([`SimDriveFault`]: a heartbeat
+//! producer that stops, an EMCY and Fault), fired by the first tick at or
+//! after their time, so that a test on the in-memory bus (or a scenario's
+//! `drive_heartbeat_loss` and `drive_emcy`, [`SimDriveFault::from_scenario`])
+//! is deterministic.
 
 use super::frame::{
     COB_EMCY, COB_HEARTBEAT, COB_NMT, COB_RPDO1, COB_SDO_RX, COB_SDO_TX, COB_SYNC, COB_TPDO1,
@@ -36,6 +44,67 @@ use embedded_can::nb::Can;
 /// following error, m (a real drive's 0x6065 following error window; wide
 /// enough for a host that runs a few ms late, small beside any real jump).
 pub const FOLLOWING_WINDOW_M: f64 = 0.002;
+
+/// A fault of a simulated drive at a time of its clock, ns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SimDriveFault {
+    /// From `at_ns` the drive's heartbeat producer is silent; everything else
+    /// (TPDOs, SDO, EMCY, its CiA 402 state) goes on, so only the host's
+    /// heartbeat supervision sees it. [`SimCia402Drive::clear_fault_cause`]
+    /// brings the heartbeat back.
+    HeartbeatLoss {
+        /// When, the drive's clock, ns.
+        at_ns: u64,
+    },
+    /// At `at_ns` the drive faults: it brakes, enters Fault and sends an EMCY
+    /// with `code`; a `persistent` cause survives fault resets until
+    /// [`SimCia402Drive::clear_fault_cause`].
+    Emcy {
+        /// When, the drive's clock, ns.
+        at_ns: u64,
+        /// The EMCY error code.
+        code: u16,
+        /// Whether the cause persists.
+        persistent: bool,
+    },
+}
+
+impl SimDriveFault {
+    /// When it fires, ns.
+    pub fn at_ns(&self) -> u64 {
+        match *self {
+            Self::HeartbeatLoss { at_ns } | Self::Emcy { at_ns, .. } => at_ns,
+        }
+    }
+
+    /// A scenario's drive fault as the fault of the simulated CANopen drive of
+    /// its axis: `drive_heartbeat_loss` (for good: a lost drive is refused a
+    /// reset until its heartbeat is back) and `drive_emcy` (a cause gone at
+    /// once, so that a reset clears it, as on the plain simulated axes), at
+    /// the scenario's time plus `start_ns` (the drives' clock at the
+    /// scenario's start). `(axis, fault)`, or `None` for a fault that is not
+    /// one drive's.
+    pub fn from_scenario(fault: &crate::sim::Fault, start_ns: u64) -> Option<(usize, Self)> {
+        match *fault {
+            crate::sim::Fault::DriveHeartbeatLoss { at_ns, axis } => Some((
+                axis,
+                Self::HeartbeatLoss {
+                    at_ns: start_ns.saturating_add(at_ns),
+                },
+            )),
+            crate::sim::Fault::DriveEmcy { at_ns, axis, code } => Some((
+                axis,
+                Self::Emcy {
+                    at_ns: start_ns.saturating_add(at_ns),
+                    code,
+                    persistent: false,
+                },
+            )),
+            _ => None,
+        }
+    }
+}
 
 /// The simulated drive's parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -119,6 +188,12 @@ pub struct SimCia402Drive {
     boot_pending: bool,
     emcys: Vec<u16>,
     syncs: u64,
+    /// Faults scheduled and not yet fired.
+    scheduled: Vec<SimDriveFault>,
+    /// The heartbeat producer is silent.
+    heartbeat_lost: bool,
+    /// TPDOs still to hold back (a busy bus: late past their SYNC's window).
+    tpdos_to_skip: u32,
 }
 
 impl SimCia402Drive {
@@ -155,6 +230,9 @@ impl SimCia402Drive {
             boot_pending: true,
             emcys: Vec::new(),
             syncs: 0,
+            scheduled: Vec::new(),
+            heartbeat_lost: false,
+            tpdos_to_skip: 0,
         }
     }
 
@@ -211,9 +289,44 @@ impl SimCia402Drive {
         self.enter_fault(code, now_ns, out);
     }
 
-    /// Test hook: the cause of a persistent fault is gone.
+    /// Test hook: the cause of a persistent fault is gone (and a lost
+    /// heartbeat producer sends again).
     pub fn clear_fault_cause(&mut self) {
         self.fault_persists = false;
+        self.heartbeat_lost = false;
+    }
+
+    /// Test hook: the drive's next `n` TPDOs are not sent, as TPDOs that
+    /// miss their SYNC's window on a busy bus (the host keeps the last status
+    /// word it read).
+    pub fn skip_tpdos(&mut self, n: u32) {
+        self.tpdos_to_skip = n;
+    }
+
+    /// Schedules a fault; it fires at the first tick at or after its time.
+    pub fn schedule(&mut self, fault: SimDriveFault) {
+        self.scheduled.push(fault);
+    }
+
+    /// Whether the heartbeat producer is silent (a [`SimDriveFault::HeartbeatLoss`] fired).
+    pub fn heartbeat_lost(&self) -> bool {
+        self.heartbeat_lost
+    }
+
+    /// Fires the scheduled faults due at `now_ns`, in the order scheduled
+    /// (without allocating: each is removed in place).
+    fn fire_scheduled(&mut self, now_ns: u64, out: &mut Vec<RawFrame>) {
+        while let Some(i) = self.scheduled.iter().position(|f| f.at_ns() <= now_ns) {
+            match self.scheduled.remove(i) {
+                SimDriveFault::HeartbeatLoss { .. } => self.heartbeat_lost = true,
+                SimDriveFault::Emcy {
+                    code, persistent, ..
+                } => {
+                    self.fault_persists = persistent;
+                    self.enter_fault(code, now_ns, out);
+                }
+            }
+        }
     }
 
     /// Test hook: the drive stops sending (and reacting), as if unplugged.
@@ -331,17 +444,19 @@ impl SimCia402Drive {
         self.supervise(now_ns, out);
     }
 
-    /// Lets time pass to `now_ns`: boot-up, heartbeat producer, consumer.
+    /// Lets time pass to `now_ns`: scheduled faults, boot-up, heartbeat
+    /// producer, consumer.
     pub fn tick(&mut self, now_ns: u64, out: &mut Vec<RawFrame>) {
         if self.silent {
             return;
         }
+        self.fire_scheduled(now_ns, out);
         let node = u16::from(self.spec.node_id);
         if self.boot_pending {
             self.boot_pending = false;
             self.send(out, COB_HEARTBEAT + node, &[heartbeat::BOOT_UP]);
         }
-        if self.producer_ms > 0 && now_ns >= self.next_heartbeat_ns {
+        if self.producer_ms > 0 && now_ns >= self.next_heartbeat_ns && !self.heartbeat_lost {
             self.send(out, COB_HEARTBEAT + node, &[self.nmt_state]);
             let period = u64::from(self.producer_ms) * 1_000_000;
             self.next_heartbeat_ns = now_ns.max(self.next_heartbeat_ns.saturating_add(period));
@@ -459,7 +574,9 @@ impl SimCia402Drive {
         }
         if self.tpdo.enabled() && (1..=240).contains(&self.tpdo.transmission) {
             let n = u64::from(self.tpdo.transmission);
-            if self.syncs.is_multiple_of(n) {
+            if self.tpdos_to_skip > 0 {
+                self.tpdos_to_skip -= 1;
+            } else if self.syncs.is_multiple_of(n) {
                 let data = self.tpdo_data(now_ns);
                 let len = usize::from(data.1);
                 let cob = (self.tpdo.cob_id & 0x7FF) as u16;

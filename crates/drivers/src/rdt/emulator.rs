@@ -1,12 +1,22 @@
 //! A device emulator for tests: serves the RDT protocol on a loopback UDP
 //! port, honours start (with its sample count), stop, bias, filter and rate,
-//! and follows a deterministic script of faults keyed by packet index (loss,
-//! duplicates, reordering, status faults, going mute until restarted), and
-//! of the sensor's own failure modes (a frozen reading, saturation, a spike,
-//! a drifting bias). Its readings carry seeded Gaussian noise in counts
-//! ([`EmulatorConfig::noise_counts`]) as a live sensor's do; with no noise
-//! the device is, in effect, frozen (every reading the same), which the
-//! daemon's frozen-sensor check rightly faults on.
+//! and follows a deterministic script of faults keyed by packet index: of the
+//! network ([`Action`]: loss, duplicates, reordering, status faults, going
+//! mute until restarted) and of the sensor itself ([`SensorFault`]: frozen,
+//! saturated, a spike, a drift, a gain error).
+//!
+//! The reading of packet `i`, in counts: the configured raw reading
+//! ([`EmulatorConfig::counts`], or [`Emulator::set_counts`]) plus the drift
+//! of the active [`SensorFault::Drift`]s, times the gain of the active
+//! [`SensorFault::Scale`]s, plus seeded normal noise
+//! ([`EmulatorConfig::noise_counts`], ChaCha8 from [`EmulatorConfig::seed`],
+//! six draws for every packet produced), plus an active
+//! [`SensorFault::Spike`], rounded, clipped to the measuring range
+//! ([`EmulatorConfig::range_counts`]) and with saturated channels pinned at
+//! it, less the device's bias; a frozen device then repeats the counts of the
+//! packet before the freeze. A device that runs with another counts-per-newton
+//! than the host's configuration is simply a reading made with another scale
+//! ([`counts_for`]).
 //!
 //! Two pacings: [`Pacing::Periodic`] sends a packet every period from its
 //! own thread (like a device; OnRobot's rate command changes the period), and
@@ -24,6 +34,7 @@ use super::Flavour;
 use super::codec::{
     BIAS_ON, CMD_BIAS, CMD_FILTER, CMD_RATE, CMD_START, CMD_STOP, Request, Response,
 };
+use crate::{Channels, Rail};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -52,27 +63,81 @@ pub enum Action {
     /// Not sent, and the stream ends: the device stays mute until it gets a
     /// new start request (as after a reboot or a lost stream).
     Mute,
-    /// From this packet on the reading is frozen: every packet repeats the
-    /// previous packet's six counts bit for bit while the RDT sequence and
-    /// the sample counter go on (a stuck converter), until [`Action::Thaw`].
-    Freeze,
-    /// From this packet on the reading is live again (ends `Freeze` and
-    /// `Saturate`).
-    Thaw,
-    /// From this packet on one channel (0..=5: Fx, Fy, Fz, Tx, Ty, Tz) reads
-    /// this many counts (an amplifier at its rail: the configured range times
-    /// counts per unit), until [`Action::Thaw`].
-    Saturate {
-        /// 0..=5.
-        channel: usize,
-        /// The counts it reads.
-        counts: i32,
+}
+
+/// A fault of the sensor itself, over a span of packets (indices as in
+/// [`EmulatorConfig::script`]: 0-based over every packet produced).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
+pub enum SensorFault {
+    /// From packet `from` (until `until`, exclusive, or for good) every packet
+    /// carries the same counts, those of packet `from - 1` (stuck-at), while
+    /// the RDT sequence and the sample counter go on counting.
+    Frozen {
+        /// First frozen packet.
+        from: u64,
+        /// First packet no longer frozen; `None`: for good.
+        until: Option<u64>,
     },
-    /// This packet alone carries these counts added to its reading.
-    Spike([i32; 6]),
-    /// From this packet on the bias drifts: each channel gains this many
-    /// counts per 1000 packets (linear in the packet index).
-    Drift([i32; 6]),
+    /// The chosen channels read the end of the measuring range (an amplifier
+    /// at its rail) from packet `from` (until `until`, or for good).
+    Saturated {
+        /// First saturated packet.
+        from: u64,
+        /// First packet no longer saturated; `None`: for good.
+        until: Option<u64>,
+        /// Which channels (Fx, Fy, Fz, Tx, Ty, Tz).
+        channels: Channels,
+        /// Which end; `None`: the side of each channel's reading (+ at 0).
+        rail: Option<Rail>,
+    },
+    /// Packets `at .. at + packets` carry `counts` more: an outlier.
+    Spike {
+        /// First packet.
+        at: u64,
+        /// Added counts per channel.
+        counts: [i32; 6],
+        /// How many packets.
+        packets: u64,
+    },
+    /// From packet `from` the reading drifts by `counts_per_packet` per
+    /// packet (packet `from` itself not yet).
+    Drift {
+        /// First packet of the drift.
+        from: u64,
+        /// Drift per channel, counts per packet.
+        counts_per_packet: [f64; 6],
+    },
+    /// From packet `from` the gain is off by `factor` (a wrong calibration, a
+    /// damaged gauge): the reading with its drift is multiplied by it.
+    Scale {
+        /// First packet.
+        from: u64,
+        /// The gain (> 0).
+        factor: f64,
+    },
+}
+
+/// The measuring range of an OnRobot HEX-E QC in counts at OnRobot's scale
+/// (10 000 counts/N, 100 000 counts/N m): 200 N on each force channel, 10 N m
+/// about x and y, 13 N m about z (the datasheet's nominal capacity, as
+/// `scenario::DEFAULT_RANGE_N` and `DEFAULT_RANGE_NM`).
+pub const HEX_E_RANGE_COUNTS: [i32; 6] = [
+    2_000_000, 2_000_000, 2_000_000, 1_000_000, 1_000_000, 1_300_000,
+];
+
+/// The counts a device with `counts_per_n` and `counts_per_nm` sends for a
+/// wrench (force then torque, sensor frame; rounded, saturating at the i32
+/// range).
+pub fn counts_for(
+    force_n: [f64; 3],
+    torque_nm: [f64; 3],
+    counts_per_n: f64,
+    counts_per_nm: f64,
+) -> [i32; 6] {
+    let [fx, fy, fz] = force_n.map(|f| (f * counts_per_n).round() as i32);
+    let [tx, ty, tz] = torque_nm.map(|t| (t * counts_per_nm).round() as i32);
+    [fx, fy, fz, tx, ty, tz]
 }
 
 /// How packets are paced.
@@ -88,7 +153,7 @@ pub enum Pacing {
 }
 
 /// The emulator's set-up.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct EmulatorConfig {
     /// Which dialect it speaks (bias semantics; filter and rate are OnRobot's).
     pub flavour: Flavour,
@@ -100,16 +165,22 @@ pub struct EmulatorConfig {
     pub first_counter: u32,
     /// Faults by packet index (0-based over all packets produced).
     pub script: Vec<(u64, Action)>,
-    /// Standard deviation of each channel's noise, counts (0: an exact,
-    /// noiseless reading: for protocol tests; a live device is never so).
-    pub noise_counts: [u32; 6],
-    /// Seed of the noise: the same seed gives the same packets.
+    /// Noise std per channel, counts (>= 0). Default none: every packet then
+    /// carries the same counts, which is exactly what a frozen sensor sends;
+    /// a test of a live sensor gives it its noise (the HEX-E's resolution at
+    /// OnRobot's scale: 2000, 2000, 8000, 1000, 1000, 200).
+    pub noise_counts: [f64; 6],
+    /// Seed of the noise (ChaCha8): same seed, same counts.
     pub seed: u64,
+    /// Measuring range per channel, counts (> 0): readings are clipped to
+    /// +-range. Default [`HEX_E_RANGE_COUNTS`].
+    pub range_counts: [i32; 6],
+    /// Faults of the sensor itself.
+    pub faults: Vec<SensorFault>,
 }
 
 impl EmulatorConfig {
-    /// An OnRobot device with a fixed, noiseless reading and no faults (for
-    /// tests of the protocol, where every count is checked).
+    /// An OnRobot device with a fixed reading and no faults.
     pub fn new(pacing: Pacing) -> Self {
         Self {
             flavour: Flavour::OnRobot,
@@ -117,33 +188,12 @@ impl EmulatorConfig {
             counts: [12_500, -25_000, 98_066, 1_000, -2_000, 3_000],
             first_counter: 1000,
             script: Vec::new(),
-            noise_counts: [0; 6],
+            noise_counts: [0.0; 6],
             seed: 0,
+            range_counts: HEX_E_RANGE_COUNTS,
+            faults: Vec::new(),
         }
     }
-
-    /// A live OnRobot HEX-6 at 10000 counts/N and 100000 counts/N m: the
-    /// article's noise (0.2, 0.2, 0.8 N; 0.01, 0.01, 0.002 N m) on the reading.
-    pub fn live(pacing: Pacing, seed: u64) -> Self {
-        Self {
-            noise_counts: [2_000, 2_000, 8_000, 1_000, 1_000, 200],
-            seed,
-            ..Self::new(pacing)
-        }
-    }
-}
-
-/// The sensor's own state of failure in the emulator.
-#[derive(Debug, Clone, Copy, Default)]
-struct SensorModes {
-    /// The counts every packet repeats.
-    frozen: Option<[i32; 6]>,
-    /// A channel pinned at a value.
-    pinned: Option<(usize, i32)>,
-    /// From which packet index, and how many counts per 1000 packets.
-    drift: Option<(u64, [i32; 6])>,
-    /// The previous packet's counts (before the bias).
-    last: Option<[i32; 6]>,
 }
 
 #[derive(Debug)]
@@ -165,56 +215,89 @@ struct State {
     requests: Vec<Request>,
     raw: Vec<Vec<u8>>,
     starts: u64,
-    noise_counts: [u32; 6],
     rng: ChaCha8Rng,
-    modes: SensorModes,
+    noise_counts: [f64; 6],
+    range_counts: [i32; 6],
+    faults: Vec<SensorFault>,
+    /// The counts of the last packet produced (sent or not).
+    last_counts: Option<[i32; 6]>,
+    /// While frozen: the counts repeated.
+    frozen_counts: Option<[i32; 6]>,
+}
+
+/// Whether `index` is in `from .. until` (`until` `None`: for good).
+fn within(index: u64, from: u64, until: Option<u64>) -> bool {
+    from <= index && until.is_none_or(|u| index < u)
 }
 
 impl State {
-    /// The raw counts of packet `index` (before the bias): the reading,
-    /// the noise (drawn for every packet, so that a packet's noise depends
-    /// only on the seed and its index), and the sensor's failure modes.
-    fn reading(&mut self, index: u64, action: Option<Action>) -> [i32; 6] {
-        let mut counts = self.counts;
-        for (c, std) in counts.iter_mut().zip(self.noise_counts) {
-            let z: f64 = self.rng.sample(StandardNormal);
-            // Within i32 by far for any realistic std.
-            *c = c.saturating_add((z * f64::from(std)).round() as i32);
+    /// The reading of packet `index` before the device's bias, counts (the
+    /// module doc's order); draws the packet's noise.
+    fn reading(&mut self, index: u64) -> [i32; 6] {
+        let mut noise = [0.0; 6];
+        for n in &mut noise {
+            *n = self.rng.sample(StandardNormal);
         }
-        match action {
-            Some(Action::Freeze) => self.modes.frozen = self.modes.last.or(Some(counts)),
-            Some(Action::Thaw) => {
-                self.modes.frozen = None;
-                self.modes.pinned = None;
+        let mut raw = self.counts.map(f64::from);
+        let mut gain = 1.0;
+        let mut pinned: [Option<Option<Rail>>; 6] = [None; 6];
+        for fault in &self.faults {
+            match *fault {
+                SensorFault::Drift {
+                    from,
+                    counts_per_packet,
+                } if from <= index => {
+                    let packets = (index - from) as f64;
+                    for (r, d) in raw.iter_mut().zip(counts_per_packet) {
+                        *r += d * packets;
+                    }
+                }
+                SensorFault::Scale { from, factor } if from <= index => gain *= factor,
+                SensorFault::Saturated {
+                    from,
+                    until,
+                    channels,
+                    rail,
+                } if within(index, from, until) => {
+                    for (p, on) in pinned.iter_mut().zip(channels) {
+                        if on {
+                            *p = Some(rail);
+                        }
+                    }
+                }
+                _ => {}
             }
-            Some(Action::Saturate { channel, counts }) => {
-                self.modes.pinned = Some((channel, counts));
+        }
+        for ((r, n), std) in raw.iter_mut().zip(noise).zip(self.noise_counts) {
+            *r = *r * gain + n * std;
+        }
+        for fault in &self.faults {
+            if let SensorFault::Spike {
+                at,
+                counts,
+                packets,
+            } = *fault
+                && at <= index
+                && index - at < packets
+            {
+                for (r, c) in raw.iter_mut().zip(counts) {
+                    *r += f64::from(c);
+                }
             }
-            Some(Action::Drift(rate)) => self.modes.drift = Some((index, rate)),
-            _ => {}
         }
-        if let Some((from, rate)) = self.modes.drift {
-            let k = index.saturating_sub(from);
-            for (c, r) in counts.iter_mut().zip(rate) {
-                let add = i64::from(r).saturating_mul(i64::try_from(k).unwrap_or(i64::MAX)) / 1000;
-                *c = c.saturating_add(i32::try_from(add).unwrap_or(i32::MAX));
-            }
+        let mut out = [0i32; 6];
+        for (((o, r), range), pin) in out.iter_mut().zip(raw).zip(self.range_counts).zip(pinned) {
+            let range = f64::from(range);
+            let value = match pin {
+                Some(rail) => rail.map_or(if r >= 0.0 { range } else { -range }, |rail| {
+                    rail.sign() * range
+                }),
+                None => r.round().clamp(-range, range),
+            };
+            // Within the i32 range: the range is an i32.
+            *o = value as i32;
         }
-        if let Some(Action::Spike(spike)) = action {
-            for (c, s) in counts.iter_mut().zip(spike) {
-                *c = c.saturating_add(s);
-            }
-        }
-        if let Some((channel, value)) = self.modes.pinned
-            && let Some(c) = counts.get_mut(channel)
-        {
-            *c = value;
-        }
-        if let Some(frozen) = self.modes.frozen {
-            counts = frozen;
-        }
-        self.modes.last = Some(counts);
-        counts
+        out
     }
 
     /// Produces one packet (if streaming) and sends what the script says.
@@ -231,10 +314,22 @@ impl State {
         self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
         self.counter = self.counter.wrapping_add(1);
         let bias = self.bias.unwrap_or([0; 6]);
-        let mut counts = self.reading(index, action);
+        let mut counts = self.reading(index);
         for (c, b) in counts.iter_mut().zip(bias) {
             *c = c.wrapping_sub(b);
         }
+        let frozen = self.faults.iter().any(|f| match *f {
+            SensorFault::Frozen { from, until } => within(index, from, until),
+            _ => false,
+        });
+        if frozen {
+            counts = *self
+                .frozen_counts
+                .get_or_insert(self.last_counts.unwrap_or(counts));
+        } else {
+            self.frozen_counts = None;
+        }
+        self.last_counts = Some(counts);
         let response = Response {
             rdt_sequence: self.rdt_sequence,
             sample_counter: self.counter,
@@ -264,16 +359,7 @@ impl State {
                 }
                 return true;
             }
-            Some(
-                Action::Status(_)
-                | Action::RestartStream
-                | Action::Freeze
-                | Action::Thaw
-                | Action::Saturate { .. }
-                | Action::Spike(_)
-                | Action::Drift(_),
-            )
-            | None => send(&bytes),
+            Some(Action::Status(_) | Action::RestartStream) | None => send(&bytes),
         }
         if let Some(held) = self.held.take() {
             send(&held);
@@ -371,9 +457,12 @@ impl Emulator {
                 requests: Vec::new(),
                 raw: Vec::new(),
                 starts: 0,
-                noise_counts: config.noise_counts,
                 rng: ChaCha8Rng::seed_from_u64(config.seed),
-                modes: SensorModes::default(),
+                noise_counts: config.noise_counts,
+                range_counts: config.range_counts,
+                faults: config.faults,
+                last_counts: None,
+                frozen_counts: None,
             }),
             changed: Condvar::new(),
             stop: AtomicBool::new(false),
@@ -423,6 +512,12 @@ impl Emulator {
     /// Replaces the raw reading, counts.
     pub fn set_counts(&self, counts: [i32; 6]) {
         self.shared.lock().counts = counts;
+    }
+
+    /// Adds a fault of the sensor (packet indices as in the config; a test
+    /// with periodic pacing can key it on [`Emulator::produced`]).
+    pub fn add_fault(&self, fault: SensorFault) {
+        self.shared.lock().faults.push(fault);
     }
 
     /// Waits at most `timeout` until `done(state)` holds; whether it does.

@@ -29,6 +29,8 @@ pub(super) struct FileToml {
     #[serde(default)]
     pub contact: Vec<ContactToml>,
     #[serde(default)]
+    pub tissue: Vec<TissueToml>,
+    #[serde(default)]
     pub tip_mass: Option<TipMassToml>,
     #[serde(default)]
     pub fault: Vec<FaultToml>,
@@ -90,6 +92,8 @@ pub(super) struct SensorToml {
     pub bias_nm: Option<[f64; 3]>,
     pub drift_n_per_s: Option<[f64; 3]>,
     pub has_tare: Option<bool>,
+    pub range_n: Option<[f64; 3]>,
+    pub range_nm: Option<[f64; 3]>,
 }
 
 /// `[[motion]]`: one step; exactly one target.
@@ -122,6 +126,39 @@ pub(super) struct ContactToml {
     pub force_n: [f64; 3],
 }
 
+/// The spring law of a `[[tissue]]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum TissueModelName {
+    Linear,
+    Exponential,
+}
+
+/// `[[tissue.shift]]`: a sudden shift of the tissue's rest point.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ShiftToml {
+    pub t_s: f64,
+    pub offset_m: f64,
+}
+
+/// `[[tissue]]`: a tissue that pushes back on the tip.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct TissueToml {
+    pub direction: [f64; 3],
+    pub rest_m: [f64; 3],
+    pub model: Option<TissueModelName>,
+    pub stiffness_n_per_m: f64,
+    pub beta_per_m: Option<f64>,
+    pub damping_n_s_per_m: Option<f64>,
+    pub breathing_amplitude_m: Option<f64>,
+    pub breathing_hz: Option<f64>,
+    pub breathing_direction: Option<[f64; 3]>,
+    #[serde(default)]
+    pub shift: Vec<ShiftToml>,
+}
+
 /// `[tip_mass]`: a known mass hung at the tip.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -137,6 +174,35 @@ pub(super) enum FaultKind {
     NanSample,
     EncoderJump,
     DriveFault,
+    SensorFrozen,
+    SensorSaturated,
+    SensorSpike,
+    SensorDrift,
+    SensorScale,
+    EncoderFrozen,
+    EncoderCountLoss,
+    DriveHeartbeatLoss,
+    DriveEmcy,
+}
+
+/// A channel of the force/torque sensor by its name (sensor frame).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum ChannelName {
+    Fx,
+    Fy,
+    Fz,
+    Tx,
+    Ty,
+    Tz,
+}
+
+/// An end of the measuring range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum RailName {
+    Positive,
+    Negative,
 }
 
 /// An axis by its joint name.
@@ -160,4 +226,13 @@ pub(super) struct FaultToml {
     pub axis: Option<AxisName>,
     pub jump_m: Option<f64>,
     pub code: Option<u16>,
+    pub axes: Option<Vec<ChannelName>>,
+    pub rail: Option<RailName>,
+    pub force_n: Option<[f64; 3]>,
+    pub torque_nm: Option<[f64; 3]>,
+    pub samples: Option<u32>,
+    pub drift_n_per_s: Option<[f64; 3]>,
+    pub drift_nm_per_s: Option<[f64; 3]>,
+    pub factor: Option<f64>,
+    pub counts: Option<i32>,
 }

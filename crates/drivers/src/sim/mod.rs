@@ -8,18 +8,27 @@
 //! - the rod's statics, by the simulator's own forward solution of the six
 //!   equilibrium equations of MODEL.md 4 (F_A, the support's reaction across u,
 //!   the U-joint torsion), independent of the estimator's inverse solution, with
-//!   the rod's weight, a tip-force script, a mass hung at the tip and the
-//!   support's Coulomb friction (MODEL.md 5: along the rod, opposite to the
+//!   the rod's weight, a tip-force script, tissues that push back on the tip
+//!   (unilateral spring-dampers, breathing and shifting: [`Tissue`]), a mass
+//!   hung at the tip and the support's Coulomb friction (MODEL.md 5: along the rod, opposite to the
 //!   slide, locked at its last value when the rod stops, zero before any slide;
 //!   it reverses only once the rod has slid the support's pre-sliding
 //!   displacement, [`crate::motion::SLIDE_THRESHOLD_M`], the other way);
 //! - the force/torque sensor: the wrench of MODEL.md 4 in the sensor frame plus
 //!   a bias with linear drift and seeded normal noise per sensor axis (ChaCha8),
-//!   sampled at a fixed period and received after a latency; an optional
-//!   device-side tare;
-//! - faults on demand: a silent sensor, a NaN sample, an encoder jump (on the
-//!   reported position only: `valid` stays true, as with a real silent encoder
-//!   error that the estimator must live with), a drive fault.
+//!   clipped to its measuring range, sampled at a fixed period and received
+//!   after a latency; an optional device-side tare;
+//! - faults on demand ([`Fault`]): of the sensor (silent, a NaN sample, frozen,
+//!   saturated, a spike, a drift, a gain error), of the encoders (a jump, a
+//!   frozen encoder, lost counts: on the reported position only, `valid`
+//!   stays true, as with a real silent encoder error that the estimator must
+//!   live with) and of the drives (a fault, a lost heartbeat, an EMCY; on these
+//!   plain axes all three are a drive fault).
+//!
+//! A sample's six values: the raw reading (wrench, bias, noise) times the gain
+//! of a `sensor_scale`, plus a `sensor_spike`, clipped to the range, with
+//! saturated channels pinned at it, less the device-side tare; a frozen sensor
+//! then repeats its last values, and a NaN sample replaces them.
 //!
 //! Time is the clock's ([`crate::SimClock`] in tests and scenario runs). The
 //! world advances lazily to the clock's time on every call, on fixed grids of
@@ -37,10 +46,13 @@
 mod error;
 pub mod spec;
 mod statics;
+mod tissue;
 mod world;
 
 pub use error::SimError;
-pub use spec::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec};
+pub use spec::{
+    AxesSpec, Breathing, ContactKey, Fault, SensorSpec, SimSpec, Tissue, TissueModel, TissueShift,
+};
 pub use world::{DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS};
 
 use crate::{
@@ -83,8 +95,11 @@ pub struct Truth {
     /// support), retracting, or unknown before any slide (a slide, or a
     /// reversal, counts once the rod has gone [`crate::motion::SLIDE_THRESHOLD_M`]).
     pub slide_sign: crate::motion::SlideSign,
-    /// F_tip from the contact script: what the tip applies to the tissue, N.
+    /// F_tip: what the tip applies to the tissue, N: the contact script's
+    /// force plus the tissues' (`tissue_force_n`).
     pub tip_force_n: Vec3,
+    /// The tissues' part of `tip_force_n`, N.
+    pub tissue_force_n: Vec3,
     /// The weight of the mass hung at the tip (acts on the rod at D), N.
     pub tip_weight_n: Vec3,
     /// The noise-free sensor force with the bias, before the tare, sensor frame, N.
@@ -169,6 +184,7 @@ impl<C: Clock + Clone> Simulator<C> {
                 friction_force_n: p.loads.friction_n,
                 slide_sign: w.slide_sign(),
                 tip_force_n: p.loads.tip_force_n,
+                tissue_force_n: p.tissue_force_n,
                 tip_weight_n: w.spec().calibration.gravity_mps2() * p.loads.tip_mass_kg,
                 reading_n: p.reading_n,
                 reading_nm: p.reading_nm,

@@ -1,11 +1,12 @@
 //! What the simulator simulates: a validated, plain description of the true
-//! robot, manipulator, support, axes, sensor, contact script and faults.
+//! robot, manipulator, support, axes, sensor, contact script, tissue and
+//! faults.
 //! Scenario files ([`crate::scenario`]) are parsed and checked into this.
 //!
 //! Times are nanoseconds from the simulator's start (the clock's time when the
 //! simulator was made).
 
-use crate::Vec3;
+use crate::{Channels, Rail, Vec3};
 use sar_kinematics::{ActiveJoints, Calibration, Profile};
 
 /// Everything the simulator needs; built by [`crate::scenario`] (or by hand in tests).
@@ -27,6 +28,9 @@ pub struct SimSpec {
     /// Tip force keyframes, piecewise linear in time, zero before the first
     /// and held after the last. Sorted by time.
     pub contact: Vec<ContactKey>,
+    /// Tissues that push back on the tip (unilateral spring-dampers); their
+    /// force adds to the contact script's.
+    pub tissue: Vec<Tissue>,
     /// A known mass hung at the tip (the article's Table 3), kg (0: none).
     pub tip_mass_kg: f64,
     /// Faults on demand.
@@ -74,6 +78,80 @@ pub struct SensorSpec {
     pub drift_n_per_s: Vec3,
     /// Whether the device has a device-side tare command.
     pub has_tare: bool,
+    /// Measuring range of the force channels, N (> 0): the raw reading (before
+    /// the device-side tare) is clipped to +-range, as a real sensor's is.
+    pub range_n: Vec3,
+    /// Measuring range of the torque channels, N m (> 0).
+    pub range_nm: Vec3,
+}
+
+/// How a tissue's spring stiffens with the penetration delta (m, > 0 inside).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TissueModel {
+    /// F = k delta.
+    Linear {
+        /// k, N/m.
+        stiffness_n_per_m: f64,
+    },
+    /// F = (k0 / beta) (exp(beta delta) - 1): stiffness k0 at zero
+    /// penetration, k0 exp(beta delta) deeper (soft tissue stiffens).
+    Exponential {
+        /// k0, N/m.
+        stiffness_n_per_m: f64,
+        /// beta, 1/m.
+        beta_per_m: f64,
+    },
+}
+
+/// Breathing: the tissue's rest point moves as
+/// `direction * amplitude_m * sin(2 pi hz t)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Breathing {
+    /// Amplitude, m (>= 0).
+    pub amplitude_m: f64,
+    /// Frequency, Hz (> 0).
+    pub hz: f64,
+    /// Unit direction of the motion, {0} (the tissue's own direction unless
+    /// the file gives another; only its part along the tissue's direction
+    /// changes the force, the surface being a plane).
+    pub direction: Vec3,
+}
+
+/// A sudden shift of a tissue: from `t_ns` on, its rest point sits
+/// `offset_m` along the tissue's direction from `rest_m` (the latest shift
+/// at or before the time counts; none before the first).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TissueShift {
+    /// From when, ns from start.
+    pub t_ns: u64,
+    /// Offset of the rest point along the direction, m.
+    pub offset_m: f64,
+}
+
+/// A tissue at the tip: a unilateral spring-damper along a unit `direction`
+/// (base frame), whose surface is the plane through the rest point normal to
+/// it. With the penetration `delta = (D - rest(t)) . direction` and its rate,
+/// the force is zero while `delta <= 0` (the tip outside), else
+/// `F = max(0, spring(delta) + damping * d(delta)/dt)` along `direction`:
+/// F_tip (what the tip applies to the tissue, MODEL.md 4) is `F * direction`,
+/// so a tip that penetrates along +direction pushes along +direction. The
+/// damping never pulls (no stickiness). The tissue has no state: the tip is
+/// carried by the axes' positions, so the law is evaluated at each instant,
+/// never integrated, and no physics step makes it unstable.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tissue {
+    /// Unit direction, {0}: the tip penetrates along +direction.
+    pub direction: Vec3,
+    /// A point of the tissue's surface at rest, {0}, m.
+    pub rest_m: Vec3,
+    /// The spring.
+    pub model: TissueModel,
+    /// Damping, N s/m (>= 0).
+    pub damping_n_s_per_m: f64,
+    /// Breathing motion of the rest point, if any.
+    pub breathing: Option<Breathing>,
+    /// Sudden shifts of the rest point, sorted by time.
+    pub shifts: Vec<TissueShift>,
 }
 
 /// One keyframe of the tip force.
@@ -115,6 +193,104 @@ pub enum Fault {
         /// When, ns from start.
         at_ns: u64,
         /// Fault code.
+        code: u16,
+    },
+    /// The sensor freezes: from `from_ns` (until `until_ns`, or for good) every
+    /// sample repeats, bit for bit, the six values of the last sample measured
+    /// before (stuck-at), while the counter advances and the samples keep
+    /// coming at the rate with a good status.
+    SensorFrozen {
+        /// Start, ns from start.
+        from_ns: u64,
+        /// End, ns from start; `None`: for good.
+        until_ns: Option<u64>,
+    },
+    /// The chosen channels sit at the end of the measuring range (an amplifier
+    /// at its rail) from `from_ns` until `until_ns` (or for good).
+    SensorSaturated {
+        /// Start, ns from start.
+        from_ns: u64,
+        /// End, ns from start; `None`: for good.
+        until_ns: Option<u64>,
+        /// Which channels (at least one).
+        channels: Channels,
+        /// Which end; `None`: the side of each channel's reading (+ at 0).
+        rail: Option<Rail>,
+    },
+    /// The `samples` samples measured from the first at or after `at_ns` carry
+    /// an added wrench (sensor frame), then it is gone: an outlier.
+    SensorSpike {
+        /// When, ns from start.
+        at_ns: u64,
+        /// Added force, sensor frame, N.
+        force_n: Vec3,
+        /// Added torque, sensor frame, N m.
+        torque_nm: Vec3,
+        /// How many samples (>= 1).
+        samples: u32,
+    },
+    /// From `from_ns` the bias drifts linearly (besides the sensor's own
+    /// `drift_n_per_s`): a temperature drift after a tare.
+    SensorDrift {
+        /// Start, ns from start.
+        from_ns: u64,
+        /// Force drift, sensor frame, N/s.
+        drift_n_per_s: Vec3,
+        /// Torque drift, sensor frame, N m/s.
+        drift_nm_per_s: Vec3,
+    },
+    /// From `from_ns` the sensor's gain is off by `factor` (a wrong
+    /// counts-per-newton or a damaged gauge): the raw reading (with its
+    /// noise) is multiplied by it, on all six channels.
+    SensorScale {
+        /// Start, ns from start.
+        from_ns: u64,
+        /// The gain factor (> 0).
+        factor: f64,
+    },
+    /// From `at_ns` (until `until_ns`, or for good) the encoder of one axis
+    /// reports the same position, while the axis itself moves as commanded.
+    EncoderFrozen {
+        /// When, ns from start.
+        at_ns: u64,
+        /// 0 = q1, 1 = q2, 2 = q3.
+        axis: usize,
+        /// End, ns from start; `None`: for good.
+        until_ns: Option<u64>,
+    },
+    /// At `at_ns` the encoder of one axis loses `counts` counts: from then on
+    /// it reads `counts * lead / counts_per_turn` less than the axis's
+    /// position (negative counts: more); the axis itself is unaffected.
+    EncoderCountLoss {
+        /// When, ns from start.
+        at_ns: u64,
+        /// 0 = q1, 1 = q2, 2 = q3.
+        axis: usize,
+        /// Counts lost (non-zero).
+        counts: i32,
+    },
+    /// At `at_ns` one drive stops sending its CANopen heartbeat. The plain
+    /// simulated axes have no heartbeat: here it is a drive fault of that
+    /// axis with the code a CANopen host gives a lost drive
+    /// ([`crate::canopen::frame::FAULT_LOST`], 0x8130), at `at_ns` itself
+    /// (the CANopen host sees it a heartbeat timeout later; see
+    /// [`crate::canopen::SimDriveFault`]); the axes brake and `fault_reset`
+    /// clears it, as [`Fault::DriveFault`].
+    DriveHeartbeatLoss {
+        /// When, ns from start.
+        at_ns: u64,
+        /// 0 = q1, 1 = q2, 2 = q3.
+        axis: usize,
+    },
+    /// At `at_ns` one drive faults and sends an EMCY with `code`. On the plain
+    /// simulated axes: a drive fault of that axis with that code, as
+    /// [`Fault::DriveFault`].
+    DriveEmcy {
+        /// When, ns from start.
+        at_ns: u64,
+        /// 0 = q1, 1 = q2, 2 = q3.
+        axis: usize,
+        /// The EMCY error code (non-zero).
         code: u16,
     },
 }

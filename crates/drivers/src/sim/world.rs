@@ -16,12 +16,13 @@
 //! reverses only after the support's pre-sliding displacement
 //! ([`crate::motion::SLIDE_THRESHOLD_M`]), as the runner's does.
 
-use super::spec::{ContactKey, Fault, SimSpec};
+use super::spec::{ContactKey, Fault, SimSpec, Tissue, TissueModel};
 use super::statics::{self, Equilibrium, Loads};
-use super::{STATUS_OUT_OF_MODEL, SimError};
+use super::{STATUS_OUT_OF_MODEL, SimError, tissue};
+use crate::canopen::frame::FAULT_LOST;
 use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
 use crate::motion::{AxisPlan, AxisState, Limits, SlideDirection, SlideSign};
-use crate::{Clock, DriveState, JointPositions, SensorStatus, Vec3, WrenchSample};
+use crate::{Clock, DriveState, JointPositions, Rail, SensorStatus, Vec3, WrenchSample};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -57,6 +58,17 @@ pub(crate) fn contact_at(keys: &[ContactKey], t_ns: u64) -> Vec3 {
     }
 }
 
+/// Fx, Fy, Fz, Tx, Ty, Tz from a force and a torque.
+fn join6(force: &Vec3, torque: &Vec3) -> [f64; 6] {
+    [force.x, force.y, force.z, torque.x, torque.y, torque.z]
+}
+
+/// A force and a torque from Fx, Fy, Fz, Tx, Ty, Tz.
+fn split6(v: [f64; 6]) -> (Vec3, Vec3) {
+    let [fx, fy, fz, tx, ty, tz] = v;
+    (Vec3::new(fx, fy, fz), Vec3::new(tx, ty, tz))
+}
+
 /// Everything physical at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Physics {
@@ -64,6 +76,8 @@ pub(crate) struct Physics {
     pub speeds_mps: [f64; 3],
     pub pose: Pose,
     pub loads: Loads,
+    /// The tissues' part of `loads.tip_force_n`, {0}, N.
+    pub tissue_force_n: Vec3,
     pub equilibrium: Equilibrium,
     /// Noise-free reading with the bias, before the tare, sensor frame.
     pub reading_n: Vec3,
@@ -124,23 +138,105 @@ fn check_period(field: &'static str, ns: u64, max_ns: u64) -> Result<(), SimErro
     }
 }
 
+/// Checks that a window's end is after its start.
+fn check_until(field: &'static str, from_ns: u64, until_ns: Option<u64>) -> Result<(), SimError> {
+    match until_ns {
+        Some(until) if until <= from_ns => Err(SimError::InvalidSpec {
+            field,
+            value: until as f64,
+            why: "must be after the start",
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// Checks one fault (index `index` in the list).
 pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
+    let axis_ok = |axis: usize| {
+        if axis > 2 {
+            Err(SimError::FaultAxis { index, axis })
+        } else {
+            Ok(())
+        }
+    };
     match *fault {
-        Fault::SensorSilent { from_ns, until_ns } => match until_ns {
-            Some(until) if until <= from_ns => Err(SimError::InvalidSpec {
-                field: "faults.sensor_silent.until_ns",
-                value: until as f64,
-                why: "must be after from_ns",
-            }),
-            _ => Ok(()),
-        },
+        Fault::SensorSilent { from_ns, until_ns } => {
+            check_until("faults.sensor_silent.until_ns", from_ns, until_ns)
+        }
         Fault::NanSample { .. } | Fault::DriveFault { .. } => Ok(()),
         Fault::EncoderJump { axis, jump_m, .. } => {
-            if axis > 2 {
-                return Err(SimError::FaultAxis { index, axis });
-            }
+            axis_ok(axis)?;
             check_finite("faults.encoder_jump.jump_m", jump_m)
+        }
+        Fault::SensorFrozen { from_ns, until_ns } => {
+            check_until("faults.sensor_frozen.until_ns", from_ns, until_ns)
+        }
+        Fault::SensorSaturated {
+            from_ns,
+            until_ns,
+            channels,
+            ..
+        } => {
+            check_until("faults.sensor_saturated.until_ns", from_ns, until_ns)?;
+            if channels.contains(&true) {
+                Ok(())
+            } else {
+                Err(SimError::InvalidSpec {
+                    field: "faults.sensor_saturated.channels",
+                    value: 0.0,
+                    why: "must name at least one channel",
+                })
+            }
+        }
+        Fault::SensorSpike {
+            force_n,
+            torque_nm,
+            samples,
+            ..
+        } => {
+            check_vec("faults.sensor_spike.force_n", &force_n)?;
+            check_vec("faults.sensor_spike.torque_nm", &torque_nm)?;
+            check_positive("faults.sensor_spike.samples", f64::from(samples))
+        }
+        Fault::SensorDrift {
+            drift_n_per_s,
+            drift_nm_per_s,
+            ..
+        } => {
+            check_vec("faults.sensor_drift.drift_n_per_s", &drift_n_per_s)?;
+            check_vec("faults.sensor_drift.drift_nm_per_s", &drift_nm_per_s)
+        }
+        Fault::SensorScale { factor, .. } => check_positive("faults.sensor_scale.factor", factor),
+        Fault::EncoderFrozen {
+            at_ns,
+            axis,
+            until_ns,
+        } => {
+            axis_ok(axis)?;
+            check_until("faults.encoder_frozen.until_ns", at_ns, until_ns)
+        }
+        Fault::EncoderCountLoss { axis, counts, .. } => {
+            axis_ok(axis)?;
+            if counts == 0 {
+                return Err(SimError::InvalidSpec {
+                    field: "faults.encoder_count_loss.counts",
+                    value: 0.0,
+                    why: "must not be 0",
+                });
+            }
+            Ok(())
+        }
+        Fault::DriveHeartbeatLoss { axis, .. } => axis_ok(axis),
+        Fault::DriveEmcy { axis, code, .. } => {
+            axis_ok(axis)?;
+            if code == 0 {
+                return Err(SimError::InvalidSpec {
+                    field: "faults.drive_emcy.code",
+                    value: 0.0,
+                    why: "must not be 0 (an EMCY with code 0 says the error is gone)",
+                });
+            }
+            Ok(())
         }
     }
 }
@@ -148,11 +244,95 @@ pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
 /// When a fault starts, ns from start.
 pub(crate) fn fault_start_ns(fault: &Fault) -> u64 {
     match *fault {
-        Fault::SensorSilent { from_ns, .. } => from_ns,
+        Fault::SensorSilent { from_ns, .. }
+        | Fault::SensorFrozen { from_ns, .. }
+        | Fault::SensorSaturated { from_ns, .. }
+        | Fault::SensorDrift { from_ns, .. }
+        | Fault::SensorScale { from_ns, .. } => from_ns,
         Fault::NanSample { at_ns }
         | Fault::EncoderJump { at_ns, .. }
-        | Fault::DriveFault { at_ns, .. } => at_ns,
+        | Fault::DriveFault { at_ns, .. }
+        | Fault::SensorSpike { at_ns, .. }
+        | Fault::EncoderFrozen { at_ns, .. }
+        | Fault::EncoderCountLoss { at_ns, .. }
+        | Fault::DriveHeartbeatLoss { at_ns, .. }
+        | Fault::DriveEmcy { at_ns, .. } => at_ns,
     }
+}
+
+/// The drive state a fault puts the drives in, and when; `None` for a fault
+/// that is not the drives'.
+fn drive_fault_event(fault: &Fault) -> Option<(u64, DriveState)> {
+    let axis_u8 = |axis: usize| u8::try_from(axis).ok();
+    match *fault {
+        Fault::DriveFault { at_ns, code } => Some((at_ns, DriveState::Fault { axis: None, code })),
+        Fault::DriveHeartbeatLoss { at_ns, axis } => Some((
+            at_ns,
+            DriveState::Fault {
+                axis: axis_u8(axis),
+                code: FAULT_LOST,
+            },
+        )),
+        Fault::DriveEmcy { at_ns, axis, code } => Some((
+            at_ns,
+            DriveState::Fault {
+                axis: axis_u8(axis),
+                code,
+            },
+        )),
+        _ => None,
+    }
+}
+
+/// Checks one tissue.
+fn check_tissue(tissue: &Tissue) -> Result<(), SimError> {
+    check_vec("tissue.direction", &tissue.direction)?;
+    if (tissue.direction.norm() - 1.0).abs() > 1e-9 {
+        return Err(SimError::InvalidSpec {
+            field: "tissue.direction",
+            value: tissue.direction.norm(),
+            why: "must be a unit vector",
+        });
+    }
+    check_vec("tissue.rest_m", &tissue.rest_m)?;
+    match tissue.model {
+        TissueModel::Linear { stiffness_n_per_m } => {
+            check_positive("tissue.stiffness_n_per_m", stiffness_n_per_m)?;
+        }
+        TissueModel::Exponential {
+            stiffness_n_per_m,
+            beta_per_m,
+        } => {
+            check_positive("tissue.stiffness_n_per_m", stiffness_n_per_m)?;
+            check_positive("tissue.beta_per_m", beta_per_m)?;
+        }
+    }
+    check_non_negative("tissue.damping_n_s_per_m", tissue.damping_n_s_per_m)?;
+    if let Some(b) = &tissue.breathing {
+        check_non_negative("tissue.breathing.amplitude_m", b.amplitude_m)?;
+        check_positive("tissue.breathing.hz", b.hz)?;
+        check_vec("tissue.breathing.direction", &b.direction)?;
+        if (b.direction.norm() - 1.0).abs() > 1e-9 {
+            return Err(SimError::InvalidSpec {
+                field: "tissue.breathing.direction",
+                value: b.direction.norm(),
+                why: "must be a unit vector",
+            });
+        }
+    }
+    let mut previous_ns = 0;
+    for shift in &tissue.shifts {
+        check_finite("tissue.shift.offset_m", shift.offset_m)?;
+        if shift.t_ns < previous_ns {
+            return Err(SimError::InvalidSpec {
+                field: "tissue.shift.t_ns",
+                value: shift.t_ns as f64,
+                why: "shifts must be sorted by time",
+            });
+        }
+        previous_ns = shift.t_ns;
+    }
+    Ok(())
 }
 
 /// Checks everything [`World::new`] checks: what the types of [`SimSpec`] do
@@ -222,6 +402,15 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
     check_vec("sensor.bias_n", &sensor.bias_n)?;
     check_vec("sensor.bias_nm", &sensor.bias_nm)?;
     check_vec("sensor.drift_n_per_s", &sensor.drift_n_per_s)?;
+    for &x in sensor.range_n.iter() {
+        check_positive("sensor.range_n", x)?;
+    }
+    for &x in sensor.range_nm.iter() {
+        check_positive("sensor.range_nm", x)?;
+    }
+    for tissue in &spec.tissue {
+        check_tissue(tissue)?;
+    }
     let mut previous_ns = 0;
     for (index, key) in spec.contact.iter().enumerate() {
         check_vec("contact.force_n", &key.force_n)?;
@@ -268,6 +457,11 @@ pub(crate) struct World<C> {
     drain_lost: u64,
     /// The device-side tare (force, torque), sensor frame.
     tare: Option<(Vec3, Vec3)>,
+    /// The six values of the last sample measured (sent or not), for a
+    /// sensor that freezes.
+    last_output: Option<[f64; 6]>,
+    /// While the sensor is frozen: the values it repeats.
+    frozen_output: Option<[f64; 6]>,
     positions: JointPositions,
 }
 
@@ -303,6 +497,8 @@ impl<C: Clock> World<C> {
             undrained: VecDeque::with_capacity(DRAIN_CAPACITY),
             drain_lost: 0,
             tare: None,
+            last_output: None,
+            frozen_output: None,
             positions: JointPositions {
                 joints: spec.axes.start,
                 stamp_ns: t0_ns,
@@ -395,26 +591,26 @@ impl<C: Clock> World<C> {
     fn next_drive_fault(&self) -> Option<u64> {
         self.faults
             .iter()
-            .filter_map(|(f, fired)| match *f {
-                Fault::DriveFault { at_ns, .. } if !fired => Some(at_ns),
-                _ => None,
-            })
+            .filter(|(_, fired)| !fired)
+            .filter_map(|(f, _)| drive_fault_event(f).map(|(at_ns, _)| at_ns))
             .min()
     }
 
+    /// Fires the drive faults due at `t_ns` (several at once: the last in
+    /// the list gives the state).
     fn fire_drive_faults(&mut self, t_ns: u64) {
-        let mut code_now = None;
+        let mut state_now = None;
         for (fault, fired) in &mut self.faults {
-            if let Fault::DriveFault { at_ns, code } = *fault
+            if let Some((at_ns, state)) = drive_fault_event(fault)
                 && !*fired
                 && at_ns == t_ns
             {
                 *fired = true;
-                code_now = Some(code);
+                state_now = Some(state);
             }
         }
-        if let Some(code) = code_now {
-            self.state = DriveState::Fault { axis: None, code };
+        if let Some(state) = state_now {
+            self.state = state;
             self.brake_all(t_ns);
         }
     }
@@ -447,13 +643,26 @@ impl<C: Clock> World<C> {
         self.slide.update(along_sq.sqrt());
     }
 
-    /// The sensor bias at `t_ns` (force drifts linearly), sensor frame.
+    /// The sensor bias at `t_ns` (force drifts linearly; `sensor_drift`
+    /// faults add their drift from their start), sensor frame.
     fn bias_at(&self, t_ns: u64) -> (Vec3, Vec3) {
         let sensor = &self.spec.sensor;
-        (
-            sensor.bias_n + sensor.drift_n_per_s * ns_to_s(t_ns),
-            sensor.bias_nm,
-        )
+        let mut bias_n = sensor.bias_n + sensor.drift_n_per_s * ns_to_s(t_ns);
+        let mut bias_nm = sensor.bias_nm;
+        for (f, _) in &self.faults {
+            if let Fault::SensorDrift {
+                from_ns,
+                drift_n_per_s,
+                drift_nm_per_s,
+            } = *f
+                && from_ns <= t_ns
+            {
+                let since_s = ns_to_s(t_ns - from_ns);
+                bias_n += drift_n_per_s * since_s;
+                bias_nm += drift_nm_per_s * since_s;
+            }
+        }
+        (bias_n, bias_nm)
     }
 
     /// Everything physical at `t_ns` (ns from start, not before the last
@@ -464,8 +673,27 @@ impl<C: Clock> World<C> {
         let spec = &self.spec;
         let pose =
             forward(&spec.calibration, &spec.profile, &joints).map_err(SimError::PoseOutOfModel)?;
+        let contact_n = contact_at(&spec.contact, t_ns);
+        let tissue_force_n = if spec.tissue.is_empty() {
+            Vec3::zeros()
+        } else {
+            let speeds_mps = states.map(|s| s.v_mps);
+            let tip_velocity_mps = tissue::tip_velocity_mps(
+                &spec.calibration,
+                &spec.profile,
+                &joints,
+                speeds_mps,
+                &pose.tip_m,
+            );
+            tissue::force_n(&spec.tissue, t_ns, &pose.tip_m, &tip_velocity_mps)
+        };
         let loads = Loads {
-            tip_force_n: contact_at(&spec.contact, t_ns),
+            // Without tissue the script's force as it is (bit for bit).
+            tip_force_n: if spec.tissue.is_empty() {
+                contact_n
+            } else {
+                contact_n + tissue_force_n
+            },
             tip_mass_kg: spec.tip_mass_kg,
             // The support's friction on the rod opposes the last slide; before
             // any slide there is none (physics, not an estimate: 0 is the truth).
@@ -481,6 +709,7 @@ impl<C: Clock> World<C> {
             speeds_mps: states.map(|s| s.v_mps),
             pose,
             loads,
+            tissue_force_n,
             equilibrium,
             reading_n: ideal_n + bias_n,
             reading_nm: ideal_nm + bias_nm,
@@ -506,6 +735,125 @@ impl<C: Clock> World<C> {
         })
     }
 
+    fn frozen_at(&self, t_ns: u64) -> bool {
+        self.faults.iter().any(|(f, _)| match *f {
+            Fault::SensorFrozen { from_ns, until_ns } => {
+                from_ns <= t_ns && until_ns.is_none_or(|until| t_ns < until)
+            }
+            _ => false,
+        })
+    }
+
+    /// The gain of the active `sensor_scale` faults (their product), `None`
+    /// when none is active.
+    fn scale_at(&self, t_ns: u64) -> Option<f64> {
+        self.faults
+            .iter()
+            .filter_map(|(f, _)| match *f {
+                Fault::SensorScale { from_ns, factor } if from_ns <= t_ns => Some(factor),
+                _ => None,
+            })
+            .reduce(|a, b| a * b)
+    }
+
+    /// The wrench the active `sensor_spike` faults add to sample `k` (their
+    /// sum), `None` when none is active.
+    fn spike_at(&self, k: u64) -> Option<(Vec3, Vec3)> {
+        let period = self.spec.sensor.period_ns;
+        self.faults
+            .iter()
+            .filter_map(|(f, _)| match *f {
+                Fault::SensorSpike {
+                    at_ns,
+                    force_n,
+                    torque_nm,
+                    samples,
+                } => {
+                    let first = at_ns.div_ceil(period);
+                    (first <= k && k - first < u64::from(samples)).then_some((force_n, torque_nm))
+                }
+                _ => None,
+            })
+            .reduce(|(f, t), (g, u)| (f + g, t + u))
+    }
+
+    /// Per channel, whether a `sensor_saturated` fault pins it at `t_ns`, and
+    /// at which rail (`None` inside: the reading's side); the later fault in
+    /// the list wins.
+    fn saturated_at(&self, t_ns: u64) -> [Option<Option<Rail>>; 6] {
+        let mut pinned = [None; 6];
+        for (f, _) in &self.faults {
+            if let Fault::SensorSaturated {
+                from_ns,
+                until_ns,
+                channels,
+                rail,
+            } = *f
+                && from_ns <= t_ns
+                && until_ns.is_none_or(|until| t_ns < until)
+            {
+                for (p, on) in pinned.iter_mut().zip(channels) {
+                    if on {
+                        *p = Some(rail);
+                    }
+                }
+            }
+        }
+        pinned
+    }
+
+    /// What the device sends for measurement `k` at `t_ns` (before a freeze
+    /// or a NaN): the raw reading (the world's wrench and bias, the noise,
+    /// times the gain of a `sensor_scale`, plus a `sensor_spike`), clipped to
+    /// the measuring range, saturated channels pinned at it, less the
+    /// device-side tare. Fx, Fy, Fz, Tx, Ty, Tz, sensor frame.
+    fn device_output(
+        &self,
+        k: u64,
+        t_ns: u64,
+        p: &Physics,
+        noise_n: &Vec3,
+        noise_nm: &Vec3,
+    ) -> [f64; 6] {
+        let sensor = &self.spec.sensor;
+        let (tare_n, tare_nm) = self.tare.unwrap_or((Vec3::zeros(), Vec3::zeros()));
+        let scale = self.scale_at(t_ns);
+        let spike = self.spike_at(k);
+        let (raw, mut out) = if scale.is_none() && spike.is_none() {
+            (
+                join6(&(p.reading_n + noise_n), &(p.reading_nm + noise_nm)),
+                // The fault-free arithmetic, bit for bit as it always was.
+                join6(
+                    &(p.reading_n - tare_n + noise_n),
+                    &(p.reading_nm - tare_nm + noise_nm),
+                ),
+            )
+        } else {
+            let gain = scale.unwrap_or(1.0);
+            let (spike_n, spike_nm) = spike.unwrap_or((Vec3::zeros(), Vec3::zeros()));
+            let raw_n = (p.reading_n + noise_n) * gain + spike_n;
+            let raw_nm = (p.reading_nm + noise_nm) * gain + spike_nm;
+            (
+                join6(&raw_n, &raw_nm),
+                join6(&(raw_n - tare_n), &(raw_nm - tare_nm)),
+            )
+        };
+        let range = join6(&sensor.range_n, &sensor.range_nm);
+        let tare = join6(&tare_n, &tare_nm);
+        let pinned = self.saturated_at(t_ns);
+        for ((((o, r), range), tare), pin) in
+            out.iter_mut().zip(raw).zip(range).zip(tare).zip(pinned)
+        {
+            if let Some(rail) = pin {
+                let sign = rail.map_or(if r >= 0.0 { 1.0 } else { -1.0 }, Rail::sign);
+                *o = sign * range - tare;
+            } else if r.abs() > range {
+                *o = range.copysign(r) - tare;
+            }
+        }
+        out
+    }
+
     /// Sensor measurement `k` at `t_ns`.
     fn measure(&mut self, k: u64, t_ns: u64) {
         // Draw the noise of every sample, sent or not, so that the noise of a
@@ -521,25 +869,32 @@ impl<C: Clock> World<C> {
         let [n0, n1, n2, n3, n4, n5] = draw;
         let noise_n = Vec3::new(n0, n1, n2).component_mul(&sensor.noise_n);
         let noise_nm = Vec3::new(n3, n4, n5).component_mul(&sensor.noise_nm);
-        let (mut force_n, mut torque_nm, status) = match self.physics_at(t_ns) {
-            Ok(p) => {
-                let (tare_n, tare_nm) = self.tare.unwrap_or((Vec3::zeros(), Vec3::zeros()));
-                (
-                    p.reading_n - tare_n + noise_n,
-                    p.reading_nm - tare_nm + noise_nm,
-                    SensorStatus::OK,
-                )
-            }
+        let (mut output, status) = match self.physics_at(t_ns) {
+            Ok(p) => (
+                self.device_output(k, t_ns, &p, &noise_n, &noise_nm),
+                SensorStatus::OK,
+            ),
             Err(_) => {
                 let (bias_n, bias_nm) = self.bias_at(t_ns);
-                (bias_n, bias_nm, STATUS_OUT_OF_MODEL)
+                (join6(&bias_n, &bias_nm), STATUS_OUT_OF_MODEL)
             }
         };
+        // A frozen sensor repeats the last sample measured before the freeze
+        // (this one's own values when there was none).
+        if self.frozen_at(t_ns) {
+            output = *self
+                .frozen_output
+                .get_or_insert(self.last_output.unwrap_or(output));
+        } else {
+            self.frozen_output = None;
+        }
+        self.last_output = Some(output);
+        let (mut force_n, mut torque_nm) = split6(output);
         if self.nan_at(k) {
             force_n = Vec3::repeat(f64::NAN);
             torque_nm = Vec3::repeat(f64::NAN);
         }
-        let receive_ns = t_ns.saturating_add(sensor.latency_ns);
+        let receive_ns = t_ns.saturating_add(self.spec.sensor.latency_ns);
         self.in_flight.push_back((
             receive_ns,
             WrenchSample {
@@ -558,21 +913,54 @@ impl<C: Clock> World<C> {
         let axes = &self.spec.axes;
         let count_m = axes.lead_m_per_turn / f64::from(axes.counts_per_turn);
         let mut offsets = [0.0; 3];
+        let mut frozen = [false; 3];
         for (f, _) in &self.faults {
-            if let Fault::EncoderJump {
-                at_ns,
-                axis,
-                jump_m,
-            } = *f
-                && at_ns <= t_ns
-                && let Some(o) = offsets.get_mut(axis)
-            {
-                *o += jump_m;
+            match *f {
+                Fault::EncoderJump {
+                    at_ns,
+                    axis,
+                    jump_m,
+                } if at_ns <= t_ns => {
+                    if let Some(o) = offsets.get_mut(axis) {
+                        *o += jump_m;
+                    }
+                }
+                Fault::EncoderCountLoss {
+                    at_ns,
+                    axis,
+                    counts,
+                } if at_ns <= t_ns => {
+                    if let Some(o) = offsets.get_mut(axis) {
+                        *o -= f64::from(counts) * count_m;
+                    }
+                }
+                Fault::EncoderFrozen {
+                    at_ns,
+                    axis,
+                    until_ns,
+                } if at_ns <= t_ns && until_ns.is_none_or(|until| t_ns < until) => {
+                    if let Some(x) = frozen.get_mut(axis) {
+                        *x = true;
+                    }
+                }
+                _ => {}
             }
         }
+        // A frozen encoder repeats its previous report.
+        let previous = joints_to_array(&self.positions.joints);
         let mut reported = [0.0; 3];
-        for ((r, s), o) in reported.iter_mut().zip(self.axes_at(t_ns)).zip(offsets) {
-            *r = ((s.x_m + o) / count_m).round() * count_m;
+        for ((((r, s), o), stuck), before) in reported
+            .iter_mut()
+            .zip(self.axes_at(t_ns))
+            .zip(offsets)
+            .zip(frozen)
+            .zip(previous)
+        {
+            *r = if stuck {
+                before
+            } else {
+                ((s.x_m + o) / count_m).round() * count_m
+            };
         }
         self.positions = JointPositions {
             joints: joints_from_array(reported),
@@ -635,10 +1023,14 @@ impl<C: Clock> World<C> {
         )
     }
 
-    /// Sets the device-side tare to the present noise-free reading.
+    /// Sets the device-side tare to the present noise-free reading (as the
+    /// device reads it: times the gain of an active `sensor_scale`).
     pub fn tare(&mut self) -> Result<(), SimError> {
         let p = self.physics_at(self.done_ns)?;
-        self.tare = Some((p.reading_n, p.reading_nm));
+        self.tare = Some(match self.scale_at(self.done_ns) {
+            None => (p.reading_n, p.reading_nm),
+            Some(gain) => (p.reading_n * gain, p.reading_nm * gain),
+        });
         Ok(())
     }
 

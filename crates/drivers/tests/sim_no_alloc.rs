@@ -1,0 +1,185 @@
+//! The simulator allocates nothing once made, with every fault on demand and
+//! tissues acting: `sard --sim` runs it on the loop's path, so its sensor and
+//! drives calls are counted under a counting global allocator (the daemon's
+//! no-alloc tests run the demo scenario; this one runs every failure mode
+//! and a breathing, shifting, damped tissue). One test in this binary, so
+//! that no other test's allocations count.
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::indexing_slicing,
+    clippy::panic
+)]
+
+use sar_drivers::sim::{Breathing, Fault, Simulator, Tissue, TissueModel, TissueShift};
+use sar_drivers::{AxisDrives, DriveState, ForceSensor, SimClock, Vec3, WrenchSample};
+use sar_kinematics::ActiveJoints;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+struct Counting;
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+// SAFETY: forwards to the system allocator, only counting.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+const MS: u64 = 1_000_000;
+
+#[test]
+fn the_simulator_with_every_fault_and_a_tissue_allocates_nothing_per_cycle() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/tissue_breathing.toml");
+    let scenario = sar_drivers::scenario::load(&path).unwrap();
+    let mut spec = scenario.spec;
+    // A second, exponential tissue across the rod.
+    spec.tissue.push(Tissue {
+        direction: Vec3::new(0.0, 0.0, -1.0),
+        rest_m: Vec3::new(0.6, 0.2, 0.002),
+        model: TissueModel::Exponential {
+            stiffness_n_per_m: 1000.0,
+            beta_per_m: 50.0,
+        },
+        damping_n_s_per_m: 10.0,
+        breathing: Some(Breathing {
+            amplitude_m: 0.003,
+            hz: 0.3,
+            direction: Vec3::new(0.0, 0.0, 1.0),
+        }),
+        shifts: vec![TissueShift {
+            t_ns: 300 * MS,
+            offset_m: 0.001,
+        }],
+    });
+    let channels = [true, false, true, false, false, true];
+    spec.faults = vec![
+        Fault::SensorFrozen {
+            from_ns: 100 * MS,
+            until_ns: Some(150 * MS),
+        },
+        Fault::SensorSaturated {
+            from_ns: 160 * MS,
+            until_ns: Some(200 * MS),
+            channels,
+            rail: None,
+        },
+        Fault::SensorSpike {
+            at_ns: 210 * MS,
+            force_n: Vec3::new(0.0, 0.0, 30.0),
+            torque_nm: Vec3::zeros(),
+            samples: 3,
+        },
+        Fault::SensorDrift {
+            from_ns: 220 * MS,
+            drift_n_per_s: Vec3::new(0.0, 0.0, 1.0),
+            drift_nm_per_s: Vec3::new(0.01, 0.0, 0.0),
+        },
+        Fault::SensorScale {
+            from_ns: 240 * MS,
+            factor: 1.1,
+        },
+        Fault::SensorSilent {
+            from_ns: 260 * MS,
+            until_ns: Some(270 * MS),
+        },
+        Fault::NanSample { at_ns: 280 * MS },
+        Fault::EncoderFrozen {
+            at_ns: 50 * MS,
+            axis: 2,
+            until_ns: Some(90 * MS),
+        },
+        Fault::EncoderCountLoss {
+            at_ns: 120 * MS,
+            axis: 0,
+            counts: 50,
+        },
+        Fault::EncoderJump {
+            at_ns: 130 * MS,
+            axis: 1,
+            jump_m: 0.001,
+        },
+        Fault::DriveEmcy {
+            at_ns: 350 * MS,
+            axis: 2,
+            code: 0x4310,
+        },
+        Fault::DriveHeartbeatLoss {
+            at_ns: 420 * MS,
+            axis: 1,
+        },
+    ];
+    let clock = SimClock::new(1_000_000_000);
+    let sim = Simulator::new(spec, clock.clone()).unwrap();
+    let mut sensor = sim.sensor();
+    let mut drives = sim.drives();
+    let mut buffer = [WrenchSample {
+        force_n: Vec3::zeros(),
+        torque_nm: Vec3::zeros(),
+        counter: 0,
+        status: Default::default(),
+        received_ns: 0,
+    }; 64];
+    let start = scenario.script.start;
+    let deeper = ActiveJoints {
+        q3_m: start.q3_m + 0.004,
+        ..start
+    };
+    // Warm up outside the count (nothing here allocates either, but the
+    // count is about the cycles).
+    drives.enable().unwrap();
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let mut samples = 0u64;
+    let mut faults_seen = 0u64;
+    let mut drive_faults = 0u64;
+    for cycle in 0..500u64 {
+        clock.advance_ns(MS);
+        if let Some(s) = sensor.poll().unwrap() {
+            samples += 1;
+            if !s.is_valid() {
+                faults_seen += 1;
+            }
+        }
+        let _ = sensor.drain(&mut buffer).unwrap();
+        let _ = drives.positions().unwrap();
+        if matches!(drives.state().unwrap(), DriveState::Fault { .. }) {
+            drive_faults += 1;
+        }
+        match cycle {
+            10 => drives.set_targets(deeper).unwrap(),
+            200 => sensor.tare().unwrap(),
+            400 | 460 => {
+                let _ = drives.quick_stop();
+                let _ = drives.fault_reset();
+                let _ = drives.disable();
+                let _ = drives.enable();
+            }
+            _ => {}
+        }
+    }
+    let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
+    assert_eq!(allocations, 0, "{allocations} allocations in 500 cycles");
+    // The run did what it says: samples came, the NaN sample was among
+    // them, the drives faulted, the tip is in the tissue.
+    assert!(samples > 200, "{samples}");
+    assert!(faults_seen >= 1);
+    assert!(drive_faults > 0);
+    assert!(sim.truth().unwrap().tissue_force_n.x > 0.0);
+}
