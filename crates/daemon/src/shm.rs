@@ -146,7 +146,7 @@ pub struct DaemonShm {
     thread: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Shared>,
     /// The simulator's truth of F_tip, when simulated.
-    truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
+    truth: Option<crate::wire::SimTruthFn>,
     queue_drops: u64,
 }
 
@@ -411,7 +411,7 @@ impl DaemonShm {
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
-        truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
+        truth: Option<crate::wire::SimTruthFn>,
     ) -> Result<Self, String> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
@@ -457,7 +457,7 @@ impl DaemonShm {
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
-        truth: Option<Box<dyn FnMut() -> Option<sar_estimator::Vec3>>>,
+        truth: Option<crate::wire::SimTruthFn>,
     ) -> Result<(Self, ShmWorker), String> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
@@ -525,7 +525,7 @@ impl Publish for DaemonShm {
     fn publish(&mut self, c: &Published<'_>) {
         // The limits in use (an operator may have changed them this cycle)
         // travel in the state to the publishing thread, for its replies.
-        let truth_tip_force_n = self.truth.as_mut().and_then(|f| f());
+        let truth = self.truth.as_mut().and_then(|f| f());
         let mut state = StateMsg::from_parts(&StateParts {
             input: c.loop_input,
             decision: c.decision,
@@ -533,7 +533,7 @@ impl Publish for DaemonShm {
             quick_stops: c.quick_stops,
             recorder_drops: c.recorder_drops,
             recording: c.recording,
-            truth_tip_force_n,
+            truth,
         });
         state.queue_drops = self.queue_drops;
         self.push_state(state);

@@ -157,6 +157,10 @@ pub struct StateMsg {
     pub recorder_drops: u64,
     /// 1 while a recording runs, else 0.
     pub recording: u64,
+    /// The simulator's time of `truth_tip_force_n` (ns from the simulator's
+    /// start, the time axis of the scenario file), when `SIM_TRUTH`; else 0.
+    /// Lets a test measure a detection time from a scripted fault's onset.
+    pub truth_elapsed_ns: u64,
 }
 
 impl Default for StateMsg {
@@ -191,6 +195,7 @@ impl Default for StateMsg {
             publish_errors: 0,
             recorder_drops: 0,
             recording: 0,
+            truth_elapsed_ns: 0,
         }
     }
 }
@@ -215,8 +220,20 @@ pub struct StateParts<'a> {
     /// Whether a recording runs.
     pub recording: bool,
     /// The simulator's truth, when simulated.
-    pub truth_tip_force_n: Option<Vec3>,
+    pub truth: Option<SimTruth>,
 }
+
+/// What the simulator says is true at the moment a cycle is published.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimTruth {
+    /// The true F_tip, N.
+    pub tip_force_n: Vec3,
+    /// The simulator's time, ns from its start (the scenario's time axis).
+    pub elapsed_ns: u64,
+}
+
+/// Asked once per published cycle on the loop's thread, when simulated.
+pub type SimTruthFn = Box<dyn FnMut() -> Option<SimTruth>>;
 
 impl StateMsg {
     /// Converts one cycle.
@@ -279,9 +296,10 @@ impl StateMsg {
         if halted {
             m.flags |= flags::HALTED;
         }
-        if let Some(t) = p.truth_tip_force_n {
+        if let Some(t) = p.truth {
             m.flags |= flags::SIM_TRUTH;
-            m.truth_tip_force_n = arr(&t);
+            m.truth_tip_force_n = arr(&t.tip_force_n);
+            m.truth_elapsed_ns = t.elapsed_ns;
         }
         m
     }

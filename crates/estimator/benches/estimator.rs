@@ -98,14 +98,32 @@ fn reading_for(
     ideal_reading(&cal.sensor_rotation(), &f_a, bias_n)
 }
 
+/// A live sensor's noise: 64 fixed small offsets (a seeded LCG, 0.1 N and
+/// 0.005 N m at most), one per cycle in turn, so that no two consecutive
+/// samples repeat (a repeating reading is a frozen sensor, and the guard
+/// would measure its Fault path) and no step is a spike.
+fn noise(cycle: u64) -> (Vector3<f64>, Vector3<f64>) {
+    let mut state = 0x9e37_79b9_7f4a_7c15u64 ^ (cycle % 64);
+    let mut next = || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    };
+    let f = Vector3::new(next(), next(), next()) * 0.1;
+    let t = Vector3::new(next(), next(), next()) * 0.005;
+    (f, t)
+}
+
 fn cycle_input(cycle: u64, reading: &Vector3<f64>, torque_nm: &Vector3<f64>) -> CycleInput {
     let now_ns = 1_000_000 * cycle;
+    let (noise_n, noise_nm) = noise(cycle);
     CycleInput {
         cycle,
         now_ns: Some(now_ns),
         sensor: SensorSample {
-            force_n: *reading,
-            torque_nm: *torque_nm,
+            force_n: *reading + noise_n,
+            torque_nm: *torque_nm + noise_nm,
             counter: cycle as u32,
             status: 0,
             stamp_ns: now_ns,
@@ -370,6 +388,45 @@ fn per_cycle(c: &mut Criterion) {
         ("d = 0", manipulator2()),
         ("d != 0", manipulator2_offset(OFFSET_M)),
     ] {
+        let reading = reading_for(&profile, &tip_n, &bias_n);
+        let torque = torque_for(&profile, &tip_n);
+        // The checks that existed before issue 14 (silence, counter, status,
+        // joints, torque, observability) without the new ones (frozen,
+        // range, spikes, tare age and drift, the first reset's mounting
+        // check): the new checks' cost is the difference, in one run.
+        let scripted = EstimatorConfig {
+            profile,
+            plausibility: sar_estimator::cycle::PlausibilityConfig::new(
+                sar_estimator::cycle::PlausibilityLimits {
+                    frozen: sar_estimator::cycle::FrozenCheck::Off,
+                    range: None,
+                    spikes: None,
+                    mounting: None,
+                    tare: sar_estimator::cycle::TareLimits {
+                        max_age_ns: None,
+                        drift_n_per_s: 0.0,
+                    },
+                    ..Default::default()
+                },
+            )
+            .unwrap(),
+            filter: None,
+            ..example_estimator_config()
+        };
+        let mut estimator = Estimator::new(&scripted, bias_n).unwrap();
+        let mut first = cycle_input(1, &reading, &torque);
+        first.command = Some(sar_estimator::cycle::Command::Reset);
+        estimator.cycle(&first);
+        let mut cycle = 1u64;
+        bench_both(
+            c,
+            &format!("full, {label}, scripted checks only (before issue 14)"),
+            || {
+                cycle += 1;
+                let input = cycle_input(cycle, &reading, &torque);
+                black_box(estimator.cycle(black_box(&input)).guard_state)
+            },
+        );
         // Every plausibility check on, the torque check included; the filter
         // (not a check: a display and recording output) is measured apart.
         let config = EstimatorConfig {
@@ -379,8 +436,6 @@ fn per_cycle(c: &mut Criterion) {
             filter: None,
             ..example_estimator_config()
         };
-        let reading = reading_for(&profile, &tip_n, &bias_n);
-        let torque = torque_for(&profile, &tip_n);
         let mut estimator = Estimator::new(&config, bias_n).unwrap();
         // Leave the initial Fault (no input yet): the good path is measured.
         let mut first = cycle_input(1, &reading, &torque);

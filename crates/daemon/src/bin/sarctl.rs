@@ -185,6 +185,7 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "tip_std_n": (s.flags & flags::ESTIMATE != 0).then_some(s.tip_std_n),
         "observable": s.flags & flags::OBSERVABLE != 0,
         "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
+        "sim_elapsed_ns": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_elapsed_ns),
         "guard": guard_state_name(s.guard_state),
         "reason": reason_name(s.guard_reason),
         "reason_code": s.guard_reason,

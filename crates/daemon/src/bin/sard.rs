@@ -133,10 +133,13 @@ fn run(args: &Args) -> Result<(), String> {
         sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
     let operator = Operator::new();
     // The simulator's true tip force only where the sensor is simulated.
-    let truth: Option<Box<dyn FnMut() -> Option<Vec3>>> = if real_sensor.is_none() {
+    let truth: Option<sar_daemon::wire::SimTruthFn> = if real_sensor.is_none() {
         let truth_sim = simulator.clone();
         Some(Box::new(move || {
-            truth_sim.truth().ok().map(|t| t.tip_force_n)
+            truth_sim.truth().ok().map(|t| sar_daemon::wire::SimTruth {
+                tip_force_n: t.tip_force_n,
+                elapsed_ns: t.elapsed_ns,
+            })
         }))
     } else {
         None
