@@ -182,6 +182,10 @@ fn sard_runs_its_loop_on_the_rdt_driver_against_the_emulator() {
         (t.y * 1e5).round() as i32,
         (t.z * 1e5).round() as i32,
     ];
+    // A live sensor's noise (the HEX-E's at OnRobot's scale): a constant
+    // reading is what a frozen sensor sends, and the guard faults on it.
+    emu.noise_counts = [2000.0, 2000.0, 8000.0, 1000.0, 1000.0, 200.0];
+    emu.seed = 0xde91;
     let emulator = Emulator::start(emu).unwrap();
     let cfg = temp_path("rdt.toml");
     std::fs::write(
