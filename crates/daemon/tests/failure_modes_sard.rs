@@ -463,7 +463,8 @@ fn first_reset_refusal(
         let r = command(client, command_kind::RESET, [0.0; 3]);
         assert_ne!(r.status, 0, "{tag}: the first reset was accepted");
         let d = r.detail_text().to_owned();
-        if d.contains("at rest") {
+        // Refused while the mean at rest is incomplete, then by the check.
+        if d.contains("differs from the model") {
             let s = sub.latest(Duration::from_secs(5)).unwrap();
             assert_eq!(s.guard_state, guard_code::FAULT, "{tag}: {}", describe(&s));
             assert!(s.flags & flags::HALTED != 0);
@@ -512,11 +513,9 @@ fn sim_a_wrong_gain_or_a_rotated_sensor_is_refused_at_the_first_reset() {
         "sensor_rotation = [[1.0, 0.0, 0.0],\n                   [0.0, 0.9961946980917455, -0.08715574274765817],\n                   [0.0, 0.08715574274765817, 0.9961946980917455]]",
     );
     assert_ne!(rotated, demo_head(), "the demo's mounting changed");
-    // Its torque residual (about 0.035 N m against 0.02 N m of tolerance)
-    // shows only in the full mean at rest (500 samples, 1 s): the reset
-    // comes after it. SAFETY.md S12: an earlier first reset checks fewer
-    // samples with a wider allowance and accepts this rotation.
-    run("rotated-5deg", rotated, Some(1_200_000_000));
+    // The first reset tried at once: refused until the mean at rest is
+    // complete (rest_incomplete), then by the mounting check.
+    run("rotated-5deg", rotated, None);
 }
 
 #[test]
@@ -541,15 +540,18 @@ fn sim_a_tare_is_due_after_max_tare_age_and_a_tare_clears_it() {
         },
         |client, s| {
             if s.guard_state == guard_code::WARN && reason_name(s.guard_reason) == "tare_due" {
-                // The bias dates from the loop's first cycle (cycle 0).
+                // The bias dates from the loop's first cycle (cycle 0); the
+                // age is counted here in cycles, which lag the clock by the
+                // cycles a loaded machine overran (the guard uses the clock):
+                // 10 ms of allowance for those.
                 let age_ms = s.cycle as f64 * CYCLE_MS - max_tare_age_s * 1e3;
                 if !warn_seen {
                     eprintln!(
                         "DETECTION | sim | tare due | warn (tare_due) | {age_ms:.1} ms after max_tare_age_s (by cycles) | bound {:.1} ms",
-                        2.0 * CYCLE_MS + SAMPLE_MS
+                        2.0 * CYCLE_MS + SAMPLE_MS + 10.0
                     );
                     assert!(
-                        (0.0..=2.0 * CYCLE_MS + SAMPLE_MS).contains(&age_ms),
+                        (-10.0..=2.0 * CYCLE_MS + SAMPLE_MS + 10.0).contains(&age_ms),
                         "tare_due {age_ms} ms after the age"
                     );
                 }

@@ -55,12 +55,13 @@ impl AxisDrives for Stubborn {
 fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
-    // 20 N along the rod from 1 s to 3 s, then nothing.
+    // 20 N along the rod from 2 s to 4 s, then nothing (after the first
+    // reset, which needs the mean at rest: 1 s).
     scenario.spec.contact = common::contact_pulse(
-        500_000_000,
-        1_000_000_000,
-        3_000_000_000,
-        3_100_000_000,
+        1_500_000_000,
+        2_000_000_000,
+        4_000_000_000,
+        4_100_000_000,
         Vec3::new(20.0, 0.0, 0.0),
     );
     let clock = SimClock::new(1_000_000_000);
@@ -89,7 +90,7 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
         *c.step(cycle, || Some(clock.now_ns()))
     };
     let mut stopped_at = None;
-    for _ in 0..2000 {
+    for _ in 0..3000 {
         let out = step(&mut c);
         if out.guard_state == GuardState::Stop {
             stopped_at = Some(out.cycle);
@@ -124,7 +125,7 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
     let r = operator.replies.pop().unwrap();
     assert_eq!(r.status, ReplyStatus::Halted);
 
-    // After the contact is gone (3.1 s), a reset is accepted and moves work again.
+    // After the contact is gone (4.1 s), a reset is accepted and moves work again.
     for _ in 0..2500 {
         step(&mut c);
     }
@@ -177,7 +178,8 @@ fn the_drives_are_enabled_only_after_an_accepted_reset() {
     )
     .unwrap();
     let mut cycle = 0u64;
-    for _ in 0..50 {
+    // The first reset needs the full mean at rest (500 samples: 1000 cycles).
+    for _ in 0..1010 {
         cycle += 1;
         clock.advance_ns(1_000_000);
         let out = *c.step(cycle, || Some(clock.now_ns()));

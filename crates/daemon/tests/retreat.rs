@@ -62,7 +62,9 @@ impl Rig {
             log: Vec::new(),
             cfg,
         };
-        for _ in 0..20 {
+        // The automatic reset, accepted once the mean at rest is complete
+        // (500 samples of the 500 Hz sensor: 1000 cycles).
+        for _ in 0..1020 {
             rig.step();
         }
         assert_eq!(rig.c.drive_state(), Some(DriveState::Enabled));

@@ -121,7 +121,18 @@ fn monitor_json_limits_status_and_commands_with_a_daemon() {
     assert_eq!(v["tip_m"][0], 0.6);
     assert_eq!(v["limits_n"][3], 11.5);
 
-    // A small move along +Z (the force is along +X): accepted in Ok.
+    // A small move along +Z (the force is along +X): accepted in Ok, which
+    // the demo's automatic reset reaches once the mean at rest is complete.
+    let start = Instant::now();
+    loop {
+        let out = sarctl(&prefix, &["status", "--format", "json"]);
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        if v["guard"] == "ok" {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "never Ok: {v}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
     let out = sarctl(
         &prefix,
         &["move-tip", "0.6", "0.2", "0.002", "--format", "json"],

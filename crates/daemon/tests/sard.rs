@@ -111,8 +111,10 @@ fn sigterm_and_sigint_stop_the_loop_cleanly_with_the_drives_halted() {
             .stdout(Stdio::null())
             .spawn()
             .unwrap();
+        // Ok once the automatic reset is accepted (after the mean at rest).
         let got = collect(&sock, Duration::from_secs(60), |g| {
             g.iter().any(|m| m == "WATCHDOG=1")
+                && g.iter().any(|m| m.starts_with("STATUS=guard ok"))
         });
         assert!(got.iter().any(|m| m == "READY=1"), "{got:?}");
         assert!(

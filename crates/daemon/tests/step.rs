@@ -99,8 +99,10 @@ impl Rig {
             cycle: 0,
             log: Vec::new(),
         };
-        // The automatic reset, then the drives come up.
-        for _ in 0..20 {
+        // The automatic reset, accepted once the mean at rest is complete
+        // (500 samples of the 500 Hz sensor: 1000 cycles), then the drives
+        // come up.
+        for _ in 0..1020 {
             rig.step();
         }
         assert_eq!(rig.c.drive_state(), Some(DriveState::Enabled));
@@ -220,6 +222,8 @@ fn an_axis_that_stops_following_is_a_fault_with_its_own_reason() {
         ),
         ReplyStatus::Accepted
     );
+    // The cycle of the reply: the move starts there.
+    let moved_at = rig.cycle;
     let mut fault = None;
     for _ in 0..3000 {
         let d = rig.step();
@@ -231,7 +235,7 @@ fn an_axis_that_stops_following_is_a_fault_with_its_own_reason() {
     let d = fault.expect("no fault");
     // At 0.2 m/s^2 the trajectory is 1 mm away after 100 ms; the fault
     // comes within a few cycles of that.
-    let after_ms = d.estimate.cycle - 21;
+    let after_ms = d.estimate.cycle - moved_at;
     assert!(
         (95..=110).contains(&after_ms),
         "fault {after_ms} ms after the move"

@@ -75,13 +75,19 @@ fn contacts(seed: u64) -> Vec<ContactKey> {
         t_ns: 0,
         force_n: Vec3::zeros(),
     }];
-    let mut t_ns = 1_100_000_000u64;
+    // After the first reset (the mean at rest: 1 s).
+    let mut t_ns = 1_600_000_000u64;
     for k in 0..4 {
         let s = mix(seed ^ ((k + 1) * 0x51));
         let dir = Vec3::new(unit(s) - 0.5, unit(s ^ 1) - 0.5, unit(s ^ 2) - 0.5).normalize();
         let force_n = dir * 24.0 * unit(s ^ 3);
         let ramp_ns = 50_000_000 + (unit(s ^ 4) * 400e6) as u64;
         let hold_ns = (unit(s ^ 5) * 600e6) as u64;
+        // Zero until the pulse (keys are interpolated linearly).
+        keys.push(ContactKey {
+            t_ns,
+            force_n: Vec3::zeros(),
+        });
         keys.push(ContactKey {
             t_ns: t_ns + ramp_ns,
             force_n,

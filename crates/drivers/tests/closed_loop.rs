@@ -534,8 +534,9 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
                 stamp_ns: joints.stamp_ns,
                 valid: joints.valid,
             },
-            // Leave the initial Fault (no input yet) with the first good input.
-            command: (cycle == 1).then_some(Command::Reset),
+            // Leave the initial Fault (no input yet): a reset every cycle
+            // until accepted (the first needs the full mean at rest).
+            command: transitions.is_empty().then_some(Command::Reset),
         };
         let out = *est.cycle(&input);
         if let Some(t) = out.transition {
@@ -1223,8 +1224,9 @@ fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_t
                 stamp_ns: joints.stamp_ns,
                 valid: joints.valid,
             },
-            // Leave the initial Fault (no input yet) with the first good input.
-            command: (cycle == 1).then_some(Command::Reset),
+            // Leave the initial Fault (no input yet): a reset every cycle
+            // until accepted (the first needs the full mean at rest).
+            command: transitions.is_empty().then_some(Command::Reset),
         };
         let out = *est.cycle(&input);
         if let Some(t) = out.transition {

@@ -1381,13 +1381,20 @@ impl Estimator {
     /// The first reset's check of the wrench at rest ([`MountingLimits`]):
     /// the refusal's reason, or `None` when the residuals are within bounds
     /// (or there is no estimate: the guard's own blocker then refuses).
+    /// Refused while the mean is not complete (`RestIncomplete`).
     fn mounting_verdict(&self, limits: &MountingLimits) -> Option<Reason> {
         let (TipOutcome::Estimate(_), Some(pose)) = (self.last.tip, self.last.pose) else {
             return None;
         };
         let rest = &self.rest;
-        if rest.count == 0 {
-            return None;
+        // The tolerances below are stated for the full mean; a first reset
+        // before it (just started, or moved) waits: never a verdict on fewer
+        // samples, with a wider allowance.
+        if rest.count < limits.rest_samples {
+            return Some(Reason::RestIncomplete {
+                samples: rest.count,
+                needed: limits.rest_samples,
+            });
         }
         let root_n = libm::sqrt(f64::from(rest.count));
         let u = pose.rod_dir;

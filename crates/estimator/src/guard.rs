@@ -857,6 +857,16 @@ pub enum Reason {
         /// The device's fault code.
         code: u16,
     },
+    /// The first reset came before the mean of the wrench at rest was
+    /// complete (the daemon has just started, or the robot moved): the
+    /// mounting check's stated tolerances hold only for the full mean, so
+    /// the first reset is refused until the robot has been still that long.
+    RestIncomplete {
+        /// Samples at rest so far.
+        samples: u32,
+        /// Samples the mean needs (`[plausibility] rest_samples`).
+        needed: u32,
+    },
 }
 
 /// A residual of the wrench at rest against the model (the first reset's
@@ -920,7 +930,7 @@ impl fmt::Display for SensorChannel {
 /// Every reason's stable code and name, in code order (recordings, the wire
 /// and `sarctl` use the codes; SAFETY.md names every reason). Codes never
 /// change meaning; a new reason gets the next free code.
-pub const REASONS: [(u16, &str); 36] = [
+pub const REASONS: [(u16, &str); 37] = [
     (1, "no_input_yet"),
     (2, "cycle_out_of_order"),
     (3, "clock_failed"),
@@ -957,6 +967,7 @@ pub const REASONS: [(u16, &str); 36] = [
     (34, "force_rising"),
     (35, "publisher_stalled"),
     (36, "drive_fault"),
+    (37, "rest_incomplete"),
 ];
 
 impl Reason {
@@ -1000,6 +1011,7 @@ impl Reason {
             Self::ForceRising { .. } => 34,
             Self::PublisherStalled { .. } => 35,
             Self::DriveFault { .. } => 36,
+            Self::RestIncomplete { .. } => 37,
         }
     }
 
@@ -1194,6 +1206,10 @@ impl fmt::Display for Reason {
                     write!(f, "the drive of q{axis} faulted (code {code:#06x})")
                 }
             }
+            Self::RestIncomplete { samples, needed } => write!(
+                f,
+                "the wrench at rest is still being measured ({samples} of {needed} samples): keep the robot still and reset again"
+            ),
         }
     }
 }

@@ -186,6 +186,14 @@ fn the_per_cycle_path_allocates_nothing() {
             max_age_ns: Some(50_000_000),
             drift_n_per_s: 1e-3,
         },
+        // The script's joints move every cycle, so the mean at rest starts
+        // again every sample: a mean of one sample is complete, and the
+        // first reset's verdict runs (its refusal while incomplete is the
+        // same function's other branch).
+        mounting: Some(sar_estimator::cycle::MountingLimits {
+            rest_samples: 1,
+            ..Default::default()
+        }),
         ..PlausibilityLimits::default()
     })
     .unwrap();
@@ -327,6 +335,11 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
             torque: Some(sar_estimator::cycle::TorqueLimits {
                 noise_nm: Vector3::new(0.01, 0.01, 0.002),
                 max_sigma: 1e9,
+            }),
+            // As above: the joints move every cycle.
+            mounting: Some(sar_estimator::cycle::MountingLimits {
+                rest_samples: 1,
+                ..Default::default()
             }),
             ..PlausibilityLimits::default()
         })
