@@ -63,11 +63,14 @@ pub enum WriteError {
     },
 }
 
-/// The `offered_qos_profiles` metadata of every channel: one profile as ROS 2's
-/// recorder (rosbag2, Jazzy: `rosbag2_storage::serialize_rclcpp_qos_vector`,
-/// yaml-cpp's `Dump`, version 9 string policies) writes a reliable, volatile
-/// publisher's offer with the durations unset (infinite). `ros2 bag play`
-/// offers this profile again when it plays the file.
+/// The `offered_qos_profiles` metadata of every channel, in the form ROS 2's
+/// recorder writes it (rosbag2, Jazzy: `rosbag2_storage::
+/// serialize_rclcpp_qos_vector`, yaml-cpp's `Dump`, version 9 string
+/// policies): one profile, a reliable, volatile, keep-last publisher with no
+/// deadline, lifespan or lease (rmw's infinite duration). `ros2 bag play`
+/// offers it again (with its default history); Python `rosbags` and the
+/// viewers parse it. (A recorder that saw the publisher on DDS would write
+/// `history: unknown`, `depth: 0`: discovery does not carry them.)
 pub const OFFERED_QOS_PROFILES: &str = "- history: keep_last
   depth: 1000
   reliability: reliable
