@@ -36,7 +36,12 @@ pub fn start(bind: SocketAddr, backend: SocketAddr) -> std::io::Result<SocketAdd
     std::thread::Builder::new()
         .name("view-front".into())
         .spawn(move || {
-            for client in listener.incoming().flatten() {
+            for client in listener.incoming() {
+                let Ok(client) = client else {
+                    // Out of descriptors or the like: wait, do not spin.
+                    std::thread::sleep(Duration::from_millis(50));
+                    continue;
+                };
                 let _ = std::thread::Builder::new()
                     .name("view-conn".into())
                     .spawn(move || {
