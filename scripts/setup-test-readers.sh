@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the strict readers the tests decode recordings with, under
-# target/test-readers/ (nothing outside it; no root, no system pip):
+# target/test-readers/ (no root, no system pip; outside it only pip's and
+# npm's download caches in the home directory):
 #   node/  the parsers Foxglove and Lichtblick use, pinned in
 #          scripts/test-readers/package.json and package-lock.json (npm ci):
 #          @foxglove/rosmsg, @foxglove/rosmsg2-serialization, @mcap/core,
