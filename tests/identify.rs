@@ -22,7 +22,9 @@ use sar_daemon::identify::{
 };
 use sar_tests::identify_fixtures::{self, TABLE2};
 use std::path::PathBuf;
-use std::process::Command;
+
+#[path = "../crates/daemon/tests/common/readers.rs"]
+mod readers;
 
 /// The true support of every scenario.
 const TRUE_B: [f64; 3] = [0.45, 0.20, 0.0];
@@ -414,41 +416,28 @@ for path in sys.argv[1:]:
 /// Python's `mcap` + `mcap-ros2-support` decode every fixture from the
 /// schemas the files carry: the same number of sensor and joint messages as
 /// our reader, header stamps equal to log times, joint names q1..q3, and the
-/// same sums of the forces and positions. Fails when python3 or the packages
-/// are missing, unless `SAR_SKIP_PYTHON=1`.
+/// same sums of the forces and positions. The packages are installed on
+/// first use under `target/test-readers/` (scripts/setup-test-readers.sh);
+/// ignored when built with `SAR_SKIP_PYTHON=1`.
 #[test]
+#[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
 fn the_fixtures_decode_with_the_python_reader() {
     use sar_daemon::record::McapReader;
     use sar_daemon::record::msgs::{ActiveJointState, WrenchStamped};
-    let skip = std::env::var("SAR_SKIP_PYTHON").is_ok_and(|v| v == "1");
     let names: Vec<String> = identify_fixtures::all()
         .into_iter()
         .map(|f| f.name)
         .collect();
     let paths: Vec<PathBuf> = names.iter().map(|n| fixture(n)).collect();
-    let out = match Command::new("python3")
+    let out = readers::python()
         .arg("-c")
         .arg(PY_READER)
         .args(&paths)
         .output()
-    {
-        Ok(out) => out,
-        Err(e) if skip => {
-            eprintln!("SAR_SKIP_PYTHON=1: python3 not run ({e})");
-            return;
-        }
-        Err(e) => panic!("python3 could not be run ({e}); or set SAR_SKIP_PYTHON=1"),
-    };
-    if out.status.code() == Some(3) && skip {
-        eprintln!(
-            "SAR_SKIP_PYTHON=1: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        return;
-    }
+        .unwrap();
     assert!(
         out.status.success(),
-        "the Python reader failed: {}\n(install: python3 -m pip install mcap mcap-ros2-support mcap-protobuf-support, or set SAR_SKIP_PYTHON=1)",
+        "the Python reader failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
     let stdout = String::from_utf8(out.stdout).unwrap();

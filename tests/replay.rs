@@ -30,7 +30,9 @@ use sar_daemon::record::{FileOptions, McapReader, RotatingWriter, read_file};
 use sar_tests::{fixture_gen, replay_dir, scenarios_dir};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+
+#[path = "../crates/daemon/tests/common/readers.rs"]
+mod readers;
 
 const CONTACT_DAEMON: &str = "contact_daemon.mcap";
 const FAULT_DAEMON: &str = "fault_daemon.mcap";
@@ -387,23 +389,12 @@ fn a_file_cut_short_replays_to_its_last_chunk_and_is_recovered() {
     assert_eq!(std::fs::read(&cut).unwrap(), &bytes[..bytes.len() / 2]);
 }
 
-/// Messages per topic by the Python reader (`mcap` + `mcap-ros2-support`),
-/// or None when skipped (`SAR_SKIP_PYTHON=1`).
+/// Messages per topic by the Python reader (`mcap` + `mcap-ros2-support`,
+/// installed on first use under `target/test-readers/`).
 fn python_counts(file: &Path) -> Option<BTreeMap<String, u64>> {
     let script =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/daemon/tests/read_recording.py");
-    let skip = std::env::var("SAR_SKIP_PYTHON").is_ok_and(|v| v == "1");
-    let out = match Command::new("python3").arg(&script).arg(file).output() {
-        Ok(out) => out,
-        Err(e) if skip => {
-            eprintln!("SAR_SKIP_PYTHON=1: python3 not run ({e})");
-            return None;
-        }
-        Err(e) => panic!("python3 could not be run ({e}); or set SAR_SKIP_PYTHON=1"),
-    };
-    if out.status.code() == Some(3) && skip {
-        return None;
-    }
+    let out = readers::python().arg(&script).arg(file).output().unwrap();
     assert!(
         out.status.success(),
         "the Python reader failed on {}: {}",
@@ -421,6 +412,7 @@ fn python_counts(file: &Path) -> Option<BTreeMap<String, u64>> {
 }
 
 #[test]
+#[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
 fn the_python_reader_decodes_every_fixture_and_every_replay_output() {
     let dir = scratch("python");
     let mut files = vec![

@@ -1,8 +1,9 @@
 //! An independent reader: Python's `mcap` and `mcap-ros2-support` decode every
 //! channel of a recording (and of a recovered one) with the ROS 2 decoder, from
 //! the schemas the file carries, and every field must equal what was recorded,
-//! bit for bit. Fails when python3 or the packages are missing, unless
-//! `SAR_SKIP_PYTHON=1` (CI installs them: `.ci/run`).
+//! bit for bit. The packages are installed on first use under
+//! `target/test-readers/` (`scripts/setup-test-readers.sh`); fails when
+//! python3 or its pip is missing, ignored when built with `SAR_SKIP_PYTHON=1`.
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -16,32 +17,19 @@ use sar_daemon::record::msgs::*;
 use sar_daemon::record::*;
 use std::fmt::Write as _;
 use std::path::Path;
-use std::process::Command;
 
-/// Runs the script; None when skipped by SAR_SKIP_PYTHON=1.
+/// Runs the script with the packages `scripts/setup-test-readers.sh`
+/// installs (on first use) under `target/test-readers/py`.
 fn python_read(file: &Path) -> Option<String> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/read_recording.py");
-    let skip = std::env::var("SAR_SKIP_PYTHON").is_ok_and(|v| v == "1");
-    let out = match Command::new("python3").arg(&script).arg(file).output() {
-        Ok(out) => out,
-        Err(e) if skip => {
-            eprintln!("SAR_SKIP_PYTHON=1: python3 not run ({e})");
-            return None;
-        }
-        Err(e) => panic!(
-            "python3 could not be run ({e}): install python3 and `python3 -m pip install mcap mcap-ros2-support mcap-protobuf-support`, or set SAR_SKIP_PYTHON=1"
-        ),
-    };
-    if out.status.code() == Some(3) && skip {
-        eprintln!(
-            "SAR_SKIP_PYTHON=1: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        return None;
-    }
+    let out = common::readers::python()
+        .arg(&script)
+        .arg(file)
+        .output()
+        .unwrap();
     assert!(
         out.status.success(),
-        "the Python reader failed ({}): {}\n(missing packages: `python3 -m pip install mcap mcap-ros2-support mcap-protobuf-support`, or set SAR_SKIP_PYTHON=1)",
+        "the Python reader failed ({}): {}",
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );
@@ -221,6 +209,7 @@ fn compare(got: &str, want: &str) {
 }
 
 #[test]
+#[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
 fn python_decodes_every_channel_bit_for_bit() {
     let dir = common::scratch("python");
     let mut files = FileOptions::new(&dir, "rec");

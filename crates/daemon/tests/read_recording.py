@@ -23,7 +23,7 @@ try:
     from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 except ImportError as e:  # pragma: no cover
     print(
-        f"missing Python package: {e}; pip install mcap mcap-ros2-support mcap-protobuf-support",
+        f"missing Python package: {e} (scripts/setup-test-readers.sh installs it)",
         file=sys.stderr,
     )
     sys.exit(3)

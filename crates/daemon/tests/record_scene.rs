@@ -1,6 +1,8 @@
-//! The live view's 3D scene in recordings: `sarctl replay --output` (and the
-//! daemon's recorder, which shares the writer) writes `/sar/scene`
-//! (`foxglove.SceneUpdate`) and `/sar/scene/tf` beside the topics, at 30 Hz
+//! The live view's 3D scene beside recordings: `sarctl replay --output
+//! OUT.mcap` (and the daemon's recorder, which shares the writer) writes
+//! `/sar/scene` (`foxglove.SceneUpdate`) and `/sar/scene/tf` into the companion
+//! file `OUT.scene.mcap`, never into the `ros2` file (whose channels stay all
+//! `cdr` with `ros2msg` schemas and `offered_qos_profiles`), at 30 Hz
 //! of log time, each scene drawn from the cycle it is stamped with: the
 //! U-joint where the cycle's recorded state puts it, the force arrow in the
 //! guard's colour, the limit spheres of the limits in use. The topics
@@ -44,10 +46,33 @@ fn replay_outputs_carry_the_scene_of_their_cycles() {
     let mut tf = 0;
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
+        // The `ros2` file: CDR only, every channel with its QoS.
+        assert_eq!(m.channel.message_encoding, "cdr", "{}", m.channel.topic);
+        assert_eq!(
+            m.channel.schema.as_ref().unwrap().encoding,
+            "ros2msg",
+            "{}",
+            m.channel.topic
+        );
+        assert_eq!(
+            m.channel
+                .metadata
+                .get("offered_qos_profiles")
+                .map(String::as_str),
+            Some(sar_daemon::record::OFFERED_QOS_PROFILES),
+            "{}",
+            m.channel.topic
+        );
+        if m.channel.topic == "/sar/estimate/state" {
+            states.insert(m.log_time, EstimatorState::decode(&m.data).unwrap());
+        }
+    }
+    let scene_file = dir.join("out.scene.mcap");
+    assert_eq!(sar_daemon::record::scene_path(&out), scene_file);
+    let scene_bytes = std::fs::read(&scene_file).unwrap();
+    for m in mcap::MessageStream::new(&scene_bytes).unwrap() {
+        let m = m.unwrap();
         match m.channel.topic.as_str() {
-            "/sar/estimate/state" => {
-                states.insert(m.log_time, EstimatorState::decode(&m.data).unwrap());
-            }
             "/sar/scene" => {
                 let schema = m.channel.schema.as_ref().unwrap();
                 assert_eq!(schema.name, "foxglove.SceneUpdate");

@@ -120,12 +120,17 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     daemon.stop();
 
-    let mut files: Vec<_> = std::fs::read_dir(&rec_dir)
+    let (scenes, mut files): (Vec<_>, Vec<_>) = std::fs::read_dir(&rec_dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .collect();
+        .partition(|p| p.to_string_lossy().ends_with(".scene.mcap"));
     files.sort();
     assert_eq!(files.len(), 2, "{files:?}");
+    // Each recording has its 3D scene in a companion file, not in itself.
+    assert_eq!(scenes.len(), 2, "{scenes:?}");
+    for f in &files {
+        assert!(sar_daemon::record::scene_path(f).exists(), "{f:?}");
+    }
     // The recording from the first cycle replays bit for bit.
     let out_file = dir.join("replayed.mcap");
     let out = Command::new(SARCTL)

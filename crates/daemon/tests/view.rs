@@ -11,6 +11,9 @@
 //! - a client that subscribes and then reads nothing does not slow the
 //!   daemon's loop (criterion in the test), and once it reads again it gets
 //!   current data (the view dropped old messages for it, it did not stop);
+//! - a client offering only `foxglove.websocket.v1` (the default of
+//!   `@foxglove/ws-protocol`, Lichtblick up to 1.21, Foxglove Studio) is
+//!   accepted with that subprotocol and served the same data;
 //! - without a daemon, `sarctl view` fails at once with one line.
 //!
 //! `view_latency_and_cpu` (ignored) prints the figures of the report.
@@ -263,6 +266,12 @@ impl Fox {
     /// As `connect`, with the socket's receive buffer set to `rcvbuf` bytes
     /// before connecting (a stalled client then holds little in the kernel).
     fn connect_with(addr: &str, topics: &[&str], rcvbuf: Option<usize>) -> Self {
+        Self::connect_offering(addr, topics, rcvbuf, "foxglove.sdk.v1")
+    }
+
+    /// As `connect_with`, offering only the subprotocol `offer` (which the
+    /// view must accept under that name).
+    fn connect_offering(addr: &str, topics: &[&str], rcvbuf: Option<usize>, offer: &str) -> Self {
         let sockaddr: std::net::SocketAddr = addr.parse().unwrap();
         let socket = socket2::Socket::new(
             socket2::Domain::for_address(sockaddr),
@@ -280,13 +289,13 @@ impl Fox {
             .unwrap();
         let mut req = format!("ws://{addr}/").into_client_request().unwrap();
         req.headers_mut()
-            .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
+            .insert("Sec-WebSocket-Protocol", offer.parse().unwrap());
         let (ws, resp) = tungstenite::client(req, stream).unwrap();
         assert_eq!(
             resp.headers()
                 .get("Sec-WebSocket-Protocol")
                 .map(|v| v.to_str().unwrap()),
-            Some("foxglove.sdk.v1")
+            Some(offer)
         );
         let mut fox = Self {
             ws,
@@ -383,6 +392,13 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
     // Read-only: no client publishing, services, parameters nor assets.
     assert!(fox.capabilities.is_empty(), "{:?}", fox.capabilities);
     fox.subscribe(&topics);
+    // A client of the protocol's published name is served as well.
+    let mut legacy = Fox::connect_offering(&addr, &topics, None, "foxglove.websocket.v1");
+    legacy.subscribe(&[TIP_TOPIC]);
+    let (topic, log_time, payload) = legacy.next();
+    assert_eq!(topic, TIP_TOPIC);
+    assert_eq!(WrenchStamped::decode(&payload).unwrap().stamp_ns, log_time);
+    drop(legacy);
 
     let cfg = sar_daemon::config::builtin().unwrap();
     let (cal, prof) = (&cfg.estimator.calibration, &cfg.estimator.profile);

@@ -2,10 +2,17 @@
 //! messages, zstd chunks written whole (a crash loses at most the chunk being
 //! filled), rotation by size or duration with every file self-contained (all
 //! schemas and channels at its start, summary and index at its end).
+//! Every channel carries `offered_qos_profiles` metadata, the YAML text ROS 2's
+//! recorder (Jazzy) writes there ([`OFFERED_QOS_PROFILES`]).
+//!
 //! With [`FileOptions::scene`], the live view's 3D scene (`/sar/scene`,
-//! `foxglove.SceneUpdate`, and `/sar/scene/tf`) is drawn from the recorded
-//! messages of a cycle and written beside them, decimated, on the writer's
-//! thread: a recording looks in Foxglove as the live view does.
+//! `foxglove.SceneUpdate`, and `/sar/scene/tf`, protobuf) is drawn from the
+//! recorded messages of a cycle, decimated, on the writer's thread, and
+//! written into a companion file beside each recording ([`scene_path`]:
+//! `NAME.scene.mcap`, no profile), never into the `ros2` file itself: a
+//! protobuf channel breaks the `ros2` profile (ROS 2 tools and Python
+//! `rosbags` refuse the whole file). Opened together in Foxglove, the two
+//! files look as the live view does.
 
 use super::msgs::{EstimatorState, Outgoing, PassiveJointState, RecorderDrops, Topic};
 use crate::view::scene::{self, SceneGeometry};
@@ -54,6 +61,39 @@ pub enum WriteError {
         /// What is wrong.
         why: &'static str,
     },
+}
+
+/// The `offered_qos_profiles` metadata of every channel, in the form ROS 2's
+/// recorder writes it (rosbag2, Jazzy: `rosbag2_storage::
+/// serialize_rclcpp_qos_vector`, yaml-cpp's `Dump`, version 9 string
+/// policies): one profile, a reliable, volatile, keep-last publisher with no
+/// deadline, lifespan or lease (rmw's infinite duration). `ros2 bag play`
+/// offers it again (with its default history); Python `rosbags` and the
+/// viewers parse it. (A recorder that saw the publisher on DDS would write
+/// `history: unknown`, `depth: 0`: discovery does not carry them.)
+pub const OFFERED_QOS_PROFILES: &str = "- history: keep_last
+  depth: 1000
+  reliability: reliable
+  durability: volatile
+  deadline:
+    sec: 9223372036
+    nsec: 854775807
+  lifespan:
+    sec: 9223372036
+    nsec: 854775807
+  liveliness: automatic
+  liveliness_lease_duration:
+    sec: 9223372036
+    nsec: 854775807
+  avoid_ros_namespace_conventions: false";
+
+/// The metadata key of [`OFFERED_QOS_PROFILES`].
+pub const QOS_METADATA_KEY: &str = "offered_qos_profiles";
+
+/// The companion file that holds the 3D scene of the recording at `path`
+/// (`rec-0000.mcap` -> `rec-0000.scene.mcap`).
+pub fn scene_path(path: &Path) -> PathBuf {
+    path.with_extension("scene.mcap")
 }
 
 /// When to start a new file. A file is closed before the message that would
@@ -247,9 +287,10 @@ struct SceneCycle {
     passive: Option<PassiveJointState>,
 }
 
-/// The channels of the scene in one file.
-#[derive(Debug, Clone, Copy)]
-struct SceneChannels {
+/// The companion file of the scene beside one recording file.
+struct SceneFile {
+    path: PathBuf,
+    writer: mcap::Writer<BufWriter<File>>,
     scene: u16,
     tf: u16,
     sequence: u32,
@@ -261,7 +302,7 @@ struct OpenFile {
     handle: File,
     position: Arc<AtomicU64>,
     channel_ids: [u16; Topic::ALL.len()],
-    scene: Option<SceneChannels>,
+    scene: Option<SceneFile>,
     first_log_ns: Option<u64>,
 }
 
@@ -334,37 +375,17 @@ impl RotatingWriter {
         let mut writer = mcap::Writer::with_options(file, self.options.mcap_options())
             .map_err(mcap_err(&path))?;
         let mut channel_ids = [0u16; Topic::ALL.len()];
-        let none = BTreeMap::new();
+        let qos = BTreeMap::from([(QOS_METADATA_KEY.to_owned(), OFFERED_QOS_PROFILES.to_owned())]);
         for (id, topic) in channel_ids.iter_mut().zip(Topic::ALL) {
             let schema = writer
                 .add_schema(topic.type_name(), "ros2msg", topic.schema().as_bytes())
                 .map_err(mcap_err(&path))?;
             *id = writer
-                .add_channel(schema, topic.name(), "cdr", &none)
+                .add_channel(schema, topic.name(), "cdr", &qos)
                 .map_err(mcap_err(&path))?;
         }
         let scene = match &self.scene {
-            Some(_) => {
-                let s = scene::schema();
-                let schema = writer
-                    .add_schema(&s.name, &s.encoding, &s.data)
-                    .map_err(mcap_err(&path))?;
-                let scene = writer
-                    .add_channel(schema, crate::view::SCENE_TOPIC, &s.message_encoding, &none)
-                    .map_err(mcap_err(&path))?;
-                let t = scene::tf_schema();
-                let schema = writer
-                    .add_schema(&t.name, &t.encoding, &t.data)
-                    .map_err(mcap_err(&path))?;
-                let tf = writer
-                    .add_channel(schema, crate::view::TF_TOPIC, &t.message_encoding, &none)
-                    .map_err(mcap_err(&path))?;
-                Some(SceneChannels {
-                    scene,
-                    tf,
-                    sequence: 0,
-                })
-            }
+            Some(_) => Some(self.open_scene(&path)?),
             None => None,
         };
         // Each file says which of the rotation it is (`file_index`, 0 for
@@ -390,6 +411,46 @@ impl RotatingWriter {
             scene,
             first_log_ns: None,
         }))
+    }
+
+    /// Creates the scene's companion file of the recording file at `path`.
+    fn open_scene(&self, path: &Path) -> Result<SceneFile, WriteError> {
+        let path = scene_path(path);
+        let mcap_err = |source| WriteError::Mcap {
+            path: path.clone(),
+            source,
+        };
+        let file = File::create(&path).map_err(|source| WriteError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        // No profile: protobuf channels, as the live view sends them.
+        let options = self.options.mcap_options().profile("");
+        let mut writer =
+            mcap::Writer::with_options(BufWriter::with_capacity(1 << 16, file), options)
+                .map_err(mcap_err)?;
+        let none = BTreeMap::new();
+        let s = scene::schema();
+        let schema = writer
+            .add_schema(&s.name, &s.encoding, &s.data)
+            .map_err(mcap_err)?;
+        let scene = writer
+            .add_channel(schema, crate::view::SCENE_TOPIC, &s.message_encoding, &none)
+            .map_err(mcap_err)?;
+        let t = scene::tf_schema();
+        let schema = writer
+            .add_schema(&t.name, &t.encoding, &t.data)
+            .map_err(mcap_err)?;
+        let tf = writer
+            .add_channel(schema, crate::view::TF_TOPIC, &t.message_encoding, &none)
+            .map_err(mcap_err)?;
+        Ok(SceneFile {
+            path,
+            writer,
+            scene,
+            tf,
+            sequence: 0,
+        })
     }
 
     fn must_rotate(&self, file: &OpenFile, log_ns: u64) -> bool {
@@ -508,6 +569,13 @@ impl RotatingWriter {
         let Some(channels) = file.scene.as_mut() else {
             return Ok(());
         };
+        let SceneFile {
+            path,
+            writer,
+            scene: scene_channel,
+            tf: tf_channel,
+            sequence,
+        } = channels;
         let joints = super::msgs::ActiveJointState {
             stamp_ns: estimator.joints_stamp_ns,
             q_m: state.q_m,
@@ -522,26 +590,26 @@ impl RotatingWriter {
         let mut write = |channel_id: u16, bytes: &[u8]| {
             let header = mcap::records::MessageHeader {
                 channel_id,
-                sequence: channels.sequence,
+                sequence: *sequence,
                 log_time: log_ns,
                 publish_time: log_ns,
             };
-            file.writer
+            writer
                 .write_to_known_channel(&header, bytes)
                 .map_err(|source| WriteError::Mcap {
-                    path: file.path.clone(),
+                    path: path.clone(),
                     source,
                 })
         };
         // Encoding into a Vec does not fail; a scene that did would be
         // skipped, not end the recording.
         if scene::encode(&update, &mut state.buf).is_ok() {
-            write(channels.scene, &state.buf)?;
+            write(*scene_channel, &state.buf)?;
         }
         if scene::encode_tf(&scene::frame_transforms(log_ns), &mut state.buf).is_ok() {
-            write(channels.tf, &state.buf)?;
+            write(*tf_channel, &state.buf)?;
         }
-        channels.sequence = channels.sequence.wrapping_add(1);
+        *sequence = sequence.wrapping_add(1);
         Ok(())
     }
 
@@ -554,6 +622,14 @@ impl RotatingWriter {
                 source,
             })?;
             file.sync()?;
+            // The scene's file is not synced (it is drawn from the recording
+            // and can be drawn again); its chunk goes to the kernel.
+            if let Some(scene) = &mut file.scene {
+                scene.writer.flush().map_err(|source| WriteError::Mcap {
+                    path: scene.path.clone(),
+                    source,
+                })?;
+            }
         }
         Ok(())
     }
@@ -592,7 +668,23 @@ impl RotatingWriter {
         file.handle.sync_all().map_err(|source| WriteError::Io {
             path: path.clone(),
             source,
-        })
+        })?;
+        if let Some(mut scene) = file.scene.take() {
+            scene.writer.finish().map_err(|source| WriteError::Mcap {
+                path: scene.path.clone(),
+                source,
+            })?;
+            let inner = scene.writer.into_inner();
+            let file = inner.into_inner().map_err(|e| WriteError::Io {
+                path: scene.path.clone(),
+                source: e.into_error(),
+            })?;
+            file.sync_all().map_err(|source| WriteError::Io {
+                path: scene.path,
+                source,
+            })?;
+        }
+        Ok(())
     }
 }
 

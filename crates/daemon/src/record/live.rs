@@ -37,7 +37,8 @@ pub struct RecordSettings {
     pub rotation: Rotation,
     /// Messages the queue holds.
     pub queue_capacity: usize,
-    /// The live view's 3D scene beside the topics (`[record] scene_hz`).
+    /// The live view's 3D scene, in a companion file beside each file
+    /// (`[record] scene_hz`; `NAME.scene.mcap`).
     pub scene: Option<super::file::SceneOptions>,
 }
 

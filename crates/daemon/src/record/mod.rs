@@ -19,7 +19,10 @@ pub mod reader;
 pub mod recorder;
 pub mod replay;
 
-pub use file::{FileOptions, RotatingWriter, Rotation, SceneOptions, WriteError};
+pub use file::{
+    FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, Rotation, SceneOptions,
+    WriteError, scene_path,
+};
 pub use msgs::{Outgoing, RosMessage, Topic};
 pub use reader::{
     McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,

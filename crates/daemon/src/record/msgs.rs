@@ -1,6 +1,7 @@
 //! The recorded messages (INTERFACES.md 1): plain fixed-size Rust structs, their
 //! ROS 2 CDR encoding and decoding, and their `ros2msg` schemas (the definition
-//! text with a `====\nMSG: pkg/msg/Type` section per nested type).
+//! text with a `====\nMSG: pkg/Type` section per nested type, spelled as the
+//! fields spell it: `std_msgs/Header`, no `/msg/`, as ROS 2's recorder writes it).
 //!
 //! The structs are `Copy` and hold no heap data, so the recorder's queue carries
 //! them as they are; they do not depend on the estimator's types (a conversion
@@ -47,12 +48,12 @@ macro_rules! header_sections {
     () => {
         concat!(
             sep!(),
-            "MSG: std_msgs/msg/Header\n",
+            "MSG: std_msgs/Header\n",
             "# Standard metadata for higher-level stamped data types.\n",
             "builtin_interfaces/Time stamp\n",
             "string frame_id\n",
             sep!(),
-            "MSG: builtin_interfaces/msg/Time\n",
+            "MSG: builtin_interfaces/Time\n",
             "int32 sec\n",
             "uint32 nanosec\n",
         )
@@ -116,12 +117,12 @@ impl RosMessage for WrenchStamped {
         "Wrench wrench\n",
         header_sections!(),
         sep!(),
-        "MSG: geometry_msgs/msg/Wrench\n",
+        "MSG: geometry_msgs/Wrench\n",
         "# This represents force in free space, separated into its linear and angular parts.\n",
         "Vector3  force\n",
         "Vector3  torque\n",
         sep!(),
-        "MSG: geometry_msgs/msg/Vector3\n",
+        "MSG: geometry_msgs/Vector3\n",
         "# This represents a vector in free space.\n",
         "float64 x\n",
         "float64 y\n",

@@ -535,7 +535,8 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
             let mut o = FileOptions::single(path);
             // The replayed file holds every cycle of its input.
             o.metadata = metadata.clone().into_iter().collect();
-            // The live view's scene, as the daemon's recorder writes it.
+            // The live view's scene, as the daemon's recorder writes it
+            // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
             o.scene = Some(super::SceneOptions {
                 geometry: crate::view::scene::SceneGeometry::from_config(&options.config),
                 limits_n: options.config.guard.force_limits().to_array(),

@@ -2,7 +2,9 @@
 //! the daemon's state over iceoryx2 (a subscriber like any other: the state
 //! service overflows safely, so a slow or absent view never makes the loop
 //! wait) and serves it over the Foxglove WebSocket protocol with the
-//! Foxglove SDK's server (`foxglove` crate, websocket feature, no TLS).
+//! Foxglove SDK's server (`foxglove` crate, websocket feature, no TLS),
+//! behind a relay ([`front`]) that also accepts clients offering only the
+//! subprotocol `foxglove.websocket.v1`.
 //!
 //! Channels:
 //! - the recordings' topics (INTERFACES.md 1, `ros2msg` schemas and `cdr`
@@ -19,6 +21,7 @@
 //! or parameters. Messages for a client wait in the SDK's per-client queue
 //! (`BACKLOG` messages; a stalled client loses the oldest).
 
+pub mod front;
 pub mod scene;
 pub mod topics;
 
@@ -280,12 +283,15 @@ pub fn run(opts: &ViewOptions, stop: impl Fn() -> bool) -> Result<(), String> {
         .map_err(|e| format!("cannot create the channel {STATUS_TOPIC}: {e}"))?;
     let server = WebSocketServer::new()
         .name(format!("sarctl view ({})", opts.prefix))
-        .bind(opts.bind.ip().to_string(), opts.bind.port())
+        // On loopback: clients connect to the relay.
+        .bind("127.0.0.1", 0)
         .message_backlog_size(BACKLOG)
         .context(&ctx)
         .start_blocking()
+        .map_err(|e| format!("cannot start the Foxglove server: {e}"))?;
+    let backend = SocketAddr::from(([127, 0, 0, 1], server.port()));
+    let served = front::start(opts.bind, backend)
         .map_err(|e| format!("cannot serve on {}: {e}", opts.bind))?;
-    let served = SocketAddr::new(opts.bind.ip(), server.port());
     println!(
         "sarctl view: serving ws://{served} (daemon prefix {:?}); open it in Foxglove",
         opts.prefix

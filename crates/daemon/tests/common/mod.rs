@@ -7,6 +7,8 @@
     clippy::indexing_slicing
 )]
 
+pub mod readers;
+
 use sar_daemon::record::cdr::FixedStr;
 use sar_daemon::record::msgs::*;
 use std::path::PathBuf;

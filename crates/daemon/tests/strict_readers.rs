@@ -1,0 +1,294 @@
+//! The recordings as the ecosystem's tools read them (issue 16), with none of
+//! this project's code: Python `rosbags` (the file opened by
+//! `rosbags.rosbag2.Reader`, a type store built only from the schemas the
+//! file embeds) and the parsers Foxglove and Lichtblick use (`@mcap/core`,
+//! `@foxglove/rosmsg` `parse(.., {ros2: true})`,
+//! `@foxglove/rosmsg2-serialization`), each decoding every schema and every
+//! message with 0 failures, on
+//! - every fixture under `tests/fixtures/`,
+//! - a `sarctl replay` output,
+//! - a fresh recording of `sard --sim`;
+//!
+//! and every message path of `deploy/foxglove-layout.json` on a recorded
+//! topic found in the decoded messages of the replay output and of the
+//! daemon's recording. The readers are installed on first use by
+//! `scripts/setup-test-readers.sh` (`common::readers`); `SAR_SKIP_PYTHON=1`
+//! or `SAR_SKIP_NODE=1` at build time mark these tests ignored.
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use common::readers;
+use sar_daemon::record::McapReader;
+use sar_daemon::record::replay::{ReplayOptions, replay_file};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+const SARD: &str = env!("CARGO_BIN_EXE_sard");
+
+/// The layout's paths on the recorded topics (the live-only
+/// `/sar/view/status` and the scene are not in `ros2` recordings).
+const RECORDED_PREFIXES: [&str; 2] = ["/sar/estimate/", "/sar/guard/"];
+
+fn fixtures() -> Vec<PathBuf> {
+    let root = readers::repo_root().join("tests/fixtures");
+    let mut files = Vec::new();
+    for sub in ["replay", "identify"] {
+        for e in std::fs::read_dir(root.join(sub)).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "mcap") {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+/// Messages per topic by this project's reader.
+fn our_counts(file: &Path) -> BTreeMap<String, u64> {
+    let bytes = std::fs::read(file).unwrap();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let mut ids = Vec::new();
+    for m in reader.by_ref() {
+        ids.push(m.unwrap().channel_id);
+    }
+    let mut counts = BTreeMap::new();
+    for id in ids {
+        *counts
+            .entry(reader.channels()[&id].topic.clone())
+            .or_default() += 1;
+    }
+    counts
+}
+
+/// Both readers over `files`: 0 failures, every message of every file (as
+/// our reader counts them per topic) decoded by each. Returns the Foxglove
+/// check's files (with the layout's paths).
+fn check_strictly(files: &[PathBuf], what: &str) -> Vec<serde_json::Value> {
+    let py = readers::rosbags(files);
+    let js = readers::foxglove(files);
+    let py_files = readers::assert_clean(&py, "rosbags");
+    let js_files = readers::assert_clean(&js, "foxglove");
+    for ((file, p), j) in files.iter().zip(&py_files).zip(&js_files) {
+        let ours = our_counts(file);
+        let as_map = |v: &serde_json::Value| -> BTreeMap<String, u64> {
+            v["topics"]
+                .as_object()
+                .unwrap()
+                .iter()
+                .map(|(k, n)| (k.clone(), n.as_u64().unwrap()))
+                .collect()
+        };
+        assert_eq!(as_map(p), ours, "rosbags vs ours: {}", file.display());
+        assert_eq!(as_map(j), ours, "foxglove vs ours: {}", file.display());
+        assert_eq!(j["profile"], "ros2", "{}", file.display());
+    }
+    let (n, schemas, messages, failures) = readers::totals(&py);
+    eprintln!(
+        "{what}: rosbags decoded {messages} messages, {schemas} schemas in {n} files, {failures} failures"
+    );
+    let (n, schemas, messages, failures) = readers::totals(&js);
+    eprintln!(
+        "{what}: Foxglove parsers decoded {messages} messages, {schemas} schemas in {n} files, {failures} failures"
+    );
+    js_files
+}
+
+/// Every layout path on a recorded topic is found in the file's messages.
+fn assert_layout_paths(file: &serde_json::Value) {
+    let layout = file["layout"].as_object().unwrap();
+    let recorded: Vec<_> = layout
+        .iter()
+        .filter(|(p, _)| RECORDED_PREFIXES.iter().any(|pre| p.starts_with(pre)))
+        .collect();
+    // The per-axis F_tip plots, the axial/lateral plots, the guard events.
+    assert!(recorded.len() >= 6, "{layout:?}");
+    for (p, status) in recorded {
+        assert_eq!(status, "ok", "{p} in {}", file["path"]);
+    }
+}
+
+#[test]
+#[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
+#[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
+fn every_fixture_decodes_with_the_strict_readers() {
+    let files = fixtures();
+    assert!(files.len() >= 10, "{files:?}");
+    for f in check_strictly(&files, "fixtures") {
+        // Fixtures with outputs (the daemon's) carry every layout path.
+        let layout = f["layout"].as_object().unwrap();
+        if layout.get("/sar/estimate/state.axial_n") != Some(&"no-channel".into())
+            && f["topics"].get("/sar/estimate/state").is_some()
+        {
+            assert_layout_paths(&f);
+        }
+    }
+}
+
+#[test]
+#[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
+#[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
+fn a_replay_output_decodes_with_the_strict_readers() {
+    let root = readers::repo_root();
+    let cfg = sar_daemon::config::load(&root.join("tests/fixtures/replay/config.toml")).unwrap();
+    let dir = common::scratch("strict_replay");
+    let out = dir.join("out.mcap");
+    let mut options = ReplayOptions::from_config(&cfg);
+    options.output = Some(out.clone());
+    let report = replay_file(
+        &root.join("tests/fixtures/replay/contact_daemon.mcap"),
+        &options,
+    )
+    .unwrap();
+    assert!(report.first_difference.is_none(), "{report:?}");
+    let files = check_strictly(std::slice::from_ref(&out), "replay output");
+    assert_layout_paths(&files[0]);
+}
+
+#[test]
+#[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
+#[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
+fn a_sard_recording_decodes_with_the_strict_readers() {
+    let dir = common::scratch("strict_sard");
+    let rec_dir = dir.join("rec");
+    let config = dir.join("sim.toml");
+    let toml = sar_daemon::config::DEFAULT_TOML
+        .replace("[record]\nenabled = false", "[record]\nenabled = true")
+        .replace(
+            "directory = \"recordings\"",
+            &format!("directory = {:?}", rec_dir.display().to_string()),
+        );
+    assert_ne!(toml, sar_daemon::config::DEFAULT_TOML);
+    std::fs::write(&config, toml).unwrap();
+    // 3 s of the demo on the simulator, then sard ends and closes the file.
+    let out = Command::new(SARD)
+        .args(["--sim", "--config"])
+        .arg(&config)
+        .args(["--max-cycles", "3000"])
+        .env(
+            "SAR_SERVICE_PREFIX",
+            format!("sar-strict-{}", std::process::id()),
+        )
+        .stdout(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "sard: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let checked = check_strictly(&files, "sard --sim recording");
+    assert_layout_paths(&checked[0]);
+    let topics = checked[0]["topics"].as_object().unwrap();
+    for t in [
+        "/sar/sensor/wrench",
+        "/sar/joints",
+        "/sar/estimate/tip_wrench",
+        "/sar/estimate/state",
+        "/sar/cycle/input",
+    ] {
+        // 3000 cycles at 1 kHz; the sensor's samples at its own rate.
+        assert!(topics[t].as_u64().unwrap() >= 1000, "{t}: {topics:?}");
+    }
+}
+
+/// A child process ended with SIGTERM (then waited for) when dropped.
+struct Proc(std::process::Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        let _ = self.0.wait();
+    }
+}
+
+/// The live view with `@foxglove/ws-protocol`'s client (its default
+/// subprotocol `foxglove.websocket.v1`): every advertised `ros2msg` schema
+/// parses, every CDR message received decodes, and every path of the layout
+/// (the live-only status panel's too) is in the decoded messages.
+#[test]
+#[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
+fn the_live_view_decodes_with_the_foxglove_client() {
+    use std::io::{BufRead, BufReader};
+    let prefix = format!("sar-strict-live-{}", std::process::id());
+    // Install first: the daemon should not wait for npm.
+    let _ = readers::ensure(readers::Part::Node);
+    let _daemon = Proc(
+        Command::new(SARD)
+            .arg("--sim")
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let client = sar_daemon::shm::Client::new(&prefix).unwrap();
+    let start = std::time::Instant::now();
+    while !client
+        .subscribe()
+        .is_ok_and(|s| s.latest(std::time::Duration::from_secs(1)).is_some())
+    {
+        assert!(start.elapsed().as_secs() < 60, "sard did not come up");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let mut view = Command::new(env!("CARGO_BIN_EXE_sarctl"))
+        .args(["--prefix", &prefix, "view", "--bind", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(view.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let _view = Proc(view);
+    let url = line
+        .split_whitespace()
+        .find(|w| w.starts_with("ws://"))
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_owned();
+    let out = readers::node()
+        .arg(readers::repo_root().join("scripts/test-readers/check_live.mjs"))
+        .arg("--layout")
+        .arg(readers::repo_root().join("deploy/foxglove-layout.json"))
+        .arg(&url)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "check_live.mjs: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    eprintln!(
+        "live view: the Foxglove client decoded {} messages, {} schemas, {} failures",
+        v["messages"], v["schemas"], v["failures"]
+    );
+    assert_eq!(v["failures"], 0, "{}", v["errors"]);
+    assert_eq!(v["subprotocol"], "foxglove.websocket.v1");
+    assert!(v["schemas"].as_u64().unwrap() >= 4, "{v}");
+    let layout = v["layout"].as_object().unwrap();
+    assert!(layout.len() >= 15, "{layout:?}");
+    for (p, status) in layout {
+        // The guard's events come only at transitions; the rest is there.
+        if p != "/sar/guard/events" {
+            assert_eq!(status, "ok", "{p}: {v}");
+        }
+    }
+}

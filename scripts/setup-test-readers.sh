@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# Installs the strict readers the tests decode recordings with, under
+# target/test-readers/ (no root, no system pip; outside it only pip's and
+# npm's download caches in the home directory):
+#   node/  the parsers Foxglove and Lichtblick use, pinned in
+#          scripts/test-readers/package.json and package-lock.json (npm ci):
+#          @foxglove/rosmsg, @foxglove/rosmsg2-serialization, @mcap/core,
+#          @mcap/support (zstd), @foxglove/ws-protocol, ws;
+#   py/    rosbags, mcap, mcap-ros2-support, mcap-protobuf-support (pinned
+#          below), installed with `python3 -m pip install --target`, which
+#          works beside a distribution's EXTERNALLY-MANAGED marker (PEP 668)
+#          and needs no venv/ensurepip; the tests put it on PYTHONPATH.
+#
+# Idempotent and safe to run concurrently (a lock file): it does nothing when
+# the stamp matches (same pins, same python3 and node). The tests run it
+# themselves on first use; run it by hand to set up ahead (needs network).
+# Needs python3 with pip (Debian/Ubuntu: python3-pip) and node with npm
+# (nodejs, npm). SAR_SKIP_PYTHON=1 / SAR_SKIP_NODE=1 skip either part.
+#
+# Usage: scripts/setup-test-readers.sh [TARGET_DIR]   (default: ./target)
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+target="${1:-${CARGO_TARGET_DIR:-$root/target}}"
+dir="$target/test-readers"
+mkdir -p "$dir"
+
+PY_PINS=(rosbags==0.11.9 mcap==1.6.0 mcap-ros2-support==0.6.0 mcap-protobuf-support==0.6.0)
+
+exec 9>"$dir/.lock"
+flock 9
+
+skip_py="${SAR_SKIP_PYTHON:-0}"
+skip_node="${SAR_SKIP_NODE:-0}"
+
+if [ "$skip_py" != 1 ]; then
+  command -v python3 >/dev/null || {
+    echo "setup-test-readers: python3 not found (Debian/Ubuntu: apt-get install python3 python3-pip), or set SAR_SKIP_PYTHON=1" >&2
+    exit 2
+  }
+  py_stamp="$(printf '%s\n' "${PY_PINS[@]}" "$(python3 -c 'import sys; print(sys.version)')")"
+  if [ ! -f "$dir/py.stamp" ] || [ "$(cat "$dir/py.stamp")" != "$py_stamp" ]; then
+    python3 -m pip --version >/dev/null 2>&1 || {
+      echo "setup-test-readers: python3 has no pip (Debian/Ubuntu: apt-get install python3-pip), or set SAR_SKIP_PYTHON=1" >&2
+      exit 2
+    }
+    echo "setup-test-readers: installing ${PY_PINS[*]} into $dir/py" >&2
+    rm -rf "$dir/py" "$dir/py.stamp"
+    PIP_BREAK_SYSTEM_PACKAGES=0 python3 -m pip install --quiet --disable-pip-version-check \
+      --no-input --no-warn-script-location --root-user-action=ignore --target "$dir/py" "${PY_PINS[@]}" >&2
+    # What the pins pulled in, for the record.
+    PYTHONPATH="$dir/py" python3 -c '
+import importlib.metadata as m, sys
+for d in sorted(m.distributions(path=[sys.argv[1]]), key=lambda d: d.metadata["Name"].lower()):
+    print(d.metadata["Name"] + "==" + d.version)' "$dir/py" > "$dir/py-freeze.txt"
+    printf '%s' "$py_stamp" > "$dir/py.stamp"
+  fi
+fi
+
+if [ "$skip_node" != 1 ]; then
+  command -v node >/dev/null && command -v npm >/dev/null || {
+    echo "setup-test-readers: node and npm not found (Debian/Ubuntu: apt-get install nodejs npm), or set SAR_SKIP_NODE=1" >&2
+    exit 2
+  }
+  node_stamp="$(cat "$root/scripts/test-readers/package.json" "$root/scripts/test-readers/package-lock.json"; node --version)"
+  if [ ! -f "$dir/node.stamp" ] || [ "$(cat "$dir/node.stamp")" != "$node_stamp" ]; then
+    echo "setup-test-readers: installing the npm packages of scripts/test-readers/package-lock.json into $dir/node" >&2
+    rm -rf "$dir/node" "$dir/node.stamp"
+    mkdir -p "$dir/node"
+    cp "$root/scripts/test-readers/package.json" "$root/scripts/test-readers/package-lock.json" "$dir/node/"
+    npm ci --prefix "$dir/node" --no-audit --no-fund --ignore-scripts --loglevel=error >&2
+    printf '%s' "$node_stamp" > "$dir/node.stamp"
+  fi
+fi
+echo "$dir"
