@@ -371,6 +371,11 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
 
         // Act: a halting state stops the drives in this very cycle.
         let entered_halt = out.transition.is_some_and(|t| t.to.is_halting());
+        if let Some(g) = decision.guarded_stop
+            && g.cycle == input.cycle
+        {
+            self.log.send(LogEvent::GuardedStop(g));
+        }
         if let Some(t) = out.transition {
             self.log.send(LogEvent::Transition(t));
             if entered_halt {

@@ -53,6 +53,8 @@ pub enum LogEvent {
         /// How late, ns.
         late_ns: u64,
     },
+    /// A guarded move was braked: its force reached the limit.
+    GuardedStop(crate::step::GuardedStop),
 }
 
 /// The loop's end of the queue.
@@ -182,5 +184,14 @@ pub fn write(event: &LogEvent) {
         LogEvent::Overrun { cycle, late_ns } => {
             tracing::warn!(cycle, "cycle overran its period by {late_ns} ns")
         }
+        LogEvent::GuardedStop(g) => tracing::info!(
+            cycle = g.cycle,
+            "guarded move braked at tip ({:.4}, {:.4}, {:.4}) m: |F_tip| {:.2} N reached its {} N",
+            g.tip_m.x,
+            g.tip_m.y,
+            g.tip_m.z,
+            g.force_n.norm(),
+            g.max_force_n
+        ),
     }
 }

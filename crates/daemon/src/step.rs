@@ -78,6 +78,30 @@ pub enum Request {
         /// How far, m.
         distance_m: f64,
     },
+    /// A guarded move (force control, issue 15): as `MoveTip`, but braked
+    /// (at the planned deceleration) in the cycle in which the magnitude of
+    /// the tip force (filtered when the filter is on) reaches
+    /// `max_force_n`; where and at what force is reported
+    /// ([`LoopOutput::guarded_stop`]).
+    GuardedMove {
+        /// The wanted tip, base frame, m.
+        tip_m: Vec3,
+        /// The force that stops it, N (0 < N <= the total stop limit).
+        max_force_n: f64,
+    },
+}
+
+/// Where a guarded move stopped, and why.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GuardedStop {
+    /// The cycle that braked it.
+    pub cycle: u64,
+    /// The tip then, base frame, m.
+    pub tip_m: Vec3,
+    /// The tip force that stopped it (filtered when the filter is on), N.
+    pub force_n: Vec3,
+    /// The move's limit, N.
+    pub max_force_n: f64,
 }
 
 /// What became of a request. The numbers are the wire codes.
@@ -178,6 +202,22 @@ pub enum ReplyDetail {
     NoEstimate,
     /// Judged acceptable but not given to the drives.
     NotCarriedOut,
+    /// A guarded move's force limit that is not within 0 < N <= the total
+    /// stop limit.
+    BadMaxForce {
+        /// The limit given, N.
+        max_force_n: f64,
+        /// The total stop limit in use, N.
+        stop_n: f64,
+    },
+    /// A guarded move asked for while the tip force already reaches its
+    /// limit.
+    AlreadyAtForce {
+        /// The tip force now (filtered when the filter is on), N.
+        force_n: f64,
+        /// The move's limit, N.
+        max_force_n: f64,
+    },
 }
 
 impl ReplyDetail {
@@ -227,6 +267,20 @@ impl core::fmt::Display for ReplyDetail {
             ),
             Self::NoEstimate => f.write_str("no tip-force estimate or pose in this cycle"),
             Self::NotCarriedOut => f.write_str("the move could not be given to the drives"),
+            Self::BadMaxForce {
+                max_force_n,
+                stop_n,
+            } => write!(
+                f,
+                "the guarded move's force must be within 0 < N <= {stop_n} N (the total stop limit), got {max_force_n} N"
+            ),
+            Self::AlreadyAtForce {
+                force_n,
+                max_force_n,
+            } => write!(
+                f,
+                "the tip force is already {force_n:.2} N, at or above the move's {max_force_n} N"
+            ),
         }
     }
 }
@@ -284,7 +338,10 @@ impl LoopInput {
                 Some(Request::Reset) => Some(Command::Reset),
                 Some(Request::Tare) => Some(Command::Tare),
                 Some(Request::SetLimits(l)) => Some(Command::SetLimits(l)),
-                Some(Request::MoveTip { .. } | Request::BackOut { .. }) | None => None,
+                Some(
+                    Request::MoveTip { .. } | Request::BackOut { .. } | Request::GuardedMove { .. },
+                )
+                | None => None,
             },
         }
     }
@@ -339,6 +396,8 @@ pub struct LoopOutput {
     pub reply_detail: ReplyDetail,
     /// The force limits in use after this cycle.
     pub limits: ForceLimits,
+    /// The last guarded move's stop (kept until the next one stops).
+    pub guarded_stop: Option<GuardedStop>,
 }
 
 /// The loop's settings beyond the estimator's.
@@ -388,6 +447,8 @@ struct Trajectory {
     /// Streamed to the drives one set point per period (retreat moves at a
     /// reduced speed) rather than given as an end point.
     streamed: bool,
+    /// A guarded move's force limit, N (braked when the force reaches it).
+    max_force_n: Option<f64>,
 }
 
 impl Trajectory {
@@ -397,6 +458,7 @@ impl Trajectory {
             target_tip_m: None,
             end_ns: now_ns,
             streamed: false,
+            max_force_n: None,
         }
     }
 
@@ -422,6 +484,7 @@ impl Trajectory {
             target_tip_m,
             end_ns,
             streamed: false,
+            max_force_n: None,
         }
     }
 }
@@ -445,6 +508,8 @@ pub struct LoopStep {
     /// The drives' state in the previous cycle (a new drive fault is a
     /// guard Fault in the cycle it appears).
     last_drive_state: Option<DriveState>,
+    /// The last guarded move's stop.
+    guarded_stop: Option<GuardedStop>,
     out: LoopOutput,
 }
 
@@ -509,6 +574,7 @@ impl LoopStep {
             reply: None,
             reply_detail: ReplyDetail::None,
             limits: estimator.guard_config().force_limits(),
+            guarded_stop: None,
         };
         Ok(Self {
             calibration,
@@ -519,6 +585,7 @@ impl LoopStep {
             last_joints: None,
             speed_mps: 0.0,
             last_drive_state: None,
+            guarded_stop: None,
             out,
         })
     }
@@ -642,7 +709,10 @@ impl LoopStep {
         let before_move = self.trajectory;
         let mut planned = false;
         let move_target = match input.request {
-            Some(Request::MoveTip { tip_m }) => Some(MoveTarget::Tip(tip_m)),
+            Some(Request::MoveTip { tip_m }) => Some(MoveTarget::Tip(tip_m, None)),
+            Some(Request::GuardedMove { tip_m, max_force_n }) => {
+                Some(MoveTarget::Tip(tip_m, Some(max_force_n)))
+            }
             Some(Request::BackOut { distance_m }) => Some(MoveTarget::BackOut(distance_m)),
             _ => None,
         };
@@ -652,6 +722,30 @@ impl LoopStep {
             move_accepted = r.0 == ReplyStatus::Accepted;
             planned = move_accepted;
             reply = Some(r);
+        }
+
+        // A guarded move under way is braked in the cycle its force reaches
+        // the limit (the magnitude of the filtered tip force when the filter
+        // is on: the unfiltered one's noise would stop it early at random).
+        if let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
+            && let Some(max_force_n) = t.max_force_n
+            && now_ns < t.end_ns
+            && let (Some(force_n), Some(pose)) = (guarded_force(&estimate), estimate.pose)
+            && force_n.norm() >= max_force_n
+        {
+            let limits = self.config.axis_limits;
+            let states = t.at(now_ns);
+            let axes = states.map(|s| AxisPlan::brake(now_ns, s, limits));
+            let mut braked = Trajectory::from_plans(now_ns, axes, None);
+            braked.streamed = t.streamed;
+            self.trajectory = Some(braked);
+            self.guarded_stop = Some(GuardedStop {
+                cycle: input.cycle,
+                tip_m: pose.tip_m,
+                force_n,
+                max_force_n,
+            });
+            planned = true;
         }
 
         // A move under way that pushes further along a force above the warn
@@ -670,6 +764,16 @@ impl LoopStep {
             let mut braked = Trajectory::from_plans(now_ns, axes, None);
             braked.streamed = t.streamed;
             self.trajectory = Some(braked);
+            // A guarded move braked by the warn limit before its own: said
+            // the same way (its force is what stopped it).
+            if let Some(max_force_n) = t.max_force_n {
+                self.guarded_stop = Some(GuardedStop {
+                    cycle: input.cycle,
+                    tip_m: pose.tip_m,
+                    force_n: e.force_n,
+                    max_force_n,
+                });
+            }
             planned = true;
         }
 
@@ -709,6 +813,7 @@ impl LoopStep {
             reply,
             reply_detail,
             limits: self.estimator.guard_config().force_limits(),
+            guarded_stop: self.guarded_stop,
         };
         &self.out
     }
@@ -736,8 +841,36 @@ impl LoopStep {
                 ReplyDetail::DrivesNotEnabled(input.drive_state),
             );
         }
+        let mut guard_n = None;
         let tip_m = match target {
-            MoveTarget::Tip(tip_m) => tip_m,
+            MoveTarget::Tip(tip_m, max_force_n) => {
+                if let Some(max_force_n) = max_force_n {
+                    let stop_n = self.estimator.guard_config().force_limits().stop_total_n;
+                    if !(max_force_n > 0.0 && max_force_n <= stop_n) {
+                        return (
+                            ReplyStatus::BadArgument,
+                            ReplyDetail::BadMaxForce {
+                                max_force_n,
+                                stop_n,
+                            },
+                        );
+                    }
+                    let Some(force_n) = guarded_force(estimate) else {
+                        return (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate);
+                    };
+                    if force_n.norm() >= max_force_n {
+                        return (
+                            ReplyStatus::Refused,
+                            ReplyDetail::AlreadyAtForce {
+                                force_n: force_n.norm(),
+                                max_force_n,
+                            },
+                        );
+                    }
+                    guard_n = Some(max_force_n);
+                }
+                tip_m
+            }
             MoveTarget::BackOut(distance_m) => {
                 if !(distance_m > 0.0 && distance_m <= MAX_BACK_OUT_M) {
                     return (
@@ -807,16 +940,27 @@ impl LoopStep {
         let mut planned = Trajectory::from_plans(now_ns, axes, Some(tip_m));
         // A retreat move, or any move while a streamed one runs, streams.
         planned.streamed = retreat || trajectory.streamed && now_ns <= trajectory.end_ns;
+        planned.max_force_n = guard_n;
         self.trajectory = Some(planned);
         (ReplyStatus::Accepted, ReplyDetail::None)
+    }
+}
+
+/// The tip force a guarded move watches: the filtered one when the filter
+/// is on, else this cycle's estimate; `None` without either.
+fn guarded_force(estimate: &CycleOutput) -> Option<Vec3> {
+    match (estimate.filtered, estimate.tip) {
+        (Some(f), _) => Some(f.force_n),
+        (None, TipOutcome::Estimate(e)) => Some(e.force_n),
+        (None, _) => None,
     }
 }
 
 /// Where a move goes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum MoveTarget {
-    /// The tip to this point, base frame, m.
-    Tip(Vec3),
+    /// The tip to this point, base frame, m; with a guarded move's limit, N.
+    Tip(Vec3, Option<f64>),
     /// The tip back along the rod by this distance, m.
     BackOut(f64),
 }

@@ -161,6 +161,12 @@ pub struct StateMsg {
     /// start, the time axis of the scenario file), when `SIM_TRUTH`; else 0.
     /// Lets a test measure a detection time from a scripted fault's onset.
     pub truth_elapsed_ns: u64,
+    /// The cycle of the last guarded move's stop (0: none yet).
+    pub guarded_stop_cycle: u64,
+    /// Where the tip was then, base frame, m.
+    pub guarded_stop_tip_m: [f64; 3],
+    /// The tip force that stopped it, base frame, N.
+    pub guarded_stop_force_n: [f64; 3],
 }
 
 impl Default for StateMsg {
@@ -196,6 +202,9 @@ impl Default for StateMsg {
             recorder_drops: 0,
             recording: 0,
             truth_elapsed_ns: 0,
+            guarded_stop_cycle: 0,
+            guarded_stop_tip_m: [0.0; 3],
+            guarded_stop_force_n: [0.0; 3],
         }
     }
 }
@@ -293,6 +302,11 @@ impl StateMsg {
         if o.new_sample {
             m.flags |= flags::NEW_SAMPLE;
         }
+        if let Some(g) = p.decision.guarded_stop {
+            m.guarded_stop_cycle = g.cycle;
+            m.guarded_stop_tip_m = arr(&g.tip_m);
+            m.guarded_stop_force_n = arr(&g.force_n);
+        }
         if halted {
             m.flags |= flags::HALTED;
         }
@@ -325,6 +339,9 @@ pub mod command_kind {
     /// Back the tip out along the rod by `tip_m[0]` metres (`sarctl
     /// retreat`).
     pub const BACK_OUT: u32 = 8;
+    /// A guarded move to `tip_m`, stopped when the tip force reaches
+    /// `limits_n[0]` N (`sarctl move-tip --max-force`).
+    pub const GUARDED_MOVE: u32 = 9;
 }
 
 /// An operator command.
@@ -339,7 +356,8 @@ pub struct CommandMsg {
     pub id: u64,
     /// For MOVE_TIP: the wanted tip, base frame, m.
     pub tip_m: [f64; 3],
-    /// For SET_LIMITS: warn, stop of total, axial, lateral, N.
+    /// For SET_LIMITS: warn, stop of total, axial, lateral, N. For
+    /// GUARDED_MOVE: `limits_n[0]` is the force that stops the move, N.
     pub limits_n: [f64; 6],
 }
 
@@ -358,6 +376,10 @@ impl CommandMsg {
             )),
             command_kind::BACK_OUT => Some(Request::BackOut {
                 distance_m: self.tip_m[0],
+            }),
+            command_kind::GUARDED_MOVE => Some(Request::GuardedMove {
+                tip_m: Vec3::new(self.tip_m[0], self.tip_m[1], self.tip_m[2]),
+                max_force_n: self.limits_n[0],
             }),
             _ => None,
         }

@@ -216,7 +216,7 @@ prop_compose! {
         axis in any::<i8>(),
         more in prop::array::uniform6(f3()),
         decision in (0u8..8, any::<u8>(), any::<u16>()),
-        host in (any::<u64>(), any::<u64>().prop_map(f64::from_bits)),
+        host in (any::<u64>(), any::<u64>().prop_map(f64::from_bits), any::<u64>().prop_map(f64::from_bits)),
     ) -> CycleInput {
         CycleInput {
             stamp_ns,
@@ -249,6 +249,7 @@ prop_compose! {
             limits_in_use_n: [more[4][0], more[4][1], more[4][2], more[5][0], more[5][1], more[5][2]],
             publisher_idle_ns: host.0,
             back_out_m: host.1,
+            move_max_force_n: host.2,
         }
     }
 }
@@ -352,10 +353,16 @@ proptest! {
         for m in common::cycle_messages(k) {
             let mut b = Vec::new();
             m.encode(&mut b).unwrap();
-            let older_end = (m.topic() == Topic::CycleInput).then(|| b.len() - 16);
+            // A CycleInput of before issue 14 (24 bytes shorter) and of
+            // before issue 15 (8 bytes shorter) decode; any other cut fails.
+            let older_ends = if m.topic() == Topic::CycleInput {
+                vec![b.len() - 24, b.len() - 8]
+            } else {
+                Vec::new()
+            };
             for cut in 0..b.len() {
                 let decoded = Outgoing::decode(m.topic(), &b[..cut]);
-                if Some(cut) == older_end {
+                if older_ends.contains(&cut) {
                     prop_assert!(decoded.is_ok(), "the older CycleInput must decode");
                 } else {
                     prop_assert!(decoded.is_err(), "{:?} cut at {}", m.topic(), cut);
@@ -438,6 +445,7 @@ fn an_older_cycle_input_without_the_new_fields_decodes() {
         cycle: 7,
         publisher_idle_ns: 123,
         back_out_m: 0.01,
+        move_max_force_n: 2.5,
         limits_in_use_n: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
         ..CycleInput::default()
     };
@@ -445,7 +453,12 @@ fn an_older_cycle_input_without_the_new_fields_decodes() {
     m.encode(&mut bytes).unwrap();
     let full = CycleInput::decode(&bytes).unwrap();
     assert_eq!(full, m);
-    // The two trailing 8-byte fields removed: an older message.
+    // Without issue 15's trailing field (a guarded move's limit).
+    bytes.truncate(bytes.len() - 8);
+    let issue14 = CycleInput::decode(&bytes).unwrap();
+    assert_eq!(issue14.move_max_force_n, 0.0);
+    assert_eq!(issue14.back_out_m, 0.01);
+    // The two trailing 8-byte fields of issue 14 removed too: an older message.
     bytes.truncate(bytes.len() - 16);
     let old = CycleInput::decode(&bytes).unwrap();
     assert_eq!(old.publisher_idle_ns, 0);

@@ -97,12 +97,20 @@ fn a_cycle_allocates_nothing() {
     let mut seen_stop = false;
     for i in 0..17_000u64 {
         if i % 1000 == 10 {
-            let request = match (i / 1000) % 4 {
+            let request = match (i / 1000) % 5 {
                 0 => Request::Reset,
-                1 => Request::Tare,
+                4 => Request::Tare,
                 2 => Request::SetLimits(c.decision().limits),
-                _ => Request::MoveTip {
+                3 => Request::MoveTip {
                     tip_m: Vec3::new(0.6, 0.2, 0.001),
+                },
+                // A guarded move along the rising contact force (+X0), its
+                // limit 0.5 N above the filtered force now: reached on the
+                // way (the contact rises 2 N/s; the move lasts 1.6 s), and
+                // the move is braked.
+                _ => Request::GuardedMove {
+                    tip_m: Vec3::new(0.63, 0.2, 0.0),
+                    max_force_n: c.output().filtered.map_or(1.0, |f| f.force_n.norm() + 0.5),
                 },
             };
             operator.requests.push(Envelope { id: i, request }).unwrap();
@@ -113,6 +121,10 @@ fn a_cycle_allocates_nothing() {
     }
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
+    assert!(
+        c.decision().guarded_stop.is_some(),
+        "no guarded move was braked: its path did not run"
+    );
     assert!(c.counts().quick_stops >= 1);
     assert_eq!(
         after - before,

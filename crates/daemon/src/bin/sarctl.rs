@@ -71,6 +71,11 @@ enum Cmd {
         /// Z, m.
         #[arg(allow_hyphen_values = true)]
         z: f64,
+        /// A guarded move: braked when |F_tip| (filtered) reaches this, N
+        /// (0 < N <= the total stop limit); where and at what force shows
+        /// in `sarctl status` and the daemon's log.
+        #[arg(long, value_name = "N")]
+        max_force: Option<f64>,
     },
     /// The guard's force limits; with any `--warn-*`/`--stop-*` option, sets
     /// them (the others kept; within the ceilings of the configuration).
@@ -186,6 +191,11 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "observable": s.flags & flags::OBSERVABLE != 0,
         "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
         "sim_elapsed_ns": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_elapsed_ns),
+        "guarded_stop": (s.guarded_stop_cycle != 0).then(|| json!({
+            "cycle": s.guarded_stop_cycle,
+            "tip_m": s.guarded_stop_tip_m,
+            "force_n": s.guarded_stop_force_n,
+        })),
         "guard": guard_state_name(s.guard_state),
         "reason": reason_name(s.guard_reason),
         "reason_code": s.guard_reason,
@@ -456,9 +466,25 @@ fn run(args: &Args) -> Result<(), String> {
             )
         }
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
-        Cmd::MoveTip { x, y, z } => {
-            report("move-tip", &command(command_kind::MOVE_TIP, [x, y, z])?)
-        }
+        Cmd::MoveTip {
+            x,
+            y,
+            z,
+            max_force: None,
+        } => report("move-tip", &command(command_kind::MOVE_TIP, [x, y, z])?),
+        Cmd::MoveTip {
+            x,
+            y,
+            z,
+            max_force: Some(n),
+        } => report(
+            "move-tip (guarded)",
+            &command_with(
+                command_kind::GUARDED_MOVE,
+                [x, y, z],
+                [n, 0.0, 0.0, 0.0, 0.0, 0.0],
+            )?,
+        ),
         Cmd::Limits {
             warn_total,
             stop_total,

@@ -257,6 +257,11 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
             m.command_kind = CommandKindCode::MoveTip;
             m.move_tip_m = arr(&tip_m);
         }
+        Some(Request::GuardedMove { tip_m, max_force_n }) => {
+            m.command_kind = CommandKindCode::MoveTip;
+            m.move_tip_m = arr(&tip_m);
+            m.move_max_force_n = max_force_n;
+        }
         Some(Request::SetLimits(l)) => {
             m.command_kind = CommandKindCode::SetLimits;
             m.limits_n = l.to_array();
@@ -295,6 +300,13 @@ pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
     let request = match m.command_kind {
         CommandKindCode::GuardReset => Some(Request::Reset),
         CommandKindCode::Tare => Some(Request::Tare),
+        // A guarded move's limit is > 0 when it was accepted as one; a
+        // recorded 0 (or an older recording) is a plain move. A non-finite or
+        // negative recorded limit goes to the step as it was, which refuses it.
+        CommandKindCode::MoveTip if m.move_max_force_n != 0.0 => Some(Request::GuardedMove {
+            tip_m: vec3(&m.move_tip_m),
+            max_force_n: m.move_max_force_n,
+        }),
         CommandKindCode::MoveTip => Some(Request::MoveTip {
             tip_m: vec3(&m.move_tip_m),
         }),

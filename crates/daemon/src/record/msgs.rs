@@ -700,6 +700,9 @@ pub struct CycleInput {
     pub publisher_idle_ns: u64,
     /// BACK_OUT: how far to back the tip out along the rod, m.
     pub back_out_m: f64,
+    /// MOVE_TIP: a guarded move's force limit, N (0: unguarded; 0 in
+    /// recordings older than this field).
+    pub move_max_force_n: f64,
 }
 
 impl RosMessage for CycleInput {
@@ -737,6 +740,7 @@ impl RosMessage for CycleInput {
         w.f64_array(&self.limits_in_use_n);
         w.u64(self.publisher_idle_ns);
         w.f64(self.back_out_m);
+        w.f64(self.move_max_force_n);
         Ok(())
     }
     fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
@@ -773,12 +777,17 @@ impl RosMessage for CycleInput {
             limits_in_use_n: r.f64_array()?,
             publisher_idle_ns: 0,
             back_out_m: 0.0,
+            move_max_force_n: 0.0,
         };
         // The fields added with issue 14, all or none: an older recording
         // ends before them (they read as 0); part of them is a cut message.
         if r.remaining() > 0 {
             m.publisher_idle_ns = r.u64()?;
             m.back_out_m = r.f64()?;
+        }
+        // Added with issue 15 (guarded moves): as above.
+        if r.remaining() > 0 {
+            m.move_max_force_n = r.f64()?;
         }
         Ok(m)
     }

@@ -93,6 +93,7 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             },
             publisher_idle_ns: mix(k + 23) % 1_000_000_000,
             back_out_m: v3(k + 24)[0],
+            move_max_force_n: v3(k + 25)[0],
         }),
         Outgoing::SensorWrench(WrenchStamped::sensor(t - 90_000, v3(k), v3(k + 1))),
         Outgoing::Joints(ActiveJointState {
