@@ -139,6 +139,46 @@ struct FileToml {
     drivers: DriversToml,
     #[serde(default)]
     record: RecordToml,
+    #[serde(default)]
+    force_control: ForceControlToml,
+}
+
+/// `[force_control]` (FORCE_CONTROL.md): the admittance law's settings.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct ForceControlToml {
+    axial_damping_n_s_per_m: f64,
+    axial_mass_kg: f64,
+    lateral_damping_n_s_per_m: f64,
+    lateral_mass_kg: f64,
+    hold_return_n_per_m: f64,
+    max_speed_mps: f64,
+    max_accel_mps2: f64,
+    max_excursion_m: f64,
+    filter_cutoff_hz: f64,
+    other_delay_s: f64,
+    max_stiffness_n_per_m: f64,
+    min_phase_margin_deg: f64,
+}
+
+impl Default for ForceControlToml {
+    fn default() -> Self {
+        let d = sar_estimator::force_control::ForceControlLimits::default();
+        Self {
+            axial_damping_n_s_per_m: d.axial.damping_n_s_per_m,
+            axial_mass_kg: d.axial.mass_kg,
+            lateral_damping_n_s_per_m: d.lateral.damping_n_s_per_m,
+            lateral_mass_kg: d.lateral.mass_kg,
+            hold_return_n_per_m: d.hold_return_n_per_m,
+            max_speed_mps: d.max_speed_mps,
+            max_accel_mps2: d.max_accel_mps2,
+            max_excursion_m: d.max_excursion_m,
+            filter_cutoff_hz: d.filter_cutoff_hz,
+            other_delay_s: d.other_delay_s,
+            max_stiffness_n_per_m: d.max_stiffness_n_per_m,
+            min_phase_margin_deg: d.min_phase_margin_deg,
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -488,6 +528,8 @@ pub struct Config {
     pub axes_driver: AxesDriver,
     /// The recording (`[record]`).
     pub record: crate::record::live::RecordSettings,
+    /// Force control (`[force_control]`), checked for stability.
+    pub force_control: sar_estimator::force_control::ForceControlConfig,
 }
 
 /// Reads and checks a configuration file; errors name `path`.
@@ -955,6 +997,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     };
 
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
+    let force_control = force_control(ctx, &f.force_control, sample_rate_hz, rate_hz)?;
 
     Ok(Config {
         origin: ctx.origin.to_owned(),
@@ -993,6 +1036,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         sensor_driver,
         axes_driver,
         record,
+        force_control,
     })
 }
 
@@ -1010,8 +1054,55 @@ impl Config {
             retreat_speed_mps: self.axes.retreat_speed_mps,
             period_ns: self.loop_.period_ns,
             publisher_stall_ns: self.loop_.publisher_stall_ns,
+            force_control: self.force_control,
         }
     }
+}
+
+/// `[force_control]`: the law's settings, with the sensor's and the loop's
+/// periods; refused (naming the key) when out of range or not stable at
+/// `max_stiffness_n_per_m` with `min_phase_margin_deg`.
+fn force_control(
+    ctx: &Ctx<'_>,
+    t: &ForceControlToml,
+    sample_rate_hz: f64,
+    rate_hz: f64,
+) -> Result<sar_estimator::force_control::ForceControlConfig, ConfigError> {
+    use sar_estimator::force_control::{Admittance, ForceControlConfig, ForceControlLimits};
+    let limits = ForceControlLimits {
+        axial: Admittance {
+            mass_kg: t.axial_mass_kg,
+            damping_n_s_per_m: t.axial_damping_n_s_per_m,
+        },
+        lateral: Admittance {
+            mass_kg: t.lateral_mass_kg,
+            damping_n_s_per_m: t.lateral_damping_n_s_per_m,
+        },
+        max_speed_mps: t.max_speed_mps,
+        max_accel_mps2: t.max_accel_mps2,
+        max_excursion_m: t.max_excursion_m,
+        hold_return_n_per_m: t.hold_return_n_per_m,
+        filter_cutoff_hz: t.filter_cutoff_hz,
+        sample_period_s: 1.0 / sample_rate_hz,
+        period_s: 1.0 / rate_hz,
+        other_delay_s: t.other_delay_s,
+        max_stiffness_n_per_m: t.max_stiffness_n_per_m,
+        min_phase_margin_deg: t.min_phase_margin_deg,
+    };
+    ForceControlConfig::new(limits).map_err(|e| {
+        let field = match &e {
+            sar_estimator::SettingError::Invalid { field, .. } => *field,
+            _ => "",
+        };
+        let key = match field {
+            "axial.mass_kg" => "axial_mass_kg",
+            "axial.damping_n_s_per_m" => "axial_damping_n_s_per_m",
+            "lateral.mass_kg" => "lateral_mass_kg",
+            "lateral.damping_n_s_per_m" => "lateral_damping_n_s_per_m",
+            other => other,
+        };
+        ctx.err(&join("force_control", key), e.to_string())
+    })
 }
 
 /// Maps an estimator setting error to its key in `section`.

@@ -53,6 +53,7 @@ use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
     EstimatorConfig, FollowingReference, JointSample, SensorSample, TipOutcome,
 };
+use sar_estimator::force_control::{ForceControlConfig, ForceController, ForceMode};
 use sar_estimator::guard::{ForceLimits, GuardState, Reason, reduces_force};
 use sar_estimator::{SettingError, Vec3};
 use sar_kinematics::{ActiveJoints, Calibration, PoseError, Profile, inverse};
@@ -89,6 +90,20 @@ pub enum Request {
         /// The force that stops it, N (0 < N <= the total stop limit).
         max_force_n: f64,
     },
+    /// Force control (issue 15, FORCE_CONTROL.md): hold the tip while the
+    /// tip force is below `max_force_n`, yield along it above.
+    Hold {
+        /// N (0 < N <= the total warn limit).
+        max_force_n: f64,
+    },
+    /// Force control: regulate the axial tip force to `axial_n`, the
+    /// lateral position held.
+    Push {
+        /// N (0 < N < the axial warn limit).
+        axial_n: f64,
+    },
+    /// End force control: hold the tip where it is (position control).
+    Position,
 }
 
 /// Where a guarded move stopped, and why.
@@ -210,6 +225,15 @@ pub enum ReplyDetail {
         /// The total stop limit in use, N.
         stop_n: f64,
     },
+    /// A force-control setpoint out of its range.
+    BadForce {
+        /// The setpoint given, N.
+        force_n: f64,
+        /// The largest accepted (a warn limit), N.
+        max_n: f64,
+    },
+    /// A force-control mode asked for outside Ok.
+    NotInOk(GuardState),
     /// A guarded move asked for while the tip force already reaches its
     /// limit.
     AlreadyAtForce {
@@ -273,6 +297,14 @@ impl core::fmt::Display for ReplyDetail {
             } => write!(
                 f,
                 "the guarded move's force must be within 0 < N <= {stop_n} N (the total stop limit), got {max_force_n} N"
+            ),
+            Self::BadForce { force_n, max_n } => write!(
+                f,
+                "the force must be within 0 < N < {max_n} N (a warn limit), got {force_n} N"
+            ),
+            Self::NotInOk(state) => write!(
+                f,
+                "force control starts only in Ok (the guard is {state:?})"
             ),
             Self::AlreadyAtForce {
                 force_n,
@@ -339,7 +371,12 @@ impl LoopInput {
                 Some(Request::Tare) => Some(Command::Tare),
                 Some(Request::SetLimits(l)) => Some(Command::SetLimits(l)),
                 Some(
-                    Request::MoveTip { .. } | Request::BackOut { .. } | Request::GuardedMove { .. },
+                    Request::MoveTip { .. }
+                    | Request::BackOut { .. }
+                    | Request::GuardedMove { .. }
+                    | Request::Hold { .. }
+                    | Request::Push { .. }
+                    | Request::Position,
                 )
                 | None => None,
             },
@@ -398,6 +435,8 @@ pub struct LoopOutput {
     pub limits: ForceLimits,
     /// The last guarded move's stop (kept until the next one stops).
     pub guarded_stop: Option<GuardedStop>,
+    /// The force-control mode after this cycle (`None`: position control).
+    pub force_mode: Option<ForceMode>,
 }
 
 /// The loop's settings beyond the estimator's.
@@ -416,6 +455,8 @@ pub struct StepConfig {
     /// The publishing thread without progress for longer than this is a
     /// Fault, ns.
     pub publisher_stall_ns: u64,
+    /// Force control's settings (`[force_control]`).
+    pub force_control: ForceControlConfig,
 }
 
 /// Why a [`StepConfig`] cannot be used.
@@ -510,6 +551,8 @@ pub struct LoopStep {
     last_drive_state: Option<DriveState>,
     /// The last guarded move's stop.
     guarded_stop: Option<GuardedStop>,
+    /// Force control (its filter runs in every cycle; a mode when active).
+    force: ForceController,
     out: LoopOutput,
 }
 
@@ -575,6 +618,7 @@ impl LoopStep {
             reply_detail: ReplyDetail::None,
             limits: estimator.guard_config().force_limits(),
             guarded_stop: None,
+            force_mode: None,
         };
         Ok(Self {
             calibration,
@@ -586,6 +630,7 @@ impl LoopStep {
             speed_mps: 0.0,
             last_drive_state: None,
             guarded_stop: None,
+            force: ForceController::new(config.force_control)?,
             out,
         })
     }
@@ -706,6 +751,38 @@ impl LoopStep {
             }
         }
 
+        // Force control: its filter sees every cycle's estimate; a halt or a
+        // Retreat ends any mode at once; a move ends it too (the move then
+        // starts from the last set point).
+        match &estimate.tip {
+            TipOutcome::Estimate(e) => {
+                self.force
+                    .observe(Some((input.sensor.counter, &e.force_n, &e.std_n)));
+            }
+            _ => self.force.observe(None),
+        }
+        if halting || estimate.guard_state == GuardState::Retreat {
+            self.force.stop();
+        }
+        match input.request {
+            Some(Request::Hold { max_force_n }) => {
+                reply = Some(self.start_force(input, &estimate, ForceMode::Hold { max_force_n }));
+            }
+            Some(Request::Push { axial_n }) => {
+                reply = Some(self.start_force(input, &estimate, ForceMode::Push { axial_n }));
+            }
+            Some(Request::Position) => {
+                self.end_force(input.now_ns);
+                reply = Some((ReplyStatus::Accepted, ReplyDetail::None));
+            }
+            Some(
+                Request::MoveTip { .. } | Request::GuardedMove { .. } | Request::BackOut { .. },
+            ) => {
+                self.end_force(input.now_ns);
+            }
+            _ => {}
+        }
+
         let before_move = self.trajectory;
         let mut planned = false;
         let move_target = match input.request {
@@ -722,6 +799,34 @@ impl LoopStep {
             move_accepted = r.0 == ReplyStatus::Accepted;
             planned = move_accepted;
             reply = Some(r);
+        }
+
+        // The force-control mode's period: the law's commanded tip, through
+        // the inverse kinematics, streamed to the drives (one set point per
+        // period, which the following check then holds the axes to). The
+        // guard's Warn removes any motion deeper along the force. No
+        // estimate, no pose or an unreachable tip ends the mode, holding the
+        // last set point.
+        if self.force.mode().is_some() && !halting {
+            let warn = estimate.guard_state == GuardState::Warn
+                && !matches!(estimate.guard_reason, Reason::TareDue { .. });
+            let next = match (input.now_ns, estimate.pose, input.drive_state) {
+                (Some(now_ns), Some(pose), Some(DriveState::Enabled)) => self
+                    .force
+                    .step(&pose.rod_dir, warn)
+                    .ok()
+                    .and_then(|out| self.reachable(&out.tip_m).ok())
+                    .map(|q| (now_ns, q)),
+                _ => None,
+            };
+            match next {
+                Some((now_ns, q)) => {
+                    let mut t = Trajectory::hold(now_ns, &q);
+                    t.streamed = true;
+                    self.trajectory = Some(t);
+                }
+                None => self.end_force(input.now_ns),
+            }
         }
 
         // A guarded move under way is braked in the cycle its force reaches
@@ -814,8 +919,85 @@ impl LoopStep {
             reply_detail,
             limits: self.estimator.guard_config().force_limits(),
             guarded_stop: self.guarded_stop,
+            force_mode: self.force.mode(),
         };
         &self.out
+    }
+
+    /// Starts a force-control mode (Ok only, the drives enabled, the axes at
+    /// rest, a filtered force to act on; the setpoint below its warn limit).
+    fn start_force(
+        &mut self,
+        input: &LoopInput,
+        estimate: &CycleOutput,
+        mode: ForceMode,
+    ) -> (ReplyStatus, ReplyDetail) {
+        let limits = self.estimator.guard_config().force_limits();
+        let (force_n, max_n) = match mode {
+            ForceMode::Hold { max_force_n } => (max_force_n, limits.warn_total_n),
+            ForceMode::Push { axial_n } => (axial_n, limits.warn_axial_n),
+        };
+        if !(force_n > 0.0 && force_n < max_n) {
+            return (
+                ReplyStatus::BadArgument,
+                ReplyDetail::BadForce { force_n, max_n },
+            );
+        }
+        if estimate.guard_state != GuardState::Ok {
+            return (
+                ReplyStatus::NotOk,
+                ReplyDetail::NotInOk(estimate.guard_state),
+            );
+        }
+        if input.drive_state != Some(DriveState::Enabled) {
+            return (
+                ReplyStatus::DrivesRefused,
+                ReplyDetail::DrivesNotEnabled(input.drive_state),
+            );
+        }
+        if self.speed_mps > REST_SPEED_MPS {
+            return (
+                ReplyStatus::AxesMoving,
+                ReplyDetail::AxesMoving {
+                    speed_mps: self.speed_mps,
+                },
+            );
+        }
+        let (Some(pose), Some(_)) = (estimate.pose, self.force.filtered_force_n()) else {
+            return (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate);
+        };
+        self.force.start(mode, pose.tip_m);
+        (ReplyStatus::Accepted, ReplyDetail::None)
+    }
+
+    /// Ends force control, holding the last set point.
+    fn end_force(&mut self, now_ns: Option<u64>) {
+        if self.force.mode().is_none() {
+            return;
+        }
+        self.force.stop();
+        if let (Some(t), Some(now_ns)) = (self.trajectory, now_ns) {
+            let mut hold = Trajectory::hold(now_ns, &t.position(now_ns));
+            hold.streamed = t.streamed;
+            self.trajectory = Some(hold);
+        }
+    }
+
+    /// The axes for a tip, within their travel.
+    fn reachable(&self, tip_m: &Vec3) -> Result<ActiveJoints, ReplyDetail> {
+        let q = inverse(&self.calibration, &self.profile, tip_m).map_err(ReplyDetail::NoPose)?;
+        let v = [q.q1_m, q.q2_m, q.q3_m];
+        for (i, (v, (lo, hi))) in v.iter().zip(self.config.travel_m.iter()).enumerate() {
+            if !(v >= lo && v <= hi) {
+                return Err(ReplyDetail::OutsideTravel {
+                    axis: u8::try_from(i + 1).unwrap_or(0),
+                    value_m: *v,
+                    min_m: *lo,
+                    max_m: *hi,
+                });
+            }
+        }
+        Ok(q)
     }
 
     /// Judges a move and, if accepted, plans it from where the trajectory is

@@ -167,6 +167,10 @@ pub struct StateMsg {
     pub guarded_stop_tip_m: [f64; 3],
     /// The tip force that stopped it, base frame, N.
     pub guarded_stop_force_n: [f64; 3],
+    /// Force control: 0 position, 1 hold, 2 push.
+    pub force_mode: u32,
+    /// Its setpoint, N (hold: the force; push: the axial force).
+    pub force_setpoint_n: f64,
 }
 
 impl Default for StateMsg {
@@ -205,6 +209,8 @@ impl Default for StateMsg {
             guarded_stop_cycle: 0,
             guarded_stop_tip_m: [0.0; 3],
             guarded_stop_force_n: [0.0; 3],
+            force_mode: 0,
+            force_setpoint_n: 0.0,
         }
     }
 }
@@ -302,6 +308,17 @@ impl StateMsg {
         if o.new_sample {
             m.flags |= flags::NEW_SAMPLE;
         }
+        match p.decision.force_mode {
+            Some(sar_estimator::force_control::ForceMode::Hold { max_force_n }) => {
+                m.force_mode = 1;
+                m.force_setpoint_n = max_force_n;
+            }
+            Some(sar_estimator::force_control::ForceMode::Push { axial_n }) => {
+                m.force_mode = 2;
+                m.force_setpoint_n = axial_n;
+            }
+            None => {}
+        }
         if let Some(g) = p.decision.guarded_stop {
             m.guarded_stop_cycle = g.cycle;
             m.guarded_stop_tip_m = arr(&g.tip_m);
@@ -342,6 +359,12 @@ pub mod command_kind {
     /// A guarded move to `tip_m`, stopped when the tip force reaches
     /// `limits_n[0]` N (`sarctl move-tip --max-force`).
     pub const GUARDED_MOVE: u32 = 9;
+    /// Force control: a compliant hold at `limits_n[0]` N (`sarctl hold`).
+    pub const HOLD: u32 = 10;
+    /// Force control: an axial push of `limits_n[0]` N (`sarctl push`).
+    pub const PUSH: u32 = 11;
+    /// End force control (`sarctl position`).
+    pub const POSITION: u32 = 12;
 }
 
 /// An operator command.
@@ -381,6 +404,13 @@ impl CommandMsg {
                 tip_m: Vec3::new(self.tip_m[0], self.tip_m[1], self.tip_m[2]),
                 max_force_n: self.limits_n[0],
             }),
+            command_kind::HOLD => Some(Request::Hold {
+                max_force_n: self.limits_n[0],
+            }),
+            command_kind::PUSH => Some(Request::Push {
+                axial_n: self.limits_n[0],
+            }),
+            command_kind::POSITION => Some(Request::Position),
             _ => None,
         }
     }

@@ -95,6 +95,7 @@ fn a_cycle_allocates_nothing() {
     let before = ALLOCATIONS.load(Ordering::SeqCst);
     let mut seen_warn = false;
     let mut seen_stop = false;
+    let mut seen_push = false;
     for i in 0..17_000u64 {
         if i % 1000 == 10 {
             let request = match (i / 1000) % 5 {
@@ -115,12 +116,19 @@ fn a_cycle_allocates_nothing() {
             };
             operator.requests.push(Envelope { id: i, request }).unwrap();
         }
+        // Force control: a push along the rod (ended by the move at 3010).
+        if i == 1500 {
+            let request = Request::Push { axial_n: 2.0 };
+            operator.requests.push(Envelope { id: i, request }).unwrap();
+        }
         let out = step(&mut c);
+        seen_push |= c.decision().force_mode.is_some();
         seen_warn |= out.guard_state == GuardState::Warn;
         seen_stop |= out.guard_state == GuardState::Stop;
     }
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
+    assert!(seen_push, "force control never ran");
     assert!(
         c.decision().guarded_stop.is_some(),
         "no guarded move was braked: its path did not run"

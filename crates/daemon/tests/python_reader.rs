@@ -164,7 +164,8 @@ fn fields(m: &Outgoing) -> String {
                 .i("reply_reason", c.reply_reason)
                 .fa("limits_in_use_n", &c.limits_in_use_n)
                 .i("publisher_idle_ns", c.publisher_idle_ns)
-                .f("back_out_m", c.back_out_m);
+                .f("back_out_m", c.back_out_m)
+                .f("move_max_force_n", c.move_max_force_n);
         }
         Outgoing::RecorderDrops(d) => {
             l.header(d.stamp_ns, "")

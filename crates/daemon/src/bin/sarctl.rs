@@ -60,6 +60,22 @@ enum Cmd {
     },
     /// Model-based tare of the force sensor.
     Tare,
+    /// Force control: hold the tip while |F_tip| is below N; above, yield
+    /// along the force so that it stays near N (FORCE_CONTROL.md).
+    Hold {
+        /// N (0 < N < the total warn limit).
+        #[arg(long, value_name = "N")]
+        max_force: f64,
+    },
+    /// Force control: regulate the force along the rod to N, the lateral
+    /// position held.
+    Push {
+        /// N (0 < N < the axial warn limit).
+        #[arg(long, value_name = "N")]
+        axial: f64,
+    },
+    /// End force control: the tip holds where it is (position control).
+    Position,
     /// Move the tip to (X, Y, Z), base frame, m.
     MoveTip {
         /// X, m.
@@ -191,6 +207,8 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "observable": s.flags & flags::OBSERVABLE != 0,
         "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
         "sim_elapsed_ns": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_elapsed_ns),
+        "force_mode": match s.force_mode { 1 => "hold", 2 => "push", _ => "position" },
+        "force_setpoint_n": (s.force_mode != 0).then_some(s.force_setpoint_n),
         "guarded_stop": (s.guarded_stop_cycle != 0).then(|| json!({
             "cycle": s.guarded_stop_cycle,
             "tip_m": s.guarded_stop_tip_m,
@@ -466,6 +484,23 @@ fn run(args: &Args) -> Result<(), String> {
             )
         }
         Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
+        Cmd::Hold { max_force } => report(
+            "hold",
+            &command_with(
+                command_kind::HOLD,
+                [0.0; 3],
+                [max_force, 0.0, 0.0, 0.0, 0.0, 0.0],
+            )?,
+        ),
+        Cmd::Push { axial } => report(
+            "push",
+            &command_with(
+                command_kind::PUSH,
+                [0.0; 3],
+                [axial, 0.0, 0.0, 0.0, 0.0, 0.0],
+            )?,
+        ),
+        Cmd::Position => report("position", &command(command_kind::POSITION, [0.0; 3])?),
         Cmd::MoveTip {
             x,
             y,

@@ -270,6 +270,15 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
             m.command_kind = CommandKindCode::BackOut;
             m.back_out_m = distance_m;
         }
+        Some(Request::Hold { max_force_n }) => {
+            m.command_kind = CommandKindCode::Hold;
+            m.command_values[0] = max_force_n;
+        }
+        Some(Request::Push { axial_n }) => {
+            m.command_kind = CommandKindCode::Push;
+            m.command_values[0] = axial_n;
+        }
+        Some(Request::Position) => m.command_kind = CommandKindCode::Position,
     }
     m.publisher_idle_ns = input.publisher_idle_ns;
     (m.drive_action, m.setpoint_q_m) = match decision.action {
@@ -314,6 +323,13 @@ pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
         CommandKindCode::BackOut => Some(Request::BackOut {
             distance_m: m.back_out_m,
         }),
+        CommandKindCode::Hold => Some(Request::Hold {
+            max_force_n: m.command_values[0],
+        }),
+        CommandKindCode::Push => Some(Request::Push {
+            axial_n: m.command_values[0],
+        }),
+        CommandKindCode::Position => Some(Request::Position),
         _ => None,
     };
     LoopInput {

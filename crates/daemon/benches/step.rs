@@ -1,0 +1,101 @@
+//! The loop's pure step with force control (an axial push against a tissue)
+//! beside the same step in position mode, in one criterion run (issue 15):
+//! 1000 recorded cycles stepped from a cloned state, per batch.
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing,
+    missing_docs
+)]
+
+use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
+use sar_daemon::control::{Controller, Envelope, Operator, Request};
+use sar_daemon::step::{LoopInput, LoopStep};
+use sar_daemon::{config, logq, sim};
+use sar_drivers::SimClock;
+use sar_drivers::sim::{Tissue, TissueModel};
+use sar_estimator::Vec3;
+use std::hint::black_box;
+
+/// Cycles measured per batch.
+const N: usize = 1000;
+
+/// The recorded inputs of a run on the simulator (a tissue 5 mm ahead of
+/// the tip along the rod, 300 N/m), with a push of 3 N from cycle 1200 when
+/// `push`; the step's state after `warm` cycles and the `N` inputs after.
+fn recorded(push: bool, warm: usize) -> (LoopStep, Vec<LoopInput>) {
+    let cfg = config::builtin().unwrap();
+    let mut scenario = sim::demo_scenario().unwrap();
+    scenario.spec.contact = Vec::new();
+    scenario.spec.tissue = vec![Tissue {
+        direction: Vec3::new(1.0, 0.0, 0.0),
+        rest_m: Vec3::new(0.605, 0.2, 0.0),
+        model: TissueModel::Linear {
+            stiffness_n_per_m: 300.0,
+        },
+        damping_n_s_per_m: 5.0,
+        breathing: None,
+        shifts: Vec::new(),
+    }];
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _t, _q) = logq::channel(false);
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.step_config(),
+        sensor,
+        drives,
+        operator.clone(),
+        log,
+        true,
+    )
+    .unwrap();
+    let mut inputs = Vec::new();
+    for cycle in 1..=(warm + N) as u64 {
+        if push && cycle == 1200 {
+            let request = Request::Push { axial_n: 3.0 };
+            operator.requests.push(Envelope { id: 1, request }).unwrap();
+        }
+        clock.advance_ns(1_000_000);
+        c.step(cycle, || Some(clock.now_ns()));
+        while operator.replies.pop().is_some() {}
+        inputs.push(*c.loop_input());
+    }
+    let mut step = LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap();
+    for input in &inputs[..warm] {
+        step.step(input);
+    }
+    assert_eq!(step.last().force_mode.is_some(), push);
+    (step, inputs.split_off(warm))
+}
+
+fn per_cycle(c: &mut Criterion) {
+    let mut g = c.benchmark_group("step");
+    g.throughput(criterion::Throughput::Elements(N as u64));
+    for (name, push) in [
+        ("position (1000 cycles)", false),
+        ("push 3 N (1000 cycles)", true),
+    ] {
+        let (state, inputs) = recorded(push, 5000);
+        g.bench_function(name, |b| {
+            b.iter_batched(
+                || state.clone(),
+                |mut s| {
+                    for input in &inputs {
+                        black_box(s.step(black_box(input)).action);
+                    }
+                    s
+                },
+                BatchSize::SmallInput,
+            )
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, per_cycle);
+criterion_main!(benches);

@@ -1,0 +1,286 @@
+//! Force control in the loop (issue 15): `sarctl push --axial N`, `sarctl
+//! hold --max-force N` and `sarctl position` through the real controller on
+//! the simulator in simulated time, against a tissue that pushes back (the
+//! simulator's spring-damper along the rod, breathing). The figures (RMS
+//! error of the true axial force, overshoot, the hold's largest force beside
+//! position mode's) are printed (`--nocapture`). Every mode ends at once on
+//! a Stop; the runs replay bit for bit through a fresh step.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod common;
+use sar_daemon::control::{Controller, Envelope, Operator, Reply, ReplyStatus, Request};
+use sar_daemon::step::{DriveAction, LoopInput, LoopOutput, LoopStep, ReplyDetail};
+use sar_daemon::{config, logq, sim};
+use sar_drivers::SimClock;
+use sar_drivers::sim::{
+    Breathing, ContactKey, SimDrives, SimSensor, Simulator, Tissue, TissueModel,
+};
+use sar_estimator::Vec3;
+use sar_estimator::force_control::ForceMode;
+use sar_estimator::guard::GuardState;
+
+/// The tip at rest, base frame, m (the demo's start); the rod points +X0.
+const TIP_M: [f64; 3] = [0.6, 0.2, 0.0];
+
+struct Rig {
+    c: Controller<SimSensor<SimClock>, SimDrives<SimClock>>,
+    sim: Simulator<SimClock>,
+    clock: SimClock,
+    operator: Operator,
+    cycle: u64,
+    log: Vec<(LoopInput, LoopOutput)>,
+    cfg: config::Config,
+}
+
+impl Rig {
+    /// The demo robot; a tissue of stiffness `k` whose surface is `gap_m`
+    /// ahead of the tip along the rod, breathing `breath_m` at 0.25 Hz;
+    /// `contact` on top. Reset after the mean at rest.
+    fn new(k_n_per_m: f64, gap_m: f64, breath_m: f64, contact: Vec<ContactKey>) -> Self {
+        let cfg = config::builtin().unwrap();
+        let mut scenario = sim::demo_scenario().unwrap();
+        scenario.spec.contact = contact;
+        let x = Vec3::new(1.0, 0.0, 0.0);
+        scenario.spec.tissue = vec![Tissue {
+            direction: x,
+            rest_m: Vec3::new(TIP_M[0] + gap_m, TIP_M[1], TIP_M[2]),
+            model: TissueModel::Linear {
+                stiffness_n_per_m: k_n_per_m,
+            },
+            damping_n_s_per_m: 5.0,
+            breathing: (breath_m > 0.0).then_some(Breathing {
+                amplitude_m: breath_m,
+                hz: 0.25,
+                direction: x,
+            }),
+            shifts: Vec::new(),
+        }];
+        let clock = SimClock::new(1_000_000_000);
+        let (sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+        let operator = Operator::new();
+        let (log, _t, _q) = logq::channel(false);
+        let c = Controller::new(
+            &cfg.estimator,
+            bias,
+            cfg.step_config(),
+            sensor,
+            drives,
+            operator.clone(),
+            log,
+            true,
+        )
+        .unwrap();
+        let mut rig = Self {
+            c,
+            sim,
+            clock,
+            operator,
+            cycle: 0,
+            log: Vec::new(),
+            cfg,
+        };
+        for _ in 0..1100 {
+            rig.step();
+        }
+        assert_eq!(
+            rig.c.output().guard_state,
+            GuardState::Ok,
+            "{:?}",
+            rig.c.output().guard_reason
+        );
+        rig
+    }
+
+    fn step(&mut self) -> LoopOutput {
+        self.cycle += 1;
+        self.clock.advance_ns(1_000_000);
+        let clock = self.clock.clone();
+        self.c.step(self.cycle, || Some(clock.now_ns()));
+        let d = *self.c.decision();
+        self.log.push((*self.c.loop_input(), d));
+        d
+    }
+
+    fn request(&mut self, id: u64, request: Request) -> Reply {
+        self.operator
+            .requests
+            .push(Envelope { id, request })
+            .unwrap();
+        self.step();
+        let r = self.operator.replies.pop().unwrap();
+        assert_eq!(r.id, id);
+        r
+    }
+
+    /// The true F_tip, base frame, N.
+    fn true_force_n(&self) -> Vec3 {
+        self.sim.truth().unwrap().tip_force_n
+    }
+
+    fn replays_bit_for_bit(&self) {
+        let scenario = sim::demo_scenario().unwrap();
+        let bias = sar_estimator::cycle::Bias {
+            force_n: scenario.spec.sensor.bias_n,
+            torque_nm: scenario.spec.sensor.bias_nm,
+        };
+        let mut step = LoopStep::new(&self.cfg.estimator, bias, self.cfg.step_config()).unwrap();
+        for (k, (input, recorded)) in self.log.iter().enumerate() {
+            let again = step.step(input);
+            assert_eq!(
+                format!("{again:?}"),
+                format!("{recorded:?}"),
+                "cycle {k} differs"
+            );
+        }
+    }
+}
+
+/// Root mean square.
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+#[test]
+fn push_regulates_the_axial_force_against_a_breathing_tissue() {
+    let axial_n = 3.0;
+    for k in [100.0, 300.0, 1000.0, 3000.0] {
+        let mut rig = Rig::new(k, 0.005, 0.003, Vec::new());
+        let r = rig.request(1, Request::Push { axial_n });
+        assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+        let mut errors = Vec::new();
+        let mut largest_n = 0.0f64;
+        let mut streamed = 0;
+        // 20 s; settled after 10 s (the approach at 6 mm/s through the
+        // 5 mm gap and up to 30 mm into the softest tissue).
+        for i in 0..20_000 {
+            let d = rig.step();
+            assert!(
+                !d.estimate.guard_state.is_halting(),
+                "k {k}: {:?}",
+                d.estimate.guard_reason
+            );
+            assert_eq!(d.force_mode, Some(ForceMode::Push { axial_n }), "k {k}");
+            streamed += usize::from(matches!(d.action, DriveAction::Stream(_)));
+            let f = rig.true_force_n().x;
+            largest_n = largest_n.max(f);
+            if i >= 10_000 {
+                errors.push(f - axial_n);
+            }
+        }
+        let rms_n = rms(&errors);
+        let overshoot = (largest_n - axial_n).max(0.0) / axial_n * 100.0;
+        println!(
+            "push {axial_n} N into {k} N/m breathing 3 mm at 0.25 Hz: RMS error of the true axial force {rms_n:.3} N after settling, largest {largest_n:.2} N (overshoot {overshoot:.1} %), {streamed} set points streamed"
+        );
+        // Every cycle of the mode streams a set point.
+        assert!(streamed > 19_000, "{streamed}");
+        // Within the issue's goal of 0.3 N RMS, with room for the breathing
+        // at the stiffest tissue.
+        assert!(rms_n < 0.5, "k {k}: RMS {rms_n:.3} N");
+        assert!(largest_n < 8.0, "k {k}: {largest_n:.2} N (the warn limit)");
+        if k == 300.0 {
+            rig.replays_bit_for_bit();
+        }
+    }
+}
+
+#[test]
+fn hold_yields_to_a_breathing_tissue_where_position_mode_does_not() {
+    // The surface at the tip, breathing 6 mm along the rod into it at
+    // 1000 N/m: up to 6 N in position mode.
+    let max_force_n = 2.0;
+    let run = |hold: bool| {
+        let mut rig = Rig::new(1000.0, 0.0, 0.006, Vec::new());
+        if hold {
+            let r = rig.request(1, Request::Hold { max_force_n });
+            assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+        }
+        let (mut largest_n, mut above, mut n) = (0.0f64, 0usize, 0usize);
+        for _ in 0..12_000 {
+            let d = rig.step();
+            assert!(!d.estimate.guard_state.is_halting());
+            let f = rig.true_force_n().norm();
+            largest_n = largest_n.max(f);
+            above += usize::from(f > max_force_n + 0.5);
+            n += 1;
+        }
+        (largest_n, above as f64 / n as f64 * 100.0)
+    };
+    let (hold_n, hold_above) = run(true);
+    let (position_n, position_above) = run(false);
+    println!(
+        "hold {max_force_n} N under a tissue breathing 6 mm at 1000 N/m: largest true |F| {hold_n:.2} N, {hold_above:.1} % of the time above {:.1} N; position mode: {position_n:.2} N, {position_above:.1} %",
+        max_force_n + 0.5
+    );
+    assert!(position_n > 5.0, "{position_n}");
+    assert!(
+        hold_n < position_n - 2.0,
+        "hold {hold_n} N, position {position_n} N"
+    );
+}
+
+#[test]
+fn position_ends_force_control_and_a_stop_ends_it_at_once() {
+    // A push at 2 N; then `position`: the mode ends, the tip stays.
+    let mut rig = Rig::new(300.0, 0.005, 0.0, Vec::new());
+    assert_eq!(
+        rig.request(1, Request::Push { axial_n: 2.0 }).status,
+        ReplyStatus::Accepted
+    );
+    for _ in 0..8000 {
+        rig.step();
+    }
+    let r = rig.request(2, Request::Position);
+    assert_eq!(r.status, ReplyStatus::Accepted);
+    assert_eq!(rig.c.decision().force_mode, None);
+    let tip = rig.c.output().pose.unwrap().tip_m;
+    for _ in 0..1000 {
+        rig.step();
+    }
+    let moved = (rig.c.output().pose.unwrap().tip_m - tip).norm();
+    assert!(moved < 0.0005, "moved {moved} m after position");
+
+    // Bad setpoints are refused with their cause.
+    for (request, max) in [
+        (Request::Push { axial_n: 0.0 }, 8.0),
+        (Request::Push { axial_n: 8.0 }, 8.0),
+        (
+            Request::Hold {
+                max_force_n: f64::NAN,
+            },
+            10.0,
+        ),
+    ] {
+        let r = rig.request(3, request);
+        assert_eq!(r.status, ReplyStatus::BadArgument, "{request:?}");
+        assert!(
+            matches!(r.detail, ReplyDetail::BadForce { max_n, .. } if max_n == max),
+            "{:?}",
+            r.detail
+        );
+    }
+
+    // A push, then a contact of 20 N on top (above the stop limit): the
+    // guard stops, and the mode ends in that very cycle.
+    let on_s = 1.1 + 0.003 + 3.0;
+    let contact = common::contact_pulse(
+        (on_s * 1e9) as u64,
+        (on_s * 1e9) as u64 + 50_000_000,
+        (on_s * 1e9) as u64 + 2_000_000_000,
+        (on_s * 1e9) as u64 + 2_050_000_000,
+        Vec3::new(20.0, 0.0, 0.0),
+    );
+    let mut rig = Rig::new(300.0, 0.005, 0.0, contact);
+    assert_eq!(
+        rig.request(4, Request::Push { axial_n: 2.0 }).status,
+        ReplyStatus::Accepted
+    );
+    let stopped = (0..6000)
+        .map(|_| rig.step())
+        .find(|d| d.estimate.guard_state == GuardState::Stop)
+        .expect("no Stop");
+    assert_eq!(stopped.force_mode, None);
+    assert_eq!(stopped.action, DriveAction::QuickStop);
+    rig.replays_bit_for_bit();
+}
