@@ -15,8 +15,9 @@ node = canopen.RemoteNode(NODE, canopen.ObjectDictionary())
 net.add_node(node)
 boot = []
 net.subscribe(0x700 + NODE, lambda _cob, data, _ts: boot.append(bytes(data)))
-# The drives' process may still be loading: reset until a boot-up answers.
-for _ in range(60):
+# The drives' process may still be loading (a loaded machine without KVM
+# has taken over 15 s): reset until a boot-up answers, for up to 90 s.
+for _ in range(360):
     node.nmt.send_command(0x81)
     time.sleep(0.25)
     if b"\x00" in boot:
