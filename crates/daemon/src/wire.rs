@@ -449,6 +449,17 @@ impl ReplyMsg {
         }
     }
 
+    /// Sets the detail to `text` (cut at a character boundary when longer
+    /// than [`DETAIL_LEN`] bytes).
+    pub fn set_detail(&mut self, text: &str) {
+        self.detail = [0u8; DETAIL_LEN];
+        let mut w = FixedText {
+            buf: &mut self.detail,
+            len: 0,
+        };
+        let _ = std::fmt::Write::write_str(&mut w, text);
+    }
+
     /// The exact cause as text ("" when none).
     pub fn detail_text(&self) -> &str {
         let end = self
