@@ -503,7 +503,7 @@ pub fn load(path: &Path) -> Result<Config, ConfigError> {
 
 /// The built-in configuration ([`DEFAULT_TOML`]).
 pub fn builtin() -> Result<Config, ConfigError> {
-    parse(DEFAULT_TOML, "(built-in configuration)")
+    parse(DEFAULT_TOML, "the built-in configuration")
 }
 
 /// Checks a configuration given as text; `origin` names it in errors.
