@@ -25,7 +25,8 @@
 //!   the commanded trajectory is a Fault).
 //! - `[record]`: recording from the daemon's start (`sarctl record start|stop`
 //!   at any time): `enabled` (false), `directory` ("recordings", relative to
-//!   the working directory), `max_file_mb` (1024; 0: no size rotation),
+//!   the working directory `sard` starts in; `sard` makes it absolute at
+//!   start and logs it), `max_file_mb` (1024; 0: no size rotation),
 //!   `max_file_s` (600; 0: no time rotation), `queue_capacity` (65536
 //!   messages, about 2.7 s of disk stall at 4 kHz; 1024..=16777216).
 //! - `[drivers.sensor]` and `[drivers.axes]`: `kind = "sim"` (default) or a real
@@ -544,7 +545,7 @@ pub fn load(path: &Path) -> Result<Config, ConfigError> {
 
 /// The built-in configuration ([`DEFAULT_TOML`]).
 pub fn builtin() -> Result<Config, ConfigError> {
-    parse(DEFAULT_TOML, "(built-in configuration)")
+    parse(DEFAULT_TOML, "the built-in configuration")
 }
 
 /// Checks a configuration given as text; `origin` names it in errors.

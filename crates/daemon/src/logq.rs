@@ -162,15 +162,15 @@ pub fn write(event: &LogEvent) {
             }
         }
         LogEvent::Command(c) => match &c.result {
-            Ok(a) => tracing::info!("command {:?} accepted: {:?}", c.command, a),
-            Err(e) => tracing::warn!("command {:?} refused: {}", c.command, e),
+            Ok(a) => tracing::info!("command {}: {}", command_text(&c.command), accepted_text(a)),
+            Err(e) => tracing::warn!("command {} refused: {}", command_text(&c.command), e),
         },
         LogEvent::Reply(r) => tracing::info!(
             id = r.id,
             cycle = r.cycle,
-            "request {:?}: {:?}",
-            r.request,
-            r.status
+            "request {}: {}",
+            request_text(&r.request),
+            crate::wire::status_name(r.status as u32)
         ),
         LogEvent::QuickStop { cycle, ok } => {
             if *ok {
@@ -180,7 +180,9 @@ pub fn write(event: &LogEvent) {
             }
         }
         LogEvent::DeviceError { cycle, what } => tracing::error!(cycle, "{what} failed"),
-        LogEvent::DriveState { cycle, state } => tracing::info!(cycle, "drives: {state:?}"),
+        LogEvent::DriveState { cycle, state } => {
+            tracing::info!(cycle, "drives: {}", drive_state_text(*state))
+        }
         LogEvent::Overrun { cycle, late_ns } => {
             tracing::warn!(cycle, "cycle overran its period by {late_ns} ns")
         }
@@ -193,5 +195,99 @@ pub fn write(event: &LogEvent) {
             g.force_n.norm(),
             g.max_force_n
         ),
+    }
+}
+
+/// A vector as `[x y z]` with `digits` decimals.
+fn v3_text(v: &sar_kinematics::Vec3, digits: usize) -> String {
+    format!("[{:.digits$} {:.digits$} {:.digits$}]", v.x, v.y, v.z)
+}
+
+/// Force limits as the log prints them.
+fn limits_text(l: &sar_estimator::guard::ForceLimits) -> String {
+    format!(
+        "warn/stop total {}/{} N, axial {}/{} N, lateral {}/{} N",
+        l.warn_total_n,
+        l.stop_total_n,
+        l.warn_axial_n,
+        l.stop_axial_n,
+        l.warn_lateral_n,
+        l.stop_lateral_n
+    )
+}
+
+/// A bias as the log prints it.
+fn bias_text(b: &sar_estimator::cycle::Bias) -> String {
+    format!(
+        "force {} N, torque {} N m",
+        v3_text(&b.force_n, 3),
+        v3_text(&b.torque_nm, 4)
+    )
+}
+
+/// An estimator command in words.
+fn command_text(c: &sar_estimator::cycle::Command) -> String {
+    use sar_estimator::cycle::Command;
+    match c {
+        Command::Reset => "reset".to_owned(),
+        Command::Tare => "tare".to_owned(),
+        Command::SetBias(b) => format!("set bias ({})", bias_text(b)),
+        Command::SetLimits(l) => format!("set limits ({})", limits_text(l)),
+    }
+}
+
+/// What an accepted estimator command did, in words.
+fn accepted_text(a: &sar_estimator::cycle::CommandAccepted) -> String {
+    use sar_estimator::cycle::CommandAccepted;
+    match a {
+        CommandAccepted::Reset => "accepted, the guard is reset".to_owned(),
+        CommandAccepted::NothingToReset => "accepted, nothing to reset".to_owned(),
+        CommandAccepted::BiasSet { previous, bias } => format!(
+            "accepted, bias now {} (was {})",
+            bias_text(bias),
+            bias_text(previous)
+        ),
+        CommandAccepted::LimitsSet { previous, limits } => format!(
+            "accepted, limits now {} (were {})",
+            limits_text(limits),
+            limits_text(previous)
+        ),
+    }
+}
+
+/// An operator request in words.
+fn request_text(r: &crate::step::Request) -> String {
+    use crate::step::Request;
+    match r {
+        Request::Reset => "reset".to_owned(),
+        Request::Tare => "tare".to_owned(),
+        Request::MoveTip { tip_m } => format!("move tip to {} m", v3_text(tip_m, 4)),
+        Request::SetLimits(l) => format!("set limits ({})", limits_text(l)),
+        Request::BackOut { distance_m } => format!("back out {distance_m} m"),
+        Request::GuardedMove { tip_m, max_force_n } => format!(
+            "guarded move of the tip to {} m, braked at {max_force_n} N",
+            v3_text(tip_m, 4)
+        ),
+        Request::Hold { max_force_n } => format!("force control: hold below {max_force_n} N"),
+        Request::Push { axial_n } => format!("force control: push {axial_n} N along the rod"),
+        Request::Position => "position control".to_owned(),
+    }
+}
+
+/// The drives' state in words (`None`: it could not be read).
+fn drive_state_text(state: Option<sar_drivers::DriveState>) -> String {
+    use sar_drivers::DriveState;
+    match state {
+        None => "state unreadable".to_owned(),
+        Some(DriveState::Ready) => "ready".to_owned(),
+        Some(DriveState::Enabled) => "enabled".to_owned(),
+        Some(DriveState::QuickStop) => "quick stop".to_owned(),
+        Some(DriveState::Fault {
+            axis: Some(axis),
+            code,
+        }) => format!("fault on q{} (code 0x{code:04x})", u16::from(axis) + 1),
+        Some(DriveState::Fault { axis: None, code }) => {
+            format!("fault (code 0x{code:04x}, axis not known)")
+        }
     }
 }

@@ -362,14 +362,22 @@ impl ShmWorker {
                 command_kind::RECORD_START | command_kind::RECORD_STOP
             ) && self.shared.record_switch.get().is_some() =>
             {
+                // The reply's detail: the first file of the recording
+                // started, or of the one being stopped.
+                let mut path = None;
                 if let Some(s) = self.shared.record_switch.get() {
                     if command.kind == command_kind::RECORD_START {
-                        s.request_start();
+                        path = s.request_start_at();
                     } else {
                         s.request_stop();
+                        path = s.current_path();
                     }
                 }
-                let _ = active.send_copy(immediate(0));
+                let mut reply = immediate(0);
+                if let Some(p) = path {
+                    reply.set_detail(&p.display().to_string());
+                }
+                let _ = active.send_copy(reply);
             }
             None => {
                 let _ = active.send_copy(immediate(reply_code::UNKNOWN_COMMAND));

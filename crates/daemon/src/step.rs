@@ -254,6 +254,16 @@ impl ReplyDetail {
     }
 }
 
+/// The drives' state in words (for a refusal's detail).
+fn drive_state_words(s: &DriveState) -> &'static str {
+    match s {
+        DriveState::Ready => "ready",
+        DriveState::Enabled => "enabled",
+        DriveState::QuickStop => "in quick stop",
+        DriveState::Fault { .. } => "in fault",
+    }
+}
+
 impl core::fmt::Display for ReplyDetail {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
@@ -265,11 +275,24 @@ impl core::fmt::Display for ReplyDetail {
                 value_m,
                 min_m,
                 max_m,
-            } => write!(
+            } => {
+                let (by_m, end) = if value_m < min_m {
+                    (min_m - value_m, "below its lower end")
+                } else {
+                    (value_m - max_m, "above its upper end")
+                };
+                write!(
+                    f,
+                    "q{axis} would be {value_m:.4} m, outside its travel {min_m:.4}..{max_m:.4} m \
+                     ([axes] travel_m) by {by_m:.4} m {end}; sarctl workspace shows the \
+                     reachable region"
+                )
+            }
+            Self::NoPose(e) => write!(
                 f,
-                "q{axis} would be {value_m:.4} m, outside its travel {min_m:.4}..{max_m:.4} m"
+                "no pose of the rod through the support reaches it: {e} (sarctl workspace \
+                 shows the reachable region)"
             ),
-            Self::NoPose(e) => write!(f, "no pose reaches it: {e}"),
             Self::NotReducing { step_m, force_n } => write!(
                 f,
                 "in retreat only motions against the tip force ({:.2}, {:.2}, {:.2}) N or back \
@@ -277,7 +300,7 @@ impl core::fmt::Display for ReplyDetail {
                 force_n.x, force_n.y, force_n.z, step_m.x, step_m.y, step_m.z
             ),
             Self::DrivesNotEnabled(state) => match state {
-                Some(s) => write!(f, "the drives are {s:?}, not enabled"),
+                Some(s) => write!(f, "the drives are {}, not enabled", drive_state_words(s)),
                 None => f.write_str("the drives' state could not be read"),
             },
             Self::AxesMoving { speed_mps } => write!(

@@ -94,6 +94,19 @@ pub fn drive_state_code(s: Option<DriveState>) -> u32 {
     }
 }
 
+/// The name of a [`drive_state_code`]: "unknown", "ready", "enabled",
+/// "quick_stop", "fault" (anything else: "invalid").
+pub fn drive_state_name(code: u32) -> &'static str {
+    match code {
+        0 => "unknown",
+        1 => "ready",
+        2 => "enabled",
+        3 => "quick_stop",
+        4 => "fault",
+        _ => "invalid",
+    }
+}
+
 /// The state of one control cycle, published once per cycle.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
@@ -499,6 +512,17 @@ impl ReplyMsg {
             limits_n,
             detail,
         }
+    }
+
+    /// Sets the detail to `text` (cut at a character boundary when longer
+    /// than [`DETAIL_LEN`] bytes).
+    pub fn set_detail(&mut self, text: &str) {
+        self.detail = [0u8; DETAIL_LEN];
+        let mut w = FixedText {
+            buf: &mut self.detail,
+            len: 0,
+        };
+        let _ = std::fmt::Write::write_str(&mut w, text);
     }
 
     /// The exact cause as text ("" when none).

@@ -1,5 +1,6 @@
 //! `sarctl`, the operator's tool: the daemon's state (`status`, `monitor`)
-//! and its commands (`reset`, `tare`, `move-tip`, `limits`), over iceoryx2.
+//! and its commands (`reset`, `tare`, `move-tip`, `limits`), over iceoryx2;
+//! `workspace` (the reachable region) and `completions` (shell completions).
 //! Every command fails with a one-line reason when no daemon runs.
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -149,12 +150,31 @@ enum Cmd {
         #[arg(long, value_name = "OUT")]
         output: Option<std::path::PathBuf>,
     },
+    /// The reachable region (read-only): the axes' travel of the
+    /// configuration (--config FILE, else the built-in one of `sard --sim`)
+    /// and, from the daemon's present pose, the tip's range along base x, y,
+    /// z when one axis at a time moves through its travel.
+    Workspace,
+    /// Shell completions for bash, zsh or fish, on stdout.
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: CompletionShell,
+    },
     /// Start or stop the daemon's recording.
     Record {
         /// start or stop.
         #[arg(value_enum)]
         action: RecordAction,
     },
+}
+
+/// The shells `sarctl completions` writes for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum CompletionShell {
+    Bash,
+    Zsh,
+    Fish,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -190,6 +210,26 @@ fn main() -> ExitCode {
     }
 }
 
+/// The guard's six force limits by name (the order of `limits_n`).
+fn limits_json(l: &[f64; 6]) -> serde_json::Value {
+    json!({"warn_total_n": l[0], "stop_total_n": l[1], "warn_axial_n": l[2],
+           "stop_axial_n": l[3], "warn_lateral_n": l[4], "stop_lateral_n": l[5]})
+}
+
+/// One symbol per tenth of a second: |F_tip| against the stop limit, in
+/// ninths (`@`: at or above the stop limit).
+const HISTORY_GLYPHS: [char; 10] = [' ', '.', ':', '-', '=', '+', '*', '#', '%', '@'];
+
+/// The legend printed above `monitor`'s history line.
+const HISTORY_LEGEND: &str = "history: one symbol per 0.1 s, |F_tip| as a share of the stop \
+     limit: ' ' under 1/9, then . : - = + * # % in ninths, @ at or above the stop limit";
+
+/// The glyph of |F_tip| = `norm` against the stop limit `stop`.
+fn history_glyph(norm: f64, stop: f64) -> char {
+    let level = ((norm / stop.max(1e-9)) * 9.0).clamp(0.0, 9.0) as usize;
+    HISTORY_GLYPHS.get(level).copied().unwrap_or('@')
+}
+
 fn state_json(s: &StateMsg) -> serde_json::Value {
     json!({
         "cycle": s.cycle,
@@ -219,7 +259,9 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "reason_code": s.guard_reason,
         "halted": s.flags & flags::HALTED != 0,
         "drive_state": s.drive_state,
+        "drive_state_name": wire::drive_state_name(s.drive_state),
         "limits_n": s.limits_n,
+        "limits": limits_json(&s.limits_n),
         "wakeup_ns": {"p50": s.wakeup_ns[0], "p99": s.wakeup_ns[1], "max": s.wakeup_ns[2]},
         "compute_ns": {"p50": s.compute_ns[0], "p99": s.compute_ns[1], "max": s.compute_ns[2]},
         "overruns": s.overruns,
@@ -313,6 +355,41 @@ fn run(args: &Args) -> Result<(), String> {
     if let Some(path) = &args.config {
         sar_daemon::config::load(path).map_err(|e| e.to_string())?;
     }
+    if let Cmd::Completions { shell } = &args.command {
+        let mut cmd = <Args as clap::CommandFactory>::command();
+        let shell = match shell {
+            CompletionShell::Bash => clap_complete::Shell::Bash,
+            CompletionShell::Zsh => clap_complete::Shell::Zsh,
+            CompletionShell::Fish => clap_complete::Shell::Fish,
+        };
+        clap_complete::generate(shell, &mut cmd, "sarctl", &mut std::io::stdout());
+        return Ok(());
+    }
+    if let Cmd::Workspace = &args.command {
+        let cfg = match &args.config {
+            Some(path) => sar_daemon::config::load(path).map_err(|e| e.to_string())?,
+            None => sar_daemon::config::builtin().map_err(|e| e.to_string())?,
+        };
+        let present = Client::new(&args.prefix)
+            .and_then(|c| c.subscribe())
+            .map_err(|e| e.to_string())
+            .and_then(|sub| {
+                sub.latest(Duration::from_secs(2))
+                    .ok_or_else(|| "the daemon published nothing within 2 s".to_owned())
+            })
+            .and_then(|s| {
+                if s.flags & flags::POSE != 0 {
+                    Ok((s.q_m, s.tip_m))
+                } else {
+                    Err("the daemon has no pose now".to_owned())
+                }
+            });
+        let (present, why) = match present {
+            Ok(p) => (Some(p), String::new()),
+            Err(e) => (None, e),
+        };
+        return sar_daemon::cli::workspace::print(&cfg, present, &why, json);
+    }
     if let Cmd::Identify(a) = &args.command {
         let json = args.format == Format::Json;
         return sar_daemon::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
@@ -355,7 +432,9 @@ fn run(args: &Args) -> Result<(), String> {
         }
     };
     match args.command {
-        Cmd::Replay { .. } | Cmd::Recover { .. } => Ok(()),
+        Cmd::Replay { .. } | Cmd::Recover { .. } | Cmd::Workspace | Cmd::Completions { .. } => {
+            Ok(())
+        }
         Cmd::Record { action } => {
             sar_daemon::cli::record::run(&client, action == RecordAction::Start, json)
         }
@@ -405,17 +484,14 @@ fn run(args: &Args) -> Result<(), String> {
                     if let Some(s) = batch.last() {
                         let f = s.tip_force_n;
                         let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-                        let glyphs = [' ', '.', ':', '-', '=', '+', '*', '#', '%', '@'];
-                        let level =
-                            ((norm / s.limits_n[1].max(1e-9)) * 9.0).clamp(0.0, 9.0) as usize;
-                        history.push(glyphs.get(level).copied().unwrap_or('@'));
+                        history.push(history_glyph(norm, s.limits_n[1]));
                         if history.len() > 60 {
                             history.remove(0);
                         }
                         let h: String = history.iter().collect();
                         write!(
                             stdout,
-                            "\x1b[2J\x1b[H{}\n|F_tip| {:6.2} N [{}] stop {:.1} N\nhistory (10 s) [{h}]\n",
+                            "\x1b[2J\x1b[H{}\n|F_tip| {:6.2} N [{}] stop {:.1} N\n{HISTORY_LEGEND}\nhistory (10 s) [{h}]\n",
                             state_line(s),
                             norm,
                             bar(s),
@@ -556,11 +632,7 @@ fn run(args: &Args) -> Result<(), String> {
             }
             let l = r.limits_n;
             if args.format == Format::Json {
-                println!(
-                    "{}",
-                    json!({"warn_total_n": l[0], "stop_total_n": l[1], "warn_axial_n": l[2],
-                           "stop_axial_n": l[3], "warn_lateral_n": l[4], "stop_lateral_n": l[5]})
-                );
+                println!("{}", limits_json(&l));
             } else {
                 println!(
                     "warn/stop total {}/{} N, axial {}/{} N, lateral {}/{} N",
@@ -570,5 +642,26 @@ fn run(args: &Args) -> Result<(), String> {
             let _ = wire::guard_code::OK;
             Ok(())
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_history_legend_matches_the_glyphs() {
+        // The glyphs between the blank and `@`, in order, then `@`.
+        let middle: Vec<String> = HISTORY_GLYPHS[1..9].iter().map(char::to_string).collect();
+        assert!(
+            HISTORY_LEGEND.contains(&middle.join(" ")),
+            "{HISTORY_LEGEND}"
+        );
+        assert!(HISTORY_LEGEND.contains("@ at or above"), "{HISTORY_LEGEND}");
+        assert_eq!(history_glyph(0.0, 15.0), ' ');
+        assert_eq!(history_glyph(15.0 / 9.0, 15.0), '.');
+        assert_eq!(history_glyph(14.9, 15.0), '%');
+        assert_eq!(history_glyph(15.0, 15.0), '@');
+        assert_eq!(history_glyph(100.0, 15.0), '@');
     }
 }

@@ -83,11 +83,19 @@ fn run(args: &Args) -> Result<(), String> {
         );
         return Ok(());
     }
-    let cfg = match &args.config {
+    let mut cfg = match &args.config {
         Some(path) => config::load(path).map_err(|e| e.to_string())?,
         None if args.sim => config::builtin().map_err(|e| e.to_string())?,
         None => return Err("give --config FILE, or --sim for the simulated robot".to_owned()),
     };
+    // `[record] directory`: a relative one is resolved once, here, against
+    // the working directory the daemon starts in, and said in the log once
+    // the devices are up (a refusal at start stays one line).
+    if cfg.record.directory.is_relative() {
+        let cwd = std::env::current_dir()
+            .map_err(|e| format!("cannot read the working directory: {e}"))?;
+        cfg.record.directory = cwd.join(&cfg.record.directory);
+    }
     // With --sim everything is simulated; otherwise the devices the file names
     // (a part it leaves "sim" is simulated: a bench set-up).
     let rdt = if args.sim {
@@ -160,6 +168,10 @@ fn run(args: &Args) -> Result<(), String> {
     } else {
         sim_bias
     };
+    tracing::info!(
+        "recordings go to {} ([record] directory)",
+        cfg.record.directory.display()
+    );
     let switch = std::sync::Arc::new(sar_daemon::record::live::RecordSwitch::default());
     let (recording, shm) = sar_daemon::record::live::RecordManager::start(
         cfg.record.clone(),

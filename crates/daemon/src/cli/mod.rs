@@ -5,3 +5,4 @@ pub mod identify;
 pub mod record;
 pub mod recover;
 pub mod replay;
+pub mod workspace;

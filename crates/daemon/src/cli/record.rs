@@ -1,6 +1,8 @@
 //! `sarctl record start|stop`: starts or stops the daemon's recording (over
 //! the command service), then waits until the daemon's published state says
-//! it records (or no longer does), at most 2 s.
+//! it records (or no longer does), at most 2 s. Both print the path of the
+//! recording's first file, which the daemon gives in its reply (absolute:
+//! the daemon resolves `[record] directory` when it starts).
 
 use crate::shm::Client;
 use crate::wire::{CommandMsg, command_kind, status_name};
@@ -28,6 +30,8 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
     if reply.status != 0 {
         return Err(format!("{what}: {}", status_name(reply.status)));
     }
+    // The first file; a rotation continues in -0001.mcap, -0002.mcap, ...
+    let path = reply.detail_text().to_owned();
     let sub = client.subscribe()?;
     let deadline = Instant::now() + Duration::from_secs(2);
     let mut last = None;
@@ -40,7 +44,8 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
                 println!(
                     "{}",
                     json!({"command": what, "recording": start, "cycle": s.cycle,
-                           "recorder_drops": s.recorder_drops})
+                           "recorder_drops": s.recorder_drops,
+                           "file": (!path.is_empty()).then_some(&path)})
                 );
             } else {
                 println!(
@@ -49,6 +54,12 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
                     s.cycle,
                     s.recorder_drops
                 );
+                if !path.is_empty() {
+                    println!(
+                        "{} {path} (after a rotation: -0001.mcap, -0002.mcap, ... beside it)",
+                        if start { "file:" } else { "written to:" }
+                    );
+                }
             }
             return Ok(());
         }

@@ -53,12 +53,59 @@ pub struct RecordSwitch {
     want: AtomicU8,
     recording: AtomicBool,
     dropped: AtomicU64,
+    /// The recordings' directory (set by [`RecordManager::start`]).
+    directory: std::sync::OnceLock<PathBuf>,
+    /// The name the next recording takes (chosen with the start request).
+    /// Locked by the command server and the manager thread, never the loop.
+    pending_name: std::sync::Mutex<Option<String>>,
+    /// The first file of the present or last recording.
+    /// Locked by the command server and the manager thread, never the loop.
+    current: std::sync::Mutex<Option<PathBuf>>,
 }
 
 impl RecordSwitch {
     /// Asks for a recording to start (no effect while one runs).
     pub fn request_start(&self) {
         self.want.store(WANT_START, Ordering::Release);
+    }
+    /// Asks for a recording to start and says where its first file goes:
+    /// the new recording's, or the present one's while one runs (then the
+    /// request has no effect). `None` before [`RecordManager::start`].
+    pub fn request_start_at(&self) -> Option<PathBuf> {
+        if self.recording() {
+            return self.current_path();
+        }
+        let directory = self.directory.get()?;
+        let name = recording_name();
+        let path = first_file(directory, &name);
+        if let Ok(mut pending) = self.pending_name.lock() {
+            *pending = Some(name);
+        }
+        self.request_start();
+        Some(path)
+    }
+    /// The first file of the present or last recording (`None`: none yet).
+    pub fn current_path(&self) -> Option<PathBuf> {
+        self.current.lock().ok().and_then(|c| c.clone())
+    }
+    /// The recordings' directory (`None` before [`RecordManager::start`]).
+    pub fn directory(&self) -> Option<&std::path::Path> {
+        self.directory.get().map(PathBuf::as_path)
+    }
+    /// The name for the recording being started: the one chosen with the
+    /// request, else a new one.
+    fn take_name(&self) -> String {
+        self.pending_name
+            .lock()
+            .ok()
+            .and_then(|mut p| p.take())
+            .unwrap_or_else(recording_name)
+    }
+    /// Remembers recording `name` (started) as the current one.
+    fn set_current(&self, directory: &std::path::Path, name: &str) {
+        if let Ok(mut c) = self.current.lock() {
+            *c = Some(first_file(directory, name));
+        }
     }
     /// Asks for the recording to stop.
     pub fn request_stop(&self) {
@@ -178,6 +225,11 @@ fn recorder_config(
     c
 }
 
+/// The first file of recording `name` in `directory` (as [`FileOptions::path`] names it).
+fn first_file(directory: &std::path::Path, name: &str) -> PathBuf {
+    FileOptions::new(directory, name).path(0)
+}
+
 fn recording_name() -> String {
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -196,8 +248,9 @@ impl RecordManager {
     ) -> Result<(Self, LiveRecorder<P>), String> {
         let incoming = Arc::new(ArrayQueue::new(1));
         let outgoing = Arc::new(ArrayQueue::new(4));
+        let _ = switch.directory.set(settings.directory.clone());
         if settings.enabled {
-            let name = recording_name();
+            let name = switch.take_name();
             let rec =
                 Recorder::start(recorder_config(&settings, &name, &bias, true)).map_err(|e| {
                     format!(
@@ -209,6 +262,7 @@ impl RecordManager {
                 "recording into {}/{name}-*.mcap",
                 settings.directory.display()
             );
+            switch.set_current(&settings.directory, &name);
             let _ = incoming.push(rec);
         }
         let stop = Arc::new(AtomicBool::new(false));
@@ -254,10 +308,14 @@ impl RecordManager {
 fn close(rec: Recorder) {
     match rec.stop() {
         Ok(r) => tracing::info!(
-            "recording closed: {} messages written, {} dropped, files {:?}",
+            "recording closed: {} messages written, {} dropped, files {}",
             r.written,
             r.dropped,
             r.files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
         ),
         Err(e) => tracing::error!("recording failed: {e}"),
     }
@@ -295,17 +353,22 @@ fn manage(
             return;
         }
         // The request is taken first (atomically), then judged.
-        if switch.take_start() && !switch.recording() && incoming.is_empty() {
-            let name = recording_name();
-            match Recorder::start(recorder_config(settings, &name, bias, false)) {
-                Ok(rec) => {
-                    tracing::info!(
-                        "recording into {}/{name}-*.mcap",
-                        settings.directory.display()
-                    );
-                    let _ = incoming.push(rec);
+        if switch.take_start() {
+            // The name chosen with the request, taken even when the request
+            // has no effect (a recording runs or is being handed over).
+            let name = switch.take_name();
+            if !switch.recording() && incoming.is_empty() {
+                match Recorder::start(recorder_config(settings, &name, bias, false)) {
+                    Ok(rec) => {
+                        tracing::info!(
+                            "recording into {}/{name}-*.mcap",
+                            settings.directory.display()
+                        );
+                        switch.set_current(&settings.directory, &name);
+                        let _ = incoming.push(rec);
+                    }
+                    Err(e) => tracing::error!("cannot start recording: {e}"),
                 }
-                Err(e) => tracing::error!("cannot start recording: {e}"),
             }
         }
         std::thread::sleep(Duration::from_millis(5));
