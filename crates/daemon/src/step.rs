@@ -775,8 +775,7 @@ impl LoopStep {
         }
 
         // Force control: its filter sees every cycle's estimate; a halt or a
-        // Retreat ends any mode at once; a move ends it too (the move then
-        // starts from the last set point).
+        // Retreat ends any mode at once; an accepted move ends it too (below).
         match &estimate.tip {
             TipOutcome::Estimate(e) => {
                 self.force
@@ -798,11 +797,6 @@ impl LoopStep {
                 self.end_force(input.now_ns);
                 reply = Some((ReplyStatus::Accepted, ReplyDetail::None));
             }
-            Some(
-                Request::MoveTip { .. } | Request::GuardedMove { .. } | Request::BackOut { .. },
-            ) => {
-                self.end_force(input.now_ns);
-            }
             _ => {}
         }
 
@@ -822,6 +816,11 @@ impl LoopStep {
             move_accepted = r.0 == ReplyStatus::Accepted;
             planned = move_accepted;
             reply = Some(r);
+            // An accepted move ends force control (it was planned from the
+            // last set point); a refused one leaves the mode as it was.
+            if move_accepted {
+                self.force.stop();
+            }
         }
 
         // The force-control mode's period: the law's commanded tip, through

@@ -289,3 +289,27 @@ fn a_syntax_error_and_a_missing_file_name_the_file() {
         "{e}"
     );
 }
+
+/// `[force_control]` (issue 15): a bad value names its key, and settings
+/// that would not keep the phase margin at the stiffest tissue are refused
+/// naming the damping to raise.
+#[test]
+fn force_control_settings_are_checked_by_key() {
+    let with = |line: &str| format!("{MINIMUM}\n[force_control]\n{line}\n");
+    let text = with("lateral_mass_kg = 0.0");
+    expect(
+        &text,
+        "force_control.lateral_mass_kg",
+        Some("lateral_mass_kg"),
+        "> 0",
+    );
+    let text = with("axial_damping_n_s_per_m = 1.0");
+    expect(
+        &text,
+        "force_control.axial_damping_n_s_per_m",
+        Some("axial_damping_n_s_per_m"),
+        "phase",
+    );
+    let c = config::parse(&with("max_speed_mps = 0.004"), "robot.toml").unwrap();
+    assert_eq!(c.force_control.limits().max_speed_mps, 0.004);
+}

@@ -448,20 +448,8 @@ fn sim_drive_faults_are_guard_faults_in_the_cycle_reported() {
 }
 
 /// Resets until the reply says why the first reset is refused by the
-/// mounting check (none accepted); its detail. With `after_ns`, the first
-/// reset waits until the simulator's time has passed it.
-fn first_reset_refusal(
-    tag: &str,
-    client: &Client,
-    sub: &StateSubscription,
-    after_ns: Option<u64>,
-) -> String {
-    if let Some(after_ns) = after_ns {
-        let seen = watch(sub, Duration::from_secs(20), |s| {
-            s.truth_elapsed_ns >= after_ns
-        });
-        assert!(seen.last().unwrap().truth_elapsed_ns >= after_ns, "{tag}");
-    }
+/// mounting check (none accepted, `rest_incomplete` before it); its detail.
+fn first_reset_refusal(tag: &str, client: &Client, sub: &StateSubscription) -> String {
     let t = Instant::now();
     loop {
         let r = command(client, command_kind::RESET, [0.0; 3]);
@@ -483,7 +471,7 @@ fn first_reset_refusal(
 fn sim_a_wrong_gain_or_a_rotated_sensor_is_refused_at_the_first_reset() {
     // The simulated robot without `--sim` (the configuration leaves every
     // part "sim"): no automatic reset, the operator's.
-    let run = |tag: &str, scenario: String, after_ns: Option<u64>| {
+    let run = |tag: &str, scenario: String| {
         let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
         let (_daemon, client, sub) = start(
             tag,
@@ -498,7 +486,7 @@ fn sim_a_wrong_gain_or_a_rotated_sensor_is_refused_at_the_first_reset() {
                 "scenario.toml".to_owned(),
             ],
         );
-        let d = first_reset_refusal(tag, &client, &sub, after_ns);
+        let d = first_reset_refusal(tag, &client, &sub);
         eprintln!("DETECTION | sim | {tag} | first reset refused: {d} | bound: the first reset");
     };
     // A gain 50 % off (counts_per_n two thirds of the device's).
@@ -508,7 +496,6 @@ fn sim_a_wrong_gain_or_a_rotated_sensor_is_refused_at_the_first_reset() {
             "{}\n[[fault]]\nkind = \"sensor_scale\"\nfrom_s = 0.0\nfactor = 1.5\n",
             demo_head()
         ),
-        None,
     );
     // The sensor turned 5 degrees about the rod (x) from the configured
     // mounting: the simulated robot has it, the configuration does not.
@@ -519,7 +506,7 @@ fn sim_a_wrong_gain_or_a_rotated_sensor_is_refused_at_the_first_reset() {
     assert_ne!(rotated, demo_head(), "the demo's mounting changed");
     // The first reset tried at once: refused until the mean at rest is
     // complete (rest_incomplete), then by the mounting check.
-    run("rotated-5deg", rotated, None);
+    run("rotated-5deg", rotated);
 }
 
 #[test]
@@ -736,6 +723,6 @@ fn rdt_a_wrong_gain_is_refused_at_the_first_reset() {
         &[("config.toml", rdt_config(&emulator))],
         &["--config".to_owned(), "config.toml".to_owned()],
     );
-    let d = first_reset_refusal("rdt-scale", &client, &sub, None);
+    let d = first_reset_refusal("rdt-scale", &client, &sub);
     eprintln!("DETECTION | rdt | gain x1.5 | first reset refused: {d} | bound: the first reset");
 }

@@ -1,5 +1,7 @@
 //! Force control in the loop (issue 15): `sarctl push --axial N`, `sarctl
-//! hold --max-force N` and `sarctl position` through the real controller on
+//! hold --max-force N`, `sarctl position` and guarded moves (`sarctl
+//! move-tip X Y Z --max-force N`: braked when the filtered tip force reaches
+//! N, reporting where and at what force) through the real controller on
 //! the simulator in simulated time, against a tissue that pushes back (the
 //! simulator's spring-damper along the rod, breathing). The figures (RMS
 //! error of the true axial force, overshoot, the hold's largest force beside
@@ -231,6 +233,18 @@ fn position_ends_force_control_and_a_stop_ends_it_at_once() {
     for _ in 0..8000 {
         rig.step();
     }
+    // A move refused (out of reach) leaves the push as it was.
+    let r = rig.request(
+        5,
+        Request::MoveTip {
+            tip_m: Vec3::new(5.0, 0.2, 0.0),
+        },
+    );
+    assert_eq!(r.status, ReplyStatus::Unreachable);
+    assert_eq!(
+        rig.c.decision().force_mode,
+        Some(ForceMode::Push { axial_n: 2.0 })
+    );
     let r = rig.request(2, Request::Position);
     assert_eq!(r.status, ReplyStatus::Accepted);
     assert_eq!(rig.c.decision().force_mode, None);
@@ -283,4 +297,147 @@ fn position_ends_force_control_and_a_stop_ends_it_at_once() {
     assert_eq!(stopped.force_mode, None);
     assert_eq!(stopped.action, DriveAction::QuickStop);
     rig.replays_bit_for_bit();
+}
+
+/// What one guarded move into the tissue did.
+struct Outcome {
+    stop_force_n: f64,
+    largest_true_n: f64,
+    final_true_n: f64,
+    stop_after_ms: u64,
+}
+
+fn guarded_move_into(k_n_per_m: f64, max_force_n: f64) -> (Rig, Outcome) {
+    let gap_m = 0.005;
+    let mut rig = Rig::new(k_n_per_m, gap_m, 0.0, Vec::new());
+    // Along the rod, half as deep again into the tissue as the limit needs.
+    let depth_m = 1.5 * max_force_n / k_n_per_m + 0.005;
+    let target = Vec3::new(TIP_M[0] + gap_m + depth_m, TIP_M[1], TIP_M[2]);
+    let r = rig.request(
+        1,
+        Request::GuardedMove {
+            tip_m: target,
+            max_force_n,
+        },
+    );
+    assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+    let start = rig.cycle;
+    let mut largest_true_n = 0.0f64;
+    let mut stop = None;
+    for _ in 0..6000 {
+        let d = rig.step();
+        largest_true_n = largest_true_n.max(rig.true_force_n().norm());
+        assert!(
+            !d.estimate.guard_state.is_halting(),
+            "k {k_n_per_m}: halted: {:?}",
+            d.estimate.guard_reason
+        );
+        if stop.is_none() {
+            stop = d.guarded_stop;
+        }
+    }
+    let stop = stop.unwrap_or_else(|| panic!("k {k_n_per_m}: never braked"));
+    assert!(stop.cycle > start);
+    assert!(
+        stop.force_n.norm() >= max_force_n,
+        "braked below the limit: {}",
+        stop.force_n.norm()
+    );
+    // It stopped short of the target, in the tissue.
+    assert!(
+        stop.tip_m.x > TIP_M[0] + gap_m && stop.tip_m.x < target.x - 0.001,
+        "k {k_n_per_m}: braked at {:?}",
+        stop.tip_m
+    );
+    let out = Outcome {
+        stop_force_n: stop.force_n.norm(),
+        largest_true_n,
+        final_true_n: rig.true_force_n().norm(),
+        stop_after_ms: stop.cycle - start,
+    };
+    (rig, out)
+}
+
+#[test]
+fn a_guarded_move_into_tissue_is_braked_at_its_force() {
+    let max_force_n = 4.0;
+    for k in [100.0, 300.0, 1000.0, 3000.0] {
+        let (rig, o) = guarded_move_into(k, max_force_n);
+        println!(
+            "guarded move at 20 mm/s into {k} N/m, --max-force {max_force_n}: braked {} ms after the command at |F| {:.2} N (filtered); largest true |F| {:.2} N; at rest after {:.2} N",
+            o.stop_after_ms, o.stop_force_n, o.largest_true_n, o.final_true_n
+        );
+        // The overshoot: the filter's lag and the braking distance (20 mm/s
+        // at 0.2 m/s^2: 1 mm) times the stiffness; below the warn limit
+        // (8 N axial) up to 1000 N/m.
+        if k <= 1000.0 {
+            assert!(o.largest_true_n < 8.0, "k {k}: {:.2} N", o.largest_true_n);
+        }
+        assert!(o.final_true_n <= o.largest_true_n + 1e-9);
+        if k == 300.0 {
+            rig.replays_bit_for_bit();
+        }
+    }
+}
+
+#[test]
+fn guarded_move_limits_are_checked() {
+    let mut rig = Rig::new(300.0, 0.010, 0.0, Vec::new());
+    let target = Vec3::new(TIP_M[0] + 0.005, TIP_M[1], TIP_M[2]);
+    for bad in [0.0, -1.0, f64::NAN, 1e3] {
+        let r = rig.request(
+            2,
+            Request::GuardedMove {
+                tip_m: target,
+                max_force_n: bad,
+            },
+        );
+        assert_eq!(r.status, ReplyStatus::BadArgument, "{bad}");
+        assert!(matches!(r.detail, ReplyDetail::BadMaxForce { .. }), "{bad}");
+        assert!(r.detail.to_string().contains("stop limit"), "{}", r.detail);
+    }
+    // A limit below the force there is already (the estimate's own noise
+    // and bias are above 0.01 N): refused, saying so.
+    let r = rig.request(
+        3,
+        Request::GuardedMove {
+            tip_m: target,
+            max_force_n: 0.001,
+        },
+    );
+    assert_eq!(r.status, ReplyStatus::Refused);
+    assert!(
+        matches!(r.detail, ReplyDetail::AlreadyAtForce { .. }),
+        "{:?}",
+        r.detail
+    );
+    // Nothing moved.
+    assert!(rig.log.iter().all(|(_, d)| d.guarded_stop.is_none()));
+}
+
+#[test]
+fn a_recorded_guarded_move_decodes_to_the_same_request() {
+    let mut rig = Rig::new(300.0, 0.010, 0.0, Vec::new());
+    let request = Request::GuardedMove {
+        tip_m: Vec3::new(0.61, 0.2, 0.0),
+        max_force_n: 2.5,
+    };
+    rig.request(4, request);
+    let (input, decision) = *rig.log.last().unwrap();
+    let msg = sar_daemon::record::convert::cycle_input_msg(&input, &decision);
+    assert_eq!(msg.move_max_force_n, 2.5);
+    let back = sar_daemon::record::convert::loop_input(&msg);
+    assert_eq!(back.request, Some(request));
+    // And a plain move stays plain.
+    let plain = Request::MoveTip {
+        tip_m: Vec3::new(0.6, 0.2, 0.001),
+    };
+    rig.request(5, plain);
+    let (input, decision) = *rig.log.last().unwrap();
+    let msg = sar_daemon::record::convert::cycle_input_msg(&input, &decision);
+    assert_eq!(msg.move_max_force_n, 0.0);
+    assert_eq!(
+        sar_daemon::record::convert::loop_input(&msg).request,
+        Some(plain)
+    );
 }

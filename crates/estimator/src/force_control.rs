@@ -137,10 +137,13 @@ fn positive(field: &'static str, value: f64) -> Result<(), SettingError> {
 impl ForceControlConfig {
     /// Checks every setting, and the stability bound.
     pub fn new(limits: ForceControlLimits) -> Result<Self, SettingError> {
-        for a in [&limits.axial, &limits.lateral] {
-            positive("mass_kg", a.mass_kg)?;
-            positive("damping_n_s_per_m", a.damping_n_s_per_m)?;
-        }
+        positive("axial.mass_kg", limits.axial.mass_kg)?;
+        positive("axial.damping_n_s_per_m", limits.axial.damping_n_s_per_m)?;
+        positive("lateral.mass_kg", limits.lateral.mass_kg)?;
+        positive(
+            "lateral.damping_n_s_per_m",
+            limits.lateral.damping_n_s_per_m,
+        )?;
         let k = limits.hold_return_n_per_m;
         if !(k.is_finite() && k >= 0.0) {
             return Err(invalid("hold_return_n_per_m", k, "must be finite and >= 0"));
