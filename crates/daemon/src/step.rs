@@ -1204,3 +1204,54 @@ fn command_reply(result: &Result<CommandAccepted, CommandRefused>) -> (ReplyStat
         ),
     }
 }
+
+// Snapshots (issue 17): the whole decision state, restorable into a step
+// built from the same configuration ([`LoopStep::snapshot`]). `out` is the
+// latest cycle's result, rewritten whole by every cycle.
+sar_snapshot::snap_struct!(GuardedStop {
+    cycle,
+    tip_m,
+    force_n,
+    max_force_n,
+});
+sar_snapshot::snap_struct!(Trajectory {
+    axes,
+    target_tip_m,
+    end_ns,
+    streamed,
+    max_force_n,
+});
+sar_snapshot::snap_state!(LoopStep {
+    state: [
+        trajectory,
+        last_joints,
+        speed_mps,
+        last_drive_state,
+        guarded_stop,
+    ],
+    nested: [estimator, force],
+    config: [calibration, profile, config],
+    output: [out],
+});
+
+/// The kind number of a [`LoopStep`] snapshot (the snapshot header's kind).
+pub const SNAPSHOT_KIND_LOOP_STEP: u16 = 1;
+
+impl LoopStep {
+    /// Writes the whole decision state into `out`, between two cycles. No
+    /// allocation; the configuration is fingerprinted, not stored.
+    pub fn snapshot(
+        &self,
+        out: &mut sar_snapshot::Snapshot,
+    ) -> Result<(), sar_snapshot::SnapshotError> {
+        sar_snapshot::take(self, SNAPSHOT_KIND_LOOP_STEP, out)
+    }
+
+    /// Restores a snapshot taken by [`LoopStep::snapshot`] of a step built
+    /// from the same configuration: from the next cycle on this step decides
+    /// exactly what that one did. Every check of the bytes is made first;
+    /// on an error the step is unchanged.
+    pub fn restore(&mut self, bytes: &[u8]) -> Result<(), sar_snapshot::SnapshotError> {
+        sar_snapshot::restore(self, SNAPSHOT_KIND_LOOP_STEP, bytes)
+    }
+}

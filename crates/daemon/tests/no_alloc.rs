@@ -1,6 +1,7 @@
 //! The control cycle allocates nothing: a counting global allocator around
 //! many simulated cycles, with operator requests (reset, tare, moves), a Warn,
-//! a Stop with its quick stop, a refused and an accepted reset.
+//! a Stop with its quick stop, a refused and an accepted reset, force
+//! control, and the snapshots of the decision state taken between cycles.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -92,6 +93,9 @@ fn a_cycle_allocates_nothing() {
         c.output().guard_reason
     );
 
+    // The snapshot the loop takes between cycles (issue 17), made before.
+    let mut snapshot = sar_snapshot::Snapshot::new();
+    let mut snapshots = 0;
     let before = ALLOCATIONS.load(Ordering::SeqCst);
     let mut seen_warn = false;
     let mut seen_stop = false;
@@ -122,6 +126,10 @@ fn a_cycle_allocates_nothing() {
             operator.requests.push(Envelope { id: i, request }).unwrap();
         }
         let out = step(&mut c);
+        if i % 500 == 0 || c.decision().force_mode.is_some() && i % 50 == 0 {
+            c.loop_step().snapshot(&mut snapshot).unwrap();
+            snapshots += 1;
+        }
         seen_push |= c.decision().force_mode.is_some();
         seen_warn |= out.guard_state == GuardState::Warn;
         seen_stop |= out.guard_state == GuardState::Stop;
@@ -129,6 +137,7 @@ fn a_cycle_allocates_nothing() {
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
     assert!(seen_push, "force control never ran");
+    assert!(snapshots >= 34 && !snapshot.as_bytes().is_empty());
     assert!(
         c.decision().guarded_stop.is_some(),
         "no guarded move was braked: its path did not run"

@@ -103,3 +103,11 @@ pub trait AxisDrives {
     /// another state, `ErrorKind::DeviceFault` while the cause persists.
     fn fault_reset(&mut self) -> Result<(), Self::Error>;
 }
+
+// Snapshots (issue 17): the loop remembers the drives' previous state.
+sar_snapshot::snap_enum!(DriveState {
+    0 => Ready,
+    1 => Enabled,
+    2 => QuickStop,
+    3 => Fault { axis, code },
+});

@@ -1669,3 +1669,35 @@ fn torque_verdict(check: &TorqueCheck, r: &TorqueResidual) -> Option<Reason> {
     }
     None
 }
+
+// Snapshots (issue 17). `last` is the latest cycle's result: every field of
+// it is written by each cycle before anything reads it, so it is output.
+sar_snapshot::snap_struct!(Bias { force_n, torque_nm });
+sar_snapshot::snap_struct!(RestMean {
+    count,
+    force_n,
+    torque_nm,
+    std_n,
+    std_nm,
+    joints,
+});
+sar_snapshot::snap_state!(Estimator {
+    state: [
+        guard,
+        bias,
+        last_now_ns,
+        last_counter,
+        counter_stamp_ns,
+        last_joints,
+        last_values,
+        repeats,
+        last_force_n,
+        spikes,
+        spike_window_left,
+        tare_ns,
+        rest,
+    ],
+    nested: [filter],
+    config: [calibration, profile, tip, frame, limits, torque, noise_n],
+    output: [last],
+});

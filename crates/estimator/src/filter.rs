@@ -379,3 +379,22 @@ impl TipFilter {
         Ok(())
     }
 }
+
+// Snapshots (issue 17): the running state is stored; the settings and the
+// coefficients come from the configuration.
+sar_snapshot::snap_struct!(Filtered { force_n, std_n });
+sar_snapshot::snap_struct!(State {
+    s1,
+    s2,
+    p11,
+    p12,
+    p22,
+    last,
+    counter,
+});
+sar_snapshot::snap_state!(TipFilter {
+    state: [state],
+    nested: [],
+    config: [config, coef, variance_gain],
+    output: [],
+});

@@ -423,3 +423,16 @@ fn clamp_norm(v: &Vec3, max: f64) -> Vec3 {
     let n = v.norm();
     if n > max { v * (max / n) } else { *v }
 }
+
+// Snapshots (issue 17): the mode and the law's state are stored; the
+// settings come from the configuration.
+sar_snapshot::snap_enum!(ForceMode {
+    0 => Hold { max_force_n },
+    1 => Push { axial_n },
+});
+sar_snapshot::snap_state!(ForceController {
+    state: [force_n, mode, reference_m, offset_m, velocity_mps],
+    nested: [filter],
+    config: [config],
+    output: [],
+});

@@ -1788,3 +1788,122 @@ mod tests {
         y
     }
 }
+
+// Snapshots (issue 17): the guard is stored whole, its limits included
+// (an operator may change them at run time). The tags of `Reason` are its
+// codes ([`REASONS`]).
+sar_snapshot::snap_struct!(GuardLimits {
+    warn_total_n,
+    stop_total_n,
+    warn_axial_n,
+    stop_axial_n,
+    warn_lateral_n,
+    stop_lateral_n,
+    hysteresis_n,
+    debounce_samples,
+    max_sensor_age_ns,
+    max_joints_age_ns,
+    std_margin,
+});
+sar_snapshot::snap_struct!(GuardConfig {
+    limits,
+    warn_n,
+    stop_n,
+    clear_n,
+    ceiling_n,
+    retreat_rise_n,
+});
+sar_snapshot::snap_struct!(ForceLimits {
+    warn_total_n,
+    stop_total_n,
+    warn_axial_n,
+    stop_axial_n,
+    warn_lateral_n,
+    stop_lateral_n,
+});
+sar_snapshot::snap_enum!(GuardState { 0 => Ok, 1 => Warn, 2 => Stop, 3 => Fault, 4 => Retreat });
+sar_snapshot::snap_enum!(ForcePart { 0 => Total, 1 => Axial, 2 => Lateral });
+sar_snapshot::snap_enum!(TipField { 0 => Force, 1 => Std, 2 => RodDir });
+sar_snapshot::snap_enum!(Axis { 0 => X, 1 => Y, 2 => Z });
+sar_snapshot::snap_enum!(SensorChannel { 0 => Fx, 1 => Fy, 2 => Fz, 3 => Tx, 4 => Ty, 5 => Tz });
+
+impl sar_snapshot::Snap for RestResidual {
+    fn put(&self, w: &mut sar_snapshot::Writer<'_>) {
+        match self {
+            Self::Axial => w.put_u8(0),
+            Self::Lateral => w.put_u8(1),
+            Self::Torque(axis) => {
+                w.put_u8(2);
+                axis.put(w);
+            }
+        }
+    }
+    fn get(r: &mut sar_snapshot::Reader<'_>) -> Result<Self, sar_snapshot::SnapshotError> {
+        let at = r.position();
+        match r.get_u8()? {
+            0 => Ok(Self::Axial),
+            1 => Ok(Self::Lateral),
+            2 => Ok(Self::Torque(sar_snapshot::Snap::get(r)?)),
+            value => Err(sar_snapshot::SnapshotError::BadTag {
+                what: "RestResidual",
+                value,
+                at,
+            }),
+        }
+    }
+}
+
+sar_snapshot::snap_enum!(Reason {
+    1 => NoInputYet,
+    2 => CycleOutOfOrder { previous, got },
+    3 => ClockFailed,
+    4 => ClockNotAdvancing { previous_ns, now_ns },
+    5 => SensorCounterGap { previous, got, max_gap },
+    6 => SensorStatus { status },
+    7 => JointJump { axis, moved_m, allowed_m },
+    8 => JointsStampBackwards { previous_ns, got_ns },
+    9 => TorqueImplausible { axis, residual_nm, std_nm, max_sigma },
+    10 => ResetNotCurrent { last, got },
+    11 => SensorInvalid,
+    12 => SensorStale { age_ns, max_age_ns },
+    13 => JointsInvalid,
+    14 => JointsStale { age_ns, max_age_ns },
+    15 => PoseInvalid,
+    16 => NonFinite { field, axis },
+    17 => NegativeStd { axis, std_n },
+    18 => RodDirNotUnit { norm },
+    19 => EstimatorNotObservable,
+    20 => NotObservable { std_max_n, max_std_n },
+    21 => AboveStop { part, force_n, limit_n },
+    22 => AboveWarn { part, force_n, limit_n },
+    23 => BelowWarn,
+    24 => Reset,
+    25 => FollowingError { axis, error_m, tolerance_m },
+    26 => AwaitingFirstReset,
+    27 => SensorFrozen { repeats },
+    28 => SensorSaturated { channel, value, range },
+    29 => SensorSpikes { spikes, window },
+    30 => TareDue { age_s, max_age_s },
+    31 => Tared,
+    32 => MountingMismatch { residual, value, allowed },
+    33 => RetreatEntered { part, force_n, limit_n },
+    34 => ForceRising { part, force_n, bound_n },
+    35 => PublisherStalled { stalled_ms },
+    36 => DriveFault { axis, code },
+    37 => RestIncomplete { samples, needed },
+});
+
+sar_snapshot::snap_struct!(Guard {
+    config,
+    state,
+    reason,
+    last_cycle,
+    blocker,
+    above_warn,
+    stop_count,
+    warn_count,
+    clear_count,
+    initial,
+    smoothed_parts_n,
+    retreat_min_n,
+});

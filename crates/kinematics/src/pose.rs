@@ -246,3 +246,5 @@ pub fn inverse(
         q3_m: q.x,
     })
 }
+
+sar_snapshot::snap_struct!(ActiveJoints { q1_m, q2_m, q3_m });

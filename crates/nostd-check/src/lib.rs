@@ -1,6 +1,6 @@
 //! A `#![no_std]` static library that uses the per-cycle path, the
-//! identification and the support calibration of the core crates. It exists
-//! only to fail the build if std (or alloc) enters their dependency tree: its
+//! identification, the support calibration and the snapshots of the core
+//! crates. It exists only to fail the build if std (or alloc) enters their dependency tree: its
 //! own `#[panic_handler]` then collides with std's.
 #![no_std]
 
@@ -181,6 +181,25 @@ pub extern "C" fn sar_nostd_cycle_offset(
         command: Some(Command::Reset),
     });
     out.guard_state as i32
+}
+
+/// A snapshot of the estimator's decision state, taken and restored
+/// (issue 17): its length in bytes, or -1.
+#[unsafe(no_mangle)]
+pub extern "C" fn sar_nostd_snapshot(fx_n: f64) -> i32 {
+    let Some(config) = config() else { return -1 };
+    let Ok(mut estimator) = Estimator::new(&config, Vec3::new(fx_n, 0.0, 0.0)) else {
+        return -1;
+    };
+    let mut snap = sar_snapshot::Snapshot::new();
+    if sar_snapshot::take(&estimator, 1, &mut snap).is_err() {
+        return -1;
+    }
+    let bytes = snap.as_bytes();
+    match sar_snapshot::restore(&mut estimator, 1, bytes) {
+        Ok(()) => i32::try_from(bytes.len()).unwrap_or(-1),
+        Err(_) => -1,
+    }
 }
 
 #[panic_handler]

@@ -312,3 +312,16 @@ mod tests {
         assert!((mid.v_mps + 0.02).abs() < 1e-12);
     }
 }
+
+// Snapshots (issue 17): a plan is stored whole (the loop's trajectory).
+sar_snapshot::snap_struct!(Phase {
+    duration_s,
+    accel_mps2,
+});
+sar_snapshot::snap_struct!(AxisPlan {
+    start_ns,
+    x0_m,
+    v0_mps,
+    phases,
+    end_m,
+});
