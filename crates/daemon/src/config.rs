@@ -191,6 +191,7 @@ struct RecordToml {
     max_file_s: f64,
     queue_capacity: i64,
     scene_hz: f64,
+    snapshot_s: f64,
 }
 
 impl Default for RecordToml {
@@ -202,6 +203,7 @@ impl Default for RecordToml {
             max_file_s: 600.0,
             queue_capacity: 65536,
             scene_hz: 30.0,
+            snapshot_s: 10.0,
         }
     }
 }
@@ -973,6 +975,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let max_s = ctx.range_f("record.max_file_s", rec.max_file_s, 0.0, 86_400.0, "s")?;
     let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
     let scene_hz = ctx.range_f("record.scene_hz", rec.scene_hz, 0.0, 1000.0, "Hz")?;
+    let snapshot_s = ctx.range_f("record.snapshot_s", rec.snapshot_s, 0.01, 3600.0, "s")?;
     let scene = (scene_hz > 0.0).then(|| crate::record::SceneOptions {
         geometry: crate::view::scene::SceneGeometry::from_config(&EstimatorConfig {
             calibration,
@@ -995,6 +998,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         },
         queue_capacity: usize::try_from(queue_capacity).unwrap_or(65536),
         scene,
+        snapshot_period_ns: (snapshot_s * 1e9).round() as u64,
     };
 
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;

@@ -24,6 +24,8 @@ pub struct Published<'a> {
     pub loop_input: &'a LoopInput,
     /// The cycle's whole decision (the estimator's output in `estimate`).
     pub decision: &'a LoopOutput,
+    /// The step after the cycle (the recorder snapshots its state).
+    pub step: &'a crate::step::LoopStep,
     /// The loop's measurements.
     pub stats: &'a LoopStats,
     /// Quick stops so far.
@@ -93,6 +95,7 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
         publisher.publish(&Published {
             loop_input: controller.loop_input(),
             decision: controller.decision(),
+            step: controller.loop_step(),
             stats,
             quick_stops: controller.counts().quick_stops,
             recorder_drops: 0,

@@ -54,6 +54,34 @@ fn every_message_type_round_trips() {
     let truth = Outgoing::SimTruth(WrenchStamped::base_force(17, [1.5, -2.25, 0.125]));
     roundtrip(&truth);
     seen.insert(truth.topic());
+    // A snapshot (variable length: its own decoder), joined from chunks.
+    let data: Vec<u8> = (0..1000u32).map(|i| (i * 7 % 251) as u8).collect();
+    let mut chunks = Vec::new();
+    assert!(SnapshotChunk::split(19, 23, &data, |c| {
+        chunks.push(c);
+        true
+    }));
+    assert_eq!(chunks.len(), 3);
+    let mut joined = Vec::new();
+    for c in &chunks {
+        let Outgoing::SnapshotChunk(c) = c else {
+            panic!("{c:?}")
+        };
+        seen.insert(Topic::StateSnapshot);
+        assert_eq!((c.stamp_ns, c.after_cycle, c.count), (19, 23, 3));
+        joined.extend_from_slice(c.data());
+    }
+    assert_eq!(joined, data);
+    let m = StateSnapshot {
+        stamp_ns: 19,
+        after_cycle: 23,
+        format_version: 1,
+        data,
+    };
+    let mut bytes = Vec::new();
+    m.encode(&mut bytes).unwrap();
+    assert_eq!(StateSnapshot::decode(&bytes).unwrap(), m);
+    assert!(Outgoing::decode(Topic::StateSnapshot, &bytes).is_err());
     assert_eq!(seen.len(), Topic::ALL.len());
 }
 

@@ -71,6 +71,8 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             // writer's speed.
             queue_capacity: 65536,
             scene: None,
+            // A snapshot every 100 ms: the loop takes and pushes 45.
+            snapshot_period_ns: 100_000_000,
         },
         bias,
         Arc::clone(&switch),
@@ -101,6 +103,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         p.publish(&Published {
             loop_input: c.loop_input(),
             decision: c.decision(),
+            step: c.loop_step(),
             stats: &stats,
             quick_stops: c.counts().quick_stops,
             recorder_drops: 0,
@@ -142,7 +145,10 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
     assert_eq!(r.mode, Mode::CycleInput);
     assert_eq!(r.cycles, 4500);
     assert_eq!(r.first_difference, None);
-    assert_eq!(r.compared, r.outputs);
+    // The snapshots taken on the loop (one at the start, one every 100 ms)
+    // were written and equal the replayed step's state.
+    assert!(r.snapshots_compared >= 44, "{}", r.snapshots_compared);
+    assert_eq!(r.compared, r.outputs + r.snapshots_compared);
     let bytes = read_file(&files[0]).unwrap();
     let events = McapReader::new(&bytes)
         .unwrap()

@@ -173,6 +173,9 @@ fn fields(m: &Outgoing) -> String {
                 .i("written", d.written)
                 .i("queue_capacity", d.queue_capacity);
         }
+        // Chunks live only in the recorder's queue (the file holds the
+        // joined `/sar/cycle/snapshot`, which `strict_readers` decodes).
+        Outgoing::SnapshotChunk(c) => panic!("a snapshot chunk is never read back: {c:?}"),
     }
     l.0.join(";")
 }

@@ -149,10 +149,19 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     assert_eq!(v["mode"], "cycle_input", "{v}");
     assert_eq!(v["recorder_dropped"], 0, "{v}");
     assert!(v["cycles"].as_u64().unwrap() > 100, "{v}");
-    assert_eq!(v["compared"], v["outputs"], "{v}");
+    // Every output, and the snapshot at the recording's start (compared
+    // with the replayed state, not restored).
+    assert_eq!(v["from_snapshot"], serde_json::Value::Null, "{v}");
+    assert_eq!(v["snapshots_compared"], 1, "{v}");
+    assert_eq!(
+        v["compared"].as_u64(),
+        v["outputs"].as_u64().map(|o| o + 1),
+        "{v}"
+    );
     assert!(out_file.exists());
     // The one started on request is a complete, readable recording too; it
-    // says that it starts after the daemon's first cycle.
+    // says that it starts after the daemon's first cycle, and replays bit
+    // for bit from the snapshot it starts with (issue 17).
     let cfg = sar_daemon::config::load(&config).unwrap();
     let r = sar_daemon::record::replay::replay_file(
         &files[1],
@@ -161,6 +170,13 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     .unwrap();
     assert_eq!(r.from_first_cycle, Some(false));
     assert!(r.cycles > 10, "{}", r.cycles);
+    assert_eq!(r.first_difference, None);
+    assert!(
+        r.from_snapshot.is_some_and(|c| c > 100),
+        "{:?}",
+        r.from_snapshot
+    );
+    assert_eq!(r.compared, r.outputs);
     let bytes = sar_daemon::record::read_file(&files[1]).unwrap();
     let mut reader = sar_daemon::record::McapReader::new(&bytes).unwrap();
     assert!(reader.by_ref().all(|m| m.is_ok()));

@@ -129,9 +129,10 @@ enum Cmd {
     Identify(sar_daemon::cli::identify::IdentifyArgs),
     /// Run the estimator over a recording's inputs, write and compare the outputs.
     Replay {
-        /// The recording.
-        #[arg(long, value_name = "REC.mcap")]
-        input: std::path::PathBuf,
+        /// The recording: a file, the files of a rotated set in order
+        /// (--input A --input B ...), or a directory of them (by name).
+        #[arg(long, value_name = "REC.mcap|DIR", required = true)]
+        input: Vec<std::path::PathBuf>,
         /// Where to write the outputs.
         #[arg(long, value_name = "OUT.mcap")]
         output: Option<std::path::PathBuf>,
@@ -141,6 +142,13 @@ enum Cmd {
         /// Draw the tip force over time (with the reference) into an SVG.
         #[arg(long, value_name = "FILE.svg")]
         plot: Option<std::path::PathBuf>,
+        /// Replay from this time on, s after the recording's first cycle
+        /// (from the snapshot before it).
+        #[arg(long, value_name = "S")]
+        from: Option<f64>,
+        /// Stop after this time, s after the recording's first cycle.
+        #[arg(long, value_name = "S")]
+        to: Option<f64>,
     },
     /// Rewrite a recording cut short with its summary and index.
     Recover {
@@ -336,6 +344,8 @@ fn run(args: &Args) -> Result<(), String> {
             output,
             compare,
             plot,
+            from,
+            to,
         } => {
             let config = args.config.as_deref().ok_or("replay needs --config FILE")?;
             return sar_daemon::cli::replay::run(&sar_daemon::cli::replay::Args {
@@ -345,6 +355,8 @@ fn run(args: &Args) -> Result<(), String> {
                 compare: compare.as_deref(),
                 json,
                 plot: plot.as_deref(),
+                from_s: *from,
+                to_s: *to,
             });
         }
         Cmd::Recover { file, output } => {

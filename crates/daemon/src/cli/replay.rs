@@ -1,22 +1,26 @@
-//! `sarctl replay --config FILE --input REC.mcap --output OUT.mcap
-//! [--compare TOPIC] [--format json] [--plot FILE.svg]`: the per-cycle step
-//! over a recording's inputs ([`crate::record::replay`]), its outputs
+//! `sarctl replay --config FILE --input REC.mcap|DIR [--input ...] --output
+//! OUT.mcap [--from S] [--to S] [--compare TOPIC] [--format json] [--plot
+//! FILE.svg]`: the
+//! per-cycle step over a recording's inputs ([`crate::record::replay`]; the
+//! files of a rotated set, or a directory of them, replayed in order as
+//! one and checked to chain), its outputs
 //! written, the recorded outputs compared bit for bit (a difference exits
 //! non-zero naming the first cycle, topic and field), the error figures
 //! against a reference topic, and the tip force over time as an SVG (the
 //! article's Figure 9).
 
-use crate::record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_file};
+use crate::record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_files};
 use serde_json::json;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The command's arguments.
 #[derive(Debug, Clone, Copy)]
 pub struct Args<'a> {
     /// The configuration.
     pub config: &'a Path,
-    /// The recording.
-    pub input: &'a Path,
+    /// The recording: files of one rotated set in order, or directories
+    /// (their `*.mcap` files by name, scene files left out).
+    pub input: &'a [PathBuf],
     /// The outputs.
     pub output: Option<&'a Path>,
     /// The reference topic.
@@ -25,6 +29,10 @@ pub struct Args<'a> {
     pub json: bool,
     /// The SVG plot.
     pub plot: Option<&'a Path>,
+    /// `--from`, s after the first cycle.
+    pub from_s: Option<f64>,
+    /// `--to`, s after the first cycle.
+    pub to_s: Option<f64>,
 }
 
 /// The report as JSON.
@@ -44,6 +52,9 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
         "stopped": r.stopped,
         "output": r.output.as_ref().map(|p| p.display().to_string()),
         "from_first_cycle": r.from_first_cycle,
+        "from_snapshot": r.from_snapshot,
+        "skipped_cycles": r.skipped_cycles,
+        "snapshots_compared": r.snapshots_compared,
         "comparison": r.comparison.as_ref().map(|c| json!({
             "topic": c.topic,
             "pairs": c.pairs,
@@ -62,9 +73,22 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
         output: a.output.map(Path::to_path_buf),
         compare: a.compare.map(str::to_owned),
         keep_series: a.plot.is_some(),
+        from_s: a.from_s,
+        to_s: a.to_s,
         ..ReplayOptions::from_config(&cfg)
     };
-    let r = replay_file(a.input, &options).map_err(|e| format!("{}: {e}", a.input.display()))?;
+    let inputs = input_files(a.input)?;
+    let shown = match inputs.as_slice() {
+        [one] => one.display().to_string(),
+        [first, .., last] => format!(
+            "{} .. {} ({} files)",
+            first.display(),
+            last.display(),
+            inputs.len()
+        ),
+        [] => String::new(),
+    };
+    let r = replay_files(&inputs, &options).map_err(|e| format!("{shown}: {e}"))?;
     if let Some(plot) = a.plot {
         plot_svg(plot, &r.series, a.compare)?;
     }
@@ -73,7 +97,7 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
     } else {
         println!(
             "{}: {} cycles replayed ({}), {} outputs{}",
-            a.input.display(),
+            shown,
             r.cycles,
             r.mode.name(),
             r.outputs,
@@ -82,6 +106,18 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
                 .map(|p| format!(" written to {}", p.display()))
                 .unwrap_or_default()
         );
+        if let Some(c) = r.from_snapshot {
+            println!(
+                "started from the snapshot after cycle {c} ({} earlier cycles in the file skipped)",
+                r.skipped_cycles
+            );
+        }
+        if r.snapshots_compared > 0 {
+            println!(
+                "{} recorded snapshots compared with the replayed state",
+                r.snapshots_compared
+            );
+        }
         if r.compared > 0 || r.differences > 0 {
             println!(
                 "compared with the recorded outputs: {} messages, {} differ",
@@ -109,16 +145,27 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
             println!("the input is cut short: replayed up to its last complete chunk ({e})");
         }
     }
+    if r.cycles == 0 && r.skipped_cycles > 0 {
+        return Err(format!(
+            "{shown}: no snapshot of the loop's state in the recording (all dropped?): its {} cycles cannot be replayed",
+            r.skipped_cycles
+        ));
+    }
     match &r.first_difference {
         Some(d) => Err(format!(
-            "replay differs from the recording: {} messages; first at cycle {} on {} field {} (recorded {}, replayed {}){}",
+            "replay differs from the recording: {} messages; first {}at cycle {} on {} field {} (recorded {}, replayed {}){}",
             r.differences,
+            d.file
+                .as_ref()
+                .filter(|_| inputs.len() > 1)
+                .map(|f| format!("in {} ", f.display()))
+                .unwrap_or_default(),
             d.cycle,
             d.topic,
             d.field,
             d.recorded,
             d.replayed,
-            if r.from_first_cycle == Some(false) {
+            if r.from_first_cycle == Some(false) && r.from_snapshot.is_none() {
                 "; the recording starts after the daemon's first cycle (sarctl record start, or a later file of a rotation), so the estimator's earlier state is not in it"
             } else {
                 ""
@@ -126,6 +173,37 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
         )),
         None => Ok(()),
     }
+}
+
+/// The files to replay: each input as given, a directory as its `*.mcap`
+/// files sorted by name (the recorder's `NAME-0000.mcap`, `NAME-0001.mcap`,
+/// ...), without the scene companions. A directory with none is an error.
+pub fn input_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
+    let mut out = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            let entries = std::fs::read_dir(input)
+                .map_err(|e| format!("{}: cannot list the directory: {e}", input.display()))?;
+            let mut files: Vec<PathBuf> = entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    let name = p.to_string_lossy();
+                    name.ends_with(".mcap") && !name.ends_with(".scene.mcap")
+                })
+                .collect();
+            if files.is_empty() {
+                return Err(format!(
+                    "{}: no .mcap file in the directory",
+                    input.display()
+                ));
+            }
+            files.sort();
+            out.extend(files);
+        } else {
+            out.push(input.clone());
+        }
+    }
+    Ok(out)
 }
 
 /// The tip force over time (X, Y, Z, one panel each) with the reference

@@ -63,6 +63,10 @@ pub enum CdrError {
         /// The field's capacity.
         max: usize,
     },
+    /// One part of a larger message (a snapshot chunk), which the writer
+    /// joins with the others before encoding; it has no CDR form alone.
+    #[error("a snapshot chunk has no CDR form alone (the writer joins the chunks)")]
+    NotAMessage,
     /// A sequence has more elements than the field holds.
     #[error("sequence at byte {offset} has {count} elements, the field holds at most {max}")]
     SequenceTooLong {
@@ -182,6 +186,11 @@ impl<'a> CdrWriter<'a> {
     pub fn f64_seq(&mut self, v: &[f64]) {
         self.seq_len(v.len());
         self.f64_array(v);
+    }
+    /// A sequence of bytes (`uint8[]`: u32 count, bytes).
+    pub fn byte_seq(&mut self, v: &[u8]) {
+        self.seq_len(v.len());
+        self.buf.extend_from_slice(v);
     }
     /// A sequence's count.
     pub fn seq_len(&mut self, n: usize) {
@@ -333,6 +342,11 @@ impl<'a> CdrReader<'a> {
             out.push(self.f64()?);
         }
         Ok(out)
+    }
+    /// A sequence of bytes (`uint8[]`, at most `max`), borrowed.
+    pub fn byte_seq(&mut self, max: usize) -> Result<&'a [u8], CdrError> {
+        let n = self.seq_len(max, 1)?;
+        self.take(n)
     }
     /// A string, borrowed.
     pub fn str(&mut self) -> Result<&'a str, CdrError> {

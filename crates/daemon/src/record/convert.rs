@@ -371,6 +371,10 @@ pub fn joints_msg(j: &JointSample) -> ActiveJointState {
 /// the messages.
 pub const REPLAY_METADATA: &str = "sar_replay";
 
+/// The `sar_replay` key of a recording whose files start with a snapshot
+/// (`/sar/cycle/snapshot`): the snapshot format's version.
+pub const SNAPSHOT_FORMAT_KEY: &str = "snapshot_format";
+
 /// `sar_replay` metadata: the bias the estimator started with (sensor frame;
 /// each value as its IEEE bits in hex, so it round-trips exactly), and
 /// whether the recording starts at the daemon's first cycle.

@@ -14,7 +14,10 @@
 //! `rosbags` refuse the whole file). Opened together in Foxglove, the two
 //! files look as the live view does.
 
-use super::msgs::{EstimatorState, Outgoing, PassiveJointState, RecorderDrops, Topic};
+use super::msgs::{
+    EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
+    StateSnapshot, Topic,
+};
 use crate::view::scene::{self, SceneGeometry};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -142,6 +145,12 @@ pub struct FileOptions {
     pub first_path: Option<PathBuf>,
     /// The live view's 3D scene beside the topics (`None`: not written).
     pub scene: Option<SceneOptions>,
+    /// Rotation waits for a snapshot (`/sar/cycle/snapshot`), which then
+    /// starts the new file, so that every file replays on its own; when no
+    /// snapshot comes for this long (log time, ns) after the rotation fell
+    /// due (all dropped), the file rotates at the next message anyway (that
+    /// file then starts without one). `None`: rotate at any message.
+    pub rotate_at_snapshots_grace_ns: Option<u64>,
 }
 
 impl FileOptions {
@@ -157,6 +166,7 @@ impl FileOptions {
             metadata: Vec::new(),
             first_path: None,
             scene: None,
+            rotate_at_snapshots_grace_ns: None,
         }
     }
 
@@ -263,6 +273,15 @@ pub struct RotatingWriter {
     buf: Vec<u8>,
     written: u64,
     scene: Option<SceneState>,
+    /// The snapshot being joined from its chunks: its `after_cycle` and the
+    /// next chunk expected.
+    joining: Option<(u64, u8)>,
+    /// The joined snapshot's bytes.
+    snapshot: StateSnapshot,
+    /// Snapshots not written because a chunk was missing.
+    snapshots_incomplete: u64,
+    /// When the current file's rotation fell due (log time, ns).
+    rotation_due_ns: Option<u64>,
 }
 
 /// What the scene is drawn from: the messages of one cycle (all stamped with
@@ -347,7 +366,21 @@ impl RotatingWriter {
                 buf: Vec::with_capacity(4096),
             }),
             options,
+            joining: None,
+            snapshot: StateSnapshot {
+                stamp_ns: 0,
+                after_cycle: 0,
+                format_version: sar_snapshot::VERSION,
+                data: Vec::with_capacity(sar_snapshot::CAPACITY),
+            },
+            snapshots_incomplete: 0,
+            rotation_due_ns: None,
         })
+    }
+
+    /// Snapshots not written because one of their chunks was missing.
+    pub fn snapshots_incomplete(&self) -> u64 {
+        self.snapshots_incomplete
     }
 
     /// The files started so far (the last one may be open).
@@ -465,14 +498,69 @@ impl RotatingWriter {
 
     /// Writes one message (log and publish time = its stamp), rotating first
     /// if the current file is full; `status` is written into the file closed.
+    /// Snapshot chunks are joined, and the snapshot written once complete
+    /// (with [`FileOptions::rotate_at_snapshots_grace_ns`], rotating there).
     pub fn write(&mut self, msg: &Outgoing, status: &RecorderDrops) -> Result<(), WriteError> {
+        if let Outgoing::SnapshotChunk(chunk) = msg {
+            return self.write_chunk(chunk, status);
+        }
         let log_ns = msg.stamp_ns();
         if let Some(file) = &self.current
             && self.must_rotate(file, log_ns)
         {
-            self.close(status)?;
+            let overdue = match self.options.rotate_at_snapshots_grace_ns {
+                None => true,
+                Some(grace) => {
+                    let due = *self.rotation_due_ns.get_or_insert(log_ns);
+                    log_ns.saturating_sub(due) >= grace
+                }
+            };
+            if overdue {
+                self.close(status)?;
+            }
         }
         self.write_raw(msg)
+    }
+
+    /// Joins a snapshot's chunks; writes it when complete. A chunk out of
+    /// order (one was dropped) abandons the snapshot it belongs to.
+    fn write_chunk(
+        &mut self,
+        chunk: &SnapshotChunk,
+        status: &RecorderDrops,
+    ) -> Result<(), WriteError> {
+        if chunk.index == 0 {
+            if self.joining.is_some() {
+                self.snapshots_incomplete += 1;
+            }
+            self.snapshot.data.clear();
+        } else if self.joining != Some((chunk.after_cycle, chunk.index)) {
+            if self.joining.is_some() {
+                self.snapshots_incomplete += 1;
+            }
+            self.joining = None;
+            return Ok(());
+        }
+        self.snapshot.data.extend_from_slice(chunk.data());
+        if chunk.index.saturating_add(1) < chunk.count {
+            self.joining = Some((chunk.after_cycle, chunk.index + 1));
+            return Ok(());
+        }
+        self.joining = None;
+        if let Some(file) = &self.current
+            && self.must_rotate(file, chunk.stamp_ns)
+        {
+            self.close(status)?;
+        }
+        self.snapshot.stamp_ns = chunk.stamp_ns;
+        self.snapshot.after_cycle = chunk.after_cycle;
+        self.snapshot
+            .encode(&mut self.buf)
+            .map_err(|source| WriteError::Encode {
+                topic: Topic::StateSnapshot.name(),
+                source,
+            })?;
+        self.write_encoded(Topic::StateSnapshot, chunk.stamp_ns)
     }
 
     fn write_raw(&mut self, msg: &Outgoing) -> Result<(), WriteError> {
@@ -483,6 +571,12 @@ impl RotatingWriter {
                 topic: topic.name(),
                 source,
             })?;
+        self.write_encoded(topic, log_ns)?;
+        self.write_scene(msg)
+    }
+
+    /// Writes the message encoded in `self.buf` on `topic`'s channel.
+    fn write_encoded(&mut self, topic: Topic, log_ns: u64) -> Result<(), WriteError> {
         let i = topic_index(topic);
         let sequence = self.sequence.get(i).copied().unwrap_or(0);
         if self.current.is_none() {
@@ -508,7 +602,7 @@ impl RotatingWriter {
             *s = s.wrapping_add(1);
         }
         self.written += 1;
-        self.write_scene(msg)
+        Ok(())
     }
 
     /// Follows the cycles' messages: a message of a later cycle closes the
@@ -648,6 +742,7 @@ impl RotatingWriter {
         let Some(mut file) = self.current.take() else {
             return Ok(());
         };
+        self.rotation_due_ns = None;
         let path = file.path.clone();
         let mcap_err = |source| WriteError::Mcap {
             path: path.clone(),

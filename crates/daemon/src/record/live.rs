@@ -8,14 +8,17 @@
 //!
 //! Per cycle: `/sar/cycle/input`, `/sar/sensor/wrench` (a new sample: its
 //! counter changed), `/sar/joints` (a new stamp), then the outputs of
-//! [`super::convert::outputs`]. A recording started with the daemon holds
-//! every cycle from the first and replays bit for bit; one started later
-//! (`sarctl record start`) lacks the estimator's earlier history (guard,
-//! filter, bias after tares) and says so in its `sar_replay` metadata
-//! (`from_first_cycle = false`).
+//! [`super::convert::outputs`]. After the cycle's messages, at the start of a
+//! recording and every `snapshot_period_ns`, `/sar/cycle/snapshot`: the
+//! loop's whole decision state after that cycle (pushed as chunks; the
+//! writer joins them and starts each rotated file with one). So a recording
+//! started at any time (`sarctl record start`), and each of its files,
+//! replays bit for bit from its first snapshot (the `sar_replay` metadata
+//! still says `from_first_cycle`).
 
 use super::convert;
 use super::file::{FileOptions, Rotation};
+use super::msgs::SnapshotChunk;
 use super::recorder::{Recorder, RecorderConfig};
 use crate::runloop::{Publish, Published};
 use crossbeam_queue::ArrayQueue;
@@ -40,6 +43,10 @@ pub struct RecordSettings {
     /// The live view's 3D scene, in a companion file beside each file
     /// (`[record] scene_hz`; `NAME.scene.mcap`).
     pub scene: Option<super::file::SceneOptions>,
+    /// A snapshot of the loop's decision state every this much time, ns
+    /// (`[record] snapshot_s`); one also starts every recording and every
+    /// file of a rotation.
+    pub snapshot_period_ns: u64,
 }
 
 const WANT_NONE: u8 = 0;
@@ -147,6 +154,11 @@ pub struct LiveRecorder<P> {
     /// Drops of the recordings already handed back.
     dropped_before: u64,
     last_joints_stamp_ns: Option<u64>,
+    /// The snapshot taken on the loop's thread (allocated at start).
+    snapshot: Box<sar_snapshot::Snapshot>,
+    snapshot_period_ns: u64,
+    /// When the next snapshot is due (cycle stamp, ns); `None`: at once.
+    next_snapshot_ns: Option<u64>,
 }
 
 impl<P> LiveRecorder<P> {
@@ -181,6 +193,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
         {
             self.active = Some(rec);
             self.last_joints_stamp_ns = None;
+            self.next_snapshot_ns = None;
             self.switch.recording.store(true, Ordering::Release);
         }
         let mut dropped = self.dropped_before;
@@ -191,6 +204,18 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             convert::cycle_record(c.loop_input, c.decision, joints_new, |m| {
                 rec.push(m);
             });
+            // The state after this cycle, at the start of a recording and
+            // then periodically: replay restores it and steps the cycles
+            // after it (the writer starts a rotated file with one).
+            let stamp_ns = convert::cycle_stamp_ns(&input.cycle_input());
+            if self.next_snapshot_ns.is_none_or(|due| stamp_ns >= due)
+                && c.step.snapshot(&mut self.snapshot).is_ok()
+            {
+                self.next_snapshot_ns = Some(stamp_ns.saturating_add(self.snapshot_period_ns));
+                SnapshotChunk::split(stamp_ns, input.cycle, self.snapshot.as_bytes(), |m| {
+                    rec.push(m)
+                });
+            }
             dropped += rec.dropped();
         }
         self.switch.dropped.store(dropped, Ordering::Relaxed);
@@ -218,8 +243,22 @@ fn recorder_config(
 ) -> RecorderConfig {
     let mut files = FileOptions::new(settings.directory.clone(), name);
     files.rotation = settings.rotation;
-    files.metadata = vec![convert::replay_metadata(bias, first)];
+    let mut replay = convert::replay_metadata(bias, first);
+    // Its files start with a snapshot (replay waits for one).
+    replay.1.insert(
+        convert::SNAPSHOT_FORMAT_KEY.to_owned(),
+        sar_snapshot::VERSION.to_string(),
+    );
+    files.metadata = vec![replay];
     files.scene = settings.scene;
+    // Rotation waits for the next snapshot, or rotates anyway after twice
+    // its period and a second more (snapshots dropped).
+    files.rotate_at_snapshots_grace_ns = Some(
+        settings
+            .snapshot_period_ns
+            .saturating_mul(2)
+            .saturating_add(1_000_000_000),
+    );
     let mut c = RecorderConfig::new(files);
     c.queue_capacity = settings.queue_capacity;
     c
@@ -248,6 +287,7 @@ impl RecordManager {
     ) -> Result<(Self, LiveRecorder<P>), String> {
         let incoming = Arc::new(ArrayQueue::new(1));
         let outgoing = Arc::new(ArrayQueue::new(4));
+        let snapshot_period_ns = settings.snapshot_period_ns;
         let _ = switch.directory.set(settings.directory.clone());
         if settings.enabled {
             let name = switch.take_name();
@@ -291,6 +331,9 @@ impl RecordManager {
                 active: None,
                 dropped_before: 0,
                 last_joints_stamp_ns: None,
+                snapshot: Box::new(sar_snapshot::Snapshot::new()),
+                snapshot_period_ns: snapshot_period_ns.max(1),
+                next_snapshot_ns: None,
             },
         ))
     }

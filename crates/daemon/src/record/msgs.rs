@@ -838,6 +838,112 @@ impl RosMessage for RecorderDrops {
     }
 }
 
+/// Snapshot bytes per [`SnapshotChunk`] (a chunk fits the queue's slot,
+/// which the largest message sets at about 420 bytes).
+pub const SNAPSHOT_CHUNK_BYTES: usize = 384;
+
+/// Chunks of one snapshot at most.
+pub const SNAPSHOT_CHUNKS_MAX: usize = sar_snapshot::CAPACITY.div_ceil(SNAPSHOT_CHUNK_BYTES);
+
+/// One part of a [`StateSnapshot`] in the recorder's queue (fixed-size,
+/// `Copy`): the loop pushes a snapshot as consecutive chunks, the writer
+/// joins them and writes one message; a snapshot with a chunk missing (a
+/// full queue) is not written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SnapshotChunk {
+    /// The cycle's `now`, ns (the message's stamp).
+    pub stamp_ns: u64,
+    /// The last cycle stepped before the snapshot was taken.
+    pub after_cycle: u64,
+    /// This chunk's place, 0-based.
+    pub index: u8,
+    /// The snapshot's chunks.
+    pub count: u8,
+    /// Bytes of `bytes` in use.
+    pub len: u16,
+    /// The snapshot's bytes from `index * SNAPSHOT_CHUNK_BYTES`.
+    pub bytes: [u8; SNAPSHOT_CHUNK_BYTES],
+}
+
+impl SnapshotChunk {
+    /// Splits `snapshot` into chunks, handing each to `push` in order; stops
+    /// at the first refused (false). Whether all were taken.
+    pub fn split(
+        stamp_ns: u64,
+        after_cycle: u64,
+        snapshot: &[u8],
+        mut push: impl FnMut(Outgoing) -> bool,
+    ) -> bool {
+        let count = snapshot.len().div_ceil(SNAPSHOT_CHUNK_BYTES);
+        let Ok(count_u8) = u8::try_from(count) else {
+            return false;
+        };
+        for (i, part) in snapshot.chunks(SNAPSHOT_CHUNK_BYTES).enumerate() {
+            let mut bytes = [0u8; SNAPSHOT_CHUNK_BYTES];
+            if let Some(dst) = bytes.get_mut(..part.len()) {
+                dst.copy_from_slice(part);
+            }
+            let chunk = SnapshotChunk {
+                stamp_ns,
+                after_cycle,
+                index: u8::try_from(i).unwrap_or(u8::MAX),
+                count: count_u8,
+                len: u16::try_from(part.len()).unwrap_or(0),
+                bytes,
+            };
+            if !push(Outgoing::SnapshotChunk(chunk)) {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// The bytes in use.
+    pub fn data(&self) -> &[u8] {
+        self.bytes.get(..usize::from(self.len)).unwrap_or(&[])
+    }
+}
+
+/// `sar_msgs/msg/StateSnapshot` (`msg/StateSnapshot.msg`): the loop's
+/// decision state after a cycle, as written (the reader's form: owns its
+/// bytes).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StateSnapshot {
+    /// `header.stamp`: the cycle's `now`, ns.
+    pub stamp_ns: u64,
+    /// The last cycle stepped before it was taken.
+    pub after_cycle: u64,
+    /// The sar-snapshot format's version.
+    pub format_version: u16,
+    /// The snapshot's bytes.
+    pub data: Vec<u8>,
+}
+
+impl RosMessage for StateSnapshot {
+    const TYPE_NAME: &'static str = "sar_msgs/msg/StateSnapshot";
+    const SCHEMA: &'static str = concat!(
+        include_str!("../../msg/StateSnapshot.msg"),
+        header_sections!()
+    );
+    fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
+        header_out(w, self.stamp_ns, "")?;
+        w.u64(self.after_cycle);
+        w.u16(self.format_version);
+        w.byte_seq(&self.data);
+        Ok(())
+    }
+    fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        let stamp_ns = r.time()?;
+        let _frame: FrameId = r.fixed_str()?;
+        Ok(Self {
+            stamp_ns,
+            after_cycle: r.u64()?,
+            format_version: r.u16()?,
+            data: r.byte_seq(sar_snapshot::CAPACITY)?.to_vec(),
+        })
+    }
+}
+
 /// The recorded topics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Topic {
@@ -863,11 +969,13 @@ pub enum Topic {
     /// simulator's true F_tip (simulator-made recordings; the reference of
     /// `sarctl replay --compare`).
     SimTipWrenchTruth,
+    /// `/sar/cycle/snapshot`, [`StateSnapshot`]: the loop's decision state.
+    StateSnapshot,
 }
 
 impl Topic {
     /// Every topic, in channel order.
-    pub const ALL: [Topic; 10] = [
+    pub const ALL: [Topic; 11] = [
         Topic::SensorWrench,
         Topic::Joints,
         Topic::TipWrench,
@@ -878,6 +986,7 @@ impl Topic {
         Topic::CycleInput,
         Topic::RecorderDrops,
         Topic::SimTipWrenchTruth,
+        Topic::StateSnapshot,
     ];
 
     /// The topic name.
@@ -893,6 +1002,7 @@ impl Topic {
             Topic::CycleInput => "/sar/cycle/input",
             Topic::RecorderDrops => "/sar/recorder/drops",
             Topic::SimTipWrenchTruth => "/sar/sim/tip_wrench_truth",
+            Topic::StateSnapshot => "/sar/cycle/snapshot",
         }
     }
 
@@ -913,6 +1023,7 @@ impl Topic {
             Topic::GuardEvents => GuardEvent::TYPE_NAME,
             Topic::CycleInput => CycleInput::TYPE_NAME,
             Topic::RecorderDrops => RecorderDrops::TYPE_NAME,
+            Topic::StateSnapshot => StateSnapshot::TYPE_NAME,
         }
     }
 
@@ -928,6 +1039,7 @@ impl Topic {
             Topic::GuardEvents => GuardEvent::SCHEMA,
             Topic::CycleInput => CycleInput::SCHEMA,
             Topic::RecorderDrops => RecorderDrops::SCHEMA,
+            Topic::StateSnapshot => StateSnapshot::SCHEMA,
         }
     }
 }
@@ -959,6 +1071,8 @@ pub enum Outgoing {
     RecorderDrops(RecorderDrops),
     /// `/sar/sim/tip_wrench_truth`.
     SimTruth(WrenchStamped),
+    /// A part of a `/sar/cycle/snapshot` message (joined by the writer).
+    SnapshotChunk(SnapshotChunk),
 }
 
 impl Outgoing {
@@ -975,6 +1089,7 @@ impl Outgoing {
             Outgoing::CycleInput(_) => Topic::CycleInput,
             Outgoing::RecorderDrops(_) => Topic::RecorderDrops,
             Outgoing::SimTruth(_) => Topic::SimTipWrenchTruth,
+            Outgoing::SnapshotChunk(_) => Topic::StateSnapshot,
         }
     }
 
@@ -991,6 +1106,7 @@ impl Outgoing {
             Outgoing::GuardEvent(m) => m.stamp_ns,
             Outgoing::CycleInput(m) => m.stamp_ns,
             Outgoing::RecorderDrops(m) => m.stamp_ns,
+            Outgoing::SnapshotChunk(m) => m.stamp_ns,
         }
     }
 
@@ -1007,6 +1123,7 @@ impl Outgoing {
             Outgoing::GuardEvent(m) => m.encode(buf),
             Outgoing::CycleInput(m) => m.encode(buf),
             Outgoing::RecorderDrops(m) => m.encode(buf),
+            Outgoing::SnapshotChunk(_) => Err(CdrError::NotAMessage),
         }
     }
 
@@ -1023,6 +1140,8 @@ impl Outgoing {
             Topic::CycleInput => Outgoing::CycleInput(CycleInput::decode(bytes)?),
             Topic::RecorderDrops => Outgoing::RecorderDrops(RecorderDrops::decode(bytes)?),
             Topic::SimTipWrenchTruth => Outgoing::SimTruth(WrenchStamped::decode(bytes)?),
+            // Variable-length: read it with `StateSnapshot::decode`.
+            Topic::StateSnapshot => return Err(CdrError::NotAMessage),
         })
     }
 }

@@ -497,7 +497,9 @@ impl<'a> McapReader<'a> {
     }
 
     /// Every message of the SAR topics ([`Topic`]) decoded, with its topic and
-    /// log time; other topics are skipped.
+    /// log time; other topics are skipped, and so are the snapshots
+    /// (`/sar/cycle/snapshot`, variable length: decode the raw message with
+    /// [`super::msgs::StateSnapshot`]).
     pub fn decoded(self) -> impl Iterator<Item = Result<(Topic, u64, Outgoing), ReadError>> + 'a {
         let mut reader = self;
         let mut failed = false;
@@ -517,6 +519,9 @@ impl<'a> McapReader<'a> {
                 let Some(topic) = Topic::from_name(&channel.topic) else {
                     continue;
                 };
+                if topic == Topic::StateSnapshot {
+                    continue;
+                }
                 if channel.schema_name != topic.type_name() {
                     failed = true;
                     return Some(Err(ReadError::WrongType {

@@ -22,7 +22,8 @@
 use super::convert::{self, REPLAY_METADATA, bias_from_metadata};
 use super::file::{FileOptions, RotatingWriter, WriteError};
 use super::msgs::{
-    ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage, Topic,
+    ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage,
+    SnapshotChunk, StateSnapshot, Topic,
 };
 use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
 use crate::step::{LoopInput, LoopStep, StepConfig};
@@ -67,6 +68,12 @@ pub struct ReplayOptions {
     pub keep_series: bool,
     /// Compare with the recorded outputs (daemon recordings; on by default).
     pub check_recorded: bool,
+    /// Replay only the cycles from this time on, s after the recording's
+    /// first cycle (daemon recordings): the step starts from the snapshot
+    /// before it and runs up to it without writing or comparing.
+    pub from_s: Option<f64>,
+    /// Stop after the cycles up to this time, s after the first cycle.
+    pub to_s: Option<f64>,
 }
 
 impl ReplayOptions {
@@ -80,6 +87,8 @@ impl ReplayOptions {
             compare: None,
             keep_series: false,
             check_recorded: true,
+            from_s: None,
+            to_s: None,
         }
     }
 }
@@ -121,6 +130,8 @@ pub struct Difference {
     pub recorded: String,
     /// The replayed value.
     pub replayed: String,
+    /// The file it is in (replays of files; `None` for bytes in memory).
+    pub file: Option<PathBuf>,
 }
 
 /// Error figures of one axis (MODEL.md 6).
@@ -192,6 +203,17 @@ pub struct ReplayReport {
     /// estimator's earlier state (guard, filter, bias after tares): its
     /// replay may differ.
     pub from_first_cycle: Option<bool>,
+    /// The snapshot replay started from (`/sar/cycle/snapshot`): the cycle
+    /// it was taken after. `None`: replay started at the recording's first
+    /// cycle (a recording from the daemon's start, or one without
+    /// snapshots).
+    pub from_snapshot: Option<u64>,
+    /// Cycles of the recording before the snapshot replay started from (not
+    /// replayed: their state is unknown).
+    pub skipped_cycles: u64,
+    /// Recorded snapshots compared with the replayed step's state (byte for
+    /// byte; a difference is reported on `/sar/cycle/snapshot`).
+    pub snapshots_compared: u64,
 }
 
 /// Why a replay could not run.
@@ -221,6 +243,29 @@ pub enum ReplayError {
     /// The output would overwrite the input.
     #[error("the output {0} is the input")]
     OutputIsInput(PathBuf),
+    /// `--from`/`--to` out of order or not finite and >= 0.
+    #[error("the time range: {0}")]
+    Range(String),
+    /// Internal: the replay reached `to_s` (never returned to the caller).
+    #[error("the end of the time range")]
+    EndOfRange,
+    /// The files of a set do not chain.
+    #[error("{file} does not follow the previous file: {why}")]
+    Chain {
+        /// The file.
+        file: String,
+        /// How.
+        why: String,
+    },
+    /// A recorded snapshot cannot be restored (corrupted, another format,
+    /// or taken under another configuration): never trusted.
+    #[error("the snapshot after cycle {after_cycle} cannot be restored: {source}")]
+    Snapshot {
+        /// The cycle it was taken after.
+        after_cycle: u64,
+        /// Why.
+        source: sar_snapshot::SnapshotError,
+    },
 }
 
 struct Sink {
@@ -257,6 +302,13 @@ struct Replayer {
     last_cycle: u64,
     keep_estimates: bool,
     left_out: usize,
+    /// Whether the step's state is known (from the first cycle, or restored
+    /// from a snapshot): cycles before are skipped with their outputs.
+    anchored: bool,
+    /// The snapshot taken of the replayed step (compared, written).
+    snapshot: Box<sar_snapshot::Snapshot>,
+    /// Before `from_s`: cycles are stepped, nothing is written or compared.
+    quiet: bool,
 }
 
 fn arr(v: &Vec3) -> [f64; 3] {
@@ -267,6 +319,11 @@ impl Replayer {
     /// One cycle of a daemon recording: the loop step.
     fn loop_cycle(&mut self, input: &LoopInput) -> Result<(), ReplayError> {
         let out = *self.step.step(input);
+        if self.quiet {
+            // Before the range: only the state matters.
+            self.last_cycle = input.cycle;
+            return Ok(());
+        }
         if self.needs_messages() {
             let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
             self.emit(input.cycle, m)?;
@@ -374,6 +431,7 @@ impl Replayer {
                 if let Some((cycle, m, _)) = rep.pop_front() {
                     self.report.differences += 1;
                     self.report.first_difference.get_or_insert(Difference {
+                        file: None,
                         cycle,
                         topic: topic.name(),
                         field: "message".into(),
@@ -387,7 +445,63 @@ impl Replayer {
         }
     }
 
+    /// A recorded `/sar/cycle/snapshot`: restores the step from it when the
+    /// state is not known yet; else compares it with the replayed step's
+    /// state, byte for byte. Written to the output either way (the replayed
+    /// step's own).
+    fn snapshot(&mut self, m: &StateSnapshot) -> Result<(), ReplayError> {
+        let failed = |source| ReplayError::Snapshot {
+            after_cycle: m.after_cycle,
+            source,
+        };
+        if !self.anchored {
+            self.step.restore(&m.data).map_err(failed)?;
+            self.anchored = true;
+            self.report.from_snapshot = Some(m.after_cycle);
+            self.last_cycle = m.after_cycle;
+            // Outputs of the skipped cycles recorded after the last one
+            // stepped: none are pending (they were never kept).
+        } else if self.comparing {
+            // The step's state after the same cycle.
+            self.match_pending();
+            self.step.snapshot(&mut self.snapshot).map_err(failed)?;
+            self.report.compared += 1;
+            self.report.snapshots_compared += 1;
+            let replayed = self.snapshot.as_bytes();
+            if replayed != m.data.as_slice() || self.last_cycle != m.after_cycle {
+                let at = replayed
+                    .iter()
+                    .zip(&m.data)
+                    .position(|(a, b)| a != b)
+                    .unwrap_or(replayed.len().min(m.data.len()));
+                self.differ(Difference {
+                    file: None,
+                    cycle: m.after_cycle,
+                    topic: Topic::StateSnapshot.name(),
+                    field: format!("state (byte {at})"),
+                    recorded: format!("{} bytes after cycle {}", m.data.len(), m.after_cycle),
+                    replayed: format!("{} bytes after cycle {}", replayed.len(), self.last_cycle),
+                });
+            }
+        }
+        if self.sink.writer.is_some() && !self.quiet {
+            self.step.snapshot(&mut self.snapshot).map_err(failed)?;
+            let snapshot = std::mem::take(&mut self.snapshot);
+            let mut result = Ok(());
+            SnapshotChunk::split(m.stamp_ns, self.last_cycle, snapshot.as_bytes(), |c| {
+                result = self.sink.write(&c);
+                result.is_ok()
+            });
+            self.snapshot = snapshot;
+            result?;
+        }
+        Ok(())
+    }
+
     fn recorded_output(&mut self, topic: Topic, data: &[u8]) {
+        if !self.anchored || self.quiet {
+            return;
+        }
         if self.comparing && !self.lacking.contains(&topic) {
             self.recorded
                 .entry(topic)
@@ -411,6 +525,7 @@ impl Replayer {
                     // A file cut short may lack its last cycle's outputs.
                     if complete || *cycle < last_cycle {
                         leftovers.push(Difference {
+                            file: None,
                             cycle: *cycle,
                             topic: topic.name(),
                             field: "message".into(),
@@ -423,6 +538,7 @@ impl Replayer {
             if let Some(rec) = self.recorded.get(&topic) {
                 for bytes in rec {
                     leftovers.push(Difference {
+                        file: None,
                         cycle: last_cycle,
                         topic: topic.name(),
                         field: "message".into(),
@@ -496,6 +612,7 @@ fn describe(topic: Topic, cycle: u64, replayed: &Outgoing, recorded: &[u8]) -> D
         ),
     };
     Difference {
+        file: None,
         cycle,
         topic: topic.name(),
         field,
@@ -516,8 +633,80 @@ fn start_bias(reader: &McapReader<'_>) -> Bias {
 
 /// Replays the recording held in `bytes` (see the module documentation).
 pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
+    replay_with(
+        1,
+        |_| Ok((None, std::borrow::Cow::Borrowed(bytes))),
+        options,
+    )
+}
+
+/// Replays the files of a rotated recording in order, as one: the step
+/// carries on from file to file, each file's first snapshot is compared
+/// with the carried state, and the files must chain (their `file_index`
+/// one after the other, and each file's first cycle the one after the
+/// previous file's last). A difference names its file.
+pub fn replay_files(
+    inputs: &[PathBuf],
+    options: &ReplayOptions,
+) -> Result<ReplayReport, ReplayError> {
+    if inputs.is_empty() {
+        return Err(ReplayError::NoInputs);
+    }
+    for input in inputs {
+        if let Some(out) = &options.output
+            && same_file(input, out)
+        {
+            return Err(ReplayError::OutputIsInput(out.clone()));
+        }
+    }
+    replay_with(
+        inputs.len(),
+        |i| {
+            let path = inputs.get(i).cloned().unwrap_or_default();
+            let bytes = super::reader::read_file(&path)?;
+            Ok((Some(path), std::borrow::Cow::Owned(bytes)))
+        },
+        options,
+    )
+}
+
+/// The `sar_replay` metadata of a file: read up to its first message.
+fn file_metadata(bytes: &[u8]) -> Result<Option<BTreeMap<String, String>>, ReplayError> {
+    let mut probe = McapReader::new(bytes)?;
+    let _ = probe.next();
+    Ok(probe
+        .metadata()
+        .iter()
+        .find(|m| m.name == REPLAY_METADATA)
+        .map(|m| m.metadata.clone()))
+}
+
+/// The replay of `count` inputs handed out by `load` in order.
+fn replay_with<'b>(
+    count: usize,
+    mut load: impl FnMut(usize) -> Result<(Option<PathBuf>, std::borrow::Cow<'b, [u8]>), ReplayError>,
+    options: &ReplayOptions,
+) -> Result<ReplayReport, ReplayError> {
+    for v in [options.from_s, options.to_s].into_iter().flatten() {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(ReplayError::Range(format!("{v} s is not a time >= 0")));
+        }
+    }
+    if let (Some(a), Some(b)) = (options.from_s, options.to_s)
+        && a > b
+    {
+        return Err(ReplayError::Range(format!(
+            "--from {a} s is after --to {b} s"
+        )));
+    }
+    let (first_path, first_bytes) = load(0)?;
+    let mut pending = Some((first_path, first_bytes));
     // The metadata is written at the start of a file: read up to the first
     // message to find it.
+    let bytes: &[u8] = match &pending {
+        Some((_, b)) => b,
+        None => &[],
+    };
     let mut probe = McapReader::new(bytes)?;
     let _ = probe.next();
     let bias = start_bias(&probe);
@@ -526,6 +715,13 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
         .iter()
         .find(|m| m.name == REPLAY_METADATA)
         .map(|m| (m.name.clone(), m.metadata.clone()));
+    let from_first_cycle = metadata.as_ref().map(|(_, m)| {
+        m.get("from_first_cycle").is_some_and(|v| v == "true")
+            && m.get("file_index").is_none_or(|i| i == "0")
+    });
+    let with_snapshots = metadata
+        .as_ref()
+        .is_some_and(|(_, m)| m.contains_key(convert::SNAPSHOT_FORMAT_KEY));
     let estimator = Estimator::with_bias(&options.config, bias)
         .map_err(|e| ReplayError::Setting(e.to_string()))?;
     let step = LoopStep::new(&options.config, bias, options.step)
@@ -567,10 +763,10 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
             comparison: None,
             series: Vec::new(),
             output: options.output.clone(),
-            from_first_cycle: metadata.as_ref().map(|(_, m)| {
-                m.get("from_first_cycle").is_some_and(|v| v == "true")
-                    && m.get("file_index").is_none_or(|i| i == "0")
-            }),
+            from_first_cycle,
+            from_snapshot: None,
+            skipped_cycles: 0,
+            snapshots_compared: 0,
         },
         replayed: BTreeMap::new(),
         recorded: BTreeMap::new(),
@@ -582,16 +778,57 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
         last_cycle: 0,
         keep_estimates: options.compare.is_some() || options.keep_series,
         left_out: 0,
+        // A recording whose files start with snapshots waits for one, unless
+        // it holds the daemon's first cycle; one without steps from its
+        // first cycle (as before snapshots; it may differ if it started
+        // mid-run, and says so).
+        anchored: from_first_cycle == Some(true) || !with_snapshots,
+        snapshot: Box::new(sar_snapshot::Snapshot::new()),
+        quiet: false,
     };
-    let mut reader = McapReader::new(bytes)?;
-    // Topic per channel id, looked up once per channel.
-    let mut topics: BTreeMap<u16, Option<Topic>> = BTreeMap::new();
-    let mut reference_channel: Option<u16> = None;
+    let range_ns = |s: Option<f64>| s.map(|v| (v * 1e9).round() as u64);
+    let (from_ns, to_ns) = (range_ns(options.from_s), range_ns(options.to_s));
+    let mut first_stamp_ns: Option<u64> = None;
+    // Per file: channel ids are the file's own.
     let mut saw_cycle_input = false;
     let mut sensors: Vec<(u64, super::msgs::WrenchStamped)> = Vec::new();
     let mut joints: Vec<(u64, ActiveJointState)> = Vec::new();
-    let mut visitor =
-        |channels: &BTreeMap<u16, ChannelInfo>, msg: MessageRef<'_>| -> Result<(), ReplayError> {
+    let mut recovered_from_cut = false;
+    let mut complete = true;
+    let mut previous_index: Option<u64> = None;
+    let mut reached_end_of_range = false;
+    for i in 0..count {
+        let (path, bytes) = match pending.take() {
+            Some(p) => p,
+            None => load(i)?,
+        };
+        let name = || {
+            path.as_ref()
+                .map_or_else(|| "the input".to_owned(), |p| p.display().to_string())
+        };
+        if count > 1 {
+            // The files chain: one rotation, in order.
+            let index = file_metadata(&bytes)?
+                .and_then(|m| m.get("file_index").and_then(|v| v.parse::<u64>().ok()));
+            if let (Some(prev), Some(index)) = (previous_index, index)
+                && index != prev + 1
+            {
+                return Err(ReplayError::Chain {
+                    file: name(),
+                    why: format!("its file_index is {index}, the previous file's {prev}"),
+                });
+            }
+            previous_index = index;
+        }
+        let mut reader = McapReader::new(&bytes)?;
+        // Topic per channel id, looked up once per channel.
+        let mut topics: BTreeMap<u16, Option<Topic>> = BTreeMap::new();
+        let mut reference_channel: Option<u16> = None;
+        // The cycle the file must start with (after the previous file's).
+        let mut expect_cycle = (i > 0 && r.anchored).then_some(r.last_cycle + 1);
+        let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
+                           msg: MessageRef<'_>|
+         -> Result<(), ReplayError> {
             let id = msg.channel_id;
             let topic = match topics.get(&id) {
                 Some(t) => *t,
@@ -625,10 +862,37 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
                         joints = Vec::new();
                     }
                     let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
+                    if let Some(want) = expect_cycle.take()
+                        && m.cycle != want
+                    {
+                        return Err(ReplayError::Chain {
+                            file: name(),
+                            why: format!(
+                                "it starts at cycle {}, the previous file ends at cycle {}",
+                                m.cycle,
+                                want - 1
+                            ),
+                        });
+                    }
+                    let t0 = *first_stamp_ns.get_or_insert(m.stamp_ns);
+                    let t = m.stamp_ns.saturating_sub(t0);
+                    if to_ns.is_some_and(|to| t > to) {
+                        return Err(ReplayError::EndOfRange);
+                    }
+                    r.quiet = from_ns.is_some_and(|from| t < from);
+                    if !r.anchored {
+                        // Before the first snapshot: the state is unknown.
+                        r.report.skipped_cycles += 1;
+                        return Ok(());
+                    }
                     // The recorded message is compared with the one rebuilt from
                     // its input and the replayed decision.
                     r.recorded_output(Topic::CycleInput, msg.data);
                     r.loop_cycle(&convert::loop_input(&m))?;
+                }
+                Some(Topic::StateSnapshot) => {
+                    let m = StateSnapshot::decode(msg.data).map_err(decode_err)?;
+                    r.snapshot(&m)?;
                 }
                 Some(Topic::SensorWrench) if !saw_cycle_input => {
                     let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
@@ -647,16 +911,36 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
             }
             Ok(())
         };
-    if let Some(e) = reader.visit(&mut visitor)? {
-        r.report.stopped = Some(e.to_string());
-    }
-    r.report.input_complete = reader.is_complete();
-    if saw_cycle_input {
-        let recovered_from_cut = reader
+        let result = match reader.visit(&mut visitor) {
+            Err(ReplayError::EndOfRange) => {
+                reached_end_of_range = true;
+                Ok(None)
+            }
+            other => other,
+        };
+        if let Some(d) = &mut r.report.first_difference
+            && d.file.is_none()
+        {
+            d.file = path.clone();
+        }
+        if let Some(e) = result? {
+            r.report.stopped = Some(format!("{}: {e}", name()));
+        }
+        complete &= reader.is_complete();
+        recovered_from_cut |= reader
             .metadata()
             .iter()
             .any(|m| m.name == "sar_recover" && m.metadata.contains_key("stopped"));
-        r.finish_comparison(r.report.input_complete && !recovered_from_cut);
+        if r.report.stopped.is_some() || reached_end_of_range {
+            // A file cut short ends the set: what follows cannot chain.
+            break;
+        }
+    }
+    r.report.input_complete = complete;
+    if saw_cycle_input {
+        r.finish_comparison(
+            r.report.input_complete && !recovered_from_cut && !reached_end_of_range,
+        );
     } else {
         if sensors.is_empty() {
             return Err(ReplayError::NoInputs);
@@ -813,8 +1097,7 @@ pub fn replay_file(input: &Path, options: &ReplayOptions) -> Result<ReplayReport
     {
         return Err(ReplayError::OutputIsInput(out.clone()));
     }
-    let bytes = super::reader::read_file(input)?;
-    replay(&bytes, options)
+    replay_files(std::slice::from_ref(&input.to_path_buf()), options)
 }
 
 /// Whether two paths name the same existing file.

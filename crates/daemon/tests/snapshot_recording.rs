@@ -1,0 +1,325 @@
+//! Recordings that start mid-run and rotate (issue 17): a recording started
+//! after the daemon has tared, had its limits changed, stopped on a contact
+//! and been reset, rotated into several files, replays bit for bit from the
+//! snapshot each file starts with: every file alone, and the set as one
+//! (whose files must chain). A corrupted snapshot is refused with a clear
+//! error, never trusted.
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+use sar_daemon::control::{Controller, Envelope, Operator, Request};
+use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
+use sar_daemon::record::msgs::{RosMessage, StateSnapshot, Topic};
+use sar_daemon::record::replay::{ReplayError, ReplayOptions, replay_file, replay_files};
+use sar_daemon::record::{McapReader, Rotation, read_file};
+use sar_daemon::runloop::{Publish, Published};
+use sar_daemon::stats::LoopStats;
+use sar_daemon::{config, logq, sim};
+use sar_drivers::SimClock;
+use sar_estimator::Vec3;
+use sar_estimator::guard::{ForceLimits, GuardState};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Records a session on the simulator: 4.5 s before the recording starts
+/// (first reset, tare, lower limits, a contact that stops the guard, a
+/// reset), then about 3.6 s recorded with 1 s files and a snapshot every
+/// 250 ms (moves, a push). Returns the files in order.
+fn session(name: &str) -> Vec<PathBuf> {
+    let dir = common::scratch(name);
+    let cfg = config::builtin().unwrap();
+    let mut scenario = sim::demo_scenario().unwrap();
+    // 20 N along the rod from 2 s (rising), held 2.7-3.2 s, off at 3.5 s.
+    scenario.spec.contact = common::contact_pulse(
+        2_000_000_000,
+        2_700_000_000,
+        3_200_000_000,
+        3_500_000_000,
+        Vec3::new(20.0, 0.0, 0.0),
+    );
+    let clock = SimClock::new(1_000_000_000);
+    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+    let operator = Operator::new();
+    let (log, _thread, queue) = logq::channel(false);
+    let mut c = Controller::new(
+        &cfg.estimator,
+        bias,
+        cfg.step_config(),
+        sensor,
+        drives,
+        operator.clone(),
+        log,
+        true,
+    )
+    .unwrap();
+    let switch = Arc::new(RecordSwitch::default());
+    let (manager, mut publisher) = RecordManager::start(
+        RecordSettings {
+            enabled: false,
+            directory: dir.clone(),
+            rotation: Rotation {
+                max_bytes: None,
+                max_duration_ns: Some(1_000_000_000),
+            },
+            queue_capacity: 65536,
+            scene: None,
+            snapshot_period_ns: 250_000_000,
+        },
+        bias,
+        Arc::clone(&switch),
+        (),
+    )
+    .unwrap();
+    let stats = LoopStats::default();
+    let mut cycle = 0u64;
+    let mut states = Vec::new();
+    let mut step = |c: &mut Controller<_, _>, p: &mut dyn Publish, request: Option<Request>| {
+        cycle += 1;
+        clock.advance_ns(1_000_000);
+        if let Some(request) = request {
+            let env = Envelope { id: cycle, request };
+            operator.requests.push(env).unwrap();
+        }
+        p.before_cycle();
+        let out = *c.step(cycle, || Some(clock.now_ns()));
+        p.publish(&Published {
+            loop_input: c.loop_input(),
+            decision: c.decision(),
+            step: c.loop_step(),
+            stats: &stats,
+            quick_stops: c.counts().quick_stops,
+            recorder_drops: 0,
+            recording: false,
+        });
+        while queue.pop().is_some() {}
+        while operator.replies.pop().is_some() {}
+        out.guard_state
+    };
+    let configured = cfg.estimator.guard.force_limits();
+    let lower = ForceLimits {
+        warn_total_n: configured.warn_total_n - 0.5,
+        stop_total_n: configured.stop_total_n - 0.5,
+        warn_lateral_n: configured.warn_lateral_n - 0.2,
+        ..configured
+    };
+    for k in 1..=4500u64 {
+        let request = match k {
+            1100 | 4000 => Some(Request::Reset),
+            1300 => Some(Request::Tare),
+            1500 => Some(Request::SetLimits(lower)),
+            _ => None,
+        };
+        states.push(step(&mut c, &mut publisher, request));
+    }
+    assert!(
+        states.contains(&GuardState::Stop),
+        "the contact never stopped"
+    );
+    assert!(
+        states.last().is_some_and(|s| !s.is_halting()),
+        "not reset after the Stop: {:?}",
+        states.last()
+    );
+    // Start recording; the manager thread opens it (bounded wait).
+    switch.request_start();
+    let mut waited = 0;
+    while !switch.recording() {
+        step(&mut c, &mut publisher, None);
+        std::thread::sleep(std::time::Duration::from_millis(1));
+        waited += 1;
+        assert!(waited < 10_000, "the recording never started");
+    }
+    for k in 0..3600u64 {
+        let request = match k {
+            200 => Some(Request::MoveTip {
+                tip_m: Vec3::new(0.6, 0.2, 0.002),
+            }),
+            1400 => Some(Request::Push { axial_n: 1.0 }),
+            2600 => Some(Request::Position),
+            3000 => Some(Request::Tare),
+            _ => None,
+        };
+        step(&mut c, &mut publisher, request);
+    }
+    switch.request_stop();
+    step(&mut c, &mut publisher, None);
+    assert!(!switch.recording());
+    assert_eq!(switch.dropped(), 0);
+    publisher.release();
+    manager.finish();
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// The `/sar/cycle/snapshot` messages of a file (after_cycle), and the cycle
+/// of its first `/sar/cycle/input`.
+fn snapshots(path: &Path) -> (Vec<u64>, Option<u64>) {
+    let bytes = read_file(path).unwrap();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let mut out = Vec::new();
+    let mut first_cycle = None;
+    while let Some(m) = reader.next() {
+        let m = m.unwrap();
+        let topic = reader.channels()[&m.channel_id].topic.clone();
+        if topic == Topic::StateSnapshot.name() {
+            out.push(StateSnapshot::decode(&m.data).unwrap().after_cycle);
+        } else if topic == Topic::CycleInput.name() && first_cycle.is_none() {
+            let c = sar_daemon::record::msgs::CycleInput::decode(&m.data).unwrap();
+            first_cycle = Some(c.cycle);
+        }
+    }
+    (out, first_cycle)
+}
+
+#[test]
+fn a_rotated_recording_started_mid_run_replays_bit_for_bit_file_by_file_and_as_a_set() {
+    let files = session("snapshot_recording");
+    assert!(files.len() >= 3, "{files:?}");
+    let cfg = config::builtin().unwrap();
+    let options = ReplayOptions::from_config(&cfg);
+    let mut total = 0;
+    for (i, f) in files.iter().enumerate() {
+        let (snaps, first_cycle) = snapshots(f);
+        // Every rotated file starts with a snapshot (the first file starts
+        // with the cycle the recording began in, then its snapshot).
+        assert!(!snaps.is_empty(), "{f:?}");
+        if i > 0 {
+            assert_eq!(Some(snaps[0] + 1), first_cycle, "{f:?}");
+        }
+        let r = replay_file(f, &options).unwrap();
+        println!(
+            "{}: {} cycles from the snapshot after cycle {:?} ({} skipped), {} outputs and {} snapshots compared",
+            f.display(),
+            r.cycles,
+            r.from_snapshot,
+            r.skipped_cycles,
+            r.outputs,
+            r.snapshots_compared
+        );
+        assert_eq!(r.first_difference, None, "{f:?}");
+        assert_eq!(r.from_first_cycle, Some(false), "{f:?}");
+        assert_eq!(r.from_snapshot, Some(snaps[0]), "{f:?}");
+        assert_eq!(r.skipped_cycles, u64::from(i == 0), "{f:?}");
+        assert!(r.cycles > 200, "{f:?}: {}", r.cycles);
+        assert_eq!(r.snapshots_compared, snaps.len() as u64 - 1, "{f:?}");
+        assert_eq!(r.compared, r.outputs + r.snapshots_compared, "{f:?}");
+        total += r.cycles;
+    }
+    // The set as one: the state carried across files, each file's first
+    // snapshot compared with it.
+    let r = replay_files(&files, &options).unwrap();
+    assert_eq!(r.first_difference, None);
+    assert_eq!(r.cycles, total);
+    assert_eq!(
+        r.snapshots_compared as usize,
+        files.iter().map(|f| snapshots(f).0.len()).sum::<usize>() - 1
+    );
+    // A time range across a rotation: from the snapshot before it, only
+    // the cycles in it compared.
+    let range = ReplayOptions {
+        from_s: Some(1.6),
+        to_s: Some(2.4),
+        ..options.clone()
+    };
+    let r = replay_files(&files, &range).unwrap();
+    assert_eq!(r.first_difference, None);
+    assert_eq!(r.cycles, 801);
+    assert!(r.compared >= 801 * 5, "{}", r.compared);
+    let backwards = ReplayOptions {
+        from_s: Some(2.0),
+        to_s: Some(1.0),
+        ..options.clone()
+    };
+    assert!(matches!(
+        replay_files(&files, &backwards).unwrap_err(),
+        ReplayError::Range(_)
+    ));
+    // Files that do not chain are refused, naming the file.
+    let gap = [files[0].clone(), files[2].clone()];
+    let e = replay_files(&gap, &options).unwrap_err();
+    assert!(matches!(e, ReplayError::Chain { .. }), "{e}");
+    assert!(e.to_string().contains(&*files[2].to_string_lossy()), "{e}");
+    let backwards = [files[1].clone(), files[0].clone()];
+    assert!(matches!(
+        replay_files(&backwards, &options).unwrap_err(),
+        ReplayError::Chain { .. }
+    ));
+}
+
+/// Copies `input` to `output` with `change` applied to every snapshot's
+/// bytes (the other messages as they are).
+fn rewrite_snapshots(input: &Path, output: &Path, mut change: impl FnMut(&mut Vec<u8>)) {
+    let bytes = read_file(input).unwrap();
+    let mut w = mcap::Writer::new(std::io::BufWriter::new(
+        std::fs::File::create(output).unwrap(),
+    ))
+    .unwrap();
+    // The metadata replay needs, first (as the recorder writes it).
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let _ = reader.next();
+    for meta in reader.metadata() {
+        w.write_metadata(&mcap::records::Metadata {
+            name: meta.name.clone(),
+            metadata: meta.metadata.clone(),
+        })
+        .unwrap();
+    }
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let mut data = m.data.to_vec();
+        if m.channel.topic == Topic::StateSnapshot.name() {
+            let mut s = StateSnapshot::decode(&data).unwrap();
+            change(&mut s.data);
+            s.encode(&mut data).unwrap();
+        }
+        w.write(&mcap::Message {
+            data: std::borrow::Cow::Owned(data),
+            ..m
+        })
+        .unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn a_corrupted_snapshot_is_refused_with_a_clear_error() {
+    let files = session("snapshot_corrupted");
+    let cfg = config::builtin().unwrap();
+    let options = ReplayOptions::from_config(&cfg);
+    let bad = files[1].with_extension("bad.mcap");
+    // One bit of the first snapshot's state flipped (its CRC then fails).
+    let mut first = true;
+    rewrite_snapshots(&files[1], &bad, |data| {
+        if std::mem::take(&mut first) {
+            data[40] ^= 0x10;
+        }
+    });
+    let e = replay_file(&bad, &options).unwrap_err();
+    let text = e.to_string();
+    println!("{text}");
+    assert!(matches!(e, ReplayError::Snapshot { .. }), "{text}");
+    assert!(
+        text.contains("checksum") && text.contains("after cycle"),
+        "{text}"
+    );
+    // The same file untouched (rewritten without change) replays.
+    let good = files[1].with_extension("good.mcap");
+    rewrite_snapshots(&files[1], &good, |_| {});
+    assert_eq!(replay_file(&good, &options).unwrap().first_difference, None);
+    // Under another configuration the snapshot is refused too.
+    let mut other = cfg.clone();
+    other.axes.following_tolerance_m *= 2.0;
+    let e = replay_file(&good, &ReplayOptions::from_config(&other)).unwrap_err();
+    assert!(e.to_string().contains("another configuration"), "{e}");
+}
