@@ -41,9 +41,13 @@ fn visible_truth(t: &Truth) -> Vec3 {
     t.tip_force_n - t.friction_force_n
 }
 
-fn writer(path: &Path, bias: &sar_estimator::cycle::Bias) -> Result<RotatingWriter, String> {
+fn writer(
+    path: &Path,
+    bias: &sar_estimator::cycle::Bias,
+    zstd_level: u32,
+) -> Result<RotatingWriter, String> {
     let mut o = FileOptions::single(path);
-    o.zstd_level = 19;
+    o.zstd_level = zstd_level;
     o.metadata = vec![convert::replay_metadata(bias, true)];
     RotatingWriter::new(o).map_err(|e| e.to_string())
 }
@@ -75,6 +79,19 @@ pub fn daemon_recording(
     requests: &[(u64, Request)],
     path: &Path,
 ) -> Result<u64, String> {
+    daemon_recording_at_level(scenario, cycles, period_ns, requests, path, 19)
+}
+
+/// [`daemon_recording`] with zstd at `zstd_level` (19 for the committed
+/// fixtures; the recorder's default, 0, for long recordings made by tests).
+pub fn daemon_recording_at_level(
+    scenario: &Path,
+    cycles: u64,
+    period_ns: u64,
+    requests: &[(u64, Request)],
+    path: &Path,
+    zstd_level: u32,
+) -> Result<u64, String> {
     let cfg = config::builtin().map_err(|e| e.to_string())?;
     let mut scenario = sar_drivers::scenario::load(scenario).map_err(|e| e.to_string())?;
     // As `sard --sim`: the simulated drives run the configured profile.
@@ -96,7 +113,7 @@ pub fn daemon_recording(
         true,
     )
     .map_err(|e| e.to_string())?;
-    let mut w = writer(path, &bias)?;
+    let mut w = writer(path, &bias, zstd_level)?;
     let mut status = RecorderDrops::default();
     let mut last_joints: Option<u64> = None;
     let mut error = None;
@@ -240,7 +257,7 @@ pub fn inputs_recording(scenario: &Path, path: &Path) -> Result<u64, String> {
         }
     }
     msgs.sort_by_key(|(t, k, _)| (*t, *k));
-    let mut w = writer(path, &bias)?;
+    let mut w = writer(path, &bias, 19)?;
     let mut status = RecorderDrops::default();
     for (t, _, m) in &msgs {
         status.stamp_ns = *t;

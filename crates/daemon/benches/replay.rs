@@ -7,13 +7,16 @@
 //! - `read` (the baseline): every message read (chunks decompressed and
 //!   CRC-checked) and every `/sar/cycle/input` decoded, through the
 //!   iterator (a copy of each message); `read_visit`: the same through
-//!   `McapReader::visit` (no copy), which replay uses;
+//!   `McapReader::visit` (no copy), which replay uses; `read_streamed`: the
+//!   same streamed from the file record by record (`McapReader::open`,
+//!   constant memory), which `sarctl replay` uses;
 //! - `read_step`: that and the daemon's loop step (estimator, guard, drive
 //!   decision) per cycle: what `sarctl replay` does without an output file
 //!   and without comparing;
 //! - `read_step_compare`: and the rebuilt `/sar/cycle/input` compared bit for
 //!   bit with the recorded one;
-//! - `read_step_write`: and every output topic written to a new MCAP file.
+//! - `read_step_write`: and every output topic written to a new MCAP file;
+//! - `read_step_streamed`: `read_step` from the file (`replay_file`).
 //!
 //! `SAR_BENCH_REPLAY_CYCLES` shortens the recording (default 3 600 000).
 //!
@@ -37,7 +40,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use sar_daemon::control::{Controller, Operator, Request};
 use sar_daemon::record::convert;
 use sar_daemon::record::msgs::{CycleInput, Outgoing, RecorderDrops, RosMessage, Topic};
-use sar_daemon::record::replay::{ReplayOptions, replay};
+use sar_daemon::record::replay::{ReplayOptions, replay, replay_file};
 use sar_daemon::record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
 use sar_daemon::step::{LoopInput, LoopStep};
 use sar_daemon::{config, logq, sim};
@@ -177,6 +180,44 @@ fn replay_bench(c: &mut Criterion) {
                 }
             }
             assert_eq!(count, n);
+        })
+    });
+    // Streamed from the file, record by record (constant memory: what
+    // `sarctl replay` does), beside the in-memory reads above.
+    let path = dir.join(format!("hour-v1-{n}.mcap"));
+    g.bench_function("read_streamed", |b| {
+        b.iter(|| {
+            let mut reader = McapReader::open(&path).unwrap();
+            let mut id = None;
+            let mut count = 0u64;
+            let stopped = reader
+                .visit::<()>(&mut |channels, m| {
+                    let input = *id.get_or_insert_with(|| {
+                        channels
+                            .values()
+                            .find(|c| c.topic == Topic::CycleInput.name())
+                            .map(|c| c.id)
+                    });
+                    if Some(m.channel_id) == input {
+                        black_box(CycleInput::decode(m.data).unwrap());
+                        count += 1;
+                    }
+                    Ok(())
+                })
+                .unwrap();
+            assert!(stopped.is_none());
+            assert_eq!(count, n);
+        })
+    });
+    g.bench_function("read_step_streamed", |b| {
+        let o = ReplayOptions {
+            check_recorded: false,
+            ..base.clone()
+        };
+        b.iter(|| {
+            let r = replay_file(&path, &o).unwrap();
+            assert_eq!(r.cycles, n);
+            black_box(r);
         })
     });
     g.bench_function("read_visit", |b| {

@@ -183,6 +183,9 @@ fn truncated_files_read_to_last_complete_chunk_and_recover() {
         let bytes = &full[..cut];
         let Ok(reader) = McapReader::new(bytes) else {
             assert!(cut < 8, "cut {cut}: magic refused");
+            let path = dir.join("cut-streamed.mcap");
+            std::fs::write(&path, bytes).unwrap();
+            assert!(McapReader::open(&path).is_err(), "cut {cut}");
             continue;
         };
         let mut got = Vec::new();
@@ -202,6 +205,26 @@ fn truncated_files_read_to_last_complete_chunk_and_recover() {
         assert_eq!(got.len(), expected, "cut at {cut}");
         for (m, want) in got.iter().zip(&all) {
             assert_eq!(&m.data, want, "cut at {cut}");
+        }
+        // Streamed from a file record by record: the same messages and the
+        // same end, error included.
+        if i % 2 == 0 {
+            let path = dir.join("cut-streamed.mcap");
+            std::fs::write(&path, bytes).unwrap();
+            let mut streamed = Vec::new();
+            let mut streamed_end = None;
+            for item in McapReader::open(&path).unwrap() {
+                match item {
+                    Ok(m) => streamed.push(m),
+                    Err(e) => streamed_end = Some(e),
+                }
+            }
+            assert_eq!(streamed, got, "cut at {cut}");
+            assert_eq!(
+                format!("{streamed_end:?}"),
+                format!("{end:?}"),
+                "cut at {cut}"
+            );
         }
         match end {
             Some(ReadError::Truncated { offset, .. }) | Some(ReadError::Unfinished { offset }) => {
@@ -489,11 +512,20 @@ mod corrupted {
                 bytes[i] = value;
             }
             bytes.truncate(cut.index(bytes.len()) + 1);
-            if let Ok(reader) = McapReader::new(&bytes) {
-                for item in reader.decoded() {
-                    let _ = item;
-                }
-            }
+            let in_memory: Option<Vec<String>> = McapReader::new(&bytes)
+                .ok()
+                .map(|r| r.decoded().map(|item| format!("{item:?}")).collect());
+            // Streamed from a file: the same items, never a panic.
+            let path = std::env::temp_dir().join(format!(
+                "sar-corrupted-{}.mcap",
+                std::process::id()
+            ));
+            std::fs::write(&path, &bytes).unwrap();
+            let streamed: Option<Vec<String>> = McapReader::open(&path)
+                .ok()
+                .map(|r| r.decoded().map(|item| format!("{item:?}")).collect());
+            let _ = std::fs::remove_file(&path);
+            prop_assert_eq!(streamed, in_memory);
         }
     }
 }

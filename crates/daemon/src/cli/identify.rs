@@ -119,11 +119,8 @@ pub fn run(
         .map_err(|e| e.to_string())?;
     let options = args.options()?;
     let result = match &args.input {
-        Some(input) => {
-            let bytes = crate::record::read_file(input).map_err(|e| e.to_string())?;
-            identify::identify(&bytes, &config, &options)
-                .map_err(|e| format!("{}: {e}", input.display()))?
-        }
+        Some(input) => identify::identify_file(input, &config, &options)
+            .map_err(|e| format!("{}: {e}", input.display()))?,
         None => {
             let dwells = live::collect(&config, &options, prefix, args)?;
             identify::identify_dwells(&dwells, &config, &options)

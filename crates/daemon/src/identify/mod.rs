@@ -220,9 +220,28 @@ pub fn find_dwells(
     config: &Config,
     options: &DwellOptions,
 ) -> Result<Vec<Dwell>, IdentifyError> {
+    find_dwells_in(|| McapReader::new(bytes), config, options)
+}
+
+/// The dwells of a recording file, streamed twice (joints, then the
+/// sensor): memory holds the dwells, never the file.
+pub fn find_dwells_in_file(
+    path: &std::path::Path,
+    config: &Config,
+    options: &DwellOptions,
+) -> Result<Vec<Dwell>, IdentifyError> {
+    find_dwells_in(|| McapReader::open(path), config, options)
+}
+
+/// The dwells, reading the recording twice through `open`.
+fn find_dwells_in<'a>(
+    open: impl Fn() -> Result<McapReader<'a>, crate::record::ReadError>,
+    config: &Config,
+    options: &DwellOptions,
+) -> Result<Vec<Dwell>, IdentifyError> {
     options.check().map_err(IdentifyError::Option)?;
     let mut finder = DwellFinder::new(&config.estimator.calibration, *options);
-    for item in McapReader::new(bytes)?.typed::<ActiveJointState>(Topic::Joints.name()) {
+    for item in open()?.typed::<ActiveJointState>(Topic::Joints.name()) {
         let (_, js) = item?;
         finder.push(js.stamp_ns, js.q_m);
     }
@@ -232,7 +251,7 @@ pub fn find_dwells(
         });
     }
     let mut averager = SensorAverager::new(finder.finish());
-    for item in McapReader::new(bytes)?.typed::<WrenchStamped>(Topic::SensorWrench.name()) {
+    for item in open()?.typed::<WrenchStamped>(Topic::SensorWrench.name()) {
         let (_, w) = item?;
         averager.push(w.stamp_ns, w.force_n);
     }
@@ -244,13 +263,24 @@ pub fn find_dwells(
     Ok(averager.finish())
 }
 
-/// Identifies m, c (and B, f) from a recording held in memory.
+/// Identifies m, c (and B, f) from a recording held in memory (see
+/// [`identify_file`]).
 pub fn identify(
     bytes: &[u8],
     config: &Config,
     options: &IdentifyOptions,
 ) -> Result<Identified, IdentifyError> {
     let dwells = find_dwells(bytes, config, &options.dwell)?;
+    identify_dwells(&dwells, config, options)
+}
+
+/// Identifies from a recording file, streamed (`sarctl identify --input`).
+pub fn identify_file(
+    path: &std::path::Path,
+    config: &Config,
+    options: &IdentifyOptions,
+) -> Result<Identified, IdentifyError> {
+    let dwells = find_dwells_in_file(path, config, &options.dwell)?;
     identify_dwells(&dwells, config, options)
 }
 

@@ -75,6 +75,16 @@ pub enum ReadError {
         /// The limit.
         limit: u64,
     },
+    /// A record read from a file claims a length beyond any chunk's.
+    #[error("record at byte {offset} claims {len} bytes (limit {limit}): corrupt")]
+    RecordTooLarge {
+        /// Its offset.
+        offset: u64,
+        /// The length it claims.
+        len: u64,
+        /// The limit.
+        limit: u64,
+    },
     /// A chunk's content is not what its header says.
     #[error("chunk at byte {offset}: {why} (at byte {at} of its content)")]
     BadChunkContent {
@@ -192,14 +202,32 @@ struct SchemaInfo {
     data: Vec<u8>,
 }
 
-/// Iterates over the messages of an MCAP file held in memory, in file order.
+/// Where a reader's bytes come from: memory, or a file read record by
+/// record into one reused buffer (memory bounded by the largest record,
+/// whatever the file's length).
+#[derive(Debug)]
+enum Source<'a> {
+    Bytes(&'a [u8]),
+    File {
+        file: std::fs::File,
+        path: PathBuf,
+        len: u64,
+        /// The current record's bytes (prefix and body), from `buf_start`.
+        buf: Vec<u8>,
+    },
+}
+
+/// Iterates over the messages of an MCAP file, in file order: held in
+/// memory ([`McapReader::new`]) or streamed from disk ([`McapReader::open`],
+/// one record at a time: memory bounded by the largest chunk, not by the
+/// file).
 ///
 /// Ends with `None` after the data section (or the footer); a file cut short
 /// ends with one `Err` (`Truncated`, `Unfinished` or `Corrupt`) after the last
 /// message of its last complete chunk.
 #[derive(Debug)]
 pub struct McapReader<'a> {
-    bytes: &'a [u8],
+    source: Source<'a>,
     pos: usize,
     schemas: BTreeMap<u16, SchemaInfo>,
     channels: BTreeMap<u16, ChannelInfo>,
@@ -216,6 +244,33 @@ const RECORD_PREFIX: usize = 9;
 /// other writers rarely exceed a few MiB). A larger size is taken as corrupt.
 pub const MAX_CHUNK_BYTES: u64 = 256 * 1024 * 1024;
 
+impl McapReader<'static> {
+    /// Opens `path` for streaming (checks the magic): records are read one
+    /// at a time, so memory does not grow with the file.
+    pub fn open(path: &Path) -> Result<Self, ReadError> {
+        use std::io::Read;
+        let io = |source| ReadError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let mut file = std::fs::File::open(path).map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        let mut magic = [0u8; 8];
+        let got = (&mut file).take(8).read(&mut magic).map_err(io)?;
+        if got < magic.len() || magic.as_slice() != mcap::MAGIC {
+            return Err(ReadError::NotMcap {
+                len: usize::try_from(len.min(8)).unwrap_or(8),
+            });
+        }
+        Ok(Self::with_source(Source::File {
+            file,
+            path: path.to_path_buf(),
+            len,
+            buf: Vec::with_capacity(64 * 1024),
+        }))
+    }
+}
+
 impl<'a> McapReader<'a> {
     /// Checks the magic.
     pub fn new(bytes: &'a [u8]) -> Result<Self, ReadError> {
@@ -224,8 +279,12 @@ impl<'a> McapReader<'a> {
                 len: bytes.len().min(8),
             });
         }
-        Ok(Self {
-            bytes,
+        Ok(Self::with_source(Source::Bytes(bytes)))
+    }
+
+    fn with_source(source: Source<'a>) -> Self {
+        Self {
+            source,
             pos: mcap::MAGIC.len(),
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
@@ -234,7 +293,7 @@ impl<'a> McapReader<'a> {
             pending: VecDeque::new(),
             done: false,
             complete: false,
-        })
+        }
     }
 
     /// The channels seen so far (all of them once the iteration has ended).
@@ -261,6 +320,14 @@ impl<'a> McapReader<'a> {
     /// short, or before the iteration ended).
     pub fn is_complete(&self) -> bool {
         self.complete
+    }
+
+    /// The file's (or the bytes') length.
+    pub fn total_bytes(&self) -> u64 {
+        match &self.source {
+            Source::Bytes(b) => b.len() as u64,
+            Source::File { len, .. } => *len,
+        }
     }
 
     /// The offset up to which the file has been read (the end of the last
@@ -396,8 +463,40 @@ impl<'a> McapReader<'a> {
     }
 
     fn step_inner<E>(&mut self, on_msg: &mut Visitor<'_, E>) -> Result<Result<bool, E>, ReadError> {
+        match &mut self.source {
+            Source::Bytes(bytes) => {
+                let bytes: &'a [u8] = bytes;
+                let rest = bytes.get(self.pos..).unwrap_or(&[]);
+                self.step_on(rest, rest.len() as u64, on_msg)
+            }
+            Source::File {
+                file,
+                path,
+                len,
+                buf,
+            } => {
+                let available = len.saturating_sub(self.pos as u64);
+                let mut record = std::mem::take(buf);
+                let filled = fill_record(file, path, self.pos as u64, available, &mut record);
+                let result = filled.and_then(|()| self.step_on(&record, available, on_msg));
+                if let Source::File { buf, .. } = &mut self.source {
+                    *buf = record;
+                }
+                result
+            }
+        }
+    }
+
+    /// One record from `rest` (the bytes from `self.pos`: all of them in
+    /// memory, or the record alone from a file), with `available` bytes
+    /// left in the file.
+    fn step_on<E>(
+        &mut self,
+        rest: &[u8],
+        available: u64,
+        on_msg: &mut Visitor<'_, E>,
+    ) -> Result<Result<bool, E>, ReadError> {
         let offset = self.pos as u64;
-        let rest = self.bytes.get(self.pos..).unwrap_or(&[]);
         if rest.is_empty() {
             return Err(ReadError::Unfinished { offset });
         }
@@ -407,7 +506,7 @@ impl<'a> McapReader<'a> {
                 offset,
                 opcode,
                 needed: RECORD_PREFIX as u64,
-                available: rest.len() as u64,
+                available,
             });
         };
         let [op_byte, len_bytes @ ..] = *prefix;
@@ -420,7 +519,7 @@ impl<'a> McapReader<'a> {
                 offset,
                 opcode,
                 needed,
-                available: rest.len() as u64,
+                available,
             })?;
         let corrupt = |source| ReadError::Corrupt {
             offset,
@@ -617,6 +716,53 @@ impl Iterator for McapReader<'_> {
     }
 }
 
+/// The largest record read from a file (a chunk's compressed bytes and its
+/// header): a larger length is taken as corrupt, so that a bad length never
+/// makes the reader allocate it.
+pub const MAX_RECORD_BYTES: u64 = MAX_CHUNK_BYTES + 1024 * 1024;
+
+/// Reads the record at `pos` of `file` into `buf`: its prefix, then its body
+/// when the file holds all of it (else the prefix alone, which the caller
+/// reports as cut short).
+fn fill_record(
+    file: &mut std::fs::File,
+    path: &Path,
+    pos: u64,
+    available: u64,
+    buf: &mut Vec<u8>,
+) -> Result<(), ReadError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let io = |source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut read = |buf: &mut Vec<u8>, n: u64| -> Result<(), ReadError> {
+        buf.clear();
+        file.seek(SeekFrom::Start(pos)).map_err(io)?;
+        (&mut *file).take(n).read_to_end(buf).map_err(io)?;
+        Ok(())
+    };
+    let head = available.min(RECORD_PREFIX as u64);
+    read(buf, head)?;
+    let Some((prefix, _)) = buf.split_first_chunk::<RECORD_PREFIX>() else {
+        return Ok(());
+    };
+    let [_, len_bytes @ ..] = *prefix;
+    let len = u64::from_le_bytes(len_bytes);
+    let needed = len.saturating_add(RECORD_PREFIX as u64);
+    if needed > available {
+        return Ok(());
+    }
+    if len > MAX_RECORD_BYTES {
+        return Err(ReadError::RecordTooLarge {
+            offset: pos,
+            len,
+            limit: MAX_RECORD_BYTES,
+        });
+    }
+    read(buf, needed)
+}
+
 /// The chunk's records, decompressed and checked against its CRC, or why not.
 fn decompress(
     header: &mcap::records::ChunkHeader,
@@ -724,8 +870,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     if input == output || same_file {
         return Err(RecoverError::SamePath(output.to_path_buf()));
     }
-    let bytes = read_file(input)?;
-    let mut reader = McapReader::new(&bytes)?;
+    let mut reader = McapReader::open(input)?;
     let mcap_err = |source| RecoverError::Mcap {
         path: output.to_path_buf(),
         source,
@@ -805,7 +950,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
         ("source".to_owned(), input.display().to_string()),
         ("messages".to_owned(), messages.to_string()),
         ("read_up_to_byte".to_owned(), reader.offset().to_string()),
-        ("input_bytes".to_owned(), bytes.len().to_string()),
+        ("input_bytes".to_owned(), reader.total_bytes().to_string()),
     ]);
     if let Some(e) = &stopped {
         info.insert("stopped".to_owned(), e.to_string());

@@ -633,11 +633,7 @@ fn start_bias(reader: &McapReader<'_>) -> Bias {
 
 /// Replays the recording held in `bytes` (see the module documentation).
 pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
-    replay_with(
-        1,
-        |_| Ok((None, std::borrow::Cow::Borrowed(bytes))),
-        options,
-    )
+    replay_with(&[Input::Bytes(bytes)], options)
 }
 
 /// Replays the files of a rotated recording in order, as one: the step
@@ -659,20 +655,36 @@ pub fn replay_files(
             return Err(ReplayError::OutputIsInput(out.clone()));
         }
     }
-    replay_with(
-        inputs.len(),
-        |i| {
-            let path = inputs.get(i).cloned().unwrap_or_default();
-            let bytes = super::reader::read_file(&path)?;
-            Ok((Some(path), std::borrow::Cow::Owned(bytes)))
-        },
-        options,
-    )
+    let inputs: Vec<Input<'_>> = inputs.iter().map(|p| Input::File(p)).collect();
+    replay_with(&inputs, options)
+}
+
+/// One recording to replay: bytes in memory, or a file streamed record by
+/// record (memory independent of its length).
+#[derive(Debug, Clone, Copy)]
+enum Input<'b> {
+    Bytes(&'b [u8]),
+    File(&'b Path),
+}
+
+impl<'b> Input<'b> {
+    fn open(&self) -> Result<McapReader<'b>, ReadError> {
+        match self {
+            Input::Bytes(b) => McapReader::new(b),
+            Input::File(p) => McapReader::open(p),
+        }
+    }
+    fn path(&self) -> Option<PathBuf> {
+        match self {
+            Input::Bytes(_) => None,
+            Input::File(p) => Some(p.to_path_buf()),
+        }
+    }
 }
 
 /// The `sar_replay` metadata of a file: read up to its first message.
-fn file_metadata(bytes: &[u8]) -> Result<Option<BTreeMap<String, String>>, ReplayError> {
-    let mut probe = McapReader::new(bytes)?;
+fn file_metadata(input: &Input<'_>) -> Result<Option<BTreeMap<String, String>>, ReplayError> {
+    let mut probe = input.open()?;
     let _ = probe.next();
     Ok(probe
         .metadata()
@@ -681,12 +693,9 @@ fn file_metadata(bytes: &[u8]) -> Result<Option<BTreeMap<String, String>>, Repla
         .map(|m| m.metadata.clone()))
 }
 
-/// The replay of `count` inputs handed out by `load` in order.
-fn replay_with<'b>(
-    count: usize,
-    mut load: impl FnMut(usize) -> Result<(Option<PathBuf>, std::borrow::Cow<'b, [u8]>), ReplayError>,
-    options: &ReplayOptions,
-) -> Result<ReplayReport, ReplayError> {
+/// The replay of `inputs`, in order, as one.
+fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
+    let count = inputs.len();
     for v in [options.from_s, options.to_s].into_iter().flatten() {
         if !(v.is_finite() && v >= 0.0) {
             return Err(ReplayError::Range(format!("{v} s is not a time >= 0")));
@@ -699,15 +708,10 @@ fn replay_with<'b>(
             "--from {a} s is after --to {b} s"
         )));
     }
-    let (first_path, first_bytes) = load(0)?;
-    let mut pending = Some((first_path, first_bytes));
+    let first = inputs.first().ok_or(ReplayError::NoInputs)?;
     // The metadata is written at the start of a file: read up to the first
     // message to find it.
-    let bytes: &[u8] = match &pending {
-        Some((_, b)) => b,
-        None => &[],
-    };
-    let mut probe = McapReader::new(bytes)?;
+    let mut probe = first.open()?;
     let _ = probe.next();
     let bias = start_bias(&probe);
     let metadata = probe
@@ -798,17 +802,17 @@ fn replay_with<'b>(
     let mut previous_index: Option<u64> = None;
     let mut reached_end_of_range = false;
     for i in 0..count {
-        let (path, bytes) = match pending.take() {
-            Some(p) => p,
-            None => load(i)?,
+        let Some(input) = inputs.get(i) else {
+            break;
         };
+        let path = input.path();
         let name = || {
             path.as_ref()
                 .map_or_else(|| "the input".to_owned(), |p| p.display().to_string())
         };
         if count > 1 {
             // The files chain: one rotation, in order.
-            let index = file_metadata(&bytes)?
+            let index = file_metadata(input)?
                 .and_then(|m| m.get("file_index").and_then(|v| v.parse::<u64>().ok()));
             if let (Some(prev), Some(index)) = (previous_index, index)
                 && index != prev + 1
@@ -820,7 +824,7 @@ fn replay_with<'b>(
             }
             previous_index = index;
         }
-        let mut reader = McapReader::new(&bytes)?;
+        let mut reader = input.open()?;
         // Topic per channel id, looked up once per channel.
         let mut topics: BTreeMap<u16, Option<Topic>> = BTreeMap::new();
         let mut reference_channel: Option<u16> = None;
