@@ -124,6 +124,9 @@ pub struct ActionCounts {
     pub halting_transitions: u64,
     /// Quick stops repeated because the drives were still enabled.
     pub quick_stop_retries: u64,
+    /// Sensor samples the driver dropped before the loop drained them (its
+    /// store of undrained samples was full): missing from the recording.
+    pub sensor_samples_lost: u64,
 }
 
 /// The per-cycle controller.
@@ -148,7 +151,16 @@ pub struct Controller<S: ForceSensor, D: AxisDrives> {
     /// The publishing thread's last beat count and when it changed (ns of
     /// the cycle clock).
     publisher_beat: Option<(u64, u64)>,
+    /// Every sensor sample received since the previous cycle (the
+    /// recorder's `/sar/sensor/wrench`), `drained_count` of them in use;
+    /// fixed at construction.
+    drained: [WrenchSample; DRAIN_CAPACITY],
+    drained_count: usize,
 }
+
+/// Sensor samples handed to the recorder per cycle at most (16 kHz at a
+/// 1 kHz loop); more wait for the next cycle (the driver keeps them).
+pub const DRAIN_CAPACITY: usize = 16;
 
 /// The per-cycle hook of drives that must be driven by the loop (see
 /// [`Controller::with_drives_cycle`]): `Err` names what failed, for the log.
@@ -217,7 +229,23 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             counts: ActionCounts::default(),
             drives_cycle: None,
             publisher_beat: None,
+            // Never read beyond `drained_count`.
+            drained: [WrenchSample {
+                force_n: Vec3::zeros(),
+                torque_nm: Vec3::zeros(),
+                counter: 0,
+                status: sar_drivers::SensorStatus(u32::MAX),
+                received_ns: 0,
+            }; DRAIN_CAPACITY],
+            drained_count: 0,
         })
+    }
+
+    /// Every sensor sample received since the previous cycle, oldest first
+    /// (the one the step used among them, or in an earlier cycle's: its
+    /// counter and stamp are in the cycle's input).
+    pub fn sensor_samples(&self) -> &[WrenchSample] {
+        self.drained.get(..self.drained_count).unwrap_or(&[])
     }
 
     /// Calls `hook` on the drives once per cycle, in the gather phase before
@@ -302,7 +330,16 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     /// it is called once, after the inputs are gathered, so that no input is
     /// stamped after the cycle's time.
     pub fn step(&mut self, cycle: u64, now: impl FnOnce() -> Option<u64>) -> &CycleOutput {
-        // Gather.
+        // Gather: every sample for the recorder, the newest for the step.
+        self.drained_count = match self.sensor.drain(&mut self.drained) {
+            Ok(d) => {
+                if d.lost > 0 {
+                    self.counts.sensor_samples_lost += d.lost;
+                }
+                d.count.min(DRAIN_CAPACITY)
+            }
+            Err(_) => 0,
+        };
         match self.sensor.poll() {
             Ok(Some(s)) => self.last_input.sensor = sensor_sample(&s),
             Ok(None) => {}

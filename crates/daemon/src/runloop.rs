@@ -26,6 +26,9 @@ pub struct Published<'a> {
     pub decision: &'a LoopOutput,
     /// The step after the cycle (the recorder snapshots its state).
     pub step: &'a crate::step::LoopStep,
+    /// Every sensor sample received since the previous cycle (the recorder
+    /// writes each as `/sar/sensor/wrench`).
+    pub sensor_samples: &'a [sar_drivers::WrenchSample],
     /// The loop's measurements.
     pub stats: &'a LoopStats,
     /// Quick stops so far.
@@ -96,6 +99,7 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
             loop_input: controller.loop_input(),
             decision: controller.decision(),
             step: controller.loop_step(),
+            sensor_samples: controller.sensor_samples(),
             stats,
             quick_stops: controller.counts().quick_stops,
             recorder_drops: 0,

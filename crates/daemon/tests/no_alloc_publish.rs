@@ -83,6 +83,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
                 loop_input: c.loop_input(),
                 decision: c.decision(),
                 step: c.loop_step(),
+                sensor_samples: c.sensor_samples(),
                 stats: &stats,
                 quick_stops: c.counts().quick_stops,
                 recorder_drops: 0,

@@ -104,6 +104,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             loop_input: c.loop_input(),
             decision: c.decision(),
             step: c.loop_step(),
+            sensor_samples: c.sensor_samples(),
             stats: &stats,
             quick_stops: c.counts().quick_stops,
             recorder_drops: 0,

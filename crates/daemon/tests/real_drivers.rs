@@ -196,6 +196,115 @@ fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
     );
 }
 
+/// A sensor faster than the loop (issue 17): the emulator sends two packets
+/// per 1 ms cycle (2 kHz), the loop drains every sample the driver received
+/// and the recorder writes each as `/sar/sensor/wrench`: the recording
+/// holds every packet the emulator produced, in order, and the sample each
+/// cycle's step used (`/sar/cycle/input`) is among them.
+#[test]
+fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
+    use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
+    use sar_daemon::record::msgs::{CycleInput, RosMessage, Topic, WrenchStamped};
+    use sar_daemon::record::{McapReader, Rotation, read_file};
+    use sar_daemon::runloop::{Publish, Published};
+    use sar_daemon::stats::LoopStats;
+    use std::sync::Arc;
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rdt_2khz");
+    let _ = std::fs::remove_dir_all(&dir);
+    let (emulator, mut controller) = rdt_rig(Vec::new());
+    let switch = Arc::new(RecordSwitch::default());
+    let (manager, mut publisher) = RecordManager::start(
+        RecordSettings {
+            enabled: true,
+            directory: dir.clone(),
+            rotation: Rotation::default(),
+            queue_capacity: 65536,
+            scene: None,
+            snapshot_period_ns: 1_000_000_000,
+        },
+        sar_estimator::cycle::Bias::force_only(Vec3::zeros()),
+        Arc::clone(&switch),
+        (),
+    )
+    .unwrap();
+    let stats = LoopStats::default();
+    let mut cycle = 0u64;
+    let mut drained = 0usize;
+    let mut most = 0usize;
+    let mut step = |c: &mut RdtController, p: &mut dyn Publish, drained: &mut usize| {
+        cycle += 1;
+        p.before_cycle();
+        c.step(cycle, rt::monotonic_ns);
+        *drained += c.sensor_samples().len();
+        most = most.max(c.sensor_samples().len());
+        p.publish(&Published {
+            loop_input: c.loop_input(),
+            decision: c.decision(),
+            step: c.loop_step(),
+            sensor_samples: c.sensor_samples(),
+            stats: &stats,
+            quick_stops: c.counts().quick_stops,
+            recorder_drops: 0,
+            recording: false,
+        });
+    };
+    let mut next = rt::monotonic_ns().unwrap();
+    for _ in 0..600 {
+        emulator.step(2);
+        next += MS;
+        rt::sleep_until_ns(next);
+        step(&mut controller, &mut publisher, &mut drained);
+    }
+    // The last packets: drained once the driver has them (bounded wait).
+    let produced = emulator.produced() as usize;
+    for _ in 0..2_000 {
+        if drained >= produced {
+            break;
+        }
+        next += MS;
+        rt::sleep_until_ns(next);
+        step(&mut controller, &mut publisher, &mut drained);
+    }
+    assert_eq!(drained, produced, "drained {drained} of {produced} samples");
+    assert!(most >= 2, "never more than {most} sample per cycle");
+    assert_eq!(controller.counts().sensor_samples_lost, 0);
+    publisher.release();
+    manager.finish();
+    assert_eq!(switch.dropped(), 0);
+    let file = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
+        .unwrap();
+    let bytes = read_file(&file).unwrap();
+    let mut stamps = Vec::new();
+    let mut used = Vec::new();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    while let Some(m) = reader.next() {
+        let m = m.unwrap();
+        let topic = reader.channels()[&m.channel_id].topic.clone();
+        if topic == Topic::SensorWrench.name() {
+            stamps.push(WrenchStamped::decode(&m.data).unwrap().stamp_ns);
+        } else if topic == Topic::CycleInput.name() {
+            let c = CycleInput::decode(&m.data).unwrap();
+            if c.sensor_valid {
+                used.push(c.sensor_stamp_ns);
+            }
+        }
+    }
+    println!(
+        "{produced} packets at 2 kHz, {cycle} cycles at 1 kHz: {} /sar/sensor/wrench messages, at most {most} per cycle",
+        stamps.len()
+    );
+    assert_eq!(stamps.len(), produced);
+    assert!(stamps.windows(2).all(|w| w[0] < w[1]), "out of order");
+    let recorded: std::collections::BTreeSet<u64> = stamps.iter().copied().collect();
+    assert!(!used.is_empty());
+    for s in &used {
+        assert!(recorded.contains(s), "the used sample {s} is not recorded");
+    }
+}
+
 #[test]
 fn rdt_loop_runs_ok_then_faults_on_a_non_zero_status() {
     // Packets 1300..1400 carry a fault status (the loop polls the newest

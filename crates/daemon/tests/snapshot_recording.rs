@@ -92,6 +92,7 @@ fn session(name: &str) -> Vec<PathBuf> {
             loop_input: c.loop_input(),
             decision: c.decision(),
             step: c.loop_step(),
+            sensor_samples: c.sensor_samples(),
             stats: &stats,
             quick_stops: c.counts().quick_stops,
             recorder_drops: 0,

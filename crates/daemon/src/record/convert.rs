@@ -110,6 +110,31 @@ pub fn cycle_record(
     outputs(&input.cycle_input(), output, emit);
 }
 
+/// [`cycle_record`] as the daemon's recorder writes it: every sensor
+/// sample received since the previous cycle (`samples`, oldest first) as
+/// `/sar/sensor/wrench`, instead of only the one the step used (its counter
+/// and stamp are in `/sar/cycle/input`; its message is among these).
+pub fn cycle_record_samples(
+    input: &LoopInput,
+    decision: &LoopOutput,
+    joints_new: bool,
+    samples: &[sar_drivers::WrenchSample],
+    mut emit: impl FnMut(Outgoing),
+) {
+    emit(Outgoing::CycleInput(cycle_input_msg(input, decision)));
+    for s in samples {
+        emit(Outgoing::SensorWrench(WrenchStamped::sensor(
+            s.received_ns,
+            arr(&s.force_n),
+            arr(&s.torque_nm),
+        )));
+    }
+    if joints_new {
+        emit(Outgoing::Joints(joints_msg(&input.joints)));
+    }
+    outputs(&input.cycle_input(), &decision.estimate, emit);
+}
+
 /// How many messages [`outputs`] gives for `output`.
 pub fn output_count(output: &CycleOutput) -> u64 {
     1 + u64::from(matches!(output.tip, TipOutcome::Estimate(_)))

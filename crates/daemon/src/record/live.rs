@@ -6,8 +6,10 @@
 //! configuration (`[record] enabled`), so that no file is created, no thread
 //! started and no writer joined on the loop's thread.
 //!
-//! Per cycle: `/sar/cycle/input`, `/sar/sensor/wrench` (a new sample: its
-//! counter changed), `/sar/joints` (a new stamp), then the outputs of
+//! Per cycle: `/sar/cycle/input`, `/sar/sensor/wrench` (every sample the
+//! sensor's driver received since the previous cycle, drained by the loop:
+//! a sensor faster than the loop loses none), `/sar/joints` (a new stamp),
+//! then the outputs of
 //! [`super::convert::outputs`]. After the cycle's messages, at the start of a
 //! recording and every `snapshot_period_ns`, `/sar/cycle/snapshot`: the
 //! loop's whole decision state after that cycle (pushed as chunks; the
@@ -201,9 +203,15 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             let input = c.loop_input;
             let joints_new = self.last_joints_stamp_ns != Some(input.joints.stamp_ns);
             self.last_joints_stamp_ns = Some(input.joints.stamp_ns);
-            convert::cycle_record(c.loop_input, c.decision, joints_new, |m| {
-                rec.push(m);
-            });
+            convert::cycle_record_samples(
+                c.loop_input,
+                c.decision,
+                joints_new,
+                c.sensor_samples,
+                |m| {
+                    rec.push(m);
+                },
+            );
             // The state after this cycle, at the start of a recording and
             // then periodically: replay restores it and steps the cycles
             // after it (the writer starts a rotated file with one).
