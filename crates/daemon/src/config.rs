@@ -572,7 +572,13 @@ pub fn parse(text: &str, origin: &str) -> Result<Config, ConfigError> {
     }
     let file: FileToml = Deserialize::deserialize(toml::de::Deserializer::from(root))
         .map_err(|e| ctx.serde_error(&e))?;
-    build(&ctx, file)
+    let mut config = build(&ctx, file)?;
+    // Recorded with every recording: it replays without hunting for this file.
+    config.record.config_source = Some(std::sync::Arc::new(crate::record::convert::ConfigSource {
+        origin: origin.to_owned(),
+        toml: text.to_owned(),
+    }));
+    Ok(config)
 }
 
 struct Ctx<'a> {
@@ -995,6 +1001,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         },
         queue_capacity: usize::try_from(queue_capacity).unwrap_or(65536),
         scene,
+        config_source: None,
     };
 
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;

@@ -71,6 +71,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             // writer's speed.
             queue_capacity: 65536,
             scene: None,
+            config_source: None,
         },
         bias,
         Arc::clone(&switch),
@@ -105,6 +106,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             quick_stops: c.counts().quick_stops,
             recorder_drops: 0,
             recording: false,
+            truth: None,
         });
         while queue.pop().is_some() {}
         while operator.replies.pop().is_some() {}

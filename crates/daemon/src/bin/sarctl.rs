@@ -142,6 +142,16 @@ enum Cmd {
         #[arg(long, value_name = "FILE.svg")]
         plot: Option<std::path::PathBuf>,
     },
+    /// Write a rosbag2 directory (metadata.yaml beside the files) that ROS 2
+    /// tools and Python rosbags open.
+    Export {
+        /// The directory to create (absent or empty).
+        #[arg(long, value_name = "DIR")]
+        rosbag2: std::path::PathBuf,
+        /// The recording's files (a rotation's -0000.mcap, -0001.mcap, ... in order).
+        #[arg(required = true, value_name = "REC.mcap")]
+        recordings: Vec<std::path::PathBuf>,
+    },
     /// Rewrite a recording cut short with its summary and index.
     Recover {
         /// The recording.
@@ -337,9 +347,8 @@ fn run(args: &Args) -> Result<(), String> {
             compare,
             plot,
         } => {
-            let config = args.config.as_deref().ok_or("replay needs --config FILE")?;
             return sar_daemon::cli::replay::run(&sar_daemon::cli::replay::Args {
-                config,
+                config: args.config.as_deref(),
                 input,
                 output: output.as_deref(),
                 compare: compare.as_deref(),
@@ -349,6 +358,12 @@ fn run(args: &Args) -> Result<(), String> {
         }
         Cmd::Recover { file, output } => {
             return sar_daemon::cli::recover::run(file, output.as_deref(), json);
+        }
+        Cmd::Export {
+            rosbag2,
+            recordings,
+        } => {
+            return sar_daemon::cli::export::run(rosbag2, recordings, json);
         }
         _ => {}
     }
@@ -432,9 +447,11 @@ fn run(args: &Args) -> Result<(), String> {
         }
     };
     match args.command {
-        Cmd::Replay { .. } | Cmd::Recover { .. } | Cmd::Workspace | Cmd::Completions { .. } => {
-            Ok(())
-        }
+        Cmd::Replay { .. }
+        | Cmd::Recover { .. }
+        | Cmd::Export { .. }
+        | Cmd::Workspace
+        | Cmd::Completions { .. } => Ok(()),
         Cmd::Record { action } => {
             sar_daemon::cli::record::run(&client, action == RecordAction::Start, json)
         }

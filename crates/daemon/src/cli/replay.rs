@@ -1,10 +1,11 @@
-//! `sarctl replay --config FILE --input REC.mcap --output OUT.mcap
+//! `sarctl replay [--config FILE] --input REC.mcap --output OUT.mcap
 //! [--compare TOPIC] [--format json] [--plot FILE.svg]`: the per-cycle step
 //! over a recording's inputs ([`crate::record::replay`]), its outputs
 //! written, the recorded outputs compared bit for bit (a difference exits
 //! non-zero naming the first cycle, topic and field), the error figures
 //! against a reference topic, and the tip force over time as an SVG (the
-//! article's Figure 9).
+//! article's Figure 9). Without `--config`, the configuration the recording
+//! carries (`sar_config` metadata, written by `sard`).
 
 use crate::record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_file};
 use serde_json::json;
@@ -13,8 +14,8 @@ use std::path::Path;
 /// The command's arguments.
 #[derive(Debug, Clone, Copy)]
 pub struct Args<'a> {
-    /// The configuration.
-    pub config: &'a Path,
+    /// The configuration (`None`: the one the recording carries).
+    pub config: Option<&'a Path>,
     /// The recording.
     pub input: &'a Path,
     /// The outputs.
@@ -57,7 +58,25 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
 
 /// Runs the command.
 pub fn run(a: &Args<'_>) -> Result<(), String> {
-    let cfg = crate::config::load(a.config).map_err(|e| e.to_string())?;
+    let cfg = match a.config {
+        Some(path) => crate::config::load(path).map_err(|e| e.to_string())?,
+        None => {
+            let source = crate::record::replay::recorded_config(a.input)
+                .map_err(|e| e.to_string())?
+                .ok_or_else(|| {
+                    format!(
+                        "{}: the recording carries no configuration (not written by sard, or by an older one): give --config FILE",
+                        a.input.display()
+                    )
+                })?;
+            let origin = format!(
+                "the configuration recorded in {} (from {})",
+                a.input.display(),
+                source.origin
+            );
+            crate::config::parse(&source.toml, &origin).map_err(|e| e.to_string())?
+        }
+    };
     let options = ReplayOptions {
         output: a.output.map(Path::to_path_buf),
         compare: a.compare.map(str::to_owned),

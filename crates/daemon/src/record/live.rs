@@ -12,10 +12,16 @@
 //! every cycle from the first and replays bit for bit; one started later
 //! (`sarctl record start`) lacks the estimator's earlier history (guard,
 //! filter, bias after tares) and says so in its `sar_replay` metadata
-//! (`from_first_cycle = false`).
+//! (`from_first_cycle = false`). On the simulator ([`LiveRecorder::with_truth`]),
+//! each cycle with a new sensor sample also records the simulator's truth on
+//! `/sar/sim/tip_wrench_truth` (the reference of `sarctl replay --compare`).
+//! Every recording carries the daemon's configuration (`sar_config`
+//! metadata: [`super::convert::config_metadata`]), so that `sarctl replay`
+//! needs no `--config`.
 
 use super::convert;
 use super::file::{FileOptions, Rotation};
+use super::msgs::{Outgoing, WrenchStamped};
 use super::recorder::{Recorder, RecorderConfig};
 use crate::runloop::{Publish, Published};
 use crossbeam_queue::ArrayQueue;
@@ -40,6 +46,10 @@ pub struct RecordSettings {
     /// The live view's 3D scene, in a companion file beside each file
     /// (`[record] scene_hz`; `NAME.scene.mcap`).
     pub scene: Option<super::file::SceneOptions>,
+    /// The configuration's text and where it came from, written into every
+    /// recording (`sar_config` metadata) so that it replays without one
+    /// (`None`: not written).
+    pub config_source: Option<std::sync::Arc<super::convert::ConfigSource>>,
 }
 
 const WANT_NONE: u8 = 0;
@@ -147,9 +157,20 @@ pub struct LiveRecorder<P> {
     /// Drops of the recordings already handed back.
     dropped_before: u64,
     last_joints_stamp_ns: Option<u64>,
+    /// The simulator's truth, asked once per cycle (`None`: not simulated).
+    truth: Option<crate::wire::SimTruthFn>,
 }
 
 impl<P> LiveRecorder<P> {
+    /// Asks `truth` once per cycle: recorded on `/sar/sim/tip_wrench_truth`
+    /// (the visible part, `tip_force_n - friction_force_n`, with every new
+    /// sensor sample, stamped as the cycle) and handed to the wrapped
+    /// publisher in [`Published::truth`].
+    pub fn with_truth(mut self, truth: Option<crate::wire::SimTruthFn>) -> Self {
+        self.truth = truth;
+        self
+    }
+
     /// Hands the active recorder back to the manager (at shutdown).
     pub fn release(&mut self) {
         if let Some(rec) = self.active.take() {
@@ -183,6 +204,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             self.last_joints_stamp_ns = None;
             self.switch.recording.store(true, Ordering::Release);
         }
+        let truth = c.truth.or_else(|| self.truth.as_mut().and_then(|f| f()));
         let mut dropped = self.dropped_before;
         if let Some(rec) = &mut self.active {
             let input = c.loop_input;
@@ -191,12 +213,22 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             convert::cycle_record(c.loop_input, c.decision, joints_new, |m| {
                 rec.push(m);
             });
+            if let Some(t) = &truth
+                && c.decision.estimate.new_sample
+            {
+                let visible = t.tip_force_n - t.friction_force_n;
+                rec.push(Outgoing::SimTruth(WrenchStamped::base_force(
+                    convert::cycle_stamp_ns(&input.cycle_input()),
+                    [visible.x, visible.y, visible.z],
+                )));
+            }
             dropped += rec.dropped();
         }
         self.switch.dropped.store(dropped, Ordering::Relaxed);
         self.inner.publish(&Published {
             recorder_drops: dropped,
             recording: self.active.is_some(),
+            truth,
             ..*c
         });
     }
@@ -219,6 +251,9 @@ fn recorder_config(
     let mut files = FileOptions::new(settings.directory.clone(), name);
     files.rotation = settings.rotation;
     files.metadata = vec![convert::replay_metadata(bias, first)];
+    if let Some(source) = &settings.config_source {
+        files.metadata.push(convert::config_metadata(source));
+    }
     files.scene = settings.scene;
     let mut c = RecorderConfig::new(files);
     c.queue_capacity = settings.queue_capacity;
@@ -291,6 +326,7 @@ impl RecordManager {
                 active: None,
                 dropped_before: 0,
                 last_joints_stamp_ns: None,
+                truth: None,
             },
         ))
     }
