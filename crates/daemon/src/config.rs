@@ -979,8 +979,15 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let max_s = ctx.range_f("record.max_file_s", rec.max_file_s, 0.0, 86_400.0, "s")?;
     let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
     let scene_hz = ctx.range_f("record.scene_hz", rec.scene_hz, 0.0, 1000.0, "Hz")?;
-    let scene = (scene_hz > 0.0).then(|| crate::record::SceneOptions {
-        geometry: crate::view::scene::SceneGeometry::from_config(&EstimatorConfig {
+    // The scene needs the cargo feature `view` (the Foxglove SDK): `sard`
+    // is built without it and writes none (said once here).
+    if scene_hz > 0.0 && !cfg!(feature = "view") {
+        tracing::info!(
+            "[record] scene_hz = {scene_hz}: no 3D scene beside recordings (NAME.scene.mcap): this build has no `view` feature"
+        );
+    }
+    let scene = (scene_hz > 0.0 && cfg!(feature = "view")).then(|| crate::record::SceneOptions {
+        geometry: crate::view::geometry::SceneGeometry::from_config(&EstimatorConfig {
             calibration,
             profile,
             noise,

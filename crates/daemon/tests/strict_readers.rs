@@ -259,6 +259,7 @@ impl Drop for Proc {
 /// (the live-only status panel's too) is in the decoded messages.
 #[test]
 #[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
+#[cfg_attr(not(feature = "view"), ignore = "needs the cargo feature `view`")]
 fn the_live_view_decodes_with_the_foxglove_client() {
     use std::io::{BufRead, BufReader};
     let prefix = format!("sar-strict-live-{}", std::process::id());

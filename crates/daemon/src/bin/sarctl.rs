@@ -365,6 +365,10 @@ fn run(args: &Args) -> Result<(), String> {
         } => {
             return sar_daemon::cli::export::run(rosbag2, recordings, json);
         }
+        #[cfg(not(feature = "view"))]
+        Cmd::View { .. } => {
+            return Err("this sarctl has no live view: build it with the cargo feature `view` (cargo install --path crates/daemon --features view)".to_owned());
+        }
         _ => {}
     }
     if let Some(path) = &args.config {
@@ -520,9 +524,12 @@ fn run(args: &Args) -> Result<(), String> {
                 }
             }
         }
+        #[cfg(feature = "view")]
         Cmd::View { ref bind, scene_hz } => {
             sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
         }
+        #[cfg(not(feature = "view"))]
+        Cmd::View { .. } => Ok(()), // refused above
         Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => {
             // Faulted drives are reset first: then the guard's reset.

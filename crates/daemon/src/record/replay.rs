@@ -552,8 +552,9 @@ pub fn replay(bytes: &[u8], options: &ReplayOptions) -> Result<ReplayReport, Rep
             o.metadata = metadata.clone().into_iter().collect();
             // The live view's scene, as the daemon's recorder writes it
             // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
-            o.scene = Some(super::SceneOptions {
-                geometry: crate::view::scene::SceneGeometry::from_config(&options.config),
+            // (With the cargo feature `view` only.)
+            o.scene = cfg!(feature = "view").then(|| super::SceneOptions {
+                geometry: crate::view::geometry::SceneGeometry::from_config(&options.config),
                 limits_n: options.config.guard.force_limits().to_array(),
                 period_ns: SCENE_PERIOD_NS,
             });
