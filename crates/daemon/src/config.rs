@@ -574,7 +574,13 @@ pub fn parse(text: &str, origin: &str) -> Result<Config, ConfigError> {
     }
     let file: FileToml = Deserialize::deserialize(toml::de::Deserializer::from(root))
         .map_err(|e| ctx.serde_error(&e))?;
-    build(&ctx, file)
+    let mut config = build(&ctx, file)?;
+    // Recorded with every recording: it replays without hunting for this file.
+    config.record.config_source = Some(std::sync::Arc::new(crate::record::convert::ConfigSource {
+        origin: origin.to_owned(),
+        toml: text.to_owned(),
+    }));
+    Ok(config)
 }
 
 struct Ctx<'a> {
@@ -976,8 +982,15 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
     let scene_hz = ctx.range_f("record.scene_hz", rec.scene_hz, 0.0, 1000.0, "Hz")?;
     let snapshot_s = ctx.range_f("record.snapshot_s", rec.snapshot_s, 0.01, 3600.0, "s")?;
-    let scene = (scene_hz > 0.0).then(|| crate::record::SceneOptions {
-        geometry: crate::view::scene::SceneGeometry::from_config(&EstimatorConfig {
+    // The scene needs the cargo feature `view` (the Foxglove SDK): `sard`
+    // is built without it and writes none (said once here).
+    if scene_hz > 0.0 && !cfg!(feature = "view") {
+        tracing::info!(
+            "[record] scene_hz = {scene_hz}: no 3D scene beside recordings (NAME.scene.mcap): this build has no `view` feature"
+        );
+    }
+    let scene = (scene_hz > 0.0 && cfg!(feature = "view")).then(|| crate::record::SceneOptions {
+        geometry: crate::view::geometry::SceneGeometry::from_config(&EstimatorConfig {
             calibration,
             profile,
             noise,
@@ -999,6 +1012,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         queue_capacity: usize::try_from(queue_capacity).unwrap_or(65536),
         scene,
         snapshot_period_ns: (snapshot_s * 1e9).round() as u64,
+        config_source: None,
     };
 
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;

@@ -37,6 +37,9 @@ pub struct Published<'a> {
     pub recorder_drops: u64,
     /// Whether a recording runs (set by `record::live`).
     pub recording: bool,
+    /// The simulator's truth of this cycle, when simulated (set by
+    /// `record::live`, which records it).
+    pub truth: Option<crate::wire::SimTruth>,
 }
 
 /// What the loop talks to around each cycle (shared memory).
@@ -104,6 +107,7 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
             quick_stops: controller.counts().quick_stops,
             recorder_drops: 0,
             recording: false,
+            truth: None,
         });
         // The watchdog is fed from here, the loop itself: a stuck loop stops
         // feeding it.

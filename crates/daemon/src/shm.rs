@@ -533,7 +533,9 @@ impl Publish for DaemonShm {
     fn publish(&mut self, c: &Published<'_>) {
         // The limits in use (an operator may have changed them this cycle)
         // travel in the state to the publishing thread, for its replies.
-        let truth = self.truth.as_mut().and_then(|f| f());
+        // The cycle's truth when the recorder asked for it already (one
+        // simulator lock per cycle), else our own.
+        let truth = c.truth.or_else(|| self.truth.as_mut().and_then(|f| f()));
         let mut state = StateMsg::from_parts(&StateParts {
             input: c.loop_input,
             decision: c.decision,

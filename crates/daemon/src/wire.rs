@@ -256,6 +256,10 @@ pub struct StateParts<'a> {
 pub struct SimTruth {
     /// The true F_tip, N.
     pub tip_force_n: Vec3,
+    /// The support's friction on the rod, N: `tip_force_n` less it is what
+    /// the estimator can see (its model has no friction term), the
+    /// reference recorded on `/sar/sim/tip_wrench_truth`.
+    pub friction_force_n: Vec3,
     /// The simulator's time, ns from its start (the scenario's time axis).
     pub elapsed_ns: u64,
 }

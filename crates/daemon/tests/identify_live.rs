@@ -131,3 +131,109 @@ fn identify_live_writes_back_the_simulated_manipulator() {
     assert!(text.contains("# m (written by `sarctl identify`)"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Waits for the daemon under `prefix` to publish a state that `ok` accepts.
+fn wait_for(prefix: &str, ok: impl Fn(&sar_daemon::wire::StateMsg) -> bool) {
+    let client = sar_daemon::shm::Client::new(prefix).unwrap();
+    let start = Instant::now();
+    loop {
+        if let Ok(sub) = client.subscribe()
+            && let Some(s) = sub.latest(Duration::from_secs(1))
+            && ok(&s)
+        {
+            return;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "never so");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The README's recipe: `sard --sim --scenario
+/// scenarios/identify_cone_manipulator_2.toml` (the built-in configuration,
+/// its whole travel) and `sarctl --config COPY identify --live`: every pose
+/// reached (the moves the guard's Warn braked near the support asked
+/// again), the progress on stderr, m and c of the simulated manipulator.
+#[test]
+fn identify_live_works_with_the_readme_recipe() {
+    let prefix = format!("sar-idrecipe-{}", std::process::id());
+    let dir = std::env::temp_dir().join(&prefix);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config_path = dir.join("my-sim.toml");
+    std::fs::write(&config_path, sar_daemon::config::DEFAULT_TOML).unwrap();
+    let scenario = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenarios/identify_cone_manipulator_2.toml");
+    let _daemon = Daemon(
+        Command::new(SARD)
+            .args(["--sim", "--scenario"])
+            .arg(&scenario)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_for(&prefix, |s| {
+        s.guard_state == sar_daemon::wire::guard_code::OK
+    });
+    let out = Command::new(SARCTL)
+        .arg("--config")
+        .arg(&config_path)
+        .args([
+            "--format",
+            "json",
+            "identify",
+            "--live",
+            "--yes",
+            "--dry-run",
+        ])
+        .env("SAR_SERVICE_PREFIX", &prefix)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("pose 1 of 22"), "{stderr}");
+    assert!(stderr.contains("pose 22 of 22"), "{stderr}");
+    assert!(stderr.contains("s left"), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let m = json["mass_kg"].as_f64().unwrap();
+    let c = json["com_m"].as_f64().unwrap();
+    assert!((m - 2.593).abs() < 0.01 * 2.593, "m {m}");
+    assert!((c - 0.103).abs() < 0.01 * 0.103, "c {c}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Out of the box (`sard --sim`, the demo's contact in Warn) identification
+/// is refused at once, with the recipe.
+#[test]
+fn identify_live_refuses_the_demo_contact_at_once() {
+    let prefix = format!("sar-iddemo-{}", std::process::id());
+    let _daemon = Daemon(
+        Command::new(SARD)
+            .arg("--sim")
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    wait_for(&prefix, |s| {
+        s.guard_state == sar_daemon::wire::guard_code::WARN
+    });
+    let start = Instant::now();
+    let out = Command::new(SARCTL)
+        .args(["identify", "--live", "--yes", "--dry-run"])
+        .arg("--config")
+        .arg(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/default_config.toml"))
+        .env("SAR_SERVICE_PREFIX", &prefix)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(start.elapsed() < Duration::from_secs(10), "not at once");
+    assert!(stderr.contains("free tip"), "{stderr}");
+    assert!(
+        stderr.contains("--scenario scenarios/identify_cone_manipulator_2.toml"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+}

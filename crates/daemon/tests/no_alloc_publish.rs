@@ -88,6 +88,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
                 quick_stops: c.counts().quick_stops,
                 recorder_drops: 0,
                 recording: false,
+                truth: None,
             });
         });
         while queue.pop().is_some() {}

@@ -73,6 +73,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             scene: None,
             // A snapshot every 100 ms: the loop takes and pushes 45.
             snapshot_period_ns: 100_000_000,
+            config_source: None,
         },
         bias,
         Arc::clone(&switch),
@@ -109,6 +110,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             quick_stops: c.counts().quick_stops,
             recorder_drops: 0,
             recording: false,
+            truth: None,
         });
         while queue.pop().is_some() {}
         while operator.replies.pop().is_some() {}

@@ -126,10 +126,16 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
         .partition(|p| p.to_string_lossy().ends_with(".scene.mcap"));
     files.sort();
     assert_eq!(files.len(), 2, "{files:?}");
-    // Each recording has its 3D scene in a companion file, not in itself.
-    assert_eq!(scenes.len(), 2, "{scenes:?}");
+    // Each recording has its 3D scene in a companion file, not in itself
+    // (with the cargo feature `view`; none without it).
+    let per_file = usize::from(cfg!(feature = "view"));
+    assert_eq!(scenes.len(), 2 * per_file, "{scenes:?}");
     for f in &files {
-        assert!(sar_daemon::record::scene_path(f).exists(), "{f:?}");
+        assert_eq!(
+            sar_daemon::record::scene_path(f).exists(),
+            cfg!(feature = "view"),
+            "{f:?}"
+        );
     }
     // The recording from the first cycle replays bit for bit.
     let out_file = dir.join("replayed.mcap");

@@ -7,7 +7,9 @@
 //! message with 0 failures, on
 //! - every fixture under `tests/fixtures/`,
 //! - a `sarctl replay` output,
-//! - a fresh recording of `sard --sim`;
+//! - a fresh recording of `sard --sim`, and the rosbag2 directory that
+//!   `sarctl export --rosbag2` makes of it (`rosbags.rosbag2.Reader(DIR)`
+//!   reads its `metadata.yaml`, then every message of the file);
 //!
 //! and every message path of `deploy/foxglove-layout.json` on a recorded
 //! topic found in the decoded messages of the replay output and of the
@@ -205,6 +207,38 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
         // 3000 cycles at 1 kHz; the sensor's samples at its own rate.
         assert!(topics[t].as_u64().unwrap() >= 1000, "{t}: {topics:?}");
     }
+    // The rosbag2 directory of it, as ROS 2's tools open one.
+    let bag = dir.join("bag");
+    let out = Command::new(env!("CARGO_BIN_EXE_sarctl"))
+        .args(["export", "--rosbag2"])
+        .arg(&bag)
+        .arg(&files[0])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "sarctl export: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let py = readers::rosbags(std::slice::from_ref(&bag));
+    let py_files = readers::assert_clean(&py, "rosbags (rosbag2 directory)");
+    let ours = our_counts(&files[0]);
+    let theirs: BTreeMap<String, u64> = py_files[0]["topics"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, n)| (k.clone(), n.as_u64().unwrap()))
+        .collect();
+    assert_eq!(theirs, ours, "rosbag2 directory vs ours");
+    // Every channel in metadata.yaml, the empty ones too.
+    assert_eq!(
+        py_files[0]["channels"].as_u64().unwrap(),
+        sar_daemon::record::Topic::ALL.len() as u64
+    );
+    let (_, schemas, messages, failures) = readers::totals(&py);
+    eprintln!(
+        "rosbag2 directory: rosbags decoded {messages} messages, {schemas} schemas, {failures} failures"
+    );
 }
 
 /// A child process ended with SIGTERM (then waited for) when dropped.
@@ -225,6 +259,7 @@ impl Drop for Proc {
 /// (the live-only status panel's too) is in the decoded messages.
 #[test]
 #[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
+#[cfg_attr(not(feature = "view"), ignore = "needs the cargo feature `view`")]
 fn the_live_view_decodes_with_the_foxglove_client() {
     use std::io::{BufRead, BufReader};
     let prefix = format!("sar-strict-live-{}", std::process::id());

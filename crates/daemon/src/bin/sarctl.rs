@@ -150,6 +150,16 @@ enum Cmd {
         #[arg(long, value_name = "S")]
         to: Option<f64>,
     },
+    /// Write a rosbag2 directory (metadata.yaml beside the files) that ROS 2
+    /// tools and Python rosbags open.
+    Export {
+        /// The directory to create (absent or empty).
+        #[arg(long, value_name = "DIR")]
+        rosbag2: std::path::PathBuf,
+        /// The recording's files (a rotation's -0000.mcap, -0001.mcap, ... in order).
+        #[arg(required = true, value_name = "REC.mcap")]
+        recordings: Vec<std::path::PathBuf>,
+    },
     /// Rewrite a recording cut short with its summary and index.
     Recover {
         /// The recording.
@@ -347,9 +357,8 @@ fn run(args: &Args) -> Result<(), String> {
             from,
             to,
         } => {
-            let config = args.config.as_deref().ok_or("replay needs --config FILE")?;
             return sar_daemon::cli::replay::run(&sar_daemon::cli::replay::Args {
-                config,
+                config: args.config.as_deref(),
                 input,
                 output: output.as_deref(),
                 compare: compare.as_deref(),
@@ -361,6 +370,16 @@ fn run(args: &Args) -> Result<(), String> {
         }
         Cmd::Recover { file, output } => {
             return sar_daemon::cli::recover::run(file, output.as_deref(), json);
+        }
+        Cmd::Export {
+            rosbag2,
+            recordings,
+        } => {
+            return sar_daemon::cli::export::run(rosbag2, recordings, json);
+        }
+        #[cfg(not(feature = "view"))]
+        Cmd::View { .. } => {
+            return Err("this sarctl has no live view: build it with the cargo feature `view` (cargo install --path crates/daemon --features view)".to_owned());
         }
         _ => {}
     }
@@ -444,9 +463,11 @@ fn run(args: &Args) -> Result<(), String> {
         }
     };
     match args.command {
-        Cmd::Replay { .. } | Cmd::Recover { .. } | Cmd::Workspace | Cmd::Completions { .. } => {
-            Ok(())
-        }
+        Cmd::Replay { .. }
+        | Cmd::Recover { .. }
+        | Cmd::Export { .. }
+        | Cmd::Workspace
+        | Cmd::Completions { .. } => Ok(()),
         Cmd::Record { action } => {
             sar_daemon::cli::record::run(&client, action == RecordAction::Start, json)
         }
@@ -515,9 +536,12 @@ fn run(args: &Args) -> Result<(), String> {
                 }
             }
         }
+        #[cfg(feature = "view")]
         Cmd::View { ref bind, scene_hz } => {
             sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
         }
+        #[cfg(not(feature = "view"))]
+        Cmd::View { .. } => Ok(()), // refused above
         Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => {
             // Faulted drives are reset first: then the guard's reset.

@@ -146,17 +146,19 @@ fn run(args: &Args) -> Result<(), String> {
         Some(Box::new(move || {
             truth_sim.truth().ok().map(|t| sar_daemon::wire::SimTruth {
                 tip_force_n: t.tip_force_n,
+                friction_force_n: t.friction_force_n,
                 elapsed_ns: t.elapsed_ns,
             })
         }))
     } else {
         None
     };
+    // The recorder asks it (and records it); the state gets it from there.
     let shm = DaemonShm::create(
         &args.prefix,
         operator.clone(),
         limits_array(&cfg.estimator.guard.limits()),
-        truth,
+        None,
     )?;
     // Recording (`[record]`, `sarctl record start|stop`): its manager thread
     // (which opens and closes the files, never the loop) starts here, before
@@ -179,6 +181,7 @@ fn run(args: &Args) -> Result<(), String> {
         std::sync::Arc::clone(&switch),
         shm.with_record_switch(switch),
     )?;
+    let shm = shm.with_truth(truth);
     // Real-time settings: said once, here, when they cannot be applied.
     // After the publishing thread has started (DaemonShm::create), so that
     // it keeps the normal priority and every CPU.

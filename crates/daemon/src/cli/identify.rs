@@ -12,7 +12,11 @@
 //! move-tip, holds each pose, and feeds the published state to the same
 //! dwell finder as a recording: the joints and, as the sensor reading with
 //! the daemon's bias removed, `-R_0s^T F_A` (F_A = -R_0s (f_s - b) is
-//! published with every estimate).
+//! published with every estimate). It refuses at once a guard that is not
+//! Ok or a tip force at half the warn limit (a contact: the built-in demo of
+//! `sard --sim`), asks again a move the guard's Warn braked near the
+//! support (the estimate's noise grows as L/a there), and says on stderr
+//! which pose it is at and about how long is left.
 
 use crate::identify::dwell::DwellOptions;
 use crate::identify::{self, IdentifyOptions, plot, writeback};
@@ -250,6 +254,139 @@ mod live {
         s.q_m.iter().zip(q).all(|(a, b)| (a - b).abs() <= ARRIVED_M)
     }
 
+    /// The largest joint distance from `q` to `t`, m.
+    fn distance_m(q: &[f64; 3], t: &PoseTarget) -> f64 {
+        q.iter()
+            .zip([t.joints.q1_m, t.joints.q2_m, t.joints.q3_m])
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// The time a move of `distance_m` takes at `speed_mps`, with some
+    /// allowance for accelerating and braking, s.
+    fn move_s(distance_m: f64, speed_mps: f64) -> f64 {
+        1.2 * distance_m / speed_mps + 0.5
+    }
+
+    /// The recipe a refusal names.
+    const RECIPE: &str = "identification needs a free tip at rest, nothing touching it \
+        (with sard --sim, the built-in demo presses on the tip from 2 s: run \
+        sard --sim --scenario scenarios/identify_cone_manipulator_2.toml; README, Recording, replay, identification)";
+
+    /// Refuses at once what cannot be identified: no state, a guard that is
+    /// not Ok, or a tip force already at half the total warn limit.
+    fn check_start(sub: &StateSubscription) -> Result<StateMsg, String> {
+        let s = sub
+            .latest(Duration::from_secs(2))
+            .ok_or("no state from the daemon within 2 s: is sard running (with this --prefix)?")?;
+        if s.guard_state != guard_code::OK {
+            return Err(format!(
+                "the guard is {} ({}): {RECIPE}",
+                crate::wire::guard_state_name(s.guard_state),
+                crate::wire::reason_name(s.guard_reason)
+            ));
+        }
+        let f = s.tip_force_n;
+        let total = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        let warn_total = s.limits_n[0];
+        if s.flags & flags::ESTIMATE != 0 && total >= 0.5 * warn_total {
+            return Err(format!(
+                "the tip force is {total:.1} N at rest, half the total warn limit {warn_total:.1} N or more: {RECIPE}"
+            ));
+        }
+        Ok(s)
+    }
+
+    /// Moves to `t` and waits until the joints arrive. A move the guard's
+    /// Warn braked (the joints at rest short of the target, the guard Ok
+    /// again) or refused (in Warn) is asked again, up to [`MAX_RETRIES`]
+    /// times: near the support the estimate's noise, amplified by L/a,
+    /// crosses the lateral warn limit for a few ms now and then. A Warn
+    /// that lasts [`WARN_LIMIT`] is a contact: refused.
+    fn reach(
+        c: &mut Collector,
+        client: &Client,
+        sub: &StateSubscription,
+        t: &PoseTarget,
+        what: &str,
+        speed: f64,
+    ) -> Result<(), String> {
+        let q0 = c.latest.map_or([0.0; 3], |s| s.q_m);
+        let deadline =
+            Instant::now() + Duration::from_secs_f64(2.0 * move_s(distance_m(&q0, t), speed) + 5.0);
+        let mut retries = 0u32;
+        let mut warn_since: Option<Instant> = None;
+        loop {
+            let reply = client.command(
+                CommandMsg {
+                    kind: command_kind::MOVE_TIP,
+                    reserved: 0,
+                    id: u64::from(std::process::id()),
+                    tip_m: t.tip_m.into(),
+                    limits_n: [0.0; 6],
+                },
+                Duration::from_secs(2),
+            )?;
+            let in_warn = c.latest.is_some_and(|s| s.guard_state == guard_code::WARN);
+            if reply.status != 0 && !in_warn {
+                return Err(format!(
+                    "the daemon refused the move to {what} (tip {:?} m): status {}, reason {}",
+                    t.tip_m.as_slice(),
+                    reply.status,
+                    crate::wire::reason_name(reply.reason)
+                ));
+            }
+            // Until arrived, at rest short of it (0.3 s without 2 um of
+            // motion), or the deadline.
+            let mut rest: Option<([f64; 3], Instant)> = None;
+            loop {
+                if Instant::now() >= deadline {
+                    return Err(format!(
+                        "{what} (tip {:?} m) not reached in time ({retries} moves asked again after the guard's Warn braked them)",
+                        t.tip_m.as_slice()
+                    ));
+                }
+                c.follow(sub, Duration::from_millis(50), |_| true)?;
+                let Some(s) = c.latest else { continue };
+                if arrived(&s, t) {
+                    return Ok(());
+                }
+                if s.guard_state == guard_code::WARN {
+                    let since = *warn_since.get_or_insert_with(Instant::now);
+                    if since.elapsed() >= WARN_LIMIT {
+                        return Err(format!(
+                            "the guard stayed in Warn for {:.0} s on the way to {what} ({}): something touches the tip; {RECIPE}",
+                            WARN_LIMIT.as_secs_f64(),
+                            crate::wire::reason_name(s.guard_reason)
+                        ));
+                    }
+                    continue;
+                }
+                warn_since = None;
+                match rest {
+                    Some((q, at)) if s.q_m.iter().zip(q).all(|(a, b)| (a - b).abs() < 2e-6) => {
+                        if at.elapsed() >= Duration::from_millis(300) {
+                            break;
+                        }
+                    }
+                    _ => rest = Some((s.q_m, Instant::now())),
+                }
+            }
+            retries += 1;
+            if retries > MAX_RETRIES {
+                return Err(format!(
+                    "{what} (tip {:?} m) not reached: the guard's Warn braked the move {MAX_RETRIES} times",
+                    t.tip_m.as_slice()
+                ));
+            }
+        }
+    }
+
+    /// Moves asked again per pose, at most.
+    const MAX_RETRIES: u32 = 50;
+    /// A Warn this long during the procedure is a contact.
+    const WARN_LIMIT: Duration = Duration::from_secs(2);
+
     /// Drives the procedure; returns the dwells with their sensor sums.
     pub(super) fn collect(
         config: &Config,
@@ -267,6 +404,7 @@ mod live {
         let targets = poses::cone_set(config)?;
         let client = Client::new(prefix)?;
         let sub = client.subscribe()?;
+        let first = check_start(&sub)?;
         confirm(args)?;
         let cal = &config.estimator.calibration;
         let mut c = Collector {
@@ -275,52 +413,39 @@ mod live {
             rotation_t: cal.sensor_rotation().transpose(),
             last_joints_ns: None,
             last_sensor_ns: None,
-            latest: None,
+            latest: Some(first),
         };
         let speed = config.axes.max_speed_mps;
+        let n = targets.len();
+        // What is left: every remaining move and hold, s.
+        let left_s = |from: [f64; 3], k: usize| -> f64 {
+            let mut q = from;
+            let mut total = 0.0;
+            for t in targets.iter().skip(k) {
+                total += move_s(distance_m(&q, t), speed) + if t.turnaround { 0.0 } else { hold_s };
+                q = [t.joints.q1_m, t.joints.q2_m, t.joints.q3_m];
+            }
+            total
+        };
+        eprintln!(
+            "identify --live: {n} poses (the cone set of MODEL.md 5.1 in the travel), about {:.0} s",
+            left_s(first.q_m, 0)
+        );
         for (i, t) in targets.iter().enumerate() {
-            let reply = client.command(
-                CommandMsg {
-                    kind: command_kind::MOVE_TIP,
-                    reserved: 0,
-                    id: u64::from(std::process::id()),
-                    tip_m: t.tip_m.into(),
-                    limits_n: [0.0; 6],
-                },
-                Duration::from_secs(2),
-            )?;
-            if reply.status != 0 {
-                return Err(format!(
-                    "the daemon refused the move to pose {} of {} (tip {:?} m): status {}, reason {}",
-                    i + 1,
-                    targets.len(),
-                    t.tip_m.as_slice(),
-                    reply.status,
-                    crate::wire::reason_name(reply.reason)
-                ));
-            }
-            // Generous: the longest axis move at the planned speed, twice, plus 5 s.
-            let distance = c.latest.map_or(1.0, |s| {
-                s.q_m
-                    .iter()
-                    .zip([t.joints.q1_m, t.joints.q2_m, t.joints.q3_m])
-                    .map(|(a, b)| (a - b).abs())
-                    .fold(0.0, f64::max)
-            });
-            let timeout = Duration::from_secs_f64(2.0 * distance / speed + 5.0);
-            if !c.follow(&sub, timeout, |s| arrived(s, t))? {
-                return Err(format!(
-                    "pose {} of {} (tip {:?} m) not reached within {:.0} s",
-                    i + 1,
-                    targets.len(),
-                    t.tip_m.as_slice(),
-                    timeout.as_secs_f64()
-                ));
-            }
+            let q = c.latest.map_or(first.q_m, |s| s.q_m);
+            let what = format!("pose {} of {n}", i + 1);
+            eprintln!(
+                "identify --live: {what}{} (a = {:.3} m), about {:.0} s left",
+                if t.turnaround { ", a turnaround" } else { "" },
+                t.support_distance_m,
+                left_s(q, i)
+            );
+            reach(&mut c, &client, &sub, t, &what, speed)?;
             if !t.turnaround {
                 c.follow(&sub, Duration::from_secs_f64(hold_s), |_| false)?;
             }
         }
+        eprintln!("identify --live: every pose held; identifying");
         // One more move would end the last stretch; the finder closes it.
         let mut averager = SensorAverager::new(c.finder.finish());
         for (stamp, f) in &c.sensor {

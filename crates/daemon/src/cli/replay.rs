@@ -1,13 +1,13 @@
-//! `sarctl replay --config FILE --input REC.mcap|DIR [--input ...] --output
+//! `sarctl replay [--config FILE] --input REC.mcap|DIR [--input ...] --output
 //! OUT.mcap [--from S] [--to S] [--compare TOPIC] [--format json] [--plot
-//! FILE.svg]`: the
-//! per-cycle step over a recording's inputs ([`crate::record::replay`]; the
-//! files of a rotated set, or a directory of them, replayed in order as
-//! one and checked to chain), its outputs
+//! FILE.svg]`: the per-cycle step over a recording's inputs
+//! ([`crate::record::replay`]; the files of a rotated set, or a directory of
+//! them, replayed in order as one and checked to chain), its outputs
 //! written, the recorded outputs compared bit for bit (a difference exits
 //! non-zero naming the first cycle, topic and field), the error figures
 //! against a reference topic, and the tip force over time as an SVG (the
-//! article's Figure 9).
+//! article's Figure 9). Without `--config`, the configuration the recording
+//! carries (`sar_config` metadata, written by `sard`).
 
 use crate::record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_files};
 use serde_json::json;
@@ -16,8 +16,8 @@ use std::path::{Path, PathBuf};
 /// The command's arguments.
 #[derive(Debug, Clone, Copy)]
 pub struct Args<'a> {
-    /// The configuration.
-    pub config: &'a Path,
+    /// The configuration (`None`: the one the recording carries).
+    pub config: Option<&'a Path>,
     /// The recording: files of one rotated set in order, or directories
     /// (their `*.mcap` files by name, scene files left out).
     pub input: &'a [PathBuf],
@@ -68,7 +68,27 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
 
 /// Runs the command.
 pub fn run(a: &Args<'_>) -> Result<(), String> {
-    let cfg = crate::config::load(a.config).map_err(|e| e.to_string())?;
+    let inputs = input_files(a.input)?;
+    let first = inputs.first().ok_or("replay needs --input REC.mcap")?;
+    let cfg = match a.config {
+        Some(path) => crate::config::load(path).map_err(|e| e.to_string())?,
+        None => {
+            let source = crate::record::replay::recorded_config(first)
+                .map_err(|e| e.to_string())?
+                .ok_or_else(|| {
+                    format!(
+                        "{}: the recording carries no configuration (not written by sard, or by an older one): give --config FILE",
+                        first.display()
+                    )
+                })?;
+            let origin = format!(
+                "the configuration recorded in {} (from {})",
+                first.display(),
+                source.origin
+            );
+            crate::config::parse(&source.toml, &origin).map_err(|e| e.to_string())?
+        }
+    };
     let options = ReplayOptions {
         output: a.output.map(Path::to_path_buf),
         compare: a.compare.map(str::to_owned),
@@ -77,7 +97,6 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
         to_s: a.to_s,
         ..ReplayOptions::from_config(&cfg)
     };
-    let inputs = input_files(a.input)?;
     let shown = match inputs.as_slice() {
         [one] => one.display().to_string(),
         [first, .., last] => format!(

@@ -6,9 +6,15 @@
 //! until every target lies in the configured travel: first the distances
 //! beyond the shortest (0.04 m, kept) by 10 % steps down to half (the tilt,
 //! which determines B across the rod, is kept as long as possible), then the
-//! cone angle by 5 degrees, down to 10 degrees. The groundwork of `sarctl identify --live` (not built yet).
+//! cone angle by 5 degrees, down to 10 degrees. A pose is also kept clear of
+//! the observability limit: the tip force's standard deviation there (it
+//! grows as a/(L - a) as the tip nears the support) at most
+//! [`OBSERVABLE_FRACTION`] of `[tip] max_std_n`, or the guard would fault
+//! (`not_observable`) while the daemon holds it. `sarctl identify --live`
+//! drives the daemon through this set.
 
 use crate::config::Config;
+use sar_estimator::tip_force::TipForceEstimator;
 use sar_kinematics::{ActiveJoints, Vec3, forward};
 
 /// The cone's half angle of MODEL.md 5.1, degrees.
@@ -19,6 +25,10 @@ pub const DISTANCES_M: [f64; 5] = [0.04, 0.07, 0.12, 0.20, 0.30];
 pub const TURNAROUND_M: f64 = 0.02;
 /// The tip stays at least this far past the support, m.
 const TIP_MARGIN_M: f64 = 0.01;
+/// A pose's tip-force standard deviation, at most this part of `[tip]
+/// max_std_n` (the guard faults beyond it; the rest is margin for the
+/// noise of a live run).
+pub const OBSERVABLE_FRACTION: f64 = 0.5;
 
 /// One target of the procedure.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,6 +62,9 @@ fn attempt(config: &Config, angle_deg: f64, scale: f64) -> Option<Vec<PoseTarget
         Vec3::new(c, 0.0, -s),
     ];
     let travel = config.axes.travel_m;
+    let est = &config.estimator;
+    let tip = TipForceEstimator::new(&est.calibration, &est.profile, &est.noise, est.tip).ok()?;
+    let zero = Vec3::zeros();
     let target = |u: &Vec3, a: f64, turnaround: bool| -> Option<PoseTarget> {
         if a + TIP_MARGIN_M >= profile.length_m() {
             return None;
@@ -68,7 +81,9 @@ fn attempt(config: &Config, angle_deg: f64, scale: f64) -> Option<Vec<PoseTarget
             .zip(travel)
             .all(|(q, (lo, hi))| (lo..=hi).contains(q));
         let pose = forward(cal, profile, &joints).ok()?;
-        inside.then_some(PoseTarget {
+        let std_n = tip.estimate(&pose, &zero, &zero).ok()?.std_n;
+        let observable = std_n.max() <= OBSERVABLE_FRACTION * tip.max_std_n();
+        (inside && observable).then_some(PoseTarget {
             direction: *u,
             support_distance_m: a,
             ujoint_m: ujoint,
@@ -127,7 +142,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_builtin_robot_gets_the_full_cone_set() {
+    fn the_builtin_robot_gets_the_cone_set_clear_of_the_observability_limit() {
         let config = crate::config::builtin().unwrap();
         let set = cone_set(&config).unwrap();
         let holds: Vec<&PoseTarget> = set.iter().filter(|p| !p.turnaround).collect();
@@ -141,10 +156,41 @@ mod tests {
             assert!(((p.tip_m - p.ujoint_m).norm() - l).abs() < 1e-9);
             assert!((p.direction.x - CONE_DEG.to_radians().cos()).abs() < 1e-12);
         }
-        // Direction 2 is swept inward, entered past its first pose.
+        // Direction 2 is swept inward, entered past its first pose; the far
+        // distance shrunk from 0.30 m (the tip 5 cm past the support, where
+        // the guard would fault: not observable).
         assert!(set[5].turnaround && set[5].support_distance_m > set[6].support_distance_m);
-        assert_eq!(set[6].support_distance_m, 0.30);
+        assert!(set[6].support_distance_m < 0.30 - 1e-9);
         assert_eq!(set[10].support_distance_m, 0.04);
+        let est = &config.estimator;
+        let tip =
+            TipForceEstimator::new(&est.calibration, &est.profile, &est.noise, est.tip).unwrap();
+        for p in &set {
+            let pose = forward(&est.calibration, &est.profile, &p.joints).unwrap();
+            let std_n = tip
+                .estimate(&pose, &Vec3::zeros(), &Vec3::zeros())
+                .unwrap()
+                .std_n;
+            assert!(
+                std_n.max() <= OBSERVABLE_FRACTION * tip.max_std_n(),
+                "{std_n:?}"
+            );
+        }
+        // Without the bound the far poses would be beyond it.
+        let far = ActiveJoints {
+            q1_m: 0.0,
+            q2_m: 0.28,
+            q3_m: 0.45 - 0.30,
+        };
+        let pose = forward(&est.calibration, &est.profile, &far).unwrap();
+        let std_n = tip
+            .estimate(&pose, &Vec3::zeros(), &Vec3::zeros())
+            .unwrap()
+            .std_n;
+        assert!(
+            std_n.max() > OBSERVABLE_FRACTION * tip.max_std_n(),
+            "{std_n:?}"
+        );
     }
 
     #[test]

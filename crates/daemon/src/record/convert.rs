@@ -436,6 +436,43 @@ pub fn replay_metadata(
     )
 }
 
+/// The name of the metadata record that holds the daemon's configuration.
+pub const CONFIG_METADATA: &str = "sar_config";
+
+/// A configuration's text and where it came from, as a recording carries it
+/// ([`CONFIG_METADATA`]): what `sarctl replay` runs with when given no
+/// `--config`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigSource {
+    /// Where it came from (a path, or "the built-in configuration").
+    pub origin: String,
+    /// The TOML text, as read.
+    pub toml: String,
+}
+
+/// `sar_config` metadata: `origin` and `toml`.
+pub fn config_metadata(
+    source: &ConfigSource,
+) -> (String, std::collections::BTreeMap<String, String>) {
+    (
+        CONFIG_METADATA.to_owned(),
+        std::collections::BTreeMap::from([
+            ("origin".to_owned(), source.origin.clone()),
+            ("toml".to_owned(), source.toml.clone()),
+        ]),
+    )
+}
+
+/// The configuration of a `sar_config` metadata record, if it holds one.
+pub fn config_from_metadata(
+    m: &std::collections::BTreeMap<String, String>,
+) -> Option<ConfigSource> {
+    Some(ConfigSource {
+        origin: m.get("origin")?.clone(),
+        toml: m.get("toml")?.clone(),
+    })
+}
+
 /// The bias of a `sar_replay` metadata record, if it holds one.
 pub fn bias_from_metadata(m: &std::collections::BTreeMap<String, String>) -> Option<Bias> {
     let parse = |key: &str| -> Option<Vec3> {

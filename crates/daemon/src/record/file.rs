@@ -18,7 +18,9 @@ use super::msgs::{
     EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
     StateSnapshot, Topic,
 };
-use crate::view::scene::{self, SceneGeometry};
+use crate::view::geometry::SceneGeometry;
+#[cfg(feature = "view")]
+use crate::view::scene;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -287,6 +289,7 @@ pub struct RotatingWriter {
 /// What the scene is drawn from: the messages of one cycle (all stamped with
 /// the cycle's `now`), gathered until a message of a later cycle (or the
 /// file's end) closes it, whatever their order.
+#[cfg_attr(not(feature = "view"), allow(dead_code))]
 struct SceneState {
     options: SceneOptions,
     next_ns: Option<u64>,
@@ -307,6 +310,7 @@ struct SceneCycle {
 }
 
 /// The companion file of the scene beside one recording file.
+#[cfg_attr(not(feature = "view"), allow(dead_code))]
 struct SceneFile {
     path: PathBuf,
     writer: mcap::Writer<BufWriter<File>>,
@@ -446,7 +450,19 @@ impl RotatingWriter {
         }))
     }
 
+    /// The scene needs the cargo feature `view` (the configuration gives no
+    /// scene without it; a caller that asks for one anyway is refused).
+    #[cfg(not(feature = "view"))]
+    fn open_scene(&self, _path: &Path) -> Result<SceneFile, WriteError> {
+        Err(WriteError::Setting {
+            field: "scene",
+            value: 1,
+            why: "this build has no 3D scene (cargo feature `view`)",
+        })
+    }
+
     /// Creates the scene's companion file of the recording file at `path`.
+    #[cfg(feature = "view")]
     fn open_scene(&self, path: &Path) -> Result<SceneFile, WriteError> {
         let path = scene_path(path);
         let mcap_err = |source| WriteError::Mcap {
@@ -638,8 +654,15 @@ impl RotatingWriter {
         Ok(())
     }
 
+    /// No scene without the cargo feature `view` (never opened).
+    #[cfg(not(feature = "view"))]
+    fn flush_scene(&mut self) -> Result<(), WriteError> {
+        Ok(())
+    }
+
     /// Closes the cycle gathered: writes its scene when one is due (at most
     /// one per period of log time, keeping the phase).
+    #[cfg(feature = "view")]
     fn flush_scene(&mut self) -> Result<(), WriteError> {
         let (Some(state), Some(file)) = (self.scene.as_mut(), self.current.as_mut()) else {
             return Ok(());

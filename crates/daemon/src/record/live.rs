@@ -9,18 +9,23 @@
 //! Per cycle: `/sar/cycle/input`, `/sar/sensor/wrench` (every sample the
 //! sensor's driver received since the previous cycle, drained by the loop:
 //! a sensor faster than the loop loses none), `/sar/joints` (a new stamp),
-//! then the outputs of
-//! [`super::convert::outputs`]. After the cycle's messages, at the start of a
-//! recording and every `snapshot_period_ns`, `/sar/cycle/snapshot`: the
-//! loop's whole decision state after that cycle (pushed as chunks; the
-//! writer joins them and starts each rotated file with one). So a recording
-//! started at any time (`sarctl record start`), and each of its files,
-//! replays bit for bit from its first snapshot (the `sar_replay` metadata
-//! still says `from_first_cycle`).
+//! then the outputs of [`super::convert::outputs`]. On the simulator
+//! ([`LiveRecorder::with_truth`]), each cycle with a new sensor sample also
+//! records the simulator's truth on `/sar/sim/tip_wrench_truth` (the
+//! reference of `sarctl replay --compare`). After the cycle's messages, at
+//! the start of a recording and every `snapshot_period_ns`,
+//! `/sar/cycle/snapshot`: the loop's whole decision state after that cycle
+//! (pushed as chunks; the writer joins them and starts each rotated file
+//! with one). So a recording started at any time (`sarctl record start`),
+//! and each of its files, replays bit for bit from its first snapshot (the
+//! `sar_replay` metadata still says `from_first_cycle`). Every recording
+//! carries the daemon's configuration (`sar_config` metadata:
+//! [`super::convert::config_metadata`]), so that `sarctl replay` needs no
+//! `--config`.
 
 use super::convert;
 use super::file::{FileOptions, Rotation};
-use super::msgs::SnapshotChunk;
+use super::msgs::{Outgoing, SnapshotChunk, WrenchStamped};
 use super::recorder::{Recorder, RecorderConfig};
 use crate::runloop::{Publish, Published};
 use crossbeam_queue::ArrayQueue;
@@ -49,6 +54,10 @@ pub struct RecordSettings {
     /// (`[record] snapshot_s`); one also starts every recording and every
     /// file of a rotation.
     pub snapshot_period_ns: u64,
+    /// The configuration's text and where it came from, written into every
+    /// recording (`sar_config` metadata) so that it replays without one
+    /// (`None`: not written).
+    pub config_source: Option<std::sync::Arc<super::convert::ConfigSource>>,
 }
 
 const WANT_NONE: u8 = 0;
@@ -161,9 +170,20 @@ pub struct LiveRecorder<P> {
     snapshot_period_ns: u64,
     /// When the next snapshot is due (cycle stamp, ns); `None`: at once.
     next_snapshot_ns: Option<u64>,
+    /// The simulator's truth, asked once per cycle (`None`: not simulated).
+    truth: Option<crate::wire::SimTruthFn>,
 }
 
 impl<P> LiveRecorder<P> {
+    /// Asks `truth` once per cycle: recorded on `/sar/sim/tip_wrench_truth`
+    /// (the visible part, `tip_force_n - friction_force_n`, with every new
+    /// sensor sample, stamped as the cycle) and handed to the wrapped
+    /// publisher in [`Published::truth`].
+    pub fn with_truth(mut self, truth: Option<crate::wire::SimTruthFn>) -> Self {
+        self.truth = truth;
+        self
+    }
+
     /// Hands the active recorder back to the manager (at shutdown).
     pub fn release(&mut self) {
         if let Some(rec) = self.active.take() {
@@ -198,6 +218,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             self.next_snapshot_ns = None;
             self.switch.recording.store(true, Ordering::Release);
         }
+        let truth = c.truth.or_else(|| self.truth.as_mut().and_then(|f| f()));
         let mut dropped = self.dropped_before;
         if let Some(rec) = &mut self.active {
             let input = c.loop_input;
@@ -212,6 +233,15 @@ impl<P: Publish> Publish for LiveRecorder<P> {
                     rec.push(m);
                 },
             );
+            if let Some(t) = &truth
+                && c.decision.estimate.new_sample
+            {
+                let visible = t.tip_force_n - t.friction_force_n;
+                rec.push(Outgoing::SimTruth(WrenchStamped::base_force(
+                    convert::cycle_stamp_ns(&input.cycle_input()),
+                    [visible.x, visible.y, visible.z],
+                )));
+            }
             // The state after this cycle, at the start of a recording and
             // then periodically: replay restores it and steps the cycles
             // after it (the writer starts a rotated file with one).
@@ -230,6 +260,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
         self.inner.publish(&Published {
             recorder_drops: dropped,
             recording: self.active.is_some(),
+            truth,
             ..*c
         });
     }
@@ -258,6 +289,9 @@ fn recorder_config(
         sar_snapshot::VERSION.to_string(),
     );
     files.metadata = vec![replay];
+    if let Some(source) = &settings.config_source {
+        files.metadata.push(convert::config_metadata(source));
+    }
     files.scene = settings.scene;
     // Rotation waits for the next snapshot, or rotates anyway after twice
     // its period and a second more (snapshots dropped).
@@ -342,6 +376,7 @@ impl RecordManager {
                 snapshot: Box::new(sar_snapshot::Snapshot::new()),
                 snapshot_period_ns: snapshot_period_ns.max(1),
                 next_snapshot_ns: None,
+                truth: None,
             },
         ))
     }

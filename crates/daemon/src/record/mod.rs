@@ -9,6 +9,7 @@
 //! - [`file`]: MCAP files and their rotation.
 //! - [`recorder`]: the bounded queue and the writer thread.
 //! - [`reader`]: reading (up to the last complete chunk) and [`recover`].
+//! - [`rosbag2`]: a rosbag2 directory (`metadata.yaml`) of recordings.
 
 pub mod cdr;
 pub mod convert;
@@ -18,6 +19,7 @@ pub mod msgs;
 pub mod reader;
 pub mod recorder;
 pub mod replay;
+pub mod rosbag2;
 
 pub use file::{
     FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, Rotation, SceneOptions,

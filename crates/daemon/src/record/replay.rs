@@ -621,6 +621,21 @@ fn describe(topic: Topic, cycle: u64, replayed: &Outgoing, recorded: &[u8]) -> D
     }
 }
 
+/// The configuration a recording carries (`sar_config` metadata, written by
+/// `sard` since it records its configuration), `None` when it has none.
+pub fn recorded_config(path: &Path) -> Result<Option<convert::ConfigSource>, ReadError> {
+    let bytes = super::reader::read_file(path)?;
+    // The metadata is written at the start of a file: read up to the first
+    // message to find it.
+    let mut probe = McapReader::new(&bytes)?;
+    let _ = probe.next();
+    Ok(probe
+        .metadata()
+        .iter()
+        .find(|m| m.name == convert::CONFIG_METADATA)
+        .and_then(|m| convert::config_from_metadata(&m.metadata)))
+}
+
 /// The `sar_replay` bias of a recording (zero when absent).
 fn start_bias(reader: &McapReader<'_>) -> Bias {
     reader
@@ -737,8 +752,9 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             o.metadata = metadata.clone().into_iter().collect();
             // The live view's scene, as the daemon's recorder writes it
             // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
-            o.scene = Some(super::SceneOptions {
-                geometry: crate::view::scene::SceneGeometry::from_config(&options.config),
+            // (With the cargo feature `view` only.)
+            o.scene = cfg!(feature = "view").then(|| super::SceneOptions {
+                geometry: crate::view::geometry::SceneGeometry::from_config(&options.config),
                 limits_n: options.config.guard.force_limits().to_array(),
                 period_ns: SCENE_PERIOD_NS,
             });

@@ -1,0 +1,314 @@
+//! The live view's server (cargo feature `view`): see the module above.
+
+use super::geometry::SceneGeometry;
+#[allow(unused_imports)]
+pub use super::{DEFAULT_BIND, DEFAULT_SCENE_HZ};
+use super::{front, scene, topics};
+use crate::record::msgs::{Outgoing, Topic};
+use crate::shm::Client;
+use crate::wire::{StateMsg, flags, guard_state_name, reason_name};
+use foxglove::messages::{FrameTransforms, SceneUpdate};
+use foxglove::{
+    Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
+};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// The 3D scene's topic.
+pub const SCENE_TOPIC: &str = "/sar/scene";
+/// The scene's transform `world` -> `base`.
+pub const TF_TOPIC: &str = "/sar/scene/tf";
+/// The view's status (JSON).
+pub const STATUS_TOPIC: &str = "/sar/view/status";
+/// Messages queued per client before the oldest are dropped (about 0.4 s of
+/// every topic at 1 kHz).
+const BACKLOG: usize = 2048;
+/// Without a state for this long, the view subscribes again (a restarted
+/// daemon).
+const IDLE: Duration = Duration::from_secs(2);
+
+/// The recordings' topics the view serves (what the state holds, [`topics`]).
+pub const RECORD_TOPICS: [Topic; 5] = [
+    Topic::Joints,
+    Topic::TipWrench,
+    Topic::PassiveJoints,
+    Topic::EstimatorState,
+    Topic::GuardEvents,
+];
+
+/// Every topic the view serves.
+pub fn served_topics() -> Vec<&'static str> {
+    let mut t: Vec<&'static str> = RECORD_TOPICS.iter().map(|t| t.name()).collect();
+    t.extend([SCENE_TOPIC, TF_TOPIC, STATUS_TOPIC]);
+    t
+}
+
+/// What `sarctl view` is asked.
+#[derive(Debug, Clone)]
+pub struct ViewOptions {
+    /// The daemon's service prefix.
+    pub prefix: String,
+    /// The address to serve on (port 0: any free port).
+    pub bind: SocketAddr,
+    /// The scene's rate, Hz.
+    pub scene_hz: f64,
+    /// The geometry of the scene.
+    pub geometry: SceneGeometry,
+}
+
+/// `sarctl view` from its command line: loads `config` (default: the
+/// built-in one), serves until SIGINT or SIGTERM. Prints the served URL on
+/// stdout (`sarctl view: serving ws://ADDR:PORT ...`).
+pub fn run_cli(
+    prefix: &str,
+    config: Option<&std::path::Path>,
+    bind: &str,
+    scene_hz: f64,
+) -> Result<(), String> {
+    let cfg = match config {
+        Some(path) => crate::config::load(path),
+        None => crate::config::builtin(),
+    }
+    .map_err(|e| e.to_string())?;
+    let bind: SocketAddr = bind
+        .parse()
+        .map_err(|e| format!("--bind {bind:?}: {e} (expected ADDR:PORT)"))?;
+    if !(scene_hz.is_finite() && scene_hz > 0.0) {
+        return Err(format!("--scene-hz {scene_hz}: must be a positive number"));
+    }
+    crate::rt::install_stop_handler()
+        .map_err(|e| format!("cannot install signal handlers: {e}"))?;
+    run(
+        &ViewOptions {
+            prefix: prefix.to_owned(),
+            bind,
+            scene_hz,
+            geometry: SceneGeometry::from_config(&cfg.estimator),
+        },
+        crate::rt::stop_requested,
+    )
+}
+
+/// The channels of the recordings' topics this view serves.
+struct RecordChannels {
+    channels: Vec<(Topic, Arc<RawChannel>)>,
+}
+
+impl RecordChannels {
+    fn new(ctx: &Arc<Context>) -> Result<Self, String> {
+        let mut channels = Vec::new();
+        for topic in RECORD_TOPICS {
+            let channel = ChannelBuilder::new(topic.name())
+                .message_encoding("cdr")
+                .schema(Schema::new(
+                    topic.type_name(),
+                    "ros2msg",
+                    topic.schema().as_bytes(),
+                ))
+                .context(ctx)
+                .build_raw()
+                .map_err(|e| format!("cannot create the channel {}: {e}", topic.name()))?;
+            channels.push((topic, channel));
+        }
+        Ok(Self { channels })
+    }
+
+    fn get(&self, topic: Topic) -> Option<&Arc<RawChannel>> {
+        self.channels
+            .iter()
+            .find(|(t, _)| *t == topic)
+            .map(|(_, c)| c)
+    }
+}
+
+/// The JSON schema of [`STATUS_TOPIC`].
+pub const STATUS_SCHEMA: &str = r#"{
+  "type": "object",
+  "properties": {
+    "cycle": {"type": "integer"},
+    "guard": {"type": "string"},
+    "guard_code": {"type": "integer"},
+    "reason": {"type": "string"},
+    "observable": {"type": "boolean"},
+    "halted": {"type": "boolean"},
+    "force_total_n": {"type": "number"},
+    "axial_n": {"type": "number"},
+    "lateral_n": {"type": "number"},
+    "warn_total_n": {"type": "number"},
+    "stop_total_n": {"type": "number"},
+    "warn_axial_n": {"type": "number"},
+    "stop_axial_n": {"type": "number"},
+    "warn_lateral_n": {"type": "number"},
+    "stop_lateral_n": {"type": "number"},
+    "truth_tip_force_n": {"type": "array", "items": {"type": "number"}},
+    "wakeup_p99_us": {"type": "number"},
+    "compute_p99_us": {"type": "number"},
+    "overruns": {"type": "integer"},
+    "quick_stops": {"type": "integer"},
+    "view_lost": {"type": "integer"}
+  }
+}"#;
+
+fn status_json(s: &StateMsg, lost: u64) -> serde_json::Value {
+    let f = s.tip_force_n;
+    let total = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+    let estimate = s.flags & flags::ESTIMATE != 0;
+    let l = s.limits_n;
+    serde_json::json!({
+        "cycle": s.cycle,
+        "guard": guard_state_name(s.guard_state),
+        "guard_code": s.guard_state,
+        "reason": reason_name(s.guard_reason),
+        "observable": s.flags & flags::OBSERVABLE != 0,
+        "halted": s.flags & flags::HALTED != 0,
+        "force_total_n": estimate.then_some(total),
+        "axial_n": estimate.then_some(s.tip_axial_lateral_n[0]),
+        "lateral_n": estimate.then_some(s.tip_axial_lateral_n[1]),
+        "warn_total_n": l[0], "stop_total_n": l[1],
+        "warn_axial_n": l[2], "stop_axial_n": l[3],
+        "warn_lateral_n": l[4], "stop_lateral_n": l[5],
+        "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
+        "wakeup_p99_us": s.wakeup_ns[1] as f64 / 1e3,
+        "compute_p99_us": s.compute_ns[1] as f64 / 1e3,
+        "overruns": s.overruns,
+        "quick_stops": s.quick_stops,
+        "view_lost": lost,
+    })
+}
+
+/// The view's state between two published states.
+struct Publisher {
+    records: RecordChannels,
+    scene: Channel<SceneUpdate>,
+    tf: Channel<FrameTransforms>,
+    status: Arc<RawChannel>,
+    geometry: SceneGeometry,
+    scene_period_ns: u64,
+    next_scene_ns: u64,
+    previous: Option<StateMsg>,
+    /// States the view did not receive (gaps in the cycle numbers).
+    lost: u64,
+    messages: Vec<Outgoing>,
+    buf: Vec<u8>,
+}
+
+impl Publisher {
+    fn on_state(&mut self, s: &StateMsg) {
+        if let Some(p) = &self.previous
+            && s.cycle > p.cycle.saturating_add(1)
+        {
+            self.lost += s.cycle - p.cycle - 1;
+        }
+        let meta = || PartialMetadata::with_log_time(s.now_ns);
+        topics::messages(s, self.previous.as_ref(), &mut self.messages);
+        for m in &self.messages {
+            let Some(channel) = self.records.get(m.topic()) else {
+                continue;
+            };
+            if channel.has_sinks() && m.encode(&mut self.buf).is_ok() {
+                channel.log_with_meta(&self.buf, meta());
+            }
+        }
+        // The scene and the status, decimated by the state's clock.
+        if s.now_ns >= self.next_scene_ns {
+            // Keep the phase (30 Hz on a 1 ms loop is 30 Hz, not 1/34 ms);
+            // after a gap, start again from this state.
+            self.next_scene_ns = self.next_scene_ns.saturating_add(self.scene_period_ns);
+            if self.next_scene_ns <= s.now_ns {
+                self.next_scene_ns = s.now_ns.saturating_add(self.scene_period_ns);
+            }
+            if self.scene.has_sinks() {
+                self.scene
+                    .log_with_meta(&scene::scene(s, &self.geometry), meta());
+            }
+            if self.tf.has_sinks() {
+                self.tf
+                    .log_with_meta(&scene::frame_transforms(s.now_ns), meta());
+            }
+            if self.status.has_sinks()
+                && let Ok(bytes) = serde_json::to_vec(&status_json(s, self.lost))
+            {
+                self.status.log_with_meta(&bytes, meta());
+            }
+        }
+        self.previous = Some(*s);
+    }
+}
+
+/// Serves the daemon's state until `stop()` says so. Fails at once when no
+/// daemon runs with `opts.prefix` or the address cannot be bound.
+pub fn run(opts: &ViewOptions, stop: impl Fn() -> bool) -> Result<(), String> {
+    let client = Client::new(&opts.prefix)?;
+    let mut sub = client.subscribe()?;
+    let ctx = Context::new();
+    let records = RecordChannels::new(&ctx)?;
+    let scene = ctx.channel_builder(SCENE_TOPIC).build::<SceneUpdate>();
+    let tf = ctx.channel_builder(TF_TOPIC).build::<FrameTransforms>();
+    let status = ChannelBuilder::new(STATUS_TOPIC)
+        .message_encoding("json")
+        .schema(Schema::new(
+            "sar_view.Status",
+            "jsonschema",
+            STATUS_SCHEMA.as_bytes(),
+        ))
+        .context(&ctx)
+        .build_raw()
+        .map_err(|e| format!("cannot create the channel {STATUS_TOPIC}: {e}"))?;
+    let server = WebSocketServer::new()
+        .name(format!("sarctl view ({})", opts.prefix))
+        // On loopback: clients connect to the relay.
+        .bind("127.0.0.1", 0)
+        .message_backlog_size(BACKLOG)
+        .context(&ctx)
+        .start_blocking()
+        .map_err(|e| format!("cannot start the Foxglove server: {e}"))?;
+    let backend = SocketAddr::from(([127, 0, 0, 1], server.port()));
+    let served = front::start(opts.bind, backend)
+        .map_err(|e| format!("cannot serve on {}: {e}", opts.bind))?;
+    println!(
+        "sarctl view: serving ws://{served} (daemon prefix {:?}); open it in Foxglove",
+        opts.prefix
+    );
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+
+    let mut publisher = Publisher {
+        records,
+        scene,
+        tf,
+        status,
+        geometry: opts.geometry,
+        scene_period_ns: (1e9 / opts.scene_hz) as u64,
+        next_scene_ns: 0,
+        previous: None,
+        lost: 0,
+        messages: Vec::with_capacity(8),
+        buf: Vec::with_capacity(512),
+    };
+    let mut last = Instant::now();
+    let mut waiting = false;
+    while !stop() {
+        let n = sub.wait(Duration::from_millis(100), |s| publisher.on_state(s));
+        if n > 0 {
+            last = Instant::now();
+            if waiting {
+                eprintln!("sarctl view: the daemon publishes again");
+                waiting = false;
+            }
+        } else if last.elapsed() > IDLE {
+            if !waiting {
+                eprintln!("sarctl view: the daemon stopped publishing; waiting for it");
+                waiting = true;
+            }
+            // A restarted daemon has new services: subscribe again.
+            if let Ok(s) = client.subscribe() {
+                sub = s;
+                publisher.previous = None;
+            }
+            last = Instant::now();
+        }
+    }
+    let _ = server.stop();
+    Ok(())
+}

@@ -1,0 +1,273 @@
+//! A `sard --sim` recording as a new user meets it (issue 16, section 3):
+//! - it carries the daemon's configuration (`sar_config` metadata), so that
+//!   `sarctl replay --input REC` needs no `--config`: a recording from the
+//!   daemon's first cycle replays bit for bit with it (exit 0); one of the
+//!   built-in configuration made with `sarctl record start|stop` names it;
+//! - it records the simulator's truth on `/sar/sim/tip_wrench_truth` (one
+//!   message per new sensor sample), so that `--compare` gives figures;
+//! - a recording without a configuration is refused with what to give;
+//! - `sarctl export --rosbag2 DIR` refuses a missing file, a directory that
+//!   exists and is not empty, a scene companion and two files of one name.
+//!   (`tests/strict_readers.rs` opens the directory with `rosbags`.)
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+mod common;
+
+use sar_daemon::record::McapReader;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const SARD: &str = env!("CARGO_BIN_EXE_sard");
+const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn sarctl(args: &[&str], paths: &[&Path]) -> Output {
+    Command::new(SARCTL)
+        .args(args)
+        .args(paths)
+        .env(
+            "SAR_SERVICE_PREFIX",
+            format!("sar-simrec-{}", std::process::id()),
+        )
+        .output()
+        .unwrap()
+}
+
+/// The recording files (not the scene companions) of `dir`, sorted.
+fn recordings(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// Messages on `topic` of `file`.
+fn count(file: &Path, topic: &str) -> u64 {
+    let bytes = std::fs::read(file).unwrap();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let mut ids = Vec::new();
+    for m in reader.by_ref() {
+        ids.push(m.unwrap().channel_id);
+    }
+    let id = reader.channel_of(topic).unwrap().id;
+    ids.iter().filter(|&&i| i == id).count() as u64
+}
+
+/// `sard --sim` for `cycles` with `[record] enabled` into `dir/rec`, with
+/// the built-in configuration saved as `dir/sim.toml` (as the README says
+/// to change it): the recording's file.
+pub fn sim_recording(dir: &Path, cycles: u64) -> PathBuf {
+    let rec_dir = dir.join("rec");
+    let config = dir.join("sim.toml");
+    let toml = sar_daemon::config::DEFAULT_TOML
+        .replace("[record]\nenabled = false", "[record]\nenabled = true")
+        .replace(
+            "directory = \"recordings\"",
+            &format!("directory = {:?}", rec_dir.display().to_string()),
+        );
+    assert_ne!(toml, sar_daemon::config::DEFAULT_TOML);
+    std::fs::write(&config, toml).unwrap();
+    let out = Command::new(SARD)
+        .args(["--sim", "--config"])
+        .arg(&config)
+        .args(["--max-cycles", &cycles.to_string()])
+        .env(
+            "SAR_SERVICE_PREFIX",
+            format!("sar-simrec-sard-{}", std::process::id()),
+        )
+        .stdout(Stdio::null())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "sard: {}", text(&out.stderr));
+    let files = recordings(&rec_dir);
+    assert_eq!(files.len(), 1, "{files:?}");
+    files[0].clone()
+}
+
+#[test]
+fn a_sim_recording_replays_without_a_configuration_and_compares_with_the_truth() {
+    let dir = common::scratch("simrec_replay");
+    // 5 s: the demo's contact rises from 2 s (2.7 N along the rod at 5 s).
+    let rec = sim_recording(&dir, 5000);
+    // The sensor's samples at 500 Hz, every one recorded; one truth per
+    // cycle with a new sample (a late cycle drains two samples, one truth).
+    let truths = count(&rec, "/sar/sim/tip_wrench_truth");
+    let samples = count(&rec, "/sar/sensor/wrench");
+    assert!(
+        truths <= samples && samples - truths <= samples / 10,
+        "{truths} truths, {samples} samples"
+    );
+    assert!(truths >= 2400, "{truths} truths in 5 s");
+    let out = sarctl(
+        &[
+            "--format",
+            "json",
+            "replay",
+            "--compare",
+            "/sar/sim/tip_wrench_truth",
+            "--input",
+        ],
+        &[&rec],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    assert_eq!(v["cycles"], 5000, "{v}");
+    let c = &v["comparison"];
+    assert!(c["pairs"].as_u64().unwrap() >= 2400, "{c}");
+    // The estimate follows the truth along the rod (X0) within the noise.
+    let rms_x = c["rms_n"][0].as_f64().unwrap();
+    assert!(rms_x > 0.0 && rms_x < 0.5, "{c}");
+    // The text says which configuration it ran.
+    let out = sarctl(&["replay", "--input"], &[&rec]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+}
+
+#[test]
+fn a_record_start_of_the_builtin_configuration_names_it_when_replayed() {
+    let dir = common::scratch("simrec_builtin");
+    let prefix = format!("sar-simrec-b-{}", std::process::id());
+    // Out of the box: no --config, recordings under the working directory.
+    let mut daemon = Command::new(SARD)
+        .arg("--sim")
+        .current_dir(&dir)
+        .env("SAR_SERVICE_PREFIX", &prefix)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let ctl = |args: &[&str]| {
+        Command::new(SARCTL)
+            .args(args)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .output()
+            .unwrap()
+    };
+    let start = Instant::now();
+    while !ctl(&["record", "start"]).status.success() {
+        assert!(start.elapsed() < Duration::from_secs(30), "no daemon");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Until the recording holds a few hundred cycles.
+    std::thread::sleep(Duration::from_millis(600));
+    let stop = ctl(&["record", "stop"]);
+    let _ = Command::new("kill")
+        .args(["-TERM", &daemon.id().to_string()])
+        .status();
+    let _ = daemon.wait();
+    assert!(stop.status.success(), "{}", text(&stop.stderr));
+    let rec = recordings(&dir.join("recordings"));
+    assert_eq!(rec.len(), 1, "{rec:?}");
+    let source = sar_daemon::record::replay::recorded_config(&rec[0])
+        .unwrap()
+        .unwrap();
+    assert_eq!(source.origin, "the built-in configuration");
+    assert_eq!(source.toml, sar_daemon::config::DEFAULT_TOML);
+    assert!(count(&rec[0], "/sar/sim/tip_wrench_truth") > 0);
+    // Replayed with the recorded configuration: it started after the first
+    // cycle, from the snapshot it begins with, bit for bit (exit 0).
+    let out = sarctl(&["--format", "json", "replay", "--input"], &[&rec[0]]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["cycles"].as_u64().unwrap() > 100, "{v}");
+    assert_eq!(v["from_first_cycle"], false, "{v}");
+    assert!(v["from_snapshot"].as_u64().is_some(), "{v}");
+    assert_eq!(v["identical"], true, "{v}");
+}
+
+#[test]
+fn a_recording_without_a_configuration_needs_one() {
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/fixtures/replay/contact_inputs.mcap");
+    let out = sarctl(&["replay", "--input"], &[&fixture]);
+    assert!(!out.status.success());
+    let err = text(&out.stderr);
+    assert!(err.contains("carries no configuration"), "{err}");
+    assert!(err.contains("--config FILE"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+}
+
+#[test]
+fn export_refuses_bad_input_with_one_line() {
+    let dir = common::scratch("simrec_export_errors");
+    let rec = dir.join("rec.mcap");
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/fixtures/replay/contact_daemon.mcap"),
+        &rec,
+    )
+    .unwrap();
+    let refused = |args: &[&str], paths: &[&Path], why: &str| {
+        let out = sarctl(args, paths);
+        assert!(!out.status.success(), "{args:?} {paths:?}");
+        let err = text(&out.stderr);
+        assert!(err.contains(why), "{args:?}: {err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+    };
+    let bag = dir.join("bag");
+    // A missing recording: nothing is created.
+    refused(
+        &["export", "--rosbag2"],
+        &[&bag, &dir.join("missing.mcap")],
+        "missing.mcap",
+    );
+    assert!(!bag.exists());
+    // A directory that exists and holds something.
+    let full = dir.join("full");
+    std::fs::create_dir_all(&full).unwrap();
+    std::fs::write(full.join("x"), "x").unwrap();
+    refused(&["export", "--rosbag2"], &[&full, &rec], "not empty");
+    // A file where the directory should be.
+    refused(&["export", "--rosbag2"], &[&rec, &rec], "is a file");
+    // Not a recording.
+    let junk = dir.join("junk.mcap");
+    std::fs::write(&junk, "not mcap").unwrap();
+    refused(&["export", "--rosbag2"], &[&bag, &junk], "not an MCAP file");
+    // A scene companion (protobuf, no profile).
+    let scene = dir.join("rec.scene.mcap");
+    let mut w = mcap::WriteOptions::new()
+        .profile("")
+        .create(std::io::BufWriter::new(
+            std::fs::File::create(&scene).unwrap(),
+        ))
+        .unwrap();
+    w.finish().unwrap();
+    drop(w);
+    refused(&["export", "--rosbag2"], &[&bag, &scene], "not \"ros2\"");
+    // A file cut short.
+    let cut = dir.join("cut.mcap");
+    let bytes = std::fs::read(&rec).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    refused(&["export", "--rosbag2"], &[&bag, &cut], "sarctl recover");
+    // Two files of one name.
+    let other = dir.join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    std::fs::copy(&rec, other.join("rec.mcap")).unwrap();
+    refused(
+        &["export", "--rosbag2"],
+        &[&bag, &rec, &other.join("rec.mcap")],
+        "two recordings are named rec.mcap",
+    );
+    assert!(!bag.exists());
+    // An empty directory is taken.
+    std::fs::create_dir_all(&bag).unwrap();
+    let out = sarctl(&["--format", "json", "export", "--rosbag2"], &[&bag, &rec]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["messages"].as_u64().unwrap() > 1000, "{v}");
+    assert!(bag.join("metadata.yaml").exists());
+    assert!(bag.join("rec.mcap").exists());
+}
