@@ -830,12 +830,25 @@ impl LoopStep {
         // estimate, no pose or an unreachable tip ends the mode, holding the
         // last set point.
         if self.force.mode().is_some() && !halting {
+            // In Warn, the force the guard judged (this cycle's estimate,
+            // the one a move is judged against); a Warn without one ends the
+            // mode.
             let warn = estimate.guard_state == GuardState::Warn
                 && !matches!(estimate.guard_reason, Reason::TareDue { .. });
-            let next = match (input.now_ns, estimate.pose, input.drive_state) {
-                (Some(now_ns), Some(pose), Some(DriveState::Enabled)) => self
+            let no_deeper_along = match (warn, &estimate.tip) {
+                (false, _) => Ok(None),
+                (true, TipOutcome::Estimate(e)) => Ok(Some(e.force_n)),
+                (true, _) => Err(()),
+            };
+            let next = match (
+                input.now_ns,
+                estimate.pose,
+                input.drive_state,
+                no_deeper_along,
+            ) {
+                (Some(now_ns), Some(pose), Some(DriveState::Enabled), Ok(along)) => self
                     .force
-                    .step(&pose.rod_dir, warn)
+                    .step(&pose.rod_dir, along.as_ref())
                     .ok()
                     .and_then(|out| self.reachable(&out.tip_m).ok())
                     .map(|q| (now_ns, q)),
