@@ -19,7 +19,12 @@
 //!   `cargo test --release -p sar-daemon --test force_figures -- --ignored
 //!   --nocapture`.
 
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 mod common;
 #[path = "common/rig.rs"]
