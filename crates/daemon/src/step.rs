@@ -81,8 +81,10 @@ pub enum Request {
     },
     /// A guarded move (force control, issue 15): as `MoveTip`, but braked
     /// (at the planned deceleration) in the cycle in which the magnitude of
-    /// the tip force (filtered when the filter is on) reaches
-    /// `max_force_n`; where and at what force is reported
+    /// the tip force (filtered when the filter is on) is anticipated to
+    /// reach `max_force_n`: the force plus its rise (its rate, low-passed)
+    /// over the filter's lag and the braking, once it is a quarter of the
+    /// limit; where and at what force is reported
     /// ([`LoopOutput::guarded_stop`]).
     GuardedMove {
         /// The wanted tip, base frame, m.
@@ -511,7 +513,8 @@ struct Trajectory {
     /// Streamed to the drives one set point per period (retreat moves at a
     /// reduced speed) rather than given as an end point.
     streamed: bool,
-    /// A guarded move's force limit, N (braked when the force reaches it).
+    /// A guarded move's force limit, N (braked when the force is
+    /// anticipated to reach it).
     max_force_n: Option<f64>,
 }
 
@@ -574,6 +577,14 @@ pub struct LoopStep {
     last_drive_state: Option<DriveState>,
     /// The last guarded move's stop.
     guarded_stop: Option<GuardedStop>,
+    /// The guarded force's magnitude at the last new sensor sample (its
+    /// counter, N) and its rate since the sample before, N/s.
+    guarded_last: Option<(u32, f64)>,
+    guarded_rate_n_per_s: f64,
+    /// The guarded force's filter: its group delay and sample period, s
+    /// (0 and the sensor's period without a filter).
+    guarded_lag_s: f64,
+    sample_period_s: f64,
     /// Force control (its filter runs in every cycle; a mode when active).
     force: ForceController,
     out: LoopOutput,
@@ -632,7 +643,24 @@ impl LoopStep {
             return Err(invalid("publisher_stall_ns", 0.0, "must be > 0"));
         }
         let (calibration, profile) = (estimator.calibration, estimator.profile);
+        let filter = estimator.filter;
         let estimator = Estimator::with_bias(estimator, bias)?;
+        // (The estimator has checked the filter; refused here the same way.)
+        let (guarded_lag_s, sample_period_s) = match filter {
+            Some(f) => match sar_estimator::filter::TipFilter::new(f) {
+                Ok(t) => (t.group_delay_s(), f.sample_period_s),
+                Err(_) => {
+                    return Err(invalid(
+                        "filter_cutoff_hz",
+                        f.cutoff_hz,
+                        "not a valid filter of the sensor's samples",
+                    ));
+                }
+            },
+            // No filter: the guarded force is the estimate, whose rate is
+            // its noise; no anticipation (a period of 0 marks it).
+            None => (0.0, 0.0),
+        };
         let out = LoopOutput {
             estimate: *estimator.last(),
             reference: None,
@@ -653,6 +681,10 @@ impl LoopStep {
             speed_mps: 0.0,
             last_drive_state: None,
             guarded_stop: None,
+            guarded_last: None,
+            guarded_rate_n_per_s: 0.0,
+            guarded_lag_s,
+            sample_period_s,
             force: ForceController::new(config.force_control)?,
             out,
         })
@@ -830,12 +862,25 @@ impl LoopStep {
         // estimate, no pose or an unreachable tip ends the mode, holding the
         // last set point.
         if self.force.mode().is_some() && !halting {
+            // In Warn, the force the guard judged (this cycle's estimate,
+            // the one a move is judged against); a Warn without one ends the
+            // mode.
             let warn = estimate.guard_state == GuardState::Warn
                 && !matches!(estimate.guard_reason, Reason::TareDue { .. });
-            let next = match (input.now_ns, estimate.pose, input.drive_state) {
-                (Some(now_ns), Some(pose), Some(DriveState::Enabled)) => self
+            let no_deeper_along = match (warn, &estimate.tip) {
+                (false, _) => Ok(None),
+                (true, TipOutcome::Estimate(e)) => Ok(Some(e.force_n)),
+                (true, _) => Err(()),
+            };
+            let next = match (
+                input.now_ns,
+                estimate.pose,
+                input.drive_state,
+                no_deeper_along,
+            ) {
+                (Some(now_ns), Some(pose), Some(DriveState::Enabled), Ok(along)) => self
                     .force
-                    .step(&pose.rod_dir, warn)
+                    .step(&pose.rod_dir, along.as_ref())
                     .ok()
                     .and_then(|out| self.reachable(&out.tip_m).ok())
                     .map(|q| (now_ns, q)),
@@ -851,14 +896,59 @@ impl LoopStep {
             }
         }
 
-        // A guarded move under way is braked in the cycle its force reaches
-        // the limit (the magnitude of the filtered tip force when the filter
-        // is on: the unfiltered one's noise would stop it early at random).
+        // The guarded force's rate, per new sensor sample.
+        match guarded_force(&estimate).filter(|_| self.sample_period_s > 0.0) {
+            Some(f) => {
+                let counter = input.sensor.counter;
+                let m = f.norm();
+                match self.guarded_last {
+                    Some((c, last)) if c != counter => {
+                        // Low-passed over the filter's lag (a difference of
+                        // one sample is mostly noise).
+                        let dt_s = f64::from(counter.wrapping_sub(c)) * self.sample_period_s;
+                        let alpha = dt_s / (dt_s + self.guarded_lag_s);
+                        self.guarded_rate_n_per_s +=
+                            alpha * ((m - last) / dt_s - self.guarded_rate_n_per_s);
+                        self.guarded_last = Some((counter, m));
+                    }
+                    Some(_) => {}
+                    None => {
+                        self.guarded_rate_n_per_s = 0.0;
+                        self.guarded_last = Some((counter, m));
+                    }
+                }
+            }
+            None => {
+                self.guarded_last = None;
+                self.guarded_rate_n_per_s = 0.0;
+            }
+        }
+        // A guarded move under way is braked in the cycle its force is
+        // anticipated to reach the limit: the magnitude of the filtered tip
+        // force when the filter is on (the unfiltered one's noise would stop
+        // it early at random), plus its rise over the filter's lag and the
+        // braking (at the planned deceleration, v / 2a at the mean speed).
         if let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
             && let Some(max_force_n) = t.max_force_n
             && now_ns < t.end_ns
             && let (Some(force_n), Some(pose)) = (guarded_force(&estimate), estimate.pose)
-            && force_n.norm() >= max_force_n
+            && {
+                let speed_mps = t
+                    .at(now_ns)
+                    .iter()
+                    .fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
+                let horizon_s =
+                    self.guarded_lag_s + speed_mps / (2.0 * self.config.axis_limits.max_accel_mps2);
+                // Anticipated once in contact (a quarter of the limit), so
+                // that the rate's noise in free space brakes nothing.
+                let m = force_n.norm();
+                let rise_n = if m >= 0.25 * max_force_n {
+                    self.guarded_rate_n_per_s.max(0.0) * horizon_s
+                } else {
+                    0.0
+                };
+                m + rise_n >= max_force_n
+            }
         {
             let limits = self.config.axis_limits;
             let states = t.at(now_ns);
@@ -1228,9 +1318,11 @@ sar_snapshot::snap_state!(LoopStep {
         speed_mps,
         last_drive_state,
         guarded_stop,
+        guarded_last,
+        guarded_rate_n_per_s,
     ],
     nested: [estimator, force],
-    config: [calibration, profile, config],
+    config: [calibration, profile, config, guarded_lag_s, sample_period_s],
     output: [out],
 });
 

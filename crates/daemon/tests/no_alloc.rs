@@ -1,7 +1,8 @@
 //! The control cycle allocates nothing: a counting global allocator around
 //! many simulated cycles, with operator requests (reset, tare, moves), a Warn,
-//! a Stop with its quick stop, a refused and an accepted reset, force
-//! control, and the snapshots of the decision state taken between cycles.
+//! a Stop with its quick stop, a refused and an accepted reset, every force
+//! control mode (hold, position, push, guarded move), and the snapshots of
+//! the decision state taken between cycles.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -10,6 +11,7 @@ use sar_daemon::control::{Controller, Envelope, Operator, Request};
 use sar_daemon::{config, logq, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
+use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::GuardState;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -100,6 +102,8 @@ fn a_cycle_allocates_nothing() {
     let mut seen_warn = false;
     let mut seen_stop = false;
     let mut seen_push = false;
+    let mut seen_hold = false;
+    let mut seen_back = false;
     for i in 0..17_000u64 {
         if i % 1000 == 10 {
             let request = match (i / 1000) % 5 {
@@ -120,23 +124,35 @@ fn a_cycle_allocates_nothing() {
             };
             operator.requests.push(Envelope { id: i, request }).unwrap();
         }
-        // Force control: a push along the rod (ended by the move at 3010).
-        if i == 1500 {
-            let request = Request::Push { axial_n: 2.0 };
+        // Force control: a compliant hold, back to position mode, then a
+        // push along the rod (ended by the move at 3010).
+        let request = match i {
+            400 => Some(Request::Hold { max_force_n: 5.0 }),
+            700 => Some(Request::Position),
+            1500 => Some(Request::Push { axial_n: 2.0 }),
+            _ => None,
+        };
+        if let Some(request) = request {
             operator.requests.push(Envelope { id: i, request }).unwrap();
         }
         let out = step(&mut c);
+        seen_hold |= matches!(c.decision().force_mode, Some(ForceMode::Hold { .. }));
+        seen_back |= i > 700 && i < 1000 && c.decision().force_mode.is_none();
         if i % 500 == 0 || c.decision().force_mode.is_some() && i % 50 == 0 {
             c.loop_step().snapshot(&mut snapshot).unwrap();
             snapshots += 1;
         }
-        seen_push |= c.decision().force_mode.is_some();
+        seen_push |= matches!(c.decision().force_mode, Some(ForceMode::Push { .. }));
         seen_warn |= out.guard_state == GuardState::Warn;
         seen_stop |= out.guard_state == GuardState::Stop;
     }
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
     assert!(seen_push, "force control never ran");
+    assert!(
+        seen_hold && seen_back,
+        "hold {seen_hold}, position {seen_back}"
+    );
     assert!(snapshots >= 34 && !snapshot.as_bytes().is_empty());
     assert!(
         c.decision().guarded_stop.is_some(),

@@ -343,10 +343,17 @@ impl ForceController {
         self.mode
     }
 
-    /// One control period: the commanded tip after it. `no_deeper` (the
-    /// guard's Warn) removes any velocity along the filtered force (no
-    /// motion deeper along it).
-    pub fn step(&mut self, rod_dir: &Vec3, no_deeper: bool) -> Result<ControlOutput, ControlError> {
+    /// One control period: the commanded tip after it. `no_deeper_along`
+    /// (the guard's Warn: the tip force it judged, {0}, N) forbids any
+    /// motion of the commanded tip along that force in this period: the
+    /// velocity along it is removed (in a push, whose motion is axial only,
+    /// all of it), and an excursion bound that would bring the tip along it
+    /// holds the tip where it is.
+    pub fn step(
+        &mut self,
+        rod_dir: &Vec3,
+        no_deeper_along: Option<&Vec3>,
+    ) -> Result<ControlOutput, ControlError> {
         let mode = self.mode.ok_or(ControlError::Idle)?;
         let f = self.force_n.ok_or(ControlError::NoForce)?;
         let norm = rod_dir.norm();
@@ -366,6 +373,9 @@ impl ForceController {
                 }
             }
         };
+        // The commanded offset of the last period (a push drops a lateral
+        // part the rod's turn may have left in it).
+        let previous_m = self.offset_m;
         let (ea, el) = split(&error, u);
         let (xa, xl) = split(&self.offset_m, u);
         let (va, vl) = split(&self.velocity_mps, u);
@@ -388,15 +398,21 @@ impl ForceController {
         let dt = l.period_s;
         let accel = clamp_norm(&accel, l.max_accel_mps2);
         let mut v = clamp_norm(&(self.velocity_mps + accel * dt), l.max_speed_mps);
-        if no_deeper {
-            let along = v.dot(&f);
+        if let Some(g) = no_deeper_along {
+            let along = v.dot(g);
             if along > 0.0 {
-                v -= f * (along / f.norm_squared());
+                v = match mode {
+                    // Axial only: the one axial velocity with no part
+                    // along the force is none (unless the force is
+                    // across the rod, where `along` is 0).
+                    ForceMode::Push { .. } => Vec3::zeros(),
+                    ForceMode::Hold { .. } => v - g * (along / g.norm_squared()),
+                };
             }
         }
         let mut x = self.offset_m + v * dt;
         let reach = x.norm();
-        let at_limit = reach >= l.max_excursion_m;
+        let mut at_limit = reach >= l.max_excursion_m;
         if at_limit {
             // At the bound: back onto it, and no speed outward.
             x *= l.max_excursion_m / reach;
@@ -404,6 +420,15 @@ impl ForceController {
             if outward > 0.0 {
                 v -= x * (outward / x.norm_squared());
             }
+        }
+        // Pulled back onto the bound, the tip may move along the force:
+        // then it stays where it is.
+        if let Some(g) = no_deeper_along
+            && (x - previous_m).dot(g) > 0.0
+        {
+            x = previous_m;
+            v = Vec3::zeros();
+            at_limit = x.norm() >= l.max_excursion_m;
         }
         debug_assert!(x.norm() <= l.max_excursion_m * (1.0 + 1e-9));
         debug_assert!(v.norm() <= l.max_speed_mps * (1.0 + 1e-9));

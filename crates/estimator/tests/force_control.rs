@@ -100,7 +100,7 @@ fn run(
             };
             pending = Some(truth + n);
         }
-        match c.step(&u, false) {
+        match c.step(&u, None) {
             Ok(out) => commanded = out.tip_m,
             Err(ControlError::NoForce) => {}
             Err(e) => panic!("{e}"),
@@ -289,7 +289,7 @@ fn a_push_into_nothing_stops_at_the_excursion_without_winding_up() {
     let mut out = None;
     for k in 0..20_000u32 {
         c.observe(Some((k / 2 + 1, &V::zeros(), &V::repeat(0.2))));
-        out = Some(c.step(&u, false).unwrap());
+        out = Some(c.step(&u, None).unwrap());
     }
     let out = out.unwrap();
     assert!(out.at_excursion_limit);
@@ -314,7 +314,7 @@ fn a_push_into_nothing_stops_at_the_excursion_without_winding_up() {
         let f = t.force(&tip, 0.0);
         peak = peak.max(f.x);
         c.observe(Some((20_000 + k / 2, &f, &V::repeat(0.2))));
-        tip = c.step(&u, false).unwrap().tip_m;
+        tip = c.step(&u, None).unwrap().tip_m;
     }
     assert!(
         peak < 1.6,
@@ -372,13 +372,13 @@ fn the_compliant_hold_keeps_the_force_near_its_limit_and_comes_back() {
         }
         .force(&tip, 0.0);
         c.observe(Some((k / 2 + 1, &f, &V::repeat(0.2))));
-        tip = c.step(&u, false).unwrap().tip_m;
+        tip = c.step(&u, None).unwrap().tip_m;
     }
     assert!(tip.x < start.x - 0.002, "{tip:?}");
     let _ = pushing;
     for k in 0..20_000u32 {
         c.observe(Some((2001 + k / 2, &V::zeros(), &V::repeat(0.2))));
-        tip = c.step(&u, false).unwrap().tip_m;
+        tip = c.step(&u, None).unwrap().tip_m;
     }
     assert!((tip - start).norm() < 1e-4, "not back: {tip:?}");
 }
@@ -393,7 +393,7 @@ fn in_warn_no_motion_goes_deeper_along_the_force() {
     let mut tip = start;
     for k in 0..2000u32 {
         c.observe(Some((k / 2 + 1, &V::new(2.0, 0.0, 0.0), &V::repeat(0.2))));
-        let out = c.step(&u, true).unwrap();
+        let out = c.step(&u, Some(&V::new(2.0, 0.0, 0.0))).unwrap();
         assert!(
             out.velocity_mps.dot(&V::x()) <= 1e-15,
             "{:?}",
@@ -403,23 +403,23 @@ fn in_warn_no_motion_goes_deeper_along_the_force() {
     }
     assert!((tip - start).norm() < 1e-12, "{tip:?}");
     // Without the rule it would go deeper.
-    let out = c.step(&u, false).unwrap();
+    let out = c.step(&u, None).unwrap();
     assert!(out.velocity_mps.x > 0.0);
 }
 
 #[test]
 fn without_a_mode_or_a_force_nothing_moves() {
     let mut c = ForceController::new(config()).unwrap();
-    assert_eq!(c.step(&V::x(), false), Err(ControlError::Idle));
+    assert_eq!(c.step(&V::x(), None), Err(ControlError::Idle));
     c.start(ForceMode::Hold { max_force_n: 2.0 }, V::zeros());
-    assert_eq!(c.step(&V::x(), false), Err(ControlError::NoForce));
+    assert_eq!(c.step(&V::x(), None), Err(ControlError::NoForce));
     c.observe(Some((1, &V::zeros(), &V::repeat(0.2))));
     assert_eq!(
-        c.step(&V::new(2.0, 0.0, 0.0), false),
+        c.step(&V::new(2.0, 0.0, 0.0), None),
         Err(ControlError::BadRodDirection)
     );
     c.observe(Some((2, &V::new(f64::NAN, 0.0, 0.0), &V::repeat(0.2))));
-    assert_eq!(c.step(&V::x(), false), Err(ControlError::NoForce));
+    assert_eq!(c.step(&V::x(), None), Err(ControlError::NoForce));
     c.stop();
     assert_eq!(c.mode(), None);
 }

@@ -88,7 +88,8 @@ enum Cmd {
         /// Z, m.
         #[arg(allow_hyphen_values = true)]
         z: f64,
-        /// A guarded move: braked when |F_tip| (filtered) reaches this, N
+        /// A guarded move: braked when |F_tip| (filtered) is anticipated to
+        /// reach this (its rise over the filter lag and the braking), N
         /// (0 < N <= the total stop limit); where and at what force shows
         /// in `sarctl status` and the daemon's log.
         #[arg(long, value_name = "N")]

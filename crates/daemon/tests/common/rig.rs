@@ -1,0 +1,170 @@
+//! The force-control test rig: the real controller on the simulator in
+//! simulated time (1 ms per cycle), the demo robot with its tip at
+//! [`TIP_M`] (the rod along +X0), tissues that push back and a contact
+//! script; every cycle's input and decision kept for a replay bit for bit.
+#![allow(
+    dead_code,
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use sar_daemon::control::{Controller, Envelope, Operator, Reply, Request};
+use sar_daemon::step::{LoopInput, LoopOutput, LoopStep};
+use sar_daemon::{config, logq, sim};
+use sar_drivers::SimClock;
+use sar_drivers::sim::{
+    Breathing, ContactKey, SimDrives, SimSensor, Simulator, Tissue, TissueModel, TissueShift,
+};
+use sar_estimator::Vec3;
+use sar_estimator::guard::GuardState;
+
+/// The tip at rest, base frame, m (the demo's start); the rod points +X0.
+pub const TIP_M: [f64; 3] = [0.6, 0.2, 0.0];
+
+/// The cycles the rig runs before it is ready (the first reset after the
+/// mean at rest), ms of simulated time.
+pub const READY_MS: u64 = 1100;
+
+/// A linear tissue along +X0 (the rod) of stiffness `k`, 5 N s/m, whose
+/// surface is `gap_m` ahead of the tip, breathing `breath_m` at 0.25 Hz
+/// along the rod, with sudden `shifts`.
+pub fn tissue(k_n_per_m: f64, gap_m: f64, breath_m: f64, shifts: Vec<TissueShift>) -> Tissue {
+    let x = Vec3::new(1.0, 0.0, 0.0);
+    Tissue {
+        direction: x,
+        rest_m: Vec3::new(TIP_M[0] + gap_m, TIP_M[1], TIP_M[2]),
+        model: TissueModel::Linear {
+            stiffness_n_per_m: k_n_per_m,
+        },
+        damping_n_s_per_m: 5.0,
+        breathing: (breath_m > 0.0).then_some(Breathing {
+            amplitude_m: breath_m,
+            hz: 0.25,
+            direction: x,
+        }),
+        shifts,
+    }
+}
+
+pub struct Rig {
+    pub c: Controller<SimSensor<SimClock>, SimDrives<SimClock>>,
+    pub sim: Simulator<SimClock>,
+    pub clock: SimClock,
+    pub operator: Operator,
+    pub cycle: u64,
+    pub log: Vec<(LoopInput, LoopOutput)>,
+    pub cfg: config::Config,
+}
+
+impl Rig {
+    /// The demo robot; a tissue of stiffness `k` whose surface is `gap_m`
+    /// ahead of the tip along the rod, breathing `breath_m` at 0.25 Hz;
+    /// `contact` on top. Reset after the mean at rest.
+    pub fn new(k_n_per_m: f64, gap_m: f64, breath_m: f64, contact: Vec<ContactKey>) -> Self {
+        Self::with(
+            vec![tissue(k_n_per_m, gap_m, breath_m, Vec::new())],
+            contact,
+        )
+    }
+
+    /// The demo robot with these tissues and contact script, reset after
+    /// the mean at rest ([`READY_MS`]).
+    pub fn with(tissues: Vec<Tissue>, contact: Vec<ContactKey>) -> Self {
+        let cfg = config::builtin().unwrap();
+        let mut scenario = sim::demo_scenario().unwrap();
+        scenario.spec.contact = if contact.is_empty() {
+            vec![ContactKey {
+                t_ns: 0,
+                force_n: Vec3::zeros(),
+            }]
+        } else {
+            contact
+        };
+        scenario.spec.tissue = tissues;
+        let clock = SimClock::new(1_000_000_000);
+        let (sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
+        let operator = Operator::new();
+        let (log, _t, _q) = logq::channel(false);
+        let c = Controller::new(
+            &cfg.estimator,
+            bias,
+            cfg.step_config(),
+            sensor,
+            drives,
+            operator.clone(),
+            log,
+            true,
+        )
+        .unwrap();
+        let mut rig = Self {
+            c,
+            sim,
+            clock,
+            operator,
+            cycle: 0,
+            log: Vec::new(),
+            cfg,
+        };
+        for _ in 0..READY_MS {
+            rig.step();
+        }
+        assert_eq!(
+            rig.c.output().guard_state,
+            GuardState::Ok,
+            "{:?}",
+            rig.c.output().guard_reason
+        );
+        rig
+    }
+
+    pub fn step(&mut self) -> LoopOutput {
+        self.cycle += 1;
+        self.clock.advance_ns(1_000_000);
+        let clock = self.clock.clone();
+        self.c.step(self.cycle, || Some(clock.now_ns()));
+        let d = *self.c.decision();
+        self.log.push((*self.c.loop_input(), d));
+        d
+    }
+
+    /// Applies `request` in the next cycle and returns its reply.
+    pub fn request(&mut self, id: u64, request: Request) -> Reply {
+        self.operator
+            .requests
+            .push(Envelope { id, request })
+            .unwrap();
+        self.step();
+        let r = self.operator.replies.pop().unwrap();
+        assert_eq!(r.id, id);
+        r
+    }
+
+    /// The true F_tip, base frame, N.
+    pub fn true_force_n(&self) -> Vec3 {
+        self.sim.truth().unwrap().tip_force_n
+    }
+
+    pub fn replays_bit_for_bit(&self) {
+        let scenario = sim::demo_scenario().unwrap();
+        let bias = sar_estimator::cycle::Bias {
+            force_n: scenario.spec.sensor.bias_n,
+            torque_nm: scenario.spec.sensor.bias_nm,
+        };
+        let mut step = LoopStep::new(&self.cfg.estimator, bias, self.cfg.step_config()).unwrap();
+        for (k, (input, recorded)) in self.log.iter().enumerate() {
+            let again = step.step(input);
+            assert_eq!(
+                format!("{again:?}"),
+                format!("{recorded:?}"),
+                "cycle {k} differs"
+            );
+        }
+    }
+}
+
+/// Root mean square.
+pub fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
