@@ -1,6 +1,9 @@
 //! The loop's pure step with force control (an axial push against a tissue)
 //! beside the same step in position mode, in one criterion run (issue 15):
-//! 1000 recorded cycles stepped from a cloned state, per batch.
+//! 1000 recorded cycles stepped from a cloned state, per batch. Beside them
+//! (issue 17): taking a snapshot of the step's whole decision state (what
+//! the recorder does on the loop at a recording's start and every
+//! `[record] snapshot_s`), and restoring one (what replay does).
 
 #![allow(
     clippy::unwrap_used,
@@ -94,6 +97,25 @@ fn per_cycle(c: &mut Criterion) {
             )
         });
     }
+    g.finish();
+    let mut g = c.benchmark_group("snapshot");
+    let (state, _) = recorded(true, 5000);
+    let mut snap = sar_snapshot::Snapshot::new();
+    g.bench_function("take (push 3 N)", |b| {
+        b.iter(|| black_box(&state).snapshot(&mut snap).unwrap())
+    });
+    state.snapshot(&mut snap).unwrap();
+    let bytes = snap.as_bytes().to_vec();
+    g.bench_function("restore (push 3 N)", |b| {
+        b.iter_batched(
+            || state.clone(),
+            |mut s| {
+                s.restore(black_box(&bytes)).unwrap();
+                s
+            },
+            BatchSize::SmallInput,
+        )
+    });
     g.finish();
 }
 

@@ -835,7 +835,11 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             {
                 return Err(ReplayError::Chain {
                     file: name(),
-                    why: format!("its file_index is {index}, the previous file's {prev}"),
+                    why: if index == 0 {
+                        "it starts another recording (file_index 0): give the files of one recording (NAME-0000.mcap, NAME-0001.mcap, ...)".to_owned()
+                    } else {
+                        format!("its file_index is {index}, the previous file's {prev}")
+                    },
                 });
             }
             previous_index = index;
