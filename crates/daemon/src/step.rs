@@ -588,6 +588,9 @@ pub struct LoopStep {
     /// Force control (its filter runs in every cycle; a mode when active).
     force: ForceController,
     out: LoopOutput,
+    /// The fingerprint of the configuration parts, for snapshots (computed
+    /// at construction: the configuration never changes after it).
+    snapshot_fingerprint: u64,
 }
 
 impl LoopStep {
@@ -671,7 +674,7 @@ impl LoopStep {
             guarded_stop: None,
             force_mode: None,
         };
-        Ok(Self {
+        let mut step = Self {
             calibration,
             profile,
             estimator,
@@ -687,7 +690,11 @@ impl LoopStep {
             sample_period_s,
             force: ForceController::new(config.force_control)?,
             out,
-        })
+            snapshot_fingerprint: 0,
+        };
+        // Hashed once here, not on the loop at every snapshot.
+        step.snapshot_fingerprint = sar_snapshot::fingerprint(&step);
+        Ok(step)
     }
 
     /// The output of the last cycle.
@@ -1324,6 +1331,7 @@ sar_snapshot::snap_state!(LoopStep {
     nested: [estimator, force],
     config: [calibration, profile, config, guarded_lag_s, sample_period_s],
     output: [out],
+    derived: [snapshot_fingerprint],
 });
 
 /// The kind number of a [`LoopStep`] snapshot (the snapshot header's kind).
@@ -1331,12 +1339,18 @@ pub const SNAPSHOT_KIND_LOOP_STEP: u16 = 1;
 
 impl LoopStep {
     /// Writes the whole decision state into `out`, between two cycles. No
-    /// allocation; the configuration is fingerprinted, not stored.
+    /// allocation; the configuration is not stored: its fingerprint, hashed
+    /// once at construction, is.
     pub fn snapshot(
         &self,
         out: &mut sar_snapshot::Snapshot,
     ) -> Result<(), sar_snapshot::SnapshotError> {
-        sar_snapshot::take(self, SNAPSHOT_KIND_LOOP_STEP, out)
+        sar_snapshot::take_with(
+            self,
+            SNAPSHOT_KIND_LOOP_STEP,
+            self.snapshot_fingerprint,
+            out,
+        )
     }
 
     /// Restores a snapshot taken by [`LoopStep::snapshot`] of a step built
@@ -1344,6 +1358,7 @@ impl LoopStep {
     /// exactly what that one did. Every check of the bytes is made first;
     /// on an error the step is unchanged.
     pub fn restore(&mut self, bytes: &[u8]) -> Result<(), sar_snapshot::SnapshotError> {
-        sar_snapshot::restore(self, SNAPSHOT_KIND_LOOP_STEP, bytes)
+        let fingerprint = self.snapshot_fingerprint;
+        sar_snapshot::restore_with(self, SNAPSHOT_KIND_LOOP_STEP, fingerprint, bytes)
     }
 }

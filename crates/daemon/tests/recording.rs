@@ -561,3 +561,43 @@ fn an_unencodable_message_is_dropped_and_the_recording_goes_on() {
         assert!(written.contains(&encoded(m)), "{m:?} missing");
     }
 }
+
+/// Snapshot chunks are joined by the writer into one `/sar/cycle/snapshot`;
+/// a snapshot with a chunk missing (dropped from a full queue) is not
+/// written, and the next complete one is, whole.
+#[test]
+fn snapshot_chunks_are_joined_and_an_incomplete_snapshot_is_left_out() {
+    let dir = common::scratch("snapshot_chunks");
+    let mut w = RotatingWriter::new(FileOptions::new(&dir, "chunks")).unwrap();
+    let status = RecorderDrops::default();
+    let a: Vec<u8> = (0..1000u32).map(|i| (i % 251) as u8).collect();
+    let b: Vec<u8> = (0..900u32).map(|i| (i * 3 % 241) as u8).collect();
+    let mut chunks = Vec::new();
+    SnapshotChunk::split(10, 7, &a, |c| {
+        chunks.push(c);
+        true
+    });
+    assert_eq!(chunks.len(), 3);
+    // The middle chunk of the first snapshot is lost.
+    chunks.remove(1);
+    SnapshotChunk::split(20, 9, &b, |c| {
+        chunks.push(c);
+        true
+    });
+    for c in &chunks {
+        w.write(c, &status).unwrap();
+    }
+    w.close(&status).unwrap();
+    let bytes = read_file(&w.files()[0]).unwrap();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let mut got = Vec::new();
+    while let Some(m) = reader.next() {
+        let m = m.unwrap();
+        if reader.channels()[&m.channel_id].topic == Topic::StateSnapshot.name() {
+            got.push(StateSnapshot::decode(&m.data).unwrap());
+        }
+    }
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!((got[0].stamp_ns, got[0].after_cycle), (20, 9));
+    assert_eq!(got[0].data, b);
+}

@@ -74,6 +74,8 @@ fn a_snapshot_restores_exactly_into_a_step_of_the_same_configuration() {
     step.snapshot(&mut snap).unwrap();
     let bytes = snap.as_bytes();
     println!("snapshot of a loop step: {} bytes", bytes.len());
+    // The fingerprint cached at construction is the configuration's now.
+    assert_eq!(snap.fingerprint(), sar_snapshot::fingerprint(&step));
     assert!(bytes.len() < sar_snapshot::CAPACITY / 2);
     let other = sar_estimator::cycle::Bias::force_only(Vec3::new(0.5, 0.5, 0.5));
     let mut fresh = LoopStep::new(&cfg.estimator, other, cfg.step_config()).unwrap();

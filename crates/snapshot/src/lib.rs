@@ -321,7 +321,9 @@ const fn crc32_table() -> [u32; 256] {
     table
 }
 
-const CRC32_TABLE: [u32; 256] = crc32_table();
+// A static, not a const: a const array indexed in a loop may be copied at
+// each use.
+static CRC32_TABLE: [u32; 256] = crc32_table();
 
 /// CRC-32 (IEEE 802.3, the one of zip and PNG).
 pub fn crc32(bytes: &[u8]) -> u32 {
@@ -397,9 +399,21 @@ pub fn fingerprint<T: SnapState>(value: &T) -> u64 {
 }
 
 /// Writes `value`'s state into `out` as a snapshot of `kind`. No allocation.
+/// Hashes the configuration's `Debug` text each time: a caller on a
+/// real-time path caches [`fingerprint`] and uses [`take_with`].
 pub fn take<T: SnapState>(value: &T, kind: u16, out: &mut Snapshot) -> Result<(), SnapshotError> {
+    take_with(value, kind, fingerprint(value), out)
+}
+
+/// [`take`] with `value`'s configuration fingerprint already known (it
+/// must be [`fingerprint`]`(value)`, computed once).
+pub fn take_with<T: SnapState>(
+    value: &T,
+    kind: u16,
+    fingerprint: u64,
+    out: &mut Snapshot,
+) -> Result<(), SnapshotError> {
     out.len = 0;
-    let fingerprint = fingerprint(value);
     let (header, rest) = out.bytes.split_at_mut(HEADER_BYTES);
     // The body, leaving four bytes for the checksum.
     let body_room = rest.len().saturating_sub(4);
@@ -477,8 +491,18 @@ pub fn restore<T: SnapState + Clone>(
     kind: u16,
     bytes: &[u8],
 ) -> Result<(), SnapshotError> {
-    let (snapshot_fp, body) = open(bytes, kind)?;
     let step_fp = fingerprint(value);
+    restore_with(value, kind, step_fp, bytes)
+}
+
+/// [`restore`] with `value`'s configuration fingerprint already known.
+pub fn restore_with<T: SnapState + Clone>(
+    value: &mut T,
+    kind: u16,
+    step_fp: u64,
+    bytes: &[u8],
+) -> Result<(), SnapshotError> {
+    let (snapshot_fp, body) = open(bytes, kind)?;
     if snapshot_fp != step_fp {
         return Err(SnapshotError::ConfigMismatch {
             snapshot: snapshot_fp,
@@ -711,29 +735,32 @@ macro_rules! snap_enum {
 /// - `state`: stored ([`Snap`]);
 /// - `nested`: a part with its own [`SnapState`];
 /// - `config`: from the configuration, fingerprinted (`Debug`), not stored;
-/// - `output`: rewritten by every cycle before it is read; neither.
+/// - `output`: rewritten by every cycle before it is read; neither;
+/// - `derived` (optional): computed once from the configuration at
+///   construction (e.g. the fingerprint itself, cached); neither.
 #[macro_export]
 macro_rules! snap_state {
     ($t:ty {
         state: [$($s:ident),* $(,)?],
         nested: [$($n:ident),* $(,)?],
         config: [$($c:ident),* $(,)?],
-        output: [$($o:ident),* $(,)?] $(,)?
+        output: [$($o:ident),* $(,)?]
+        $(, derived: [$($d:ident),* $(,)?])? $(,)?
     }) => {
         impl $crate::SnapState for $t {
             fn put_state(&self, w: &mut $crate::Writer<'_>) {
-                let Self { $($s,)* $($n,)* $($c: _,)* $($o: _,)* } = self;
+                let Self { $($s,)* $($n,)* $($c: _,)* $($o: _,)* $($($d: _,)*)? } = self;
                 $( $crate::Snap::put($s, w); )*
                 $( $crate::SnapState::put_state($n, w); )*
             }
             fn fingerprint_config(&self, h: &mut $crate::Fingerprint) {
-                let Self { $($s: _,)* $($n,)* $($c,)* $($o: _,)* } = self;
+                let Self { $($s: _,)* $($n,)* $($c,)* $($o: _,)* $($($d: _,)*)? } = self;
                 h.bytes(stringify!($t).as_bytes());
                 $( h.add(stringify!($c), $c); )*
                 $( $crate::SnapState::fingerprint_config($n, h); )*
             }
             fn load_state(&mut self, r: &mut $crate::Reader<'_>) -> Result<(), $crate::SnapshotError> {
-                let Self { $($s,)* $($n,)* $($c: _,)* $($o: _,)* } = self;
+                let Self { $($s,)* $($n,)* $($c: _,)* $($o: _,)* $($($d: _,)*)? } = self;
                 $( *$s = $crate::Snap::get(r)?; )*
                 $( $crate::SnapState::load_state($n, r)?; )*
                 Ok(())

@@ -97,17 +97,13 @@ pub fn cycle_record(
     input: &LoopInput,
     decision: &LoopOutput,
     joints_new: bool,
-    mut emit: impl FnMut(Outgoing),
+    emit: impl FnMut(Outgoing),
 ) {
-    emit(Outgoing::CycleInput(cycle_input_msg(input, decision)));
-    let output = &decision.estimate;
-    if output.new_sample {
-        emit(Outgoing::SensorWrench(sensor_wrench(&input.sensor)));
-    }
-    if joints_new {
-        emit(Outgoing::Joints(joints_msg(&input.joints)));
-    }
-    outputs(&input.cycle_input(), output, emit);
+    let sensor = decision
+        .estimate
+        .new_sample
+        .then(|| sensor_wrench(&input.sensor));
+    record_cycle(input, decision, joints_new, sensor.into_iter(), emit);
 }
 
 /// [`cycle_record`] as the daemon's recorder writes it: every sensor
@@ -119,15 +115,26 @@ pub fn cycle_record_samples(
     decision: &LoopOutput,
     joints_new: bool,
     samples: &[sar_drivers::WrenchSample],
+    emit: impl FnMut(Outgoing),
+) {
+    let sensor = samples
+        .iter()
+        .map(|s| WrenchStamped::sensor(s.received_ns, arr(&s.force_n), arr(&s.torque_nm)));
+    record_cycle(input, decision, joints_new, sensor, emit);
+}
+
+/// One cycle's messages in their fixed order: the cycle input, the sensor
+/// messages given, the joints when new, the outputs.
+fn record_cycle(
+    input: &LoopInput,
+    decision: &LoopOutput,
+    joints_new: bool,
+    sensor: impl Iterator<Item = WrenchStamped>,
     mut emit: impl FnMut(Outgoing),
 ) {
     emit(Outgoing::CycleInput(cycle_input_msg(input, decision)));
-    for s in samples {
-        emit(Outgoing::SensorWrench(WrenchStamped::sensor(
-            s.received_ns,
-            arr(&s.force_n),
-            arr(&s.torque_nm),
-        )));
+    for w in sensor {
+        emit(Outgoing::SensorWrench(w));
     }
     if joints_new {
         emit(Outgoing::Joints(joints_msg(&input.joints)));

@@ -280,8 +280,6 @@ pub struct RotatingWriter {
     joining: Option<(u64, u8)>,
     /// The joined snapshot's bytes.
     snapshot: StateSnapshot,
-    /// Snapshots not written because a chunk was missing.
-    snapshots_incomplete: u64,
     /// When the current file's rotation fell due (log time, ns).
     rotation_due_ns: Option<u64>,
 }
@@ -377,14 +375,8 @@ impl RotatingWriter {
                 format_version: sar_snapshot::VERSION,
                 data: Vec::with_capacity(sar_snapshot::CAPACITY),
             },
-            snapshots_incomplete: 0,
             rotation_due_ns: None,
         })
-    }
-
-    /// Snapshots not written because one of their chunks was missing.
-    pub fn snapshots_incomplete(&self) -> u64 {
-        self.snapshots_incomplete
     }
 
     /// The files started so far (the last one may be open).
@@ -539,21 +531,16 @@ impl RotatingWriter {
     }
 
     /// Joins a snapshot's chunks; writes it when complete. A chunk out of
-    /// order (one was dropped) abandons the snapshot it belongs to.
+    /// order (one was dropped: the queue's drop count has it) abandons the
+    /// snapshot it belongs to.
     fn write_chunk(
         &mut self,
         chunk: &SnapshotChunk,
         status: &RecorderDrops,
     ) -> Result<(), WriteError> {
         if chunk.index == 0 {
-            if self.joining.is_some() {
-                self.snapshots_incomplete += 1;
-            }
             self.snapshot.data.clear();
         } else if self.joining != Some((chunk.after_cycle, chunk.index)) {
-            if self.joining.is_some() {
-                self.snapshots_incomplete += 1;
-            }
             self.joining = None;
             return Ok(());
         }

@@ -849,7 +849,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
         let mut topics: BTreeMap<u16, Option<Topic>> = BTreeMap::new();
         let mut reference_channel: Option<u16> = None;
         // The cycle the file must start with (after the previous file's).
-        let mut expect_cycle = (i > 0 && r.anchored).then_some(r.last_cycle + 1);
+        let mut expect_cycle = (i > 0 && r.anchored).then_some(r.last_cycle.saturating_add(1));
         let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
                            msg: MessageRef<'_>|
          -> Result<(), ReplayError> {
@@ -894,7 +894,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                             why: format!(
                                 "it starts at cycle {}, the previous file ends at cycle {}",
                                 m.cycle,
-                                want - 1
+                                want.saturating_sub(1)
                             ),
                         });
                     }
