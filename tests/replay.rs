@@ -315,6 +315,102 @@ fn an_inputs_only_recording_replays_one_cycle_per_sensor_message() {
     assert!(a == b);
 }
 
+/// The messages of `input`, in the order `order` gives their indices,
+/// written to `output` (same metadata; the recorder's drops left out).
+fn reorder(input: &Path, output: &Path, order: impl FnOnce(&mut Vec<Outgoing>)) {
+    let bytes = read_file(input).unwrap();
+    let mut msgs: Vec<Outgoing> = McapReader::new(&bytes)
+        .unwrap()
+        .decoded()
+        .map(|m| m.unwrap())
+        .filter(|(topic, _, _)| *topic != Topic::RecorderDrops)
+        .map(|(_, _, m)| m)
+        .collect();
+    order(&mut msgs);
+    let mut w = RotatingWriter::new(FileOptions::single(output)).unwrap();
+    let status = RecorderDrops::default();
+    for m in &msgs {
+        w.write(m, &status).unwrap();
+    }
+    w.close(&status).unwrap();
+}
+
+fn message_data(path: &Path) -> Vec<Vec<u8>> {
+    McapReader::new(&read_file(path).unwrap())
+        .unwrap()
+        .map(|m| m.unwrap().data.to_vec())
+        .collect()
+}
+
+/// Issue 17: an inputs-only recording is paired in a bounded window
+/// (`INPUT_WINDOW` messages) instead of being held whole. Messages out of
+/// log-time order within the window replay exactly as the same messages in
+/// order; one further out than the window is refused, never paired wrongly.
+#[test]
+fn inputs_out_of_order_within_the_window_replay_as_in_order_and_beyond_it_are_refused() {
+    use sar_daemon::record::replay::{INPUT_WINDOW, ReplayError};
+    let dir = scratch("inputs_order");
+    let in_order = dir.join("in_order.mcap");
+    reorder(&fixture(CONTACT_INPUTS), &in_order, |_| {});
+    let shuffled = dir.join("shuffled.mcap");
+    // Blocks of 64 messages, each reversed: every sensor and joint message
+    // leaves its place by up to 63.
+    reorder(&fixture(CONTACT_INPUTS), &shuffled, |m| {
+        for block in m.chunks_mut(64) {
+            block.reverse();
+        }
+    });
+    // One joint message moved later in the file, past `by` sensor and joint
+    // messages.
+    let moved = |by: usize| {
+        let path = dir.join(format!("moved_{by}.mcap"));
+        reorder(&fixture(CONTACT_INPUTS), &path, |m| {
+            let i = m
+                .iter()
+                .position(|x| matches!(x, Outgoing::Joints(_)))
+                .unwrap()
+                + 1000;
+            let i = i + m[i..]
+                .iter()
+                .position(|x| matches!(x, Outgoing::Joints(_)))
+                .unwrap();
+            let j = m.remove(i);
+            // `by` sensor and joint messages (the window's) pass it.
+            let is_input =
+                |x: &Outgoing| matches!(x, Outgoing::Joints(_) | Outgoing::SensorWrench(_));
+            let mut passed = 0;
+            let mut k = i;
+            while passed < by {
+                passed += usize::from(is_input(&m[k]));
+                k += 1;
+            }
+            m.insert(k, j);
+        });
+        path
+    };
+    let replayed = |input: &Path, name: &str| {
+        let out = dir.join(name);
+        let r = replay_file(input, &options(Some(out.clone()), None)).unwrap();
+        assert_eq!(r.mode, Mode::InputsOnly);
+        assert!(r.cycles > 2 * INPUT_WINDOW as u64, "{}", r.cycles);
+        (r.cycles, message_data(&out))
+    };
+    let reference = replayed(&in_order, "out_in_order.mcap");
+    assert_eq!(replayed(&shuffled, "out_shuffled.mcap"), reference);
+    let near = moved(INPUT_WINDOW - 100);
+    assert_eq!(replayed(&near, "out_near.mcap"), reference);
+    // Moving it does change the file: the comparison can fail.
+    assert_ne!(message_data(&near), message_data(&in_order));
+    let far = moved(INPUT_WINDOW + 100);
+    match replay_file(&far, &options(None, None)) {
+        Err(e @ ReplayError::Order { window, .. }) => {
+            assert_eq!(window, INPUT_WINDOW);
+            assert!(e.to_string().contains("time order"), "{e}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
 #[test]
 fn compare_gives_the_error_measure_on_the_contact_scenario() {
     for name in [CONTACT_INPUTS, CONTACT_DAEMON] {

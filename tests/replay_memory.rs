@@ -53,6 +53,9 @@ unsafe impl GlobalAlloc for Peak {
 #[global_allocator]
 static GLOBAL: Peak = Peak;
 
+/// The counters are the process's: the tests measure one at a time.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Peak heap bytes in use beyond those in use before, while `f` runs.
 fn peak_of<T>(f: impl FnOnce() -> T) -> (u64, T) {
     let before = LIVE.load(Ordering::SeqCst);
@@ -107,6 +110,7 @@ fn measure(dir: &Path, cycles: u64) -> (u64, u64, u64) {
 
 #[test]
 fn the_peak_heap_of_a_replay_does_not_grow_with_the_recording() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch("replay_memory");
     let (_, short, _) = measure(&dir, 3_000);
     let (len, long, in_memory) = measure(&dir, 30_000);
@@ -118,10 +122,88 @@ fn the_peak_heap_of_a_replay_does_not_grow_with_the_recording() {
     assert!(long < len / 2, "{long} vs a {len}-byte file");
 }
 
+/// The sensor and joint messages of the daemon recording `daemon`: a
+/// recording of the inputs alone (another program's, to the replay).
+/// Returns the file's length and its sensor messages.
+fn inputs_only(daemon: &Path, path: &Path) -> (u64, u64) {
+    use sar_daemon::record::msgs::{Outgoing, RecorderDrops};
+    use sar_daemon::record::{FileOptions, McapReader, RotatingWriter};
+    let mut o = FileOptions::single(path);
+    // Small chunks: the reader's buffers are warm (each grown to the largest
+    // chunk) within the short recording too.
+    o.chunk_size_bytes = 16 * 1024;
+    let mut w = RotatingWriter::new(o).unwrap();
+    let status = RecorderDrops::default();
+    let mut sensors = 0;
+    for m in McapReader::open(daemon).unwrap().decoded() {
+        let (_, _, m) = m.unwrap();
+        sensors += u64::from(matches!(m, Outgoing::SensorWrench(_)));
+        if matches!(m, Outgoing::SensorWrench(_) | Outgoing::Joints(_)) {
+            w.write(&m, &status).unwrap();
+        }
+    }
+    w.close(&status).unwrap();
+    (std::fs::metadata(path).unwrap().len(), sensors)
+}
+
+/// Issue 17: an inputs-only recording is paired in a bounded window, not
+/// held whole: its replay's peak does not grow with its length either.
+#[test]
+fn the_peak_heap_of_an_inputs_only_replay_does_not_grow_with_the_recording() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = scratch("replay_memory_inputs");
+    let cfg = sar_daemon::config::builtin().unwrap();
+    let options = ReplayOptions::from_config(&cfg);
+    let mut peaks = Vec::new();
+    for cycles in [3_000, 30_000] {
+        let daemon = dir.join(format!("daemon-{cycles}.mcap"));
+        record(&daemon, cycles);
+        let path = dir.join(format!("inputs-{cycles}.mcap"));
+        let (len, sensors) = inputs_only(&daemon, &path);
+        let (streamed, r) = peak_of(|| replay_file(&path, &options).unwrap());
+        assert_eq!(r.mode, sar_daemon::record::replay::Mode::InputsOnly);
+        // One cycle per sensor message (after the first joint message).
+        assert!(
+            r.cycles <= sensors && r.cycles + 2 >= sensors,
+            "{} of {sensors}",
+            r.cycles
+        );
+        println!(
+            "inputs only, {cycles} cycles ({:.1} MB file): peak heap {:.2} MB streamed",
+            len as f64 / 1e6,
+            streamed as f64 / 1e6
+        );
+        peaks.push((len, streamed));
+    }
+    let [(short_len, short), (len, long)] = peaks[..] else {
+        unreachable!()
+    };
+    // Ten times the messages, the same peak: nothing held per message.
+    assert!(len > 5 * short_len, "{len} vs {short_len}");
+    assert!(long <= short + 64_000, "{long} vs {short}");
+}
+
 #[test]
 #[ignore = "figures: a one-minute and a one-hour recording (release build, minutes)"]
 fn peak_heap_for_a_one_minute_and_a_one_hour_recording() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch("replay_memory_hour");
-    measure(&dir, 60_000);
-    measure(&dir, 3_600_000);
+    for cycles in [60_000, 3_600_000] {
+        measure(&dir, cycles);
+        // Its inputs alone, as another program would have recorded them.
+        let daemon = dir.join(format!("rec-{cycles}.mcap"));
+        let path = dir.join(format!("inputs-{cycles}.mcap"));
+        let (len, _) = inputs_only(&daemon, &path);
+        std::fs::remove_file(&daemon).unwrap();
+        let cfg = sar_daemon::config::builtin().unwrap();
+        let options = ReplayOptions::from_config(&cfg);
+        let (streamed, r) = peak_of(|| replay_file(&path, &options).unwrap());
+        assert_eq!(r.mode, sar_daemon::record::replay::Mode::InputsOnly);
+        println!(
+            "inputs only, {cycles} cycles ({:.1} MB file): peak heap {:.2} MB streamed",
+            len as f64 / 1e6,
+            streamed as f64 / 1e6
+        );
+        std::fs::remove_file(&path).unwrap();
+    }
 }

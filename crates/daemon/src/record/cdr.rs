@@ -311,6 +311,23 @@ impl<'a> CdrReader<'a> {
     /// A fixed array of N f64.
     pub fn f64_array<const N: usize>(&mut self) -> Result<[f64; N], CdrError> {
         let mut out = [0.0; N];
+        // Fast path: aligned once, the N elements in one bounds check (the
+        // replay's hot path). A message cut inside the array takes the
+        // element-wise path below, for the same error as before.
+        let pad = (8 - self.pos % 8) % 8;
+        if let Some(bytes) = self
+            .data
+            .get(self.pos + pad..)
+            .and_then(|rest| rest.get(..N * 8))
+        {
+            for (x, b) in out.iter_mut().zip(bytes.chunks_exact(8)) {
+                let mut le = [0u8; 8];
+                le.copy_from_slice(b);
+                *x = f64::from_le_bytes(le);
+            }
+            self.pos += pad + N * 8;
+            return Ok(out);
+        }
         for x in &mut out {
             *x = self.f64()?;
         }

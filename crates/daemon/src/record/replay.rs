@@ -10,6 +10,9 @@
 //!   message with the newest joint message at or before it (by log time);
 //!   the sensor counter is the message's index, `now` its log time, and a
 //!   reset is given every cycle until one is accepted (as an operator would).
+//!   The messages are put in log-time order in a window of
+//!   [`INPUT_WINDOW`] messages, so memory stays bounded; a recording further
+//!   out of order than that is refused.
 //! - `compare`: the unfiltered tip force of every cycle with a new sample and
 //!   an observable estimate against a reference channel (e.g.
 //!   `/sar/sim/tip_wrench_truth`), paired by stamp (the newest reference at or
@@ -249,6 +252,28 @@ pub enum ReplayError {
     /// Internal: the replay reached `to_s` (never returned to the caller).
     #[error("the end of the time range")]
     EndOfRange,
+    /// An inputs-only recording's messages are further out of log-time
+    /// order than the window that orders them in bounded memory.
+    #[error(
+        "a message at log time {log_time_ns} ns comes after later ones by more than {window} messages: the inputs cannot be put in time order in bounded memory"
+    )]
+    Order {
+        /// The message's log time.
+        log_time_ns: u64,
+        /// [`INPUT_WINDOW`].
+        window: usize,
+    },
+    /// `/sar/cycle/input` appears after the inputs-only replay had started
+    /// (more than the window of sensor and joint messages before it).
+    #[error(
+        "/sar/cycle/input first appears at log time {log_time_ns} ns, after more than {window} sensor and joint messages had been replayed as an inputs-only recording"
+    )]
+    LateCycleInput {
+        /// The cycle input's log time.
+        log_time_ns: u64,
+        /// [`INPUT_WINDOW`].
+        window: usize,
+    },
     /// The files of a set do not chain.
     #[error("{file} does not follow the previous file: {why}")]
     Chain {
@@ -811,8 +836,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
     let mut first_stamp_ns: Option<u64> = None;
     // Per file: channel ids are the file's own.
     let mut saw_cycle_input = false;
-    let mut sensors: Vec<(u64, super::msgs::WrenchStamped)> = Vec::new();
-    let mut joints: Vec<(u64, ActiveJointState)> = Vec::new();
+    let mut inputs_only = InputsOnly::new();
     let mut recovered_from_cut = false;
     let mut complete = true;
     let mut previous_index: Option<u64> = None;
@@ -881,9 +905,14 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             match topic {
                 Some(Topic::CycleInput) => {
                     if !saw_cycle_input {
+                        if inputs_only.started {
+                            return Err(ReplayError::LateCycleInput {
+                                log_time_ns: msg.log_time_ns,
+                                window: INPUT_WINDOW,
+                            });
+                        }
                         saw_cycle_input = true;
-                        sensors = Vec::new();
-                        joints = Vec::new();
+                        inputs_only.discard();
                     }
                     let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
                     if let Some(want) = expect_cycle.take()
@@ -920,11 +949,11 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                 }
                 Some(Topic::SensorWrench) if !saw_cycle_input => {
                     let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
-                    sensors.push((msg.log_time_ns, w));
+                    inputs_only.push(&mut r, msg.log_time_ns, InputItem::Sensor(w))?;
                 }
                 Some(Topic::Joints) if !saw_cycle_input => {
                     let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
-                    joints.push((msg.log_time_ns, j));
+                    inputs_only.push(&mut r, msg.log_time_ns, InputItem::Joints(j))?;
                 }
                 Some(Topic::RecorderDrops) => {
                     let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
@@ -966,14 +995,14 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             r.report.input_complete && !recovered_from_cut && !reached_end_of_range,
         );
     } else {
-        if sensors.is_empty() {
+        if inputs_only.sensors_seen == 0 {
             return Err(ReplayError::NoInputs);
         }
         r.report.mode = Mode::InputsOnly;
         r.comparing = false;
         r.replayed.clear();
         r.recorded.clear();
-        inputs_only(&mut r, &mut sensors, &mut joints)?;
+        inputs_only.finish(&mut r)?;
     }
     if let Some(topic) = &options.compare {
         r.report.comparison = Some(compare(&mut r, topic)?);
@@ -997,41 +1026,171 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
     Ok(r.report)
 }
 
-fn inputs_only(
-    r: &mut Replayer,
-    sensors: &mut [(u64, super::msgs::WrenchStamped)],
-    joints: &mut [(u64, ActiveJointState)],
-) -> Result<(), ReplayError> {
-    sensors.sort_by_key(|(t, _)| *t);
-    joints.sort_by_key(|(t, _)| *t);
-    let mut j = 0usize;
-    let mut latest: Option<&ActiveJointState> = None;
-    let mut reset_pending = true;
-    let mut cycle = 0u64;
-    for (i, (t, w)) in sensors.iter().enumerate() {
-        while let Some((tj, js)) = joints.get(j) {
-            if tj > t {
-                break;
-            }
-            latest = Some(js);
-            j += 1;
+/// The most inputs-only messages (`/sar/sensor/wrench`, `/sar/joints`) held
+/// to put them in log-time order: a recording whose messages are further out
+/// of order than this is refused ([`ReplayError::Order`]), never paired
+/// wrongly. 4096 messages are about 2 s of a 1 kHz sensor and joints.
+pub const INPUT_WINDOW: usize = 4096;
+
+/// One inputs-only message waiting in the window.
+#[derive(Debug)]
+enum InputItem {
+    Joints(ActiveJointState),
+    Sensor(super::msgs::WrenchStamped),
+}
+
+/// Its place in the replay's order: log time, then joints before a sensor
+/// sample at the same time (the joint at or before a sample pairs with it),
+/// then the order in the file.
+#[derive(Debug)]
+struct Pending {
+    key: (u64, u8, u64),
+    item: InputItem,
+}
+
+impl PartialEq for Pending {
+    fn eq(&self, other: &Self) -> bool {
+        self.key == other.key
+    }
+}
+impl Eq for Pending {}
+impl PartialOrd for Pending {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Pending {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.key.cmp(&other.key)
+    }
+}
+
+/// The replay of an inputs-only recording, streamed: messages enter a
+/// window of at most [`INPUT_WINDOW`] ordered by [`Pending::key`]; the
+/// earliest leaves when the window is full, and its cycle runs. The result
+/// is the one of sorting the whole recording (as the replay did when it held
+/// it in memory) whenever no message is more than the window out of order;
+/// otherwise the replay stops with [`ReplayError::Order`].
+struct InputsOnly {
+    window: std::collections::BinaryHeap<std::cmp::Reverse<Pending>>,
+    /// Messages pushed, for the order in the file.
+    sequence: u64,
+    /// Sensor messages seen (in any order).
+    sensors_seen: u64,
+    /// The key of the last message out of the window.
+    last_key: Option<(u64, u8, u64)>,
+    /// Whether a message has left the window (a cycle may have run).
+    started: bool,
+    /// The newest joint message out of the window.
+    latest: Option<ActiveJointState>,
+    /// Sensor messages out of the window (the counter given to the cycle).
+    sensor_index: u64,
+    cycle: u64,
+    reset_pending: bool,
+}
+
+impl InputsOnly {
+    fn new() -> Self {
+        Self {
+            window: std::collections::BinaryHeap::with_capacity(INPUT_WINDOW),
+            sequence: 0,
+            sensors_seen: 0,
+            last_key: None,
+            started: false,
+            latest: None,
+            sensor_index: 0,
+            cycle: 0,
+            reset_pending: true,
         }
-        let Some(js) = latest else {
-            continue;
+    }
+
+    /// Forget the window: the recording turned out to hold cycle inputs.
+    fn discard(&mut self) {
+        debug_assert!(!self.started, "inputs-only cycles ran before a cycle input");
+        self.window.clear();
+    }
+
+    /// One message, at its log time; cycles run for those that leave.
+    fn push(
+        &mut self,
+        r: &mut Replayer,
+        log_time_ns: u64,
+        item: InputItem,
+    ) -> Result<(), ReplayError> {
+        let kind = match item {
+            InputItem::Joints(_) => 0,
+            InputItem::Sensor(_) => {
+                self.sensors_seen += 1;
+                1
+            }
         };
-        cycle += 1;
+        let key = (log_time_ns, kind, self.sequence);
+        self.sequence += 1;
+        if let Some(last) = self.last_key
+            && key < last
+        {
+            return Err(ReplayError::Order {
+                log_time_ns,
+                window: INPUT_WINDOW,
+            });
+        }
+        if self.window.len() >= INPUT_WINDOW
+            && let Some(std::cmp::Reverse(first)) = self.window.pop()
+        {
+            if !self.started {
+                // The recording is an inputs-only one: nothing to compare.
+                self.started = true;
+                r.report.mode = Mode::InputsOnly;
+                r.comparing = false;
+                r.replayed.clear();
+                r.recorded.clear();
+            }
+            self.run(r, first)?;
+        }
+        debug_assert!(self.window.len() < INPUT_WINDOW);
+        self.window.push(std::cmp::Reverse(Pending { key, item }));
+        Ok(())
+    }
+
+    /// The messages left in the window, in order.
+    fn finish(&mut self, r: &mut Replayer) -> Result<(), ReplayError> {
+        while let Some(std::cmp::Reverse(first)) = self.window.pop() {
+            self.run(r, first)?;
+        }
+        Ok(())
+    }
+
+    /// A message leaves the window: a joint message becomes the newest, a
+    /// sensor message runs a cycle with it.
+    fn run(&mut self, r: &mut Replayer, p: Pending) -> Result<(), ReplayError> {
+        debug_assert!(self.last_key.is_none_or(|last| last < p.key));
+        self.last_key = Some(p.key);
+        let t = p.key.0;
+        let w = match p.item {
+            InputItem::Joints(j) => {
+                self.latest = Some(j);
+                return Ok(());
+            }
+            InputItem::Sensor(w) => w,
+        };
+        let index = self.sensor_index;
+        self.sensor_index += 1;
+        let Some(js) = &self.latest else {
+            return Ok(());
+        };
+        self.cycle += 1;
         let finite = w.force_n.iter().chain(&w.torque_nm).all(|v| v.is_finite());
         let [fx, fy, fz] = w.force_n;
         let [tx, ty, tz] = w.torque_nm;
         let [q1_m, q2_m, q3_m] = js.q_m;
         let input = CycleInput {
-            cycle,
-            now_ns: Some(*t),
+            cycle: self.cycle,
+            now_ns: Some(t),
             sensor: SensorSample {
                 force_n: Vec3::new(fx, fy, fz),
                 torque_nm: Vec3::new(tx, ty, tz),
                 // The index: every message a new sample, no gap.
-                counter: (i as u32).wrapping_add(1),
+                counter: (index as u32).wrapping_add(1),
                 status: 0,
                 stamp_ns: w.stamp_ns,
                 valid: finite,
@@ -1041,16 +1200,16 @@ fn inputs_only(
                 stamp_ns: js.stamp_ns,
                 valid: js.q_m.iter().all(|v| v.is_finite()),
             },
-            command: reset_pending.then_some(Command::Reset),
+            command: self.reset_pending.then_some(Command::Reset),
         };
         r.estimator_cycle(&input)?;
         if let Some(ev) = r.estimator.last().command
             && matches!(ev.result, Ok(CommandAccepted::Reset))
         {
-            reset_pending = false;
+            self.reset_pending = false;
         }
+        Ok(())
     }
-    Ok(())
 }
 
 fn reference_at(refs: &[(u64, [f64; 3])], t: u64) -> Option<[f64; 3]> {
