@@ -1542,7 +1542,9 @@ impl Estimator {
         let force_n = b + step;
         let tared = self.tip.estimate(pose, reading, &force_n).ok()?;
         let torque_nm = sensor.torque_nm
-            - predicted_torque_nm(&self.frame, pose, reading, &force_n, tared.torsion_nm);
+            - predicted_torque_nm(&self.frame, reading, &force_n, tared.torsion_nm, || {
+                self.frame.torsion_axis_s(pose)
+            });
         let bias = Bias { force_n, torque_nm };
         bias.check().ok()?;
         Some(bias)
@@ -1574,18 +1576,21 @@ impl Estimator {
 /// The model's sensor torque without the torque bias, sensor frame:
 /// `R_0s^T ((A - S) x (-F_A) - M_T n)` with `-F_A = R_0s (f - b_f)`, i.e.
 /// `(R_0s^T (A - S)) x (f - b_f) - R_0s^T n M_T` (MODEL.md 4), N m.
+/// `torsion_axis_s` gives R_0s^T n ([`SensorFrame::torsion_axis_s`]); it is
+/// called only when the torsion is not 0 (never with d = 0), so that a caller
+/// which has it already passes it, and one which has not pays only when needed.
 fn predicted_torque_nm(
     frame: &SensorFrame,
-    pose: &Pose,
     reading_n: &Vec3,
     bias_n: &Vec3,
     torsion_nm: f64,
+    torsion_axis_s: impl FnOnce() -> Vec3,
 ) -> Vec3 {
     let wrench = frame.lever_s_m.cross(&(reading_n - bias_n));
     if torsion_nm == 0.0 {
         wrench
     } else {
-        wrench - frame.r_t * torsion_axis(pose) * torsion_nm
+        wrench - torsion_axis_s() * torsion_nm
     }
 }
 
@@ -1607,11 +1612,22 @@ impl SensorFrame {
             lever_s_m: r_t * (cal.ujoint_offset_m() - cal.sensor_offset_m()),
         }
     }
+
+    /// R_0s^T n: the torsion axis of `pose` in the sensor frame.
+    fn torsion_axis_s(&self, pose: &Pose) -> Vec3 {
+        self.r_t * torsion_axis(&rod_cross(pose))
+    }
 }
 
-/// n = -(s4, 0, c4), written as Y0 x (u x w) as the tip-force estimator does.
-fn torsion_axis(pose: &Pose) -> Vec3 {
-    Vec3::y().cross(&pose.rod_dir.cross(&pose.rod_normal))
+/// v = u x w, the q5 axis (c4, 0, -s4), as the tip-force estimator forms it.
+fn rod_cross(pose: &Pose) -> Vec3 {
+    pose.rod_dir.cross(&pose.rod_normal)
+}
+
+/// n = -(s4, 0, c4) = Y0 x v, from v = u x w ([`rod_cross`]), as the
+/// tip-force estimator forms it.
+fn torsion_axis(v: &Vec3) -> Vec3 {
+    Vec3::y().cross(v)
 }
 
 /// Measured minus predicted torque, with its standard deviation.
@@ -1623,29 +1639,52 @@ fn torque_residual(
     bias: &Bias,
     torsion_nm: f64,
 ) -> TorqueResidual {
-    // The same prediction as the tare's (one model of the sensor torque).
-    let predicted = predicted_torque_nm(frame, pose, &sensor.force_n, &bias.force_n, torsion_nm)
-        + bias.torque_nm;
     if check.offset_m == 0.0 {
+        // d = 0: the torsion is 0 and the deviation a constant. The same
+        // prediction as the tare's (one model of the sensor torque).
+        let predicted =
+            predicted_torque_nm(frame, &sensor.force_n, &bias.force_n, torsion_nm, || {
+                frame.torsion_axis_s(pose)
+            }) + bias.torque_nm;
         return TorqueResidual {
             residual_nm: sensor.torque_nm - predicted,
             std_nm: check.std_nm,
         };
     }
-    // d != 0: the prediction also holds -R_0s^T n M_T, with the torsion's
-    // estimate M_T = d (F_A . v) / w_y (v = u x w) and F_A = -R_0s (f - b_f),
-    // so its Jacobian in the reading f is
-    // J = [l]x + (d / w_y) (R_0s^T n) (R_0s^T v)^T, and
-    // var_i = sigma_t,i^2 + sum_j J_ij^2 sigma_f,j^2.
+    // d != 0: v and n = Y0 x v in the sensor frame, once for the prediction
+    // and the deviation.
     let r_t = &frame.r_t;
-    let n_s = r_t * torsion_axis(pose);
-    let v_s = r_t * pose.rod_dir.cross(&pose.rod_normal);
+    let v = rod_cross(pose);
+    let n_s = r_t * torsion_axis(&v);
+    let predicted = predicted_torque_nm(frame, &sensor.force_n, &bias.force_n, torsion_nm, || n_s)
+        + bias.torque_nm;
+    // The prediction also holds -R_0s^T n M_T, with the torsion's estimate
+    // M_T = d (F_A . v) / w_y and F_A = -R_0s (f - b_f), so its Jacobian in
+    // the reading f is J = [l]x + (d / w_y) (R_0s^T n) (R_0s^T v)^T, and
+    // var_i = sigma_t,i^2 + sum_j J_ij^2 sigma_f,j^2.
+    // Written out per entry (no 3x3 temporaries), in nalgebra's order of
+    // operations for `[l]x + n_s v_s^T k` and `(J o J) sigma_f^2`, so the
+    // result is the same to the bit.
+    let v_s = r_t * v;
     let k = check.offset_m / pose.rod_normal.y;
-    let jacobian = check.cross + n_s * v_s.transpose() * k;
-    let var = check.torque_var_nm2 + jacobian.component_mul(&jacobian) * check.force_var_n2;
+    let (l, fv, tv) = (&check.cross, &check.force_var_n2, &check.torque_var_nm2);
+    // Row i of J: l_i + n_i k v_s^T, squared per entry, against sigma_f^2.
+    let std = |l_i: [f64; 3], n_i: f64, tv_i: f64| {
+        let sq = |l_ic: f64, v_c: f64| {
+            let j_ic = l_ic + n_i * v_c * k;
+            j_ic * j_ic
+        };
+        let [l0, l1, l2] = l_i;
+        let sum = sq(l0, v_s.x) * fv.x + sq(l1, v_s.y) * fv.y + sq(l2, v_s.z) * fv.z;
+        nalgebra::ComplexField::sqrt(tv_i + sum)
+    };
     TorqueResidual {
         residual_nm: sensor.torque_nm - predicted,
-        std_nm: var.map(nalgebra::ComplexField::sqrt),
+        std_nm: Vec3::new(
+            std([l.m11, l.m12, l.m13], n_s.x, tv.x),
+            std([l.m21, l.m22, l.m23], n_s.y, tv.y),
+            std([l.m31, l.m32, l.m33], n_s.z, tv.z),
+        ),
     }
 }
 
