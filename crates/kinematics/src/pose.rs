@@ -189,7 +189,10 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
             && rod_dir.dot(&rod_normal).abs() < 1e-9,
         "u {rod_dir:?}, w {rod_normal:?} not orthonormal"
     );
-    debug_assert!(s > 0.0 && margin_m >= MIN_DISTANCE_M, "s {s}, L - s {margin_m}");
+    debug_assert!(
+        s > 0.0 && margin_m >= MIN_DISTANCE_M,
+        "s {s}, L - s {margin_m}"
+    );
     let axis_m = ujoint_m + rod_normal * d;
     Ok(Pose {
         carriage_m,
