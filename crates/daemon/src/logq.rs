@@ -140,10 +140,7 @@ fn log_loop(queue: &ArrayQueue<LogEvent>, stop: &AtomicBool, dropped: &AtomicU64
 pub fn write(event: &LogEvent) {
     match event {
         LogEvent::Transition(t) => {
-            if matches!(
-                t.to,
-                sar_estimator::guard::GuardState::Stop | sar_estimator::guard::GuardState::Fault
-            ) {
+            if t.to.is_halting() {
                 tracing::error!(
                     cycle = t.cycle,
                     "guard {} -> {}: {}",

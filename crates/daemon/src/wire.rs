@@ -272,7 +272,7 @@ impl StateMsg {
     pub fn from_parts(p: &StateParts<'_>) -> Self {
         let (i, o) = (p.input, &p.decision.estimate);
         // Halted: the guard's Stop or Fault (quick-stopped or never released).
-        let halted = matches!(o.guard_state, GuardState::Stop | GuardState::Fault);
+        let halted = o.guard_state.is_halting();
         let mut m = Self {
             cycle: o.cycle,
             now_ns: i.now_ns.unwrap_or(0),

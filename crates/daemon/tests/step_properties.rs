@@ -181,10 +181,8 @@ fn run(seed: u64) {
         let d = *c.decision();
         let out = &d.estimate;
         recorded.push((input, d));
-        let halting = matches!(out.guard_state, GuardState::Stop | GuardState::Fault);
-        let entered = out
-            .transition
-            .is_some_and(|t| matches!(t.to, GuardState::Stop | GuardState::Fault));
+        let halting = out.guard_state.is_halting();
+        let entered = out.transition.is_some_and(|t| t.to.is_halting());
         stops += u32::from(out.guard_state == GuardState::Stop);
         warns += u32::from(out.guard_state == GuardState::Warn);
         let ctx = format!(

@@ -859,6 +859,68 @@ struct SampleVerdict {
     spike: bool,
 }
 
+/// What the plausibility checks of one cycle's inputs found
+/// ([`Estimator::check_inputs`]): the clock, the sensor's counter, status and
+/// values, the joints. Each fault is kept apart, so that the guard gets the
+/// first in the fixed order ([`InputChecks::first_fault`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct InputChecks {
+    /// The clock's reading, when it can be trusted (read, and advancing).
+    now_ns: Option<u64>,
+    clock_fault: Option<Reason>,
+    /// The sensor sample is a new one (its counter changed).
+    new_sample: bool,
+    /// Samples were lost since the previous new one.
+    lost_samples: bool,
+    counter_fault: Option<Reason>,
+    status_fault: Option<Reason>,
+    values: SampleVerdict,
+    joint_fault: Option<Reason>,
+}
+
+impl InputChecks {
+    /// The guard's input fault: the first of clock, counter, status, the
+    /// sensor's values, the host's fault, joints, torque.
+    fn first_fault(
+        &self,
+        host_fault: Option<Reason>,
+        torque_fault: Option<Reason>,
+    ) -> Option<Reason> {
+        self.clock_fault
+            .or(self.counter_fault)
+            .or(self.status_fault)
+            .or(self.values.fault)
+            .or(host_fault)
+            .or(self.joint_fault)
+            .or(torque_fault)
+    }
+}
+
+/// How old the inputs are and whether they may be used
+/// ([`Estimator::freshness`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Freshness {
+    /// now - stamp of the sample that first carried the current counter, ns.
+    sensor_age_ns: Option<u64>,
+    /// now - joints stamp, ns.
+    joints_age_ns: Option<u64>,
+    /// Marked valid, stamped no later than now, and finite.
+    sensor_valid: bool,
+    /// Marked valid and stamped no later than now.
+    joints_valid: bool,
+}
+
+/// The tare's age and what follows from it ([`Estimator::tare_status`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TareStatus {
+    /// Time since the tare in use, ns.
+    age_ns: Option<u64>,
+    /// The drift bound since the tare, added to the guard's margin, N.
+    extra_margin_n: f64,
+    /// The warning that a tare is due.
+    due: Option<Reason>,
+}
+
 /// ns to s.
 fn ns_to_s(ns: u64) -> f64 {
     ns as f64 * 1e-9
@@ -994,6 +1056,52 @@ impl Estimator {
         reference: Option<&FollowingReference>,
         host_fault: Option<Reason>,
     ) -> &CycleOutput {
+        let checks = self.check_inputs(input, reference);
+        let sensor = &input.sensor;
+        let joints = &input.joints;
+        let fresh = self.freshness(checks.now_ns, sensor, joints);
+        let tare = self.tare_status(checks.now_ns);
+        self.begin_output(input.cycle, &checks, &fresh, &tare);
+        let (tip_input, torque_fault) = self.estimate_tip(
+            &joints.joints,
+            fresh.joints_valid,
+            fresh.sensor_valid,
+            sensor,
+        );
+        self.step_filter(checks.lost_samples, sensor.counter);
+        if checks.new_sample && self.guard.awaiting_first_reset() {
+            self.update_rest_mean(&joints.joints);
+        }
+        self.last.transition = self.guard.step(&GuardInput {
+            cycle: input.cycle,
+            input_fault: checks.first_fault(host_fault, torque_fault),
+            new_sample: checks.new_sample,
+            sensor_age_ns: fresh.sensor_age_ns.unwrap_or(0),
+            sensor_valid: fresh.sensor_valid,
+            joints_age_ns: fresh.joints_age_ns.unwrap_or(0),
+            joints_valid: fresh.joints_valid,
+            tip: tip_input,
+            extra_margin_n: tare.extra_margin_n,
+            tare_due: tare.due,
+            smoothed_force_n: self.last.filtered.map(|f| f.force_n),
+        });
+        if let Some(command) = input.command {
+            let result = self.apply(command, input, checks.now_ns);
+            self.last.command = Some(CommandEvent { command, result });
+        }
+        self.finish_output();
+        &self.last
+    }
+
+    /// The plausibility checks of the inputs, in their fixed order (each
+    /// moves its own memory of earlier cycles): clock, sensor counter,
+    /// device status, the sensor's values, joints (with the following error
+    /// against `reference`).
+    fn check_inputs(
+        &mut self,
+        input: &CycleInput,
+        reference: Option<&FollowingReference>,
+    ) -> InputChecks {
         let (now_ns, clock_fault) = self.check_clock(input.now_ns);
         let sensor = &input.sensor;
         let (new_sample, lost_samples, counter_fault) = self.check_counter(sensor);
@@ -1002,83 +1110,123 @@ impl Estimator {
         });
         let values = self.check_values(sensor, new_sample);
         let joint_fault = self.check_joints(&input.joints, reference);
+        InputChecks {
+            now_ns,
+            clock_fault,
+            new_sample,
+            lost_samples,
+            counter_fault,
+            status_fault,
+            values,
+            joint_fault,
+        }
+    }
 
-        let joints = &input.joints;
-        let (sensor_age_ns, joints_age_ns, sensor_valid, joints_valid) = match now_ns {
-            Some(now) => (
-                Some(now.saturating_sub(self.counter_stamp_ns)),
-                Some(now.saturating_sub(joints.stamp_ns)),
-                // A sample stamped in the future, or not finite, is invalid
-                // whatever the driver said.
-                sensor.valid
+    /// The inputs' ages and validity at `now_ns` (none without a trusted
+    /// clock). A sample stamped in the future, or not finite, is invalid
+    /// whatever the driver said; so are joints stamped in the future.
+    fn freshness(
+        &self,
+        now_ns: Option<u64>,
+        sensor: &SensorSample,
+        joints: &JointSample,
+    ) -> Freshness {
+        match now_ns {
+            Some(now) => Freshness {
+                sensor_age_ns: Some(now.saturating_sub(self.counter_stamp_ns)),
+                joints_age_ns: Some(now.saturating_sub(joints.stamp_ns)),
+                sensor_valid: sensor.valid
                     && self.counter_stamp_ns <= now
                     && sensor.force_n.iter().all(|x| x.is_finite())
                     && sensor.torque_nm.iter().all(|x| x.is_finite()),
-                joints.valid && joints.stamp_ns <= now,
-            ),
-            None => (None, None, false, false),
-        };
+                joints_valid: joints.valid && joints.stamp_ns <= now,
+            },
+            None => Freshness {
+                sensor_age_ns: None,
+                joints_age_ns: None,
+                sensor_valid: false,
+                joints_valid: false,
+            },
+        }
+    }
 
-        // The tare's age and the drift bound since it.
+    /// The tare's age (its clock starts at the first trusted reading), the
+    /// drift bound since it, and whether a tare is due.
+    fn tare_status(&mut self, now_ns: Option<u64>) -> TareStatus {
         if let (Some(now), None) = (now_ns, self.tare_ns) {
             self.tare_ns = Some(now);
         }
-        let tare_age_ns = now_ns
+        let age_ns = now_ns
             .zip(self.tare_ns)
             .map(|(now, tare)| now.saturating_sub(tare));
         let tare = self.limits.tare;
-        let extra_margin_n = tare_age_ns.map_or(0.0, |age| tare.drift_n_per_s * ns_to_s(age));
-        let tare_due = match (tare.max_age_ns, tare_age_ns) {
+        let extra_margin_n = age_ns.map_or(0.0, |age| tare.drift_n_per_s * ns_to_s(age));
+        let due = match (tare.max_age_ns, age_ns) {
             (Some(max_ns), Some(age_ns)) if age_ns > max_ns => Some(Reason::TareDue {
                 age_s: ns_to_s(age_ns),
                 max_age_s: ns_to_s(max_ns),
             }),
             _ => None,
         };
+        TareStatus {
+            age_ns,
+            extra_margin_n,
+            due,
+        }
+    }
 
+    /// The output's fields known before the estimate; the torque check and
+    /// the command are cleared (this cycle writes them if it has them).
+    fn begin_output(
+        &mut self,
+        cycle: u64,
+        checks: &InputChecks,
+        fresh: &Freshness,
+        tare: &TareStatus,
+    ) {
         let out = &mut self.last;
-        out.cycle = input.cycle;
-        out.sensor_age_ns = sensor_age_ns;
-        out.joints_age_ns = joints_age_ns;
-        out.new_sample = new_sample;
+        out.cycle = cycle;
+        out.sensor_age_ns = fresh.sensor_age_ns;
+        out.joints_age_ns = fresh.joints_age_ns;
+        out.new_sample = checks.new_sample;
         out.torque = None;
         out.command = None;
-        out.spike = values.spike;
-        out.tare_age_ns = tare_age_ns;
-        let (tip_input, torque_fault) =
-            self.estimate_tip(&joints.joints, joints_valid, sensor_valid, sensor);
-        self.step_filter(lost_samples, sensor.counter);
-        if new_sample && self.guard.awaiting_first_reset() {
-            self.update_rest_mean(&joints.joints);
-        }
-        let input_fault = clock_fault
-            .or(counter_fault)
-            .or(status_fault)
-            .or(values.fault)
-            .or(host_fault)
-            .or(joint_fault)
-            .or(torque_fault);
-        let smoothed_force_n = self.last.filtered.map(|f| f.force_n);
-        self.last.transition = self.guard.step(&GuardInput {
-            cycle: input.cycle,
-            input_fault,
-            new_sample,
-            sensor_age_ns: sensor_age_ns.unwrap_or(0),
-            sensor_valid,
-            joints_age_ns: joints_age_ns.unwrap_or(0),
-            joints_valid,
-            tip: tip_input,
-            extra_margin_n,
-            tare_due,
-            smoothed_force_n,
-        });
-        if let Some(command) = input.command {
-            let result = self.apply(command, input, now_ns);
-            self.last.command = Some(CommandEvent { command, result });
-        }
+        out.spike = checks.values.spike;
+        out.tare_age_ns = tare.age_ns;
+    }
+
+    /// The guard's state and reason after the step and the command, into the
+    /// output; in debug builds, the output's coherence.
+    fn finish_output(&mut self) {
         self.last.guard_state = self.guard.state();
         self.last.guard_reason = self.guard.reason();
-        &self.last
+        self.debug_check_output();
+    }
+
+    /// What a reader of [`CycleOutput`] may rely on, checked in debug builds
+    /// after every cycle: a pose exactly when the kinematics gave one (an
+    /// estimate, a refusal of the estimator and an invalid sensor sample
+    /// come with one); the torque residual and the filtered force only
+    /// beside an estimate (the filtered one beside an observable one); a
+    /// spike only in a new sample; the guard's state as the guard holds it.
+    #[inline]
+    fn debug_check_output(&self) {
+        let out = &self.last;
+        let with_pose = matches!(
+            out.tip,
+            TipOutcome::Estimate(_) | TipOutcome::Refused(_) | TipOutcome::SensorInvalid
+        );
+        debug_assert_eq!(out.pose.is_some(), with_pose, "pose vs {:?}", out.tip);
+        debug_assert!(
+            out.torque.is_none() || matches!(out.tip, TipOutcome::Estimate(_)),
+            "a torque residual without an estimate"
+        );
+        debug_assert!(
+            out.filtered.is_none() || matches!(out.tip, TipOutcome::Estimate(e) if e.observable),
+            "a filtered force without an observable estimate"
+        );
+        debug_assert!(!out.spike || out.new_sample, "a spike in a repeated sample");
+        debug_assert_eq!(out.guard_state, self.guard.state());
     }
 
     /// The clock: no reading, or one that does not advance, trusts nothing.
@@ -1221,7 +1369,15 @@ impl Estimator {
             }
             self.spikes = self.spikes.saturating_add(1);
         }
+        // A window holds at most `window_samples` new samples, so at most
+        // that many spikes.
         debug_assert!(self.spike_window_left <= limits.window_samples);
+        debug_assert!(
+            self.spikes <= limits.window_samples,
+            "{} spikes in a window of {}",
+            self.spikes,
+            limits.window_samples
+        );
         spike
     }
 
@@ -1542,7 +1698,9 @@ impl Estimator {
         let force_n = b + step;
         let tared = self.tip.estimate(pose, reading, &force_n).ok()?;
         let torque_nm = sensor.torque_nm
-            - predicted_torque_nm(&self.frame, pose, reading, &force_n, tared.torsion_nm);
+            - predicted_torque_nm(&self.frame, reading, &force_n, tared.torsion_nm, || {
+                self.frame.torsion_axis_s(pose)
+            });
         let bias = Bias { force_n, torque_nm };
         bias.check().ok()?;
         Some(bias)
@@ -1574,18 +1732,21 @@ impl Estimator {
 /// The model's sensor torque without the torque bias, sensor frame:
 /// `R_0s^T ((A - S) x (-F_A) - M_T n)` with `-F_A = R_0s (f - b_f)`, i.e.
 /// `(R_0s^T (A - S)) x (f - b_f) - R_0s^T n M_T` (MODEL.md 4), N m.
+/// `torsion_axis_s` gives R_0s^T n ([`SensorFrame::torsion_axis_s`]); it is
+/// called only when the torsion is not 0 (never with d = 0), so that a caller
+/// which has it already passes it, and one which has not pays only when needed.
 fn predicted_torque_nm(
     frame: &SensorFrame,
-    pose: &Pose,
     reading_n: &Vec3,
     bias_n: &Vec3,
     torsion_nm: f64,
+    torsion_axis_s: impl FnOnce() -> Vec3,
 ) -> Vec3 {
     let wrench = frame.lever_s_m.cross(&(reading_n - bias_n));
     if torsion_nm == 0.0 {
         wrench
     } else {
-        wrench - frame.r_t * torsion_axis(pose) * torsion_nm
+        wrench - torsion_axis_s() * torsion_nm
     }
 }
 
@@ -1607,11 +1768,22 @@ impl SensorFrame {
             lever_s_m: r_t * (cal.ujoint_offset_m() - cal.sensor_offset_m()),
         }
     }
+
+    /// R_0s^T n: the torsion axis of `pose` in the sensor frame.
+    fn torsion_axis_s(&self, pose: &Pose) -> Vec3 {
+        self.r_t * torsion_axis(&rod_cross(pose))
+    }
 }
 
-/// n = -(s4, 0, c4), written as Y0 x (u x w) as the tip-force estimator does.
-fn torsion_axis(pose: &Pose) -> Vec3 {
-    Vec3::y().cross(&pose.rod_dir.cross(&pose.rod_normal))
+/// v = u x w, the q5 axis (c4, 0, -s4), as the tip-force estimator forms it.
+fn rod_cross(pose: &Pose) -> Vec3 {
+    pose.rod_dir.cross(&pose.rod_normal)
+}
+
+/// n = -(s4, 0, c4) = Y0 x v, from v = u x w ([`rod_cross`]), as the
+/// tip-force estimator forms it.
+fn torsion_axis(v: &Vec3) -> Vec3 {
+    Vec3::y().cross(v)
 }
 
 /// Measured minus predicted torque, with its standard deviation.
@@ -1623,29 +1795,52 @@ fn torque_residual(
     bias: &Bias,
     torsion_nm: f64,
 ) -> TorqueResidual {
-    // The same prediction as the tare's (one model of the sensor torque).
-    let predicted = predicted_torque_nm(frame, pose, &sensor.force_n, &bias.force_n, torsion_nm)
-        + bias.torque_nm;
     if check.offset_m == 0.0 {
+        // d = 0: the torsion is 0 and the deviation a constant. The same
+        // prediction as the tare's (one model of the sensor torque).
+        let predicted =
+            predicted_torque_nm(frame, &sensor.force_n, &bias.force_n, torsion_nm, || {
+                frame.torsion_axis_s(pose)
+            }) + bias.torque_nm;
         return TorqueResidual {
             residual_nm: sensor.torque_nm - predicted,
             std_nm: check.std_nm,
         };
     }
-    // d != 0: the prediction also holds -R_0s^T n M_T, with the torsion's
-    // estimate M_T = d (F_A . v) / w_y (v = u x w) and F_A = -R_0s (f - b_f),
-    // so its Jacobian in the reading f is
-    // J = [l]x + (d / w_y) (R_0s^T n) (R_0s^T v)^T, and
-    // var_i = sigma_t,i^2 + sum_j J_ij^2 sigma_f,j^2.
+    // d != 0: v and n = Y0 x v in the sensor frame, once for the prediction
+    // and the deviation.
     let r_t = &frame.r_t;
-    let n_s = r_t * torsion_axis(pose);
-    let v_s = r_t * pose.rod_dir.cross(&pose.rod_normal);
+    let v = rod_cross(pose);
+    let n_s = r_t * torsion_axis(&v);
+    let predicted = predicted_torque_nm(frame, &sensor.force_n, &bias.force_n, torsion_nm, || n_s)
+        + bias.torque_nm;
+    // The prediction also holds -R_0s^T n M_T, with the torsion's estimate
+    // M_T = d (F_A . v) / w_y and F_A = -R_0s (f - b_f), so its Jacobian in
+    // the reading f is J = [l]x + (d / w_y) (R_0s^T n) (R_0s^T v)^T, and
+    // var_i = sigma_t,i^2 + sum_j J_ij^2 sigma_f,j^2.
+    // Written out per entry (no 3x3 temporaries), in nalgebra's order of
+    // operations for `[l]x + n_s v_s^T k` and `(J o J) sigma_f^2`, so the
+    // result is the same to the bit.
+    let v_s = r_t * v;
     let k = check.offset_m / pose.rod_normal.y;
-    let jacobian = check.cross + n_s * v_s.transpose() * k;
-    let var = check.torque_var_nm2 + jacobian.component_mul(&jacobian) * check.force_var_n2;
+    let (l, fv, tv) = (&check.cross, &check.force_var_n2, &check.torque_var_nm2);
+    // Row i of J: l_i + n_i k v_s^T, squared per entry, against sigma_f^2.
+    let std = |l_i: [f64; 3], n_i: f64, tv_i: f64| {
+        let sq = |l_ic: f64, v_c: f64| {
+            let j_ic = l_ic + n_i * v_c * k;
+            j_ic * j_ic
+        };
+        let [l0, l1, l2] = l_i;
+        let sum = sq(l0, v_s.x) * fv.x + sq(l1, v_s.y) * fv.y + sq(l2, v_s.z) * fv.z;
+        nalgebra::ComplexField::sqrt(tv_i + sum)
+    };
     TorqueResidual {
         residual_nm: sensor.torque_nm - predicted,
-        std_nm: var.map(nalgebra::ComplexField::sqrt),
+        std_nm: Vec3::new(
+            std([l.m11, l.m12, l.m13], n_s.x, tv.x),
+            std([l.m21, l.m22, l.m23], n_s.y, tv.y),
+            std([l.m31, l.m32, l.m33], n_s.z, tv.z),
+        ),
     }
 }
 

@@ -305,6 +305,17 @@ impl TipFilter {
             self.reset();
             return Err(e);
         }
+        // A held state was stored only with a finite output (the overflow
+        // check below): what the next output builds on.
+        debug_assert!(
+            self.state.is_none_or(|s| s
+                .last
+                .force_n
+                .iter()
+                .chain(s.last.std_n.iter())
+                .all(|v| v.is_finite())),
+            "a stored filter state with a non-finite output"
+        );
         let c = self.coef;
         let var_n2 = std_n.component_mul(std_n);
         let state = match self.state {

@@ -1367,6 +1367,38 @@ impl Guard {
     /// `Warn`, its reason) changed.
     #[inline]
     pub fn step(&mut self, input: &GuardInput) -> Option<Transition> {
+        let transition = self.step_state(input);
+        self.debug_check();
+        transition
+    }
+
+    /// The invariants a reader of the guard would otherwise have to trust,
+    /// checked in debug builds after every step and reset: each debounce
+    /// count within `0..=debounce_samples` (a vote never passes the
+    /// threshold); the initial latch only in `Fault` (nothing leaves it but
+    /// an accepted reset, which ends the latch).
+    #[inline]
+    fn debug_check(&self) {
+        let debounce = self.config.limits.debounce_samples;
+        debug_assert!(
+            self.stop_count <= debounce
+                && self.warn_count <= debounce
+                && self.clear_count <= debounce,
+            "debounce counts {}/{}/{} above {debounce}",
+            self.stop_count,
+            self.warn_count,
+            self.clear_count
+        );
+        debug_assert!(
+            !self.initial || self.state == GuardState::Fault,
+            "the initial latch in {}",
+            self.state
+        );
+    }
+
+    /// [`Guard::step`] without the invariants' check.
+    #[inline]
+    fn step_state(&mut self, input: &GuardInput) -> Option<Transition> {
         let cycle = input.cycle;
         let parts_n = match self.evaluate(input) {
             Err(fault) => {
@@ -1415,9 +1447,6 @@ impl Guard {
             self.warn_count = vote(self.warn_count, warn_hit.is_some());
             self.clear_count = vote(self.clear_count, clear);
         }
-        debug_assert!(self.stop_count <= debounce);
-        debug_assert!(self.warn_count <= debounce);
-        debug_assert!(self.clear_count <= debounce);
         self.blocker = stop_hit.map(|(part, force_n, limit_n)| Reason::AboveStop {
             part,
             force_n,
@@ -1564,7 +1593,9 @@ impl Guard {
                 self.warn_count = 0;
                 self.clear_count = 0;
                 self.initial = false;
-                Ok(self.enter(to, reason, cycle))
+                let transition = self.enter(to, reason, cycle);
+                self.debug_check();
+                Ok(transition)
             }
         }
     }

@@ -287,6 +287,13 @@ impl TipForceEstimator {
         if !(axial_n.is_finite() && lateral_n.is_finite()) {
             return Err(TipForceError::NonFiniteResult);
         }
+        // What the guard trusts in an estimate: every deviation a finite
+        // number >= 0 (NaN and infinity were turned away above), so that the
+        // observability flag and the guard's margin compare real numbers.
+        debug_assert!(
+            std_n.iter().all(|s| s.is_finite() && *s >= 0.0),
+            "std_n {std_n:?}"
+        );
         Ok(TipForceEstimate {
             force_n,
             std_n,

@@ -249,6 +249,20 @@ fn force_levels_are_what_they_claim() {
 
 // ---------------------------------------------------------------- start, reset
 
+/// `is_halting` (what the daemon and the tests ask instead of naming the
+/// states) is exactly Stop and Fault; the match is exhaustive, so a new state
+/// does not compile here until it is classified.
+#[test]
+fn halting_is_exactly_stop_and_fault() {
+    for state in GuardState::ALL {
+        let halting = match state {
+            GuardState::Stop | GuardState::Fault => true,
+            GuardState::Ok | GuardState::Warn | GuardState::Retreat => false,
+        };
+        assert_eq!(state.is_halting(), halting, "{state:?}");
+    }
+}
+
 #[test]
 fn starts_in_fault_and_a_reset_after_a_good_input_gives_ok() {
     let mut rig = Rig::with(limits());
@@ -1893,7 +1907,7 @@ proptest! {
                             _ => prop_assert!(false, "{:?} vs {:?}", got, want),
                         }
                         if let Ok(Some(t)) = got {
-                            prop_assert!(matches!(before, GuardState::Stop | GuardState::Fault));
+                            prop_assert!(before.is_halting());
                             prop_assert_eq!((t.cycle, t.from, t.to, t.reason),
                                 (cycle, before, GuardState::Ok, Reason::Reset));
                         }
@@ -1910,8 +1924,7 @@ proptest! {
                         }
                         match before {
                             GuardState::Fault => prop_assert_eq!(guard.state(), GuardState::Fault),
-                            GuardState::Stop => prop_assert!(matches!(
-                                guard.state(), GuardState::Stop | GuardState::Fault)),
+                            GuardState::Stop => prop_assert!(guard.state().is_halting()),
                             _ => {}
                         }
                         match got {

@@ -77,7 +77,7 @@ use sar_estimator::cycle::{
     Bias, Command, CycleInput, Estimator, JointSample, PlausibilityConfig, PlausibilityLimits,
     SensorSample,
 };
-use sar_estimator::guard::{GuardState, Reason};
+use sar_estimator::guard::Reason;
 
 thread_local! {
     /// Which reason codes the allocation-free loop saw (no allocation to record).
@@ -204,11 +204,7 @@ fn the_per_cycle_path_allocates_nothing() {
     let (_, allocations) = allocations_in(|| {
         for input in inputs.iter_mut() {
             // After a Stop or Fault the next cycle carries a reset.
-            if matches!(
-                estimator.last().guard_state,
-                GuardState::Stop | GuardState::Fault
-            ) && input.command.is_none()
-            {
+            if estimator.last().guard_state.is_halting() && input.command.is_none() {
                 input.command = Some(Command::Reset);
             }
             let out = estimator.cycle(input);
@@ -352,11 +348,7 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
     let (_, allocations) = allocations_in(|| {
         for input in inputs.iter_mut() {
             // After a Stop or Fault the next cycle carries a reset.
-            if matches!(
-                estimator.last().guard_state,
-                GuardState::Stop | GuardState::Fault
-            ) && input.command.is_none()
-            {
+            if estimator.last().guard_state.is_halting() && input.command.is_none() {
                 input.command = Some(Command::Reset);
             }
             let out = estimator.cycle(input);

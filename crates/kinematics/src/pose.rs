@@ -180,6 +180,19 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
     if margin_m < 0.0 {
         return Err(PoseError::SupportBeyondTip { short_m: -margin_m });
     }
+    // What the statics rely on: (u, w) orthonormal to round-off (they are
+    // built from one (s4, c4) and one (s5, c5) pair, each unit), and the
+    // support strictly between A's foot and the tip.
+    debug_assert!(
+        (rod_dir.norm_squared() - 1.0).abs() < 1e-9
+            && (rod_normal.norm_squared() - 1.0).abs() < 1e-9
+            && rod_dir.dot(&rod_normal).abs() < 1e-9,
+        "u {rod_dir:?}, w {rod_normal:?} not orthonormal"
+    );
+    debug_assert!(
+        s > 0.0 && margin_m >= MIN_DISTANCE_M,
+        "s {s}, L - s {margin_m}"
+    );
     let axis_m = ujoint_m + rod_normal * d;
     Ok(Pose {
         carriage_m,

@@ -153,6 +153,21 @@ pub enum SupportError {
         /// The norm of the last scaled step tried.
         step: f64,
     },
+    /// No damped step lowered the cost: the damping of Levenberg-Marquardt
+    /// rose above its ceiling, or its counted bound of trials per iteration
+    /// ran out.
+    #[error(
+        "no damped step lowers the fit's cost: {trials} trials, damping {lambda:e} (last scaled step {step:e})"
+    )]
+    DampingExhausted {
+        /// The trials refused in the last iteration.
+        trials: u32,
+        /// The damping reached (relative to the unit diagonal of the scaled
+        /// normal matrix).
+        lambda: f64,
+        /// The norm of the last scaled step tried.
+        step: f64,
+    },
     /// A value of the result is NaN or infinite (finite inputs so large that
     /// the cost overflows).
     #[error("the fit's {field} is not finite ({value}): readings far out of range")]
@@ -542,6 +557,8 @@ impl SupportCalibration {
             }
             let mut passes = 1u32;
             loop {
+                // The last pass cannot change the free set: it ends the loop.
+                debug_assert!(passes <= MAX_PASSES, "pass {passes} of {MAX_PASSES}");
                 self.check_count(&free)?;
                 let last_pass = passes >= MAX_PASSES;
                 let pass = Pass {
