@@ -14,16 +14,17 @@
 //!   runner: only `/sar/sensor/wrench` and `/sar/joints` (as another
 //!   program would record them) and the truth at each sample's measure time.
 
-use sar_daemon::control::{Controller, Envelope, Operator, Request};
 use sar_daemon::record::convert;
-use sar_daemon::record::msgs::{Outgoing, RecorderDrops, WrenchStamped};
 use sar_daemon::record::{FileOptions, RotatingWriter};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::runner::{RunOptions, run};
 use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
 use sar_estimator::Vec3;
 use sar_kinematics::ActiveJoints;
+use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::logq;
+use sar_msgs::msgs::{Outgoing, RecorderDrops, WrenchStamped};
 use std::path::Path;
 
 /// The simulated host clock's start, ns.
@@ -222,7 +223,7 @@ pub fn inputs_recording(scenario: &Path, path: &Path) -> Result<u64, String> {
             msgs.push((
                 p.stamp_ns,
                 0,
-                Outgoing::Joints(sar_daemon::record::msgs::ActiveJointState {
+                Outgoing::Joints(sar_msgs::msgs::ActiveJointState {
                     stamp_ns: p.stamp_ns,
                     q_m: [p.joints.q1_m, p.joints.q2_m, p.joints.q3_m],
                 }),

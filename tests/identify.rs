@@ -423,7 +423,7 @@ for path in sys.argv[1:]:
 #[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
 fn the_fixtures_decode_with_the_python_reader() {
     use sar_daemon::record::McapReader;
-    use sar_daemon::record::msgs::{ActiveJointState, WrenchStamped};
+    use sar_msgs::msgs::{ActiveJointState, WrenchStamped};
     let names: Vec<String> = identify_fixtures::all()
         .into_iter()
         .map(|f| f.name)

@@ -24,9 +24,9 @@
 )]
 
 use sar_daemon::record::convert::REPLAY_METADATA;
-use sar_daemon::record::msgs::{DriveActionCode, Outgoing, RecorderDrops, Topic};
 use sar_daemon::record::replay::{Mode, ReplayOptions, replay, replay_file};
 use sar_daemon::record::{FileOptions, McapReader, RotatingWriter, read_file};
+use sar_msgs::msgs::{DriveActionCode, Outgoing, RecorderDrops, Topic};
 use sar_tests::{fixture_gen, replay_dir, scenarios_dir};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -126,8 +126,8 @@ fn the_peak_heap_of_a_replay_does_not_grow_with_the_recording() {
 /// recording of the inputs alone (another program's, to the replay).
 /// Returns the file's length and its sensor messages.
 fn inputs_only(daemon: &Path, path: &Path) -> (u64, u64) {
-    use sar_daemon::record::msgs::{Outgoing, RecorderDrops};
     use sar_daemon::record::{FileOptions, McapReader, RotatingWriter};
+    use sar_msgs::msgs::{Outgoing, RecorderDrops};
     let mut o = FileOptions::single(path);
     // Small chunks: the reader's buffers are warm (each grown to the largest
     // chunk) within the short recording too.

@@ -6,12 +6,13 @@
 
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
-use sar_daemon::control::{Controller, Operator};
-use sar_daemon::notify::Watchdog;
 use sar_daemon::runloop::{self, RunLimits};
-use sar_daemon::stats::{Histogram, LoopStats};
-use sar_daemon::{config, logq, rt, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::MonotonicClock;
+use sar_loop::control::{Controller, Operator};
+use sar_loop::notify::Watchdog;
+use sar_loop::stats::{Histogram, LoopStats};
+use sar_loop::{logq, rt};
 
 const CYCLES: u64 = 3000;
 const PERIOD_NS: u64 = 1_000_000;

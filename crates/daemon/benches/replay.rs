@@ -37,14 +37,15 @@
 mod common;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use sar_daemon::control::{Controller, Operator, Request};
 use sar_daemon::record::convert;
-use sar_daemon::record::msgs::{CycleInput, Outgoing, RecorderDrops, RosMessage, Topic};
 use sar_daemon::record::replay::{ReplayOptions, replay, replay_file};
 use sar_daemon::record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
-use sar_daemon::step::{LoopInput, LoopStep};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::{DriveState, SimClock};
+use sar_loop::control::{Controller, Operator, Request};
+use sar_loop::logq;
+use sar_loop::step::{LoopInput, LoopStep};
+use sar_msgs::msgs::{CycleInput, Outgoing, RecorderDrops, RosMessage, Topic};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};

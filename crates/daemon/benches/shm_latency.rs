@@ -31,9 +31,9 @@
 )]
 
 use criterion::{Criterion, criterion_group};
-use sar_daemon::control::Operator;
 use sar_daemon::shm::{Client, DaemonShm, node};
-use sar_daemon::wire::StateMsg;
+use sar_loop::control::Operator;
+use sar_msgs::wire::StateMsg;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Mutex};
@@ -43,7 +43,7 @@ use std::time::Duration;
 #[allow(unsafe_code)]
 fn fifo(on: bool) {
     if on {
-        FIFO.store(sar_daemon::rt::set_fifo(80).is_ok(), Ordering::Relaxed);
+        FIFO.store(sar_loop::rt::set_fifo(80).is_ok(), Ordering::Relaxed);
     } else {
         let param = libc::sched_param { sched_priority: 0 };
         // SAFETY: `param` is valid; pid 0 is the calling thread.
@@ -54,7 +54,7 @@ fn fifo(on: bool) {
 static FIFO: AtomicBool = AtomicBool::new(false);
 
 fn mono() -> u64 {
-    sar_daemon::rt::monotonic_ns().unwrap()
+    sar_loop::rt::monotonic_ns().unwrap()
 }
 
 /// Latencies (ns) and publish-call times (ns) per setup.

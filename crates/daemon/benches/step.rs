@@ -14,12 +14,13 @@
 )]
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use sar_daemon::control::{Controller, Envelope, Operator, Request};
-use sar_daemon::step::{LoopInput, LoopStep};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_drivers::sim::{Tissue, TissueModel};
 use sar_estimator::Vec3;
+use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::logq;
+use sar_loop::step::{LoopInput, LoopStep};
 use std::hint::black_box;
 
 /// Cycles measured per batch.

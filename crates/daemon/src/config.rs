@@ -1062,8 +1062,8 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
 impl Config {
     /// The loop step's settings: the axes' travel, the speed and
     /// acceleration of planned moves, the following tolerance.
-    pub fn step_config(&self) -> crate::step::StepConfig {
-        crate::step::StepConfig {
+    pub fn step_config(&self) -> sar_loop::step::StepConfig {
+        sar_loop::step::StepConfig {
             travel_m: self.axes.travel_m,
             axis_limits: sar_drivers::motion::Limits {
                 max_speed_mps: self.axes.max_speed_mps,

@@ -71,7 +71,7 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
 }
 
 /// The CANopen drives' per-cycle exchange (SYNC, TPDOs, RPDOs, supervision),
-/// as the hook of [`crate::control::Controller::with_drives_cycle`].
+/// as the hook of [`sar_loop::control::Controller::with_drives_cycle`].
 pub fn canopen_cycle<C: embedded_can::nb::Can, K: Clock>(
     drives: &mut CanOpenDrives<C, K>,
 ) -> Result<(), &'static str> {

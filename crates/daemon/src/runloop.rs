@@ -7,14 +7,14 @@
 //! SIGTERM/SIGINT (or after `max_cycles`) with the drives halted.
 
 use crate::config::LoopConfig;
-use crate::control::Controller;
-use crate::logq::{LogEvent, LogSender};
-use crate::notify::Watchdog;
-use crate::rt;
-use crate::stats::LoopStats;
-use crate::step::{LoopInput, LoopOutput};
 use sar_drivers::{AxisDrives, ForceSensor};
 use sar_estimator::cycle::TipOutcome;
+use sar_loop::control::Controller;
+use sar_loop::logq::{LogEvent, LogSender};
+use sar_loop::notify::Watchdog;
+use sar_loop::rt;
+use sar_loop::stats::LoopStats;
+use sar_loop::step::{LoopInput, LoopOutput};
 
 /// One cycle as the loop hands it to publishers.
 #[derive(Debug, Clone, Copy)]
@@ -25,7 +25,7 @@ pub struct Published<'a> {
     /// The cycle's whole decision (the estimator's output in `estimate`).
     pub decision: &'a LoopOutput,
     /// The step after the cycle (the recorder snapshots its state).
-    pub step: &'a crate::step::LoopStep,
+    pub step: &'a sar_loop::step::LoopStep,
     /// Every sensor sample received since the previous cycle (the recorder
     /// writes each as `/sar/sensor/wrench`).
     pub sensor_samples: &'a [sar_drivers::WrenchSample],
@@ -39,7 +39,7 @@ pub struct Published<'a> {
     pub recording: bool,
     /// The simulator's truth of this cycle, when simulated (set by
     /// `record::live`, which records it).
-    pub truth: Option<crate::wire::SimTruth>,
+    pub truth: Option<sar_loop::publish::SimTruth>,
 }
 
 /// What the loop talks to around each cycle (shared memory).

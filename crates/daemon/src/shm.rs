@@ -22,15 +22,16 @@
 //! or client killed with SIGKILL) and then creates the services; when they
 //! exist (a living daemon with the same prefix), it refuses to start.
 
-use crate::control::{Envelope, Operator, Reply};
 use crate::runloop::{Publish, Published};
-use crate::wire::{CommandMsg, ReplyMsg, StateMsg, StateParts, command_kind, reply_code};
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
+use sar_loop::control::{Envelope, Operator, Reply};
+use sar_loop::publish::StateParts;
+use sar_msgs::wire::{CommandMsg, ReplyMsg, StateMsg, command_kind, reply_code};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
@@ -146,7 +147,7 @@ pub struct DaemonShm {
     thread: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Shared>,
     /// The simulator's truth of F_tip, when simulated.
-    truth: Option<crate::wire::SimTruthFn>,
+    truth: Option<sar_loop::publish::SimTruthFn>,
     queue_drops: u64,
 }
 
@@ -319,7 +320,7 @@ impl ShmWorker {
                 return;
             }
             if let Some(active) = self.in_flight.take() {
-                let _ = active.send_copy(ReplyMsg::from_reply(&reply, self.limits_n));
+                let _ = active.send_copy(sar_loop::publish::reply_msg(&reply, self.limits_n));
             }
         }
     }
@@ -342,7 +343,7 @@ impl ShmWorker {
             limits_n: self.limits_n,
             ..ReplyMsg::default()
         };
-        match command.request() {
+        match sar_loop::publish::request_of(&command) {
             Some(request) => {
                 let env = Envelope {
                     id: command.id,
@@ -419,7 +420,7 @@ impl DaemonShm {
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
-        truth: Option<crate::wire::SimTruthFn>,
+        truth: Option<sar_loop::publish::SimTruthFn>,
     ) -> Result<Self, String> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
@@ -465,7 +466,7 @@ impl DaemonShm {
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
-        truth: Option<crate::wire::SimTruthFn>,
+        truth: Option<sar_loop::publish::SimTruthFn>,
     ) -> Result<(Self, ShmWorker), String> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
@@ -536,7 +537,7 @@ impl Publish for DaemonShm {
         // The cycle's truth when the recorder asked for it already (one
         // simulator lock per cycle), else our own.
         let truth = c.truth.or_else(|| self.truth.as_mut().and_then(|f| f()));
-        let mut state = StateMsg::from_parts(&StateParts {
+        let mut state = sar_loop::publish::state_msg(&StateParts {
             input: c.loop_input,
             decision: c.decision,
             stats: c.stats,

@@ -13,9 +13,9 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::control::ReplyStatus;
 use sar_daemon::shm::Client;
-use sar_daemon::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
+use sar_loop::control::ReplyStatus;
+use sar_msgs::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -62,7 +62,7 @@ impl Drop for Daemon {
     }
 }
 
-fn command(client: &Client, kind: u32) -> sar_daemon::wire::ReplyMsg {
+fn command(client: &Client, kind: u32) -> sar_msgs::wire::ReplyMsg {
     client
         .command(
             CommandMsg {
@@ -249,7 +249,7 @@ fn after_sigkill_a_new_daemon_starts_on_the_same_prefix() {
         }
     };
     let mut first = spawn();
-    wait_state(sar_daemon::rt::monotonic_ns().unwrap());
+    wait_state(sar_loop::rt::monotonic_ns().unwrap());
     let ok = Command::new("kill")
         .args(["-KILL", &first.id().to_string()])
         .status()
@@ -257,7 +257,7 @@ fn after_sigkill_a_new_daemon_starts_on_the_same_prefix() {
         .success();
     assert!(ok);
     let _ = first.wait();
-    let killed_ns = sar_daemon::rt::monotonic_ns().unwrap();
+    let killed_ns = sar_loop::rt::monotonic_ns().unwrap();
     // The killed daemon's services are stale; the new one cleans them.
     let mut second = Daemon(spawn());
     wait_state(killed_ns);

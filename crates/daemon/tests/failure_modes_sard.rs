@@ -25,12 +25,13 @@
 )]
 
 use sar_daemon::shm::{Client, StateSubscription};
-use sar_daemon::wire::{
-    CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_code, guard_state_name, reason_name,
-};
-use sar_daemon::{config, rt, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::ForceSensor;
 use sar_drivers::rdt::emulator::{Emulator, EmulatorConfig, Pacing, SensorFault};
+use sar_loop::rt;
+use sar_msgs::wire::{
+    CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_code, guard_state_name, reason_name,
+};
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};

@@ -4,10 +4,11 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use sar_daemon::control::{Controller, Operator};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_estimator::guard::{GuardState, Reason};
+use sar_loop::control::{Controller, Operator};
+use sar_loop::logq;
 use std::path::Path;
 
 #[test]

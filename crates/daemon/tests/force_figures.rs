@@ -30,10 +30,10 @@ mod common;
 #[path = "common/rig.rs"]
 mod rig;
 use rig::{Rig, TIP_M, rms, tissue};
-use sar_daemon::control::{ReplyStatus, Request};
 use sar_drivers::sim::TissueShift;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
+use sar_loop::control::{ReplyStatus, Request};
 
 const STIFFNESSES: [f64; 4] = [100.0, 300.0, 1000.0, 3000.0];
 const BREATH_M: f64 = 0.003;

@@ -14,11 +14,11 @@ mod common;
 #[path = "common/rig.rs"]
 mod rig;
 use rig::{Rig, TIP_M, rms};
-use sar_daemon::control::{ReplyStatus, Request};
-use sar_daemon::step::{DriveAction, ReplyDetail};
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::GuardState;
+use sar_loop::control::{ReplyStatus, Request};
+use sar_loop::step::{DriveAction, ReplyDetail};
 
 #[test]
 fn push_regulates_the_axial_force_against_a_breathing_tissue() {

@@ -44,12 +44,12 @@ mod rig;
 use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed, TestRunner};
 use rig::{READY_MS, Rig, TIP_M, tissue};
-use sar_daemon::control::{ReplyStatus, Request};
-use sar_daemon::step::DriveAction;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{GuardState, Reason, reduces_force};
 use sar_kinematics::{ActiveJoints, forward};
+use sar_loop::control::{ReplyStatus, Request};
+use sar_loop::step::DriveAction;
 
 /// What the case asks for when the contact comes.
 #[derive(Debug, Clone, Copy)]
@@ -182,7 +182,7 @@ fn run(mode: Mode, force: Vec3, k_n_per_m: f64, ramp_ms: u64, hold_ms: u64, seed
             id += 1;
             rig.operator
                 .requests
-                .push(sar_daemon::control::Envelope { id, request })
+                .push(sar_loop::control::Envelope { id, request })
                 .unwrap();
         }
         let d = rig.step();

@@ -5,13 +5,14 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use sar_daemon::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::sim::{SimDrives, SimError};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_kinematics::ActiveJoints;
+use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
+use sar_loop::logq;
 
 /// Simulated drives whose first `refuse` quick stops fail.
 struct Stubborn {

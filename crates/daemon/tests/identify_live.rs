@@ -103,7 +103,7 @@ fn identify_live_writes_back_the_simulated_manipulator() {
     // complete (1 s): identification starts from Ok.
     loop {
         let s = sub.latest(Duration::from_secs(5)).unwrap();
-        if s.guard_state == sar_daemon::wire::guard_code::OK {
+        if s.guard_state == sar_msgs::wire::guard_code::OK {
             break;
         }
         assert!(start.elapsed() < Duration::from_secs(30), "never Ok");
@@ -133,7 +133,7 @@ fn identify_live_writes_back_the_simulated_manipulator() {
 }
 
 /// Waits for the daemon under `prefix` to publish a state that `ok` accepts.
-fn wait_for(prefix: &str, ok: impl Fn(&sar_daemon::wire::StateMsg) -> bool) {
+fn wait_for(prefix: &str, ok: impl Fn(&sar_msgs::wire::StateMsg) -> bool) {
     let client = sar_daemon::shm::Client::new(prefix).unwrap();
     let start = Instant::now();
     loop {
@@ -172,9 +172,7 @@ fn identify_live_works_with_the_readme_recipe() {
             .spawn()
             .unwrap(),
     );
-    wait_for(&prefix, |s| {
-        s.guard_state == sar_daemon::wire::guard_code::OK
-    });
+    wait_for(&prefix, |s| s.guard_state == sar_msgs::wire::guard_code::OK);
     let out = Command::new(SARCTL)
         .arg("--config")
         .arg(&config_path)
@@ -217,7 +215,7 @@ fn identify_live_refuses_the_demo_contact_at_once() {
             .unwrap(),
     );
     wait_for(&prefix, |s| {
-        s.guard_state == sar_daemon::wire::guard_code::WARN
+        s.guard_state == sar_msgs::wire::guard_code::WARN
     });
     let start = Instant::now();
     let out = Command::new(SARCTL)

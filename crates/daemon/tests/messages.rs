@@ -11,8 +11,8 @@ mod common;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
-use sar_daemon::record::cdr::{CdrError, CdrReader, FixedStr};
-use sar_daemon::record::msgs::*;
+use sar_msgs::cdr::{CdrError, CdrReader, FixedStr};
+use sar_msgs::msgs::*;
 
 fn config() -> Config {
     Config {
@@ -417,9 +417,9 @@ fn outgoing_is_small_and_copy() {
 /// other (besides `REASON_OTHER`).
 #[test]
 fn the_msg_constants_are_the_reason_table() {
-    use sar_daemon::control::recorded_reason_code;
     use sar_estimator::guard::{GuardState, REASONS, Reason};
-    let msg = include_str!("../msg/GuardEvent.msg");
+    use sar_loop::control::recorded_reason_code;
+    let msg = include_str!("../../msgs/msg/GuardEvent.msg");
     let constants: std::collections::BTreeMap<String, u16> = msg
         .lines()
         .filter_map(|l| l.strip_prefix("uint8 "))
@@ -468,7 +468,7 @@ fn the_msg_constants_are_the_reason_table() {
 /// fields read as 0.
 #[test]
 fn an_older_cycle_input_without_the_new_fields_decodes() {
-    use sar_daemon::record::msgs::{CycleInput, RosMessage};
+    use sar_msgs::msgs::{CycleInput, RosMessage};
     let m = CycleInput {
         cycle: 7,
         publisher_idle_ns: 123,

@@ -7,12 +7,13 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use sar_daemon::control::{Controller, Envelope, Operator, Request};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::GuardState;
+use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::logq;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 

@@ -16,13 +16,14 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::control::{Controller, Operator, ReplyStatus};
 use sar_daemon::runloop::{Publish, Published};
 use sar_daemon::shm::{Client, DaemonShm};
-use sar_daemon::stats::LoopStats;
-use sar_daemon::wire::{CommandMsg, command_kind, limits_array};
-use sar_daemon::{config, logq, rt, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
+use sar_loop::control::{Controller, Operator, ReplyStatus};
+use sar_loop::stats::LoopStats;
+use sar_loop::{logq, rt};
+use sar_msgs::wire::{CommandMsg, command_kind, limits_array};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
@@ -192,9 +193,9 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
 /// ends the run (as a signal would) once it has its replies.
 #[test]
 fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
-    use sar_daemon::notify::Watchdog;
     use sar_daemon::runloop::{self, RunLimits};
     use sar_drivers::MonotonicClock;
+    use sar_loop::notify::Watchdog;
 
     let cfg = config::builtin().unwrap();
     let scenario = sim::demo_scenario().unwrap();

@@ -13,17 +13,18 @@
 )]
 
 mod common;
-use sar_daemon::control::{Controller, Envelope, Operator, Request};
 use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
-use sar_daemon::record::msgs::Outgoing;
 use sar_daemon::record::replay::{Mode, ReplayOptions, replay_file};
 use sar_daemon::record::{McapReader, Rotation, read_file};
 use sar_daemon::runloop::{Publish, Published};
-use sar_daemon::stats::LoopStats;
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
+use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::logq;
+use sar_loop::stats::LoopStats;
+use sar_msgs::msgs::Outgoing;
 use std::sync::Arc;
 
 #[path = "common/counting.rs"]

@@ -13,8 +13,7 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_daemon::{config, devices, logq, rt, sim};
+use sar_daemon::{config, devices, sim};
 use sar_drivers::canopen::{
     CanOpenDrives, FOLLOWING_WINDOW_M, MemBus, MemCan, SimCia402Drive, SimDriveSpec, frame,
 };
@@ -26,6 +25,8 @@ use sar_drivers::{
 use sar_estimator::Vec3;
 use sar_estimator::guard::{GuardState, Reason};
 use sar_kinematics::ActiveJoints;
+use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
+use sar_loop::{logq, rt};
 use std::cell::Cell;
 use std::rc::Rc;
 use std::time::Duration;
@@ -204,10 +205,10 @@ fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
 #[test]
 fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
     use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
-    use sar_daemon::record::msgs::{CycleInput, RosMessage, Topic, WrenchStamped};
     use sar_daemon::record::{McapReader, Rotation, read_file};
     use sar_daemon::runloop::{Publish, Published};
-    use sar_daemon::stats::LoopStats;
+    use sar_loop::stats::LoopStats;
+    use sar_msgs::msgs::{CycleInput, RosMessage, Topic, WrenchStamped};
     use std::sync::Arc;
     let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rdt_2khz");
     let _ = std::fs::remove_dir_all(&dir);

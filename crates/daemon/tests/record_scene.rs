@@ -17,9 +17,9 @@
 
 use foxglove::Decode;
 use foxglove::messages::SceneUpdate;
-use sar_daemon::record::msgs::{EstimatorState, RosMessage};
 use sar_daemon::record::replay::{ReplayOptions, replay_file};
 use sar_daemon::view::scene::{guard_color, ids};
+use sar_msgs::msgs::{EstimatorState, RosMessage};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -97,7 +97,7 @@ fn replay_outputs_carry_the_scene_of_their_cycles() {
         let state = states.get(t).expect("a scene at a cycle's stamp");
         let entity = |id: &str| scene.entities.iter().find(|e| e.id == id).unwrap();
         let ujoint = entity(ids::UJOINT);
-        if state.flags & sar_daemon::record::msgs::flags::POSE_VALID != 0 {
+        if state.flags & sar_msgs::msgs::flags::POSE_VALID != 0 {
             let p = ujoint.spheres[0]
                 .pose
                 .as_ref()

@@ -11,9 +11,9 @@
 
 mod common;
 
-use sar_daemon::record::msgs::*;
 use sar_daemon::record::reader::ReadError;
 use sar_daemon::record::*;
+use sar_msgs::msgs::*;
 use std::path::Path;
 
 fn config(dir: &Path, chunk: u64) -> RecorderConfig {

@@ -10,13 +10,14 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use sar_daemon::control::{Controller, Envelope, Operator, Reply, ReplyStatus, Request};
-use sar_daemon::step::{DriveAction, LoopInput, LoopOutput, LoopStep, ReplyDetail};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::sim::{ContactKey, SimDrives, SimSensor};
 use sar_drivers::{DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{GuardState, Reason};
+use sar_loop::control::{Controller, Envelope, Operator, Reply, ReplyStatus, Request};
+use sar_loop::logq;
+use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep, ReplyDetail};
 
 struct Rig {
     c: Controller<SimSensor<SimClock>, SimDrives<SimClock>>,
@@ -285,8 +286,8 @@ fn a_silent_publishing_thread_is_a_fault_after_the_stall_time() {
     assert_eq!(d.action, DriveAction::QuickStop);
     // systemd's watchdog is no longer fed (it restarts sard); any other
     // fault keeps it fed (the loop itself is alive).
-    assert!(!sar_daemon::notify::watchdog_fed(&d.estimate.guard_reason));
-    assert!(sar_daemon::notify::watchdog_fed(&Reason::SensorInvalid));
+    assert!(!sar_loop::notify::watchdog_fed(&d.estimate.guard_reason));
+    assert!(sar_loop::notify::watchdog_fed(&Reason::SensorInvalid));
     // A reset is refused while it stays silent.
     rig.operator
         .requests
@@ -437,7 +438,7 @@ fn a_drive_fault_is_a_guard_fault_and_a_reset_brings_the_drives_back() {
     assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
     assert_eq!(
         rig.c.decision().action,
-        DriveAction::Release(sar_daemon::step::Release::Enable)
+        DriveAction::Release(sar_loop::step::Release::Enable)
     );
     rig.until(20, |_| false);
     assert_eq!(rig.c.drive_state(), Some(DriveState::Enabled));

@@ -12,9 +12,9 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::control::Operator;
 use sar_daemon::shm::{Client, DaemonShm};
-use sar_daemon::wire::StateMsg;
+use sar_loop::control::Operator;
+use sar_msgs::wire::StateMsg;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 

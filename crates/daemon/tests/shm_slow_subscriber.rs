@@ -11,11 +11,11 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::control::Operator;
 use sar_daemon::shm::{
     Client, DaemonShm, Names, STATE_BORROWED, STATE_BUFFER, STATE_QUEUE, ShmWorker,
 };
-use sar_daemon::wire::StateMsg;
+use sar_loop::control::Operator;
+use sar_msgs::wire::StateMsg;
 
 fn daemon(name: &str) -> (String, DaemonShm, ShmWorker) {
     let prefix = format!("sar-slow-{name}-{}", std::process::id());

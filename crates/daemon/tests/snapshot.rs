@@ -14,12 +14,13 @@
 )]
 
 mod common;
-use sar_daemon::control::{Controller, Envelope, Operator, Request};
-use sar_daemon::step::LoopStep;
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
+use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::logq;
+use sar_loop::step::LoopStep;
 use sar_snapshot::{Snapshot, SnapshotError};
 
 /// A step after 3 s of the demo: reset, a push of 1 N into a contact that

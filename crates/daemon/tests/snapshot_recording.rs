@@ -13,17 +13,18 @@
 )]
 
 mod common;
-use sar_daemon::control::{Controller, Envelope, Operator, Request};
 use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
-use sar_daemon::record::msgs::{RosMessage, StateSnapshot, Topic};
 use sar_daemon::record::replay::{ReplayError, ReplayOptions, replay_file, replay_files};
 use sar_daemon::record::{McapReader, Rotation, read_file};
 use sar_daemon::runloop::{Publish, Published};
-use sar_daemon::stats::LoopStats;
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState};
+use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::logq;
+use sar_loop::stats::LoopStats;
+use sar_msgs::msgs::{RosMessage, StateSnapshot, Topic};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -178,7 +179,7 @@ fn snapshots(path: &Path) -> (Vec<u64>, Option<u64>) {
         if topic == Topic::StateSnapshot.name() {
             out.push(StateSnapshot::decode(&m.data).unwrap().after_cycle);
         } else if topic == Topic::CycleInput.name() && first_cycle.is_none() {
-            let c = sar_daemon::record::msgs::CycleInput::decode(&m.data).unwrap();
+            let c = sar_msgs::msgs::CycleInput::decode(&m.data).unwrap();
             first_cycle = Some(c.cycle);
         }
     }

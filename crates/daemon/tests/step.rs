@@ -8,14 +8,15 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use sar_daemon::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_daemon::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::sim::{SimDrives, SimError};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState, Reason};
 use sar_kinematics::{ActiveJoints, inverse};
+use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
+use sar_loop::logq;
+use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
 
 /// Simulated drives that can be blocked: after `block_after` setpoints,
 /// further ones are ignored (a blocked, slipping or disconnected axis: the

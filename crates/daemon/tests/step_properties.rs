@@ -17,15 +17,16 @@
 
 mod common;
 use common::mix;
-use sar_daemon::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_daemon::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::sim::{ContactKey, SimDrives, SimError};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_kinematics::ActiveJoints;
+use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
+use sar_loop::logq;
+use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
 
 /// Simulated drives that refuse a quick stop when told to (seeded).
 struct Flaky {
@@ -240,7 +241,7 @@ fn run(seed: u64) {
                     .max((a.joints.q2_m - b.joints.q2_m).abs())
                     .max((a.joints.q3_m - b.joints.q3_m).abs())
                     / dt_s;
-                assert!(v <= sar_daemon::step::REST_SPEED_MPS, "{ctx}: {v} m/s");
+                assert!(v <= sar_loop::step::REST_SPEED_MPS, "{ctx}: {v} m/s");
             }
         }
         // Replies: one per request, none without.

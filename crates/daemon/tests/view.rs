@@ -27,10 +27,10 @@
 
 use foxglove::Decode;
 use foxglove::messages::SceneUpdate;
-use sar_daemon::record::msgs::{RosMessage, WrenchStamped};
 use sar_daemon::shm::Client;
 use sar_daemon::view::scene::{self, SceneGeometry, ids};
-use sar_daemon::wire::{StateMsg, flags};
+use sar_msgs::msgs::{RosMessage, WrenchStamped};
+use sar_msgs::wire::{StateMsg, flags};
 use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
@@ -628,7 +628,7 @@ fn view_without_a_daemon_fails_in_one_line() {
 }
 
 fn monotonic_ns() -> u64 {
-    sar_daemon::rt::monotonic_ns().unwrap()
+    sar_loop::rt::monotonic_ns().unwrap()
 }
 
 /// utime + stime of a process, clock ticks.

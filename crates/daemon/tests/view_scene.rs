@@ -16,8 +16,8 @@
 use foxglove::Decode;
 use foxglove::messages::{SceneEntity, SceneUpdate};
 use sar_daemon::view::scene::{self, SceneGeometry, ids};
-use sar_daemon::wire::{StateMsg, flags, guard_code};
 use sar_kinematics::{ActiveJoints, Profile, ProfileSpec, forward};
+use sar_msgs::wire::{StateMsg, flags, guard_code};
 use std::collections::BTreeMap;
 
 type V3 = [f64; 3];
@@ -303,7 +303,7 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
     assert!(paths.len() > 10, "{paths:?}");
     let served = sar_daemon::view::served_topics();
     let schema_of = |topic: &str| -> &'static str {
-        use sar_daemon::record::msgs::Topic;
+        use sar_msgs::msgs::Topic;
         match Topic::from_name(topic) {
             Some(t) => t.schema(),
             None if topic == sar_daemon::view::STATUS_TOPIC => sar_daemon::view::STATUS_SCHEMA,
@@ -337,8 +337,8 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
 
 #[test]
 fn the_recorded_messages_of_a_cycle_draw_the_same_scene() {
-    use sar_daemon::record::msgs::Outgoing;
     use sar_daemon::view::topics;
+    use sar_msgs::msgs::Outgoing;
     let cfg = config(0.01);
     let g = SceneGeometry::from_config(&cfg);
     for (k, q) in POSES.iter().enumerate() {
@@ -367,8 +367,8 @@ fn the_recorded_messages_of_a_cycle_draw_the_same_scene() {
 
 #[test]
 fn topics_of_a_state_follow_its_flags_and_the_guards_transitions() {
-    use sar_daemon::record::msgs::{GuardStateCode, Outgoing, Topic};
     use sar_daemon::view::topics;
+    use sar_msgs::msgs::{GuardStateCode, Outgoing, Topic};
     let cfg = config(0.0);
     let ok = state(&cfg, POSES[0], [1.0, 0.0, 0.0], guard_code::OK);
     let mut warn = ok;
@@ -408,8 +408,5 @@ fn topics_of_a_state_follow_its_flags_and_the_guards_transitions() {
     let Some(Outgoing::EstimatorState(st)) = out.last() else {
         panic!()
     };
-    assert_eq!(
-        st.tip_outcome,
-        sar_daemon::record::msgs::TipOutcomeCode::PoseInvalid
-    );
+    assert_eq!(st.tip_outcome, sar_msgs::msgs::TipOutcomeCode::PoseInvalid);
 }

@@ -42,23 +42,29 @@ impl MonotonicClock {
 
     /// `CLOCK_MONOTONIC` in ns, or `None` when the clock cannot be read.
     fn read_ns() -> Option<u64> {
-        let mut ts = libc::timespec {
-            tv_sec: 0,
-            tv_nsec: 0,
-        };
-        // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC exists on Linux.
-        #[allow(unsafe_code)]
-        let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-        if rc != 0 {
-            return None;
-        }
-        Some(
-            u64::try_from(ts.tv_sec)
-                .ok()?
-                .saturating_mul(1_000_000_000)
-                .saturating_add(u64::try_from(ts.tv_nsec).ok()?),
-        )
+        monotonic_ns()
     }
+}
+
+/// `CLOCK_MONOTONIC` in ns, or `None` when the clock cannot be read: the one
+/// place the workspace reads it (the loop's `rt::monotonic_ns` is this).
+pub fn monotonic_ns() -> Option<u64> {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC exists on Linux.
+    #[allow(unsafe_code)]
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    if rc != 0 {
+        return None;
+    }
+    Some(
+        u64::try_from(ts.tv_sec)
+            .ok()?
+            .saturating_mul(1_000_000_000)
+            .saturating_add(u64::try_from(ts.tv_nsec).ok()?),
+    )
 }
 
 impl Clock for MonotonicClock {

@@ -5,7 +5,7 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use sar_daemon::shm::{Client, DEFAULT_PREFIX};
-use sar_daemon::wire::{
+use sar_msgs::wire::{
     self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name,
     status_name,
 };
@@ -548,7 +548,7 @@ fn run(args: &Args) -> Result<(), String> {
             // Faulted drives are reset first: then the guard's reset.
             let mut r = command(command_kind::RESET, [0.0; 3])?;
             for _ in 0..10 {
-                if r.status != sar_daemon::control::ReplyStatus::DrivesFaultReset as u32 {
+                if r.status != sar_loop::control::ReplyStatus::DrivesFaultReset as u32 {
                     break;
                 }
                 std::thread::sleep(Duration::from_millis(100));

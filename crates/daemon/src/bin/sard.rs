@@ -2,17 +2,18 @@
 //! the configuration, or on the simulated robot (`--sim`).
 
 use clap::Parser;
-use sar_daemon::control::{Controller, DrivesCycle, Operator};
-use sar_daemon::notify::{Notifier, Watchdog};
 use sar_daemon::record::live::{LiveRecorder, RecordManager};
 use sar_daemon::runloop::{self, RunLimits};
 use sar_daemon::shm::DaemonShm;
-use sar_daemon::stats::LoopStats;
-use sar_daemon::wire::limits_array;
-use sar_daemon::{config, devices, logq, rt, sim};
+use sar_daemon::{config, devices, sim};
 use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::Bias;
+use sar_loop::control::{Controller, DrivesCycle, Operator};
+use sar_loop::notify::{Notifier, Watchdog};
+use sar_loop::stats::LoopStats;
+use sar_loop::{logq, rt};
+use sar_msgs::wire::limits_array;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -141,10 +142,10 @@ fn run(args: &Args) -> Result<(), String> {
         sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
     let operator = Operator::new();
     // The simulator's true tip force only where the sensor is simulated.
-    let truth: Option<sar_daemon::wire::SimTruthFn> = if real_sensor.is_none() {
+    let truth: Option<sar_loop::publish::SimTruthFn> = if real_sensor.is_none() {
         let truth_sim = simulator.clone();
         Some(Box::new(move || {
-            truth_sim.truth().ok().map(|t| sar_daemon::wire::SimTruth {
+            truth_sim.truth().ok().map(|t| sar_loop::publish::SimTruth {
                 tip_force_n: t.tip_force_n,
                 friction_force_n: t.friction_force_n,
                 elapsed_ns: t.elapsed_ns,

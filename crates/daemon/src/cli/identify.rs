@@ -166,8 +166,8 @@ mod live {
     use crate::identify::dwell::{Dwell, DwellFinder, SensorAverager};
     use crate::identify::poses::{self, PoseTarget};
     use crate::shm::{Client, StateSubscription};
-    use crate::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
     use sar_kinematics::{Mat3, Vec3};
+    use sar_msgs::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
     use std::io::{BufRead, Write};
     use std::time::{Duration, Instant};
 
@@ -216,8 +216,8 @@ mod live {
                     if s.guard_state == guard_code::STOP || s.guard_state == guard_code::FAULT {
                         return Err(format!(
                             "the guard halted the robot (state {}, reason {}): the procedure stopped; reset, then run it again",
-                            crate::wire::guard_state_name(s.guard_state),
-                            crate::wire::reason_name(s.guard_reason)
+                            sar_msgs::wire::guard_state_name(s.guard_state),
+                            sar_msgs::wire::reason_name(s.guard_reason)
                         ));
                     }
                 }
@@ -282,8 +282,8 @@ mod live {
         if s.guard_state != guard_code::OK {
             return Err(format!(
                 "the guard is {} ({}): {RECIPE}",
-                crate::wire::guard_state_name(s.guard_state),
-                crate::wire::reason_name(s.guard_reason)
+                sar_msgs::wire::guard_state_name(s.guard_state),
+                sar_msgs::wire::reason_name(s.guard_reason)
             ));
         }
         let f = s.tip_force_n;
@@ -333,7 +333,7 @@ mod live {
                     "the daemon refused the move to {what} (tip {:?} m): status {}, reason {}",
                     t.tip_m.as_slice(),
                     reply.status,
-                    crate::wire::reason_name(reply.reason)
+                    sar_msgs::wire::reason_name(reply.reason)
                 ));
             }
             // Until arrived, at rest short of it (0.3 s without 2 um of
@@ -357,7 +357,7 @@ mod live {
                         return Err(format!(
                             "the guard stayed in Warn for {:.0} s on the way to {what} ({}): something touches the tip; {RECIPE}",
                             WARN_LIMIT.as_secs_f64(),
-                            crate::wire::reason_name(s.guard_reason)
+                            sar_msgs::wire::reason_name(s.guard_reason)
                         ));
                     }
                     continue;

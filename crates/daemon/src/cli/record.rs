@@ -5,7 +5,7 @@
 //! the daemon resolves `[record] directory` when it starts).
 
 use crate::shm::Client;
-use crate::wire::{CommandMsg, command_kind, status_name};
+use sar_msgs::wire::{CommandMsg, command_kind, status_name};
 use serde_json::json;
 use std::time::{Duration, Instant};
 

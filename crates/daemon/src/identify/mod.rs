@@ -26,7 +26,6 @@ pub mod poses;
 pub mod writeback;
 
 use crate::config::Config;
-use crate::record::msgs::{ActiveJointState, Topic, WrenchStamped};
 use crate::record::{McapReader, ReadError};
 use dwell::{Dwell, DwellFinder, DwellOptions, SensorAverager};
 use sar_estimator::identification::{
@@ -35,6 +34,7 @@ use sar_estimator::identification::{
 use sar_estimator::support::{SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportOptions};
 use sar_estimator::{StaticPose, Vec3};
 use sar_kinematics::forward;
+use sar_msgs::msgs::{ActiveJointState, Topic, WrenchStamped};
 use serde_json::json;
 
 /// The poses to add, named in every refusal that more or other poses cure.

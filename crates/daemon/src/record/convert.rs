@@ -12,17 +12,17 @@
 //! Every message of a cycle is stamped with the cycle's `now` ([`cycle_stamp_ns`]).
 //! Nothing here allocates (the recorder's push side calls it every cycle).
 
-use super::msgs::{
-    ActiveJointState, ClockStatusCode, CommandKindCode, CycleInput as CycleInputMsg,
-    DriveActionCode, DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
-    PassiveJointState, REPLY_NONE, ReasonText, TipOutcomeCode, WrenchStamped, flags,
-};
-use crate::step::{DriveAction, LoopInput, LoopOutput, Release, Request, recorded_reason_code};
 use sar_drivers::DriveState;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{Bias, CycleInput, CycleOutput, JointSample, SensorSample, TipOutcome};
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_kinematics::ActiveJoints;
+use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request, recorded_reason_code};
+use sar_msgs::msgs::{
+    ActiveJointState, ClockStatusCode, CommandKindCode, CycleInput as CycleInputMsg,
+    DriveActionCode, DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
+    PassiveJointState, REPLY_NONE, ReasonText, TipOutcomeCode, WrenchStamped, flags,
+};
 use std::fmt::Write as _;
 
 fn arr(v: &Vec3) -> [f64; 3] {

@@ -14,13 +14,13 @@
 //! `rosbags` refuse the whole file). Opened together in Foxglove, the two
 //! files look as the live view does.
 
-use super::msgs::{
-    EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
-    StateSnapshot, Topic,
-};
 use crate::view::geometry::SceneGeometry;
 #[cfg(feature = "view")]
 use crate::view::scene;
+use sar_msgs::msgs::{
+    EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
+    StateSnapshot, Topic,
+};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -54,7 +54,7 @@ pub enum WriteError {
         /// The topic.
         topic: &'static str,
         /// The cause.
-        source: super::cdr::CdrError,
+        source: sar_msgs::cdr::CdrError,
     },
     /// A setting is out of range.
     #[error("recorder setting {field} = {value}: {why}")]
@@ -680,7 +680,7 @@ impl RotatingWriter {
             tf: tf_channel,
             sequence,
         } = channels;
-        let joints = super::msgs::ActiveJointState {
+        let joints = sar_msgs::msgs::ActiveJointState {
             stamp_ns: estimator.joints_stamp_ns,
             q_m: state.q_m,
         };

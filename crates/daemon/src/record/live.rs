@@ -25,11 +25,11 @@
 
 use super::convert;
 use super::file::{FileOptions, Rotation};
-use super::msgs::{Outgoing, SnapshotChunk, WrenchStamped};
 use super::recorder::{Recorder, RecorderConfig};
 use crate::runloop::{Publish, Published};
 use crossbeam_queue::ArrayQueue;
 use sar_estimator::cycle::Bias;
+use sar_msgs::msgs::{Outgoing, SnapshotChunk, WrenchStamped};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
@@ -171,7 +171,7 @@ pub struct LiveRecorder<P> {
     /// When the next snapshot is due (cycle stamp, ns); `None`: at once.
     next_snapshot_ns: Option<u64>,
     /// The simulator's truth, asked once per cycle (`None`: not simulated).
-    truth: Option<crate::wire::SimTruthFn>,
+    truth: Option<sar_loop::publish::SimTruthFn>,
 }
 
 impl<P> LiveRecorder<P> {
@@ -179,7 +179,7 @@ impl<P> LiveRecorder<P> {
     /// (the visible part, `tip_force_n - friction_force_n`, with every new
     /// sensor sample, stamped as the cycle) and handed to the wrapped
     /// publisher in [`Published::truth`].
-    pub fn with_truth(mut self, truth: Option<crate::wire::SimTruthFn>) -> Self {
+    pub fn with_truth(mut self, truth: Option<sar_loop::publish::SimTruthFn>) -> Self {
         self.truth = truth;
         self
     }

@@ -4,18 +4,15 @@
 //! rotated by size or duration, read back by topic, and recovered after a
 //! crash.
 //!
-//! - [`cdr`]: the CDR encoder and decoder.
-//! - [`msgs`]: the message structs, their schemas and the topics.
+//! The messages, their CDR and topics are `sar_msgs::{cdr, msgs}`.
 //! - [`file`]: MCAP files and their rotation.
 //! - [`recorder`]: the bounded queue and the writer thread.
 //! - [`reader`]: reading (up to the last complete chunk) and [`recover`].
 //! - [`rosbag2`]: a rosbag2 directory (`metadata.yaml`) of recordings.
 
-pub mod cdr;
 pub mod convert;
 pub mod file;
 pub mod live;
-pub mod msgs;
 pub mod reader;
 pub mod recorder;
 pub mod replay;
@@ -25,8 +22,8 @@ pub use file::{
     FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, Rotation, SceneOptions,
     WriteError, scene_path,
 };
-pub use msgs::{Outgoing, RosMessage, Topic};
 pub use reader::{
     McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,
 };
 pub use recorder::{Recorder, RecorderConfig, RecorderError, RecordingReport};
+pub use sar_msgs::msgs::{Outgoing, RosMessage, Topic};

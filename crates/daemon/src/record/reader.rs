@@ -7,10 +7,10 @@
 //! panics on a prefix of a valid file. [`recover`] rewrites such a file into a
 //! complete one (summary, chunk and message indexes).
 
-use super::cdr::CdrError;
 use super::file::{CountingFile, FileOptions};
-use super::msgs::{Outgoing, RosMessage, Topic};
 use mcap::records::{Record, op};
+use sar_msgs::cdr::CdrError;
+use sar_msgs::msgs::{Outgoing, RosMessage, Topic};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
 
@@ -664,7 +664,7 @@ impl<'a> McapReader<'a> {
     /// Every message of the SAR topics ([`Topic`]) decoded, with its topic and
     /// log time; other topics are skipped, and so are the snapshots
     /// (`/sar/cycle/snapshot`, variable length: decode the raw message with
-    /// [`super::msgs::StateSnapshot`]).
+    /// [`sar_msgs::msgs::StateSnapshot`]).
     pub fn decoded(self) -> impl Iterator<Item = Result<(Topic, u64, Outgoing), ReadError>> + 'a {
         let mut reader = self;
         let mut failed = false;

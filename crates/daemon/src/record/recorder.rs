@@ -12,7 +12,7 @@
 //! nothing).
 
 use super::file::{FileOptions, RotatingWriter, WriteError};
-use super::msgs::{Outgoing, RecorderDrops};
+use sar_msgs::msgs::{Outgoing, RecorderDrops};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

@@ -24,18 +24,18 @@
 
 use super::convert::{self, REPLAY_METADATA, bias_from_metadata};
 use super::file::{FileOptions, RotatingWriter, WriteError};
-use super::msgs::{
-    ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage,
-    SnapshotChunk, StateSnapshot, Topic,
-};
 use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
-use crate::step::{LoopInput, LoopStep, StepConfig};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CycleInput, CycleOutput, Estimator, EstimatorConfig,
     JointSample, SensorSample, TipOutcome,
 };
 use sar_kinematics::ActiveJoints;
+use sar_loop::step::{LoopInput, LoopStep, StepConfig};
+use sar_msgs::msgs::{
+    ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage,
+    SnapshotChunk, StateSnapshot, Topic,
+};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
 
@@ -898,7 +898,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                 source,
             };
             if reference_channel == Some(id) {
-                let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
                 r.references.push((w.stamp_ns, w.force_n));
                 return Ok(());
             }
@@ -948,7 +948,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                     r.snapshot(&m)?;
                 }
                 Some(Topic::SensorWrench) if !saw_cycle_input => {
-                    let w = super::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                    let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
                     inputs_only.push(&mut r, msg.log_time_ns, InputItem::Sensor(w))?;
                 }
                 Some(Topic::Joints) if !saw_cycle_input => {
@@ -1036,7 +1036,7 @@ pub const INPUT_WINDOW: usize = 4096;
 #[derive(Debug)]
 enum InputItem {
     Joints(ActiveJointState),
-    Sensor(super::msgs::WrenchStamped),
+    Sensor(sar_msgs::msgs::WrenchStamped),
 }
 
 /// Its place in the replay's order: log time, then joints before a sensor

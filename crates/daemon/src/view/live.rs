@@ -4,13 +4,13 @@ use super::geometry::SceneGeometry;
 #[allow(unused_imports)]
 pub use super::{DEFAULT_BIND, DEFAULT_SCENE_HZ};
 use super::{front, scene, topics};
-use crate::record::msgs::{Outgoing, Topic};
 use crate::shm::Client;
-use crate::wire::{StateMsg, flags, guard_state_name, reason_name};
 use foxglove::messages::{FrameTransforms, SceneUpdate};
 use foxglove::{
     Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
 };
+use sar_msgs::msgs::{Outgoing, Topic};
+use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -77,7 +77,7 @@ pub fn run_cli(
     if !(scene_hz.is_finite() && scene_hz > 0.0) {
         return Err(format!("--scene-hz {scene_hz}: must be a positive number"));
     }
-    crate::rt::install_stop_handler()
+    sar_loop::rt::install_stop_handler()
         .map_err(|e| format!("cannot install signal handlers: {e}"))?;
     run(
         &ViewOptions {
@@ -86,7 +86,7 @@ pub fn run_cli(
             scene_hz,
             geometry: SceneGeometry::from_config(&cfg.estimator),
         },
-        crate::rt::stop_requested,
+        sar_loop::rt::stop_requested,
     )
 }
 

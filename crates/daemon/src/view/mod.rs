@@ -8,7 +8,7 @@
 //!
 //! Channels:
 //! - the recordings' topics (INTERFACES.md 1, `ros2msg` schemas and `cdr`
-//!   messages from [`crate::record::msgs`]) that the state holds, every
+//!   messages from [`sar_msgs::msgs`]) that the state holds, every
 //!   state ([`topics`]);
 //! - [`SCENE_TOPIC`] (`foxglove.SceneUpdate`, protobuf, [`scene`]) and
 //!   [`TF_TOPIC`] (`foxglove.FrameTransforms`: `world` -> `base`, Y0 up),

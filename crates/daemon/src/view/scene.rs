@@ -26,13 +26,13 @@
 //! the bytes and the schema for an MCAP channel (protobuf, the SDK's
 //! built-in descriptor).
 
-use crate::wire::{StateMsg, flags, guard_code};
 use foxglove::Encode;
 use foxglove::messages::{
     ArrowPrimitive, Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms,
     KeyValuePair, LinePrimitive, Point3, Pose, Quaternion, SceneEntity, SceneUpdate,
     SpherePrimitive, TextPrimitive, Timestamp, Vector3, line_primitive,
 };
+use sar_msgs::wire::{StateMsg, flags, guard_code};
 
 /// The frame id of the base frame {0} (as in the recordings).
 pub const FRAME_BASE: &str = "base";
@@ -361,7 +361,7 @@ pub fn scene(s: &StateMsg, g: &SceneGeometry) -> SceneUpdate {
             color: color(gr, gg, gb, 1.0),
             text: format!(
                 "|F| {magnitude:.2} N, {}{observable}",
-                crate::wire::guard_state_name(s.guard_state)
+                sar_msgs::wire::guard_state_name(s.guard_state)
             ),
         });
     }

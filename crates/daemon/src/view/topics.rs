@@ -13,11 +13,11 @@
 //! cycle without an estimate is `TIP_POSE_INVALID` without a pose, else
 //! `TIP_REFUSED` (the state does not say which input was refused).
 
-use crate::record::msgs::{
+use sar_msgs::msgs::{
     self, ActiveJointState, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
     PassiveJointState, ReasonText, TipOutcomeCode, WrenchStamped,
 };
-use crate::wire::{StateMsg, flags, reason_name};
+use sar_msgs::wire::{StateMsg, flags, reason_name};
 
 /// The recording's guard state of a wire code (the same numbers; an unknown
 /// one is Fault).

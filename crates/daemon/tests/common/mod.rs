@@ -9,8 +9,8 @@
 
 pub mod readers;
 
-use sar_daemon::record::cdr::FixedStr;
-use sar_daemon::record::msgs::*;
+use sar_msgs::cdr::FixedStr;
+use sar_msgs::msgs::*;
 use std::path::PathBuf;
 
 /// A fresh scratch directory under the target's tmp dir.

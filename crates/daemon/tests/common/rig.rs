@@ -10,15 +10,16 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::control::{Controller, Envelope, Operator, Reply, Request};
-use sar_daemon::step::{LoopInput, LoopOutput, LoopStep};
-use sar_daemon::{config, logq, sim};
+use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_drivers::sim::{
     Breathing, ContactKey, SimDrives, SimSensor, Simulator, Tissue, TissueModel, TissueShift,
 };
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
+use sar_loop::control::{Controller, Envelope, Operator, Reply, Request};
+use sar_loop::logq;
+use sar_loop::step::{LoopInput, LoopOutput, LoopStep};
 
 /// The tip at rest, base frame, m (the demo's start); the rod points +X0.
 pub const TIP_M: [f64; 3] = [0.6, 0.2, 0.0];

@@ -176,6 +176,15 @@ impl AxisPlan {
 
     /// Position and velocity `elapsed_s` after the plan's start (>= 0).
     pub fn after_s(&self, elapsed_s: f64) -> AxisState {
+        // The trajectory's times, which the step trusts: elapsed time is a
+        // time, each phase lasts a finite, non-negative time.
+        debug_assert!(elapsed_s >= 0.0, "elapsed {elapsed_s} s before the plan");
+        debug_assert!(
+            self.phases
+                .iter()
+                .all(|p| p.duration_s.is_finite() && p.duration_s >= 0.0),
+            "a phase of {self:?} has no valid duration"
+        );
         let mut left_s = elapsed_s;
         let (mut x, mut v) = (self.x0_m, self.v0_mps);
         for phase in &self.phases {

@@ -167,7 +167,7 @@ pub fn write(event: &LogEvent) {
             cycle = r.cycle,
             "request {}: {}",
             request_text(&r.request),
-            crate::wire::status_name(r.status as u32)
+            sar_msgs::wire::status_name(r.status as u32)
         ),
         LogEvent::QuickStop { cycle, ok } => {
             if *ok {

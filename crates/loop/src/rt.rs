@@ -6,24 +6,9 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// `CLOCK_MONOTONIC` in ns, or `None` when it cannot be read.
-pub fn monotonic_ns() -> Option<u64> {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, writable timespec.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    if rc != 0 {
-        return None;
-    }
-    Some(
-        u64::try_from(ts.tv_sec)
-            .ok()?
-            .saturating_mul(1_000_000_000)
-            .saturating_add(u64::try_from(ts.tv_nsec).ok()?),
-    )
-}
+/// `CLOCK_MONOTONIC` in ns, or `None` when it cannot be read (the drivers'
+/// clock: one place reads it).
+pub use sar_drivers::clock::monotonic_ns;
 
 /// Sleeps until the monotonic clock reads `deadline_ns` (absolute: a late
 /// wake-up never shifts later deadlines). Interrupted sleeps are resumed; a

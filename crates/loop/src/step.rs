@@ -121,51 +121,7 @@ pub struct GuardedStop {
     pub max_force_n: f64,
 }
 
-/// What became of a request. The numbers are the wire codes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u16)]
-pub enum ReplyStatus {
-    /// Done.
-    Accepted = 0,
-    /// A reset while nothing was latched.
-    NothingToReset = 1,
-    /// A reset refused: its cause persists (the reason code says which).
-    ResetRefused = 2,
-    /// A tare outside `Ok`.
-    NotOk = 3,
-    /// A tare with a force above a warn limit.
-    AboveWarn = 4,
-    /// A tare without an estimate, or whose bias cannot be solved.
-    NoEstimate = 5,
-    /// A move while the drives are halted (Stop or Fault not yet reset).
-    Halted = 6,
-    /// A move the kinematics cannot reach, or outside the travel.
-    Unreachable = 7,
-    /// A move deeper along the tip force while it is above the warn limit.
-    TowardForce = 8,
-    /// A move while the drives are not enabled (they report another state,
-    /// or could not be read).
-    DrivesRefused = 9,
-    /// Refused for another reason.
-    Refused = 10,
-    /// Force limits that are invalid or above their configured ceiling.
-    LimitsRefused = 11,
-    /// A reset while the axes still move (braking after a quick stop, or
-    /// drives that have not stopped): the trajectory to hold would not be
-    /// theirs. Wait until they are at rest.
-    AxesMoving = 12,
-    /// A move in Retreat that does not reduce the tip force.
-    NotReducing = 13,
-    /// A move that was judged acceptable but could not be given to the
-    /// drives in the same cycle (it was not carried out).
-    NotCarriedOut = 14,
-    /// A request whose argument is not valid (e.g. a back-out distance).
-    BadArgument = 15,
-    /// A reset while the drives are in Fault: their fault was reset (their
-    /// positions are invalid while they are faulted, so the guard could not
-    /// judge the reset); reset again once they report Ready.
-    DrivesFaultReset = 16,
-}
+pub use sar_msgs::wire::ReplyStatus;
 
 /// The exact cause behind a reply: what `sarctl` prints (its `Display`).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -3,13 +3,8 @@
 //! for states and reasons, no enums with payloads, no references). The
 //! estimator's types are converted here, at the edge.
 
-use crate::control::{Reply, ReplyStatus, Request, reason_code};
-use crate::stats::LoopStats;
-use crate::step::{LoopInput, LoopOutput};
 use iceoryx2::prelude::ZeroCopySend;
 use sar_drivers::DriveState;
-use sar_estimator::Vec3;
-use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{GuardLimits, GuardState};
 
 /// The limits as published: warn, stop for total, axial, lateral, N.
@@ -228,131 +223,6 @@ impl Default for StateMsg {
     }
 }
 
-fn arr(v: &Vec3) -> [f64; 3] {
-    [v.x, v.y, v.z]
-}
-
-/// Everything a [`StateMsg`] is made from.
-#[derive(Debug, Clone, Copy)]
-pub struct StateParts<'a> {
-    /// The cycle's input (stamps, joints, the drives' state).
-    pub input: &'a LoopInput,
-    /// The cycle's decision (the estimator's output, the limits in use).
-    pub decision: &'a LoopOutput,
-    /// The loop's measurements.
-    pub stats: &'a LoopStats,
-    /// Quick stops so far.
-    pub quick_stops: u64,
-    /// Messages the recorder dropped so far.
-    pub recorder_drops: u64,
-    /// Whether a recording runs.
-    pub recording: bool,
-    /// The simulator's truth, when simulated.
-    pub truth: Option<SimTruth>,
-}
-
-/// What the simulator says is true at the moment a cycle is published.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SimTruth {
-    /// The true F_tip, N.
-    pub tip_force_n: Vec3,
-    /// The support's friction on the rod, N: `tip_force_n` less it is what
-    /// the estimator can see (its model has no friction term), the
-    /// reference recorded on `/sar/sim/tip_wrench_truth`.
-    pub friction_force_n: Vec3,
-    /// The simulator's time, ns from its start (the scenario's time axis).
-    pub elapsed_ns: u64,
-}
-
-/// Asked once per published cycle on the loop's thread, when simulated.
-pub type SimTruthFn = Box<dyn FnMut() -> Option<SimTruth>>;
-
-impl StateMsg {
-    /// Converts one cycle.
-    pub fn from_parts(p: &StateParts<'_>) -> Self {
-        let (i, o) = (p.input, &p.decision.estimate);
-        // Halted: the guard's Stop or Fault (quick-stopped or never released).
-        let halted = o.guard_state.is_halting();
-        let mut m = Self {
-            cycle: o.cycle,
-            now_ns: i.now_ns.unwrap_or(0),
-            sensor_stamp_ns: i.sensor.stamp_ns,
-            joints_stamp_ns: i.joints.stamp_ns,
-            sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
-            joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
-            q_m: [
-                i.joints.joints.q1_m,
-                i.joints.joints.q2_m,
-                i.joints.joints.q3_m,
-            ],
-            guard_state: guard_state_code(o.guard_state),
-            guard_reason: u32::from(reason_code(&o.guard_reason)),
-            drive_state: drive_state_code(i.drive_state),
-            limits_n: p.decision.limits.to_array(),
-            wakeup_ns: [
-                p.stats.wakeup.quantile_ns(0.5),
-                p.stats.wakeup.quantile_ns(0.99),
-                p.stats.wakeup.max_ns(),
-            ],
-            compute_ns: [
-                p.stats.compute.quantile_ns(0.5),
-                p.stats.compute.quantile_ns(0.99),
-                p.stats.compute.max_ns(),
-            ],
-            overruns: p.stats.overruns,
-            quick_stops: p.quick_stops,
-            recorder_drops: p.recorder_drops,
-            recording: u64::from(p.recording),
-            ..Self::default()
-        };
-        if let Some(pose) = o.pose {
-            m.flags |= flags::POSE;
-            m.q45_rad = [pose.q4_rad(), pose.q5_rad()];
-            m.ujoint_m = arr(&pose.ujoint_m);
-            m.tip_m = arr(&pose.tip_m);
-            m.support_distance_m = pose.support_distance_m;
-        }
-        if let TipOutcome::Estimate(e) = o.tip {
-            m.flags |= flags::ESTIMATE;
-            if e.observable {
-                m.flags |= flags::OBSERVABLE;
-            }
-            m.ujoint_force_n = arr(&e.ujoint_force_n);
-            m.tip_force_n = arr(&e.force_n);
-            m.tip_std_n = arr(&e.std_n);
-            m.tip_axial_lateral_n = [e.axial_n, e.lateral_n];
-        }
-        if o.new_sample {
-            m.flags |= flags::NEW_SAMPLE;
-        }
-        match p.decision.force_mode {
-            Some(sar_estimator::force_control::ForceMode::Hold { max_force_n }) => {
-                m.force_mode = 1;
-                m.force_setpoint_n = max_force_n;
-            }
-            Some(sar_estimator::force_control::ForceMode::Push { axial_n }) => {
-                m.force_mode = 2;
-                m.force_setpoint_n = axial_n;
-            }
-            None => {}
-        }
-        if let Some(g) = p.decision.guarded_stop {
-            m.guarded_stop_cycle = g.cycle;
-            m.guarded_stop_tip_m = arr(&g.tip_m);
-            m.guarded_stop_force_n = arr(&g.force_n);
-        }
-        if halted {
-            m.flags |= flags::HALTED;
-        }
-        if let Some(t) = p.truth {
-            m.flags |= flags::SIM_TRUTH;
-            m.truth_tip_force_n = arr(&t.tip_force_n);
-            m.truth_elapsed_ns = t.elapsed_ns;
-        }
-        m
-    }
-}
-
 /// Command kinds of [`CommandMsg::kind`].
 pub mod command_kind {
     /// Reset the guard.
@@ -401,36 +271,50 @@ pub struct CommandMsg {
     pub limits_n: [f64; 6],
 }
 
-impl CommandMsg {
-    /// The loop's request, or `None` for a kind the loop does not take
-    /// (LIMITS is answered without the loop; unknown kinds are refused).
-    pub fn request(&self) -> Option<Request> {
-        match self.kind {
-            command_kind::RESET => Some(Request::Reset),
-            command_kind::TARE => Some(Request::Tare),
-            command_kind::MOVE_TIP => Some(Request::MoveTip {
-                tip_m: Vec3::new(self.tip_m[0], self.tip_m[1], self.tip_m[2]),
-            }),
-            command_kind::SET_LIMITS => Some(Request::SetLimits(
-                sar_estimator::guard::ForceLimits::from_array(self.limits_n),
-            )),
-            command_kind::BACK_OUT => Some(Request::BackOut {
-                distance_m: self.tip_m[0],
-            }),
-            command_kind::GUARDED_MOVE => Some(Request::GuardedMove {
-                tip_m: Vec3::new(self.tip_m[0], self.tip_m[1], self.tip_m[2]),
-                max_force_n: self.limits_n[0],
-            }),
-            command_kind::HOLD => Some(Request::Hold {
-                max_force_n: self.limits_n[0],
-            }),
-            command_kind::PUSH => Some(Request::Push {
-                axial_n: self.limits_n[0],
-            }),
-            command_kind::POSITION => Some(Request::Position),
-            _ => None,
-        }
-    }
+/// What became of a request. The numbers are the wire codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u16)]
+pub enum ReplyStatus {
+    /// Done.
+    Accepted = 0,
+    /// A reset while nothing was latched.
+    NothingToReset = 1,
+    /// A reset refused: its cause persists (the reason code says which).
+    ResetRefused = 2,
+    /// A tare outside `Ok`.
+    NotOk = 3,
+    /// A tare with a force above a warn limit.
+    AboveWarn = 4,
+    /// A tare without an estimate, or whose bias cannot be solved.
+    NoEstimate = 5,
+    /// A move while the drives are halted (Stop or Fault not yet reset).
+    Halted = 6,
+    /// A move the kinematics cannot reach, or outside the travel.
+    Unreachable = 7,
+    /// A move deeper along the tip force while it is above the warn limit.
+    TowardForce = 8,
+    /// A move while the drives are not enabled (they report another state,
+    /// or could not be read).
+    DrivesRefused = 9,
+    /// Refused for another reason.
+    Refused = 10,
+    /// Force limits that are invalid or above their configured ceiling.
+    LimitsRefused = 11,
+    /// A reset while the axes still move (braking after a quick stop, or
+    /// drives that have not stopped): the trajectory to hold would not be
+    /// theirs. Wait until they are at rest.
+    AxesMoving = 12,
+    /// A move in Retreat that does not reduce the tip force.
+    NotReducing = 13,
+    /// A move that was judged acceptable but could not be given to the
+    /// drives in the same cycle (it was not carried out).
+    NotCarriedOut = 14,
+    /// A request whose argument is not valid (e.g. a back-out distance).
+    BadArgument = 15,
+    /// A reset while the drives are in Fault: their fault was reset (their
+    /// positions are invalid while they are faulted, so the guard could not
+    /// judge the reset); reset again once they report Ready.
+    DrivesFaultReset = 16,
 }
 
 /// Reply status codes beyond [`ReplyStatus`] (whose numbers are kept).
@@ -499,22 +383,30 @@ impl std::fmt::Write for FixedText<'_> {
 }
 
 impl ReplyMsg {
-    /// Converts the loop's reply.
-    pub fn from_reply(r: &Reply, limits_n: [f64; 6]) -> Self {
-        let mut detail = [0u8; DETAIL_LEN];
+    /// A reply with its detail written from `detail` (cut at a character
+    /// boundary when longer than [`DETAIL_LEN`] bytes; no allocation).
+    pub fn with_detail(
+        id: u64,
+        cycle: u64,
+        status: u32,
+        reason: u32,
+        limits_n: [f64; 6],
+        detail: core::fmt::Arguments<'_>,
+    ) -> Self {
+        let mut text = [0u8; DETAIL_LEN];
         let mut w = FixedText {
-            buf: &mut detail,
+            buf: &mut text,
             len: 0,
         };
         // A cut detail is fine: what fits is kept.
-        let _ = std::fmt::Write::write_fmt(&mut w, format_args!("{}", r.detail));
+        let _ = std::fmt::Write::write_fmt(&mut w, detail);
         Self {
-            id: r.id,
-            cycle: r.cycle,
-            status: r.status as u32,
-            reason: u32::from(r.reason),
+            id,
+            cycle,
+            status,
+            reason,
             limits_n,
-            detail,
+            detail: text,
         }
     }
 

@@ -249,7 +249,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     }
 
     /// Calls `hook` on the drives once per cycle, in the gather phase before
-    /// their positions are read (e.g. [`crate::devices::canopen_cycle`]: a
+    /// their positions are read (e.g. `sar_daemon::devices::canopen_cycle`: a
     /// CANopen host that stops cycling makes its drives quick-stop). A
     /// failing hook counts as a drive error and is logged; the positions it
     /// could not refresh go stale and the guard acts on that.

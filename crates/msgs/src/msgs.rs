@@ -8,7 +8,7 @@
 //! from `sar_estimator::cycle` is the daemon's business). Units are the last part
 //! of each name; stamps are ns of the daemon's monotonic clock.
 
-use super::cdr::{CdrError, CdrReader, CdrWriter, FixedStr};
+use crate::cdr::{CdrError, CdrReader, CdrWriter, FixedStr};
 
 /// A frame id (`header.frame_id`), at most 32 bytes.
 pub type FrameId = FixedStr<32>;
@@ -540,7 +540,7 @@ pub struct EstimatorState {
 impl RosMessage for EstimatorState {
     const TYPE_NAME: &'static str = "sar_msgs/msg/EstimatorState";
     const SCHEMA: &'static str = concat!(
-        include_str!("../../msg/EstimatorState.msg"),
+        include_str!("../msg/EstimatorState.msg"),
         header_sections!()
     );
     fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
@@ -617,8 +617,7 @@ pub struct GuardEvent {
 
 impl RosMessage for GuardEvent {
     const TYPE_NAME: &'static str = "sar_msgs/msg/GuardEvent";
-    const SCHEMA: &'static str =
-        concat!(include_str!("../../msg/GuardEvent.msg"), header_sections!());
+    const SCHEMA: &'static str = concat!(include_str!("../msg/GuardEvent.msg"), header_sections!());
     fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
         header_out(w, self.stamp_ns, FRAME_BASE)?;
         w.u64(self.cycle);
@@ -713,8 +712,7 @@ pub struct CycleInput {
 
 impl RosMessage for CycleInput {
     const TYPE_NAME: &'static str = "sar_msgs/msg/CycleInput";
-    const SCHEMA: &'static str =
-        concat!(include_str!("../../msg/CycleInput.msg"), header_sections!());
+    const SCHEMA: &'static str = concat!(include_str!("../msg/CycleInput.msg"), header_sections!());
     fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
         header_out(w, self.stamp_ns, FRAME_BASE)?;
         w.u64(self.cycle);
@@ -815,10 +813,8 @@ pub struct RecorderDrops {
 
 impl RosMessage for RecorderDrops {
     const TYPE_NAME: &'static str = "sar_msgs/msg/RecorderDrops";
-    const SCHEMA: &'static str = concat!(
-        include_str!("../../msg/RecorderDrops.msg"),
-        header_sections!()
-    );
+    const SCHEMA: &'static str =
+        concat!(include_str!("../msg/RecorderDrops.msg"), header_sections!());
     fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
         header_out(w, self.stamp_ns, "")?;
         w.u64(self.dropped);
@@ -921,10 +917,8 @@ pub struct StateSnapshot {
 
 impl RosMessage for StateSnapshot {
     const TYPE_NAME: &'static str = "sar_msgs/msg/StateSnapshot";
-    const SCHEMA: &'static str = concat!(
-        include_str!("../../msg/StateSnapshot.msg"),
-        header_sections!()
-    );
+    const SCHEMA: &'static str =
+        concat!(include_str!("../msg/StateSnapshot.msg"), header_sections!());
     fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
         header_out(w, self.stamp_ns, "")?;
         w.u64(self.after_cycle);

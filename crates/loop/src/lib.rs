@@ -1,0 +1,21 @@
+//! The SAR control loop (`sar-loop`), below the daemon: the pure per-cycle
+//! step and the controller that runs it, with what the loop needs at its
+//! edges and nothing of files, configuration or transport.
+//!
+//! - [`step`]: the pure step, a function of the cycle's recorded inputs.
+//! - [`control`]: the controller: gathers a cycle's inputs from the drivers,
+//!   runs the step, carries out its outputs.
+//! - [`logq`]: the bounded queue of log events the loop hands off.
+//! - [`stats`]: the loop's timing statistics.
+//! - [`notify`]: the guard's transitions as operator notifications.
+//! - [`rt`]: real-time setup (SCHED_FIFO, mlockall), the monotonic clock,
+//!   the stop signal.
+//! - [`publish`]: the loop's types as the shared-memory payloads.
+
+pub mod control;
+pub mod logq;
+pub mod notify;
+pub mod publish;
+pub mod rt;
+pub mod stats;
+pub mod step;

@@ -1,0 +1,182 @@
+//! The loop's side of the shared-memory payloads (`sar_msgs::wire`): a
+//! cycle's input, decision and statistics as a [`StateMsg`], an operator's
+//! [`CommandMsg`] as a loop [`Request`], a [`Reply`] as a [`ReplyMsg`]. The
+//! payloads themselves know nothing of the loop.
+
+use crate::control::Reply;
+use crate::stats::LoopStats;
+use crate::step::{LoopInput, LoopOutput, Request, reason_code};
+use sar_estimator::Vec3;
+use sar_estimator::cycle::TipOutcome;
+use sar_msgs::wire::{
+    CommandMsg, ReplyMsg, StateMsg, command_kind, drive_state_code, flags, guard_state_code,
+};
+
+fn arr(v: &Vec3) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Everything a [`StateMsg`] is made from.
+#[derive(Debug, Clone, Copy)]
+pub struct StateParts<'a> {
+    /// The cycle's input (stamps, joints, the drives' state).
+    pub input: &'a LoopInput,
+    /// The cycle's decision (the estimator's output, the limits in use).
+    pub decision: &'a LoopOutput,
+    /// The loop's measurements.
+    pub stats: &'a LoopStats,
+    /// Quick stops so far.
+    pub quick_stops: u64,
+    /// Messages the recorder dropped so far.
+    pub recorder_drops: u64,
+    /// Whether a recording runs.
+    pub recording: bool,
+    /// The simulator's truth, when simulated.
+    pub truth: Option<SimTruth>,
+}
+
+/// What the simulator says is true at the moment a cycle is published.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimTruth {
+    /// The true F_tip, N.
+    pub tip_force_n: Vec3,
+    /// The support's friction on the rod, N: `tip_force_n` less it is what
+    /// the estimator can see (its model has no friction term), the
+    /// reference recorded on `/sar/sim/tip_wrench_truth`.
+    pub friction_force_n: Vec3,
+    /// The simulator's time, ns from its start (the scenario's time axis).
+    pub elapsed_ns: u64,
+}
+
+/// Asked once per published cycle on the loop's thread, when simulated.
+pub type SimTruthFn = Box<dyn FnMut() -> Option<SimTruth>>;
+
+/// One cycle as published.
+pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
+    {
+        let (i, o) = (p.input, &p.decision.estimate);
+        // Halted: the guard's Stop or Fault (quick-stopped or never released).
+        let halted = o.guard_state.is_halting();
+        let mut m = StateMsg {
+            cycle: o.cycle,
+            now_ns: i.now_ns.unwrap_or(0),
+            sensor_stamp_ns: i.sensor.stamp_ns,
+            joints_stamp_ns: i.joints.stamp_ns,
+            sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
+            joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
+            q_m: [
+                i.joints.joints.q1_m,
+                i.joints.joints.q2_m,
+                i.joints.joints.q3_m,
+            ],
+            guard_state: guard_state_code(o.guard_state),
+            guard_reason: u32::from(reason_code(&o.guard_reason)),
+            drive_state: drive_state_code(i.drive_state),
+            limits_n: p.decision.limits.to_array(),
+            wakeup_ns: [
+                p.stats.wakeup.quantile_ns(0.5),
+                p.stats.wakeup.quantile_ns(0.99),
+                p.stats.wakeup.max_ns(),
+            ],
+            compute_ns: [
+                p.stats.compute.quantile_ns(0.5),
+                p.stats.compute.quantile_ns(0.99),
+                p.stats.compute.max_ns(),
+            ],
+            overruns: p.stats.overruns,
+            quick_stops: p.quick_stops,
+            recorder_drops: p.recorder_drops,
+            recording: u64::from(p.recording),
+            ..StateMsg::default()
+        };
+        if let Some(pose) = o.pose {
+            m.flags |= flags::POSE;
+            m.q45_rad = [pose.q4_rad(), pose.q5_rad()];
+            m.ujoint_m = arr(&pose.ujoint_m);
+            m.tip_m = arr(&pose.tip_m);
+            m.support_distance_m = pose.support_distance_m;
+        }
+        if let TipOutcome::Estimate(e) = o.tip {
+            m.flags |= flags::ESTIMATE;
+            if e.observable {
+                m.flags |= flags::OBSERVABLE;
+            }
+            m.ujoint_force_n = arr(&e.ujoint_force_n);
+            m.tip_force_n = arr(&e.force_n);
+            m.tip_std_n = arr(&e.std_n);
+            m.tip_axial_lateral_n = [e.axial_n, e.lateral_n];
+        }
+        if o.new_sample {
+            m.flags |= flags::NEW_SAMPLE;
+        }
+        match p.decision.force_mode {
+            Some(sar_estimator::force_control::ForceMode::Hold { max_force_n }) => {
+                m.force_mode = 1;
+                m.force_setpoint_n = max_force_n;
+            }
+            Some(sar_estimator::force_control::ForceMode::Push { axial_n }) => {
+                m.force_mode = 2;
+                m.force_setpoint_n = axial_n;
+            }
+            None => {}
+        }
+        if let Some(g) = p.decision.guarded_stop {
+            m.guarded_stop_cycle = g.cycle;
+            m.guarded_stop_tip_m = arr(&g.tip_m);
+            m.guarded_stop_force_n = arr(&g.force_n);
+        }
+        if halted {
+            m.flags |= flags::HALTED;
+        }
+        if let Some(t) = p.truth {
+            m.flags |= flags::SIM_TRUTH;
+            m.truth_tip_force_n = arr(&t.tip_force_n);
+            m.truth_elapsed_ns = t.elapsed_ns;
+        }
+        m
+    }
+}
+
+/// The loop's request of a command, or `None` for a kind the loop does not
+/// take (LIMITS is answered without the loop; unknown kinds are refused).
+pub fn request_of(c: &CommandMsg) -> Option<Request> {
+    {
+        match c.kind {
+            command_kind::RESET => Some(Request::Reset),
+            command_kind::TARE => Some(Request::Tare),
+            command_kind::MOVE_TIP => Some(Request::MoveTip {
+                tip_m: Vec3::new(c.tip_m[0], c.tip_m[1], c.tip_m[2]),
+            }),
+            command_kind::SET_LIMITS => Some(Request::SetLimits(
+                sar_estimator::guard::ForceLimits::from_array(c.limits_n),
+            )),
+            command_kind::BACK_OUT => Some(Request::BackOut {
+                distance_m: c.tip_m[0],
+            }),
+            command_kind::GUARDED_MOVE => Some(Request::GuardedMove {
+                tip_m: Vec3::new(c.tip_m[0], c.tip_m[1], c.tip_m[2]),
+                max_force_n: c.limits_n[0],
+            }),
+            command_kind::HOLD => Some(Request::Hold {
+                max_force_n: c.limits_n[0],
+            }),
+            command_kind::PUSH => Some(Request::Push {
+                axial_n: c.limits_n[0],
+            }),
+            command_kind::POSITION => Some(Request::Position),
+            _ => None,
+        }
+    }
+}
+
+/// The reply as published, with the guard's limits.
+pub fn reply_msg(r: &Reply, limits_n: [f64; 6]) -> ReplyMsg {
+    ReplyMsg::with_detail(
+        r.id,
+        r.cycle,
+        r.status as u32,
+        u32::from(r.reason),
+        limits_n,
+        format_args!("{}", r.detail),
+    )
+}
