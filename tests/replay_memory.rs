@@ -85,25 +85,50 @@ fn record(path: &Path, cycles: u64) -> u64 {
     std::fs::metadata(path).unwrap().len()
 }
 
+/// The process's peak resident memory (VmHWM) while `f` runs, bytes: the peak
+/// is reset first (`/proc/self/clear_refs` 5, Linux >= 4.0) to what is
+/// resident now. `None` where /proc cannot do it. Counts the whole process
+/// (binary, allocator's retained pages), unlike [`peak_of`].
+fn peak_rss_of<T>(f: impl FnOnce() -> T) -> (Option<u64>, T) {
+    let hwm = || -> Option<u64> {
+        let status = std::fs::read_to_string("/proc/self/status").ok()?;
+        let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+        let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+        Some(kb * 1024)
+    };
+    let reset = std::fs::write("/proc/self/clear_refs", "5").is_ok();
+    let out = f();
+    (if reset { hwm() } else { None }, out)
+}
+
+fn mb(bytes: Option<u64>) -> String {
+    bytes.map_or_else(|| "?".to_owned(), |b| format!("{:.1}", b as f64 / 1e6))
+}
+
 /// Streamed and in-memory peaks for a recording of `cycles`.
 fn measure(dir: &Path, cycles: u64) -> (u64, u64, u64) {
     let path = dir.join(format!("rec-{cycles}.mcap"));
     let len = record(&path, cycles);
     let cfg = sar_daemon::config::builtin().unwrap();
     let options = ReplayOptions::from_config(&cfg);
-    let (streamed, r) = peak_of(|| replay_file(&path, &options).unwrap());
+    let (rss_streamed, (streamed, r)) =
+        peak_rss_of(|| peak_of(|| replay_file(&path, &options).unwrap()));
     assert_eq!(r.cycles, cycles);
     assert_eq!(r.first_difference, None);
-    let (in_memory, r) = peak_of(|| {
-        let bytes = read_file(&path).unwrap();
-        replay(&bytes, &options).unwrap()
+    let (rss_in_memory, (in_memory, r)) = peak_rss_of(|| {
+        peak_of(|| {
+            let bytes = read_file(&path).unwrap();
+            replay(&bytes, &options).unwrap()
+        })
     });
     assert_eq!(r.cycles, cycles);
     println!(
-        "{cycles} cycles ({:.1} MB file): peak heap {:.2} MB streamed, {:.2} MB in memory",
+        "{cycles} cycles ({:.1} MB file): peak heap {:.2} MB streamed, {:.2} MB in memory; peak RSS of the process {} MB streamed, {} MB in memory",
         len as f64 / 1e6,
         streamed as f64 / 1e6,
-        in_memory as f64 / 1e6
+        in_memory as f64 / 1e6,
+        mb(rss_streamed),
+        mb(rss_in_memory),
     );
     (len, streamed, in_memory)
 }
@@ -197,12 +222,14 @@ fn peak_heap_for_a_one_minute_and_a_one_hour_recording() {
         std::fs::remove_file(&daemon).unwrap();
         let cfg = sar_daemon::config::builtin().unwrap();
         let options = ReplayOptions::from_config(&cfg);
-        let (streamed, r) = peak_of(|| replay_file(&path, &options).unwrap());
+        let (rss, (streamed, r)) =
+            peak_rss_of(|| peak_of(|| replay_file(&path, &options).unwrap()));
         assert_eq!(r.mode, sar_daemon::record::replay::Mode::InputsOnly);
         println!(
-            "inputs only, {cycles} cycles ({:.1} MB file): peak heap {:.2} MB streamed",
+            "inputs only, {cycles} cycles ({:.1} MB file): peak heap {:.2} MB streamed; peak RSS of the process {} MB",
             len as f64 / 1e6,
-            streamed as f64 / 1e6
+            streamed as f64 / 1e6,
+            mb(rss)
         );
         std::fs::remove_file(&path).unwrap();
     }
