@@ -85,24 +85,37 @@ fn record(path: &Path, cycles: u64) -> u64 {
     std::fs::metadata(path).unwrap().len()
 }
 
-/// The process's peak resident memory (VmHWM) while `f` runs, bytes: the peak
-/// is reset first (`/proc/self/clear_refs` 5, Linux >= 4.0) to what is
-/// resident now. `None` where /proc cannot do it. Counts the whole process
-/// (binary, allocator's retained pages), unlike [`peak_of`].
-fn peak_rss_of<T>(f: impl FnOnce() -> T) -> (Option<u64>, T) {
-    let hwm = || -> Option<u64> {
+/// The process's resident memory before `f` runs and its peak (VmHWM) while
+/// it runs, bytes: the peak is reset first (`/proc/self/clear_refs` 5, Linux
+/// >= 4.0) to what is resident now. `None` where /proc cannot do it. Counts
+/// the whole process (binary, pages the allocator kept from earlier work),
+/// unlike [`peak_of`]: the growth over "before" is the replay's.
+fn peak_rss_of<T>(f: impl FnOnce() -> T) -> (Option<(u64, u64)>, T) {
+    let read = |key: &str| -> Option<u64> {
         let status = std::fs::read_to_string("/proc/self/status").ok()?;
-        let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+        let line = status.lines().find(|l| l.starts_with(key))?;
         let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
         Some(kb * 1024)
     };
     let reset = std::fs::write("/proc/self/clear_refs", "5").is_ok();
+    let before = read("VmRSS:");
     let out = f();
-    (if reset { hwm() } else { None }, out)
+    let peak = read("VmHWM:");
+    (if reset { before.zip(peak) } else { None }, out)
 }
 
-fn mb(bytes: Option<u64>) -> String {
-    bytes.map_or_else(|| "?".to_owned(), |b| format!("{:.1}", b as f64 / 1e6))
+/// "peak (+ growth over what was resident before)", MB.
+fn mb(rss: Option<(u64, u64)>) -> String {
+    rss.map_or_else(
+        || "?".to_owned(),
+        |(before, peak)| {
+            format!(
+                "{:.1} (+{:.1})",
+                peak as f64 / 1e6,
+                peak.saturating_sub(before) as f64 / 1e6
+            )
+        },
+    )
 }
 
 /// Streamed and in-memory peaks for a recording of `cycles`.
