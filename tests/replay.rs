@@ -411,6 +411,45 @@ fn inputs_out_of_order_within_the_window_replay_as_in_order_and_beyond_it_are_re
     }
 }
 
+/// A replay that neither writes nor compares counts each decision where it
+/// lies instead of making its messages (the fast path of `sarctl replay`'s
+/// speed): its report is the one of the full replay, cycle for cycle, and so
+/// is the tip-force series it keeps.
+#[test]
+fn a_replay_without_output_or_comparison_reports_what_the_full_replay_does() {
+    let full = ReplayOptions {
+        keep_series: true,
+        ..options(None, Some("/sar/sim/tip_wrench_truth"))
+    };
+    let bare = ReplayOptions {
+        check_recorded: false,
+        ..full.clone()
+    };
+    for name in [CONTACT_DAEMON, FAULT_DAEMON] {
+        let a = replay_file(&fixture(name), &full).unwrap();
+        let b = replay_file(&fixture(name), &bare).unwrap();
+        assert!(a.compared > 0 && b.compared == 0, "{name}");
+        assert_eq!(
+            (
+                a.cycles,
+                a.outputs,
+                a.input_complete,
+                &a.series,
+                a.comparison.as_ref().map(|c| c.pairs)
+            ),
+            (
+                b.cycles,
+                b.outputs,
+                b.input_complete,
+                &b.series,
+                b.comparison.as_ref().map(|c| c.pairs)
+            ),
+            "{name}"
+        );
+        assert!(!a.series.is_empty(), "{name}");
+    }
+}
+
 #[test]
 fn compare_gives_the_error_measure_on_the_contact_scenario() {
     for name in [CONTACT_INPUTS, CONTACT_DAEMON] {
