@@ -86,8 +86,8 @@ fn record(path: &Path, cycles: u64) -> u64 {
 }
 
 /// The process's resident memory before `f` runs and its peak (VmHWM) while
-/// it runs, bytes: the peak is reset first (`/proc/self/clear_refs` 5, Linux
-/// >= 4.0) to what is resident now. `None` where /proc cannot do it. Counts
+/// it runs, bytes: the peak is reset first (`/proc/self/clear_refs` 5, since
+/// Linux 4.0) to what is resident now. `None` where /proc cannot do it. Counts
 /// the whole process (binary, pages the allocator kept from earlier work),
 /// unlike [`peak_of`]: the growth over "before" is the replay's.
 fn peak_rss_of<T>(f: impl FnOnce() -> T) -> (Option<(u64, u64)>, T) {
