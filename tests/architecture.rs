@@ -2,8 +2,9 @@
 //! table says, for every crate of the workspace, which of the workspace's
 //! crates it may depend on and which external crates it must never link.
 //! Every `Cargo.toml` is read: each workspace crate has a row; its
-//! `[dependencies]` and `[dev-dependencies]` name only the workspace crates
-//! its row allows; none of its dependencies is one its row forbids.
+//! dependency sections (of every kind and target) name only the workspace crates
+//! its row allows; nothing it links, itself or through the workspace crates
+//! below it, is one its row forbids.
 
 #![allow(
     clippy::unwrap_used,
@@ -55,12 +56,37 @@ fn rules(architecture: &str) -> BTreeMap<String, Rule> {
     rules
 }
 
-/// A manifest's package name and its dependencies, per section.
+/// A manifest's package name and its dependencies: what it links (every
+/// `dependencies` and `build-dependencies` section, `[target.'cfg(..)'.*]`
+/// ones included, and the `[dependencies.NAME]` form) and what only its
+/// tests and benches link (`dev-dependencies`).
 #[derive(Debug)]
 struct Manifest {
     name: String,
     dependencies: BTreeSet<String>,
     dev_dependencies: BTreeSet<String>,
+}
+
+/// The kind of a section's dependencies, and the name of a
+/// `[dependencies.NAME]` section (`None`: not a dependency section).
+fn dependency_section(section: &str) -> Option<(bool, Option<String>)> {
+    // `target.'cfg(unix)'.dependencies` is read as `dependencies`.
+    let rest = match section.strip_prefix("target.") {
+        Some(t) => t
+            .rsplit_once("'.")
+            .or_else(|| t.split_once('.'))
+            .map(|(_, r)| r)?,
+        None => section,
+    };
+    let (kind, name) = match rest.split_once('.') {
+        Some((kind, name)) => (kind, Some(name.trim_matches('"').to_owned())),
+        None => (rest, None),
+    };
+    match kind {
+        "dependencies" | "build-dependencies" => Some((false, name)),
+        "dev-dependencies" => Some((true, name)),
+        _ => None,
+    }
 }
 
 fn manifest(text: &str) -> Manifest {
@@ -73,23 +99,33 @@ fn manifest(text: &str) -> Manifest {
     for line in text.lines().map(str::trim) {
         if line.starts_with('[') {
             section = line.trim_matches(['[', ']']).to_owned();
+            if let Some((dev, Some(name))) = dependency_section(&section) {
+                if dev {
+                    &mut m.dev_dependencies
+                } else {
+                    &mut m.dependencies
+                }
+                .insert(name);
+            }
             continue;
         }
         let Some((key, value)) = line.split_once('=') else {
             continue;
         };
         let key = key.trim();
+        if section == "package" && key == "name" {
+            m.name = value.trim().trim_matches('"').to_owned();
+            continue;
+        }
         // `name.workspace = true` and `name = ...` alike.
         let dep = key.split('.').next().unwrap_or(key).to_owned();
-        match section.as_str() {
-            "package" if key == "name" => m.name = value.trim().trim_matches('"').to_owned(),
-            "dependencies" => {
-                m.dependencies.insert(dep);
+        if let Some((dev, None)) = dependency_section(&section) {
+            if dev {
+                &mut m.dev_dependencies
+            } else {
+                &mut m.dependencies
             }
-            "dev-dependencies" => {
-                m.dev_dependencies.insert(dep);
-            }
-            _ => {}
+            .insert(dep);
         }
     }
     m
@@ -114,9 +150,38 @@ fn manifests() -> Vec<(PathBuf, Manifest)> {
         .collect()
 }
 
+/// Every crate `name` links, directly or through the workspace crates it
+/// depends on, each with the workspace crate it comes through (`None`:
+/// named by `name` itself). Dev-dependencies are not linked into the crate.
+fn linked(name: &str, by_name: &BTreeMap<&str, &Manifest>) -> BTreeMap<String, Option<String>> {
+    let mut out = BTreeMap::new();
+    let mut todo = vec![name.to_owned()];
+    let mut seen = BTreeSet::new();
+    while let Some(krate) = todo.pop() {
+        if !seen.insert(krate.clone()) {
+            continue;
+        }
+        let Some(m) = by_name.get(krate.as_str()) else {
+            continue;
+        };
+        for dep in &m.dependencies {
+            // Said as the workspace crate that names it.
+            out.entry(dep.clone())
+                .or_insert_with(|| (krate != name).then(|| krate.clone()));
+            if by_name.contains_key(dep.as_str()) {
+                todo.push(dep.clone());
+            }
+        }
+    }
+    out
+}
+
 /// What is wrong with the manifests against the table (empty: nothing).
 fn violations(rules: &BTreeMap<String, Rule>, manifests: &[(PathBuf, Manifest)]) -> Vec<String> {
-    let ours: BTreeSet<&str> = manifests.iter().map(|(_, m)| m.name.as_str()).collect();
+    let by_name: BTreeMap<&str, &Manifest> = manifests
+        .iter()
+        .map(|(_, m)| (m.name.as_str(), m))
+        .collect();
     let mut wrong = Vec::new();
     for (path, m) in manifests {
         // The no_std proof is checked by its own build (ARCHITECTURE.md).
@@ -136,20 +201,23 @@ fn violations(rules: &BTreeMap<String, Rule>, manifests: &[(PathBuf, Manifest)])
             ("dev-dependencies", &m.dev_dependencies),
         ] {
             for dep in deps {
-                if ours.contains(dep.as_str()) && !rule.may.contains(dep) {
+                if by_name.contains_key(dep.as_str()) && !rule.may.contains(dep) {
                     wrong.push(format!(
                         "{}: [{section}] {dep}: {} may not depend on it",
                         path.display(),
                         m.name
                     ));
                 }
-                if section == "dependencies" && rule.must_not.contains(dep) {
-                    wrong.push(format!(
-                        "{}: [{section}] {dep}: {} must not link it",
-                        path.display(),
-                        m.name
-                    ));
-                }
+            }
+        }
+        for (dep, via) in linked(&m.name, &by_name) {
+            if rule.must_not.contains(&dep) {
+                let through = via.map(|v| format!(" (through {v})")).unwrap_or_default();
+                wrong.push(format!(
+                    "{}: {dep}{through}: {} must not link it",
+                    path.display(),
+                    m.name
+                ));
             }
         }
     }
@@ -191,7 +259,60 @@ fn the_check_refuses_a_dependency_pointing_up_and_a_forbidden_one() {
         .unwrap();
     the_loop.dependencies.insert("mcap".to_owned());
     let wrong = violations(&rules, &manifests);
-    assert_eq!(wrong.len(), 2, "{wrong:?}");
-    assert!(wrong[0].contains("sar-loop: sar-estimator may not depend on it"));
-    assert!(wrong[1].contains("mcap: sar-loop must not link it"));
+    // Both are found; the circle also makes the estimator link what the
+    // loop links, which is said as well.
+    let found = |s: &str| wrong.iter().filter(|w| w.contains(s)).count();
+    assert_eq!(
+        found("sar-loop: sar-estimator may not depend on it"),
+        1,
+        "{wrong:?}"
+    );
+    assert_eq!(found("mcap: sar-loop must not link it"), 1, "{wrong:?}");
+    assert_eq!(
+        found("mcap (through sar-loop): sar-estimator must not link it"),
+        1,
+        "{wrong:?}"
+    );
+}
+
+#[test]
+fn the_check_follows_workspace_crates_and_reads_every_dependency_section() {
+    let architecture = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let rules = rules(&architecture);
+    let mut manifests = manifests();
+    // A forbidden crate two workspace crates down is found, and said where
+    // it comes through.
+    let (_, kinematics) = manifests
+        .iter_mut()
+        .find(|(_, m)| m.name == "sar-kinematics")
+        .unwrap();
+    kinematics.dependencies.insert("mcap".to_owned());
+    let wrong = violations(&rules, &manifests);
+    assert!(
+        wrong
+            .iter()
+            .any(|w| w.contains("mcap (through sar-kinematics): sar-loop must not link it")),
+        "{wrong:?}"
+    );
+    // Target-specific, build and `[dependencies.NAME]` sections are read.
+    let m = manifest(
+        "[package]\nname = \"x\"\n[target.'cfg(target_os = \"linux\")'.dependencies]\na = \"1\"\n\
+         [build-dependencies]\nb.workspace = true\n[dependencies.c]\nversion = \"1\"\n\
+         [target.'cfg(unix)'.dev-dependencies]\nd = \"1\"\n[features]\ne = []\n",
+    );
+    assert_eq!(m.name, "x");
+    assert_eq!(
+        m.dependencies
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+        ["a", "b", "c"]
+    );
+    assert_eq!(
+        m.dev_dependencies
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+        ["d"]
+    );
 }

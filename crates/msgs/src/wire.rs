@@ -3,7 +3,8 @@
 //! for states and reasons, no enums with payloads, no references). The
 //! estimator's types are converted here, at the edge.
 
-use iceoryx2::prelude::ZeroCopySend;
+use iceoryx2_bb_derive_macros::ZeroCopySend;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use sar_drivers::DriveState;
 use sar_estimator::guard::{GuardLimits, GuardState};
 
@@ -393,32 +394,33 @@ impl ReplyMsg {
         limits_n: [f64; 6],
         detail: core::fmt::Arguments<'_>,
     ) -> Self {
-        let mut text = [0u8; DETAIL_LEN];
-        let mut w = FixedText {
-            buf: &mut text,
-            len: 0,
-        };
-        // A cut detail is fine: what fits is kept.
-        let _ = std::fmt::Write::write_fmt(&mut w, detail);
-        Self {
+        let mut reply = Self {
             id,
             cycle,
             status,
             reason,
             limits_n,
-            detail: text,
-        }
+            detail: [0u8; DETAIL_LEN],
+        };
+        reply.write_detail(detail);
+        reply
     }
 
     /// Sets the detail to `text` (cut at a character boundary when longer
     /// than [`DETAIL_LEN`] bytes).
     pub fn set_detail(&mut self, text: &str) {
+        self.write_detail(format_args!("{text}"));
+    }
+
+    /// The one writer of the fixed detail buffer: cleared, then filled with
+    /// what fits (a cut detail is fine; no allocation).
+    fn write_detail(&mut self, detail: core::fmt::Arguments<'_>) {
         self.detail = [0u8; DETAIL_LEN];
         let mut w = FixedText {
             buf: &mut self.detail,
             len: 0,
         };
-        let _ = std::fmt::Write::write_str(&mut w, text);
+        let _ = std::fmt::Write::write_fmt(&mut w, detail);
     }
 
     /// The exact cause as text ("" when none).
@@ -465,5 +467,25 @@ pub fn status_name(code: u32) -> &'static str {
         reply_code::UNKNOWN_COMMAND => "unknown command",
         reply_code::BUSY => "refused: the daemon's command queue is full",
         _ => "refused",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::*;
+
+    #[test]
+    fn a_detail_is_cut_at_a_character_boundary_and_replaced_whole() {
+        // 255 ASCII bytes then a 2-byte character: the character does not
+        // fit and is left out whole.
+        let long = format!("{}é", "a".repeat(DETAIL_LEN - 1));
+        let mut reply = ReplyMsg::with_detail(1, 2, 0, 0, [0.0; 6], format_args!("{long}"));
+        assert_eq!(reply.detail_text(), "a".repeat(DETAIL_LEN - 1));
+        // A shorter detail leaves nothing of the longer one behind.
+        reply.set_detail("ré");
+        assert_eq!(reply.detail_text(), "ré");
+        assert!(reply.detail[3..].iter().all(|b| *b == 0));
+        assert_eq!((reply.id, reply.cycle), (1, 2));
     }
 }
