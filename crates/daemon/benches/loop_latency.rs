@@ -6,11 +6,11 @@
 
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
-use sar_daemon::runloop::{self, RunLimits};
 use sar_daemon::{config, sim};
 use sar_drivers::MonotonicClock;
 use sar_loop::control::{Controller, Operator};
 use sar_loop::notify::Watchdog;
+use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::{Histogram, LoopStats};
 use sar_loop::{logq, rt};
 
@@ -55,9 +55,12 @@ fn daemon() -> LoopStats {
             stall_after_cycles: None,
         },
         &mut stats,
-        &mut (),
-        &mut Watchdog::new(None, 100),
-        &log,
+        Edges {
+            sinks: (),
+            truth: None,
+            watchdog: &mut Watchdog::new(None, 100),
+            log: &log,
+        },
     );
     if let Some(t) = thread {
         t.finish();

@@ -138,7 +138,7 @@ fn latency(c: &mut Criterion) {
     // The daemon's path.
     {
         let prefix = format!("sar-bench-{}", std::process::id());
-        let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6], None).unwrap();
+        let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]).unwrap();
         let (tx, rx) = channel();
         let stop = Arc::new(AtomicBool::new(false));
         let sub = {
@@ -237,7 +237,7 @@ fn loop_side(c: &mut Criterion) {
     {
         let prefix = format!("sar-bench-push-{}", std::process::id());
         let (mut shm, mut worker) =
-            DaemonShm::create_manual(&prefix, Operator::new(), [1.0; 6], None).unwrap();
+            DaemonShm::create_manual(&prefix, Operator::new(), [1.0; 6]).unwrap();
         g.bench_function("queue_push", |b| {
             b.iter_custom(|iters| {
                 let mut total = Duration::ZERO;

@@ -45,6 +45,7 @@ use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::tip_force::TipForceConfig;
 use sar_kinematics::{Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3};
+use sar_loop::runloop::LoopConfig;
 use serde::Deserialize;
 use std::net::SocketAddr;
 use std::path::Path;
@@ -440,23 +441,6 @@ struct AxesDriverToml {
 
 // ---------------------------------------------------------------------------
 // The checked configuration.
-
-/// The fixed-rate loop's settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LoopConfig {
-    /// Cycles per second (100..=10000).
-    pub rate_hz: f64,
-    /// The cycle period, ns.
-    pub period_ns: u64,
-    /// SCHED_FIFO priority of the loop thread (1..=99).
-    pub priority: i32,
-    /// The CPU the loop thread is pinned to, if any.
-    pub cpu: Option<usize>,
-    /// The publishing thread (the operator's commands and the published
-    /// state) making no progress for this long while the loop hands it
-    /// states is a Fault (`PublisherStalled`), ns.
-    pub publisher_stall_ns: u64,
-}
 
 /// The axes as the daemon plans moves on them.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -8,7 +8,6 @@ pub mod config;
 pub mod devices;
 pub mod identify;
 pub mod record;
-pub mod runloop;
 pub mod shm;
 pub mod sim;
 pub mod view;

@@ -22,7 +22,6 @@
 //! or client killed with SIGKILL) and then creates the services; when they
 //! exist (a living daemon with the same prefix), it refuses to start.
 
-use crate::runloop::{Publish, Published};
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::port::notifier::Notifier;
@@ -31,6 +30,7 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
 use sar_loop::control::{Envelope, Operator, Reply};
 use sar_loop::publish::StateParts;
+use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_msgs::wire::{CommandMsg, ReplyMsg, StateMsg, command_kind, reply_code};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -122,10 +122,21 @@ struct Shared {
     /// States the thread sent.
     published: AtomicU64,
     /// Where `record start|stop` go (unset: refused as unknown).
-    record_switch: std::sync::OnceLock<Arc<crate::record::live::RecordSwitch>>,
+    record_switch: std::sync::OnceLock<Arc<dyn RecordCommands>>,
 }
 
-/// The daemon's loop side: implements [`Publish`] for the loop.
+/// Where the commands `record start|stop` go: the recording's switch, wired
+/// in by `sard` (the transport knows no recorder). Called on the publishing
+/// thread; must not block for long.
+pub trait RecordCommands: Send + Sync + std::fmt::Debug {
+    /// Asks for a recording to start: the first file of the recording
+    /// started, or of the one already running (then nothing changes).
+    fn start(&self) -> Option<std::path::PathBuf>;
+    /// Asks for the recording to stop: the first file of the one stopped.
+    fn stop(&self) -> Option<std::path::PathBuf>;
+}
+
+/// The daemon's loop side: a [`Sink`] of the loop.
 ///
 /// iceoryx2 0.10 allocates on the heap for every sample it loans (an `Rc` of
 /// the sample's shared state in `Publisher::loan_uninit`, also behind
@@ -146,8 +157,6 @@ pub struct DaemonShm {
     wake: Option<std::thread::Thread>,
     thread: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Shared>,
-    /// The simulator's truth of F_tip, when simulated.
-    truth: Option<sar_loop::publish::SimTruthFn>,
     queue_drops: u64,
 }
 
@@ -365,15 +374,13 @@ impl ShmWorker {
             {
                 // The reply's detail: the first file of the recording
                 // started, or of the one being stopped.
-                let mut path = None;
-                if let Some(s) = self.shared.record_switch.get() {
+                let path = self.shared.record_switch.get().and_then(|s| {
                     if command.kind == command_kind::RECORD_START {
-                        path = s.request_start_at();
+                        s.start()
                     } else {
-                        s.request_stop();
-                        path = s.current_path();
+                        s.stop()
                     }
-                }
+                });
                 let mut reply = immediate(0);
                 if let Some(p) = path {
                     reply.set_detail(&p.display().to_string());
@@ -416,12 +423,7 @@ impl DaemonShm {
     /// this moment: `sard` calls this before the loop thread switches to
     /// SCHED_FIFO and pins itself, so the publishing thread runs at normal
     /// priority and never competes with the loop.
-    pub fn create(
-        prefix: &str,
-        operator: Operator,
-        limits_n: [f64; 6],
-        truth: Option<sar_loop::publish::SimTruthFn>,
-    ) -> Result<Self, String> {
+    pub fn create(prefix: &str, operator: Operator, limits_n: [f64; 6]) -> Result<Self, String> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
         let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), String>>(1);
@@ -454,7 +456,6 @@ impl DaemonShm {
             wake: Some(thread.thread().clone()),
             thread: Some(thread),
             shared,
-            truth,
             queue_drops: 0,
         })
     }
@@ -466,7 +467,6 @@ impl DaemonShm {
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
-        truth: Option<sar_loop::publish::SimTruthFn>,
     ) -> Result<(Self, ShmWorker), String> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
@@ -477,7 +477,6 @@ impl DaemonShm {
                 wake: None,
                 thread: None,
                 shared,
-                truth,
                 queue_drops: 0,
             },
             worker,
@@ -486,7 +485,7 @@ impl DaemonShm {
 
     /// Takes `record start|stop` commands into `switch` (on the publishing
     /// thread; the loop and the recording's manager thread act on it).
-    pub fn with_record_switch(self, switch: Arc<crate::record::live::RecordSwitch>) -> Self {
+    pub fn with_record_commands(self, switch: Arc<dyn RecordCommands>) -> Self {
         let _ = self.shared.record_switch.set(switch);
         self
     }
@@ -530,24 +529,22 @@ impl Drop for DaemonShm {
     }
 }
 
-impl Publish for DaemonShm {
-    fn publish(&mut self, c: &Published<'_>) {
+impl Sink for DaemonShm {
+    fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
         // The limits in use (an operator may have changed them this cycle)
         // travel in the state to the publishing thread, for its replies.
-        // The cycle's truth when the recorder asked for it already (one
-        // simulator lock per cycle), else our own.
-        let truth = c.truth.or_else(|| self.truth.as_mut().and_then(|f| f()));
         let mut state = sar_loop::publish::state_msg(&StateParts {
             input: c.loop_input,
             decision: c.decision,
             stats: c.stats,
             quick_stops: c.quick_stops,
-            recorder_drops: c.recorder_drops,
-            recording: c.recording,
-            truth,
+            recorder_drops: health.recorder_drops,
+            recording: health.recording,
+            truth: c.truth,
         });
         state.queue_drops = self.queue_drops;
         self.push_state(state);
+        health.publisher_queue_drops = self.queue_drops;
     }
 }
 

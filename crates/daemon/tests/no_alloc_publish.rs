@@ -16,11 +16,11 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::runloop::{Publish, Published};
 use sar_daemon::shm::{Client, DaemonShm};
 use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_loop::control::{Controller, Operator, ReplyStatus};
+use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::{CommandMsg, command_kind, limits_array};
@@ -56,7 +56,6 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
         &prefix,
         operator.clone(),
         limits_array(&cfg.estimator.guard.limits()),
-        None,
     )
     .unwrap();
     let mut c = Controller::new(
@@ -80,17 +79,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
         counted(|| {
             shm.before_cycle();
             c.step(cycle, || Some(clock.now_ns()));
-            shm.publish(&Published {
-                loop_input: c.loop_input(),
-                decision: c.decision(),
-                step: c.loop_step(),
-                sensor_samples: c.sensor_samples(),
-                stats: &stats,
-                quick_stops: c.counts().quick_stops,
-                recorder_drops: 0,
-                recording: false,
-                truth: None,
-            });
+            shm.cycle(&Cycle::of(c, &stats, None), &mut SinkHealth::default());
         });
         while queue.pop().is_some() {}
     };
@@ -193,9 +182,9 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
 /// ends the run (as a signal would) once it has its replies.
 #[test]
 fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
-    use sar_daemon::runloop::{self, RunLimits};
     use sar_drivers::MonotonicClock;
     use sar_loop::notify::Watchdog;
+    use sar_loop::runloop::{self, Edges, RunLimits};
 
     let cfg = config::builtin().unwrap();
     let scenario = sim::demo_scenario().unwrap();
@@ -208,7 +197,6 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
         &prefix,
         operator.clone(),
         limits_array(&cfg.estimator.guard.limits()),
-        None,
     )
     .unwrap();
     let mut c = Controller::new(
@@ -278,9 +266,12 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
                 stall_after_cycles: None,
             },
             &mut stats,
-            &mut shm,
-            &mut watchdog,
-            &log,
+            Edges {
+                sinks: &mut shm,
+                truth: None,
+                watchdog: &mut watchdog,
+                log: &log,
+            },
         );
     });
     let after = allocations();

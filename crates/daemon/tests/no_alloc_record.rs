@@ -16,13 +16,13 @@ mod common;
 use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
 use sar_daemon::record::replay::{Mode, ReplayOptions, replay_file};
 use sar_daemon::record::{McapReader, Rotation, read_file};
-use sar_daemon::runloop::{Publish, Published};
 use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Controller, Envelope, Operator, Request};
 use sar_loop::logq;
+use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
 use sar_msgs::msgs::Outgoing;
 use std::sync::Arc;
@@ -78,13 +78,17 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         },
         bias,
         Arc::clone(&switch),
-        (),
     )
     .unwrap();
     let stats = LoopStats::default();
     let mut cycle = 0u64;
     let mut seen = (false, false);
-    let mut step = |c: &mut Controller<_, _>, p: &mut dyn Publish| {
+    // The loop's one health, kept across cycles as `runloop::run` keeps it.
+    let mut health = SinkHealth {
+        recorder_drops: u64::MAX,
+        ..SinkHealth::default()
+    };
+    let mut step = |c: &mut Controller<_, _>, p: &mut dyn Sink| {
         cycle += 1;
         clock.advance_ns(1_000_000);
         if cycle % 1000 == 10 {
@@ -102,17 +106,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         }
         p.before_cycle();
         let out = *c.step(cycle, || Some(clock.now_ns()));
-        p.publish(&Published {
-            loop_input: c.loop_input(),
-            decision: c.decision(),
-            step: c.loop_step(),
-            sensor_samples: c.sensor_samples(),
-            stats: &stats,
-            quick_stops: c.counts().quick_stops,
-            recorder_drops: 0,
-            recording: false,
-            truth: None,
-        });
+        p.cycle(&Cycle::of(c, &stats, None), &mut health);
         while queue.pop().is_some() {}
         while operator.replies.pop().is_some() {}
         seen.0 |= out.guard_state == GuardState::Warn;
@@ -135,6 +129,10 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         "the recorded cycles allocated {allocations} times"
     );
     assert_eq!(switch.dropped(), 0);
+    // The recording sink keeps its counters in the loop's health, where the
+    // publisher after it reads them.
+    assert!(health.recording);
+    assert_eq!(health.recorder_drops, 0);
     publisher.release();
     manager.finish();
 

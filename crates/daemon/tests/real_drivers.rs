@@ -206,7 +206,7 @@ fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
 fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
     use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
     use sar_daemon::record::{McapReader, Rotation, read_file};
-    use sar_daemon::runloop::{Publish, Published};
+    use sar_loop::sink::{Cycle, Sink, SinkHealth};
     use sar_loop::stats::LoopStats;
     use sar_msgs::msgs::{CycleInput, RosMessage, Topic, WrenchStamped};
     use std::sync::Arc;
@@ -226,30 +226,19 @@ fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
         },
         sar_estimator::cycle::Bias::force_only(Vec3::zeros()),
         Arc::clone(&switch),
-        (),
     )
     .unwrap();
     let stats = LoopStats::default();
     let mut cycle = 0u64;
     let mut drained = 0usize;
     let mut most = 0usize;
-    let mut step = |c: &mut RdtController, p: &mut dyn Publish, drained: &mut usize| {
+    let mut step = |c: &mut RdtController, p: &mut dyn Sink, drained: &mut usize| {
         cycle += 1;
         p.before_cycle();
         c.step(cycle, rt::monotonic_ns);
         *drained += c.sensor_samples().len();
         most = most.max(c.sensor_samples().len());
-        p.publish(&Published {
-            loop_input: c.loop_input(),
-            decision: c.decision(),
-            step: c.loop_step(),
-            sensor_samples: c.sensor_samples(),
-            truth: None,
-            stats: &stats,
-            quick_stops: c.counts().quick_stops,
-            recorder_drops: 0,
-            recording: false,
-        });
+        p.cycle(&Cycle::of(c, &stats, None), &mut SinkHealth::default());
     };
     let mut next = rt::monotonic_ns().unwrap();
     for _ in 0..600 {

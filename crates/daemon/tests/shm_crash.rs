@@ -30,7 +30,7 @@ fn child_daemon() {
     let Ok(prefix) = std::env::var(CHILD_ENV) else {
         return;
     };
-    let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6], None).unwrap();
+    let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]).unwrap();
     // A subscriber of its own that holds a sample: the child's node owns
     // ports of every kind when it dies.
     let client = Client::new(&prefix).unwrap();
@@ -88,7 +88,7 @@ fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     let s = wait_state(&client, |s| s.cycle > CHILD_MARK);
     assert!(s.cycle > CHILD_MARK);
     // While the child lives, a second daemon with its prefix is refused.
-    let refused = DaemonShm::create(&prefix, Operator::new(), [1.0; 6], None);
+    let refused = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]);
     assert!(
         refused.is_err(),
         "a second daemon started beside a living one"
@@ -109,7 +109,7 @@ fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     let cleaned = sar_daemon::shm::clean_dead_nodes();
     assert!(cleaned >= 1, "no dead node cleaned");
     // Then a new daemon creates its services on the same prefix.
-    let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6], None).unwrap();
+    let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]).unwrap();
     let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
     let reader = std::thread::spawn(move || {
         let client = Client::new(&prefix).unwrap();

@@ -19,7 +19,7 @@ use sar_msgs::wire::StateMsg;
 
 fn daemon(name: &str) -> (String, DaemonShm, ShmWorker) {
     let prefix = format!("sar-slow-{name}-{}", std::process::id());
-    let (shm, worker) = DaemonShm::create_manual(&prefix, Operator::new(), [1.0; 6], None).unwrap();
+    let (shm, worker) = DaemonShm::create_manual(&prefix, Operator::new(), [1.0; 6]).unwrap();
     (prefix, shm, worker)
 }
 

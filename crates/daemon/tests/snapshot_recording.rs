@@ -16,13 +16,13 @@ mod common;
 use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
 use sar_daemon::record::replay::{ReplayError, ReplayOptions, replay_file, replay_files};
 use sar_daemon::record::{McapReader, Rotation, read_file};
-use sar_daemon::runloop::{Publish, Published};
 use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_loop::control::{Controller, Envelope, Operator, Request};
 use sar_loop::logq;
+use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
 use sar_msgs::msgs::{RosMessage, StateSnapshot, Topic};
 use std::path::{Path, PathBuf};
@@ -75,13 +75,12 @@ fn session(name: &str) -> Vec<PathBuf> {
         },
         bias,
         Arc::clone(&switch),
-        (),
     )
     .unwrap();
     let stats = LoopStats::default();
     let mut cycle = 0u64;
     let mut states = Vec::new();
-    let mut step = |c: &mut Controller<_, _>, p: &mut dyn Publish, request: Option<Request>| {
+    let mut step = |c: &mut Controller<_, _>, p: &mut dyn Sink, request: Option<Request>| {
         cycle += 1;
         clock.advance_ns(1_000_000);
         if let Some(request) = request {
@@ -90,17 +89,7 @@ fn session(name: &str) -> Vec<PathBuf> {
         }
         p.before_cycle();
         let out = *c.step(cycle, || Some(clock.now_ns()));
-        p.publish(&Published {
-            loop_input: c.loop_input(),
-            decision: c.decision(),
-            step: c.loop_step(),
-            sensor_samples: c.sensor_samples(),
-            truth: None,
-            stats: &stats,
-            quick_stops: c.counts().quick_stops,
-            recorder_drops: 0,
-            recording: false,
-        });
+        p.cycle(&Cycle::of(c, &stats, None), &mut SinkHealth::default());
         while queue.pop().is_some() {}
         while operator.replies.pop().is_some() {}
         out.guard_state

@@ -11,11 +11,16 @@
 //! - [`rt`]: real-time setup (SCHED_FIFO, mlockall), the monotonic clock,
 //!   the stop signal.
 //! - [`publish`]: the loop's types as the shared-memory payloads.
+//! - [`sink`]: what the loop hands each cycle to (one interface, one
+//!   shared health struct).
+//! - [`runloop`]: the fixed-rate loop itself.
 
 pub mod control;
 pub mod logq;
 pub mod notify;
 pub mod publish;
 pub mod rt;
+pub mod runloop;
+pub mod sink;
 pub mod stats;
 pub mod step;

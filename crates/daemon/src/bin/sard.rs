@@ -2,15 +2,16 @@
 //! the configuration, or on the simulated robot (`--sim`).
 
 use clap::Parser;
-use sar_daemon::record::live::{LiveRecorder, RecordManager};
-use sar_daemon::runloop::{self, RunLimits};
-use sar_daemon::shm::DaemonShm;
+use sar_daemon::record::live::{LiveRecorder, RecordManager, RecordSwitch};
+use sar_daemon::shm::{DaemonShm, RecordCommands};
 use sar_daemon::{config, devices, sim};
 use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::Bias;
 use sar_loop::control::{Controller, DrivesCycle, Operator};
 use sar_loop::notify::{Notifier, Watchdog};
+use sar_loop::publish::SimTruthFn;
+use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::limits_array;
@@ -154,12 +155,12 @@ fn run(args: &Args) -> Result<(), String> {
     } else {
         None
     };
-    // The recorder asks it (and records it); the state gets it from there.
+    // The loop asks it once per cycle and hands it to the recorder and the
+    // publisher.
     let shm = DaemonShm::create(
         &args.prefix,
         operator.clone(),
         limits_array(&cfg.estimator.guard.limits()),
-        None,
     )?;
     // Recording (`[record]`, `sarctl record start|stop`): its manager thread
     // (which opens and closes the files, never the loop) starts here, before
@@ -175,14 +176,13 @@ fn run(args: &Args) -> Result<(), String> {
         "recordings go to {} ([record] directory)",
         cfg.record.directory.display()
     );
-    let switch = std::sync::Arc::new(sar_daemon::record::live::RecordSwitch::default());
-    let (recording, shm) = sar_daemon::record::live::RecordManager::start(
+    let switch = std::sync::Arc::new(RecordSwitch::default());
+    let (recording, recorder) = RecordManager::start(
         cfg.record.clone(),
         start_bias,
         std::sync::Arc::clone(&switch),
-        shm.with_record_switch(switch),
     )?;
-    let shm = shm.with_truth(truth);
+    let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
     // Real-time settings: said once, here, when they cannot be applied.
     // After the publishing thread has started (DaemonShm::create), so that
     // it keeps the normal priority and every CPU.
@@ -206,6 +206,8 @@ fn run(args: &Args) -> Result<(), String> {
         cfg: &cfg,
         operator,
         shm,
+        recorder,
+        truth,
         recording,
         auto_reset: args.sim,
     };
@@ -278,12 +280,28 @@ fn start_canopen(
     Ok(drives)
 }
 
+/// `sarctl record start|stop`, from the transport to the recording's switch.
+#[derive(Debug)]
+struct SwitchCommands(std::sync::Arc<RecordSwitch>);
+
+impl RecordCommands for SwitchCommands {
+    fn start(&self) -> Option<PathBuf> {
+        self.0.request_start_at()
+    }
+    fn stop(&self) -> Option<PathBuf> {
+        self.0.request_stop();
+        self.0.current_path()
+    }
+}
+
 /// What every combination of devices runs with.
 struct Run<'a> {
     args: &'a Args,
     cfg: &'a config::Config,
     operator: Operator,
-    shm: LiveRecorder<DaemonShm>,
+    shm: DaemonShm,
+    recorder: LiveRecorder,
+    truth: Option<SimTruthFn>,
     recording: RecordManager,
     auto_reset: bool,
 }
@@ -331,12 +349,17 @@ impl Run<'_> {
                 stall_after_cycles: self.args.stall_after_cycles,
             },
             &mut stats,
-            &mut self.shm,
-            &mut watchdog,
-            &log,
+            Edges {
+                // The recorder first: the publisher puts its counters in
+                // the published state.
+                sinks: (&mut self.recorder, &mut self.shm),
+                truth: self.truth.take(),
+                watchdog: &mut watchdog,
+                log: &log,
+            },
         );
         // The last recording closed (its writer drains the queue first).
-        self.shm.release();
+        self.recorder.release();
         self.recording.finish();
         if let Some(t) = log_thread {
             t.finish();

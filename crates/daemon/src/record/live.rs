@@ -1,5 +1,5 @@
-//! Recording from `sard`: the loop's publisher wrapped by [`LiveRecorder`],
-//! which pushes each cycle's messages into the active [`Recorder`]'s bounded
+//! Recording from `sard`: the loop's recording sink [`LiveRecorder`]
+//! (`sar_loop::sink`), which pushes each cycle's messages into the active [`Recorder`]'s bounded
 //! queue (no wait, no allocation: a full queue drops and counts), and a
 //! manager thread ([`RecordManager`]) that opens and closes recordings on
 //! request (`sarctl record start|stop`, through [`RecordSwitch`]) or by
@@ -10,7 +10,7 @@
 //! sensor's driver received since the previous cycle, drained by the loop:
 //! a sensor faster than the loop loses none), `/sar/joints` (a new stamp),
 //! then the outputs of [`super::convert::outputs`]. On the simulator
-//! ([`LiveRecorder::with_truth`]), each cycle with a new sensor sample also
+//! (the loop's [`Cycle::truth`]), each cycle with a new sensor sample also
 //! records the simulator's truth on `/sar/sim/tip_wrench_truth` (the
 //! reference of `sarctl replay --compare`). After the cycle's messages, at
 //! the start of a recording and every `snapshot_period_ns`,
@@ -26,9 +26,9 @@
 use super::convert;
 use super::file::{FileOptions, Rotation};
 use super::recorder::{Recorder, RecorderConfig};
-use crate::runloop::{Publish, Published};
 use crossbeam_queue::ArrayQueue;
 use sar_estimator::cycle::Bias;
+use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_msgs::msgs::{Outgoing, SnapshotChunk, WrenchStamped};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -154,10 +154,9 @@ impl RecordSwitch {
     }
 }
 
-/// The loop's publisher with recording: pushes every cycle into the active
-/// recorder, then publishes through `inner` with the drop count.
-pub struct LiveRecorder<P> {
-    inner: P,
+/// The loop's recording sink: pushes every cycle into the active recorder
+/// and keeps the recorder's counters in the loop's [`SinkHealth`].
+pub struct LiveRecorder {
     switch: Arc<RecordSwitch>,
     incoming: Arc<ArrayQueue<Recorder>>,
     outgoing: Arc<ArrayQueue<Recorder>>,
@@ -170,20 +169,9 @@ pub struct LiveRecorder<P> {
     snapshot_period_ns: u64,
     /// When the next snapshot is due (cycle stamp, ns); `None`: at once.
     next_snapshot_ns: Option<u64>,
-    /// The simulator's truth, asked once per cycle (`None`: not simulated).
-    truth: Option<sar_loop::publish::SimTruthFn>,
 }
 
-impl<P> LiveRecorder<P> {
-    /// Asks `truth` once per cycle: recorded on `/sar/sim/tip_wrench_truth`
-    /// (the visible part, `tip_force_n - friction_force_n`, with every new
-    /// sensor sample, stamped as the cycle) and handed to the wrapped
-    /// publisher in [`Published::truth`].
-    pub fn with_truth(mut self, truth: Option<sar_loop::publish::SimTruthFn>) -> Self {
-        self.truth = truth;
-        self
-    }
-
+impl LiveRecorder {
     /// Hands the active recorder back to the manager (at shutdown).
     pub fn release(&mut self) {
         if let Some(rec) = self.active.take() {
@@ -194,19 +182,13 @@ impl<P> LiveRecorder<P> {
             }
         }
     }
-
-    /// The wrapped publisher.
-    pub fn inner(&self) -> &P {
-        &self.inner
-    }
 }
 
-impl<P: Publish> Publish for LiveRecorder<P> {
-    fn before_cycle(&mut self) {
-        self.inner.before_cycle();
-    }
-
-    fn publish(&mut self, c: &Published<'_>) {
+/// The simulator's truth of a cycle ([`Cycle::truth`]) is recorded on
+/// `/sar/sim/tip_wrench_truth`: the visible part, `tip_force_n -
+/// friction_force_n`, with every new sensor sample, stamped as the cycle.
+impl Sink for LiveRecorder {
+    fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
         if self.switch.take_stop() {
             self.release();
         }
@@ -218,7 +200,7 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             self.next_snapshot_ns = None;
             self.switch.recording.store(true, Ordering::Release);
         }
-        let truth = c.truth.or_else(|| self.truth.as_mut().and_then(|f| f()));
+        let truth = c.truth;
         let mut dropped = self.dropped_before;
         if let Some(rec) = &mut self.active {
             let input = c.loop_input;
@@ -257,12 +239,8 @@ impl<P: Publish> Publish for LiveRecorder<P> {
             dropped += rec.dropped();
         }
         self.switch.dropped.store(dropped, Ordering::Relaxed);
-        self.inner.publish(&Published {
-            recorder_drops: dropped,
-            recording: self.active.is_some(),
-            truth,
-            ..*c
-        });
+        health.recorder_drops = dropped;
+        health.recording = self.active.is_some();
     }
 }
 
@@ -319,14 +297,14 @@ fn recording_name() -> String {
 }
 
 impl RecordManager {
-    /// Wraps `inner`; with `settings.enabled`, the first recording is open
-    /// before this returns (it holds the daemon's first cycle).
-    pub fn start<P: Publish>(
+    /// The manager and the loop's recording sink; with `settings.enabled`,
+    /// the first recording is open before this returns (it holds the
+    /// daemon's first cycle).
+    pub fn start(
         settings: RecordSettings,
         bias: Bias,
         switch: Arc<RecordSwitch>,
-        inner: P,
-    ) -> Result<(Self, LiveRecorder<P>), String> {
+    ) -> Result<(Self, LiveRecorder), String> {
         let incoming = Arc::new(ArrayQueue::new(1));
         let outgoing = Arc::new(ArrayQueue::new(4));
         let snapshot_period_ns = settings.snapshot_period_ns;
@@ -366,7 +344,6 @@ impl RecordManager {
                 thread: Some(thread),
             },
             LiveRecorder {
-                inner,
                 switch,
                 incoming,
                 outgoing,
@@ -376,7 +353,6 @@ impl RecordManager {
                 snapshot: Box::new(sar_snapshot::Snapshot::new()),
                 snapshot_period_ns: snapshot_period_ns.max(1),
                 next_snapshot_ns: None,
-                truth: None,
             },
         ))
     }

@@ -1,59 +1,37 @@
 //! The fixed-rate loop: absolute deadlines on the monotonic clock
 //! (`clock_nanosleep`, `TIMER_ABSTIME`; never "sleep for the period"), one
-//! [`Controller::step`] per deadline, then publishing. Every cycle is measured
+//! [`Controller::step`] per deadline, then the cycle handed to the sinks
+//! ([`crate::sink`]). Every cycle is measured
 //! (wake-up latency, compute time) into fixed-size histograms; a cycle that
 //! ends after the next deadline is an overrun, counted and logged, and the
 //! next cycle runs at once (the grid is kept: no cycle is skipped). Ends on
 //! SIGTERM/SIGINT (or after `max_cycles`) with the drives halted.
 
-use crate::config::LoopConfig;
+use crate::control::Controller;
+use crate::logq::{LogEvent, LogSender};
+use crate::notify::Watchdog;
+use crate::publish::SimTruthFn;
+use crate::rt;
+use crate::sink::{Cycle, Sink, SinkHealth};
+use crate::stats::LoopStats;
 use sar_drivers::{AxisDrives, ForceSensor};
 use sar_estimator::cycle::TipOutcome;
-use sar_loop::control::Controller;
-use sar_loop::logq::{LogEvent, LogSender};
-use sar_loop::notify::Watchdog;
-use sar_loop::rt;
-use sar_loop::stats::LoopStats;
-use sar_loop::step::{LoopInput, LoopOutput};
 
-/// One cycle as the loop hands it to publishers.
-#[derive(Debug, Clone, Copy)]
-pub struct Published<'a> {
-    /// The cycle's whole input (what `/sar/cycle/input` records; the drive
-    /// state as read in the cycle).
-    pub loop_input: &'a LoopInput,
-    /// The cycle's whole decision (the estimator's output in `estimate`).
-    pub decision: &'a LoopOutput,
-    /// The step after the cycle (the recorder snapshots its state).
-    pub step: &'a sar_loop::step::LoopStep,
-    /// Every sensor sample received since the previous cycle (the recorder
-    /// writes each as `/sar/sensor/wrench`).
-    pub sensor_samples: &'a [sar_drivers::WrenchSample],
-    /// The loop's measurements.
-    pub stats: &'a LoopStats,
-    /// Quick stops so far.
-    pub quick_stops: u64,
-    /// Messages the recorder dropped so far (set by `record::live`).
-    pub recorder_drops: u64,
-    /// Whether a recording runs (set by `record::live`).
-    pub recording: bool,
-    /// The simulator's truth of this cycle, when simulated (set by
-    /// `record::live`, which records it).
-    pub truth: Option<sar_loop::publish::SimTruth>,
-}
-
-/// What the loop talks to around each cycle (shared memory).
-pub trait Publish {
-    /// Called on the loop thread before every cycle (take operator commands);
-    /// must not block.
-    fn before_cycle(&mut self) {}
-    /// Called on the loop thread after every cycle; must not block.
-    fn publish(&mut self, cycle: &Published<'_>);
-}
-
-/// No publisher.
-impl Publish for () {
-    fn publish(&mut self, _: &Published<'_>) {}
+/// The fixed-rate loop's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopConfig {
+    /// Cycles per second (100..=10000).
+    pub rate_hz: f64,
+    /// The cycle period, ns.
+    pub period_ns: u64,
+    /// SCHED_FIFO priority of the loop thread (1..=99).
+    pub priority: i32,
+    /// The CPU the loop thread is pinned to, if any.
+    pub cpu: Option<usize>,
+    /// The publishing thread (the operator's commands and the published
+    /// state) making no progress for this long while the loop hands it
+    /// states is a Fault (`PublisherStalled`), ns.
+    pub publisher_stall_ns: u64,
 }
 
 /// Options of a run.
@@ -66,16 +44,34 @@ pub struct RunLimits {
     pub stall_after_cycles: Option<u64>,
 }
 
-/// Runs the loop until a stop is requested; the drives are halted at the end.
-pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
+/// What a run hands each cycle to, besides the drives.
+pub struct Edges<'a, K: Sink> {
+    /// The sinks, in order (the recorder before the publisher).
+    pub sinks: K,
+    /// The simulator's truth, asked once per cycle (`None`: a real robot).
+    pub truth: Option<SimTruthFn>,
+    /// Fed after every cycle.
+    pub watchdog: &'a mut Watchdog,
+    /// Where overruns are told.
+    pub log: &'a LogSender,
+}
+
+/// Runs the loop until a stop is requested; the drives are halted at the
+/// end. Returns the sinks' last health.
+pub fn run<S: ForceSensor, D: AxisDrives, K: Sink>(
     controller: &mut Controller<S, D>,
     config: &LoopConfig,
     limits: RunLimits,
     stats: &mut LoopStats,
-    publisher: &mut P,
-    watchdog: &mut Watchdog,
-    log: &LogSender,
-) {
+    edges: Edges<'_, K>,
+) -> SinkHealth {
+    let Edges {
+        mut sinks,
+        mut truth,
+        watchdog,
+        log,
+    } = edges;
+    let mut health = SinkHealth::default();
     let period_ns = config.period_ns;
     let mut next_ns = rt::monotonic_ns().unwrap_or(0).saturating_add(period_ns);
     let mut cycle: u64 = 0;
@@ -96,19 +92,10 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
         let woke_ns = woke.unwrap_or(next_ns);
         stats.wakeup.record(woke_ns.saturating_sub(next_ns));
         cycle += 1;
-        publisher.before_cycle();
+        sinks.before_cycle();
         let out = *controller.step(cycle, rt::monotonic_ns);
-        publisher.publish(&Published {
-            loop_input: controller.loop_input(),
-            decision: controller.decision(),
-            step: controller.loop_step(),
-            sensor_samples: controller.sensor_samples(),
-            stats,
-            quick_stops: controller.counts().quick_stops,
-            recorder_drops: 0,
-            recording: false,
-            truth: None,
-        });
+        let truth_now = truth.as_mut().and_then(|f| f());
+        sinks.cycle(&Cycle::of(controller, stats, truth_now), &mut health);
         // The watchdog is fed from here, the loop itself: a stuck loop stops
         // feeding it.
         let estimate = matches!(out.tip, TipOutcome::Estimate(_));
@@ -128,4 +115,5 @@ pub fn run<S: ForceSensor, D: AxisDrives, P: Publish>(
     }
     watchdog.stopping();
     controller.shutdown();
+    health
 }
