@@ -31,9 +31,9 @@
 )]
 
 use criterion::{Criterion, criterion_group};
-use sar_daemon::shm::{Client, DaemonShm, node};
 use sar_loop::control::Operator;
 use sar_msgs::wire::StateMsg;
+use sar_shm::{Client, DaemonShm, node};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Mutex};

@@ -8,6 +8,5 @@ pub mod config;
 pub mod devices;
 pub mod identify;
 pub mod record;
-pub mod shm;
 pub mod sim;
 pub mod view;

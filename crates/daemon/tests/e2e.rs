@@ -13,9 +13,9 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::shm::Client;
 use sar_loop::control::ReplyStatus;
 use sar_msgs::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
+use sar_shm::Client;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -85,7 +85,8 @@ fn sard_sim_end_to_end() {
     let client = Client::new(&prefix).unwrap();
     // No daemon yet: a clear refusal.
     let err = client.subscribe().unwrap_err();
-    assert!(err.starts_with("no daemon runs"), "{err}");
+    assert!(matches!(err, sar_shm::ShmError::NoDaemon { .. }), "{err:?}");
+    assert!(err.to_string().starts_with("no daemon runs"), "{err}");
 
     let daemon = Daemon(
         Command::new(SARD)

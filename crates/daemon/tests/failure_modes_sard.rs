@@ -24,7 +24,6 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::shm::{Client, StateSubscription};
 use sar_daemon::{config, sim};
 use sar_drivers::ForceSensor;
 use sar_drivers::rdt::emulator::{Emulator, EmulatorConfig, Pacing, SensorFault};
@@ -32,6 +31,7 @@ use sar_loop::rt;
 use sar_msgs::wire::{
     CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_code, guard_state_name, reason_name,
 };
+use sar_shm::{Client, StateSubscription};
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};

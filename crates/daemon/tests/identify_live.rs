@@ -88,7 +88,7 @@ fn identify_live_writes_back_the_simulated_manipulator() {
             .spawn()
             .unwrap(),
     );
-    let client = sar_daemon::shm::Client::new(&prefix).unwrap();
+    let client = sar_shm::Client::new(&prefix).unwrap();
     let start = Instant::now();
     let sub = loop {
         match client.subscribe() {
@@ -134,7 +134,7 @@ fn identify_live_writes_back_the_simulated_manipulator() {
 
 /// Waits for the daemon under `prefix` to publish a state that `ok` accepts.
 fn wait_for(prefix: &str, ok: impl Fn(&sar_msgs::wire::StateMsg) -> bool) {
-    let client = sar_daemon::shm::Client::new(prefix).unwrap();
+    let client = sar_shm::Client::new(prefix).unwrap();
     let start = Instant::now();
     loop {
         if let Ok(sub) = client.subscribe()

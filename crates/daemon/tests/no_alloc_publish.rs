@@ -16,7 +16,6 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::shm::{Client, DaemonShm};
 use sar_daemon::{config, sim};
 use sar_drivers::SimClock;
 use sar_loop::control::{Controller, Operator, ReplyStatus};
@@ -24,6 +23,7 @@ use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::{CommandMsg, command_kind, limits_array};
+use sar_shm::{Client, DaemonShm};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;

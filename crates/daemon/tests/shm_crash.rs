@@ -12,9 +12,9 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::shm::{Client, DaemonShm};
 use sar_loop::control::Operator;
 use sar_msgs::wire::StateMsg;
+use sar_shm::{Client, DaemonShm};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -90,8 +90,9 @@ fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     // While the child lives, a second daemon with its prefix is refused.
     let refused = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]);
     assert!(
-        refused.is_err(),
-        "a second daemon started beside a living one"
+        matches!(refused, Err(sar_shm::ShmError::DaemonRuns { .. })),
+        "a second daemon started beside a living one: {:?}",
+        refused.map(|_| ())
     );
 
     let ok = Command::new("kill")
@@ -106,7 +107,7 @@ fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     // that the daemon runs first at start finds and removes them (iceoryx2's
     // own cleaning when a node is made depends on its configuration file;
     // this one does not).
-    let cleaned = sar_daemon::shm::clean_dead_nodes();
+    let cleaned = sar_shm::clean_dead_nodes();
     assert!(cleaned >= 1, "no dead node cleaned");
     // Then a new daemon creates its services on the same prefix.
     let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]).unwrap();

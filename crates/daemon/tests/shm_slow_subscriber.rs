@@ -11,11 +11,9 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::shm::{
-    Client, DaemonShm, Names, STATE_BORROWED, STATE_BUFFER, STATE_QUEUE, ShmWorker,
-};
 use sar_loop::control::Operator;
 use sar_msgs::wire::StateMsg;
+use sar_shm::{Client, DaemonShm, Names, STATE_BORROWED, STATE_BUFFER, STATE_QUEUE, ShmWorker};
 
 fn daemon(name: &str) -> (String, DaemonShm, ShmWorker) {
     let prefix = format!("sar-slow-{name}-{}", std::process::id());
@@ -40,7 +38,7 @@ fn subscribers_that_never_read_or_hold_samples_never_slow_the_loop() {
     // A subscriber that took as many samples as it may and holds them for
     // ever (what a process stopped in a debugger, or killed and not yet
     // cleaned, looks like to the publisher).
-    let node = sar_daemon::shm::node().unwrap();
+    let node = sar_shm::node().unwrap();
     let names = Names::new(&prefix);
     let service = node
         .service_builder(&names.state.as_str().try_into().unwrap())

@@ -274,7 +274,7 @@ fn the_live_view_decodes_with_the_foxglove_client() {
             .spawn()
             .unwrap(),
     );
-    let client = sar_daemon::shm::Client::new(&prefix).unwrap();
+    let client = sar_shm::Client::new(&prefix).unwrap();
     let start = std::time::Instant::now();
     while !client
         .subscribe()

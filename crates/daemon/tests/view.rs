@@ -27,10 +27,10 @@
 
 use foxglove::Decode;
 use foxglove::messages::SceneUpdate;
-use sar_daemon::shm::Client;
 use sar_daemon::view::scene::{self, SceneGeometry, ids};
 use sar_msgs::msgs::{RosMessage, WrenchStamped};
 use sar_msgs::wire::{StateMsg, flags};
+use sar_shm::Client;
 use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};

@@ -4,11 +4,11 @@
 //! Every command fails with a one-line reason when no daemon runs.
 
 use clap::{Parser, Subcommand, ValueEnum};
-use sar_daemon::shm::{Client, DEFAULT_PREFIX};
 use sar_msgs::wire::{
     self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name,
     status_name,
 };
+use sar_shm::{Client, DEFAULT_PREFIX};
 use serde_json::json;
 use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
@@ -426,7 +426,7 @@ fn run(args: &Args) -> Result<(), String> {
         let json = args.format == Format::Json;
         return sar_daemon::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
     }
-    let client = Client::new(&args.prefix)?;
+    let client = Client::new(&args.prefix).map_err(|e| e.to_string())?;
     let command_with = |kind: u32, tip_m: [f64; 3], limits_n: [f64; 6]| {
         client.command(
             CommandMsg {
@@ -473,7 +473,7 @@ fn run(args: &Args) -> Result<(), String> {
             sar_daemon::cli::record::run(&client, action == RecordAction::Start, json)
         }
         Cmd::Status => {
-            let sub = client.subscribe()?;
+            let sub = client.subscribe().map_err(|e| e.to_string())?;
             let s = sub
                 .latest(Duration::from_secs(2))
                 .ok_or("the daemon published nothing within 2 s")?;
@@ -485,7 +485,7 @@ fn run(args: &Args) -> Result<(), String> {
             Ok(())
         }
         Cmd::Monitor { count } => {
-            let sub = client.subscribe()?;
+            let sub = client.subscribe().map_err(|e| e.to_string())?;
             let live = args.format == Format::Text && std::io::stdout().is_terminal();
             let mut seen = 0u64;
             let mut history: Vec<char> = Vec::new();
@@ -546,18 +546,18 @@ fn run(args: &Args) -> Result<(), String> {
         Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => {
             // Faulted drives are reset first: then the guard's reset.
-            let mut r = command(command_kind::RESET, [0.0; 3])?;
+            let mut r = command(command_kind::RESET, [0.0; 3]).map_err(|e| e.to_string())?;
             for _ in 0..10 {
                 if r.status != sar_loop::control::ReplyStatus::DrivesFaultReset as u32 {
                     break;
                 }
                 std::thread::sleep(Duration::from_millis(100));
-                r = command(command_kind::RESET, [0.0; 3])?;
+                r = command(command_kind::RESET, [0.0; 3]).map_err(|e| e.to_string())?;
             }
             report("reset", &r)
         }
         Cmd::Retreat { distance } => {
-            let sub = client.subscribe()?;
+            let sub = client.subscribe().map_err(|e| e.to_string())?;
             let latest = |what: &str| {
                 sub.latest(Duration::from_secs(2)).ok_or_else(|| {
                     format!("retreat: the daemon published nothing within 2 s ({what})")
@@ -565,7 +565,7 @@ fn run(args: &Args) -> Result<(), String> {
             };
             let s = latest("start")?;
             if s.flags & flags::HALTED != 0 {
-                let r = command(command_kind::RESET, [0.0; 3])?;
+                let r = command(command_kind::RESET, [0.0; 3]).map_err(|e| e.to_string())?;
                 report("retreat: reset", &r)?;
             }
             // The drives come back within a few cycles after the reset.
@@ -593,17 +593,22 @@ fn run(args: &Args) -> Result<(), String> {
             }
             report(
                 "retreat: back out",
-                &command(command_kind::BACK_OUT, [distance, 0.0, 0.0])?,
+                &command(command_kind::BACK_OUT, [distance, 0.0, 0.0])
+                    .map_err(|e| e.to_string())?,
             )
         }
-        Cmd::Tare => report("tare", &command(command_kind::TARE, [0.0; 3])?),
+        Cmd::Tare => report(
+            "tare",
+            &command(command_kind::TARE, [0.0; 3]).map_err(|e| e.to_string())?,
+        ),
         Cmd::Hold { max_force } => report(
             "hold",
             &command_with(
                 command_kind::HOLD,
                 [0.0; 3],
                 [max_force, 0.0, 0.0, 0.0, 0.0, 0.0],
-            )?,
+            )
+            .map_err(|e| e.to_string())?,
         ),
         Cmd::Push { axial } => report(
             "push",
@@ -611,15 +616,22 @@ fn run(args: &Args) -> Result<(), String> {
                 command_kind::PUSH,
                 [0.0; 3],
                 [axial, 0.0, 0.0, 0.0, 0.0, 0.0],
-            )?,
+            )
+            .map_err(|e| e.to_string())?,
         ),
-        Cmd::Position => report("position", &command(command_kind::POSITION, [0.0; 3])?),
+        Cmd::Position => report(
+            "position",
+            &command(command_kind::POSITION, [0.0; 3]).map_err(|e| e.to_string())?,
+        ),
         Cmd::MoveTip {
             x,
             y,
             z,
             max_force: None,
-        } => report("move-tip", &command(command_kind::MOVE_TIP, [x, y, z])?),
+        } => report(
+            "move-tip",
+            &command(command_kind::MOVE_TIP, [x, y, z]).map_err(|e| e.to_string())?,
+        ),
         Cmd::MoveTip {
             x,
             y,
@@ -631,7 +643,8 @@ fn run(args: &Args) -> Result<(), String> {
                 command_kind::GUARDED_MOVE,
                 [x, y, z],
                 [n, 0.0, 0.0, 0.0, 0.0, 0.0],
-            )?,
+            )
+            .map_err(|e| e.to_string())?,
         ),
         Cmd::Limits {
             warn_total,
@@ -641,7 +654,7 @@ fn run(args: &Args) -> Result<(), String> {
             warn_lateral,
             stop_lateral,
         } => {
-            let mut r = command(command_kind::LIMITS, [0.0; 3])?;
+            let mut r = command(command_kind::LIMITS, [0.0; 3]).map_err(|e| e.to_string())?;
             let wanted = [
                 warn_total,
                 stop_total,
@@ -657,7 +670,8 @@ fn run(args: &Args) -> Result<(), String> {
                         *slot = v;
                     }
                 }
-                r = command_with(command_kind::SET_LIMITS, [0.0; 3], limits_n)?;
+                r = command_with(command_kind::SET_LIMITS, [0.0; 3], limits_n)
+                    .map_err(|e| e.to_string())?;
                 if r.status != 0 {
                     return Err(format!(
                         "limits: {}: {}",
@@ -665,7 +679,7 @@ fn run(args: &Args) -> Result<(), String> {
                         r.detail_text()
                     ));
                 }
-                r = command(command_kind::LIMITS, [0.0; 3])?;
+                r = command(command_kind::LIMITS, [0.0; 3]).map_err(|e| e.to_string())?;
             }
             let l = r.limits_n;
             if args.format == Format::Json {

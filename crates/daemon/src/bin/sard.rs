@@ -3,7 +3,6 @@
 
 use clap::Parser;
 use sar_daemon::record::live::{LiveRecorder, RecordManager, RecordSwitch};
-use sar_daemon::shm::{DaemonShm, RecordCommands};
 use sar_daemon::{config, devices, sim};
 use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_estimator::Vec3;
@@ -15,6 +14,7 @@ use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::limits_array;
+use sar_shm::{DaemonShm, RecordCommands};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -42,7 +42,7 @@ struct Args {
     #[arg(long, value_name = "FILE", conflicts_with_all = ["sim", "config", "scenario"])]
     check_config: Option<PathBuf>,
     /// Prefix of the shared-memory service names (one daemon per prefix).
-    #[arg(long, env = "SAR_SERVICE_PREFIX", default_value = sar_daemon::shm::DEFAULT_PREFIX)]
+    #[arg(long, env = "SAR_SERVICE_PREFIX", default_value = sar_shm::DEFAULT_PREFIX)]
     prefix: String,
     /// Stop after this many cycles (tests and benchmarks).
     #[arg(long, hide = true)]
@@ -161,7 +161,8 @@ fn run(args: &Args) -> Result<(), String> {
         &args.prefix,
         operator.clone(),
         limits_array(&cfg.estimator.guard.limits()),
-    )?;
+    )
+    .map_err(|e| e.to_string())?;
     // Recording (`[record]`, `sarctl record start|stop`): its manager thread
     // (which opens and closes the files, never the loop) starts here, before
     // the real-time settings, so that it and the writer threads it starts

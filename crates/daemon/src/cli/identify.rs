@@ -165,9 +165,9 @@ mod live {
     use crate::identify::IdentifyOptions;
     use crate::identify::dwell::{Dwell, DwellFinder, SensorAverager};
     use crate::identify::poses::{self, PoseTarget};
-    use crate::shm::{Client, StateSubscription};
     use sar_kinematics::{Mat3, Vec3};
     use sar_msgs::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
+    use sar_shm::{Client, StateSubscription};
     use std::io::{BufRead, Write};
     use std::time::{Duration, Instant};
 
@@ -317,16 +317,18 @@ mod live {
         let mut retries = 0u32;
         let mut warn_since: Option<Instant> = None;
         loop {
-            let reply = client.command(
-                CommandMsg {
-                    kind: command_kind::MOVE_TIP,
-                    reserved: 0,
-                    id: u64::from(std::process::id()),
-                    tip_m: t.tip_m.into(),
-                    limits_n: [0.0; 6],
-                },
-                Duration::from_secs(2),
-            )?;
+            let reply = client
+                .command(
+                    CommandMsg {
+                        kind: command_kind::MOVE_TIP,
+                        reserved: 0,
+                        id: u64::from(std::process::id()),
+                        tip_m: t.tip_m.into(),
+                        limits_n: [0.0; 6],
+                    },
+                    Duration::from_secs(2),
+                )
+                .map_err(|e| e.to_string())?;
             let in_warn = c.latest.is_some_and(|s| s.guard_state == guard_code::WARN);
             if reply.status != 0 && !in_warn {
                 return Err(format!(
@@ -402,8 +404,8 @@ mod live {
             ));
         }
         let targets = poses::cone_set(config)?;
-        let client = Client::new(prefix)?;
-        let sub = client.subscribe()?;
+        let client = Client::new(prefix).map_err(|e| e.to_string())?;
+        let sub = client.subscribe().map_err(|e| e.to_string())?;
         let first = check_start(&sub)?;
         confirm(args)?;
         let cal = &config.estimator.calibration;

@@ -4,8 +4,8 @@
 //! recording's first file, which the daemon gives in its reply (absolute:
 //! the daemon resolves `[record] directory` when it starts).
 
-use crate::shm::Client;
 use sar_msgs::wire::{CommandMsg, command_kind, status_name};
+use sar_shm::Client;
 use serde_json::json;
 use std::time::{Duration, Instant};
 
@@ -17,22 +17,24 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
         command_kind::RECORD_STOP
     };
     let what = if start { "record start" } else { "record stop" };
-    let reply = client.command(
-        CommandMsg {
-            kind,
-            reserved: 0,
-            id: u64::from(std::process::id()),
-            tip_m: [0.0; 3],
-            limits_n: [0.0; 6],
-        },
-        Duration::from_secs(2),
-    )?;
+    let reply = client
+        .command(
+            CommandMsg {
+                kind,
+                reserved: 0,
+                id: u64::from(std::process::id()),
+                tip_m: [0.0; 3],
+                limits_n: [0.0; 6],
+            },
+            Duration::from_secs(2),
+        )
+        .map_err(|e| e.to_string())?;
     if reply.status != 0 {
         return Err(format!("{what}: {}", status_name(reply.status)));
     }
     // The first file; a rotation continues in -0001.mcap, -0002.mcap, ...
     let path = reply.detail_text().to_owned();
-    let sub = client.subscribe()?;
+    let sub = client.subscribe().map_err(|e| e.to_string())?;
     let deadline = Instant::now() + Duration::from_secs(2);
     let mut last = None;
     while Instant::now() < deadline {

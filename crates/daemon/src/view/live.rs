@@ -4,13 +4,13 @@ use super::geometry::SceneGeometry;
 #[allow(unused_imports)]
 pub use super::{DEFAULT_BIND, DEFAULT_SCENE_HZ};
 use super::{front, scene, topics};
-use crate::shm::Client;
 use foxglove::messages::{FrameTransforms, SceneUpdate};
 use foxglove::{
     Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
 };
 use sar_msgs::msgs::{Outgoing, Topic};
 use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
+use sar_shm::Client;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -239,8 +239,8 @@ impl Publisher {
 /// Serves the daemon's state until `stop()` says so. Fails at once when no
 /// daemon runs with `opts.prefix` or the address cannot be bound.
 pub fn run(opts: &ViewOptions, stop: impl Fn() -> bool) -> Result<(), String> {
-    let client = Client::new(&opts.prefix)?;
-    let mut sub = client.subscribe()?;
+    let client = Client::new(&opts.prefix).map_err(|e| e.to_string())?;
+    let mut sub = client.subscribe().map_err(|e| e.to_string())?;
     let ctx = Context::new();
     let records = RecordChannels::new(&ctx)?;
     let scene = ctx.channel_builder(SCENE_TOPIC).build::<SceneUpdate>();

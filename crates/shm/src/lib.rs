@@ -76,20 +76,79 @@ impl Names {
     }
 }
 
-fn msg(what: &str, e: impl std::fmt::Debug) -> String {
-    format!("{what}: {e:?}")
+/// Why the transport failed (every error a caller of this crate sees).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ShmError {
+    /// The prefix makes a name iceoryx2 refuses.
+    #[error("bad service name {name:?}: {detail}")]
+    ServiceName {
+        /// The name.
+        name: String,
+        /// iceoryx2's reason.
+        detail: String,
+    },
+    /// An iceoryx2 port or node could not be made, or a command not sent.
+    #[error("{what}: {detail}")]
+    Port {
+        /// What was being done.
+        what: &'static str,
+        /// iceoryx2's reason.
+        detail: String,
+    },
+    /// The daemon's service exists: another daemon runs with the prefix.
+    #[error(
+        "cannot create the service {service:?} ({detail}): another sard runs with the prefix {prefix:?}"
+    )]
+    DaemonRuns {
+        /// The prefix.
+        prefix: String,
+        /// The service that exists.
+        service: String,
+        /// iceoryx2's reason.
+        detail: String,
+    },
+    /// A client found no daemon's service.
+    #[error("no daemon runs (cannot open the service {service:?}: {detail})")]
+    NoDaemon {
+        /// The service that is missing.
+        service: String,
+        /// iceoryx2's reason.
+        detail: String,
+    },
+    /// The daemon did not reply in time.
+    #[error("no reply from the daemon within {timeout_ms} ms")]
+    NoReply {
+        /// How long the client waited, ms.
+        timeout_ms: u128,
+    },
+    /// The publishing thread could not be started, or ended at start.
+    #[error("the publishing thread: {detail}")]
+    Thread {
+        /// Why.
+        detail: String,
+    },
 }
 
-fn service_name(name: &str) -> Result<ServiceName, String> {
-    ServiceName::new(name).map_err(|e| msg(&format!("bad service name {name:?}"), e))
+fn port(what: &'static str, e: impl std::fmt::Debug) -> ShmError {
+    ShmError::Port {
+        what,
+        detail: format!("{e:?}"),
+    }
+}
+
+fn service_name(name: &str) -> Result<ServiceName, ShmError> {
+    ServiceName::new(name).map_err(|e| ShmError::ServiceName {
+        name: name.to_owned(),
+        detail: format!("{e:?}"),
+    })
 }
 
 /// A node without iceoryx2's own signal handlers (the daemon has its own).
-pub fn node() -> Result<Node<ipc::Service>, String> {
+pub fn node() -> Result<Node<ipc::Service>, ShmError> {
     NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
-        .map_err(|e| msg("cannot create the iceoryx2 node", e))
+        .map_err(|e| port("cannot create the iceoryx2 node", e))
 }
 
 /// Removes the resources of dead nodes; returns how many were cleaned.
@@ -201,10 +260,12 @@ impl std::fmt::Debug for ShmWorker {
     }
 }
 
-fn exists(prefix: &str, service: &str, e: impl std::fmt::Debug) -> String {
-    format!(
-        "cannot create the service {service:?} ({e:?}): another sard runs with the prefix {prefix:?}"
-    )
+fn exists(prefix: &str, service: &str, e: impl std::fmt::Debug) -> ShmError {
+    ShmError::DaemonRuns {
+        prefix: prefix.to_owned(),
+        service: service.to_owned(),
+        detail: format!("{e:?}"),
+    }
 }
 
 impl ShmWorker {
@@ -216,7 +277,7 @@ impl ShmWorker {
         limits_n: [f64; 6],
         states: rtrb::Consumer<StateMsg>,
         shared: Arc<Shared>,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, ShmError> {
         let cleaned = clean_dead_nodes();
         if cleaned > 0 {
             tracing::info!("removed the shared-memory resources of {cleaned} dead process(es)");
@@ -241,7 +302,7 @@ impl ShmWorker {
             // oldest sample is replaced anyway).
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
-            .map_err(|e| msg("cannot create the state publisher", e))?;
+            .map_err(|e| port("cannot create the state publisher", e))?;
         let event = node
             .service_builder(&service_name(&names.event)?)
             .event()
@@ -252,7 +313,7 @@ impl ShmWorker {
         let notifier = event
             .notifier_builder()
             .create()
-            .map_err(|e| msg("cannot create the state notifier", e))?;
+            .map_err(|e| port("cannot create the state notifier", e))?;
         let command = node
             .service_builder(&service_name(&names.command)?)
             .request_response::<CommandMsg, ReplyMsg>()
@@ -267,7 +328,7 @@ impl ShmWorker {
         let server = command
             .server_builder()
             .create()
-            .map_err(|e| msg("cannot create the command server", e))?;
+            .map_err(|e| port("cannot create the command server", e))?;
         Ok(Self {
             _node: node,
             publisher,
@@ -423,10 +484,10 @@ impl DaemonShm {
     /// this moment: `sard` calls this before the loop thread switches to
     /// SCHED_FIFO and pins itself, so the publishing thread runs at normal
     /// priority and never competes with the loop.
-    pub fn create(prefix: &str, operator: Operator, limits_n: [f64; 6]) -> Result<Self, String> {
+    pub fn create(prefix: &str, operator: Operator, limits_n: [f64; 6]) -> Result<Self, ShmError> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
-        let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), String>>(1);
+        let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), ShmError>>(1);
         let thread = {
             let (prefix, shared) = (prefix.to_owned(), shared.clone());
             std::thread::Builder::new()
@@ -442,11 +503,15 @@ impl DaemonShm {
                         }
                     }
                 })
-                .map_err(|e| format!("cannot start the publishing thread: {e}"))?
+                .map_err(|e| ShmError::Thread {
+                    detail: format!("cannot start it: {e}"),
+                })?
         };
-        let started = ready_rx
-            .recv()
-            .unwrap_or_else(|_| Err("the publishing thread ended at start".into()));
+        let started = ready_rx.recv().unwrap_or_else(|_| {
+            Err(ShmError::Thread {
+                detail: "it ended at start".to_owned(),
+            })
+        });
         if let Err(e) = started {
             let _ = thread.join();
             return Err(e);
@@ -467,7 +532,7 @@ impl DaemonShm {
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
-    ) -> Result<(Self, ShmWorker), String> {
+    ) -> Result<(Self, ShmWorker), ShmError> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
         let worker = ShmWorker::create(prefix, operator, limits_n, consumer, shared.clone())?;
@@ -556,7 +621,7 @@ pub struct Client {
 }
 
 /// Why a client call failed.
-pub type ClientError = String;
+pub type ClientError = ShmError;
 
 impl Client {
     /// A client for the daemon with `prefix`.
@@ -567,8 +632,11 @@ impl Client {
         })
     }
 
-    fn no_daemon(&self, service: &str, e: impl std::fmt::Debug) -> String {
-        format!("no daemon runs (cannot open the service {service:?}: {e:?})")
+    fn no_daemon(&self, service: &str, e: impl std::fmt::Debug) -> ShmError {
+        ShmError::NoDaemon {
+            service: service.to_owned(),
+            detail: format!("{e:?}"),
+        }
     }
 
     /// Subscribes to the state; `Err` when no daemon runs.
@@ -583,7 +651,7 @@ impl Client {
             .subscriber_builder()
             .buffer_size(STATE_BUFFER)
             .create()
-            .map_err(|e| msg("cannot subscribe to the state", e))?;
+            .map_err(|e| port("cannot subscribe to the state", e))?;
         let event = self
             .node
             .service_builder(&service_name(&self.names.event)?)
@@ -593,7 +661,7 @@ impl Client {
         let listener = event
             .listener_builder()
             .create()
-            .map_err(|e| msg("cannot listen to the state event", e))?;
+            .map_err(|e| port("cannot listen to the state event", e))?;
         Ok(StateSubscription {
             subscriber,
             listener,
@@ -611,10 +679,10 @@ impl Client {
         let client = service
             .client_builder()
             .create()
-            .map_err(|e| msg("cannot create the command client", e))?;
+            .map_err(|e| port("cannot create the command client", e))?;
         let pending = client
             .send_copy(command)
-            .map_err(|e| msg("cannot send the command", e))?;
+            .map_err(|e| port("cannot send the command", e))?;
         let start = std::time::Instant::now();
         while start.elapsed() < timeout {
             if let Ok(Some(reply)) = pending.receive() {
@@ -622,10 +690,9 @@ impl Client {
             }
             std::thread::sleep(Duration::from_millis(1));
         }
-        Err(format!(
-            "no reply from the daemon within {} ms",
-            timeout.as_millis()
-        ))
+        Err(ShmError::NoReply {
+            timeout_ms: timeout.as_millis(),
+        })
     }
 }
 
