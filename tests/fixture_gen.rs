@@ -14,9 +14,10 @@
 //!   runner: only `/sar/sensor/wrench` and `/sar/joints` (as another
 //!   program would record them) and the truth at each sample's measure time.
 
+use sar_config as config;
 use sar_daemon::record::convert;
 use sar_daemon::record::{FileOptions, RotatingWriter};
-use sar_daemon::{config, sim};
+use sar_daemon::sim;
 use sar_drivers::runner::{RunOptions, run};
 use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};

@@ -16,7 +16,7 @@
     clippy::needless_range_loop
 )]
 
-use sar_daemon::config::{self, Config};
+use sar_config::Config;
 use sar_daemon::identify::{
     self, Identified, IdentifyError, IdentifyOptions, find_dwells, identify_dwells, plot, writeback,
 };
@@ -66,7 +66,7 @@ noise_n = [0.2, 0.2, 0.8]              # force noise std per sensor axis, N
 }
 
 fn config(support: [f64; 3]) -> Config {
-    config::parse(&minimal_config(support), "test").unwrap_or_else(|e| panic!("{e}"))
+    sar_config::parse(&minimal_config(support), "test").unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn fixture(name: &str) -> PathBuf {
@@ -315,7 +315,7 @@ fn the_write_back_keeps_comments_and_key_order() {
         }
     }
     assert!(new.contains("mass_kg = 2.59"), "{new}");
-    let cfg = config::parse(&new, "written").unwrap();
+    let cfg = sar_config::parse(&new, "written").unwrap();
     let profile = cfg.estimator.profile;
     assert!((profile.mass_kg() - r.mass_kg).abs() < 1e-5);
     assert!((profile.com_m() - r.com_m).abs() < 1e-6);

@@ -57,7 +57,7 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn options(output: Option<PathBuf>, compare: Option<&str>) -> ReplayOptions {
-    let cfg = sar_daemon::config::load(&fixture("config.toml")).unwrap();
+    let cfg = sar_config::load(&fixture("config.toml")).unwrap();
     ReplayOptions {
         output,
         compare: compare.map(str::to_owned),
@@ -76,7 +76,7 @@ fn regenerate_fixtures() {
     );
     let dir = replay_dir();
     std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(dir.join("config.toml"), sar_daemon::config::DEFAULT_TOML).unwrap();
+    std::fs::write(dir.join("config.toml"), sar_config::DEFAULT_TOML).unwrap();
     let contact = scenarios_dir().join("random_contact_manipulator_2.toml");
     let fault = scenarios_dir().join("fault_encoder_jump.toml");
     fixture_gen::daemon_recording(

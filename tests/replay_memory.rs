@@ -122,7 +122,7 @@ fn mb(rss: Option<(u64, u64)>) -> String {
 fn measure(dir: &Path, cycles: u64) -> (u64, u64, u64) {
     let path = dir.join(format!("rec-{cycles}.mcap"));
     let len = record(&path, cycles);
-    let cfg = sar_daemon::config::builtin().unwrap();
+    let cfg = sar_config::builtin().unwrap();
     let options = ReplayOptions::from_config(&cfg);
     let (rss_streamed, (streamed, r)) =
         peak_rss_of(|| peak_of(|| replay_file(&path, &options).unwrap()));
@@ -190,7 +190,7 @@ fn inputs_only(daemon: &Path, path: &Path) -> (u64, u64) {
 fn the_peak_heap_of_an_inputs_only_replay_does_not_grow_with_the_recording() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch("replay_memory_inputs");
-    let cfg = sar_daemon::config::builtin().unwrap();
+    let cfg = sar_config::builtin().unwrap();
     let options = ReplayOptions::from_config(&cfg);
     let mut peaks = Vec::new();
     for cycles in [3_000, 30_000] {
@@ -233,7 +233,7 @@ fn peak_heap_for_a_one_minute_and_a_one_hour_recording() {
         let path = dir.join(format!("inputs-{cycles}.mcap"));
         let (len, _) = inputs_only(&daemon, &path);
         std::fs::remove_file(&daemon).unwrap();
-        let cfg = sar_daemon::config::builtin().unwrap();
+        let cfg = sar_config::builtin().unwrap();
         let options = ReplayOptions::from_config(&cfg);
         let (rss, (streamed, r)) =
             peak_rss_of(|| peak_of(|| replay_file(&path, &options).unwrap()));

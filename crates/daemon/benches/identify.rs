@@ -146,7 +146,7 @@ fn bench(c: &mut Criterion) {
     let dir = std::env::temp_dir().join(format!("sar-bench-identify-{}", std::process::id()));
     let bytes = synthesise(&dir);
     std::fs::remove_dir_all(&dir).unwrap();
-    let config = sar_daemon::config::parse(CONFIG, "bench").unwrap();
+    let config = sar_config::parse(CONFIG, "bench").unwrap();
     let options = IdentifyOptions::default();
     // The result must be right before its time means anything.
     let r = identify::identify(&bytes, &config, &options).unwrap();

@@ -6,7 +6,8 @@
 
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::MonotonicClock;
 use sar_loop::control::{Controller, Operator};
 use sar_loop::notify::Watchdog;

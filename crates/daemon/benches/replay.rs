@@ -37,10 +37,11 @@
 mod common;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use sar_config as config;
 use sar_daemon::record::convert;
 use sar_daemon::record::replay::{ReplayOptions, replay, replay_file};
 use sar_daemon::record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
-use sar_daemon::{config, sim};
+use sar_daemon::sim;
 use sar_drivers::{DriveState, SimClock};
 use sar_loop::control::{Controller, Operator, Request};
 use sar_loop::logq;

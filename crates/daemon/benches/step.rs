@@ -14,7 +14,8 @@
 )]
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_drivers::sim::{Tissue, TissueModel};
 use sar_estimator::Vec3;

@@ -4,7 +4,7 @@
 //! the per-cycle hook of the CANopen drives ([`canopen_cycle`]), which the
 //! controller calls once per period in its gather phase.
 
-use crate::config::{AxesDriver, Config, SensorDriver};
+use sar_config::{AxesDriver, Config, SensorDriver};
 use sar_drivers::canopen::{CanOpenConfig, CanOpenDrives};
 use sar_drivers::rdt::{RdtConfig, RdtSensor};
 use sar_drivers::{AxisDrives, Clock, DriveState, ForceSensor};

@@ -4,7 +4,6 @@
 //! binaries `sard` and `sarctl` are thin shells over it.
 
 pub mod cli;
-pub mod config;
 pub mod devices;
 pub mod identify;
 pub mod record;

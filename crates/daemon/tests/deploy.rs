@@ -12,7 +12,7 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::config::{self, AxesDriver, SensorDriver};
+use sar_config::{self as config, AxesDriver, SensorDriver};
 use sar_daemon::sim;
 use sar_drivers::ForceSensor;
 use sar_drivers::rdt::emulator::{Emulator, EmulatorConfig, Pacing};

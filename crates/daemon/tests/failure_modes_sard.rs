@@ -24,7 +24,8 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::ForceSensor;
 use sar_drivers::rdt::emulator::{Emulator, EmulatorConfig, Pacing, SensorFault};
 use sar_loop::rt;

@@ -4,7 +4,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_estimator::guard::{GuardState, Reason};
 use sar_loop::control::{Controller, Operator};

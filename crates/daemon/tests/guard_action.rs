@@ -5,7 +5,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::sim::{SimDrives, SimError};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
 use sar_estimator::Vec3;

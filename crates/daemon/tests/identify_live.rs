@@ -125,7 +125,7 @@ fn identify_live_writes_back_the_simulated_manipulator() {
     assert!((m - 2.593).abs() < 0.01 * 2.593, "m {m}");
     assert!((c - 0.103).abs() < 0.01 * 0.103, "c {c}");
     assert!((b - 0.20).abs() < 0.3e-3, "B_y {b}");
-    let written = sar_daemon::config::load(&config_path).unwrap();
+    let written = sar_config::load(&config_path).unwrap();
     assert!((written.estimator.profile.mass_kg() - m).abs() < 1e-5);
     let text = std::fs::read_to_string(&config_path).unwrap();
     assert!(text.contains("# m (written by `sarctl identify`)"));
@@ -159,7 +159,7 @@ fn identify_live_works_with_the_readme_recipe() {
     let dir = std::env::temp_dir().join(&prefix);
     std::fs::create_dir_all(&dir).unwrap();
     let config_path = dir.join("my-sim.toml");
-    std::fs::write(&config_path, sar_daemon::config::DEFAULT_TOML).unwrap();
+    std::fs::write(&config_path, sar_config::DEFAULT_TOML).unwrap();
     let scenario = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../scenarios/identify_cone_manipulator_2.toml");
     let _daemon = Daemon(
@@ -221,7 +221,10 @@ fn identify_live_refuses_the_demo_contact_at_once() {
     let out = Command::new(SARCTL)
         .args(["identify", "--live", "--yes", "--dry-run"])
         .arg("--config")
-        .arg(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/default_config.toml"))
+        .arg(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../config/src/default_config.toml"),
+        )
         .env("SAR_SERVICE_PREFIX", &prefix)
         .output()
         .unwrap();

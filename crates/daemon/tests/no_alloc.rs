@@ -7,7 +7,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;

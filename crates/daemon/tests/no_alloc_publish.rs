@@ -16,7 +16,8 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_loop::control::{Controller, Operator, ReplyStatus};
 use sar_loop::sink::{Cycle, Sink, SinkHealth};

@@ -13,10 +13,12 @@
 )]
 
 mod common;
-use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
+use sar_config as config;
+use sar_config::{RecordSettings, Rotation};
+use sar_daemon::record::live::{RecordManager, RecordSwitch};
 use sar_daemon::record::replay::{Mode, ReplayOptions, replay_file};
-use sar_daemon::record::{McapReader, Rotation, read_file};
-use sar_daemon::{config, sim};
+use sar_daemon::record::{McapReader, read_file};
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
@@ -71,11 +73,12 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             // 4500 cycles of at most 8 messages: never full, whatever the
             // writer's speed.
             queue_capacity: 65536,
-            scene: None,
+            scene_period_ns: None,
             // A snapshot every 100 ms: the loop takes and pushes 45.
             snapshot_period_ns: 100_000_000,
             config_source: None,
         },
+        None,
         bias,
         Arc::clone(&switch),
     )

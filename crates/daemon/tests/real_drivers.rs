@@ -13,7 +13,8 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::{config, devices, sim};
+use sar_config as config;
+use sar_daemon::{devices, sim};
 use sar_drivers::canopen::{
     CanOpenDrives, FOLLOWING_WINDOW_M, MemBus, MemCan, SimCia402Drive, SimDriveSpec, frame,
 };
@@ -204,8 +205,9 @@ fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
 /// cycle's step used (`/sar/cycle/input`) is among them.
 #[test]
 fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
-    use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
-    use sar_daemon::record::{McapReader, Rotation, read_file};
+    use sar_config::{RecordSettings, Rotation};
+    use sar_daemon::record::live::{RecordManager, RecordSwitch};
+    use sar_daemon::record::{McapReader, read_file};
     use sar_loop::sink::{Cycle, Sink, SinkHealth};
     use sar_loop::stats::LoopStats;
     use sar_msgs::msgs::{CycleInput, RosMessage, Topic, WrenchStamped};
@@ -220,10 +222,11 @@ fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
             directory: dir.clone(),
             rotation: Rotation::default(),
             queue_capacity: 65536,
-            scene: None,
+            scene_period_ns: None,
             snapshot_period_ns: 1_000_000_000,
             config_source: None,
         },
+        None,
         sar_estimator::cycle::Bias::force_only(Vec3::zeros()),
         Arc::clone(&switch),
     )

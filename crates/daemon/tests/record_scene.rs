@@ -26,7 +26,7 @@ use std::path::PathBuf;
 #[test]
 fn replay_outputs_carry_the_scene_of_their_cycles() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let cfg = sar_daemon::config::load(&root.join("tests/fixtures/replay/config.toml")).unwrap();
+    let cfg = sar_config::load(&root.join("tests/fixtures/replay/config.toml")).unwrap();
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("record_scene");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();

@@ -72,13 +72,13 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     let dir = common::scratch("replay_cli_e2e");
     let rec_dir = dir.join("rec");
     let config = dir.join("sim.toml");
-    let toml = sar_daemon::config::DEFAULT_TOML
+    let toml = sar_config::DEFAULT_TOML
         .replace("[record]\nenabled = false", "[record]\nenabled = true")
         .replace(
             "directory = \"recordings\"",
             &format!("directory = {:?}", rec_dir.display().to_string()),
         );
-    assert_ne!(toml, sar_daemon::config::DEFAULT_TOML);
+    assert_ne!(toml, sar_config::DEFAULT_TOML);
     std::fs::write(&config, toml).unwrap();
     let prefix = format!("sar-rec-{}", std::process::id());
     let daemon = Daemon(
@@ -168,7 +168,7 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     // The one started on request is a complete, readable recording too; it
     // says that it starts after the daemon's first cycle, and replays bit
     // for bit from the snapshot it starts with (issue 17).
-    let cfg = sar_daemon::config::load(&config).unwrap();
+    let cfg = sar_config::load(&config).unwrap();
     let r = sar_daemon::record::replay::replay_file(
         &files[1],
         &sar_daemon::record::replay::ReplayOptions::from_config(&cfg),

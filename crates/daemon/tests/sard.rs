@@ -66,7 +66,7 @@ fn collect(sock: &UnixDatagram, limit: Duration, until: impl Fn(&[String]) -> bo
 #[test]
 fn check_config_accepts_a_good_file_and_names_the_key_of_a_bad_one() {
     let good = temp_path("good.toml");
-    std::fs::write(&good, sar_daemon::config::DEFAULT_TOML).unwrap();
+    std::fs::write(&good, sar_config::DEFAULT_TOML).unwrap();
     let out = Command::new(SARD)
         .arg("--check-config")
         .arg(&good)
@@ -80,7 +80,7 @@ fn check_config_accepts_a_good_file_and_names_the_key_of_a_bad_one() {
     let bad = temp_path("bad.toml");
     std::fs::write(
         &bad,
-        sar_daemon::config::DEFAULT_TOML.replace("stop_total_n = 15.0", "stop_total = 15.0"),
+        sar_config::DEFAULT_TOML.replace("stop_total_n = 15.0", "stop_total = 15.0"),
     )
     .unwrap();
     let out = Command::new(SARD)

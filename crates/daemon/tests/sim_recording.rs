@@ -72,13 +72,13 @@ fn count(file: &Path, topic: &str) -> u64 {
 pub fn sim_recording(dir: &Path, cycles: u64) -> PathBuf {
     let rec_dir = dir.join("rec");
     let config = dir.join("sim.toml");
-    let toml = sar_daemon::config::DEFAULT_TOML
+    let toml = sar_config::DEFAULT_TOML
         .replace("[record]\nenabled = false", "[record]\nenabled = true")
         .replace(
             "directory = \"recordings\"",
             &format!("directory = {:?}", rec_dir.display().to_string()),
         );
-    assert_ne!(toml, sar_daemon::config::DEFAULT_TOML);
+    assert_ne!(toml, sar_config::DEFAULT_TOML);
     std::fs::write(&config, toml).unwrap();
     let out = Command::new(SARD)
         .args(["--sim", "--config"])
@@ -175,7 +175,7 @@ fn a_record_start_of_the_builtin_configuration_names_it_when_replayed() {
         .unwrap()
         .unwrap();
     assert_eq!(source.origin, "the built-in configuration");
-    assert_eq!(source.toml, sar_daemon::config::DEFAULT_TOML);
+    assert_eq!(source.toml, sar_config::DEFAULT_TOML);
     assert!(count(&rec[0], "/sar/sim/tip_wrench_truth") > 0);
     // Replayed with the recorded configuration: it started after the first
     // cycle, from the snapshot it begins with, bit for bit (exit 0).

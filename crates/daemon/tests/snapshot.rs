@@ -14,7 +14,8 @@
 )]
 
 mod common;
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;

@@ -13,10 +13,12 @@
 )]
 
 mod common;
-use sar_daemon::record::live::{RecordManager, RecordSettings, RecordSwitch};
+use sar_config as config;
+use sar_config::{RecordSettings, Rotation};
+use sar_daemon::record::live::{RecordManager, RecordSwitch};
 use sar_daemon::record::replay::{ReplayError, ReplayOptions, replay_file, replay_files};
-use sar_daemon::record::{McapReader, Rotation, read_file};
-use sar_daemon::{config, sim};
+use sar_daemon::record::{McapReader, read_file};
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState};
@@ -69,10 +71,11 @@ fn session(name: &str) -> Vec<PathBuf> {
                 max_duration_ns: Some(1_000_000_000),
             },
             queue_capacity: 65536,
-            scene: None,
+            scene_period_ns: None,
             snapshot_period_ns: 250_000_000,
             config_source: None,
         },
+        None,
         bias,
         Arc::clone(&switch),
     )

@@ -17,7 +17,8 @@
 
 mod common;
 use common::mix;
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::sim::{ContactKey, SimDrives, SimError};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
 use sar_estimator::Vec3;

@@ -140,7 +140,7 @@ fn every_fixture_decodes_with_the_strict_readers() {
 #[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
 fn a_replay_output_decodes_with_the_strict_readers() {
     let root = readers::repo_root();
-    let cfg = sar_daemon::config::load(&root.join("tests/fixtures/replay/config.toml")).unwrap();
+    let cfg = sar_config::load(&root.join("tests/fixtures/replay/config.toml")).unwrap();
     let dir = common::scratch("strict_replay");
     let out = dir.join("out.mcap");
     let mut options = ReplayOptions::from_config(&cfg);
@@ -162,13 +162,13 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     let dir = common::scratch("strict_sard");
     let rec_dir = dir.join("rec");
     let config = dir.join("sim.toml");
-    let toml = sar_daemon::config::DEFAULT_TOML
+    let toml = sar_config::DEFAULT_TOML
         .replace("[record]\nenabled = false", "[record]\nenabled = true")
         .replace(
             "directory = \"recordings\"",
             &format!("directory = {:?}", rec_dir.display().to_string()),
         );
-    assert_ne!(toml, sar_daemon::config::DEFAULT_TOML);
+    assert_ne!(toml, sar_config::DEFAULT_TOML);
     std::fs::write(&config, toml).unwrap();
     // 3 s of the demo on the simulator, then sard ends and closes the file.
     let out = Command::new(SARD)

@@ -12,7 +12,7 @@
     clippy::panic
 )]
 
-use sar_daemon::config;
+use sar_config as config;
 use sar_drivers::canopen::{self, SimCia402Drive, SimDriveSpec};
 use sar_drivers::{Clock, MonotonicClock};
 use std::process::Command;

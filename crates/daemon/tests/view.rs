@@ -400,7 +400,7 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
     assert_eq!(WrenchStamped::decode(&payload).unwrap().stamp_ns, log_time);
     drop(legacy);
 
-    let cfg = sar_daemon::config::builtin().unwrap();
+    let cfg = sar_config::builtin().unwrap();
     let (cal, prof) = (&cfg.estimator.calibration, &cfg.estimator.profile);
     let geometry = SceneGeometry::from_config(&cfg.estimator);
 

@@ -40,7 +40,7 @@ fn entity<'a>(s: &'a SceneUpdate, id: &str) -> &'a SceneEntity {
 
 /// The built-in configuration with the rod offset `d`.
 fn config(d: f64) -> sar_estimator::cycle::EstimatorConfig {
-    let mut cfg = sar_daemon::config::builtin().unwrap().estimator;
+    let mut cfg = sar_config::builtin().unwrap().estimator;
     cfg.profile = Profile::new(&ProfileSpec {
         offset_m: d,
         ..cfg.profile.spec()

@@ -385,7 +385,7 @@ fn run(args: &Args) -> Result<(), String> {
         _ => {}
     }
     if let Some(path) = &args.config {
-        sar_daemon::config::load(path).map_err(|e| e.to_string())?;
+        sar_config::load(path).map_err(|e| e.to_string())?;
     }
     if let Cmd::Completions { shell } = &args.command {
         let mut cmd = <Args as clap::CommandFactory>::command();
@@ -399,8 +399,8 @@ fn run(args: &Args) -> Result<(), String> {
     }
     if let Cmd::Workspace = &args.command {
         let cfg = match &args.config {
-            Some(path) => sar_daemon::config::load(path).map_err(|e| e.to_string())?,
-            None => sar_daemon::config::builtin().map_err(|e| e.to_string())?,
+            Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
+            None => sar_config::builtin().map_err(|e| e.to_string())?,
         };
         let present = Client::new(&args.prefix)
             .and_then(|c| c.subscribe())

@@ -2,8 +2,10 @@
 //! the configuration, or on the simulated robot (`--sim`).
 
 use clap::Parser;
+use sar_config as config;
+use sar_daemon::record::SceneOptions;
 use sar_daemon::record::live::{LiveRecorder, RecordManager, RecordSwitch};
-use sar_daemon::{config, devices, sim};
+use sar_daemon::{devices, sim};
 use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::Bias;
@@ -180,6 +182,7 @@ fn run(args: &Args) -> Result<(), String> {
     let switch = std::sync::Arc::new(RecordSwitch::default());
     let (recording, recorder) = RecordManager::start(
         cfg.record.clone(),
+        SceneOptions::from_config(&cfg),
         start_bias,
         std::sync::Arc::clone(&switch),
     )?;

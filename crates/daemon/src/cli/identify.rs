@@ -119,8 +119,8 @@ pub fn run(
         config_path.ok_or("identify needs --config FILE (the configuration to identify for)")?;
     let text = std::fs::read_to_string(config_path)
         .map_err(|e| format!("{}: {e}", config_path.display()))?;
-    let config = crate::config::parse(&text, &config_path.display().to_string())
-        .map_err(|e| e.to_string())?;
+    let config =
+        sar_config::parse(&text, &config_path.display().to_string()).map_err(|e| e.to_string())?;
     let options = args.options()?;
     let result = match &args.input {
         Some(input) => identify::identify_file(input, &config, &options)
@@ -141,7 +141,7 @@ pub fn run(
         let new = writeback::write_back(&text, result.mass_kg, result.com_m, result.support_m)
             .map_err(|e| format!("{}: {e}", config_path.display()))?;
         // The new text must still be a valid configuration before it replaces the old.
-        crate::config::parse(&new, &config_path.display().to_string())
+        sar_config::parse(&new, &config_path.display().to_string())
             .map_err(|e| format!("the written configuration would be refused: {e}"))?;
         let tmp = config_path.with_extension("toml.identify-tmp");
         std::fs::write(&tmp, &new).map_err(|e| format!("{}: {e}", tmp.display()))?;
@@ -161,10 +161,10 @@ pub fn run(
 /// The live procedure against a running daemon.
 mod live {
     use super::IdentifyArgs;
-    use crate::config::Config;
     use crate::identify::IdentifyOptions;
     use crate::identify::dwell::{Dwell, DwellFinder, SensorAverager};
     use crate::identify::poses::{self, PoseTarget};
+    use sar_config::Config;
     use sar_kinematics::{Mat3, Vec3};
     use sar_msgs::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
     use sar_shm::{Client, StateSubscription};

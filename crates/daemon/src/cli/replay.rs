@@ -71,7 +71,7 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
     let inputs = input_files(a.input)?;
     let first = inputs.first().ok_or("replay needs --input REC.mcap")?;
     let cfg = match a.config {
-        Some(path) => crate::config::load(path).map_err(|e| e.to_string())?,
+        Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
         None => {
             let source = crate::record::replay::recorded_config(first)
                 .map_err(|e| e.to_string())?
@@ -86,7 +86,7 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
                 first.display(),
                 source.origin
             );
-            crate::config::parse(&source.toml, &origin).map_err(|e| e.to_string())?
+            sar_config::parse(&source.toml, &origin).map_err(|e| e.to_string())?
         }
     };
     let options = ReplayOptions {

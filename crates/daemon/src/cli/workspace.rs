@@ -8,7 +8,7 @@
 //! reach when it needs two or three axes at once: the ranges are a guide,
 //! `move-tip` judges.
 
-use crate::config::Config;
+use sar_config::Config;
 use sar_kinematics::{ActiveJoints, forward};
 use serde_json::json;
 

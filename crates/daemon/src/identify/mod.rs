@@ -25,9 +25,9 @@ pub mod plot;
 pub mod poses;
 pub mod writeback;
 
-use crate::config::Config;
 use crate::record::{McapReader, ReadError};
 use dwell::{Dwell, DwellFinder, DwellOptions, SensorAverager};
+use sar_config::Config;
 use sar_estimator::identification::{
     Identification, IdentificationError, IdentificationOptions, IdentificationResult,
 };

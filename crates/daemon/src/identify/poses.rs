@@ -13,7 +13,7 @@
 //! (`not_observable`) while the daemon holds it. `sarctl identify --live`
 //! drives the daemon through this set.
 
-use crate::config::Config;
+use sar_config::Config;
 use sar_estimator::tip_force::TipForceEstimator;
 use sar_kinematics::{ActiveJoints, Vec3, forward};
 
@@ -143,7 +143,7 @@ mod tests {
 
     #[test]
     fn the_builtin_robot_gets_the_cone_set_clear_of_the_observability_limit() {
-        let config = crate::config::builtin().unwrap();
+        let config = sar_config::builtin().unwrap();
         let set = cone_set(&config).unwrap();
         let holds: Vec<&PoseTarget> = set.iter().filter(|p| !p.turnaround).collect();
         assert_eq!(holds.len(), 20);
@@ -195,7 +195,7 @@ mod tests {
 
     #[test]
     fn a_small_travel_shrinks_the_set_or_is_refused() {
-        let mut config = crate::config::builtin().unwrap();
+        let mut config = sar_config::builtin().unwrap();
         // q2 (height) within 0.1 m of the support's: the 35 degree cone at
         // a = 0.30 needs 0.17 m; with the distances beyond 0.04 m halved
         // (0.17 m at most) it fits.

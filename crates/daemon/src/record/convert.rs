@@ -12,6 +12,7 @@
 //! Every message of a cycle is stamped with the cycle's `now` ([`cycle_stamp_ns`]).
 //! Nothing here allocates (the recorder's push side calls it every cycle).
 
+use sar_config::ConfigSource;
 use sar_drivers::DriveState;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{Bias, CycleInput, CycleOutput, JointSample, SensorSample, TipOutcome};
@@ -445,17 +446,6 @@ pub fn replay_metadata(
 
 /// The name of the metadata record that holds the daemon's configuration.
 pub const CONFIG_METADATA: &str = "sar_config";
-
-/// A configuration's text and where it came from, as a recording carries it
-/// ([`CONFIG_METADATA`]): what `sarctl replay` runs with when given no
-/// `--config`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ConfigSource {
-    /// Where it came from (a path, or "the built-in configuration").
-    pub origin: String,
-    /// The TOML text, as read.
-    pub toml: String,
-}
 
 /// `sar_config` metadata: `origin` and `toml`.
 pub fn config_metadata(

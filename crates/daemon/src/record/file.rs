@@ -17,6 +17,7 @@
 use crate::view::geometry::SceneGeometry;
 #[cfg(feature = "view")]
 use crate::view::scene;
+use sar_config::Rotation;
 use sar_msgs::msgs::{
     EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
     StateSnapshot, Topic,
@@ -101,17 +102,6 @@ pub fn scene_path(path: &Path) -> PathBuf {
     path.with_extension("scene.mcap")
 }
 
-/// When to start a new file. A file is closed before the message that would
-/// take it past either limit (size is counted at chunk granularity: the bytes
-/// on disk, which grow a chunk at a time).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Rotation {
-    /// Bytes on disk after which the next chunk starts a new file.
-    pub max_bytes: Option<u64>,
-    /// Log-time span after which a new file starts, ns.
-    pub max_duration_ns: Option<u64>,
-}
-
 /// The 3D scene written beside the recorded topics.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SceneOptions {
@@ -122,6 +112,27 @@ pub struct SceneOptions {
     pub limits_n: [f64; 6],
     /// At most one scene per this much log time, ns (33 333 333: 30 Hz).
     pub period_ns: u64,
+}
+
+impl SceneOptions {
+    /// The scene the configuration asks for (`[record] scene_hz`), drawn
+    /// from its geometry and limits. `None` when it asks for none, or when
+    /// this build has no cargo feature `view` (the Foxglove SDK): `sard` is
+    /// built without it and writes none (said once in the log, here).
+    pub fn from_config(config: &sar_config::Config) -> Option<Self> {
+        let period_ns = config.record.scene_period_ns?;
+        if !cfg!(feature = "view") {
+            tracing::info!(
+                "[record] scene_hz: no 3D scene beside recordings (NAME.scene.mcap): this build has no `view` feature"
+            );
+            return None;
+        }
+        Some(Self {
+            geometry: SceneGeometry::from_config(&config.estimator),
+            limits_n: config.estimator.guard.force_limits().to_array(),
+            period_ns,
+        })
+    }
 }
 
 /// How files are written.

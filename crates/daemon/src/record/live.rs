@@ -24,9 +24,10 @@
 //! `--config`.
 
 use super::convert;
-use super::file::{FileOptions, Rotation};
+use super::file::{FileOptions, SceneOptions};
 use super::recorder::{Recorder, RecorderConfig};
 use crossbeam_queue::ArrayQueue;
+use sar_config::RecordSettings;
 use sar_estimator::cycle::Bias;
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_msgs::msgs::{Outgoing, SnapshotChunk, WrenchStamped};
@@ -35,30 +36,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
-
-/// The recording's settings (`[record]` of the configuration).
-#[derive(Debug, Clone, PartialEq)]
-pub struct RecordSettings {
-    /// Record from the daemon's start.
-    pub enabled: bool,
-    /// The directory of the files.
-    pub directory: PathBuf,
-    /// When to start a new file.
-    pub rotation: Rotation,
-    /// Messages the queue holds.
-    pub queue_capacity: usize,
-    /// The live view's 3D scene, in a companion file beside each file
-    /// (`[record] scene_hz`; `NAME.scene.mcap`).
-    pub scene: Option<super::file::SceneOptions>,
-    /// A snapshot of the loop's decision state every this much time, ns
-    /// (`[record] snapshot_s`); one also starts every recording and every
-    /// file of a rotation.
-    pub snapshot_period_ns: u64,
-    /// The configuration's text and where it came from, written into every
-    /// recording (`sar_config` metadata) so that it replays without one
-    /// (`None`: not written).
-    pub config_source: Option<std::sync::Arc<super::convert::ConfigSource>>,
-}
 
 const WANT_NONE: u8 = 0;
 const WANT_START: u8 = 1;
@@ -254,6 +231,7 @@ pub struct RecordManager {
 /// The recorder's file options under `settings` for a recording named `name`.
 fn recorder_config(
     settings: &RecordSettings,
+    scene: Option<SceneOptions>,
     name: &str,
     bias: &Bias,
     first: bool,
@@ -270,7 +248,7 @@ fn recorder_config(
     if let Some(source) = &settings.config_source {
         files.metadata.push(convert::config_metadata(source));
     }
-    files.scene = settings.scene;
+    files.scene = scene;
     // Rotation waits for the next snapshot, or rotates anyway after twice
     // its period and a second more (snapshots dropped).
     files.rotate_at_snapshots_grace_ns = Some(
@@ -302,6 +280,7 @@ impl RecordManager {
     /// daemon's first cycle).
     pub fn start(
         settings: RecordSettings,
+        scene: Option<SceneOptions>,
         bias: Bias,
         switch: Arc<RecordSwitch>,
     ) -> Result<(Self, LiveRecorder), String> {
@@ -311,8 +290,8 @@ impl RecordManager {
         let _ = switch.directory.set(settings.directory.clone());
         if settings.enabled {
             let name = switch.take_name();
-            let rec =
-                Recorder::start(recorder_config(&settings, &name, &bias, true)).map_err(|e| {
+            let rec = Recorder::start(recorder_config(&settings, scene, &name, &bias, true))
+                .map_err(|e| {
                     format!(
                         "cannot start recording into {}: {e}",
                         settings.directory.display()
@@ -335,7 +314,11 @@ impl RecordManager {
             );
             std::thread::Builder::new()
                 .name("sar-record-mgr".into())
-                .spawn(move || manage(&settings, &bias, &switch, &incoming, &outgoing, &stop))
+                .spawn(move || {
+                    manage(
+                        &settings, scene, &bias, &switch, &incoming, &outgoing, &stop,
+                    )
+                })
                 .map_err(|e| format!("cannot start the recording thread: {e}"))?
         };
         Ok((
@@ -385,6 +368,7 @@ fn close(rec: Recorder) {
 
 fn manage(
     settings: &RecordSettings,
+    scene: Option<SceneOptions>,
     bias: &Bias,
     switch: &RecordSwitch,
     incoming: &ArrayQueue<Recorder>,
@@ -420,7 +404,7 @@ fn manage(
             // has no effect (a recording runs or is being handed over).
             let name = switch.take_name();
             if !switch.recording() && incoming.is_empty() {
-                match Recorder::start(recorder_config(settings, &name, bias, false)) {
+                match Recorder::start(recorder_config(settings, scene, &name, bias, false)) {
                     Ok(rec) => {
                         tracing::info!(
                             "recording into {}/{name}-*.mcap",

@@ -19,8 +19,8 @@ pub mod replay;
 pub mod rosbag2;
 
 pub use file::{
-    FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, Rotation, SceneOptions,
-    WriteError, scene_path,
+    FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, SceneOptions, WriteError,
+    scene_path,
 };
 pub use reader::{
     McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,

@@ -82,7 +82,7 @@ pub struct ReplayOptions {
 impl ReplayOptions {
     /// The options of a daemon configuration: nothing written, no
     /// comparison, no series.
-    pub fn from_config(config: &crate::config::Config) -> Self {
+    pub fn from_config(config: &sar_config::Config) -> Self {
         Self {
             config: config.estimator,
             step: config.step_config(),
@@ -696,7 +696,7 @@ fn describe(topic: Topic, cycle: u64, replayed: &Outgoing, recorded: &[u8]) -> D
 
 /// The configuration a recording carries (`sar_config` metadata, written by
 /// `sard` since it records its configuration), `None` when it has none.
-pub fn recorded_config(path: &Path) -> Result<Option<convert::ConfigSource>, ReadError> {
+pub fn recorded_config(path: &Path) -> Result<Option<sar_config::ConfigSource>, ReadError> {
     let bytes = super::reader::read_file(path)?;
     // The metadata is written at the start of a file: read up to the first
     // message to find it.

@@ -67,8 +67,8 @@ pub fn run_cli(
     scene_hz: f64,
 ) -> Result<(), String> {
     let cfg = match config {
-        Some(path) => crate::config::load(path),
-        None => crate::config::builtin(),
+        Some(path) => sar_config::load(path),
+        None => sar_config::builtin(),
     }
     .map_err(|e| e.to_string())?;
     let bind: SocketAddr = bind

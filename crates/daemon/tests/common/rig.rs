@@ -10,7 +10,8 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::{config, sim};
+use sar_config as config;
+use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_drivers::sim::{
     Breathing, ContactKey, SimDrives, SimSensor, Simulator, Tissue, TissueModel, TissueShift,

@@ -2,7 +2,7 @@
 //! as documented, and every bad file is refused naming the file, key and line.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
-use sar_daemon::config::{self, AxesDriver, ConfigError, SensorDriver};
+use sar_config::{self as config, AxesDriver, ConfigError, SensorDriver};
 
 const MINIMUM: &str = r#"
 [geometry]

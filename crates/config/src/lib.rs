@@ -48,7 +48,7 @@ use sar_kinematics::{Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, V
 use sar_loop::runloop::LoopConfig;
 use serde::Deserialize;
 use std::net::SocketAddr;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The configuration of the built-in demo (`sard --sim` without `--config`):
 /// the example robot of INTERFACES.md 2, every optional section written out
@@ -514,9 +514,57 @@ pub struct Config {
     /// The axes' driver.
     pub axes_driver: AxesDriver,
     /// The recording (`[record]`).
-    pub record: crate::record::live::RecordSettings,
+    pub record: RecordSettings,
     /// Force control (`[force_control]`), checked for stability.
     pub force_control: sar_estimator::force_control::ForceControlConfig,
+}
+
+/// The recording's settings (`[record]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordSettings {
+    /// Record from the daemon's start.
+    pub enabled: bool,
+    /// The directory of the files.
+    pub directory: PathBuf,
+    /// When to start a new file.
+    pub rotation: Rotation,
+    /// Messages the queue holds.
+    pub queue_capacity: usize,
+    /// The live view's 3D scene in a companion file beside each file, at
+    /// most one per this much log time, ns (`[record] scene_hz`;
+    /// `NAME.scene.mcap`; `None`: none). The recording draws it from the
+    /// rest of the configuration.
+    pub scene_period_ns: Option<u64>,
+    /// A snapshot of the loop's decision state every this much time, ns
+    /// (`[record] snapshot_s`); one also starts every recording and every
+    /// file of a rotation.
+    pub snapshot_period_ns: u64,
+    /// The configuration's text and where it came from, written into every
+    /// recording (`sar_config` metadata) so that it replays without one
+    /// (`None`: not written).
+    pub config_source: Option<std::sync::Arc<ConfigSource>>,
+}
+
+/// When a recording starts a new file. A file is closed before the message
+/// that would take it past either limit (size is counted at chunk
+/// granularity: the bytes on disk, which grow a chunk at a time).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Rotation {
+    /// Bytes on disk after which the next chunk starts a new file.
+    pub max_bytes: Option<u64>,
+    /// Log-time span after which a new file starts, ns.
+    pub max_duration_ns: Option<u64>,
+}
+
+/// A configuration's text and where it came from, as a recording carries it
+/// (its `sar_config` metadata): what `sarctl replay` runs with when given no
+/// `--config`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigSource {
+    /// Where it came from (a path, or "the built-in configuration").
+    pub origin: String,
+    /// The TOML text, as read.
+    pub toml: String,
 }
 
 /// Reads and checks a configuration file; errors name `path`.
@@ -560,7 +608,7 @@ pub fn parse(text: &str, origin: &str) -> Result<Config, ConfigError> {
         .map_err(|e| ctx.serde_error(&e))?;
     let mut config = build(&ctx, file)?;
     // Recorded with every recording: it replays without hunting for this file.
-    config.record.config_source = Some(std::sync::Arc::new(crate::record::convert::ConfigSource {
+    config.record.config_source = Some(std::sync::Arc::new(ConfigSource {
         origin: origin.to_owned(),
         toml: text.to_owned(),
     }));
@@ -966,35 +1014,15 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
     let scene_hz = ctx.range_f("record.scene_hz", rec.scene_hz, 0.0, 1000.0, "Hz")?;
     let snapshot_s = ctx.range_f("record.snapshot_s", rec.snapshot_s, 0.01, 3600.0, "s")?;
-    // The scene needs the cargo feature `view` (the Foxglove SDK): `sard`
-    // is built without it and writes none (said once here).
-    if scene_hz > 0.0 && !cfg!(feature = "view") {
-        tracing::info!(
-            "[record] scene_hz = {scene_hz}: no 3D scene beside recordings (NAME.scene.mcap): this build has no `view` feature"
-        );
-    }
-    let scene = (scene_hz > 0.0 && cfg!(feature = "view")).then(|| crate::record::SceneOptions {
-        geometry: crate::view::geometry::SceneGeometry::from_config(&EstimatorConfig {
-            calibration,
-            profile,
-            noise,
-            tip: TipForceConfig { max_std_n },
-            guard,
-            plausibility,
-            filter,
-        }),
-        limits_n: guard.force_limits().to_array(),
-        period_ns: (1e9 / scene_hz).round() as u64,
-    });
-    let record = crate::record::live::RecordSettings {
+    let record = RecordSettings {
         enabled: rec.enabled,
         directory: std::path::PathBuf::from(&rec.directory),
-        rotation: crate::record::Rotation {
+        rotation: Rotation {
             max_bytes: (max_mb > 0.0).then(|| (max_mb * 1e6).round() as u64),
             max_duration_ns: (max_s > 0.0).then(|| (max_s * 1e9).round() as u64),
         },
         queue_capacity: usize::try_from(queue_capacity).unwrap_or(65536),
-        scene,
+        scene_period_ns: (scene_hz > 0.0).then(|| (1e9 / scene_hz).round() as u64),
         snapshot_period_ns: (snapshot_s * 1e9).round() as u64,
         config_source: None,
     };
