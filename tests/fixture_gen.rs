@@ -15,8 +15,6 @@
 //!   program would record them) and the truth at each sample's measure time.
 
 use sar_config as config;
-use sar_daemon::record::convert;
-use sar_daemon::record::{FileOptions, RotatingWriter};
 use sar_daemon::sim;
 use sar_drivers::runner::{RunOptions, run};
 use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
@@ -26,6 +24,8 @@ use sar_kinematics::ActiveJoints;
 use sar_loop::control::{Controller, Envelope, Operator, Request};
 use sar_loop::logq;
 use sar_msgs::msgs::{Outgoing, RecorderDrops, WrenchStamped};
+use sar_record::convert;
+use sar_record::{FileOptions, RotatingWriter};
 use std::path::Path;
 
 /// The simulated host clock's start, ns.

@@ -422,8 +422,8 @@ for path in sys.argv[1:]:
 #[test]
 #[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
 fn the_fixtures_decode_with_the_python_reader() {
-    use sar_daemon::record::McapReader;
     use sar_msgs::msgs::{ActiveJointState, WrenchStamped};
+    use sar_record::McapReader;
     let names: Vec<String> = identify_fixtures::all()
         .into_iter()
         .map(|f| f.name)

@@ -29,12 +29,12 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::record::{FileOptions, Outgoing, RotatingWriter};
 use sar_drivers::SimClock;
 use sar_drivers::runner::{EndReason, RunOptions, run};
 use sar_drivers::scenario::{Scenario, parse};
 use sar_drivers::sim::Simulator;
 use sar_msgs::msgs::{ActiveJointState, RecorderDrops, WrenchStamped};
+use sar_record::{FileOptions, Outgoing, RotatingWriter};
 use std::path::{Path, PathBuf};
 
 /// Host time at the start of every run, ns.

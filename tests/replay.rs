@@ -23,10 +23,10 @@
     clippy::indexing_slicing
 )]
 
-use sar_daemon::record::convert::REPLAY_METADATA;
-use sar_daemon::record::replay::{Mode, ReplayOptions, replay, replay_file};
-use sar_daemon::record::{FileOptions, McapReader, RotatingWriter, read_file};
 use sar_msgs::msgs::{DriveActionCode, Outgoing, RecorderDrops, Topic};
+use sar_record::convert::REPLAY_METADATA;
+use sar_record::replay::{Mode, ReplayOptions, replay, replay_file};
+use sar_record::{FileOptions, McapReader, RotatingWriter, read_file};
 use sar_tests::{fixture_gen, replay_dir, scenarios_dir};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -163,7 +163,7 @@ fn daemon_fixtures_replay_bit_for_bit_with_their_guard_transitions() {
         // The outputs written are the recorded ones, message for message.
         let recorded = counts(&fixture(name));
         let written = counts(&out);
-        for t in sar_daemon::record::replay::OUTPUT_TOPICS {
+        for t in sar_record::replay::OUTPUT_TOPICS {
             assert_eq!(
                 recorded.get(t.name()),
                 written.get(t.name()),
@@ -348,7 +348,7 @@ fn message_data(path: &Path) -> Vec<Vec<u8>> {
 /// order; one further out than the window is refused, never paired wrongly.
 #[test]
 fn inputs_out_of_order_within_the_window_replay_as_in_order_and_beyond_it_are_refused() {
-    use sar_daemon::record::replay::{INPUT_WINDOW, ReplayError};
+    use sar_record::replay::{INPUT_WINDOW, ReplayError};
     let dir = scratch("inputs_order");
     let in_order = dir.join("in_order.mcap");
     reorder(&fixture(CONTACT_INPUTS), &in_order, |_| {});

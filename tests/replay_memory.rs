@@ -10,8 +10,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use sar_daemon::record::read_file;
-use sar_daemon::record::replay::{ReplayOptions, replay, replay_file};
+use sar_record::read_file;
+use sar_record::replay::{ReplayOptions, replay, replay_file};
 use sar_tests::{fixture_gen, scenarios_dir};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::{Path, PathBuf};
@@ -164,8 +164,8 @@ fn the_peak_heap_of_a_replay_does_not_grow_with_the_recording() {
 /// recording of the inputs alone (another program's, to the replay).
 /// Returns the file's length and its sensor messages.
 fn inputs_only(daemon: &Path, path: &Path) -> (u64, u64) {
-    use sar_daemon::record::{FileOptions, McapReader, RotatingWriter};
     use sar_msgs::msgs::{Outgoing, RecorderDrops};
+    use sar_record::{FileOptions, McapReader, RotatingWriter};
     let mut o = FileOptions::single(path);
     // Small chunks: the reader's buffers are warm (each grown to the largest
     // chunk) within the short recording too.
@@ -199,7 +199,7 @@ fn the_peak_heap_of_an_inputs_only_replay_does_not_grow_with_the_recording() {
         let path = dir.join(format!("inputs-{cycles}.mcap"));
         let (len, sensors) = inputs_only(&daemon, &path);
         let (streamed, r) = peak_of(|| replay_file(&path, &options).unwrap());
-        assert_eq!(r.mode, sar_daemon::record::replay::Mode::InputsOnly);
+        assert_eq!(r.mode, sar_record::replay::Mode::InputsOnly);
         // One cycle per sensor message (after the first joint message).
         assert!(
             r.cycles <= sensors && r.cycles + 2 >= sensors,
@@ -237,7 +237,7 @@ fn peak_heap_for_a_one_minute_and_a_one_hour_recording() {
         let options = ReplayOptions::from_config(&cfg);
         let (rss, (streamed, r)) =
             peak_rss_of(|| peak_of(|| replay_file(&path, &options).unwrap()));
-        assert_eq!(r.mode, sar_daemon::record::replay::Mode::InputsOnly);
+        assert_eq!(r.mode, sar_record::replay::Mode::InputsOnly);
         println!(
             "inputs only, {cycles} cycles ({:.1} MB file): peak heap {:.2} MB streamed; peak RSS of the process {} MB",
             len as f64 / 1e6,

@@ -17,9 +17,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use sar_daemon::identify::{self, IdentifyOptions};
-use sar_daemon::record::McapReader;
-use sar_daemon::record::{FileOptions, Outgoing, RotatingWriter};
 use sar_msgs::msgs::{ActiveJointState, RecorderDrops, WrenchStamped};
+use sar_record::McapReader;
+use sar_record::{FileOptions, Outgoing, RotatingWriter};
 use std::hint::black_box;
 use std::time::Duration;
 

@@ -14,8 +14,8 @@
 mod common;
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
-use sar_daemon::record::{FileOptions, Recorder, RecorderConfig, RotatingWriter};
 use sar_msgs::msgs::{Outgoing, RecorderDrops};
+use sar_record::{FileOptions, Recorder, RecorderConfig, RotatingWriter};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 

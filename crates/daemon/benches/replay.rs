@@ -38,15 +38,15 @@ mod common;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use sar_config as config;
-use sar_daemon::record::convert;
-use sar_daemon::record::replay::{ReplayOptions, replay, replay_file};
-use sar_daemon::record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
 use sar_daemon::sim;
 use sar_drivers::{DriveState, SimClock};
 use sar_loop::control::{Controller, Operator, Request};
 use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopStep};
 use sar_msgs::msgs::{CycleInput, Outgoing, RecorderDrops, RosMessage, Topic};
+use sar_record::convert;
+use sar_record::replay::{ReplayOptions, replay, replay_file};
+use sar_record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};

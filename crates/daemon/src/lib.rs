@@ -6,6 +6,5 @@
 pub mod cli;
 pub mod devices;
 pub mod identify;
-pub mod record;
 pub mod sim;
 pub mod view;

@@ -306,9 +306,9 @@ fn a_recorded_guarded_move_decodes_to_the_same_request() {
     };
     rig.request(4, request);
     let (input, decision) = *rig.log.last().unwrap();
-    let msg = sar_daemon::record::convert::cycle_input_msg(&input, &decision);
+    let msg = sar_record::convert::cycle_input_msg(&input, &decision);
     assert_eq!(msg.move_max_force_n, 2.5);
-    let back = sar_daemon::record::convert::loop_input(&msg);
+    let back = sar_record::convert::loop_input(&msg);
     assert_eq!(back.request, Some(request));
     // And a plain move stays plain.
     let plain = Request::MoveTip {
@@ -316,12 +316,9 @@ fn a_recorded_guarded_move_decodes_to_the_same_request() {
     };
     rig.request(5, plain);
     let (input, decision) = *rig.log.last().unwrap();
-    let msg = sar_daemon::record::convert::cycle_input_msg(&input, &decision);
+    let msg = sar_record::convert::cycle_input_msg(&input, &decision);
     assert_eq!(msg.move_max_force_n, 0.0);
-    assert_eq!(
-        sar_daemon::record::convert::loop_input(&msg).request,
-        Some(plain)
-    );
+    assert_eq!(sar_record::convert::loop_input(&msg).request, Some(plain));
 }
 
 #[test]

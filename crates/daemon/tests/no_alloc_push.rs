@@ -10,8 +10,8 @@
 
 mod common;
 
-use sar_daemon::record::{FileOptions, Recorder, RecorderConfig};
 use sar_msgs::msgs::Outgoing;
+use sar_record::{FileOptions, Recorder, RecorderConfig};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 

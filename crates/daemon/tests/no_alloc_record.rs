@@ -15,9 +15,6 @@
 mod common;
 use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
-use sar_daemon::record::live::{RecordManager, RecordSwitch};
-use sar_daemon::record::replay::{Mode, ReplayOptions, replay_file};
-use sar_daemon::record::{McapReader, read_file};
 use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_estimator::Vec3;
@@ -27,6 +24,9 @@ use sar_loop::logq;
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
 use sar_msgs::msgs::Outgoing;
+use sar_record::live::{RecordManager, RecordSwitch};
+use sar_record::replay::{Mode, ReplayOptions, replay_file};
+use sar_record::{McapReader, read_file};
 use std::sync::Arc;
 
 #[path = "common/counting.rs"]

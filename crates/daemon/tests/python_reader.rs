@@ -13,8 +13,8 @@
 
 mod common;
 
-use sar_daemon::record::*;
 use sar_msgs::msgs::*;
+use sar_record::*;
 use std::fmt::Write as _;
 use std::path::Path;
 

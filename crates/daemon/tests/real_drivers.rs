@@ -206,11 +206,11 @@ fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
 #[test]
 fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
     use sar_config::{RecordSettings, Rotation};
-    use sar_daemon::record::live::{RecordManager, RecordSwitch};
-    use sar_daemon::record::{McapReader, read_file};
     use sar_loop::sink::{Cycle, Sink, SinkHealth};
     use sar_loop::stats::LoopStats;
     use sar_msgs::msgs::{CycleInput, RosMessage, Topic, WrenchStamped};
+    use sar_record::live::{RecordManager, RecordSwitch};
+    use sar_record::{McapReader, read_file};
     use std::sync::Arc;
     let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rdt_2khz");
     let _ = std::fs::remove_dir_all(&dir);

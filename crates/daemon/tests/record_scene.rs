@@ -17,9 +17,9 @@
 
 use foxglove::Decode;
 use foxglove::messages::SceneUpdate;
-use sar_daemon::record::replay::{ReplayOptions, replay_file};
-use sar_daemon::view::scene::{guard_color, ids};
 use sar_msgs::msgs::{EstimatorState, RosMessage};
+use sar_record::replay::{ReplayOptions, replay_file};
+use sar_scene::draw::{guard_color, ids};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -59,7 +59,7 @@ fn replay_outputs_carry_the_scene_of_their_cycles() {
                 .metadata
                 .get("offered_qos_profiles")
                 .map(String::as_str),
-            Some(sar_daemon::record::OFFERED_QOS_PROFILES),
+            Some(sar_record::OFFERED_QOS_PROFILES),
             "{}",
             m.channel.topic
         );
@@ -68,7 +68,7 @@ fn replay_outputs_carry_the_scene_of_their_cycles() {
         }
     }
     let scene_file = dir.join("out.scene.mcap");
-    assert_eq!(sar_daemon::record::scene_path(&out), scene_file);
+    assert_eq!(sar_record::scene_path(&out), scene_file);
     let scene_bytes = std::fs::read(&scene_file).unwrap();
     for m in mcap::MessageStream::new(&scene_bytes).unwrap() {
         let m = m.unwrap();

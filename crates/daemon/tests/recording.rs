@@ -11,9 +11,9 @@
 
 mod common;
 
-use sar_daemon::record::reader::ReadError;
-use sar_daemon::record::*;
 use sar_msgs::msgs::*;
+use sar_record::reader::ReadError;
+use sar_record::*;
 use std::path::Path;
 
 fn config(dir: &Path, chunk: u64) -> RecorderConfig {
@@ -323,8 +323,7 @@ fn rotation_by_size() {
         let len = std::fs::metadata(f).unwrap().len();
         // Closed before the chunk that passed the limit, plus the summary;
         // and the channels' QoS text, at the start and in the summary.
-        let qos =
-            2 * Topic::ALL.len() as u64 * sar_daemon::record::OFFERED_QOS_PROFILES.len() as u64;
+        let qos = 2 * Topic::ALL.len() as u64 * sar_record::OFFERED_QOS_PROFILES.len() as u64;
         assert!(len < 24 * 1024 + 16 * 1024 + qos, "{}: {len}", f.display());
     }
     let all = read_files(&report.files);

@@ -132,7 +132,7 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     assert_eq!(scenes.len(), 2 * per_file, "{scenes:?}");
     for f in &files {
         assert_eq!(
-            sar_daemon::record::scene_path(f).exists(),
+            sar_record::scene_path(f).exists(),
             cfg!(feature = "view"),
             "{f:?}"
         );
@@ -169,9 +169,9 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     // says that it starts after the daemon's first cycle, and replays bit
     // for bit from the snapshot it starts with (issue 17).
     let cfg = sar_config::load(&config).unwrap();
-    let r = sar_daemon::record::replay::replay_file(
+    let r = sar_record::replay::replay_file(
         &files[1],
-        &sar_daemon::record::replay::ReplayOptions::from_config(&cfg),
+        &sar_record::replay::ReplayOptions::from_config(&cfg),
     )
     .unwrap();
     assert_eq!(r.from_first_cycle, Some(false));
@@ -183,8 +183,8 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
         r.from_snapshot
     );
     assert_eq!(r.compared, r.outputs);
-    let bytes = sar_daemon::record::read_file(&files[1]).unwrap();
-    let mut reader = sar_daemon::record::McapReader::new(&bytes).unwrap();
+    let bytes = sar_record::read_file(&files[1]).unwrap();
+    let mut reader = sar_record::McapReader::new(&bytes).unwrap();
     assert!(reader.by_ref().all(|m| m.is_ok()));
     assert!(reader.is_complete());
 }

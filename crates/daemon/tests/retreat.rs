@@ -358,7 +358,7 @@ fn refusals_carry_their_exact_cause() {
 
 #[test]
 fn the_record_switch_loses_no_request() {
-    use sar_daemon::record::live::RecordSwitch;
+    use sar_record::live::RecordSwitch;
     let s = RecordSwitch::default();
     // The manager looks for a start while the operator asks stop, then start:
     // the later request survives the other side's take.

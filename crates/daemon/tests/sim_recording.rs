@@ -19,7 +19,7 @@
 
 mod common;
 
-use sar_daemon::record::McapReader;
+use sar_record::McapReader;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -171,7 +171,7 @@ fn a_record_start_of_the_builtin_configuration_names_it_when_replayed() {
     assert!(stop.status.success(), "{}", text(&stop.stderr));
     let rec = recordings(&dir.join("recordings"));
     assert_eq!(rec.len(), 1, "{rec:?}");
-    let source = sar_daemon::record::replay::recorded_config(&rec[0])
+    let source = sar_record::replay::recorded_config(&rec[0])
         .unwrap()
         .unwrap();
     assert_eq!(source.origin, "the built-in configuration");

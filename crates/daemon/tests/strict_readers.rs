@@ -27,8 +27,8 @@
 mod common;
 
 use common::readers;
-use sar_daemon::record::McapReader;
-use sar_daemon::record::replay::{ReplayOptions, replay_file};
+use sar_record::McapReader;
+use sar_record::replay::{ReplayOptions, replay_file};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -233,7 +233,7 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     // Every channel in metadata.yaml, the empty ones too.
     assert_eq!(
         py_files[0]["channels"].as_u64().unwrap(),
-        sar_daemon::record::Topic::ALL.len() as u64
+        sar_record::Topic::ALL.len() as u64
     );
     let (_, schemas, messages, failures) = readers::totals(&py);
     eprintln!(

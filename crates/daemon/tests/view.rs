@@ -27,9 +27,10 @@
 
 use foxglove::Decode;
 use foxglove::messages::SceneUpdate;
-use sar_daemon::view::scene::{self, SceneGeometry, ids};
 use sar_msgs::msgs::{RosMessage, WrenchStamped};
 use sar_msgs::wire::{StateMsg, flags};
+use sar_scene::draw::{self as scene, ids};
+use sar_scene::geometry::SceneGeometry;
 use sar_shm::Client;
 use serde_json::{Value, json};
 use std::collections::HashMap;
@@ -387,7 +388,7 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
     let (_daemon, _client) = start_sard(&prefix);
     let states = States::collect(&prefix, true);
     let (view, addr) = start_view(&prefix);
-    let topics = [TIP_TOPIC, sar_daemon::view::SCENE_TOPIC];
+    let topics = [TIP_TOPIC, sar_scene::SCENE_TOPIC];
     let mut fox = Fox::connect(&addr, &topics);
     // Read-only: no client publishing, services, parameters nor assets.
     assert!(fox.capabilities.is_empty(), "{:?}", fox.capabilities);

@@ -15,9 +15,10 @@
 
 use foxglove::Decode;
 use foxglove::messages::{SceneEntity, SceneUpdate};
-use sar_daemon::view::scene::{self, SceneGeometry, ids};
 use sar_kinematics::{ActiveJoints, Profile, ProfileSpec, forward};
 use sar_msgs::wire::{StateMsg, flags, guard_code};
+use sar_scene::draw::{self as scene, ids};
+use sar_scene::geometry::SceneGeometry;
 use std::collections::BTreeMap;
 
 type V3 = [f64; 3];
@@ -239,7 +240,7 @@ fn the_scene_goes_into_an_mcap_file_and_back() {
         let ch = w
             .add_channel(
                 id,
-                sar_daemon::view::SCENE_TOPIC,
+                sar_scene::SCENE_TOPIC,
                 &schema.message_encoding,
                 &BTreeMap::new(),
             )
@@ -264,7 +265,7 @@ fn the_scene_goes_into_an_mcap_file_and_back() {
         .unwrap();
     assert_eq!(msgs.len(), 1);
     let m = &msgs[0];
-    assert_eq!(m.channel.topic, sar_daemon::view::SCENE_TOPIC);
+    assert_eq!(m.channel.topic, sar_scene::SCENE_TOPIC);
     assert_eq!(m.log_time, s.now_ns);
     let schema_back = m.channel.schema.as_ref().unwrap();
     assert_eq!(schema_back.name, "foxglove.SceneUpdate");
@@ -329,7 +330,7 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
         "/sar/estimate/tip_wrench.wrench.force.x",
         "/sar/view/status.stop_total_n",
         "/sar/view/status.guard_code",
-        sar_daemon::view::SCENE_TOPIC,
+        sar_scene::SCENE_TOPIC,
     ] {
         assert!(paths.iter().any(|p| p == wanted), "{wanted}");
     }
@@ -337,8 +338,8 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
 
 #[test]
 fn the_recorded_messages_of_a_cycle_draw_the_same_scene() {
-    use sar_daemon::view::topics;
     use sar_msgs::msgs::Outgoing;
+    use sar_scene::topics;
     let cfg = config(0.01);
     let g = SceneGeometry::from_config(&cfg);
     for (k, q) in POSES.iter().enumerate() {
@@ -367,8 +368,8 @@ fn the_recorded_messages_of_a_cycle_draw_the_same_scene() {
 
 #[test]
 fn topics_of_a_state_follow_its_flags_and_the_guards_transitions() {
-    use sar_daemon::view::topics;
     use sar_msgs::msgs::{GuardStateCode, Outgoing, Topic};
+    use sar_scene::topics;
     let cfg = config(0.0);
     let ok = state(&cfg, POSES[0], [1.0, 0.0, 0.0], guard_code::OK);
     let mut warn = ok;

@@ -3,8 +3,6 @@
 
 use clap::Parser;
 use sar_config as config;
-use sar_daemon::record::SceneOptions;
-use sar_daemon::record::live::{LiveRecorder, RecordManager, RecordSwitch};
 use sar_daemon::{devices, sim};
 use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_estimator::Vec3;
@@ -16,6 +14,8 @@ use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::limits_array;
+use sar_record::SceneOptions;
+use sar_record::live::{LiveRecorder, RecordManager, RecordSwitch};
 use sar_shm::{DaemonShm, RecordCommands};
 use std::path::PathBuf;
 use std::process::ExitCode;

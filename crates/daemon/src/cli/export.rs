@@ -1,8 +1,8 @@
 //! `sarctl export --rosbag2 DIR REC.mcap...`: a rosbag2 directory of a
-//! recording's files ([`crate::record::rosbag2`]), its contents printed
+//! recording's files ([`sar_record::rosbag2`]), its contents printed
 //! (`--format json`: one object).
 
-use crate::record::rosbag2;
+use sar_record::rosbag2;
 use std::path::{Path, PathBuf};
 
 /// Runs the command.

@@ -3,8 +3,8 @@
 //! chunk. Never overwrites the input; the default output is `FILE` with
 //! `.recovered.mcap` in place of `.mcap`.
 
-use crate::record::reader::recover;
-use crate::record::replay::same_file;
+use sar_record::reader::recover;
+use sar_record::replay::same_file;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 

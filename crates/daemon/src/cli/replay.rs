@@ -1,7 +1,7 @@
 //! `sarctl replay [--config FILE] --input REC.mcap|DIR [--input ...] --output
 //! OUT.mcap [--from S] [--to S] [--compare TOPIC] [--format json] [--plot
 //! FILE.svg]`: the per-cycle step over a recording's inputs
-//! ([`crate::record::replay`]; the files of a rotated set, or a directory of
+//! ([`sar_record::replay`]; the files of a rotated set, or a directory of
 //! them, replayed in order as one and checked to chain), its outputs
 //! written, the recorded outputs compared bit for bit (a difference exits
 //! non-zero naming the first cycle, topic and field), the error figures
@@ -9,7 +9,7 @@
 //! article's Figure 9). Without `--config`, the configuration the recording
 //! carries (`sar_config` metadata, written by `sard`).
 
-use crate::record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_files};
+use sar_record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_files};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 
@@ -73,7 +73,7 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
     let cfg = match a.config {
         Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
         None => {
-            let source = crate::record::replay::recorded_config(first)
+            let source = sar_record::replay::recorded_config(first)
                 .map_err(|e| e.to_string())?
                 .ok_or_else(|| {
                     format!(

@@ -25,7 +25,6 @@ pub mod plot;
 pub mod poses;
 pub mod writeback;
 
-use crate::record::{McapReader, ReadError};
 use dwell::{Dwell, DwellFinder, DwellOptions, SensorAverager};
 use sar_config::Config;
 use sar_estimator::identification::{
@@ -35,6 +34,7 @@ use sar_estimator::support::{SUPPORT_CAPACITY, SupportCalibration, SupportError,
 use sar_estimator::{StaticPose, Vec3};
 use sar_kinematics::forward;
 use sar_msgs::msgs::{ActiveJointState, Topic, WrenchStamped};
+use sar_record::{McapReader, ReadError};
 use serde_json::json;
 
 /// The poses to add, named in every refusal that more or other poses cure.
@@ -235,7 +235,7 @@ pub fn find_dwells_in_file(
 
 /// The dwells, reading the recording twice through `open`.
 fn find_dwells_in<'a>(
-    open: impl Fn() -> Result<McapReader<'a>, crate::record::ReadError>,
+    open: impl Fn() -> Result<McapReader<'a>, sar_record::ReadError>,
     config: &Config,
     options: &DwellOptions,
 ) -> Result<Vec<Dwell>, IdentifyError> {

@@ -1,24 +1,21 @@
 //! The live view's server (cargo feature `view`): see the module above.
 
-use super::geometry::SceneGeometry;
+use super::front;
 #[allow(unused_imports)]
 pub use super::{DEFAULT_BIND, DEFAULT_SCENE_HZ};
-use super::{front, scene, topics};
 use foxglove::messages::{FrameTransforms, SceneUpdate};
 use foxglove::{
     Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
 };
 use sar_msgs::msgs::{Outgoing, Topic};
 use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
+use sar_scene::geometry::SceneGeometry;
+use sar_scene::{SCENE_TOPIC, TF_TOPIC, draw as scene, topics};
 use sar_shm::Client;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// The 3D scene's topic.
-pub const SCENE_TOPIC: &str = "/sar/scene";
-/// The scene's transform `world` -> `base`.
-pub const TF_TOPIC: &str = "/sar/scene/tf";
 /// The view's status (JSON).
 pub const STATUS_TOPIC: &str = "/sar/view/status";
 /// Messages queued per client before the oldest are dropped (about 0.4 s of

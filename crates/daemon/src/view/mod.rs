@@ -10,8 +10,8 @@
 //! - the recordings' topics (INTERFACES.md 1, `ros2msg` schemas and `cdr`
 //!   messages from [`sar_msgs::msgs`]) that the state holds, every
 //!   state ([`topics`]);
-//! - [`SCENE_TOPIC`] (`foxglove.SceneUpdate`, protobuf, [`scene`]) and
-//!   [`TF_TOPIC`] (`foxglove.FrameTransforms`: `world` -> `base`, Y0 up),
+//! - `sar_scene::SCENE_TOPIC` (`foxglove.SceneUpdate`, protobuf, drawn by
+//!   `sar_scene::draw`) and `sar_scene::TF_TOPIC` (`foxglove.FrameTransforms`: `world` -> `base`, Y0 up),
 //!   decimated to `scene_hz` by the state's clock;
 //! - [`STATUS_TOPIC`] (JSON: |F_tip|, the guard's limits and state, the
 //!   loop's figures, the states the view lost), at the scene's rate.
@@ -21,22 +21,16 @@
 //! or parameters. Messages for a client wait in the SDK's per-client queue
 //! (`BACKLOG` messages; a stalled client loses the oldest).
 //!
-//! All of it but [`geometry`] is behind the cargo feature `view` (the
-//! Foxglove SDK brings tokio, prost and tungstenite): `sard` is built
-//! without it and links none of them; `sarctl view` needs it (`cargo
-//! install --path crates/daemon --features view`). Without it recordings get
-//! no scene companion (`NAME.scene.mcap`) either.
-
-pub mod geometry;
+//! All of it is behind the cargo feature `view` (the Foxglove SDK brings
+//! tokio, prost and tungstenite): `sard` is built without it and links none
+//! of them; `sarctl view` needs it (`cargo install --path crates/daemon
+//! --features view`). Without it recordings get no scene companion
+//! (`NAME.scene.mcap`) either (`sar-record`'s feature `scene`).
 
 #[cfg(feature = "view")]
 pub mod front;
 #[cfg(feature = "view")]
 mod live;
-#[cfg(feature = "view")]
-pub mod scene;
-#[cfg(feature = "view")]
-pub mod topics;
 
 #[cfg(feature = "view")]
 pub use live::*;

@@ -119,7 +119,7 @@ pub fn messages(s: &StateMsg, previous: Option<&StateMsg>, out: &mut Vec<Outgoin
     }
 }
 
-/// A state for [`super::scene::scene`] from the recorded messages of one
+/// A state for the scene (`draw::scene`) from the recorded messages of one
 /// cycle (the inverse of [`messages`] for what the scene needs): the
 /// recorder, which holds `EstimatorState`, the joints and the passive
 /// joints rather than the published state, draws the same scene with it.

@@ -825,9 +825,9 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             o.metadata = metadata.clone().into_iter().collect();
             // The live view's scene, as the daemon's recorder writes it
             // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
-            // (With the cargo feature `view` only.)
-            o.scene = cfg!(feature = "view").then(|| super::SceneOptions {
-                geometry: crate::view::geometry::SceneGeometry::from_config(&options.config),
+            // (With the cargo feature `scene` only.)
+            o.scene = cfg!(feature = "scene").then(|| super::SceneOptions {
+                geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
                 limits_n: options.config.guard.force_limits().to_array(),
                 period_ns: SCENE_PERIOD_NS,
             });

@@ -14,14 +14,14 @@
 //! `rosbags` refuse the whole file). Opened together in Foxglove, the two
 //! files look as the live view does.
 
-use crate::view::geometry::SceneGeometry;
-#[cfg(feature = "view")]
-use crate::view::scene;
 use sar_config::Rotation;
 use sar_msgs::msgs::{
     EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
     StateSnapshot, Topic,
 };
+#[cfg(feature = "scene")]
+use sar_scene::draw as scene;
+use sar_scene::geometry::SceneGeometry;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -117,13 +117,13 @@ pub struct SceneOptions {
 impl SceneOptions {
     /// The scene the configuration asks for (`[record] scene_hz`), drawn
     /// from its geometry and limits. `None` when it asks for none, or when
-    /// this build has no cargo feature `view` (the Foxglove SDK): `sard` is
+    /// this build has no cargo feature `scene` (the Foxglove SDK): `sard` is
     /// built without it and writes none (said once in the log, here).
     pub fn from_config(config: &sar_config::Config) -> Option<Self> {
         let period_ns = config.record.scene_period_ns?;
-        if !cfg!(feature = "view") {
+        if !cfg!(feature = "scene") {
             tracing::info!(
-                "[record] scene_hz: no 3D scene beside recordings (NAME.scene.mcap): this build has no `view` feature"
+                "[record] scene_hz: no 3D scene beside recordings (NAME.scene.mcap): this build has no `scene` feature"
             );
             return None;
         }
@@ -298,7 +298,7 @@ pub struct RotatingWriter {
 /// What the scene is drawn from: the messages of one cycle (all stamped with
 /// the cycle's `now`), gathered until a message of a later cycle (or the
 /// file's end) closes it, whatever their order.
-#[cfg_attr(not(feature = "view"), allow(dead_code))]
+#[cfg_attr(not(feature = "scene"), allow(dead_code))]
 struct SceneState {
     options: SceneOptions,
     next_ns: Option<u64>,
@@ -319,7 +319,7 @@ struct SceneCycle {
 }
 
 /// The companion file of the scene beside one recording file.
-#[cfg_attr(not(feature = "view"), allow(dead_code))]
+#[cfg_attr(not(feature = "scene"), allow(dead_code))]
 struct SceneFile {
     path: PathBuf,
     writer: mcap::Writer<BufWriter<File>>,
@@ -453,19 +453,19 @@ impl RotatingWriter {
         }))
     }
 
-    /// The scene needs the cargo feature `view` (the configuration gives no
+    /// The scene needs the cargo feature `scene` (the configuration gives no
     /// scene without it; a caller that asks for one anyway is refused).
-    #[cfg(not(feature = "view"))]
+    #[cfg(not(feature = "scene"))]
     fn open_scene(&self, _path: &Path) -> Result<SceneFile, WriteError> {
         Err(WriteError::Setting {
             field: "scene",
             value: 1,
-            why: "this build has no 3D scene (cargo feature `view`)",
+            why: "this build has no 3D scene (cargo feature `scene`)",
         })
     }
 
     /// Creates the scene's companion file of the recording file at `path`.
-    #[cfg(feature = "view")]
+    #[cfg(feature = "scene")]
     fn open_scene(&self, path: &Path) -> Result<SceneFile, WriteError> {
         let path = scene_path(path);
         let mcap_err = |source| WriteError::Mcap {
@@ -487,14 +487,14 @@ impl RotatingWriter {
             .add_schema(&s.name, &s.encoding, &s.data)
             .map_err(mcap_err)?;
         let scene = writer
-            .add_channel(schema, crate::view::SCENE_TOPIC, &s.message_encoding, &none)
+            .add_channel(schema, sar_scene::SCENE_TOPIC, &s.message_encoding, &none)
             .map_err(mcap_err)?;
         let t = scene::tf_schema();
         let schema = writer
             .add_schema(&t.name, &t.encoding, &t.data)
             .map_err(mcap_err)?;
         let tf = writer
-            .add_channel(schema, crate::view::TF_TOPIC, &t.message_encoding, &none)
+            .add_channel(schema, sar_scene::TF_TOPIC, &t.message_encoding, &none)
             .map_err(mcap_err)?;
         Ok(SceneFile {
             path,
@@ -652,15 +652,15 @@ impl RotatingWriter {
         Ok(())
     }
 
-    /// No scene without the cargo feature `view` (never opened).
-    #[cfg(not(feature = "view"))]
+    /// No scene without the cargo feature `scene` (never opened).
+    #[cfg(not(feature = "scene"))]
     fn flush_scene(&mut self) -> Result<(), WriteError> {
         Ok(())
     }
 
     /// Closes the cycle gathered: writes its scene when one is due (at most
     /// one per period of log time, keeping the phase).
-    #[cfg(feature = "view")]
+    #[cfg(feature = "scene")]
     fn flush_scene(&mut self) -> Result<(), WriteError> {
         let (Some(state), Some(file)) = (self.scene.as_mut(), self.current.as_mut()) else {
             return Ok(());
@@ -695,7 +695,7 @@ impl RotatingWriter {
             stamp_ns: estimator.joints_stamp_ns,
             q_m: state.q_m,
         };
-        let published = crate::view::topics::state_from_recorded(
+        let published = sar_scene::topics::state_from_recorded(
             &estimator,
             &joints,
             passive.as_ref(),

@@ -9,6 +9,9 @@
 //! - [`recorder`]: the bounded queue and the writer thread.
 //! - [`reader`]: reading (up to the last complete chunk) and [`recover`].
 //! - [`rosbag2`]: a rosbag2 directory (`metadata.yaml`) of recordings.
+//! - [`convert`]: the loop's cycle as recorded messages, and back.
+//! - [`live`]: the loop's recording sink and the recordings' manager.
+//! - [`replay`]: bit-exact replay of recordings and rotated sets.
 
 pub mod convert;
 pub mod file;

@@ -1,4 +1,4 @@
-//! The 3D scene of the live view (and, later, of the recordings): a pure
+//! The 3D scene of the live view and of the recordings: a pure
 //! function of one published state ([`StateMsg`]) and the robot's geometry
 //! ([`SceneGeometry`], from the configuration's calibration and profile) to a
 //! `foxglove.SceneUpdate`, everything in the frame `base` ({0}, MODEL.md 2).
@@ -26,6 +26,7 @@
 //! the bytes and the schema for an MCAP channel (protobuf, the SDK's
 //! built-in descriptor).
 
+use crate::geometry::SceneGeometry;
 use foxglove::Encode;
 use foxglove::messages::{
     ArrowPrimitive, Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms,
@@ -66,8 +67,6 @@ pub mod ids {
         FORCE_LIMITS,
     ];
 }
-
-pub use super::geometry::SceneGeometry;
 
 type V3 = [f64; 3];
 
