@@ -19,7 +19,11 @@ use std::path::{Path, PathBuf};
 /// One row of the table.
 #[derive(Debug)]
 struct Rule {
+    /// Workspace crates it may depend on.
     may: BTreeSet<String>,
+    /// Of those, the ones only its tests and benches may use ("(tests
+    /// only)" in the table): allowed in dev-dependencies alone.
+    tests_only: BTreeSet<String>,
     must_not: BTreeSet<String>,
 }
 
@@ -29,8 +33,17 @@ fn root() -> PathBuf {
 
 fn names(cell: &str) -> BTreeSet<String> {
     cell.split(',')
-        .map(|n| n.trim().to_owned())
-        .filter(|n| !n.is_empty())
+        .filter_map(|n| n.split_whitespace().next())
+        .map(str::to_owned)
+        .collect()
+}
+
+/// The names of a cell marked "(tests only)".
+fn tests_only(cell: &str) -> BTreeSet<String> {
+    cell.split(',')
+        .filter(|n| n.contains("(tests only)"))
+        .filter_map(|n| n.split_whitespace().next())
+        .map(str::to_owned)
         .collect()
 }
 
@@ -40,11 +53,12 @@ fn rules(architecture: &str) -> BTreeMap<String, Rule> {
     for line in architecture.lines() {
         let cells: Vec<&str> = line.split('|').map(str::trim).collect();
         // "| name | may | must not |" splits into 5 cells, empty at the ends.
-        if cells.len() != 5 || !cells[1].starts_with("sar-") {
+        if cells.len() != 5 || !(cells[1].starts_with("sar-") || cells[1] == "sarctl") {
             continue;
         }
         let rule = Rule {
             may: names(cells[2]),
+            tests_only: tests_only(cells[2]),
             must_not: names(cells[3]),
         };
         assert!(
@@ -65,6 +79,10 @@ struct Manifest {
     name: String,
     dependencies: BTreeSet<String>,
     dev_dependencies: BTreeSet<String>,
+    /// Dependencies marked `optional = true`: linked only with the feature
+    /// that names them (what a build really links is CI's `cargo tree`
+    /// check).
+    optional: BTreeSet<String>,
 }
 
 /// The kind of a section's dependencies, and the name of a
@@ -95,6 +113,7 @@ fn manifest(text: &str) -> Manifest {
         name: String::new(),
         dependencies: BTreeSet::new(),
         dev_dependencies: BTreeSet::new(),
+        optional: BTreeSet::new(),
     };
     for line in text.lines().map(str::trim) {
         if line.starts_with('[') {
@@ -119,13 +138,23 @@ fn manifest(text: &str) -> Manifest {
         }
         // `name.workspace = true` and `name = ...` alike.
         let dep = key.split('.').next().unwrap_or(key).to_owned();
-        if let Some((dev, None)) = dependency_section(&section) {
-            if dev {
-                &mut m.dev_dependencies
-            } else {
-                &mut m.dependencies
+        let compact = value.replace(' ', "");
+        match dependency_section(&section) {
+            Some((dev, None)) => {
+                if !dev && compact.contains("optional=true") {
+                    m.optional.insert(dep.clone());
+                }
+                if dev {
+                    &mut m.dev_dependencies
+                } else {
+                    &mut m.dependencies
+                }
+                .insert(dep);
             }
-            .insert(dep);
+            Some((false, Some(name))) if key == "optional" && compact == "true" => {
+                m.optional.insert(name);
+            }
+            _ => {}
         }
     }
     m
@@ -164,7 +193,7 @@ fn linked(name: &str, by_name: &BTreeMap<&str, &Manifest>) -> BTreeMap<String, O
         let Some(m) = by_name.get(krate.as_str()) else {
             continue;
         };
-        for dep in &m.dependencies {
+        for dep in m.dependencies.difference(&m.optional) {
             // Said as the workspace crate that names it.
             out.entry(dep.clone())
                 .or_insert_with(|| (krate != name).then(|| krate.clone()));
@@ -201,7 +230,12 @@ fn violations(rules: &BTreeMap<String, Rule>, manifests: &[(PathBuf, Manifest)])
             ("dev-dependencies", &m.dev_dependencies),
         ] {
             for dep in deps {
-                if by_name.contains_key(dep.as_str()) && !rule.may.contains(dep) {
+                let ours = by_name.contains_key(dep.as_str());
+                let allowed = match section {
+                    "dependencies" => rule.may.contains(dep) && !rule.tests_only.contains(dep),
+                    _ => rule.may.contains(dep),
+                };
+                if ours && !allowed {
                     wrong.push(format!(
                         "{}: [{section}] {dep}: {} may not depend on it",
                         path.display(),
@@ -294,10 +328,25 @@ fn the_check_follows_workspace_crates_and_reads_every_dependency_section() {
             .any(|w| w.contains("mcap (through sar-kinematics): sar-loop must not link it")),
         "{wrong:?}"
     );
+    // A crate allowed to tests only is refused in [dependencies].
+    let (_, sarctl) = manifests
+        .iter_mut()
+        .find(|(_, m)| m.name == "sarctl")
+        .unwrap();
+    assert!(sarctl.dev_dependencies.contains("sar-daemon"));
+    sarctl.dependencies.insert("sar-daemon".to_owned());
+    let wrong = violations(&rules, &manifests);
+    assert!(
+        wrong
+            .iter()
+            .any(|w| w.contains("[dependencies] sar-daemon: sarctl may not depend on it")),
+        "{wrong:?}"
+    );
     // Target-specific, build and `[dependencies.NAME]` sections are read.
     let m = manifest(
         "[package]\nname = \"x\"\n[target.'cfg(target_os = \"linux\")'.dependencies]\na = \"1\"\n\
-         [build-dependencies]\nb.workspace = true\n[dependencies.c]\nversion = \"1\"\n\
+         [build-dependencies]\nb.workspace = true\n[dependencies.c]\nversion = \"1\"\noptional = true\n\
+         [dependencies]\nf = { version = \"1\", optional = true }\n\
          [target.'cfg(unix)'.dev-dependencies]\nd = \"1\"\n[features]\ne = []\n",
     );
     assert_eq!(m.name, "x");
@@ -306,7 +355,11 @@ fn the_check_follows_workspace_crates_and_reads_every_dependency_section() {
             .iter()
             .map(String::as_str)
             .collect::<Vec<_>>(),
-        ["a", "b", "c"]
+        ["a", "b", "c", "f"]
+    );
+    assert_eq!(
+        m.optional.iter().map(String::as_str).collect::<Vec<_>>(),
+        ["c", "f"]
     );
     assert_eq!(
         m.dev_dependencies

@@ -17,10 +17,10 @@
 )]
 
 use sar_config::Config;
-use sar_daemon::identify::{
+use sar_tests::identify_fixtures::{self, TABLE2};
+use sarctl::identify::{
     self, Identified, IdentifyError, IdentifyOptions, find_dwells, identify_dwells, plot, writeback,
 };
-use sar_tests::identify_fixtures::{self, TABLE2};
 use std::path::PathBuf;
 
 #[path = "../crates/daemon/tests/common/readers.rs"]

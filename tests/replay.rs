@@ -498,7 +498,7 @@ fn a_file_cut_short_replays_to_its_last_chunk_and_is_recovered() {
     assert_eq!(r.first_difference, None);
     // Recovered: complete, the same messages.
     let recovered = dir.join("recovered.mcap");
-    sar_daemon::cli::recover::run(&cut, Some(&recovered), false).unwrap();
+    sarctl::cli::recover::run(&cut, Some(&recovered), false).unwrap();
     let r2 = replay_file(&recovered, &options(None, None)).unwrap();
     assert!(r2.input_complete);
     assert_eq!(r2.cycles, r.cycles);
@@ -516,10 +516,10 @@ fn a_file_cut_short_replays_to_its_last_chunk_and_is_recovered() {
             .collect::<BTreeMap<_, _>>()
     });
     // Never over the input, under any spelling.
-    let e = sar_daemon::cli::recover::run(&cut, Some(&cut), false).unwrap_err();
+    let e = sarctl::cli::recover::run(&cut, Some(&cut), false).unwrap_err();
     assert!(e.contains("overwrite"), "{e}");
     let spelled = dir.join(".").join("cut.mcap");
-    let e = sar_daemon::cli::recover::run(&cut, Some(&spelled), false).unwrap_err();
+    let e = sarctl::cli::recover::run(&cut, Some(&spelled), false).unwrap_err();
     assert!(e.contains("overwrite"), "{e}");
     assert_eq!(std::fs::read(&cut).unwrap(), &bytes[..bytes.len() / 2]);
 }

@@ -143,6 +143,12 @@ fn service_name(name: &str) -> Result<ServiceName, ShmError> {
     })
 }
 
+/// iceoryx2's own log (e.g. "no config file was loaded") only for errors:
+/// what a command-line tool sets before it talks to the daemon.
+pub fn log_errors_only() {
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+}
+
 /// A node without iceoryx2's own signal handlers (the daemon has its own).
 pub fn node() -> Result<Node<ipc::Service>, ShmError> {
     NodeBuilder::new()

@@ -60,7 +60,7 @@ const FIRST_SAMPLE_TIMEOUT_NS: u64 = 2_000_000_000;
 fn main() -> ExitCode {
     let args = Args::parse();
     // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
-    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    sar_shm::log_errors_only();
     // Colours only on a terminal: journald and log files get plain text.
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)

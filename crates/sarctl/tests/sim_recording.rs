@@ -17,15 +17,15 @@
     clippy::indexing_slicing
 )]
 
+#[path = "../../daemon/tests/common/mod.rs"]
 mod common;
+mod support;
+use support::{SARCTL, SARD};
 
 use sar_record::McapReader;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-const SARD: &str = env!("CARGO_BIN_EXE_sard");
-const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
 
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
@@ -80,7 +80,7 @@ pub fn sim_recording(dir: &Path, cycles: u64) -> PathBuf {
         );
     assert_ne!(toml, sar_config::DEFAULT_TOML);
     std::fs::write(&config, toml).unwrap();
-    let out = Command::new(SARD)
+    let out = Command::new(&*SARD)
         .args(["--sim", "--config"])
         .arg(&config)
         .args(["--max-cycles", &cycles.to_string()])
@@ -141,7 +141,7 @@ fn a_record_start_of_the_builtin_configuration_names_it_when_replayed() {
     let dir = common::scratch("simrec_builtin");
     let prefix = format!("sar-simrec-b-{}", std::process::id());
     // Out of the box: no --config, recordings under the working directory.
-    let mut daemon = Command::new(SARD)
+    let mut daemon = Command::new(&*SARD)
         .arg("--sim")
         .current_dir(&dir)
         .env("SAR_SERVICE_PREFIX", &prefix)

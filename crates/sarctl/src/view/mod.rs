@@ -21,18 +21,12 @@
 //! or parameters. Messages for a client wait in the SDK's per-client queue
 //! (`BACKLOG` messages; a stalled client loses the oldest).
 //!
-//! All of it is behind the cargo feature `view` (the Foxglove SDK brings
-//! tokio, prost and tungstenite): `sard` is built without it and links none
-//! of them; `sarctl view` needs it (`cargo install --path crates/daemon
-//! --features view`). Without it recordings get no scene companion
-//! (`NAME.scene.mcap`) either (`sar-record`'s feature `scene`).
+//! The Foxglove SDK brings tokio, prost and tungstenite: only `sarctl`
+//! links them (`sard` is another crate, which does not depend on this one).
 
-#[cfg(feature = "view")]
 pub mod front;
-#[cfg(feature = "view")]
 mod live;
 
-#[cfg(feature = "view")]
 pub use live::*;
 
 /// The default address.

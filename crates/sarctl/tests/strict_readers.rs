@@ -24,7 +24,10 @@
     clippy::indexing_slicing
 )]
 
+#[path = "../../daemon/tests/common/mod.rs"]
 mod common;
+mod support;
+use support::SARD;
 
 use common::readers;
 use sar_record::McapReader;
@@ -32,8 +35,6 @@ use sar_record::replay::{ReplayOptions, replay_file};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-
-const SARD: &str = env!("CARGO_BIN_EXE_sard");
 
 /// The layout's paths on the recorded topics (the live-only
 /// `/sar/view/status` and the scene are not in `ros2` recordings).
@@ -171,7 +172,7 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     assert_ne!(toml, sar_config::DEFAULT_TOML);
     std::fs::write(&config, toml).unwrap();
     // 3 s of the demo on the simulator, then sard ends and closes the file.
-    let out = Command::new(SARD)
+    let out = Command::new(&*SARD)
         .args(["--sim", "--config"])
         .arg(&config)
         .args(["--max-cycles", "3000"])
@@ -209,7 +210,7 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     }
     // The rosbag2 directory of it, as ROS 2's tools open one.
     let bag = dir.join("bag");
-    let out = Command::new(env!("CARGO_BIN_EXE_sarctl"))
+    let out = Command::new(support::SARCTL)
         .args(["export", "--rosbag2"])
         .arg(&bag)
         .arg(&files[0])
@@ -259,14 +260,13 @@ impl Drop for Proc {
 /// (the live-only status panel's too) is in the decoded messages.
 #[test]
 #[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
-#[cfg_attr(not(feature = "view"), ignore = "needs the cargo feature `view`")]
 fn the_live_view_decodes_with_the_foxglove_client() {
     use std::io::{BufRead, BufReader};
     let prefix = format!("sar-strict-live-{}", std::process::id());
     // Install first: the daemon should not wait for npm.
     let _ = readers::ensure(readers::Part::Node);
     let _daemon = Proc(
-        Command::new(SARD)
+        Command::new(&*SARD)
             .arg("--sim")
             .env("SAR_SERVICE_PREFIX", &prefix)
             .stdout(Stdio::null())
@@ -283,7 +283,7 @@ fn the_live_view_decodes_with_the_foxglove_client() {
         assert!(start.elapsed().as_secs() < 60, "sard did not come up");
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
-    let mut view = Command::new(env!("CARGO_BIN_EXE_sarctl"))
+    let mut view = Command::new(support::SARCTL)
         .args(["--prefix", &prefix, "view", "--bind", "127.0.0.1:0"])
         .stdout(Stdio::piped())
         .spawn()

@@ -5,11 +5,10 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod support;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-const SARD: &str = env!("CARGO_BIN_EXE_sard");
-const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
+use support::{SARCTL, SARD};
 
 fn sarctl(prefix: &str, args: &[&str]) -> Output {
     Command::new(SARCTL)
@@ -54,7 +53,7 @@ impl Drop for Daemon {
 fn monitor_json_limits_status_and_commands_with_a_daemon() {
     let prefix = format!("sar-ctl-{}", std::process::id());
     let _daemon = Daemon(
-        Command::new(SARD)
+        Command::new(&*SARD)
             .arg("--sim")
             .env("SAR_SERVICE_PREFIX", &prefix)
             .stdout(Stdio::null())
@@ -229,7 +228,7 @@ fn completions_name_the_subcommands() {
 fn the_log_has_no_rust_debug_text() {
     let prefix = format!("sar-log-{}", std::process::id());
     let dir = scratch("log_words");
-    let out = Command::new(SARD)
+    let out = Command::new(&*SARD)
         .args(["--sim", "--max-cycles", "2000"])
         .current_dir(&dir)
         .env("SAR_SERVICE_PREFIX", &prefix)
@@ -248,7 +247,7 @@ fn the_log_has_no_rust_debug_text() {
 fn start_daemon(prefix: &str, dir: &std::path::Path, extra: &[&str]) -> Daemon {
     let log = std::fs::File::create(dir.join("sard.log")).unwrap();
     let daemon = Daemon(
-        Command::new(SARD)
+        Command::new(&*SARD)
             .arg("--sim")
             .args(extra)
             .current_dir(dir)

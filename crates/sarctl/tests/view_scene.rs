@@ -302,12 +302,12 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
     let mut paths = Vec::new();
     topic_paths(&layout, &mut paths);
     assert!(paths.len() > 10, "{paths:?}");
-    let served = sar_daemon::view::served_topics();
+    let served = sarctl::view::served_topics();
     let schema_of = |topic: &str| -> &'static str {
         use sar_msgs::msgs::Topic;
         match Topic::from_name(topic) {
             Some(t) => t.schema(),
-            None if topic == sar_daemon::view::STATUS_TOPIC => sar_daemon::view::STATUS_SCHEMA,
+            None if topic == sarctl::view::STATUS_TOPIC => sarctl::view::STATUS_SCHEMA,
             None => "",
         }
     };

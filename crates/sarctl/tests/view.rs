@@ -25,6 +25,7 @@
     clippy::indexing_slicing
 )]
 
+mod support;
 use foxglove::Decode;
 use foxglove::messages::SceneUpdate;
 use sar_msgs::msgs::{RosMessage, WrenchStamped};
@@ -40,15 +41,13 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+use support::{SARCTL, SARD};
 use tungstenite::client::IntoClientRequest;
 use tungstenite::{Message, WebSocket};
 
-const SARD: &str = env!("CARGO_BIN_EXE_sard");
-const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
-
 /// The binary `name`: this build's, or the one in `SAR_VIEW_BIN_DIR` (the
 /// measurement on release binaries: `SAR_VIEW_BIN_DIR=target/release`).
-fn bin(name: &str, built: &str) -> std::path::PathBuf {
+fn bin(name: &str, built: &std::path::Path) -> std::path::PathBuf {
     match std::env::var_os("SAR_VIEW_BIN_DIR") {
         Some(dir) => {
             let dir = std::path::PathBuf::from(dir);
@@ -135,7 +134,7 @@ force_n = [5.0, 1.0, -0.5]
 fn start_sard(prefix: &str) -> (Proc, Client) {
     let path = scenario(prefix);
     let daemon = Proc::new(
-        Command::new(bin("sard", SARD))
+        Command::new(bin("sard", &SARD))
             .arg("--sim")
             .arg("--scenario")
             .arg(&path)
@@ -163,7 +162,7 @@ fn start_sard(prefix: &str) -> (Proc, Client) {
 
 /// Starts `sarctl view` on a free port; returns it and its address.
 fn start_view(prefix: &str) -> (Proc, String) {
-    let mut child = Command::new(bin("sarctl", SARCTL))
+    let mut child = Command::new(bin("sarctl", std::path::Path::new(SARCTL)))
         .args(["--prefix", prefix, "view", "--bind", "127.0.0.1:0"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())

@@ -12,11 +12,10 @@
     clippy::indexing_slicing
 )]
 
+mod support;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-
-const SARD: &str = env!("CARGO_BIN_EXE_sard");
-const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
+use support::{SARCTL, SARD};
 
 struct Daemon(Child);
 
@@ -76,7 +75,7 @@ fn identify_live_writes_back_the_simulated_manipulator() {
     let config_path = dir.join("robot.toml");
     std::fs::write(&config_path, CONFIG).unwrap();
     let _daemon = Daemon(
-        Command::new(SARD)
+        Command::new(&*SARD)
             .arg("--sim")
             .arg("--config")
             .arg(&config_path)
@@ -163,7 +162,7 @@ fn identify_live_works_with_the_readme_recipe() {
     let scenario = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../scenarios/identify_cone_manipulator_2.toml");
     let _daemon = Daemon(
-        Command::new(SARD)
+        Command::new(&*SARD)
             .args(["--sim", "--scenario"])
             .arg(&scenario)
             .env("SAR_SERVICE_PREFIX", &prefix)
@@ -206,7 +205,7 @@ fn identify_live_works_with_the_readme_recipe() {
 fn identify_live_refuses_the_demo_contact_at_once() {
     let prefix = format!("sar-iddemo-{}", std::process::id());
     let _daemon = Daemon(
-        Command::new(SARD)
+        Command::new(&*SARD)
             .arg("--sim")
             .env("SAR_SERVICE_PREFIX", &prefix)
             .stdout(Stdio::null())

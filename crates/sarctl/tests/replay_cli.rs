@@ -15,14 +15,14 @@
     clippy::indexing_slicing
 )]
 
+#[path = "../../daemon/tests/common/mod.rs"]
 mod common;
+mod support;
+use support::{SARCTL, SARD};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-const SARD: &str = env!("CARGO_BIN_EXE_sard");
-const SARCTL: &str = env!("CARGO_BIN_EXE_sarctl");
 
 fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/replay")
@@ -82,7 +82,7 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
     std::fs::write(&config, toml).unwrap();
     let prefix = format!("sar-rec-{}", std::process::id());
     let daemon = Daemon(
-        Command::new(SARD)
+        Command::new(&*SARD)
             .args(["--sim", "--config"])
             .arg(&config)
             .env("SAR_SERVICE_PREFIX", &prefix)
@@ -126,16 +126,10 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
         .partition(|p| p.to_string_lossy().ends_with(".scene.mcap"));
     files.sort();
     assert_eq!(files.len(), 2, "{files:?}");
-    // Each recording has its 3D scene in a companion file, not in itself
-    // (with the cargo feature `view`; none without it).
-    let per_file = usize::from(cfg!(feature = "view"));
-    assert_eq!(scenes.len(), 2 * per_file, "{scenes:?}");
+    // Each recording has its 3D scene in a companion file, not in itself.
+    assert_eq!(scenes.len(), 2, "{scenes:?}");
     for f in &files {
-        assert_eq!(
-            sar_record::scene_path(f).exists(),
-            cfg!(feature = "view"),
-            "{f:?}"
-        );
+        assert!(sar_record::scene_path(f).exists(), "{f:?}");
     }
     // The recording from the first cycle replays bit for bit.
     let out_file = dir.join("replayed.mcap");

@@ -120,14 +120,14 @@ enum Cmd {
     /// The live view: serves the state to Foxglove (WebSocket) until stopped.
     View {
         /// Address to serve on, ADDR:PORT (port 0: any free port).
-        #[arg(long, default_value = sar_daemon::view::DEFAULT_BIND)]
+        #[arg(long, default_value = sarctl::view::DEFAULT_BIND)]
         bind: String,
         /// Rate of the 3D scene, Hz.
-        #[arg(long, default_value_t = sar_daemon::view::DEFAULT_SCENE_HZ)]
+        #[arg(long, default_value_t = sarctl::view::DEFAULT_SCENE_HZ)]
         scene_hz: f64,
     },
     /// Identify m and c (and calibrate the support) from a recording or live.
-    Identify(sar_daemon::cli::identify::IdentifyArgs),
+    Identify(sarctl::cli::identify::IdentifyArgs),
     /// Run the estimator over a recording's inputs, write and compare the outputs.
     Replay {
         /// The recording: a file, the files of a rotated set in order
@@ -218,7 +218,7 @@ const OUTPUT_CLOSED: &str = "output closed";
 fn main() -> ExitCode {
     let args = Args::parse();
     // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
-    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    sar_shm::log_errors_only();
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if e == OUTPUT_CLOSED => ExitCode::SUCCESS,
@@ -358,7 +358,7 @@ fn run(args: &Args) -> Result<(), String> {
             from,
             to,
         } => {
-            return sar_daemon::cli::replay::run(&sar_daemon::cli::replay::Args {
+            return sarctl::cli::replay::run(&sarctl::cli::replay::Args {
                 config: args.config.as_deref(),
                 input,
                 output: output.as_deref(),
@@ -370,17 +370,13 @@ fn run(args: &Args) -> Result<(), String> {
             });
         }
         Cmd::Recover { file, output } => {
-            return sar_daemon::cli::recover::run(file, output.as_deref(), json);
+            return sarctl::cli::recover::run(file, output.as_deref(), json);
         }
         Cmd::Export {
             rosbag2,
             recordings,
         } => {
-            return sar_daemon::cli::export::run(rosbag2, recordings, json);
-        }
-        #[cfg(not(feature = "view"))]
-        Cmd::View { .. } => {
-            return Err("this sarctl has no live view: build it with the cargo feature `view` (cargo install --path crates/daemon --features view)".to_owned());
+            return sarctl::cli::export::run(rosbag2, recordings, json);
         }
         _ => {}
     }
@@ -420,11 +416,11 @@ fn run(args: &Args) -> Result<(), String> {
             Ok(p) => (Some(p), String::new()),
             Err(e) => (None, e),
         };
-        return sar_daemon::cli::workspace::print(&cfg, present, &why, json);
+        return sarctl::cli::workspace::print(&cfg, present, &why, json);
     }
     if let Cmd::Identify(a) = &args.command {
         let json = args.format == Format::Json;
-        return sar_daemon::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
+        return sarctl::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
     }
     let client = Client::new(&args.prefix).map_err(|e| e.to_string())?;
     let command_with = |kind: u32, tip_m: [f64; 3], limits_n: [f64; 6]| {
@@ -470,7 +466,7 @@ fn run(args: &Args) -> Result<(), String> {
         | Cmd::Workspace
         | Cmd::Completions { .. } => Ok(()),
         Cmd::Record { action } => {
-            sar_daemon::cli::record::run(&client, action == RecordAction::Start, json)
+            sarctl::cli::record::run(&client, action == RecordAction::Start, json)
         }
         Cmd::Status => {
             let sub = client.subscribe().map_err(|e| e.to_string())?;
@@ -537,18 +533,15 @@ fn run(args: &Args) -> Result<(), String> {
                 }
             }
         }
-        #[cfg(feature = "view")]
         Cmd::View { ref bind, scene_hz } => {
-            sar_daemon::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
+            sarctl::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
         }
-        #[cfg(not(feature = "view"))]
-        Cmd::View { .. } => Ok(()), // refused above
         Cmd::Identify(_) => Ok(()), // run above, without a daemon
         Cmd::Reset => {
             // Faulted drives are reset first: then the guard's reset.
             let mut r = command(command_kind::RESET, [0.0; 3]).map_err(|e| e.to_string())?;
             for _ in 0..10 {
-                if r.status != sar_loop::control::ReplyStatus::DrivesFaultReset as u32 {
+                if r.status != sar_msgs::wire::ReplyStatus::DrivesFaultReset as u32 {
                     break;
                 }
                 std::thread::sleep(Duration::from_millis(100));

@@ -16,10 +16,10 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sar_daemon::identify::{self, IdentifyOptions};
 use sar_msgs::msgs::{ActiveJointState, RecorderDrops, WrenchStamped};
 use sar_record::McapReader;
 use sar_record::{FileOptions, Outgoing, RotatingWriter};
+use sarctl::identify::{self, IdentifyOptions};
 use std::hint::black_box;
 use std::time::Duration;
 
