@@ -90,9 +90,7 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("encode");
     let m = cycle_input();
     let mut buf = Vec::with_capacity(1024);
-    g.bench_function("cycle_input", |b| {
-        b.iter(|| black_box(&m).encode(&mut buf))
-    });
+    g.bench_function("cycle_input", |b| b.iter(|| black_box(&m).encode(&mut buf)));
     let m = estimator_state();
     g.bench_function("estimator_state", |b| {
         b.iter(|| black_box(&m).encode(&mut buf))
