@@ -628,9 +628,9 @@ code_enum!(
         SetLimits = 11,
         /// Back the tip out along the rod (`back_out_m`).
         BackOut = 12,
-        /// Force control, compliant hold (values[0]: the force, N).
+        /// Force control, compliant hold (`values[0]`: the force, N).
         Hold = 13,
-        /// Force control, axial push (values[0]: the axial force, N).
+        /// Force control, axial push (`values[0]`: the axial force, N).
         Push = 14,
         /// End force control: position control again.
         Position = 15,
