@@ -7,6 +7,11 @@
 //! The writer appends to a caller-owned `Vec<u8>` (reused, it allocates only
 //! while it grows); the reader never panics on arbitrary bytes: every fault is a
 //! [`CdrError`] naming the byte offset.
+//!
+//! [`CdrField`] is one field of a message as its type writes and reads it
+//! (the recorded messages list their fields once, `msgs.rs`);
+//! [`CdrReader::fixed_run`] reads a run of fixed-size fields with one bounds
+//! check.
 
 /// The encapsulation header of little-endian plain CDR.
 pub const ENCAPSULATION_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
@@ -238,11 +243,13 @@ impl<'a> CdrReader<'a> {
         self.data.len().saturating_sub(self.pos)
     }
 
+    #[inline(always)]
     fn align(&mut self, n: usize) -> Result<(), CdrError> {
         let pad = (n - self.pos % n) % n;
         self.take(pad).map(|_| ())
     }
 
+    #[inline(always)]
     fn take(&mut self, n: usize) -> Result<&'a [u8], CdrError> {
         let end = self.pos.checked_add(n).ok_or(CdrError::UnexpectedEnd {
             offset: self.pos,
@@ -259,6 +266,7 @@ impl<'a> CdrReader<'a> {
         Ok(s)
     }
 
+    #[inline(always)]
     fn array<const N: usize>(&mut self) -> Result<[u8; N], CdrError> {
         let offset = self.pos;
         let s = self.take(N)?;
@@ -267,14 +275,17 @@ impl<'a> CdrReader<'a> {
     }
 
     /// A u8.
+    #[inline(always)]
     pub fn u8(&mut self) -> Result<u8, CdrError> {
         Ok(u8::from_le_bytes(self.array()?))
     }
     /// An i8.
+    #[inline(always)]
     pub fn i8(&mut self) -> Result<i8, CdrError> {
         Ok(i8::from_le_bytes(self.array()?))
     }
     /// A bool, refusing anything but 0 and 1.
+    #[inline(always)]
     pub fn bool(&mut self) -> Result<bool, CdrError> {
         let offset = self.pos;
         match self.u8()? {
@@ -284,31 +295,37 @@ impl<'a> CdrReader<'a> {
         }
     }
     /// A u16.
+    #[inline(always)]
     pub fn u16(&mut self) -> Result<u16, CdrError> {
         self.align(2)?;
         Ok(u16::from_le_bytes(self.array()?))
     }
     /// A u32.
+    #[inline(always)]
     pub fn u32(&mut self) -> Result<u32, CdrError> {
         self.align(4)?;
         Ok(u32::from_le_bytes(self.array()?))
     }
     /// An i32.
+    #[inline(always)]
     pub fn i32(&mut self) -> Result<i32, CdrError> {
         self.align(4)?;
         Ok(i32::from_le_bytes(self.array()?))
     }
     /// A u64.
+    #[inline(always)]
     pub fn u64(&mut self) -> Result<u64, CdrError> {
         self.align(8)?;
         Ok(u64::from_le_bytes(self.array()?))
     }
     /// An f64.
+    #[inline(always)]
     pub fn f64(&mut self) -> Result<f64, CdrError> {
         self.align(8)?;
         Ok(f64::from_le_bytes(self.array()?))
     }
     /// A fixed array of N f64.
+    #[inline(always)]
     pub fn f64_array<const N: usize>(&mut self) -> Result<[f64; N], CdrError> {
         let mut out = [0.0; N];
         // Fast path: aligned once, the N elements in one bounds check (the
@@ -392,6 +409,30 @@ impl<'a> CdrReader<'a> {
             max: N,
         })
     }
+    /// Reads a run of fixed-size values with one bounds check: `read` reads
+    /// them from a reader over exactly the `len` bytes that start at the next
+    /// multiple of `align` (which every alignment in the run divides, so that
+    /// the window lays them out as the whole message does). With the window's
+    /// positions constant, the reads fold into loads at fixed offsets.
+    ///
+    /// `None`, with nothing consumed, when fewer bytes are left or `read`
+    /// fails: the caller then reads value by value, for the error at its
+    /// offset in the message.
+    #[inline]
+    pub fn fixed_run<T>(
+        &mut self,
+        align: usize,
+        len: usize,
+        read: impl FnOnce(&mut CdrReader<'a>) -> Result<T, CdrError>,
+    ) -> Option<T> {
+        let align = align.max(1);
+        let start = self.pos.checked_add((align - self.pos % align) % align)?;
+        let data = self.data.get(start..)?.get(..len)?;
+        let mut window = CdrReader { data, pos: 0 };
+        let value = read(&mut window).ok()?;
+        self.pos = start + window.pos;
+        Some(value)
+    }
     /// A `builtin_interfaces/Time` as u64 ns.
     pub fn time(&mut self) -> Result<u64, CdrError> {
         let sec = self.i32()?;
@@ -401,6 +442,120 @@ impl<'a> CdrReader<'a> {
         }
         // sec < 2^31: the product fits a u64.
         Ok(sec.unsigned_abs() as u64 * 1_000_000_000 + u64::from(nanosec))
+    }
+}
+
+/// The alignment and size in bytes of a fixed-size CDR value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FixedLayout {
+    /// Its alignment, bytes (a power of two).
+    pub align: usize,
+    /// Its size, bytes.
+    pub size: usize,
+}
+
+impl FixedLayout {
+    /// The alignment and length of `fields` laid out one after the other
+    /// from a multiple of the first one's alignment: `None` unless every
+    /// field is fixed-size and aligned to a divisor of the first one's
+    /// alignment (then the run's layout is the same wherever it starts).
+    pub const fn run(fields: &[Option<FixedLayout>]) -> Option<FixedLayout> {
+        let Some((Some(first), _)) = fields.split_first() else {
+            return None;
+        };
+        let mut end: usize = 0;
+        let mut rest = fields;
+        while let Some((field, tail)) = rest.split_first() {
+            let Some(f) = field else {
+                return None;
+            };
+            if f.align == 0 || f.align > first.align || first.align % f.align != 0 {
+                return None;
+            }
+            end = end.next_multiple_of(f.align) + f.size;
+            rest = tail;
+        }
+        Some(FixedLayout {
+            align: first.align,
+            size: end,
+        })
+    }
+}
+
+/// One field of a message: its `.msg` type and how its value is written and
+/// read.
+pub trait CdrField: Sized {
+    /// The `.msg` type (`uint64`, `float64`, `string`), without an array's
+    /// length.
+    const ROS_TYPE: &'static str;
+    /// The length of a fixed array (`float64[3]`), `None` for one value.
+    const ARRAY_LEN: Option<usize> = None;
+    /// The layout of a fixed-size value, `None` for a string.
+    const LAYOUT: Option<FixedLayout>;
+    /// Writes the value.
+    fn write(&self, w: &mut CdrWriter<'_>);
+    /// Reads a value.
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError>;
+}
+
+macro_rules! primitive_field {
+    ($($t:ident, $ros:literal;)*) => {$(
+        impl CdrField for $t {
+            const ROS_TYPE: &'static str = $ros;
+            const LAYOUT: Option<FixedLayout> = Some(FixedLayout {
+                align: core::mem::size_of::<$t>(),
+                size: core::mem::size_of::<$t>(),
+            });
+            #[inline]
+            fn write(&self, w: &mut CdrWriter<'_>) {
+                w.$t(*self);
+            }
+            #[inline(always)]
+            fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+                r.$t()
+            }
+        }
+    )*};
+}
+
+primitive_field! {
+    u8, "uint8";
+    i8, "int8";
+    bool, "bool";
+    u16, "uint16";
+    u32, "uint32";
+    i32, "int32";
+    u64, "uint64";
+    f64, "float64";
+}
+
+impl<const N: usize> CdrField for [f64; N] {
+    const ROS_TYPE: &'static str = "float64";
+    const ARRAY_LEN: Option<usize> = Some(N);
+    const LAYOUT: Option<FixedLayout> = Some(FixedLayout {
+        align: 8,
+        size: 8 * N,
+    });
+    #[inline]
+    fn write(&self, w: &mut CdrWriter<'_>) {
+        w.f64_array(self);
+    }
+    #[inline(always)]
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        r.f64_array()
+    }
+}
+
+impl<const N: usize> CdrField for FixedStr<N> {
+    const ROS_TYPE: &'static str = "string";
+    const LAYOUT: Option<FixedLayout> = None;
+    #[inline]
+    fn write(&self, w: &mut CdrWriter<'_>) {
+        w.string(self.as_str());
+    }
+    #[inline]
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        r.fixed_str()
     }
 }
 

@@ -7,8 +7,14 @@
 //! them as they are; they do not depend on the estimator's types (a conversion
 //! from `sar_estimator::cycle` is the daemon's business). Units are the last part
 //! of each name; stamps are ns of the daemon's monotonic clock.
+//!
+//! Each message but the joint states is one list of its fields in wire order
+//! (`ros_message!`): the struct, its encoding and its decoding are made from
+//! it, and a test checks it against the `.msg` file, which is the `sar_msgs`
+//! types' schema. The joint states (`sensor_msgs/msg/JointState`, a name per
+//! position, read in any order) are written out by hand.
 
-use crate::cdr::{CdrError, CdrReader, CdrWriter, FixedStr};
+use crate::cdr::{CdrError, CdrField, CdrReader, CdrWriter, FixedLayout, FixedStr};
 
 /// A frame id (`header.frame_id`), at most 32 bytes.
 pub type FrameId = FixedStr<32>;
@@ -66,6 +72,203 @@ fn header_out(w: &mut CdrWriter<'_>, stamp_ns: u64, frame_id: &str) -> Result<()
     Ok(())
 }
 
+/// One field as the `.msg` file declares it (`float64[3] joints_q_m`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MsgField {
+    /// Its type (`uint64`, `string`, `uint8[]`, `std_msgs/Header`), without
+    /// a fixed array's length.
+    pub ros_type: &'static str,
+    /// A fixed array's length.
+    pub array_len: Option<usize>,
+    /// Its name.
+    pub name: &'static str,
+}
+
+impl MsgField {
+    /// `std_msgs/Header header`.
+    pub const HEADER: MsgField = MsgField {
+        ros_type: "std_msgs/Header",
+        array_len: None,
+        name: "header",
+    };
+}
+
+/// The `.msg` line, `float64[3] joints_q_m`.
+impl core::fmt::Display for MsgField {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.ros_type)?;
+        if let Some(n) = self.array_len {
+            write!(f, "[{n}]")?;
+        }
+        write!(f, " {}", self.name)
+    }
+}
+
+/// Defines a message from one list of its fields in wire order: the struct
+/// (the list's docs and types), its [`RosMessage`] encoding and decoding,
+/// and `MSG_FIELDS`, the list as `.msg` lines (a test checks them against
+/// the `.msg` file).
+///
+/// ```text
+/// ros_message! {
+///     /// Docs, derives.
+///     pub struct Name: "pkg/msg/Name", SCHEMA;
+///     header {
+///         /// Docs.
+///         stamp_ns,              // header.stamp: builtin_interfaces/Time from ns
+///         frame_id = FRAME_BASE, // a constant frame id (read, checked, dropped)
+///      or /// Docs.
+///         frame_id: FrameId,     // the frame id a field
+///     }
+///     fields {
+///         /// Docs.
+///         name: Type,               // a `CdrField`: number, bool, [f64; N], text, code
+///         data: Vec<u8> [<= MAX],   // uint8[], at most MAX bytes
+///     }
+///     since { ... } // fields added later, all or none: a message that ends
+///                   // before them reads them as their `Default` (0)
+/// }
+/// ```
+///
+/// Decoding reads the fields after the header in one window (one bounds
+/// check, [`CdrReader::fixed_run`]) when they are all fixed-size and the
+/// message holds them all, the `since` ones too; otherwise (an older message,
+/// a cut one, a string among the fields), or when a value is refused, one by
+/// one as they are listed, so that an error names the same offset.
+macro_rules! ros_message {
+    // A field's read, write, layout and `.msg` line: by its `CdrField` type,
+    // or a `uint8[]` of at most `$max` bytes.
+    (@read $r:ident, $ty:ty) => { <$ty as CdrField>::read($r)? };
+    (@read $r:ident, $ty:ty, $max:expr) => { $r.byte_seq($max)?.to_vec() };
+    (@write $w:ident, $v:expr, $ty:ty) => { <$ty as CdrField>::write(&$v, $w) };
+    (@write $w:ident, $v:expr, $ty:ty, $max:expr) => { $w.byte_seq(&$v) };
+    (@layout $ty:ty) => { <$ty as CdrField>::LAYOUT };
+    (@layout $ty:ty, $max:expr) => { None };
+    (@msg_field $f:ident: $ty:ty) => {
+        MsgField {
+            ros_type: <$ty as CdrField>::ROS_TYPE,
+            array_len: <$ty as CdrField>::ARRAY_LEN,
+            name: stringify!($f),
+        }
+    };
+    (@msg_field $f:ident: $ty:ty, $max:expr) => {
+        MsgField { ros_type: "uint8[]", array_len: None, name: stringify!($f) }
+    };
+    // The header's frame id: a constant (read, checked and dropped) or a field.
+    (@frame $self:ident [const $e:expr]) => { $e };
+    (@frame $self:ident [field $f:ident]) => { $self.$f.as_str() };
+    (@new [$stamp:ident = $s:ident] [$f:ident = const $e:expr] { $($field:ident: $v:expr,)* }) => {{
+        let _ = $f;
+        Self { $stamp: $s, $($field: $v,)* }
+    }};
+    (@new [$stamp:ident = $s:ident] [$f:ident = field $frame:ident] { $($field:ident: $v:expr,)* }) => {
+        Self { $stamp: $s, $frame: $f, $($field: $v,)* }
+    };
+    // The struct, `MSG_FIELDS`, and the encoding and decoding.
+    (@message [$(#[$m:meta])*] $name:ident $type_name:literal [$schema:expr]
+        [$(#[$sm:meta])* $stamp:ident] [$($frame:tt)*] [$($frame_decl:tt)*]
+        fields {
+            $( $(#[$fm:meta])* $field:ident: $ty:ty $([<= $max:expr])? ),* $(,)?
+        }
+        $( since {
+            $( $(#[$om:meta])* $ofield:ident: $oty:ty ),* $(,)?
+        } )*
+    ) => {
+        $(#[$m])*
+        pub struct $name {
+            $(#[$sm])*
+            pub $stamp: u64,
+            $($frame_decl)*
+            $( $(#[$fm])* pub $field: $ty, )*
+            $($( $(#[$om])* pub $ofield: $oty, )*)*
+        }
+
+        impl $name {
+            /// The fields in wire order as the `.msg` file declares them,
+            /// the header first.
+            pub const MSG_FIELDS: &'static [MsgField] = &[
+                MsgField::HEADER,
+                $( ros_message!(@msg_field $field: $ty $(, $max)?), )*
+                $($( ros_message!(@msg_field $ofield: $oty), )*)*
+            ];
+
+            /// The fields after the header, one by one.
+            #[inline(always)]
+            fn decode_body(
+                r: &mut CdrReader<'_>,
+                stamp_ns: u64,
+                frame_id: FrameId,
+            ) -> Result<Self, CdrError> {
+                #[allow(unused_mut)]
+                let mut m = ros_message!(@new [$stamp = stamp_ns] [frame_id = $($frame)*] {
+                    $( $field: ros_message!(@read r, $ty $(, $max)?), )*
+                    $($( $ofield: Default::default(), )*)*
+                });
+                $(
+                    if r.remaining() > 0 {
+                        $( m.$ofield = CdrField::read(r)?; )*
+                    }
+                )*
+                Ok(m)
+            }
+        }
+
+        impl RosMessage for $name {
+            const TYPE_NAME: &'static str = $type_name;
+            const SCHEMA: &'static str = $schema;
+            fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
+                w.time(self.$stamp)?;
+                w.string(ros_message!(@frame self [$($frame)*]));
+                $( ros_message!(@write w, self.$field, $ty $(, $max)?); )*
+                $($( CdrField::write(&self.$ofield, w); )*)*
+                Ok(())
+            }
+            fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+                const RUN: Option<FixedLayout> = FixedLayout::run(&[
+                    $( ros_message!(@layout $ty $(, $max)?), )*
+                    $($( <$oty as CdrField>::LAYOUT, )*)*
+                ]);
+                let stamp_ns = r.time()?;
+                let frame_id: FrameId = r.fixed_str()?;
+                if let Some(run) = RUN
+                    && let Some(m) = r.fixed_run(run.align, run.size, |window| {
+                        Self::decode_body(window, stamp_ns, frame_id)
+                    })
+                {
+                    return Ok(m);
+                }
+                Self::decode_body(r, stamp_ns, frame_id)
+            }
+        }
+    };
+    // The frame id a constant.
+    (
+        $(#[$m:meta])*
+        pub struct $name:ident: $type_name:literal, $schema:expr;
+        header {
+            $(#[$sm:meta])* $stamp:ident,
+            frame_id = $frame:expr $(,)?
+        }
+        $($rest:tt)*
+    ) => {
+        ros_message!(@message [$(#[$m])*] $name $type_name [$schema]
+            [$(#[$sm])* $stamp] [const $frame] [] $($rest)*);
+    };
+    // The frame id a field.
+    (
+        $(#[$m:meta])*
+        pub struct $name:ident: $type_name:literal, $schema:expr;
+        header {
+            $(#[$sm:meta])* $stamp:ident,
+            $(#[$fm:meta])* $frame:ident: FrameId $(,)?
+        }
+        $($rest:tt)*
+    ) => {
+        ros_message!(@message [$(#[$m])*] $name $type_name [$schema]
+            [$(#[$sm])* $stamp] [field $frame] [$(#[$fm])* pub $frame: FrameId,] $($rest)*);
+    };
+}
+
 /// The frame id of the base frame {0}.
 pub const FRAME_BASE: &str = "base";
 /// The frame id of the force/torque sensor's frame.
@@ -75,17 +278,39 @@ fn frame(s: &str) -> FrameId {
     FrameId::truncating(s)
 }
 
-/// `geometry_msgs/msg/WrenchStamped`.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct WrenchStamped {
-    /// `header.stamp`, ns.
-    pub stamp_ns: u64,
-    /// `header.frame_id`.
-    pub frame_id: FrameId,
-    /// Force, N.
-    pub force_n: [f64; 3],
-    /// Torque, N m.
-    pub torque_nm: [f64; 3],
+ros_message! {
+    /// `geometry_msgs/msg/WrenchStamped`.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct WrenchStamped: "geometry_msgs/msg/WrenchStamped", concat!(
+        "# A wrench with reference coordinate frame and timestamp\n",
+        "std_msgs/Header header\n",
+        "Wrench wrench\n",
+        header_sections!(),
+        sep!(),
+        "MSG: geometry_msgs/Wrench\n",
+        "# This represents force in free space, separated into its linear and angular parts.\n",
+        "Vector3  force\n",
+        "Vector3  torque\n",
+        sep!(),
+        "MSG: geometry_msgs/Vector3\n",
+        "# This represents a vector in free space.\n",
+        "float64 x\n",
+        "float64 y\n",
+        "float64 z\n",
+    );
+    header {
+        /// `header.stamp`, ns.
+        stamp_ns,
+        /// `header.frame_id`.
+        frame_id: FrameId,
+    }
+    // `wrench.force` and `wrench.torque`: a Vector3 is three float64.
+    fields {
+        /// Force, N.
+        force_n: [f64; 3],
+        /// Torque, N m.
+        torque_nm: [f64; 3],
+    }
 }
 
 impl WrenchStamped {
@@ -106,41 +331,6 @@ impl WrenchStamped {
             force_n,
             torque_nm: [0.0; 3],
         }
-    }
-}
-
-impl RosMessage for WrenchStamped {
-    const TYPE_NAME: &'static str = "geometry_msgs/msg/WrenchStamped";
-    const SCHEMA: &'static str = concat!(
-        "# A wrench with reference coordinate frame and timestamp\n",
-        "std_msgs/Header header\n",
-        "Wrench wrench\n",
-        header_sections!(),
-        sep!(),
-        "MSG: geometry_msgs/Wrench\n",
-        "# This represents force in free space, separated into its linear and angular parts.\n",
-        "Vector3  force\n",
-        "Vector3  torque\n",
-        sep!(),
-        "MSG: geometry_msgs/Vector3\n",
-        "# This represents a vector in free space.\n",
-        "float64 x\n",
-        "float64 y\n",
-        "float64 z\n",
-    );
-    fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
-        header_out(w, self.stamp_ns, self.frame_id.as_str())?;
-        w.f64_array(&self.force_n);
-        w.f64_array(&self.torque_nm);
-        Ok(())
-    }
-    fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        Ok(Self {
-            stamp_ns: r.time()?,
-            frame_id: r.fixed_str()?,
-            force_n: r.f64_array()?,
-            torque_nm: r.f64_array()?,
-        })
     }
 }
 
@@ -318,16 +508,31 @@ macro_rules! code_enum {
         }
         impl $name {
             /// The numeric code of the `.msg` file.
+            #[inline]
             pub fn code(self) -> u8 {
                 self as u8
             }
             /// The value of a code, or `BadValue`.
+            #[inline]
             pub fn from_code(code: u8) -> Result<Self, CdrError> {
                 match code {
                     $fc => Ok(Self::$first),
                     $($c => Ok(Self::$v),)*
                     _ => Err(CdrError::BadValue { field: $field, value: i64::from(code) }),
                 }
+            }
+        }
+        /// A `uint8` code.
+        impl CdrField for $name {
+            const ROS_TYPE: &'static str = "uint8";
+            const LAYOUT: Option<FixedLayout> = <u8 as CdrField>::LAYOUT;
+            #[inline]
+            fn write(&self, w: &mut CdrWriter<'_>) {
+                w.u8(self.code());
+            }
+            #[inline(always)]
+            fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+                Self::from_code(r.u8()?)
             }
         }
     };
@@ -423,9 +628,9 @@ code_enum!(
         SetLimits = 11,
         /// Back the tip out along the rod (`back_out_m`).
         BackOut = 12,
-        /// Force control, compliant hold (values[0]: the force, N).
+        /// Force control, compliant hold (`values[0]`: the force, N).
         Hold = 13,
-        /// Force control, axial push (values[0]: the axial force, N).
+        /// Force control, axial push (`values[0]`: the axial force, N).
         Push = 14,
         /// End force control: position control again.
         Position = 15,
@@ -488,349 +693,188 @@ pub mod flags {
     pub const CLOCK_ADVANCES: u32 = 64;
 }
 
-/// `sar_msgs/msg/EstimatorState` (`msg/EstimatorState.msg`): one cycle.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct EstimatorState {
-    /// `header.stamp` = `now_ns`, frame `base`.
-    pub stamp_ns: u64,
-    /// The cycle number.
-    pub cycle: u64,
-    /// The cycle's now, ns.
-    pub now_ns: u64,
-    /// The sensor sample's stamp, ns.
-    pub sensor_stamp_ns: u64,
-    /// The joint sample's stamp, ns.
-    pub joints_stamp_ns: u64,
-    /// now - sensor stamp, ns.
-    pub sensor_age_ns: u64,
-    /// now - joints stamp, ns.
-    pub joints_age_ns: u64,
-    /// What became of the tip force.
-    pub tip_outcome: TipOutcomeCode,
-    /// A, m.
-    pub ujoint_m: [f64; 3],
-    /// D, m.
-    pub tip_m: [f64; 3],
-    /// a = |B - A|, m.
-    pub support_distance_m: f64,
-    /// F_A, N.
-    pub ujoint_force_n: [f64; 3],
-    /// F_tip, N.
-    pub tip_force_n: [f64; 3],
-    /// Its standard deviation per axis, N.
-    pub tip_force_std_n: [f64; 3],
-    /// Axial part of F_tip, N.
-    pub axial_n: f64,
-    /// Lateral part of F_tip, N.
-    pub lateral_n: f64,
-    /// Torsion about the rod, N m.
-    pub torsion_nm: f64,
-    /// The causal filtered F_tip, N.
-    pub tip_force_filtered_n: [f64; 3],
-    /// The guard's state after the cycle.
-    pub guard_state: GuardStateCode,
-    /// Why ([`reason`]).
-    pub guard_reason_code: u8,
-    /// Why, in words.
-    pub guard_reason_text: ReasonText,
-    /// [`flags`] or-ed.
-    pub flags: u32,
-}
-
-impl RosMessage for EstimatorState {
-    const TYPE_NAME: &'static str = "sar_msgs/msg/EstimatorState";
-    const SCHEMA: &'static str = concat!(
+ros_message! {
+    /// `sar_msgs/msg/EstimatorState` (`msg/EstimatorState.msg`): one cycle.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct EstimatorState: "sar_msgs/msg/EstimatorState", concat!(
         include_str!("../msg/EstimatorState.msg"),
         header_sections!()
     );
-    fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
-        header_out(w, self.stamp_ns, FRAME_BASE)?;
-        w.u64(self.cycle);
-        w.u64(self.now_ns);
-        w.u64(self.sensor_stamp_ns);
-        w.u64(self.joints_stamp_ns);
-        w.u64(self.sensor_age_ns);
-        w.u64(self.joints_age_ns);
-        w.u8(self.tip_outcome.code());
-        w.f64_array(&self.ujoint_m);
-        w.f64_array(&self.tip_m);
-        w.f64(self.support_distance_m);
-        w.f64_array(&self.ujoint_force_n);
-        w.f64_array(&self.tip_force_n);
-        w.f64_array(&self.tip_force_std_n);
-        w.f64(self.axial_n);
-        w.f64(self.lateral_n);
-        w.f64(self.torsion_nm);
-        w.f64_array(&self.tip_force_filtered_n);
-        w.u8(self.guard_state.code());
-        w.u8(self.guard_reason_code);
-        w.string(self.guard_reason_text.as_str());
-        w.u32(self.flags);
-        Ok(())
+    header {
+        /// `header.stamp` = `now_ns`, frame `base`.
+        stamp_ns,
+        frame_id = FRAME_BASE,
     }
-    fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        let stamp_ns = r.time()?;
-        let _frame: FrameId = r.fixed_str()?;
-        Ok(Self {
-            stamp_ns,
-            cycle: r.u64()?,
-            now_ns: r.u64()?,
-            sensor_stamp_ns: r.u64()?,
-            joints_stamp_ns: r.u64()?,
-            sensor_age_ns: r.u64()?,
-            joints_age_ns: r.u64()?,
-            tip_outcome: TipOutcomeCode::from_code(r.u8()?)?,
-            ujoint_m: r.f64_array()?,
-            tip_m: r.f64_array()?,
-            support_distance_m: r.f64()?,
-            ujoint_force_n: r.f64_array()?,
-            tip_force_n: r.f64_array()?,
-            tip_force_std_n: r.f64_array()?,
-            axial_n: r.f64()?,
-            lateral_n: r.f64()?,
-            torsion_nm: r.f64()?,
-            tip_force_filtered_n: r.f64_array()?,
-            guard_state: GuardStateCode::from_code(r.u8()?)?,
-            guard_reason_code: r.u8()?,
-            guard_reason_text: r.fixed_str()?,
-            flags: r.u32()?,
-        })
+    fields {
+        /// The cycle number.
+        cycle: u64,
+        /// The cycle's now, ns.
+        now_ns: u64,
+        /// The sensor sample's stamp, ns.
+        sensor_stamp_ns: u64,
+        /// The joint sample's stamp, ns.
+        joints_stamp_ns: u64,
+        /// now - sensor stamp, ns.
+        sensor_age_ns: u64,
+        /// now - joints stamp, ns.
+        joints_age_ns: u64,
+        /// What became of the tip force.
+        tip_outcome: TipOutcomeCode,
+        /// A, m.
+        ujoint_m: [f64; 3],
+        /// D, m.
+        tip_m: [f64; 3],
+        /// a = |B - A|, m.
+        support_distance_m: f64,
+        /// F_A, N.
+        ujoint_force_n: [f64; 3],
+        /// F_tip, N.
+        tip_force_n: [f64; 3],
+        /// Its standard deviation per axis, N.
+        tip_force_std_n: [f64; 3],
+        /// Axial part of F_tip, N.
+        axial_n: f64,
+        /// Lateral part of F_tip, N.
+        lateral_n: f64,
+        /// Torsion about the rod, N m.
+        torsion_nm: f64,
+        /// The causal filtered F_tip, N.
+        tip_force_filtered_n: [f64; 3],
+        /// The guard's state after the cycle.
+        guard_state: GuardStateCode,
+        /// Why ([`reason`]).
+        guard_reason_code: u8,
+        /// Why, in words.
+        guard_reason_text: ReasonText,
+        /// [`flags`] or-ed.
+        flags: u32,
     }
 }
 
-/// `sar_msgs/msg/GuardEvent` (`msg/GuardEvent.msg`): one guard transition.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct GuardEvent {
-    /// `header.stamp` = now of the cycle, frame `base`.
-    pub stamp_ns: u64,
-    /// The cycle.
-    pub cycle: u64,
-    /// The state left.
-    pub from_state: GuardStateCode,
-    /// The state entered.
-    pub to_state: GuardStateCode,
-    /// Why ([`reason`]).
-    pub reason_code: u8,
-    /// Why, in words.
-    pub reason_text: ReasonText,
-}
-
-impl RosMessage for GuardEvent {
-    const TYPE_NAME: &'static str = "sar_msgs/msg/GuardEvent";
-    const SCHEMA: &'static str = concat!(include_str!("../msg/GuardEvent.msg"), header_sections!());
-    fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
-        header_out(w, self.stamp_ns, FRAME_BASE)?;
-        w.u64(self.cycle);
-        w.u8(self.from_state.code());
-        w.u8(self.to_state.code());
-        w.u8(self.reason_code);
-        w.string(self.reason_text.as_str());
-        Ok(())
+ros_message! {
+    /// `sar_msgs/msg/GuardEvent` (`msg/GuardEvent.msg`): one guard transition.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct GuardEvent: "sar_msgs/msg/GuardEvent",
+        concat!(include_str!("../msg/GuardEvent.msg"), header_sections!());
+    header {
+        /// `header.stamp` = now of the cycle, frame `base`.
+        stamp_ns,
+        frame_id = FRAME_BASE,
     }
-    fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        let stamp_ns = r.time()?;
-        let _frame: FrameId = r.fixed_str()?;
-        Ok(Self {
-            stamp_ns,
-            cycle: r.u64()?,
-            from_state: GuardStateCode::from_code(r.u8()?)?,
-            to_state: GuardStateCode::from_code(r.u8()?)?,
-            reason_code: r.u8()?,
-            reason_text: r.fixed_str()?,
-        })
+    fields {
+        /// The cycle.
+        cycle: u64,
+        /// The state left.
+        from_state: GuardStateCode,
+        /// The state entered.
+        to_state: GuardStateCode,
+        /// Why ([`reason`]).
+        reason_code: u8,
+        /// Why, in words.
+        reason_text: ReasonText,
     }
 }
 
-/// `sar_msgs/msg/CycleInput` (`msg/CycleInput.msg`): what one cycle consumed.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct CycleInput {
-    /// `header.stamp` = `now_ns`, frame `base`.
-    pub stamp_ns: u64,
-    /// The cycle number.
-    pub cycle: u64,
-    /// Host monotonic time now, ns.
-    pub now_ns: u64,
-    /// The clock's status.
-    pub clock_status: ClockStatusCode,
-    /// Force, sensor frame, N.
-    pub sensor_force_n: [f64; 3],
-    /// Torque, sensor frame, N m.
-    pub sensor_torque_nm: [f64; 3],
-    /// The device's sample counter.
-    pub sensor_counter: u32,
-    /// The device's status word.
-    pub sensor_status: u32,
-    /// Receive time, ns.
-    pub sensor_stamp_ns: u64,
-    /// The driver's word that the sample is good.
-    pub sensor_valid: bool,
-    /// q1, q2, q3, m.
-    pub joints_q_m: [f64; 3],
-    /// Measure time, ns.
-    pub joints_stamp_ns: u64,
-    /// The driver's word that the positions are good.
-    pub joints_valid: bool,
-    /// The drives' state.
-    pub drive_state: DriveStateCode,
-    /// The faulted axis (0..=2), -1 for none.
-    pub drive_fault_axis: i8,
-    /// The device's fault code (0 unless faulted).
-    pub drive_fault_code: u16,
-    /// Commanded q1..q3, m.
-    pub target_q_m: [f64; 3],
-    /// Whether a target is commanded.
-    pub target_valid: bool,
-    /// The operator command applied.
-    pub command_kind: CommandKindCode,
-    /// Its real arguments.
-    pub command_values: [f64; 6],
-    /// Its integer argument.
-    pub command_arg: u64,
-    /// MOVE_TIP: the wanted tip, base frame, m.
-    pub move_tip_m: [f64; 3],
-    /// SET_LIMITS: warn, stop of total, axial, lateral, N.
-    pub limits_n: [f64; 6],
-    /// The step's decision: what the drives were told.
-    pub drive_action: DriveActionCode,
-    /// With `Setpoint`: q1..q3 one period ahead, m.
-    pub setpoint_q_m: [f64; 3],
-    /// The reply's status code, [`REPLY_NONE`] without a request.
-    pub reply_status: u8,
-    /// The guard's reason code behind a refusal.
-    pub reply_reason: u16,
-    /// The force limits in use after the cycle, N.
-    pub limits_in_use_n: [f64; 6],
-    /// How long the publishing thread had made no progress, ns (0 in
-    /// recordings older than this field).
-    pub publisher_idle_ns: u64,
-    /// BACK_OUT: how far to back the tip out along the rod, m.
-    pub back_out_m: f64,
-    /// MOVE_TIP: a guarded move's force limit, N (0: unguarded; 0 in
-    /// recordings older than this field).
-    pub move_max_force_n: f64,
-}
-
-impl RosMessage for CycleInput {
-    const TYPE_NAME: &'static str = "sar_msgs/msg/CycleInput";
-    const SCHEMA: &'static str = concat!(include_str!("../msg/CycleInput.msg"), header_sections!());
-    fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
-        header_out(w, self.stamp_ns, FRAME_BASE)?;
-        w.u64(self.cycle);
-        w.u64(self.now_ns);
-        w.u8(self.clock_status.code());
-        w.f64_array(&self.sensor_force_n);
-        w.f64_array(&self.sensor_torque_nm);
-        w.u32(self.sensor_counter);
-        w.u32(self.sensor_status);
-        w.u64(self.sensor_stamp_ns);
-        w.bool(self.sensor_valid);
-        w.f64_array(&self.joints_q_m);
-        w.u64(self.joints_stamp_ns);
-        w.bool(self.joints_valid);
-        w.u8(self.drive_state.code());
-        w.i8(self.drive_fault_axis);
-        w.u16(self.drive_fault_code);
-        w.f64_array(&self.target_q_m);
-        w.bool(self.target_valid);
-        w.u8(self.command_kind.code());
-        w.f64_array(&self.command_values);
-        w.u64(self.command_arg);
-        w.f64_array(&self.move_tip_m);
-        w.f64_array(&self.limits_n);
-        w.u8(self.drive_action.code());
-        w.f64_array(&self.setpoint_q_m);
-        w.u8(self.reply_status);
-        w.u16(self.reply_reason);
-        w.f64_array(&self.limits_in_use_n);
-        w.u64(self.publisher_idle_ns);
-        w.f64(self.back_out_m);
-        w.f64(self.move_max_force_n);
-        Ok(())
+ros_message! {
+    /// `sar_msgs/msg/CycleInput` (`msg/CycleInput.msg`): what one cycle consumed.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct CycleInput: "sar_msgs/msg/CycleInput",
+        concat!(include_str!("../msg/CycleInput.msg"), header_sections!());
+    header {
+        /// `header.stamp` = `now_ns`, frame `base`.
+        stamp_ns,
+        frame_id = FRAME_BASE,
     }
-    fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        let stamp_ns = r.time()?;
-        let _frame: FrameId = r.fixed_str()?;
-        let mut m = Self {
-            stamp_ns,
-            cycle: r.u64()?,
-            now_ns: r.u64()?,
-            clock_status: ClockStatusCode::from_code(r.u8()?)?,
-            sensor_force_n: r.f64_array()?,
-            sensor_torque_nm: r.f64_array()?,
-            sensor_counter: r.u32()?,
-            sensor_status: r.u32()?,
-            sensor_stamp_ns: r.u64()?,
-            sensor_valid: r.bool()?,
-            joints_q_m: r.f64_array()?,
-            joints_stamp_ns: r.u64()?,
-            joints_valid: r.bool()?,
-            drive_state: DriveStateCode::from_code(r.u8()?)?,
-            drive_fault_axis: r.i8()?,
-            drive_fault_code: r.u16()?,
-            target_q_m: r.f64_array()?,
-            target_valid: r.bool()?,
-            command_kind: CommandKindCode::from_code(r.u8()?)?,
-            command_values: r.f64_array()?,
-            command_arg: r.u64()?,
-            move_tip_m: r.f64_array()?,
-            limits_n: r.f64_array()?,
-            drive_action: DriveActionCode::from_code(r.u8()?)?,
-            setpoint_q_m: r.f64_array()?,
-            reply_status: r.u8()?,
-            reply_reason: r.u16()?,
-            limits_in_use_n: r.f64_array()?,
-            publisher_idle_ns: 0,
-            back_out_m: 0.0,
-            move_max_force_n: 0.0,
-        };
-        // The fields added with issue 14, all or none: an older recording
-        // ends before them (they read as 0); part of them is a cut message.
-        if r.remaining() > 0 {
-            m.publisher_idle_ns = r.u64()?;
-            m.back_out_m = r.f64()?;
-        }
-        // Added with issue 15 (guarded moves): as above.
-        if r.remaining() > 0 {
-            m.move_max_force_n = r.f64()?;
-        }
-        Ok(m)
+    fields {
+        /// The cycle number.
+        cycle: u64,
+        /// Host monotonic time now, ns.
+        now_ns: u64,
+        /// The clock's status.
+        clock_status: ClockStatusCode,
+        /// Force, sensor frame, N.
+        sensor_force_n: [f64; 3],
+        /// Torque, sensor frame, N m.
+        sensor_torque_nm: [f64; 3],
+        /// The device's sample counter.
+        sensor_counter: u32,
+        /// The device's status word.
+        sensor_status: u32,
+        /// Receive time, ns.
+        sensor_stamp_ns: u64,
+        /// The driver's word that the sample is good.
+        sensor_valid: bool,
+        /// q1, q2, q3, m.
+        joints_q_m: [f64; 3],
+        /// Measure time, ns.
+        joints_stamp_ns: u64,
+        /// The driver's word that the positions are good.
+        joints_valid: bool,
+        /// The drives' state.
+        drive_state: DriveStateCode,
+        /// The faulted axis (0..=2), -1 for none.
+        drive_fault_axis: i8,
+        /// The device's fault code (0 unless faulted).
+        drive_fault_code: u16,
+        /// Commanded q1..q3, m.
+        target_q_m: [f64; 3],
+        /// Whether a target is commanded.
+        target_valid: bool,
+        /// The operator command applied.
+        command_kind: CommandKindCode,
+        /// Its real arguments.
+        command_values: [f64; 6],
+        /// Its integer argument.
+        command_arg: u64,
+        /// MOVE_TIP: the wanted tip, base frame, m.
+        move_tip_m: [f64; 3],
+        /// SET_LIMITS: warn, stop of total, axial, lateral, N.
+        limits_n: [f64; 6],
+        /// The step's decision: what the drives were told.
+        drive_action: DriveActionCode,
+        /// With `Setpoint`: q1..q3 one period ahead, m.
+        setpoint_q_m: [f64; 3],
+        /// The reply's status code, [`REPLY_NONE`] without a request.
+        reply_status: u8,
+        /// The guard's reason code behind a refusal.
+        reply_reason: u16,
+        /// The force limits in use after the cycle, N.
+        limits_in_use_n: [f64; 6],
+    }
+    // Added with issue 14: an older recording ends before them.
+    since {
+        /// How long the publishing thread had made no progress, ns (0 in
+        /// recordings older than this field).
+        publisher_idle_ns: u64,
+        /// BACK_OUT: how far to back the tip out along the rod, m.
+        back_out_m: f64,
+    }
+    // Added with issue 15 (guarded moves).
+    since {
+        /// MOVE_TIP: a guarded move's force limit, N (0: unguarded; 0 in
+        /// recordings older than this field).
+        move_max_force_n: f64,
     }
 }
 
-/// `sar_msgs/msg/RecorderDrops` (`msg/RecorderDrops.msg`): the recorder's
-/// account of dropped messages.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct RecorderDrops {
-    /// `header.stamp`: the log time of the newest message seen, ns.
-    pub stamp_ns: u64,
-    /// Messages dropped since the recorder started (queue full or writer failed).
-    pub dropped: u64,
-    /// Messages written since the recorder started.
-    pub written: u64,
-    /// The queue's capacity.
-    pub queue_capacity: u64,
-}
-
-impl RosMessage for RecorderDrops {
-    const TYPE_NAME: &'static str = "sar_msgs/msg/RecorderDrops";
-    const SCHEMA: &'static str =
+ros_message! {
+    /// `sar_msgs/msg/RecorderDrops` (`msg/RecorderDrops.msg`): the recorder's
+    /// account of dropped messages.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct RecorderDrops: "sar_msgs/msg/RecorderDrops",
         concat!(include_str!("../msg/RecorderDrops.msg"), header_sections!());
-    fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
-        header_out(w, self.stamp_ns, "")?;
-        w.u64(self.dropped);
-        w.u64(self.written);
-        w.u64(self.queue_capacity);
-        Ok(())
+    header {
+        /// `header.stamp`: the log time of the newest message seen, ns.
+        stamp_ns,
+        frame_id = "",
     }
-    fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        let stamp_ns = r.time()?;
-        let _frame: FrameId = r.fixed_str()?;
-        Ok(Self {
-            stamp_ns,
-            dropped: r.u64()?,
-            written: r.u64()?,
-            queue_capacity: r.u64()?,
-        })
+    fields {
+        /// Messages dropped since the recorder started (queue full or writer failed).
+        dropped: u64,
+        /// Messages written since the recorder started.
+        written: u64,
+        /// The queue's capacity.
+        queue_capacity: u64,
     }
 }
 
@@ -900,41 +944,25 @@ impl SnapshotChunk {
     }
 }
 
-/// `sar_msgs/msg/StateSnapshot` (`msg/StateSnapshot.msg`): the loop's
-/// decision state after a cycle, as written (the reader's form: owns its
-/// bytes).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct StateSnapshot {
-    /// `header.stamp`: the cycle's `now`, ns.
-    pub stamp_ns: u64,
-    /// The last cycle stepped before it was taken.
-    pub after_cycle: u64,
-    /// The sar-snapshot format's version.
-    pub format_version: u16,
-    /// The snapshot's bytes.
-    pub data: Vec<u8>,
-}
-
-impl RosMessage for StateSnapshot {
-    const TYPE_NAME: &'static str = "sar_msgs/msg/StateSnapshot";
-    const SCHEMA: &'static str =
+ros_message! {
+    /// `sar_msgs/msg/StateSnapshot` (`msg/StateSnapshot.msg`): the loop's
+    /// decision state after a cycle, as written (the reader's form: owns its
+    /// bytes).
+    #[derive(Debug, Clone, PartialEq, Eq)]
+    pub struct StateSnapshot: "sar_msgs/msg/StateSnapshot",
         concat!(include_str!("../msg/StateSnapshot.msg"), header_sections!());
-    fn encode_fields(&self, w: &mut CdrWriter<'_>) -> Result<(), CdrError> {
-        header_out(w, self.stamp_ns, "")?;
-        w.u64(self.after_cycle);
-        w.u16(self.format_version);
-        w.byte_seq(&self.data);
-        Ok(())
+    header {
+        /// `header.stamp`: the cycle's `now`, ns.
+        stamp_ns,
+        frame_id = "",
     }
-    fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
-        let stamp_ns = r.time()?;
-        let _frame: FrameId = r.fixed_str()?;
-        Ok(Self {
-            stamp_ns,
-            after_cycle: r.u64()?,
-            format_version: r.u16()?,
-            data: r.byte_seq(sar_snapshot::CAPACITY)?.to_vec(),
-        })
+    fields {
+        /// The last cycle stepped before it was taken.
+        after_cycle: u64,
+        /// The sar-snapshot format's version.
+        format_version: u16,
+        /// The snapshot's bytes.
+        data: Vec<u8> [<= sar_snapshot::CAPACITY],
     }
 }
 
