@@ -738,14 +738,53 @@ fn vec3(v: [f64; 3]) -> Vec3 {
     Vec3::from(v)
 }
 
+/// Everything the file says, checked section by section (each section's
+/// function names its own keys in its errors).
 fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
-    // Geometry and manipulator, through the kinematics' own checks.
-    let g = &f.geometry;
+    let calibration = geometry(ctx, &f.geometry)?;
+    let profile = manipulator(ctx, &f.manipulator)?;
+    let noise = SensorNoise::new(vec3(f.sensor.noise_n))
+        .map_err(|e| ctx.err("sensor.noise_n", e.to_string()))?;
+    let axes = axes(ctx, &f.axes, f.plausibility.max_joint_speed_mps)?;
+    check_reach(ctx, &calibration, &profile, &axes.travel_m)?;
+    let guard = guard(ctx, &f.guard)?;
+    let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
+    let plausibility = plausibility(ctx, &f.plausibility, &f.sensor, &sensor_driver)?;
+    let tip = tip(ctx, &f.tip)?;
+    let loop_ = loop_config(ctx, &f.loop_)?;
+    let record = record(ctx, &f.record)?;
+    let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
+    let force_control = force_control(ctx, &f.force_control, tip.sample_rate_hz, loop_.rate_hz)?;
+    Ok(Config {
+        origin: ctx.origin.to_owned(),
+        manipulator_name: f.manipulator.name.clone(),
+        estimator: EstimatorConfig {
+            calibration,
+            profile,
+            noise,
+            tip: TipForceConfig {
+                max_std_n: tip.max_std_n,
+            },
+            guard,
+            plausibility,
+            filter: tip.filter,
+        },
+        loop_,
+        axes,
+        sensor_driver,
+        axes_driver,
+        record,
+        force_control,
+    })
+}
+
+/// `[geometry]`, through the kinematics' own checks.
+fn geometry(ctx: &Ctx<'_>, g: &GeometryToml) -> Result<Calibration, ConfigError> {
     let r = g.sensor_rotation;
     let rotation = Mat3::from_row_slice(&[
         r[0][0], r[0][1], r[0][2], r[1][0], r[1][1], r[1][2], r[2][0], r[2][1], r[2][2],
     ]);
-    let calibration = Calibration::new(&CalibrationSpec {
+    Calibration::new(&CalibrationSpec {
         p_home_m: vec3(g.p_home),
         ujoint_offset_m: vec3(g.ujoint_offset),
         sensor_offset_m: vec3(g.sensor_offset),
@@ -753,45 +792,27 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         support_m: vec3(g.support),
         gravity_mps2: vec3(g.gravity),
     })
-    .map_err(|e| {
-        let text = e.to_string();
-        let field = [
-            "sensor_rotation",
-            "gravity",
-            "support",
-            "p_home",
-            "ujoint_offset",
-            "sensor_offset",
-        ]
-        .into_iter()
-        .find(|k| text.starts_with(k))
-        .unwrap_or("");
-        ctx.err(&join("geometry", field), text)
-    })?;
-    let m = &f.manipulator;
+    .map_err(|e| ctx.err(&join("geometry", e.field()), e.to_string()))
+}
+
+/// `[manipulator]`, through the kinematics' own checks.
+fn manipulator(ctx: &Ctx<'_>, m: &ManipulatorToml) -> Result<Profile, ConfigError> {
     if m.name.trim().is_empty() {
         return Err(ctx.err("manipulator.name", "must not be empty"));
     }
-    let profile = Profile::new(&ProfileSpec {
+    Profile::new(&ProfileSpec {
         length_m: m.length_m,
         offset_m: m.offset_m,
         mass_kg: m.mass_kg,
         com_m: m.com_m,
     })
-    .map_err(|e| {
-        let text = e.to_string();
-        let field = ["length_m", "offset_m", "mass_kg", "com_m"]
-            .into_iter()
-            .find(|k| text.contains(k))
-            .unwrap_or("");
-        ctx.err(&join("manipulator", field), text)
-    })?;
-    let noise = SensorNoise::new(vec3(f.sensor.noise_n))
-        .map_err(|e| ctx.err("sensor.noise_n", e.to_string()))?;
+    .map_err(|e| ctx.err(&join("manipulator", e.field()), e.to_string()))
+}
 
-    // The axes, and whether the support is within the rod's reach.
+/// `[axes]` (the planned speed at most the plausibility's joint speed).
+fn axes(ctx: &Ctx<'_>, a: &AxesToml, max_joint_speed_mps: f64) -> Result<AxesConfig, ConfigError> {
     let mut travel_m = [(0.0, 0.0); 3];
-    for (i, (slot, [lo, hi])) in travel_m.iter_mut().zip(f.axes.travel_m).enumerate() {
+    for (i, (slot, [lo, hi])) in travel_m.iter_mut().zip(a.travel_m).enumerate() {
         if lo >= hi {
             return Err(ctx.err(
                 &format!("axes.travel_m[{i}]"),
@@ -800,31 +821,25 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         }
         *slot = (lo, hi);
     }
-    let speed = f.axes.max_speed_mps;
-    if !(speed > 0.0 && speed <= f.plausibility.max_joint_speed_mps) {
+    let speed = a.max_speed_mps;
+    if !(speed > 0.0 && speed <= max_joint_speed_mps) {
         return Err(ctx.err(
             "axes.max_speed_mps",
             format!(
                 "must be > 0 and at most plausibility.max_joint_speed_mps ({} m/s), got {speed}",
-                f.plausibility.max_joint_speed_mps
+                max_joint_speed_mps
             ),
         ));
     }
-    let accel = ctx.range_f(
-        "axes.max_accel_mps2",
-        f.axes.max_accel_mps2,
-        1e-6,
-        10.0,
-        "m/s^2",
-    )?;
+    let accel = ctx.range_f("axes.max_accel_mps2", a.max_accel_mps2, 1e-6, 10.0, "m/s^2")?;
     let following_tolerance_m = ctx.range_f(
         "axes.following_tolerance_m",
-        f.axes.following_tolerance_m,
+        a.following_tolerance_m,
         1e-5,
         0.05,
         "m",
     )?;
-    let retreat_speed_mps = f.axes.retreat_speed_mps;
+    let retreat_speed_mps = a.retreat_speed_mps;
     if !(retreat_speed_mps > 0.0 && retreat_speed_mps <= speed) {
         return Err(ctx.err(
             "axes.retreat_speed_mps",
@@ -833,10 +848,18 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             ),
         ));
     }
-    check_reach(ctx, &calibration, &profile, &travel_m)?;
 
-    // The guard.
-    let gt = &f.guard;
+    Ok(AxesConfig {
+        travel_m,
+        max_speed_mps: speed,
+        max_accel_mps2: accel,
+        following_tolerance_m,
+        retreat_speed_mps,
+    })
+}
+
+/// `[guard]`.
+fn guard(ctx: &Ctx<'_>, gt: &GuardToml) -> Result<GuardConfig, ConfigError> {
     let debounce = ctx.range_i(
         "guard.debounce_samples",
         gt.debounce_samples,
@@ -864,12 +887,18 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             gt.max_stop_lateral_n.unwrap_or(gt.stop_lateral_n),
         ])
         .map_err(|e| setting_error(ctx, "guard", &e))?;
-    let guard = guard
+    guard
         .with_retreat_rise_n(gt.retreat_rise_n)
-        .map_err(|e| setting_error(ctx, "guard", &e))?;
+        .map_err(|e| setting_error(ctx, "guard", &e))
+}
 
-    // Plausibility and tip.
-    let p = &f.plausibility;
+/// `[plausibility]`, with the `[sensor]` keys it checks against.
+fn plausibility(
+    ctx: &Ctx<'_>,
+    p: &PlausibilityToml,
+    sensor: &SensorToml,
+    sensor_driver: &SensorDriver,
+) -> Result<PlausibilityConfig, ConfigError> {
     let gap = ctx.range_i(
         "plausibility.max_counter_gap",
         p.max_counter_gap,
@@ -884,16 +913,15 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             max_sigma: p.torque_max_sigma,
         })
     };
-    let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
-    let plausibility = PlausibilityConfig::new(PlausibilityLimits {
+    PlausibilityConfig::new(PlausibilityLimits {
         max_joint_speed_mps: p.max_joint_speed_mps,
         joint_margin_m: p.joint_margin_m,
         max_counter_gap: u32::try_from(gap).unwrap_or(1),
         torque,
-        frozen: frozen_check(ctx, p, &f.sensor, torque.as_ref(), &sensor_driver)?,
+        frozen: frozen_check(ctx, p, sensor, torque.as_ref(), sensor_driver)?,
         range: Some(SensorRange {
-            force_n: positive_vec3(ctx, "sensor.range_n", f.sensor.range_n)?,
-            torque_nm: positive_vec3(ctx, "sensor.range_nm", f.sensor.range_nm)?,
+            force_n: positive_vec3(ctx, "sensor.range_n", sensor.range_n)?,
+            torque_nm: positive_vec3(ctx, "sensor.range_nm", sensor.range_nm)?,
         }),
         spikes: if p.spike_check {
             Some(SpikeLimits {
@@ -920,7 +948,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             max_age_ns: {
                 let s = ctx.range_f(
                     "sensor.max_tare_age_s",
-                    f.sensor.max_tare_age_s,
+                    sensor.max_tare_age_s,
                     0.0,
                     7.0 * 86_400.0,
                     "s (0: never)",
@@ -929,7 +957,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             },
             drift_n_per_s: ctx.range_f(
                 "sensor.drift_n_per_s",
-                f.sensor.drift_n_per_s,
+                sensor.drift_n_per_s,
                 0.0,
                 10.0,
                 "N/s",
@@ -971,19 +999,25 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             None
         },
     })
-    .map_err(|e| setting_error(ctx, "plausibility", &e))?;
-    let max_std_n = f.tip.max_std_n;
+    .map_err(|e| setting_error(ctx, "plausibility", &e))
+}
+
+/// `[tip]`: the observability limit, the sensor's rate and the filter.
+struct Tip {
+    max_std_n: f64,
+    sample_rate_hz: f64,
+    filter: Option<FilterConfig>,
+}
+
+/// `[tip]`.
+fn tip(ctx: &Ctx<'_>, t: &TipToml) -> Result<Tip, ConfigError> {
+    let max_std_n = t.max_std_n;
     if !(max_std_n.is_finite() && max_std_n > 0.0) {
         return Err(ctx.err("tip.max_std_n", format!("must be > 0 N, got {max_std_n}")));
     }
-    let sample_rate_hz = ctx.range_f(
-        "tip.sample_rate_hz",
-        f.tip.sample_rate_hz,
-        1.0,
-        100_000.0,
-        "Hz",
-    )?;
-    let cutoff_hz = f.tip.filter_cutoff_hz;
+    let sample_rate_hz =
+        ctx.range_f("tip.sample_rate_hz", t.sample_rate_hz, 1.0, 100_000.0, "Hz")?;
+    let cutoff_hz = t.filter_cutoff_hz;
     let filter = if cutoff_hz == 0.0 {
         None
     } else {
@@ -996,8 +1030,15 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         Some(filter)
     };
 
-    // The loop.
-    let l = &f.loop_;
+    Ok(Tip {
+        max_std_n,
+        sample_rate_hz,
+        filter,
+    })
+}
+
+/// `[loop]`.
+fn loop_config(ctx: &Ctx<'_>, l: &LoopToml) -> Result<LoopConfig, ConfigError> {
     let rate_hz = ctx.range_f("loop.rate_hz", l.rate_hz, 100.0, 10_000.0, "Hz")?;
     let priority = ctx.range_i("loop.priority", l.priority, 1, 99)?;
     let cpu = match l.cpu {
@@ -1005,7 +1046,25 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         Some(c) => Some(ctx.range_i("loop.cpu", c, 0, 1023)?),
     };
 
-    let rec = &f.record;
+    Ok(LoopConfig {
+        rate_hz,
+        // 100..=10000 Hz: 1e5..=1e7 ns.
+        period_ns: (1e9 / rate_hz).round() as u64,
+        priority: i32::try_from(priority).unwrap_or(1),
+        cpu: cpu.and_then(|c| usize::try_from(c).ok()),
+        publisher_stall_ns: (ctx.range_f(
+            "loop.publisher_stall_s",
+            l.publisher_stall_s,
+            0.01,
+            60.0,
+            "s",
+        )? * 1e9)
+            .round() as u64,
+    })
+}
+
+/// `[record]`.
+fn record(ctx: &Ctx<'_>, rec: &RecordToml) -> Result<RecordSettings, ConfigError> {
     if rec.directory.is_empty() {
         return Err(ctx.err("record.directory", "must not be empty"));
     }
@@ -1014,7 +1073,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
     let scene_hz = ctx.range_f("record.scene_hz", rec.scene_hz, 0.0, 1000.0, "Hz")?;
     let snapshot_s = ctx.range_f("record.snapshot_s", rec.snapshot_s, 0.01, 3600.0, "s")?;
-    let record = RecordSettings {
+    Ok(RecordSettings {
         enabled: rec.enabled,
         directory: std::path::PathBuf::from(&rec.directory),
         rotation: Rotation {
@@ -1025,49 +1084,6 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         scene_period_ns: (scene_hz > 0.0).then(|| (1e9 / scene_hz).round() as u64),
         snapshot_period_ns: (snapshot_s * 1e9).round() as u64,
         config_source: None,
-    };
-
-    let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
-    let force_control = force_control(ctx, &f.force_control, sample_rate_hz, rate_hz)?;
-
-    Ok(Config {
-        origin: ctx.origin.to_owned(),
-        manipulator_name: m.name.clone(),
-        estimator: EstimatorConfig {
-            calibration,
-            profile,
-            noise,
-            tip: TipForceConfig { max_std_n },
-            guard,
-            plausibility,
-            filter,
-        },
-        loop_: LoopConfig {
-            rate_hz,
-            // 100..=10000 Hz: 1e5..=1e7 ns.
-            period_ns: (1e9 / rate_hz).round() as u64,
-            priority: i32::try_from(priority).unwrap_or(1),
-            cpu: cpu.and_then(|c| usize::try_from(c).ok()),
-            publisher_stall_ns: (ctx.range_f(
-                "loop.publisher_stall_s",
-                l.publisher_stall_s,
-                0.01,
-                60.0,
-                "s",
-            )? * 1e9)
-                .round() as u64,
-        },
-        axes: AxesConfig {
-            travel_m,
-            max_speed_mps: speed,
-            max_accel_mps2: accel,
-            following_tolerance_m,
-            retreat_speed_mps,
-        },
-        sensor_driver,
-        axes_driver,
-        record,
-        force_control,
     })
 }
 

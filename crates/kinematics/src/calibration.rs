@@ -57,6 +57,24 @@ pub enum ConfigError {
     },
 }
 
+impl ConfigError {
+    /// The named field of [`CalibrationSpec`] or [`ProfileSpec`] that is
+    /// wrong, as a configuration file names it (`p_home`, `length_m`, ...):
+    /// a loader says the key from it, never from the message's text.
+    pub fn field(&self) -> &'static str {
+        match self {
+            Self::NonFinite { field, .. } => field,
+            Self::RotationNotOrthonormal { .. } | Self::RotationNotProper { .. } => {
+                "sensor_rotation"
+            }
+            Self::GravityOutOfRange { .. } => "gravity",
+            Self::NonPositiveLength { .. } => "length_m",
+            Self::OffsetTooLarge { .. } => "offset_m",
+            Self::NegativeMass { .. } => "mass_kg",
+        }
+    }
+}
+
 /// Largest accepted entry of `R^T R - I` for the sensor rotation.
 pub const ORTHONORMAL_TOLERANCE: f64 = 1e-6;
 /// Accepted range of the gravity magnitude, m/s^2.

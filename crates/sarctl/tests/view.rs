@@ -665,7 +665,7 @@ fn quantile(sorted: &[u64], q: f64) -> u64 {
 /// and the latency from the cycle's clock reading (`now_ns`, the stamp) to
 /// the WebSocket frame's arrival in this client, both CLOCK_MONOTONIC.
 #[test]
-#[ignore = "a measurement: cargo test -p sar-daemon --test view -- --ignored --nocapture \
+#[ignore = "a measurement: cargo test -p sarctl --test view -- --ignored --nocapture \
             (SAR_VIEW_BIN_DIR=target/release for the release binaries)"]
 fn view_latency_and_cpu() {
     let _serial = serial();
