@@ -78,15 +78,143 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), String> {
     if let Some(path) = &args.check_config {
-        let c = config::load(path).map_err(|e| e.to_string())?;
-        println!(
-            "{}: valid ({}, {} Hz)",
-            path.display(),
-            c.manipulator_name,
-            c.loop_.rate_hz
-        );
-        return Ok(());
+        return check_config(path);
     }
+    let cfg = configuration(args)?;
+    let (rdt, canopen) = chosen_devices(args, &cfg)?;
+    rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
+
+    // The sensor first: its receive thread keeps the normal priority.
+    let real_sensor = match rdt {
+        Some(c) => {
+            let mut sensor = devices::connect_rdt(c)?;
+            devices::first_sample(&mut sensor, FIRST_SAMPLE_TIMEOUT_NS)?;
+            Some(sensor)
+        }
+        None => None,
+    };
+    // The simulator only for the parts that are simulated (none on the
+    // real robot).
+    let mut scenario_name = String::new();
+    let simulated = if real_sensor.is_some() && canopen.is_some() {
+        if let Some(path) = &args.scenario {
+            return Err(format!(
+                "--scenario {}: nothing is simulated ({} names a real sensor and real axes)",
+                path.display(),
+                cfg.origin
+            ));
+        }
+        None
+    } else {
+        let scenario = scenario(args, &cfg)?;
+        scenario_name = scenario.name.clone();
+        let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
+        Some(sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?)
+    };
+    // The start bias, decided once for the estimator and the recordings: a
+    // real sensor starts with none (the operator tares), the simulated one
+    // with the scenario's, as if measured beforehand.
+    let bias = match (&real_sensor, &simulated) {
+        (None, Some((_, _, _, sim_bias))) => *sim_bias,
+        _ => Bias::force_only(Vec3::zeros()),
+    };
+    // The simulator's true tip force only where the sensor is simulated.
+    let truth = match (&real_sensor, &simulated) {
+        (None, Some((simulator, ..))) => Some(truth_of(simulator.clone())),
+        _ => None,
+    };
+    let operator = Operator::new();
+    let shm = DaemonShm::create(
+        &args.prefix,
+        operator.clone(),
+        limits_array(&cfg.estimator.guard.limits()),
+    )
+    .map_err(|e| e.to_string())?;
+    // Recording (`[record]`, `sarctl record start|stop`): its manager thread
+    // (which opens and closes the files, never the loop) starts here, before
+    // the real-time settings, so that it and the writer threads it starts
+    // keep the normal priority and every CPU.
+    tracing::info!(
+        "recordings go to {} ([record] directory)",
+        cfg.record.directory.display()
+    );
+    let switch = std::sync::Arc::new(RecordSwitch::default());
+    let (recording, recorder) = RecordManager::start(
+        cfg.record.clone(),
+        SceneOptions::from_config(&cfg),
+        bias,
+        std::sync::Arc::clone(&switch),
+    )?;
+    let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
+    real_time(&cfg);
+    let run = Run {
+        args,
+        cfg: &cfg,
+        operator,
+        shm,
+        recorder,
+        truth,
+        recording,
+        bias,
+        auto_reset: args.sim,
+    };
+    let sensor_what = match (&real_sensor, &simulated) {
+        (Some(s), _) => format!("the RDT sensor at {}", s.config().address),
+        _ => format!("the simulated sensor of {scenario_name:?}"),
+    };
+    match (real_sensor, canopen, simulated) {
+        (None, None, Some((_, sensor, drives, _))) => run.run(
+            sensor,
+            drives,
+            None,
+            &format!("{sensor_what} and the simulated axes"),
+        ),
+        (Some(sensor), None, Some((_, _, drives, _))) => run.run(
+            sensor,
+            drives,
+            None,
+            &format!("{sensor_what} and the simulated axes"),
+        ),
+        #[cfg(all(feature = "socketcan", target_os = "linux"))]
+        (sensor, Some((interface, c)), simulated) => {
+            let drives = start_canopen(&interface, c)?;
+            let axes_what = format!("the CANopen drives on {interface}");
+            let what = format!("{sensor_what} and {axes_what}");
+            match (sensor, simulated) {
+                (Some(sensor), _) => run.run(sensor, drives, Some(devices::canopen_cycle), &what),
+                (None, Some((_, sensor, _, _))) => {
+                    run.run(sensor, drives, Some(devices::canopen_cycle), &what)
+                }
+                (None, None) => Err(NO_SIMULATOR.to_owned()),
+            }
+        }
+        #[cfg(not(all(feature = "socketcan", target_os = "linux")))]
+        (_, Some((interface, _)), _) => Err(format!(
+            "{}: CANopen drives on {interface} need the `socketcan` feature",
+            cfg.origin
+        )),
+        (_, None, None) => Err(NO_SIMULATOR.to_owned()),
+    }
+}
+
+/// A combination of devices that needs the simulator found none (a bug:
+/// the simulator is made whenever a part is simulated).
+const NO_SIMULATOR: &str = "internal error: a simulated part without the simulator";
+
+/// `sard --check-config FILE`.
+fn check_config(path: &std::path::Path) -> Result<(), String> {
+    let c = config::load(path).map_err(|e| e.to_string())?;
+    println!(
+        "{}: valid ({}, {} Hz)",
+        path.display(),
+        c.manipulator_name,
+        c.loop_.rate_hz
+    );
+    Ok(())
+}
+
+/// The configuration `--config` names, or the built-in one with `--sim`.
+fn configuration(args: &Args) -> Result<config::Config, String> {
     let mut cfg = match &args.config {
         Some(path) => config::load(path).map_err(|e| e.to_string())?,
         None if args.sim => config::builtin().map_err(|e| e.to_string())?,
@@ -100,18 +228,22 @@ fn run(args: &Args) -> Result<(), String> {
             .map_err(|e| format!("cannot read the working directory: {e}"))?;
         cfg.record.directory = cwd.join(&cfg.record.directory);
     }
-    // With --sim everything is simulated; otherwise the devices the file names
-    // (a part it leaves "sim" is simulated: a bench set-up).
-    let rdt = if args.sim {
-        None
-    } else {
-        devices::rdt_config(&cfg)
-    };
-    let canopen = if args.sim {
-        None
-    } else {
-        devices::canopen_config(&cfg)
-    };
+    Ok(cfg)
+}
+
+/// The real sensor and drives a configuration names (`None`: simulated).
+type RealDevices = (
+    Option<sar_drivers::rdt::RdtConfig>,
+    Option<(String, sar_drivers::canopen::CanOpenConfig)>,
+);
+
+/// The real devices to run: with --sim none; otherwise those the file names
+/// (a part it leaves "sim" is simulated: a bench set-up).
+fn chosen_devices(args: &Args, cfg: &config::Config) -> Result<RealDevices, String> {
+    if args.sim {
+        return Ok((None, None));
+    }
+    let canopen = devices::canopen_config(cfg);
     if let Some((interface, _)) = &canopen
         && !cfg!(all(feature = "socketcan", target_os = "linux"))
     {
@@ -120,76 +252,37 @@ fn run(args: &Args) -> Result<(), String> {
             cfg.origin
         ));
     }
+    Ok((devices::rdt_config(cfg), canopen))
+}
+
+/// The scenario of the simulated parts, its drives running the configured
+/// profile as configured drives would (the loop's plan is then the
+/// trajectory they follow).
+fn scenario(args: &Args, cfg: &config::Config) -> Result<sar_drivers::scenario::Scenario, String> {
     let mut scenario = match &args.scenario {
         Some(path) => sar_drivers::scenario::load(path).map_err(|e| e.to_string())?,
         None => sim::demo_scenario().map_err(|e| e.to_string())?,
     };
-    // The simulated drives run the configured profile, as configured drives
-    // would: the loop's plan is then the trajectory they follow.
     scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
     scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
-    rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
+    Ok(scenario)
+}
 
-    // The sensor first: its receive thread keeps the normal priority.
-    let real_sensor = match rdt {
-        Some(c) => {
-            let mut sensor = devices::connect_rdt(c)?;
-            devices::first_sample(&mut sensor, FIRST_SAMPLE_TIMEOUT_NS)?;
-            Some(sensor)
-        }
-        None => None,
-    };
+/// The simulator's truth, asked once per cycle by the loop.
+fn truth_of(simulator: sar_drivers::sim::Simulator<MonotonicClock>) -> SimTruthFn {
+    Box::new(move || {
+        simulator.truth().ok().map(|t| sar_loop::publish::SimTruth {
+            tip_force_n: t.tip_force_n,
+            friction_force_n: t.friction_force_n,
+            elapsed_ns: t.elapsed_ns,
+        })
+    })
+}
 
-    let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
-    let (simulator, sim_sensor, sim_drives, sim_bias) =
-        sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
-    let operator = Operator::new();
-    // The simulator's true tip force only where the sensor is simulated.
-    let truth: Option<sar_loop::publish::SimTruthFn> = if real_sensor.is_none() {
-        let truth_sim = simulator.clone();
-        Some(Box::new(move || {
-            truth_sim.truth().ok().map(|t| sar_loop::publish::SimTruth {
-                tip_force_n: t.tip_force_n,
-                friction_force_n: t.friction_force_n,
-                elapsed_ns: t.elapsed_ns,
-            })
-        }))
-    } else {
-        None
-    };
-    // The loop asks it once per cycle and hands it to the recorder and the
-    // publisher.
-    let shm = DaemonShm::create(
-        &args.prefix,
-        operator.clone(),
-        limits_array(&cfg.estimator.guard.limits()),
-    )
-    .map_err(|e| e.to_string())?;
-    // Recording (`[record]`, `sarctl record start|stop`): its manager thread
-    // (which opens and closes the files, never the loop) starts here, before
-    // the real-time settings, so that it and the writer threads it starts
-    // keep the normal priority and every CPU. Its start bias is the one the
-    // estimator starts with (below).
-    let start_bias = if real_sensor.is_some() {
-        Bias::force_only(Vec3::zeros())
-    } else {
-        sim_bias
-    };
-    tracing::info!(
-        "recordings go to {} ([record] directory)",
-        cfg.record.directory.display()
-    );
-    let switch = std::sync::Arc::new(RecordSwitch::default());
-    let (recording, recorder) = RecordManager::start(
-        cfg.record.clone(),
-        SceneOptions::from_config(&cfg),
-        start_bias,
-        std::sync::Arc::clone(&switch),
-    )?;
-    let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
-    // Real-time settings: said once, here, when they cannot be applied.
-    // After the publishing thread has started (DaemonShm::create), so that
-    // it keeps the normal priority and every CPU.
+/// Real-time settings: said once, here, when they cannot be applied. After
+/// the publishing and recording threads have started, so that they keep the
+/// normal priority and every CPU.
+fn real_time(cfg: &config::Config) {
     if let Err(e) = rt::lock_memory() {
         tracing::warn!("{e}; running without locked memory");
     }
@@ -200,65 +293,6 @@ fn run(args: &Args) -> Result<(), String> {
         && let Err(e) = rt::pin_to_cpu(cpu)
     {
         tracing::warn!("{e}; running unpinned");
-    }
-    let sensor_what = match &real_sensor {
-        Some(s) => format!("the RDT sensor at {}", s.config().address),
-        None => format!("the simulated sensor of {:?}", scenario.name),
-    };
-    let run = Run {
-        args,
-        cfg: &cfg,
-        operator,
-        shm,
-        recorder,
-        truth,
-        recording,
-        auto_reset: args.sim,
-    };
-    // A real sensor starts with no bias (the operator tares); the simulated
-    // one with the scenario's, as if measured beforehand.
-    let zero_bias = Bias::force_only(Vec3::zeros());
-    match (real_sensor, canopen) {
-        (None, None) => run.run(
-            sim_sensor,
-            sim_drives,
-            sim_bias,
-            None,
-            &format!("{sensor_what} and the simulated axes"),
-        ),
-        (Some(sensor), None) => run.run(
-            sensor,
-            sim_drives,
-            zero_bias,
-            None,
-            &format!("{sensor_what} and the simulated axes"),
-        ),
-        #[cfg(all(feature = "socketcan", target_os = "linux"))]
-        (sensor, Some((interface, c))) => {
-            let drives = start_canopen(&interface, c)?;
-            let axes_what = format!("the CANopen drives on {interface}");
-            match sensor {
-                Some(sensor) => run.run(
-                    sensor,
-                    drives,
-                    zero_bias,
-                    Some(devices::canopen_cycle),
-                    &format!("{sensor_what} and {axes_what}"),
-                ),
-                None => run.run(
-                    sim_sensor,
-                    drives,
-                    sim_bias,
-                    Some(devices::canopen_cycle),
-                    &format!("{sensor_what} and {axes_what}"),
-                ),
-            }
-        }
-        #[cfg(not(all(feature = "socketcan", target_os = "linux")))]
-        (_, Some((interface, _))) => Err(format!(
-            "{}: CANopen drives on {interface} need the `socketcan` feature",
-            cfg.origin
-        )),
     }
 }
 
@@ -307,6 +341,8 @@ struct Run<'a> {
     recorder: LiveRecorder,
     truth: Option<SimTruthFn>,
     recording: RecordManager,
+    /// The start bias (decided once in `run`).
+    bias: Bias,
     auto_reset: bool,
 }
 
@@ -315,7 +351,6 @@ impl Run<'_> {
         mut self,
         sensor: S,
         drives: D,
-        bias: Bias,
         drives_cycle: Option<DrivesCycle<D>>,
         what: &str,
     ) -> Result<(), String> {
@@ -323,7 +358,7 @@ impl Run<'_> {
         let (log, log_thread, _queue) = logq::channel(true);
         let mut controller = Controller::new(
             &cfg.estimator,
-            bias,
+            self.bias,
             cfg.step_config(),
             sensor,
             drives,
