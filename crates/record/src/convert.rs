@@ -48,9 +48,17 @@ pub fn guard_code(s: GuardState) -> GuardStateCode {
 /// The stamp of every message of a cycle: its `now`; when the clock could
 /// not be read, the newer of the input stamps (never a made-up time).
 pub fn cycle_stamp_ns(input: &CycleInput) -> u64 {
-    input
-        .now_ns
-        .unwrap_or(input.sensor.stamp_ns.max(input.joints.stamp_ns))
+    stamp_of(input.now_ns, &input.sensor, &input.joints)
+}
+
+/// [`cycle_stamp_ns`] of a loop step's input: the stamp of its
+/// [`LoopInput::cycle_input`], without making it.
+pub fn loop_stamp_ns(input: &LoopInput) -> u64 {
+    stamp_of(input.now_ns, &input.sensor, &input.joints)
+}
+
+fn stamp_of(now_ns: Option<u64>, sensor: &SensorSample, joints: &JointSample) -> u64 {
+    now_ns.unwrap_or(sensor.stamp_ns.max(joints.stamp_ns))
 }
 
 /// The output messages of one cycle, in a fixed order (state, tip wrench,

@@ -190,10 +190,20 @@ impl MessageRef<'_> {
     }
 }
 
-/// The callback of [`McapReader::visit`]: the channels known so far and one
-/// message.
+/// The callback of [`McapReader::visit`] as a trait object: the channels
+/// known so far and one message. (`visit` takes any such closure; a concrete
+/// one is inlined into the record loop, the hot path of a replay.)
 pub type Visitor<'v, E> =
     dyn FnMut(&BTreeMap<u16, ChannelInfo>, MessageRef<'_>) -> Result<(), E> + 'v;
+
+/// The bound of the record loop's callback: any closure of the [`Visitor`]
+/// shape, or a [`Visitor`] itself.
+trait OnMessage<E>: FnMut(&BTreeMap<u16, ChannelInfo>, MessageRef<'_>) -> Result<(), E> {}
+
+impl<E, F> OnMessage<E> for F where
+    F: FnMut(&BTreeMap<u16, ChannelInfo>, MessageRef<'_>) -> Result<(), E> + ?Sized
+{
+}
 
 #[derive(Debug, Clone)]
 struct SchemaInfo {
@@ -235,6 +245,10 @@ pub struct McapReader<'a> {
     pos: usize,
     schemas: BTreeMap<u16, SchemaInfo>,
     channels: BTreeMap<u16, ChannelInfo>,
+    /// The ids of `channels`, one bit each (bit `id % 64` of word `id / 64`):
+    /// the check that every message's channel is known, without a map
+    /// lookup per message.
+    known_channels: Vec<u64>,
     metadata: Vec<mcap::records::Metadata>,
     profile: Option<String>,
     pending: VecDeque<RawMessage>,
@@ -308,6 +322,7 @@ impl<'a> McapReader<'a> {
             pos: mcap::MAGIC.len(),
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
+            known_channels: Vec::new(),
             metadata: Vec::new(),
             profile: None,
             pending: VecDeque::new(),
@@ -383,6 +398,13 @@ impl<'a> McapReader<'a> {
                     schema_data: schema.map(|s| s.data.clone()).unwrap_or_default(),
                     metadata: c.metadata,
                 };
+                let (word, bit) = (usize::from(c.id / 64), c.id % 64);
+                if self.known_channels.len() <= word {
+                    self.known_channels.resize(word + 1, 0);
+                }
+                if let Some(w) = self.known_channels.get_mut(word) {
+                    *w |= 1 << bit;
+                }
                 self.channels.insert(c.id, info);
             }
             Record::Metadata(m) => self.metadata.push(m),
@@ -390,14 +412,21 @@ impl<'a> McapReader<'a> {
         }
     }
 
+    /// Whether a channel record with this id has been read.
+    fn is_known(&self, channel_id: u16) -> bool {
+        self.known_channels
+            .get(usize::from(channel_id / 64))
+            .is_some_and(|w| w & (1 << (channel_id % 64)) != 0)
+    }
+
     /// Hands one message record's body to `on_msg` (its channel must be
     /// known).
-    fn message<E>(
+    fn message<E, F: OnMessage<E> + ?Sized>(
         &self,
         body: &[u8],
         offset: u64,
         opcode: u8,
-        on_msg: &mut Visitor<'_, E>,
+        on_msg: &mut F,
     ) -> Result<Result<(), E>, ReadError> {
         // The message header by hand (channel u16, sequence u32, log and
         // publish times u64, little-endian; MCAP spec): the hot path of a
@@ -432,7 +461,7 @@ impl<'a> McapReader<'a> {
             p @ ..,
         ] = header;
         let channel_id = u16::from_le_bytes([c0, c1]);
-        if !self.channels.contains_key(&channel_id) {
+        if !self.is_known(channel_id) {
             return Err(ReadError::UnknownChannel { offset, channel_id });
         }
         Ok(on_msg(
@@ -450,10 +479,11 @@ impl<'a> McapReader<'a> {
     /// Reads the next record for the iterator (its messages queued).
     fn step(&mut self) -> Result<bool, ReadError> {
         let mut queued = std::mem::take(&mut self.pending);
-        let result = self.step_with::<std::convert::Infallible>(&mut |_, m| {
+        let mut queue = |_: &BTreeMap<u16, ChannelInfo>, m: MessageRef<'_>| {
             queued.push_back(m.to_owned_message());
-            Ok(())
-        });
+            Ok::<(), std::convert::Infallible>(())
+        };
+        let result = self.step_with(&mut queue);
         self.pending = queued;
         match result {
             Ok(r) => r,
@@ -466,7 +496,10 @@ impl<'a> McapReader<'a> {
     /// the end of the data section, `Ok(Some(e))` where a file cut short or
     /// corrupt stops (after the messages of its last complete chunk;
     /// [`McapReader::is_complete`] tells), and `Err` when `f` fails.
-    pub fn visit<E>(&mut self, f: &mut Visitor<'_, E>) -> Result<Option<ReadError>, E> {
+    pub fn visit<E>(
+        &mut self,
+        f: &mut (impl FnMut(&BTreeMap<u16, ChannelInfo>, MessageRef<'_>) -> Result<(), E> + ?Sized),
+    ) -> Result<Option<ReadError>, E> {
         // Queued by an earlier iteration first.
         while let Some(m) = self.pending.pop_front() {
             f(
@@ -498,7 +531,10 @@ impl<'a> McapReader<'a> {
 
     /// Reads the next record, handing its messages to `on_msg`; Ok(Ok(false))
     /// at the end of the data section.
-    fn step_with<E>(&mut self, on_msg: &mut Visitor<'_, E>) -> Result<Result<bool, ReadError>, E> {
+    fn step_with<E, F: OnMessage<E> + ?Sized>(
+        &mut self,
+        on_msg: &mut F,
+    ) -> Result<Result<bool, ReadError>, E> {
         match self.step_inner(on_msg) {
             Ok(Ok(more)) => Ok(Ok(more)),
             Ok(Err(e)) => Err(e),
@@ -506,7 +542,10 @@ impl<'a> McapReader<'a> {
         }
     }
 
-    fn step_inner<E>(&mut self, on_msg: &mut Visitor<'_, E>) -> Result<Result<bool, E>, ReadError> {
+    fn step_inner<E, F: OnMessage<E> + ?Sized>(
+        &mut self,
+        on_msg: &mut F,
+    ) -> Result<Result<bool, E>, ReadError> {
         match &mut self.source {
             Source::Bytes(bytes) => {
                 let bytes: &'a [u8] = bytes;
@@ -534,11 +573,11 @@ impl<'a> McapReader<'a> {
     /// One record from `rest` (the bytes from `self.pos`: all of them in
     /// memory, or the record alone from a file), with `available` bytes
     /// left in the file.
-    fn step_on<E>(
+    fn step_on<E, F: OnMessage<E> + ?Sized>(
         &mut self,
         rest: &[u8],
         available: u64,
-        on_msg: &mut Visitor<'_, E>,
+        on_msg: &mut F,
     ) -> Result<Result<bool, E>, ReadError> {
         let offset = self.pos as u64;
         if rest.is_empty() {
@@ -559,7 +598,7 @@ impl<'a> McapReader<'a> {
         let body = usize::try_from(len)
             .ok()
             .and_then(|n| after.get(..n))
-            .ok_or(ReadError::Truncated {
+            .ok_or_else(|| ReadError::Truncated {
                 offset,
                 opcode,
                 needed,
@@ -617,12 +656,12 @@ impl<'a> McapReader<'a> {
     /// The records of a chunk (`content`, decompressed and checked) of
     /// `chunk_len` bytes at `offset`: messages to `on_msg`, schemas and
     /// channels noted.
-    fn chunk_records<E>(
+    fn chunk_records<E, F: OnMessage<E> + ?Sized>(
         &mut self,
         content: &[u8],
         offset: u64,
         chunk_len: usize,
-        on_msg: &mut Visitor<'_, E>,
+        on_msg: &mut F,
     ) -> Result<Result<bool, E>, ReadError> {
         let mut at = 0usize;
         while at < content.len() {
@@ -634,12 +673,12 @@ impl<'a> McapReader<'a> {
             };
             let (prefix, after) = inner
                 .split_first_chunk::<RECORD_PREFIX>()
-                .ok_or(bad("a record prefix is cut"))?;
+                .ok_or_else(|| bad("a record prefix is cut"))?;
             let [inner_op, len_bytes @ ..] = *prefix;
             let body = usize::try_from(u64::from_le_bytes(len_bytes))
                 .ok()
                 .and_then(|n| after.get(..n))
-                .ok_or(bad("a record is longer than the chunk"))?;
+                .ok_or_else(|| bad("a record is longer than the chunk"))?;
             if inner_op == op::MESSAGE {
                 if let Err(e) = self.message(body, offset, inner_op, on_msg)? {
                     // The callback failed: stop after this record.

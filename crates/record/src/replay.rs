@@ -321,12 +321,10 @@ struct Replayer {
     comparing: bool,
     /// Topics whose recorded outputs are missing (no longer compared).
     lacking: Vec<Topic>,
-    estimates: Vec<(u64, [f64; 3])>,
+    /// What the cycles add up to beyond the report's counts.
+    tally: Tally,
     references: Vec<(u64, [f64; 3])>,
-    first_ns: Option<u64>,
     last_cycle: u64,
-    keep_estimates: bool,
-    left_out: usize,
     /// Whether the step's state is known (from the first cycle, or restored
     /// from a snapshot): cycles before are skipped with their outputs.
     anchored: bool,
@@ -340,29 +338,32 @@ fn arr(v: &Vec3) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
 
-/// What every replayed cycle adds to the report, whether its messages are
-/// made or not.
-struct Counted<'r> {
-    report: &'r mut ReplayReport,
-    first_ns: &'r mut Option<u64>,
-    estimates: &'r mut Vec<(u64, [f64; 3])>,
-    left_out: &'r mut usize,
+/// What every replayed cycle adds up to, whether its messages are made or
+/// not (beside the report's counts): the first cycle's stamp and the
+/// estimates kept for `--compare` and `--plot`.
+struct Tally {
+    /// The stamp of the first cycle replayed, ns.
+    first_ns: Option<u64>,
+    /// The observable estimates of new samples (stamp, tip force N), with
+    /// `keep_estimates`.
+    estimates: Vec<(u64, [f64; 3])>,
+    /// New samples without an observable estimate, with `keep_estimates`.
+    left_out: usize,
     keep_estimates: bool,
 }
 
-impl Counted<'_> {
-    /// One cycle: counted, its stamp noted, its estimate kept (`--compare`,
-    /// `--plot`).
-    fn cycle(self, input: &CycleInput, out: &CycleOutput) {
-        self.report.cycles += 1;
-        let stamp_ns = convert::cycle_stamp_ns(input);
+impl Tally {
+    /// One cycle stamped `stamp_ns` ([`convert::cycle_stamp_ns`]): counted in
+    /// `report`, its stamp noted, its estimate kept (`--compare`, `--plot`).
+    fn cycle(&mut self, report: &mut ReplayReport, stamp_ns: u64, out: &CycleOutput) {
+        report.cycles += 1;
         self.first_ns.get_or_insert(stamp_ns);
         if self.keep_estimates && out.new_sample {
             match out.tip {
                 TipOutcome::Estimate(e) if e.observable => {
                     self.estimates.push((stamp_ns, arr(&e.force_n)));
                 }
-                _ => *self.left_out += 1,
+                _ => self.left_out += 1,
             }
         }
     }
@@ -371,41 +372,27 @@ impl Counted<'_> {
 impl Replayer {
     /// One cycle of a daemon recording: the loop step.
     fn loop_cycle(&mut self, input: &LoopInput) -> Result<(), ReplayError> {
-        if !self.needs_messages() {
+        let needs_messages = self.needs_messages();
+        let out = self.step.step(input);
+        self.last_cycle = input.cycle;
+        if self.quiet {
+            // Before the range: only the state matters.
+            return Ok(());
+        }
+        if !needs_messages {
             // Nothing written or compared (no output file, no comparison
             // with the recorded outputs): the decision is counted where it
             // lies, not copied (the copies of the step's output were about
-            // a twentieth of a replayed cycle).
-            let out = self.step.step(input);
-            self.last_cycle = input.cycle;
-            if self.quiet {
-                return Ok(());
-            }
-            self.report.outputs += 1;
-            let estimator_input = input.cycle_input();
-            Counted {
-                report: &mut self.report,
-                first_ns: &mut self.first_ns,
-                estimates: &mut self.estimates,
-                left_out: &mut self.left_out,
-                keep_estimates: self.keep_estimates,
-            }
-            .cycle(&estimator_input, &out.estimate);
-            self.report.outputs += convert::output_count(&out.estimate);
+            // a twentieth of a replayed cycle): `/sar/cycle/input` and the
+            // messages `convert::outputs` would give are counted.
+            self.report.outputs += 1 + convert::output_count(&out.estimate);
+            let stamp_ns = convert::loop_stamp_ns(input);
+            self.tally.cycle(&mut self.report, stamp_ns, &out.estimate);
             return Ok(());
         }
-        let out = *self.step.step(input);
-        if self.quiet {
-            // Before the range: only the state matters.
-            self.last_cycle = input.cycle;
-            return Ok(());
-        }
-        if self.needs_messages() {
-            let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
-            self.emit(input.cycle, m)?;
-        } else {
-            self.report.outputs += 1;
-        }
+        let out = *out;
+        let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
+        self.emit(input.cycle, m)?;
         self.emit_outputs(&input.cycle_input(), &out.estimate)
     }
 
@@ -433,14 +420,8 @@ impl Replayer {
     fn emit_outputs(&mut self, input: &CycleInput, out: &CycleOutput) -> Result<(), ReplayError> {
         let out = *out;
         self.last_cycle = input.cycle;
-        Counted {
-            report: &mut self.report,
-            first_ns: &mut self.first_ns,
-            estimates: &mut self.estimates,
-            left_out: &mut self.left_out,
-            keep_estimates: self.keep_estimates,
-        }
-        .cycle(input, &out);
+        let stamp_ns = convert::cycle_stamp_ns(input);
+        self.tally.cycle(&mut self.report, stamp_ns, &out);
         let cycle = input.cycle;
         if !self.needs_messages() {
             // Nothing written or compared: only counted (the messages'
@@ -865,12 +846,14 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
         recorded: BTreeMap::new(),
         comparing: options.check_recorded,
         lacking: Vec::new(),
-        estimates: Vec::new(),
+        tally: Tally {
+            first_ns: None,
+            estimates: Vec::new(),
+            left_out: 0,
+            keep_estimates: options.compare.is_some() || options.keep_series,
+        },
         references: Vec::new(),
-        first_ns: None,
         last_cycle: 0,
-        keep_estimates: options.compare.is_some() || options.keep_series,
-        left_out: 0,
         // A recording whose files start with snapshots waits for one, unless
         // it holds the daemon's first cycle; one without steps from its
         // first cycle (as before snapshots; it may differ if it started
@@ -917,8 +900,9 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             previous_index = index;
         }
         let mut reader = input.open()?;
-        // Topic per channel id, looked up once per channel.
-        let mut topics: BTreeMap<u16, Option<Topic>> = BTreeMap::new();
+        // Topic per channel id (the index), looked up once per channel:
+        // `None` for a channel not seen yet.
+        let mut topics: Vec<Option<Option<Topic>>> = Vec::new();
         let mut reference_channel: Option<u16> = None;
         // The cycle the file must start with (after the previous file's).
         let mut expect_cycle = (i > 0 && r.anchored).then_some(r.last_cycle.saturating_add(1));
@@ -926,9 +910,9 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                            msg: MessageRef<'_>|
          -> Result<(), ReplayError> {
             let id = msg.channel_id;
-            let topic = match topics.get(&id) {
-                Some(t) => *t,
-                None => {
+            let topic = match topics.get(usize::from(id)) {
+                Some(Some(t)) => *t,
+                _ => {
                     let channel = channels.get(&id);
                     let topic = channel.and_then(|c| Topic::from_name(&c.topic));
                     if let (Some(c), Some(reference)) = (channel, &options.compare)
@@ -936,7 +920,13 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                     {
                         reference_channel = Some(id);
                     }
-                    topics.insert(id, topic);
+                    let at = usize::from(id);
+                    if topics.len() <= at {
+                        topics.resize(at + 1, None);
+                    }
+                    if let Some(slot) = topics.get_mut(at) {
+                        *slot = Some(topic);
+                    }
                     topic
                 }
             };
@@ -1056,9 +1046,10 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
         r.report.comparison = Some(compare(&mut r, topic)?);
     }
     if options.keep_series {
-        let t0 = r.first_ns.unwrap_or(0);
+        let t0 = r.tally.first_ns.unwrap_or(0);
         let refs = &r.references;
         r.report.series = r
+            .tally
             .estimates
             .iter()
             .map(|(t, e)| SeriesPoint {
@@ -1275,8 +1266,8 @@ fn compare(r: &mut Replayer, topic: &str) -> Result<Comparison, ReplayError> {
     r.references.sort_by_key(|(t, _)| *t);
     let mut est: [Vec<f64>; 3] = Default::default();
     let mut refv: [Vec<f64>; 3] = Default::default();
-    let mut left_out = r.left_out;
-    for (t, e) in &r.estimates {
+    let mut left_out = r.tally.left_out;
+    for (t, e) in &r.tally.estimates {
         let Some(f) = reference_at(&r.references, *t) else {
             left_out += 1;
             continue;
