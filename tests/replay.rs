@@ -560,12 +560,22 @@ fn the_python_reader_decodes_every_fixture_and_every_replay_output() {
         replay_file(&fixture(name), &options(Some(out.clone()), None)).unwrap();
         files.push(out);
     }
-    for f in &files {
-        let Some(py) = python_counts(f) else {
-            return;
-        };
-        assert_eq!(py, counts(f), "{}", f.display());
-    }
+    // One reader process per file, all at once: each decodes every message
+    // of its file in Python (the longest test of this binary when they ran
+    // one after the other). The same files, the same comparison.
+    std::thread::scope(|s| {
+        let readers: Vec<_> = files
+            .iter()
+            .map(|f| s.spawn(move || (f, python_counts(f))))
+            .collect();
+        for r in readers {
+            let (f, py) = r.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+            let Some(py) = py else {
+                return;
+            };
+            assert_eq!(py, counts(f), "{}", f.display());
+        }
+    });
 }
 
 #[test]
