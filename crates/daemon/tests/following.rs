@@ -4,12 +4,10 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
-use sar_daemon::sim;
-use sar_drivers::SimClock;
 use sar_estimator::guard::{GuardState, Reason};
-use sar_loop::control::{Controller, Operator};
-use sar_loop::logq;
 use std::path::Path;
 
 #[test]
@@ -18,20 +16,7 @@ fn an_encoder_jump_is_a_fault_and_stops_the_drives() {
     let path =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/fault_encoder_jump.toml");
     let scenario = sar_drivers::scenario::load(&path).unwrap();
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let (log, _t, _q) = logq::channel(false);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        Operator::new(),
-        log,
-        true,
-    )
-    .unwrap();
+    let SimRig { mut c, clock, .. } = RigBuilder::new(&scenario).config(&cfg).build();
     let mut fault = None;
     // The jump is at 2.0 s of the simulator's time.
     for cycle in 1..=3000u64 {

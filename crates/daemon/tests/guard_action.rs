@@ -5,6 +5,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{SimDrives, SimError};
@@ -12,8 +13,7 @@ use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_kinematics::ActiveJoints;
-use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_loop::logq;
+use sar_loop::control::{Controller, Envelope, ReplyStatus, Request};
 
 /// Simulated drives whose first `refuse` quick stops fail.
 struct Stubborn {
@@ -66,25 +66,17 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
         4_100_000_000,
         Vec3::new(20.0, 0.0, 0.0),
     );
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let operator = Operator::new();
-    let (log, _t, _q) = logq::channel(false);
-    let drives = Stubborn {
-        inner: drives,
-        refuse: 3,
-    };
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .unwrap();
+    let SimRig {
+        mut c,
+        clock,
+        operator,
+        ..
+    } = RigBuilder::new(&scenario)
+        .config(&cfg)
+        .build_with(|drives| Stubborn {
+            inner: drives,
+            refuse: 3,
+        });
     let mut cycle = 0u64;
     let mut step = |c: &mut Controller<_, _>| {
         cycle += 1;
@@ -164,21 +156,15 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
 fn the_drives_are_enabled_only_after_an_accepted_reset() {
     let cfg = config::builtin().unwrap();
     let scenario = sim::demo_scenario().unwrap();
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let operator = Operator::new();
-    let (log, _t, _q) = logq::channel(false);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        false,
-    )
-    .unwrap();
+    let SimRig {
+        mut c,
+        clock,
+        operator,
+        ..
+    } = RigBuilder::new(&scenario)
+        .config(&cfg)
+        .without_auto_reset()
+        .build();
     let mut cycle = 0u64;
     // The first reset needs the full mean at rest (500 samples: 1000 cycles).
     for _ in 0..1010 {

@@ -7,14 +7,13 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::GuardState;
-use sar_loop::control::{Controller, Envelope, Operator, Request};
-use sar_loop::logq;
+use sar_loop::control::{Controller, Envelope, Request};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -59,21 +58,13 @@ fn a_cycle_allocates_nothing() {
         15_000_000_000,
         Vec3::new(20.0, 0.0, 0.0),
     );
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let operator = Operator::new();
-    let (log, _thread, queue) = logq::channel(false);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .unwrap();
+    let SimRig {
+        mut c,
+        clock,
+        operator,
+        queue,
+        ..
+    } = RigBuilder::new(&scenario).config(&cfg).build();
     // Warm-up: the first cycles (and the start-up reset) may touch lazily
     // made state in the simulator.
     let mut cycle = 0;

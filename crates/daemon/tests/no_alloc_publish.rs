@@ -16,9 +16,10 @@
     clippy::indexing_slicing
 )]
 
+mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::SimClock;
 use sar_loop::control::{Controller, Operator, ReplyStatus};
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
@@ -48,26 +49,18 @@ fn the_counter_sees_an_allocation_on_the_loop_thread() {
 fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
     let cfg = config::builtin().unwrap();
     let scenario = sim::demo_scenario().unwrap();
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let operator = Operator::new();
-    let (log, _thread, queue) = logq::channel(false);
+    let SimRig {
+        mut c,
+        clock,
+        operator,
+        queue,
+        ..
+    } = RigBuilder::new(&scenario).config(&cfg).build();
     let prefix = format!("sar-noalloc-pub-{}", std::process::id());
     let mut shm = DaemonShm::create(
         &prefix,
         operator.clone(),
         limits_array(&cfg.estimator.guard.limits()),
-    )
-    .unwrap();
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator,
-        log,
-        true,
     )
     .unwrap();
     let stats = LoopStats::default();

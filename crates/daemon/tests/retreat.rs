@@ -10,6 +10,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{ContactKey, SimDrives, SimSensor};
@@ -17,7 +18,6 @@ use sar_drivers::{DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{GuardState, Reason};
 use sar_loop::control::{Controller, Envelope, Operator, Reply, ReplyStatus, Request};
-use sar_loop::logq;
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep, ReplyDetail};
 
 struct Rig {
@@ -41,21 +41,9 @@ impl Rig {
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = contact;
         scenario.spec.faults = faults;
-        let clock = SimClock::new(1_000_000_000);
-        let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-        let operator = Operator::new();
-        let (log, _t, _q) = logq::channel(false);
-        let c = Controller::new(
-            &cfg.estimator,
-            bias,
-            cfg.step_config(),
-            sensor,
-            drives,
-            operator.clone(),
-            log,
-            true,
-        )
-        .unwrap();
+        let SimRig {
+            c, clock, operator, ..
+        } = RigBuilder::new(&scenario).config(&cfg).build();
         let mut rig = Self {
             c,
             clock,

@@ -14,13 +14,12 @@
 )]
 
 mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
-use sar_loop::control::{Controller, Envelope, Operator, Request};
-use sar_loop::logq;
+use sar_loop::control::{Envelope, Request};
 use sar_loop::step::LoopStep;
 use sar_snapshot::{Snapshot, SnapshotError};
 
@@ -36,21 +35,12 @@ fn session() -> (LoopStep, config::Config) {
         4_000_000_000,
         Vec3::new(20.0, 0.0, 0.0),
     );
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let operator = Operator::new();
-    let (log, _t, _q) = logq::channel(false);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .unwrap();
+    let SimRig {
+        mut c,
+        clock,
+        operator,
+        ..
+    } = RigBuilder::new(&scenario).config(&cfg).build();
     let mut seen_stop = false;
     for cycle in 1..=3200u64 {
         if cycle == 1100 {

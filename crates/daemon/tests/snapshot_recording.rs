@@ -13,14 +13,13 @@
 )]
 
 mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
 use sar_daemon::sim;
-use sar_drivers::SimClock;
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState};
-use sar_loop::control::{Controller, Envelope, Operator, Request};
-use sar_loop::logq;
+use sar_loop::control::{Controller, Envelope, Request};
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
 use sar_msgs::msgs::{RosMessage, StateSnapshot, Topic};
@@ -46,21 +45,14 @@ fn session(name: &str) -> Vec<PathBuf> {
         3_500_000_000,
         Vec3::new(20.0, 0.0, 0.0),
     );
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let operator = Operator::new();
-    let (log, _thread, queue) = logq::channel(false);
-    let mut c = Controller::new(
-        &cfg.estimator,
+    let SimRig {
+        mut c,
+        clock,
+        operator,
+        queue,
         bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .unwrap();
+        ..
+    } = RigBuilder::new(&scenario).config(&cfg).build();
     let switch = Arc::new(RecordSwitch::default());
     let (manager, mut publisher) = RecordManager::start(
         RecordSettings {

@@ -8,6 +8,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{SimDrives, SimError};
@@ -16,7 +17,6 @@ use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState, Reason};
 use sar_kinematics::{ActiveJoints, inverse};
 use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_loop::logq;
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
 
 /// Simulated drives that can be blocked: after `block_after` setpoints,
@@ -74,26 +74,15 @@ impl Rig {
         let cfg = config::builtin().unwrap();
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = contact;
-        let clock = SimClock::new(1_000_000_000);
-        let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-        let operator = Operator::new();
-        let (log, _t, _q) = logq::channel(false);
-        let drives = Blockable {
-            inner: drives,
-            setpoints: 0,
-            block_after,
-        };
-        let c = Controller::new(
-            &cfg.estimator,
-            bias,
-            cfg.step_config(),
-            sensor,
-            drives,
-            operator.clone(),
-            log,
-            true,
-        )
-        .unwrap();
+        let SimRig {
+            c, clock, operator, ..
+        } = RigBuilder::new(&scenario)
+            .config(&cfg)
+            .build_with(|drives| Blockable {
+                inner: drives,
+                setpoints: 0,
+                block_after,
+            });
         let mut rig = Self {
             c,
             clock,

@@ -17,6 +17,7 @@
 
 mod common;
 use common::mix;
+use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{ContactKey, SimDrives, SimError};
@@ -25,8 +26,7 @@ use sar_estimator::Vec3;
 use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_kinematics::ActiveJoints;
-use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_loop::logq;
+use sar_loop::control::{Envelope, ReplyStatus, Request};
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
 
 /// Simulated drives that refuse a quick stop when told to (seeded).
@@ -134,26 +134,20 @@ fn run(seed: u64) {
     let step_config = cfg.step_config();
     let mut scenario = sim::demo_scenario().unwrap();
     scenario.spec.contact = contacts(seed);
-    let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-    let operator = Operator::new();
-    let (log, _t, _q) = logq::channel(false);
-    let drives = Flaky {
-        inner: drives,
-        seed,
-        calls: 0,
-    };
-    let mut c = Controller::new(
-        &cfg.estimator,
+    let SimRig {
+        mut c,
+        clock,
+        operator,
         bias,
-        step_config,
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .unwrap();
+        ..
+    } = RigBuilder::new(&scenario)
+        .config(&cfg)
+        .step_config(step_config)
+        .build_with(|drives| Flaky {
+            inner: drives,
+            seed,
+            calls: 0,
+        });
     let mut recorded: Vec<(LoopInput, LoopOutput)> = Vec::new();
     let mut previous: Option<(GuardState, Option<ActiveJoints>)> = None;
     let (mut moves, mut stops, mut warns, mut warn_moves) = (0, 0, 0, 0);

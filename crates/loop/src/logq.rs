@@ -57,6 +57,9 @@ pub enum LogEvent {
     GuardedStop(crate::step::GuardedStop),
 }
 
+/// The bounded queue of log events the loop fills ([`channel`]).
+pub type LogQueue = Arc<ArrayQueue<LogEvent>>;
+
 /// The loop's end of the queue.
 #[derive(Debug, Clone)]
 pub struct LogSender {
@@ -87,7 +90,7 @@ pub struct LogThread {
 
 /// Makes the queue (allocated here, once) and, when `spawn`, the thread
 /// that writes its events with `tracing`.
-pub fn channel(spawn: bool) -> (LogSender, Option<LogThread>, Arc<ArrayQueue<LogEvent>>) {
+pub fn channel(spawn: bool) -> (LogSender, Option<LogThread>, LogQueue) {
     let queue = Arc::new(ArrayQueue::new(CAPACITY));
     let sender = LogSender {
         queue: Arc::clone(&queue),

@@ -8,6 +8,7 @@
 )]
 
 pub mod readers;
+pub mod sim_rig;
 
 use sar_msgs::cdr::FixedStr;
 use sar_msgs::msgs::*;

@@ -19,7 +19,6 @@ use sar_drivers::sim::{
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Controller, Envelope, Operator, Reply, Request};
-use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopOutput, LoopStep};
 
 /// The tip at rest, base frame, m (the demo's start); the rod points +X0.
@@ -85,21 +84,15 @@ impl Rig {
             contact
         };
         scenario.spec.tissue = tissues;
-        let clock = SimClock::new(1_000_000_000);
-        let (sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
-        let operator = Operator::new();
-        let (log, _t, _q) = logq::channel(false);
-        let c = Controller::new(
-            &cfg.estimator,
-            bias,
-            cfg.step_config(),
-            sensor,
-            drives,
-            operator.clone(),
-            log,
-            true,
-        )
-        .unwrap();
+        let crate::common::sim_rig::SimRig {
+            c,
+            sim,
+            clock,
+            operator,
+            ..
+        } = crate::common::sim_rig::RigBuilder::new(&scenario)
+            .config(&cfg)
+            .build();
         let mut rig = Self {
             c,
             sim,

@@ -1,0 +1,113 @@
+//! The one builder of the daemon tests' simulated rigs: the real controller
+//! on the simulator of a scenario, on a simulated clock that starts at 1 s,
+//! with the built-in configuration unless told otherwise, the automatic
+//! reset on and the log events kept in their queue (no thread drains them).
+#![allow(dead_code, clippy::unwrap_used)]
+
+use sar_config as config;
+use sar_daemon::sim;
+use sar_drivers::scenario::Scenario;
+use sar_drivers::sim::{SimDrives, SimSensor, Simulator};
+use sar_drivers::{AxisDrives, SimClock};
+use sar_estimator::cycle::Bias;
+use sar_loop::control::{Controller, Operator};
+use sar_loop::logq::{self, LogQueue};
+use sar_loop::step::StepConfig;
+
+/// What a rig is made of.
+pub struct SimRig<D: AxisDrives> {
+    /// The controller (the step, the simulated sensor, the drives).
+    pub c: Controller<SimSensor<SimClock>, D>,
+    /// The simulator (its truth, its faults).
+    pub sim: Simulator<SimClock>,
+    /// The simulated clock the simulator and the tests advance.
+    pub clock: SimClock,
+    /// The operator's side of the controller's queues.
+    pub operator: Operator,
+    /// The configuration the controller runs.
+    pub cfg: config::Config,
+    /// The controller's log events.
+    pub queue: LogQueue,
+    /// The scenario's start bias, which the estimator starts with.
+    pub bias: Bias,
+}
+
+/// Builds a [`SimRig`].
+pub struct RigBuilder {
+    scenario: Scenario,
+    cfg: Option<config::Config>,
+    step_config: Option<StepConfig>,
+    auto_reset: bool,
+}
+
+impl RigBuilder {
+    /// A rig on `scenario`.
+    pub fn new(scenario: &Scenario) -> Self {
+        Self {
+            scenario: scenario.clone(),
+            cfg: None,
+            step_config: None,
+            auto_reset: true,
+        }
+    }
+
+    /// Without the demo's automatic reset (the operator resets).
+    pub fn without_auto_reset(mut self) -> Self {
+        self.auto_reset = false;
+        self
+    }
+
+    /// Runs `cfg` instead of the built-in configuration.
+    pub fn config(mut self, cfg: &config::Config) -> Self {
+        self.cfg = Some(cfg.clone());
+        self
+    }
+
+    /// Steps with `step_config` instead of the configuration's.
+    pub fn step_config(mut self, step_config: StepConfig) -> Self {
+        self.step_config = Some(step_config);
+        self
+    }
+
+    /// The rig with the simulator's drives.
+    pub fn build(self) -> SimRig<SimDrives<SimClock>> {
+        self.build_with(|drives| drives)
+    }
+
+    /// The rig with the simulator's drives wrapped by `wrap` (a test's
+    /// faulty drives).
+    pub fn build_with<D: AxisDrives>(
+        self,
+        wrap: impl FnOnce(SimDrives<SimClock>) -> D,
+    ) -> SimRig<D> {
+        let cfg = match self.cfg {
+            Some(cfg) => cfg,
+            None => config::builtin().unwrap(),
+        };
+        let clock = SimClock::new(1_000_000_000);
+        let (sim, sensor, drives, bias) = sim::simulated(&self.scenario, clock.clone()).unwrap();
+        let operator = Operator::new();
+        let (log, _thread, queue) = logq::channel(false);
+        let step_config = self.step_config.unwrap_or_else(|| cfg.step_config());
+        let c = Controller::new(
+            &cfg.estimator,
+            bias,
+            step_config,
+            sensor,
+            wrap(drives),
+            operator.clone(),
+            log,
+            self.auto_reset,
+        )
+        .unwrap();
+        SimRig {
+            c,
+            sim,
+            clock,
+            operator,
+            cfg,
+            queue,
+            bias,
+        }
+    }
+}
