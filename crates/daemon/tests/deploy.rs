@@ -242,6 +242,9 @@ fn sard_runs_its_loop_on_the_rdt_driver_against_the_emulator() {
         "{err}"
     );
     assert!(err.contains("stopped after 3000 cycles"), "{err}");
+    // The sinks' counters in the stop line (recording off: the recorder
+    // dropped nothing).
+    assert!(err.contains("0 messages dropped by the recorder"), "{err}");
     assert!(emulator.starts() >= 1);
     assert!(emulator.produced() > 0);
     let _ = std::fs::remove_file(cfg);

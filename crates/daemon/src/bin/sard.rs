@@ -380,7 +380,8 @@ impl Run<'_> {
             cfg.origin,
             cfg.loop_.rate_hz,
         );
-        runloop::run(
+        // The sinks' last counters: said in the stop line below.
+        let health = runloop::run(
             &mut controller,
             &cfg.loop_,
             RunLimits {
@@ -405,7 +406,7 @@ impl Run<'_> {
         }
         let out = controller.output();
         tracing::info!(
-            "sard: stopped after {} cycles, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns; {} quick stops",
+            "sard: stopped after {} cycles, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns; {} quick stops; {} states dropped by the publisher's queue; {} messages dropped by the recorder",
             stats.cycles,
             out.guard_state,
             out.guard_reason,
@@ -415,6 +416,8 @@ impl Run<'_> {
             stats.compute.quantile_ns(0.99) / 1000,
             stats.overruns,
             controller.counts().quick_stops,
+            health.publisher_queue_drops,
+            health.recorder_drops,
         );
         Ok(())
     }
