@@ -60,7 +60,10 @@ fn the_minimum_file_works_with_the_documented_defaults() {
     let g = c.estimator.guard.limits();
     assert_eq!((g.force.warn_total_n, g.force.stop_total_n), (10.0, 15.0));
     assert_eq!((g.force.warn_axial_n, g.force.stop_axial_n), (8.0, 12.0));
-    assert_eq!((g.force.warn_lateral_n, g.force.stop_lateral_n), (6.0, 10.0));
+    assert_eq!(
+        (g.force.warn_lateral_n, g.force.stop_lateral_n),
+        (6.0, 10.0)
+    );
     assert_eq!(g.debounce_samples, 3);
     assert_eq!(g.max_sensor_age_ns, 10_000_000);
     assert_eq!(c.estimator.tip.max_std_n, 2.0);

@@ -76,8 +76,7 @@ fn every_part_of_the_configuration_changes_it() {
         ("the plausibility's counter gap", |c| {
             let mut l = c.estimator.plausibility.limits();
             l.max_counter_gap += 1;
-            c.estimator.plausibility =
-                sar_estimator::cycle::PlausibilityConfig::new(l).unwrap();
+            c.estimator.plausibility = sar_estimator::cycle::PlausibilityConfig::new(l).unwrap();
         }),
         ("no filter", |c| {
             c.estimator.filter = None;

@@ -13,8 +13,8 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
 use sar_estimator::SettingError;
 use sar_estimator::guard::{
-    Axis, ForceLimits, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState, MAX_DEBOUNCE_SAMPLES,
-    MAX_STD_MARGIN, Reason, TipField, TipInput, Transition,
+    Axis, ForceLimits, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState,
+    MAX_DEBOUNCE_SAMPLES, MAX_STD_MARGIN, Reason, TipField, TipInput, Transition,
 };
 
 type V = Vector3<f64>;
@@ -231,8 +231,16 @@ fn warn_force(part: ForcePart) -> V {
 #[test]
 fn force_levels_are_what_they_claim() {
     let l = limits();
-    let warn = [l.force.warn_total_n, l.force.warn_axial_n, l.force.warn_lateral_n];
-    let stop = [l.force.stop_total_n, l.force.stop_axial_n, l.force.stop_lateral_n];
+    let warn = [
+        l.force.warn_total_n,
+        l.force.warn_axial_n,
+        l.force.warn_lateral_n,
+    ];
+    let stop = [
+        l.force.stop_total_n,
+        l.force.stop_axial_n,
+        l.force.stop_lateral_n,
+    ];
     let u = rod_basis().0;
     for (i, part) in PARTS.iter().enumerate() {
         let s = parts(&stop_force(*part), &u);
@@ -384,7 +392,11 @@ fn warn_clears_only_below_warn_minus_hysteresis_after_debounce() {
         (ForcePart::Lateral, force(0.0, 5.5)),
     ];
     let l = limits();
-    let warn = [l.force.warn_total_n, l.force.warn_axial_n, l.force.warn_lateral_n];
+    let warn = [
+        l.force.warn_total_n,
+        l.force.warn_axial_n,
+        l.force.warn_lateral_n,
+    ];
     let u = rod_basis().0;
     for (part, band) in bands {
         let p = parts(&band, &u);
@@ -1043,14 +1055,20 @@ fn invalid_configurations_are_refused() {
         ("warn_total_n", |l| l.force.warn_total_n = 0.0),
         ("warn_total_n", |l| l.force.warn_total_n = -1.0),
         ("warn_total_n", |l| l.force.warn_total_n = f64::NAN),
-        ("stop_total_n", |l| l.force.stop_total_n = l.force.warn_total_n),
+        ("stop_total_n", |l| {
+            l.force.stop_total_n = l.force.warn_total_n
+        }),
         ("stop_total_n", |l| l.force.stop_total_n = 5.0),
         ("stop_total_n", |l| l.force.stop_total_n = f64::INFINITY),
         ("warn_axial_n", |l| l.force.warn_axial_n = f64::NEG_INFINITY),
-        ("stop_axial_n", |l| l.force.warn_axial_n = l.force.stop_axial_n + 1.0),
+        ("stop_axial_n", |l| {
+            l.force.warn_axial_n = l.force.stop_axial_n + 1.0
+        }),
         ("stop_axial_n", |l| l.force.stop_axial_n = f64::NAN),
         ("warn_lateral_n", |l| l.force.warn_lateral_n = -0.0),
-        ("stop_lateral_n", |l| l.force.stop_lateral_n = l.force.warn_lateral_n),
+        ("stop_lateral_n", |l| {
+            l.force.stop_lateral_n = l.force.warn_lateral_n
+        }),
         ("hysteresis_n", |l| l.hysteresis_n = -0.1),
         ("hysteresis_n", |l| l.hysteresis_n = f64::NAN),
         ("hysteresis_n", |l| l.hysteresis_n = l.force.warn_lateral_n),
@@ -1612,8 +1630,16 @@ impl Model {
         }
         let margin = l.std_margin * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
         let p = parts(&f, &u).map(|x| x + margin);
-        let warn = [l.force.warn_total_n, l.force.warn_axial_n, l.force.warn_lateral_n];
-        let stop = [l.force.stop_total_n, l.force.stop_axial_n, l.force.stop_lateral_n];
+        let warn = [
+            l.force.warn_total_n,
+            l.force.warn_axial_n,
+            l.force.warn_lateral_n,
+        ];
+        let stop = [
+            l.force.stop_total_n,
+            l.force.stop_axial_n,
+            l.force.stop_lateral_n,
+        ];
         let first = |limits: [f64; 3], above: bool| {
             (0..3).find(|&j| p[j] >= limits[j]).map(|j| {
                 if above {
