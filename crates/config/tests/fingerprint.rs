@@ -59,7 +59,8 @@ fn the_bias_and_the_guard_limits_are_state_not_configuration() {
 fn every_part_of_the_configuration_changes_it() {
     let cfg = sar_config::builtin().unwrap();
     let base = fingerprint_of(&cfg);
-    let edits: [(&str, fn(&mut sar_config::Config)); 5] = [
+    type Edit = fn(&mut sar_config::Config);
+    let edits: [(&str, Edit); 5] = [
         ("axes.following_tolerance_m", |c| {
             c.axes.following_tolerance_m *= 2.0;
         }),

@@ -100,19 +100,19 @@ impl Fingerprint {
 
     /// An `f64`, as its bits (`F`).
     pub fn f64(&mut self, v: f64) {
-        self.bytes(&[b'F']);
+        self.bytes(b"F");
         self.bytes(&v.to_bits().to_le_bytes());
     }
 
     /// An unsigned integer (`U`).
     pub fn unsigned(&mut self, v: u64) {
-        self.bytes(&[b'U']);
+        self.bytes(b"U");
         self.bytes(&v.to_le_bytes());
     }
 
     /// A signed integer (`I`).
     pub fn signed(&mut self, v: i64) {
-        self.bytes(&[b'I']);
+        self.bytes(b"I");
         self.bytes(&v.to_le_bytes());
     }
 
@@ -128,7 +128,7 @@ impl Fingerprint {
 
     /// A sequence's element count (`A`); the elements follow.
     pub fn sequence(&mut self, count: usize) {
-        self.bytes(&[b'A']);
+        self.bytes(b"A");
         self.bytes(&(count as u64).to_le_bytes());
     }
 
