@@ -42,7 +42,7 @@ use core::fmt;
 
 use nalgebra::{Matrix3, Vector3};
 
-mod fingerprint;
+pub mod fingerprint;
 pub use fingerprint::{ConfigHash, Fingerprint};
 
 /// Bytes in a snapshot at most (header and checksum included).
