@@ -3,7 +3,7 @@
 //!
 //! Every configuration type implements [`ConfigHash`], by hand for the
 //! primitives, arrays, tuples, `Option` and nalgebra's `Vector3`/`Matrix3`
-//! (here), and through [`config_struct!`] / [`config_enum!`] for the
+//! (here), and through [`config_struct!`](crate::config_struct) / [`config_enum!`](crate::config_enum) for the
 //! project's own types, beside the type. The macros list **every** field
 //! (they destructure `Self` without `..`, so a field added later does not
 //! compile until it is listed) and hash each field's name and value.
@@ -22,11 +22,11 @@
 //! | `Option` | `O`, 0 (None) or 1 (Some, then the value) |
 //! | array, tuple, `Vector3`, `Matrix3` | `A`, element count (u64), then the elements (a matrix column-major) |
 //!
-//! A struct made by [`config_struct!`] is **transparent**: as a field, it
+//! A struct made by [`config_struct!`](crate::config_struct) is **transparent**: as a field, it
 //! hashes its own fields (names and values) and not its name, so wrapping
 //! fields in a nested struct (or unwrapping them) does not change the
 //! sequence, as long as their names and order stay. An enum made by
-//! [`config_enum!`] hashes, as a field, the field's name, the variant's name
+//! [`config_enum!`](crate::config_enum) hashes, as a field, the field's name, the variant's name
 //! and the variant's fields. A part of the decision state
 //! ([`crate::SnapState`], [`crate::snap_state!`]) hashes its `config` fields
 //! in their listed order, then its nested parts' (an optional part: `O` and
@@ -43,7 +43,7 @@
 //! - `Debug` text (derived or hand-written), derives, the struct's field
 //!   order in its declaration (the macro's list decides), visibility, types'
 //!   names, the width of an integer;
-//! - fields wrapped in (or taken out of) a nested [`config_struct!`] struct
+//! - fields wrapped in (or taken out of) a nested [`config_struct!`](crate::config_struct) struct
 //!   with the same names in the same order (e.g. the six force limits as
 //!   `ForceLimits` inside the guard's limits).
 //!
@@ -145,7 +145,7 @@ pub trait ConfigHash {
     fn hash_value(&self, h: &mut Fingerprint);
 
     /// Mixes in the value as the field `name`: the name, then the value. A
-    /// struct made by [`config_struct!`] overrides it to be transparent (its
+    /// struct made by [`config_struct!`](crate::config_struct) overrides it to be transparent (its
     /// fields only).
     fn hash_field(&self, name: &str, h: &mut Fingerprint) {
         h.name(name);
