@@ -359,13 +359,13 @@ pub fn fingerprint<T: SnapState>(value: &T) -> u64 {
 
 /// Writes `value`'s state into `out` as a snapshot of `kind`. No allocation.
 /// Hashes the configuration each time: a caller on a real-time path caches
-/// [`fingerprint`] and uses [`take_with`].
+/// [`fingerprint()`] and uses [`take_with`].
 pub fn take<T: SnapState>(value: &T, kind: u16, out: &mut Snapshot) -> Result<(), SnapshotError> {
     take_with(value, kind, fingerprint(value), out)
 }
 
 /// [`take`] with `value`'s configuration fingerprint already known (it
-/// must be [`fingerprint`]`(value)`, computed once).
+/// must be [`fingerprint()`] of `value`, computed once).
 pub fn take_with<T: SnapState>(
     value: &T,
     kind: u16,
