@@ -42,7 +42,7 @@ use sar_estimator::cycle::{
     SensorRange, SpikeLimits, TareLimits, TorqueLimits, frozen_repeats,
 };
 use sar_estimator::filter::{FilterConfig, TipFilter};
-use sar_estimator::guard::{GuardConfig, GuardLimits};
+use sar_estimator::guard::{ForceLimits, GuardConfig, GuardLimits};
 use sar_estimator::tip_force::TipForceConfig;
 use sar_kinematics::{Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3};
 use sar_loop::runloop::LoopConfig;
@@ -282,6 +282,10 @@ impl Default for LoopToml {
     }
 }
 
+/// `[guard]`. Its six force limits keep their own keys (INTERFACES.md 2,
+/// the names of [`ForceLimits::NAMES`]; `deny_unknown_fields` cannot
+/// flatten) and become a [`ForceLimits`] in one place,
+/// [`GuardToml::force_limits`].
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct GuardToml {
@@ -300,6 +304,20 @@ struct GuardToml {
     max_stop_axial_n: Option<f64>,
     max_stop_lateral_n: Option<f64>,
     retreat_rise_n: f64,
+}
+
+impl GuardToml {
+    /// The six force limits, the only place they leave the TOML's fields.
+    fn force_limits(&self) -> ForceLimits {
+        ForceLimits {
+            warn_total_n: self.warn_total_n,
+            stop_total_n: self.stop_total_n,
+            warn_axial_n: self.warn_axial_n,
+            stop_axial_n: self.stop_axial_n,
+            warn_lateral_n: self.warn_lateral_n,
+            stop_lateral_n: self.stop_lateral_n,
+        }
+    }
 }
 
 impl Default for GuardToml {
@@ -866,13 +884,9 @@ fn guard(ctx: &Ctx<'_>, gt: &GuardToml) -> Result<GuardConfig, ConfigError> {
         1,
         i64::from(sar_estimator::guard::MAX_DEBOUNCE_SAMPLES),
     )?;
+    let force = gt.force_limits();
     let limits = GuardLimits {
-        warn_total_n: gt.warn_total_n,
-        stop_total_n: gt.stop_total_n,
-        warn_axial_n: gt.warn_axial_n,
-        stop_axial_n: gt.stop_axial_n,
-        warn_lateral_n: gt.warn_lateral_n,
-        stop_lateral_n: gt.stop_lateral_n,
+        force,
         hysteresis_n: gt.hysteresis_n,
         debounce_samples: u32::try_from(debounce).unwrap_or(1),
         max_sensor_age_ns: ctx.seconds_ns("guard.max_sensor_age_s", gt.max_sensor_age_s)?,
@@ -881,11 +895,14 @@ fn guard(ctx: &Ctx<'_>, gt: &GuardToml) -> Result<GuardConfig, ConfigError> {
     };
     let guard = GuardConfig::new(limits).map_err(|e| setting_error(ctx, "guard", &e))?;
     let guard = guard
-        .with_ceiling([
-            gt.max_stop_total_n.unwrap_or(gt.stop_total_n),
-            gt.max_stop_axial_n.unwrap_or(gt.stop_axial_n),
-            gt.max_stop_lateral_n.unwrap_or(gt.stop_lateral_n),
-        ])
+        .with_ceiling({
+            let [total_n, axial_n, lateral_n] = force.stop_n();
+            [
+                gt.max_stop_total_n.unwrap_or(total_n),
+                gt.max_stop_axial_n.unwrap_or(axial_n),
+                gt.max_stop_lateral_n.unwrap_or(lateral_n),
+            ]
+        })
         .map_err(|e| setting_error(ctx, "guard", &e))?;
     guard
         .with_retreat_rise_n(gt.retreat_rise_n)

@@ -58,9 +58,12 @@ fn the_minimum_file_works_with_the_documented_defaults() {
     assert_eq!(c.loop_.priority, 80);
     assert_eq!(c.loop_.cpu, None);
     let g = c.estimator.guard.limits();
-    assert_eq!((g.warn_total_n, g.stop_total_n), (10.0, 15.0));
-    assert_eq!((g.warn_axial_n, g.stop_axial_n), (8.0, 12.0));
-    assert_eq!((g.warn_lateral_n, g.stop_lateral_n), (6.0, 10.0));
+    assert_eq!((g.force.warn_total_n, g.force.stop_total_n), (10.0, 15.0));
+    assert_eq!((g.force.warn_axial_n, g.force.stop_axial_n), (8.0, 12.0));
+    assert_eq!(
+        (g.force.warn_lateral_n, g.force.stop_lateral_n),
+        (6.0, 10.0)
+    );
     assert_eq!(g.debounce_samples, 3);
     assert_eq!(g.max_sensor_age_ns, 10_000_000);
     assert_eq!(c.estimator.tip.max_std_n, 2.0);
@@ -120,8 +123,8 @@ counts_per_turn = 4096
     assert_eq!(c.loop_.period_ns, 250_000);
     assert_eq!(c.loop_.priority, 90);
     assert_eq!(c.loop_.cpu, Some(1));
-    assert_eq!(c.estimator.guard.limits().stop_total_n, 7.0);
-    assert_eq!(c.estimator.guard.limits().stop_axial_n, 12.0);
+    assert_eq!(c.estimator.guard.force_limits().stop_total_n, 7.0);
+    assert_eq!(c.estimator.guard.force_limits().stop_axial_n, 12.0);
     assert!(c.estimator.plausibility.limits().torque.is_none());
     assert_eq!(c.estimator.tip.max_std_n, 3.0);
     assert_eq!(
@@ -312,4 +315,25 @@ fn force_control_settings_are_checked_by_key() {
     );
     let c = config::parse(&with("max_speed_mps = 0.004"), "robot.toml").unwrap();
     assert_eq!(c.force_control.limits().max_speed_mps, 0.004);
+}
+
+#[test]
+fn the_guard_keys_are_the_force_limits_names_in_wire_order() {
+    use sar_estimator::guard::ForceLimits;
+    // Six distinct valid limits, each under its name of ForceLimits::NAMES:
+    // each lands in its place of ForceLimits::to_array (the wire's order).
+    let values = [11.0, 16.0, 9.0, 13.0, 7.0, 11.5];
+    let mut text = format!("{MINIMUM}\n[guard]\n");
+    for (name, v) in ForceLimits::NAMES.iter().zip(values) {
+        text.push_str(&format!("{name} = {v:?}\n"));
+    }
+    let c = config::parse(&text, "robot.toml").unwrap();
+    assert_eq!(c.estimator.guard.force_limits().to_array(), values);
+    // And the built-in file spells every one of them.
+    for name in ForceLimits::NAMES {
+        assert!(
+            config::DEFAULT_TOML.contains(&format!("\n{name} = ")),
+            "{name}"
+        );
+    }
 }

@@ -24,7 +24,7 @@ use sar_loop::control::{Controller, Operator, ReplyStatus};
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
-use sar_msgs::wire::{CommandMsg, command_kind, limits_array};
+use sar_msgs::wire::{CommandMsg, command_kind};
 use sar_shm::{Client, DaemonShm};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -60,7 +60,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
     let mut shm = DaemonShm::create(
         &prefix,
         operator.clone(),
-        limits_array(&cfg.estimator.guard.limits()),
+        cfg.estimator.guard.force_limits().to_array(),
     )
     .unwrap();
     let stats = LoopStats::default();
@@ -190,7 +190,7 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
     let mut shm = DaemonShm::create(
         &prefix,
         operator.clone(),
-        limits_array(&cfg.estimator.guard.limits()),
+        cfg.estimator.guard.force_limits().to_array(),
     )
     .unwrap();
     let mut c = Controller::new(

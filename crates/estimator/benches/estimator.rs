@@ -195,9 +195,9 @@ impl Floor {
             offset: config.profile.offset_m(),
             bias: [bias.x, bias.y, bias.z],
             limits: [
-                limits.stop_total_n,
-                limits.stop_axial_n,
-                limits.stop_lateral_n,
+                limits.force.stop_total_n,
+                limits.force.stop_axial_n,
+                limits.force.stop_lateral_n,
             ],
         }
     }
@@ -347,9 +347,9 @@ fn check_floor(out: &FloorOut, tip: &TipOutcome, limits: &GuardLimits) {
         assert!((out.std[i] - e.std_n[i]).abs() < 1e-9 * e.std_n.norm());
     }
     let stop = [
-        e.force_n.norm() >= limits.stop_total_n,
-        e.axial_n.abs() >= limits.stop_axial_n,
-        e.lateral_n >= limits.stop_lateral_n,
+        e.force_n.norm() >= limits.force.stop_total_n,
+        e.axial_n.abs() >= limits.force.stop_axial_n,
+        e.lateral_n >= limits.force.stop_lateral_n,
     ];
     assert_eq!(out.above, stop);
 }

@@ -1876,6 +1876,49 @@ sar_snapshot::snap_struct!(RestMean {
     std_nm,
     joints,
 });
+// The configuration fingerprint (names and values, never `Debug`).
+sar_snapshot::config_struct!(PlausibilityLimits {
+    max_joint_speed_mps,
+    joint_margin_m,
+    max_counter_gap,
+    torque,
+    frozen,
+    range,
+    spikes,
+    tare,
+    mounting,
+});
+sar_snapshot::config_struct!(TorqueLimits {
+    noise_nm,
+    max_sigma
+});
+sar_snapshot::config_enum!(FrozenCheck { On { repeats }, Off });
+sar_snapshot::config_struct!(SensorRange { force_n, torque_nm });
+sar_snapshot::config_struct!(SpikeLimits {
+    jump_sigma,
+    max_spikes,
+    window_samples,
+});
+sar_snapshot::config_struct!(TareLimits {
+    max_age_ns,
+    drift_n_per_s
+});
+sar_snapshot::config_struct!(MountingLimits {
+    sigma,
+    friction_n,
+    tolerance_n,
+    tolerance_nm,
+    rest_samples,
+});
+sar_snapshot::config_struct!(TorqueCheck {
+    std_nm,
+    cross,
+    force_var_n2,
+    torque_var_nm2,
+    offset_m,
+    max_sigma,
+});
+sar_snapshot::config_struct!(SensorFrame { r_t, lever_s_m });
 sar_snapshot::snap_state!(Estimator {
     state: [
         guard,

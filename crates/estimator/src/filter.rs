@@ -403,6 +403,19 @@ sar_snapshot::snap_struct!(State {
     last,
     counter,
 });
+sar_snapshot::config_struct!(FilterConfig {
+    cutoff_hz,
+    sample_period_s
+});
+sar_snapshot::config_struct!(Biquad {
+    b0,
+    a1,
+    a2,
+    k1,
+    k2,
+    ss1,
+    ss2
+});
 sar_snapshot::snap_state!(TipFilter {
     state: [state],
     nested: [],

@@ -455,6 +455,29 @@ sar_snapshot::snap_enum!(ForceMode {
     0 => Hold { max_force_n },
     1 => Push { axial_n },
 });
+sar_snapshot::config_struct!(ForceControlConfig {
+    limits,
+    filter,
+    filter_delay_s
+});
+sar_snapshot::config_struct!(ForceControlLimits {
+    axial,
+    lateral,
+    max_speed_mps,
+    max_accel_mps2,
+    max_excursion_m,
+    hold_return_n_per_m,
+    filter_cutoff_hz,
+    sample_period_s,
+    period_s,
+    other_delay_s,
+    max_stiffness_n_per_m,
+    min_phase_margin_deg,
+});
+sar_snapshot::config_struct!(Admittance {
+    mass_kg,
+    damping_n_s_per_m
+});
 sar_snapshot::snap_state!(ForceController {
     state: [force_n, mode, reference_m, offset_m, velocity_mps],
     nested: [filter],

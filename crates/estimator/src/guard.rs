@@ -55,18 +55,9 @@ const SCALE_ABOVE_N: f64 = 1e150;
 /// configuration file). [`GuardConfig::new`] checks them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GuardLimits {
-    /// Warn limit on the total tip force |F_tip|, N.
-    pub warn_total_n: f64,
-    /// Stop limit on the total tip force |F_tip|, N.
-    pub stop_total_n: f64,
-    /// Warn limit on the axial part |F_tip . u|, N.
-    pub warn_axial_n: f64,
-    /// Stop limit on the axial part |F_tip . u|, N.
-    pub stop_axial_n: f64,
-    /// Warn limit on the lateral part |F_tip - (F_tip . u) u|, N.
-    pub warn_lateral_n: f64,
-    /// Stop limit on the lateral part |F_tip - (F_tip . u) u|, N.
-    pub stop_lateral_n: f64,
+    /// The six force limits (warn and stop on the total, axial and lateral
+    /// parts), N.
+    pub force: ForceLimits,
     /// `Warn` clears only when every part is below its warn limit minus this, N.
     pub hysteresis_n: f64,
     /// The up/down count over new sensor samples at which `Warn` or `Stop` is
@@ -87,39 +78,73 @@ pub struct GuardLimits {
     pub std_margin: f64,
 }
 
-/// The six force limits alone: what an operator may change at run time
-/// ([`crate::cycle::Command::SetLimits`]), within the ceilings fixed at start
-/// ([`GuardConfig::with_ceiling`]).
+/// The six force limits of the guard, the one type that holds them: in the
+/// guard's limits ([`GuardLimits::force`]), what an operator may change at
+/// run time ([`crate::cycle::Command::SetLimits`], within the ceilings
+/// fixed at start, [`GuardConfig::with_ceiling`]), and, through
+/// [`ForceLimits::to_array`] and [`ForceLimits::NAMES`], the wire's six
+/// numbers and every name they are shown under (configuration keys, JSON
+/// fields, the command line's options, the log).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ForceLimits {
-    /// Warn limit on |F_tip|, N.
+    /// Warn limit on the total tip force |F_tip|, N.
     pub warn_total_n: f64,
-    /// Stop limit on |F_tip|, N.
+    /// Stop limit on the total tip force |F_tip|, N.
     pub stop_total_n: f64,
-    /// Warn limit on the axial part, N.
+    /// Warn limit on the axial part |F_tip . u|, N.
     pub warn_axial_n: f64,
-    /// Stop limit on the axial part, N.
+    /// Stop limit on the axial part |F_tip . u|, N.
     pub stop_axial_n: f64,
-    /// Warn limit on the lateral part, N.
+    /// Warn limit on the lateral part |F_tip - (F_tip . u) u|, N.
     pub warn_lateral_n: f64,
-    /// Stop limit on the lateral part, N.
+    /// Stop limit on the lateral part |F_tip - (F_tip . u) u|, N.
     pub stop_lateral_n: f64,
 }
 
 impl ForceLimits {
-    /// In the order (warn, stop) total, axial, lateral (the wire's order).
+    /// The six limits' names, in the order of [`ForceLimits::to_array`]
+    /// (the wire's): (warn, stop) for total, axial, lateral. They are the
+    /// keys of the configuration's `[guard]`, the fields of `sarctl`'s
+    /// JSON, and (without `_n`, `-` for `_`) its options.
+    pub const NAMES: [&'static str; 6] = [
+        "warn_total_n",
+        "stop_total_n",
+        "warn_axial_n",
+        "stop_axial_n",
+        "warn_lateral_n",
+        "stop_lateral_n",
+    ];
+
+    /// The names of the (warn, stop) limits of each part, in
+    /// [`ForcePart::ALL`] order (from [`ForceLimits::NAMES`]).
+    pub const fn pair_names() -> [(&'static str, &'static str); 3] {
+        let [wt, st, wa, sa, wl, sl] = Self::NAMES;
+        [(wt, st), (wa, sa), (wl, sl)]
+    }
+
+    /// In the order (warn, stop) total, axial, lateral (the wire's order,
+    /// [`ForceLimits::NAMES`]).
     pub fn to_array(&self) -> [f64; 6] {
+        let Self {
+            warn_total_n,
+            stop_total_n,
+            warn_axial_n,
+            stop_axial_n,
+            warn_lateral_n,
+            stop_lateral_n,
+        } = *self;
         [
-            self.warn_total_n,
-            self.stop_total_n,
-            self.warn_axial_n,
-            self.stop_axial_n,
-            self.warn_lateral_n,
-            self.stop_lateral_n,
+            warn_total_n,
+            stop_total_n,
+            warn_axial_n,
+            stop_axial_n,
+            warn_lateral_n,
+            stop_lateral_n,
         ]
     }
 
-    /// From (warn, stop) total, axial, lateral.
+    /// From (warn, stop) total, axial, lateral (the order of
+    /// [`ForceLimits::to_array`]).
     pub fn from_array(v: [f64; 6]) -> Self {
         let [
             warn_total_n,
@@ -138,6 +163,30 @@ impl ForceLimits {
             stop_lateral_n,
         }
     }
+
+    /// The warn limits in [`ForcePart::ALL`] order, N.
+    pub fn warn_n(&self) -> [f64; 3] {
+        [self.warn_total_n, self.warn_axial_n, self.warn_lateral_n]
+    }
+
+    /// The stop limits in [`ForcePart::ALL`] order, N.
+    pub fn stop_n(&self) -> [f64; 3] {
+        [self.stop_total_n, self.stop_axial_n, self.stop_lateral_n]
+    }
+}
+
+/// As the log and `sarctl limits` print them: `warn/stop total 9/17 N,
+/// axial 8/14 N, lateral 3/6 N`.
+impl fmt::Display for ForceLimits {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("warn/stop")?;
+        let parts = ForcePart::ALL.iter().zip(self.warn_n()).zip(self.stop_n());
+        for (i, ((part, warn), stop)) in parts.enumerate() {
+            let sep = if i == 0 { " " } else { ", " };
+            write!(f, "{sep}{part} {warn}/{stop} N")?;
+        }
+        Ok(())
+    }
 }
 
 /// Largest accepted `debounce_samples` (0.2 s at 500 Hz): a larger debounce
@@ -151,11 +200,14 @@ pub const MAX_STD_MARGIN: f64 = 10.0;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GuardConfig {
     limits: GuardLimits,
-    /// Warn limits in [`ForcePart::ALL`] order, N.
+    /// Warn limits in [`ForcePart::ALL`] order, N: a cache, derived from
+    /// `limits.force` ([`ForceLimits::warn_n`]) whenever it is set.
     warn_n: [f64; 3],
-    /// Stop limits in [`ForcePart::ALL`] order, N.
+    /// Stop limits in [`ForcePart::ALL`] order, N: a cache, derived from
+    /// `limits.force` ([`ForceLimits::stop_n`]).
     stop_n: [f64; 3],
-    /// Warn limits minus the hysteresis, in [`ForcePart::ALL`] order, N.
+    /// Warn limits minus the hysteresis, in [`ForcePart::ALL`] order, N: a
+    /// cache, derived from `limits` too.
     clear_n: [f64; 3],
     /// The largest stop limit a run-time change may set, in
     /// [`ForcePart::ALL`] order, N (default: the configured stop limits, so
@@ -182,27 +234,10 @@ impl GuardConfig {
     /// 0 < warn < stop; 0 <= hysteresis < every warn limit; both maximum ages
     /// > 0; 1 <= debounce <= 100; 0 <= std_margin <= 10.
     pub fn new(limits: GuardLimits) -> Result<Self, SettingError> {
-        let pairs = [
-            (
-                "warn_total_n",
-                limits.warn_total_n,
-                "stop_total_n",
-                limits.stop_total_n,
-            ),
-            (
-                "warn_axial_n",
-                limits.warn_axial_n,
-                "stop_axial_n",
-                limits.stop_axial_n,
-            ),
-            (
-                "warn_lateral_n",
-                limits.warn_lateral_n,
-                "stop_lateral_n",
-                limits.stop_lateral_n,
-            ),
-        ];
-        for (warn_field, warn, stop_field, stop) in pairs {
+        let force = &limits.force;
+        let (warn_n, stop_n) = (force.warn_n(), force.stop_n());
+        let names = ForceLimits::pair_names();
+        for (((warn_field, stop_field), warn), stop) in names.into_iter().zip(warn_n).zip(stop_n) {
             if !(warn.is_finite() && warn > 0.0) {
                 return Err(invalid(warn_field, warn, "must be finite and > 0"));
             }
@@ -215,10 +250,10 @@ impl GuardConfig {
             }
         }
         let h = limits.hysteresis_n;
-        let min_warn = limits
+        let min_warn = force
             .warn_total_n
-            .min(limits.warn_axial_n)
-            .min(limits.warn_lateral_n);
+            .min(force.warn_axial_n)
+            .min(force.warn_lateral_n);
         if !(h.is_finite() && h >= 0.0 && h < min_warn) {
             return Err(invalid(
                 "hysteresis_n",
@@ -243,16 +278,6 @@ impl GuardConfig {
         if limits.max_joints_age_ns == 0 {
             return Err(invalid("max_joints_age_ns", 0.0, "must be > 0"));
         }
-        let warn_n = [
-            limits.warn_total_n,
-            limits.warn_axial_n,
-            limits.warn_lateral_n,
-        ];
-        let stop_n = [
-            limits.stop_total_n,
-            limits.stop_axial_n,
-            limits.stop_lateral_n,
-        ];
         let clear_n = warn_n.map(|w| w - h);
         Ok(Self {
             limits,
@@ -291,15 +316,7 @@ impl GuardConfig {
 
     /// The six force limits in use.
     pub fn force_limits(&self) -> ForceLimits {
-        let l = &self.limits;
-        ForceLimits {
-            warn_total_n: l.warn_total_n,
-            stop_total_n: l.stop_total_n,
-            warn_axial_n: l.warn_axial_n,
-            stop_axial_n: l.stop_axial_n,
-            warn_lateral_n: l.warn_lateral_n,
-            stop_lateral_n: l.stop_lateral_n,
-        }
+        self.limits.force
     }
 
     /// The ceilings of the stop limits (total, axial, lateral), N.
@@ -331,16 +348,11 @@ impl GuardConfig {
     /// the ceilings are kept.
     pub fn with_force_limits(&self, force: &ForceLimits) -> Result<Self, SettingError> {
         let limits = GuardLimits {
-            warn_total_n: force.warn_total_n,
-            stop_total_n: force.stop_total_n,
-            warn_axial_n: force.warn_axial_n,
-            stop_axial_n: force.stop_axial_n,
-            warn_lateral_n: force.warn_lateral_n,
-            stop_lateral_n: force.stop_lateral_n,
+            force: *force,
             ..self.limits
         };
         let next = Self::new(limits)?;
-        let fields = ["stop_total_n", "stop_axial_n", "stop_lateral_n"];
+        let fields = ForceLimits::pair_names().map(|(_, stop)| stop);
         for ((field, stop), ceiling) in fields.into_iter().zip(next.stop_n).zip(self.ceiling_n) {
             if stop > ceiling {
                 return Err(invalid(
@@ -1733,12 +1745,14 @@ mod tests {
 
     fn limits(debounce_samples: u32) -> GuardLimits {
         GuardLimits {
-            warn_total_n: 9.0,
-            stop_total_n: 17.0,
-            warn_axial_n: 8.0,
-            stop_axial_n: 15.0,
-            warn_lateral_n: 6.0,
-            stop_lateral_n: 10.0,
+            force: ForceLimits {
+                warn_total_n: 9.0,
+                stop_total_n: 17.0,
+                warn_axial_n: 8.0,
+                stop_axial_n: 15.0,
+                warn_lateral_n: 6.0,
+                stop_lateral_n: 10.0,
+            },
             hysteresis_n: 1.0,
             debounce_samples,
             max_sensor_age_ns: 1_000_000,
@@ -1823,13 +1837,10 @@ mod tests {
 // Snapshots (issue 17): the guard is stored whole, its limits included
 // (an operator may change them at run time). The tags of `Reason` are its
 // codes ([`REASONS`]).
+// `GuardLimits` stores its `ForceLimits` first: the same bytes as when
+// the six were its own first fields.
 sar_snapshot::snap_struct!(GuardLimits {
-    warn_total_n,
-    stop_total_n,
-    warn_axial_n,
-    stop_axial_n,
-    warn_lateral_n,
-    stop_lateral_n,
+    force,
     hysteresis_n,
     debounce_samples,
     max_sensor_age_ns,

@@ -549,3 +549,24 @@ impl TipForceEstimator {
         }
     }
 }
+
+// The snapshot's configuration fingerprint (names and values, never `Debug`).
+sar_snapshot::config_struct!(TipForceEstimator {
+    calibration,
+    covariance_n2,
+    covariance_diag_n2,
+    noise_factor,
+    weight_n,
+    length_m,
+    com_m,
+    offset_m,
+    max_std_n,
+});
+sar_snapshot::config_struct!(Symmetric3 {
+    xx,
+    yy,
+    zz,
+    xy,
+    xz,
+    yz
+});

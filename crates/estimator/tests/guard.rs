@@ -13,8 +13,8 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
 use sar_estimator::SettingError;
 use sar_estimator::guard::{
-    Axis, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState, MAX_DEBOUNCE_SAMPLES,
-    MAX_STD_MARGIN, Reason, TipField, TipInput, Transition,
+    Axis, ForceLimits, ForcePart, Guard, GuardConfig, GuardInput, GuardLimits, GuardState,
+    MAX_DEBOUNCE_SAMPLES, MAX_STD_MARGIN, Reason, TipField, TipInput, Transition,
 };
 
 type V = Vector3<f64>;
@@ -27,12 +27,14 @@ const MS_NS: u64 = 1_000_000;
 /// lateral < 5 (sqrt(7^2 + 5^2) = 8.6).
 fn limits() -> GuardLimits {
     GuardLimits {
-        warn_total_n: 9.0,
-        stop_total_n: 17.0,
-        warn_axial_n: 8.0,
-        stop_axial_n: 15.0,
-        warn_lateral_n: 6.0,
-        stop_lateral_n: 10.0,
+        force: ForceLimits {
+            warn_total_n: 9.0,
+            stop_total_n: 17.0,
+            warn_axial_n: 8.0,
+            stop_axial_n: 15.0,
+            warn_lateral_n: 6.0,
+            stop_lateral_n: 10.0,
+        },
         hysteresis_n: 1.0,
         debounce_samples: 3,
         max_sensor_age_ns: 2 * MS_NS,
@@ -229,8 +231,16 @@ fn warn_force(part: ForcePart) -> V {
 #[test]
 fn force_levels_are_what_they_claim() {
     let l = limits();
-    let warn = [l.warn_total_n, l.warn_axial_n, l.warn_lateral_n];
-    let stop = [l.stop_total_n, l.stop_axial_n, l.stop_lateral_n];
+    let warn = [
+        l.force.warn_total_n,
+        l.force.warn_axial_n,
+        l.force.warn_lateral_n,
+    ];
+    let stop = [
+        l.force.stop_total_n,
+        l.force.stop_axial_n,
+        l.force.stop_lateral_n,
+    ];
     let u = rod_basis().0;
     for (i, part) in PARTS.iter().enumerate() {
         let s = parts(&stop_force(*part), &u);
@@ -382,7 +392,11 @@ fn warn_clears_only_below_warn_minus_hysteresis_after_debounce() {
         (ForcePart::Lateral, force(0.0, 5.5)),
     ];
     let l = limits();
-    let warn = [l.warn_total_n, l.warn_axial_n, l.warn_lateral_n];
+    let warn = [
+        l.force.warn_total_n,
+        l.force.warn_axial_n,
+        l.force.warn_lateral_n,
+    ];
     let u = rod_basis().0;
     for (part, band) in bands {
         let p = parts(&band, &u);
@@ -1038,20 +1052,26 @@ fn an_accepted_reset_clears_the_debounce_counters() {
 fn invalid_configurations_are_refused() {
     type LimitsEdit = fn(&mut GuardLimits);
     let cases: Vec<(&str, LimitsEdit)> = vec![
-        ("warn_total_n", |l| l.warn_total_n = 0.0),
-        ("warn_total_n", |l| l.warn_total_n = -1.0),
-        ("warn_total_n", |l| l.warn_total_n = f64::NAN),
-        ("stop_total_n", |l| l.stop_total_n = l.warn_total_n),
-        ("stop_total_n", |l| l.stop_total_n = 5.0),
-        ("stop_total_n", |l| l.stop_total_n = f64::INFINITY),
-        ("warn_axial_n", |l| l.warn_axial_n = f64::NEG_INFINITY),
-        ("stop_axial_n", |l| l.warn_axial_n = l.stop_axial_n + 1.0),
-        ("stop_axial_n", |l| l.stop_axial_n = f64::NAN),
-        ("warn_lateral_n", |l| l.warn_lateral_n = -0.0),
-        ("stop_lateral_n", |l| l.stop_lateral_n = l.warn_lateral_n),
+        ("warn_total_n", |l| l.force.warn_total_n = 0.0),
+        ("warn_total_n", |l| l.force.warn_total_n = -1.0),
+        ("warn_total_n", |l| l.force.warn_total_n = f64::NAN),
+        ("stop_total_n", |l| {
+            l.force.stop_total_n = l.force.warn_total_n
+        }),
+        ("stop_total_n", |l| l.force.stop_total_n = 5.0),
+        ("stop_total_n", |l| l.force.stop_total_n = f64::INFINITY),
+        ("warn_axial_n", |l| l.force.warn_axial_n = f64::NEG_INFINITY),
+        ("stop_axial_n", |l| {
+            l.force.warn_axial_n = l.force.stop_axial_n + 1.0
+        }),
+        ("stop_axial_n", |l| l.force.stop_axial_n = f64::NAN),
+        ("warn_lateral_n", |l| l.force.warn_lateral_n = -0.0),
+        ("stop_lateral_n", |l| {
+            l.force.stop_lateral_n = l.force.warn_lateral_n
+        }),
         ("hysteresis_n", |l| l.hysteresis_n = -0.1),
         ("hysteresis_n", |l| l.hysteresis_n = f64::NAN),
-        ("hysteresis_n", |l| l.hysteresis_n = l.warn_lateral_n),
+        ("hysteresis_n", |l| l.hysteresis_n = l.force.warn_lateral_n),
         ("hysteresis_n", |l| l.hysteresis_n = 7.0),
         ("hysteresis_n", |l| l.hysteresis_n = f64::INFINITY),
         ("debounce_samples", |l| l.debounce_samples = 0),
@@ -1068,7 +1088,7 @@ fn invalid_configurations_are_refused() {
     }
     // The offending value is reported.
     let mut l = limits();
-    l.stop_total_n = 5.0;
+    l.force.stop_total_n = 5.0;
     let err = GuardConfig::new(l).unwrap_err();
     assert!(matches!(err, SettingError::Invalid { value, .. } if value == 5.0));
     assert!(err.to_string().contains("stop_total_n"));
@@ -1218,7 +1238,7 @@ fn std_margin_stops_a_force_that_may_be_above_the_limit() {
     let u = V::new(1.0, 0.0, 0.0);
     let std_n = V::new(0.3, 0.4, 0.0); // |std| = 0.5 N
     // Axial estimate 0.8 N below the axial stop limit; lateral and total below theirs.
-    let force_n = u * (l.stop_axial_n - 0.8);
+    let force_n = u * (l.force.stop_axial_n - 0.8);
     let run = |std_margin: f64| {
         let mut g = Guard::new(GuardConfig::new(GuardLimits { std_margin, ..l }).unwrap());
         g.step(&input(1, V::zeros()));
@@ -1247,8 +1267,8 @@ fn std_margin_stops_a_force_that_may_be_above_the_limit() {
             force_n,
             limit_n,
         } => {
-            assert!((force_n - (l.stop_axial_n - 0.8 + 1.0)).abs() < 1e-12);
-            assert_eq!(limit_n, l.stop_axial_n);
+            assert!((force_n - (l.force.stop_axial_n - 0.8 + 1.0)).abs() < 1e-12);
+            assert_eq!(limit_n, l.force.stop_axial_n);
         }
         other => panic!("{other:?}"),
     }
@@ -1610,8 +1630,16 @@ impl Model {
         }
         let margin = l.std_margin * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
         let p = parts(&f, &u).map(|x| x + margin);
-        let warn = [l.warn_total_n, l.warn_axial_n, l.warn_lateral_n];
-        let stop = [l.stop_total_n, l.stop_axial_n, l.stop_lateral_n];
+        let warn = [
+            l.force.warn_total_n,
+            l.force.warn_axial_n,
+            l.force.warn_lateral_n,
+        ];
+        let stop = [
+            l.force.stop_total_n,
+            l.force.stop_axial_n,
+            l.force.stop_lateral_n,
+        ];
         let first = |limits: [f64; 3], above: bool| {
             (0..3).find(|&j| p[j] >= limits[j]).map(|j| {
                 if above {

@@ -294,3 +294,19 @@ impl Profile {
         self.com_m
     }
 }
+
+// The snapshot's configuration fingerprint (names and values, never `Debug`).
+sar_snapshot::config_struct!(Calibration {
+    p_home_m,
+    ujoint_offset_m,
+    sensor_offset_m,
+    sensor_rotation,
+    support_m,
+    gravity_mps2,
+});
+sar_snapshot::config_struct!(Profile {
+    length_m,
+    offset_m,
+    mass_kg,
+    com_m,
+});

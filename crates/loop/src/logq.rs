@@ -203,17 +203,9 @@ fn v3_text(v: &sar_kinematics::Vec3, digits: usize) -> String {
     format!("[{:.digits$} {:.digits$} {:.digits$}]", v.x, v.y, v.z)
 }
 
-/// Force limits as the log prints them.
+/// Force limits as the log prints them (their `Display`).
 fn limits_text(l: &sar_estimator::guard::ForceLimits) -> String {
-    format!(
-        "warn/stop total {}/{} N, axial {}/{} N, lateral {}/{} N",
-        l.warn_total_n,
-        l.stop_total_n,
-        l.warn_axial_n,
-        l.stop_axial_n,
-        l.warn_lateral_n,
-        l.stop_lateral_n
-    )
+    l.to_string()
 }
 
 /// A bias as the log prints it.

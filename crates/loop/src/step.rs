@@ -1274,6 +1274,16 @@ sar_snapshot::snap_struct!(Trajectory {
     streamed,
     max_force_n,
 });
+// The configuration fingerprint (names and values, never `Debug`).
+sar_snapshot::config_struct!(StepConfig {
+    travel_m,
+    axis_limits,
+    following_tolerance_m,
+    retreat_speed_mps,
+    period_ns,
+    publisher_stall_ns,
+    force_control,
+});
 sar_snapshot::snap_state!(LoopStep {
     state: [
         trajectory,

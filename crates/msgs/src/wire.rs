@@ -6,19 +6,7 @@
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use sar_drivers::DriveState;
-use sar_estimator::guard::{GuardLimits, GuardState};
-
-/// The limits as published: warn, stop for total, axial, lateral, N.
-pub fn limits_array(l: &GuardLimits) -> [f64; 6] {
-    [
-        l.warn_total_n,
-        l.stop_total_n,
-        l.warn_axial_n,
-        l.stop_axial_n,
-        l.warn_lateral_n,
-        l.stop_lateral_n,
-    ]
-}
+use sar_estimator::guard::GuardState;
 
 /// Flag bits of [`StateMsg::flags`].
 pub mod flags {
@@ -147,7 +135,8 @@ pub struct StateMsg {
     pub guard_reason: u32,
     /// [`drive_state_code`].
     pub drive_state: u32,
-    /// Warn and stop limits: total, axial, lateral (warn, stop each), N.
+    /// Warn and stop limits: total, axial, lateral (warn, stop each), N:
+    /// `sar_estimator::guard::ForceLimits::to_array`, named by its `NAMES`.
     pub limits_n: [f64; 6],
     /// Wake-up latency p50, p99, max, ns.
     pub wakeup_ns: [u64; 3],

@@ -8,7 +8,7 @@ use sar_estimator::cycle::{
     Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig, SensorSample,
 };
 use sar_estimator::tip_force::TipForceConfig;
-use sar_estimator::guard::{GuardConfig, GuardLimits};
+use sar_estimator::guard::{ForceLimits, GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::filter::{FilterConfig, TipFilter};
@@ -28,12 +28,14 @@ fn config() -> Option<EstimatorConfig> {
     })
     .ok()?;
     let guard = GuardConfig::new(GuardLimits {
-        warn_total_n: 10.0,
-        stop_total_n: 15.0,
-        warn_axial_n: 8.0,
-        stop_axial_n: 12.0,
-        warn_lateral_n: 6.0,
-        stop_lateral_n: 10.0,
+        force: ForceLimits {
+            warn_total_n: 10.0,
+            stop_total_n: 15.0,
+            warn_axial_n: 8.0,
+            stop_axial_n: 12.0,
+            warn_lateral_n: 6.0,
+            stop_lateral_n: 10.0,
+        },
         hysteresis_n: 1.0,
         debounce_samples: 3,
         max_sensor_age_ns: 5_000_000,

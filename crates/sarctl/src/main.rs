@@ -4,6 +4,7 @@
 //! Every command fails with a one-line reason when no daemon runs.
 
 use clap::{Parser, Subcommand, ValueEnum};
+use sar_estimator::guard::ForceLimits;
 use sar_msgs::wire::{
     self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name,
     status_name,
@@ -98,24 +99,8 @@ enum Cmd {
     /// The guard's force limits; with any `--warn-*`/`--stop-*` option, sets
     /// them (the others kept; within the ceilings of the configuration).
     Limits {
-        /// Warn limit on |F_tip|, N.
-        #[arg(long)]
-        warn_total: Option<f64>,
-        /// Stop limit on |F_tip|, N.
-        #[arg(long)]
-        stop_total: Option<f64>,
-        /// Warn limit on the axial part, N.
-        #[arg(long)]
-        warn_axial: Option<f64>,
-        /// Stop limit on the axial part, N.
-        #[arg(long)]
-        stop_axial: Option<f64>,
-        /// Warn limit on the lateral part, N.
-        #[arg(long)]
-        warn_lateral: Option<f64>,
-        /// Stop limit on the lateral part, N.
-        #[arg(long)]
-        stop_lateral: Option<f64>,
+        #[command(flatten)]
+        set: LimitOptions,
     },
     /// The live view: serves the state to Foxglove (WebSocket) until stopped.
     View {
@@ -229,10 +214,61 @@ fn main() -> ExitCode {
     }
 }
 
-/// The guard's six force limits by name (the order of `limits_n`).
+/// The options of `sarctl limits`: one per force limit, named after
+/// [`ForceLimits::NAMES`] (without `_n`, `-` for `_`; checked by a test).
+#[derive(clap::Args, Debug, Clone, Copy, PartialEq)]
+struct LimitOptions {
+    /// Warn limit on |F_tip|, N.
+    #[arg(long)]
+    warn_total: Option<f64>,
+    /// Stop limit on |F_tip|, N.
+    #[arg(long)]
+    stop_total: Option<f64>,
+    /// Warn limit on the axial part, N.
+    #[arg(long)]
+    warn_axial: Option<f64>,
+    /// Stop limit on the axial part, N.
+    #[arg(long)]
+    stop_axial: Option<f64>,
+    /// Warn limit on the lateral part, N.
+    #[arg(long)]
+    warn_lateral: Option<f64>,
+    /// Stop limit on the lateral part, N.
+    #[arg(long)]
+    stop_lateral: Option<f64>,
+}
+
+impl LimitOptions {
+    /// The wanted limits in the order of [`ForceLimits::to_array`] (the
+    /// wire's `limits_n`); `None` keeps the one in force.
+    fn wanted(&self) -> [Option<f64>; 6] {
+        let Self {
+            warn_total,
+            stop_total,
+            warn_axial,
+            stop_axial,
+            warn_lateral,
+            stop_lateral,
+        } = *self;
+        [
+            warn_total,
+            stop_total,
+            warn_axial,
+            stop_axial,
+            warn_lateral,
+            stop_lateral,
+        ]
+    }
+}
+
+/// The guard's six force limits by name ([`ForceLimits::NAMES`], the order
+/// of `limits_n`).
 fn limits_json(l: &[f64; 6]) -> serde_json::Value {
-    json!({"warn_total_n": l[0], "stop_total_n": l[1], "warn_axial_n": l[2],
-           "stop_axial_n": l[3], "warn_lateral_n": l[4], "stop_lateral_n": l[5]})
+    let fields = ForceLimits::NAMES
+        .iter()
+        .zip(l)
+        .map(|(name, v)| ((*name).to_owned(), json!(v)));
+    serde_json::Value::Object(fields.collect())
 }
 
 /// One symbol per tenth of a second: |F_tip| against the stop limit, in
@@ -639,23 +675,9 @@ fn run(args: &Args) -> Result<(), String> {
             )
             .map_err(|e| e.to_string())?,
         ),
-        Cmd::Limits {
-            warn_total,
-            stop_total,
-            warn_axial,
-            stop_axial,
-            warn_lateral,
-            stop_lateral,
-        } => {
+        Cmd::Limits { set } => {
             let mut r = command(command_kind::LIMITS, [0.0; 3]).map_err(|e| e.to_string())?;
-            let wanted = [
-                warn_total,
-                stop_total,
-                warn_axial,
-                stop_axial,
-                warn_lateral,
-                stop_lateral,
-            ];
+            let wanted = set.wanted();
             if wanted.iter().any(Option::is_some) {
                 let mut limits_n = r.limits_n;
                 for (slot, value) in limits_n.iter_mut().zip(wanted) {
@@ -678,10 +700,7 @@ fn run(args: &Args) -> Result<(), String> {
             if args.format == Format::Json {
                 println!("{}", limits_json(&l));
             } else {
-                println!(
-                    "warn/stop total {}/{} N, axial {}/{} N, lateral {}/{} N",
-                    l[0], l[1], l[2], l[3], l[4], l[5]
-                );
+                println!("{}", ForceLimits::from_array(l));
             }
             let _ = wire::guard_code::OK;
             Ok(())
@@ -692,6 +711,46 @@ fn run(args: &Args) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    #[allow(clippy::unwrap_used, clippy::panic, clippy::indexing_slicing)]
+    fn the_limit_options_are_the_force_limits_names_in_wire_order() {
+        for (i, name) in ForceLimits::NAMES.iter().enumerate() {
+            let option = format!("--{}", name.trim_end_matches("_n").replace('_', "-"));
+            let value = (i + 1).to_string();
+            let cli = Args::try_parse_from(["sarctl", "limits", &option, &value]).unwrap();
+            let Cmd::Limits { set } = cli.command else {
+                panic!("{option}: not `limits`");
+            };
+            let mut expected = [None; 6];
+            expected[i] = Some((i + 1) as f64);
+            assert_eq!(set.wanted(), expected, "{option}");
+        }
+        // No other option sets a limit.
+        let cmd = <Args as clap::CommandFactory>::command();
+        let limits = cmd.find_subcommand("limits").unwrap();
+        let options: Vec<&str> = limits
+            .get_arguments()
+            .filter(|a| a.get_id() != "help")
+            .filter_map(|a| a.get_long())
+            .filter(|l| l.starts_with("warn") || l.starts_with("stop"))
+            .collect();
+        assert_eq!(options.len(), 6, "{options:?}");
+    }
+
+    #[test]
+    fn the_limits_json_and_text_name_the_six_in_wire_order() {
+        let l = [1.0, 2.0, 3.5, 4.0, 5.0, 6.25];
+        assert_eq!(
+            limits_json(&l),
+            json!({"warn_total_n": 1.0, "stop_total_n": 2.0, "warn_axial_n": 3.5,
+                   "stop_axial_n": 4.0, "warn_lateral_n": 5.0, "stop_lateral_n": 6.25})
+        );
+        assert_eq!(
+            ForceLimits::from_array(l).to_string(),
+            "warn/stop total 1/2 N, axial 3.5/4 N, lateral 5/6.25 N"
+        );
+    }
 
     #[test]
     fn the_history_legend_matches_the_glyphs() {

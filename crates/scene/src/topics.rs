@@ -123,7 +123,7 @@ pub fn messages(s: &StateMsg, previous: Option<&StateMsg>, out: &mut Vec<Outgoin
 /// cycle (the inverse of [`messages`] for what the scene needs): the
 /// recorder, which holds `EstimatorState`, the joints and the passive
 /// joints rather than the published state, draws the same scene with it.
-/// `limits_n` are the guard's (`wire::limits_array`), which the recordings
+/// `limits_n` are the guard's (`ForceLimits::to_array`), which the recordings
 /// do not carry per cycle.
 pub fn state_from_recorded(
     est: &EstimatorState,

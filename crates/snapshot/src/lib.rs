@@ -26,8 +26,11 @@
 //!   without `..`, so a field added later fails to compile until it is
 //!   placed in `state`, `nested`, `config` or `output`.
 //! - `config` fields are not stored: they come from the configuration the
-//!   step is built from, and their `Debug` text is hashed into the
-//!   fingerprint, so a snapshot is refused by a step built differently.
+//!   step is built from, and their names and values are hashed into the
+//!   fingerprint ([`ConfigHash`]; never their `Debug` text: what changes a
+//!   fingerprint and what does not is the [`fingerprint`](mod@fingerprint)
+//!   module's documentation), so a snapshot is refused by a step built
+//!   differently.
 //! - `output` fields are rewritten by every cycle before they are read (the
 //!   last cycle's result); they are neither stored nor fingerprinted.
 //! - A snapshot is never trusted on its face: magic, version, kind, length,
@@ -39,12 +42,18 @@ use core::fmt;
 
 use nalgebra::{Matrix3, Vector3};
 
+pub mod fingerprint;
+pub use fingerprint::{ConfigHash, Fingerprint};
+
 /// Bytes in a snapshot at most (header and checksum included).
 pub const CAPACITY: usize = 4096;
 
 /// The format's version: raise it when the layout of any snapshotted type
-/// changes (a field added, removed or reordered).
-pub const VERSION: u16 = 1;
+/// changes (a field added, removed or reordered), or the meaning of the
+/// fingerprint (what [`ConfigHash`] hashes, and how). 1: the fingerprint
+/// hashed the configuration's `Debug` text; 2: it hashes the fields'
+/// names and values explicitly ([`fingerprint`](mod@fingerprint)).
+pub const VERSION: u16 = 2;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";
@@ -249,56 +258,6 @@ pub trait SnapState {
     fn load_state(&mut self, r: &mut Reader<'_>) -> Result<(), SnapshotError>;
 }
 
-/// FNV-1a (64 bits) over the `Debug` text of configuration fields: no
-/// allocation, the same on every build whose `Debug` output is the same.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Fingerprint(u64);
-
-impl Default for Fingerprint {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Fingerprint {
-    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-
-    /// The empty hash.
-    pub const fn new() -> Self {
-        Self(Self::OFFSET)
-    }
-
-    /// Mixes in raw bytes.
-    pub fn bytes(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 ^= u64::from(*b);
-            self.0 = self.0.wrapping_mul(Self::PRIME);
-        }
-    }
-
-    /// Mixes in a field's name and its `Debug` text.
-    pub fn add(&mut self, name: &str, value: &dyn fmt::Debug) {
-        self.bytes(name.as_bytes());
-        self.bytes(b"=");
-        // Writing into the hash cannot fail; a `Debug` impl that returns an
-        // error would only shorten the text hashed.
-        let _ = fmt::write(self, format_args!("{value:?};"));
-    }
-
-    /// The hash.
-    pub fn value(&self) -> u64 {
-        self.0
-    }
-}
-
-impl fmt::Write for Fingerprint {
-    fn write_str(&mut self, s: &str) -> fmt::Result {
-        self.bytes(s.as_bytes());
-        Ok(())
-    }
-}
-
 // Indexing in a const fn (no `get_mut` there); `i < 256` by the loop.
 #[allow(clippy::indexing_slicing)]
 const fn crc32_table() -> [u32; 256] {
@@ -399,14 +358,14 @@ pub fn fingerprint<T: SnapState>(value: &T) -> u64 {
 }
 
 /// Writes `value`'s state into `out` as a snapshot of `kind`. No allocation.
-/// Hashes the configuration's `Debug` text each time: a caller on a
-/// real-time path caches [`fingerprint`] and uses [`take_with`].
+/// Hashes the configuration each time: a caller on a real-time path caches
+/// [`fingerprint()`] and uses [`take_with`].
 pub fn take<T: SnapState>(value: &T, kind: u16, out: &mut Snapshot) -> Result<(), SnapshotError> {
     take_with(value, kind, fingerprint(value), out)
 }
 
 /// [`take`] with `value`'s configuration fingerprint already known (it
-/// must be [`fingerprint`]`(value)`, computed once).
+/// must be [`fingerprint()`] of `value`, computed once).
 pub fn take_with<T: SnapState>(
     value: &T,
     kind: u16,
@@ -655,12 +614,9 @@ impl<T: SnapState> SnapState for Option<T> {
         }
     }
     fn fingerprint_config(&self, h: &mut Fingerprint) {
-        match self {
-            None => h.bytes(b"none;"),
-            Some(v) => {
-                h.bytes(b"some;");
-                v.fingerprint_config(h);
-            }
+        h.option(self.is_some());
+        if let Some(v) = self {
+            v.fingerprint_config(h);
         }
     }
     fn load_state(&mut self, r: &mut Reader<'_>) -> Result<(), SnapshotError> {
@@ -734,7 +690,9 @@ macro_rules! snap_enum {
 /// field is in exactly one list:
 /// - `state`: stored ([`Snap`]);
 /// - `nested`: a part with its own [`SnapState`];
-/// - `config`: from the configuration, fingerprinted (`Debug`), not stored;
+/// - `config`: from the configuration, fingerprinted ([`ConfigHash`]: each
+///   field's name and value, in the listed order, then the nested parts'),
+///   not stored;
 /// - `output`: rewritten by every cycle before it is read; neither;
 /// - `derived` (optional): computed once from the configuration at
 ///   construction (e.g. the fingerprint itself, cached); neither.
@@ -755,8 +713,7 @@ macro_rules! snap_state {
             }
             fn fingerprint_config(&self, h: &mut $crate::Fingerprint) {
                 let Self { $($s: _,)* $($n,)* $($c,)* $($o: _,)* $($($d: _,)*)? } = self;
-                h.bytes(stringify!($t).as_bytes());
-                $( h.add(stringify!($c), $c); )*
+                $( $crate::ConfigHash::hash_field($c, stringify!($c), h); )*
                 $( $crate::SnapState::fingerprint_config($n, h); )*
             }
             fn load_state(&mut self, r: &mut $crate::Reader<'_>) -> Result<(), $crate::SnapshotError> {
@@ -927,6 +884,69 @@ mod tests {
                 at: 0
             }
         );
+    }
+
+    #[test]
+    fn a_version_1_snapshot_is_refused_as_another_format() {
+        // Version 1 fingerprinted the configuration's `Debug` text: its
+        // fingerprint means something else, so it is refused by version,
+        // before its fingerprint or body are looked at, even under a good
+        // checksum.
+        let mut snap = Snapshot::new();
+        take(&whole(2.0, 1.0), 7, &mut snap).unwrap();
+        let n = snap.as_bytes().len();
+        let mut bytes = [0u8; CAPACITY];
+        bytes[..n].copy_from_slice(snap.as_bytes());
+        assert_eq!(bytes[8..10], 2u16.to_le_bytes());
+        bytes[8..10].copy_from_slice(&1u16.to_le_bytes());
+        let crc = crc32(&bytes[..n - 4]);
+        bytes[n - 4..n].copy_from_slice(&crc.to_le_bytes());
+        let mut dst = whole(2.0, 5.0);
+        let e = restore(&mut dst, 7, &bytes[..n]).unwrap_err();
+        assert_eq!(
+            e,
+            SnapshotError::Version {
+                got: 1,
+                expected: 2
+            }
+        );
+        assert_eq!(dst.a.x, 5.0);
+        let mut text = Text::default();
+        fmt::write(&mut text, format_args!("{e}")).unwrap();
+        assert_eq!(
+            text.as_str(),
+            "snapshot format version 1; this build reads version 2"
+        );
+    }
+
+    /// A fixed buffer for an error's text (no alloc in this crate).
+    struct Text {
+        buf: [u8; 128],
+        len: usize,
+    }
+    impl Default for Text {
+        fn default() -> Self {
+            Self {
+                buf: [0; 128],
+                len: 0,
+            }
+        }
+    }
+    impl Text {
+        fn as_str(&self) -> &str {
+            core::str::from_utf8(&self.buf[..self.len]).unwrap()
+        }
+    }
+    impl fmt::Write for Text {
+        fn write_str(&mut self, s: &str) -> fmt::Result {
+            let end = self.len + s.len();
+            self.buf
+                .get_mut(self.len..end)
+                .ok_or(fmt::Error)?
+                .copy_from_slice(s.as_bytes());
+            self.len = end;
+            Ok(())
+        }
     }
 
     #[test]

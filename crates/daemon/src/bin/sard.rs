@@ -13,7 +13,6 @@ use sar_loop::publish::SimTruthFn;
 use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
-use sar_msgs::wire::limits_array;
 use sar_record::SceneOptions;
 use sar_record::live::{LiveRecorder, RecordManager, RecordSwitch};
 use sar_shm::{DaemonShm, RecordCommands};
@@ -127,7 +126,7 @@ fn run(args: &Args) -> Result<(), String> {
     let shm = DaemonShm::create(
         &args.prefix,
         operator.clone(),
-        limits_array(&cfg.estimator.guard.limits()),
+        cfg.estimator.guard.force_limits().to_array(),
     )
     .map_err(|e| e.to_string())?;
     // Recording (`[record]`, `sarctl record start|stop`): its manager thread

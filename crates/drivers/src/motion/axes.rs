@@ -334,3 +334,8 @@ sar_snapshot::snap_struct!(AxisPlan {
     phases,
     end_m,
 });
+// The snapshot's configuration fingerprint (names and values, never `Debug`).
+sar_snapshot::config_struct!(Limits {
+    max_speed_mps,
+    max_accel_mps2
+});

@@ -309,12 +309,14 @@ pub fn manipulator2_truth() -> Truth {
 /// hysteresis 1 N, debounce 3 new samples, inputs at most 5 ms old.
 pub fn test_guard_limits() -> sar_estimator::guard::GuardLimits {
     sar_estimator::guard::GuardLimits {
-        warn_total_n: 10.0,
-        stop_total_n: 15.0,
-        warn_axial_n: 8.0,
-        stop_axial_n: 12.0,
-        warn_lateral_n: 6.0,
-        stop_lateral_n: 10.0,
+        force: sar_estimator::guard::ForceLimits {
+            warn_total_n: 10.0,
+            stop_total_n: 15.0,
+            warn_axial_n: 8.0,
+            stop_axial_n: 12.0,
+            warn_lateral_n: 6.0,
+            stop_lateral_n: 10.0,
+        },
         hysteresis_n: 1.0,
         debounce_samples: 3,
         max_sensor_age_ns: 5_000_000,

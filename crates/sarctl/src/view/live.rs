@@ -7,6 +7,7 @@ use foxglove::messages::{FrameTransforms, SceneUpdate};
 use foxglove::{
     Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
 };
+use sar_estimator::guard::ForceLimits;
 use sar_msgs::msgs::{Outgoing, Topic};
 use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 use sar_scene::geometry::SceneGeometry;
@@ -151,8 +152,7 @@ fn status_json(s: &StateMsg, lost: u64) -> serde_json::Value {
     let f = s.tip_force_n;
     let total = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
     let estimate = s.flags & flags::ESTIMATE != 0;
-    let l = s.limits_n;
-    serde_json::json!({
+    let mut status = serde_json::json!({
         "cycle": s.cycle,
         "guard": guard_state_name(s.guard_state),
         "guard_code": s.guard_state,
@@ -162,16 +162,21 @@ fn status_json(s: &StateMsg, lost: u64) -> serde_json::Value {
         "force_total_n": estimate.then_some(total),
         "axial_n": estimate.then_some(s.tip_axial_lateral_n[0]),
         "lateral_n": estimate.then_some(s.tip_axial_lateral_n[1]),
-        "warn_total_n": l[0], "stop_total_n": l[1],
-        "warn_axial_n": l[2], "stop_axial_n": l[3],
-        "warn_lateral_n": l[4], "stop_lateral_n": l[5],
         "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
         "wakeup_p99_us": s.wakeup_ns[1] as f64 / 1e3,
         "compute_p99_us": s.compute_ns[1] as f64 / 1e3,
         "overruns": s.overruns,
         "quick_stops": s.quick_stops,
         "view_lost": lost,
-    })
+    });
+    // The six force limits under their names (`ForceLimits::NAMES`, the
+    // order of `limits_n`).
+    if let serde_json::Value::Object(fields) = &mut status {
+        for (name, v) in ForceLimits::NAMES.iter().zip(s.limits_n) {
+            fields.insert((*name).to_owned(), serde_json::json!(v));
+        }
+    }
+    status
 }
 
 /// The view's state between two published states.
@@ -308,4 +313,32 @@ pub fn run(opts: &ViewOptions, stop: impl Fn() -> bool) -> Result<(), String> {
     }
     let _ = server.stop();
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::*;
+
+    #[test]
+    fn the_status_names_the_six_limits_as_its_schema_does() {
+        let state = StateMsg {
+            limits_n: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+            ..StateMsg::default()
+        };
+        let status = status_json(&state, 0);
+        let schema: serde_json::Value = serde_json::from_str(STATUS_SCHEMA).unwrap();
+        let properties = schema["properties"].as_object().unwrap();
+        let fields = status.as_object().unwrap();
+        // The status has exactly the schema's fields.
+        let mut a: Vec<&String> = fields.keys().collect();
+        let mut b: Vec<&String> = properties.keys().collect();
+        a.sort();
+        b.sort();
+        assert_eq!(a, b);
+        for (i, name) in ForceLimits::NAMES.iter().enumerate() {
+            assert_eq!(fields[*name], serde_json::json!(i as f64 + 1.0), "{name}");
+            assert_eq!(properties[*name]["type"], "number", "{name}");
+        }
+    }
 }
