@@ -95,7 +95,7 @@ pub fn daemon_recording_at_level(
     zstd_level: u32,
 ) -> Result<u64, String> {
     let cfg = config::builtin().map_err(|e| e.to_string())?;
-    let mut scenario = sar_drivers::scenario::load(scenario).map_err(|e| e.to_string())?;
+    let mut scenario = sar_config::scenario::load(scenario).map_err(|e| e.to_string())?;
     // As `sard --sim`: the simulated drives run the configured profile.
     scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
     scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
@@ -201,7 +201,7 @@ impl AxisDrives for TruthTap {
 /// Runs `scenario`'s motion script and records its inputs alone into `path`
 /// (see the module documentation); returns the sensor samples written.
 pub fn inputs_recording(scenario: &Path, path: &Path) -> Result<u64, String> {
-    let s = sar_drivers::scenario::load(scenario).map_err(|e| e.to_string())?;
+    let s = sar_config::scenario::load(scenario).map_err(|e| e.to_string())?;
     let clock = SimClock::new(HOST_START_NS);
     let sim = Simulator::new(s.spec.clone(), clock.clone()).map_err(|e| e.to_string())?;
     let mut sensor = sim.sensor();

@@ -29,9 +29,9 @@
     clippy::indexing_slicing
 )]
 
+use sar_config::scenario::{Scenario, parse};
 use sar_drivers::SimClock;
 use sar_drivers::runner::{EndReason, RunOptions, run};
-use sar_drivers::scenario::{Scenario, parse};
 use sar_drivers::sim::Simulator;
 use sar_msgs::msgs::{ActiveJointState, RecorderDrops, WrenchStamped};
 use sar_record::{FileOptions, Outgoing, RotatingWriter};

@@ -34,8 +34,18 @@
 //!
 //! Every error names the file, the dotted key, the line where the file has it,
 //! and the problem ([`ConfigError`]).
+//!
+//! The simulator's scenario files (`scenarios/`) are read here too
+//! ([`scenario`]: TOML -> `sar_drivers::scenario::Scenario`), with the same
+//! machinery and the same error type.
 
-use sar_drivers::scenario::locate::{Locator, join};
+mod locate;
+pub mod scenario;
+mod toml_file;
+
+pub use toml_file::ConfigError;
+
+use locate::join;
 use sar_estimator::SensorNoise;
 use sar_estimator::cycle::{
     EstimatorConfig, FrozenCheck, MountingLimits, PlausibilityConfig, PlausibilityLimits,
@@ -49,74 +59,12 @@ use sar_loop::runloop::LoopConfig;
 use serde::Deserialize;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use toml_file::Ctx;
 
 /// The configuration of the built-in demo (`sard --sim` without `--config`):
 /// the example robot of INTERFACES.md 2, every optional section written out
 /// with its default.
 pub const DEFAULT_TOML: &str = include_str!("default_config.toml");
-
-/// A configuration that cannot be used. The message names the file, the key
-/// (dotted, e.g. `guard.stop_total_n`), the line when the file writes the key,
-/// and what is wrong.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{origin}: cannot read the file: {reason}")]
-    Read {
-        /// The file.
-        origin: String,
-        /// The system's reason.
-        reason: String,
-    },
-    /// The file is not valid TOML (toml's message, with line and column).
-    #[error("{origin}: not valid TOML: {message}")]
-    Syntax {
-        /// The file.
-        origin: String,
-        /// toml's message.
-        message: String,
-    },
-    /// A key is missing, unknown, of the wrong type, or has a value that is
-    /// not allowed.
-    #[error("{origin}: {}{}: {problem}", key_or_top(key), line_suffix(*line))]
-    Invalid {
-        /// The file.
-        origin: String,
-        /// The dotted key ("" for the file as a whole).
-        key: String,
-        /// The 1-based line where the key (or its table) is written.
-        line: Option<usize>,
-        /// What is wrong.
-        problem: String,
-    },
-}
-
-impl ConfigError {
-    /// The dotted key, for [`ConfigError::Invalid`].
-    pub fn key(&self) -> Option<&str> {
-        match self {
-            Self::Invalid { key, .. } => Some(key),
-            _ => None,
-        }
-    }
-
-    /// The line, for [`ConfigError::Invalid`] when the file writes the key.
-    pub fn line(&self) -> Option<usize> {
-        match self {
-            Self::Invalid { line, .. } => *line,
-            _ => None,
-        }
-    }
-}
-
-fn key_or_top(key: &str) -> &str {
-    if key.is_empty() { "(top level)" } else { key }
-}
-
-fn line_suffix(line: Option<usize>) -> String {
-    line.map(|l| format!(" (line {l})")).unwrap_or_default()
-}
 
 // ---------------------------------------------------------------------------
 // The file as written.
@@ -587,11 +535,7 @@ pub struct ConfigSource {
 
 /// Reads and checks a configuration file; errors name `path`.
 pub fn load(path: &Path) -> Result<Config, ConfigError> {
-    let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Read {
-        origin: origin.clone(),
-        reason: e.to_string(),
-    })?;
+    let (text, origin) = toml_file::read(path)?;
     parse(&text, &origin)
 }
 
@@ -602,28 +546,7 @@ pub fn builtin() -> Result<Config, ConfigError> {
 
 /// Checks a configuration given as text; `origin` names it in errors.
 pub fn parse(text: &str, origin: &str) -> Result<Config, ConfigError> {
-    let root = toml::de::DeTable::parse(text).map_err(|e| {
-        let mut e = e;
-        e.set_input(Some(text));
-        ConfigError::Syntax {
-            origin: origin.to_owned(),
-            message: e.to_string().trim_end().to_owned(),
-        }
-    })?;
-    let ctx = Ctx {
-        origin,
-        locator: Locator::new(text, &root),
-    };
-    if let Some((key, line)) = ctx.locator.first_non_finite() {
-        return Err(ConfigError::Invalid {
-            origin: origin.to_owned(),
-            key,
-            line: Some(line),
-            problem: "not a finite number".to_owned(),
-        });
-    }
-    let file: FileToml = Deserialize::deserialize(toml::de::Deserializer::from(root))
-        .map_err(|e| ctx.serde_error(&e))?;
+    let (ctx, file): (Ctx<'_>, FileToml) = toml_file::parse(text, origin)?;
     let mut config = build(&ctx, file)?;
     // Recorded with every recording: it replays without hunting for this file.
     config.record.config_source = Some(std::sync::Arc::new(ConfigSource {
@@ -633,31 +556,8 @@ pub fn parse(text: &str, origin: &str) -> Result<Config, ConfigError> {
     Ok(config)
 }
 
-struct Ctx<'a> {
-    origin: &'a str,
-    locator: Locator<'a>,
-}
-
+/// The configuration's own checks of a value.
 impl Ctx<'_> {
-    fn err(&self, key: &str, problem: impl Into<String>) -> ConfigError {
-        ConfigError::Invalid {
-            origin: self.origin.to_owned(),
-            key: key.to_owned(),
-            line: self.locator.line_near(key),
-            problem: problem.into(),
-        }
-    }
-
-    fn serde_error(&self, e: &toml::de::Error) -> ConfigError {
-        let (key, line, problem) = self.locator.serde_problem(e);
-        ConfigError::Invalid {
-            origin: self.origin.to_owned(),
-            key,
-            line,
-            problem,
-        }
-    }
-
     fn range_f(&self, key: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<f64, ConfigError> {
         if (lo..=hi).contains(&v) {
             Ok(v)

@@ -3,8 +3,9 @@
 //! clock for a real-time run, so that the simulated world advances with real
 //! time; a `SimClock` in tests).
 
+use sar_config::ConfigError;
+use sar_config::scenario::{self, Scenario};
 use sar_drivers::Clock;
-use sar_drivers::scenario::{self, Scenario, ScenarioError};
 use sar_drivers::sim::{SimDrives, SimError, SimSensor, Simulator};
 use sar_estimator::cycle::Bias;
 
@@ -12,7 +13,7 @@ use sar_estimator::cycle::Bias;
 pub const DEMO_SCENARIO_TOML: &str = include_str!("demo_scenario.toml");
 
 /// The built-in demo scenario, checked.
-pub fn demo_scenario() -> Result<Scenario, ScenarioError> {
+pub fn demo_scenario() -> Result<Scenario, ConfigError> {
     scenario::parse(DEMO_SCENARIO_TOML, "(built-in demo scenario)")
 }
 

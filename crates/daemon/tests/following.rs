@@ -15,7 +15,7 @@ fn an_encoder_jump_is_a_fault_and_stops_the_drives() {
     let cfg = config::builtin().unwrap();
     let path =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/fault_encoder_jump.toml");
-    let scenario = sar_drivers::scenario::load(&path).unwrap();
+    let scenario = sar_config::scenario::load(&path).unwrap();
     let SimRig { mut c, clock, .. } = RigBuilder::new(&scenario).config(&cfg).build();
     let mut fault = None;
     // The jump is at 2.0 s of the simulator's time.

@@ -1,7 +1,6 @@
 //! Small conversions that several modules need: nanoseconds to seconds and
-//! the active joints to and from arrays and base-frame displacements.
+//! the active joints to and from arrays.
 
-use crate::Vec3;
 use sar_kinematics::ActiveJoints;
 
 /// Nanoseconds as seconds (exact below 2^53 ns, about 104 days).
@@ -18,14 +17,4 @@ pub(crate) fn joints_from_array(q_m: [f64; 3]) -> ActiveJoints {
 /// The active joints as `[q1, q2, q3]`, m.
 pub(crate) fn joints_to_array(q: &ActiveJoints) -> [f64; 3] {
     [q.q1_m, q.q2_m, q.q3_m]
-}
-
-/// The active joints whose displacement (q3, q2, q1), in base X, Y, Z order,
-/// is `displacement_m` (the inverse of [`ActiveJoints::displacement_m`]).
-pub(crate) fn joints_from_displacement(displacement_m: &Vec3) -> ActiveJoints {
-    ActiveJoints {
-        q1_m: displacement_m.z,
-        q2_m: displacement_m.y,
-        q3_m: displacement_m.x,
-    }
 }

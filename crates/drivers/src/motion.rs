@@ -1,5 +1,5 @@
 //! How the axes move and how the rod slides in the support: shared by the
-//! simulator ([`crate::sim`]), the scenario checks ([`crate::scenario`]) and the
+//! simulator ([`crate::sim`]), the scenario checks (`sar_config::scenario`) and the
 //! runner ([`crate::runner`]), so that they agree by construction. It depends
 //! on no other module of the crate but the small helpers.
 //!

@@ -13,6 +13,7 @@
 mod conformance;
 
 use conformance::{Capability, DrivesHarness};
+use sar_drivers::Vec3;
 use sar_drivers::canopen::frame::{
     self, COB_RPDO1, COB_SDO_RX, COB_SYNC, Cia402State, RawFrame, Sdo, control, decode_rpdo,
 };
@@ -20,8 +21,9 @@ use sar_drivers::canopen::{
     CanOpenConfig, CanOpenDrives, CanOpenError, FOLLOWING_WINDOW_M, MemBus, MemBusError, MemCan,
     SimCia402Drive, SimDriveFault, SimDriveSpec,
 };
+use sar_drivers::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec, Simulator};
 use sar_drivers::{AxisDrives, DriveState, Error, ErrorKind, SimClock};
-use sar_kinematics::ActiveJoints;
+use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec};
 
 const CLOCK_START_NS: u64 = 5_000_000_000_000;
 const MS: u64 = 1_000_000;
@@ -662,20 +664,98 @@ fn a_fault_reset_never_completes_on_a_status_word_from_before_the_fault() {
     assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
 }
 
+/// The simulated robot of the scenario files `fault_drive_emcy.toml` and
+/// `fault_drive_heartbeat_loss.toml` (their values, typed here: this crate
+/// does not read scenario files), at rest at its start, with `fault`.
+fn fault_file_spec(seed: u64, fault: Fault) -> SimSpec {
+    SimSpec {
+        seed,
+        calibration: Calibration::new(&CalibrationSpec {
+            p_home_m: Vec3::zeros(),
+            ujoint_offset_m: Vec3::new(0.0, -0.08, 0.0),
+            sensor_offset_m: Vec3::new(0.0, -0.03, 0.0),
+            sensor_rotation: Mat3::identity(),
+            support_m: Vec3::new(0.45, 0.20, 0.0),
+            gravity_mps2: Vec3::new(0.0, -9.80665, 0.0),
+        })
+        .unwrap(),
+        profile: Profile::new(&ProfileSpec {
+            length_m: 0.35,
+            offset_m: 0.0,
+            mass_kg: 2.593,
+            com_m: 0.103,
+        })
+        .unwrap(),
+        friction_n: 0.3,
+        axes: AxesSpec {
+            max_speed_mps: 0.05,
+            max_accel_mps2: 0.5,
+            lead_m_per_turn: 0.005,
+            counts_per_turn: 4096,
+            position_period_ns: MS,
+            travel_m: [(-0.3, 0.3), (0.0, 0.6), (0.0, 0.6)],
+            start: ActiveJoints {
+                q1_m: 0.0,
+                q2_m: 0.28,
+                q3_m: 0.25,
+            },
+        },
+        sensor: SensorSpec {
+            period_ns: 2 * MS,
+            latency_ns: MS,
+            noise_n: Vec3::new(0.2, 0.2, 0.8),
+            noise_nm: Vec3::new(0.01, 0.01, 0.002),
+            bias_n: Vec3::new(1.5, -2.0, 0.7),
+            bias_nm: Vec3::new(0.05, -0.03, 0.02),
+            drift_n_per_s: Vec3::zeros(),
+            has_tare: true,
+            range_n: Vec3::new(200.0, 200.0, 200.0),
+            range_nm: Vec3::new(10.0, 10.0, 13.0),
+        },
+        contact: vec![ContactKey {
+            t_ns: 0,
+            force_n: Vec3::new(1.0, -0.5, 0.3),
+        }],
+        tissue: Vec::new(),
+        tip_mass_kg: 0.0,
+        faults: vec![fault],
+        physics_step_ns: 100_000,
+    }
+}
+
 /// A scenario's drive faults give on the CANopen drives the fault the plain
 /// simulated axes give (the host sees a lost heartbeat a timeout later).
 #[test]
 fn scenario_drive_faults_latch_the_same_fault_on_the_canopen_drives() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
-    for (file, latency_ns) in [
-        ("fault_drive_emcy.toml", 2 * MS),
-        ("fault_drive_heartbeat_loss.toml", 62 * MS),
+    for (name, spec, latency_ns) in [
+        (
+            "drive_emcy",
+            fault_file_spec(
+                512,
+                Fault::DriveEmcy {
+                    at_ns: 2 * S,
+                    axis: 2,
+                    code: 0x4310,
+                },
+            ),
+            2 * MS,
+        ),
+        (
+            "drive_heartbeat_loss",
+            fault_file_spec(
+                511,
+                Fault::DriveHeartbeatLoss {
+                    at_ns: 2 * S,
+                    axis: 1,
+                },
+            ),
+            62 * MS,
+        ),
     ] {
-        let scenario = sar_drivers::scenario::load(&dir.join(file)).unwrap();
-        let fault = scenario.spec.faults[0];
+        let fault = spec.faults[0];
         // The plain simulated axes.
         let clock = SimClock::new(0);
-        let sim = sar_drivers::sim::Simulator::new(scenario.spec.clone(), clock.clone()).unwrap();
+        let sim = Simulator::new(spec, clock.clone()).unwrap();
         clock.advance_ns(2 * S);
         let plain = sim.truth().unwrap().drive_state;
         assert!(
@@ -690,14 +770,14 @@ fn scenario_drive_faults_latch_the_same_fault_on_the_canopen_drives() {
         assert_eq!(drive_fault.at_ns(), start_ns + 2 * S);
         rig.drive(axis, |d, _, _| d.schedule(drive_fault));
         rig.run(2 * S - 20 * MS);
-        assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled, "{file}");
+        assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled, "{name}");
         rig.run(20 * MS + latency_ns);
-        assert_eq!(rig.drives.state().unwrap(), plain, "{file}");
+        assert_eq!(rig.drives.state().unwrap(), plain, "{name}");
     }
     // The other faults are not a drive's.
     assert_eq!(
         SimDriveFault::from_scenario(
-            &sar_drivers::sim::Fault::DriveFault {
+            &Fault::DriveFault {
                 at_ns: 0,
                 code: 0x2310
             },

@@ -257,9 +257,9 @@ fn chosen_devices(args: &Args, cfg: &config::Config) -> Result<RealDevices, Stri
 /// The scenario of the simulated parts, its drives running the configured
 /// profile as configured drives would (the loop's plan is then the
 /// trajectory they follow).
-fn scenario(args: &Args, cfg: &config::Config) -> Result<sar_drivers::scenario::Scenario, String> {
+fn scenario(args: &Args, cfg: &config::Config) -> Result<config::scenario::Scenario, String> {
     let mut scenario = match &args.scenario {
-        Some(path) => sar_drivers::scenario::load(path).map_err(|e| e.to_string())?,
+        Some(path) => config::scenario::load(path).map_err(|e| e.to_string())?,
         None => sim::demo_scenario().map_err(|e| e.to_string())?,
     };
     scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;

@@ -121,7 +121,7 @@ pub enum SensorFault {
 /// The measuring range of an OnRobot HEX-E QC in counts at OnRobot's scale
 /// (10 000 counts/N, 100 000 counts/N m): 200 N on each force channel, 10 N m
 /// about x and y, 13 N m about z (the datasheet's nominal capacity, as
-/// `scenario::DEFAULT_RANGE_N` and `DEFAULT_RANGE_NM`).
+/// `sar_config::scenario::DEFAULT_RANGE_N` and `DEFAULT_RANGE_NM`).
 pub const HEX_E_RANGE_COUNTS: [i32; 6] = [
     2_000_000, 2_000_000, 2_000_000, 1_000_000, 1_000_000, 1_300_000,
 ];

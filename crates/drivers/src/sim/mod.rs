@@ -53,7 +53,7 @@ pub use error::SimError;
 pub use spec::{
     AxesSpec, Breathing, ContactKey, Fault, SensorSpec, SimSpec, Tissue, TissueModel, TissueShift,
 };
-pub use world::{DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS};
+pub use world::{DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS, validate};
 
 use crate::{
     AxisDrives, Clock, DriveState, ForceSensor, JointPositions, SensorStatus, Vec3, WrenchSample,
@@ -62,7 +62,6 @@ use sar_kinematics::{ActiveJoints, Pose};
 use std::cell::RefCell;
 use std::rc::Rc;
 use world::World;
-pub(crate) use world::validate;
 
 /// Status of a sample taken while the simulated pose is outside the model (no
 /// kinematic solution or singular statics): the sample is invalid, its values

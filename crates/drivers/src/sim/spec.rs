@@ -1,7 +1,7 @@
 //! What the simulator simulates: a validated, plain description of the true
 //! robot, manipulator, support, axes, sensor, contact script, tissue and
 //! faults.
-//! Scenario files ([`crate::scenario`]) are parsed and checked into this.
+//! Scenario files are parsed and checked into this by `sar_config::scenario`.
 //!
 //! Times are nanoseconds from the simulator's start (the clock's time when the
 //! simulator was made).
@@ -9,7 +9,8 @@
 use crate::{Channels, Rail, Vec3};
 use sar_kinematics::{ActiveJoints, Calibration, Profile};
 
-/// Everything the simulator needs; built by [`crate::scenario`] (or by hand in tests).
+/// Everything the simulator needs; built from a scenario file by
+/// `sar_config::scenario` (or by hand in tests).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimSpec {
     /// Seed of every random number (sensor noise): same seed and spec, same samples.

@@ -336,10 +336,10 @@ fn check_tissue(tissue: &Tissue) -> Result<(), SimError> {
 }
 
 /// Checks everything [`World::new`] checks: what the types of [`SimSpec`] do
-/// not, the start pose and its statics. Scenario files call it too, so that a
-/// file the loader accepts is never refused by the simulator later (where the
-/// error could not name the file).
-pub(crate) fn validate(spec: &SimSpec) -> Result<(), SimError> {
+/// not, the start pose and its statics. The scenario loader
+/// (`sar_config::scenario`) calls it too, so that a file it accepts is never
+/// refused by the simulator later (where the error could not name the file).
+pub fn validate(spec: &SimSpec) -> Result<(), SimError> {
     check_spec(spec)?;
     let pose =
         forward(&spec.calibration, &spec.profile, &spec.axes.start).map_err(SimError::StartPose)?;

@@ -1,16 +1,16 @@
 //! `[axes]` and `[sensor]`: every key optional, defaults the article's axes
 //! and the HEX-6 of MODEL.md 7; each value checked under its own key.
 
-use super::ctx::Ctx;
 use super::raw::{AxesToml, SensorToml};
 use super::{
-    DEFAULT_COUNTS_PER_TURN, DEFAULT_LEAD_M_PER_TURN, DEFAULT_MAX_ACCEL_MPS2,
+    ConfigError, DEFAULT_COUNTS_PER_TURN, DEFAULT_LEAD_M_PER_TURN, DEFAULT_MAX_ACCEL_MPS2,
     DEFAULT_MAX_SPEED_MPS, DEFAULT_NOISE_N, DEFAULT_NOISE_NM, DEFAULT_POSITION_RATE_HZ,
     DEFAULT_RANGE_N, DEFAULT_RANGE_NM, DEFAULT_SENSOR_LATENCY_S, DEFAULT_SENSOR_RATE_HZ,
-    DEFAULT_TRAVEL_M, ScenarioError,
+    DEFAULT_TRAVEL_M,
 };
-use crate::Vec3;
-use crate::sim::SensorSpec;
+use crate::toml_file::Ctx;
+use sar_drivers::Vec3;
+use sar_drivers::sim::SensorSpec;
 
 /// `[axes]`, checked (the start is checked later, against the kinematics).
 pub(super) struct Axes {
@@ -24,7 +24,7 @@ pub(super) struct Axes {
 }
 
 /// `[axes]` with its defaults.
-pub(super) fn axes(ctx: &Ctx<'_>, axes: &AxesToml) -> Result<Axes, ScenarioError> {
+pub(super) fn axes(ctx: &Ctx<'_>, axes: &AxesToml) -> Result<Axes, ConfigError> {
     let max_speed_mps = ctx.positive(
         "axes.max_speed_mps",
         axes.max_speed_mps.unwrap_or(DEFAULT_MAX_SPEED_MPS),
@@ -74,7 +74,7 @@ pub(super) fn axes(ctx: &Ctx<'_>, axes: &AxesToml) -> Result<Axes, ScenarioError
 }
 
 /// `[sensor]` with its defaults.
-pub(super) fn sensor(ctx: &Ctx<'_>, sensor: &SensorToml) -> Result<SensorSpec, ScenarioError> {
+pub(super) fn sensor(ctx: &Ctx<'_>, sensor: &SensorToml) -> Result<SensorSpec, ConfigError> {
     let period_ns = ctx.period_ns(
         "sensor.rate_hz",
         sensor.rate_hz.unwrap_or(DEFAULT_SENSOR_RATE_HZ),
@@ -115,7 +115,7 @@ pub(super) fn sensor(ctx: &Ctx<'_>, sensor: &SensorToml) -> Result<SensorSpec, S
     })
 }
 
-fn positive3(ctx: &Ctx<'_>, key: &str, v: [f64; 3], unit: &str) -> Result<Vec3, ScenarioError> {
+fn positive3(ctx: &Ctx<'_>, key: &str, v: [f64; 3], unit: &str) -> Result<Vec3, ConfigError> {
     for (i, x) in v.iter().enumerate() {
         ctx.positive(&format!("{key}[{i}]"), *x, unit)?;
     }

@@ -18,7 +18,8 @@
 //! unfiltered estimate and the centred average have no lag; each filter's lag
 //! is its group delay (within a bound derived from the cutoff); the filter's
 //! propagated deviation is the one the residual noise shows where the force is
-//! steady. Run with `--nocapture` to see the table.
+//! steady. Run with `--nocapture` to see the table. (Here, beside the
+//! scenario loader, since `sar-drivers` reads no scenario file.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -26,8 +27,8 @@
     clippy::panic
 )]
 
+use sar_config::scenario::{Scenario, load};
 use sar_drivers::runner::{EndReason, RunOptions, run};
-use sar_drivers::scenario::{Scenario, load};
 use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3};
 use sar_estimator::SensorNoise;

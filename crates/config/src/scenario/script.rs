@@ -3,17 +3,16 @@
 //! kinematics, and the path between them checked too (each axis on its own
 //! trapezoid, as the simulator's move), with the planned slide of the rod.
 
-use super::ctx::Ctx;
 use super::raw::{MotionToml, RandomMotionToml};
 use super::{
-    MotionStep, PATH_CHECK_INTERVAL_S, PATH_CHECK_MAX_POINTS, PATH_CHECK_POINTS, ScenarioError,
+    ConfigError, MotionStep, PATH_CHECK_INTERVAL_S, PATH_CHECK_MAX_POINTS, PATH_CHECK_POINTS,
     VERTICAL_CLEARANCE_M,
 };
-use crate::Vec3;
-use crate::convert::{joints_from_array, joints_from_displacement, joints_to_array};
-use crate::motion::{SlideTracker, axis_progress_m, move_time_s};
+use crate::toml_file::Ctx;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use sar_drivers::Vec3;
+use sar_drivers::motion::{SlideTracker, axis_progress_m, move_time_s};
 use sar_kinematics::{
     ActiveJoints, Calibration, MIN_DISTANCE_M, PoseError, Profile, forward, inverse,
 };
@@ -38,7 +37,7 @@ pub(super) fn steps(
     ctx: &Ctx<'_>,
     machine: &Machine,
     file: &MotionFile<'_>,
-) -> Result<(ActiveJoints, Vec<MotionStep>), ScenarioError> {
+) -> Result<(ActiveJoints, Vec<MotionStep>), ConfigError> {
     let mut targets: Vec<(String, ActiveJoints, u64)> = Vec::new();
     for (i, step) in file.motion.iter().enumerate() {
         let key = format!("motion[{i}]");
@@ -100,7 +99,7 @@ impl Machine {
         ctx: &Ctx<'_>,
         key: &str,
         q: &ActiveJoints,
-    ) -> Result<(), ScenarioError> {
+    ) -> Result<(), ConfigError> {
         let values = joints_to_array(q);
         for ((name, value), (min, max)) in ["q1", "q2", "q3"].iter().zip(values).zip(self.travel_m)
         {
@@ -132,7 +131,7 @@ impl Machine {
         to: &ActiveJoints,
         limits: (f64, f64),
         tracker: &mut SlideTracker,
-    ) -> Result<(), ScenarioError> {
+    ) -> Result<(), ConfigError> {
         let (max_speed_mps, max_accel_mps2) = limits;
         let start = from.displacement_m();
         let delta = to.displacement_m() - start;
@@ -212,7 +211,7 @@ fn resolve_step(
     machine: &Machine,
     key: &str,
     step: &MotionToml,
-) -> Result<(String, ActiveJoints), ScenarioError> {
+) -> Result<(String, ActiveJoints), ConfigError> {
     let given: Vec<&str> = [
         ("joints", step.joints.is_some()),
         ("ujoint", step.ujoint.is_some()),
@@ -298,7 +297,7 @@ fn random_steps(
     machine: &Machine,
     random: &RandomMotionToml,
     seed: u64,
-) -> Result<Vec<(String, ActiveJoints, u64)>, ScenarioError> {
+) -> Result<Vec<(String, ActiveJoints, u64)>, ConfigError> {
     if random.count == 0 || random.count > 10_000 {
         return Err(ctx.err(
             "random_motion.count",
@@ -343,4 +342,25 @@ fn random_steps(
         steps.push((key, q, hold_ns));
     }
     Ok(steps)
+}
+
+/// The active joints from `[q1, q2, q3]`, m (the order of arrays indexed by axis).
+fn joints_from_array(q_m: [f64; 3]) -> ActiveJoints {
+    let [q1_m, q2_m, q3_m] = q_m;
+    ActiveJoints { q1_m, q2_m, q3_m }
+}
+
+/// The active joints as `[q1, q2, q3]`, m.
+fn joints_to_array(q: &ActiveJoints) -> [f64; 3] {
+    [q.q1_m, q.q2_m, q.q3_m]
+}
+
+/// The active joints whose displacement (q3, q2, q1), in base X, Y, Z order,
+/// is `displacement_m` (the inverse of [`ActiveJoints::displacement_m`]).
+fn joints_from_displacement(displacement_m: &Vec3) -> ActiveJoints {
+    ActiveJoints {
+        q1_m: displacement_m.z,
+        q2_m: displacement_m.y,
+        q3_m: displacement_m.x,
+    }
 }

@@ -2,7 +2,8 @@
 //! loads and implements the protocol it claims (checked with the kinematics,
 //! independently of how the loader built it); every kind of bad file is
 //! refused with a message naming the file and the key; the runner does what
-//! its doc says on simple fake drives and a fake sensor.
+//! its doc says on simple fake drives and a fake sensor. (Here, beside the
+//! loader, since `sar-drivers`, the runner's crate, reads no TOML.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -12,11 +13,12 @@
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
+use sar_config::ConfigError;
+use sar_config::scenario::{Scenario, load, parse};
 use sar_drivers::motion::{
     SLIDE_THRESHOLD_M, SlideTracker, axis_move_time_s, axis_progress_m, move_time_s,
 };
 use sar_drivers::runner::{EndReason, RunError, RunEvent, RunOptions, run};
-use sar_drivers::scenario::{Scenario, ScenarioError, load, parse};
 use sar_drivers::sim::{Breathing, Fault, Simulator, Tissue, TissueModel, TissueShift};
 use sar_drivers::{
     AxisDrives, DriveState, ErrorKind, ForceSensor, JointPositions, Rail, SensorStatus, SimClock,
@@ -589,7 +591,7 @@ fn replaced(from: &str, to: &str) -> String {
     MINIMAL.replacen(from, to, 1)
 }
 
-fn refused(text: &str) -> ScenarioError {
+fn refused(text: &str) -> ConfigError {
     match parse(text, ORIGIN) {
         Ok(_) => panic!("accepted:\n{text}"),
         Err(e) => e,
@@ -1187,7 +1189,7 @@ fn errors_give_the_line_of_the_key() {
 fn syntax_errors_keep_tomls_line_and_column() {
     let text = replaced("support = [0.45, 0.20, 0.0]", "support = [0.45, 0.20 0.0]");
     let e = refused(&text);
-    assert!(matches!(e, ScenarioError::Syntax { .. }), "{e:?}");
+    assert!(matches!(e, ConfigError::Syntax { .. }), "{e:?}");
     let line = text
         .lines()
         .position(|l| l.starts_with("support ="))
@@ -1207,7 +1209,7 @@ fn load_names_the_path_for_a_missing_and_for_a_bad_file() {
     std::fs::create_dir_all(&dir).unwrap();
     let missing = dir.join("does_not_exist.toml");
     let e = load(&missing).unwrap_err();
-    assert!(matches!(e, ScenarioError::Read { .. }));
+    assert!(matches!(e, ConfigError::Read { .. }));
     assert!(
         e.to_string().starts_with(&missing.display().to_string()),
         "{e}"

@@ -1,14 +1,16 @@
 //! `[robot]` and `[manipulator]`: the true geometry and manipulator, checked
 //! by the kinematics' own constructors (whose errors are mapped to the key).
 
-use super::ScenarioError;
-use super::ctx::Ctx;
 use super::raw::{ManipulatorToml, RobotToml};
-use crate::Vec3;
-use sar_kinematics::{Calibration, CalibrationSpec, ConfigError, Mat3, Profile, ProfileSpec};
+use crate::ConfigError;
+use crate::toml_file::Ctx;
+use sar_drivers::Vec3;
+use sar_kinematics::{
+    Calibration, CalibrationSpec, ConfigError as KinematicsError, Mat3, Profile, ProfileSpec,
+};
 
 /// `[robot]` as the true calibration.
-pub(super) fn calibration(ctx: &Ctx<'_>, r: &RobotToml) -> Result<Calibration, ScenarioError> {
+pub(super) fn calibration(ctx: &Ctx<'_>, r: &RobotToml) -> Result<Calibration, ConfigError> {
     let [r0, r1, r2] = r.sensor_rotation;
     let [[m00, m01, m02], [m10, m11, m12], [m20, m21, m22]] = [r0, r1, r2];
     let rotation = Mat3::new(m00, m01, m02, m10, m11, m12, m20, m21, m22);
@@ -24,7 +26,7 @@ pub(super) fn calibration(ctx: &Ctx<'_>, r: &RobotToml) -> Result<Calibration, S
 }
 
 /// `[manipulator]` as the true profile (its optional name must not be blank).
-pub(super) fn profile(ctx: &Ctx<'_>, m: &ManipulatorToml) -> Result<Profile, ScenarioError> {
+pub(super) fn profile(ctx: &Ctx<'_>, m: &ManipulatorToml) -> Result<Profile, ConfigError> {
     let profile = Profile::new(&ProfileSpec {
         length_m: m.length_m,
         offset_m: m.offset_m,
@@ -38,23 +40,22 @@ pub(super) fn profile(ctx: &Ctx<'_>, m: &ManipulatorToml) -> Result<Profile, Sce
     Ok(profile)
 }
 
-fn calibration_error_key(e: &ConfigError) -> String {
+fn calibration_error_key(e: &KinematicsError) -> String {
     match e {
-        ConfigError::NonFinite { field, .. } => format!("robot.{field}"),
-        ConfigError::RotationNotOrthonormal { .. } | ConfigError::RotationNotProper { .. } => {
-            "robot.sensor_rotation".to_owned()
-        }
-        ConfigError::GravityOutOfRange { .. } => "robot.gravity".to_owned(),
+        KinematicsError::NonFinite { field, .. } => format!("robot.{field}"),
+        KinematicsError::RotationNotOrthonormal { .. }
+        | KinematicsError::RotationNotProper { .. } => "robot.sensor_rotation".to_owned(),
+        KinematicsError::GravityOutOfRange { .. } => "robot.gravity".to_owned(),
         _ => "robot".to_owned(),
     }
 }
 
-fn profile_error_key(e: &ConfigError) -> String {
+fn profile_error_key(e: &KinematicsError) -> String {
     match e {
-        ConfigError::NonFinite { field, .. } => format!("manipulator.{field}"),
-        ConfigError::NonPositiveLength { .. } => "manipulator.length_m".to_owned(),
-        ConfigError::OffsetTooLarge { .. } => "manipulator.offset_m".to_owned(),
-        ConfigError::NegativeMass { .. } => "manipulator.mass_kg".to_owned(),
+        KinematicsError::NonFinite { field, .. } => format!("manipulator.{field}"),
+        KinematicsError::NonPositiveLength { .. } => "manipulator.length_m".to_owned(),
+        KinematicsError::OffsetTooLarge { .. } => "manipulator.offset_m".to_owned(),
+        KinematicsError::NegativeMass { .. } => "manipulator.mass_kg".to_owned(),
         _ => "manipulator".to_owned(),
     }
 }

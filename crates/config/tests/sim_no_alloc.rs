@@ -3,7 +3,8 @@
 //! drives calls are counted under a counting global allocator (the daemon's
 //! no-alloc tests run the demo scenario; this one runs every failure mode
 //! and a breathing, shifting, damped tissue). One test in this binary, so
-//! that no other test's allocations count.
+//! that no other test's allocations count. (Here, beside the scenario
+//! loader, since `sar-drivers` reads no scenario file.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -48,7 +49,7 @@ const MS: u64 = 1_000_000;
 #[test]
 fn the_simulator_with_every_fault_and_a_tissue_allocates_nothing_per_cycle() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/tissue_breathing.toml");
-    let scenario = sar_drivers::scenario::load(&path).unwrap();
+    let scenario = sar_config::scenario::load(&path).unwrap();
     let mut spec = scenario.spec;
     // A second, exponential tissue across the rod.
     spec.tissue.push(Tissue {

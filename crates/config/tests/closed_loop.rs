@@ -19,7 +19,8 @@
 //! - The sensor torque follows the model within its noise on every scenario
 //!   whose sensor does not fail on purpose.
 //!
-//! Run with `--nocapture` to see the figures.
+//! Run with `--nocapture` to see the figures. (Here, beside the scenario
+//! loader, since `sar-drivers` reads no scenario file.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -27,9 +28,9 @@
     clippy::panic
 )]
 
+use sar_config::scenario::{Scenario, load, parse};
 use sar_drivers::motion::SLIDE_THRESHOLD_M;
 use sar_drivers::runner::{EndReason, Run, RunEvent, RunOptions, run};
-use sar_drivers::scenario::{Scenario, load, parse};
 use sar_drivers::sim::{Fault, SimDrives, SimError, Simulator, Truth};
 use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3, WrenchSample};
 use sar_estimator::SensorNoise;

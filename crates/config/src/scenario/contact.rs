@@ -1,11 +1,11 @@
 //! What touches the tip: `[[contact]]`, the scripted tip force (keyframes
 //! sorted by time), and `[[tissue]]`, tissues that push back.
 
-use super::ScenarioError;
-use super::ctx::Ctx;
 use super::raw::{ContactToml, TissueModelName, TissueToml};
-use crate::Vec3;
-use crate::sim::{Breathing, ContactKey, Tissue, TissueModel, TissueShift};
+use crate::ConfigError;
+use crate::toml_file::Ctx;
+use sar_drivers::Vec3;
+use sar_drivers::sim::{Breathing, ContactKey, Tissue, TissueModel, TissueShift};
 
 /// Largest tissue stiffness accepted, N/m (soft tissue: about 100 to 5000).
 pub const MAX_STIFFNESS_N_PER_M: f64 = 1e6;
@@ -21,7 +21,7 @@ pub const MAX_BREATHING_HZ: f64 = 10.0;
 pub const MAX_SHIFT_M: f64 = 1.0;
 
 /// The `[[contact]]` keyframes, in file order (which must be time order).
-pub(super) fn keys(ctx: &Ctx<'_>, file: &[ContactToml]) -> Result<Vec<ContactKey>, ScenarioError> {
+pub(super) fn keys(ctx: &Ctx<'_>, file: &[ContactToml]) -> Result<Vec<ContactKey>, ConfigError> {
     let mut contact = Vec::with_capacity(file.len());
     let mut last_t: Option<(f64, usize)> = None;
     for (i, key) in file.iter().enumerate() {
@@ -49,7 +49,7 @@ pub(super) fn keys(ctx: &Ctx<'_>, file: &[ContactToml]) -> Result<Vec<ContactKey
 }
 
 /// A unit vector from a non-zero one (`key` names it in the error).
-fn unit(ctx: &Ctx<'_>, key: &str, v: [f64; 3]) -> Result<Vec3, ScenarioError> {
+fn unit(ctx: &Ctx<'_>, key: &str, v: [f64; 3]) -> Result<Vec3, ConfigError> {
     let v = Vec3::from(v);
     let norm = v.norm();
     if norm < 1e-9 {
@@ -65,7 +65,7 @@ fn in_range(
     value: f64,
     max: f64,
     unit: &str,
-) -> Result<f64, ScenarioError> {
+) -> Result<f64, ConfigError> {
     if value > 0.0 && value <= max {
         Ok(value)
     } else {
@@ -77,14 +77,14 @@ fn in_range(
 }
 
 /// Every `[[tissue]]`, in file order.
-pub(super) fn tissues(ctx: &Ctx<'_>, file: &[TissueToml]) -> Result<Vec<Tissue>, ScenarioError> {
+pub(super) fn tissues(ctx: &Ctx<'_>, file: &[TissueToml]) -> Result<Vec<Tissue>, ConfigError> {
     file.iter()
         .enumerate()
         .map(|(i, t)| tissue(ctx, &format!("tissue[{i}]"), t))
         .collect()
 }
 
-fn tissue(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<Tissue, ScenarioError> {
+fn tissue(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<Tissue, ConfigError> {
     let k = |name: &str| format!("{key}.{name}");
     let direction = unit(ctx, &k("direction"), t.direction)?;
     let stiffness_n_per_m = in_range(

@@ -1,11 +1,11 @@
 //! `[[fault]]`: faults on demand; each kind takes exactly its own keys (the
 //! table in `scenarios/README.md`), each value checked under its own key.
 
-use super::ScenarioError;
-use super::ctx::Ctx;
 use super::raw::{AxisName, ChannelName, FaultKind, FaultToml, RailName};
-use crate::sim::Fault;
-use crate::{Channels, Rail, Vec3};
+use crate::ConfigError;
+use crate::toml_file::Ctx;
+use sar_drivers::sim::Fault;
+use sar_drivers::{Channels, Rail, Vec3};
 
 /// Largest offset an encoder fault may put on a position, m.
 pub const MAX_ENCODER_OFFSET_M: f64 = 1.0;
@@ -17,7 +17,7 @@ pub(super) fn faults(
     ctx: &Ctx<'_>,
     file: &[FaultToml],
     count_m: f64,
-) -> Result<Vec<Fault>, ScenarioError> {
+) -> Result<Vec<Fault>, ConfigError> {
     let mut faults = Vec::with_capacity(file.len());
     for (i, f) in file.iter().enumerate() {
         faults.push(resolve_fault(ctx, &format!("fault[{i}]"), f, count_m)?);
@@ -59,30 +59,30 @@ impl Table<'_, '_> {
         format!("{}.{name}", self.key)
     }
 
-    fn missing(&self, name: &str) -> ScenarioError {
+    fn missing(&self, name: &str) -> ConfigError {
         self.ctx.err(&self.key(name), "missing key")
     }
 
-    fn required<T: Copy>(&self, name: &str, value: Option<T>) -> Result<T, ScenarioError> {
+    fn required<T: Copy>(&self, name: &str, value: Option<T>) -> Result<T, ConfigError> {
         value.ok_or_else(|| self.missing(name))
     }
 
     /// A time key (`at_s` or `from_s`): (s, ns).
-    fn time(&self, name: &str, value: Option<f64>) -> Result<(f64, u64), ScenarioError> {
+    fn time(&self, name: &str, value: Option<f64>) -> Result<(f64, u64), ConfigError> {
         let s = self.required(name, value)?;
         Ok((s, self.ctx.time_ns(&self.key(name), s)?))
     }
 
-    fn at(&self) -> Result<(f64, u64), ScenarioError> {
+    fn at(&self) -> Result<(f64, u64), ConfigError> {
         self.time("at_s", self.f.at_s)
     }
 
-    fn from(&self) -> Result<(f64, u64), ScenarioError> {
+    fn from(&self) -> Result<(f64, u64), ConfigError> {
         self.time("from_s", self.f.from_s)
     }
 
     /// The optional `until_s`, after the start `start_name` = `start_s`.
-    fn until(&self, start_name: &str, start_s: f64) -> Result<Option<u64>, ScenarioError> {
+    fn until(&self, start_name: &str, start_s: f64) -> Result<Option<u64>, ConfigError> {
         let Some(until_s) = self.f.until_s else {
             return Ok(None);
         };
@@ -97,7 +97,7 @@ impl Table<'_, '_> {
         Ok(Some(until_ns))
     }
 
-    fn axis(&self) -> Result<usize, ScenarioError> {
+    fn axis(&self) -> Result<usize, ConfigError> {
         Ok(match self.required("axis", self.f.axis)? {
             AxisName::Q1 => 0,
             AxisName::Q2 => 1,
@@ -106,7 +106,7 @@ impl Table<'_, '_> {
     }
 
     /// `axes`: one or more channels, each once.
-    fn channels(&self) -> Result<Channels, ScenarioError> {
+    fn channels(&self) -> Result<Channels, ConfigError> {
         let names = self.f.axes.as_deref().ok_or_else(|| self.missing("axes"))?;
         if names.is_empty() {
             return Err(self.ctx.err(
@@ -130,7 +130,10 @@ impl Table<'_, '_> {
                         &format!("{}.axes[{i}]", self.key),
                         format!(
                             "names {} twice",
-                            crate::sensor::CHANNEL_NAMES.get(c).copied().unwrap_or("?")
+                            sar_drivers::sensor::CHANNEL_NAMES
+                                .get(c)
+                                .copied()
+                                .unwrap_or("?")
                         ),
                     ));
                 }
@@ -147,7 +150,7 @@ fn resolve_fault(
     key: &str,
     f: &FaultToml,
     count_m: f64,
-) -> Result<Fault, ScenarioError> {
+) -> Result<Fault, ConfigError> {
     let present = [
         ("from_s", f.from_s.is_some()),
         ("until_s", f.until_s.is_some()),
