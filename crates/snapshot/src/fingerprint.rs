@@ -74,8 +74,10 @@ impl Fingerprint {
         Self(Self::OFFSET)
     }
 
-    /// Mixes in raw bytes (no marker: prefer the typed items).
-    pub fn bytes(&mut self, bytes: &[u8]) {
+    /// Mixes in raw bytes. Private: every item of the stream goes through a
+    /// typed method with its marker, so that no caller can hash bytes the
+    /// documented table does not describe.
+    fn bytes(&mut self, bytes: &[u8]) {
         for b in bytes {
             self.0 ^= u64::from(*b);
             self.0 = self.0.wrapping_mul(Self::PRIME);
