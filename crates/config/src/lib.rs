@@ -39,11 +39,14 @@
 //! ([`scenario`]: TOML -> `sar_drivers::scenario::Scenario`), with the same
 //! machinery and the same error type.
 
+mod exact;
 mod locate;
+mod plausible;
 pub mod scenario;
 mod toml_file;
 
-pub use toml_file::ConfigError;
+pub use plausible::{Applies, PLAUSIBLE, Plausible};
+pub use toml_file::{ConfigError, MAX_FILE_BYTES};
 
 use locate::join;
 use sar_estimator::SensorNoise;
@@ -160,11 +163,17 @@ impl Default for RecordToml {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct GeometryToml {
+    #[serde(deserialize_with = "crate::exact::array")]
     gravity: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     support: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     p_home: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     ujoint_offset: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     sensor_offset: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::rows")]
     sensor_rotation: [[f64; 3]; 3],
 }
 
@@ -181,10 +190,13 @@ struct ManipulatorToml {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SensorToml {
+    #[serde(deserialize_with = "crate::exact::array")]
     noise_n: [f64; 3],
     #[serde(default = "default_range_n")]
+    #[serde(deserialize_with = "crate::exact::array")]
     range_n: [f64; 3],
     #[serde(default = "default_range_nm")]
+    #[serde(deserialize_with = "crate::exact::array")]
     range_nm: [f64; 3],
     #[serde(default = "default_drift_n_per_s")]
     drift_n_per_s: f64,
@@ -296,6 +308,7 @@ struct PlausibilityToml {
     max_joint_speed_mps: f64,
     joint_margin_m: f64,
     max_counter_gap: i64,
+    #[serde(deserialize_with = "crate::exact::array")]
     torque_noise_nm: [f64; 3],
     torque_max_sigma: f64,
     frozen_check: bool,
@@ -360,6 +373,7 @@ impl Default for TipToml {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct AxesToml {
+    #[serde(deserialize_with = "crate::exact::rows")]
     travel_m: [[f64; 2]; 3],
     max_speed_mps: f64,
     max_accel_mps2: f64,
@@ -562,7 +576,13 @@ impl Ctx<'_> {
         if (lo..=hi).contains(&v) {
             Ok(v)
         } else {
-            Err(self.err(key, format!("must be within {lo}..={hi} {unit}, got {v}")))
+            Err(self.err(
+                key,
+                format!(
+                    "must be within {lo}..={hi} {unit}, got {}",
+                    toml_file::num(v)
+                ),
+            ))
         }
     }
 
@@ -664,7 +684,6 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let noise = SensorNoise::new(vec3(f.sensor.noise_n))
         .map_err(|e| ctx.err("sensor.noise_n", e.to_string()))?;
     let axes = axes(ctx, &f.axes, f.plausibility.max_joint_speed_mps)?;
-    check_reach(ctx, &calibration, &profile, &axes.travel_m)?;
     let guard = guard(ctx, &f.guard)?;
     let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
     let plausibility = plausibility(ctx, &f.plausibility, &f.sensor, &sensor_driver)?;
@@ -673,6 +692,10 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let record = record(ctx, &f.record)?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
     let force_control = force_control(ctx, &f.force_control, tip.sample_rate_hz, loop_.rate_hz)?;
+    // Valid values, then plausible ones (a unit mistake is named with its
+    // range), then the geometry against the travel.
+    plausible::check(ctx, &f)?;
+    check_reach(ctx, &calibration, &profile, &axes.travel_m)?;
     Ok(Config {
         origin: ctx.origin.to_owned(),
         manipulator_name: f.manipulator.name.clone(),

@@ -337,3 +337,268 @@ fn the_guard_keys_are_the_force_limits_names_in_wire_order() {
         );
     }
 }
+
+// ---------------------------------------------------------------------------
+// Issue 25, finding 4: plausible configurations only.
+
+/// `length_m = 35.0` (for 0.35) put the tip 34.8 m past the support, was
+/// reported valid, and blinded the lateral guard (a true (1.0, 2.0, -2.5) N
+/// read as (1.07, 0.01, -0.01) N): refused with the range and the likely
+/// unit.
+#[test]
+fn a_length_in_cm_is_refused_with_its_range_and_the_likely_unit() {
+    let text = MINIMUM.replace("length_m = 0.35", "length_m = 35.0");
+    expect(
+        &text,
+        "manipulator.length_m",
+        Some("length_m"),
+        "must be within 0.1..=1.5 m, got 35",
+    );
+    let msg = bad(&text).to_string();
+    assert!(msg.contains("a value in cm?"), "{msg}");
+    let text = MINIMUM.replace("length_m = 0.35", "length_m = 350.0");
+    let msg = bad(&text).to_string();
+    assert!(msg.contains("a value in mm?"), "{msg}");
+    // A mass in g, a noise in mN.
+    let text = MINIMUM.replace("mass_kg = 2.593", "mass_kg = 2593.0");
+    expect(&text, "manipulator.mass_kg", Some("mass_kg"), "in g?");
+}
+
+/// `1e308` for a mass, a length or a limit was valid.
+#[test]
+fn values_of_1e308_are_refused() {
+    for (from, to, key) in [
+        ("mass_kg = 2.593", "mass_kg = 1e308", "manipulator.mass_kg"),
+        (
+            "length_m = 0.35",
+            "length_m = 1e308",
+            "manipulator.length_m",
+        ),
+        ("com_m = 0.103", "com_m = 1e308", "manipulator.com_m"),
+        (
+            "p_home = [0.0, 0.0, 0.0]",
+            "p_home = [1e308, 0.0, 0.0]",
+            "geometry.p_home[0]",
+        ),
+        (
+            "noise_n = [0.2, 0.2, 0.8]",
+            "noise_n = [0.2, 1e308, 0.8]",
+            "sensor.noise_n[1]",
+        ),
+    ] {
+        let text = MINIMUM.replace(from, to);
+        let at = to.split(" =").next().unwrap();
+        expect(&text, key, Some(at), "must be within");
+    }
+    for (key, section) in [
+        ("stop_total_n", "guard"),
+        ("max_stop_lateral_n", "guard"),
+        ("max_joint_speed_mps", "plausibility"),
+        ("max_std_n", "tip"),
+    ] {
+        let text = format!("{MINIMUM}\n[{section}]\n{key} = 1e308\n");
+        let msg = bad(&text).to_string();
+        assert_eq!(
+            bad(&text).key(),
+            Some(&*format!("{section}.{key}")),
+            "{msg}"
+        );
+        assert!(msg.contains("1e308"), "{msg}");
+    }
+    // A limit beyond the sensor's range: the sensor saturates first.
+    let text = format!(
+        "{}range_n = [50.0, 50.0, 50.0]\n[guard]\nmax_stop_total_n = 60.0\n",
+        MINIMUM
+    );
+    expect(
+        &text,
+        "guard.max_stop_total_n",
+        Some("max_stop_total_n"),
+        "sensor.range_n",
+    );
+    // The centre of mass within the rod.
+    let text = MINIMUM.replace("com_m = 0.103", "com_m = 0.5");
+    expect(&text, "manipulator.com_m", Some("com_m"), "on the rod");
+}
+
+/// `support = [0.45, 0.2, 0.0, 7.0]`, a 4-row rotation and a 1e6-element
+/// `noise_n` were accepted silently.
+#[test]
+fn arrays_have_their_exact_length() {
+    let text = MINIMUM.replace(
+        "support = [0.45, 0.20, 0.0]",
+        "support = [0.45, 0.2, 0.0, 7.0]",
+    );
+    expect(
+        &text,
+        "geometry.support",
+        Some("support ="),
+        "invalid length 4, expected an array of length 3",
+    );
+    let text = MINIMUM.replace(
+        "[0.0, 0.0, 1.0]]",
+        "[0.0, 0.0, 1.0],\n                   [0.0, 0.0, 0.0]]",
+    );
+    expect(
+        &text,
+        "geometry.sensor_rotation",
+        Some("sensor_rotation"),
+        "invalid length 4",
+    );
+    let text = MINIMUM.replace("[[1.0, 0.0, 0.0],", "[[1.0, 0.0, 0.0, 0.0],");
+    expect(
+        &text,
+        "geometry.sensor_rotation[0]",
+        Some("sensor_rotation"),
+        "invalid length 4",
+    );
+    let long = vec!["0.2"; 1_000_000].join(", ");
+    let text = MINIMUM.replace("noise_n = [0.2, 0.2, 0.8]", &format!("noise_n = [{long}]"));
+    let e = bad(&text);
+    assert_eq!(e.key(), Some("sensor.noise_n"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("invalid length 1000000, expected an array of length 3"),
+        "{e}"
+    );
+    assert!(e.to_string().len() < 200, "{e}");
+    // The axes' travel and the drivers' node ids too.
+    let text = format!(
+        "{MINIMUM}\n[axes]\ntravel_m = [[-0.3, 0.3], [0.0, 0.6], [0.0, 0.6], [0.0, 0.6]]\n"
+    );
+    expect(&text, "axes.travel_m", Some("travel_m"), "invalid length 4");
+}
+
+/// Runs `f` on another thread; a call that does not return within 10 s
+/// ends the test process (a read of /dev/zero must not run on).
+fn at_once<T: Send + 'static>(what: &str, f: impl FnOnce() -> T + Send + 'static) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(f());
+    });
+    match rx.recv_timeout(std::time::Duration::from_secs(10)) {
+        Ok(v) => v,
+        Err(_) => {
+            // Past the test harness's capture: the process ends here.
+            use std::io::Write;
+            let _ = writeln!(std::io::stderr(), "{what}: not refused within 10 s");
+            std::process::abort();
+        }
+    }
+}
+
+fn scratch_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("sar-config-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `--check-config /dev/zero` grew to 10.5 GB; a FIFO blocked: a
+/// configuration (and a scenario) is a regular file of at most 1 MB, checked
+/// before it is read.
+#[test]
+fn only_a_regular_file_of_at_most_1_mb_is_read() {
+    use std::path::{Path, PathBuf};
+    let dir = scratch_dir("files");
+    let fifo = dir.join("robot.fifo");
+    let status = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let big = dir.join("big.toml");
+    // A valid file padded past 1 MB with comments.
+    let padding = "# padding\n".repeat(110_000);
+    std::fs::write(&big, format!("{MINIMUM}{padding}")).unwrap();
+    let cases: [(PathBuf, &str); 5] = [
+        (
+            PathBuf::from("/dev/zero"),
+            "not a regular file (a character device)",
+        ),
+        (
+            PathBuf::from("/dev/null"),
+            "not a regular file (a character device)",
+        ),
+        (fifo.clone(), "not a regular file (a FIFO)"),
+        (dir.clone(), "not a regular file (a directory)"),
+        (big.clone(), "more than 1 MB"),
+    ];
+    for (path, words) in cases {
+        let p = path.clone();
+        let e = at_once(&path.display().to_string(), move || {
+            config::load(&p).unwrap_err()
+        });
+        let msg = e.to_string();
+        assert!(matches!(e, ConfigError::Read { .. }), "{msg}");
+        assert!(
+            msg.starts_with(&format!("{}: cannot read the file: ", path.display())),
+            "{msg}"
+        );
+        assert!(msg.contains(words), "{msg} lacks {words:?}");
+        // Scenario files share the reader.
+        let p = path.clone();
+        let e = at_once(&path.display().to_string(), move || {
+            config::scenario::load(&p).unwrap_err()
+        });
+        assert!(e.to_string().contains(words), "{e}");
+    }
+    // Exactly 1 MB is still read (and refused for its content only).
+    let edge = dir.join("edge.toml");
+    let mut text = MINIMUM.to_string();
+    text.push_str(&"#".repeat(1_000_000 - text.len() - 1));
+    text.push('\n');
+    assert_eq!(text.len(), 1_000_000);
+    std::fs::write(&edge, &text).unwrap();
+    config::load(Path::new(&edge)).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An error about a nested array printed 200 KB: every error is one line
+/// of at most a few hundred characters (values are cut).
+#[test]
+fn every_error_is_one_short_line() {
+    let row = vec!["0.5"; 50_000].join(", ");
+    let cases = [
+        // A syntax error in a 200 KB line of a nested array.
+        MINIMUM.replace(
+            "sensor_rotation = [[1.0, 0.0, 0.0],",
+            &format!("sensor_rotation = [[{row}] [1.0, 0.0, 0.0],"),
+        ),
+        // A wrong type deep in a nested array.
+        MINIMUM.replace(
+            "sensor_rotation = [[1.0, 0.0, 0.0],",
+            &format!("sensor_rotation = [[[{row}]], [1.0, 0.0, 0.0],"),
+        ),
+        // A 100 KB string where a kind is expected.
+        format!(
+            "{MINIMUM}\n[drivers.sensor]\nkind = \"{}\"\n",
+            "x".repeat(100_000)
+        ),
+        // A 100 KB address.
+        format!(
+            "{MINIMUM}\n[drivers.sensor]\nkind = \"rdt\"\naddress = \"{}\"\ncounts_per_n = 1.0\ncounts_per_nm = 1.0\n",
+            "1".repeat(100_000)
+        ),
+        // A 100 KB unknown key.
+        format!("{MINIMUM}\n[guard]\n{} = 1.0\n", "k".repeat(100_000)),
+        // A 100 KB manipulator name is fine, a 100 KB string where a number is expected is not.
+        MINIMUM.replace(
+            "com_m = 0.103",
+            &format!("com_m = \"{}\"", "9".repeat(100_000)),
+        ),
+    ];
+    for text in cases {
+        let msg = bad(&text).to_string();
+        let head: String = msg.chars().take(300).collect();
+        assert!(msg.chars().count() <= 600, "{} chars: {head}", msg.len());
+        assert_eq!(msg.lines().count(), 1, "{head}");
+    }
+    // A long origin is cut too (it keeps its end: the file's name).
+    let origin = format!("/{}/robot.toml", "d".repeat(5000));
+    let msg = config::parse("[geometry\n", &origin)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.chars().count() <= 600, "{msg}");
+    assert!(msg.contains("robot.toml: not valid TOML"), "{msg}");
+}

@@ -689,6 +689,31 @@ fn bad_files() -> Vec<(&'static str, String, &'static str, &'static str)> {
             "length",
         ),
         (
+            // Issue 25: serde's arrays ignored the elements past their length.
+            "array too long",
+            replaced(
+                "support = [0.45, 0.20, 0.0]",
+                "support = [0.45, 0.2, 0.0, 7.0]",
+            ),
+            "robot.support",
+            "invalid length 4, expected an array of length 3",
+        ),
+        (
+            "a row too many",
+            replaced("[0.0, 0.0, 1.0]]", "[0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]"),
+            "robot.sensor_rotation",
+            "invalid length 4",
+        ),
+        (
+            "an optional array too long",
+            replaced(
+                "noise_n = [0.2, 0.2, 0.8]",
+                "noise_n = [0.2, 0.2, 0.8, 0.8]",
+            ),
+            "sensor.noise_n",
+            "invalid length 4",
+        ),
+        (
             "NaN",
             replaced("support = [0.45, 0.20, 0.0]", "support = [0.45, nan, 0.0]"),
             "robot.support[1]",

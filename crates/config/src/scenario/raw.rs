@@ -40,11 +40,17 @@ pub(super) struct FileToml {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct RobotToml {
+    #[serde(deserialize_with = "crate::exact::array")]
     pub gravity: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     pub support: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     pub p_home: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     pub ujoint_offset: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     pub sensor_offset: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::rows")]
     pub sensor_rotation: [[f64; 3]; 3],
 }
 
@@ -76,7 +82,9 @@ pub(super) struct AxesToml {
     pub lead_m_per_turn: Option<f64>,
     pub counts_per_turn: Option<u32>,
     pub position_rate_hz: Option<f64>,
+    #[serde(default, deserialize_with = "crate::exact::option_rows")]
     pub travel_m: Option<[[f64; 2]; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub start: Option<[f64; 3]>,
 }
 
@@ -86,13 +94,20 @@ pub(super) struct AxesToml {
 pub(super) struct SensorToml {
     pub rate_hz: Option<f64>,
     pub latency_s: Option<f64>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub noise_n: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub noise_nm: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub bias_n: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub bias_nm: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub drift_n_per_s: Option<[f64; 3]>,
     pub has_tare: Option<bool>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub range_n: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub range_nm: Option<[f64; 3]>,
 }
 
@@ -100,9 +115,13 @@ pub(super) struct SensorToml {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct MotionToml {
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub joints: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub ujoint: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub tip: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub rod_dir: Option<[f64; 3]>,
     pub support_distance_m: Option<f64>,
     pub hold_s: Option<f64>,
@@ -114,6 +133,7 @@ pub(super) struct MotionToml {
 pub(super) struct RandomMotionToml {
     pub count: u32,
     pub max_angle_deg: f64,
+    #[serde(deserialize_with = "crate::exact::array")]
     pub beyond_m: [f64; 2],
     pub hold_s: f64,
 }
@@ -123,6 +143,7 @@ pub(super) struct RandomMotionToml {
 #[serde(deny_unknown_fields)]
 pub(super) struct ContactToml {
     pub t_s: f64,
+    #[serde(deserialize_with = "crate::exact::array")]
     pub force_n: [f64; 3],
 }
 
@@ -146,7 +167,9 @@ pub(super) struct ShiftToml {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct TissueToml {
+    #[serde(deserialize_with = "crate::exact::array")]
     pub direction: [f64; 3],
+    #[serde(deserialize_with = "crate::exact::array")]
     pub rest_m: [f64; 3],
     pub model: Option<TissueModelName>,
     pub stiffness_n_per_m: f64,
@@ -154,6 +177,7 @@ pub(super) struct TissueToml {
     pub damping_n_s_per_m: Option<f64>,
     pub breathing_amplitude_m: Option<f64>,
     pub breathing_hz: Option<f64>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub breathing_direction: Option<[f64; 3]>,
     #[serde(default)]
     pub shift: Vec<ShiftToml>,
@@ -228,10 +252,14 @@ pub(super) struct FaultToml {
     pub code: Option<u16>,
     pub axes: Option<Vec<ChannelName>>,
     pub rail: Option<RailName>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub force_n: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub torque_nm: Option<[f64; 3]>,
     pub samples: Option<u32>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub drift_n_per_s: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub drift_nm_per_s: Option<[f64; 3]>,
     pub factor: Option<f64>,
     pub counts: Option<i32>,
