@@ -33,7 +33,23 @@
 //!   device (`rdt`, `canopen`) with its keys (INTERFACES.md 2).
 //!
 //! Every error names the file, the dotted key, the line where the file has it,
-//! and the problem ([`ConfigError`]).
+//! and the problem ([`ConfigError`]), on one line of at most about 700
+//! characters (a long value, key or path is cut).
+//!
+//! Plausible values only (issue 25): a file is read only if it is a regular
+//! file of at most [`MAX_FILE_BYTES`] (1 MB; a FIFO or a device is refused
+//! at once, never waited on); every array has its exact length (more
+//! elements are refused, as fewer were); and beyond what the model can
+//! compute with, every physical key has a plausible range, [`PLAUSIBLE`]
+//! (the README's "Plausible configurations" lists it as a table): the rod
+//! 0.1..=1.5 m long, its mass 0..=10 kg, its centre of mass on the rod, the
+//! positions within 2 m of the base frame's origin, the sensor's noise at
+//! most a tenth of its range, every force limit at most 100 N and at most
+//! the sensor's smallest force range, ... A value outside is refused with
+//! the range and, when the value read in a smaller unit falls within it, that
+//! unit ("got 35 (a value in cm? 35 cm is 0.35 m)"). These checks follow the
+//! validity checks of each section; the support's reach from the travel
+//! comes last.
 //!
 //! The simulator's scenario files (`scenarios/`) are read here too
 //! ([`scenario`]: TOML -> `sar_drivers::scenario::Scenario`), with the same

@@ -85,7 +85,7 @@ pub const PLAUSIBLE: &[Plausible] = &[
     row("manipulator.length_m", 0.1, 1.5, "m"),
     also(
         row("manipulator.offset_m", -0.1, 0.1, "m"),
-        "|offset_m| < length_m",
+        "below length_m in magnitude",
     ),
     row("manipulator.mass_kg", 0.0, 10.0, "kg"),
     also(

@@ -602,3 +602,51 @@ fn every_error_is_one_short_line() {
     assert!(msg.chars().count() <= 600, "{msg}");
     assert!(msg.contains("robot.toml: not valid TOML"), "{msg}");
 }
+
+/// The configurations the repository ships are plausible (and read through
+/// the bounded reader).
+#[test]
+fn every_shipped_configuration_is_plausible() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    for file in ["deploy/robot.toml", "tests/fixtures/replay/config.toml"] {
+        config::load(&root.join(file)).unwrap_or_else(|e| panic!("{e}"));
+    }
+    config::builtin().unwrap();
+}
+
+/// The README's table of plausible ranges is [`config::PLAUSIBLE`], row by
+/// row.
+#[test]
+fn the_readme_lists_every_plausible_range() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let rows: Vec<String> = config::PLAUSIBLE
+        .iter()
+        .map(|p| {
+            let what = match p.applies {
+                config::Applies::Value => "",
+                config::Applies::EachComponent => "each: ",
+                config::Applies::Magnitude => "magnitude: ",
+                _ => "?",
+            };
+            let also = if p.also.is_empty() {
+                " ".to_owned()
+            } else {
+                format!(" {} ", p.also)
+            };
+            format!(
+                "| `{}` | {what}{}..={} {} |{also}|",
+                p.key, p.lo, p.hi, p.unit
+            )
+        })
+        .collect();
+    let missing: Vec<&String> = rows
+        .iter()
+        .filter(|r| !readme.contains(r.as_str()))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "the README lacks (or differs in) these rows; the table is:\n{}",
+        rows.join("\n")
+    );
+}
