@@ -563,6 +563,13 @@ pub struct ConfigSource {
     pub toml: String,
 }
 
+/// The text of a configuration file, read as [`load`] reads it (a regular
+/// file of at most [`MAX_FILE_BYTES`], never waited on), for a tool that
+/// edits the file (`sarctl identify`).
+pub fn read_text(path: &Path) -> Result<String, ConfigError> {
+    toml_file::read(path).map(|(text, _)| text)
+}
+
 /// Reads and checks a configuration file; errors name `path`.
 pub fn load(path: &Path) -> Result<Config, ConfigError> {
     let (text, origin) = toml_file::read(path)?;

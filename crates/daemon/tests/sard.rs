@@ -160,3 +160,73 @@ fn a_stalled_loop_stops_feeding_the_watchdog() {
     );
     let _ = std::fs::remove_file(&sock_path);
 }
+
+/// Issue 25, finding 4: `--check-config` reported `length_m = 35.0` (for
+/// 0.35) valid, blocked on a FIFO and read /dev/zero until memory ran out.
+/// Now each is refused at once, in one line, naming the range and the
+/// likely unit or what the path is.
+#[test]
+fn check_config_refuses_a_unit_mistake_and_a_non_regular_file_at_once() {
+    let cm = temp_path("length-cm.toml");
+    std::fs::write(
+        &cm,
+        sar_config::DEFAULT_TOML.replace("length_m = 0.35 ", "length_m = 35.0 "),
+    )
+    .unwrap();
+    let fifo = temp_path("config.fifo");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    for (path, words) in [
+        (
+            cm.clone(),
+            "manipulator.length_m (line 19): must be within 0.1..=1.5 m, got 35 (a value in cm?",
+        ),
+        (
+            fifo.clone(),
+            "cannot read the file: not a regular file (a FIFO)",
+        ),
+        (
+            PathBuf::from("/dev/zero"),
+            "cannot read the file: not a regular file (a character device)",
+        ),
+    ] {
+        let mut child = Command::new(SARD)
+            .arg("--check-config")
+            .arg(&path)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let status = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status;
+            }
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("{}: not refused within 10 s", path.display());
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let mut err = String::new();
+        child
+            .stderr
+            .take()
+            .unwrap()
+            .read_to_string(&mut err)
+            .unwrap();
+        assert!(!status.success(), "{}: {err}", path.display());
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(words), "{err} lacks {words:?}");
+        assert!(err.len() < 700, "{err}");
+    }
+    let _ = std::fs::remove_file(cm);
+    let _ = std::fs::remove_file(fifo);
+}

@@ -117,8 +117,7 @@ pub fn run(
 ) -> Result<(), String> {
     let config_path =
         config_path.ok_or("identify needs --config FILE (the configuration to identify for)")?;
-    let text = std::fs::read_to_string(config_path)
-        .map_err(|e| format!("{}: {e}", config_path.display()))?;
+    let text = sar_config::read_text(config_path).map_err(|e| e.to_string())?;
     let config =
         sar_config::parse(&text, &config_path.display().to_string()).map_err(|e| e.to_string())?;
     let options = args.options()?;
