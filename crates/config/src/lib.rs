@@ -759,10 +759,23 @@ fn geometry(ctx: &Ctx<'_>, g: &GeometryToml) -> Result<Calibration, ConfigError>
     .map_err(|e| ctx.err(&join("geometry", e.field()), e.to_string()))
 }
 
+/// The longest manipulator name, characters.
+pub const MAX_NAME_CHARS: usize = 100;
+
 /// `[manipulator]`, through the kinematics' own checks.
 fn manipulator(ctx: &Ctx<'_>, m: &ManipulatorToml) -> Result<Profile, ConfigError> {
     if m.name.trim().is_empty() {
         return Err(ctx.err("manipulator.name", "must not be empty"));
+    }
+    // Shown by `--check-config`, `sarctl status` and the recordings.
+    let chars = m.name.chars().count();
+    if chars > MAX_NAME_CHARS || m.name.chars().any(char::is_control) {
+        return Err(ctx.err(
+            "manipulator.name",
+            format!(
+                "must be one line of at most {MAX_NAME_CHARS} characters, got {chars} characters"
+            ),
+        ));
     }
     Profile::new(&ProfileSpec {
         length_m: m.length_m,

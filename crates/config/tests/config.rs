@@ -582,10 +582,15 @@ fn every_error_is_one_short_line() {
         ),
         // A 100 KB unknown key.
         format!("{MINIMUM}\n[guard]\n{} = 1.0\n", "k".repeat(100_000)),
-        // A 100 KB manipulator name is fine, a 100 KB string where a number is expected is not.
+        // A 100 KB string where a number is expected.
         MINIMUM.replace(
             "com_m = 0.103",
             &format!("com_m = \"{}\"", "9".repeat(100_000)),
+        ),
+        // A 100 KB manipulator name (`--check-config` prints the name).
+        MINIMUM.replace(
+            "name = \"manipulator-2\"",
+            &format!("name = \"{}\"", "m".repeat(100_000)),
         ),
     ];
     for text in cases {
