@@ -92,7 +92,7 @@ impl ConfigError {
 /// that a value quoted from the file cannot make an error line long).
 pub const MAX_PROBLEM_CHARS: usize = 400;
 /// The longest key an error shows, characters.
-pub const MAX_KEY_CHARS: usize = 80;
+pub const MAX_KEY_CHARS: usize = 64;
 /// The longest origin (path) an error shows, characters: a longer one keeps
 /// its end, the file's name.
 pub const MAX_ORIGIN_CHARS: usize = 160;

@@ -599,6 +599,11 @@ fn every_error_is_one_short_line() {
         assert!(msg.chars().count() <= 600, "{} chars: {head}", msg.len());
         assert_eq!(msg.lines().count(), 1, "{head}");
     }
+    // The worst case: a long path, a long key and a long problem together.
+    let origin = format!("/{}/robot.toml", "d".repeat(5000));
+    let text = format!("{MINIMUM}\n[guard]\n{} = 1.0\n", "k".repeat(100_000));
+    let msg = config::parse(&text, &origin).unwrap_err().to_string();
+    assert!(msg.chars().count() <= 700, "{} chars: {msg}", msg.len());
     // A long origin is cut too (it keeps its end: the file's name).
     let origin = format!("/{}/robot.toml", "d".repeat(5000));
     let msg = config::parse("[geometry\n", &origin)
