@@ -324,7 +324,12 @@ pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     value(ctx, "tip.max_std_n", f.tip.max_std_n)?;
 
     let a = &f.axes;
-    components(ctx, "axes.travel_m", &a.travel_m.concat())?;
+    let travel = range_of(ctx, "axes.travel_m")?;
+    for (i, axis) in a.travel_m.iter().enumerate() {
+        for (j, bound) in axis.iter().enumerate() {
+            within(ctx, travel, &format!("axes.travel_m[{i}][{j}]"), *bound)?;
+        }
+    }
     value(ctx, "axes.max_speed_mps", a.max_speed_mps)?;
     value(ctx, "axes.retreat_speed_mps", a.retreat_speed_mps)?;
 

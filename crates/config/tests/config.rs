@@ -359,9 +359,17 @@ fn a_length_in_cm_is_refused_with_its_range_and_the_likely_unit() {
     let text = MINIMUM.replace("length_m = 0.35", "length_m = 350.0");
     let msg = bad(&text).to_string();
     assert!(msg.contains("a value in mm?"), "{msg}");
-    // A mass in g, a noise in mN.
+    // A mass in g; a travel in mm.
     let text = MINIMUM.replace("mass_kg = 2.593", "mass_kg = 2593.0");
     expect(&text, "manipulator.mass_kg", Some("mass_kg"), "in g?");
+    let text =
+        format!("{MINIMUM}\n[axes]\ntravel_m = [[-300.0, 300.0], [0.0, 600.0], [0.0, 600.0]]\n");
+    expect(
+        &text,
+        "axes.travel_m[0][0]",
+        Some("travel_m"),
+        "got -300 (a value in mm? -300 mm is -0.3 m)",
+    );
 }
 
 /// `1e308` for a mass, a length or a limit was valid.
