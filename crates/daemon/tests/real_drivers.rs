@@ -413,6 +413,22 @@ impl CanRig {
         assert_eq!(can_config.travel_m, file.axes.travel_m);
         assert_eq!(can_config.max_speed_mps, file.axes.max_speed_mps);
         assert_eq!(can_config.node_ids, [1, 2, 3]);
+        // The drives' own limits, each looser than sard's check: the travel,
+        // the plausibility's joint speed (above the planned speed), twice the
+        // following tolerance, the quick stop key's default.
+        assert_eq!(
+            can_config.drive_max_speed_mps,
+            file.estimator.plausibility.limits().max_joint_speed_mps
+        );
+        assert!(can_config.drive_max_speed_mps > file.axes.max_speed_mps);
+        assert_eq!(
+            can_config.following_window_m,
+            2.0 * file.axes.following_tolerance_m
+        );
+        assert_eq!(can_config.quick_stop_decel_mps2, 1.0);
+        assert!(can_config.quick_stop_decel_mps2 >= file.axes.max_accel_mps2);
+        assert_eq!(can_config.max_torque_permille, 1000);
+        let limits = can_config.clone();
         let bus = MemBus::new(clock.clone());
         let start = scenario.spec.axes.start;
         for (i, start_m) in [start.q1_m, start.q2_m, start.q3_m].into_iter().enumerate() {
@@ -432,6 +448,17 @@ impl CanRig {
         bus.tick();
         let period_ns = can_config.sync_period_ns;
         let mut drives = CanOpenDrives::start(bus.can(), clock.clone(), can_config).unwrap();
+        // Written and read back at start-up: the drives hold them.
+        for axis in 0..3 {
+            bus.with_drive(axis, |d, _, _| {
+                let (lo, hi) = d.position_limits_m();
+                let (t_lo, t_hi) = limits.travel_m[axis];
+                assert!(lo <= t_lo && hi >= t_hi && t_lo - lo < 1e-5 && hi - t_hi < 1e-5);
+                assert!((d.quick_stop_decel_mps2() - 1.0).abs() < 1e-5);
+                assert!((d.max_velocity_mps() - limits.drive_max_speed_mps).abs() < 1e-5);
+            })
+            .unwrap();
+        }
         devices::bring_up(&mut drives, &interface, 100, || {
             advance(&clock, &bus, period_ns)
         })
