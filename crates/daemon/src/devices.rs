@@ -53,7 +53,8 @@ pub fn first_sample(sensor: &mut RdtSensor, timeout_ns: u64) -> Result<(), Strin
 ///   to whole counts (sard refuses targets outside the travel itself);
 /// - max profile velocity (0x607F): `[plausibility] max_joint_speed_mps`
 ///   (the speed sard calls an encoder jump beyond), but at least 1.25 x
-///   `[axes] max_speed_mps` (the planned moves never reach it);
+///   `[axes] max_speed_mps` and that speed plus two counts per SYNC (the
+///   planned moves, rounded to counts, never reach it);
 /// - following error window (0x6065): 2 x `[axes] following_tolerance_m`
 ///   for 10 ms (0x6066); sard's own check is the tolerance, at once;
 /// - quick stop deceleration (0x6085): `[drivers.axes]
@@ -80,12 +81,16 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
             // reference).
             c.max_accel_mps2 = config.axes.max_accel_mps2;
             c.travel_m = config.axes.travel_m;
+            // Above the planned speed by 25 % and by the host's rounding to
+            // whole counts (at most one count per SYNC more; 2 allowed).
+            let rounding_mps = 2.0 * c.m_per_count() / (c.sync_period_ns as f64 * 1e-9);
             c.drive_max_speed_mps = config
                 .estimator
                 .plausibility
                 .limits()
                 .max_joint_speed_mps
-                .max(1.25 * config.axes.max_speed_mps);
+                .max(1.25 * config.axes.max_speed_mps)
+                .max((config.axes.max_speed_mps + rounding_mps) * (1.0 + 1e-9));
             c.following_window_m = 2.0 * config.axes.following_tolerance_m;
             c.quick_stop_decel_mps2 = *quick_stop_decel_mps2;
             c.max_torque_permille = *max_torque_permille;
