@@ -63,7 +63,7 @@ type RdtController = Controller<RdtSensor, sar_drivers::sim::SimDrives<Monotonic
 /// The emulator (manual pacing: one packet per cycle, sent by the test), the
 /// controller on the RDT driver connected to it, and the emulator reading
 /// what the simulated sensor reads at the start (so the estimate is sane).
-fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
+fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController, logq::LogQueue) {
     let cfg = test_config();
     let mut scenario = quiet_scenario();
     // The reading without the simulator's noise (the emulator adds its own):
@@ -107,7 +107,7 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
     assert!(emulator.wait_for_starts(1, Duration::from_secs(10)));
     emulator.step(1);
     devices::first_sample(&mut sensor, 10_000 * MS).unwrap();
-    let (log, _thread, _queue) = logq::channel(false);
+    let (log, _thread, queue) = logq::channel(false);
     let controller = Controller::new(
         &cfg.estimator,
         bias,
@@ -119,7 +119,7 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
         true,
     )
     .unwrap();
-    (emulator, controller)
+    (emulator, controller, queue)
 }
 
 /// Runs cycles at 1 kHz on the monotonic clock (the emulator sends one
@@ -155,7 +155,7 @@ fn guard(c: &RdtController) -> GuardState {
 
 #[test]
 fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
-    let (emulator, mut controller) = rdt_rig(Vec::new());
+    let (emulator, mut controller, log) = rdt_rig(Vec::new());
     let mut cycle = 0;
     assert!(
         run_rdt_until(&emulator, &mut controller, &mut cycle, true, 10_000, |c| {
@@ -190,6 +190,20 @@ fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
         "{reason:?}"
     );
     assert!(controller.counts().sensor_errors > 0);
+    // The log line says why the poll failed (the emulator sends nothing).
+    let mut causes = Vec::new();
+    while let Some(event) = log.pop() {
+        if let logq::LogEvent::SensorPollFailed { cause, .. } = event {
+            causes.push(cause);
+        }
+    }
+    assert!(!causes.is_empty(), "no sensor poll failure logged");
+    assert!(
+        causes
+            .iter()
+            .all(|c| *c == "sensor silent: nothing received from its address"),
+        "{causes:?}"
+    );
     assert!(controller.halted());
     assert_eq!(controller.counts().quick_stops, 1);
     assert_eq!(
@@ -214,7 +228,7 @@ fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
     use std::sync::Arc;
     let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rdt_2khz");
     let _ = std::fs::remove_dir_all(&dir);
-    let (emulator, mut controller) = rdt_rig(Vec::new());
+    let (emulator, mut controller, _) = rdt_rig(Vec::new());
     let switch = Arc::new(RecordSwitch::default());
     let (manager, mut publisher) = RecordManager::start(
         RecordSettings {
@@ -308,7 +322,7 @@ fn rdt_loop_runs_ok_then_faults_on_a_non_zero_status() {
     let script = (1300..1400)
         .map(|i| (i, Action::Status(0x8000_0001)))
         .collect();
-    let (emulator, mut controller) = rdt_rig(script);
+    let (emulator, mut controller, _) = rdt_rig(script);
     let mut cycle = 0;
     assert!(run_rdt_until(
         &emulator,
