@@ -62,9 +62,9 @@ use super::frame::{
 use crate::motion::{AxisPlan, AxisState, Limits};
 use embedded_can::nb::Can;
 
-/// A set point further than this from the drive's actual position is a
-/// following error, m (a real drive's 0x6065 following error window; wide
-/// enough for a host that runs a few ms late, small beside any real jump).
+/// The default following error window of the simulated drive (0x6065 at
+/// power-on), m: wide enough for a host that runs a few ms late, small beside
+/// any real jump. The host writes its own (`CanOpenConfig::following_window_m`).
 pub const FOLLOWING_WINDOW_M: f64 = 0.002;
 
 /// A fault of a simulated drive at a time of its clock, ns.
@@ -143,9 +143,9 @@ pub struct SimDriveSpec {
     pub max_accel_mps2: f64,
     /// Position at power-on, m.
     pub start_m: f64,
-    /// A set point further than this from the actual position is a
-    /// following error, m ([`FOLLOWING_WINDOW_M`] unless a test on a
-    /// non-real-time host needs more).
+    /// The following error window at power-on and after a reset node
+    /// (0x6065's default), m ([`FOLLOWING_WINDOW_M`] unless a test on a
+    /// non-real-time host needs more); a host that writes 0x6065 replaces it.
     pub following_window_m: f64,
 }
 
