@@ -30,7 +30,14 @@
 //!   `max_file_s` (600; 0: no time rotation), `queue_capacity` (65536
 //!   messages, about 2.7 s of disk stall at 4 kHz; 1024..=16777216).
 //! - `[drivers.sensor]` and `[drivers.axes]`: `kind = "sim"` (default) or a real
-//!   device (`rdt`, `canopen`) with its keys (INTERFACES.md 2).
+//!   device (`rdt`, `canopen`) with its keys (INTERFACES.md 2). `canopen`
+//!   also takes the drives' own limits that no other key gives (beyond
+//!   INTERFACES.md): `quick_stop_decel_mps2` (1; at least `[axes]
+//!   max_accel_mps2`, at most 10), the deceleration of the drives' own quick
+//!   stop (CiA 402 0x6085), and `max_torque_permille` (1000; 1..=3000), their
+//!   max torque (0x6072) in per mille of the motor's rated torque. The
+//!   drives' other limits come from `[axes]` and `[plausibility]` (see
+//!   `sar-daemon`'s `devices::canopen_config`).
 //!
 //! Every error names the file, the dotted key, the line where the file has it,
 //! and the problem ([`ConfigError`]), on one line of at most about 700
@@ -433,6 +440,8 @@ struct AxesDriverToml {
     node_ids: Option<Vec<i64>>,
     lead_m: Option<f64>,
     counts_per_turn: Option<i64>,
+    quick_stop_decel_mps2: Option<f64>,
+    max_torque_permille: Option<i64>,
 }
 
 // ---------------------------------------------------------------------------
@@ -489,8 +498,19 @@ pub enum AxesDriver {
         lead_m: f64,
         /// Encoder counts per motor turn.
         counts_per_turn: u32,
+        /// The drives' own quick stop deceleration (CiA 402 0x6085), m/s^2:
+        /// at least `[axes] max_accel_mps2`, at most 10 (default 1).
+        quick_stop_decel_mps2: f64,
+        /// The drives' own max torque (0x6072), per mille of the motor's
+        /// rated torque, 1..=3000 (default 1000).
+        max_torque_permille: u16,
     },
 }
+
+/// Default of `[drivers.axes] quick_stop_decel_mps2`, m/s^2.
+pub const DEFAULT_QUICK_STOP_DECEL_MPS2: f64 = 1.0;
+/// Default of `[drivers.axes] max_torque_permille`.
+pub const DEFAULT_MAX_TORQUE_PERMILLE: u16 = 1000;
 
 /// A checked configuration.
 #[derive(Debug, Clone)]
@@ -713,7 +733,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let tip = tip(ctx, &f.tip)?;
     let loop_ = loop_config(ctx, &f.loop_)?;
     let record = record(ctx, &f.record)?;
-    let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref())?;
+    let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
     let force_control = force_control(ctx, &f.force_control, tip.sample_rate_hz, loop_.rate_hz)?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
@@ -1237,7 +1257,11 @@ fn sensor_driver(ctx: &Ctx<'_>, s: Option<&SensorDriverToml>) -> Result<SensorDr
     }
 }
 
-fn axes_driver(ctx: &Ctx<'_>, a: Option<&AxesDriverToml>) -> Result<AxesDriver, ConfigError> {
+fn axes_driver(
+    ctx: &Ctx<'_>,
+    a: Option<&AxesDriverToml>,
+    max_accel_mps2: f64,
+) -> Result<AxesDriver, ConfigError> {
     let Some(a) = a else {
         return Ok(AxesDriver::Sim);
     };
@@ -1248,6 +1272,8 @@ fn axes_driver(ctx: &Ctx<'_>, a: Option<&AxesDriverToml>) -> Result<AxesDriver, 
                 ("node_ids", a.node_ids.is_some()),
                 ("lead_m", a.lead_m.is_some()),
                 ("counts_per_turn", a.counts_per_turn.is_some()),
+                ("quick_stop_decel_mps2", a.quick_stop_decel_mps2.is_some()),
+                ("max_torque_permille", a.max_torque_permille.is_some()),
             ] {
                 if given {
                     return Err(ctx.err(
@@ -1299,11 +1325,30 @@ fn axes_driver(ctx: &Ctx<'_>, a: Option<&AxesDriverToml>) -> Result<AxesDriver, 
                 .counts_per_turn
                 .ok_or_else(|| ctx.err("drivers.axes.counts_per_turn", "missing key"))?;
             let cpt = ctx.range_i("drivers.axes.counts_per_turn", cpt, 1, i64::from(u32::MAX))?;
+            // The drives' own quick stop brakes at least as hard as the
+            // planned moves accelerate.
+            let quick_stop_decel_mps2 = ctx.range_f(
+                "drivers.axes.quick_stop_decel_mps2",
+                a.quick_stop_decel_mps2
+                    .unwrap_or(DEFAULT_QUICK_STOP_DECEL_MPS2),
+                max_accel_mps2,
+                10.0,
+                "m/s^2 (at least [axes] max_accel_mps2)",
+            )?;
+            let torque = ctx.range_i(
+                "drivers.axes.max_torque_permille",
+                a.max_torque_permille
+                    .unwrap_or(i64::from(DEFAULT_MAX_TORQUE_PERMILLE)),
+                1,
+                3000,
+            )?;
             Ok(AxesDriver::Canopen {
                 interface,
                 node_ids,
                 lead_m,
                 counts_per_turn: u32::try_from(cpt).unwrap_or(1),
+                quick_stop_decel_mps2,
+                max_torque_permille: u16::try_from(torque).unwrap_or(DEFAULT_MAX_TORQUE_PERMILLE),
             })
         }
         other => Err(ctx.err(

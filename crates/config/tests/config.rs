@@ -668,3 +668,55 @@ fn the_readme_lists_every_plausible_range() {
         rows.join("\n")
     );
 }
+
+/// The CANopen drives' own limits that no other key gives: the quick stop
+/// deceleration (0x6085) and the max torque (0x6072), with their defaults
+/// and ranges (the quick stop brakes at least as hard as the planned moves
+/// accelerate).
+#[test]
+fn the_canopen_drives_own_limits_have_defaults_and_ranges() {
+    let canopen = "[drivers.axes]\nkind = \"canopen\"\ninterface = \"can0\"\nnode_ids = [1, 2, 3]\nlead_m = 0.01\ncounts_per_turn = 4096\n";
+    let c = config::parse(&format!("{MINIMUM}\n{canopen}"), "robot.toml").unwrap();
+    assert!(matches!(
+        c.axes_driver,
+        AxesDriver::Canopen {
+            quick_stop_decel_mps2: 1.0,
+            max_torque_permille: 1000,
+            ..
+        }
+    ));
+    let text =
+        format!("{MINIMUM}\n{canopen}quick_stop_decel_mps2 = 2.5\nmax_torque_permille = 800\n");
+    let c = config::parse(&text, "robot.toml").unwrap();
+    assert!(matches!(
+        c.axes_driver,
+        AxesDriver::Canopen {
+            quick_stop_decel_mps2: 2.5,
+            max_torque_permille: 800,
+            ..
+        }
+    ));
+    // Gentler than the planned moves' 0.2 m/s^2: refused.
+    let text = format!("{MINIMUM}\n{canopen}quick_stop_decel_mps2 = 0.1\n");
+    expect(
+        &text,
+        "drivers.axes.quick_stop_decel_mps2",
+        Some("quick_stop_decel_mps2"),
+        "at least [axes] max_accel_mps2",
+    );
+    let text = format!("{MINIMUM}\n{canopen}max_torque_permille = 0\n");
+    expect(
+        &text,
+        "drivers.axes.max_torque_permille",
+        Some("max_torque_permille"),
+        "1..=3000",
+    );
+    // Not keys of the simulated axes.
+    let text = format!("{MINIMUM}\n[drivers.axes]\nkind = \"sim\"\nmax_torque_permille = 800\n");
+    expect(
+        &text,
+        "drivers.axes.max_torque_permille",
+        Some("max_torque_permille"),
+        "not a key of the simulated axes",
+    );
+}

@@ -45,6 +45,21 @@ pub fn first_sample(sensor: &mut RdtSensor, timeout_ns: u64) -> Result<(), Strin
 /// the file's node ids, lead and counts per turn, SYNC at the loop's rate,
 /// moves at `[axes] max_speed_mps` within `[axes] travel_m`, the driver's
 /// defaults for the rest. With the interface's name; `None` for another kind.
+///
+/// The drives' own limits (written at start-up, read back; the second
+/// channel that still holds when `sard` is wrong), each looser than the
+/// check of `sard` that acts first, none looser than safe:
+/// - software position limits (0x607D): `[axes] travel_m`, rounded outwards
+///   to whole counts (sard refuses targets outside the travel itself);
+/// - max profile velocity (0x607F): `[plausibility] max_joint_speed_mps`
+///   (the speed sard calls an encoder jump beyond), but at least 1.25 x
+///   `[axes] max_speed_mps` and that speed plus two counts per SYNC (the
+///   planned moves, rounded to counts, never reach it);
+/// - following error window (0x6065): 2 x `[axes] following_tolerance_m`
+///   for 10 ms (0x6066); sard's own check is the tolerance, at once;
+/// - quick stop deceleration (0x6085): `[drivers.axes]
+///   quick_stop_decel_mps2` (at least `[axes] max_accel_mps2`);
+/// - max torque (0x6072): `[drivers.axes] max_torque_permille`.
 pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
     match &config.axes_driver {
         AxesDriver::Canopen {
@@ -52,6 +67,8 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
             node_ids,
             lead_m,
             counts_per_turn,
+            quick_stop_decel_mps2,
+            max_torque_permille,
         } => {
             let mut c = CanOpenConfig::new(*node_ids, *lead_m, *counts_per_turn);
             c.sync_period_ns = config.loop_.period_ns;
@@ -64,6 +81,19 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
             // reference).
             c.max_accel_mps2 = config.axes.max_accel_mps2;
             c.travel_m = config.axes.travel_m;
+            // Above the planned speed by 25 % and by the host's rounding to
+            // whole counts (at most one count per SYNC more; 2 allowed).
+            let rounding_mps = 2.0 * c.m_per_count() / (c.sync_period_ns as f64 * 1e-9);
+            c.drive_max_speed_mps = config
+                .estimator
+                .plausibility
+                .limits()
+                .max_joint_speed_mps
+                .max(1.25 * config.axes.max_speed_mps)
+                .max((config.axes.max_speed_mps + rounding_mps) * (1.0 + 1e-9));
+            c.following_window_m = 2.0 * config.axes.following_tolerance_m;
+            c.quick_stop_decel_mps2 = *quick_stop_decel_mps2;
+            c.max_torque_permille = *max_torque_permille;
             Some((interface.clone(), c))
         }
         _ => None,

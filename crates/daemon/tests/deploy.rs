@@ -62,6 +62,8 @@ fn the_robot_configuration_passes_check_config_and_names_the_real_devices() {
             node_ids: [1, 2, 3],
             lead_m: 0.01,
             counts_per_turn: 4096,
+            quick_stop_decel_mps2: 1.0,
+            max_torque_permille: 1000,
         }
     );
     // The robot keeps the guard's defaults (the demo's relaxed ages are not

@@ -63,7 +63,7 @@ type RdtController = Controller<RdtSensor, sar_drivers::sim::SimDrives<Monotonic
 /// The emulator (manual pacing: one packet per cycle, sent by the test), the
 /// controller on the RDT driver connected to it, and the emulator reading
 /// what the simulated sensor reads at the start (so the estimate is sane).
-fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
+fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController, logq::LogQueue) {
     let cfg = test_config();
     let mut scenario = quiet_scenario();
     // The reading without the simulator's noise (the emulator adds its own):
@@ -107,7 +107,7 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
     assert!(emulator.wait_for_starts(1, Duration::from_secs(10)));
     emulator.step(1);
     devices::first_sample(&mut sensor, 10_000 * MS).unwrap();
-    let (log, _thread, _queue) = logq::channel(false);
+    let (log, _thread, queue) = logq::channel(false);
     let controller = Controller::new(
         &cfg.estimator,
         bias,
@@ -119,7 +119,7 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController) {
         true,
     )
     .unwrap();
-    (emulator, controller)
+    (emulator, controller, queue)
 }
 
 /// Runs cycles at 1 kHz on the monotonic clock (the emulator sends one
@@ -155,7 +155,7 @@ fn guard(c: &RdtController) -> GuardState {
 
 #[test]
 fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
-    let (emulator, mut controller) = rdt_rig(Vec::new());
+    let (emulator, mut controller, log) = rdt_rig(Vec::new());
     let mut cycle = 0;
     assert!(
         run_rdt_until(&emulator, &mut controller, &mut cycle, true, 10_000, |c| {
@@ -190,6 +190,20 @@ fn rdt_loop_runs_ok_then_faults_when_the_emulator_goes_silent() {
         "{reason:?}"
     );
     assert!(controller.counts().sensor_errors > 0);
+    // The log line says why the poll failed (the emulator sends nothing).
+    let mut causes = Vec::new();
+    while let Some(event) = log.pop() {
+        if let logq::LogEvent::SensorPollFailed { cause, .. } = event {
+            causes.push(cause);
+        }
+    }
+    assert!(!causes.is_empty(), "no sensor poll failure logged");
+    assert!(
+        causes
+            .iter()
+            .all(|c| *c == "sensor silent: nothing received from its address"),
+        "{causes:?}"
+    );
     assert!(controller.halted());
     assert_eq!(controller.counts().quick_stops, 1);
     assert_eq!(
@@ -214,7 +228,7 @@ fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
     use std::sync::Arc;
     let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("rdt_2khz");
     let _ = std::fs::remove_dir_all(&dir);
-    let (emulator, mut controller) = rdt_rig(Vec::new());
+    let (emulator, mut controller, _) = rdt_rig(Vec::new());
     let switch = Arc::new(RecordSwitch::default());
     let (manager, mut publisher) = RecordManager::start(
         RecordSettings {
@@ -308,7 +322,7 @@ fn rdt_loop_runs_ok_then_faults_on_a_non_zero_status() {
     let script = (1300..1400)
         .map(|i| (i, Action::Status(0x8000_0001)))
         .collect();
-    let (emulator, mut controller) = rdt_rig(script);
+    let (emulator, mut controller, _) = rdt_rig(script);
     let mut cycle = 0;
     assert!(run_rdt_until(
         &emulator,
@@ -413,6 +427,22 @@ impl CanRig {
         assert_eq!(can_config.travel_m, file.axes.travel_m);
         assert_eq!(can_config.max_speed_mps, file.axes.max_speed_mps);
         assert_eq!(can_config.node_ids, [1, 2, 3]);
+        // The drives' own limits, each looser than sard's check: the travel,
+        // the plausibility's joint speed (above the planned speed), twice the
+        // following tolerance, the quick stop key's default.
+        assert_eq!(
+            can_config.drive_max_speed_mps,
+            file.estimator.plausibility.limits().max_joint_speed_mps
+        );
+        assert!(can_config.drive_max_speed_mps > file.axes.max_speed_mps);
+        assert_eq!(
+            can_config.following_window_m,
+            2.0 * file.axes.following_tolerance_m
+        );
+        assert_eq!(can_config.quick_stop_decel_mps2, 1.0);
+        assert!(can_config.quick_stop_decel_mps2 >= file.axes.max_accel_mps2);
+        assert_eq!(can_config.max_torque_permille, 1000);
+        let limits = can_config.clone();
         let bus = MemBus::new(clock.clone());
         let start = scenario.spec.axes.start;
         for (i, start_m) in [start.q1_m, start.q2_m, start.q3_m].into_iter().enumerate() {
@@ -432,6 +462,17 @@ impl CanRig {
         bus.tick();
         let period_ns = can_config.sync_period_ns;
         let mut drives = CanOpenDrives::start(bus.can(), clock.clone(), can_config).unwrap();
+        // Written and read back at start-up: the drives hold them.
+        for axis in 0..3 {
+            bus.with_drive(axis, |d, _, _| {
+                let (lo, hi) = d.position_limits_m();
+                let (t_lo, t_hi) = limits.travel_m[axis];
+                assert!(lo <= t_lo && hi >= t_hi && t_lo - lo < 1e-5 && hi - t_hi < 1e-5);
+                assert!((d.quick_stop_decel_mps2() - 1.0).abs() < 1e-5);
+                assert!((d.max_velocity_mps() - limits.drive_max_speed_mps).abs() < 1e-5);
+            })
+            .unwrap();
+        }
         devices::bring_up(&mut drives, &interface, 100, || {
             advance(&clock, &bus, period_ns)
         })

@@ -41,4 +41,11 @@ impl core::fmt::Display for ErrorKind {
 pub trait Error: core::fmt::Debug + core::fmt::Display {
     /// The kind of this error.
     fn kind(&self) -> ErrorKind;
+
+    /// Its specific cause in a few words, static so that the loop can log it
+    /// without allocating ("sensor silent: only duplicate packets"); empty
+    /// when the kind says it all.
+    fn cause(&self) -> &'static str {
+        ""
+    }
 }

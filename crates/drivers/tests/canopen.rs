@@ -72,13 +72,17 @@ struct Rig {
 
 impl Rig {
     fn new() -> Self {
+        Self::with_config(config())
+    }
+
+    fn with_config(config: CanOpenConfig) -> Self {
         let clock = SimClock::new(CLOCK_START_NS);
         let bus = MemBus::new(clock.clone());
         for axis in 0..3 {
             bus.add_drive(SimCia402Drive::new(drive_spec(axis), clock.now_ns()));
         }
         bus.tick();
-        let drives = CanOpenDrives::start(bus.can(), clock.clone(), config()).unwrap();
+        let drives = CanOpenDrives::start(bus.can(), clock.clone(), config).unwrap();
         let next_cycle_ns = clock.now_ns();
         let mut rig = Self {
             clock,
@@ -970,4 +974,375 @@ fn halt_brakes_and_holds_in_operation_enabled_and_release_resumes_the_move() {
     let p = rig.drives.positions().unwrap();
     assert!((p.joints.q3_m - 0.35).abs() <= count_m(), "{p:?}");
     assert_eq!(rig.drives.state().unwrap(), DriveState::Enabled);
+}
+
+// ---------------------------------------------------------------------------
+// The drives' own limits: a second channel outside the host (SAFETY.md H40..)
+
+/// The drives' own limits of `config()` (the defaults of the driver): quick
+/// stop 1 m/s^2, 0.1 m/s, following window 2 mm for 10 ms, 1000 per mille.
+fn own_limits_of(c: &CanOpenConfig, axis: usize) -> Vec<(u16, u8, u32)> {
+    c.drive_limit_objects(axis)
+        .iter()
+        .map(|(i, s, v, _)| (*i, *s, *v))
+        .collect()
+}
+
+/// The SDO uploads (reads) the host sent to `node`.
+fn sdo_reads(sent: &[RawFrame], node: u8) -> Vec<(u16, u8)> {
+    sent.iter()
+        .filter(|f| f.cob_id == COB_SDO_RX + u16::from(node))
+        .filter_map(|f| match Sdo::decode(f.payload()) {
+            Some(Sdo::Upload { index, sub }) => Some((index, sub)),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn start_up_writes_the_drives_own_limits_and_reads_each_back() {
+    let rig = Rig::new();
+    let sent = rig.bus.take_sent();
+    let c = config();
+    for (axis, node) in NODES.iter().enumerate() {
+        let writes = sdo_writes(&sent, *node);
+        let reads = sdo_reads(&sent, *node);
+        let limits = own_limits_of(&c, axis);
+        assert_eq!(limits.len(), 7);
+        for (index, sub, value) in &limits {
+            let w = writes
+                .iter()
+                .position(|x| x == &(*index, *sub, *value))
+                .unwrap_or_else(|| panic!("node {node}: {index:#x}:{sub} not written"));
+            // Read back after its write (the n-th read of that object
+            // follows the n-th write).
+            assert!(
+                reads.contains(&(*index, *sub)),
+                "node {node}: {index:#x}:{sub} not read back"
+            );
+            let _ = w;
+        }
+        // The watchdog's settings are read back too.
+        for object in [(0x605A, 0), (0x6007, 0), (0x1016, 1)] {
+            assert!(reads.contains(&object), "node {node}: {object:x?}");
+        }
+        // The drive holds them, in its units (counts).
+        rig.drive(axis, |d, _, _| {
+            assert!((d.quick_stop_decel_mps2() - c.quick_stop_decel_mps2).abs() < count_m());
+            let (lo, hi) = d.position_limits_m();
+            let (t_lo, t_hi) = c.travel_m[axis];
+            // The travel, rounded outwards by less than a count.
+            assert!(lo <= t_lo && t_lo - lo < count_m(), "{lo} {t_lo}");
+            assert!(hi >= t_hi && hi - t_hi < count_m(), "{hi} {t_hi}");
+            assert!(d.max_velocity_mps() >= c.drive_max_speed_mps);
+            assert!(d.max_velocity_mps() - c.drive_max_speed_mps < count_m());
+        });
+    }
+    // Values: 1 m/s^2 = 409600 counts/s^2, 0.1 m/s = 40960 counts/s, 2 mm =
+    // 820 counts (819.2 rounded up), 10 ms, 1000 per mille.
+    let q1 = own_limits_of(&c, 0);
+    assert!(q1.contains(&(0x6085, 0, 409_600)), "{q1:?}");
+    assert!(q1.contains(&(0x607F, 0, 40_960)), "{q1:?}");
+    assert!(q1.contains(&(0x6065, 0, 820)), "{q1:?}");
+    assert!(q1.contains(&(0x6066, 0, 10)), "{q1:?}");
+    assert!(q1.contains(&(0x6072, 0, 1000)), "{q1:?}");
+}
+
+/// The bus and three drives at power-on, `hook` applied to each drive.
+fn bus_with(hook: impl Fn(usize, &mut SimCia402Drive)) -> (SimClock, MemBus) {
+    let clock = SimClock::new(CLOCK_START_NS);
+    let bus = MemBus::new(clock.clone());
+    for axis in 0..3 {
+        let mut d = SimCia402Drive::new(drive_spec(axis), clock.now_ns());
+        hook(axis, &mut d);
+        bus.add_drive(d);
+    }
+    bus.tick();
+    (clock, bus)
+}
+
+#[test]
+fn a_drive_that_does_not_hold_its_limits_refuses_the_start_and_is_never_enabled() {
+    // q2's drive caps its max profile velocity at 1000 counts/s (as a drive
+    // whose motor cannot go faster clamps the value) and says nothing.
+    let (clock, bus) = bus_with(|axis, d| {
+        if axis == 1 {
+            d.store_instead(0x607F, 0, 1000);
+        }
+    });
+    let err = CanOpenDrives::start(bus.can(), clock.clone(), config()).unwrap_err();
+    assert_eq!(
+        err,
+        CanOpenError::LimitMismatch {
+            node: 2,
+            index: 0x607F,
+            sub: 0,
+            name: "max profile velocity",
+            written: 40_960,
+            read: 1000,
+        }
+    );
+    assert_eq!(err.kind(), ErrorKind::DeviceFault);
+    let text = err.to_string();
+    for part in [
+        "node 2",
+        "max profile velocity",
+        "0x607f:0",
+        "40960",
+        "1000",
+    ] {
+        assert!(text.contains(part), "{part:?} not in {text:?}");
+    }
+    // No drive was started (NMT start), so none can be enabled.
+    assert!(
+        !bus.take_sent()
+            .iter()
+            .any(|f| f.cob_id == 0 && f.payload().first() == Some(&frame::nmt::START)),
+        "an NMT start was sent"
+    );
+    // A signed limit shows signed: q1's minimum (-0.1 m = -40960 counts)
+    // stored as 0.
+    let (clock, bus) = bus_with(|axis, d| {
+        if axis == 0 {
+            d.store_instead(0x607D, 1, 0);
+        }
+    });
+    let err = CanOpenDrives::start(bus.can(), clock, config()).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            CanOpenError::LimitMismatch {
+                node: 1,
+                index: 0x607D,
+                sub: 1,
+                written: -40_960,
+                read: 0,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // The drive's own watchdog is checked the same way.
+    let (clock, bus) = bus_with(|axis, d| {
+        if axis == 2 {
+            d.store_instead(0x1016, 1, 0);
+        }
+    });
+    let err = CanOpenDrives::start(bus.can(), clock, config()).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            CanOpenError::LimitMismatch {
+                node: 3,
+                index: 0x1016,
+                ..
+            }
+        ),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_drives_own_limits_are_checked_in_the_configuration() {
+    for (field, change) in [
+        (
+            "quick_stop_decel_mps2",
+            (|c: &mut CanOpenConfig| c.quick_stop_decel_mps2 = 0.4) as fn(&mut CanOpenConfig),
+        ),
+        ("drive_max_speed_mps", |c| c.drive_max_speed_mps = V_MAX),
+        ("following_window_m", |c| c.following_window_m = 0.0),
+        ("max_torque_permille", |c| c.max_torque_permille = 0),
+    ] {
+        let mut c = config();
+        change(&mut c);
+        let err = c.validate().unwrap_err();
+        assert!(
+            matches!(err, CanOpenError::InvalidConfig { field: f, .. } if f == field),
+            "{field}: {err}"
+        );
+    }
+}
+
+/// The host stalled (it sends nothing); a rogue host's frames straight to the
+/// drives instead, once per ms: its heartbeat, then to drive `axis` an RPDO
+/// (enable operation, the set point `target_m(k)` of the k-th ms), then a
+/// SYNC to all. Returns the true position and velocity of `axis` after
+/// each ms.
+fn rogue_host(
+    rig: &mut Rig,
+    axis: usize,
+    ms: usize,
+    target_m: impl Fn(usize) -> f64,
+) -> Vec<(f64, f64)> {
+    rig.host_alive = false;
+    let heartbeat = RawFrame::new_data(0x700 + 127, &[frame::heartbeat::OPERATIONAL]).unwrap();
+    let sync = RawFrame::new_data(COB_SYNC, &[]).unwrap();
+    let mut at = Vec::new();
+    for k in 0..ms {
+        let counts = (target_m(k) / count_m()).round() as i32;
+        let rpdo = RawFrame::new_data(
+            COB_RPDO1 + u16::from(NODES[axis]),
+            &frame::encode_rpdo(control::ENABLE_OPERATION, counts),
+        )
+        .unwrap();
+        for a in 0..3 {
+            rig.drive(a, |d, now, out| d.on_frame(&heartbeat, now, out));
+        }
+        rig.drive(axis, |d, now, out| d.on_frame(&rpdo, now, out));
+        for a in 0..3 {
+            rig.drive(a, |d, now, out| d.on_frame(&sync, now, out));
+        }
+        rig.run(MS);
+        at.push((
+            rig.true_position(axis),
+            rig.drive(axis, |d, now, _| d.velocity_mps(now)),
+        ));
+    }
+    at
+}
+
+#[test]
+fn a_set_point_beyond_the_travel_is_clamped_by_the_drive_itself() {
+    let mut c = config();
+    c.travel_m[0] = (-0.1, 0.002);
+    let mut rig = Rig::with_config(c);
+    rig.enable();
+    // The host refuses such a target itself...
+    let beyond = ActiveJoints {
+        q1_m: 0.004,
+        ..target()
+    };
+    let err = rig.drives.set_targets(beyond).unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::InvalidArgument);
+    // ... a host that sends it anyway (its checks bypassed): 40 mm/s from
+    // 0 to 4 mm, then held there. The drive stops at its limit, 2 mm,
+    // staying enabled, with bit 11 (internal limit active) set.
+    let x = rogue_host(&mut rig, 0, 200, |k| (0.00004 * k as f64).min(0.004));
+    let (_, hi) = rig.drive(0, |d, _, _| d.position_limits_m());
+    assert!((hi - 0.002).abs() < count_m());
+    let highest = x.iter().map(|p| p.0).fold(f64::MIN, f64::max);
+    assert!(highest <= hi + 1e-12, "{highest} beyond {hi}");
+    assert_eq!(x[199], (hi, 0.0));
+    assert!(rig.drive(0, |d, _, _| d.internal_limit()));
+    assert_eq!(rig.cia402(0), Cia402State::OperationEnabled);
+    assert!(rig.drive(0, |d, _, _| d.emcys().is_empty()));
+    // The status word says so (bit 11 in the TPDO the host reads).
+    let sync = RawFrame::new_data(COB_SYNC, &[]).unwrap();
+    let mut out = Vec::new();
+    rig.drive(0, |d, now, _| d.on_frame(&sync, now, &mut out));
+    let tpdo = out.iter().find(|f| f.cob_id == 0x180 + 1).unwrap();
+    let (sw, _) = frame::decode_tpdo(tpdo.payload()).unwrap();
+    assert_ne!(sw & frame::STATUS_INTERNAL_LIMIT, 0, "{sw:#06x}");
+}
+
+#[test]
+fn a_set_point_too_fast_is_limited_by_the_drive_and_its_lag_faults() {
+    // The host plans at 20 mm/s; the drives' own limit is 40 mm/s (below
+    // the axis's 50 mm/s, so that the drive's limit is what shows).
+    let mut c = config();
+    c.max_speed_mps = 0.02;
+    c.drive_max_speed_mps = 0.04;
+    let mut rig = Rig::with_config(c.clone());
+    rig.enable();
+    // The host refuses a streamed set point beyond its own speed...
+    let far = ActiveJoints {
+        q1_m: START_M[0] + 0.0003,
+        q2_m: START_M[1],
+        q3_m: START_M[2],
+    };
+    assert_eq!(
+        rig.drives.stream(far, MS).unwrap_err().kind(),
+        ErrorKind::InvalidArgument
+    );
+    // ... a rogue host streams 0.3 mm per ms (0.3 m/s, each step within the
+    // 2 mm window). The drive moves at its 40 mm/s (bit 11 set), lags
+    // 0.26 mm more each ms, and faults once the lag has been beyond the
+    // window for its time out: after about 8 ms + 10 ms.
+    let v_cmd = 0.3;
+    let v_lim = rig.drive(0, |d, _, _| d.max_velocity_mps());
+    assert!(v_lim >= c.drive_max_speed_mps && v_lim < c.drive_max_speed_mps + 1e-4);
+    let mut limited = false;
+    let mut x = Vec::new();
+    for k in 0..40 {
+        x.extend(rogue_host(&mut rig, 0, 1, |_| {
+            START_M[0] + v_cmd * 1e-3 * (k + 1) as f64
+        }));
+        limited |= rig.drive(0, |d, _, _| d.internal_limit());
+    }
+    assert!(limited, "bit 11 never set");
+    let emcys = rig.drive(0, |d, _, _| d.emcys().to_vec());
+    assert_eq!(emcys, [0x8611], "{emcys:x?}");
+    assert_eq!(rig.cia402(0), Cia402State::Fault);
+    // Never faster than its own limit; the farthest point is what 40 mm/s
+    // reach before the fault (lag beyond the window after
+    // window / (v_cmd - v_lim), then the time out), short of the set point.
+    for (k, (_, v)) in x.iter().enumerate() {
+        assert!(v.abs() <= v_lim + 1e-12, "ms {k}: {v} m/s");
+    }
+    let lag_ms = c.following_window_m / (v_cmd - v_lim) * 1e3;
+    let fault_ms = lag_ms + f64::from(c.following_timeout_ms);
+    let moved = x.iter().map(|p| p.0).fold(f64::MIN, f64::max) - START_M[0];
+    let braking_m = v_lim * v_lim / (2.0 * c.quick_stop_decel_mps2);
+    assert!(
+        moved <= v_lim * (fault_ms + 2.0) * 1e-3 + braking_m,
+        "{moved}"
+    );
+    assert!(moved >= v_lim * (fault_ms - 2.0) * 1e-3, "{moved}");
+    assert!(moved < v_cmd * fault_ms * 1e-3 / 2.0, "{moved}");
+    // The host sees the drive's fault with its code.
+    rig.host_alive = true;
+    rig.run(3 * MS);
+    assert_eq!(
+        rig.drives.state().unwrap(),
+        DriveState::Fault {
+            axis: Some(0),
+            code: 0x8611
+        }
+    );
+}
+
+#[test]
+fn a_silent_host_ends_in_the_drives_quick_stop_at_its_own_deceleration() {
+    // A quick stop deceleration (2 m/s^2) other than the axis's acceleration
+    // limit (0.5 m/s^2): the stop shows which one the drive used.
+    let mut c = config();
+    c.quick_stop_decel_mps2 = 2.0;
+    let mut rig = Rig::with_config(c);
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(400 * MS);
+    assert!((rig.drive(2, |d, now, _| d.velocity_mps(now)) - V_MAX).abs() < 1e-9);
+    assert!((rig.drive(2, |d, _, _| d.quick_stop_decel_mps2()) - 2.0).abs() < count_m());
+    rig.host_alive = false;
+    // Step 0.1 ms until the drive's watchdog acts (50 ms + a heartbeat period).
+    let mut waited_us = 0;
+    while rig.cia402(2) != Cia402State::QuickStopActive {
+        rig.run(MS / 10);
+        waited_us += 100;
+        assert!(waited_us <= 70_000, "no quick stop after {waited_us} us");
+    }
+    assert!(waited_us >= 40_000, "{waited_us}");
+    let x0 = rig.true_position(2);
+    let v0 = rig.drive(2, |d, now, _| d.velocity_mps(now));
+    assert!(v0 > 0.9 * V_MAX, "{v0}");
+    // The stop: a ramp (no jump), the speed never rising, to rest.
+    let (mut x_prev, mut v_prev) = (x0, v0);
+    for _ in 0..1000 {
+        rig.run(MS / 10);
+        let x = rig.true_position(2);
+        let v = rig.drive(2, |d, now, _| d.velocity_mps(now));
+        assert!(x >= x_prev && x - x_prev <= v_prev * 1e-4 + 1e-12, "a jump");
+        assert!(v <= v_prev && v >= 0.0);
+        (x_prev, v_prev) = (x, v);
+    }
+    assert_eq!(v_prev, 0.0);
+    let distance = x_prev - x0;
+    let expected = v0 * v0 / (2.0 * 2.0);
+    assert!(
+        (distance - expected).abs() < 1e-9,
+        "{distance} vs {expected}"
+    );
+    // At the axis's acceleration limit it would have been 4 times as long.
+    assert!(distance < v0 * v0 / (2.0 * A_MAX) / 3.0);
+    assert_eq!(rig.drive(2, |d, _, _| d.emcys().to_vec()), [0x8130]);
 }

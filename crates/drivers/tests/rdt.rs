@@ -21,7 +21,7 @@ use sar_drivers::rdt::codec::{CMD_BIAS, CMD_FILTER, CMD_RATE, Request, Response}
 use sar_drivers::rdt::emulator::{
     Action, Emulator, EmulatorConfig, HEX_E_RANGE_COUNTS, Pacing, SensorFault, counts_for,
 };
-use sar_drivers::rdt::{Filter, Flavour, RdtConfig, RdtSensor};
+use sar_drivers::rdt::{Filter, Flavour, RdtConfig, RdtError, RdtSensor, SilenceCause};
 use sar_drivers::{Clock, Error, ErrorKind, ForceSensor, MonotonicClock, Rail, WrenchSample};
 use std::time::Duration;
 
@@ -840,4 +840,185 @@ fn a_sensor_faster_than_the_loop_loses_nothing_for_the_recorder() {
         assert_eq!(pair[1].counter, pair[0].counter + 1, "a gap");
     }
     assert_eq!(sensor.stats().lost, 0);
+}
+
+// ---------------------------------------------------------------------------
+// The sensor's network (SAFETY.md H4x): every poll failure names its cause;
+// a spoofed packet is accepted (RDT has no authentication).
+
+/// A manual emulator and a driver with a 30 ms silence limit, its stream
+/// started.
+fn quick_silence() -> (Emulator, RdtSensor) {
+    manual_with(EmulatorConfig::new(Pacing::Manual), |e| RdtConfig {
+        silence_limit_ns: 30 * MS,
+        restart_interval_ns: 30 * MS,
+        ..config(e)
+    })
+}
+
+/// Polls (bounded) until `poll` fails with a silence whose cause `want`
+/// accepts; the error.
+fn poll_failure(sensor: &mut RdtSensor, want: impl Fn(&SilenceCause) -> bool) -> RdtError {
+    let clock = MonotonicClock::new().unwrap();
+    let deadline = now_ns(&clock) + PATIENCE_NS;
+    let mut last = None;
+    loop {
+        if let Err(e) = sensor.poll() {
+            if let RdtError::Silent { cause, .. } = e
+                && want(&cause)
+            {
+                return e;
+            }
+            last = Some(e);
+        }
+        assert!(now_ns(&clock) < deadline, "not the cause wanted: {last:?}");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
+#[test]
+fn every_poll_failure_names_its_cause() {
+    // Nothing at all from the sensor's address.
+    let (_emulator, mut sensor) = quick_silence();
+    let e = poll_failure(&mut sensor, |c| *c == SilenceCause::NothingReceived);
+    assert_eq!(e.kind(), ErrorKind::Disconnected);
+    assert!(
+        e.to_string().contains("nothing received from 127.0.0.1:"),
+        "{e}"
+    );
+    assert!(e.cause().contains("nothing received"), "{}", e.cause());
+    // Only datagrams of the wrong length (a short packet).
+    let (emulator, mut sensor) = quick_silence();
+    emulator.step(1);
+    collect_until(&mut sensor, 1001);
+    assert!(emulator.send_raw(&[0x12; 20]));
+    let e = poll_failure(&mut sensor, |c| *c == SilenceCause::WrongLength { got: 20 });
+    assert!(e.to_string().contains("20 bytes, not 36"), "{e}");
+    assert!(e.cause().contains("wrong length"), "{}", e.cause());
+    // Only repeats of the last sample (its sequence and counter).
+    let (emulator, mut sensor) = quick_silence();
+    emulator.step(1);
+    collect_until(&mut sensor, 1001);
+    let again = Response {
+        rdt_sequence: 1,
+        sample_counter: 1001,
+        ..Response::default()
+    };
+    assert!(emulator.send_raw(&again.encode()));
+    let e = poll_failure(&mut sensor, |c| *c == SilenceCause::Duplicates);
+    assert!(e.cause().contains("duplicate"), "{}", e.cause());
+    // Only late packets (behind the last accepted one).
+    let (emulator, mut sensor) = quick_silence();
+    emulator.step(3);
+    collect_until(&mut sensor, 1003);
+    let late = Response {
+        rdt_sequence: 2,
+        sample_counter: 1002,
+        ..Response::default()
+    };
+    assert!(emulator.send_raw(&late.encode()));
+    let e = poll_failure(&mut sensor, |c| *c == SilenceCause::Late);
+    assert!(e.cause().contains("late"), "{}", e.cause());
+    // The sensor's port closed (the device gone): the restart requests come
+    // back as ICMP port unreachable, a socket error.
+    let (emulator, mut sensor) = quick_silence();
+    drop(emulator);
+    let e = poll_failure(&mut sensor, |c| matches!(c, SilenceCause::Socket { .. }));
+    let RdtError::Silent {
+        cause: SilenceCause::Socket { kind },
+        ..
+    } = e
+    else {
+        unreachable!()
+    };
+    assert_eq!(kind, std::io::ErrorKind::ConnectionRefused);
+    assert!(e.to_string().contains("socket error"), "{e}");
+    assert!(e.cause().contains("socket error"), "{}", e.cause());
+    // A receive thread that is gone says so.
+    assert!(RdtError::ReceiverGone.cause().contains("receive thread"));
+}
+
+/// Sends `payload` as a UDP datagram from `from` to `to` through a raw socket
+/// (the source port written by hand: what anyone on the sensor's network can
+/// do). Needs CAP_NET_RAW (CI runs as root).
+#[allow(unsafe_code)]
+fn spoof(from: std::net::SocketAddrV4, to: std::net::SocketAddrV4, payload: &[u8]) {
+    // SAFETY: plain socket calls on a descriptor owned here; the buffers
+    // outlive the calls.
+    unsafe {
+        let fd = libc::socket(libc::AF_INET, libc::SOCK_RAW, libc::IPPROTO_UDP);
+        assert!(
+            fd >= 0,
+            "a raw socket needs CAP_NET_RAW (run as root): {}",
+            std::io::Error::last_os_error()
+        );
+        let len = 8 + payload.len();
+        let mut datagram = Vec::with_capacity(len);
+        datagram.extend_from_slice(&from.port().to_be_bytes());
+        datagram.extend_from_slice(&to.port().to_be_bytes());
+        datagram.extend_from_slice(&u16::try_from(len).unwrap().to_be_bytes());
+        // Checksum 0: none (allowed over IPv4).
+        datagram.extend_from_slice(&[0, 0]);
+        datagram.extend_from_slice(payload);
+        let dest = libc::sockaddr_in {
+            sin_family: libc::AF_INET as libc::sa_family_t,
+            sin_port: 0,
+            sin_addr: libc::in_addr {
+                s_addr: u32::from_ne_bytes(to.ip().octets()),
+            },
+            sin_zero: [0; 8],
+        };
+        let sent = libc::sendto(
+            fd,
+            datagram.as_ptr().cast(),
+            datagram.len(),
+            0,
+            std::ptr::from_ref(&dest).cast(),
+            std::mem::size_of::<libc::sockaddr_in>() as libc::socklen_t,
+        );
+        let error = std::io::Error::last_os_error();
+        libc::close(fd);
+        assert_eq!(sent, datagram.len() as isize, "{error}");
+    }
+}
+
+/// RDT has no authentication: a packet from the sensor's address (the
+/// source address and port are only what the packet says) with the next
+/// sequence number is taken as the sensor's sample, and the sensor's own
+/// packet after it is dropped as a duplicate. The driver cannot tell; only
+/// the network can (SAFETY.md: a dedicated link, no routing).
+#[test]
+fn a_spoofed_packet_with_the_next_sequence_from_the_sensors_address_is_accepted() {
+    let (emulator, mut sensor) = manual(Vec::new());
+    emulator.step(1);
+    let first = collect_until(&mut sensor, 1001);
+    assert_eq!(first.len(), 1);
+    let std::net::SocketAddr::V4(device) = emulator.address() else {
+        panic!("the emulator is on IPv4 loopback")
+    };
+    let std::net::SocketAddr::V4(driver) = sensor.local_address().unwrap() else {
+        panic!("the driver is on IPv4 loopback")
+    };
+    // 50 N along z, the next sequence and counter, from the device's address.
+    let forged = Response {
+        rdt_sequence: 2,
+        sample_counter: 1002,
+        status: 0,
+        counts: [0, 0, 500_000, 0, 0, 0],
+    };
+    spoof(device, driver, &forged.encode());
+    let got = sensor.wait(PATIENCE_NS).unwrap();
+    assert_eq!(got.counter, 1002);
+    assert!(got.is_valid());
+    assert_eq!(got.force_n.z, 50.0);
+    // The device's own packet 2 now looks like a repeat and is dropped.
+    emulator.step(1);
+    let clock = MonotonicClock::new().unwrap();
+    let deadline = now_ns(&clock) + PATIENCE_NS;
+    while sensor.stats().duplicates == 0 {
+        assert!(now_ns(&clock) < deadline, "the device's packet never came");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert_eq!(sensor.stats().accepted, 2);
+    assert_eq!(sensor.poll().unwrap(), None);
 }

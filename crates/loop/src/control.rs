@@ -343,12 +343,13 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         match self.sensor.poll() {
             Ok(Some(s)) => self.last_input.sensor = sensor_sample(&s),
             Ok(None) => {}
-            Err(_) => {
+            Err(e) => {
                 self.last_input.sensor.valid = false;
                 self.counts.sensor_errors += 1;
-                self.log.send(LogEvent::DeviceError {
+                // Its cause, a static text: no allocation here.
+                self.log.send(LogEvent::SensorPollFailed {
                     cycle,
-                    what: "sensor poll",
+                    cause: sar_drivers::Error::cause(&e),
                 });
             }
         }

@@ -39,6 +39,13 @@ pub enum LogEvent {
         /// Which call.
         what: &'static str,
     },
+    /// The sensor's poll failed, with the driver's cause (empty: none given).
+    SensorPollFailed {
+        /// The cycle.
+        cycle: u64,
+        /// The cause ("sensor silent: only duplicate packets").
+        cause: &'static str,
+    },
     /// The drives' state changed (`None`: it could not be read).
     DriveState {
         /// The cycle.
@@ -180,6 +187,12 @@ pub fn write(event: &LogEvent) {
             }
         }
         LogEvent::DeviceError { cycle, what } => tracing::error!(cycle, "{what} failed"),
+        LogEvent::SensorPollFailed { cycle, cause: "" } => {
+            tracing::error!(cycle, "sensor poll failed")
+        }
+        LogEvent::SensorPollFailed { cycle, cause } => {
+            tracing::error!(cycle, "sensor poll failed: {cause}")
+        }
         LogEvent::DriveState { cycle, state } => {
             tracing::info!(cycle, "drives: {}", drive_state_text(*state))
         }

@@ -79,6 +79,36 @@ pub mod od {
     pub const POSITION_ACTUAL: u16 = 0x6064;
     /// Target position (i32, counts).
     pub const TARGET_POSITION: u16 = 0x607A;
+    /// Following error window (u32, counts).
+    pub const FOLLOWING_ERROR_WINDOW: u16 = 0x6065;
+    /// Following error time out (u16, ms).
+    pub const FOLLOWING_ERROR_TIMEOUT: u16 = 0x6066;
+    /// Max torque (u16, per thousand of the motor's rated torque).
+    pub const MAX_TORQUE: u16 = 0x6072;
+    /// Software position limit (sub 1 min, sub 2 max: i32, counts).
+    pub const SOFTWARE_POSITION_LIMIT: u16 = 0x607D;
+    /// Max profile velocity (u32, counts/s).
+    pub const MAX_PROFILE_VELOCITY: u16 = 0x607F;
+    /// Quick stop deceleration (u32, counts/s^2).
+    pub const QUICK_STOP_DECELERATION: u16 = 0x6085;
+
+    /// The object's name (CiA 402), for messages.
+    pub fn name(index: u16) -> &'static str {
+        match index {
+            CONSUMER_HEARTBEAT => "consumer heartbeat time",
+            PRODUCER_HEARTBEAT => "producer heartbeat time",
+            ABORT_CONNECTION => "abort connection option code",
+            QUICK_STOP_OPTION => "quick stop option code",
+            MODES_OF_OPERATION => "modes of operation",
+            FOLLOWING_ERROR_WINDOW => "following error window",
+            FOLLOWING_ERROR_TIMEOUT => "following error time out",
+            MAX_TORQUE => "max torque",
+            SOFTWARE_POSITION_LIMIT => "software position limit",
+            MAX_PROFILE_VELOCITY => "max profile velocity",
+            QUICK_STOP_DECELERATION => "quick stop deceleration",
+            _ => "object",
+        }
+    }
 }
 
 /// Mapping entries (index << 16 | sub << 8 | bits).
@@ -134,6 +164,9 @@ pub mod control {
 pub const STATUS_REFERENCED: u16 = 0x8000;
 /// Status word bit 7: warning.
 pub const STATUS_WARNING: u16 = 0x0080;
+/// Status word bit 11: internal limit active (the drive clamped a set point
+/// at its software position limits or limited its speed at 0x607F).
+pub const STATUS_INTERNAL_LIMIT: u16 = 0x0800;
 /// Status word bit 9: remote.
 pub const STATUS_REMOTE: u16 = 0x0200;
 

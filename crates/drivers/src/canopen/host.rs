@@ -6,8 +6,19 @@
 //! RPDO1 = control word + target position, both synchronous (every SYNC);
 //! mode 8 (CSP) written in 0x6060 and checked in 0x6061; 0x6007 = 3 (quick
 //! stop on loss of the host) with 0x605A = 6 (quick stop ramp, then hold);
-//! the drive's heartbeat producer; the host as its heartbeat consumer; then
-//! NMT start. Every wait is bounded (`sdo_timeout_ns`, `boot_timeout_ns`).
+//! the drive's heartbeat producer; the host as its heartbeat consumer; the
+//! drive's own limits ([`CanOpenConfig::drive_limit_objects`]: quick stop
+//! deceleration 0x6085, software position limits 0x607D, max profile
+//! velocity 0x607F, following error window and time out 0x6065/0x6066, max
+//! torque 0x6072); every one of these safety settings is read back, and a
+//! drive that stores another value refuses the start
+//! ([`CanOpenError::LimitMismatch`]), so the drives are never enabled
+//! without them; then NMT start. Every wait is bounded (`sdo_timeout_ns`,
+//! `boot_timeout_ns`). (They are written here, at start-up, not in
+//! `enable`, which runs on the loop's path and never touches the bus; a
+//! drive that reboots loses them, but also leaves operational, which the
+//! host latches as a lost drive whose fault cannot be reset: it is never
+//! enabled again without a new start.)
 //!
 //! Each control period the caller calls [`CanOpenDrives::cycle`]: it takes
 //! what has arrived (heartbeats, EMCY), sends SYNC, waits (at most
@@ -429,15 +440,16 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
         if mode != MODE_CSP {
             return Err(CanOpenError::WrongMode { node, mode });
         }
-        // Watchdog: quick stop (and hold) when the host's heartbeat is lost.
-        self.write(
+        // Watchdog: quick stop (and hold) when the host's heartbeat is lost;
+        // each value read back.
+        self.write_checked(
             node,
             od::QUICK_STOP_OPTION,
             0,
             u32::from(QUICK_STOP_RAMP_AND_HOLD as u16),
             2,
         )?;
-        self.write(
+        self.write_checked(
             node,
             od::ABORT_CONNECTION,
             0,
@@ -453,7 +465,48 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
         )?;
         let consumer = (u32::from(self.config.host_node_id) << 16)
             | u32::from(self.config.host_heartbeat_timeout_ms);
-        self.write(node, od::CONSUMER_HEARTBEAT, 1, consumer, 4)?;
+        self.write_checked(node, od::CONSUMER_HEARTBEAT, 1, consumer, 4)?;
+        // The drive's own limits, the second channel outside the host: each
+        // written and read back; any other value refuses the start (the
+        // drives are never enabled).
+        let axis = self.axes.iter().position(|a| a.node == node).unwrap_or(0);
+        for (index, sub, value, size) in self.config.drive_limit_objects(axis) {
+            self.write_checked(node, index, sub, value, size)?;
+        }
+        Ok(())
+    }
+
+    /// Writes an object and reads it back: a drive that stores another value
+    /// (clamped to its own range, or ignored) is
+    /// [`CanOpenError::LimitMismatch`].
+    fn write_checked(
+        &mut self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        value: u32,
+        size: u8,
+    ) -> Result<(), CanOpenError> {
+        self.write(node, index, sub, value, size)?;
+        let read = self.read(node, index, sub)?;
+        if read != value {
+            let signed = index == od::SOFTWARE_POSITION_LIMIT;
+            let show = |v: u32| {
+                if signed {
+                    i64::from(v as i32)
+                } else {
+                    i64::from(v)
+                }
+            };
+            return Err(CanOpenError::LimitMismatch {
+                node,
+                index,
+                sub,
+                name: od::name(index),
+                written: show(value),
+                read: show(read),
+            });
+        }
         Ok(())
     }
 

@@ -69,13 +69,35 @@ pub struct CanOpenConfig {
     pub boot_timeout_ns: u64,
     /// How long the host sleeps between polls of the bus while waiting, ns.
     pub poll_interval_ns: u64,
+    /// The drives' own quick stop deceleration (0x6085), m/s^2: the ramp of
+    /// every quick stop, the host's and the drive's own when the host goes
+    /// silent. At least `max_accel_mps2`.
+    pub quick_stop_decel_mps2: f64,
+    /// The drives' own speed limit (max profile velocity, 0x607F), m/s: a set
+    /// point implying more is limited by the drive. Above `max_speed_mps` by
+    /// more than two counts per SYNC period (the host's own plans never reach
+    /// it).
+    pub drive_max_speed_mps: f64,
+    /// The drives' following error window (0x6065), m: the actual position
+    /// farther than this from the set point for longer than
+    /// `following_timeout_ms` is a drive fault (EMCY 0x8611); a set point
+    /// farther than this from the previous one is one at once.
+    pub following_window_m: f64,
+    /// The drives' following error time out (0x6066), ms.
+    pub following_timeout_ms: u16,
+    /// The drives' max torque (0x6072), per thousand of the motor's rated
+    /// torque (1..=10000).
+    pub max_torque_permille: u16,
 }
 
 impl CanOpenConfig {
     /// The configuration with the file's keys and defaults for the rest:
     /// host node 127, 1 kHz SYNC, 0.05 m/s and 0.5 m/s^2, travel ±1 m, host
     /// heartbeat 10 ms (consumer time 50 ms), drive heartbeat 10 ms (timeout
-    /// 50 ms), SDO 20 ms, PDO wait 0.5 ms, boot-up 2 s, polls every 20 µs.
+    /// 50 ms), SDO 20 ms, PDO wait 0.5 ms, boot-up 2 s, polls every 20 µs;
+    /// the drives' own limits: quick stop at 1 m/s^2, 0.1 m/s, following
+    /// window 2 mm for 10 ms, max torque 1000 per mille (the rated torque),
+    /// software position limits = the travel.
     pub fn new(node_ids: [u8; 3], lead_m: f64, counts_per_turn: u32) -> Self {
         Self {
             node_ids,
@@ -94,6 +116,11 @@ impl CanOpenConfig {
             pdo_wait_ns: 500_000,
             boot_timeout_ns: 2_000_000_000,
             poll_interval_ns: 20_000,
+            quick_stop_decel_mps2: 1.0,
+            drive_max_speed_mps: 0.1,
+            following_window_m: 0.002,
+            following_timeout_ms: 10,
+            max_torque_permille: 1000,
         }
     }
 
@@ -158,7 +185,82 @@ impl CanOpenConfig {
                 self.drive_heartbeat_timeout_ms.to_string(),
             );
         }
+        let per_s = |v: f64| v / self.m_per_count();
+        if !(self.quick_stop_decel_mps2.is_finite()
+            && self.quick_stop_decel_mps2 >= self.max_accel_mps2
+            && per_s(self.quick_stop_decel_mps2) <= f64::from(u32::MAX))
+        {
+            return bad(
+                "quick_stop_decel_mps2",
+                self.quick_stop_decel_mps2.to_string(),
+            );
+        }
+        // The host's plans, rounded to whole counts, move at most
+        // max_speed + 1 count per SYNC: the drive's limit is above that.
+        let rounding_mps = 2.0 * self.m_per_count() / (self.sync_period_ns as f64 * 1e-9);
+        if !(self.drive_max_speed_mps.is_finite()
+            && self.drive_max_speed_mps >= self.max_speed_mps + rounding_mps
+            && per_s(self.drive_max_speed_mps) <= f64::from(u32::MAX))
+        {
+            return bad("drive_max_speed_mps", self.drive_max_speed_mps.to_string());
+        }
+        if !(self.following_window_m.is_finite()
+            && self.following_window_m >= self.m_per_count()
+            && per_s(self.following_window_m) <= f64::from(u32::MAX))
+        {
+            return bad("following_window_m", self.following_window_m.to_string());
+        }
+        if !(1..=10_000).contains(&self.max_torque_permille) {
+            return bad("max_torque_permille", self.max_torque_permille.to_string());
+        }
         Ok(())
+    }
+
+    /// The drive's own limits of axis `axis` (0 = q1) as the objects written
+    /// at start-up and read back, `(index, sub, value, bytes)`, in the
+    /// drive's units (position units = encoder counts): quick stop
+    /// deceleration 0x6085 (counts/s^2, to the nearest), software position
+    /// limits 0x607D sub 1/2 (the travel, rounded outwards to whole counts:
+    /// a target within the travel is never clamped), max profile velocity
+    /// 0x607F (counts/s, rounded up), following error window 0x6065 (counts,
+    /// rounded up) and time out 0x6066 (ms), max torque 0x6072 (per mille).
+    pub fn drive_limit_objects(&self, axis: usize) -> [(u16, u8, u32, u8); 7] {
+        use frame::od;
+        let count = self.m_per_count();
+        let (lo, hi) = self.travel_m.get(axis).copied().unwrap_or((0.0, 0.0));
+        // Saturating float-to-int conversions; `validate` keeps them in range.
+        let counts_u32 = |v: f64| v.max(0.0) as u32;
+        let min = (lo / count).floor() as i32;
+        let max = (hi / count).ceil() as i32;
+        [
+            (
+                od::QUICK_STOP_DECELERATION,
+                0,
+                counts_u32((self.quick_stop_decel_mps2 / count).round()),
+                4,
+            ),
+            (od::SOFTWARE_POSITION_LIMIT, 1, min as u32, 4),
+            (od::SOFTWARE_POSITION_LIMIT, 2, max as u32, 4),
+            (
+                od::MAX_PROFILE_VELOCITY,
+                0,
+                counts_u32((self.drive_max_speed_mps / count).ceil()),
+                4,
+            ),
+            (
+                od::FOLLOWING_ERROR_WINDOW,
+                0,
+                counts_u32((self.following_window_m / count).ceil()),
+                4,
+            ),
+            (
+                od::FOLLOWING_ERROR_TIMEOUT,
+                0,
+                u32::from(self.following_timeout_ms),
+                2,
+            ),
+            (od::MAX_TORQUE, 0, u32::from(self.max_torque_permille), 2),
+        ]
     }
 
     /// Metres per encoder count.
@@ -272,6 +374,27 @@ pub enum CanOpenError {
         /// Travel maximum, m.
         max_m: f64,
     },
+    /// A safety setting of a drive (one of its own limits, its watchdog)
+    /// reads back other than written (a drive that clamps a value to its own
+    /// range, or ignores it): the start is refused, the drives are never
+    /// enabled.
+    #[error(
+        "node {node}: {name} {index:#06x}:{sub} reads {read} after writing {written}; the drive does not hold the configured value: not enabling the drives"
+    )]
+    LimitMismatch {
+        /// Node id.
+        node: u8,
+        /// Index.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// The object's name.
+        name: &'static str,
+        /// The value written (signed for 0x607D), drive units.
+        written: i64,
+        /// The value read back.
+        read: i64,
+    },
     /// A fault that a reset cannot clear now (a drive still lost).
     #[error("axis {axis}: fault {code:#06x} persists")]
     FaultPersists {
@@ -289,9 +412,10 @@ impl Error for CanOpenError {
             Self::SdoTimeout { .. } | Self::NoBootUp { .. } | Self::NotOperational { .. } => {
                 ErrorKind::Timeout
             }
-            Self::SdoAbort { .. } | Self::WrongMode { .. } | Self::FaultPersists { .. } => {
-                ErrorKind::DeviceFault
-            }
+            Self::SdoAbort { .. }
+            | Self::WrongMode { .. }
+            | Self::FaultPersists { .. }
+            | Self::LimitMismatch { .. } => ErrorKind::DeviceFault,
             Self::Bus { .. } | Self::Transmit { .. } | Self::Open { .. } => ErrorKind::Disconnected,
             Self::InvalidState { .. } => ErrorKind::InvalidState,
             Self::Clock => ErrorKind::Other,

@@ -8,11 +8,33 @@
 //! interpolator EXTRAPOLATES at the last set-point velocity (the worst case a
 //! real drive's interpolator may do: a host that stops sending leaves the axis
 //! moving until the drive's own watchdog acts; the extrapolation speed is
-//! clamped to the speed limit). A set point further than the
-//! following window (default [`FOLLOWING_WINDOW_M`]) from the actual position is a following error (EMCY
-//! 0x8611, Fault).
-//! Quick stop, halt, disable and fault reaction brake at the acceleration
-//! limit (the planner's `brake`) and hold.
+//! clamped to the speed limit).
+//!
+//! The drive's own limits, stored as a real drive stores them (SDO, reset to
+//! their defaults by an NMT reset node) and enforced on every set point,
+//! whatever the host checked:
+//! - software position limits (0x607D sub 1 min, sub 2 max, counts; default
+//!   none): a target beyond them is CLAMPED at the limit, and status word
+//!   bit 11 (internal limit active, [`STATUS_INTERNAL_LIMIT`]) is set while
+//!   it is;
+//! - max profile velocity (0x607F, counts/s; default none): a set point
+//!   implying a higher speed since the last SYNC is approached at that speed
+//!   (bit 11 set while limited); the axis then lags its set point;
+//! - following error window and time out (0x6065 counts, default
+//!   [`FOLLOWING_WINDOW_M`] or the spec's; 0x6066 ms, default 0): the actual
+//!   position farther than the window from the (clamped) set point for the
+//!   time out or longer is a following error (EMCY 0x8611, Fault); a set
+//!   point that jumps farther than the window from the previous one is one
+//!   at once;
+//! - quick stop deceleration (0x6085, counts/s^2; default the spec's
+//!   acceleration limit): the ramp of every quick stop (the control word's,
+//!   the watchdog's) and of the fault reaction (0x605E = 2, slow down on the
+//!   quick stop ramp);
+//! - max torque (0x6072, per mille of the rated torque; default 1000):
+//!   stored and read back only (this model has no load, so no torque).
+//!
+//! Halt and disable brake at the acceleration limit (the planner's `brake`)
+//! and hold.
 //!
 //! Watchdog: with the host's heartbeat configured in 0x1016, a heartbeat older
 //! than the consumer time sends EMCY 0x8130 and acts as 0x6007 says (1 fault,
@@ -34,15 +56,15 @@
 use super::frame::{
     COB_EMCY, COB_HEARTBEAT, COB_NMT, COB_RPDO1, COB_SDO_RX, COB_SDO_TX, COB_SYNC, COB_TPDO1,
     Cia402State, EMCY_FOLLOWING_ERROR, EMCY_HEARTBEAT, Emcy, MODE_CSP, RawFrame, SDO_ABORT_COMMAND,
-    SDO_ABORT_NO_OBJECT, SDO_ABORT_RANGE, SDO_ABORT_STATE, STATUS_REFERENCED, STATUS_REMOTE, Sdo,
-    control, heartbeat, mapping, nmt, od,
+    SDO_ABORT_NO_OBJECT, SDO_ABORT_RANGE, SDO_ABORT_STATE, STATUS_INTERNAL_LIMIT,
+    STATUS_REFERENCED, STATUS_REMOTE, Sdo, control, heartbeat, mapping, nmt, od,
 };
 use crate::motion::{AxisPlan, AxisState, Limits};
 use embedded_can::nb::Can;
 
-/// A set point further than this from the drive's actual position is a
-/// following error, m (a real drive's 0x6065 following error window; wide
-/// enough for a host that runs a few ms late, small beside any real jump).
+/// The default following error window of the simulated drive (0x6065 at
+/// power-on), m: wide enough for a host that runs a few ms late, small beside
+/// any real jump. The host writes its own (`CanOpenConfig::following_window_m`).
 pub const FOLLOWING_WINDOW_M: f64 = 0.002;
 
 /// A fault of a simulated drive at a time of its clock, ns.
@@ -121,9 +143,9 @@ pub struct SimDriveSpec {
     pub max_accel_mps2: f64,
     /// Position at power-on, m.
     pub start_m: f64,
-    /// A set point further than this from the actual position is a
-    /// following error, m ([`FOLLOWING_WINDOW_M`] unless a test on a
-    /// non-real-time host needs more).
+    /// The following error window at power-on and after a reset node
+    /// (0x6065's default), m ([`FOLLOWING_WINDOW_M`] unless a test on a
+    /// non-real-time host needs more); a host that writes 0x6065 replaces it.
     pub following_window_m: f64,
 }
 
@@ -194,6 +216,49 @@ pub struct SimCia402Drive {
     heartbeat_lost: bool,
     /// TPDOs still to hold back (a busy bus: late past their SYNC's window).
     tpdos_to_skip: u32,
+    /// The drive's own limits (0x6085, 0x607D, 0x607F, 0x6065, 0x6066, 0x6072).
+    own: OwnLimits,
+    /// The last set point followed (clamped), m; `None` after a brake or an
+    /// enable (the next one is compared with the actual position).
+    last_target_m: Option<f64>,
+    /// Since when the actual position is beyond the following window, ns.
+    following_since_ns: Option<u64>,
+    /// Status word bit 11: a set point clamped or speed-limited now.
+    internal_limit: bool,
+    /// The time of the last SYNC taken in Operation enabled, ns.
+    last_sync_ns: Option<u64>,
+    /// Test hook: a write of (index, sub) stores this value instead.
+    store_instead: Option<(u16, u8, u32)>,
+}
+
+/// The drive's own limits as stored in its object dictionary (drive units:
+/// counts, counts/s, counts/s^2, ms, per mille).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct OwnLimits {
+    quick_stop_decel: u32,
+    position_min: i32,
+    position_max: i32,
+    max_velocity: u32,
+    following_window: u32,
+    following_timeout_ms: u16,
+    max_torque: u16,
+}
+
+impl OwnLimits {
+    /// The defaults at power-on and after an NMT reset node.
+    fn defaults(spec: &SimDriveSpec) -> Self {
+        let count = spec.lead_m / f64::from(spec.counts_per_turn.max(1));
+        // Saturating float-to-int conversions.
+        Self {
+            quick_stop_decel: ((spec.max_accel_mps2 / count).round() as u32).max(1),
+            position_min: i32::MIN,
+            position_max: i32::MAX,
+            max_velocity: u32::MAX,
+            following_window: (spec.following_window_m / count).ceil() as u32,
+            following_timeout_ms: 0,
+            max_torque: 1000,
+        }
+    }
 }
 
 impl SimCia402Drive {
@@ -233,7 +298,44 @@ impl SimCia402Drive {
             scheduled: Vec::new(),
             heartbeat_lost: false,
             tpdos_to_skip: 0,
+            own: OwnLimits::defaults(&spec),
+            last_target_m: None,
+            following_since_ns: None,
+            internal_limit: false,
+            last_sync_ns: None,
+            store_instead: None,
         }
+    }
+
+    /// Test hook: from now on a write of `(index, sub)` stores `value`
+    /// instead of what was written (and answers as if it had taken it), as a
+    /// drive that clamps a value to its own range or ignores it.
+    pub fn store_instead(&mut self, index: u16, sub: u8, value: u32) {
+        self.store_instead = Some((index, sub, value));
+    }
+
+    /// The quick stop deceleration in force (0x6085), m/s^2.
+    pub fn quick_stop_decel_mps2(&self) -> f64 {
+        f64::from(self.own.quick_stop_decel) * self.m_per_count()
+    }
+
+    /// The software position limits in force (0x607D), m.
+    pub fn position_limits_m(&self) -> (f64, f64) {
+        let c = self.m_per_count();
+        (
+            f64::from(self.own.position_min) * c,
+            f64::from(self.own.position_max) * c,
+        )
+    }
+
+    /// The speed limit in force (0x607F), m/s.
+    pub fn max_velocity_mps(&self) -> f64 {
+        f64::from(self.own.max_velocity) * self.m_per_count()
+    }
+
+    /// Whether status word bit 11 (internal limit active) is set.
+    pub fn internal_limit(&self) -> bool {
+        self.internal_limit
     }
 
     /// The node id.
@@ -341,10 +443,20 @@ impl SimCia402Drive {
 
     fn axis_state(&self, now_ns: u64) -> AxisState {
         match self.motion {
-            Motion::Follow { x_m, v_mps, at_ns } => AxisState {
-                x_m: x_m + v_mps * crate::convert::ns_to_s(now_ns.saturating_sub(at_ns)),
-                v_mps,
-            },
+            Motion::Follow { x_m, v_mps, at_ns } => {
+                let x = x_m + v_mps * crate::convert::ns_to_s(now_ns.saturating_sub(at_ns));
+                // The interpolator never extrapolates past a software
+                // position limit (from within them).
+                let (lo, hi) = self.position_limits_m();
+                if (lo..=hi).contains(&x_m) && !(lo..=hi).contains(&x) {
+                    AxisState {
+                        x_m: x.clamp(lo, hi),
+                        v_mps: 0.0,
+                    }
+                } else {
+                    AxisState { x_m: x, v_mps }
+                }
+            }
             Motion::Plan(plan) => plan.at(now_ns),
         }
     }
@@ -364,12 +476,35 @@ impl SimCia402Drive {
         if self.referenced {
             sw |= STATUS_REFERENCED;
         }
+        if self.internal_limit {
+            sw |= STATUS_INTERNAL_LIMIT;
+        }
         sw
     }
 
+    /// Halt and disable: braked at the acceleration limit.
     fn brake(&mut self, now_ns: u64) {
         let s = self.axis_state(now_ns);
         self.motion = Motion::Plan(AxisPlan::brake(now_ns, s, self.limits));
+        self.stop_following();
+    }
+
+    /// Quick stop and fault reaction: braked at the quick stop deceleration
+    /// (0x6085).
+    fn brake_quick(&mut self, now_ns: u64) {
+        let s = self.axis_state(now_ns);
+        let limits = Limits {
+            max_speed_mps: self.limits.max_speed_mps,
+            max_accel_mps2: self.quick_stop_decel_mps2(),
+        };
+        self.motion = Motion::Plan(AxisPlan::brake(now_ns, s, limits));
+        self.stop_following();
+    }
+
+    fn stop_following(&mut self) {
+        self.last_target_m = None;
+        self.following_since_ns = None;
+        self.internal_limit = false;
     }
 
     fn send(&self, out: &mut Vec<RawFrame>, cob: u16, data: &[u8]) {
@@ -387,7 +522,7 @@ impl SimCia402Drive {
     }
 
     fn enter_fault(&mut self, code: u16, now_ns: u64, out: &mut Vec<RawFrame>) {
-        self.brake(now_ns);
+        self.brake_quick(now_ns);
         self.state = Cia402State::Fault;
         self.fault_code = code;
         self.emcy(code, 0x01, out);
@@ -479,7 +614,7 @@ impl SimCia402Drive {
         self.emcy(EMCY_HEARTBEAT, 0x11, out);
         match self.abort_option {
             1 if self.state != Cia402State::Fault => {
-                self.brake(now_ns);
+                self.brake_quick(now_ns);
                 self.state = Cia402State::Fault;
                 self.fault_code = EMCY_HEARTBEAT;
             }
@@ -492,7 +627,11 @@ impl SimCia402Drive {
         use Cia402State::*;
         match self.state {
             OperationEnabled => {
-                self.brake(now_ns);
+                if disable {
+                    self.brake(now_ns);
+                } else {
+                    self.brake_quick(now_ns);
+                }
                 self.state = if disable || !(5..=8).contains(&self.quick_stop_option) {
                     SwitchOnDisabled
                 } else {
@@ -517,6 +656,7 @@ impl SimCia402Drive {
                 self.abort_option = 1;
                 self.quick_stop_option = 2;
                 self.controlword = 0;
+                self.own = OwnLimits::defaults(&self.spec);
                 if !self.fault_persists {
                     self.fault_code = 0;
                 } else {
@@ -585,34 +725,66 @@ impl SimCia402Drive {
         }
     }
 
-    /// CSP: the new set point, with the following check.
+    /// CSP: the new set point, within the drive's own limits (clamped at
+    /// the software position limits, approached at most at the max profile
+    /// velocity), with the following checks (see the module doc).
     fn follow(&mut self, now_ns: u64, out: &mut Vec<RawFrame>) {
+        let previous_sync_ns = self.last_sync_ns.replace(now_ns);
         if self.mode != MODE_CSP || self.controlword & control::HALT != 0 {
             return;
         }
-        let target_m = f64::from(self.target_counts) * self.m_per_count();
+        let count = self.m_per_count();
+        let raw = self.target_counts;
+        let clamped = raw.clamp(
+            self.own.position_min,
+            self.own.position_max.max(self.own.position_min),
+        );
+        let target_m = f64::from(clamped) * count;
+        let window_m = f64::from(self.own.following_window) * count;
         let actual_m = self.axis_state(now_ns).x_m;
-        if (target_m - actual_m).abs() > self.spec.following_window_m {
+        // A set point that jumps beyond the window: a following error at once.
+        let reference_m = self.last_target_m.unwrap_or(actual_m);
+        if (target_m - reference_m).abs() > window_m {
             self.enter_fault(EMCY_FOLLOWING_ERROR, now_ns, out);
             return;
         }
+        self.last_target_m = Some(target_m);
+        // Where the drive's demand was at the last SYNC, and how long ago.
+        let (from_m, from_ns, v_before) = match self.motion {
+            Motion::Follow { x_m, v_mps, at_ns } => (x_m, at_ns, v_mps),
+            Motion::Plan(_) => (actual_m, previous_sync_ns.unwrap_or(now_ns), 0.0),
+        };
+        let dt_s = crate::convert::ns_to_s(now_ns.saturating_sub(from_ns));
+        let reach_m = f64::from(self.own.max_velocity) * count * dt_s;
+        let step_m = target_m - from_m;
+        let speed_limited = step_m.abs() > reach_m + 1e-12;
+        let x_m = if speed_limited {
+            from_m + reach_m.copysign(step_m)
+        } else {
+            target_m
+        };
+        self.internal_limit = clamped != raw || speed_limited;
         let v_max = self.spec.max_speed_mps;
-        let v_mps = match self.motion {
-            Motion::Follow { x_m, v_mps, at_ns } => {
-                let dt_s = crate::convert::ns_to_s(now_ns.saturating_sub(at_ns));
-                if dt_s > 0.0 {
-                    ((target_m - x_m) / dt_s).clamp(-v_max, v_max)
-                } else {
-                    v_mps
-                }
-            }
-            Motion::Plan(_) => 0.0,
+        let v_mps = if dt_s > 0.0 {
+            ((x_m - from_m) / dt_s).clamp(-v_max, v_max)
+        } else {
+            v_before
         };
         self.motion = Motion::Follow {
-            x_m: target_m,
+            x_m,
             v_mps,
             at_ns: now_ns,
         };
+        // The actual position against the set point, over the time out.
+        if (target_m - x_m).abs() > window_m {
+            let since = *self.following_since_ns.get_or_insert(now_ns);
+            let timeout_ns = u64::from(self.own.following_timeout_ms) * 1_000_000;
+            if now_ns.saturating_sub(since) >= timeout_ns {
+                self.enter_fault(EMCY_FOLLOWING_ERROR, now_ns, out);
+            }
+        } else {
+            self.following_since_ns = None;
+        }
     }
 
     /// Applies a control word; true when it enabled operation.
@@ -666,6 +838,8 @@ impl SimCia402Drive {
                 v_mps: 0.0,
                 at_ns: now_ns,
             };
+            self.stop_following();
+            self.last_sync_ns = Some(now_ns);
         }
         if next == OperationEnabled && halt_rising {
             self.brake(now_ns);
@@ -771,13 +945,42 @@ impl SimCia402Drive {
             }
             (od::POSITION_ACTUAL, 0) => (self.counts(now_ns) as u32, 4),
             (od::TARGET_POSITION, 0) => (self.target_counts as u32, 4),
+            (od::QUICK_STOP_DECELERATION, 0) => (self.own.quick_stop_decel, 4),
+            (od::SOFTWARE_POSITION_LIMIT, 0) => (2, 1),
+            (od::SOFTWARE_POSITION_LIMIT, 1) => (self.own.position_min as u32, 4),
+            (od::SOFTWARE_POSITION_LIMIT, 2) => (self.own.position_max as u32, 4),
+            (od::MAX_PROFILE_VELOCITY, 0) => (self.own.max_velocity, 4),
+            (od::FOLLOWING_ERROR_WINDOW, 0) => (self.own.following_window, 4),
+            (od::FOLLOWING_ERROR_TIMEOUT, 0) => (u32::from(self.own.following_timeout_ms), 2),
+            (od::MAX_TORQUE, 0) => (u32::from(self.own.max_torque), 2),
             _ => return Err(SDO_ABORT_NO_OBJECT),
         })
     }
 
     fn write_object(&mut self, index: u16, sub: u8, value: u32) -> Result<(), u32> {
         let pre_op = self.nmt_state == heartbeat::PRE_OPERATIONAL;
+        let value = match self.store_instead {
+            Some((i, s, v)) if i == index && s == sub => v,
+            _ => value,
+        };
         match (index, sub) {
+            (od::QUICK_STOP_DECELERATION, 0) => {
+                if value == 0 {
+                    return Err(SDO_ABORT_RANGE);
+                }
+                self.own.quick_stop_decel = value;
+            }
+            (od::SOFTWARE_POSITION_LIMIT, 1) => self.own.position_min = value as i32,
+            (od::SOFTWARE_POSITION_LIMIT, 2) => self.own.position_max = value as i32,
+            (od::MAX_PROFILE_VELOCITY, 0) => self.own.max_velocity = value,
+            (od::FOLLOWING_ERROR_WINDOW, 0) => self.own.following_window = value,
+            (od::FOLLOWING_ERROR_TIMEOUT, 0) => {
+                self.own.following_timeout_ms =
+                    u16::try_from(value).map_err(|_| SDO_ABORT_RANGE)?;
+            }
+            (od::MAX_TORQUE, 0) => {
+                self.own.max_torque = u16::try_from(value).map_err(|_| SDO_ABORT_RANGE)?;
+            }
             (od::CONSUMER_HEARTBEAT, 1) => {
                 self.consumer = value;
                 self.host_heartbeat_ns = None;

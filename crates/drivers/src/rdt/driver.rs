@@ -22,7 +22,7 @@
 
 use super::codec::{CodecError, RESPONSE_LEN, Request, Response};
 use super::handoff::{Latest, Ring};
-use super::{Flavour, RdtConfig, RdtError, RdtStats};
+use super::{Flavour, RdtConfig, RdtError, RdtStats, SilenceCause};
 use crate::sensor::Drained;
 use crate::{Clock, ForceSensor, MonotonicClock, SensorStatus, Vec3, WrenchSample};
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, UdpSocket};
@@ -91,9 +91,68 @@ struct Shared {
     silent: AtomicBool,
     /// Host time of the last accepted packet (or of the first start), ns.
     last_received_ns: AtomicU64,
+    /// What the receive thread last rejected since the last accepted
+    /// packet ([`Reject`] encoded; 0: nothing).
+    last_reject: AtomicU64,
     /// The settings sent again on each restart (`UNSET`: none).
     filter_code: AtomicU32,
     rate_period_ms: AtomicU32,
+}
+
+/// What the receive thread rejected, as one atomic word: the code in the
+/// low byte, the detail (a length, an OS error number) above.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Reject {
+    WrongLength(usize),
+    Duplicate,
+    Late,
+    Socket(std::io::ErrorKind),
+    Clock,
+}
+
+/// The socket errors a silence can name by kind (others: `Other`).
+const SOCKET_KINDS: [std::io::ErrorKind; 6] = [
+    std::io::ErrorKind::Other,
+    std::io::ErrorKind::ConnectionRefused,
+    std::io::ErrorKind::ConnectionReset,
+    std::io::ErrorKind::PermissionDenied,
+    std::io::ErrorKind::AddrNotAvailable,
+    std::io::ErrorKind::NotConnected,
+];
+
+impl Reject {
+    fn encode(self) -> u64 {
+        match self {
+            Self::WrongLength(n) => 1 | ((n.min(0xFFFF) as u64) << 8),
+            Self::Duplicate => 2,
+            Self::Late => 3,
+            Self::Socket(kind) => {
+                let code = SOCKET_KINDS.iter().position(|k| *k == kind).unwrap_or(0);
+                4 | ((code as u64) << 8)
+            }
+            Self::Clock => 5,
+        }
+    }
+
+    /// The cause of a silence from the encoded word (0: nothing rejected).
+    fn cause(word: u64) -> SilenceCause {
+        let detail = word >> 8;
+        match word & 0xFF {
+            1 => SilenceCause::WrongLength {
+                got: usize::try_from(detail).unwrap_or(usize::MAX),
+            },
+            2 => SilenceCause::Duplicates,
+            3 => SilenceCause::Late,
+            4 => SilenceCause::Socket {
+                kind: usize::try_from(detail)
+                    .ok()
+                    .and_then(|i| SOCKET_KINDS.get(i).copied())
+                    .unwrap_or(std::io::ErrorKind::Other),
+            },
+            5 => SilenceCause::Clock,
+            _ => SilenceCause::NothingReceived,
+        }
+    }
 }
 
 /// Clears `alive` when the receive thread ends, however it ends.
@@ -152,6 +211,7 @@ impl RdtSensor {
             alive: AtomicBool::new(true),
             silent: AtomicBool::new(false),
             last_received_ns: AtomicU64::new(0),
+            last_reject: AtomicU64::new(0),
             filter_code: AtomicU32::new(config.filter.map_or(UNSET, super::Filter::code)),
             rate_period_ms: AtomicU32::new(config.rate_hz.map_or(UNSET, |hz| 1000 / hz.max(1))),
         });
@@ -274,6 +334,8 @@ impl RdtSensor {
         RdtError::Silent {
             last_received_ns: self.shared.last_received_ns.load(Ordering::Relaxed),
             limit_ns: self.config.silence_limit_ns,
+            cause: Reject::cause(self.shared.last_reject.load(Ordering::Relaxed)),
+            address: self.config.address,
         }
     }
 
@@ -459,17 +521,21 @@ impl Receiver {
                 Ok(n) => match host_now_ns(&self.clock) {
                     Ok(now_ns) => self.handle(buf.get(..n).unwrap_or(&[]), now_ns),
                     // No time to stamp it with: dropped and counted.
-                    Err(_) => bump(&self.shared.counters.clock_errors, 1),
+                    Err(_) => {
+                        bump(&self.shared.counters.clock_errors, 1);
+                        self.reject(Reject::Clock);
+                    }
                 },
                 Err(e)
                     if matches!(
                         e.kind(),
                         std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
                     ) => {}
-                Err(_) => {
+                Err(e) => {
                     // ICMP port unreachable and the like: counted, and a
                     // pause so that a failing socket does not spin.
                     bump(&self.shared.counters.io_errors, 1);
+                    self.reject(Reject::Socket(e.kind()));
                     std::thread::sleep(Duration::from_nanos(MIN_RECV_TIMEOUT_NS));
                 }
             }
@@ -479,18 +545,32 @@ impl Receiver {
         }
     }
 
+    /// Notes what was rejected (the cause of a silence, if one follows).
+    fn reject(&self, what: Reject) {
+        self.shared
+            .last_reject
+            .store(what.encode(), Ordering::Relaxed);
+    }
+
     fn handle(&mut self, bytes: &[u8], now_ns: u64) {
         let c = &self.shared.counters;
         let response = match Response::decode(bytes) {
             Ok(r) => r,
             Err(CodecError::WrongLength { .. } | CodecError::BadHeader { .. }) => {
                 bump(&c.malformed, 1);
+                self.reject(Reject::WrongLength(bytes.len()));
                 return;
             }
         };
         match judge(self.last, &response) {
-            Verdict::Duplicate => return bump(&c.duplicates, 1),
-            Verdict::Late => return bump(&c.reordered, 1),
+            Verdict::Duplicate => {
+                self.reject(Reject::Duplicate);
+                return bump(&c.duplicates, 1);
+            }
+            Verdict::Late => {
+                self.reject(Reject::Late);
+                return bump(&c.reordered, 1);
+            }
             Verdict::Resync => bump(&c.resyncs, 1),
             Verdict::Accept { lost } => bump(&c.lost, u64::from(lost)),
         }
@@ -514,6 +594,7 @@ impl Receiver {
         self.shared
             .last_received_ns
             .store(now_ns, Ordering::Relaxed);
+        self.shared.last_reject.store(0, Ordering::Relaxed);
         self.shared.silent.store(false, Ordering::Release);
     }
 
@@ -530,7 +611,12 @@ impl Receiver {
             self.last = None;
             match send_start(&self.socket, &self.shared) {
                 Ok(()) => bump(&self.shared.counters.restarts, 1),
-                Err(_) => bump(&self.shared.counters.io_errors, 1),
+                Err(e) => {
+                    bump(&self.shared.counters.io_errors, 1);
+                    if let RdtError::Io { kind, .. } = e {
+                        self.reject(Reject::Socket(kind));
+                    }
+                }
             }
         }
     }

@@ -203,6 +203,77 @@ pub struct RdtStats {
     pub clock_errors: u64,
 }
 
+/// Why a sensor is silent: the last thing the receive thread saw since the
+/// last accepted packet. (A sequence gap is never a cause: a packet after a
+/// gap is accepted, the gap counted in [`RdtStats::lost`] and judged by the
+/// loop's counter check.)
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum SilenceCause {
+    /// Nothing arrived from the sensor's address: the device is off,
+    /// unplugged, not streaming, or streaming to another host. The socket is
+    /// connected to the sensor's address, so datagrams from any other
+    /// address (a sensor configured at another address, another device) are
+    /// never received: they look like this too.
+    NothingReceived,
+    /// Only datagrams of the wrong length came (`got` bytes, not 36): a
+    /// short or long packet, not an RDT response.
+    WrongLength {
+        /// The last one's length, bytes.
+        got: usize,
+    },
+    /// Only repeats of the last accepted sample came (same RDT sequence, or
+    /// same sample counter).
+    Duplicates,
+    /// Only packets behind the last accepted one came (late, reordered).
+    Late,
+    /// The socket reported an error (`ConnectionRefused`: an ICMP port
+    /// unreachable, the sensor's port is closed).
+    Socket {
+        /// The error's kind.
+        kind: std::io::ErrorKind,
+    },
+    /// Packets came, but the host's clock could not be read to stamp them.
+    Clock,
+}
+
+impl SilenceCause {
+    /// The cause in a few words (static: for the loop's log, no allocation).
+    pub fn short(&self) -> &'static str {
+        match self {
+            Self::NothingReceived => "sensor silent: nothing received from its address",
+            Self::WrongLength { .. } => "sensor silent: only datagrams of the wrong length",
+            Self::Duplicates => "sensor silent: only duplicate packets",
+            Self::Late => "sensor silent: only late packets",
+            Self::Socket { .. } => "sensor silent: socket error",
+            Self::Clock => "sensor silent: the clock cannot be read to stamp packets",
+        }
+    }
+
+    /// The cause in a sentence, with the sensor's address.
+    pub fn text(&self, address: &SocketAddr) -> String {
+        match self {
+            Self::NothingReceived => format!(
+                "nothing received from {address} (off, unplugged, not streaming, or streaming to another host; datagrams from other addresses are not received)"
+            ),
+            Self::WrongLength { got } => format!(
+                "only datagrams of the wrong length from {address} (the last {got} bytes, not {})",
+                codec::RESPONSE_LEN
+            ),
+            Self::Duplicates => format!(
+                "only duplicates of the last sample from {address} (same RDT sequence or counter)"
+            ),
+            Self::Late => format!("only late packets from {address} (behind the last sample)"),
+            Self::Socket { kind } => {
+                format!("socket error ({kind}) receiving from {address}")
+            }
+            Self::Clock => {
+                "packets came, but the monotonic clock cannot be read to stamp them".to_owned()
+            }
+        }
+    }
+}
+
 /// An error of the RDT driver.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -232,13 +303,20 @@ pub enum RdtError {
         kind: std::io::ErrorKind,
     },
     /// No packet accepted for longer than the silence limit.
-    #[error("sensor silent: last sample received at {last_received_ns} ns, limit {limit_ns} ns")]
+    #[error(
+        "sensor silent: no sample accepted for more than {limit_ns} ns (last at {last_received_ns} ns): {}",
+        cause.text(address)
+    )]
     Silent {
         /// Host time of the last accepted packet (or of the first start
         /// request, when none came), ns.
         last_received_ns: u64,
         /// The configured limit, ns.
         limit_ns: u64,
+        /// Why: what the receive thread last saw since then.
+        cause: SilenceCause,
+        /// The sensor's address.
+        address: SocketAddr,
     },
     /// `wait` saw no new sample within its timeout.
     #[error("no sample within {timeout_ns} ns")]
@@ -255,6 +333,18 @@ pub enum RdtError {
 }
 
 impl crate::Error for RdtError {
+    fn cause(&self) -> &'static str {
+        match self {
+            Self::Silent { cause, .. } => cause.short(),
+            Self::ReceiverGone => "the RDT receive thread is gone",
+            Self::Timeout { .. } => "no sample within the wait",
+            Self::Io { .. } => "socket error",
+            Self::Clock => "the monotonic clock cannot be read",
+            Self::InvalidConfig { .. } => "invalid configuration",
+            Self::Unsupported { .. } => "not supported by this sensor",
+        }
+    }
+
     fn kind(&self) -> ErrorKind {
         match self {
             Self::InvalidConfig { .. } => ErrorKind::InvalidArgument,
