@@ -98,6 +98,17 @@ pub enum RecorderError {
     WriterPanicked,
 }
 
+impl RecorderError {
+    /// The OS error behind a write error (e.g. ENOSPC, a full disk).
+    pub fn os_error(&self) -> Option<i32> {
+        match self {
+            RecorderError::Write { source, .. } => source.os_error(),
+            RecorderError::Spawn(e) => e.raw_os_error(),
+            _ => None,
+        }
+    }
+}
+
 /// The loop's side: push messages, read the drop count.
 ///
 /// Dropping it without [`Recorder::stop`] lets the writer thread drain the
