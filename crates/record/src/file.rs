@@ -742,12 +742,17 @@ impl RotatingWriter {
     /// written so far survives a power loss.
     pub fn sync(&mut self) -> Result<(), WriteError> {
         if let Some(file) = &mut self.current {
-            file.writer.flush().map_err(|source| WriteError::mcap(file.path.clone(), source))?;
+            file.writer
+                .flush()
+                .map_err(|source| WriteError::mcap(file.path.clone(), source))?;
             file.sync()?;
             // The scene's file is not synced (it is drawn from the recording
             // and can be drawn again); its chunk goes to the kernel.
             if let Some(scene) = &mut file.scene {
-                scene.writer.flush().map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
+                scene
+                    .writer
+                    .flush()
+                    .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
             }
         }
         Ok(())
@@ -795,7 +800,10 @@ impl RotatingWriter {
             source,
         })?;
         if let Some(mut scene) = file.scene.take() {
-            scene.writer.finish().map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
+            scene
+                .writer
+                .finish()
+                .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
             let inner = scene.writer.into_inner();
             let file = inner.into_inner().map_err(|e| WriteError::Io {
                 path: scene.path.clone(),

@@ -256,7 +256,15 @@ impl Sink for LiveRecorder {
     fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
         // A stop request, or a writer that failed (a full disk): the
         // recording ends here and the manager closes it (and says why).
-        if self.switch.take_stop() || self.active.as_ref().is_some_and(Recorder::failed) {
+        if let Some(rec) = self.active.as_ref().filter(|r| r.failed()) {
+            // Published from this cycle on (the manager's close confirms it).
+            self.switch.failure.store(
+                sar_msgs::wire::recording_code::failed(rec.os_error()),
+                Ordering::Relaxed,
+            );
+            self.release();
+        }
+        if self.switch.take_stop() {
             self.release();
         }
         if self.active.is_none()
@@ -467,7 +475,9 @@ pub fn check_directory(directory: &Path, bytes_per_minute: u64) -> Result<(), St
     let mut vfs: libc::statvfs = unsafe { std::mem::zeroed() };
     if unsafe { libc::statvfs(c.as_ptr(), &mut vfs) } != 0 {
         let e = std::io::Error::last_os_error();
-        return Err(format!("{shown}: cannot read the file system's free space: {e}"));
+        return Err(format!(
+            "{shown}: cannot read the file system's free space: {e}"
+        ));
     }
     if vfs.f_flag & libc::ST_RDONLY != 0 {
         return Err(format!(
@@ -512,11 +522,16 @@ fn close(rec: Recorder, first: Option<&Path>) -> (RecordAnswer, u32) {
         }
         Err(e) => {
             let errno = e.os_error().map_or(0, i32::unsigned_abs);
-            let why = format!(
-                "the recording {first} is incomplete: {e}; it stopped there (`sarctl recover` rewrites a file cut short)"
+            tracing::error!(
+                "the recording {first} is incomplete, it stopped at a write error: {e}; \
+                 the loop goes on (`sarctl recover` rewrites a file cut short)"
             );
-            tracing::error!("{why}");
-            (Err(why), errno)
+            // The reply's detail is short (256 bytes): the file and the cause.
+            let cause = match e.os_error() {
+                Some(n) => format!("write error: {}", std::io::Error::from_raw_os_error(n)),
+                None => e.to_string(),
+            };
+            (Err(format!("{first} is incomplete: {cause}")), errno)
         }
     }
 }

@@ -6,8 +6,8 @@
 use clap::{Parser, Subcommand, ValueEnum};
 use sar_estimator::guard::ForceLimits;
 use sar_msgs::wire::{
-    self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name, recording_code,
-    status_name,
+    self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name,
+    recording_code, status_name,
 };
 use sar_shm::{Client, DEFAULT_PREFIX};
 use serde_json::json;
@@ -357,8 +357,10 @@ fn state_line(s: &StateMsg) -> String {
                 ", recording {}, {} dropped",
                 match recording_code::state(s.recording) {
                     recording_code::ON => "on".to_owned(),
-                    recording_code::FAILED =>
-                        format!("FAILED ({}; its file is incomplete)", recording_failure(s.recording)),
+                    recording_code::FAILED => format!(
+                        "FAILED ({}; its file is incomplete)",
+                        recording_failure(s.recording)
+                    ),
                     _ => "off".to_owned(),
                 },
                 s.recorder_drops

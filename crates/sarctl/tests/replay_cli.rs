@@ -287,3 +287,208 @@ fn recover_refuses_to_overwrite_its_input() {
     assert_eq!(v["input_complete"], false, "{v}");
     assert!(dir.join("cut.recovered.mcap").exists());
 }
+
+/// A tmpfs mounted at `dir` (made if missing) with `options`, unmounted on
+/// drop. Needs root (CI runs as root): a test that cannot mount says so.
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(dir: &Path, options: &str) -> Self {
+        std::fs::create_dir_all(dir).unwrap();
+        let out = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", options, "tmpfs"])
+            .arg(dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "this test needs a tmpfs (mount, as root): mount -t tmpfs -o {options} failed: {}",
+            text(&out.stderr)
+        );
+        Self(dir.to_path_buf())
+    }
+    fn remount(&self, options: &str) {
+        let out = Command::new("mount")
+            .args(["-o", &format!("remount,{options}")])
+            .arg(&self.0)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "remount: {}", text(&out.stderr));
+    }
+    /// Bytes in use.
+    fn used(&self) -> u64 {
+        let out = Command::new("df")
+            .args(["-B1", "--output=used"])
+            .arg(&self.0)
+            .output()
+            .unwrap();
+        text(&out.stdout)
+            .lines()
+            .nth(1)
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// Issue 25, finding 5: a recording on a file system that is read-only or
+/// too small is refused at `record start` (saying why, with the space a
+/// minute needs and the space free); one that fills up stops at the write
+/// error, which the status and the daemon's log name at once ("No space
+/// left on device"); `record stop` then says the file is incomplete and
+/// exits non-zero, never "written to"; the guard and the loop go on
+/// unaffected (recording is not a safety function); the cut file is
+/// recovered and replays.
+#[test]
+fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomplete() {
+    let dir = common::scratch("replay_cli_full_disk");
+    let rec_dir = dir.join("rec");
+    let config = dir.join("sim.toml");
+    let toml = sar_config::DEFAULT_TOML.replace(
+        "directory = \"recordings\"",
+        &format!("directory = {:?}", rec_dir.display().to_string()),
+    );
+    std::fs::write(&config, toml).unwrap();
+    let fs = Tmpfs::mount(&rec_dir, "ro,size=256m");
+    let log = dir.join("sard.log");
+    let prefix = format!("sar-full-{}", std::process::id());
+    let daemon = Daemon(
+        Command::new(&*SARD)
+            .args(["--sim", "--config"])
+            .arg(&config)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .unwrap(),
+    );
+    let start = Instant::now();
+    while !sarctl(&prefix, &["status"]).status.success() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "sard did not come up"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Read-only: refused, saying so.
+    let out = sarctl(&prefix, &["record", "start"]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stderr).contains("read-only file system"),
+        "{}",
+        text(&out.stderr)
+    );
+    // Too small for a minute of recording: refused with both figures.
+    drop(fs);
+    let fs = Tmpfs::mount(&rec_dir, "size=2m");
+    let out = sarctl(&prefix, &["record", "start"]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("too little space")
+            && e.contains("MB free")
+            && e.contains("a minute of recording needs"),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1, "{e}");
+    // Room enough at the start, then the disk fills.
+    drop(fs);
+    let fs = Tmpfs::mount(&rec_dir, "size=256m");
+    let out = sarctl(&prefix, &["record", "start"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    // The simulator's automatic first reset: the guard is Ok from then on.
+    let start = Instant::now();
+    while status_json(&prefix)["guard"] != "ok" {
+        assert!(start.elapsed() < Duration::from_secs(20), "never ok");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let file = text(&out.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("file: "))
+        .and_then(|l| l.split(' ').next())
+        .map(PathBuf::from)
+        .unwrap();
+    let before = status_json(&prefix);
+    assert_eq!(before["recording"], true, "{before}");
+    fs.remount(&format!("size={}", fs.used() + 64 * 1024));
+    let start = Instant::now();
+    let failed = loop {
+        let s = status_json(&prefix);
+        if s["recording"] == false {
+            break s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "still recording: {s}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let why = failed["recording_failed"]
+        .as_str()
+        .unwrap_or_default()
+        .to_owned();
+    assert!(why.contains("No space left on device"), "{failed}");
+    // In the log at once, before any stop.
+    let logged = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        logged.contains("No space left on device") && logged.contains("incomplete"),
+        "{logged}"
+    );
+    let out = sarctl(&prefix, &["status"]);
+    assert!(
+        text(&out.stdout).contains("recording FAILED"),
+        "{}",
+        text(&out.stdout)
+    );
+    // Not a safety function: the guard and the loop went on as before.
+    assert_eq!(failed["guard"], before["guard"], "{failed}");
+    assert_eq!(failed["quick_stops"], before["quick_stops"], "{failed}");
+    assert!(failed["cycle"].as_u64() > before["cycle"].as_u64());
+    let later = status_json(&prefix);
+    assert!(later["cycle"].as_u64() > failed["cycle"].as_u64());
+    assert_eq!(later["guard"], before["guard"]);
+    // Stop: the file is incomplete, never "written to".
+    let out = sarctl(&prefix, &["record", "stop"]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("incomplete") && e.contains("No space left on device"),
+        "{e}"
+    );
+    assert!(
+        !text(&out.stdout).contains("written to"),
+        "{}",
+        text(&out.stdout)
+    );
+    daemon.stop();
+    // The cut file: recovered, then replayed (exit 0).
+    let recovered = dir.join("recovered.mcap");
+    let out = Command::new(SARCTL)
+        .arg("recover")
+        .arg(&file)
+        .arg("--output")
+        .arg(&recovered)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    drop(fs);
+    let out = Command::new(SARCTL)
+        .arg("replay")
+        .arg("--input")
+        .arg(&recovered)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{} {}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+}
