@@ -492,3 +492,242 @@ fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomple
         text(&out.stderr)
     );
 }
+
+/// The chunks of an MCAP file (offset, record length with its prefix), by
+/// walking its records.
+fn chunks(bytes: &[u8]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut pos = 8;
+    while pos + 9 <= bytes.len() {
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        match bytes[pos] {
+            0x06 => out.push((pos, len + 9)),
+            0x0F => break,
+            _ => {}
+        }
+        pos += 9 + len;
+    }
+    out
+}
+
+/// Runs `sarctl args`, killed after 10 s (a tool blocked on a FIFO).
+fn sarctl_bounded(args: &[&std::ffi::OsStr]) -> (Output, Duration) {
+    let start = Instant::now();
+    let mut child = Command::new(SARCTL)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(10) {
+            let _ = child.kill();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    (child.wait_with_output().unwrap(), start.elapsed())
+}
+
+/// Issue 25, finding 6: every tool exits non-zero when it did not do all it
+/// was asked. A corrupt chunk in the middle: `replay` passes over it, reads
+/// the rest and names the gap (where, how many bytes, the cycles lost),
+/// exit non-zero; `recover` keeps the good chunks after it. Cut files:
+/// "truncated at byte N" (not "carries no configuration"), exit non-zero;
+/// `recover` of a file with no complete chunk exits non-zero; `export
+/// --rosbag2` refuses a file cut inside its summary. A FIFO or a device is
+/// refused at once by every tool that reads a file; a read error is named.
+#[test]
+fn bad_files_exit_non_zero_and_say_what_was_not_done() {
+    let dir = common::scratch("replay_cli_bad_files");
+    let bytes = std::fs::read(fixtures().join("fault_daemon.mcap")).unwrap();
+    let all = chunks(&bytes);
+    assert!(all.len() > 10, "{} chunks", all.len());
+    let os = |p: &Path| p.as_os_str().to_owned();
+    // One corrupt chunk in the middle (its compressed data).
+    let (at, len) = all[all.len() / 2];
+    let mut corrupt = bytes.clone();
+    for b in &mut corrupt[at + len / 2..at + len / 2 + 16] {
+        *b ^= 0x5a;
+    }
+    let corrupt_path = dir.join("corrupt.mcap");
+    std::fs::write(&corrupt_path, &corrupt).unwrap();
+    let config = fixtures().join("config.toml");
+    let out = sarctl(
+        "unused",
+        &[
+            "replay",
+            "--config",
+            config.to_str().unwrap(),
+            "--format",
+            "json",
+            "--input",
+            corrupt_path.to_str().unwrap(),
+        ],
+    );
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stderr).contains(&format!("at byte {at}")),
+        "{}",
+        text(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let gap = &v["gaps"][0];
+    assert_eq!(gap["offset"], at as u64, "{v}");
+    assert_eq!(gap["bytes"], len as u64, "{v}");
+    let lost = gap["cycles_lost"].as_u64().unwrap();
+    let not_replayed = gap["cycles_not_replayed"].as_u64().unwrap();
+    assert!(lost > 0 && not_replayed > 0, "{v}");
+    // Every cycle of the file is accounted for: the chunks after the gap
+    // were read.
+    assert_eq!(
+        v["cycles"].as_u64().unwrap() + lost + not_replayed,
+        3000,
+        "{v}"
+    );
+    // Recover keeps the good chunks after it.
+    let cut_at_gap = dir.join("cut_at_gap.mcap");
+    std::fs::write(&cut_at_gap, &bytes[..at]).unwrap();
+    let recover_json = |input: &Path, output: &Path| {
+        let (out, _) = sarctl_bounded(&[
+            "recover".as_ref(),
+            "--format".as_ref(),
+            "json".as_ref(),
+            input.as_os_str(),
+            "--output".as_ref(),
+            output.as_os_str(),
+        ]);
+        (
+            out.status.success(),
+            text(&out.stderr),
+            serde_json::from_slice::<serde_json::Value>(&out.stdout).ok(),
+        )
+    };
+    let (ok, e, before_gap) = recover_json(&cut_at_gap, &dir.join("r1.mcap"));
+    assert!(ok, "{e}");
+    let (ok, e, past_gap) = recover_json(&corrupt_path, &dir.join("r2.mcap"));
+    assert!(ok, "{e}");
+    let (before_gap, past_gap) = (before_gap.unwrap(), past_gap.unwrap());
+    assert!(
+        past_gap["messages"].as_u64().unwrap() > before_gap["messages"].as_u64().unwrap() * 3 / 2,
+        "{before_gap} {past_gap}"
+    );
+    assert!(
+        past_gap["skipped"][0]
+            .as_str()
+            .unwrap()
+            .contains(&format!("at byte {at}")),
+        "{past_gap}"
+    );
+    // Cut files: truncated, at which byte; never "no configuration".
+    let (first_chunk, _) = all[0];
+    for cut in [8, first_chunk / 2, first_chunk + 100, at + len / 2] {
+        let path = dir.join(format!("cut{cut}.mcap"));
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        // (The fixture carries no configuration: the last cut, whose
+        // start is whole, is given one.)
+        let mut args: Vec<&std::ffi::OsStr> =
+            vec!["replay".as_ref(), "--input".as_ref(), path.as_os_str()];
+        if cut > first_chunk + 100 {
+            args.extend([
+                <&std::ffi::OsStr>::from("--config".as_ref()),
+                config.as_os_str(),
+            ]);
+        }
+        let (out, _) = sarctl_bounded(&args);
+        let e = text(&out.stderr);
+        assert!(!out.status.success(), "cut {cut}: {}", text(&out.stdout));
+        assert!(e.contains("truncated at byte"), "cut {cut}: {e}");
+        assert!(!e.contains("carries no configuration"), "cut {cut}: {e}");
+        // Nothing to recover before the first complete chunk.
+        if cut < first_chunk + 100 {
+            let output = dir.join(format!("cut{cut}.recovered.mcap"));
+            let (ok, e, _) = recover_json(&path, &output);
+            assert!(!ok && e.contains("recovered nothing"), "cut {cut}: {e}");
+            assert!(!output.exists(), "cut {cut}");
+        }
+    }
+    // Cut inside the summary (the data section whole): export refuses it.
+    let (summary_cut, _) = (bytes.len() - 100, ());
+    let path = dir.join("summary_cut.mcap");
+    std::fs::write(&path, &bytes[..summary_cut]).unwrap();
+    let (out, _) = sarctl_bounded(&[
+        "export".as_ref(),
+        "--rosbag2".as_ref(),
+        dir.join("bag").as_os_str(),
+        path.as_os_str(),
+    ]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stderr).contains("sarctl recover"),
+        "{}",
+        text(&out.stderr)
+    );
+    // A FIFO and a device: refused at once by every tool that reads a file.
+    let fifo = dir.join("fifo.mcap");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let bag2 = dir.join("bag2");
+    let runs: [Vec<&std::ffi::OsStr>; 5] = [
+        vec!["replay".as_ref(), "--input".as_ref(), fifo.as_os_str()],
+        vec![
+            "replay".as_ref(),
+            "--config".as_ref(),
+            config.as_os_str(),
+            "--input".as_ref(),
+            fifo.as_os_str(),
+        ],
+        vec!["recover".as_ref(), fifo.as_os_str()],
+        vec![
+            "export".as_ref(),
+            "--rosbag2".as_ref(),
+            bag2.as_os_str(),
+            fifo.as_os_str(),
+        ],
+        vec![
+            "identify".as_ref(),
+            "--config".as_ref(),
+            config.as_os_str(),
+            "--input".as_ref(),
+            fifo.as_os_str(),
+        ],
+    ];
+    for args in &runs {
+        let (out, took) = sarctl_bounded(args);
+        assert!(took < Duration::from_secs(5), "{args:?} took {took:?}");
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            text(&out.stderr).contains("not a regular file (a FIFO)"),
+            "{args:?}: {}",
+            text(&out.stderr)
+        );
+    }
+    let (out, _) = sarctl_bounded(&[
+        "recover".as_ref(),
+        "/dev/zero".as_ref(),
+        "--output".as_ref(),
+        dir.join("z.mcap").as_os_str(),
+    ]);
+    assert!(
+        text(&out.stderr).contains("a character device"),
+        "{}",
+        text(&out.stderr)
+    );
+    // A read error is named as such (reading /proc/self/mem at 0: EIO).
+    let (out, _) = sarctl_bounded(&[
+        "replay".as_ref(),
+        "--input".as_ref(),
+        "/proc/self/mem".as_ref(),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("read error: Input/output error"),
+        "{}",
+        text(&out.stderr)
+    );
+}
