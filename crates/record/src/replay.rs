@@ -1094,7 +1094,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                 r.gap(Gap {
                     file: path.clone(),
                     skipped,
-                    last_cycle_before: (r.report.cycles > 0).then_some(r.last_cycle),
+                    last_cycle_before: (r.anchored || r.report.cycles > 0).then_some(r.last_cycle),
                     first_cycle_after: None,
                     cycles_not_replayed: 0,
                     resumed_after_cycle: None,
