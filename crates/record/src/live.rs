@@ -489,6 +489,8 @@ pub fn check_directory(directory: &Path, bytes_per_minute: u64) -> Result<(), St
         let e = std::io::Error::last_os_error();
         return Err(format!("{shown}: not writable by the daemon: {e}"));
     }
+    // (u64 on 64-bit Linux, narrower elsewhere.)
+    #[allow(clippy::useless_conversion)]
     let free = u64::from(vfs.f_bavail).saturating_mul(u64::from(vfs.f_frsize));
     if free < bytes_per_minute {
         return Err(format!(

@@ -430,6 +430,10 @@ fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomple
         );
         std::thread::sleep(Duration::from_millis(50));
     };
+    println!(
+        "the recording failed {:?} after the disk was filled",
+        start.elapsed()
+    );
     let why = failed["recording_failed"]
         .as_str()
         .unwrap_or_default()
@@ -543,7 +547,6 @@ fn bad_files_exit_non_zero_and_say_what_was_not_done() {
     let bytes = std::fs::read(fixtures().join("fault_daemon.mcap")).unwrap();
     let all = chunks(&bytes);
     assert!(all.len() > 10, "{} chunks", all.len());
-    let os = |p: &Path| p.as_os_str().to_owned();
     // One corrupt chunk in the middle (its compressed data).
     let (at, len) = all[all.len() / 2];
     let mut corrupt = bytes.clone();
@@ -629,10 +632,7 @@ fn bad_files_exit_non_zero_and_say_what_was_not_done() {
         let mut args: Vec<&std::ffi::OsStr> =
             vec!["replay".as_ref(), "--input".as_ref(), path.as_os_str()];
         if cut > first_chunk + 100 {
-            args.extend([
-                <&std::ffi::OsStr>::from("--config".as_ref()),
-                config.as_os_str(),
-            ]);
+            args.extend(["--config".as_ref(), config.as_os_str()]);
         }
         let (out, _) = sarctl_bounded(&args);
         let e = text(&out.stderr);
@@ -699,6 +699,7 @@ fn bad_files_exit_non_zero_and_say_what_was_not_done() {
     ];
     for args in &runs {
         let (out, took) = sarctl_bounded(args);
+        println!("{args:?}: refused in {took:?}");
         assert!(took < Duration::from_secs(5), "{args:?} took {took:?}");
         assert!(!out.status.success(), "{args:?}");
         assert!(
