@@ -365,6 +365,9 @@ struct Replayer {
     snapshot: Box<sar_snapshot::Snapshot>,
     /// Before `from_s`: cycles are stepped, nothing is written or compared.
     quiet: bool,
+    /// Whether a cycle was stepped since the state became known (the next
+    /// one must follow it).
+    stepped: bool,
 }
 
 fn arr(v: &Vec3) -> [f64; 3] {
@@ -408,6 +411,7 @@ impl Replayer {
         let needs_messages = self.needs_messages();
         let out = self.step.step(input);
         self.last_cycle = input.cycle;
+        self.stepped = true;
         if self.quiet {
             // Before the range: only the state matters.
             return Ok(());
@@ -544,6 +548,7 @@ impl Replayer {
         if !self.anchored {
             self.step.restore(&m.data).map_err(failed)?;
             self.anchored = true;
+            self.stepped = true;
             if let Some(gap) = self.report.gaps.last_mut() {
                 // Replay goes on after a corrupt part.
                 gap.resumed_after_cycle = Some(m.after_cycle);
@@ -614,14 +619,18 @@ impl Replayer {
 
     /// A corrupt part passed over: what is pending on either side of it is
     /// not compared (its counterpart was in it), and the state is unknown
-    /// until the next snapshot.
-    fn gap(&mut self, gap: Gap) {
-        if self.comparing {
+    /// until the next snapshot. `match_first`: what was read before it is
+    /// matched first (a corrupt chunk, found before any message after it
+    /// was read; not for cycles found missing, whose recorded outputs read
+    /// may already be the later cycles').
+    fn gap(&mut self, gap: Gap, match_first: bool) {
+        if self.comparing && match_first {
             self.match_pending();
         }
         self.replayed.clear();
         self.recorded.clear();
         self.anchored = false;
+        self.stepped = false;
         self.report.gaps.push(gap);
     }
 
@@ -928,6 +937,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
         anchored: from_first_cycle == Some(true) || !with_snapshots,
         snapshot: Box::new(sar_snapshot::Snapshot::new()),
         quiet: false,
+        stepped: false,
     };
     let range_ns = |s: Option<f64>| s.map(|v| (v * 1e9).round() as u64);
     let (from_ns, to_ns) = (range_ns(options.from_s), range_ns(options.to_s));
@@ -1039,6 +1049,28 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
                             return Err(ReplayError::EndOfRange);
                         }
                         r.quiet = from_ns.is_some_and(|from| t < from);
+                        // Cycles missing from the recording (dropped by its
+                        // recorder, or a corrupt chunk `sarctl recover`
+                        // passed over): a gap, as a corrupt chunk is.
+                        if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
+                            r.gap(Gap {
+                                file: path.clone(),
+                                skipped: super::reader::Skipped {
+                                    offset: 0,
+                                    bytes: 0,
+                                    log_time_ns: None,
+                                    why: format!(
+                                        "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
+                                        r.last_cycle + 1,
+                                        m.cycle - 1
+                                    ),
+                                },
+                                last_cycle_before: Some(r.last_cycle),
+                                first_cycle_after: None,
+                                cycles_not_replayed: 0,
+                                resumed_after_cycle: None,
+                            }, false);
+                        }
                         if let Some(gap) = r.report.gaps.last_mut() {
                             gap.first_cycle_after.get_or_insert(m.cycle);
                             if !r.anchored {
@@ -1091,14 +1123,18 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             if let Ok(Some(e)) = &result
                 && let Some(skipped) = reader.skip_bad_record(e)
             {
-                r.gap(Gap {
-                    file: path.clone(),
-                    skipped,
-                    last_cycle_before: (r.anchored || r.report.cycles > 0).then_some(r.last_cycle),
-                    first_cycle_after: None,
-                    cycles_not_replayed: 0,
-                    resumed_after_cycle: None,
-                });
+                r.gap(
+                    Gap {
+                        file: path.clone(),
+                        skipped,
+                        last_cycle_before: (r.anchored || r.report.cycles > 0)
+                            .then_some(r.last_cycle),
+                        first_cycle_after: None,
+                        cycles_not_replayed: 0,
+                        resumed_after_cycle: None,
+                    },
+                    true,
+                );
                 continue;
             }
             break result;

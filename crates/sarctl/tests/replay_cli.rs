@@ -622,6 +622,24 @@ fn bad_files_exit_non_zero_and_say_what_was_not_done() {
             .contains(&format!("at byte {at}")),
         "{past_gap}"
     );
+    // The recovered file replays to the same end: the cycles missing are
+    // named, never "differs".
+    let out = sarctl(
+        "unused",
+        &[
+            "replay",
+            "--config",
+            config.to_str().unwrap(),
+            "--input",
+            dir.join("r2.mcap").to_str().unwrap(),
+        ],
+    );
+    assert!(!out.status.success());
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("are missing from the recording") && !e.contains("differs"),
+        "{e}"
+    );
     // Cut files: truncated, at which byte; never "no configuration".
     let (first_chunk, _) = all[0];
     for cut in [8, first_chunk / 2, first_chunk + 100, at + len / 2] {

@@ -182,7 +182,7 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
     // Never exit 0 over a part not replayed.
     if let Some(g) = r.gaps.first() {
         return Err(format!(
-            "{shown}: {} corrupt part(s) passed over, not replayed; the first: {}",
+            "{shown}: {} part(s) not replayed (corrupt, or cycles missing); the first: {}",
             r.gaps.len(),
             gap_line(g)
         ));
@@ -225,6 +225,27 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
 
 /// One line for a corrupt part passed over: where, how much, what was lost.
 fn gap_line(g: &sar_record::replay::Gap) -> String {
+    if g.skipped.bytes == 0 {
+        // Cycles missing between two good chunks (no corrupt bytes here).
+        return format!(
+            "{}{}{}",
+            g.skipped.why,
+            g.file
+                .as_ref()
+                .map(|f| format!(" in {}", f.display()))
+                .unwrap_or_default(),
+            match g.resumed_after_cycle {
+                Some(c) => format!(
+                    "; {} cycles after them not replayed, replay went on from the snapshot after cycle {c}",
+                    g.cycles_not_replayed
+                ),
+                None => format!(
+                    "; the {} cycles read after them were not replayed (no snapshot after them)",
+                    g.cycles_not_replayed
+                ),
+            }
+        );
+    }
     format!(
         "corrupt part passed over: {} bytes at byte {}{}{} ({}); {}{}",
         g.skipped.bytes,
