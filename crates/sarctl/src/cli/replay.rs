@@ -86,7 +86,13 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
         Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
         None => {
             let source = sar_record::replay::recorded_config(first)
-                .map_err(|e| format!("{}: {e}", first.display()))?
+                .map_err(|e| match e {
+                    // These name the file themselves.
+                    sar_record::ReadError::Io { .. } | sar_record::ReadError::NotRegular { .. } => {
+                        e.to_string()
+                    }
+                    e => format!("{}: {e}", first.display()),
+                })?
                 .ok_or_else(|| {
                     format!(
                         "{}: the recording carries no configuration (not written by sard, or by an older one): give --config FILE",
