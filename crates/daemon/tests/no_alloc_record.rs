@@ -126,7 +126,7 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
     assert_eq!(switch.dropped(), 0);
     // The recording sink keeps its counters in the loop's health, where the
     // publisher after it reads them.
-    assert!(health.recording);
+    assert_eq!(health.recording, sar_msgs::wire::recording_code::ON);
     assert_eq!(health.recorder_drops, 0);
     publisher.release();
     manager.finish();

@@ -600,3 +600,46 @@ fn snapshot_chunks_are_joined_and_an_incomplete_snapshot_is_left_out() {
     assert_eq!((got[0].stamp_ns, got[0].after_cycle), (20, 9));
     assert_eq!(got[0].data, b);
 }
+
+/// Issue 25, finding 5: a file system too small for the recording (a tmpfs
+/// of 12 KiB: the messages fit in the writer's buffer, the disk does not)
+/// ends in a write error naming ENOSPC ("No space left on device", the OS
+/// error kept; the mcap crate's own text, "I/O error from writing, or
+/// reading a compression stream", named nothing), at the latest when the
+/// last bytes are flushed at the close; never a report of a file written.
+#[test]
+fn a_full_file_system_is_a_write_error_naming_enospc_never_a_file_written() {
+    let dir = common::scratch("full_file_system");
+    let mount = dir.join("tiny");
+    std::fs::create_dir_all(&mount).unwrap();
+    let out = std::process::Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=12k", "tmpfs"])
+        .arg(&mount)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "this test needs a tmpfs (mount, as root): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    struct Unmount(std::path::PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("umount").arg(&self.0).status();
+        }
+    }
+    let _unmount = Unmount(mount.clone());
+    let mut rec = Recorder::start(config(&mount, 16 * 1024)).unwrap();
+    for k in 0..300 {
+        for m in common::cycle_messages(k) {
+            rec.push(m);
+        }
+    }
+    match rec.stop() {
+        Err(e @ RecorderError::Write { .. }) => {
+            assert_eq!(e.os_error(), Some(28), "{e}");
+            assert!(e.to_string().contains("No space left on device"), "{e}");
+        }
+        other => panic!("a full file system, yet {other:?}"),
+    }
+}

@@ -243,6 +243,53 @@ fn a_rotated_recording_started_mid_run_replays_bit_for_bit_file_by_file_and_as_a
         replay_files(&backwards, &options).unwrap_err(),
         ReplayError::Chain { .. }
     ));
+    // A corrupt chunk in a file (issue 25): passed over and reported, the
+    // replay goes on from the next snapshot, bit for bit; every cycle of
+    // the file is replayed, lost in the chunk, or waiting for the snapshot.
+    let whole = replay_file(&files[1], &options).unwrap();
+    let mut bytes = read_file(&files[1]).unwrap();
+    let (mut pos, mut chunks) = (8usize, Vec::new());
+    while pos + 9 <= bytes.len() && bytes[pos] != 0x0F {
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        if bytes[pos] == 0x06 {
+            chunks.push((pos, len + 9));
+        }
+        pos += 9 + len;
+    }
+    assert!(chunks.len() >= 3, "{chunks:?}");
+    let (at, len) = chunks[chunks.len() / 2];
+    for b in &mut bytes[at + len / 2..at + len / 2 + 8] {
+        *b ^= 0xa5;
+    }
+    let corrupt = files[1].with_extension("corrupt.mcap");
+    std::fs::write(&corrupt, &bytes).unwrap();
+    let r = replay_file(&corrupt, &options).unwrap();
+    assert_eq!(r.first_difference, None);
+    assert_eq!(r.gaps.len(), 1, "{:?}", r.gaps);
+    let g = &r.gaps[0];
+    assert_eq!((g.skipped.offset, g.skipped.bytes), (at as u64, len as u64));
+    assert!(g.resumed_after_cycle.is_some(), "{g:?}");
+    assert!(
+        g.cycles_lost().is_some_and(|n| n > 0) && g.cycles_not_replayed > 0,
+        "{g:?}"
+    );
+    assert_eq!(
+        r.cycles + g.cycles_lost().unwrap() + g.cycles_not_replayed,
+        whole.cycles,
+        "{g:?}"
+    );
+    assert!(r.snapshots_compared >= 1);
+    // Recovered (the chunks after it kept), it replays the same: the cycles
+    // missing are a gap, replay goes on from the next snapshot.
+    let recovered = files[1].with_extension("recovered.mcap");
+    let rec = sar_record::recover(&corrupt, &recovered).unwrap();
+    assert_eq!(rec.skipped.len(), 1, "{rec:?}");
+    let r2 = replay_file(&recovered, &options).unwrap();
+    assert_eq!(r2.first_difference, None);
+    assert_eq!(r2.gaps.len(), 1, "{:?}", r2.gaps);
+    assert_eq!(r2.gaps[0].resumed_after_cycle, g.resumed_after_cycle);
+    assert_eq!(r2.gaps[0].cycles_lost(), g.cycles_lost());
+    assert_eq!(r2.cycles, r.cycles);
 }
 
 /// Copies `input` to `output` with `change` applied to every snapshot's

@@ -29,8 +29,8 @@ pub struct StateParts<'a> {
     pub quick_stops: u64,
     /// Messages the recorder dropped so far.
     pub recorder_drops: u64,
-    /// Whether a recording runs.
-    pub recording: bool,
+    /// The recording's state (`sar_msgs::wire::recording_code`).
+    pub recording: u64,
     /// The simulator's truth, when simulated.
     pub truth: Option<SimTruth>,
 }
@@ -86,7 +86,7 @@ pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
             overruns: p.stats.overruns,
             quick_stops: p.quick_stops,
             recorder_drops: p.recorder_drops,
-            recording: u64::from(p.recording),
+            recording: p.recording,
             ..StateMsg::default()
         };
         if let Some(pose) = o.pose {

@@ -62,8 +62,9 @@ pub struct SinkHealth {
     /// Messages the recorder dropped so far, over every recording (the
     /// recorder).
     pub recorder_drops: u64,
-    /// Whether a recording runs (the recorder).
-    pub recording: bool,
+    /// The recording's state, `sar_msgs::wire::recording_code` (on, off,
+    /// or failed with its OS error) (the recorder).
+    pub recording: u64,
     /// States the publisher's queue dropped so far (the publisher).
     pub publisher_queue_drops: u64,
 }

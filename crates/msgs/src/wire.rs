@@ -153,7 +153,9 @@ pub struct StateMsg {
     pub publish_errors: u64,
     /// Messages the recorder dropped so far (queue full or disk failed).
     pub recorder_drops: u64,
-    /// 1 while a recording runs, else 0.
+    /// The recording's state ([`recording_code`]): 1 while a recording
+    /// runs, 0 when none does; a failed recording (a write error, e.g. a
+    /// full disk, which stopped it) until the next start.
     pub recording: u64,
     /// The simulator's time of `truth_tip_force_n` (ns from the simulator's
     /// start, the time axis of the scenario file), when `SIM_TRUTH`; else 0.
@@ -313,6 +315,34 @@ pub mod reply_code {
     pub const UNKNOWN_COMMAND: u32 = 100;
     /// The loop's request queue is full.
     pub const BUSY: u32 = 101;
+    /// `record start|stop`: the start was refused, or the recording failed
+    /// (the detail says why).
+    pub const RECORD_FAILED: u32 = 102;
+}
+
+/// The values of [`StateMsg::recording`].
+pub mod recording_code {
+    /// No recording runs (the last one, if any, was closed complete).
+    pub const OFF: u64 = 0;
+    /// A recording runs.
+    pub const ON: u64 = 1;
+    /// The last recording failed (a write error stopped it; its file is
+    /// incomplete); the OS error number (errno, 0: none) is in the upper
+    /// 32 bits.
+    pub const FAILED: u64 = 2;
+
+    /// The code of a recording failed with OS error `errno`.
+    pub const fn failed(errno: u32) -> u64 {
+        FAILED | ((errno as u64) << 32)
+    }
+    /// The state of a code: [`OFF`], [`ON`] or [`FAILED`].
+    pub const fn state(code: u64) -> u64 {
+        code & 0xffff_ffff
+    }
+    /// The OS error of a failed recording's code (0: none named).
+    pub const fn errno(code: u64) -> u32 {
+        (code >> 32) as u32
+    }
 }
 
 /// The reply to a command.
@@ -455,6 +485,7 @@ pub fn status_name(code: u32) -> &'static str {
         }
         reply_code::UNKNOWN_COMMAND => "unknown command",
         reply_code::BUSY => "refused: the daemon's command queue is full",
+        reply_code::RECORD_FAILED => "the recording failed",
         _ => "refused",
     }
 }

@@ -33,8 +33,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 #[non_exhaustive]
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
-    /// The file could not be created, written or synced.
-    #[error("{path}: {source}")]
+    /// The file could not be created, written or synced (a full disk:
+    /// "No space left on device").
+    #[error("{path}: write error: {source}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -67,6 +68,24 @@ pub enum WriteError {
         /// What is wrong.
         why: &'static str,
     },
+}
+
+impl WriteError {
+    /// The MCAP writer's error on `path`: its I/O errors as [`WriteError::Io`]
+    /// (the mcap crate's own text does not name the cause, e.g. a full disk).
+    pub fn mcap(path: PathBuf, source: mcap::McapError) -> Self {
+        match source {
+            mcap::McapError::Io(source) => WriteError::Io { path, source },
+            source => WriteError::Mcap { path, source },
+        }
+    }
+    /// The OS error behind it (ENOSPC for a full disk), if any.
+    pub fn os_error(&self) -> Option<i32> {
+        match self {
+            WriteError::Io { source, .. } => source.raw_os_error(),
+            _ => None,
+        }
+    }
 }
 
 /// The `offered_qos_profiles` metadata of every channel, in the form ROS 2's
@@ -405,7 +424,7 @@ impl RotatingWriter {
         self.next_index += 1;
         let mcap_err = |path: &Path| {
             let path = path.to_path_buf();
-            move |source| WriteError::Mcap { path, source }
+            move |source| WriteError::mcap(path, source)
         };
         let (file, handle, position) =
             CountingFile::create(&path).map_err(|source| WriteError::Io {
@@ -468,10 +487,7 @@ impl RotatingWriter {
     #[cfg(feature = "scene")]
     fn open_scene(&self, path: &Path) -> Result<SceneFile, WriteError> {
         let path = scene_path(path);
-        let mcap_err = |source| WriteError::Mcap {
-            path: path.clone(),
-            source,
-        };
+        let mcap_err = |source| WriteError::mcap(path.clone(), source);
         let file = File::create(&path).map_err(|source| WriteError::Io {
             path: path.clone(),
             source,
@@ -608,10 +624,7 @@ impl RotatingWriter {
         };
         file.writer
             .write_to_known_channel(&header, &self.buf)
-            .map_err(|source| WriteError::Mcap {
-                path: file.path.clone(),
-                source,
-            })?;
+            .map_err(|source| WriteError::mcap(file.path.clone(), source))?;
         if let Some(s) = self.sequence.get_mut(i) {
             *s = s.wrapping_add(1);
         }
@@ -711,10 +724,7 @@ impl RotatingWriter {
             };
             writer
                 .write_to_known_channel(&header, bytes)
-                .map_err(|source| WriteError::Mcap {
-                    path: path.clone(),
-                    source,
-                })
+                .map_err(|source| WriteError::mcap(path.clone(), source))
         };
         // Encoding into a Vec does not fail; a scene that did would be
         // skipped, not end the recording.
@@ -732,18 +742,17 @@ impl RotatingWriter {
     /// written so far survives a power loss.
     pub fn sync(&mut self) -> Result<(), WriteError> {
         if let Some(file) = &mut self.current {
-            file.writer.flush().map_err(|source| WriteError::Mcap {
-                path: file.path.clone(),
-                source,
-            })?;
+            file.writer
+                .flush()
+                .map_err(|source| WriteError::mcap(file.path.clone(), source))?;
             file.sync()?;
             // The scene's file is not synced (it is drawn from the recording
             // and can be drawn again); its chunk goes to the kernel.
             if let Some(scene) = &mut file.scene {
-                scene.writer.flush().map_err(|source| WriteError::Mcap {
-                    path: scene.path.clone(),
-                    source,
-                })?;
+                scene
+                    .writer
+                    .flush()
+                    .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
             }
         }
         Ok(())
@@ -765,10 +774,7 @@ impl RotatingWriter {
         };
         self.rotation_due_ns = None;
         let path = file.path.clone();
-        let mcap_err = |source| WriteError::Mcap {
-            path: path.clone(),
-            source,
-        };
+        let mcap_err = |source| WriteError::mcap(path.clone(), source);
         let metadata = mcap::records::Metadata {
             name: "sar_recorder".into(),
             metadata: BTreeMap::from([
@@ -780,16 +786,24 @@ impl RotatingWriter {
         };
         file.writer.write_metadata(&metadata).map_err(mcap_err)?;
         file.writer.finish().map_err(mcap_err)?;
-        drop(file.writer.into_inner());
+        // The buffer's last bytes: an error here (a full disk) is the
+        // file's, never dropped unseen.
+        file.writer
+            .into_inner()
+            .flush()
+            .map_err(|source| WriteError::Io {
+                path: path.clone(),
+                source,
+            })?;
         file.handle.sync_all().map_err(|source| WriteError::Io {
             path: path.clone(),
             source,
         })?;
         if let Some(mut scene) = file.scene.take() {
-            scene.writer.finish().map_err(|source| WriteError::Mcap {
-                path: scene.path.clone(),
-                source,
-            })?;
+            scene
+                .writer
+                .finish()
+                .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
             let inner = scene.writer.into_inner();
             let file = inner.into_inner().map_err(|e| WriteError::Io {
                 path: scene.path.clone(),

@@ -31,7 +31,7 @@ use sar_config::RecordSettings;
 use sar_estimator::cycle::Bias;
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_msgs::msgs::{Outgoing, SnapshotChunk, WrenchStamped};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::thread::JoinHandle;
@@ -41,13 +41,37 @@ const WANT_NONE: u8 = 0;
 const WANT_START: u8 = 1;
 const WANT_STOP: u8 = 2;
 
+/// Bytes a recorded cycle takes at most before compression (measured: about
+/// 1.4 kB with one sensor sample a cycle, about 0.24 kB in the file after
+/// zstd on the simulator): the bound behind the free-space check of a
+/// recording's start.
+pub const RECORD_BYTES_PER_CYCLE_BOUND: u64 = 2048;
+
+/// What a start or stop request came to (the answer `sarctl record
+/// start|stop` prints): the recording's first file, or why it failed.
+pub type RecordAnswer = Result<String, String>;
+
 /// Requests to start or stop recording, and what the loop reports back;
 /// shared by the command server, the loop and the manager thread.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct RecordSwitch {
     want: AtomicU8,
     recording: AtomicBool,
     dropped: AtomicU64,
+    /// `sar_msgs::wire::recording_code::failed(errno)` after a recording
+    /// failed (written by the manager thread, read by the loop), else 0.
+    failure: AtomicU64,
+    /// The loop's period, ns (the free-space check's rate).
+    cycle_period_ns: u64,
+    /// Requests numbered (start and stop), for their answers.
+    tickets: AtomicU64,
+    /// The start request waiting for the manager's answer.
+    start_ticket: AtomicU64,
+    /// The stop request waiting for the manager's answer.
+    stop_ticket: AtomicU64,
+    /// The answer to a request, by its ticket. Locked by the command server
+    /// and the manager thread, never the loop.
+    answer: std::sync::Mutex<Option<(u64, RecordAnswer)>>,
     /// The recordings' directory (set by [`RecordManager::start`]).
     directory: std::sync::OnceLock<PathBuf>,
     /// The name the next recording takes (chosen with the start request).
@@ -58,10 +82,38 @@ pub struct RecordSwitch {
     current: std::sync::Mutex<Option<PathBuf>>,
 }
 
+impl Default for RecordSwitch {
+    /// A 1 kHz loop.
+    fn default() -> Self {
+        Self::new(1_000_000)
+    }
+}
+
 impl RecordSwitch {
-    /// Asks for a recording to start (no effect while one runs).
-    pub fn request_start(&self) {
+    /// The switch of a loop running every `cycle_period_ns`.
+    pub fn new(cycle_period_ns: u64) -> Self {
+        Self {
+            want: AtomicU8::new(WANT_NONE),
+            recording: AtomicBool::new(false),
+            dropped: AtomicU64::new(0),
+            failure: AtomicU64::new(0),
+            cycle_period_ns: cycle_period_ns.max(1),
+            tickets: AtomicU64::new(0),
+            start_ticket: AtomicU64::new(0),
+            stop_ticket: AtomicU64::new(0),
+            answer: std::sync::Mutex::new(None),
+            directory: std::sync::OnceLock::new(),
+            pending_name: std::sync::Mutex::new(None),
+            current: std::sync::Mutex::new(None),
+        }
+    }
+    /// Asks for a recording to start (no effect while one runs): the
+    /// request's ticket, for [`RecordSwitch::answer`].
+    pub fn request_start(&self) -> u64 {
+        let ticket = self.tickets.fetch_add(1, Ordering::AcqRel) + 1;
+        self.start_ticket.store(ticket, Ordering::Release);
         self.want.store(WANT_START, Ordering::Release);
+        ticket
     }
     /// Asks for a recording to start and says where its first file goes:
     /// the new recording's, or the present one's while one runs (then the
@@ -78,6 +130,32 @@ impl RecordSwitch {
         }
         self.request_start();
         Some(path)
+    }
+    /// The manager's answer to request `ticket`, once given (the first
+    /// file, or why the start was refused or the recording failed).
+    pub fn answer(&self, ticket: u64) -> Option<RecordAnswer> {
+        let guard = self.answer.lock().ok()?;
+        match &*guard {
+            Some((t, a)) if *t == ticket => Some(a.clone()),
+            _ => None,
+        }
+    }
+    fn give_answer(&self, ticket: u64, answer: RecordAnswer) {
+        if ticket == 0 {
+            return;
+        }
+        if let Ok(mut a) = self.answer.lock() {
+            *a = Some((ticket, answer));
+        }
+    }
+    /// The state to publish (`StateMsg::recording`): on, off, or failed
+    /// with the OS error (`sar_msgs::wire::recording_code`).
+    pub fn state_code(&self) -> u64 {
+        if self.recording() {
+            sar_msgs::wire::recording_code::ON
+        } else {
+            self.failure.load(Ordering::Relaxed)
+        }
     }
     /// The first file of the present or last recording (`None`: none yet).
     pub fn current_path(&self) -> Option<PathBuf> {
@@ -102,9 +180,13 @@ impl RecordSwitch {
             *c = Some(first_file(directory, name));
         }
     }
-    /// Asks for the recording to stop.
-    pub fn request_stop(&self) {
+    /// Asks for the recording to stop: the request's ticket, for
+    /// [`RecordSwitch::answer`] (given once the file is closed).
+    pub fn request_stop(&self) -> u64 {
+        let ticket = self.tickets.fetch_add(1, Ordering::AcqRel) + 1;
+        self.stop_ticket.store(ticket, Ordering::Release);
         self.want.store(WANT_STOP, Ordering::Release);
+        ticket
     }
     /// Whether the loop records now.
     pub fn recording(&self) -> bool {
@@ -128,6 +210,10 @@ impl RecordSwitch {
         self.want
             .compare_exchange(want, WANT_NONE, Ordering::AcqRel, Ordering::Acquire)
             .is_ok()
+    }
+    /// Bytes a minute of recording needs at most (before compression).
+    pub fn bytes_per_minute(&self) -> u64 {
+        RECORD_BYTES_PER_CYCLE_BOUND.saturating_mul(60_000_000_000 / self.cycle_period_ns)
     }
 }
 
@@ -153,10 +239,12 @@ impl LiveRecorder {
     pub fn release(&mut self) {
         if let Some(rec) = self.active.take() {
             self.dropped_before += rec.dropped();
-            self.switch.recording.store(false, Ordering::Release);
+            // Handed over before the flag falls: the manager that reads
+            // "not recording" finds the recorder to close.
             if let Err(rec) = self.outgoing.push(rec) {
                 drop(rec);
             }
+            self.switch.recording.store(false, Ordering::Release);
         }
     }
 }
@@ -166,6 +254,16 @@ impl LiveRecorder {
 /// friction_force_n`, with every new sensor sample, stamped as the cycle.
 impl Sink for LiveRecorder {
     fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
+        // A stop request, or a writer that failed (a full disk): the
+        // recording ends here and the manager closes it (and says why).
+        if let Some(rec) = self.active.as_ref().filter(|r| r.failed()) {
+            // Published from this cycle on (the manager's close confirms it).
+            self.switch.failure.store(
+                sar_msgs::wire::recording_code::failed(rec.os_error()),
+                Ordering::Relaxed,
+            );
+            self.release();
+        }
         if self.switch.take_stop() {
             self.release();
         }
@@ -217,7 +315,11 @@ impl Sink for LiveRecorder {
         }
         self.switch.dropped.store(dropped, Ordering::Relaxed);
         health.recorder_drops = dropped;
-        health.recording = self.active.is_some();
+        health.recording = if self.active.is_some() {
+            sar_msgs::wire::recording_code::ON
+        } else {
+            self.switch.failure.load(Ordering::Relaxed)
+        };
     }
 }
 
@@ -289,6 +391,7 @@ impl RecordManager {
         let snapshot_period_ns = settings.snapshot_period_ns;
         let _ = switch.directory.set(settings.directory.clone());
         if settings.enabled {
+            check_directory(&settings.directory, switch.bytes_per_minute())?;
             let name = switch.take_name();
             let rec = Recorder::start(recorder_config(&settings, scene, &name, &bias, true))
                 .map_err(|e| {
@@ -350,19 +453,88 @@ impl RecordManager {
     }
 }
 
-fn close(rec: Recorder) {
+/// Megabytes (10^6 bytes), for the messages.
+fn mb(bytes: u64) -> f64 {
+    bytes as f64 / 1e6
+}
+
+/// Whether a recording can start in `directory` (made if missing): it must
+/// be writable and hold at least a minute of recording
+/// (`bytes_per_minute`, the bound before compression). The refusal says
+/// which, with the free space and the need.
+#[allow(unsafe_code)]
+pub fn check_directory(directory: &Path, bytes_per_minute: u64) -> Result<(), String> {
+    use std::os::unix::ffi::OsStrExt;
+    let shown = directory.display();
+    std::fs::create_dir_all(directory)
+        .map_err(|e| format!("{shown}: the recordings' directory cannot be made: {e}"))?;
+    let c = std::ffi::CString::new(directory.as_os_str().as_bytes())
+        .map_err(|_| format!("{shown}: the path holds a NUL byte"))?;
+    // SAFETY: `c` is a valid NUL-terminated path; `vfs` is written by the
+    // call before it is read (zeroed: a plain C struct).
+    let mut vfs: libc::statvfs = unsafe { std::mem::zeroed() };
+    if unsafe { libc::statvfs(c.as_ptr(), &mut vfs) } != 0 {
+        let e = std::io::Error::last_os_error();
+        return Err(format!(
+            "{shown}: cannot read the file system's free space: {e}"
+        ));
+    }
+    if vfs.f_flag & libc::ST_RDONLY != 0 {
+        return Err(format!(
+            "{shown}: read-only file system: a recording cannot be written there"
+        ));
+    }
+    // SAFETY: as above; `access` only reads the path.
+    if unsafe { libc::access(c.as_ptr(), libc::W_OK | libc::X_OK) } != 0 {
+        let e = std::io::Error::last_os_error();
+        return Err(format!("{shown}: not writable by the daemon: {e}"));
+    }
+    // (u64 on 64-bit Linux, narrower elsewhere.)
+    #[allow(clippy::useless_conversion)]
+    let free = u64::from(vfs.f_bavail).saturating_mul(u64::from(vfs.f_frsize));
+    if free < bytes_per_minute {
+        return Err(format!(
+            "{shown}: too little space: {:.1} MB free, a minute of recording needs up to {:.1} MB ({} bytes a cycle before compression)",
+            mb(free),
+            mb(bytes_per_minute),
+            RECORD_BYTES_PER_CYCLE_BOUND
+        ));
+    }
+    Ok(())
+}
+
+/// Closes a recording handed back by the loop: its first file, or why it
+/// is incomplete (logged at once either way), and the OS error behind a
+/// failure (0: none).
+fn close(rec: Recorder, first: Option<&Path>) -> (RecordAnswer, u32) {
+    let first = first.map_or_else(String::new, |p| p.display().to_string());
     match rec.stop() {
-        Ok(r) => tracing::info!(
-            "recording closed: {} messages written, {} dropped, files {}",
-            r.written,
-            r.dropped,
-            r.files
-                .iter()
-                .map(|f| f.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-        Err(e) => tracing::error!("recording failed: {e}"),
+        Ok(r) => {
+            tracing::info!(
+                "recording closed: {} messages written, {} dropped, files {}",
+                r.written,
+                r.dropped,
+                r.files
+                    .iter()
+                    .map(|f| f.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            (Ok(first), 0)
+        }
+        Err(e) => {
+            let errno = e.os_error().map_or(0, i32::unsigned_abs);
+            tracing::error!(
+                "the recording {first} is incomplete, it stopped at a write error: {e}; \
+                 the loop goes on (`sarctl recover` rewrites a file cut short)"
+            );
+            // The reply's detail is short (256 bytes): the file and the cause.
+            let cause = match e.os_error() {
+                Some(n) => format!("write error: {}", std::io::Error::from_raw_os_error(n)),
+                None => e.to_string(),
+            };
+            (Err(format!("{first} is incomplete: {cause}")), errno)
+        }
     }
 }
 
@@ -377,6 +549,8 @@ fn manage(
 ) {
     // The drops the log has told of, and when (at most one line a second).
     let mut told = (0u64, std::time::Instant::now());
+    // What the last recording came to (`None`: none closed yet).
+    let mut last: Option<RecordAnswer> = None;
     loop {
         let dropped = switch.dropped();
         if dropped > told.0 && told.1.elapsed() >= Duration::from_secs(1) {
@@ -388,35 +562,77 @@ fn manage(
             told = (dropped, std::time::Instant::now());
         }
         let stopping = stop.load(Ordering::Acquire);
+        // Read before closing: a stop taken by the loop with the recording
+        // handed back (the flag falls after the hand-over) is answered below.
+        let stop_ticket = switch.stop_ticket.load(Ordering::Acquire);
+        let stop_taken = stop_ticket != 0 && switch.want.load(Ordering::Acquire) != WANT_STOP;
+        let idle = !switch.recording();
         while let Some(rec) = outgoing.pop() {
-            close(rec);
+            let (answer, errno) = close(rec, switch.current_path().as_deref());
+            let code = match &answer {
+                Ok(_) => 0,
+                Err(_) => sar_msgs::wire::recording_code::failed(errno),
+            };
+            switch.failure.store(code, Ordering::Relaxed);
+            last = Some(answer);
+        }
+        if stop_taken && idle {
+            let answer = last.clone().unwrap_or_else(|| Ok(String::new()));
+            switch.give_answer(stop_ticket, answer);
+            let _ = switch.stop_ticket.compare_exchange(
+                stop_ticket,
+                0,
+                Ordering::AcqRel,
+                Ordering::Acquire,
+            );
         }
         if stopping {
             // Never handed to the loop: close it too.
             while let Some(rec) = incoming.pop() {
-                close(rec);
+                let _ = close(rec, switch.current_path().as_deref());
             }
             return;
         }
         // The request is taken first (atomically), then judged.
         if switch.take_start() {
+            let ticket = switch.start_ticket.swap(0, Ordering::AcqRel);
             // The name chosen with the request, taken even when the request
             // has no effect (a recording runs or is being handed over).
             let name = switch.take_name();
-            if !switch.recording() && incoming.is_empty() {
-                match Recorder::start(recorder_config(settings, scene, &name, bias, false)) {
-                    Ok(rec) => {
-                        tracing::info!(
-                            "recording into {}/{name}-*.mcap",
-                            settings.directory.display()
-                        );
-                        switch.set_current(&settings.directory, &name);
-                        let _ = incoming.push(rec);
-                    }
-                    Err(e) => tracing::error!("cannot start recording: {e}"),
-                }
+            let answer = if switch.recording() || !incoming.is_empty() {
+                Ok(switch
+                    .current_path()
+                    .map_or_else(String::new, |p| p.display().to_string()))
+            } else {
+                start_one(settings, scene, bias, switch, incoming, &name)
+            };
+            if let Err(e) = &answer {
+                tracing::error!("cannot start recording: {e}");
             }
+            switch.give_answer(ticket, answer);
         }
         std::thread::sleep(Duration::from_millis(5));
     }
+}
+
+/// Starts recording `name` after checking the directory: its first file.
+fn start_one(
+    settings: &RecordSettings,
+    scene: Option<SceneOptions>,
+    bias: &Bias,
+    switch: &RecordSwitch,
+    incoming: &ArrayQueue<Recorder>,
+    name: &str,
+) -> RecordAnswer {
+    check_directory(&settings.directory, switch.bytes_per_minute())?;
+    let rec = Recorder::start(recorder_config(settings, scene, name, bias, false))
+        .map_err(|e| format!("{}: {e}", settings.directory.display()))?;
+    tracing::info!(
+        "recording into {}/{name}-*.mcap",
+        settings.directory.display()
+    );
+    switch.set_current(&settings.directory, name);
+    switch.failure.store(0, Ordering::Relaxed);
+    let _ = incoming.push(rec);
+    Ok(first_file(&settings.directory, name).display().to_string())
 }

@@ -18,13 +18,23 @@ use std::path::{Path, PathBuf};
 #[non_exhaustive]
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
-    /// The file could not be read.
-    #[error("{path}: {source}")]
+    /// The file could not be opened or read (a read error: the disk, the
+    /// permissions).
+    #[error("{path}: read error: {source}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The cause.
         source: std::io::Error,
+    },
+    /// The path is not a regular file (a FIFO, a device, a directory,
+    /// a socket): refused before it is opened (a FIFO would block).
+    #[error("{path}: not a regular file ({kind}): give a recording's file")]
+    NotRegular {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        kind: &'static str,
     },
     /// The file does not start with the MCAP magic.
     #[error("not an MCAP file (the first {len} bytes are not the MCAP magic)")]
@@ -34,7 +44,7 @@ pub enum ReadError {
     },
     /// The file ends inside a record: everything before `offset` was read.
     #[error(
-        "the file ends inside a record at byte {offset} (opcode {opcode:?}, {needed} bytes needed, {available} available): read up to there"
+        "truncated at byte {offset}: the file ends inside a record (opcode {opcode:?}, {needed} bytes needed, {available} available): read up to there"
     )]
     Truncated {
         /// Offset of the incomplete record: the end of the last complete one.
@@ -48,7 +58,9 @@ pub enum ReadError {
     },
     /// The file ends after a complete record but before the data section's end
     /// (no data-end record, no footer): all of it was read.
-    #[error("the file ends at byte {offset} without a data-end record or footer: read up to there")]
+    #[error(
+        "truncated at byte {offset}: the file ends there without a data-end record or footer: read up to there"
+    )]
     Unfinished {
         /// The file's length.
         offset: u64,
@@ -259,6 +271,22 @@ pub struct McapReader<'a> {
     chunk: Vec<u8>,
     /// The zstd context, made at the first compressed chunk and reused.
     zstd: Option<ZstdContext>,
+    /// The record being read: its offset and length (prefix included),
+    /// once the file holds all of it (a corrupt one can be skipped).
+    current: Option<(u64, u64)>,
+}
+
+/// A corrupt record passed over by [`McapReader::skip_bad_record`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Skipped {
+    /// Its offset in the file.
+    pub offset: u64,
+    /// Its length, prefix included (the bytes skipped).
+    pub bytes: u64,
+    /// The log times of its messages (a chunk's header, when readable), ns.
+    pub log_time_ns: Option<(u64, u64)>,
+    /// Why it was refused.
+    pub why: String,
 }
 
 /// A reused zstd decompression context.
@@ -287,7 +315,7 @@ impl McapReader<'static> {
             path: path.to_path_buf(),
             source,
         };
-        let mut file = std::fs::File::open(path).map_err(io)?;
+        let mut file = open_regular(path)?;
         let len = file.metadata().map_err(io)?.len();
         let mut magic = [0u8; 8];
         let got = (&mut file).take(8).read(&mut magic).map_err(io)?;
@@ -330,7 +358,63 @@ impl<'a> McapReader<'a> {
             complete: false,
             chunk: Vec::new(),
             zstd: None,
+            current: None,
         }
+    }
+
+    /// After an error at a complete but corrupt record (a chunk whose
+    /// compressed data, CRC or content is bad; a record that does not
+    /// parse), passes over it so that the iteration goes on with the
+    /// records after it; `why` is the error's text. `None` when there is
+    /// nothing to pass over: the iteration did not stop at such a record
+    /// (a file cut short ends there: what follows is not in it).
+    pub fn skip_bad_record(&mut self, why: &dyn std::fmt::Display) -> Option<Skipped> {
+        if !self.done || self.complete {
+            return None;
+        }
+        let (offset, bytes) = self.current.take()?;
+        let end = usize::try_from(offset.saturating_add(bytes)).ok()?;
+        if end <= self.pos {
+            return None;
+        }
+        // The chunk header's message times, when they parse.
+        let log_time_ns = self.chunk_times(offset, bytes);
+        self.pos = end;
+        self.done = false;
+        Some(Skipped {
+            offset,
+            bytes,
+            log_time_ns,
+            why: why.to_string(),
+        })
+    }
+
+    /// The message times of the chunk at `offset` (from its header), if
+    /// it is one and they can be read.
+    fn chunk_times(&mut self, offset: u64, bytes: u64) -> Option<(u64, u64)> {
+        const TIMES: usize = RECORD_PREFIX + 16;
+        let head: Vec<u8> = match &mut self.source {
+            Source::Bytes(b) => {
+                let at = usize::try_from(offset).ok()?;
+                b.get(at..at.checked_add(TIMES)?)?.to_vec()
+            }
+            Source::File { file, .. } => {
+                use std::io::{Read, Seek, SeekFrom};
+                let mut head = vec![0u8; TIMES];
+                file.seek(SeekFrom::Start(offset)).ok()?;
+                file.read_exact(&mut head).ok()?;
+                head
+            }
+        };
+        if head.first() != Some(&op::CHUNK) || bytes < TIMES as u64 {
+            return None;
+        }
+        let word = |at: usize| {
+            head.get(at..at + 8)
+                .and_then(|w| <[u8; 8]>::try_from(w).ok())
+                .map(u64::from_le_bytes)
+        };
+        Some((word(RECORD_PREFIX)?, word(RECORD_PREFIX + 8)?))
     }
 
     /// The channels seen so far (all of them once the iteration has ended).
@@ -580,6 +664,7 @@ impl<'a> McapReader<'a> {
         on_msg: &mut F,
     ) -> Result<Result<bool, E>, ReadError> {
         let offset = self.pos as u64;
+        self.current = None;
         if rest.is_empty() {
             return Err(ReadError::Unfinished { offset });
         }
@@ -604,6 +689,8 @@ impl<'a> McapReader<'a> {
                 needed,
                 available,
             })?;
+        // Whole in the file: a corrupt one can be passed over.
+        self.current = Some((offset, needed));
         let corrupt = |source| ReadError::Corrupt {
             offset,
             opcode: op_byte,
@@ -912,12 +999,54 @@ fn decompress(
     Ok(())
 }
 
-/// Reads a whole file into memory.
-pub fn read_file(path: &Path) -> Result<Vec<u8>, ReadError> {
-    std::fs::read(path).map_err(|source| ReadError::Io {
+/// Opens `path` for reading if it is a regular file; anything else (a
+/// FIFO, which would block until a writer comes; a device; a directory) is
+/// refused at once, before it is opened.
+pub fn open_regular(path: &Path) -> Result<std::fs::File, ReadError> {
+    use std::os::unix::fs::FileTypeExt;
+    let io = |source| ReadError::Io {
         path: path.to_path_buf(),
         source,
-    })
+    };
+    let kind = std::fs::metadata(path).map_err(io)?.file_type();
+    let not = |kind| {
+        Err(ReadError::NotRegular {
+            path: path.to_path_buf(),
+            kind,
+        })
+    };
+    if kind.is_fifo() {
+        return not("a FIFO");
+    }
+    if kind.is_char_device() {
+        return not("a character device");
+    }
+    if kind.is_block_device() {
+        return not("a block device");
+    }
+    if kind.is_socket() {
+        return not("a socket");
+    }
+    if kind.is_dir() {
+        return not("a directory");
+    }
+    if !kind.is_file() {
+        return not("not a file");
+    }
+    std::fs::File::open(path).map_err(io)
+}
+
+/// Reads a whole file into memory (a regular file only: [`open_regular`]).
+pub fn read_file(path: &Path) -> Result<Vec<u8>, ReadError> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    open_regular(path)?
+        .read_to_end(&mut bytes)
+        .map_err(|source| ReadError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    Ok(bytes)
 }
 
 /// What [`recover`] did.
@@ -931,6 +1060,8 @@ pub struct RecoverReport {
     pub input_complete: bool,
     /// Where and why the input stopped, when it was cut short.
     pub stopped: Option<ReadError>,
+    /// The corrupt records passed over (the chunks after them are kept).
+    pub skipped: Vec<Skipped>,
 }
 
 /// Why [`recover`] failed.
@@ -1008,6 +1139,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     })?;
     let options = FileOptions::new(".", "recovered").mcap_options();
     let mut stopped = None;
+    let mut skipped: Vec<Skipped> = Vec::new();
     let mut messages = 0u64;
     let mut writer = None;
     let mut file = Some(file);
@@ -1019,10 +1151,17 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
         let msg = match reader.next() {
             None => break,
             Some(Ok(m)) => m,
-            Some(Err(e)) => {
-                stopped = Some(e);
-                break;
-            }
+            Some(Err(e)) => match reader.skip_bad_record(&e) {
+                // A corrupt chunk: the good ones after it are kept.
+                Some(s) => {
+                    skipped.push(s);
+                    continue;
+                }
+                None => {
+                    stopped = Some(e);
+                    break;
+                }
+            },
         };
         let w = match (&mut writer, file.take()) {
             (Some(w), _) => w,
@@ -1082,6 +1221,16 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     if let Some(e) = &stopped {
         info.insert("stopped".to_owned(), e.to_string());
     }
+    if !skipped.is_empty() {
+        info.insert(
+            "skipped".to_owned(),
+            skipped
+                .iter()
+                .map(|s| format!("{} bytes at byte {}: {}", s.bytes, s.offset, s.why))
+                .collect::<Vec<_>>()
+                .join("; "),
+        );
+    }
     w.write_metadata(&mcap::records::Metadata {
         name: "sar_recover".into(),
         metadata: info,
@@ -1096,7 +1245,8 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     Ok(RecoverReport {
         messages,
         channels: reader.channels().len(),
-        input_complete: reader.is_complete(),
+        input_complete: reader.is_complete() && skipped.is_empty(),
         stopped,
+        skipped,
     })
 }

@@ -52,6 +52,8 @@ struct Shared {
     dropped: AtomicU64,
     stop: AtomicBool,
     failed: AtomicBool,
+    /// The OS error of the failure (0: none named), set before `failed`.
+    errno: std::sync::atomic::AtomicU32,
 }
 
 /// What a finished recording wrote.
@@ -96,6 +98,17 @@ pub enum RecorderError {
     /// The writer thread panicked.
     #[error("the writer thread panicked")]
     WriterPanicked,
+}
+
+impl RecorderError {
+    /// The OS error behind a write error (e.g. ENOSPC, a full disk).
+    pub fn os_error(&self) -> Option<i32> {
+        match self {
+            RecorderError::Write { source, .. } => source.os_error(),
+            RecorderError::Spawn(e) => e.raw_os_error(),
+            _ => None,
+        }
+    }
 }
 
 /// The loop's side: push messages, read the drop count.
@@ -195,7 +208,13 @@ impl Recorder {
 
     /// Whether the writer has failed (from then on every message is dropped).
     pub fn failed(&self) -> bool {
-        self.shared.failed.load(Ordering::Relaxed)
+        self.shared.failed.load(Ordering::Acquire)
+    }
+
+    /// The OS error the writer failed with (ENOSPC: a full disk); 0 when
+    /// it has not failed or the failure named none.
+    pub fn os_error(&self) -> u32 {
+        self.shared.errno.load(Ordering::Relaxed)
     }
 
     /// Free slots in the queue now.
@@ -230,7 +249,9 @@ impl PendingWriter {
     }
 
     fn fail(&mut self, source: WriteError) -> RecorderError {
-        self.shared.failed.store(true, Ordering::Relaxed);
+        let errno = source.os_error().map_or(0, i32::unsigned_abs);
+        self.shared.errno.store(errno, Ordering::Relaxed);
+        self.shared.failed.store(true, Ordering::Release);
         RecorderError::Write {
             written: self.files.written(),
             dropped: self.shared.dropped.load(Ordering::Relaxed),

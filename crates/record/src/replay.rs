@@ -217,6 +217,39 @@ pub struct ReplayReport {
     /// Recorded snapshots compared with the replayed step's state (byte for
     /// byte; a difference is reported on `/sar/cycle/snapshot`).
     pub snapshots_compared: u64,
+    /// Corrupt parts passed over (a chunk whose data, CRC or content is
+    /// bad): reading went on after each; the cycles after one are replayed
+    /// again from the next snapshot (their state is unknown before it).
+    pub gaps: Vec<Gap>,
+}
+
+/// A corrupt part of a recording that replay passed over.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Gap {
+    /// The file (replays of files).
+    pub file: Option<PathBuf>,
+    /// Where, and how many bytes (the record passed over).
+    pub skipped: super::reader::Skipped,
+    /// The last cycle read before it.
+    pub last_cycle_before: Option<u64>,
+    /// The first cycle read after it (`None`: none followed).
+    pub first_cycle_after: Option<u64>,
+    /// Cycles read after it but not replayed (no snapshot yet to restore
+    /// the state from).
+    pub cycles_not_replayed: u64,
+    /// The snapshot replay went on from after it (`None`: none came).
+    pub resumed_after_cycle: Option<u64>,
+}
+
+impl Gap {
+    /// Cycles lost in it (by their numbers on either side).
+    pub fn cycles_lost(&self) -> Option<u64> {
+        Some(
+            self.first_cycle_after?
+                .saturating_sub(self.last_cycle_before?)
+                .saturating_sub(1),
+        )
+    }
 }
 
 /// Why a replay could not run.
@@ -332,6 +365,9 @@ struct Replayer {
     snapshot: Box<sar_snapshot::Snapshot>,
     /// Before `from_s`: cycles are stepped, nothing is written or compared.
     quiet: bool,
+    /// Whether a cycle was stepped since the state became known (the next
+    /// one must follow it).
+    stepped: bool,
 }
 
 fn arr(v: &Vec3) -> [f64; 3] {
@@ -375,6 +411,7 @@ impl Replayer {
         let needs_messages = self.needs_messages();
         let out = self.step.step(input);
         self.last_cycle = input.cycle;
+        self.stepped = true;
         if self.quiet {
             // Before the range: only the state matters.
             return Ok(());
@@ -511,6 +548,13 @@ impl Replayer {
         if !self.anchored {
             self.step.restore(&m.data).map_err(failed)?;
             self.anchored = true;
+            self.stepped = true;
+            if let Some(gap) = self.report.gaps.last_mut() {
+                // Replay goes on after a corrupt part.
+                gap.resumed_after_cycle = Some(m.after_cycle);
+                self.last_cycle = m.after_cycle;
+                return self.write_snapshot(m);
+            }
             self.report.from_snapshot = Some(m.after_cycle);
             self.last_cycle = m.after_cycle;
             // Outputs of the skipped cycles recorded after the last one
@@ -538,6 +582,15 @@ impl Replayer {
                 });
             }
         }
+        self.write_snapshot(m)
+    }
+
+    /// The replayed step's snapshot into the output, with `m`'s stamp.
+    fn write_snapshot(&mut self, m: &StateSnapshot) -> Result<(), ReplayError> {
+        let failed = |source| ReplayError::Snapshot {
+            after_cycle: m.after_cycle,
+            source,
+        };
         if self.sink.writer.is_some() && !self.quiet {
             self.step.snapshot(&mut self.snapshot).map_err(failed)?;
             let snapshot = std::mem::take(&mut self.snapshot);
@@ -562,6 +615,23 @@ impl Replayer {
                 .or_default()
                 .push_back(data.to_vec());
         }
+    }
+
+    /// A corrupt part passed over: what is pending on either side of it is
+    /// not compared (its counterpart was in it), and the state is unknown
+    /// until the next snapshot. `match_first`: what was read before it is
+    /// matched first (a corrupt chunk, found before any message after it
+    /// was read; not for cycles found missing, whose recorded outputs read
+    /// may already be the later cycles').
+    fn gap(&mut self, gap: Gap, match_first: bool) {
+        if self.comparing && match_first {
+            self.match_pending();
+        }
+        self.replayed.clear();
+        self.recorded.clear();
+        self.anchored = false;
+        self.stepped = false;
+        self.report.gaps.push(gap);
     }
 
     /// `complete`: the recording was not cut short (a recovered file says
@@ -677,17 +747,22 @@ fn describe(topic: Topic, cycle: u64, replayed: &Outgoing, recorded: &[u8]) -> D
 
 /// The configuration a recording carries (`sar_config` metadata, written by
 /// `sard` since it records its configuration), `None` when it has none.
+/// A file that ends (or is corrupt) before its first message and holds no
+/// configuration is that error (truncated at which byte), not "none".
 pub fn recorded_config(path: &Path) -> Result<Option<sar_config::ConfigSource>, ReadError> {
-    let bytes = super::reader::read_file(path)?;
     // The metadata is written at the start of a file: read up to the first
-    // message to find it.
-    let mut probe = McapReader::new(&bytes)?;
-    let _ = probe.next();
-    Ok(probe
+    // message to find it (streamed: the file is not read whole).
+    let mut probe = McapReader::open(path)?;
+    let first = probe.next();
+    let config = probe
         .metadata()
         .iter()
         .find(|m| m.name == convert::CONFIG_METADATA)
-        .and_then(|m| convert::config_from_metadata(&m.metadata)))
+        .and_then(|m| convert::config_from_metadata(&m.metadata));
+    match (config, first) {
+        (None, Some(Err(e))) => Err(e),
+        (config, _) => Ok(config),
+    }
 }
 
 /// The `sar_replay` bias of a recording (zero when absent).
@@ -841,6 +916,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             from_snapshot: None,
             skipped_cycles: 0,
             snapshots_compared: 0,
+            gaps: Vec::new(),
         },
         replayed: BTreeMap::new(),
         recorded: BTreeMap::new(),
@@ -861,6 +937,7 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
         anchored: from_first_cycle == Some(true) || !with_snapshots,
         snapshot: Box::new(sar_snapshot::Snapshot::new()),
         quiet: false,
+        stepped: false,
     };
     let range_ns = |s: Option<f64>| s.map(|v| (v * 1e9).round() as u64);
     let (from_ns, to_ns) = (range_ns(options.from_s), range_ns(options.to_s));
@@ -906,108 +983,161 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
         let mut reference_channel: Option<u16> = None;
         // The cycle the file must start with (after the previous file's).
         let mut expect_cycle = (i > 0 && r.anchored).then_some(r.last_cycle.saturating_add(1));
-        let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
-                           msg: MessageRef<'_>|
-         -> Result<(), ReplayError> {
-            let id = msg.channel_id;
-            let topic = match topics.get(usize::from(id)) {
-                Some(Some(t)) => *t,
-                _ => {
-                    let channel = channels.get(&id);
-                    let topic = channel.and_then(|c| Topic::from_name(&c.topic));
-                    if let (Some(c), Some(reference)) = (channel, &options.compare)
-                        && &c.topic == reference
-                    {
-                        reference_channel = Some(id);
+        let result = loop {
+            let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
+                               msg: MessageRef<'_>|
+             -> Result<(), ReplayError> {
+                let id = msg.channel_id;
+                let topic = match topics.get(usize::from(id)) {
+                    Some(Some(t)) => *t,
+                    _ => {
+                        let channel = channels.get(&id);
+                        let topic = channel.and_then(|c| Topic::from_name(&c.topic));
+                        if let (Some(c), Some(reference)) = (channel, &options.compare)
+                            && &c.topic == reference
+                        {
+                            reference_channel = Some(id);
+                        }
+                        let at = usize::from(id);
+                        if topics.len() <= at {
+                            topics.resize(at + 1, None);
+                        }
+                        if let Some(slot) = topics.get_mut(at) {
+                            *slot = Some(topic);
+                        }
+                        topic
                     }
-                    let at = usize::from(id);
-                    if topics.len() <= at {
-                        topics.resize(at + 1, None);
-                    }
-                    if let Some(slot) = topics.get_mut(at) {
-                        *slot = Some(topic);
-                    }
-                    topic
+                };
+                let decode_err = |source| ReadError::Decode {
+                    topic: topic.map_or("?", |t| t.name()).to_owned(),
+                    log_time_ns: msg.log_time_ns,
+                    source,
+                };
+                if reference_channel == Some(id) {
+                    let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                    r.references.push((w.stamp_ns, w.force_n));
+                    return Ok(());
                 }
-            };
-            let decode_err = |source| ReadError::Decode {
-                topic: topic.map_or("?", |t| t.name()).to_owned(),
-                log_time_ns: msg.log_time_ns,
-                source,
-            };
-            if reference_channel == Some(id) {
-                let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
-                r.references.push((w.stamp_ns, w.force_n));
-                return Ok(());
-            }
-            match topic {
-                Some(Topic::CycleInput) => {
-                    if !saw_cycle_input {
-                        if inputs_only.started {
-                            return Err(ReplayError::LateCycleInput {
-                                log_time_ns: msg.log_time_ns,
-                                window: INPUT_WINDOW,
+                match topic {
+                    Some(Topic::CycleInput) => {
+                        if !saw_cycle_input {
+                            if inputs_only.started {
+                                return Err(ReplayError::LateCycleInput {
+                                    log_time_ns: msg.log_time_ns,
+                                    window: INPUT_WINDOW,
+                                });
+                            }
+                            saw_cycle_input = true;
+                            inputs_only.discard();
+                        }
+                        let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
+                        if let Some(want) = expect_cycle.take()
+                            && m.cycle != want
+                        {
+                            return Err(ReplayError::Chain {
+                                file: name(),
+                                why: format!(
+                                    "it starts at cycle {}, the previous file ends at cycle {}",
+                                    m.cycle,
+                                    want.saturating_sub(1)
+                                ),
                             });
                         }
-                        saw_cycle_input = true;
-                        inputs_only.discard();
+                        let t0 = *first_stamp_ns.get_or_insert(m.stamp_ns);
+                        let t = m.stamp_ns.saturating_sub(t0);
+                        if to_ns.is_some_and(|to| t > to) {
+                            return Err(ReplayError::EndOfRange);
+                        }
+                        r.quiet = from_ns.is_some_and(|from| t < from);
+                        // Cycles missing from the recording (dropped by its
+                        // recorder, or a corrupt chunk `sarctl recover`
+                        // passed over): a gap, as a corrupt chunk is.
+                        if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
+                            r.gap(Gap {
+                                file: path.clone(),
+                                skipped: super::reader::Skipped {
+                                    offset: 0,
+                                    bytes: 0,
+                                    log_time_ns: None,
+                                    why: format!(
+                                        "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
+                                        r.last_cycle + 1,
+                                        m.cycle - 1
+                                    ),
+                                },
+                                last_cycle_before: Some(r.last_cycle),
+                                first_cycle_after: None,
+                                cycles_not_replayed: 0,
+                                resumed_after_cycle: None,
+                            }, false);
+                        }
+                        if let Some(gap) = r.report.gaps.last_mut() {
+                            gap.first_cycle_after.get_or_insert(m.cycle);
+                            if !r.anchored {
+                                // After a corrupt part, before a snapshot.
+                                gap.cycles_not_replayed += 1;
+                                return Ok(());
+                            }
+                        }
+                        if !r.anchored {
+                            // Before the first snapshot: the state is unknown.
+                            r.report.skipped_cycles += 1;
+                            return Ok(());
+                        }
+                        // The recorded message is compared with the one rebuilt from
+                        // its input and the replayed decision.
+                        r.recorded_output(Topic::CycleInput, msg.data);
+                        r.loop_cycle(&convert::loop_input(&m))?;
                     }
-                    let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
-                    if let Some(want) = expect_cycle.take()
-                        && m.cycle != want
-                    {
-                        return Err(ReplayError::Chain {
-                            file: name(),
-                            why: format!(
-                                "it starts at cycle {}, the previous file ends at cycle {}",
-                                m.cycle,
-                                want.saturating_sub(1)
-                            ),
-                        });
+                    Some(Topic::StateSnapshot) => {
+                        let m = StateSnapshot::decode(msg.data).map_err(decode_err)?;
+                        r.snapshot(&m)?;
                     }
-                    let t0 = *first_stamp_ns.get_or_insert(m.stamp_ns);
-                    let t = m.stamp_ns.saturating_sub(t0);
-                    if to_ns.is_some_and(|to| t > to) {
-                        return Err(ReplayError::EndOfRange);
+                    Some(Topic::SensorWrench) if !saw_cycle_input => {
+                        let w =
+                            sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                        inputs_only.push(&mut r, msg.log_time_ns, InputItem::Sensor(w))?;
                     }
-                    r.quiet = from_ns.is_some_and(|from| t < from);
-                    if !r.anchored {
-                        // Before the first snapshot: the state is unknown.
-                        r.report.skipped_cycles += 1;
-                        return Ok(());
+                    Some(Topic::Joints) if !saw_cycle_input => {
+                        let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
+                        inputs_only.push(&mut r, msg.log_time_ns, InputItem::Joints(j))?;
                     }
-                    // The recorded message is compared with the one rebuilt from
-                    // its input and the replayed decision.
-                    r.recorded_output(Topic::CycleInput, msg.data);
-                    r.loop_cycle(&convert::loop_input(&m))?;
+                    Some(Topic::RecorderDrops) => {
+                        let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
+                        r.report.recorder_dropped = r.report.recorder_dropped.max(d.dropped);
+                    }
+                    Some(t) if OUTPUT_TOPICS.contains(&t) => r.recorded_output(t, msg.data),
+                    _ => {}
                 }
-                Some(Topic::StateSnapshot) => {
-                    let m = StateSnapshot::decode(msg.data).map_err(decode_err)?;
-                    r.snapshot(&m)?;
+                Ok(())
+            };
+            let result = match reader.visit(&mut visitor) {
+                Err(ReplayError::EndOfRange) => {
+                    reached_end_of_range = true;
+                    Ok(None)
                 }
-                Some(Topic::SensorWrench) if !saw_cycle_input => {
-                    let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
-                    inputs_only.push(&mut r, msg.log_time_ns, InputItem::Sensor(w))?;
-                }
-                Some(Topic::Joints) if !saw_cycle_input => {
-                    let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
-                    inputs_only.push(&mut r, msg.log_time_ns, InputItem::Joints(j))?;
-                }
-                Some(Topic::RecorderDrops) => {
-                    let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
-                    r.report.recorder_dropped = r.report.recorder_dropped.max(d.dropped);
-                }
-                Some(t) if OUTPUT_TOPICS.contains(&t) => r.recorded_output(t, msg.data),
-                _ => {}
+                other => other,
+            };
+            // A corrupt part: passed over, reading goes on after it (the
+            // state is unknown until the next snapshot).
+            if let Ok(Some(e)) = &result
+                && let Some(skipped) = reader.skip_bad_record(e)
+            {
+                r.gap(
+                    Gap {
+                        file: path.clone(),
+                        skipped,
+                        last_cycle_before: (r.anchored || r.report.cycles > 0)
+                            .then_some(r.last_cycle),
+                        first_cycle_after: None,
+                        cycles_not_replayed: 0,
+                        resumed_after_cycle: None,
+                    },
+                    true,
+                );
+                continue;
             }
-            Ok(())
-        };
-        let result = match reader.visit(&mut visitor) {
-            Err(ReplayError::EndOfRange) => {
-                reached_end_of_range = true;
-                Ok(None)
-            }
-            other => other,
+            break result;
         };
         if let Some(d) = &mut r.report.first_difference
             && d.file.is_none()

@@ -8,7 +8,8 @@
 //!
 //! The files of one recording (a rotation's `-0000.mcap`, `-0001.mcap`,
 //! ...) go into one directory in the order given. Only complete `ros2`
-//! files are taken: a file cut short is refused (`sarctl recover` first),
+//! files are taken: a file cut short, even inside its summary (the data
+//! section whole), is refused (`sarctl recover` first),
 //! and so is a scene companion (`NAME.scene.mcap`, protobuf, no profile).
 
 use super::reader::{McapReader, ReadError};
@@ -148,6 +149,28 @@ fn count(path: &Path, topics: &mut Vec<TopicCount>) -> Result<FileCount, ExportE
         first = first.min(m.log_time_ns);
         last = last.max(m.log_time_ns);
         messages += 1;
+    }
+    // The data section is whole; the summary and the footer must be too:
+    // ROS 2's and Python's readers start there (a file cut inside its
+    // summary is refused by them).
+    match mcap::Summary::read(&bytes) {
+        Ok(Some(_)) => {}
+        Ok(None) => {
+            return Err(ExportError::NotRos2 {
+                path: path.to_path_buf(),
+                why: "the file has no summary section: `sarctl recover` rewrites it with one"
+                    .to_owned(),
+            });
+        }
+        Err(e) => {
+            return Err(ExportError::NotRos2 {
+                path: path.to_path_buf(),
+                why: format!(
+                    "truncated or corrupt after its data section (it ends at byte {} inside its summary or footer: {e}): `sarctl recover` rewrites it",
+                    bytes.len()
+                ),
+            });
+        }
     }
     let profile = reader.profile().unwrap_or_default();
     if profile != "ros2" {

@@ -7,7 +7,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use sar_estimator::guard::ForceLimits;
 use sar_msgs::wire::{
     self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name,
-    status_name,
+    recording_code, status_name,
 };
 use sar_shm::{Client, DEFAULT_PREFIX};
 use serde_json::json;
@@ -323,7 +323,9 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "quick_stops": s.quick_stops,
         "publish_queue_drops": s.queue_drops,
         "publish_errors": s.publish_errors,
-        "recording": s.recording != 0,
+        "recording": recording_code::state(s.recording) == recording_code::ON,
+        "recording_failed": (recording_code::state(s.recording) == recording_code::FAILED)
+            .then(|| recording_failure(s.recording)),
         "recorder_drops": s.recorder_drops,
     })
 }
@@ -353,13 +355,32 @@ fn state_line(s: &StateMsg) -> String {
         if s.recording != 0 || s.recorder_drops != 0 {
             format!(
                 ", recording {}, {} dropped",
-                if s.recording != 0 { "on" } else { "off" },
+                match recording_code::state(s.recording) {
+                    recording_code::ON => "on".to_owned(),
+                    recording_code::FAILED => format!(
+                        "FAILED ({}; its file is incomplete)",
+                        recording_failure(s.recording)
+                    ),
+                    _ => "off".to_owned(),
+                },
                 s.recorder_drops
             )
         } else {
             String::new()
         }
     )
+}
+
+/// Why the last recording failed: its OS error ("No space left on device
+/// (os error 28)"), from [`StateMsg::recording`].
+fn recording_failure(code: u64) -> String {
+    match recording_code::errno(code) {
+        0 => "a write error (see the daemon's log)".to_owned(),
+        e => format!(
+            "write error: {}",
+            std::io::Error::from_raw_os_error(i32::try_from(e).unwrap_or(i32::MAX))
+        ),
+    }
 }
 
 /// A bar of |F| against the stop limit, for the terminal view.

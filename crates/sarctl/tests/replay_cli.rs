@@ -287,3 +287,466 @@ fn recover_refuses_to_overwrite_its_input() {
     assert_eq!(v["input_complete"], false, "{v}");
     assert!(dir.join("cut.recovered.mcap").exists());
 }
+
+/// A tmpfs mounted at `dir` (made if missing) with `options`, unmounted on
+/// drop. Needs root (CI runs as root): a test that cannot mount says so.
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(dir: &Path, options: &str) -> Self {
+        std::fs::create_dir_all(dir).unwrap();
+        let out = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", options, "tmpfs"])
+            .arg(dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "this test needs a tmpfs (mount, as root): mount -t tmpfs -o {options} failed: {}",
+            text(&out.stderr)
+        );
+        Self(dir.to_path_buf())
+    }
+    fn remount(&self, options: &str) {
+        let out = Command::new("mount")
+            .args(["-o", &format!("remount,{options}")])
+            .arg(&self.0)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "remount: {}", text(&out.stderr));
+    }
+    /// Bytes in use.
+    fn used(&self) -> u64 {
+        let out = Command::new("df")
+            .args(["-B1", "--output=used"])
+            .arg(&self.0)
+            .output()
+            .unwrap();
+        text(&out.stdout)
+            .lines()
+            .nth(1)
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap()
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0).status();
+    }
+}
+
+/// Issue 25, finding 5: a recording on a file system that is read-only or
+/// too small is refused at `record start` (saying why, with the space a
+/// minute needs and the space free); one that fills up stops at the write
+/// error, which the status and the daemon's log name at once ("No space
+/// left on device"); `record stop` then says the file is incomplete and
+/// exits non-zero, never "written to"; the guard and the loop go on
+/// unaffected (recording is not a safety function); the cut file is
+/// recovered and replays.
+#[test]
+fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomplete() {
+    let dir = common::scratch("replay_cli_full_disk");
+    let rec_dir = dir.join("rec");
+    let config = dir.join("sim.toml");
+    let toml = sar_config::DEFAULT_TOML.replace(
+        "directory = \"recordings\"",
+        &format!("directory = {:?}", rec_dir.display().to_string()),
+    );
+    std::fs::write(&config, toml).unwrap();
+    let fs = Tmpfs::mount(&rec_dir, "ro,size=256m");
+    let log = dir.join("sard.log");
+    let prefix = format!("sar-full-{}", std::process::id());
+    let daemon = Daemon(
+        Command::new(&*SARD)
+            .args(["--sim", "--config"])
+            .arg(&config)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .unwrap(),
+    );
+    let start = Instant::now();
+    while !sarctl(&prefix, &["status"]).status.success() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "sard did not come up"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Read-only: refused, saying so.
+    let out = sarctl(&prefix, &["record", "start"]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stderr).contains("read-only file system"),
+        "{}",
+        text(&out.stderr)
+    );
+    // Too small for a minute of recording: refused with both figures.
+    drop(fs);
+    let fs = Tmpfs::mount(&rec_dir, "size=2m");
+    let out = sarctl(&prefix, &["record", "start"]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("too little space")
+            && e.contains("MB free")
+            && e.contains("a minute of recording needs"),
+        "{e}"
+    );
+    assert_eq!(e.lines().count(), 1, "{e}");
+    // Room enough at the start, then the disk fills.
+    drop(fs);
+    let fs = Tmpfs::mount(&rec_dir, "size=256m");
+    let out = sarctl(&prefix, &["record", "start"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    // The simulator's automatic first reset: the guard is Ok from then on.
+    let start = Instant::now();
+    while status_json(&prefix)["guard"] != "ok" {
+        assert!(start.elapsed() < Duration::from_secs(20), "never ok");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let file = text(&out.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("file: "))
+        .and_then(|l| l.split(' ').next())
+        .map(PathBuf::from)
+        .unwrap();
+    let before = status_json(&prefix);
+    assert_eq!(before["recording"], true, "{before}");
+    fs.remount(&format!("size={}", fs.used() + 64 * 1024));
+    let start = Instant::now();
+    let failed = loop {
+        let s = status_json(&prefix);
+        if s["recording"] == false {
+            break s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "still recording: {s}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    println!(
+        "the recording failed {:?} after the disk was filled",
+        start.elapsed()
+    );
+    let why = failed["recording_failed"]
+        .as_str()
+        .unwrap_or_default()
+        .to_owned();
+    assert!(why.contains("No space left on device"), "{failed}");
+    // In the log at once, before any stop.
+    let logged = std::fs::read_to_string(&log).unwrap();
+    assert!(
+        logged.contains("No space left on device") && logged.contains("incomplete"),
+        "{logged}"
+    );
+    let out = sarctl(&prefix, &["status"]);
+    assert!(
+        text(&out.stdout).contains("recording FAILED"),
+        "{}",
+        text(&out.stdout)
+    );
+    // Not a safety function: the guard and the loop went on as before.
+    assert_eq!(failed["guard"], before["guard"], "{failed}");
+    assert_eq!(failed["quick_stops"], before["quick_stops"], "{failed}");
+    assert!(failed["cycle"].as_u64() > before["cycle"].as_u64());
+    let later = status_json(&prefix);
+    assert!(later["cycle"].as_u64() > failed["cycle"].as_u64());
+    assert_eq!(later["guard"], before["guard"]);
+    // Stop: the file is incomplete, never "written to".
+    let out = sarctl(&prefix, &["record", "stop"]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("incomplete") && e.contains("No space left on device"),
+        "{e}"
+    );
+    assert!(
+        !text(&out.stdout).contains("written to"),
+        "{}",
+        text(&out.stdout)
+    );
+    daemon.stop();
+    // The cut file: recovered, then replayed (exit 0).
+    let recovered = dir.join("recovered.mcap");
+    let out = Command::new(SARCTL)
+        .arg("recover")
+        .arg(&file)
+        .arg("--output")
+        .arg(&recovered)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    drop(fs);
+    let out = Command::new(SARCTL)
+        .arg("replay")
+        .arg("--input")
+        .arg(&recovered)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{} {}",
+        text(&out.stdout),
+        text(&out.stderr)
+    );
+}
+
+/// The chunks of an MCAP file (offset, record length with its prefix), by
+/// walking its records.
+fn chunks(bytes: &[u8]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut pos = 8;
+    while pos + 9 <= bytes.len() {
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        match bytes[pos] {
+            0x06 => out.push((pos, len + 9)),
+            0x0F => break,
+            _ => {}
+        }
+        pos += 9 + len;
+    }
+    out
+}
+
+/// Runs `sarctl args`, killed after 10 s (a tool blocked on a FIFO).
+fn sarctl_bounded(args: &[&std::ffi::OsStr]) -> (Output, Duration) {
+    let start = Instant::now();
+    let mut child = Command::new(SARCTL)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(10) {
+            let _ = child.kill();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    (child.wait_with_output().unwrap(), start.elapsed())
+}
+
+/// Issue 25, finding 6: every tool exits non-zero when it did not do all it
+/// was asked. A corrupt chunk in the middle: `replay` passes over it, reads
+/// the rest and names the gap (where, how many bytes, the cycles lost),
+/// exit non-zero; `recover` keeps the good chunks after it. Cut files:
+/// "truncated at byte N" (not "carries no configuration"), exit non-zero;
+/// `recover` of a file with no complete chunk exits non-zero; `export
+/// --rosbag2` refuses a file cut inside its summary. A FIFO or a device is
+/// refused at once by every tool that reads a file; a read error is named.
+#[test]
+fn bad_files_exit_non_zero_and_say_what_was_not_done() {
+    let dir = common::scratch("replay_cli_bad_files");
+    let bytes = std::fs::read(fixtures().join("fault_daemon.mcap")).unwrap();
+    let all = chunks(&bytes);
+    assert!(all.len() > 10, "{} chunks", all.len());
+    // One corrupt chunk in the middle (its compressed data).
+    let (at, len) = all[all.len() / 2];
+    let mut corrupt = bytes.clone();
+    for b in &mut corrupt[at + len / 2..at + len / 2 + 16] {
+        *b ^= 0x5a;
+    }
+    let corrupt_path = dir.join("corrupt.mcap");
+    std::fs::write(&corrupt_path, &corrupt).unwrap();
+    let config = fixtures().join("config.toml");
+    let out = sarctl(
+        "unused",
+        &[
+            "replay",
+            "--config",
+            config.to_str().unwrap(),
+            "--format",
+            "json",
+            "--input",
+            corrupt_path.to_str().unwrap(),
+        ],
+    );
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stderr).contains(&format!("at byte {at}")),
+        "{}",
+        text(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let gap = &v["gaps"][0];
+    assert_eq!(gap["offset"], at as u64, "{v}");
+    assert_eq!(gap["bytes"], len as u64, "{v}");
+    let lost = gap["cycles_lost"].as_u64().unwrap();
+    let not_replayed = gap["cycles_not_replayed"].as_u64().unwrap();
+    assert!(lost > 0 && not_replayed > 0, "{v}");
+    // Every cycle of the file is accounted for: the chunks after the gap
+    // were read.
+    assert_eq!(
+        v["cycles"].as_u64().unwrap() + lost + not_replayed,
+        3000,
+        "{v}"
+    );
+    // Recover keeps the good chunks after it.
+    let cut_at_gap = dir.join("cut_at_gap.mcap");
+    std::fs::write(&cut_at_gap, &bytes[..at]).unwrap();
+    let recover_json = |input: &Path, output: &Path| {
+        let (out, _) = sarctl_bounded(&[
+            "recover".as_ref(),
+            "--format".as_ref(),
+            "json".as_ref(),
+            input.as_os_str(),
+            "--output".as_ref(),
+            output.as_os_str(),
+        ]);
+        (
+            out.status.success(),
+            text(&out.stderr),
+            serde_json::from_slice::<serde_json::Value>(&out.stdout).ok(),
+        )
+    };
+    let (ok, e, before_gap) = recover_json(&cut_at_gap, &dir.join("r1.mcap"));
+    assert!(ok, "{e}");
+    let (ok, e, past_gap) = recover_json(&corrupt_path, &dir.join("r2.mcap"));
+    assert!(ok, "{e}");
+    let (before_gap, past_gap) = (before_gap.unwrap(), past_gap.unwrap());
+    assert!(
+        past_gap["messages"].as_u64().unwrap() > before_gap["messages"].as_u64().unwrap() * 3 / 2,
+        "{before_gap} {past_gap}"
+    );
+    assert!(
+        past_gap["skipped"][0]
+            .as_str()
+            .unwrap()
+            .contains(&format!("at byte {at}")),
+        "{past_gap}"
+    );
+    // The recovered file replays to the same end: the cycles missing are
+    // named, never "differs".
+    let out = sarctl(
+        "unused",
+        &[
+            "replay",
+            "--config",
+            config.to_str().unwrap(),
+            "--input",
+            dir.join("r2.mcap").to_str().unwrap(),
+        ],
+    );
+    assert!(!out.status.success());
+    let e = text(&out.stderr);
+    assert!(
+        e.contains("are missing from the recording") && !e.contains("differs"),
+        "{e}"
+    );
+    // Cut files: truncated, at which byte; never "no configuration".
+    let (first_chunk, _) = all[0];
+    for cut in [8, first_chunk / 2, first_chunk + 100, at + len / 2] {
+        let path = dir.join(format!("cut{cut}.mcap"));
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        // (The fixture carries no configuration: the last cut, whose
+        // start is whole, is given one.)
+        let mut args: Vec<&std::ffi::OsStr> =
+            vec!["replay".as_ref(), "--input".as_ref(), path.as_os_str()];
+        if cut > first_chunk + 100 {
+            args.extend(["--config".as_ref(), config.as_os_str()]);
+        }
+        let (out, _) = sarctl_bounded(&args);
+        let e = text(&out.stderr);
+        assert!(!out.status.success(), "cut {cut}: {}", text(&out.stdout));
+        assert!(e.contains("truncated at byte"), "cut {cut}: {e}");
+        assert!(!e.contains("carries no configuration"), "cut {cut}: {e}");
+        // Nothing to recover before the first complete chunk.
+        if cut < first_chunk + 100 {
+            let output = dir.join(format!("cut{cut}.recovered.mcap"));
+            let (ok, e, _) = recover_json(&path, &output);
+            assert!(!ok && e.contains("recovered nothing"), "cut {cut}: {e}");
+            assert!(!output.exists(), "cut {cut}");
+        }
+    }
+    // Cut inside the summary (the data section whole): export refuses it.
+    let (summary_cut, _) = (bytes.len() - 100, ());
+    let path = dir.join("summary_cut.mcap");
+    std::fs::write(&path, &bytes[..summary_cut]).unwrap();
+    let (out, _) = sarctl_bounded(&[
+        "export".as_ref(),
+        "--rosbag2".as_ref(),
+        dir.join("bag").as_os_str(),
+        path.as_os_str(),
+    ]);
+    assert!(!out.status.success(), "{}", text(&out.stdout));
+    assert!(
+        text(&out.stderr).contains("sarctl recover"),
+        "{}",
+        text(&out.stderr)
+    );
+    // A FIFO and a device: refused at once by every tool that reads a file.
+    let fifo = dir.join("fifo.mcap");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let bag2 = dir.join("bag2");
+    let runs: [Vec<&std::ffi::OsStr>; 5] = [
+        vec!["replay".as_ref(), "--input".as_ref(), fifo.as_os_str()],
+        vec![
+            "replay".as_ref(),
+            "--config".as_ref(),
+            config.as_os_str(),
+            "--input".as_ref(),
+            fifo.as_os_str(),
+        ],
+        vec!["recover".as_ref(), fifo.as_os_str()],
+        vec![
+            "export".as_ref(),
+            "--rosbag2".as_ref(),
+            bag2.as_os_str(),
+            fifo.as_os_str(),
+        ],
+        vec![
+            "identify".as_ref(),
+            "--config".as_ref(),
+            config.as_os_str(),
+            "--input".as_ref(),
+            fifo.as_os_str(),
+        ],
+    ];
+    for args in &runs {
+        let (out, took) = sarctl_bounded(args);
+        println!("{args:?}: refused in {took:?}");
+        assert!(took < Duration::from_secs(5), "{args:?} took {took:?}");
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            text(&out.stderr).contains("not a regular file (a FIFO)"),
+            "{args:?}: {}",
+            text(&out.stderr)
+        );
+    }
+    let (out, _) = sarctl_bounded(&[
+        "recover".as_ref(),
+        "/dev/zero".as_ref(),
+        "--output".as_ref(),
+        dir.join("z.mcap").as_os_str(),
+    ]);
+    assert!(
+        text(&out.stderr).contains("a character device"),
+        "{}",
+        text(&out.stderr)
+    );
+    // A read error is named as such (reading /proc/self/mem at 0: EIO).
+    let (out, _) = sarctl_bounded(&[
+        "replay".as_ref(),
+        "--input".as_ref(),
+        "/proc/self/mem".as_ref(),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("read error: Input/output error"),
+        "{}",
+        text(&out.stderr)
+    );
+}

@@ -192,14 +192,26 @@ struct Shared {
 
 /// Where the commands `record start|stop` go: the recording's switch, wired
 /// in by `sard` (the transport knows no recorder). Called on the publishing
-/// thread; must not block for long.
+/// thread; must not block: the recording's own thread does the file
+/// system's work (the checks of a start, the closing of a stop), and the
+/// publishing thread asks for its answer at each round and replies once
+/// it has one (other commands go on meanwhile).
 pub trait RecordCommands: Send + Sync + std::fmt::Debug {
-    /// Asks for a recording to start: the first file of the recording
-    /// started, or of the one already running (then nothing changes).
-    fn start(&self) -> Option<std::path::PathBuf>;
-    /// Asks for the recording to stop: the first file of the one stopped.
-    fn stop(&self) -> Option<std::path::PathBuf>;
+    /// Asks for a recording to start: a ticket for
+    /// [`RecordCommands::answer`].
+    fn start(&self) -> u64;
+    /// Asks for the recording to stop: a ticket for
+    /// [`RecordCommands::answer`].
+    fn stop(&self) -> u64;
+    /// The answer to request `ticket`, once the recorder has acted: the
+    /// recording's first file, or why the start was refused or the
+    /// recording failed (its file is incomplete).
+    fn answer(&self, ticket: u64) -> Option<Result<String, String>>;
 }
+
+/// How long a `record start|stop` waits for the recorder's answer (closing
+/// a file syncs it to disk) before the reply says it did not come.
+pub const RECORD_ANSWER_WAIT: Duration = Duration::from_secs(8);
 
 /// The daemon's loop side: a [`Sink`] of the loop.
 ///
@@ -249,6 +261,9 @@ pub struct ShmWorker {
     shared: Arc<Shared>,
     /// The command handed to the loop, waiting for its reply.
     in_flight: Option<CommandRequest>,
+    /// A `record start|stop` waiting for the recorder's answer: the
+    /// request, its ticket and until when it waits.
+    record_pending: Option<(CommandRequest, u64, std::time::Instant)>,
     /// The loop's reply, waiting for the state of its cycle.
     waiting: Option<Reply>,
     /// The newest state's cycle.
@@ -344,6 +359,7 @@ impl ShmWorker {
             states,
             shared,
             in_flight: None,
+            record_pending: None,
             waiting: None,
             last_cycle: 0,
             limits_n,
@@ -378,8 +394,50 @@ impl ShmWorker {
             let _ = self.notifier.notify();
         }
         self.send_replies(false);
+        self.answer_record();
         self.take_command();
         sent
+    }
+
+    /// Replies to a waiting `record start|stop` once the recorder answered
+    /// (or when it did not within [`RECORD_ANSWER_WAIT`]).
+    fn answer_record(&mut self) {
+        let Some((active, ticket, until)) = self.record_pending.take() else {
+            return;
+        };
+        let answer = self
+            .shared
+            .record_switch
+            .get()
+            .and_then(|s| s.answer(ticket));
+        let answer = match answer {
+            Some(a) => a,
+            None if std::time::Instant::now() < until => {
+                self.record_pending = Some((active, ticket, until));
+                return;
+            }
+            None => Err(format!(
+                "the recorder did not answer within {} s (see the daemon's log)",
+                RECORD_ANSWER_WAIT.as_secs()
+            )),
+        };
+        let command = *active.payload();
+        let mut reply = ReplyMsg {
+            id: command.id,
+            cycle: self.last_cycle,
+            status: 0,
+            reason: 0,
+            limits_n: self.limits_n,
+            ..ReplyMsg::default()
+        };
+        match answer {
+            Ok(path) => reply.set_detail(&path),
+            Err(why) => {
+                reply.status = reply_code::RECORD_FAILED;
+                reply.set_detail(&why);
+            }
+        }
+        let _ = active.send_copy(reply);
     }
 
     /// Sends the replies of the commands the loop judged, each after the
@@ -439,20 +497,24 @@ impl ShmWorker {
                 command_kind::RECORD_START | command_kind::RECORD_STOP
             ) && self.shared.record_switch.get().is_some() =>
             {
-                // The reply's detail: the first file of the recording
-                // started, or of the one being stopped.
-                let path = self.shared.record_switch.get().and_then(|s| {
+                // One at a time; the reply waits for the recorder's answer
+                // (the first file, or why not), other commands go on.
+                if self.record_pending.is_some() {
+                    let _ = active.send_copy(immediate(reply_code::BUSY));
+                    return;
+                }
+                let ticket = self.shared.record_switch.get().map_or(0, |s| {
                     if command.kind == command_kind::RECORD_START {
                         s.start()
                     } else {
                         s.stop()
                     }
                 });
-                let mut reply = immediate(0);
-                if let Some(p) = path {
-                    reply.set_detail(&p.display().to_string());
-                }
-                let _ = active.send_copy(reply);
+                self.record_pending = Some((
+                    active,
+                    ticket,
+                    std::time::Instant::now() + RECORD_ANSWER_WAIT,
+                ));
             }
             None => {
                 let _ = active.send_copy(immediate(reply_code::UNKNOWN_COMMAND));

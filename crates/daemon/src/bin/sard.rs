@@ -137,7 +137,7 @@ fn run(args: &Args) -> Result<(), String> {
         "recordings go to {} ([record] directory)",
         cfg.record.directory.display()
     );
-    let switch = std::sync::Arc::new(RecordSwitch::default());
+    let switch = std::sync::Arc::new(RecordSwitch::new(cfg.loop_.period_ns));
     let (recording, recorder) = RecordManager::start(
         cfg.record.clone(),
         SceneOptions::from_config(&cfg),
@@ -322,12 +322,14 @@ fn start_canopen(
 struct SwitchCommands(std::sync::Arc<RecordSwitch>);
 
 impl RecordCommands for SwitchCommands {
-    fn start(&self) -> Option<PathBuf> {
-        self.0.request_start_at()
+    fn start(&self) -> u64 {
+        self.0.request_start()
     }
-    fn stop(&self) -> Option<PathBuf> {
-        self.0.request_stop();
-        self.0.current_path()
+    fn stop(&self) -> u64 {
+        self.0.request_stop()
+    }
+    fn answer(&self, ticket: u64) -> Option<Result<String, String>> {
+        self.0.answer(ticket)
     }
 }
 

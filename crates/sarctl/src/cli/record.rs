@@ -1,10 +1,15 @@
 //! `sarctl record start|stop`: starts or stops the daemon's recording (over
-//! the command service), then waits until the daemon's published state says
-//! it records (or no longer does), at most 2 s. Both print the path of the
-//! recording's first file, which the daemon gives in its reply (absolute:
-//! the daemon resolves `[record] directory` when it starts).
+//! the command service). The daemon replies once its recorder has acted: a
+//! start after the directory's checks (writable, a minute of recording's
+//! space free), a stop once the file is closed. A refused start, or a
+//! recording that failed (a write error, e.g. a full disk, stops it; its
+//! file is incomplete), exits non-zero with the daemon's reason; the file
+//! is named as written only when it was closed complete. Then it waits
+//! until the published state says the daemon records (or no longer does),
+//! at most 2 s. The path is absolute (the daemon resolves `[record]
+//! directory` when it starts).
 
-use sar_msgs::wire::{CommandMsg, command_kind, status_name};
+use sar_msgs::wire::{CommandMsg, command_kind, recording_code, reply_code, status_name};
 use sar_shm::Client;
 use serde_json::json;
 use std::time::{Duration, Instant};
@@ -26,9 +31,13 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
                 tip_m: [0.0; 3],
                 limits_n: [0.0; 6],
             },
-            Duration::from_secs(2),
+            // The daemon answers once the file is closed (synced to disk).
+            sar_shm::RECORD_ANSWER_WAIT + Duration::from_secs(2),
         )
         .map_err(|e| e.to_string())?;
+    if reply.status == reply_code::RECORD_FAILED {
+        return Err(format!("{what}: {}", reply.detail_text()));
+    }
     if reply.status != 0 {
         return Err(format!("{what}: {}", status_name(reply.status)));
     }
@@ -40,7 +49,7 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
     while Instant::now() < deadline {
         sub.wait(Duration::from_millis(20), |s| last = Some(*s));
         if let Some(s) = last
-            && (s.recording != 0) == start
+            && (recording_code::state(s.recording) == recording_code::ON) == start
         {
             if json {
                 println!(
@@ -56,7 +65,9 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
                     s.cycle,
                     s.recorder_drops
                 );
-                if !path.is_empty() {
+                if path.is_empty() && !start {
+                    println!("(no recording ran)");
+                } else if !path.is_empty() {
                     println!(
                         "{} {path} (after a rotation: -0001.mcap, -0002.mcap, ... beside it)",
                         if start { "file:" } else { "written to:" }

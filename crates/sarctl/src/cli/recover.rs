@@ -1,7 +1,11 @@
 //! `sarctl recover FILE [--output OUT]`: rewrites a recording cut short (a
 //! crash, a full disk) with its summary and index, up to its last complete
-//! chunk. Never overwrites the input; the default output is `FILE` with
-//! `.recovered.mcap` in place of `.mcap`.
+//! chunk; a corrupt chunk on the way is passed over (named: where, how many
+//! bytes) and the good chunks after it are kept. Never overwrites the
+//! input; the default output is `FILE` with `.recovered.mcap` in place of
+//! `.mcap`. Recovering nothing (a file cut before its first complete
+//! chunk, a magic-only file) is an error: no output is left, the exit is
+//! non-zero.
 
 use sar_record::reader::recover;
 use sar_record::replay::same_file;
@@ -27,12 +31,30 @@ pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String
         ));
     }
     let r = recover(input, &output).map_err(|e| e.to_string())?;
+    if r.messages == 0 {
+        let _ = std::fs::remove_file(&output);
+        return Err(format!(
+            "{}: recovered nothing: no complete chunk with a message{}",
+            input.display(),
+            match (&r.stopped, r.skipped.first()) {
+                (Some(e), _) => format!(" ({e})"),
+                (None, Some(s)) => format!(" (corrupt: {})", s.why),
+                (None, None) => " (the file holds none)".to_owned(),
+            }
+        ));
+    }
+    let skipped: Vec<String> = r
+        .skipped
+        .iter()
+        .map(|s| format!("{} bytes at byte {} ({})", s.bytes, s.offset, s.why))
+        .collect();
     if json {
         println!(
             "{}",
             json!({"input": input.display().to_string(), "output": output.display().to_string(),
                    "messages": r.messages, "channels": r.channels,
                    "input_complete": r.input_complete,
+                   "skipped": skipped,
                    "stopped": r.stopped.as_ref().map(ToString::to_string)})
         );
     } else {
@@ -44,9 +66,13 @@ pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String
             output.display(),
             match &r.stopped {
                 Some(e) => format!(" (input cut short: {e})"),
-                None => " (input was complete)".to_owned(),
+                None if r.skipped.is_empty() => " (input was complete)".to_owned(),
+                None => " (input read to its end)".to_owned(),
             }
         );
+        for s in &skipped {
+            println!("corrupt, passed over (its messages are lost): {s}");
+        }
     }
     Ok(())
 }

@@ -55,6 +55,18 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
         "from_snapshot": r.from_snapshot,
         "skipped_cycles": r.skipped_cycles,
         "snapshots_compared": r.snapshots_compared,
+        "gaps": r.gaps.iter().map(|g| json!({
+            "file": g.file.as_ref().map(|f| f.display().to_string()),
+            "offset": g.skipped.offset,
+            "bytes": g.skipped.bytes,
+            "log_time_ns": g.skipped.log_time_ns,
+            "why": g.skipped.why,
+            "last_cycle_before": g.last_cycle_before,
+            "first_cycle_after": g.first_cycle_after,
+            "cycles_lost": g.cycles_lost(),
+            "cycles_not_replayed": g.cycles_not_replayed,
+            "resumed_after_cycle": g.resumed_after_cycle,
+        })).collect::<Vec<_>>(),
         "comparison": r.comparison.as_ref().map(|c| json!({
             "topic": c.topic,
             "pairs": c.pairs,
@@ -74,7 +86,13 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
         Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
         None => {
             let source = sar_record::replay::recorded_config(first)
-                .map_err(|e| e.to_string())?
+                .map_err(|e| match e {
+                    // These name the file themselves.
+                    sar_record::ReadError::Io { .. } | sar_record::ReadError::NotRegular { .. } => {
+                        e.to_string()
+                    }
+                    e => format!("{}: {e}", first.display()),
+                })?
                 .ok_or_else(|| {
                     format!(
                         "{}: the recording carries no configuration (not written by sard, or by an older one): give --config FILE",
@@ -160,9 +178,26 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
                 c.axes[2].max_n
             );
         }
+        for g in &r.gaps {
+            println!("{}", gap_line(g));
+        }
         if let Some(e) = &r.stopped {
             println!("the input is cut short: replayed up to its last complete chunk ({e})");
         }
+    }
+    // Never exit 0 over a part not replayed.
+    if let Some(g) = r.gaps.first() {
+        return Err(format!(
+            "{shown}: {} part(s) not replayed (corrupt, or cycles missing); the first: {}",
+            r.gaps.len(),
+            gap_line(g)
+        ));
+    }
+    if let Some(e) = &r.stopped {
+        return Err(format!(
+            "{e}: replayed {} cycles up to its last complete chunk; `sarctl recover` rewrites a file cut short (then replay that)",
+            r.cycles
+        ));
     }
     if r.cycles == 0 && r.skipped_cycles > 0 {
         return Err(format!(
@@ -192,6 +227,61 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
         )),
         None => Ok(()),
     }
+}
+
+/// One line for a corrupt part passed over: where, how much, what was lost.
+fn gap_line(g: &sar_record::replay::Gap) -> String {
+    if g.skipped.bytes == 0 {
+        // Cycles missing between two good chunks (no corrupt bytes here).
+        return format!(
+            "{}{}{}",
+            g.skipped.why,
+            g.file
+                .as_ref()
+                .map(|f| format!(" in {}", f.display()))
+                .unwrap_or_default(),
+            match g.resumed_after_cycle {
+                Some(c) => format!(
+                    "; {} cycles after them not replayed, replay went on from the snapshot after cycle {c}",
+                    g.cycles_not_replayed
+                ),
+                None => format!(
+                    "; the {} cycles read after them were not replayed (no snapshot after them)",
+                    g.cycles_not_replayed
+                ),
+            }
+        );
+    }
+    format!(
+        "corrupt part passed over: {} bytes at byte {}{}{} ({}); {}{}",
+        g.skipped.bytes,
+        g.skipped.offset,
+        g.file
+            .as_ref()
+            .map(|f| format!(" of {}", f.display()))
+            .unwrap_or_default(),
+        g.skipped
+            .log_time_ns
+            .map(|(a, b)| format!(", log time {a}..{b} ns"))
+            .unwrap_or_default(),
+        g.skipped.why,
+        match (g.cycles_lost(), g.last_cycle_before) {
+            (Some(n), Some(c)) => format!("{n} cycles lost in it (after cycle {c})"),
+            (None, Some(c)) => format!("nothing read after it (last cycle {c})"),
+            _ => "before the first cycle".to_owned(),
+        },
+        match g.resumed_after_cycle {
+            Some(c) => format!(
+                "; {} cycles after it not replayed, replay went on from the snapshot after cycle {c}",
+                g.cycles_not_replayed
+            ),
+            None if g.cycles_not_replayed > 0 => format!(
+                "; the {} cycles read after it were not replayed (no snapshot after it)",
+                g.cycles_not_replayed
+            ),
+            None => String::new(),
+        }
+    )
 }
 
 /// The files to replay: each input as given, a directory as its `*.mcap`
