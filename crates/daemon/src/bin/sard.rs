@@ -123,10 +123,15 @@ fn run(args: &Args) -> Result<(), String> {
         _ => None,
     };
     let operator = Operator::new();
-    let shm = DaemonShm::create(
+    // The shared memory in the runtime directory (`SAR_RUNTIME_DIR`, default
+    // /run/sar: the access model, README "Access"); a SIGTERM while iceoryx2
+    // is stuck on a damaged file still ends sard.
+    let shm = DaemonShm::create_in(
+        &sar_shm::runtime_dir(),
         &args.prefix,
         operator.clone(),
         cfg.estimator.guard.force_limits().to_array(),
+        &rt::stop_requested,
     )
     .map_err(|e| e.to_string())?;
     // Recording (`[record]`, `sarctl record start|stop`): its manager thread

@@ -1,0 +1,285 @@
+//! The access model (issue 25): where the daemon and its clients meet, who
+//! may, and the checks made before iceoryx2 is called.
+//!
+//! Every iceoryx2 file of a daemon lives in its runtime directory
+//! ([`DEFAULT_RUNTIME_DIR`], or `SAR_RUNTIME_DIR`): under systemd
+//! `RuntimeDirectory=sar`, owned by the daemon's user and its group `sar`,
+//! mode 0770. The daemon's user and the members of the directory's group
+//! (the operators) read and command; nobody else can enter the directory,
+//! so nobody else can read, command, create or damage anything there.
+//!
+//! - The daemon creates the directory when it is missing (mode 0770), refuses
+//!   one that is not a directory or belongs to another user, and takes the
+//!   other users' access away when the mode gives them any.
+//! - A client never creates it: a missing directory means no daemon runs;
+//!   one it may not enter is refused at once, naming the user and the group.
+//! - Both check iceoryx2's management file before creating a node: a
+//!   truncated or foreign one made iceoryx2 spin forever (finding 2).
+//!
+//! The `unsafe` here: `libc` calls (user and group names, `faccessat`,
+//! `getgroups`) on buffers owned by the caller.
+#![allow(unsafe_code)]
+
+use crate::ShmError;
+use std::ffi::CString;
+use std::os::unix::ffi::OsStrExt;
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+
+/// The runtime directory when `SAR_RUNTIME_DIR` is not set (systemd's
+/// `RuntimeDirectory=sar`).
+pub const DEFAULT_RUNTIME_DIR: &str = "/run/sar";
+/// The environment variable that names the runtime directory (the daemon and
+/// its clients must agree; tests give each daemon its own).
+pub const RUNTIME_DIR_ENV: &str = "SAR_RUNTIME_DIR";
+/// The mode the daemon gives a runtime directory it creates.
+pub const RUNTIME_DIR_MODE: u32 = 0o770;
+/// How the name of iceoryx2's management segment in the runtime directory
+/// ends (iceoryx2 0.10: `iox2_<hash>_node.0_10_0.global_mgmt`).
+pub const GLOBAL_MGMT_SUFFIX: &str = ".global_mgmt";
+/// The size of a healthy management segment, bytes (a version and a node
+/// counter; checked by a test against the file iceoryx2 writes).
+pub const GLOBAL_MGMT_SIZE: u64 = 16;
+
+/// The runtime directory: `SAR_RUNTIME_DIR`, else [`DEFAULT_RUNTIME_DIR`].
+pub fn runtime_dir() -> PathBuf {
+    match std::env::var_os(RUNTIME_DIR_ENV) {
+        Some(d) if !d.is_empty() => PathBuf::from(d),
+        _ => PathBuf::from(DEFAULT_RUNTIME_DIR),
+    }
+}
+
+/// Who asks: the daemon may create and repair the directory, a client not.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// `sard`.
+    Daemon,
+    /// `sarctl` and every other client.
+    Client,
+}
+
+/// A user's name, or its number when it has none.
+pub fn user_name(uid: u32) -> String {
+    let mut buf = vec![0u8; 4096];
+    // SAFETY: a plain C struct; all-zero is a valid value.
+    let mut pwd: libc::passwd = unsafe { std::mem::zeroed() };
+    let mut out: *mut libc::passwd = std::ptr::null_mut();
+    // SAFETY: buffers owned here, sizes given; `out` is null or `&pwd`.
+    let rc = unsafe {
+        libc::getpwuid_r(
+            uid,
+            &mut pwd,
+            buf.as_mut_ptr().cast(),
+            buf.len(),
+            &mut out,
+        )
+    };
+    if rc == 0 && !out.is_null() && !pwd.pw_name.is_null() {
+        // SAFETY: a NUL-terminated string inside `buf`.
+        let name = unsafe { std::ffi::CStr::from_ptr(pwd.pw_name) };
+        return name.to_string_lossy().into_owned();
+    }
+    format!("uid {uid}")
+}
+
+/// A group's name, or its number when it has none.
+pub fn group_name(gid: u32) -> String {
+    let mut buf = vec![0u8; 4096];
+    // SAFETY: a plain C struct; all-zero is a valid value.
+    let mut grp: libc::group = unsafe { std::mem::zeroed() };
+    let mut out: *mut libc::group = std::ptr::null_mut();
+    // SAFETY: as in `user_name`.
+    let rc = unsafe {
+        libc::getgrgid_r(
+            gid,
+            &mut grp,
+            buf.as_mut_ptr().cast(),
+            buf.len(),
+            &mut out,
+        )
+    };
+    if rc == 0 && !out.is_null() && !grp.gr_name.is_null() {
+        // SAFETY: a NUL-terminated string inside `buf`.
+        let name = unsafe { std::ffi::CStr::from_ptr(grp.gr_name) };
+        return name.to_string_lossy().into_owned();
+    }
+    format!("gid {gid}")
+}
+
+/// Whether this process may `mode` (`libc::R_OK` ...) `path`, by its
+/// effective ids; `Err` carries the OS error.
+fn may(path: &Path, mode: libc::c_int) -> std::io::Result<()> {
+    let c = CString::new(path.as_os_str().as_bytes())
+        .map_err(|_| std::io::Error::from(std::io::ErrorKind::InvalidInput))?;
+    // SAFETY: a valid NUL-terminated path.
+    let rc = unsafe { libc::faccessat(libc::AT_FDCWD, c.as_ptr(), mode, libc::AT_EACCESS) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Whether this process is in group `gid` (effective or supplementary).
+fn in_group(gid: u32) -> bool {
+    // SAFETY: plain queries.
+    if unsafe { libc::getegid() } == gid {
+        return true;
+    }
+    let n = unsafe { libc::getgroups(0, std::ptr::null_mut()) };
+    if n <= 0 {
+        return false;
+    }
+    let mut groups = vec![0 as libc::gid_t; n as usize];
+    // SAFETY: `groups` holds `n` entries.
+    let n = unsafe { libc::getgroups(n, groups.as_mut_ptr()) };
+    groups.iter().take(n.max(0) as usize).any(|g| *g == gid)
+}
+
+fn euid() -> u32 {
+    // SAFETY: a plain query.
+    unsafe { libc::geteuid() }
+}
+
+fn dir_error(dir: &Path, detail: impl Into<String>) -> ShmError {
+    ShmError::RuntimeDir {
+        dir: dir.display().to_string(),
+        detail: detail.into(),
+    }
+}
+
+/// Checks (the daemon: creates or repairs) the runtime directory before
+/// iceoryx2 touches it, then its management file.
+pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
+    let meta = match std::fs::symlink_metadata(dir) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => match side {
+            Side::Client => {
+                return Err(ShmError::NoRuntimeDir {
+                    dir: dir.display().to_string(),
+                });
+            }
+            Side::Daemon => {
+                std::fs::create_dir(dir)
+                    .and_then(|()| {
+                        std::fs::set_permissions(
+                            dir,
+                            std::fs::Permissions::from_mode(RUNTIME_DIR_MODE),
+                        )
+                    })
+                    .map_err(|e| dir_error(dir, format!("cannot create it: {e}")))?;
+                std::fs::symlink_metadata(dir)
+                    .map_err(|e| dir_error(dir, format!("cannot read it: {e}")))?
+            }
+        },
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+            return Err(denied(dir, None));
+        }
+        Err(e) => return Err(dir_error(dir, format!("cannot read it: {e}"))),
+    };
+    if !meta.file_type().is_dir() {
+        return Err(dir_error(dir, "not a directory"));
+    }
+    let me = euid();
+    if side == Side::Daemon {
+        if meta.uid() != me {
+            return Err(dir_error(
+                dir,
+                format!(
+                    "it belongs to {}, not to sard's user {}: remove it, or start sard as its owner",
+                    user_name(meta.uid()),
+                    user_name(me)
+                ),
+            ));
+        }
+        if meta.mode() & 0o007 != 0 {
+            // Other users keep nothing: the directory is the fence.
+            std::fs::set_permissions(
+                dir,
+                std::fs::Permissions::from_mode(meta.mode() & 0o7770),
+            )
+            .map_err(|e| dir_error(dir, format!("cannot take other users' access away: {e}")))?;
+            tracing::warn!(
+                "{}: took other users' access away (mode {:04o} -> {:04o})",
+                dir.display(),
+                meta.mode() & 0o7777,
+                meta.mode() & 0o7770
+            );
+        }
+    }
+    if may(dir, libc::R_OK | libc::W_OK | libc::X_OK).is_err() {
+        return Err(denied(dir, Some(&meta)));
+    }
+    check_mgmt(dir)
+}
+
+/// A client (or a daemon) that may not use the directory: who, and why.
+fn denied(dir: &Path, meta: Option<&std::fs::Metadata>) -> ShmError {
+    let user = user_name(euid());
+    let detail = match meta {
+        Some(m) if !in_group(m.gid()) => format!(
+            "user {user} is not in group {} (the group of {}; an administrator adds an operator with `usermod -aG {} {user}`)",
+            group_name(m.gid()),
+            dir.display(),
+            group_name(m.gid())
+        ),
+        Some(m) => format!(
+            "{} (mode {:04o}) gives its group {} no read, write and search access",
+            dir.display(),
+            m.mode() & 0o7777,
+            group_name(m.gid())
+        ),
+        None => format!("user {user} may not enter a parent of {}", dir.display()),
+    };
+    ShmError::PermissionDenied { detail }
+}
+
+/// iceoryx2's management segment, when present, must be a regular file of
+/// the right size that this process may read and write: iceoryx2 spins
+/// forever on an empty one and faults on a short one.
+fn check_mgmt(dir: &Path) -> Result<(), ShmError> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| dir_error(dir, format!("cannot list it: {e}")))?;
+    for entry in entries.flatten() {
+        if entry.file_name().as_bytes().ends_with(GLOBAL_MGMT_SUFFIX.as_bytes()) {
+            check_mgmt_file(&entry.path())?;
+        }
+    }
+    Ok(())
+}
+
+fn check_mgmt_file(path: &Path) -> Result<(), ShmError> {
+    let meta = match std::fs::symlink_metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(damaged(path, format!("cannot read it: {e}"))),
+    };
+    if !meta.file_type().is_file() {
+        return Err(damaged(path, "not a regular file".to_owned()));
+    }
+    if meta.len() != GLOBAL_MGMT_SIZE {
+        return Err(damaged(
+            path,
+            format!("{} bytes, not {GLOBAL_MGMT_SIZE}", meta.len()),
+        ));
+    }
+    if may(path, libc::R_OK | libc::W_OK).is_err() {
+        return Err(damaged(
+            path,
+            format!(
+                "owned by {} with mode {:04o}: {} may not read and write it",
+                user_name(meta.uid()),
+                meta.mode() & 0o7777,
+                user_name(euid())
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn damaged(path: &Path, detail: String) -> ShmError {
+    ShmError::Damaged {
+        path: path.display().to_string(),
+        detail,
+    }
+}
