@@ -41,6 +41,10 @@ pub const GLOBAL_MGMT_SUFFIX: &str = ".global_mgmt";
 /// counter; checked by a test against the file iceoryx2 writes).
 pub const GLOBAL_MGMT_SIZE: u64 = 16;
 
+/// The first 8 bytes of a healthy management segment: iceoryx2's version
+/// (0.10.0: major << 32 | minor << 16 | patch), little-endian.
+pub const GLOBAL_MGMT_VERSION: u64 = 10 << 16;
+
 /// The runtime directory: `SAR_RUNTIME_DIR`, else [`DEFAULT_RUNTIME_DIR`].
 pub fn runtime_dir() -> PathBuf {
     match std::env::var_os(RUNTIME_DIR_ENV) {
@@ -65,15 +69,8 @@ pub fn user_name(uid: u32) -> String {
     let mut pwd: libc::passwd = unsafe { std::mem::zeroed() };
     let mut out: *mut libc::passwd = std::ptr::null_mut();
     // SAFETY: buffers owned here, sizes given; `out` is null or `&pwd`.
-    let rc = unsafe {
-        libc::getpwuid_r(
-            uid,
-            &mut pwd,
-            buf.as_mut_ptr().cast(),
-            buf.len(),
-            &mut out,
-        )
-    };
+    let rc =
+        unsafe { libc::getpwuid_r(uid, &mut pwd, buf.as_mut_ptr().cast(), buf.len(), &mut out) };
     if rc == 0 && !out.is_null() && !pwd.pw_name.is_null() {
         // SAFETY: a NUL-terminated string inside `buf`.
         let name = unsafe { std::ffi::CStr::from_ptr(pwd.pw_name) };
@@ -89,15 +86,8 @@ pub fn group_name(gid: u32) -> String {
     let mut grp: libc::group = unsafe { std::mem::zeroed() };
     let mut out: *mut libc::group = std::ptr::null_mut();
     // SAFETY: as in `user_name`.
-    let rc = unsafe {
-        libc::getgrgid_r(
-            gid,
-            &mut grp,
-            buf.as_mut_ptr().cast(),
-            buf.len(),
-            &mut out,
-        )
-    };
+    let rc =
+        unsafe { libc::getgrgid_r(gid, &mut grp, buf.as_mut_ptr().cast(), buf.len(), &mut out) };
     if rc == 0 && !out.is_null() && !grp.gr_name.is_null() {
         // SAFETY: a NUL-terminated string inside `buf`.
         let name = unsafe { std::ffi::CStr::from_ptr(grp.gr_name) };
@@ -194,11 +184,10 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
         }
         if meta.mode() & 0o007 != 0 {
             // Other users keep nothing: the directory is the fence.
-            std::fs::set_permissions(
-                dir,
-                std::fs::Permissions::from_mode(meta.mode() & 0o7770),
-            )
-            .map_err(|e| dir_error(dir, format!("cannot take other users' access away: {e}")))?;
+            std::fs::set_permissions(dir, std::fs::Permissions::from_mode(meta.mode() & 0o7770))
+                .map_err(|e| {
+                    dir_error(dir, format!("cannot take other users' access away: {e}"))
+                })?;
             tracing::warn!(
                 "{}: took other users' access away (mode {:04o} -> {:04o})",
                 dir.display(),
@@ -238,10 +227,14 @@ fn denied(dir: &Path, meta: Option<&std::fs::Metadata>) -> ShmError {
 /// the right size that this process may read and write: iceoryx2 spins
 /// forever on an empty one and faults on a short one.
 fn check_mgmt(dir: &Path) -> Result<(), ShmError> {
-    let entries = std::fs::read_dir(dir)
-        .map_err(|e| dir_error(dir, format!("cannot list it: {e}")))?;
+    let entries =
+        std::fs::read_dir(dir).map_err(|e| dir_error(dir, format!("cannot list it: {e}")))?;
     for entry in entries.flatten() {
-        if entry.file_name().as_bytes().ends_with(GLOBAL_MGMT_SUFFIX.as_bytes()) {
+        if entry
+            .file_name()
+            .as_bytes()
+            .ends_with(GLOBAL_MGMT_SUFFIX.as_bytes())
+        {
             check_mgmt_file(&entry.path())?;
         }
     }
@@ -272,6 +265,17 @@ fn check_mgmt_file(path: &Path) -> Result<(), ShmError> {
                 meta.mode() & 0o7777,
                 user_name(euid())
             ),
+        ));
+    }
+    let mut version = [0u8; 8];
+    std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut version))
+        .map_err(|e| damaged(path, format!("cannot read it: {e}")))?;
+    let version = u64::from_le_bytes(version);
+    if version != GLOBAL_MGMT_VERSION {
+        return Err(damaged(
+            path,
+            format!("version field {version:#x}, not iceoryx2 0.10.0's {GLOBAL_MGMT_VERSION:#x}"),
         ));
     }
     Ok(())

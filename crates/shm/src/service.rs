@@ -30,8 +30,7 @@ type FileStorage<T> = dynamic_storage::file::Storage<T>;
 impl iceoryx2::service::Service for Service {
     type StaticStorage = static_storage::file::Storage;
     type ConfigSerializer = serialize::recommended::Recommended;
-    type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
-        FileStorage<T>;
+    type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> = FileStorage<T>;
     type Bag = bag::recommended::Recommended;
     type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> = FileStorage<T>;
     type ServiceNameHasher = hash::recommended::Recommended;
