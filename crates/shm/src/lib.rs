@@ -775,7 +775,9 @@ impl Sink for DaemonShm {
 /// A client's side: subscribes to the state, sends commands.
 #[derive(Debug)]
 pub struct Client {
-    node: Node<SarIpc>,
+    dir: std::path::PathBuf,
+    /// Made at the first call when the runtime directory did not exist yet.
+    node: std::cell::OnceCell<Node<SarIpc>>,
     names: Names,
 }
 
@@ -793,10 +795,38 @@ impl Client {
     /// refused at once, naming the user and the group, when this process
     /// may not use the directory; never creates it.
     pub fn in_dir(dir: &Path, prefix: &str) -> Result<Self, ClientError> {
+        let node = std::cell::OnceCell::new();
+        match node_in(dir, Side::Client) {
+            Ok(n) => {
+                let _ = node.set(n);
+            }
+            // No daemon yet: the first call tries again.
+            Err(ShmError::NoRuntimeDir { .. }) => {}
+            Err(e) => return Err(e),
+        }
         Ok(Self {
-            node: node_in(dir, Side::Client)?,
+            dir: dir.to_owned(),
+            node,
             names: Names::new(prefix),
         })
+    }
+
+    /// The client's node (made now when the runtime directory appeared
+    /// since); a missing directory reads "no daemon runs" for `service`.
+    fn node(&self, service: &str) -> Result<&Node<SarIpc>, ShmError> {
+        if let Some(n) = self.node.get() {
+            return Ok(n);
+        }
+        let n = node_in(&self.dir, Side::Client).map_err(|e| match e {
+            ShmError::NoRuntimeDir { dir } => ShmError::NoDaemon {
+                service: service.to_owned(),
+                detail: format!(
+                    "the runtime directory {dir} does not exist: sard creates it; {RUNTIME_DIR_ENV} names another"
+                ),
+            },
+            e => e,
+        })?;
+        Ok(self.node.get_or_init(|| n))
     }
 
     fn no_daemon(&self, service: &str, e: impl std::fmt::Debug) -> ShmError {
@@ -809,7 +839,7 @@ impl Client {
     /// Subscribes to the state; `Err` when no daemon runs.
     pub fn subscribe(&self) -> Result<StateSubscription, ClientError> {
         let state = self
-            .node
+            .node(&self.names.state)?
             .service_builder(&service_name(&self.names.state)?)
             .publish_subscribe::<StateMsg>()
             .open()
@@ -820,7 +850,7 @@ impl Client {
             .create()
             .map_err(|e| port("cannot subscribe to the state", e))?;
         let event = self
-            .node
+            .node(&self.names.event)?
             .service_builder(&service_name(&self.names.event)?)
             .event()
             .open()
@@ -838,7 +868,7 @@ impl Client {
     /// Sends a command and waits up to `timeout` for its reply.
     pub fn command(&self, command: CommandMsg, timeout: Duration) -> Result<ReplyMsg, ClientError> {
         let service = self
-            .node
+            .node(&self.names.command)?
             .service_builder(&service_name(&self.names.command)?)
             .request_response::<CommandMsg, ReplyMsg>()
             .open()
