@@ -616,5 +616,27 @@ fn a_damaged_management_file_is_named_within_a_second() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains("is damaged"), "{what}: {err}");
     }
+    // A dead node's details file that blocks whoever reads it (a FIFO): a
+    // client never reads other nodes' files, so it answers at once.
+    std::fs::write(&mgmt, &healthy).unwrap();
+    std::fs::create_dir_all(run.join("nodes/111")).unwrap();
+    std::fs::write(run.join("nodes/iox2_111.node_monitor"), b"").unwrap();
+    let fifo = run.join("nodes/111/iox2_node.details");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let t = Instant::now();
+    let out = sarctl_as(None, &run, &prefix, &["status"]);
+    assert!(
+        t.elapsed() < Duration::from_secs(1),
+        "fifo: {:?}",
+        t.elapsed()
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.starts_with("sarctl: no daemon runs"), "fifo: {err}");
     let _ = std::fs::remove_dir_all(&base);
 }

@@ -229,6 +229,13 @@ pub fn config(dir: &Path, side: Side) -> Result<Config, ShmError> {
         Side::Daemon => DAEMON_CREATION_TIMEOUT,
         Side::Client => CLIENT_CREATION_TIMEOUT,
     };
+    if side == Side::Client {
+        // The daemon removes dead nodes' resources; a client never reads
+        // other nodes' files (one damaged, e.g. a FIFO, would block it).
+        config.global.node.cleanup_dead_nodes_on_creation = false;
+        config.global.node.cleanup_dead_nodes_on_destruction = false;
+        config.global.service.cleanup_dead_nodes_on_open = false;
+    }
     Ok(config)
 }
 
