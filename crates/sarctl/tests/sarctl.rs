@@ -3,7 +3,12 @@
 //! JSON object per line and `limits`, `status`, `tare`, `move-tip` answer;
 //! `record start|stop` print the recording's absolute path.
 
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 mod support;
 use std::process::{Command, Output, Stdio};
@@ -535,6 +540,12 @@ fn whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named() 
         "{err}"
     );
     assert!(!err.contains("InternalError"), "{err}");
+    // Nothing of the daemon's in /dev/shm (where anyone may create, truncate
+    // or fill a name), all of it in the runtime directory.
+    for e in std::fs::read_dir("/dev/shm").unwrap().flatten() {
+        let m = e.metadata().unwrap();
+        assert_ne!(m.uid(), DAEMON_UID, "{}", e.path().display());
+    }
     drop(daemon);
     // The directory keeps other users out.
     let meta = std::fs::metadata(&run).unwrap();

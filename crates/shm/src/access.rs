@@ -287,3 +287,66 @@ fn damaged(path: &Path, detail: String) -> ShmError {
         detail,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::panic)]
+
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("sar-shm-access-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    /// The daemon creates a missing directory 0770, takes other users'
+    /// access away from one it owns, and refuses a file; a client creates
+    /// nothing.
+    #[test]
+    fn the_daemon_makes_and_fences_its_directory_and_a_client_creates_nothing() {
+        let d = scratch("fence");
+        let e = prepare(&d, Side::Client).unwrap_err();
+        assert!(matches!(e, ShmError::NoRuntimeDir { .. }), "{e:?}");
+        assert!(!d.exists());
+        prepare(&d, Side::Daemon).unwrap();
+        let mode = std::fs::metadata(&d).unwrap().mode() & 0o7777;
+        assert_eq!(mode, RUNTIME_DIR_MODE, "{mode:o}");
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o777)).unwrap();
+        prepare(&d, Side::Daemon).unwrap();
+        let mode = std::fs::metadata(&d).unwrap().mode() & 0o7777;
+        assert_eq!(mode, 0o770, "{mode:o}");
+        prepare(&d, Side::Client).unwrap();
+        let f = d.join("file");
+        std::fs::write(&f, b"").unwrap();
+        let e = prepare(&f, Side::Daemon).unwrap_err();
+        assert!(e.to_string().contains("not a directory"), "{e}");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// A directory of another user: the daemon refuses it, naming both
+    /// users (needs root to make one; says so otherwise).
+    #[test]
+    fn the_daemon_refuses_a_directory_of_another_user() {
+        if euid() != 0 {
+            if std::env::var_os("SAR_SKIP_ROOT_TESTS").is_some_and(|v| v == "1") {
+                eprintln!("SKIPPED the_daemon_refuses_a_directory_of_another_user: needs root");
+                return;
+            }
+            panic!("needs root (chown); SAR_SKIP_ROOT_TESTS=1 skips it");
+        }
+        let d = scratch("owner");
+        std::fs::create_dir(&d).unwrap();
+        std::os::unix::fs::chown(&d, Some(64_213), Some(64_213)).unwrap();
+        let e = prepare(&d, Side::Daemon).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "the runtime directory {}: it belongs to uid 64213, not to sard's user root: \
+                 remove it, or start sard as its owner",
+                d.display()
+            )
+        );
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}
