@@ -8,6 +8,13 @@
 //! directory (`/run/sar`, mode 0770, the daemon's user and group) are out of
 //! reach of everyone else. The runtime directory is a tmpfs under systemd
 //! (`/run`), so the mappings are as fast as `/dev/shm`'s.
+//!
+//! iceoryx2 is built with its feature `dev_permissions` (`Cargo.toml`): its
+//! files are mode 0666 and its directories 0777, so that the operators'
+//! processes and the daemon (different users of one group) open each
+//! other's; without it every file is its creator's alone (0600) and the
+//! daemon spun on a root client's connection for a second (finding 1). The
+//! runtime directory, not the modes, keeps everyone else out.
 
 use core::fmt::Debug;
 use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
