@@ -199,7 +199,31 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
     if may(dir, libc::R_OK | libc::W_OK | libc::X_OK).is_err() {
         return Err(denied(dir, Some(&meta)));
     }
+    if side == Side::Daemon && !on_tmpfs(dir) {
+        tracing::warn!(
+            "{}: not a tmpfs; the shared memory's pages are written back to its disk (systemd's /run is a tmpfs)",
+            dir.display()
+        );
+    }
     check_mgmt(dir)
+}
+
+/// Whether `dir` is on a memory file system (tmpfs, ramfs).
+fn on_tmpfs(dir: &Path) -> bool {
+    const TMPFS_MAGIC: i64 = 0x0102_1994;
+    const RAMFS_MAGIC: i64 = 0x8584_58f6;
+    let Ok(c) = CString::new(dir.as_os_str().as_bytes()) else {
+        return false;
+    };
+    // SAFETY: a plain C struct; all-zero is a valid value.
+    let mut st: libc::statfs = unsafe { std::mem::zeroed() };
+    // SAFETY: a valid path and a buffer of the right type.
+    if unsafe { libc::statfs(c.as_ptr(), &mut st) } != 0 {
+        return false;
+    }
+    #[allow(clippy::unnecessary_cast, clippy::cast_lossless)]
+    let kind = st.f_type as i64;
+    kind == TMPFS_MAGIC || kind == RAMFS_MAGIC
 }
 
 /// A client (or a daemon) that may not use the directory: who, and why.
