@@ -164,10 +164,10 @@ fn a_stalled_loop_stops_feeding_the_watchdog() {
 /// Finding 2 of issue 25: `sard` stuck in iceoryx2 (there: spinning on a
 /// truncated management file) ignored SIGTERM until killed. A damaged file
 /// in the runtime directory that blocks iceoryx2 (a node's details file that
-/// is a FIFO: reading it never returns): `sard` gives up after 1 s with a
+/// is a FIFO: reading it never returns): `sard` gives up after 2 s with a
 /// line naming the directory, and a SIGTERM meanwhile ends it at once.
 #[test]
-fn sard_stuck_in_iceoryx2_answers_sigterm_and_gives_up_within_a_second() {
+fn sard_stuck_in_iceoryx2_answers_sigterm_and_gives_up_in_two_seconds() {
     let run = temp_path("stuck-run");
     let _ = std::fs::remove_dir_all(&run);
     std::fs::create_dir_all(run.join("nodes/111")).unwrap();
@@ -194,10 +194,10 @@ fn sard_stuck_in_iceoryx2_answers_sigterm_and_gives_up_within_a_second() {
     };
     let t = Instant::now();
     let (code, err) = finish(start("stuck"));
-    assert!(t.elapsed() < Duration::from_secs(2), "{:?}", t.elapsed());
+    assert!(t.elapsed() < Duration::from_secs(3), "{:?}", t.elapsed());
     assert_eq!(code, 1, "{err}");
     assert!(
-        err.contains("did not create the services within 1000 ms")
+        err.contains("did not create the services within 2000 ms")
             && err.contains(&run.display().to_string()),
         "{err}"
     );

@@ -199,17 +199,12 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
     if may(dir, libc::R_OK | libc::W_OK | libc::X_OK).is_err() {
         return Err(denied(dir, Some(&meta)));
     }
-    if side == Side::Daemon && !on_tmpfs(dir) {
-        tracing::warn!(
-            "{}: not a tmpfs; the shared memory's pages are written back to its disk (systemd's /run is a tmpfs)",
-            dir.display()
-        );
-    }
     check_mgmt(dir)
 }
 
-/// Whether `dir` is on a memory file system (tmpfs, ramfs).
-fn on_tmpfs(dir: &Path) -> bool {
+/// Whether `dir` is on a memory file system (tmpfs, ramfs): elsewhere the
+/// shared memory's pages are written back to a disk.
+pub fn on_tmpfs(dir: &Path) -> bool {
     const TMPFS_MAGIC: i64 = 0x0102_1994;
     const RAMFS_MAGIC: i64 = 0x8584_58f6;
     let Ok(c) = CString::new(dir.as_os_str().as_bytes()) else {

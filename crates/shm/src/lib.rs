@@ -211,8 +211,12 @@ fn service_name(name: &str) -> Result<ServiceName, ShmError> {
 pub const DAEMON_CREATION_TIMEOUT: Duration = Duration::from_millis(100);
 /// The same for a client.
 pub const CLIENT_CREATION_TIMEOUT: Duration = Duration::from_millis(500);
-/// How long `sard` waits for iceoryx2 to create its node and services.
-pub const START_TIMEOUT: Duration = Duration::from_secs(1);
+/// How long `sard` waits for iceoryx2 to create its node and services (a
+/// few milliseconds when healthy; a margin for a loaded machine).
+pub const START_TIMEOUT: Duration = Duration::from_secs(2);
+/// The same for [`DaemonShm::create`] (tests and benchmarks, many at once on
+/// a loaded machine).
+const LIBRARY_START_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// iceoryx2's configuration for the runtime directory `dir` (never a file
 /// iceoryx2 would look for: the defaults, with the root path in `dir`).
@@ -406,6 +410,12 @@ impl ShmWorker {
         shared: Arc<Shared>,
     ) -> Result<Self, ShmError> {
         access::prepare(dir, Side::Daemon)?;
+        if !access::on_tmpfs(dir) {
+            tracing::warn!(
+                "{}: not a tmpfs; the shared memory's pages are written back to its disk (systemd's /run is a tmpfs)",
+                dir.display()
+            );
+        }
         let cleaned = clean_dead_nodes_in(dir);
         if cleaned > 0 {
             tracing::info!("removed the shared-memory resources of {cleaned} dead process(es)");
@@ -613,7 +623,14 @@ impl DaemonShm {
     /// SCHED_FIFO and pins itself, so the publishing thread runs at normal
     /// priority and never competes with the loop.
     pub fn create(prefix: &str, operator: Operator, limits_n: [f64; 6]) -> Result<Self, ShmError> {
-        Self::create_in(&runtime_dir(), prefix, operator, limits_n, &|| false)
+        Self::start(
+            &runtime_dir(),
+            prefix,
+            operator,
+            limits_n,
+            &|| false,
+            LIBRARY_START_TIMEOUT,
+        )
     }
 
     /// [`DaemonShm::create`] in the runtime directory `dir`. Waits at most
@@ -626,6 +643,17 @@ impl DaemonShm {
         operator: Operator,
         limits_n: [f64; 6],
         stop: &dyn Fn() -> bool,
+    ) -> Result<Self, ShmError> {
+        Self::start(dir, prefix, operator, limits_n, stop, START_TIMEOUT)
+    }
+
+    fn start(
+        dir: &Path,
+        prefix: &str,
+        operator: Operator,
+        limits_n: [f64; 6],
+        stop: &dyn Fn() -> bool,
+        timeout: Duration,
     ) -> Result<Self, ShmError> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
@@ -664,10 +692,10 @@ impl DaemonShm {
             if stop() {
                 return Err(ShmError::Stopped);
             }
-            if start.elapsed() >= START_TIMEOUT {
+            if start.elapsed() >= timeout {
                 return Err(ShmError::Stuck {
                     dir: dir.display().to_string(),
-                    timeout_ms: START_TIMEOUT.as_millis(),
+                    timeout_ms: timeout.as_millis(),
                 });
             }
         };
