@@ -45,11 +45,22 @@ pub const GLOBAL_MGMT_SIZE: u64 = 16;
 /// (0.10.0: major << 32 | minor << 16 | patch), little-endian.
 pub const GLOBAL_MGMT_VERSION: u64 = 10 << 16;
 
-/// The runtime directory: `SAR_RUNTIME_DIR`, else [`DEFAULT_RUNTIME_DIR`].
+/// The runtime directory: `SAR_RUNTIME_DIR` when set; else
+/// [`DEFAULT_RUNTIME_DIR`] when it exists (a daemon under systemd) or for
+/// root; else, for a user without it (a developer's `sard --sim` and its
+/// `sarctl`), `$XDG_RUNTIME_DIR/sar` when that is set; else
+/// [`DEFAULT_RUNTIME_DIR`].
 pub fn runtime_dir() -> PathBuf {
-    match std::env::var_os(RUNTIME_DIR_ENV) {
-        Some(d) if !d.is_empty() => PathBuf::from(d),
-        _ => PathBuf::from(DEFAULT_RUNTIME_DIR),
+    if let Some(d) = std::env::var_os(RUNTIME_DIR_ENV).filter(|d| !d.is_empty()) {
+        return PathBuf::from(d);
+    }
+    let default = PathBuf::from(DEFAULT_RUNTIME_DIR);
+    if euid() == 0 || std::fs::symlink_metadata(&default).is_ok() {
+        return default;
+    }
+    match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(x) => PathBuf::from(x).join("sar"),
+        None => default,
     }
 }
 
