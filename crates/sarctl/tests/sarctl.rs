@@ -352,19 +352,15 @@ const SAR_GID: u32 = 64_210;
 const OPERATOR_UID: u32 = 64_211;
 const OUTSIDER_UID: u32 = 64_212;
 
-/// Whether this process runs as root; the tests of the access model need
-/// it and fail loudly without it, unless `SAR_SKIP_ROOT_TESTS=1` says to
-/// skip them (printed, never a silent pass).
-fn root_or_skip(test: &str) -> bool {
+/// The tests of the access model need root; without it they fail saying
+/// so (build with `SAR_SKIP_ROOT_TESTS=1` to mark them ignored instead).
+fn require_root(test: &str) {
     use std::os::unix::fs::MetadataExt;
-    if std::fs::metadata("/proc/self").unwrap().uid() == 0 {
-        return true;
-    }
-    if std::env::var_os("SAR_SKIP_ROOT_TESTS").is_some_and(|v| v == "1") {
-        eprintln!("SKIPPED {test}: needs root (runs processes as other users)");
-        return false;
-    }
-    panic!("{test} needs root (it runs processes as other users); SAR_SKIP_ROOT_TESTS=1 skips it");
+    assert_eq!(
+        std::fs::metadata("/proc/self").unwrap().uid(),
+        0,
+        "{test} needs root (it runs processes as other users); SAR_SKIP_ROOT_TESTS=1 at build time marks it ignored"
+    );
 }
 
 /// A fresh base directory (the daemon's user's, 0755: every test user may
@@ -452,10 +448,9 @@ fn start_daemon_as_user(base: &std::path::Path, run: &std::path::Path, prefix: &
 /// the drives. Now root's files are openable by the daemon, and the daemon
 /// never waits longer than `DAEMON_CREATION_TIMEOUT` for a client.
 #[test]
+#[cfg_attr(sar_skip_root_tests, ignore = "needs root (SAR_SKIP_ROOT_TESTS=1)")]
 fn a_root_client_never_stalls_the_daemon_of_another_user() {
-    if !root_or_skip("a_root_client_never_stalls_the_daemon_of_another_user") {
-        return;
-    }
+    require_root("a_root_client_never_stalls_the_daemon_of_another_user");
     let prefix = format!("sar-acc1-{}", std::process::id());
     let (base, run) = access_dirs("root_client");
     let daemon = start_daemon_as_user(&base, &run, &prefix);
@@ -496,10 +491,9 @@ fn a_root_client_never_stalls_the_daemon_of_another_user() {
 /// operator (group member) commands, and an outsider is refused at once
 /// naming the user and the group.
 #[test]
+#[cfg_attr(sar_skip_root_tests, ignore = "needs root (SAR_SKIP_ROOT_TESTS=1)")]
 fn whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named() {
-    if !root_or_skip("whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named") {
-        return;
-    }
+    require_root("whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named");
     use std::os::unix::fs::MetadataExt;
     let prefix = format!("sar-acc3-{}", std::process::id());
     let (base, run) = access_dirs("first");
@@ -649,5 +643,26 @@ fn a_damaged_management_file_is_named_within_a_second() {
     );
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.starts_with("sarctl: no daemon runs"), "fifo: {err}");
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+/// A runtime directory of another user: the daemon refuses it, naming both
+/// users (`sar_shm::access`).
+#[test]
+#[cfg_attr(sar_skip_root_tests, ignore = "needs root (SAR_SKIP_ROOT_TESTS=1)")]
+fn the_daemon_refuses_a_directory_of_another_user() {
+    require_root("the_daemon_refuses_a_directory_of_another_user");
+    let (base, run) = access_dirs("owner");
+    std::fs::create_dir(&run).unwrap();
+    std::os::unix::fs::chown(&run, Some(OUTSIDER_UID), Some(OUTSIDER_UID)).unwrap();
+    let e = sar_shm::access::prepare(&run, sar_shm::Side::Daemon).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "the runtime directory {}: it belongs to uid {OUTSIDER_UID}, not to sard's user root: \
+             remove it, or start sard as its owner",
+            run.display()
+        )
+    );
     let _ = std::fs::remove_dir_all(&base);
 }
