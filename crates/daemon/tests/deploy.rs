@@ -253,7 +253,7 @@ fn sard_runs_its_loop_on_the_rdt_driver_against_the_emulator() {
 
 /// The unit states the access model (issue 25, README "Access"): the
 /// runtime directory where `sard` and its clients meet is systemd's
-/// `RuntimeDirectory=sar` (the transport's default), the group's (0770),
+/// `RuntimeDirectory=sar` (the transport's default), the group's (2770),
 /// nothing is shared through /dev/shm or /tmp, and the comment says how an
 /// operator is added.
 #[test]
@@ -265,7 +265,7 @@ fn the_unit_states_the_access_model() {
         "User=sar",
         "Group=sar",
         "RuntimeDirectory=sar",
-        "RuntimeDirectoryMode=0770",
+        "RuntimeDirectoryMode=2770",
         "UMask=0007",
         "PrivateTmp=yes",
         "ReadWritePaths=/run/sar",

@@ -506,7 +506,7 @@ fn whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named() 
     let daemon = start_daemon_as_user(&base, &run, &prefix);
     let meta = std::fs::metadata(&run).unwrap();
     assert_eq!((meta.uid(), meta.gid()), (DAEMON_UID, SAR_GID));
-    assert_eq!(meta.mode() & 0o777, 0o770, "{:o}", meta.mode());
+    assert_eq!(meta.mode() & 0o7777, 0o2770, "{:o}", meta.mode());
 
     // An operator commands (a reset of the running daemon is answered).
     let out = sarctl_as(Some((OPERATOR_UID, SAR_GID)), &run, &prefix, &["reset"]);
@@ -534,6 +534,23 @@ fn whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named() 
         "{err}"
     );
     assert!(!err.contains("InternalError"), "{err}");
+    // No file in the directory, the daemon's or the operator's, is open to
+    // other users, not even by its mode (iceoryx2 makes them 0666: the
+    // daemon fences its own within a second, a client its own after its
+    // ports), and every one is the group's (set-group-ID directory).
+    let start = Instant::now();
+    loop {
+        let open: Vec<String> = walk(&run)
+            .into_iter()
+            .filter(|(_, _, gid, mode)| mode & 0o007 != 0 || *gid != SAR_GID)
+            .map(|(p, uid, gid, mode)| format!("{p} {uid}:{gid} {mode:o}"))
+            .collect();
+        if open.is_empty() {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(3), "{open:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
     // Nothing of the daemon's in /dev/shm (where anyone may create, truncate
     // or fill a name), all of it in the runtime directory.
     for e in std::fs::read_dir("/dev/shm").unwrap().flatten() {
@@ -665,4 +682,25 @@ fn the_daemon_refuses_a_directory_of_another_user() {
         )
     );
     let _ = std::fs::remove_dir_all(&base);
+}
+
+/// Every entry under `dir` (path, owner, group, mode), depth first.
+fn walk(dir: &std::path::Path) -> Vec<(String, u32, u32, u32)> {
+    use std::os::unix::fs::MetadataExt;
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let Ok(m) = e.path().symlink_metadata() else {
+            continue;
+        };
+        out.push((
+            e.path().display().to_string(),
+            m.uid(),
+            m.gid(),
+            m.mode() & 0o7777,
+        ));
+        if m.is_dir() {
+            out.extend(walk(&e.path()));
+        }
+    }
+    out
 }

@@ -4,11 +4,11 @@
 //! Every iceoryx2 file of a daemon lives in its runtime directory
 //! ([`DEFAULT_RUNTIME_DIR`], or `SAR_RUNTIME_DIR`): under systemd
 //! `RuntimeDirectory=sar`, owned by the daemon's user and its group `sar`,
-//! mode 0770. The daemon's user and the members of the directory's group
+//! mode 2770 (set-group-ID). The daemon's user and the members of the directory's group
 //! (the operators) read and command; nobody else can enter the directory,
 //! so nobody else can read, command, create or damage anything there.
 //!
-//! - The daemon creates the directory when it is missing (mode 0770), refuses
+//! - The daemon creates the directory when it is missing (mode 2770), refuses
 //!   one that is not a directory or belongs to another user, and takes the
 //!   other users' access away when the mode gives them any.
 //! - A client never creates it: a missing directory means no daemon runs;
@@ -32,8 +32,10 @@ pub const DEFAULT_RUNTIME_DIR: &str = "/run/sar";
 /// The environment variable that names the runtime directory (the daemon and
 /// its clients must agree; tests give each daemon its own).
 pub const RUNTIME_DIR_ENV: &str = "SAR_RUNTIME_DIR";
-/// The mode the daemon gives a runtime directory it creates.
-pub const RUNTIME_DIR_MODE: u32 = 0o770;
+/// The mode the daemon gives a runtime directory it creates: the user's and
+/// the group's, and set-group-ID, so that every file in it (an operator's
+/// too) belongs to the directory's group.
+pub const RUNTIME_DIR_MODE: u32 = 0o2770;
 /// How the name of iceoryx2's management segment in the runtime directory
 /// ends (iceoryx2 0.10: `iox2_<hash>_node.0_10_0.global_mgmt`).
 pub const GLOBAL_MGMT_SUFFIX: &str = ".global_mgmt";
@@ -213,6 +215,78 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
     check_mgmt(dir)
 }
 
+/// Takes every access of other users away from the files and directories
+/// of this process's user in the runtime directory `dir` (two levels: the
+/// files, `nodes/*`, `services/*`) that belong to the directory's group
+/// (a file of another group stays as it is: its group's access would not
+/// be the directory's). iceoryx2 (`dev_permissions`) makes them 0666 and
+/// 0777; the directory already keeps others out, this keeps a file that
+/// leaves it (a hard link made elsewhere by a member) closed to them too.
+/// The daemon's publishing thread calls it every [`FENCE_PERIOD`], a client
+/// after making its ports. Returns how many it changed (at most `limit`
+/// entries are looked at).
+pub fn fence_own_files(dir: &Path, limit: usize) -> usize {
+    let me = euid();
+    let Ok(group) = std::fs::metadata(dir).map(|m| m.gid()) else {
+        return 0;
+    };
+    let mut seen = 0;
+    let mut changed = 0;
+    let visit = |path: &Path, changed: &mut usize| {
+        let Ok(m) = std::fs::symlink_metadata(path) else {
+            return false;
+        };
+        if m.uid() == me && m.gid() == group && !m.file_type().is_symlink() && m.mode() & 0o007 != 0
+        {
+            let mode = m.mode() & 0o7770;
+            if std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).is_ok() {
+                *changed += 1;
+            }
+        }
+        m.file_type().is_dir()
+    };
+    let Ok(top) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    for entry in top.flatten() {
+        seen += 1;
+        if seen > limit {
+            break;
+        }
+        let path = entry.path();
+        if visit(&path, &mut changed) {
+            let Ok(inner) = std::fs::read_dir(&path) else {
+                continue;
+            };
+            for e in inner.flatten() {
+                seen += 1;
+                if seen > limit {
+                    break;
+                }
+                let p = e.path();
+                if visit(&p, &mut changed)
+                    && let Ok(deep) = std::fs::read_dir(&p)
+                {
+                    for f in deep.flatten() {
+                        seen += 1;
+                        if seen > limit {
+                            break;
+                        }
+                        visit(&f.path(), &mut changed);
+                    }
+                }
+            }
+        }
+    }
+    changed
+}
+
+/// How often the daemon takes other users' access away from its new files.
+pub const FENCE_PERIOD: std::time::Duration = std::time::Duration::from_secs(1);
+/// Entries a fence looks at, at most (a directory flooded by a member does
+/// not hold the publishing thread).
+pub const FENCE_LIMIT: usize = 4096;
+
 /// Whether `dir` is on a memory file system (tmpfs, ramfs): elsewhere the
 /// shared memory's pages are written back to a disk.
 pub fn on_tmpfs(dir: &Path) -> bool {
@@ -330,7 +404,7 @@ mod tests {
         d
     }
 
-    /// The daemon creates a missing directory 0770, takes other users'
+    /// The daemon creates a missing directory 2770, takes other users'
     /// access away from one it owns, and refuses a file; a client creates
     /// nothing.
     #[test]

@@ -365,6 +365,8 @@ impl std::fmt::Debug for DaemonShm {
 /// [`ShmWorker::pump`] when it likes (deterministic tests).
 pub struct ShmWorker {
     _node: Node<SarIpc>,
+    /// The runtime directory (fenced every `access::FENCE_PERIOD`).
+    dir: std::path::PathBuf,
     publisher: StatePublisher,
     notifier: Notifier<SarIpc>,
     server: CommandServer,
@@ -467,8 +469,12 @@ impl ShmWorker {
             .server_builder()
             .create()
             .map_err(|e| port("cannot create the command server", e))?;
+        // The daemon's files: its user's and group's only (as every later
+        // one, from the publishing thread).
+        access::fence_own_files(dir, access::FENCE_LIMIT);
         Ok(Self {
             _node: node,
+            dir: dir.to_owned(),
             publisher,
             notifier,
             server,
@@ -598,7 +604,12 @@ impl ShmWorker {
     /// side is dropped, after sending what is queued.
     fn run(mut self) {
         self.operator.publisher.watch();
+        let mut fenced = std::time::Instant::now();
         loop {
+            if fenced.elapsed() >= access::FENCE_PERIOD {
+                access::fence_own_files(&self.dir, access::FENCE_LIMIT);
+                fenced = std::time::Instant::now();
+            }
             // A sign of life per wake-up (the loop wakes it every cycle):
             // the loop faults when it stops (`Reason::PublisherStalled`).
             self.operator.publisher.beat();
@@ -894,6 +905,7 @@ impl Client {
             .listener_builder()
             .create()
             .map_err(|e| port("cannot listen to the state event", e))?;
+        access::fence_own_files(&self.dir, access::FENCE_LIMIT);
         Ok(StateSubscription {
             subscriber,
             listener,
@@ -916,7 +928,12 @@ impl Client {
             .send_copy(command)
             .map_err(|e| port("cannot send the command", e))?;
         let start = std::time::Instant::now();
+        let mut fenced = false;
         while start.elapsed() < timeout {
+            if !fenced {
+                access::fence_own_files(&self.dir, access::FENCE_LIMIT);
+                fenced = true;
+            }
             if let Ok(Some(reply)) = pending.receive() {
                 return Ok(*reply.payload());
             }
