@@ -234,11 +234,14 @@ pub fn config(dir: &Path, side: Side) -> Result<Config, ShmError> {
         Side::Client => CLIENT_CREATION_TIMEOUT,
     };
     if side == Side::Client {
-        // The daemon removes dead nodes' resources; a client never reads
-        // other nodes' files (one damaged, e.g. a FIFO, would block it).
+        // The daemon removes dead nodes' resources at its start; a client
+        // never lists every node (one damaged, e.g. a details file that is a
+        // FIFO, would block it). It still cleans the dead owners of a
+        // service it opens (iceoryx2's default): else it would keep a
+        // killed daemon's service alive, and the new daemon would find it
+        // taken.
         config.global.node.cleanup_dead_nodes_on_creation = false;
         config.global.node.cleanup_dead_nodes_on_destruction = false;
-        config.global.service.cleanup_dead_nodes_on_open = false;
     }
     Ok(config)
 }
