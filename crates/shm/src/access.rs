@@ -163,14 +163,18 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
                 });
             }
             Side::Daemon => {
-                std::fs::create_dir(dir)
-                    .and_then(|()| {
-                        std::fs::set_permissions(
-                            dir,
-                            std::fs::Permissions::from_mode(RUNTIME_DIR_MODE),
-                        )
-                    })
-                    .map_err(|e| dir_error(dir, format!("cannot create it: {e}")))?;
+                // Never open to others, not even before the mode is set (a
+                // daemon making it at the same moment is no error).
+                use std::os::unix::fs::DirBuilderExt;
+                match std::fs::DirBuilder::new().mode(0o770).create(dir) {
+                    Ok(()) => std::fs::set_permissions(
+                        dir,
+                        std::fs::Permissions::from_mode(RUNTIME_DIR_MODE),
+                    )
+                    .map_err(|e| dir_error(dir, format!("cannot set its mode: {e}")))?,
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                    Err(e) => return Err(dir_error(dir, format!("cannot create it: {e}"))),
+                }
                 std::fs::symlink_metadata(dir)
                     .map_err(|e| dir_error(dir, format!("cannot read it: {e}")))?
             }
