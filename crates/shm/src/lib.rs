@@ -427,6 +427,23 @@ impl ShmWorker {
         }
         let names = Names::new(prefix);
         let node = node_in(dir, Side::Daemon)?;
+        // The command service first: a client that finds the state finds
+        // the command server too.
+        let command = node
+            .service_builder(&service_name(&names.command)?)
+            .request_response::<CommandMsg, ReplyMsg>()
+            .max_servers(1)
+            .max_clients(MAX_CLIENTS)
+            .max_active_requests_per_client(1)
+            .max_response_buffer_size(1)
+            .enable_safe_overflow_for_requests(true)
+            .enable_safe_overflow_for_responses(true)
+            .create()
+            .map_err(|e| exists(prefix, &names.command, e))?;
+        let server = command
+            .server_builder()
+            .create()
+            .map_err(|e| port("cannot create the command server", e))?;
         let state = node
             .service_builder(&service_name(&names.state)?)
             .publish_subscribe::<StateMsg>()
@@ -457,21 +474,6 @@ impl ShmWorker {
             .notifier_builder()
             .create()
             .map_err(|e| port("cannot create the state notifier", e))?;
-        let command = node
-            .service_builder(&service_name(&names.command)?)
-            .request_response::<CommandMsg, ReplyMsg>()
-            .max_servers(1)
-            .max_clients(MAX_CLIENTS)
-            .max_active_requests_per_client(1)
-            .max_response_buffer_size(1)
-            .enable_safe_overflow_for_requests(true)
-            .enable_safe_overflow_for_responses(true)
-            .create()
-            .map_err(|e| exists(prefix, &names.command, e))?;
-        let server = command
-            .server_builder()
-            .create()
-            .map_err(|e| port("cannot create the command server", e))?;
         // The daemon's files: its user's and group's only (as every later
         // one, from the publishing thread).
         access::fence_own_files(dir, access::FENCE_LIMIT);
