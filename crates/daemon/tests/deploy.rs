@@ -252,3 +252,34 @@ fn sard_runs_its_loop_on_the_rdt_driver_against_the_emulator() {
     let _ = std::fs::remove_file(cfg);
     let _ = std::fs::remove_file(sock_path);
 }
+
+/// The unit states the access model (issue 25, README "Access"): the
+/// runtime directory where `sard` and its clients meet is systemd's
+/// `RuntimeDirectory=sar` (the transport's default), the group's (2770),
+/// nothing is shared through /dev/shm or /tmp, and the comment says how an
+/// operator is added.
+#[test]
+fn the_unit_states_the_access_model() {
+    let unit = std::fs::read_to_string(robot_toml().with_file_name("sard.service")).unwrap();
+    let lines: Vec<&str> = unit.lines().map(str::trim).collect();
+    assert_eq!(sar_shm::DEFAULT_RUNTIME_DIR, "/run/sar");
+    for line in [
+        "User=sar",
+        "Group=sar",
+        "RuntimeDirectory=sar",
+        "RuntimeDirectoryMode=2770",
+        "UMask=0007",
+        "PrivateTmp=yes",
+        "ReadWritePaths=/run/sar",
+    ] {
+        assert!(lines.contains(&line), "{line} missing");
+    }
+    assert!(unit.contains("usermod -aG sar alice"), "{unit}");
+    assert!(
+        !lines
+            .iter()
+            .any(|l| l.starts_with("ReadWritePaths=")
+                && (l.contains("/dev/shm") || l.contains("/tmp"))),
+        "{unit}"
+    );
+}

@@ -230,3 +230,58 @@ fn check_config_refuses_a_unit_mistake_and_a_non_regular_file_at_once() {
     let _ = std::fs::remove_file(cm);
     let _ = std::fs::remove_file(fifo);
 }
+
+/// Finding 2 of issue 25: `sard` stuck in iceoryx2 (there: spinning on a
+/// truncated management file) ignored SIGTERM until killed. A damaged file
+/// in the runtime directory that blocks iceoryx2 (a node's details file that
+/// is a FIFO: reading it never returns): `sard` gives up after 2 s with a
+/// line naming the directory, and a SIGTERM meanwhile ends it at once.
+#[test]
+fn sard_stuck_in_iceoryx2_answers_sigterm_and_gives_up_in_two_seconds() {
+    let run = temp_path("stuck-run");
+    let _ = std::fs::remove_dir_all(&run);
+    std::fs::create_dir_all(run.join("nodes/111")).unwrap();
+    // A node "111": its monitor token (no process holds its lock: dead) and
+    // its details, a FIFO.
+    std::fs::write(run.join("nodes/iox2_111.node_monitor"), b"").unwrap();
+    let fifo = run.join("nodes/111/iox2_node.details");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let start = |name: &str| {
+        Command::new(SARD)
+            .args(["--sim", "--max-cycles", "3000"])
+            .env("SAR_RUNTIME_DIR", &run)
+            .env("SAR_SERVICE_PREFIX", prefix(name))
+            .stderr(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap()
+    };
+    let t = Instant::now();
+    let (code, err) = finish(start("stuck"));
+    assert!(t.elapsed() < Duration::from_secs(3), "{:?}", t.elapsed());
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("did not create the services within 2000 ms")
+            && err.contains(&run.display().to_string()),
+        "{err}"
+    );
+    let child = start("stuck-term");
+    std::thread::sleep(Duration::from_millis(300));
+    let t = Instant::now();
+    signal(&child, "-TERM");
+    let (code, err) = finish(child);
+    assert!(
+        t.elapsed() < Duration::from_millis(500),
+        "{:?}",
+        t.elapsed()
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("stopped while creating"), "{err}");
+    let _ = std::fs::remove_dir_all(&run);
+}

@@ -3,7 +3,12 @@
 //! JSON object per line and `limits`, `status`, `tare`, `move-tip` answer;
 //! `record start|stop` print the recording's absolute path.
 
-#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
 
 mod support;
 use std::process::{Command, Output, Stdio};
@@ -334,4 +339,368 @@ fn record_start_and_stop_print_the_absolute_path() {
         log.contains(&format!("recordings go to {}", expected_dir.display())),
         "{log}"
     );
+}
+
+// The access model (issue 25, README "Access"): processes of other users
+// through `CommandExt::uid/gid` (needs root, as CI runs; uids need no
+// /etc/passwd entry). Each test has its own runtime directory.
+
+/// The daemon's user and group in these tests, an operator (in the group
+/// as its primary group) and an outsider.
+const DAEMON_UID: u32 = 64_210;
+const SAR_GID: u32 = 64_210;
+const OPERATOR_UID: u32 = 64_211;
+const OUTSIDER_UID: u32 = 64_212;
+
+/// The tests of the access model need root; without it they fail saying
+/// so (build with `SAR_SKIP_ROOT_TESTS=1` to mark them ignored instead).
+fn require_root(test: &str) {
+    use std::os::unix::fs::MetadataExt;
+    assert_eq!(
+        std::fs::metadata("/proc/self").unwrap().uid(),
+        0,
+        "{test} needs root (it runs processes as other users); SAR_SKIP_ROOT_TESTS=1 at build time marks it ignored"
+    );
+}
+
+/// A fresh base directory (the daemon's user's, 0755: every test user may
+/// pass, as through /run) and the runtime directory in it (not created).
+fn access_dirs(name: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    use std::os::unix::fs::PermissionsExt;
+    let base = std::path::PathBuf::from(format!("/tmp/sar-access-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    std::fs::create_dir_all(&base).unwrap();
+    std::fs::set_permissions(&base, std::fs::Permissions::from_mode(0o755)).unwrap();
+    if std::fs::metadata("/proc/self").is_ok_and(|m| std::os::unix::fs::MetadataExt::uid(&m) == 0) {
+        std::os::unix::fs::chown(&base, Some(DAEMON_UID), Some(SAR_GID)).unwrap();
+    }
+    let run = base.join("run");
+    (base, run)
+}
+
+/// `sarctl` with the runtime directory `run`, as `who` (uid, gid) or as
+/// this process (`None`).
+fn sarctl_as(
+    who: Option<(u32, u32)>,
+    run: &std::path::Path,
+    prefix: &str,
+    args: &[&str],
+) -> Output {
+    use std::os::unix::process::CommandExt;
+    let mut cmd = Command::new(SARCTL);
+    cmd.args(args)
+        .env("SAR_SERVICE_PREFIX", prefix)
+        .env("SAR_RUNTIME_DIR", run);
+    if let Some((uid, gid)) = who {
+        cmd.uid(uid).gid(gid);
+    }
+    cmd.output().unwrap()
+}
+
+/// `sard --sim` as the daemon's user with the runtime directory `run`, its
+/// log to `base/sard.log`; waits until its own user's `sarctl status`
+/// answers with the guard Ok (the simulation's automatic first reset).
+fn start_daemon_as_user(base: &std::path::Path, run: &std::path::Path, prefix: &str) -> Daemon {
+    use std::os::unix::process::CommandExt;
+    let log = std::fs::File::create(base.join("sard.log")).unwrap();
+    let daemon = Daemon(
+        Command::new(&*SARD)
+            .arg("--sim")
+            .current_dir(base)
+            .env("SAR_SERVICE_PREFIX", prefix)
+            .env("SAR_RUNTIME_DIR", run)
+            .uid(DAEMON_UID)
+            .gid(SAR_GID)
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap(),
+    );
+    let mut daemon = daemon;
+    let start = Instant::now();
+    loop {
+        let out = sarctl_as(
+            Some((DAEMON_UID, SAR_GID)),
+            run,
+            prefix,
+            &["status", "--format", "json"],
+        );
+        if out.status.success()
+            && serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["guard"] == "ok"
+        {
+            break;
+        }
+        let log = std::fs::read_to_string(base.join("sard.log")).unwrap_or_default();
+        assert!(
+            start.elapsed() < Duration::from_secs(30) && daemon.0.try_wait().unwrap().is_none(),
+            "sard did not come up: {}\n{log}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    daemon
+}
+
+/// Finding 1: a read-only `sarctl status` (and `limits`) run by root
+/// against a daemon of another user made the daemon's publishing thread
+/// retry opening root's 0600 connection segment for iceoryx2's whole
+/// creation timeout (1 s): the guard faulted after 500 ms and quick-stopped
+/// the drives. Now root's files are openable by the daemon, and the daemon
+/// never waits longer than `DAEMON_CREATION_TIMEOUT` for a client.
+#[test]
+#[cfg_attr(sar_skip_root_tests, ignore = "needs root (SAR_SKIP_ROOT_TESTS=1)")]
+fn a_root_client_never_stalls_the_daemon_of_another_user() {
+    require_root("a_root_client_never_stalls_the_daemon_of_another_user");
+    let prefix = format!("sar-acc1-{}", std::process::id());
+    let (base, run) = access_dirs("root_client");
+    let daemon = start_daemon_as_user(&base, &run, &prefix);
+    for args in [
+        &["status"][..],
+        &["limits"],
+        &["status", "--format", "json"],
+    ] {
+        let out = sarctl_as(None, &run, &prefix, args);
+        assert!(
+            out.status.success(),
+            "root sarctl {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    // Longer than the stall detection (500 ms) after the last root client.
+    std::thread::sleep(Duration::from_millis(700));
+    let out = sarctl_as(
+        Some((DAEMON_UID, SAR_GID)),
+        &run,
+        &prefix,
+        &["status", "--format", "json"],
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["quick_stops"], 0, "{v}");
+    assert_eq!(v["guard"], "ok", "{v}");
+    drop(daemon);
+    let log = std::fs::read_to_string(base.join("sard.log")).unwrap();
+    assert!(!log.contains("made no progress"), "{log}");
+    assert!(!log.contains("quick-stop"), "{log}");
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+/// Finding 3: a root `sarctl status` while no daemon ran created iceoryx2's
+/// directory as root (0750), and `sard` as its own user then failed with
+/// `InternalError`; every permission problem read `InternalError`. Now a
+/// client never creates the runtime directory, the daemon owns it, an
+/// operator (group member) commands, and an outsider is refused at once
+/// naming the user and the group.
+#[test]
+#[cfg_attr(sar_skip_root_tests, ignore = "needs root (SAR_SKIP_ROOT_TESTS=1)")]
+fn whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named() {
+    require_root("whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named");
+    use std::os::unix::fs::MetadataExt;
+    let prefix = format!("sar-acc3-{}", std::process::id());
+    let (base, run) = access_dirs("first");
+    let out = sarctl_as(None, &run, &prefix, &["status"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.starts_with("sarctl: no daemon runs"), "{err}");
+    assert!(!run.exists(), "a client created {}", run.display());
+
+    let daemon = start_daemon_as_user(&base, &run, &prefix);
+    let meta = std::fs::metadata(&run).unwrap();
+    assert_eq!((meta.uid(), meta.gid()), (DAEMON_UID, SAR_GID));
+    assert_eq!(meta.mode() & 0o7777, 0o2770, "{:o}", meta.mode());
+
+    // An operator commands (a reset of the running daemon is answered).
+    let out = sarctl_as(Some((OPERATOR_UID, SAR_GID)), &run, &prefix, &["reset"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // An outsider: refused at once, in one line, naming who and which group.
+    let t = Instant::now();
+    let out = sarctl_as(
+        Some((OUTSIDER_UID, OUTSIDER_UID)),
+        &run,
+        &prefix,
+        &["status"],
+    );
+    assert!(t.elapsed() < Duration::from_secs(1), "{:?}", t.elapsed());
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(&format!(
+            "sarctl: permission denied: user uid {OUTSIDER_UID} is not in group gid {SAR_GID}"
+        )),
+        "{err}"
+    );
+    assert!(!err.contains("InternalError"), "{err}");
+    // No file in the directory, the daemon's or the operator's, is open to
+    // other users, not even by its mode (iceoryx2 makes them 0666: the
+    // daemon fences its own within a second, a client its own after its
+    // ports), and every one is the group's (set-group-ID directory).
+    let start = Instant::now();
+    loop {
+        let open: Vec<String> = walk(&run)
+            .into_iter()
+            .filter(|(_, _, gid, mode)| mode & 0o007 != 0 || *gid != SAR_GID)
+            .map(|(p, uid, gid, mode)| format!("{p} {uid}:{gid} {mode:o}"))
+            .collect();
+        if open.is_empty() {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(3), "{open:?}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Nothing of the daemon's in /dev/shm (where anyone may create, truncate
+    // or fill a name), all of it in the runtime directory.
+    for e in std::fs::read_dir("/dev/shm").unwrap().flatten() {
+        let m = e.metadata().unwrap();
+        assert_ne!(m.uid(), DAEMON_UID, "{}", e.path().display());
+    }
+    drop(daemon);
+    // The directory keeps other users out.
+    let meta = std::fs::metadata(&run).unwrap();
+    assert_eq!(meta.mode() & 0o007, 0, "{:o}", meta.mode());
+    // A management file of the wrong owner (root's, 0600): named, at once.
+    let mgmt = std::fs::read_dir(&run)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().ends_with(".global_mgmt"))
+        .unwrap();
+    std::os::unix::fs::chown(&mgmt, Some(0), Some(0)).unwrap();
+    std::fs::set_permissions(&mgmt, std::os::unix::fs::PermissionsExt::from_mode(0o600)).unwrap();
+    let out = sarctl_as(Some((OPERATOR_UID, SAR_GID)), &run, &prefix, &["status"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("is damaged (owned by root with mode 0600"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+/// Finding 2: iceoryx2's management segment was a world-writable file in
+/// /dev/shm; truncated, every new `sarctl` and `sard` spun on it forever
+/// (and `sard` ignored SIGTERM); with garbage, `UnableToGenerateUniqueNodeId`.
+/// Now it lives in the runtime directory, and a damaged one (empty, short,
+/// garbage, not the caller's) is named within a second by both.
+#[test]
+fn a_damaged_management_file_is_named_within_a_second() {
+    let prefix = format!("sar-acc2-{}", std::process::id());
+    let (base, run) = access_dirs("damaged");
+    // A healthy one, as iceoryx2 writes it (and its size, as the check
+    // expects it).
+    drop(sar_shm::node_in(&run, sar_shm::Side::Daemon).unwrap());
+    let mgmt = std::fs::read_dir(&run)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().ends_with(".global_mgmt"))
+        .unwrap();
+    let healthy = std::fs::read(&mgmt).unwrap();
+    assert_eq!(healthy.len() as u64, sar_shm::access::GLOBAL_MGMT_SIZE);
+    assert_eq!(
+        healthy[..8],
+        sar_shm::access::GLOBAL_MGMT_VERSION.to_le_bytes()
+    );
+    for (what, bytes) in [
+        ("empty", Vec::new()),
+        ("short", healthy[..8].to_vec()),
+        ("garbage", vec![0xA5; healthy.len()]),
+    ] {
+        std::fs::write(&mgmt, &bytes).unwrap();
+        let t = Instant::now();
+        let out = sarctl_as(None, &run, &prefix, &["status"]);
+        assert!(
+            t.elapsed() < Duration::from_secs(1),
+            "{what}: {:?}",
+            t.elapsed()
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{what}");
+        assert_eq!(err.lines().count(), 1, "{what}: {err}");
+        assert!(
+            err.contains("management file") && err.contains("is damaged"),
+            "{what}: {err}"
+        );
+        let t = Instant::now();
+        let out = Command::new(&*SARD)
+            .arg("--sim")
+            .current_dir(&base)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .env("SAR_RUNTIME_DIR", &run)
+            .output()
+            .unwrap();
+        assert!(
+            t.elapsed() < Duration::from_secs(2),
+            "{what}: {:?}",
+            t.elapsed()
+        );
+        assert!(!out.status.success(), "{what}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("is damaged"), "{what}: {err}");
+    }
+    // A dead node's details file that blocks whoever reads it (a FIFO): a
+    // client never reads other nodes' files, so it answers at once.
+    std::fs::write(&mgmt, &healthy).unwrap();
+    std::fs::create_dir_all(run.join("nodes/111")).unwrap();
+    std::fs::write(run.join("nodes/iox2_111.node_monitor"), b"").unwrap();
+    let fifo = run.join("nodes/111/iox2_node.details");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let t = Instant::now();
+    let out = sarctl_as(None, &run, &prefix, &["status"]);
+    assert!(
+        t.elapsed() < Duration::from_secs(1),
+        "fifo: {:?}",
+        t.elapsed()
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.starts_with("sarctl: no daemon runs"), "fifo: {err}");
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+/// A runtime directory of another user: the daemon refuses it, naming both
+/// users (`sar_shm::access`).
+#[test]
+#[cfg_attr(sar_skip_root_tests, ignore = "needs root (SAR_SKIP_ROOT_TESTS=1)")]
+fn the_daemon_refuses_a_directory_of_another_user() {
+    require_root("the_daemon_refuses_a_directory_of_another_user");
+    let (base, run) = access_dirs("owner");
+    std::fs::create_dir(&run).unwrap();
+    std::os::unix::fs::chown(&run, Some(OUTSIDER_UID), Some(OUTSIDER_UID)).unwrap();
+    let e = sar_shm::access::prepare(&run, sar_shm::Side::Daemon).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "the runtime directory {}: it belongs to uid {OUTSIDER_UID}, not to sard's user root: \
+             remove it, or start sard as its owner",
+            run.display()
+        )
+    );
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+/// Every entry under `dir` (path, owner, group, mode), depth first.
+fn walk(dir: &std::path::Path) -> Vec<(String, u32, u32, u32)> {
+    use std::os::unix::fs::MetadataExt;
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let Ok(m) = e.path().symlink_metadata() else {
+            continue;
+        };
+        out.push((
+            e.path().display().to_string(),
+            m.uid(),
+            m.gid(),
+            m.mode() & 0o7777,
+        ));
+        if m.is_dir() {
+            out.extend(walk(&e.path()));
+        }
+    }
+    out
 }

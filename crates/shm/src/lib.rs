@@ -21,6 +21,13 @@
 //! At start the daemon removes the stale resources of dead nodes (a daemon
 //! or client killed with SIGKILL) and then creates the services; when they
 //! exist (a living daemon with the same prefix), it refuses to start.
+//!
+//! Every file lives in the runtime directory ([`access`]: `/run/sar` or
+//! `SAR_RUNTIME_DIR`), never in `/dev/shm` or `/tmp` ([`SarIpc`]): the
+//! daemon's user and its group (the operators) may enter it, nobody else.
+//! The checks of [`access`] run before iceoryx2 is called, so a client
+//! without the right fails at once with the user and the group named, and a
+//! damaged management file is named instead of spun on.
 
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
@@ -28,10 +35,16 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
+
+pub mod access;
+mod service;
+pub use access::{DEFAULT_RUNTIME_DIR, RUNTIME_DIR_ENV, Side, runtime_dir};
 use sar_loop::control::{Envelope, Operator, Reply};
 use sar_loop::publish::StateParts;
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
 use sar_msgs::wire::{CommandMsg, ReplyMsg, StateMsg, command_kind, reply_code};
+pub use service::Service as SarIpc;
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
@@ -121,6 +134,53 @@ pub enum ShmError {
         /// How long the client waited, ms.
         timeout_ms: u128,
     },
+    /// A client found no runtime directory: no daemon runs there.
+    #[error(
+        "no daemon runs: the runtime directory {dir} does not exist (sard creates it; SAR_RUNTIME_DIR names another)"
+    )]
+    NoRuntimeDir {
+        /// The directory.
+        dir: String,
+    },
+    /// The runtime directory cannot be used (missing parent, not a
+    /// directory, another user's).
+    #[error("the runtime directory {dir}: {detail}")]
+    RuntimeDir {
+        /// The directory.
+        dir: String,
+        /// Why.
+        detail: String,
+    },
+    /// This process may not use the runtime directory.
+    #[error("permission denied: {detail}")]
+    PermissionDenied {
+        /// Who, and what is missing.
+        detail: String,
+    },
+    /// A management file of iceoryx2 is damaged.
+    #[error(
+        "the shared-memory management file {path} is damaged ({detail}): stop every sard and sarctl of it and remove it"
+    )]
+    Damaged {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        detail: String,
+    },
+    /// iceoryx2 did not finish creating the daemon's node and services in
+    /// time (a damaged file it spins on).
+    #[error(
+        "iceoryx2 did not create the services within {timeout_ms} ms (a damaged file in the runtime directory {dir}?)"
+    )]
+    Stuck {
+        /// The runtime directory.
+        dir: String,
+        /// How long sard waited, ms.
+        timeout_ms: u128,
+    },
+    /// The daemon was asked to stop while it was starting.
+    #[error("stopped while creating the services")]
+    Stopped,
     /// The publishing thread could not be started, or ended at start.
     #[error("the publishing thread: {detail}")]
     Thread {
@@ -143,24 +203,86 @@ fn service_name(name: &str) -> Result<ServiceName, ShmError> {
     })
 }
 
+/// How long a daemon's iceoryx2 call waits for a resource another process
+/// is still initialising (a new subscriber's connection, a client's request
+/// segment), at most: the publishing thread must never wait long for a
+/// client (its stall faults the loop after 500 ms; finding 1). A resource
+/// not ready in time is not connected (that client gets nothing).
+pub const DAEMON_CREATION_TIMEOUT: Duration = Duration::from_millis(100);
+/// The same for a client.
+pub const CLIENT_CREATION_TIMEOUT: Duration = Duration::from_millis(500);
+/// How long `sard` waits for iceoryx2 to create its node and services (a
+/// few milliseconds when healthy; a margin for a loaded machine).
+pub const START_TIMEOUT: Duration = Duration::from_secs(2);
+/// The same for [`DaemonShm::create`] (tests and benchmarks, many at once on
+/// a loaded machine).
+const LIBRARY_START_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// iceoryx2's configuration for the runtime directory `dir` (never a file
+/// iceoryx2 would look for: the defaults, with the root path in `dir`).
+pub fn config(dir: &Path, side: Side) -> Result<Config, ShmError> {
+    let mut config = Config::default();
+    let root = iceoryx2::prelude::Path::new(dir.as_os_str().as_encoded_bytes()).map_err(|e| {
+        ShmError::RuntimeDir {
+            dir: dir.display().to_string(),
+            detail: format!("iceoryx2 refuses the path: {e:?}"),
+        }
+    })?;
+    config.global.set_root_path(&root);
+    config.global.creation_timeout = match side {
+        Side::Daemon => DAEMON_CREATION_TIMEOUT,
+        Side::Client => CLIENT_CREATION_TIMEOUT,
+    };
+    if side == Side::Client {
+        // The daemon removes dead nodes' resources at its start; a client
+        // never lists every node (one damaged, e.g. a details file that is a
+        // FIFO, would block it). It still cleans the dead owners of a
+        // service it opens (iceoryx2's default): else it would keep a
+        // killed daemon's service alive, and the new daemon would find it
+        // taken.
+        config.global.node.cleanup_dead_nodes_on_creation = false;
+        config.global.node.cleanup_dead_nodes_on_destruction = false;
+    }
+    Ok(config)
+}
+
 /// iceoryx2's own log (e.g. "no config file was loaded") only for errors:
 /// what a command-line tool sets before it talks to the daemon.
 pub fn log_errors_only() {
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
 }
 
-/// A node without iceoryx2's own signal handlers (the daemon has its own).
-pub fn node() -> Result<Node<ipc::Service>, ShmError> {
+/// A node in the runtime directory `dir` (checked first, [`access`]),
+/// without iceoryx2's own signal handlers (the daemon has its own).
+pub fn node_in(dir: &Path, side: Side) -> Result<Node<SarIpc>, ShmError> {
+    access::prepare(dir, side)?;
+    let config = config(dir, side)?;
     NodeBuilder::new()
+        .config(&config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .map_err(|e| port("cannot create the iceoryx2 node", e))
+        .create::<SarIpc>()
+        .map_err(|e| ShmError::Port {
+            what: "cannot create the iceoryx2 node",
+            detail: format!(
+                "{e:?} (a damaged file in the runtime directory {}?)",
+                dir.display()
+            ),
+        })
 }
 
-/// Removes the resources of dead nodes; returns how many were cleaned.
-pub fn clean_dead_nodes() -> usize {
+/// A client's node in the runtime directory [`runtime_dir`].
+pub fn node() -> Result<Node<SarIpc>, ShmError> {
+    node_in(&runtime_dir(), Side::Client)
+}
+
+/// Removes the resources of dead nodes in the runtime directory `dir`;
+/// returns how many were cleaned.
+pub fn clean_dead_nodes_in(dir: &Path) -> usize {
+    let Ok(config) = config(dir, Side::Daemon) else {
+        return 0;
+    };
     let mut cleaned = 0;
-    let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
+    let _ = Node::<SarIpc>::list(&config, |state| {
         if let NodeState::Dead(view) = state
             && view.try_remove_stale_resources().is_ok()
         {
@@ -171,9 +293,14 @@ pub fn clean_dead_nodes() -> usize {
     cleaned
 }
 
-type StatePublisher = Publisher<ipc::Service, StateMsg, ()>;
-type CommandServer = Server<ipc::Service, CommandMsg, (), ReplyMsg, ()>;
-type CommandRequest = ActiveRequest<ipc::Service, CommandMsg, (), ReplyMsg, ()>;
+/// [`clean_dead_nodes_in`] the runtime directory [`runtime_dir`].
+pub fn clean_dead_nodes() -> usize {
+    clean_dead_nodes_in(&runtime_dir())
+}
+
+type StatePublisher = Publisher<SarIpc, StateMsg, ()>;
+type CommandServer = Server<SarIpc, CommandMsg, (), ReplyMsg, ()>;
+type CommandRequest = ActiveRequest<SarIpc, CommandMsg, (), ReplyMsg, ()>;
 
 /// What the loop side and the publishing thread share.
 #[derive(Debug, Default)]
@@ -252,9 +379,11 @@ impl std::fmt::Debug for DaemonShm {
 /// thread with [`DaemonShm::create_manual`], which then calls
 /// [`ShmWorker::pump`] when it likes (deterministic tests).
 pub struct ShmWorker {
-    _node: Node<ipc::Service>,
+    _node: Node<SarIpc>,
+    /// The runtime directory (fenced every `access::FENCE_PERIOD`).
+    dir: std::path::PathBuf,
     publisher: StatePublisher,
-    notifier: Notifier<ipc::Service>,
+    notifier: Notifier<SarIpc>,
     server: CommandServer,
     operator: Operator,
     states: rtrb::Consumer<StateMsg>,
@@ -293,18 +422,43 @@ impl ShmWorker {
     /// Cleans dead nodes' resources, then creates the services under
     /// `prefix`; refuses when a living daemon has them.
     fn create(
+        dir: &Path,
         prefix: &str,
         operator: Operator,
         limits_n: [f64; 6],
         states: rtrb::Consumer<StateMsg>,
         shared: Arc<Shared>,
     ) -> Result<Self, ShmError> {
-        let cleaned = clean_dead_nodes();
+        access::prepare(dir, Side::Daemon)?;
+        if !access::on_tmpfs(dir) {
+            tracing::warn!(
+                "{}: not a tmpfs; the shared memory's pages are written back to its disk (systemd's /run is a tmpfs)",
+                dir.display()
+            );
+        }
+        let cleaned = clean_dead_nodes_in(dir);
         if cleaned > 0 {
             tracing::info!("removed the shared-memory resources of {cleaned} dead process(es)");
         }
         let names = Names::new(prefix);
-        let node = node()?;
+        let node = node_in(dir, Side::Daemon)?;
+        // The command service first: a client that finds the state finds
+        // the command server too.
+        let command = node
+            .service_builder(&service_name(&names.command)?)
+            .request_response::<CommandMsg, ReplyMsg>()
+            .max_servers(1)
+            .max_clients(MAX_CLIENTS)
+            .max_active_requests_per_client(1)
+            .max_response_buffer_size(1)
+            .enable_safe_overflow_for_requests(true)
+            .enable_safe_overflow_for_responses(true)
+            .create()
+            .map_err(|e| exists(prefix, &names.command, e))?;
+        let server = command
+            .server_builder()
+            .create()
+            .map_err(|e| port("cannot create the command server", e))?;
         let state = node
             .service_builder(&service_name(&names.state)?)
             .publish_subscribe::<StateMsg>()
@@ -335,23 +489,12 @@ impl ShmWorker {
             .notifier_builder()
             .create()
             .map_err(|e| port("cannot create the state notifier", e))?;
-        let command = node
-            .service_builder(&service_name(&names.command)?)
-            .request_response::<CommandMsg, ReplyMsg>()
-            .max_servers(1)
-            .max_clients(MAX_CLIENTS)
-            .max_active_requests_per_client(1)
-            .max_response_buffer_size(1)
-            .enable_safe_overflow_for_requests(true)
-            .enable_safe_overflow_for_responses(true)
-            .create()
-            .map_err(|e| exists(prefix, &names.command, e))?;
-        let server = command
-            .server_builder()
-            .create()
-            .map_err(|e| port("cannot create the command server", e))?;
+        // The daemon's files: its user's and group's only (as every later
+        // one, from the publishing thread).
+        access::fence_own_files(dir, access::FENCE_LIMIT);
         Ok(Self {
             _node: node,
+            dir: dir.to_owned(),
             publisher,
             notifier,
             server,
@@ -528,7 +671,12 @@ impl ShmWorker {
     /// side is dropped, after sending what is queued.
     fn run(mut self) {
         self.operator.publisher.watch();
+        let mut fenced = std::time::Instant::now();
         loop {
+            if fenced.elapsed() >= access::FENCE_PERIOD {
+                access::fence_own_files(&self.dir, access::FENCE_LIMIT);
+                fenced = std::time::Instant::now();
+            }
             // A sign of life per wake-up (the loop wakes it every cycle):
             // the loop faults when it stops (`Reason::PublisherStalled`).
             self.operator.publisher.beat();
@@ -553,18 +701,51 @@ impl DaemonShm {
     /// SCHED_FIFO and pins itself, so the publishing thread runs at normal
     /// priority and never competes with the loop.
     pub fn create(prefix: &str, operator: Operator, limits_n: [f64; 6]) -> Result<Self, ShmError> {
+        Self::start(
+            &runtime_dir(),
+            prefix,
+            operator,
+            limits_n,
+            &|| false,
+            LIBRARY_START_TIMEOUT,
+        )
+    }
+
+    /// [`DaemonShm::create`] in the runtime directory `dir`. Waits at most
+    /// [`START_TIMEOUT`] for iceoryx2 and returns early when `stop` says so
+    /// (a SIGTERM during the start): a thread stuck in iceoryx2 is left
+    /// behind, and ends with the process.
+    pub fn create_in(
+        dir: &Path,
+        prefix: &str,
+        operator: Operator,
+        limits_n: [f64; 6],
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Self, ShmError> {
+        Self::start(dir, prefix, operator, limits_n, stop, START_TIMEOUT)
+    }
+
+    fn start(
+        dir: &Path,
+        prefix: &str,
+        operator: Operator,
+        limits_n: [f64; 6],
+        stop: &dyn Fn() -> bool,
+        timeout: Duration,
+    ) -> Result<Self, ShmError> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
         let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), ShmError>>(1);
         let thread = {
-            let (prefix, shared) = (prefix.to_owned(), shared.clone());
+            let (dir, prefix, shared) = (dir.to_owned(), prefix.to_owned(), shared.clone());
             std::thread::Builder::new()
                 .name("sard-shm".into())
                 .spawn(move || {
-                    match ShmWorker::create(&prefix, operator, limits_n, consumer, shared) {
+                    match ShmWorker::create(&dir, &prefix, operator, limits_n, consumer, shared) {
                         Ok(worker) => {
-                            let _ = ready_tx.send(Ok(()));
-                            worker.run();
+                            if ready_tx.send(Ok(())).is_ok() {
+                                worker.run();
+                            }
                         }
                         Err(e) => {
                             let _ = ready_tx.send(Err(e));
@@ -575,11 +756,27 @@ impl DaemonShm {
                     detail: format!("cannot start it: {e}"),
                 })?
         };
-        let started = ready_rx.recv().unwrap_or_else(|_| {
-            Err(ShmError::Thread {
-                detail: "it ended at start".to_owned(),
-            })
-        });
+        let start = std::time::Instant::now();
+        let started = loop {
+            match ready_rx.recv_timeout(Duration::from_millis(20)) {
+                Ok(r) => break r,
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                    break Err(ShmError::Thread {
+                        detail: "it ended at start".to_owned(),
+                    });
+                }
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            }
+            if stop() {
+                return Err(ShmError::Stopped);
+            }
+            if start.elapsed() >= timeout {
+                return Err(ShmError::Stuck {
+                    dir: dir.display().to_string(),
+                    timeout_ms: timeout.as_millis(),
+                });
+            }
+        };
         if let Err(e) = started {
             let _ = thread.join();
             return Err(e);
@@ -603,7 +800,14 @@ impl DaemonShm {
     ) -> Result<(Self, ShmWorker), ShmError> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
-        let worker = ShmWorker::create(prefix, operator, limits_n, consumer, shared.clone())?;
+        let worker = ShmWorker::create(
+            &runtime_dir(),
+            prefix,
+            operator,
+            limits_n,
+            consumer,
+            shared.clone(),
+        )?;
         Ok((
             Self {
                 states: producer,
@@ -684,7 +888,9 @@ impl Sink for DaemonShm {
 /// A client's side: subscribes to the state, sends commands.
 #[derive(Debug)]
 pub struct Client {
-    node: Node<ipc::Service>,
+    dir: std::path::PathBuf,
+    /// Made at the first call when the runtime directory did not exist yet.
+    node: std::cell::OnceCell<Node<SarIpc>>,
     names: Names,
 }
 
@@ -692,12 +898,48 @@ pub struct Client {
 pub type ClientError = ShmError;
 
 impl Client {
-    /// A client for the daemon with `prefix`.
+    /// A client for the daemon with `prefix` in the runtime directory
+    /// [`runtime_dir`].
     pub fn new(prefix: &str) -> Result<Self, ClientError> {
+        Self::in_dir(&runtime_dir(), prefix)
+    }
+
+    /// A client for the daemon with `prefix` in the runtime directory `dir`:
+    /// refused at once, naming the user and the group, when this process
+    /// may not use the directory; never creates it.
+    pub fn in_dir(dir: &Path, prefix: &str) -> Result<Self, ClientError> {
+        let node = std::cell::OnceCell::new();
+        match node_in(dir, Side::Client) {
+            Ok(n) => {
+                let _ = node.set(n);
+            }
+            // No daemon yet: the first call tries again.
+            Err(ShmError::NoRuntimeDir { .. }) => {}
+            Err(e) => return Err(e),
+        }
         Ok(Self {
-            node: node()?,
+            dir: dir.to_owned(),
+            node,
             names: Names::new(prefix),
         })
+    }
+
+    /// The client's node (made now when the runtime directory appeared
+    /// since); a missing directory reads "no daemon runs" for `service`.
+    fn node(&self, service: &str) -> Result<&Node<SarIpc>, ShmError> {
+        if let Some(n) = self.node.get() {
+            return Ok(n);
+        }
+        let n = node_in(&self.dir, Side::Client).map_err(|e| match e {
+            ShmError::NoRuntimeDir { dir } => ShmError::NoDaemon {
+                service: service.to_owned(),
+                detail: format!(
+                    "the runtime directory {dir} does not exist: sard creates it; {RUNTIME_DIR_ENV} names another"
+                ),
+            },
+            e => e,
+        })?;
+        Ok(self.node.get_or_init(|| n))
     }
 
     fn no_daemon(&self, service: &str, e: impl std::fmt::Debug) -> ShmError {
@@ -710,7 +952,7 @@ impl Client {
     /// Subscribes to the state; `Err` when no daemon runs.
     pub fn subscribe(&self) -> Result<StateSubscription, ClientError> {
         let state = self
-            .node
+            .node(&self.names.state)?
             .service_builder(&service_name(&self.names.state)?)
             .publish_subscribe::<StateMsg>()
             .open()
@@ -721,7 +963,7 @@ impl Client {
             .create()
             .map_err(|e| port("cannot subscribe to the state", e))?;
         let event = self
-            .node
+            .node(&self.names.event)?
             .service_builder(&service_name(&self.names.event)?)
             .event()
             .open()
@@ -730,6 +972,7 @@ impl Client {
             .listener_builder()
             .create()
             .map_err(|e| port("cannot listen to the state event", e))?;
+        access::fence_own_files(&self.dir, access::FENCE_LIMIT);
         Ok(StateSubscription {
             subscriber,
             listener,
@@ -739,7 +982,7 @@ impl Client {
     /// Sends a command and waits up to `timeout` for its reply.
     pub fn command(&self, command: CommandMsg, timeout: Duration) -> Result<ReplyMsg, ClientError> {
         let service = self
-            .node
+            .node(&self.names.command)?
             .service_builder(&service_name(&self.names.command)?)
             .request_response::<CommandMsg, ReplyMsg>()
             .open()
@@ -752,7 +995,12 @@ impl Client {
             .send_copy(command)
             .map_err(|e| port("cannot send the command", e))?;
         let start = std::time::Instant::now();
+        let mut fenced = false;
         while start.elapsed() < timeout {
+            if !fenced {
+                access::fence_own_files(&self.dir, access::FENCE_LIMIT);
+                fenced = true;
+            }
             if let Ok(Some(reply)) = pending.receive() {
                 return Ok(*reply.payload());
             }
@@ -767,8 +1015,8 @@ impl Client {
 /// A subscription to the state.
 #[derive(Debug)]
 pub struct StateSubscription {
-    subscriber: iceoryx2::port::subscriber::Subscriber<ipc::Service, StateMsg, ()>,
-    listener: iceoryx2::port::listener::Listener<ipc::Service>,
+    subscriber: iceoryx2::port::subscriber::Subscriber<SarIpc, StateMsg, ()>,
+    listener: iceoryx2::port::listener::Listener<SarIpc>,
 }
 
 impl StateSubscription {

@@ -123,12 +123,25 @@ fn run(args: &Args) -> Result<(), String> {
         _ => None,
     };
     let operator = Operator::new();
-    let shm = DaemonShm::create(
+    // The shared memory in the runtime directory (`SAR_RUNTIME_DIR`, default
+    // /run/sar: the access model, README "Access"); a SIGTERM while iceoryx2
+    // is stuck on a damaged file still ends sard.
+    let shm = match DaemonShm::create_in(
+        &sar_shm::runtime_dir(),
         &args.prefix,
         operator.clone(),
         cfg.estimator.guard.force_limits().to_array(),
-    )
-    .map_err(|e| e.to_string())?;
+        &rt::stop_requested,
+    ) {
+        Ok(shm) => shm,
+        Err(sar_shm::ShmError::Stopped) => {
+            tracing::info!(
+                "sard: stopped while creating the shared-memory services (the loop never ran)"
+            );
+            return Ok(());
+        }
+        Err(e) => return Err(e.to_string()),
+    };
     // Recording (`[record]`, `sarctl record start|stop`): its manager thread
     // (which opens and closes the files, never the loop) starts here, before
     // the real-time settings, so that it and the writer threads it starts
