@@ -160,3 +160,66 @@ fn a_stalled_loop_stops_feeding_the_watchdog() {
     );
     let _ = std::fs::remove_file(&sock_path);
 }
+
+/// Issue 25, finding 7: the terminal that runs `sard` closes (SIGHUP), or
+/// someone sends SIGUSR1: the daemon stops as on SIGTERM, with the drives
+/// halted, the stop line (naming the signal) logged, exit 0, and a complete
+/// recording (readable, its summary written).
+#[test]
+fn sighup_and_sigusr1_stop_cleanly_with_the_recording_complete() {
+    for sig in ["-HUP", "-USR1"] {
+        let dir = temp_path(&format!("sig{sig}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let rec_dir = dir.join("rec");
+        let config = dir.join("sim.toml");
+        let toml = sar_config::DEFAULT_TOML
+            .replace("[record]\nenabled = false", "[record]\nenabled = true")
+            .replace(
+                "directory = \"recordings\"",
+                &format!("directory = {:?}", rec_dir.display().to_string()),
+            );
+        assert_ne!(toml, sar_config::DEFAULT_TOML);
+        std::fs::write(&config, toml).unwrap();
+        let sock_path = dir.join("notify");
+        let sock = UnixDatagram::bind(&sock_path).unwrap();
+        let child = Command::new(SARD)
+            .args(["--sim", "--config"])
+            .arg(&config)
+            .env("NOTIFY_SOCKET", &sock_path)
+            .env("SAR_SERVICE_PREFIX", prefix(&format!("sig{sig}")))
+            .stderr(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap();
+        // Two watchdog pings: 200 cycles into the loop, recording.
+        let got = collect(&sock, Duration::from_secs(30), |g| {
+            g.iter().filter(|m| *m == "WATCHDOG=1").count() >= 2
+        });
+        assert!(got.iter().any(|m| m == "READY=1"), "{got:?}");
+        signal(&child, sig);
+        let (code, err) = finish(child);
+        assert_eq!(code, 0, "{sig}: exit {code}: {err}");
+        assert!(err.contains("drives halted"), "{sig}: {err}");
+        let name = format!("SIG{}", &sig[1..]);
+        assert!(err.contains(&name), "{sig}: the stop line names it: {err}");
+        let files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
+            .collect();
+        assert_eq!(files.len(), 1, "{files:?}");
+        let bytes = std::fs::read(&files[0]).unwrap();
+        let mut reader = sar_record::McapReader::new(&bytes).unwrap();
+        let messages = reader.by_ref().map(|m| m.unwrap()).count();
+        assert!(messages > 100, "{sig}: {messages} messages");
+        assert!(reader.is_complete(), "{sig}: the data section is cut");
+        // The footer (opcode 0x02, 20 bytes) before the closing magic names
+        // where the summary starts: 0 would be a file without one.
+        let footer = bytes.len() - 8 - 29;
+        assert_eq!(bytes[footer], 0x02, "{sig}: no footer");
+        let summary_start = u64::from_le_bytes(bytes[footer + 9..footer + 17].try_into().unwrap());
+        assert!(summary_start > 0, "{sig}: the summary is missing");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
