@@ -205,6 +205,16 @@ pub fn install_stop_handler() -> std::io::Result<()> {
     Ok(())
 }
 
+/// Gives SIGPIPE back its default action (end the process), which Rust's
+/// runtime sets to "ignore" before `main`: for a command-line tool whose
+/// output goes into a pipe (`sarctl status | head -1`), a reader that has
+/// gone ends it quietly, as it ends `cat` or `grep`, instead of every write
+/// failing with EPIPE and `println!` panicking. Not for a daemon or a
+/// server ([`install_stop_handler`] ignores it again).
+pub fn default_sigpipe() -> std::io::Result<()> {
+    set_disposition(libc::SIGPIPE, libc::SIG_DFL)
+}
+
 /// Whether a stop signal arrived (or [`request_stop`] was called).
 pub fn stop_requested() -> bool {
     STOP.load(Ordering::SeqCst)
