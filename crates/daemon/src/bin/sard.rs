@@ -418,7 +418,7 @@ impl Run<'_> {
         }
         let out = controller.output();
         tracing::info!(
-            "sard: stopped after {} cycles{by}, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns; {} quick stops; {} states dropped by the publisher's queue; {} messages dropped by the recorder",
+            "sard: stopped after {} cycles{by}, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns ({} periods skipped); {} quick stops; {} states dropped by the publisher's queue; {} messages dropped by the recorder",
             stats.cycles,
             out.guard_state,
             out.guard_reason,
@@ -427,6 +427,7 @@ impl Run<'_> {
             stats.wakeup.max_ns() / 1000,
             stats.compute.quantile_ns(0.99) / 1000,
             stats.overruns,
+            stats.skipped_periods,
             controller.counts().quick_stops,
             health.publisher_queue_drops,
             health.recorder_drops,
