@@ -192,6 +192,9 @@ pub enum ReplyDetail {
     },
     /// A force-control mode asked for outside Ok.
     NotInOk(GuardState),
+    /// A tare refused by its mean at rest or its rate limit (not at rest
+    /// long enough, not steady, too soon after the last).
+    Tare(sar_estimator::cycle::CommandRefused),
     /// A guarded move asked for while the tip force already reaches its
     /// limit.
     AlreadyAtForce {
@@ -283,6 +286,7 @@ impl core::fmt::Display for ReplyDetail {
                 f,
                 "the force must be within 0 < N < {max_n} N (a warn limit), got {force_n} N"
             ),
+            Self::Tare(refusal) => write!(f, "{refusal}"),
             Self::NotInOk(state) => write!(
                 f,
                 "force control starts only in Ok (the guard is {state:?})"
@@ -1247,6 +1251,11 @@ fn command_reply(result: &Result<CommandAccepted, CommandRefused>) -> (ReplyStat
                 why,
             },
         ),
+        Err(
+            refusal @ (CommandRefused::TareNotAtRest { .. }
+            | CommandRefused::TareNotSteady { .. }
+            | CommandRefused::TareTooSoon { .. }),
+        ) => (ReplyStatus::Refused, ReplyDetail::Tare(*refusal)),
         Err(CommandRefused::BiasNonFinite { value }) => (
             ReplyStatus::Refused,
             ReplyDetail::Limits {
