@@ -1848,7 +1848,21 @@ impl Estimator {
         let bias = match command {
             Command::SetBias(bias) => bias,
             _ => {
-                let reading = self.tare_reading(&input.sensor, now_ns)?;
+                let reading = match self.tare_reading(&input.sensor, now_ns) {
+                    Ok(reading) => reading,
+                    Err(refused) => {
+                        // Not at rest: the mean starts again (its spread
+                        // would otherwise remember the motion for a few
+                        // windows), so the next tare needs a fresh window.
+                        if matches!(refused, CommandRefused::TareNotSteady { .. }) {
+                            self.tare_mean = TareMean {
+                                joints: self.tare_mean.joints,
+                                ..TareMean::EMPTY
+                            };
+                        }
+                        return Err(refused);
+                    }
+                };
                 let bias = self
                     .tare(&pose, &reading)
                     .ok_or(CommandRefused::Unsolvable)?;

@@ -1341,3 +1341,97 @@ fn hundreds_of_tares_in_a_row_do_not_make_the_guard_flap() {
         "{accepted} tares accepted; the guard left Ok in {warns} cycles (lateral up to {worst_lateral_n:.2} N)"
     );
 }
+
+/// Issue 25, finding 8: the tare's refusals, each with its cause: before
+/// its mean at rest is complete (after a move), while the readings spread
+/// beyond twice the noise (a contact that changes: not at rest), and sooner
+/// than the rate limit after the last accepted tare.
+#[test]
+fn a_tare_is_refused_until_at_rest_while_not_steady_and_too_soon() {
+    let mut rig = armed_at(all_checks(), NOMINAL_Q, 0x7a5e);
+    // A move of 1 mm restarts the mean.
+    let mut q = NOMINAL_Q;
+    for _ in 0..20 {
+        q[2] += 5e-5;
+        rig.step(q, &V::zeros(), None);
+    }
+    for _ in 0..99 {
+        rig.step(q, &V::zeros(), None);
+    }
+    let out = rig.step(q, &V::zeros(), Some(Command::Tare));
+    // The mean restarts whenever the joints are 0.2 mm from where it began:
+    // it holds the last samples of the move and the 99 after it.
+    let result = out.command.unwrap().result;
+    assert!(
+        matches!(result, Err(CommandRefused::TareNotAtRest { samples, needed: 500 })
+            if (100..120).contains(&samples)),
+        "{result:?}"
+    );
+    // A contact that changes (1.5 N across the rod, vertical, at 2 Hz:
+    // 2 N at the U-joint, on the sensor's Y axis whose noise is 0.2 N):
+    // below every warn limit, but not at rest.
+    let wobble = |i: u32| {
+        V::new(
+            0.0,
+            1.5 * (f64::from(i) * 2e-3 * std::f64::consts::TAU).sin(),
+            0.0,
+        )
+    };
+    let mut i = 0;
+    for _ in 0..1000 {
+        i += 1;
+        rig.step(q, &wobble(i), None);
+    }
+    let out = rig.step(q, &wobble(i + 1), Some(Command::Tare));
+    let result = out.command.unwrap().result;
+    assert!(
+        matches!(result, Err(CommandRefused::TareNotSteady { std_n, allowed_n, .. }) if std_n > allowed_n),
+        "{result:?}"
+    );
+    assert_eq!(out.guard_state, GuardState::Ok);
+    // The refusal restarted the mean: at rest again, a tare is refused
+    // until the fresh mean is complete, then accepted; 1 s later too soon;
+    // 5 s after it, accepted again.
+    for _ in 0..400 {
+        rig.step(q, &V::zeros(), None);
+    }
+    let out = rig.step(q, &V::zeros(), Some(Command::Tare));
+    let result = out.command.unwrap().result;
+    assert!(
+        matches!(
+            result,
+            Err(CommandRefused::TareNotAtRest { samples: 401, .. })
+        ),
+        "{result:?}"
+    );
+    for _ in 0..599 {
+        rig.step(q, &V::zeros(), None);
+    }
+    let out = rig.step(q, &V::zeros(), Some(Command::Tare));
+    assert!(matches!(
+        out.command.unwrap().result,
+        Ok(CommandAccepted::BiasSet { .. })
+    ));
+    for _ in 0..999 {
+        rig.step(q, &V::zeros(), None);
+    }
+    let out = rig.step(q, &V::zeros(), Some(Command::Tare));
+    let result = out.command.unwrap().result;
+    assert!(
+        matches!(result, Err(CommandRefused::TareTooSoon { since_s, min_interval_s })
+            if (since_s - 1.0).abs() < 1e-9 && min_interval_s == 5.0),
+        "{result:?}"
+    );
+    for _ in 0..3999 {
+        rig.step(q, &V::zeros(), None);
+    }
+    let out = rig.step(q, &V::zeros(), Some(Command::Tare));
+    assert!(
+        matches!(
+            out.command.unwrap().result,
+            Ok(CommandAccepted::BiasSet { .. })
+        ),
+        "{:?}",
+        out.command
+    );
+}
