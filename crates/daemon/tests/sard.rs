@@ -206,7 +206,11 @@ fn sighup_and_sigusr1_stop_cleanly_with_the_recording_complete() {
         assert_eq!(files.len(), 1, "{files:?}");
         let bytes = std::fs::read(&files[0]).unwrap();
         let mut reader = sar_record::McapReader::new(&bytes).unwrap();
-        let messages = reader.by_ref().map(|m| m.unwrap()).count();
+        let mut messages = 0;
+        for m in reader.by_ref() {
+            m.unwrap();
+            messages += 1;
+        }
         assert!(messages > 100, "{sig}: {messages} messages");
         assert!(reader.is_complete(), "{sig}: the data section is cut");
         // The footer (opcode 0x02, 20 bytes) before the closing magic names

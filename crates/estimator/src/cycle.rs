@@ -587,8 +587,9 @@ pub struct TareLimits {
     pub window_samples: u32,
     /// The readings' standard deviation over the mean, per sensor axis, may
     /// be at most this multiple of the sensor's configured noise (finite,
-    /// >= 1): beyond, the robot is not at rest (a contact that changes, a
-    /// vibration) and the tare is refused ([`CommandRefused::TareNotSteady`]).
+    /// at least 1): beyond, the robot is not at rest (a contact that
+    /// changes, a vibration) and the tare is refused
+    /// ([`CommandRefused::TareNotSteady`]).
     pub max_spread: f64,
     /// Two accepted tares at least this far apart, ns
     /// ([`CommandRefused::TareTooSoon`]); 0: no limit.
