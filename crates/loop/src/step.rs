@@ -286,7 +286,29 @@ impl core::fmt::Display for ReplyDetail {
                 f,
                 "the force must be within 0 < N < {max_n} N (a warn limit), got {force_n} N"
             ),
-            Self::Tare(refusal) => write!(f, "{refusal}"),
+            // Without the refusal's own "tare refused: " (sarctl says it).
+            Self::Tare(refusal) => match refusal {
+                CommandRefused::TareNotAtRest { samples, needed } => write!(
+                    f,
+                    "{samples} of {needed} samples at rest in the mean: keep the robot still and tare again"
+                ),
+                CommandRefused::TareNotSteady {
+                    axis,
+                    std_n,
+                    allowed_n,
+                } => write!(
+                    f,
+                    "the force on sensor axis {axis:?} spreads by {std_n:.3} N (std) over the mean, more than {allowed_n:.3} N: the robot is not at rest"
+                ),
+                CommandRefused::TareTooSoon {
+                    since_s,
+                    min_interval_s,
+                } => write!(
+                    f,
+                    "{since_s:.3} s since the last tare, at least {min_interval_s} s apart ([sensor] tare_min_interval_s)"
+                ),
+                other => write!(f, "{other}"),
+            },
             Self::NotInOk(state) => write!(
                 f,
                 "force control starts only in Ok (the guard is {state:?})"
