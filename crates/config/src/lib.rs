@@ -225,6 +225,24 @@ struct SensorToml {
     drift_n_per_s: f64,
     #[serde(default = "default_max_tare_age_s")]
     max_tare_age_s: f64,
+    #[serde(default = "default_tare_window_samples")]
+    tare_window_samples: i64,
+    #[serde(default = "default_tare_max_spread")]
+    tare_max_spread: f64,
+    #[serde(default = "default_tare_min_interval_s")]
+    tare_min_interval_s: f64,
+}
+
+fn default_tare_window_samples() -> i64 {
+    i64::from(TareLimits::default().window_samples)
+}
+
+fn default_tare_max_spread() -> f64 {
+    TareLimits::default().max_spread
+}
+
+fn default_tare_min_interval_s() -> f64 {
+    TareLimits::default().min_interval_ns as f64 * 1e-9
 }
 
 fn default_range_n() -> [f64; 3] {
@@ -958,6 +976,30 @@ fn plausibility(
                 10.0,
                 "N/s",
             )?,
+            window_samples: u32::try_from(ctx.range_i(
+                "sensor.tare_window_samples",
+                sensor.tare_window_samples,
+                1,
+                100_000,
+            )?)
+            .unwrap_or(1),
+            max_spread: ctx.range_f(
+                "sensor.tare_max_spread",
+                sensor.tare_max_spread,
+                1.0,
+                100.0,
+                "(times the noise)",
+            )?,
+            min_interval_ns: {
+                let s = ctx.range_f(
+                    "sensor.tare_min_interval_s",
+                    sensor.tare_min_interval_s,
+                    0.0,
+                    3600.0,
+                    "s (0: no limit)",
+                )?;
+                (s * 1e9).round() as u64
+            },
         },
         mounting: if p.rest_check {
             Some(MountingLimits {

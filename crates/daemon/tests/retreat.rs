@@ -342,6 +342,27 @@ fn refusals_carry_their_exact_cause() {
         text.contains("stop_axial_n") && text.contains("40"),
         "{text}"
     );
+    // A tare right after another (accepted or not): refused by the tare's
+    // own rules (its mean at rest, its rate limit), in words.
+    let _ = rig.request(4, Request::Tare);
+    let r = rig.request(5, Request::Tare);
+    assert_eq!(r.status, ReplyStatus::Refused, "{}", r.detail);
+    assert!(
+        matches!(
+            r.detail,
+            ReplyDetail::Tare(
+                sar_estimator::cycle::CommandRefused::TareTooSoon { .. }
+                    | sar_estimator::cycle::CommandRefused::TareNotAtRest { .. }
+            )
+        ),
+        "{:?}",
+        r.detail
+    );
+    let text = r.detail.to_string();
+    assert!(
+        text.contains("since the last tare") || text.contains("samples at rest"),
+        "{text}"
+    );
 }
 
 #[test]

@@ -10,7 +10,6 @@
     clippy::indexing_slicing
 )]
 
-use std::io::Read;
 use std::os::unix::net::UnixDatagram;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -36,16 +35,12 @@ fn signal(child: &Child, sig: &str) {
     assert!(ok, "kill {sig} failed");
 }
 
-fn finish(mut child: Child) -> (i32, String) {
-    let status = child.wait().unwrap();
-    let mut err = String::new();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
-    (status.code().unwrap_or(-1), err)
+/// Waits for the child's exit, reading its stderr meanwhile (a log larger
+/// than the pipe's buffer must not block it).
+fn finish(child: Child) -> (i32, String) {
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.status.code().unwrap_or(-1), err)
 }
 
 /// Collects notify messages until `until` says stop or `limit` passes.
@@ -284,4 +279,142 @@ fn sard_stuck_in_iceoryx2_answers_sigterm_and_gives_up_in_two_seconds() {
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("stopped while creating"), "{err}");
     let _ = std::fs::remove_dir_all(&run);
+}
+
+/// Issue 25, finding 7: the terminal that runs `sard` closes (SIGHUP), or
+/// someone sends SIGUSR1: the daemon stops as on SIGTERM, with the drives
+/// halted, the stop line (naming the signal) logged, exit 0, and a complete
+/// recording (readable, its summary written).
+#[test]
+fn sighup_and_sigusr1_stop_cleanly_with_the_recording_complete() {
+    for sig in ["-HUP", "-USR1"] {
+        let dir = temp_path(&format!("sig{sig}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let rec_dir = dir.join("rec");
+        let config = dir.join("sim.toml");
+        let toml = sar_config::DEFAULT_TOML
+            .replace("[record]\nenabled = false", "[record]\nenabled = true")
+            .replace(
+                "directory = \"recordings\"",
+                &format!("directory = {:?}", rec_dir.display().to_string()),
+            );
+        assert_ne!(toml, sar_config::DEFAULT_TOML);
+        std::fs::write(&config, toml).unwrap();
+        let sock_path = dir.join("notify");
+        let sock = UnixDatagram::bind(&sock_path).unwrap();
+        let child = Command::new(SARD)
+            .args(["--sim", "--config"])
+            .arg(&config)
+            .env("NOTIFY_SOCKET", &sock_path)
+            .env("SAR_SERVICE_PREFIX", prefix(&format!("sig{sig}")))
+            .stderr(Stdio::piped())
+            .stdout(Stdio::null())
+            .spawn()
+            .unwrap();
+        // Two watchdog pings: 200 cycles into the loop, recording.
+        let got = collect(&sock, Duration::from_secs(30), |g| {
+            g.iter().filter(|m| *m == "WATCHDOG=1").count() >= 2
+        });
+        assert!(got.iter().any(|m| m == "READY=1"), "{got:?}");
+        signal(&child, sig);
+        let (code, err) = finish(child);
+        assert_eq!(code, 0, "{sig}: exit {code}: {err}");
+        assert!(err.contains("drives halted"), "{sig}: {err}");
+        let name = format!("SIG{}", &sig[1..]);
+        assert!(err.contains(&name), "{sig}: the stop line names it: {err}");
+        let files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
+            .collect();
+        assert_eq!(files.len(), 1, "{files:?}");
+        let bytes = std::fs::read(&files[0]).unwrap();
+        let mut reader = sar_record::McapReader::new(&bytes).unwrap();
+        let mut messages = 0;
+        for m in reader.by_ref() {
+            m.unwrap();
+            messages += 1;
+        }
+        assert!(messages > 100, "{sig}: {messages} messages");
+        assert!(reader.is_complete(), "{sig}: the data section is cut");
+        // The footer (opcode 0x02, 20 bytes) before the closing magic names
+        // where the summary starts: 0 would be a file without one.
+        let footer = bytes.len() - 8 - 29;
+        assert_eq!(bytes[footer], 0x02, "{sig}: no footer");
+        let summary_start = u64::from_le_bytes(bytes[footer + 9..footer + 17].try_into().unwrap());
+        assert!(summary_start > 0, "{sig}: the summary is missing");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// Issue 25, finding 7: after a stall (SIGSTOP for a second, then SIGCONT)
+/// the loop skips the missed periods, counted in one log line, instead of
+/// running them back to back (it used to run about 1000 cycles at once and
+/// log an "overran" line for each). The guard's reaction to the jump in
+/// time is the one SAFETY.md C4 states: the inputs are too old on waking.
+#[test]
+fn after_a_stall_the_missed_periods_are_skipped_and_counted_once() {
+    let sock_path = temp_path("notify-stop-cont");
+    let _ = std::fs::remove_file(&sock_path);
+    let sock = UnixDatagram::bind(&sock_path).unwrap();
+    let child = Command::new(SARD)
+        .arg("--sim")
+        .env("NOTIFY_SOCKET", &sock_path)
+        .env("SAR_SERVICE_PREFIX", prefix("stop-cont"))
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Ok once the automatic reset is accepted (after the mean at rest).
+    let got = collect(&sock, Duration::from_secs(60), |g| {
+        g.iter().any(|m| m == "WATCHDOG=1") && g.iter().any(|m| m.starts_with("STATUS=guard ok"))
+    });
+    assert!(
+        got.iter().any(|m| m.starts_with("STATUS=guard ok")),
+        "{got:?}"
+    );
+    signal(&child, "-STOP");
+    // The stall itself (the process cannot run: nothing to race with).
+    std::thread::sleep(Duration::from_millis(1000));
+    // What the loop sent before it was stopped.
+    let _ = collect(&sock, Duration::from_millis(200), |_| false);
+    signal(&child, "-CONT");
+    // The loop runs again: its status after the stall, then two pings
+    // (200 cycles later) or the faulted guard's status.
+    let after = collect(&sock, Duration::from_secs(30), |g| {
+        g.iter().filter(|m| *m == "WATCHDOG=1").count() >= 2
+    });
+    signal(&child, "-TERM");
+    let (code, err) = finish(child);
+    assert_eq!(code, 0, "{err}");
+    let overran = err.lines().filter(|l| l.contains("overran")).count();
+    let skipped: Vec<u64> = err
+        .lines()
+        .filter_map(|l| {
+            let (_, rest) = l.split_once("overran its period by ")?;
+            let (_, rest) = rest.split_once(": ")?;
+            rest.split_whitespace().next()?.parse().ok()
+        })
+        .collect();
+    assert!(
+        overran < 50,
+        "{overran} overrun lines after one stall of 1 s:\n{err}"
+    );
+    let stall = skipped.iter().copied().max().unwrap_or(0);
+    assert!(
+        (900..=1300).contains(&stall),
+        "the stall of 1 s at 1 kHz skipped {skipped:?} periods:\n{err}"
+    );
+    // The jump in time faults the guard on the inputs' age (C4).
+    let status: Vec<&String> = after.iter().filter(|m| m.starts_with("STATUS=")).collect();
+    assert!(
+        status.iter().any(|m| m.starts_with("STATUS=guard FAULT")),
+        "{after:?}\n{err}"
+    );
+    let fault = err.lines().find(|l| l.contains("guard ok -> fault"));
+    let fault = fault.unwrap_or_else(|| panic!("no fault after the stall:\n{err}"));
+    // `--nocapture` shows which input aged first.
+    println!("after the stall: {fault}");
+    let _ = std::fs::remove_file(&sock_path);
 }

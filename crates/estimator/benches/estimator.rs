@@ -423,6 +423,7 @@ fn per_cycle(c: &mut Criterion) {
                     tare: sar_estimator::cycle::TareLimits {
                         max_age_ns: None,
                         drift_n_per_s: 0.0,
+                        ..sar_estimator::cycle::TareLimits::default()
                     },
                     ..Default::default()
                 },
@@ -457,6 +458,7 @@ fn per_cycle(c: &mut Criterion) {
                     tare: sar_estimator::cycle::TareLimits {
                         max_age_ns: Some(10 * 365 * 86_400 * 1_000_000_000),
                         drift_n_per_s: 0.0,
+                        ..sar_estimator::cycle::TareLimits::default()
                     },
                     ..all
                 },

@@ -95,13 +95,18 @@ pub enum Command {
     /// Leave `Stop` or `Fault` for `Ok`: accepted only when nothing in this
     /// cycle's input would fault or stop (see [`Guard::reset`]).
     Reset,
-    /// Model-based tare of force and torque: the bias becomes such that this
-    /// cycle's reading gives zero tip force at this pose (the rod's weight
-    /// stays in the model) and the measured torque equals the predicted one.
-    /// Accepted only in `Ok`, with a valid, fresh, observable estimate whose
-    /// every part (with the guard's margin) is below its warn limit: a tare
-    /// cannot hide more than a warn-level force, and never acts on stale,
-    /// invalid or unobservable input.
+    /// Model-based tare of force and torque over the mean at rest: the bias
+    /// becomes such that the mean reading of the last
+    /// [`TareLimits::window_samples`] new samples at rest gives zero tip
+    /// force at this pose (the rod's weight stays in the model) and the
+    /// mean measured torque equals the predicted one. Accepted only in
+    /// `Ok`, with a valid, fresh, observable estimate whose every part (with
+    /// the guard's margin) is below its warn limit (a tare cannot hide more
+    /// than a warn-level force, and never acts on stale, invalid or
+    /// unobservable input), once the mean is complete, while the readings'
+    /// spread over it is within [`TareLimits::max_spread`] times the noise
+    /// (at rest), and at least [`TareLimits::min_interval_ns`] after the
+    /// last accepted tare.
     Tare,
     /// Sets the bias to values measured otherwise (e.g. with the rod
     /// detached). Same rules as [`Command::Tare`], and the values must be
@@ -205,6 +210,38 @@ pub enum CommandRefused {
     /// The tare's linear solve failed (a singular or non-finite system).
     #[error("tare refused: the bias for zero tip force cannot be solved")]
     Unsolvable,
+    /// A tare before its mean at rest holds `window_samples` samples (just
+    /// started, or the joints moved, or the estimate was lost).
+    #[error(
+        "tare refused: {samples} of {needed} samples at rest in the mean: keep the robot still and tare again"
+    )]
+    TareNotAtRest {
+        /// Samples in the mean.
+        samples: u32,
+        /// Samples it needs ([`TareLimits::window_samples`]).
+        needed: u32,
+    },
+    /// A tare while the readings spread more than the noise allows: the
+    /// robot is not at rest.
+    #[error(
+        "tare refused: the force on sensor axis {axis:?} spreads by {std_n:.3} N (std) over the mean, more than {allowed_n:.3} N: the robot is not at rest"
+    )]
+    TareNotSteady {
+        /// The sensor axis.
+        axis: Axis,
+        /// The readings' standard deviation over the mean, N.
+        std_n: f64,
+        /// [`TareLimits::max_spread`] times the configured noise, N.
+        allowed_n: f64,
+    },
+    /// A tare sooner than [`TareLimits::min_interval_ns`] after the last.
+    #[error("tare refused: {since_s:.3} s since the last tare, at least {min_interval_s} s apart")]
+    TareTooSoon {
+        /// Since the last accepted tare, s.
+        since_s: f64,
+        /// The minimum interval, s.
+        min_interval_s: f64,
+    },
     /// A bias component is NaN or infinite.
     #[error("bias refused: {value} is not finite")]
     BiasNonFinite {
@@ -542,19 +579,68 @@ pub struct TareLimits {
     /// the standard-deviation margin, so that a bias that drifted by up to
     /// that much since the tare cannot hide a force above a limit.
     pub drift_n_per_s: f64,
+    /// A tare takes the mean reading of this many new samples at rest
+    /// (1..=100000; beyond, an exponential mean of that length): with one
+    /// sample it would carry that sample's noise into the bias (eight
+    /// one-sample tares at rest moved the mean tip force by up to 0.17 N).
+    /// Refused until the mean holds that many ([`CommandRefused::TareNotAtRest`]).
+    pub window_samples: u32,
+    /// The readings' standard deviation over the mean, per sensor axis, may
+    /// be at most this multiple of the sensor's configured noise (finite,
+    /// at least 1): beyond, the robot is not at rest (a contact that
+    /// changes, a vibration) and the tare is refused
+    /// ([`CommandRefused::TareNotSteady`]).
+    pub max_spread: f64,
+    /// Two accepted tares at least this far apart, ns
+    /// ([`CommandRefused::TareTooSoon`]); 0: no limit.
+    pub min_interval_ns: u64,
 }
 
 impl Default for TareLimits {
     /// A tare due after one hour; a drift bound of 1e-4 N/s (0.36 N after
     /// the hour). The HEX-6's datasheet gives no drift over time: this is an
     /// assumption to replace by the sensor's measured drift (a recording at
-    /// rest over an hour after warm-up).
+    /// rest over an hour after warm-up). A tare over the mean of 500 samples
+    /// at rest (1 s at 500 Hz), refused when the readings spread more than
+    /// twice the configured noise, and at most one tare every 5 s.
     fn default() -> Self {
         Self {
             max_age_ns: Some(3_600_000_000_000),
             drift_n_per_s: 1e-4,
+            window_samples: 500,
+            max_spread: 2.0,
+            min_interval_ns: 5_000_000_000,
         }
     }
+}
+
+/// The mean reading at rest a tare is taken over ([`TareLimits`]): the raw
+/// force and torque (sensor frame, before the bias) of the new samples
+/// since the joints last moved, and the force's spread. One recursion gives
+/// the running mean and population variance of the first `window_samples`
+/// samples, and an exponential mean and variance of that length beyond.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TareMean {
+    /// New samples in the mean (at most `window_samples`).
+    count: u32,
+    /// Mean force reading, sensor frame, N.
+    force_n: Vec3,
+    /// Mean torque reading, sensor frame, N m.
+    torque_nm: Vec3,
+    /// Variance of the force reading per sensor axis, N^2.
+    var_n2: Vec3,
+    /// The joints the mean was taken at.
+    joints: Option<ActiveJoints>,
+}
+
+impl TareMean {
+    const EMPTY: TareMean = TareMean {
+        count: 0,
+        force_n: Vec3::new(0.0, 0.0, 0.0),
+        torque_nm: Vec3::new(0.0, 0.0, 0.0),
+        var_n2: Vec3::new(0.0, 0.0, 0.0),
+        joints: None,
+    };
 }
 
 /// The first reset's check of the wrench at rest: with the tip free, the
@@ -703,6 +789,21 @@ impl PlausibilityConfig {
         if limits.tare.max_age_ns == Some(0) {
             return Err(invalid("tare.max_age", 0.0, "must be > 0"));
         }
+        if !(1..=100_000).contains(&limits.tare.window_samples) {
+            return Err(invalid(
+                "tare.window_samples",
+                f64::from(limits.tare.window_samples),
+                "must be 1..=100000",
+            ));
+        }
+        let spread = limits.tare.max_spread;
+        if !(spread.is_finite() && spread >= 1.0) {
+            return Err(invalid(
+                "tare.max_spread",
+                spread,
+                "must be finite and >= 1",
+            ));
+        }
         if let Some(m) = limits.mounting {
             if !(m.sigma.is_finite() && m.sigma >= 0.0) {
                 return Err(invalid(
@@ -850,6 +951,10 @@ pub struct Estimator {
     tare_ns: Option<u64>,
     /// The means at rest, kept until the first reset is accepted.
     rest: RestMean,
+    /// The mean reading at rest a tare is taken over.
+    tare_mean: TareMean,
+    /// `now_ns` of the last accepted tare (the rate limit).
+    last_tare_ns: Option<u64>,
 }
 
 /// What the checks of the sensor's own values found in one new sample.
@@ -1024,6 +1129,8 @@ impl Estimator {
             spike_window_left: 0,
             tare_ns: None,
             rest: RestMean::EMPTY,
+            tare_mean: TareMean::EMPTY,
+            last_tare_ns: None,
         })
     }
 
@@ -1071,6 +1178,9 @@ impl Estimator {
         self.step_filter(checks.lost_samples, sensor.counter);
         if checks.new_sample && self.guard.awaiting_first_reset() {
             self.update_rest_mean(&joints.joints);
+        }
+        if checks.new_sample {
+            self.update_tare_mean(&joints.joints, sensor);
         }
         self.last.transition = self.guard.step(&GuardInput {
             cycle: input.cycle,
@@ -1534,6 +1644,80 @@ impl Estimator {
         }
     }
 
+    /// The tare's mean at rest: one new sample's reading into it; joints
+    /// that moved (beyond the joint margin) restart it, and so does a
+    /// sample without an estimate (no pose, invalid or stale input).
+    fn update_tare_mean(&mut self, q: &ActiveJoints, sensor: &SensorSample) {
+        let window = self.limits.tare.window_samples.max(1);
+        let mean = &mut self.tare_mean;
+        if !matches!(self.last.tip, TipOutcome::Estimate(_)) {
+            *mean = TareMean::EMPTY;
+            return;
+        }
+        let moved = mean
+            .joints
+            .is_some_and(|p| largest_move(q, &p).1 > self.limits.joint_margin_m);
+        if moved || mean.joints.is_none() {
+            *mean = TareMean {
+                joints: Some(*q),
+                ..TareMean::EMPTY
+            };
+        }
+        mean.count = mean.count.saturating_add(1).min(window);
+        let k = 1.0 / f64::from(mean.count);
+        // Welford's recursion with weight k: the population variance of the
+        // first `window` samples, an exponential one beyond.
+        let d = sensor.force_n - mean.force_n;
+        mean.force_n += d * k;
+        mean.var_n2 = (mean.var_n2 + d.component_mul(&d) * k) * (1.0 - k);
+        mean.torque_nm += (sensor.torque_nm - mean.torque_nm) * k;
+    }
+
+    /// Whether a tare may be taken now: the rate limit, a full mean at
+    /// rest, a spread within the noise; the mean reading when it may.
+    fn tare_reading(
+        &self,
+        sensor: &SensorSample,
+        now_ns: Option<u64>,
+    ) -> Result<SensorSample, CommandRefused> {
+        let limits = self.limits.tare;
+        if let (Some(last), Some(now)) = (self.last_tare_ns, now_ns) {
+            let since_ns = now.saturating_sub(last);
+            if since_ns < limits.min_interval_ns {
+                return Err(CommandRefused::TareTooSoon {
+                    since_s: ns_to_s(since_ns),
+                    min_interval_s: ns_to_s(limits.min_interval_ns),
+                });
+            }
+        }
+        let mean = &self.tare_mean;
+        let needed = limits.window_samples.max(1);
+        if mean.count < needed {
+            return Err(CommandRefused::TareNotAtRest {
+                samples: mean.count,
+                needed,
+            });
+        }
+        let axes = [Axis::X, Axis::Y, Axis::Z];
+        for ((axis, var), noise) in axes.iter().zip(mean.var_n2.iter()).zip(self.noise_n.iter()) {
+            let std_n = libm::sqrt(*var);
+            let allowed_n = limits.max_spread * noise;
+            // NaN counts as beyond.
+            if std_n.is_nan() || std_n > allowed_n {
+                return Err(CommandRefused::TareNotSteady {
+                    axis: *axis,
+                    std_n,
+                    allowed_n,
+                });
+            }
+        }
+        Ok(SensorSample {
+            force_n: mean.force_n,
+            torque_nm: mean.torque_nm,
+            ..*sensor
+        })
+    }
+
     /// The first reset's check of the wrench at rest ([`MountingLimits`]):
     /// the refusal's reason, or `None` when the residuals are within bounds
     /// (or there is no estimate: the guard's own blocker then refuses).
@@ -1659,14 +1843,33 @@ impl Estimator {
         if let Some(reason) = self.guard.warn_blocker() {
             return Err(CommandRefused::AboveWarn { reason });
         }
-        let (TipOutcome::Estimate(estimate), Some(pose)) = (self.last.tip, self.last.pose) else {
+        let (TipOutcome::Estimate(_), Some(pose)) = (self.last.tip, self.last.pose) else {
             return Err(CommandRefused::NoEstimate);
         };
         let bias = match command {
             Command::SetBias(bias) => bias,
-            _ => self
-                .tare(&pose, &input.sensor, &estimate)
-                .ok_or(CommandRefused::Unsolvable)?,
+            _ => {
+                let reading = match self.tare_reading(&input.sensor, now_ns) {
+                    Ok(reading) => reading,
+                    Err(refused) => {
+                        // Not at rest: the mean starts again (its spread
+                        // would otherwise remember the motion for a few
+                        // windows), so the next tare needs a fresh window.
+                        if matches!(refused, CommandRefused::TareNotSteady { .. }) {
+                            self.tare_mean = TareMean {
+                                joints: self.tare_mean.joints,
+                                ..TareMean::EMPTY
+                            };
+                        }
+                        return Err(refused);
+                    }
+                };
+                let bias = self
+                    .tare(&pose, &reading)
+                    .ok_or(CommandRefused::Unsolvable)?;
+                self.last_tare_ns = now_ns.or(self.last_tare_ns);
+                bias
+            }
         };
         let previous = self.bias;
         self.bias = bias;
@@ -1676,19 +1879,16 @@ impl Estimator {
         Ok(CommandAccepted::BiasSet { previous, bias })
     }
 
-    /// The bias for which this reading gives zero tip force at this pose, and
-    /// the torque bias for which the measured torque is the predicted one.
-    /// The estimate is affine in the force bias, F_tip(b + x) = F_tip(b) + J x:
-    /// J from three unit steps, then x = -J^-1 F_tip(b). `None` when J is
-    /// singular or a result is not finite.
-    fn tare(
-        &self,
-        pose: &Pose,
-        sensor: &SensorSample,
-        estimate: &TipForceEstimate,
-    ) -> Option<Bias> {
+    /// The bias for which this reading (the mean at rest) gives zero tip
+    /// force at this pose, and the torque bias for which the measured torque
+    /// is the predicted one. The estimate is affine in the force bias,
+    /// F_tip(b + x) = F_tip(b) + J x: J from three unit steps, then
+    /// x = -J^-1 F_tip(b). `None` when J is singular or a result is not
+    /// finite.
+    fn tare(&self, pose: &Pose, sensor: &SensorSample) -> Option<Bias> {
         let b = self.bias.force_n;
         let reading = &sensor.force_n;
+        let estimate = self.tip.estimate(pose, reading, &b).ok()?;
         let column = |unit: Vec3| -> Option<Vec3> {
             let e = self.tip.estimate(pose, reading, &(b + unit)).ok()?;
             Some(e.force_n - estimate.force_n)
@@ -1901,7 +2101,17 @@ sar_snapshot::config_struct!(SpikeLimits {
 });
 sar_snapshot::config_struct!(TareLimits {
     max_age_ns,
-    drift_n_per_s
+    drift_n_per_s,
+    window_samples,
+    max_spread,
+    min_interval_ns,
+});
+sar_snapshot::snap_struct!(TareMean {
+    count,
+    force_n,
+    torque_nm,
+    var_n2,
+    joints,
 });
 sar_snapshot::config_struct!(MountingLimits {
     sigma,
@@ -1934,6 +2144,8 @@ sar_snapshot::snap_state!(Estimator {
         spike_window_left,
         tare_ns,
         rest,
+        tare_mean,
+        last_tare_ns,
     ],
     nested: [filter],
     config: [calibration, profile, tip, frame, limits, torque, noise_n],

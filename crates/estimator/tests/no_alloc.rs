@@ -185,6 +185,7 @@ fn the_per_cycle_path_allocates_nothing() {
         tare: sar_estimator::cycle::TareLimits {
             max_age_ns: Some(50_000_000),
             drift_n_per_s: 1e-3,
+            ..sar_estimator::cycle::TareLimits::default()
         },
         // The script's joints move every cycle, so the mean at rest starts
         // again every sample: a mean of one sample is complete, and the

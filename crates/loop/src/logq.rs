@@ -59,6 +59,8 @@ pub enum LogEvent {
         cycle: u64,
         /// How late, ns.
         late_ns: u64,
+        /// Whole periods that passed meanwhile, skipped (a stall).
+        skipped: u64,
     },
     /// A guarded move was braked: its force reached the limit.
     GuardedStop(crate::step::GuardedStop),
@@ -196,9 +198,14 @@ pub fn write(event: &LogEvent) {
         LogEvent::DriveState { cycle, state } => {
             tracing::info!(cycle, "drives: {}", drive_state_text(*state))
         }
-        LogEvent::Overrun { cycle, late_ns } => {
-            tracing::warn!(cycle, "cycle overran its period by {late_ns} ns")
-        }
+        LogEvent::Overrun {
+            cycle,
+            late_ns,
+            skipped,
+        } => tracing::warn!(
+            cycle,
+            "cycle overran its period by {late_ns} ns: {skipped} periods skipped"
+        ),
         LogEvent::GuardedStop(g) => tracing::info!(
             cycle = g.cycle,
             "guarded move braked at tip ({:.4}, {:.4}, {:.4}) m: |F_tip| {:.2} N reached its {} N",

@@ -1,10 +1,11 @@
 //! The few system calls of the real-time loop: the monotonic clock, absolute
 //! sleeps (`clock_nanosleep` with `TIMER_ABSTIME`), memory locking, SCHED_FIFO
-//! and CPU pinning, and the SIGTERM/SIGINT flag. Each call says why it failed;
+//! and CPU pinning, and the stop flag that SIGTERM, SIGINT, SIGHUP and every
+//! other terminating signal that can be caught set ([`STOP_SIGNALS`]). Each call says why it failed;
 //! none allocates.
 #![allow(unsafe_code)]
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 
 /// `CLOCK_MONOTONIC` in ns, or `None` when it cannot be read (the drivers'
 /// clock: one place reads it).
@@ -125,35 +126,152 @@ pub fn pin_to_cpu(cpu: usize) -> Result<(), RtError> {
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
+/// The signal that asked to stop (0: none yet, or [`request_stop`]).
+static STOP_SIGNAL: AtomicI32 = AtomicI32::new(0);
 
-extern "C" fn on_signal(_: libc::c_int) {
+extern "C" fn on_signal(sig: libc::c_int) {
+    // The first signal is kept (a second one while stopping changes nothing).
+    let _ = STOP_SIGNAL.compare_exchange(0, sig, Ordering::SeqCst, Ordering::SeqCst);
     STOP.store(true, Ordering::SeqCst);
 }
 
-/// Installs the SIGTERM and SIGINT handler that asks the loop to stop.
+/// The signals whose default action ends the process and that can be
+/// caught, by name: each asks the loop to stop cleanly, as SIGTERM does
+/// (drives halted, recording closed, the stop line logged, exit 0). The
+/// real-time signals (SIGRTMIN..=SIGRTMAX, default: terminate) are caught
+/// too ([`install_stop_handler`]).
+///
+/// Not among them: SIGKILL and SIGSTOP (cannot be caught); SIGSEGV, SIGBUS,
+/// SIGFPE, SIGILL, SIGSYS, SIGTRAP, SIGABRT (a fault of the process itself
+/// or a debugger's: the process cannot be trusted to go on, the drives'
+/// heartbeat consumer stops them, SAFETY.md D4); SIGPIPE and SIGXFSZ
+/// (ignored instead: they come from a write to a closed pipe or socket, or
+/// beyond the file-size limit, and that write then fails with EPIPE or
+/// EFBIG, which its writer reports; a closed log pipe or a recording at
+/// its size limit must not stop the robot).
+pub const STOP_SIGNALS: [(libc::c_int, &str); 13] = [
+    (libc::SIGTERM, "SIGTERM"),
+    (libc::SIGINT, "SIGINT"),
+    (libc::SIGHUP, "SIGHUP"),
+    (libc::SIGQUIT, "SIGQUIT"),
+    (libc::SIGUSR1, "SIGUSR1"),
+    (libc::SIGUSR2, "SIGUSR2"),
+    (libc::SIGALRM, "SIGALRM"),
+    (libc::SIGVTALRM, "SIGVTALRM"),
+    (libc::SIGPROF, "SIGPROF"),
+    (libc::SIGXCPU, "SIGXCPU"),
+    (libc::SIGIO, "SIGIO"),
+    (libc::SIGPWR, "SIGPWR"),
+    (libc::SIGSTKFLT, "SIGSTKFLT"),
+];
+
+/// The signals that are ignored rather than caught (see [`STOP_SIGNALS`]).
+pub const IGNORED_SIGNALS: [libc::c_int; 2] = [libc::SIGPIPE, libc::SIGXFSZ];
+
+/// Sets `sig`'s disposition to `handler` (a function or `SIG_IGN`).
+fn set_disposition(sig: libc::c_int, handler: libc::sighandler_t) -> std::io::Result<()> {
+    // SAFETY: a zeroed sigaction is valid; the handler only stores atomics
+    // (async-signal-safe). SA_RESTART: the other threads' interrupted
+    // system calls resume; the loop's sleep is never restarted whatever the
+    // flag (clock_nanosleep returns EINTR, signal(7)) and checks the flag.
+    let rc = unsafe {
+        let mut action: libc::sigaction = std::mem::zeroed();
+        action.sa_sigaction = handler;
+        action.sa_flags = libc::SA_RESTART;
+        libc::sigemptyset(&mut action.sa_mask);
+        libc::sigaction(sig, &action, std::ptr::null_mut())
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Installs the handler that asks the loop to stop for every signal of
+/// [`STOP_SIGNALS`] and every real-time signal, and ignores
+/// [`IGNORED_SIGNALS`].
 pub fn install_stop_handler() -> std::io::Result<()> {
-    for sig in [libc::SIGTERM, libc::SIGINT] {
-        // SAFETY: a zeroed sigaction is valid; the handler only stores an
-        // atomic (async-signal-safe); no SA_RESTART, so sleeps are interrupted.
-        let rc = unsafe {
-            let mut action: libc::sigaction = std::mem::zeroed();
-            action.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
-            libc::sigemptyset(&mut action.sa_mask);
-            libc::sigaction(sig, &action, std::ptr::null_mut())
-        };
-        if rc != 0 {
-            return Err(std::io::Error::last_os_error());
-        }
+    let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+    for (sig, _) in STOP_SIGNALS {
+        set_disposition(sig, handler)?;
+    }
+    for sig in libc::SIGRTMIN()..=libc::SIGRTMAX() {
+        set_disposition(sig, handler)?;
+    }
+    for sig in IGNORED_SIGNALS {
+        set_disposition(sig, libc::SIG_IGN)?;
     }
     Ok(())
 }
 
-/// Whether SIGTERM or SIGINT arrived (or [`request_stop`] was called).
+/// Gives SIGPIPE back its default action (end the process), which Rust's
+/// runtime sets to "ignore" before `main`: for a command-line tool whose
+/// output goes into a pipe (`sarctl status | head -1`), a reader that has
+/// gone ends it quietly, as it ends `cat` or `grep`, instead of every write
+/// failing with EPIPE and `println!` panicking. Not for a daemon or a
+/// server ([`install_stop_handler`] ignores it again).
+pub fn default_sigpipe() -> std::io::Result<()> {
+    set_disposition(libc::SIGPIPE, libc::SIG_DFL)
+}
+
+/// Whether a stop signal arrived (or [`request_stop`] was called).
 pub fn stop_requested() -> bool {
     STOP.load(Ordering::SeqCst)
+}
+
+/// The signal that asked to stop, if one did.
+pub fn stop_signal() -> Option<libc::c_int> {
+    match STOP_SIGNAL.load(Ordering::SeqCst) {
+        0 => None,
+        sig => Some(sig),
+    }
+}
+
+/// A signal's name: `SIGHUP`, `SIGRTMIN+3`, or `signal 99`.
+pub fn signal_name(sig: libc::c_int) -> String {
+    if let Some((_, name)) = STOP_SIGNALS.iter().find(|(s, _)| *s == sig) {
+        return (*name).to_owned();
+    }
+    if (libc::SIGRTMIN()..=libc::SIGRTMAX()).contains(&sig) {
+        return format!("SIGRTMIN+{}", sig - libc::SIGRTMIN());
+    }
+    format!("signal {sig}")
 }
 
 /// Asks the loop to stop (as a signal would).
 pub fn request_stop() {
     STOP.store(true, Ordering::SeqCst);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The dispositions after [`install_stop_handler`]: every stop signal
+    /// caught, the ignored ones ignored. (Nothing is raised: the flag is
+    /// process-wide and other tests of this binary read it.)
+    #[test]
+    fn every_terminating_signal_is_caught_and_pipe_and_xfsz_are_ignored() {
+        assert!(install_stop_handler().is_ok());
+        let disposition = |sig| {
+            // SAFETY: reading the current action into a zeroed struct.
+            unsafe {
+                let mut old: libc::sigaction = std::mem::zeroed();
+                assert_eq!(libc::sigaction(sig, std::ptr::null(), &mut old), 0);
+                old.sa_sigaction
+            }
+        };
+        let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+        for (sig, name) in STOP_SIGNALS {
+            assert_eq!(disposition(sig), handler, "{name}");
+            assert_eq!(signal_name(sig), name);
+        }
+        for sig in libc::SIGRTMIN()..=libc::SIGRTMAX() {
+            assert_eq!(disposition(sig), handler, "{}", signal_name(sig));
+        }
+        for sig in IGNORED_SIGNALS {
+            assert_eq!(disposition(sig), libc::SIG_IGN, "{sig}");
+        }
+    }
 }

@@ -3,9 +3,12 @@
 //! [`Controller::step`] per deadline, then the cycle handed to the sinks
 //! ([`crate::sink`]). Every cycle is measured
 //! (wake-up latency, compute time) into fixed-size histograms; a cycle that
-//! ends after the next deadline is an overrun, counted and logged, and the
-//! next cycle runs at once (the grid is kept: no cycle is skipped). Ends on
-//! SIGTERM/SIGINT (or after `max_cycles`) with the drives halted.
+//! ends after the next deadline is an overrun, counted and logged (one line,
+//! with the periods skipped), and the next cycle runs at once; the periods
+//! that passed entirely meanwhile (a stall) are skipped and counted, never
+//! run back to back ([`next_deadline`]; the grid is kept, the cycle numbers
+//! stay consecutive: a skipped period is no cycle). Ends on a stop signal
+//! (`rt::STOP_SIGNALS`, or after `max_cycles`) with the drives halted.
 
 use crate::control::Controller;
 use crate::logq::{LogEvent, LogSender};
@@ -56,6 +59,44 @@ pub struct Edges<'a, K: Sink> {
     pub log: &'a LogSender,
 }
 
+/// The next deadline after a cycle ([`next_deadline`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NextDeadline {
+    /// When the next cycle runs, ns (on the grid of the first deadline).
+    pub deadline_ns: u64,
+    /// How far the cycle ended after the deadline that followed its own,
+    /// ns (0: no overrun).
+    pub late_ns: u64,
+    /// Whole periods that passed entirely after that deadline: skipped,
+    /// never run.
+    pub skipped: u64,
+}
+
+/// The deadline after a cycle whose deadline was `deadline_ns` and which
+/// ended at `end_ns`: the next point of the grid (`deadline_ns + period`).
+/// A cycle that ended after it is an overrun: the next cycle runs at once
+/// (late by less than a period), and the periods that passed entirely
+/// since (a stall: SIGSTOP, a late wake-up, a stalled device call) are
+/// skipped, counted in `skipped`, never run back to back; the grid is kept.
+/// Integer arithmetic only (no allocation, no panic; saturating).
+pub fn next_deadline(deadline_ns: u64, period_ns: u64, end_ns: u64) -> NextDeadline {
+    let next_ns = deadline_ns.saturating_add(period_ns);
+    if end_ns <= next_ns {
+        return NextDeadline {
+            deadline_ns: next_ns,
+            late_ns: 0,
+            skipped: 0,
+        };
+    }
+    let late_ns = end_ns - next_ns;
+    let skipped = late_ns.checked_div(period_ns).unwrap_or(0);
+    NextDeadline {
+        deadline_ns: next_ns.saturating_add(skipped.saturating_mul(period_ns)),
+        late_ns,
+        skipped,
+    }
+}
+
 /// Runs the loop until a stop is requested; the drives are halted at the
 /// end. Returns the sinks' last health.
 pub fn run<S: ForceSensor, D: AxisDrives, K: Sink>(
@@ -103,17 +144,77 @@ pub fn run<S: ForceSensor, D: AxisDrives, K: Sink>(
         let end_ns = rt::monotonic_ns().unwrap_or(woke_ns);
         stats.compute.record(end_ns.saturating_sub(woke_ns));
         stats.cycles = cycle;
-        next_ns = next_ns.saturating_add(period_ns);
-        if end_ns > next_ns {
+        let grid = next_deadline(next_ns, period_ns, end_ns);
+        next_ns = grid.deadline_ns;
+        if grid.late_ns > 0 {
             stats.overruns += 1;
+            stats.skipped_periods = stats.skipped_periods.saturating_add(grid.skipped);
             stats.note_overrun(cycle);
             log.send(LogEvent::Overrun {
                 cycle,
-                late_ns: end_ns - next_ns,
+                late_ns: grid.late_ns,
+                skipped: grid.skipped,
             });
         }
     }
     watchdog.stopping();
     controller.shutdown();
     health
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const P: u64 = 1_000_000;
+
+    #[test]
+    fn on_time_the_next_deadline_is_one_period_on() {
+        let d = next_deadline(5 * P, P, 5 * P + 300_000);
+        assert_eq!(
+            d,
+            NextDeadline {
+                deadline_ns: 6 * P,
+                late_ns: 0,
+                skipped: 0
+            }
+        );
+        // Ending exactly at the next deadline is not an overrun.
+        assert_eq!(next_deadline(5 * P, P, 6 * P).late_ns, 0);
+    }
+
+    #[test]
+    fn an_overrun_of_less_than_a_period_runs_the_next_cycle_at_once() {
+        let d = next_deadline(5 * P, P, 6 * P + 400_000);
+        assert_eq!(d.deadline_ns, 6 * P);
+        assert_eq!((d.late_ns, d.skipped), (400_000, 0));
+    }
+
+    /// A stall of 4.16 s (SIGSTOP, SIGCONT) at 1 kHz: 4159 whole periods
+    /// skipped, one cycle at once on the grid, then on time again. The old
+    /// runner ran them back to back (4160 cycles in 130 ms).
+    #[test]
+    fn a_stall_skips_the_whole_periods_and_keeps_the_grid() {
+        let start = 1_000 * P;
+        let end = start + 4_160 * P + 250_000;
+        let d = next_deadline(start, P, end);
+        assert_eq!(d.skipped, 4_159);
+        assert_eq!(d.late_ns, 4_159 * P + 250_000);
+        assert_eq!(d.deadline_ns, start + 4_160 * P);
+        assert!(d.deadline_ns <= end && end - d.deadline_ns < P);
+        // The cycle run at once ends in time for the next grid point.
+        let after = next_deadline(d.deadline_ns, P, end + 100_000);
+        assert_eq!((after.late_ns, after.skipped), (0, 0));
+        assert_eq!(after.deadline_ns, start + 4_161 * P);
+    }
+
+    #[test]
+    fn extreme_values_saturate_and_never_panic() {
+        let d = next_deadline(u64::MAX - 10, P, u64::MAX);
+        assert_eq!(d.deadline_ns, u64::MAX);
+        assert_eq!(next_deadline(0, 0, 5).skipped, 0);
+        let d = next_deadline(0, P, u64::MAX);
+        assert_eq!(d.skipped, (u64::MAX - P) / P);
+        assert!(d.deadline_ns > u64::MAX - P);
+    }
 }

@@ -75,8 +75,11 @@ pub struct LoopStats {
     pub wakeup: Histogram,
     /// Compute time of the cycle body, ns.
     pub compute: Histogram,
-    /// Cycles that ended after the next deadline (counted, never skipped).
+    /// Cycles that ended after the next deadline (counted; the whole
+    /// periods that passed meanwhile are skipped: `skipped_periods`).
     pub overruns: u64,
+    /// Whole periods skipped after overruns (a stall): never run.
+    pub skipped_periods: u64,
     /// Cycles run.
     pub cycles: u64,
     /// The cycle of the last overrun.

@@ -201,6 +201,11 @@ fn output_error(e: std::io::Error) -> String {
 const OUTPUT_CLOSED: &str = "output closed";
 
 fn main() -> ExitCode {
+    // A closed output pipe (`sarctl status | head -0`) ends sarctl quietly
+    // by SIGPIPE, as it ends any Unix filter, whatever prints (clap's help,
+    // text, JSON): one place instead of an EPIPE check at every print.
+    // `sarctl view`, a server, ignores it again (its stop handler).
+    let _ = sar_loop::rt::default_sigpipe();
     let args = Args::parse();
     // iceoryx2's own log (e.g. "no config file was loaded") only for errors.
     sar_shm::log_errors_only();

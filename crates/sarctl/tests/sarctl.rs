@@ -704,3 +704,45 @@ fn walk(dir: &std::path::Path) -> Vec<(String, u32, u32, u32)> {
     }
     out
 }
+
+/// Issue 25, finding 7: `sarctl status | head -0` and every other output
+/// into a pipe whose reader has gone end quietly: no panic ("failed
+/// printing to stdout"), no exit 101, nothing on stderr. The reader is
+/// closed before `sarctl` starts, so that its first write meets the closed
+/// pipe whatever the timing. `sarctl` ends as the Unix filters do, by
+/// SIGPIPE (a shell says 141).
+#[test]
+fn a_closed_pipe_ends_every_output_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let prefix = format!("sar-pipe-{}", std::process::id());
+    let dir = scratch("closed_pipe");
+    let _daemon = start_daemon(&prefix, &dir, &[]);
+    for args in [
+        &["status"][..],
+        &["status", "--format", "json"],
+        &["workspace"],
+        &["workspace", "--format", "json"],
+        &["limits"],
+        &["monitor", "--count", "3"],
+        &["monitor", "--format", "json", "--count", "3"],
+        &["completions", "bash"],
+        &["--help"],
+    ] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = Command::new(SARCTL)
+            .args(args)
+            .env("SAR_SERVICE_PREFIX", &prefix)
+            .stdout(writer)
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.is_empty(), "{args:?}: {err}");
+        assert!(
+            out.status.success() || out.status.signal() == Some(13),
+            "{args:?}: {:?}",
+            out.status
+        );
+    }
+}

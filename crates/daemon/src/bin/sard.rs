@@ -16,6 +16,7 @@ use sar_loop::{logq, rt};
 use sar_record::SceneOptions;
 use sar_record::live::{LiveRecorder, RecordManager, RecordSwitch};
 use sar_shm::{DaemonShm, RecordCommands};
+use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -69,7 +70,9 @@ fn main() -> ExitCode {
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(message) => {
-            eprintln!("sard: {message}");
+            // Not `eprintln!`: a closed stderr (SIGPIPE is ignored) must
+            // not turn a one-line refusal into a panic.
+            let _ = writeln!(std::io::stderr(), "sard: {message}");
             ExitCode::FAILURE
         }
     }
@@ -412,6 +415,16 @@ impl Run<'_> {
                 log: &log,
             },
         );
+        // Which signal ended the loop (SIGTERM, SIGHUP, ...: the same clean
+        // stop for each), said before the recording is closed.
+        let by = match rt::stop_signal() {
+            Some(sig) => {
+                let name = rt::signal_name(sig);
+                tracing::info!("sard: {name} received: stopping (drives halted, recording closed)");
+                format!(" on {name}")
+            }
+            None => String::new(),
+        };
         // The last recording closed (its writer drains the queue first).
         self.recorder.release();
         self.recording.finish();
@@ -420,7 +433,7 @@ impl Run<'_> {
         }
         let out = controller.output();
         tracing::info!(
-            "sard: stopped after {} cycles, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns; {} quick stops; {} states dropped by the publisher's queue; {} messages dropped by the recorder",
+            "sard: stopped after {} cycles{by}, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns ({} periods skipped); {} quick stops; {} states dropped by the publisher's queue; {} messages dropped by the recorder",
             stats.cycles,
             out.guard_state,
             out.guard_reason,
@@ -429,6 +442,7 @@ impl Run<'_> {
             stats.wakeup.max_ns() / 1000,
             stats.compute.quantile_ns(0.99) / 1000,
             stats.overruns,
+            stats.skipped_periods,
             controller.counts().quick_stops,
             health.publisher_queue_drops,
             health.recorder_drops,

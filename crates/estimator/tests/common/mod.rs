@@ -364,9 +364,14 @@ pub fn scripted_checks_only() -> sar_estimator::cycle::PlausibilityLimits {
         frozen: sar_estimator::cycle::FrozenCheck::Off,
         spikes: None,
         mounting: None,
+        // One-sample tares, no rate limit: the scripted readings are
+        // exact (the mean at rest is tested with a live sensor).
         tare: sar_estimator::cycle::TareLimits {
             max_age_ns: None,
             drift_n_per_s: 0.0,
+            window_samples: 1,
+            max_spread: 2.0,
+            min_interval_ns: 0,
         },
         ..Default::default()
     }
