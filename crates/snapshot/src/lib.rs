@@ -52,8 +52,10 @@ pub const CAPACITY: usize = 4096;
 /// changes (a field added, removed or reordered), or the meaning of the
 /// fingerprint (what [`ConfigHash`] hashes, and how). 1: the fingerprint
 /// hashed the configuration's `Debug` text; 2: it hashes the fields'
-/// names and values explicitly ([`fingerprint`](mod@fingerprint)).
-pub const VERSION: u16 = 2;
+/// names and values explicitly ([`fingerprint`](mod@fingerprint)); 3: the
+/// estimator's tare over a mean at rest (its running mean and the last
+/// tare's time) is part of the snapshotted state.
+pub const VERSION: u16 = 3;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";
@@ -897,7 +899,7 @@ mod tests {
         let n = snap.as_bytes().len();
         let mut bytes = [0u8; CAPACITY];
         bytes[..n].copy_from_slice(snap.as_bytes());
-        assert_eq!(bytes[8..10], 2u16.to_le_bytes());
+        assert_eq!(bytes[8..10], 3u16.to_le_bytes());
         bytes[8..10].copy_from_slice(&1u16.to_le_bytes());
         let crc = crc32(&bytes[..n - 4]);
         bytes[n - 4..n].copy_from_slice(&crc.to_le_bytes());
@@ -907,7 +909,7 @@ mod tests {
             e,
             SnapshotError::Version {
                 got: 1,
-                expected: 2
+                expected: 3
             }
         );
         assert_eq!(dst.a.x, 5.0);
@@ -915,7 +917,7 @@ mod tests {
         fmt::write(&mut text, format_args!("{e}")).unwrap();
         assert_eq!(
             text.as_str(),
-            "snapshot format version 1; this build reads version 2"
+            "snapshot format version 1; this build reads version 3"
         );
     }
 
