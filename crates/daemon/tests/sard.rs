@@ -10,6 +10,7 @@
     clippy::indexing_slicing
 )]
 
+use std::io::Read;
 use std::os::unix::net::UnixDatagram;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
