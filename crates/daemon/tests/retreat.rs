@@ -351,8 +351,8 @@ fn refusals_carry_their_exact_cause() {
         matches!(
             r.detail,
             ReplyDetail::Tare(
-                sar_estimator::cycle::CommandRefused::TareTooSoon { .. }
-                    | sar_estimator::cycle::CommandRefused::TareNotAtRest { .. }
+                sar_estimator::cycle::TareRefused::TooSoon { .. }
+                    | sar_estimator::cycle::TareRefused::NotAtRest { .. }
             )
         ),
         "{:?}",

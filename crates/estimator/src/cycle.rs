@@ -210,38 +210,9 @@ pub enum CommandRefused {
     /// The tare's linear solve failed (a singular or non-finite system).
     #[error("tare refused: the bias for zero tip force cannot be solved")]
     Unsolvable,
-    /// A tare before its mean at rest holds `window_samples` samples (just
-    /// started, or the joints moved, or the estimate was lost).
-    #[error(
-        "tare refused: {samples} of {needed} samples at rest in the mean: keep the robot still and tare again"
-    )]
-    TareNotAtRest {
-        /// Samples in the mean.
-        samples: u32,
-        /// Samples it needs ([`TareLimits::window_samples`]).
-        needed: u32,
-    },
-    /// A tare while the readings spread more than the noise allows: the
-    /// robot is not at rest.
-    #[error(
-        "tare refused: the force on sensor axis {axis:?} spreads by {std_n:.3} N (std) over the mean, more than {allowed_n:.3} N: the robot is not at rest"
-    )]
-    TareNotSteady {
-        /// The sensor axis.
-        axis: Axis,
-        /// The readings' standard deviation over the mean, N.
-        std_n: f64,
-        /// [`TareLimits::max_spread`] times the configured noise, N.
-        allowed_n: f64,
-    },
-    /// A tare sooner than [`TareLimits::min_interval_ns`] after the last.
-    #[error("tare refused: {since_s:.3} s since the last tare, at least {min_interval_s} s apart")]
-    TareTooSoon {
-        /// Since the last accepted tare, s.
-        since_s: f64,
-        /// The minimum interval, s.
-        min_interval_s: f64,
-    },
+    /// A tare refused by its mean at rest or its rate limit.
+    #[error("tare refused: {0}")]
+    Tare(TareRefused),
     /// A bias component is NaN or infinite.
     #[error("bias refused: {value} is not finite")]
     BiasNonFinite {
@@ -257,6 +228,47 @@ pub enum CommandRefused {
         value: f64,
         /// What is wrong.
         why: &'static str,
+    },
+}
+
+/// Why a tare was refused by its mean at rest or its rate limit (in
+/// [`CommandRefused::Tare`], which adds "tare refused: "; the loop's reply
+/// shows this text alone).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum TareRefused {
+    /// The mean at rest holds fewer than `window_samples` samples (just
+    /// started, or the joints moved, or the estimate was lost).
+    #[error(
+        "{samples} of {needed} samples at rest in the mean: keep the robot still and tare again"
+    )]
+    NotAtRest {
+        /// Samples in the mean.
+        samples: u32,
+        /// Samples it needs ([`TareLimits::window_samples`]).
+        needed: u32,
+    },
+    /// The readings spread more than the noise allows: the robot is not at
+    /// rest.
+    #[error(
+        "the force on sensor axis {axis:?} spreads by {std_n:.3} N (std) over the mean, more than {allowed_n:.3} N: the robot is not at rest"
+    )]
+    NotSteady {
+        /// The sensor axis.
+        axis: Axis,
+        /// The readings' standard deviation over the mean, N.
+        std_n: f64,
+        /// [`TareLimits::max_spread`] times the configured noise, N.
+        allowed_n: f64,
+    },
+    /// Sooner than [`TareLimits::min_interval_ns`] after the last tare.
+    #[error(
+        "{since_s:.3} s since the last tare, at least {min_interval_s} s apart ([sensor] tare_min_interval_s)"
+    )]
+    TooSoon {
+        /// Since the last accepted tare, s.
+        since_s: f64,
+        /// The minimum interval, s.
+        min_interval_s: f64,
     },
 }
 
@@ -583,16 +595,16 @@ pub struct TareLimits {
     /// (1..=100000; beyond, an exponential mean of that length): with one
     /// sample it would carry that sample's noise into the bias (eight
     /// one-sample tares at rest moved the mean tip force by up to 0.17 N).
-    /// Refused until the mean holds that many ([`CommandRefused::TareNotAtRest`]).
+    /// Refused until the mean holds that many ([`TareRefused::NotAtRest`]).
     pub window_samples: u32,
     /// The readings' standard deviation over the mean, per sensor axis, may
     /// be at most this multiple of the sensor's configured noise (finite,
     /// at least 1): beyond, the robot is not at rest (a contact that
     /// changes, a vibration) and the tare is refused
-    /// ([`CommandRefused::TareNotSteady`]).
+    /// ([`TareRefused::NotSteady`]).
     pub max_spread: f64,
     /// Two accepted tares at least this far apart, ns
-    /// ([`CommandRefused::TareTooSoon`]); 0: no limit.
+    /// ([`TareRefused::TooSoon`]); 0: no limit.
     pub min_interval_ns: u64,
 }
 
@@ -1679,12 +1691,12 @@ impl Estimator {
         &self,
         sensor: &SensorSample,
         now_ns: Option<u64>,
-    ) -> Result<SensorSample, CommandRefused> {
+    ) -> Result<SensorSample, TareRefused> {
         let limits = self.limits.tare;
         if let (Some(last), Some(now)) = (self.last_tare_ns, now_ns) {
             let since_ns = now.saturating_sub(last);
             if since_ns < limits.min_interval_ns {
-                return Err(CommandRefused::TareTooSoon {
+                return Err(TareRefused::TooSoon {
                     since_s: ns_to_s(since_ns),
                     min_interval_s: ns_to_s(limits.min_interval_ns),
                 });
@@ -1693,7 +1705,7 @@ impl Estimator {
         let mean = &self.tare_mean;
         let needed = limits.window_samples.max(1);
         if mean.count < needed {
-            return Err(CommandRefused::TareNotAtRest {
+            return Err(TareRefused::NotAtRest {
                 samples: mean.count,
                 needed,
             });
@@ -1704,7 +1716,7 @@ impl Estimator {
             let allowed_n = limits.max_spread * noise;
             // NaN counts as beyond.
             if std_n.is_nan() || std_n > allowed_n {
-                return Err(CommandRefused::TareNotSteady {
+                return Err(TareRefused::NotSteady {
                     axis: *axis,
                     std_n,
                     allowed_n,
@@ -1855,13 +1867,13 @@ impl Estimator {
                         // Not at rest: the mean starts again (its spread
                         // would otherwise remember the motion for a few
                         // windows), so the next tare needs a fresh window.
-                        if matches!(refused, CommandRefused::TareNotSteady { .. }) {
+                        if matches!(refused, TareRefused::NotSteady { .. }) {
                             self.tare_mean = TareMean {
                                 joints: self.tare_mean.joints,
                                 ..TareMean::EMPTY
                             };
                         }
-                        return Err(refused);
+                        return Err(CommandRefused::Tare(refused));
                     }
                 };
                 let bias = self

@@ -18,7 +18,7 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
     EstimatorConfig, FrozenCheck, JointSample, MountingLimits, PlausibilityConfig,
-    PlausibilityLimits, SensorRange, SensorSample, SpikeLimits, TareLimits,
+    PlausibilityLimits, SensorRange, SensorSample, SpikeLimits, TareLimits, TareRefused,
     frozen_false_alarms_in_ten_years, frozen_repeat_probability, frozen_repeats,
 };
 use sar_estimator::guard::{
@@ -1363,7 +1363,7 @@ fn a_tare_is_refused_until_at_rest_while_not_steady_and_too_soon() {
     // it holds the last samples of the move and the 99 after it.
     let result = out.command.unwrap().result;
     assert!(
-        matches!(result, Err(CommandRefused::TareNotAtRest { samples, needed: 500 })
+        matches!(result, Err(CommandRefused::Tare(TareRefused::NotAtRest { samples, needed: 500 }))
             if (100..120).contains(&samples)),
         "{result:?}"
     );
@@ -1385,7 +1385,7 @@ fn a_tare_is_refused_until_at_rest_while_not_steady_and_too_soon() {
     let out = rig.step(q, &wobble(i + 1), Some(Command::Tare));
     let result = out.command.unwrap().result;
     assert!(
-        matches!(result, Err(CommandRefused::TareNotSteady { std_n, allowed_n, .. }) if std_n > allowed_n),
+        matches!(result, Err(CommandRefused::Tare(TareRefused::NotSteady { std_n, allowed_n, .. })) if std_n > allowed_n),
         "{result:?}"
     );
     assert_eq!(out.guard_state, GuardState::Ok);
@@ -1400,7 +1400,10 @@ fn a_tare_is_refused_until_at_rest_while_not_steady_and_too_soon() {
     assert!(
         matches!(
             result,
-            Err(CommandRefused::TareNotAtRest { samples: 401, .. })
+            Err(CommandRefused::Tare(TareRefused::NotAtRest {
+                samples: 401,
+                ..
+            }))
         ),
         "{result:?}"
     );
@@ -1418,7 +1421,7 @@ fn a_tare_is_refused_until_at_rest_while_not_steady_and_too_soon() {
     let out = rig.step(q, &V::zeros(), Some(Command::Tare));
     let result = out.command.unwrap().result;
     assert!(
-        matches!(result, Err(CommandRefused::TareTooSoon { since_s, min_interval_s })
+        matches!(result, Err(CommandRefused::Tare(TareRefused::TooSoon { since_s, min_interval_s }))
             if (since_s - 1.0).abs() < 1e-9 && min_interval_s == 5.0),
         "{result:?}"
     );

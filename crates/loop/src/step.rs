@@ -194,7 +194,7 @@ pub enum ReplyDetail {
     NotInOk(GuardState),
     /// A tare refused by its mean at rest or its rate limit (not at rest
     /// long enough, not steady, too soon after the last).
-    Tare(sar_estimator::cycle::CommandRefused),
+    Tare(sar_estimator::cycle::TareRefused),
     /// A guarded move asked for while the tip force already reaches its
     /// limit.
     AlreadyAtForce {
@@ -286,29 +286,8 @@ impl core::fmt::Display for ReplyDetail {
                 f,
                 "the force must be within 0 < N < {max_n} N (a warn limit), got {force_n} N"
             ),
-            // Without the refusal's own "tare refused: " (sarctl says it).
-            Self::Tare(refusal) => match refusal {
-                CommandRefused::TareNotAtRest { samples, needed } => write!(
-                    f,
-                    "{samples} of {needed} samples at rest in the mean: keep the robot still and tare again"
-                ),
-                CommandRefused::TareNotSteady {
-                    axis,
-                    std_n,
-                    allowed_n,
-                } => write!(
-                    f,
-                    "the force on sensor axis {axis:?} spreads by {std_n:.3} N (std) over the mean, more than {allowed_n:.3} N: the robot is not at rest"
-                ),
-                CommandRefused::TareTooSoon {
-                    since_s,
-                    min_interval_s,
-                } => write!(
-                    f,
-                    "{since_s:.3} s since the last tare, at least {min_interval_s} s apart ([sensor] tare_min_interval_s)"
-                ),
-                other => write!(f, "{other}"),
-            },
+            // Without CommandRefused's own "tare refused: " (sarctl says it).
+            Self::Tare(refusal) => write!(f, "{refusal}"),
             Self::NotInOk(state) => write!(
                 f,
                 "force control starts only in Ok (the guard is {state:?})"
@@ -1273,11 +1252,7 @@ fn command_reply(result: &Result<CommandAccepted, CommandRefused>) -> (ReplyStat
                 why,
             },
         ),
-        Err(
-            refusal @ (CommandRefused::TareNotAtRest { .. }
-            | CommandRefused::TareNotSteady { .. }
-            | CommandRefused::TareTooSoon { .. }),
-        ) => (ReplyStatus::Refused, ReplyDetail::Tare(*refusal)),
+        Err(CommandRefused::Tare(refusal)) => (ReplyStatus::Refused, ReplyDetail::Tare(*refusal)),
         Err(CommandRefused::BiasNonFinite { value }) => (
             ReplyStatus::Refused,
             ReplyDetail::Limits {
