@@ -268,7 +268,7 @@ fn the_unit_states_the_access_model() {
         "Group=sar",
         "RuntimeDirectory=sar",
         "RuntimeDirectoryMode=2770",
-        "UMask=0007",
+        "UMask=0027",
         "PrivateTmp=yes",
         "ReadWritePaths=/run/sar",
     ] {

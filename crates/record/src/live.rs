@@ -74,9 +74,6 @@ pub struct RecordSwitch {
     answer: std::sync::Mutex<Option<(u64, RecordAnswer)>>,
     /// The recordings' directory (set by [`RecordManager::start`]).
     directory: std::sync::OnceLock<PathBuf>,
-    /// The name the next recording takes (chosen with the start request).
-    /// Locked by the command server and the manager thread, never the loop.
-    pending_name: std::sync::Mutex<Option<String>>,
     /// The first file of the present or last recording.
     /// Locked by the command server and the manager thread, never the loop.
     current: std::sync::Mutex<Option<PathBuf>>,
@@ -103,7 +100,6 @@ impl RecordSwitch {
             stop_ticket: AtomicU64::new(0),
             answer: std::sync::Mutex::new(None),
             directory: std::sync::OnceLock::new(),
-            pending_name: std::sync::Mutex::new(None),
             current: std::sync::Mutex::new(None),
         }
     }
@@ -114,22 +110,6 @@ impl RecordSwitch {
         self.start_ticket.store(ticket, Ordering::Release);
         self.want.store(WANT_START, Ordering::Release);
         ticket
-    }
-    /// Asks for a recording to start and says where its first file goes:
-    /// the new recording's, or the present one's while one runs (then the
-    /// request has no effect). `None` before [`RecordManager::start`].
-    pub fn request_start_at(&self) -> Option<PathBuf> {
-        if self.recording() {
-            return self.current_path();
-        }
-        let directory = self.directory.get()?;
-        let name = recording_name();
-        let path = first_file(directory, &name);
-        if let Ok(mut pending) = self.pending_name.lock() {
-            *pending = Some(name);
-        }
-        self.request_start();
-        Some(path)
     }
     /// The manager's answer to request `ticket`, once given (the first
     /// file, or why the start was refused or the recording failed).
@@ -164,15 +144,6 @@ impl RecordSwitch {
     /// The recordings' directory (`None` before [`RecordManager::start`]).
     pub fn directory(&self) -> Option<&std::path::Path> {
         self.directory.get().map(PathBuf::as_path)
-    }
-    /// The name for the recording being started: the one chosen with the
-    /// request, else a new one.
-    fn take_name(&self) -> String {
-        self.pending_name
-            .lock()
-            .ok()
-            .and_then(|mut p| p.take())
-            .unwrap_or_else(recording_name)
     }
     /// Remembers recording `name` (started) as the current one.
     fn set_current(&self, directory: &std::path::Path, name: &str) {
@@ -392,7 +363,7 @@ impl RecordManager {
         let _ = switch.directory.set(settings.directory.clone());
         if settings.enabled {
             check_directory(&settings.directory, switch.bytes_per_minute())?;
-            let name = switch.take_name();
+            let name = recording_name();
             let rec = Recorder::start(recorder_config(&settings, scene, &name, &bias, true))
                 .map_err(|e| {
                     format!(
@@ -577,7 +548,9 @@ fn manage(
             last = Some(answer);
         }
         if stop_taken && idle {
-            let answer = last.clone().unwrap_or_else(|| Ok(String::new()));
+            // Taken: a later stop with nothing recorded is answered "no
+            // recording ran", not with this recording's outcome again.
+            let answer = last.take().unwrap_or_else(|| Ok(String::new()));
             switch.give_answer(stop_ticket, answer);
             let _ = switch.stop_ticket.compare_exchange(
                 stop_ticket,
@@ -598,7 +571,7 @@ fn manage(
             let ticket = switch.start_ticket.swap(0, Ordering::AcqRel);
             // The name chosen with the request, taken even when the request
             // has no effect (a recording runs or is being handed over).
-            let name = switch.take_name();
+            let name = recording_name();
             let answer = if switch.recording() || !incoming.is_empty() {
                 Ok(switch
                     .current_path()

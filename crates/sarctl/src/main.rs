@@ -330,7 +330,7 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "publish_errors": s.publish_errors,
         "recording": recording_code::state(s.recording) == recording_code::ON,
         "recording_failed": (recording_code::state(s.recording) == recording_code::FAILED)
-            .then(|| recording_failure(s.recording)),
+            .then(|| sarctl::cli::record::recording_failure(s.recording)),
         "recorder_drops": s.recorder_drops,
     })
 }
@@ -364,7 +364,7 @@ fn state_line(s: &StateMsg) -> String {
                     recording_code::ON => "on".to_owned(),
                     recording_code::FAILED => format!(
                         "FAILED ({}; its file is incomplete)",
-                        recording_failure(s.recording)
+                        sarctl::cli::record::recording_failure(s.recording)
                     ),
                     _ => "off".to_owned(),
                 },
@@ -374,18 +374,6 @@ fn state_line(s: &StateMsg) -> String {
             String::new()
         }
     )
-}
-
-/// Why the last recording failed: its OS error ("No space left on device
-/// (os error 28)"), from [`StateMsg::recording`].
-fn recording_failure(code: u64) -> String {
-    match recording_code::errno(code) {
-        0 => "a write error (see the daemon's log)".to_owned(),
-        e => format!(
-            "write error: {}",
-            std::io::Error::from_raw_os_error(i32::try_from(e).unwrap_or(i32::MAX))
-        ),
-    }
 }
 
 /// A bar of |F| against the stop limit, for the terminal view.

@@ -471,6 +471,15 @@ fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomple
         "{}",
         text(&out.stdout)
     );
+    // A second stop, with nothing recording: "no recording ran", exit 0
+    // (not the failed recording's answer again).
+    let out = sarctl(&prefix, &["record", "stop"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("no recording ran"),
+        "{}",
+        text(&out.stdout)
+    );
     daemon.stop();
     // The cut file: recovered, then replayed (exit 0).
     let recovered = dir.join("recovered.mcap");

@@ -337,7 +337,9 @@ fn denied(dir: &Path, meta: Option<&std::fs::Metadata>) -> ShmError {
 fn check_mgmt(dir: &Path) -> Result<(), ShmError> {
     let entries =
         std::fs::read_dir(dir).map_err(|e| dir_error(dir, format!("cannot list it: {e}")))?;
-    for entry in entries.flatten() {
+    // Bounded like the fence: a directory filled with files (clients killed
+    // before they could clean up) costs at most FENCE_LIMIT entries here.
+    for entry in entries.flatten().take(FENCE_LIMIT) {
         if entry
             .file_name()
             .as_bytes()
@@ -375,10 +377,26 @@ fn check_mgmt_file(path: &Path) -> Result<(), ShmError> {
             ),
         ));
     }
+    // Opened without following a link and without blocking (a member of
+    // the group may swap the file for a FIFO or a link after the check
+    // above), then checked again on the open file.
     let mut version = [0u8; 8];
-    std::fs::File::open(path)
-        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut version))
-        .map_err(|e| damaged(path, format!("cannot read it: {e}")))?;
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK | libc::O_NOFOLLOW)
+            .open(path)
+            .map_err(|e| damaged(path, format!("cannot open it: {e}")))?;
+        let opened = file
+            .metadata()
+            .map_err(|e| damaged(path, format!("cannot read it: {e}")))?;
+        if !opened.file_type().is_file() || opened.len() != GLOBAL_MGMT_SIZE {
+            return Err(damaged(path, "changed while it was checked".to_owned()));
+        }
+        std::io::Read::read_exact(&mut file, &mut version)
+            .map_err(|e| damaged(path, format!("cannot read it: {e}")))?;
+    }
     let version = u64::from_le_bytes(version);
     if version != GLOBAL_MGMT_VERSION {
         return Err(damaged(
@@ -420,10 +438,11 @@ mod tests {
         prepare(&d, Side::Daemon).unwrap();
         let mode = std::fs::metadata(&d).unwrap().mode() & 0o7777;
         assert_eq!(mode, RUNTIME_DIR_MODE, "{mode:o}");
-        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o777)).unwrap();
+        // Others' bits go, the set-group-ID bit stays.
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o2777)).unwrap();
         prepare(&d, Side::Daemon).unwrap();
         let mode = std::fs::metadata(&d).unwrap().mode() & 0o7777;
-        assert_eq!(mode, 0o770, "{mode:o}");
+        assert_eq!(mode, 0o2770, "{mode:o}");
         prepare(&d, Side::Client).unwrap();
         let f = d.join("file");
         std::fs::write(&f, b"").unwrap();

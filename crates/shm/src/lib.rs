@@ -559,8 +559,10 @@ impl ShmWorker {
                 self.record_pending = Some((active, ticket, until));
                 return;
             }
+            // Not a refusal: the request may still take effect (the
+            // recorder's thread acts on it when it wakes).
             None => Err(format!(
-                "the recorder did not answer within {} s (see the daemon's log)",
+                "the recorder did not answer within {} s: the request may still take effect (see `sarctl status` and the daemon's log)",
                 RECORD_ANSWER_WAIT.as_secs()
             )),
         };

@@ -206,7 +206,8 @@ impl CanOpenConfig {
         }
         if !(self.following_window_m.is_finite()
             && self.following_window_m >= self.m_per_count()
-            && per_s(self.following_window_m) <= f64::from(u32::MAX))
+            // 0xFFFF_FFFF switches a CiA 402 drive's following check off.
+            && per_s(self.following_window_m) < f64::from(u32::MAX))
         {
             return bad("following_window_m", self.following_window_m.to_string());
         }

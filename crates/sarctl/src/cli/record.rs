@@ -48,6 +48,16 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
     let mut last = None;
     while Instant::now() < deadline {
         sub.wait(Duration::from_millis(20), |s| last = Some(*s));
+        // A recording that failed at once (a full disk) says why, rather
+        // than "did not start" (a state of a cycle after the reply: the
+        // failure of an earlier recording is cleared before it).
+        if start
+            && let Some(s) = last
+            && s.cycle > reply.cycle
+            && recording_code::state(s.recording) == recording_code::FAILED
+        {
+            return Err(format!("{what}: {}", recording_failure(s.recording)));
+        }
         if let Some(s) = last
             && (recording_code::state(s.recording) == recording_code::ON) == start
         {
@@ -85,4 +95,16 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
             "stop recording"
         }
     ))
+}
+
+/// Why the last recording failed: its OS error ("No space left on device
+/// (os error 28)"), from `StateMsg::recording`.
+pub fn recording_failure(code: u64) -> String {
+    match recording_code::errno(code) {
+        0 => "a write error (see the daemon's log)".to_owned(),
+        e => format!(
+            "write error: {}",
+            std::io::Error::from_raw_os_error(i32::try_from(e).unwrap_or(i32::MAX))
+        ),
+    }
 }
