@@ -369,3 +369,504 @@ fn the_check_follows_workspace_crates_and_reads_every_dependency_section() {
         ["d"]
     );
 }
+
+// ---------------------------------------------------------------------------
+// The names ARCHITECTURE.md gives (issue 27): every back-quoted crate, file,
+// module, type, function and macro exists where the text puts it, and each
+// crate's "Links:" line is its external dependencies, exactly.
+
+/// Back-quoted words that are not this project's names (std, the C library,
+/// other crates' items, keywords): not checked.
+const NOT_OURS: &[&str] = &[
+    "clock_nanosleep",
+    "ZeroCopySend",
+    "unwrap",
+    "expect",
+    "panic!",
+    "optional",
+    "unsafe",
+    "dev-dependencies",
+    "Cargo.toml",
+    "..",
+    "sar",
+    "Debug",
+    "ros2",
+];
+
+/// What the source defines: each name with the files that define it (items,
+/// enum variants, `mod` blocks, `pub use` re-exports) and the files that
+/// `impl` something for it.
+#[derive(Debug, Default)]
+struct Defined {
+    /// Name -> files (relative to the root) defining it.
+    items: BTreeMap<String, BTreeSet<String>>,
+    /// Type name -> files holding an `impl` block of it.
+    impls: BTreeMap<String, BTreeSet<String>>,
+    /// Module name -> the files of the module (`m.rs`, `m/mod.rs`, `m/*`).
+    modules: BTreeMap<String, BTreeSet<String>>,
+    /// Crate name as code writes it (`sar_loop`) -> its source files.
+    crates: BTreeMap<String, BTreeSet<String>>,
+    /// Enum variant -> the enums that have it.
+    variants: BTreeMap<String, BTreeSet<String>>,
+    /// Package names and binary names.
+    packages: BTreeSet<String>,
+    /// External crates some manifest depends on.
+    external: BTreeSet<String>,
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+fn is_ident(s: &str) -> bool {
+    let mut c = s.chars();
+    c.next()
+        .is_some_and(|f| f.is_ascii_alphabetic() || f == '_')
+        && c.all(|x| x.is_ascii_alphanumeric() || x == '_')
+}
+
+/// The identifier after `keyword ` in `line`, if `line` has one.
+fn after<'a>(line: &'a str, keyword: &str) -> Option<&'a str> {
+    let at = line.find(keyword)?;
+    let before = &line[..at];
+    if !(before.is_empty() || before.ends_with([' ', '(', '{'])) {
+        return None;
+    }
+    let rest = &line[at + keyword.len()..];
+    let end = rest
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .unwrap_or(rest.len());
+    let name = &rest[..end];
+    is_ident(name).then_some(name)
+}
+
+fn defined() -> Defined {
+    let root = root();
+    let mut d = Defined::default();
+    for (_, m) in manifests() {
+        d.packages.insert(m.name.clone());
+        d.external
+            .extend(m.dependencies.iter().chain(&m.dev_dependencies).cloned());
+    }
+    d.packages.insert("sard".to_owned());
+    let mut files = Vec::new();
+    rust_files(&root.join("crates"), &mut files);
+    for path in files {
+        let rel = path
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        // crates/NAME/src/...: only library and binary sources.
+        let parts: Vec<&str> = rel.split('/').collect();
+        if parts.len() < 4 || parts[2] != "src" {
+            continue;
+        }
+        let manifest = manifest(
+            &std::fs::read_to_string(root.join("crates").join(parts[1]).join("Cargo.toml"))
+                .unwrap(),
+        );
+        d.crates
+            .entry(manifest.name.replace('-', "_"))
+            .or_default()
+            .insert(rel.clone());
+        // The module a file is: its stem, or its folder for mod.rs, and every
+        // folder above it below src/.
+        for (i, part) in parts.iter().enumerate().skip(3) {
+            let name = part.trim_end_matches(".rs");
+            if i + 1 == parts.len() && (name == "mod" || name == "lib" || name == "main") {
+                continue;
+            }
+            d.modules
+                .entry(name.to_owned())
+                .or_default()
+                .insert(rel.clone());
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        let mut in_enum = 0usize;
+        let mut enum_name = String::new();
+        let mut depth = 0isize;
+        for line in text.lines() {
+            let t = line.trim_start();
+            if t.starts_with("//") {
+                continue;
+            }
+            for kw in [
+                "fn ",
+                "struct ",
+                "enum ",
+                "trait ",
+                "type ",
+                "const ",
+                "static ",
+                "mod ",
+                "union ",
+                "macro_rules! ",
+            ] {
+                for (i, _) in t.match_indices(kw) {
+                    if let Some(name) = after(&t[i..], kw)
+                        .filter(|_| i == 0 || t[..i].ends_with([' ', '(', '{', '$']))
+                    {
+                        d.items
+                            .entry(name.to_owned())
+                            .or_default()
+                            .insert(rel.clone());
+                        if kw == "mod " {
+                            d.modules
+                                .entry(name.to_owned())
+                                .or_default()
+                                .insert(rel.clone());
+                        }
+                    }
+                }
+            }
+            if let Some(rest) = t.strip_prefix("impl") {
+                // `impl X`, `impl<T> X<T>`, `impl Trait for X`.
+                let rest = rest.trim_start_matches(|c: char| c != ' ').trim();
+                let target = rest.rsplit(" for ").next().unwrap_or(rest);
+                let name: String = target
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                if is_ident(&name) {
+                    d.impls.entry(name).or_default().insert(rel.clone());
+                }
+            }
+            if t.starts_with("pub use") || t.starts_with("pub(crate) use") {
+                for name in t.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')) {
+                    if is_ident(name) && name != "pub" && name != "use" && name != "crate" {
+                        d.items
+                            .entry(name.to_owned())
+                            .or_default()
+                            .insert(rel.clone());
+                    }
+                }
+            }
+            // Enum variants: the first identifier of a line one level inside
+            // an `enum` body.
+            if in_enum > 0 && depth == in_enum as isize {
+                let name: String = t
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                if is_ident(&name) && name.starts_with(|c: char| c.is_ascii_uppercase()) {
+                    d.variants
+                        .entry(name)
+                        .or_default()
+                        .insert(enum_name.clone());
+                }
+            }
+            if let Some(name) = t.find("enum ").and_then(|i| after(&t[i..], "enum ")) {
+                in_enum = (depth + 1) as usize;
+                enum_name = name.to_owned();
+            }
+            depth += line.matches('{').count() as isize - line.matches('}').count() as isize;
+            if in_enum > 0 && depth < in_enum as isize {
+                in_enum = 0;
+            }
+        }
+    }
+    d
+}
+
+/// Files that hold `name`'s items: a module's files, a crate's files, a
+/// type's defining and `impl` files.
+fn scope(d: &Defined, name: &str) -> BTreeSet<String> {
+    let mut out = BTreeSet::new();
+    for map in [&d.modules, &d.crates, &d.impls] {
+        if let Some(files) = map.get(name) {
+            out.extend(files.iter().cloned());
+        }
+    }
+    if let Some(files) = d.items.get(name) {
+        out.extend(files.iter().cloned());
+    }
+    // A module's folder holds its submodules' files too.
+    let folders: Vec<String> = out
+        .iter()
+        .filter(|f| f.ends_with(&format!("/{name}.rs")) || f.ends_with(&format!("/{name}/mod.rs")))
+        .map(|f| {
+            f.trim_end_matches(".rs")
+                .trim_end_matches("/mod")
+                .to_owned()
+                + "/"
+        })
+        .collect();
+    for (_, files) in d.modules.iter().chain(d.items.iter()) {
+        for f in files {
+            if folders.iter().any(|dir| f.starts_with(dir.as_str())) {
+                out.insert(f.clone());
+            }
+        }
+    }
+    out
+}
+
+/// Why the back-quoted `word` is not a true name (None: it is, or it is
+/// not a name of ours). `crate_files`: the files of the section's crate.
+fn check_word(d: &Defined, word: &str) -> Option<String> {
+    let root = root();
+    if NOT_OURS.contains(&word) {
+        return None;
+    }
+    // A path of the repository (or of the shared spec beside it).
+    if word.contains('/') && !word.contains(' ') {
+        let first = word.split('/').next().unwrap_or("");
+        let ours = [
+            "crates",
+            "tests",
+            "scripts",
+            "deploy",
+            "scenarios",
+            ".ci",
+            "..",
+        ]
+        .contains(&first);
+        if ours && !root.join(word).exists() {
+            return Some(format!("`{word}`: no such file or folder"));
+        }
+        return None;
+    }
+    if word.ends_with(".md") && !word.contains(' ') {
+        return (!root.join(word).exists()).then(|| format!("`{word}`: no such file"));
+    }
+    if d.external.contains(word) {
+        return None; // another crate, named as a dependency
+    }
+    if (word.starts_with("sar-") || word == "sarctl" || word == "sard") && !word.contains(' ') {
+        return (!d.packages.contains(word)).then(|| format!("`{word}`: no such crate"));
+    }
+    let bare = word.trim_end_matches("()").trim_end_matches('!');
+    let segments: Vec<&str> = bare.split("::").collect();
+    if !segments.iter().all(|s| is_ident(s)) {
+        return None; // not a name: a command, a key, an expression
+    }
+    let single_lower = segments.len() == 1
+        && !word.ends_with("()")
+        && !word.ends_with('!')
+        && !bare.starts_with(|c: char| c.is_ascii_uppercase());
+    let last = segments[segments.len() - 1];
+    if single_lower {
+        // A module or function of ours, or not a code name at all (a word).
+        let known = d.modules.contains_key(last)
+            || d.items.contains_key(last)
+            || d.crates.contains_key(last);
+        return (!known).then(|| format!("`{word}`: no module, function or item of that name"));
+    }
+    if segments.len() == 1 {
+        return (!d.items.contains_key(last) && !d.variants.contains_key(last))
+            .then(|| format!("`{word}`: not defined anywhere in crates/*/src"));
+    }
+    for pair in segments.windows(2) {
+        let (outer, inner) = (pair[0], pair[1]);
+        let files = scope(d, outer);
+        if files.is_empty() {
+            return Some(format!(
+                "`{word}`: `{outer}` is no crate, module or type of ours"
+            ));
+        }
+        let inside = d
+            .items
+            .get(inner)
+            .into_iter()
+            .chain(d.modules.get(inner))
+            .flatten()
+            .any(|f| files.contains(f))
+            || d.variants
+                .get(inner)
+                .is_some_and(|enums| enums.contains(outer));
+        if !inside {
+            return Some(format!("`{word}`: `{inner}` is not defined in `{outer}`"));
+        }
+    }
+    None
+}
+
+/// Every back-quoted span of `text` outside code blocks, with its line.
+fn quoted(text: &str) -> Vec<(usize, String)> {
+    let mut out = Vec::new();
+    let mut fenced = false;
+    for (i, line) in text.lines().enumerate() {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+            continue;
+        }
+        if fenced {
+            continue;
+        }
+        // Odd pieces between back-quotes are the quoted spans.
+        for (k, q) in line.split('`').enumerate() {
+            if k % 2 == 1 {
+                out.push((i + 1, q.to_owned()));
+            }
+        }
+    }
+    out
+}
+
+/// The "Links:" line of each crate section: crate name -> the names listed.
+fn links_lines(text: &str) -> BTreeMap<String, BTreeSet<String>> {
+    let mut out = BTreeMap::new();
+    let mut krate: Option<String> = None;
+    let mut collecting: Option<String> = None;
+    for line in text.lines() {
+        if line.starts_with("### ") {
+            krate = line
+                .split('(')
+                .nth(1)
+                .and_then(|r| r.split(')').next())
+                .map(|s| s.trim_matches('`').to_owned());
+            collecting = None;
+            continue;
+        }
+        let t = line.trim();
+        if let Some(rest) = t.strip_prefix("- Links:") {
+            collecting = Some(rest.to_owned());
+        } else if let Some(c) = collecting.as_mut() {
+            if t.is_empty() || t.starts_with("- ") || t.starts_with('#') {
+                let names = std::mem::take(c);
+                collecting = None;
+                if let Some(k) = &krate {
+                    out.insert(k.clone(), parse_links(&names));
+                }
+            } else {
+                c.push(' ');
+                c.push_str(t);
+            }
+        }
+    }
+    if let (Some(c), Some(k)) = (collecting, krate) {
+        out.insert(k, parse_links(&c));
+    }
+    out
+}
+
+fn parse_links(s: &str) -> BTreeSet<String> {
+    // Up to the first full stop; "(...)" remarks dropped.
+    let mut clean = String::new();
+    let mut depth = 0;
+    for c in s.chars() {
+        match c {
+            '(' => depth += 1,
+            ')' => depth -= 1,
+            '.' if depth == 0 => break,
+            _ if depth == 0 => clean.push(c),
+            _ => {}
+        }
+    }
+    clean
+        .split(',')
+        .map(|n| n.trim().trim_matches('`').to_owned())
+        .filter(|n| !n.is_empty())
+        .collect()
+}
+
+#[test]
+fn every_name_in_architecture_md_exists_where_it_says() {
+    let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let d = defined();
+    let words = quoted(&text);
+    let mut wrong = Vec::new();
+    let mut checked = 0;
+    for (line, word) in &words {
+        let counts = !NOT_OURS.contains(&word.as_str());
+        if let Some(why) = check_word(&d, word) {
+            wrong.push(format!("ARCHITECTURE.md:{line}: {why}"));
+        } else if counts {
+            checked += 1;
+        }
+    }
+    println!(
+        "{checked} back-quoted names checked of {} spans",
+        words.len()
+    );
+    assert!(
+        checked >= 100,
+        "only {checked} names checked: the parser lost them"
+    );
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}
+
+#[test]
+fn each_crates_links_line_is_its_external_dependencies() {
+    let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let lines = links_lines(&text);
+    let mut wrong = Vec::new();
+    let mut seen = 0;
+    for (_, m) in manifests() {
+        if m.name == "sar-nostd-check" || m.name == "sar-tests" {
+            continue;
+        }
+        let external: BTreeSet<String> = m
+            .dependencies
+            .iter()
+            .filter(|d| !(d.starts_with("sar-") || *d == "sarctl"))
+            .cloned()
+            .collect();
+        match lines.get(&m.name) {
+            None => wrong.push(format!("{}: no \"- Links:\" line in its section", m.name)),
+            Some(listed) => {
+                seen += 1;
+                for d in external.difference(listed) {
+                    wrong.push(format!(
+                        "{}: links {d}, which its Links: line omits",
+                        m.name
+                    ));
+                }
+                for d in listed.difference(&external) {
+                    wrong.push(format!(
+                        "{}: its Links: line names {d}, which it does not depend on",
+                        m.name
+                    ));
+                }
+            }
+        }
+    }
+    assert!(seen >= 10, "{lines:?}");
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}
+
+#[test]
+fn the_name_check_refuses_a_stale_name() {
+    let d = defined();
+    // Real ones pass...
+    for ok in [
+        "LoopStep::step",
+        "sar_drivers::motion",
+        "Estimator::cycle_checked",
+        "crates/loop/src/step.rs",
+        "sar-loop",
+        "snap_struct!",
+        "GuardState",
+        "runloop::run",
+    ] {
+        assert_eq!(check_word(&d, ok), None, "{ok}");
+    }
+    // ...and made-up or misplaced ones fail.
+    for bad in [
+        "LoopStep::cycle_following",
+        "sar_loop::Estimator",
+        "crates/loop/src/nothing.rs",
+        "sar-nothing",
+        "NoSuchType",
+        "guard::state_msg",
+        "no_such_macro!",
+    ] {
+        assert!(check_word(&d, bad).is_some(), "{bad} passed");
+    }
+    let links = parse_links(" nalgebra, foxglove (optional), socketcan.\n");
+    assert_eq!(
+        links.into_iter().collect::<Vec<_>>(),
+        ["foxglove", "nalgebra", "socketcan"]
+    );
+}
