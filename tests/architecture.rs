@@ -870,3 +870,107 @@ fn the_name_check_refuses_a_stale_name() {
         ["foxglove", "nalgebra", "socketcan"]
     );
 }
+
+/// The top-level modules of each crate and the ones each imports
+/// (`crate::NAME` in code, outside comments and `#[cfg(test)]` modules).
+fn module_imports() -> BTreeMap<String, BTreeMap<String, BTreeSet<String>>> {
+    let root = root();
+    let mut out: BTreeMap<String, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
+    let mut files = Vec::new();
+    rust_files(&root.join("crates"), &mut files);
+    for path in files {
+        let rel = path
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        let parts: Vec<&str> = rel.split('/').collect();
+        if parts.len() < 4 || parts[2] != "src" {
+            continue;
+        }
+        let module = parts[3].trim_end_matches(".rs");
+        if matches!(module, "lib" | "main" | "bin") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        let code = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
+        let imports = out
+            .entry(parts[1].to_owned())
+            .or_default()
+            .entry(module.to_owned())
+            .or_default();
+        for line in code.lines() {
+            let line = line.split("//").next().unwrap_or("");
+            for (i, _) in line.match_indices("crate::") {
+                let name: String = line[i + 7..]
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                if name != module && !name.is_empty() {
+                    imports.insert(name);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// An import circle among `graph`'s modules, as the path that closes it.
+fn circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        n: &str,
+        graph: &BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(at) = path.iter().position(|p| p == n) {
+            let mut c = path[at..].to_vec();
+            c.push(n.to_owned());
+            return Some(c);
+        }
+        if done.contains(n) {
+            return None;
+        }
+        path.push(n.to_owned());
+        for next in graph.get(n).into_iter().flatten() {
+            // Only modules of this crate (a re-exported item is not a module).
+            if graph.contains_key(next) {
+                if let Some(c) = visit(next, graph, path, done) {
+                    return Some(c);
+                }
+            }
+        }
+        path.pop();
+        done.insert(n.to_owned());
+        None
+    }
+    let mut done = BTreeSet::new();
+    graph
+        .keys()
+        .find_map(|n| visit(n, graph, &mut Vec::new(), &mut done))
+}
+
+#[test]
+fn no_crate_has_an_import_circle_between_its_modules() {
+    let all = module_imports();
+    assert!(all.len() >= 10, "{:?}", all.keys());
+    let circles: Vec<String> = all
+        .iter()
+        .filter_map(|(krate, graph)| {
+            circle(graph).map(|c| format!("crates/{krate}: {}", c.join(" -> ")))
+        })
+        .collect();
+    assert!(
+        circles.is_empty(),
+        "import circles:\n{}",
+        circles.join("\n")
+    );
+    // The check finds one when there is one.
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    graph.insert("a".into(), ["b".into()].into());
+    graph.insert("b".into(), ["c".into()].into());
+    graph.insert("c".into(), ["a".into()].into());
+    assert_eq!(circle(&graph).unwrap(), ["a", "b", "c", "a"]);
+    graph.insert("c".into(), BTreeSet::new());
+    assert_eq!(circle(&graph), None);
+}

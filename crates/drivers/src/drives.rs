@@ -4,6 +4,11 @@
 use crate::Error;
 use sar_kinematics::ActiveJoints;
 
+/// The fault code of a drive lost on the bus (its heartbeat or PDOs
+/// missing): CiA 301's life-guard EMCY code, shared by the CANopen host and
+/// the simulator's drives.
+pub const FAULT_HEARTBEAT_LOST: u16 = 0x8130;
+
 /// The state of the three drives taken together, a reduced CiA 402 state machine.
 ///
 /// `Ready --enable--> Enabled`; `Enabled --disable--> Ready`;

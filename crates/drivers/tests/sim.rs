@@ -1353,7 +1353,7 @@ fn tip_mass_is_identified_back_as_in_table_3() {
     let cal = spec.calibration;
     let bias = spec.sensor.bias_n;
     let mut rig = Rig::new(spec);
-    let mut fit = sar_estimator::identification::LineFit::new(&cal, bias, 1e-3).unwrap();
+    let mut fit = sar_estimator::line_fit::LineFit::new(&cal, bias, 1e-3).unwrap();
     for a in [0.04, 0.07, 0.12, 0.20, 0.30] {
         rig.move_to(horizontal(a));
         let t = rig.truth();

@@ -20,9 +20,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use sar_estimator::identification::{
-    Identification, IdentificationError, IdentificationOptions, IdentificationResult, LineFit,
+    Identification, IdentificationError, IdentificationOptions, IdentificationResult,
     MAX_CONDITION, bias_across_gravity_basis,
 };
+use sar_estimator::line_fit::LineFit;
 use sar_estimator::{
     Calibration, CalibrationSpec, MIN_SUPPORT_DISTANCE_M, PoseInputError, SensorNoise, SlideSign,
     StaticPose,

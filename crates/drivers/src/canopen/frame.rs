@@ -130,7 +130,7 @@ pub const ABORT_QUICK_STOP: i16 = 3;
 /// Quick stop option: quick stop ramp, then stay in Quick stop active (0x605A).
 pub const QUICK_STOP_RAMP_AND_HOLD: i16 = 6;
 /// EMCY code of a heartbeat (life guard) event.
-pub const EMCY_HEARTBEAT: u16 = 0x8130;
+pub const EMCY_HEARTBEAT: u16 = crate::drives::FAULT_HEARTBEAT_LOST;
 /// EMCY code of a following error.
 pub const EMCY_FOLLOWING_ERROR: u16 = 0x8611;
 /// Fault code the host gives a drive it lost on the bus (its heartbeat or

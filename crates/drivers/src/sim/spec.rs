@@ -273,7 +273,7 @@ pub enum Fault {
     /// At `at_ns` one drive stops sending its CANopen heartbeat. The plain
     /// simulated axes have no heartbeat: here it is a drive fault of that
     /// axis with the code a CANopen host gives a lost drive
-    /// ([`crate::canopen::frame::FAULT_LOST`], 0x8130), at `at_ns` itself
+    /// ([`crate::drives::FAULT_HEARTBEAT_LOST`], 0x8130), at `at_ns` itself
     /// (the CANopen host sees it a heartbeat timeout later; see
     /// [`crate::canopen::SimDriveFault`]); the axes brake and `fault_reset`
     /// clears it, as [`Fault::DriveFault`].

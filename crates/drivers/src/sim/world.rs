@@ -19,8 +19,8 @@
 use super::spec::{ContactKey, Fault, SimSpec, Tissue, TissueModel};
 use super::statics::{self, Equilibrium, Loads};
 use super::{STATUS_OUT_OF_MODEL, SimError, tissue};
-use crate::canopen::frame::FAULT_LOST;
 use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
+use crate::drives::FAULT_HEARTBEAT_LOST as FAULT_LOST;
 use crate::motion::{AxisPlan, AxisState, Limits, SlideDirection, SlideSign};
 use crate::{Clock, DriveState, JointPositions, Rail, SensorStatus, Vec3, WrenchSample};
 use rand::{Rng, SeedableRng};
