@@ -934,10 +934,10 @@ fn circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
         path.push(n.to_owned());
         for next in graph.get(n).into_iter().flatten() {
             // Only modules of this crate (a re-exported item is not a module).
-            if graph.contains_key(next) {
-                if let Some(c) = visit(next, graph, path, done) {
-                    return Some(c);
-                }
+            if graph.contains_key(next)
+                && let Some(c) = visit(next, graph, path, done)
+            {
+                return Some(c);
             }
         }
         path.pop();
