@@ -27,7 +27,12 @@ use sar_msgs::msgs::{DriveActionCode, Outgoing, RecorderDrops, Topic};
 use sar_record::convert::REPLAY_METADATA;
 use sar_record::replay::{Mode, ReplayOptions, replay, replay_file};
 use sar_record::{FileOptions, McapReader, RotatingWriter, read_file};
-use sar_tests::{fixture_gen, replay_dir, scenarios_dir};
+use sar_tests::{replay_dir, scenarios_dir};
+
+// The fixtures' generator (a module of the tests, not of the library: it
+// taps the simulator's truth with the dev-only test-support crate).
+#[allow(dead_code)]
+mod fixture_gen;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

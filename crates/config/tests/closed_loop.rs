@@ -31,8 +31,8 @@
 use sar_config::scenario::{Scenario, load, parse};
 use sar_drivers::motion::SLIDE_THRESHOLD_M;
 use sar_drivers::runner::{EndReason, Run, RunEvent, RunOptions, run};
-use sar_drivers::sim::{Fault, SimDrives, SimError, Simulator, Truth};
-use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3, WrenchSample};
+use sar_drivers::sim::{Fault, Simulator, Truth};
+use sar_drivers::{JointPositions, SimClock, Vec3, WrenchSample};
 use sar_estimator::SensorNoise;
 use sar_estimator::StaticPose;
 use sar_estimator::cycle::{
@@ -44,6 +44,7 @@ use sar_estimator::identification::{Identification, IdentificationOptions, Ident
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::TipForceConfig;
 use sar_kinematics::{ActiveJoints, SlideSign, forward};
+use sar_test_support::truth::{run_tapped, truth_at};
 use std::path::{Path, PathBuf};
 
 /// Host time at which every simulated run starts (not 0, so that host and
@@ -73,53 +74,6 @@ fn shipped() -> Vec<PathBuf> {
     files
 }
 
-/// The drives, with the simulator's truth taken at every position read (every
-/// tick of the runner): the runner stays generic, the test sees the truth.
-struct TruthTap {
-    drives: SimDrives<SimClock>,
-    sim: Simulator<SimClock>,
-    truths: Vec<Truth>,
-}
-
-impl AxisDrives for TruthTap {
-    type Error = SimError;
-
-    fn positions(&mut self) -> Result<JointPositions, SimError> {
-        if let Ok(truth) = self.sim.truth() {
-            self.truths.push(truth);
-        }
-        self.drives.positions()
-    }
-
-    fn state(&mut self) -> Result<DriveState, SimError> {
-        self.drives.state()
-    }
-
-    fn enable(&mut self) -> Result<(), SimError> {
-        self.drives.enable()
-    }
-
-    fn disable(&mut self) -> Result<(), SimError> {
-        self.drives.disable()
-    }
-
-    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
-        self.drives.stream(targets, period_ns)
-    }
-
-    fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), SimError> {
-        self.drives.set_targets(targets)
-    }
-
-    fn quick_stop(&mut self) -> Result<(), SimError> {
-        self.drives.quick_stop()
-    }
-
-    fn fault_reset(&mut self) -> Result<(), SimError> {
-        self.drives.fault_reset()
-    }
-}
-
 /// A run of a scenario on the simulator, with the truth at every tick when asked.
 struct Simulated {
     run: Run,
@@ -129,9 +83,7 @@ struct Simulated {
 impl Simulated {
     /// The truth at host time `t_ns` (a tick of the runner).
     fn truth_at(&self, t_ns: u64) -> Option<&Truth> {
-        let elapsed = t_ns.checked_sub(HOST_START_NS)?;
-        let i = self.truths.partition_point(|t| t.elapsed_ns < elapsed);
-        self.truths.get(i).filter(|t| t.elapsed_ns == elapsed)
+        truth_at(&self.truths, t_ns.checked_sub(HOST_START_NS)?)
     }
 }
 
@@ -140,24 +92,15 @@ fn simulate_with_seed(s: &Scenario, seed: u64, with_truth: bool) -> Simulated {
     let mut spec = s.spec.clone();
     spec.seed = seed;
     let sim = Simulator::new(spec, clock.clone()).unwrap_or_else(|e| panic!("{}: {e}", s.name));
-    let options = RunOptions::for_script(&s.script, PERIOD_NS);
-    let mut sensor = sim.sensor();
     let (run, truths) = if with_truth {
-        let mut tap = TruthTap {
-            drives: sim.drives(),
-            sim: sim.clone(),
-            truths: Vec::new(),
-        };
-        let run = run(&s.script, &mut sensor, &mut tap, &clock, &options);
-        (run, tap.truths)
+        run_tapped(&s.script, &sim, &clock, PERIOD_NS)
     } else {
+        let options = RunOptions::for_script(&s.script, PERIOD_NS);
+        let mut sensor = sim.sensor();
         let mut drives = sim.drives();
-        (
-            run(&s.script, &mut sensor, &mut drives, &clock, &options),
-            Vec::new(),
-        )
-    };
-    let run = run.unwrap_or_else(|e| panic!("{}: {e}", s.name));
+        run(&s.script, &mut sensor, &mut drives, &clock, &options).map(|r| (r, Vec::new()))
+    }
+    .unwrap_or_else(|e| panic!("{}: {e}", s.name));
     assert_eq!(run.start_ns, HOST_START_NS);
     Simulated { run, truths }
 }

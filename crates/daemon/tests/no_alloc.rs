@@ -7,37 +7,14 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Controller, Envelope, Request};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
-
-struct Counting;
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-// SAFETY: forwards to the system allocator, only counting.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use sar_test_support::counting::{Counting, process_allocations};
+use sar_test_support::rig::{RigBuilder, SimRig};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -91,7 +68,7 @@ fn a_cycle_allocates_nothing() {
     // The snapshot the loop takes between cycles (issue 17), made before.
     let mut snapshot = sar_snapshot::Snapshot::new();
     let mut snapshots = 0;
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = process_allocations();
     let mut seen_warn = false;
     let mut seen_stop = false;
     let mut seen_push = false;
@@ -139,7 +116,7 @@ fn a_cycle_allocates_nothing() {
         seen_warn |= out.guard_state == GuardState::Warn;
         seen_stop |= out.guard_state == GuardState::Stop;
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = process_allocations();
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
     assert!(seen_push, "force control never ran");
     assert!(

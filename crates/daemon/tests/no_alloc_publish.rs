@@ -17,7 +17,6 @@
 )]
 
 mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_loop::control::{Controller, Operator, ReplyStatus};
@@ -26,16 +25,15 @@ use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::{CommandMsg, command_kind};
 use sar_shm::{Client, DaemonShm};
+use sar_test_support::rig::{RigBuilder, SimRig};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
-#[path = "common/counting.rs"]
-mod counting;
-use counting::{allocations, counted};
+use sar_test_support::counting::{Counting, allocations, counted};
 
 #[global_allocator]
-static GLOBAL: counting::Counting = counting::Counting;
+static GLOBAL: Counting = Counting;
 
 #[test]
 fn the_counter_sees_an_allocation_on_the_loop_thread() {

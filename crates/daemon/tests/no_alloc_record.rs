@@ -13,7 +13,6 @@
 )]
 
 mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
 use sar_daemon::sim;
@@ -26,14 +25,13 @@ use sar_msgs::msgs::Outgoing;
 use sar_record::live::{RecordManager, RecordSwitch};
 use sar_record::replay::{Mode, ReplayOptions, replay_file};
 use sar_record::{McapReader, read_file};
+use sar_test_support::rig::{RigBuilder, SimRig};
 use std::sync::Arc;
 
-#[path = "common/counting.rs"]
-mod counting;
-use counting::{allocations, counted};
+use sar_test_support::counting::{Counting, allocations, counted};
 
 #[global_allocator]
-static GLOBAL: counting::Counting = counting::Counting;
+static GLOBAL: Counting = Counting;
 
 #[test]
 fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {

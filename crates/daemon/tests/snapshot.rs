@@ -14,7 +14,6 @@
 )]
 
 mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_estimator::Vec3;
@@ -22,6 +21,7 @@ use sar_estimator::guard::GuardState;
 use sar_loop::control::{Envelope, Request};
 use sar_loop::step::LoopStep;
 use sar_snapshot::{Snapshot, SnapshotError};
+use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// A step after 3 s of the demo: reset, a push of 1 N into a contact that
 /// rises to a Stop. Returns it and its configuration.

@@ -13,7 +13,6 @@
 )]
 
 mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
 use sar_daemon::sim;
@@ -26,6 +25,7 @@ use sar_msgs::msgs::{RosMessage, StateSnapshot, Topic};
 use sar_record::live::{RecordManager, RecordSwitch};
 use sar_record::replay::{ReplayError, ReplayOptions, replay_file, replay_files};
 use sar_record::{McapReader, read_file};
+use sar_test_support::rig::{RigBuilder, SimRig};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 

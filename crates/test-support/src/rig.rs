@@ -2,7 +2,9 @@
 //! on the simulator of a scenario, on a simulated clock that starts at 1 s,
 //! with the built-in configuration unless told otherwise, the automatic
 //! reset on and the log events kept in their queue (no thread drains them).
-#![allow(dead_code, clippy::unwrap_used)]
+//! A rig steps 1 ms of simulated time per cycle and keeps every cycle's
+//! input and decision, for a replay bit for bit through a fresh step.
+#![allow(clippy::unwrap_used, clippy::panic)]
 
 use sar_config as config;
 use sar_daemon::sim;
@@ -10,9 +12,9 @@ use sar_drivers::scenario::Scenario;
 use sar_drivers::sim::{SimDrives, SimSensor, Simulator};
 use sar_drivers::{AxisDrives, SimClock};
 use sar_estimator::cycle::Bias;
-use sar_loop::control::{Controller, Operator};
+use sar_loop::control::{Controller, Envelope, Operator, Reply, Request};
 use sar_loop::logq::{self, LogQueue};
-use sar_loop::step::StepConfig;
+use sar_loop::step::{LoopInput, LoopOutput, LoopStep, StepConfig};
 
 /// What a rig is made of.
 pub struct SimRig<D: AxisDrives> {
@@ -30,6 +32,76 @@ pub struct SimRig<D: AxisDrives> {
     pub queue: LogQueue,
     /// The scenario's start bias, which the estimator starts with.
     pub bias: Bias,
+    /// The loop's settings the controller runs.
+    pub step_config: StepConfig,
+    /// The cycles stepped so far by [`SimRig::step`].
+    pub cycle: u64,
+    /// Every cycle's input and decision stepped by [`SimRig::step`].
+    pub log: Vec<(LoopInput, LoopOutput)>,
+}
+
+impl<D: AxisDrives> SimRig<D> {
+    /// One cycle, 1 ms of simulated time after the last: its decision (the
+    /// input and the decision kept in [`SimRig::log`]).
+    pub fn step(&mut self) -> LoopOutput {
+        self.cycle += 1;
+        self.clock.advance_ns(1_000_000);
+        let clock = self.clock.clone();
+        self.c.step(self.cycle, || Some(clock.now_ns()));
+        let d = *self.c.decision();
+        self.log.push((*self.c.loop_input(), d));
+        d
+    }
+
+    /// Applies `request` in the next cycle and returns its reply.
+    pub fn request(&mut self, id: u64, request: Request) -> Reply {
+        self.operator
+            .requests
+            .push(Envelope { id, request })
+            .unwrap();
+        self.step();
+        let r = self.operator.replies.pop().unwrap();
+        assert_eq!(r.id, id);
+        r
+    }
+
+    /// Steps until `done` holds, at most `max` cycles: that decision.
+    pub fn until(&mut self, max: u32, done: impl Fn(&LoopOutput) -> bool) -> Option<LoopOutput> {
+        (0..max).map(|_| self.step()).find(|d| done(d))
+    }
+
+    /// The run's inputs through a fresh step give the same decisions.
+    pub fn replays_bit_for_bit(&self) {
+        let mut step = LoopStep::new(&self.cfg.estimator, self.bias, self.step_config).unwrap();
+        for (k, (input, recorded)) in self.log.iter().enumerate() {
+            let again = step.step(input);
+            assert_eq!(
+                format!("{again:?}"),
+                format!("{recorded:?}"),
+                "cycle {k} differs"
+            );
+        }
+    }
+}
+
+/// `Deref` and `DerefMut` of a test's rig type `$rig` (a tuple struct of
+/// one field) to the [`SimRig`] `$target` it wraps: the test's own methods
+/// beside the shared ones.
+#[macro_export]
+macro_rules! deref_rig {
+    ($rig:ty => $target:ty) => {
+        impl ::std::ops::Deref for $rig {
+            type Target = $target;
+            fn deref(&self) -> &$target {
+                &self.0
+            }
+        }
+        impl ::std::ops::DerefMut for $rig {
+            fn deref_mut(&mut self) -> &mut $target {
+                &mut self.0
+            }
+        }
+    };
 }
 
 /// Builds a [`SimRig`].
@@ -108,6 +180,9 @@ impl RigBuilder {
             cfg,
             queue,
             bias,
+            step_config,
+            cycle: 0,
+            log: Vec::new(),
         }
     }
 }

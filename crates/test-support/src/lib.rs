@@ -1,0 +1,20 @@
+//! The workspace's shared test rigs. A dev-dependency only (never a normal
+//! one): integration tests and benchmarks of any crate may use it, since they
+//! link the crates' normal libraries, the same ones this crate links.
+//!
+//! - [`rig`]: the one builder of the simulated rigs (the real controller on
+//!   the simulator of a scenario, on a simulated clock).
+//! - [`drives`]: the one pass-through drive wrapper ([`drives::Hooked`]),
+//!   which forwards every call to the drives it wraps except those its hook
+//!   takes over (a blocked axis, a refused quick stop, a truth tap).
+//! - [`truth`]: the simulator's truth at every position read of a run.
+//! - [`counting`]: the counting global allocator of the no-alloc tests (a
+//!   test binary declares it: `#[global_allocator] static GLOBAL:
+//!   sar_test_support::counting::Counting = sar_test_support::counting::Counting;`).
+//! - [`messages`]: deterministic messages of every topic, cycle by cycle.
+
+pub mod counting;
+pub mod drives;
+pub mod messages;
+pub mod rig;
+pub mod truth;
