@@ -16,8 +16,8 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::sim::{Simulator, Truth};
 use sar_drivers::SimClock;
+use sar_drivers::sim::{Simulator, Truth};
 use sar_estimator::Vec3;
 use sar_loop::control::{Controller, Envelope, Operator, Request};
 use sar_loop::logq;

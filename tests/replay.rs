@@ -533,7 +533,7 @@ fn a_file_cut_short_replays_to_its_last_chunk_and_is_recovered() {
 /// installed on first use under `target/test-readers/`).
 fn python_counts(file: &Path) -> Option<BTreeMap<String, u64>> {
     let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/daemon/tests/read_recording.py");
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/record/tests/read_recording.py");
     let out = readers::python().arg(&script).arg(file).output().unwrap();
     assert!(
         out.status.success(),

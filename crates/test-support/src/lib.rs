@@ -18,3 +18,13 @@ pub mod drives;
 pub mod messages;
 pub mod rig;
 pub mod truth;
+
+/// A fresh scratch directory `name` under the test's target tmp dir, in a
+/// folder of its package (`CARGO_TARGET_TMPDIR` is only set for tests and
+/// benchmarks, so the macro reads it where it is used).
+#[macro_export]
+macro_rules! scratch {
+    ($name:expr) => {
+        $crate::messages::scratch_in(env!("CARGO_TARGET_TMPDIR"), env!("CARGO_PKG_NAME"), $name)
+    };
+}

@@ -9,7 +9,6 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{ContactKey, SimDrives};
@@ -56,7 +55,7 @@ impl Rig {
 /// 20 N along the rod (+X0) from 0.1 s to `off_s`, gone 0.1 s later.
 fn push(off_s: f64) -> Vec<ContactKey> {
     let off_ns = (off_s * 1e9) as u64;
-    common::contact_pulse(
+    sar_test_support::messages::contact_pulse(
         1_100_000_000,
         1_200_000_000,
         1_000_000_000 + off_ns,

@@ -6,7 +6,6 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
 use sar_config as config;
 use sar_daemon::sim;
 use sar_estimator::Vec3;
@@ -28,7 +27,7 @@ fn a_cycle_allocates_nothing() {
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
     // Push on to the stop limit: 20 N along the rod at 12 s, then release at 20 s.
-    scenario.spec.contact = common::contact_pulse(
+    scenario.spec.contact = sar_test_support::messages::contact_pulse(
         2_000_000_000,
         12_000_000_000,
         14_000_000_000,

@@ -12,7 +12,6 @@
     clippy::indexing_slicing
 )]
 
-mod common;
 use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
 use sar_daemon::sim;
@@ -35,11 +34,11 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
-    let dir = common::scratch("no_alloc_record");
+    let dir = sar_test_support::scratch!("no_alloc_record");
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
     // 20 N along the rod from 1.5 s to 3 s: Warn, then Stop.
-    scenario.spec.contact = common::contact_pulse(
+    scenario.spec.contact = sar_test_support::messages::contact_pulse(
         500_000_000,
         2_500_000_000,
         3_000_000_000,

@@ -26,10 +26,7 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-#[path = "common/rig.rs"]
-mod rig;
-use rig::{Rig, TIP_M, rms, tissue};
+use crate::rig::{Rig, TIP_M, rms, tissue};
 use sar_drivers::sim::TissueShift;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;

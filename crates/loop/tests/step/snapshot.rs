@@ -13,7 +13,6 @@
     clippy::indexing_slicing
 )]
 
-mod common;
 use sar_config as config;
 use sar_daemon::sim;
 use sar_estimator::Vec3;
@@ -28,7 +27,7 @@ use sar_test_support::rig::{RigBuilder, SimRig};
 fn session() -> (LoopStep, config::Config) {
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
-    scenario.spec.contact = common::contact_pulse(
+    scenario.spec.contact = sar_test_support::messages::contact_pulse(
         2_000_000_000,
         3_000_000_000,
         3_500_000_000,

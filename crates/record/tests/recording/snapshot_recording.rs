@@ -12,7 +12,6 @@
     clippy::indexing_slicing
 )]
 
-mod common;
 use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
 use sar_daemon::sim;
@@ -34,11 +33,11 @@ use std::sync::Arc;
 /// reset), then about 3.6 s recorded with 1 s files and a snapshot every
 /// 250 ms (moves, a push). Returns the files in order.
 fn session(name: &str) -> Vec<PathBuf> {
-    let dir = common::scratch(name);
+    let dir = sar_test_support::scratch!(name);
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
     // 20 N along the rod from 2 s (rising), held 2.7-3.2 s, off at 3.5 s.
-    scenario.spec.contact = common::contact_pulse(
+    scenario.spec.contact = sar_test_support::messages::contact_pulse(
         2_000_000_000,
         2_700_000_000,
         3_200_000_000,

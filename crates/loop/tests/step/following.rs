@@ -4,7 +4,6 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
 use sar_config as config;
 use sar_estimator::guard::{GuardState, Reason};
 use sar_test_support::rig::{RigBuilder, SimRig};

@@ -7,7 +7,19 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
+// The other tests of the step on the simulator, in this binary (one binary:
+// less to link).
+#[path = "step/following.rs"]
+mod following;
+#[path = "step/guard_action.rs"]
+mod guard_action;
+#[path = "step/retreat.rs"]
+mod retreat;
+#[path = "step/snapshot.rs"]
+mod snapshot;
+#[path = "step/step_properties.rs"]
+mod step_properties;
+
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{SimDrives, SimError};
@@ -84,7 +96,7 @@ impl Rig {
 }
 
 fn quiet() -> Vec<sar_drivers::sim::ContactKey> {
-    common::contact_pulse(0, 1, 2, 3, Vec3::zeros())
+    sar_test_support::messages::contact_pulse(0, 1, 2, 3, Vec3::zeros())
 }
 
 /// A move is planned by the loop: its end point goes to the drives once (they
@@ -238,7 +250,7 @@ fn limits_change_within_their_ceilings() {
 #[test]
 fn a_move_into_a_warning_force_is_braked_and_a_run_replays_bit_for_bit() {
     // 9 N along +x (the rod's direction at the start) from 1.02 s to 1.52 s.
-    let contact = common::contact_pulse(
+    let contact = sar_test_support::messages::contact_pulse(
         1_020_000_000,
         1_520_000_000,
         60_000_000_000,

@@ -16,7 +16,6 @@
     clippy::indexing_slicing
 )]
 
-mod common;
 use sar_config as config;
 use sar_daemon::sim;
 use sar_loop::control::{Controller, Operator, ReplyStatus};

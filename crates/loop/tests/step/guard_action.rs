@@ -4,7 +4,6 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{SimDrives, SimError};
@@ -36,7 +35,7 @@ fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
     let mut scenario = sim::demo_scenario().unwrap();
     // 20 N along the rod from 2 s to 4 s, then nothing (after the first
     // reset, which needs the mean at rest: 1 s).
-    scenario.spec.contact = common::contact_pulse(
+    scenario.spec.contact = sar_test_support::messages::contact_pulse(
         1_500_000_000,
         2_000_000_000,
         4_000_000_000,

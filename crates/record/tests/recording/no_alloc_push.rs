@@ -8,8 +8,6 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-
 use sar_msgs::msgs::Outgoing;
 use sar_record::{FileOptions, Recorder, RecorderConfig};
 use sar_test_support::counting::{Counting, thread_allocations as allocations};
@@ -19,11 +17,13 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn push_does_not_allocate() {
-    let dir = common::scratch("no_alloc");
+    let dir = sar_test_support::scratch!("no_alloc");
     let mut config = RecorderConfig::new(FileOptions::new(&dir, "rec"));
     config.queue_capacity = 4096;
     // Prepared before counting: the messages of 2000 cycles.
-    let msgs: Vec<Outgoing> = (0..2000).flat_map(common::cycle_messages).collect();
+    let msgs: Vec<Outgoing> = (0..2000)
+        .flat_map(sar_test_support::messages::cycle_messages)
+        .collect();
 
     // Writer running: pushes accepted.
     let mut rec = Recorder::start(config.clone()).unwrap();

@@ -15,8 +15,6 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-use common::mix;
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{ContactKey, SimDrives, SimError};
@@ -28,6 +26,7 @@ use sar_kinematics::ActiveJoints;
 use sar_loop::control::{Envelope, ReplyStatus, Request};
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
 use sar_test_support::drives::{DriveHook, Hooked};
+use sar_test_support::messages::mix;
 use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// Simulated drives that refuse a quick stop when told to (seeded).
