@@ -6,13 +6,12 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use sar_config as config;
-use sar_daemon::sim;
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Controller, Envelope, Request};
 use sar_test_support::counting::{Counting, process_allocations};
+use sar_test_support::messages::rod_push_20n;
 use sar_test_support::rig::{RigBuilder, SimRig};
 
 #[global_allocator]
@@ -24,23 +23,20 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 #[test]
 fn a_cycle_allocates_nothing() {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let cfg = config::builtin().unwrap();
-    let mut scenario = sim::demo_scenario().unwrap();
     // Push on to the stop limit: 20 N along the rod at 12 s, then release at 20 s.
-    scenario.spec.contact = sar_test_support::messages::contact_pulse(
-        2_000_000_000,
-        12_000_000_000,
-        14_000_000_000,
-        15_000_000_000,
-        Vec3::new(20.0, 0.0, 0.0),
-    );
     let SimRig {
         mut c,
         clock,
         operator,
         queue,
         ..
-    } = RigBuilder::new(&scenario).config(&cfg).build();
+    } = RigBuilder::demo(rod_push_20n([
+        2_000_000_000,
+        12_000_000_000,
+        14_000_000_000,
+        15_000_000_000,
+    ]))
+    .build();
     // Warm-up: the first cycles (and the start-up reset) may touch lazily
     // made state in the simulator.
     let mut cycle = 0;

@@ -21,7 +21,6 @@ mod snapshot;
 mod step_properties;
 
 use sar_config as config;
-use sar_daemon::sim;
 use sar_drivers::sim::{SimDrives, SimError};
 use sar_drivers::{AxisDrives, DriveState, SimClock};
 use sar_estimator::Vec3;
@@ -62,18 +61,12 @@ sar_test_support::deref_rig!(Rig => SimRig<Hooked<SimDrives<SimClock>, Blockable
 
 impl Rig {
     fn new(contact: Vec<sar_drivers::sim::ContactKey>, block_after: Option<u32>) -> Self {
-        let cfg = config::builtin().unwrap();
-        let mut scenario = sim::demo_scenario().unwrap();
-        scenario.spec.contact = contact;
         let hook = Blockable {
             setpoints: 0,
             block_after,
         };
-        let mut rig = Self(
-            RigBuilder::new(&scenario)
-                .config(&cfg)
-                .build_with(|drives| Hooked::new(drives, hook)),
-        );
+        let mut rig =
+            Self(RigBuilder::demo(contact).build_with(|drives| Hooked::new(drives, hook)));
         // The automatic reset, accepted once the mean at rest is complete
         // (500 samples of the 500 Hz sensor: 1000 cycles), then the drives
         // come up.

@@ -11,8 +11,6 @@
 
 // The other recording tests, in this binary (one binary: less to link); the
 // strict readers of the tests (shared with sar-daemon's and sar-tests' tests).
-#[path = "recording/no_alloc_push.rs"]
-mod no_alloc_push;
 #[path = "recording/python_reader.rs"]
 mod python_reader;
 #[path = "../../daemon/tests/common/readers.rs"]

@@ -2,6 +2,7 @@
 //! tests push them), and the simulator's contact pulses.
 #![allow(clippy::unwrap_used)]
 
+use sar_drivers::sim::ContactKey;
 use sar_msgs::cdr::FixedStr;
 use sar_msgs::msgs::*;
 use std::path::PathBuf;
@@ -139,7 +140,7 @@ pub fn contact_pulse(
     hold_ns: u64,
     off_ns: u64,
     force_n: sar_kinematics::Vec3,
-) -> Vec<sar_drivers::sim::ContactKey> {
+) -> Vec<ContactKey> {
     let zero = sar_kinematics::Vec3::zeros();
     [
         (start_ns, zero),
@@ -148,8 +149,15 @@ pub fn contact_pulse(
         (off_ns, zero),
     ]
     .into_iter()
-    .map(|(t_ns, force_n)| sar_drivers::sim::ContactKey { t_ns, force_n })
+    .map(|(t_ns, force_n)| ContactKey { t_ns, force_n })
     .collect()
+}
+
+/// A push of 20 N along the rod (+X0 at the demo's start: above its stop
+/// limit) as a [`contact_pulse`] of the times `[start, on, hold, off]`, ns.
+pub fn rod_push_20n([start_ns, on_ns, hold_ns, off_ns]: [u64; 4]) -> Vec<ContactKey> {
+    let force_n = sar_kinematics::Vec3::new(20.0, 0.0, 0.0);
+    contact_pulse(start_ns, on_ns, hold_ns, off_ns, force_n)
 }
 
 /// A fresh scratch directory `tmp_dir/group/name` (`tmp_dir`: the test's

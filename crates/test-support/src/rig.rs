@@ -9,7 +9,7 @@
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::scenario::Scenario;
-use sar_drivers::sim::{SimDrives, SimSensor, Simulator};
+use sar_drivers::sim::{ContactKey, SimDrives, SimSensor, Simulator};
 use sar_drivers::{AxisDrives, SimClock};
 use sar_estimator::cycle::Bias;
 use sar_loop::control::{Controller, Envelope, Operator, Reply, Request};
@@ -121,6 +121,14 @@ impl RigBuilder {
             step_config: None,
             auto_reset: true,
         }
+    }
+
+    /// A rig on the built-in demo scenario with the tip contact `contact`
+    /// (simulator keys) instead of its own.
+    pub fn demo(contact: Vec<ContactKey>) -> Self {
+        let mut scenario = sim::demo_scenario().unwrap();
+        scenario.spec.contact = contact;
+        Self::new(&scenario)
     }
 
     /// Without the demo's automatic reset (the operator resets).

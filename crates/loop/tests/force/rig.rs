@@ -10,7 +10,6 @@
     clippy::indexing_slicing
 )]
 
-use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_drivers::sim::{Breathing, ContactKey, SimDrives, Tissue, TissueModel, TissueShift};
@@ -65,7 +64,6 @@ impl Rig {
     /// The demo robot with these tissues and contact script, reset after
     /// the mean at rest ([`READY_MS`]).
     pub fn with(tissues: Vec<Tissue>, contact: Vec<ContactKey>) -> Self {
-        let cfg = config::builtin().unwrap();
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = if contact.is_empty() {
             vec![ContactKey {
@@ -76,7 +74,7 @@ impl Rig {
             contact
         };
         scenario.spec.tissue = tissues;
-        let mut rig = Self(RigBuilder::new(&scenario).config(&cfg).build());
+        let mut rig = Self(RigBuilder::new(&scenario).build());
         for _ in 0..READY_MS {
             rig.step();
         }

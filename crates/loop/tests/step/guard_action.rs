@@ -12,6 +12,7 @@ use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Envelope, ReplyStatus, Request};
 use sar_test_support::drives::{DriveHook, Hooked};
+use sar_test_support::messages::rod_push_20n;
 use sar_test_support::rig::RigBuilder;
 
 /// Simulated drives whose first `refuse` quick stops fail.
@@ -31,20 +32,15 @@ impl DriveHook<SimDrives<SimClock>> for Stubborn {
 
 #[test]
 fn a_refused_quick_stop_is_repeated_and_moves_wait_for_a_reset() {
-    let cfg = config::builtin().unwrap();
-    let mut scenario = sim::demo_scenario().unwrap();
     // 20 N along the rod from 2 s to 4 s, then nothing (after the first
     // reset, which needs the mean at rest: 1 s).
-    scenario.spec.contact = sar_test_support::messages::contact_pulse(
+    let mut rig = RigBuilder::demo(rod_push_20n([
         1_500_000_000,
         2_000_000_000,
         4_000_000_000,
         4_100_000_000,
-        Vec3::new(20.0, 0.0, 0.0),
-    );
-    let mut rig = RigBuilder::new(&scenario)
-        .config(&cfg)
-        .build_with(|drives| Hooked::new(drives, Stubborn { refuse: 3 }));
+    ]))
+    .build_with(|drives| Hooked::new(drives, Stubborn { refuse: 3 }));
     let mut stopped_at = None;
     for _ in 0..3000 {
         rig.step();

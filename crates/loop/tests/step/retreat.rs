@@ -9,7 +9,6 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{ContactKey, SimDrives};
 use sar_drivers::{DriveState, SimClock};
@@ -32,11 +31,10 @@ impl Rig {
 
     /// [`Rig::new`] with faults on demand.
     fn with_faults(contact: Vec<ContactKey>, faults: Vec<sar_drivers::sim::Fault>) -> Self {
-        let cfg = config::builtin().unwrap();
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = contact;
         scenario.spec.faults = faults;
-        let mut rig = Self(RigBuilder::new(&scenario).config(&cfg).build());
+        let mut rig = Self(RigBuilder::new(&scenario).build());
         // The automatic reset, accepted once the mean at rest is complete
         // (500 samples of the 500 Hz sensor: 1000 cycles).
         for _ in 0..1020 {
