@@ -19,11 +19,12 @@ use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_drivers::sim::{Simulator, Truth};
 use sar_estimator::Vec3;
-use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::control::{Envelope, Operator, Request};
 use sar_loop::logq;
 use sar_msgs::msgs::{Outgoing, RecorderDrops, WrenchStamped};
 use sar_record::convert;
 use sar_record::{FileOptions, RotatingWriter};
+use sar_test_support::rig::controller;
 use sar_test_support::truth::run_tapped;
 use std::path::Path;
 
@@ -103,17 +104,8 @@ pub fn daemon_recording_at_level(
         sim::simulated(&scenario, clock.clone()).map_err(|e| e.to_string())?;
     let (log, _thread, _queue) = logq::channel(false);
     let operator = Operator::new();
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .map_err(|e| e.to_string())?;
+    let mut c =
+        controller(&cfg, bias, sensor, drives, operator.clone(), log).map_err(|e| e.to_string())?;
     let mut w = writer(path, &bias, zstd_level)?;
     let mut status = RecorderDrops::default();
     let mut last_joints: Option<u64> = None;

@@ -436,6 +436,42 @@ fn joints_at(run: &Run, t_ns: u64) -> Option<JointPositions> {
     })
 }
 
+/// The samples of `run` with positions at the instant they measure (one
+/// `latency_ns` before they are received): each sample, that instant and
+/// the positions then.
+fn measured_samples(
+    run: &Run,
+    latency_ns: u64,
+) -> impl Iterator<Item = (&WrenchSample, u64, JointPositions)> {
+    run.sensor_samples.iter().filter_map(move |sample| {
+        let measured_ns = sample.received_ns - latency_ns;
+        Some((sample, measured_ns, joints_at(run, measured_ns)?))
+    })
+}
+
+/// Cycle `cycle`'s input at `now_ns`: `sample`, the positions `joints`, and
+/// a reset while `reset` (leaving the initial Fault, no input yet: a reset
+/// every cycle until one is accepted; the first needs the full mean at rest).
+fn cycle_input(
+    cycle: u64,
+    now_ns: u64,
+    sample: &WrenchSample,
+    joints: &JointPositions,
+    reset: bool,
+) -> CycleInput {
+    CycleInput {
+        cycle,
+        now_ns: Some(now_ns),
+        sensor: sensor_input(sample),
+        joints: JointSample {
+            joints: joints.joints,
+            stamp_ns: joints.stamp_ns,
+            valid: joints.valid,
+        },
+        command: reset.then_some(Command::Reset),
+    }
+}
+
 fn sensor_input(sample: &WrenchSample) -> SensorSample {
     SensorSample {
         force_n: sample.force_n,
@@ -462,28 +498,11 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
     let mut max_err = Vec3::zeros();
     let mut transitions = Vec::new();
     let mut torque_stats = TorqueStats::default();
-    let mut cycle = 0;
-    for sample in &run.sensor_samples {
-        // The sample measures 1 latency before it is received; take the
-        // positions and the truth of that instant.
-        let measured_ns = sample.received_ns - latency_ns;
-        let Some(joints) = joints_at(run, measured_ns) else {
-            continue;
-        };
-        cycle += 1;
-        let input = CycleInput {
-            cycle,
-            now_ns: Some(sample.received_ns),
-            sensor: sensor_input(sample),
-            joints: JointSample {
-                joints: joints.joints,
-                stamp_ns: joints.stamp_ns,
-                valid: joints.valid,
-            },
-            // Leave the initial Fault (no input yet): a reset every cycle
-            // until accepted (the first needs the full mean at rest).
-            command: transitions.is_empty().then_some(Command::Reset),
-        };
+    // The sample measures 1 latency before it is received; take the
+    // positions and the truth of that instant.
+    for (cycle, (sample, measured_ns, joints)) in (1..).zip(measured_samples(run, latency_ns)) {
+        let reset = transitions.is_empty();
+        let input = cycle_input(cycle, sample.received_ns, sample, &joints, reset);
         let out = *est.cycle(&input);
         if let Some(t) = out.transition {
             transitions.push((measured_ns, t.to, t.reason));
@@ -964,17 +983,8 @@ fn daemon_loop(s: &Scenario, run: &Run) -> (Vec<GuardEvent>, Vec<(u64, Vec3)>) {
         }
         let Some(sample) = latest else { continue };
         let cycle = i as u64 + 1;
-        let out = *est.cycle(&CycleInput {
-            cycle,
-            now_ns: Some(now),
-            sensor: sensor_input(sample),
-            joints: JointSample {
-                joints: p.joints,
-                stamp_ns: p.stamp_ns,
-                valid: p.valid,
-            },
-            command: transitions.is_empty().then_some(Command::Reset),
-        });
+        let reset = transitions.is_empty();
+        let out = *est.cycle(&cycle_input(cycle, now, sample, p, reset));
         if let Some(t) = out.transition {
             transitions.push((now, t.to, t.reason));
         }
@@ -1154,26 +1164,9 @@ fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_t
     let (mut sum_z2, mut sum_e2, mut n, mut beyond_4_std) = (Vec3::zeros(), Vec3::zeros(), 0, 0);
     let (mut sum_torsion_z2, mut max_torsion_nm) = (0.0, 0.0_f64);
     let mut transitions = Vec::new();
-    let mut cycle = 0;
-    for sample in &run.sensor_samples {
-        let measured_ns = sample.received_ns - latency_ns;
-        let Some(joints) = joints_at(run, measured_ns) else {
-            continue;
-        };
-        cycle += 1;
-        let input = CycleInput {
-            cycle,
-            now_ns: Some(sample.received_ns),
-            sensor: sensor_input(sample),
-            joints: JointSample {
-                joints: joints.joints,
-                stamp_ns: joints.stamp_ns,
-                valid: joints.valid,
-            },
-            // Leave the initial Fault (no input yet): a reset every cycle
-            // until accepted (the first needs the full mean at rest).
-            command: transitions.is_empty().then_some(Command::Reset),
-        };
+    for (cycle, (sample, measured_ns, joints)) in (1..).zip(measured_samples(run, latency_ns)) {
+        let reset = transitions.is_empty();
+        let input = cycle_input(cycle, sample.received_ns, sample, &joints, reset);
         let out = *est.cycle(&input);
         if let Some(t) = out.transition {
             transitions.push((measured_ns, t.to, t.reason));

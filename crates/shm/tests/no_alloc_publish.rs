@@ -24,7 +24,7 @@ use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::{CommandMsg, command_kind};
 use sar_shm::{Client, DaemonShm};
-use sar_test_support::rig::{RigBuilder, SimRig};
+use sar_test_support::rig::{RigBuilder, SimRig, controller};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
@@ -190,17 +190,7 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
         cfg.estimator.guard.force_limits().to_array(),
     )
     .unwrap();
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator,
-        log.clone(),
-        true,
-    )
-    .unwrap();
+    let mut c = controller(&cfg, bias, sensor, drives, operator, log.clone()).unwrap();
     let client_thread = {
         let prefix = prefix.clone();
         std::thread::spawn(move || {

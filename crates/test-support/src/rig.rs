@@ -10,11 +10,11 @@ use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::scenario::Scenario;
 use sar_drivers::sim::{ContactKey, SimDrives, SimSensor, Simulator};
-use sar_drivers::{AxisDrives, SimClock};
+use sar_drivers::{AxisDrives, ForceSensor, SimClock};
 use sar_estimator::cycle::Bias;
 use sar_loop::control::{Controller, Envelope, Operator, Reply, Request};
-use sar_loop::logq::{self, LogQueue};
-use sar_loop::step::{LoopInput, LoopOutput, LoopStep, StepConfig};
+use sar_loop::logq::{self, LogQueue, LogSender};
+use sar_loop::step::{LoopInput, LoopOutput, LoopStep, StepConfig, StepConfigError};
 
 /// What a rig is made of.
 pub struct SimRig<D: AxisDrives> {
@@ -102,6 +102,30 @@ macro_rules! deref_rig {
             }
         }
     };
+}
+
+/// The real controller running `cfg` (its loop settings too) with the
+/// automatic reset on, as `sard` makes it, on `sensor` and `drives` (any:
+/// simulated, emulated or real), the estimator starting from `bias`.
+pub fn controller<S: ForceSensor, D: AxisDrives>(
+    cfg: &config::Config,
+    bias: Bias,
+    sensor: S,
+    drives: D,
+    operator: Operator,
+    log: LogSender,
+) -> Result<Controller<S, D>, StepConfigError> {
+    let step_config = cfg.step_config();
+    Controller::new(
+        &cfg.estimator,
+        bias,
+        step_config,
+        sensor,
+        drives,
+        operator,
+        log,
+        true,
+    )
 }
 
 /// Builds a [`SimRig`].
