@@ -133,4 +133,4 @@ fn a_cycle_allocates_nothing() {
 }
 
 // Publishing (the loop's `Publish` calls on the daemon's shared memory) is
-// proved allocation-free in `tests/no_alloc_publish.rs`.
+// proved allocation-free in `crates/shm/tests/no_alloc_publish.rs`.

@@ -16,8 +16,8 @@
 //! - sudden tissue shifts (3 mm into the tip, then 6 mm away) under push
 //!   and hold;
 //! - the 10-minute breathing runs (no Stop at any stiffness) are `#[ignore]`d:
-//!   `cargo test --release -p sar-daemon --test force_figures -- --ignored
-//!   --nocapture`.
+//!   `cargo test --release -p sar-loop --test force_modes force_figures --
+//!   --ignored --nocapture`.
 
 #![allow(
     clippy::unwrap_used,
@@ -388,7 +388,7 @@ fn sudden_tissue_shifts_under_push_and_hold() {
 
 /// Ten minutes of breathing under a push at 3 N and a hold at 5 N at each
 /// stiffness: no Stop. Slow in a debug build:
-/// `cargo test --release -p sar-daemon --test force_figures -- --ignored --nocapture`.
+/// `cargo test --release -p sar-loop --test force_modes force_figures -- --ignored --nocapture`.
 #[test]
 #[ignore = "ten simulated minutes per stiffness and mode: run with --release -- --ignored"]
 fn ten_minutes_of_breathing_without_a_stop() {
