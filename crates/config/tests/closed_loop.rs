@@ -392,28 +392,7 @@ fn estimator_for(s: &Scenario) -> Estimator {
         Vec3::zeros(),
         "the tare is the bias at start"
     );
-    let config = EstimatorConfig {
-        calibration: s.spec.calibration,
-        profile: s.spec.profile,
-        noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
-        tip: TipForceConfig { max_std_n: 3.0 },
-        guard: GuardConfig::new(guard_limits()).unwrap(),
-        plausibility: PlausibilityConfig::new(PlausibilityLimits {
-            max_joint_speed_mps: s.spec.axes.max_speed_mps,
-            torque: Some(TorqueLimits {
-                noise_nm: s.spec.sensor.noise_nm,
-                max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
-            }),
-            ..PlausibilityLimits::default()
-        })
-        .unwrap(),
-        filter: None,
-    };
-    let bias = Bias {
-        force_n: s.spec.sensor.bias_n,
-        torque_nm: s.spec.sensor.bias_nm,
-    };
-    Estimator::with_bias(&config, bias).unwrap()
+    estimator_for_torque(s)
 }
 
 /// The positions at host time `t_ns`, linear between the two reports around it.

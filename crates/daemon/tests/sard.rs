@@ -10,6 +10,7 @@
     clippy::indexing_slicing
 )]
 
+use sar_test_support::files::mkfifo;
 use std::ffi::OsStr;
 use std::io::Read;
 use std::os::unix::net::UnixDatagram;
@@ -175,14 +176,7 @@ fn check_config_refuses_a_unit_mistake_and_a_non_regular_file_at_once() {
     )
     .unwrap();
     let fifo = temp_path("config.fifo");
-    let _ = std::fs::remove_file(&fifo);
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    mkfifo(&fifo);
     for (path, words) in [
         (
             cm.clone(),
@@ -246,13 +240,7 @@ fn sard_stuck_in_iceoryx2_answers_sigterm_and_gives_up_in_two_seconds() {
     // its details, a FIFO.
     std::fs::write(run.join("nodes/iox2_111.node_monitor"), b"").unwrap();
     let fifo = run.join("nodes/111/iox2_node.details");
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    mkfifo(&fifo);
     let start = |name: &str| {
         Command::new(SARD)
             .args(["--sim", "--max-cycles", "3000"])

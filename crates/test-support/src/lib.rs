@@ -12,9 +12,11 @@
 //!   test binary declares it: `#[global_allocator] static GLOBAL:
 //!   sar_test_support::counting::Counting = sar_test_support::counting::Counting;`).
 //! - [`messages`]: deterministic messages of every topic, cycle by cycle.
+//! - [`files`]: scratch directories ([`scratch!`]) and named pipes.
 
 pub mod counting;
 pub mod drives;
+pub mod files;
 pub mod messages;
 pub mod rig;
 pub mod truth;
@@ -25,6 +27,6 @@ pub mod truth;
 #[macro_export]
 macro_rules! scratch {
     ($name:expr) => {
-        $crate::messages::scratch_in(env!("CARGO_TARGET_TMPDIR"), env!("CARGO_PKG_NAME"), $name)
+        $crate::files::scratch_in(env!("CARGO_TARGET_TMPDIR"), env!("CARGO_PKG_NAME"), $name)
     };
 }

@@ -5,7 +5,6 @@
 use sar_drivers::sim::ContactKey;
 use sar_msgs::cdr::FixedStr;
 use sar_msgs::msgs::*;
-use std::path::PathBuf;
 
 /// splitmix64: a deterministic stream of bits.
 pub fn mix(mut x: u64) -> u64 {
@@ -158,13 +157,4 @@ pub fn contact_pulse(
 pub fn rod_push_20n([start_ns, on_ns, hold_ns, off_ns]: [u64; 4]) -> Vec<ContactKey> {
     let force_n = sar_kinematics::Vec3::new(20.0, 0.0, 0.0);
     contact_pulse(start_ns, on_ns, hold_ns, off_ns, force_n)
-}
-
-/// A fresh scratch directory `tmp_dir/group/name` (`tmp_dir`: the test's
-/// `env!("CARGO_TARGET_TMPDIR")`, which only tests and benchmarks have).
-pub fn scratch_in(tmp_dir: &str, group: &str, name: &str) -> PathBuf {
-    let dir = PathBuf::from(tmp_dir).join(group).join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }

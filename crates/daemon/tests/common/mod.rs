@@ -1,14 +1,10 @@
 //! Shared test helpers: deterministic messages of every topic, scratch dirs.
-#![allow(
-    dead_code,
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing
-)]
+// Each test binary that includes this module uses a part of it.
+#![allow(dead_code, unused_imports)]
 
 pub mod readers;
 
+use sar_test_support::files::scratch_in;
 pub use sar_test_support::messages::*;
 use std::path::PathBuf;
 

@@ -2,13 +2,7 @@
 //! simulated time (1 ms per cycle), the demo robot with its tip at
 //! [`TIP_M`] (the rod along +X0), tissues that push back and a contact
 //! script; every cycle's input and decision kept for a replay bit for bit.
-#![allow(
-    dead_code,
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing
-)]
+#![allow(dead_code, clippy::unwrap_used)]
 
 use sar_daemon::sim;
 use sar_drivers::SimClock;
