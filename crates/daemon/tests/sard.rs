@@ -10,7 +10,7 @@
     clippy::indexing_slicing
 )]
 
-use sar_test_support::files::mkfifo;
+use sar_test_support::files::{mkfifo, recording_config};
 use std::ffi::OsStr;
 use std::io::Read;
 use std::os::unix::net::UnixDatagram;
@@ -285,16 +285,7 @@ fn sighup_and_sigusr1_stop_cleanly_with_the_recording_complete() {
         let dir = temp_path(&format!("sig{sig}"));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let rec_dir = dir.join("rec");
-        let config = dir.join("sim.toml");
-        let toml = sar_config::DEFAULT_TOML
-            .replace("[record]\nenabled = false", "[record]\nenabled = true")
-            .replace(
-                "directory = \"recordings\"",
-                &format!("directory = {:?}", rec_dir.display().to_string()),
-            );
-        assert_ne!(toml, sar_config::DEFAULT_TOML);
-        std::fs::write(&config, toml).unwrap();
+        let (config, rec_dir) = recording_config(&dir);
         let sock_path = dir.join("notify");
         let sock = notify_socket(&sock_path);
         let args = [

@@ -1,4 +1,5 @@
-//! Files of the tests: scratch directories and named pipes.
+//! Files of the tests: scratch directories, named pipes, a configuration
+//! that records.
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
@@ -18,4 +19,20 @@ pub fn mkfifo(path: &Path) {
     let _ = std::fs::remove_file(path);
     let made = Command::new("mkfifo").arg(path).status().unwrap().success();
     assert!(made, "mkfifo {}", path.display());
+}
+
+/// The built-in configuration with recording on into `dir/rec`, written to
+/// `dir/sim.toml`: that file and the recordings' directory.
+pub fn recording_config(dir: &Path) -> (PathBuf, PathBuf) {
+    let rec_dir = dir.join("rec");
+    let config = dir.join("sim.toml");
+    let toml = sar_config::DEFAULT_TOML
+        .replace("[record]\nenabled = false", "[record]\nenabled = true")
+        .replace(
+            "directory = \"recordings\"",
+            &format!("directory = {:?}", rec_dir.display().to_string()),
+        );
+    assert_ne!(toml, sar_config::DEFAULT_TOML);
+    std::fs::write(&config, toml).unwrap();
+    (config, rec_dir)
 }

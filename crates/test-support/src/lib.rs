@@ -12,7 +12,8 @@
 //!   test binary declares it: `#[global_allocator] static GLOBAL:
 //!   sar_test_support::counting::Counting = sar_test_support::counting::Counting;`).
 //! - [`messages`]: deterministic messages of every topic, cycle by cycle.
-//! - [`files`]: scratch directories ([`scratch!`]) and named pipes.
+//! - [`files`]: scratch directories ([`scratch!`]), named pipes, a
+//!   configuration that records.
 
 pub mod counting;
 pub mod drives;
