@@ -462,6 +462,31 @@ fn sensor_input(sample: &WrenchSample) -> SensorSample {
     }
 }
 
+/// The guard of the random-contact scenarios (random_contact_manipulator_2
+/// and its offset twin): Ok from the first cycle, never Fault, one Stop
+/// during the push (17.2 to 17.6 s at 17.5 N; ramps from 16.9 s, released
+/// at 17.8 s), latched.
+fn assert_one_latched_stop_in_the_push(transitions: &[(u64, GuardState, Reason)], est: &Estimator) {
+    println!("guard transitions: {transitions:?}");
+    assert!(matches!(
+        transitions.first(),
+        Some((_, GuardState::Ok, Reason::Reset))
+    ));
+    assert!(
+        transitions.iter().all(|t| t.1 != GuardState::Fault),
+        "{transitions:?}"
+    );
+    let stops: Vec<_> = transitions
+        .iter()
+        .filter(|t| t.1 == GuardState::Stop)
+        .collect();
+    assert_eq!(stops.len(), 1, "{transitions:?}");
+    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
+    println!("guard Stop at {stop_s:.3} s: {}", stops[0].2);
+    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
+    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+}
+
 #[test]
 fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
     let s = scenario("random_contact_manipulator_2.toml");
@@ -554,26 +579,7 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
         "{beyond_4_std} of {n} samples beyond 4 std"
     );
     torque_stats.report("random-contact-manipulator-2");
-    // The guard: Ok from the first cycle, never Fault, Stop during the push
-    // (17.2 to 17.6 s at 17.5 N; ramps from 16.9 s, released at 17.8 s).
-    println!("guard transitions: {transitions:?}");
-    assert!(matches!(
-        transitions.first(),
-        Some((_, GuardState::Ok, Reason::Reset))
-    ));
-    assert!(
-        transitions.iter().all(|t| t.1 != GuardState::Fault),
-        "{transitions:?}"
-    );
-    let stops: Vec<_> = transitions
-        .iter()
-        .filter(|t| t.1 == GuardState::Stop)
-        .collect();
-    assert_eq!(stops.len(), 1, "{transitions:?}");
-    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
-    println!("guard Stop at {stop_s:.3} s: {}", stops[0].2);
-    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
-    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+    assert_one_latched_stop_in_the_push(&transitions, &est);
 }
 
 /// Mean, standard deviation and largest magnitude of the normalised torque
@@ -1189,21 +1195,5 @@ fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_t
     assert!((beyond_4_std as f64) < 1e-3 * nf, "{beyond_4_std} of {n}");
     assert!(max_torsion_nm > 0.01, "the scenario must load the torsion");
     assert!((0.9..1.1).contains(&rms_torsion_z), "{rms_torsion_z}");
-    println!("guard transitions: {transitions:?}");
-    assert!(matches!(
-        transitions.first(),
-        Some((_, GuardState::Ok, Reason::Reset))
-    ));
-    assert!(
-        transitions.iter().all(|t| t.1 != GuardState::Fault),
-        "{transitions:?}"
-    );
-    let stops: Vec<_> = transitions
-        .iter()
-        .filter(|t| t.1 == GuardState::Stop)
-        .collect();
-    assert_eq!(stops.len(), 1, "{transitions:?}");
-    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
-    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
-    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+    assert_one_latched_stop_in_the_push(&transitions, &est);
 }
