@@ -76,3 +76,10 @@ pub fn process_allocations() -> u64 {
 pub fn thread_allocations() -> u64 {
     THREAD.with(Cell::get)
 }
+
+/// Runs `f`: its result and the allocations it made on this thread.
+pub fn allocations_in<R>(f: impl FnOnce() -> R) -> (R, u64) {
+    let before = thread_allocations();
+    let out = f();
+    (out, thread_allocations() - before)
+}
