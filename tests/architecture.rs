@@ -752,6 +752,10 @@ fn links_lines(text: &str) -> BTreeMap<String, BTreeSet<String>> {
 }
 
 fn parse_links(s: &str) -> BTreeSet<String> {
+    // "none ...": no external dependency.
+    if s.trim().starts_with("none") {
+        return BTreeSet::new();
+    }
     // Up to the first full stop; "(...)" remarks dropped.
     let mut clean = String::new();
     let mut depth = 0;

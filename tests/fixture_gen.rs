@@ -16,16 +16,16 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::runner::{RunOptions, run};
-use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
-use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
+use sar_drivers::SimClock;
+use sar_drivers::sim::{Simulator, Truth};
 use sar_estimator::Vec3;
-use sar_kinematics::ActiveJoints;
-use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::control::{Envelope, Operator, Request};
 use sar_loop::logq;
 use sar_msgs::msgs::{Outgoing, RecorderDrops, WrenchStamped};
 use sar_record::convert;
 use sar_record::{FileOptions, RotatingWriter};
+use sar_test_support::rig::controller;
+use sar_test_support::truth::run_tapped;
 use std::path::Path;
 
 /// The simulated host clock's start, ns.
@@ -104,17 +104,8 @@ pub fn daemon_recording_at_level(
         sim::simulated(&scenario, clock.clone()).map_err(|e| e.to_string())?;
     let (log, _thread, _queue) = logq::channel(false);
     let operator = Operator::new();
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .map_err(|e| e.to_string())?;
+    let mut c =
+        controller(&cfg, bias, sensor, drives, operator.clone(), log).map_err(|e| e.to_string())?;
     let mut w = writer(path, &bias, zstd_level)?;
     let mut status = RecorderDrops::default();
     let mut last_joints: Option<u64> = None;
@@ -160,58 +151,13 @@ pub fn daemon_recording_at_level(
     Ok(cycles)
 }
 
-/// The drives, with the simulator's truth taken at every position read.
-struct TruthTap {
-    drives: SimDrives<SimClock>,
-    sim: Simulator<SimClock>,
-    truths: Vec<Truth>,
-}
-
-impl AxisDrives for TruthTap {
-    type Error = SimError;
-    fn positions(&mut self) -> Result<JointPositions, SimError> {
-        if let Ok(truth) = self.sim.truth() {
-            self.truths.push(truth);
-        }
-        self.drives.positions()
-    }
-    fn state(&mut self) -> Result<DriveState, SimError> {
-        self.drives.state()
-    }
-    fn enable(&mut self) -> Result<(), SimError> {
-        self.drives.enable()
-    }
-    fn disable(&mut self) -> Result<(), SimError> {
-        self.drives.disable()
-    }
-    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
-        self.drives.stream(targets, period_ns)
-    }
-    fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), SimError> {
-        self.drives.set_targets(targets)
-    }
-    fn quick_stop(&mut self) -> Result<(), SimError> {
-        self.drives.quick_stop()
-    }
-    fn fault_reset(&mut self) -> Result<(), SimError> {
-        self.drives.fault_reset()
-    }
-}
-
 /// Runs `scenario`'s motion script and records its inputs alone into `path`
 /// (see the module documentation); returns the sensor samples written.
 pub fn inputs_recording(scenario: &Path, path: &Path) -> Result<u64, String> {
     let s = sar_config::scenario::load(scenario).map_err(|e| e.to_string())?;
     let clock = SimClock::new(HOST_START_NS);
     let sim = Simulator::new(s.spec.clone(), clock.clone()).map_err(|e| e.to_string())?;
-    let mut sensor = sim.sensor();
-    let mut tap = TruthTap {
-        drives: sim.drives(),
-        sim: sim.clone(),
-        truths: Vec::new(),
-    };
-    let options = RunOptions::for_script(&s.script, PERIOD_NS);
-    let r = run(&s.script, &mut sensor, &mut tap, &clock, &options).map_err(|e| e.to_string())?;
+    let (r, truths) = run_tapped(&s.script, &sim, &clock, PERIOD_NS).map_err(|e| e.to_string())?;
     let bias = sar_estimator::cycle::Bias {
         force_n: s.spec.sensor.bias_n,
         torque_nm: s.spec.sensor.bias_nm,
@@ -246,8 +192,8 @@ pub fn inputs_recording(scenario: &Path, path: &Path) -> Result<u64, String> {
             .received_ns
             .saturating_sub(latency_ns)
             .saturating_sub(HOST_START_NS);
-        let i = tap.truths.partition_point(|t| t.elapsed_ns <= elapsed);
-        if let Some(t) = i.checked_sub(1).and_then(|i| tap.truths.get(i)) {
+        let i = truths.partition_point(|t| t.elapsed_ns <= elapsed);
+        if let Some(t) = i.checked_sub(1).and_then(|i| truths.get(i)) {
             msgs.push((
                 sample.received_ns,
                 2,

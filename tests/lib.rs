@@ -15,8 +15,6 @@ pub fn scenarios_dir() -> PathBuf {
 
 pub mod identify_fixtures;
 
-pub mod fixture_gen;
-
 /// The folder of the replay fixtures (`tests/fixtures/replay`).
 pub fn replay_dir() -> PathBuf {
     fixtures_dir().join("replay")

@@ -27,7 +27,12 @@ use sar_msgs::msgs::{DriveActionCode, Outgoing, RecorderDrops, Topic};
 use sar_record::convert::REPLAY_METADATA;
 use sar_record::replay::{Mode, ReplayOptions, replay, replay_file};
 use sar_record::{FileOptions, McapReader, RotatingWriter, read_file};
-use sar_tests::{fixture_gen, replay_dir, scenarios_dir};
+use sar_tests::{replay_dir, scenarios_dir};
+
+// The fixtures' generator (a module of the tests, not of the library: it
+// taps the simulator's truth with the dev-only test-support crate).
+#[allow(dead_code)]
+mod fixture_gen;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -528,7 +533,7 @@ fn a_file_cut_short_replays_to_its_last_chunk_and_is_recovered() {
 /// installed on first use under `target/test-readers/`).
 fn python_counts(file: &Path) -> Option<BTreeMap<String, u64>> {
     let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/daemon/tests/read_recording.py");
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../crates/record/tests/read_recording.py");
     let out = readers::python().arg(&script).arg(file).output().unwrap();
     assert!(
         out.status.success(),

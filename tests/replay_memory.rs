@@ -12,7 +12,11 @@
 
 use sar_record::read_file;
 use sar_record::replay::{ReplayOptions, replay, replay_file};
-use sar_tests::{fixture_gen, scenarios_dir};
+use sar_tests::scenarios_dir;
+
+// The fixtures' generator (see replay.rs).
+#[allow(dead_code)]
+mod fixture_gen;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};

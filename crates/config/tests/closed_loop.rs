@@ -31,8 +31,8 @@
 use sar_config::scenario::{Scenario, load, parse};
 use sar_drivers::motion::SLIDE_THRESHOLD_M;
 use sar_drivers::runner::{EndReason, Run, RunEvent, RunOptions, run};
-use sar_drivers::sim::{Fault, SimDrives, SimError, Simulator, Truth};
-use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3, WrenchSample};
+use sar_drivers::sim::{Fault, Simulator, Truth};
+use sar_drivers::{JointPositions, SimClock, Vec3, WrenchSample};
 use sar_estimator::SensorNoise;
 use sar_estimator::StaticPose;
 use sar_estimator::cycle::{
@@ -44,6 +44,7 @@ use sar_estimator::identification::{Identification, IdentificationOptions, Ident
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::TipForceConfig;
 use sar_kinematics::{ActiveJoints, SlideSign, forward};
+use sar_test_support::truth::{run_tapped, truth_at};
 use std::path::{Path, PathBuf};
 
 /// Host time at which every simulated run starts (not 0, so that host and
@@ -73,53 +74,6 @@ fn shipped() -> Vec<PathBuf> {
     files
 }
 
-/// The drives, with the simulator's truth taken at every position read (every
-/// tick of the runner): the runner stays generic, the test sees the truth.
-struct TruthTap {
-    drives: SimDrives<SimClock>,
-    sim: Simulator<SimClock>,
-    truths: Vec<Truth>,
-}
-
-impl AxisDrives for TruthTap {
-    type Error = SimError;
-
-    fn positions(&mut self) -> Result<JointPositions, SimError> {
-        if let Ok(truth) = self.sim.truth() {
-            self.truths.push(truth);
-        }
-        self.drives.positions()
-    }
-
-    fn state(&mut self) -> Result<DriveState, SimError> {
-        self.drives.state()
-    }
-
-    fn enable(&mut self) -> Result<(), SimError> {
-        self.drives.enable()
-    }
-
-    fn disable(&mut self) -> Result<(), SimError> {
-        self.drives.disable()
-    }
-
-    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
-        self.drives.stream(targets, period_ns)
-    }
-
-    fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), SimError> {
-        self.drives.set_targets(targets)
-    }
-
-    fn quick_stop(&mut self) -> Result<(), SimError> {
-        self.drives.quick_stop()
-    }
-
-    fn fault_reset(&mut self) -> Result<(), SimError> {
-        self.drives.fault_reset()
-    }
-}
-
 /// A run of a scenario on the simulator, with the truth at every tick when asked.
 struct Simulated {
     run: Run,
@@ -129,9 +83,7 @@ struct Simulated {
 impl Simulated {
     /// The truth at host time `t_ns` (a tick of the runner).
     fn truth_at(&self, t_ns: u64) -> Option<&Truth> {
-        let elapsed = t_ns.checked_sub(HOST_START_NS)?;
-        let i = self.truths.partition_point(|t| t.elapsed_ns < elapsed);
-        self.truths.get(i).filter(|t| t.elapsed_ns == elapsed)
+        truth_at(&self.truths, t_ns.checked_sub(HOST_START_NS)?)
     }
 }
 
@@ -140,24 +92,15 @@ fn simulate_with_seed(s: &Scenario, seed: u64, with_truth: bool) -> Simulated {
     let mut spec = s.spec.clone();
     spec.seed = seed;
     let sim = Simulator::new(spec, clock.clone()).unwrap_or_else(|e| panic!("{}: {e}", s.name));
-    let options = RunOptions::for_script(&s.script, PERIOD_NS);
-    let mut sensor = sim.sensor();
     let (run, truths) = if with_truth {
-        let mut tap = TruthTap {
-            drives: sim.drives(),
-            sim: sim.clone(),
-            truths: Vec::new(),
-        };
-        let run = run(&s.script, &mut sensor, &mut tap, &clock, &options);
-        (run, tap.truths)
+        run_tapped(&s.script, &sim, &clock, PERIOD_NS)
     } else {
+        let options = RunOptions::for_script(&s.script, PERIOD_NS);
+        let mut sensor = sim.sensor();
         let mut drives = sim.drives();
-        (
-            run(&s.script, &mut sensor, &mut drives, &clock, &options),
-            Vec::new(),
-        )
-    };
-    let run = run.unwrap_or_else(|e| panic!("{}: {e}", s.name));
+        run(&s.script, &mut sensor, &mut drives, &clock, &options).map(|r| (r, Vec::new()))
+    }
+    .unwrap_or_else(|e| panic!("{}: {e}", s.name));
     assert_eq!(run.start_ns, HOST_START_NS);
     Simulated { run, truths }
 }
@@ -449,28 +392,7 @@ fn estimator_for(s: &Scenario) -> Estimator {
         Vec3::zeros(),
         "the tare is the bias at start"
     );
-    let config = EstimatorConfig {
-        calibration: s.spec.calibration,
-        profile: s.spec.profile,
-        noise: SensorNoise::new(s.spec.sensor.noise_n).unwrap(),
-        tip: TipForceConfig { max_std_n: 3.0 },
-        guard: GuardConfig::new(guard_limits()).unwrap(),
-        plausibility: PlausibilityConfig::new(PlausibilityLimits {
-            max_joint_speed_mps: s.spec.axes.max_speed_mps,
-            torque: Some(TorqueLimits {
-                noise_nm: s.spec.sensor.noise_nm,
-                max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
-            }),
-            ..PlausibilityLimits::default()
-        })
-        .unwrap(),
-        filter: None,
-    };
-    let bias = Bias {
-        force_n: s.spec.sensor.bias_n,
-        torque_nm: s.spec.sensor.bias_nm,
-    };
-    Estimator::with_bias(&config, bias).unwrap()
+    estimator_for_torque(s)
 }
 
 /// The positions at host time `t_ns`, linear between the two reports around it.
@@ -493,6 +415,42 @@ fn joints_at(run: &Run, t_ns: u64) -> Option<JointPositions> {
     })
 }
 
+/// The samples of `run` with positions at the instant they measure (one
+/// `latency_ns` before they are received): each sample, that instant and
+/// the positions then.
+fn measured_samples(
+    run: &Run,
+    latency_ns: u64,
+) -> impl Iterator<Item = (&WrenchSample, u64, JointPositions)> {
+    run.sensor_samples.iter().filter_map(move |sample| {
+        let measured_ns = sample.received_ns - latency_ns;
+        Some((sample, measured_ns, joints_at(run, measured_ns)?))
+    })
+}
+
+/// Cycle `cycle`'s input at `now_ns`: `sample`, the positions `joints`, and
+/// a reset while `reset` (leaving the initial Fault, no input yet: a reset
+/// every cycle until one is accepted; the first needs the full mean at rest).
+fn cycle_input(
+    cycle: u64,
+    now_ns: u64,
+    sample: &WrenchSample,
+    joints: &JointPositions,
+    reset: bool,
+) -> CycleInput {
+    CycleInput {
+        cycle,
+        now_ns: Some(now_ns),
+        sensor: sensor_input(sample),
+        joints: JointSample {
+            joints: joints.joints,
+            stamp_ns: joints.stamp_ns,
+            valid: joints.valid,
+        },
+        command: reset.then_some(Command::Reset),
+    }
+}
+
 fn sensor_input(sample: &WrenchSample) -> SensorSample {
     SensorSample {
         force_n: sample.force_n,
@@ -502,6 +460,31 @@ fn sensor_input(sample: &WrenchSample) -> SensorSample {
         stamp_ns: sample.received_ns,
         valid: sample.is_valid(),
     }
+}
+
+/// The guard of the random-contact scenarios (random_contact_manipulator_2
+/// and its offset twin): Ok from the first cycle, never Fault, one Stop
+/// during the push (17.2 to 17.6 s at 17.5 N; ramps from 16.9 s, released
+/// at 17.8 s), latched.
+fn assert_one_latched_stop_in_the_push(transitions: &[(u64, GuardState, Reason)], est: &Estimator) {
+    println!("guard transitions: {transitions:?}");
+    assert!(matches!(
+        transitions.first(),
+        Some((_, GuardState::Ok, Reason::Reset))
+    ));
+    assert!(
+        transitions.iter().all(|t| t.1 != GuardState::Fault),
+        "{transitions:?}"
+    );
+    let stops: Vec<_> = transitions
+        .iter()
+        .filter(|t| t.1 == GuardState::Stop)
+        .collect();
+    assert_eq!(stops.len(), 1, "{transitions:?}");
+    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
+    println!("guard Stop at {stop_s:.3} s: {}", stops[0].2);
+    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
+    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
 }
 
 #[test]
@@ -519,28 +502,11 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
     let mut max_err = Vec3::zeros();
     let mut transitions = Vec::new();
     let mut torque_stats = TorqueStats::default();
-    let mut cycle = 0;
-    for sample in &run.sensor_samples {
-        // The sample measures 1 latency before it is received; take the
-        // positions and the truth of that instant.
-        let measured_ns = sample.received_ns - latency_ns;
-        let Some(joints) = joints_at(run, measured_ns) else {
-            continue;
-        };
-        cycle += 1;
-        let input = CycleInput {
-            cycle,
-            now_ns: Some(sample.received_ns),
-            sensor: sensor_input(sample),
-            joints: JointSample {
-                joints: joints.joints,
-                stamp_ns: joints.stamp_ns,
-                valid: joints.valid,
-            },
-            // Leave the initial Fault (no input yet): a reset every cycle
-            // until accepted (the first needs the full mean at rest).
-            command: transitions.is_empty().then_some(Command::Reset),
-        };
+    // The sample measures 1 latency before it is received; take the
+    // positions and the truth of that instant.
+    for (cycle, (sample, measured_ns, joints)) in (1..).zip(measured_samples(run, latency_ns)) {
+        let reset = transitions.is_empty();
+        let input = cycle_input(cycle, sample.received_ns, sample, &joints, reset);
         let out = *est.cycle(&input);
         if let Some(t) = out.transition {
             transitions.push((measured_ns, t.to, t.reason));
@@ -613,26 +579,7 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
         "{beyond_4_std} of {n} samples beyond 4 std"
     );
     torque_stats.report("random-contact-manipulator-2");
-    // The guard: Ok from the first cycle, never Fault, Stop during the push
-    // (17.2 to 17.6 s at 17.5 N; ramps from 16.9 s, released at 17.8 s).
-    println!("guard transitions: {transitions:?}");
-    assert!(matches!(
-        transitions.first(),
-        Some((_, GuardState::Ok, Reason::Reset))
-    ));
-    assert!(
-        transitions.iter().all(|t| t.1 != GuardState::Fault),
-        "{transitions:?}"
-    );
-    let stops: Vec<_> = transitions
-        .iter()
-        .filter(|t| t.1 == GuardState::Stop)
-        .collect();
-    assert_eq!(stops.len(), 1, "{transitions:?}");
-    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
-    println!("guard Stop at {stop_s:.3} s: {}", stops[0].2);
-    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
-    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+    assert_one_latched_stop_in_the_push(&transitions, &est);
 }
 
 /// Mean, standard deviation and largest magnitude of the normalised torque
@@ -1021,17 +968,8 @@ fn daemon_loop(s: &Scenario, run: &Run) -> (Vec<GuardEvent>, Vec<(u64, Vec3)>) {
         }
         let Some(sample) = latest else { continue };
         let cycle = i as u64 + 1;
-        let out = *est.cycle(&CycleInput {
-            cycle,
-            now_ns: Some(now),
-            sensor: sensor_input(sample),
-            joints: JointSample {
-                joints: p.joints,
-                stamp_ns: p.stamp_ns,
-                valid: p.valid,
-            },
-            command: transitions.is_empty().then_some(Command::Reset),
-        });
+        let reset = transitions.is_empty();
+        let out = *est.cycle(&cycle_input(cycle, now, sample, p, reset));
         if let Some(t) = out.transition {
             transitions.push((now, t.to, t.reason));
         }
@@ -1211,26 +1149,9 @@ fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_t
     let (mut sum_z2, mut sum_e2, mut n, mut beyond_4_std) = (Vec3::zeros(), Vec3::zeros(), 0, 0);
     let (mut sum_torsion_z2, mut max_torsion_nm) = (0.0, 0.0_f64);
     let mut transitions = Vec::new();
-    let mut cycle = 0;
-    for sample in &run.sensor_samples {
-        let measured_ns = sample.received_ns - latency_ns;
-        let Some(joints) = joints_at(run, measured_ns) else {
-            continue;
-        };
-        cycle += 1;
-        let input = CycleInput {
-            cycle,
-            now_ns: Some(sample.received_ns),
-            sensor: sensor_input(sample),
-            joints: JointSample {
-                joints: joints.joints,
-                stamp_ns: joints.stamp_ns,
-                valid: joints.valid,
-            },
-            // Leave the initial Fault (no input yet): a reset every cycle
-            // until accepted (the first needs the full mean at rest).
-            command: transitions.is_empty().then_some(Command::Reset),
-        };
+    for (cycle, (sample, measured_ns, joints)) in (1..).zip(measured_samples(run, latency_ns)) {
+        let reset = transitions.is_empty();
+        let input = cycle_input(cycle, sample.received_ns, sample, &joints, reset);
         let out = *est.cycle(&input);
         if let Some(t) = out.transition {
             transitions.push((measured_ns, t.to, t.reason));
@@ -1274,21 +1195,5 @@ fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_t
     assert!((beyond_4_std as f64) < 1e-3 * nf, "{beyond_4_std} of {n}");
     assert!(max_torsion_nm > 0.01, "the scenario must load the torsion");
     assert!((0.9..1.1).contains(&rms_torsion_z), "{rms_torsion_z}");
-    println!("guard transitions: {transitions:?}");
-    assert!(matches!(
-        transitions.first(),
-        Some((_, GuardState::Ok, Reason::Reset))
-    ));
-    assert!(
-        transitions.iter().all(|t| t.1 != GuardState::Fault),
-        "{transitions:?}"
-    );
-    let stops: Vec<_> = transitions
-        .iter()
-        .filter(|t| t.1 == GuardState::Stop)
-        .collect();
-    assert_eq!(stops.len(), 1, "{transitions:?}");
-    let stop_s = (stops[0].0 - HOST_START_NS) as f64 * 1e-9;
-    assert!((16.9..17.8).contains(&stop_s), "Stop at {stop_s} s");
-    assert_eq!(est.guard_state(), GuardState::Stop, "Stop is latched");
+    assert_one_latched_stop_in_the_push(&transitions, &est);
 }

@@ -510,11 +510,7 @@ fn only_a_regular_file_of_at_most_1_mb_is_read() {
     use std::path::{Path, PathBuf};
     let dir = scratch_dir("files");
     let fifo = dir.join("robot.fifo");
-    let status = std::process::Command::new("mkfifo")
-        .arg(&fifo)
-        .status()
-        .unwrap();
-    assert!(status.success());
+    sar_test_support::files::mkfifo(&fifo);
     let big = dir.join("big.toml");
     // A valid file padded past 1 MB with comments.
     let padding = "# padding\n".repeat(110_000);

@@ -28,14 +28,15 @@
 )]
 
 use sar_config::scenario::{Scenario, load};
-use sar_drivers::runner::{EndReason, RunOptions, run};
-use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
-use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock, Vec3};
+use sar_drivers::runner::EndReason;
+use sar_drivers::sim::Simulator;
+use sar_drivers::{JointPositions, SimClock, Vec3};
 use sar_estimator::SensorNoise;
 use sar_estimator::error_measure::absolute_relative_error;
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
 use sar_kinematics::{ActiveJoints, forward};
+use sar_test_support::truth::{run_tapped, truth_at};
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -47,44 +48,6 @@ const AVERAGE_SAMPLES: usize = 50;
 const SLOW_END_S: f64 = 16.9;
 /// Largest shift tried by the cross-correlation, samples (200 ms at 500 Hz).
 const MAX_SHIFT: usize = 100;
-
-/// The drives, with the simulator's truth taken at every position read.
-struct TruthTap {
-    drives: SimDrives<SimClock>,
-    sim: Simulator<SimClock>,
-    truths: Vec<Truth>,
-}
-
-impl AxisDrives for TruthTap {
-    type Error = SimError;
-    fn positions(&mut self) -> Result<JointPositions, SimError> {
-        if let Ok(truth) = self.sim.truth() {
-            self.truths.push(truth);
-        }
-        self.drives.positions()
-    }
-    fn state(&mut self) -> Result<DriveState, SimError> {
-        self.drives.state()
-    }
-    fn enable(&mut self) -> Result<(), SimError> {
-        self.drives.enable()
-    }
-    fn disable(&mut self) -> Result<(), SimError> {
-        self.drives.disable()
-    }
-    fn stream(&mut self, targets: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
-        self.drives.stream(targets, period_ns)
-    }
-    fn set_targets(&mut self, targets: ActiveJoints) -> Result<(), SimError> {
-        self.drives.set_targets(targets)
-    }
-    fn quick_stop(&mut self) -> Result<(), SimError> {
-        self.drives.quick_stop()
-    }
-    fn fault_reset(&mut self) -> Result<(), SimError> {
-        self.drives.fault_reset()
-    }
-}
 
 /// The series of one run: per sensor sample, its time from the start (s), the
 /// unfiltered estimate and its deviation, and the truth the estimator can see.
@@ -122,16 +85,8 @@ fn contact_run() -> Series {
     assert_eq!(s.spec.sensor.drift_n_per_s, Vec3::zeros());
     let clock = SimClock::new(HOST_START_NS);
     let sim = Simulator::new(s.spec.clone(), clock.clone()).unwrap();
-    let mut sensor = sim.sensor();
-    let mut tap = TruthTap {
-        drives: sim.drives(),
-        sim: sim.clone(),
-        truths: Vec::new(),
-    };
-    let options = RunOptions::for_script(&s.script, PERIOD_NS);
-    let r = run(&s.script, &mut sensor, &mut tap, &clock, &options).unwrap();
+    let (r, truths) = run_tapped(&s.script, &sim, &clock, PERIOD_NS).unwrap();
     assert_eq!(r.end, EndReason::ScriptDone);
-    let truths = tap.truths;
     let estimator = TipForceEstimator::new(
         &s.spec.calibration,
         &s.spec.profile,
@@ -154,11 +109,7 @@ fn contact_run() -> Series {
             continue;
         };
         let elapsed = measured_ns - HOST_START_NS;
-        let i = truths.partition_point(|t| t.elapsed_ns < elapsed);
-        let truth = truths
-            .get(i)
-            .filter(|t| t.elapsed_ns == elapsed)
-            .expect("a truth at every measurement");
+        let truth = truth_at(&truths, elapsed).expect("a truth at every measurement");
         let pose = forward(&s.spec.calibration, &s.spec.profile, &joints).unwrap();
         let e = estimator
             .estimate(&pose, &sample.force_n, &s.spec.sensor.bias_n)

@@ -15,31 +15,8 @@
 use sar_drivers::sim::{Breathing, Fault, Simulator, Tissue, TissueModel, TissueShift};
 use sar_drivers::{AxisDrives, DriveState, ForceSensor, SimClock, Vec3, WrenchSample};
 use sar_kinematics::ActiveJoints;
-use std::alloc::{GlobalAlloc, Layout, System};
+use sar_test_support::counting::{Counting, process_allocations};
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
-
-struct Counting;
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-// SAFETY: forwards to the system allocator, only counting.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -146,7 +123,7 @@ fn the_simulator_with_every_fault_and_a_tissue_allocates_nothing_per_cycle() {
     // Warm up outside the count (nothing here allocates either, but the
     // count is about the cycles).
     drives.enable().unwrap();
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = process_allocations();
     let mut samples = 0u64;
     let mut faults_seen = 0u64;
     let mut drive_faults = 0u64;
@@ -175,7 +152,7 @@ fn the_simulator_with_every_fault_and_a_tissue_allocates_nothing_per_cycle() {
             _ => {}
         }
     }
-    let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
+    let allocations = process_allocations() - before;
     assert_eq!(allocations, 0, "{allocations} allocations in 500 cycles");
     // The run did what it says: samples came, the NaN sample was among
     // them, the drives faulted, the tip is in the tissue.

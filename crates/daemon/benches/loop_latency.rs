@@ -9,11 +9,12 @@
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::MonotonicClock;
-use sar_loop::control::{Controller, Operator};
+use sar_loop::control::Operator;
 use sar_loop::notify::Watchdog;
 use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::{Histogram, LoopStats};
 use sar_loop::{logq, rt};
+use sar_test_support::rig::controller;
 
 const CYCLES: u64 = 3000;
 const PERIOD_NS: u64 = 1_000_000;
@@ -36,17 +37,7 @@ fn daemon() -> LoopStats {
     let (_sim, sensor, drives, bias) =
         sim::simulated(&scenario, MonotonicClock::new().unwrap()).unwrap();
     let (log, thread, _q) = logq::channel(true);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        Operator::new(),
-        log.clone(),
-        true,
-    )
-    .unwrap();
+    let mut c = controller(&cfg, bias, sensor, drives, Operator::new(), log.clone()).unwrap();
     let mut stats = LoopStats::default();
     runloop::run(
         &mut c,

@@ -40,13 +40,14 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::{DriveState, SimClock};
-use sar_loop::control::{Controller, Operator, Request};
+use sar_loop::control::{Operator, Request};
 use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopStep};
 use sar_msgs::msgs::{CycleInput, Outgoing, RecorderDrops, RosMessage, Topic};
 use sar_record::convert;
 use sar_record::replay::{ReplayOptions, replay, replay_file};
 use sar_record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
+use sar_test_support::rig::controller;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -76,17 +77,7 @@ fn make_recording(path: &Path, n: u64) {
     let clock = SimClock::new(1_000_000_000);
     let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
     let (log, _t, _q) = logq::channel(false);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        Operator::new(),
-        log,
-        true,
-    )
-    .unwrap();
+    let mut c = controller(&cfg, bias, sensor, drives, Operator::new(), log).unwrap();
     for k in 1..=100 {
         clock.advance_ns(PERIOD_NS);
         c.step(k, || Some(clock.now_ns()));

@@ -19,9 +19,10 @@ use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_drivers::sim::{Tissue, TissueModel};
 use sar_estimator::Vec3;
-use sar_loop::control::{Controller, Envelope, Operator, Request};
+use sar_loop::control::{Envelope, Operator, Request};
 use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopStep};
+use sar_test_support::rig::controller;
 use std::hint::black_box;
 
 /// Cycles measured per batch.
@@ -48,17 +49,7 @@ fn recorded(push: bool, warm: usize) -> (LoopStep, Vec<LoopInput>) {
     let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
     let operator = Operator::new();
     let (log, _t, _q) = logq::channel(false);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator.clone(),
-        log,
-        true,
-    )
-    .unwrap();
+    let mut c = controller(&cfg, bias, sensor, drives, operator.clone(), log).unwrap();
     let mut inputs = Vec::new();
     for cycle in 1..=(warm + N) as u64 {
         if push && cycle == 1200 {

@@ -24,6 +24,25 @@ use std::time::{Duration, Instant};
 
 const SARD: &str = env!("CARGO_BIN_EXE_sard");
 
+/// Runs `sard --config cfg` for 50 cycles under a service prefix of its own
+/// (`name`): it must refuse to start, in one line, which is returned.
+fn refused_in_one_line(cfg: &Path, name: &str) -> String {
+    let out = Command::new(SARD)
+        .arg("--config")
+        .arg(cfg)
+        .args(["--max-cycles", "50"])
+        .env(
+            "SAR_SERVICE_PREFIX",
+            format!("sar-deploy-{}-{name}", std::process::id()),
+        )
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    err
+}
+
 fn robot_toml() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/robot.toml")
 }
@@ -109,19 +128,7 @@ fn a_missing_can_interface_is_refused_in_one_line_naming_it() {
         ),
     )
     .unwrap();
-    let out = Command::new(SARD)
-        .arg("--config")
-        .arg(&cfg)
-        .args(["--max-cycles", "50"])
-        .env(
-            "SAR_SERVICE_PREFIX",
-            format!("sar-deploy-{}-nocan", std::process::id()),
-        )
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    let err = refused_in_one_line(&cfg, "nocan");
     assert!(err.contains("sarnocan0"), "{err}");
     let _ = std::fs::remove_file(cfg);
 }
@@ -143,19 +150,7 @@ fn a_silent_sensor_is_refused_at_start_in_one_line_naming_it() {
         ),
     )
     .unwrap();
-    let out = Command::new(SARD)
-        .arg("--config")
-        .arg(&cfg)
-        .args(["--max-cycles", "50"])
-        .env(
-            "SAR_SERVICE_PREFIX",
-            format!("sar-deploy-{}-silent", std::process::id()),
-        )
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    let err = refused_in_one_line(&cfg, "silent");
     assert!(
         err.contains(&format!("RDT sensor at 127.0.0.1:{port}")),
         "{err}"

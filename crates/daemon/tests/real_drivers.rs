@@ -28,6 +28,7 @@ use sar_estimator::guard::{GuardState, Reason};
 use sar_kinematics::ActiveJoints;
 use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
 use sar_loop::{logq, rt};
+use sar_test_support::rig::controller;
 use std::cell::Cell;
 use std::rc::Rc;
 use std::time::Duration;
@@ -108,17 +109,7 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController, logq::LogQue
     emulator.step(1);
     devices::first_sample(&mut sensor, 10_000 * MS).unwrap();
     let (log, _thread, queue) = logq::channel(false);
-    let controller = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        Operator::new(),
-        log,
-        true,
-    )
-    .unwrap();
+    let controller = controller(&cfg, bias, sensor, drives, Operator::new(), log).unwrap();
     (emulator, controller, queue)
 }
 
@@ -481,21 +472,13 @@ impl CanRig {
         let fault = Rc::new(Cell::new(false));
         let operator = Operator::new();
         let (log, _thread, _queue) = logq::channel(false);
-        let controller = Controller::new(
-            &cfg.estimator,
-            bias,
-            cfg.step_config(),
-            Switchable {
-                inner: sensor,
-                fault: Rc::clone(&fault),
-            },
-            drives,
-            operator.clone(),
-            log,
-            true,
-        )
-        .unwrap()
-        .with_drives_cycle(devices::canopen_cycle);
+        let sensor = Switchable {
+            inner: sensor,
+            fault: Rc::clone(&fault),
+        };
+        let controller = controller(&cfg, bias, sensor, drives, operator.clone(), log)
+            .unwrap()
+            .with_drives_cycle(devices::canopen_cycle);
         Self {
             clock,
             bus,

@@ -10,9 +10,11 @@
     clippy::indexing_slicing
 )]
 
+use sar_test_support::files::{mkfifo, recording_config};
+use std::ffi::OsStr;
 use std::io::Read;
 use std::os::unix::net::UnixDatagram;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -25,6 +27,25 @@ fn temp_path(name: &str) -> PathBuf {
 /// A service prefix no other test (or test run) uses.
 fn prefix(name: &str) -> String {
     format!("sar-test-{}-{name}", std::process::id())
+}
+
+/// A notify socket bound at `path` (a stale one removed first).
+fn notify_socket(path: &Path) -> UnixDatagram {
+    let _ = std::fs::remove_file(path);
+    UnixDatagram::bind(path).unwrap()
+}
+
+/// `sard` with `args`, speaking systemd's notify protocol to `sock_path`,
+/// under the service prefix of `name`: stderr piped, stdout dropped.
+fn spawn_notifying<A: AsRef<OsStr>>(args: &[A], sock_path: &Path, name: &str) -> Child {
+    Command::new(SARD)
+        .args(args)
+        .env("NOTIFY_SOCKET", sock_path)
+        .env("SAR_SERVICE_PREFIX", prefix(name))
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap()
 }
 
 fn signal(child: &Child, sig: &str) {
@@ -97,16 +118,8 @@ fn check_config_accepts_a_good_file_and_names_the_key_of_a_bad_one() {
 fn sigterm_and_sigint_stop_the_loop_cleanly_with_the_drives_halted() {
     for sig in ["-TERM", "-INT"] {
         let sock_path = temp_path(&format!("notify{sig}"));
-        let _ = std::fs::remove_file(&sock_path);
-        let sock = UnixDatagram::bind(&sock_path).unwrap();
-        let child = Command::new(SARD)
-            .arg("--sim")
-            .env("NOTIFY_SOCKET", &sock_path)
-            .env("SAR_SERVICE_PREFIX", prefix(&format!("sig{sig}")))
-            .stderr(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap();
+        let sock = notify_socket(&sock_path);
+        let child = spawn_notifying(&["--sim"], &sock_path, &format!("sig{sig}"));
         // Ok once the automatic reset is accepted (after the mean at rest).
         let got = collect(&sock, Duration::from_secs(60), |g| {
             g.iter().any(|m| m == "WATCHDOG=1")
@@ -132,18 +145,11 @@ fn sigterm_and_sigint_stop_the_loop_cleanly_with_the_drives_halted() {
 #[test]
 fn a_stalled_loop_stops_feeding_the_watchdog() {
     let sock_path = temp_path("notify-stall");
-    let _ = std::fs::remove_file(&sock_path);
-    let sock = UnixDatagram::bind(&sock_path).unwrap();
+    let sock = notify_socket(&sock_path);
     // Pings every 100 cycles at 1 kHz; the loop stalls after cycle 300: at
     // most 3 pings, however long we listen.
-    let child = Command::new(SARD)
-        .args(["--sim", "--stall-after-cycles", "300"])
-        .env("NOTIFY_SOCKET", &sock_path)
-        .env("SAR_SERVICE_PREFIX", prefix("stall"))
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let args = ["--sim", "--stall-after-cycles", "300"];
+    let child = spawn_notifying(&args, &sock_path, "stall");
     let got = collect(&sock, Duration::from_secs(3), |_| false);
     signal(&child, "-TERM");
     let (code, err) = finish(child);
@@ -170,14 +176,7 @@ fn check_config_refuses_a_unit_mistake_and_a_non_regular_file_at_once() {
     )
     .unwrap();
     let fifo = temp_path("config.fifo");
-    let _ = std::fs::remove_file(&fifo);
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    mkfifo(&fifo);
     for (path, words) in [
         (
             cm.clone(),
@@ -241,13 +240,7 @@ fn sard_stuck_in_iceoryx2_answers_sigterm_and_gives_up_in_two_seconds() {
     // its details, a FIFO.
     std::fs::write(run.join("nodes/iox2_111.node_monitor"), b"").unwrap();
     let fifo = run.join("nodes/111/iox2_node.details");
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    mkfifo(&fifo);
     let start = |name: &str| {
         Command::new(SARD)
             .args(["--sim", "--max-cycles", "3000"])
@@ -292,27 +285,15 @@ fn sighup_and_sigusr1_stop_cleanly_with_the_recording_complete() {
         let dir = temp_path(&format!("sig{sig}"));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let rec_dir = dir.join("rec");
-        let config = dir.join("sim.toml");
-        let toml = sar_config::DEFAULT_TOML
-            .replace("[record]\nenabled = false", "[record]\nenabled = true")
-            .replace(
-                "directory = \"recordings\"",
-                &format!("directory = {:?}", rec_dir.display().to_string()),
-            );
-        assert_ne!(toml, sar_config::DEFAULT_TOML);
-        std::fs::write(&config, toml).unwrap();
+        let (config, rec_dir) = recording_config(&dir);
         let sock_path = dir.join("notify");
-        let sock = UnixDatagram::bind(&sock_path).unwrap();
-        let child = Command::new(SARD)
-            .args(["--sim", "--config"])
-            .arg(&config)
-            .env("NOTIFY_SOCKET", &sock_path)
-            .env("SAR_SERVICE_PREFIX", prefix(&format!("sig{sig}")))
-            .stderr(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .unwrap();
+        let sock = notify_socket(&sock_path);
+        let args = [
+            OsStr::new("--sim"),
+            OsStr::new("--config"),
+            config.as_os_str(),
+        ];
+        let child = spawn_notifying(&args, &sock_path, &format!("sig{sig}"));
         // Two watchdog pings: 200 cycles into the loop, recording.
         let got = collect(&sock, Duration::from_secs(30), |g| {
             g.iter().filter(|m| *m == "WATCHDOG=1").count() >= 2
@@ -357,16 +338,8 @@ fn sighup_and_sigusr1_stop_cleanly_with_the_recording_complete() {
 #[test]
 fn after_a_stall_the_missed_periods_are_skipped_and_counted_once() {
     let sock_path = temp_path("notify-stop-cont");
-    let _ = std::fs::remove_file(&sock_path);
-    let sock = UnixDatagram::bind(&sock_path).unwrap();
-    let child = Command::new(SARD)
-        .arg("--sim")
-        .env("NOTIFY_SOCKET", &sock_path)
-        .env("SAR_SERVICE_PREFIX", prefix("stop-cont"))
-        .stderr(Stdio::piped())
-        .stdout(Stdio::null())
-        .spawn()
-        .unwrap();
+    let sock = notify_socket(&sock_path);
+    let child = spawn_notifying(&["--sim"], &sock_path, "stop-cont");
     // Ok once the automatic reset is accepted (after the mean at rest).
     let got = collect(&sock, Duration::from_secs(60), |g| {
         g.iter().any(|m| m == "WATCHDOG=1") && g.iter().any(|m| m.starts_with("STATUS=guard ok"))

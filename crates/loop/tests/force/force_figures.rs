@@ -16,8 +16,8 @@
 //! - sudden tissue shifts (3 mm into the tip, then 6 mm away) under push
 //!   and hold;
 //! - the 10-minute breathing runs (no Stop at any stiffness) are `#[ignore]`d:
-//!   `cargo test --release -p sar-daemon --test force_figures -- --ignored
-//!   --nocapture`.
+//!   `cargo test --release -p sar-loop --test force_modes force_figures --
+//!   --ignored --nocapture`.
 
 #![allow(
     clippy::unwrap_used,
@@ -26,10 +26,7 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-#[path = "common/rig.rs"]
-mod rig;
-use rig::{Rig, TIP_M, rms, tissue};
+use crate::rig::{Rig, TIP_M, rms, tissue};
 use sar_drivers::sim::TissueShift;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
@@ -391,7 +388,7 @@ fn sudden_tissue_shifts_under_push_and_hold() {
 
 /// Ten minutes of breathing under a push at 3 N and a hold at 5 N at each
 /// stiffness: no Stop. Slow in a debug build:
-/// `cargo test --release -p sar-daemon --test force_figures -- --ignored --nocapture`.
+/// `cargo test --release -p sar-loop --test force_modes force_figures -- --ignored --nocapture`.
 #[test]
 #[ignore = "ten simulated minutes per stiffness and mode: run with --release -- --ignored"]
 fn ten_minutes_of_breathing_without_a_stop() {

@@ -11,8 +11,6 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-
 use sar_msgs::msgs::*;
 use sar_record::*;
 use std::fmt::Write as _;
@@ -22,7 +20,7 @@ use std::path::Path;
 /// installs (on first use) under `target/test-readers/py`.
 fn python_read(file: &Path) -> Option<String> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/read_recording.py");
-    let out = common::readers::python()
+    let out = crate::readers::python()
         .arg(&script)
         .arg(file)
         .output()
@@ -215,14 +213,14 @@ fn compare(got: &str, want: &str) {
 #[test]
 #[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
 fn python_decodes_every_channel_bit_for_bit() {
-    let dir = common::scratch("python");
+    let dir = sar_test_support::scratch!("python");
     let mut files = FileOptions::new(&dir, "rec");
     files.chunk_size_bytes = 32 * 1024;
     let mut config = RecorderConfig::new(files);
     config.status_interval_ns = 20_000_000;
     let mut rec = Recorder::start(config).unwrap();
     for k in 0..400 {
-        for m in common::cycle_messages(k) {
+        for m in sar_test_support::messages::cycle_messages(k) {
             assert!(rec.push(m));
         }
     }

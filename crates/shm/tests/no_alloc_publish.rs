@@ -16,8 +16,6 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_loop::control::{Controller, Operator, ReplyStatus};
@@ -26,16 +24,24 @@ use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
 use sar_msgs::wire::{CommandMsg, command_kind};
 use sar_shm::{Client, DaemonShm};
+use sar_test_support::rig::{RigBuilder, SimRig, controller};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
-#[path = "common/counting.rs"]
-mod counting;
-use counting::{allocations, counted};
+use sar_test_support::counting::{Counting, allocations, counted};
 
 #[global_allocator]
-static GLOBAL: counting::Counting = counting::Counting;
+static GLOBAL: Counting = Counting;
+
+/// The daemon's real shared memory with `cfg`'s limits, under a prefix of
+/// this process and `name`: the prefix and the daemon's side.
+fn daemon_shm(name: &str, operator: &Operator, cfg: &config::Config) -> (String, DaemonShm) {
+    let prefix = format!("sar-noalloc-{name}-{}", std::process::id());
+    let limits = cfg.estimator.guard.force_limits().to_array();
+    let shm = DaemonShm::create(&prefix, operator.clone(), limits).unwrap();
+    (prefix, shm)
+}
 
 #[test]
 fn the_counter_sees_an_allocation_on_the_loop_thread() {
@@ -56,13 +62,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
         queue,
         ..
     } = RigBuilder::new(&scenario).config(&cfg).build();
-    let prefix = format!("sar-noalloc-pub-{}", std::process::id());
-    let mut shm = DaemonShm::create(
-        &prefix,
-        operator.clone(),
-        cfg.estimator.guard.force_limits().to_array(),
-    )
-    .unwrap();
+    let (prefix, mut shm) = daemon_shm("pub", &operator, &cfg);
     let stats = LoopStats::default();
     let mut cycle = 0u64;
     // One cycle exactly as `runloop::run` makes it; only the calls of the
@@ -186,24 +186,8 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
         sim::simulated(&scenario, MonotonicClock::new().unwrap()).unwrap();
     let operator = Operator::new();
     let (log, log_thread, _queue) = logq::channel(true);
-    let prefix = format!("sar-noalloc-run-{}", std::process::id());
-    let mut shm = DaemonShm::create(
-        &prefix,
-        operator.clone(),
-        cfg.estimator.guard.force_limits().to_array(),
-    )
-    .unwrap();
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        operator,
-        log.clone(),
-        true,
-    )
-    .unwrap();
+    let (prefix, mut shm) = daemon_shm("run", &operator, &cfg);
+    let mut c = controller(&cfg, bias, sensor, drives, operator, log.clone()).unwrap();
     let client_thread = {
         let prefix = prefix.clone();
         std::thread::spawn(move || {

@@ -6,38 +6,13 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
-use sar_config as config;
-use sar_daemon::sim;
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Controller, Envelope, Request};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicU64, Ordering};
-
-struct Counting;
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-// SAFETY: forwards to the system allocator, only counting.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use sar_test_support::counting::{Counting, process_allocations};
+use sar_test_support::messages::rod_push_20n;
+use sar_test_support::rig::{RigBuilder, SimRig};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -48,23 +23,20 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 #[test]
 fn a_cycle_allocates_nothing() {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let cfg = config::builtin().unwrap();
-    let mut scenario = sim::demo_scenario().unwrap();
     // Push on to the stop limit: 20 N along the rod at 12 s, then release at 20 s.
-    scenario.spec.contact = common::contact_pulse(
-        2_000_000_000,
-        12_000_000_000,
-        14_000_000_000,
-        15_000_000_000,
-        Vec3::new(20.0, 0.0, 0.0),
-    );
     let SimRig {
         mut c,
         clock,
         operator,
         queue,
         ..
-    } = RigBuilder::new(&scenario).config(&cfg).build();
+    } = RigBuilder::demo(rod_push_20n([
+        2_000_000_000,
+        12_000_000_000,
+        14_000_000_000,
+        15_000_000_000,
+    ]))
+    .build();
     // Warm-up: the first cycles (and the start-up reset) may touch lazily
     // made state in the simulator.
     let mut cycle = 0;
@@ -91,7 +63,7 @@ fn a_cycle_allocates_nothing() {
     // The snapshot the loop takes between cycles (issue 17), made before.
     let mut snapshot = sar_snapshot::Snapshot::new();
     let mut snapshots = 0;
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = process_allocations();
     let mut seen_warn = false;
     let mut seen_stop = false;
     let mut seen_push = false;
@@ -139,7 +111,7 @@ fn a_cycle_allocates_nothing() {
         seen_warn |= out.guard_state == GuardState::Warn;
         seen_stop |= out.guard_state == GuardState::Stop;
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = process_allocations();
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
     assert!(seen_push, "force control never ran");
     assert!(
@@ -161,4 +133,4 @@ fn a_cycle_allocates_nothing() {
 }
 
 // Publishing (the loop's `Publish` calls on the daemon's shared memory) is
-// proved allocation-free in `tests/no_alloc_publish.rs`.
+// proved allocation-free in `crates/shm/tests/no_alloc_publish.rs`.

@@ -12,11 +12,8 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
-use sar_daemon::sim;
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_loop::control::{Controller, Envelope, Request};
@@ -26,6 +23,8 @@ use sar_msgs::msgs::{RosMessage, StateSnapshot, Topic};
 use sar_record::live::{RecordManager, RecordSwitch};
 use sar_record::replay::{ReplayError, ReplayOptions, replay_file, replay_files};
 use sar_record::{McapReader, read_file};
+use sar_test_support::messages::rod_push_20n;
+use sar_test_support::rig::{RigBuilder, SimRig};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -34,25 +33,23 @@ use std::sync::Arc;
 /// reset), then about 3.6 s recorded with 1 s files and a snapshot every
 /// 250 ms (moves, a push). Returns the files in order.
 fn session(name: &str) -> Vec<PathBuf> {
-    let dir = common::scratch(name);
-    let cfg = config::builtin().unwrap();
-    let mut scenario = sim::demo_scenario().unwrap();
+    let dir = sar_test_support::scratch!(name);
     // 20 N along the rod from 2 s (rising), held 2.7-3.2 s, off at 3.5 s.
-    scenario.spec.contact = common::contact_pulse(
-        2_000_000_000,
-        2_700_000_000,
-        3_200_000_000,
-        3_500_000_000,
-        Vec3::new(20.0, 0.0, 0.0),
-    );
     let SimRig {
         mut c,
         clock,
         operator,
         queue,
         bias,
+        cfg,
         ..
-    } = RigBuilder::new(&scenario).config(&cfg).build();
+    } = RigBuilder::demo(rod_push_20n([
+        2_000_000_000,
+        2_700_000_000,
+        3_200_000_000,
+        3_500_000_000,
+    ]))
+    .build();
     let switch = Arc::new(RecordSwitch::default());
     let (manager, mut publisher) = RecordManager::start(
         RecordSettings {

@@ -10,8 +10,13 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-#[path = "common/rig.rs"]
+// The force-control rig, and the other force-control tests in this binary
+// (one binary: less to link).
+#[path = "force/force_figures.rs"]
+mod force_figures;
+#[path = "force/force_properties.rs"]
+mod force_properties;
+#[path = "force/rig.rs"]
 mod rig;
 use rig::{Rig, TIP_M, rms};
 use sar_estimator::Vec3;
@@ -155,7 +160,7 @@ fn position_ends_force_control_and_a_stop_ends_it_at_once() {
     // A push, then a contact of 20 N on top (above the stop limit): the
     // guard stops, and the mode ends in that very cycle.
     let on_s = 1.1 + 0.003 + 3.0;
-    let contact = common::contact_pulse(
+    let contact = sar_test_support::messages::contact_pulse(
         (on_s * 1e9) as u64,
         (on_s * 1e9) as u64 + 50_000_000,
         (on_s * 1e9) as u64 + 2_000_000_000,

@@ -2,24 +2,14 @@
 //! simulated time (1 ms per cycle), the demo robot with its tip at
 //! [`TIP_M`] (the rod along +X0), tissues that push back and a contact
 //! script; every cycle's input and decision kept for a replay bit for bit.
-#![allow(
-    dead_code,
-    clippy::unwrap_used,
-    clippy::expect_used,
-    clippy::panic,
-    clippy::indexing_slicing
-)]
+#![allow(dead_code, clippy::unwrap_used)]
 
-use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::SimClock;
-use sar_drivers::sim::{
-    Breathing, ContactKey, SimDrives, SimSensor, Simulator, Tissue, TissueModel, TissueShift,
-};
+use sar_drivers::sim::{Breathing, ContactKey, SimDrives, Tissue, TissueModel, TissueShift};
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
-use sar_loop::control::{Controller, Envelope, Operator, Reply, Request};
-use sar_loop::step::{LoopInput, LoopOutput, LoopStep};
+use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// The tip at rest, base frame, m (the demo's start); the rod points +X0.
 pub const TIP_M: [f64; 3] = [0.6, 0.2, 0.0];
@@ -49,15 +39,10 @@ pub fn tissue(k_n_per_m: f64, gap_m: f64, breath_m: f64, shifts: Vec<TissueShift
     }
 }
 
-pub struct Rig {
-    pub c: Controller<SimSensor<SimClock>, SimDrives<SimClock>>,
-    pub sim: Simulator<SimClock>,
-    pub clock: SimClock,
-    pub operator: Operator,
-    pub cycle: u64,
-    pub log: Vec<(LoopInput, LoopOutput)>,
-    pub cfg: config::Config,
-}
+/// The demo robot on the simulator, ready (see [`SimRig`]).
+pub struct Rig(pub SimRig<SimDrives<SimClock>>);
+
+sar_test_support::deref_rig!(Rig => SimRig<SimDrives<SimClock>>);
 
 impl Rig {
     /// The demo robot; a tissue of stiffness `k` whose surface is `gap_m`
@@ -73,7 +58,6 @@ impl Rig {
     /// The demo robot with these tissues and contact script, reset after
     /// the mean at rest ([`READY_MS`]).
     pub fn with(tissues: Vec<Tissue>, contact: Vec<ContactKey>) -> Self {
-        let cfg = config::builtin().unwrap();
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = if contact.is_empty() {
             vec![ContactKey {
@@ -84,24 +68,7 @@ impl Rig {
             contact
         };
         scenario.spec.tissue = tissues;
-        let crate::common::sim_rig::SimRig {
-            c,
-            sim,
-            clock,
-            operator,
-            ..
-        } = crate::common::sim_rig::RigBuilder::new(&scenario)
-            .config(&cfg)
-            .build();
-        let mut rig = Self {
-            c,
-            sim,
-            clock,
-            operator,
-            cycle: 0,
-            log: Vec::new(),
-            cfg,
-        };
+        let mut rig = Self(RigBuilder::new(&scenario).build());
         for _ in 0..READY_MS {
             rig.step();
         }
@@ -114,48 +81,9 @@ impl Rig {
         rig
     }
 
-    pub fn step(&mut self) -> LoopOutput {
-        self.cycle += 1;
-        self.clock.advance_ns(1_000_000);
-        let clock = self.clock.clone();
-        self.c.step(self.cycle, || Some(clock.now_ns()));
-        let d = *self.c.decision();
-        self.log.push((*self.c.loop_input(), d));
-        d
-    }
-
-    /// Applies `request` in the next cycle and returns its reply.
-    pub fn request(&mut self, id: u64, request: Request) -> Reply {
-        self.operator
-            .requests
-            .push(Envelope { id, request })
-            .unwrap();
-        self.step();
-        let r = self.operator.replies.pop().unwrap();
-        assert_eq!(r.id, id);
-        r
-    }
-
     /// The true F_tip, base frame, N.
     pub fn true_force_n(&self) -> Vec3 {
         self.sim.truth().unwrap().tip_force_n
-    }
-
-    pub fn replays_bit_for_bit(&self) {
-        let scenario = sim::demo_scenario().unwrap();
-        let bias = sar_estimator::cycle::Bias {
-            force_n: scenario.spec.sensor.bias_n,
-            torque_nm: scenario.spec.sensor.bias_nm,
-        };
-        let mut step = LoopStep::new(&self.cfg.estimator, bias, self.cfg.step_config()).unwrap();
-        for (k, (input, recorded)) in self.log.iter().enumerate() {
-            let again = step.step(input);
-            assert_eq!(
-                format!("{again:?}"),
-                format!("{recorded:?}"),
-                "cycle {k} differs"
-            );
-        }
     }
 }
 

@@ -9,7 +9,14 @@
     clippy::indexing_slicing
 )]
 
-mod common;
+// The other recording tests, in this binary (one binary: less to link); the
+// strict readers of the tests (shared with sar-daemon's and sar-tests' tests).
+#[path = "recording/python_reader.rs"]
+mod python_reader;
+#[path = "../../daemon/tests/common/readers.rs"]
+mod readers;
+#[path = "recording/snapshot_recording.rs"]
+mod snapshot_recording;
 
 use sar_msgs::msgs::*;
 use sar_record::reader::ReadError;
@@ -29,7 +36,7 @@ fn record(config: RecorderConfig, n: u64) -> (RecordingReport, Vec<Outgoing>) {
     let mut rec = Recorder::start(config).unwrap();
     let mut pushed = Vec::new();
     for k in 0..n {
-        for m in common::cycle_messages(k) {
+        for m in sar_test_support::messages::cycle_messages(k) {
             assert!(rec.push(m));
             pushed.push(m);
         }
@@ -64,7 +71,7 @@ fn read_all(bytes: &[u8]) -> (Vec<(String, RawMessage)>, Option<ReadError>, Mcap
 
 #[test]
 fn recording_reads_back_bit_for_bit() {
-    let dir = common::scratch("bit_for_bit");
+    let dir = sar_test_support::scratch!("bit_for_bit");
     let (report, pushed) = record(config(&dir, 64 * 1024), 2000);
     assert_eq!(report.files.len(), 1);
     let bytes = read_file(&report.files[0]).unwrap();
@@ -95,7 +102,7 @@ fn recording_reads_back_bit_for_bit() {
     let drops = RecorderDrops::decode(&status[0].1.data).unwrap();
     assert_eq!(drops.dropped, 0);
     assert_eq!(drops.written, pushed.len() as u64 + 1);
-    assert_eq!(drops.stamp_ns, common::now_ns(1999));
+    assert_eq!(drops.stamp_ns, sar_test_support::messages::now_ns(1999));
     let meta = reader
         .metadata()
         .iter()
@@ -112,7 +119,7 @@ fn recording_reads_back_bit_for_bit() {
     for (k, (log, m)) in inputs.iter().enumerate() {
         assert_eq!(
             Outgoing::CycleInput(*m),
-            common::cycle_messages(k as u64)[0]
+            sar_test_support::messages::cycle_messages(k as u64)[0]
         );
         assert_eq!(*log, m.now_ns);
     }
@@ -155,7 +162,7 @@ fn recording_reads_back_bit_for_bit() {
 
 #[test]
 fn truncated_files_read_to_last_complete_chunk_and_recover() {
-    let dir = common::scratch("truncated");
+    let dir = sar_test_support::scratch!("truncated");
     let (report, pushed) = record(config(&dir, 16 * 1024), 1500);
     let full = read_file(&report.files[0]).unwrap();
     let summary = mcap::Summary::read(&full).unwrap().unwrap();
@@ -274,7 +281,7 @@ fn truncated_files_read_to_last_complete_chunk_and_recover() {
 
 #[test]
 fn recover_refuses_to_overwrite_its_input_and_non_mcap() {
-    let dir = common::scratch("recover_refuses");
+    let dir = sar_test_support::scratch!("recover_refuses");
     let p = dir.join("x.mcap");
     std::fs::write(&p, b"not an mcap file").unwrap();
     assert!(matches!(recover(&p, &p), Err(RecoverError::SamePath(_))));
@@ -314,7 +321,7 @@ fn pushed_in(all: &[(String, RawMessage)]) -> Vec<Vec<u8>> {
 
 #[test]
 fn rotation_by_size() {
-    let dir = common::scratch("rotation_size");
+    let dir = sar_test_support::scratch!("rotation_size");
     let mut c = config(&dir, 8 * 1024);
     c.files.rotation.max_bytes = Some(24 * 1024);
     let (report, pushed) = record(c, 3000);
@@ -339,7 +346,7 @@ fn rotation_by_size() {
 
 #[test]
 fn rotation_by_duration() {
-    let dir = common::scratch("rotation_duration");
+    let dir = sar_test_support::scratch!("rotation_duration");
     let mut c = config(&dir, 64 * 1024);
     c.files.rotation.max_duration_ns = Some(100_000_000);
     // 2000 cycles at 4 kHz: 0.5 s, five files of 0.1 s.
@@ -353,7 +360,7 @@ fn rotation_by_duration() {
         let max = msgs.iter().map(|m| m.1.log_time_ns).max().unwrap();
         assert!(max - min < 100_000_000, "{}: {min}..{max}", f.display());
         // A file starts with the cycle that reached the limit.
-        assert_eq!(first, common::now_ns(400 * i as u64));
+        assert_eq!(first, sar_test_support::messages::now_ns(400 * i as u64));
     }
     let all = read_files(&report.files);
     let want: Vec<_> = pushed.iter().map(encoded).collect();
@@ -362,12 +369,14 @@ fn rotation_by_duration() {
 
 #[test]
 fn drops_are_counted_when_the_writer_is_stalled() {
-    let dir = common::scratch("drops");
+    let dir = sar_test_support::scratch!("drops");
     let mut c = config(&dir, 64 * 1024);
     c.queue_capacity = 100;
     // The writer not started: a stalled disk, deterministically.
     let mut rec = Recorder::new_paused(c).unwrap();
-    let msgs: Vec<Outgoing> = (0..30).flat_map(common::cycle_messages).collect();
+    let msgs: Vec<Outgoing> = (0..30)
+        .flat_map(sar_test_support::messages::cycle_messages)
+        .collect();
     assert!(msgs.len() > 150);
     let accepted = msgs.iter().filter(|m| rec.push(**m)).count();
     assert_eq!(accepted, 100);
@@ -395,7 +404,7 @@ fn drops_are_counted_when_the_writer_is_stalled() {
 
 #[test]
 fn status_messages_every_interval() {
-    let dir = common::scratch("status");
+    let dir = sar_test_support::scratch!("status");
     let mut c = config(&dir, 64 * 1024);
     c.status_interval_ns = 50_000_000;
     let (report, _) = record(c, 2000);
@@ -413,9 +422,9 @@ fn status_messages_every_interval() {
 
 #[test]
 fn a_dropped_recorder_still_closes_its_file() {
-    let dir = common::scratch("dropped_recorder");
+    let dir = sar_test_support::scratch!("dropped_recorder");
     let mut rec = Recorder::start(config(&dir, 64 * 1024)).unwrap();
-    for m in common::cycle_messages(0) {
+    for m in sar_test_support::messages::cycle_messages(0) {
         assert!(rec.push(m));
     }
     drop(rec);
@@ -428,7 +437,10 @@ fn a_dropped_recorder_still_closes_its_file() {
         {
             let (msgs, end, _) = read_all(&bytes);
             assert!(end.is_none());
-            assert_eq!(msgs.len(), common::cycle_messages(0).len() + 1);
+            assert_eq!(
+                msgs.len(),
+                sar_test_support::messages::cycle_messages(0).len() + 1
+            );
             return;
         }
         std::thread::sleep(std::time::Duration::from_millis(10));
@@ -438,12 +450,12 @@ fn a_dropped_recorder_still_closes_its_file() {
 
 #[test]
 fn a_failed_writer_drops_and_counts_and_stop_reports_it() {
-    let dir = common::scratch("failed_writer");
+    let dir = sar_test_support::scratch!("failed_writer");
     let sub = dir.join("gone");
     let mut rec = Recorder::new_paused(config(&sub, 64 * 1024)).unwrap();
     // The disk goes away before the first file is created.
     std::fs::remove_dir_all(&sub).unwrap();
-    let msgs = common::cycle_messages(0);
+    let msgs = sar_test_support::messages::cycle_messages(0);
     for m in &msgs {
         assert!(rec.push(*m));
     }
@@ -460,7 +472,7 @@ fn a_failed_writer_drops_and_counts_and_stop_reports_it() {
 
 #[test]
 fn bad_settings_are_refused() {
-    let dir = common::scratch("settings");
+    let dir = sar_test_support::scratch!("settings");
     let mut c = config(&dir, 64 * 1024);
     c.queue_capacity = 0;
     assert!(matches!(
@@ -483,7 +495,7 @@ mod corrupted {
     fn small_recording() -> Vec<u8> {
         static FILE: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
         FILE.get_or_init(|| {
-            let dir = common::scratch("corrupted");
+            let dir = sar_test_support::scratch!("corrupted");
             let (report, _) = record(config(&dir, 2 * 1024), 60);
             read_file(&report.files[0]).unwrap()
         })
@@ -533,9 +545,9 @@ mod corrupted {
 /// dropped and counted; the recording goes on with the next ones.
 #[test]
 fn an_unencodable_message_is_dropped_and_the_recording_goes_on() {
-    let dir = common::scratch("unencodable");
+    let dir = sar_test_support::scratch!("unencodable");
     let mut rec = Recorder::start(config(&dir, 64 * 1024)).unwrap();
-    let good = common::cycle_messages(1);
+    let good = sar_test_support::messages::cycle_messages(1);
     let bad = Outgoing::SensorWrench(WrenchStamped::sensor(
         u64::MAX,
         [1.0, 2.0, 3.0],
@@ -566,7 +578,7 @@ fn an_unencodable_message_is_dropped_and_the_recording_goes_on() {
 /// written, and the next complete one is, whole.
 #[test]
 fn snapshot_chunks_are_joined_and_an_incomplete_snapshot_is_left_out() {
-    let dir = common::scratch("snapshot_chunks");
+    let dir = sar_test_support::scratch!("snapshot_chunks");
     let mut w = RotatingWriter::new(FileOptions::new(&dir, "chunks")).unwrap();
     let status = RecorderDrops::default();
     let a: Vec<u8> = (0..1000u32).map(|i| (i % 251) as u8).collect();
@@ -609,7 +621,7 @@ fn snapshot_chunks_are_joined_and_an_incomplete_snapshot_is_left_out() {
 /// last bytes are flushed at the close; never a report of a file written.
 #[test]
 fn a_full_file_system_is_a_write_error_naming_enospc_never_a_file_written() {
-    let dir = common::scratch("full_file_system");
+    let dir = sar_test_support::scratch!("full_file_system");
     let mount = dir.join("tiny");
     std::fs::create_dir_all(&mount).unwrap();
     let out = std::process::Command::new("mount")
@@ -631,7 +643,7 @@ fn a_full_file_system_is_a_write_error_naming_enospc_never_a_file_written() {
     let _unmount = Unmount(mount.clone());
     let mut rec = Recorder::start(config(&mount, 16 * 1024)).unwrap();
     for k in 0..300 {
-        for m in common::cycle_messages(k) {
+        for m in sar_test_support::messages::cycle_messages(k) {
             rec.push(m);
         }
     }

@@ -7,89 +7,66 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
+// The other tests of the step on the simulator, in this binary (one binary:
+// less to link).
+#[path = "step/following.rs"]
+mod following;
+#[path = "step/guard_action.rs"]
+mod guard_action;
+#[path = "step/retreat.rs"]
+mod retreat;
+#[path = "step/snapshot.rs"]
+mod snapshot;
+#[path = "step/step_properties.rs"]
+mod step_properties;
+
 use sar_config as config;
-use sar_daemon::sim;
 use sar_drivers::sim::{SimDrives, SimError};
-use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
+use sar_drivers::{AxisDrives, DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState, Reason};
 use sar_kinematics::{ActiveJoints, inverse};
-use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
-use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
+use sar_loop::control::{ReplyStatus, Request};
+use sar_loop::step::DriveAction;
+use sar_test_support::drives::{DriveHook, Hooked};
+use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// Simulated drives that can be blocked: after `block_after` setpoints,
 /// further ones are ignored (a blocked, slipping or disconnected axis: the
 /// axes stay where they are while the loop's trajectory goes on).
 struct Blockable {
-    inner: SimDrives<SimClock>,
     setpoints: u32,
     block_after: Option<u32>,
 }
 
-impl AxisDrives for Blockable {
-    type Error = SimError;
-    fn positions(&mut self) -> Result<JointPositions, SimError> {
-        self.inner.positions()
-    }
-    fn state(&mut self) -> Result<DriveState, SimError> {
-        self.inner.state()
-    }
-    fn enable(&mut self) -> Result<(), SimError> {
-        self.inner.enable()
-    }
-    fn disable(&mut self) -> Result<(), SimError> {
-        self.inner.disable()
-    }
-    fn stream(&mut self, t: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
-        self.inner.stream(t, period_ns)
-    }
-    fn set_targets(&mut self, t: ActiveJoints) -> Result<(), SimError> {
+impl DriveHook<SimDrives<SimClock>> for Blockable {
+    fn set_targets(
+        &mut self,
+        inner: &mut SimDrives<SimClock>,
+        t: ActiveJoints,
+    ) -> Result<(), SimError> {
         self.setpoints += 1;
         if self.block_after.is_some_and(|n| self.setpoints > n) {
             return Ok(());
         }
-        self.inner.set_targets(t)
-    }
-    fn quick_stop(&mut self) -> Result<(), SimError> {
-        self.inner.quick_stop()
-    }
-    fn fault_reset(&mut self) -> Result<(), SimError> {
-        self.inner.fault_reset()
+        inner.set_targets(t)
     }
 }
 
-struct Rig {
-    c: Controller<sar_drivers::sim::SimSensor<SimClock>, Blockable>,
-    clock: SimClock,
-    operator: Operator,
-    cycle: u64,
-    /// Every cycle's input and decision, for the replay check.
-    log: Vec<(LoopInput, LoopOutput)>,
-}
+/// The demo robot on blockable drives (every cycle's input and decision
+/// kept, for the replay check).
+struct Rig(SimRig<Hooked<SimDrives<SimClock>, Blockable>>);
+
+sar_test_support::deref_rig!(Rig => SimRig<Hooked<SimDrives<SimClock>, Blockable>>);
 
 impl Rig {
     fn new(contact: Vec<sar_drivers::sim::ContactKey>, block_after: Option<u32>) -> Self {
-        let cfg = config::builtin().unwrap();
-        let mut scenario = sim::demo_scenario().unwrap();
-        scenario.spec.contact = contact;
-        let SimRig {
-            c, clock, operator, ..
-        } = RigBuilder::new(&scenario)
-            .config(&cfg)
-            .build_with(|drives| Blockable {
-                inner: drives,
-                setpoints: 0,
-                block_after,
-            });
-        let mut rig = Self {
-            c,
-            clock,
-            operator,
-            cycle: 0,
-            log: Vec::new(),
+        let hook = Blockable {
+            setpoints: 0,
+            block_after,
         };
+        let mut rig =
+            Self(RigBuilder::demo(contact).build_with(|drives| Hooked::new(drives, hook)));
         // The automatic reset, accepted once the mean at rest is complete
         // (500 samples of the 500 Hz sensor: 1000 cycles), then the drives
         // come up.
@@ -101,25 +78,8 @@ impl Rig {
         rig
     }
 
-    fn step(&mut self) -> LoopOutput {
-        self.cycle += 1;
-        self.clock.advance_ns(1_000_000);
-        let clock = self.clock.clone();
-        self.c.step(self.cycle, || Some(clock.now_ns()));
-        let d = *self.c.decision();
-        self.log.push((*self.c.loop_input(), d));
-        d
-    }
-
     fn request(&mut self, id: u64, request: Request) -> ReplyStatus {
-        self.operator
-            .requests
-            .push(Envelope { id, request })
-            .unwrap();
-        self.step();
-        let r = self.operator.replies.pop().unwrap();
-        assert_eq!(r.id, id);
-        r.status
+        self.0.request(id, request).status
     }
 
     fn joints(&self) -> [f64; 3] {
@@ -129,7 +89,7 @@ impl Rig {
 }
 
 fn quiet() -> Vec<sar_drivers::sim::ContactKey> {
-    common::contact_pulse(0, 1, 2, 3, Vec3::zeros())
+    sar_test_support::messages::contact_pulse(0, 1, 2, 3, Vec3::zeros())
 }
 
 /// A move is planned by the loop: its end point goes to the drives once (they
@@ -282,9 +242,8 @@ fn limits_change_within_their_ceilings() {
 /// inputs replay through a fresh step to the same decisions, bit for bit.
 #[test]
 fn a_move_into_a_warning_force_is_braked_and_a_run_replays_bit_for_bit() {
-    let cfg = config::builtin().unwrap();
     // 9 N along +x (the rod's direction at the start) from 1.02 s to 1.52 s.
-    let contact = common::contact_pulse(
+    let contact = sar_test_support::messages::contact_pulse(
         1_020_000_000,
         1_520_000_000,
         60_000_000_000,
@@ -331,21 +290,8 @@ fn a_move_into_a_warning_force_is_braked_and_a_run_replays_bit_for_bit() {
         rig.step();
     }
 
-    // Replay: the same inputs through a fresh step.
-    let scenario = sim::demo_scenario().unwrap();
-    let bias = sar_estimator::cycle::Bias {
-        force_n: scenario.spec.sensor.bias_n,
-        torque_nm: scenario.spec.sensor.bias_nm,
-    };
-    let mut step = LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap();
+    // Replay: the same inputs through a fresh step (Debug prints every f64
+    // exactly: shortest round trip).
     assert!(rig.log.len() > 3000);
-    for (k, (input, recorded)) in rig.log.iter().enumerate() {
-        let again = step.step(input);
-        // Debug prints every f64 exactly (shortest round trip).
-        assert_eq!(
-            format!("{again:?}"),
-            format!("{recorded:?}"),
-            "cycle {k} differs"
-        );
-    }
+    rig.replays_bit_for_bit();
 }

@@ -4,10 +4,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_estimator::guard::{GuardState, Reason};
+use sar_test_support::rig::{RigBuilder, SimRig};
 use std::path::Path;
 
 #[test]

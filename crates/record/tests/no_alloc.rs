@@ -3,7 +3,9 @@
 //! nothing on the loop's thread, through a Warn, a Stop with its quick stop
 //! and operator requests; the writer thread (which may allocate) is not
 //! counted. The file it writes replays bit for bit, guard transitions
-//! included.
+//! included. A push onto the recorder's queue does not allocate, accepted or
+//! dropped (counted on the pushing thread alone: the writer thread allocates
+//! as it likes; the loop's thread must not).
 
 #![allow(
     clippy::unwrap_used,
@@ -12,11 +14,7 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
-use sar_config as config;
 use sar_config::{RecordSettings, Rotation};
-use sar_daemon::sim;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Controller, Envelope, Request};
@@ -25,37 +23,34 @@ use sar_loop::stats::LoopStats;
 use sar_msgs::msgs::Outgoing;
 use sar_record::live::{RecordManager, RecordSwitch};
 use sar_record::replay::{Mode, ReplayOptions, replay_file};
-use sar_record::{McapReader, read_file};
+use sar_record::{FileOptions, McapReader, Recorder, RecorderConfig, read_file};
+use sar_test_support::counting::{Counting, allocations, counted, thread_allocations};
+use sar_test_support::messages::rod_push_20n;
+use sar_test_support::rig::{RigBuilder, SimRig};
 use std::sync::Arc;
 
-#[path = "common/counting.rs"]
-mod counting;
-use counting::{allocations, counted};
-
 #[global_allocator]
-static GLOBAL: counting::Counting = counting::Counting;
+static GLOBAL: Counting = Counting;
 
 #[test]
 fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
-    let dir = common::scratch("no_alloc_record");
-    let cfg = config::builtin().unwrap();
-    let mut scenario = sim::demo_scenario().unwrap();
+    let dir = sar_test_support::scratch!("no_alloc_record");
     // 20 N along the rod from 1.5 s to 3 s: Warn, then Stop.
-    scenario.spec.contact = common::contact_pulse(
-        500_000_000,
-        2_500_000_000,
-        3_000_000_000,
-        3_500_000_000,
-        Vec3::new(20.0, 0.0, 0.0),
-    );
     let SimRig {
         mut c,
         clock,
         operator,
         queue,
         bias,
+        cfg,
         ..
-    } = RigBuilder::new(&scenario).config(&cfg).build();
+    } = RigBuilder::demo(rod_push_20n([
+        500_000_000,
+        2_500_000_000,
+        3_000_000_000,
+        3_500_000_000,
+    ]))
+    .build();
     let switch = Arc::new(RecordSwitch::default());
     let (manager, mut publisher) = RecordManager::start(
         RecordSettings {
@@ -153,4 +148,50 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
         .filter(|m| matches!(m, Ok((_, _, Outgoing::GuardEvent(_)))))
         .count();
     assert!(events >= 3, "{events} guard events");
+}
+
+#[test]
+fn push_does_not_allocate() {
+    let dir = sar_test_support::scratch!("no_alloc");
+    let mut config = RecorderConfig::new(FileOptions::new(&dir, "rec"));
+    config.queue_capacity = 4096;
+    // Prepared before counting: the messages of 2000 cycles.
+    let msgs: Vec<Outgoing> = (0..2000)
+        .flat_map(sar_test_support::messages::cycle_messages)
+        .collect();
+
+    // Writer running: pushes accepted.
+    let mut rec = Recorder::start(config.clone()).unwrap();
+    let before = thread_allocations();
+    let mut accepted = 0u64;
+    for m in &msgs[..1000] {
+        accepted += u64::from(rec.push(*m));
+    }
+    let during = thread_allocations() - before;
+    let _ = rec.dropped();
+    assert_eq!(
+        during, 0,
+        "{during} allocations in {accepted} accepted pushes"
+    );
+    assert!(accepted > 0);
+    rec.stop().unwrap();
+
+    // Writer stalled: most pushes dropped, counted, still no allocation.
+    let mut rec = Recorder::new_paused(config).unwrap();
+    let before = thread_allocations();
+    let mut dropped = 0u64;
+    for m in &msgs {
+        dropped += u64::from(!rec.push(*m));
+    }
+    let count = rec.dropped();
+    let during = thread_allocations() - before;
+    assert_eq!(during, 0, "{during} allocations in {} pushes", msgs.len());
+    assert_eq!(dropped, msgs.len() as u64 - 4096);
+    assert_eq!(count, dropped);
+    rec.stop().unwrap();
+
+    // The counter counts: an allocation on this thread is seen.
+    let before = thread_allocations();
+    let v = std::hint::black_box(vec![1u8; 10]);
+    assert!(thread_allocations() > before, "{v:?}");
 }

@@ -38,12 +38,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-#[path = "common/rig.rs"]
-mod rig;
+use crate::rig::{READY_MS, Rig, TIP_M, tissue};
 use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed, TestRunner};
-use rig::{READY_MS, Rig, TIP_M, tissue};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{GuardState, Reason, reduces_force};
@@ -106,7 +103,13 @@ fn run(mode: Mode, force: Vec3, k_n_per_m: f64, ramp_ms: u64, hold_ms: u64, seed
     let start_ns = (READY_MS + 100) * 1_000_000;
     let on_ns = start_ns + ramp_ms * 1_000_000;
     let off_ns = on_ns + hold_ms * 1_000_000;
-    let contact = common::contact_pulse(start_ns, on_ns, off_ns, off_ns + 300_000_000, force);
+    let contact = sar_test_support::messages::contact_pulse(
+        start_ns,
+        on_ns,
+        off_ns,
+        off_ns + 300_000_000,
+        force,
+    );
     let tissues = if k_n_per_m > 0.0 {
         vec![tissue(k_n_per_m, 0.003, 0.0, Vec::new())]
     } else {
@@ -142,7 +145,7 @@ fn run(mode: Mode, force: Vec3, k_n_per_m: f64, ramp_ms: u64, hold_ms: u64, seed
         let request = if t == 5 {
             first
         } else if t % 41 == 0 && t > 50 && (!force_mode || t > 100 + ramp_ms + hold_ms / 2) {
-            let s = common::mix(seed ^ t);
+            let s = sar_test_support::messages::mix(seed ^ t);
             let r = |k: u64| unit(s ^ k);
             match (mode, out.guard_state, out.tip, out.pose) {
                 (Mode::Retreat, GuardState::Stop, _, _) => Some(Request::Reset),
@@ -323,7 +326,7 @@ fn run(mode: Mode, force: Vec3, k_n_per_m: f64, ramp_ms: u64, hold_ms: u64, seed
 
 /// A uniform number in [0, 1) from a seed.
 fn unit(seed: u64) -> f64 {
-    (common::mix(seed) >> 11) as f64 / (1u64 << 53) as f64
+    (sar_test_support::messages::mix(seed) >> 11) as f64 / (1u64 << 53) as f64
 }
 
 /// The contact's magnitude along `dir` (the rod along +X0): `frac` of the

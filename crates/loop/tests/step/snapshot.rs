@@ -13,34 +13,31 @@
     clippy::indexing_slicing
 )]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
-use sar_daemon::sim;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{Envelope, Request};
 use sar_loop::step::LoopStep;
 use sar_snapshot::{Snapshot, SnapshotError};
+use sar_test_support::messages::rod_push_20n;
+use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// A step after 3 s of the demo: reset, a push of 1 N into a contact that
 /// rises to a Stop. Returns it and its configuration.
 fn session() -> (LoopStep, config::Config) {
-    let cfg = config::builtin().unwrap();
-    let mut scenario = sim::demo_scenario().unwrap();
-    scenario.spec.contact = common::contact_pulse(
-        2_000_000_000,
-        3_000_000_000,
-        3_500_000_000,
-        4_000_000_000,
-        Vec3::new(20.0, 0.0, 0.0),
-    );
     let SimRig {
         mut c,
         clock,
         operator,
+        cfg,
         ..
-    } = RigBuilder::new(&scenario).config(&cfg).build();
+    } = RigBuilder::demo(rod_push_20n([
+        2_000_000_000,
+        3_000_000_000,
+        3_500_000_000,
+        4_000_000_000,
+    ]))
+    .build();
     let mut seen_stop = false;
     for cycle in 1..=3200u64 {
         if cycle == 1100 {

@@ -9,25 +9,19 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-use common::sim_rig::{RigBuilder, SimRig};
-use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::sim::{ContactKey, SimDrives, SimSensor};
+use sar_drivers::sim::{ContactKey, SimDrives};
 use sar_drivers::{DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{GuardState, Reason};
-use sar_loop::control::{Controller, Envelope, Operator, Reply, ReplyStatus, Request};
-use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep, ReplyDetail};
+use sar_loop::control::{Envelope, ReplyStatus, Request};
+use sar_loop::step::{DriveAction, ReplyDetail};
+use sar_test_support::rig::{RigBuilder, SimRig};
 
-struct Rig {
-    c: Controller<SimSensor<SimClock>, SimDrives<SimClock>>,
-    clock: SimClock,
-    operator: Operator,
-    cycle: u64,
-    log: Vec<(LoopInput, LoopOutput)>,
-    cfg: config::Config,
-}
+/// The demo robot on the simulator, ready (see [`SimRig`]).
+struct Rig(SimRig<SimDrives<SimClock>>);
+
+sar_test_support::deref_rig!(Rig => SimRig<SimDrives<SimClock>>);
 
 impl Rig {
     /// The demo robot with `contact` (simulator keys), reset at the start.
@@ -37,21 +31,10 @@ impl Rig {
 
     /// [`Rig::new`] with faults on demand.
     fn with_faults(contact: Vec<ContactKey>, faults: Vec<sar_drivers::sim::Fault>) -> Self {
-        let cfg = config::builtin().unwrap();
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = contact;
         scenario.spec.faults = faults;
-        let SimRig {
-            c, clock, operator, ..
-        } = RigBuilder::new(&scenario).config(&cfg).build();
-        let mut rig = Self {
-            c,
-            clock,
-            operator,
-            cycle: 0,
-            log: Vec::new(),
-            cfg,
-        };
+        let mut rig = Self(RigBuilder::new(&scenario).build());
         // The automatic reset, accepted once the mean at rest is complete
         // (500 samples of the 500 Hz sensor: 1000 cycles).
         for _ in 0..1020 {
@@ -62,58 +45,15 @@ impl Rig {
         rig
     }
 
-    fn step(&mut self) -> LoopOutput {
-        self.cycle += 1;
-        self.clock.advance_ns(1_000_000);
-        let clock = self.clock.clone();
-        self.c.step(self.cycle, || Some(clock.now_ns()));
-        let d = *self.c.decision();
-        self.log.push((*self.c.loop_input(), d));
-        d
-    }
-
-    fn request(&mut self, id: u64, request: Request) -> Reply {
-        self.operator
-            .requests
-            .push(Envelope { id, request })
-            .unwrap();
-        self.step();
-        let r = self.operator.replies.pop().unwrap();
-        assert_eq!(r.id, id);
-        r
-    }
-
-    fn until(&mut self, max: u32, done: impl Fn(&LoopOutput) -> bool) -> Option<LoopOutput> {
-        (0..max).map(|_| self.step()).find(|d| done(d))
-    }
-
     fn tip(&self) -> Vec3 {
         self.c.output().pose.unwrap().tip_m
-    }
-
-    /// The run's inputs through a fresh step give the same decisions.
-    fn replays_bit_for_bit(&self) {
-        let scenario = sim::demo_scenario().unwrap();
-        let bias = sar_estimator::cycle::Bias {
-            force_n: scenario.spec.sensor.bias_n,
-            torque_nm: scenario.spec.sensor.bias_nm,
-        };
-        let mut step = LoopStep::new(&self.cfg.estimator, bias, self.cfg.step_config()).unwrap();
-        for (k, (input, recorded)) in self.log.iter().enumerate() {
-            let again = step.step(input);
-            assert_eq!(
-                format!("{again:?}"),
-                format!("{recorded:?}"),
-                "cycle {k} differs"
-            );
-        }
     }
 }
 
 /// 20 N along the rod (+X0) from 0.1 s to `off_s`, gone 0.1 s later.
 fn push(off_s: f64) -> Vec<ContactKey> {
     let off_ns = (off_s * 1e9) as u64;
-    common::contact_pulse(
+    sar_test_support::messages::contact_pulse(
         1_100_000_000,
         1_200_000_000,
         1_000_000_000 + off_ns,

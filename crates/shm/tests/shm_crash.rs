@@ -3,7 +3,8 @@
 //! services with its publishing thread, publishes, holds a subscriber's
 //! borrowed sample, and is killed with SIGKILL (no destructor runs). A new
 //! daemon with the same prefix then starts in this process, and a client
-//! receives its state. (`tests/e2e.rs` does the same with `sard` itself.)
+//! receives its state. (`crates/daemon/tests/e2e.rs` does the same with `sard`
+//! itself.)
 
 #![allow(
     clippy::unwrap_used,
@@ -11,6 +12,10 @@
     clippy::panic,
     clippy::indexing_slicing
 )]
+
+// The slow-subscriber tests, in this binary (one binary: less to link).
+#[path = "shm/shm_slow_subscriber.rs"]
+mod shm_slow_subscriber;
 
 use sar_loop::control::Operator;
 use sar_msgs::wire::StateMsg;

@@ -15,56 +15,33 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-mod common;
-use common::mix;
-use common::sim_rig::{RigBuilder, SimRig};
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::sim::{ContactKey, SimDrives, SimError};
-use sar_drivers::{AxisDrives, DriveState, JointPositions, SimClock};
+use sar_drivers::{AxisDrives, DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_kinematics::ActiveJoints;
 use sar_loop::control::{Envelope, ReplyStatus, Request};
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
+use sar_test_support::drives::{DriveHook, Hooked};
+use sar_test_support::messages::mix;
+use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// Simulated drives that refuse a quick stop when told to (seeded).
 struct Flaky {
-    inner: SimDrives<SimClock>,
     seed: u64,
     calls: u64,
 }
 
-impl AxisDrives for Flaky {
-    type Error = SimError;
-    fn positions(&mut self) -> Result<JointPositions, SimError> {
-        self.inner.positions()
-    }
-    fn state(&mut self) -> Result<DriveState, SimError> {
-        self.inner.state()
-    }
-    fn enable(&mut self) -> Result<(), SimError> {
-        self.inner.enable()
-    }
-    fn disable(&mut self) -> Result<(), SimError> {
-        self.inner.disable()
-    }
-    fn stream(&mut self, t: ActiveJoints, period_ns: u64) -> Result<(), SimError> {
-        self.inner.stream(t, period_ns)
-    }
-    fn set_targets(&mut self, t: ActiveJoints) -> Result<(), SimError> {
-        self.inner.set_targets(t)
-    }
-    fn quick_stop(&mut self) -> Result<(), SimError> {
+impl DriveHook<SimDrives<SimClock>> for Flaky {
+    fn quick_stop(&mut self, inner: &mut SimDrives<SimClock>) -> Result<(), SimError> {
         self.calls += 1;
         if mix(self.seed ^ self.calls).is_multiple_of(3) {
             return Err(SimError::Busy);
         }
-        self.inner.quick_stop()
-    }
-    fn fault_reset(&mut self) -> Result<(), SimError> {
-        self.inner.fault_reset()
+        inner.quick_stop()
     }
 }
 
@@ -143,11 +120,7 @@ fn run(seed: u64) {
     } = RigBuilder::new(&scenario)
         .config(&cfg)
         .step_config(step_config)
-        .build_with(|drives| Flaky {
-            inner: drives,
-            seed,
-            calls: 0,
-        });
+        .build_with(|drives| Hooked::new(drives, Flaky { seed, calls: 0 }));
     let mut recorded: Vec<(LoopInput, LoopOutput)> = Vec::new();
     let mut previous: Option<(GuardState, Option<ActiveJoints>)> = None;
     let (mut moves, mut stops, mut warns, mut warn_moves) = (0, 0, 0, 0);
