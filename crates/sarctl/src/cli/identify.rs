@@ -160,12 +160,12 @@ pub fn run(
 /// The live procedure against a running daemon.
 mod live {
     use super::IdentifyArgs;
+    use crate::cli::request::command_msg;
     use crate::identify::IdentifyOptions;
     use crate::identify::dwell::{Dwell, DwellFinder, SensorAverager};
     use crate::identify::poses::{self, PoseTarget};
     use sar_config::Config;
     use sar_kinematics::{Mat3, Vec3};
-    use crate::cli::request::command_msg;
     use sar_msgs::wire::{StateMsg, command_kind, flags, guard_code};
     use sar_shm::{Client, StateSubscription};
     use std::io::{BufRead, Write};

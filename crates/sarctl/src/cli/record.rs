@@ -10,9 +10,7 @@
 //! directory` when it starts).
 
 use super::request::command_msg;
-use sar_msgs::wire::{
-    ReplyMsg, StateMsg, command_kind, recording_code, reply_code, status_name,
-};
+use sar_msgs::wire::{ReplyMsg, StateMsg, command_kind, recording_code, reply_code, status_name};
 use sar_shm::Client;
 use serde_json::json;
 use std::time::{Duration, Instant};

@@ -285,7 +285,10 @@ impl Publisher {
 
 /// Starts the Foxglove server of `ctx` on loopback and the relay on
 /// `opts.bind` in front of it; prints the served URL.
-fn serve(ctx: &Arc<Context>, opts: &ViewOptions) -> Result<foxglove::WebSocketServerHandle, String> {
+fn serve(
+    ctx: &Arc<Context>,
+    opts: &ViewOptions,
+) -> Result<foxglove::WebSocketServerHandle, String> {
     let server = WebSocketServer::new()
         .name(format!("sarctl view ({})", opts.prefix))
         // On loopback: clients connect to the relay.
