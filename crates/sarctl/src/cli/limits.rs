@@ -36,21 +36,13 @@ impl LimitOptions {
     /// The wanted limits in the order of [`ForceLimits::to_array`] (the
     /// wire's `limits_n`); `None` keeps the one in force.
     pub fn wanted(&self) -> [Option<f64>; 6] {
-        let Self {
-            warn_total,
-            stop_total,
-            warn_axial,
-            stop_axial,
-            warn_lateral,
-            stop_lateral,
-        } = *self;
         [
-            warn_total,
-            stop_total,
-            warn_axial,
-            stop_axial,
-            warn_lateral,
-            stop_lateral,
+            self.warn_total,
+            self.stop_total,
+            self.warn_axial,
+            self.stop_axial,
+            self.warn_lateral,
+            self.stop_lateral,
         ]
     }
 }

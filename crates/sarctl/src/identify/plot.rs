@@ -86,6 +86,36 @@ pub fn svg(result: &Identified) -> Result<String, String> {
     Ok(out)
 }
 
+/// The chart of one panel: its caption (text, font size), X = 1/a over
+/// `x` and `y_desc` over `y`.
+fn panel<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, plotters::coord::Shift>,
+    (caption, font_size): (String, i32),
+    x: (f64, f64),
+    y: (f64, f64),
+    y_desc: &str,
+) -> Result<Chart<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", font_size))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x.0..x.1, y.0..y.1)?;
+    chart
+        .configure_mesh()
+        .x_desc("X = 1/a (1/m)")
+        .y_desc(y_desc)
+        .draw()?;
+    Ok(chart)
+}
+
+/// A chart of f64 over f64.
+type Chart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
 /// The upper panel: the fitted line, the full model and the measured force
 /// at each pose, against X = 1/a.
 fn draw_fit<DB: DrawingBackend>(
@@ -93,24 +123,11 @@ fn draw_fit<DB: DrawingBackend>(
     result: &Identified,
     f: &Figure,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let ((x0, x1), (y0, y1)) = (f.x, f.y);
-    let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!(
-                "vertical force at A against 1/a: m = {:.4} kg, c = {:.5} m",
-                result.mass_kg, result.com_m
-            ),
-            ("sans-serif", 20),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, y0..y1)?;
-    chart
-        .configure_mesh()
-        .x_desc("X = 1/a (1/m)")
-        .y_desc("F_A up (N)")
-        .draw()?;
+    let caption = format!(
+        "vertical force at A against 1/a: m = {:.4} kg, c = {:.5} m",
+        result.mass_kg, result.com_m
+    );
+    let mut chart = panel(area, (caption, 20), f.x, f.y, "F_A up (N)")?;
     chart
         .draw_series(LineSeries::new(f.line, RED.stroke_width(2)))?
         .label("m|g| - M|g| X (fitted line)")
@@ -144,23 +161,12 @@ fn draw_residuals<DB: DrawingBackend>(
     result: &Identified,
     f: &Figure,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let ((x0, x1), (r0, r1)) = (f.x, f.r);
-    let mut res = ChartBuilder::on(area)
-        .caption(
-            format!(
-                "residuals (measured - model), RMS {:.3} N, chi2/dof {:.2}",
-                result.residual_rms_n, result.chi2_dof
-            ),
-            ("sans-serif", 18),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1, r0..r1)?;
-    res.configure_mesh()
-        .x_desc("X = 1/a (1/m)")
-        .y_desc("residual (N)")
-        .draw()?;
+    let (x0, x1) = f.x;
+    let caption = format!(
+        "residuals (measured - model), RMS {:.3} N, chi2/dof {:.2}",
+        result.residual_rms_n, result.chi2_dof
+    );
+    let mut res = panel(area, (caption, 18), f.x, f.r, "residual (N)")?;
     res.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], BLACK))?;
     res.draw_series(
         f.residuals
