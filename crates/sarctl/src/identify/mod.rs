@@ -337,7 +337,8 @@ pub fn identify_dwells(
     let tare = Vec3::from(options.tare_n);
     let poses = static_poses(dwells, est, options)?;
     // 1. The linear fit at the configured support.
-    let linear = linear_fit(est, tare, &poses, options)?;
+    let fits = Fits { est, tare, options };
+    let linear = fits.linear(&poses)?;
     // 2. The support calibration (all of B held when it is kept).
     let usable: Vec<(Dwell, StaticPose)> = poses
         .iter()
@@ -345,7 +346,7 @@ pub fn identify_dwells(
         .filter(|(_, p)| !options.friction || p.slide_sign.is_known())
         .collect();
     let left_out = dwells.len() - usable.len();
-    let fit = support_fit(est, tare, &usable, options)?;
+    let fit = fits.support(&usable)?;
     let method = method(options, usable.len(), &fit);
     let used = used_poses(cal, tare, &fit, &usable);
     Ok(Identified {
@@ -428,106 +429,111 @@ fn check_condition(condition: f64, limit: f64, what: &str) -> Result<(), Identif
 /// What the linear fit cannot tell when it is ill-conditioned.
 const LINEAR_CANNOT_TELL: &str = "the linear identification cannot tell m from M and f";
 
-/// The linear identification of (m, M, f) at the configured support.
-fn linear_fit(
-    est: &EstimatorConfig,
+/// What both fits start from: the estimator's configuration (B, g, R_0s,
+/// the noise), the tare and the options.
+struct Fits<'a> {
+    est: &'a EstimatorConfig,
     tare: Vec3,
-    poses: &[(Dwell, StaticPose)],
-    options: &IdentifyOptions,
-) -> Result<IdentificationResult, IdentifyError> {
-    let fit_error = |reason: String| IdentifyError::Fit {
-        fit: "the linear identification",
-        reason,
-    };
-    let mut linear = Identification::new(
-        &est.calibration,
-        &est.noise,
-        tare,
-        IdentificationOptions {
-            bias_across_gravity: false,
-            friction: options.friction,
-        },
-    )
-    .map_err(|e| IdentifyError::Option(e.to_string()))?;
-    for (_, p) in poses {
-        linear.add(p).map_err(|e| fit_error(e.to_string()))?;
-    }
-    let linear = linear.solve().map_err(|e| match e {
-        IdentificationError::IllConditioned { condition, limit } => IdentifyError::IllConditioned {
-            condition,
-            limit,
-            what: LINEAR_CANNOT_TELL.into(),
-        },
-        IdentificationError::TooFewRows { poses, needed, .. } => IdentifyError::TooFewPoses {
-            found: poses as usize,
-            needed: needed.div_ceil(2) as usize,
-            why: dwell_description(&options.dwell),
-        },
-        IdentificationError::NonPositiveMass { mass_kg } => fit_error(format!(
-            "it gives a mass of {mass_kg} kg: the poses cannot tell m from M"
-        )),
-        other => fit_error(other.to_string()),
-    })?;
-    check_condition(linear.condition, options.max_condition, LINEAR_CANNOT_TELL)?;
-    Ok(linear)
+    options: &'a IdentifyOptions,
 }
 
-/// The support calibration of (m, M, B, f) over the `usable` poses (those
-/// with a known slide when friction is estimated).
-fn support_fit(
-    est: &EstimatorConfig,
-    tare: Vec3,
-    usable: &[(Dwell, StaticPose)],
-    options: &IdentifyOptions,
-) -> Result<SupportFit, IdentifyError> {
-    if usable.len() > SUPPORT_CAPACITY {
-        return Err(IdentifyError::TooManyPoses {
-            found: usable.len(),
-            capacity: SUPPORT_CAPACITY,
-        });
-    }
-    let fit_error = |reason: String| IdentifyError::Fit {
-        fit: "the support calibration",
-        reason,
-    };
-    let support_options = SupportOptions {
-        friction: options.friction,
-        calibrate_support: options.calibrate_support,
-        max_chi2_dof: options.max_chi2_dof,
-        ..SupportOptions::default()
-    };
-    let mut support = SupportCalibration::new(&est.calibration, &est.noise, tare, support_options)
-        .map_err(|e| IdentifyError::Option(e.to_string()))?;
-    for (_, p) in usable {
-        support.push(p).map_err(|e| fit_error(e.to_string()))?;
-    }
-    let fit = support.fit().map_err(|e| match e {
-        SupportError::PoorFit { chi2_dof, limit } => IdentifyError::PoorFit { chi2_dof, limit },
-        SupportError::TooFewPoses { poses, .. } => IdentifyError::TooFewPoses {
-            found: poses,
-            needed: unknowns(options) + 1,
-            why: format!(
-                "{}, reached by a slide of the rod",
-                dwell_description(&options.dwell)
-            ),
-        },
-        SupportError::Undetermined { unknown, pivot, .. } => IdentifyError::IllConditioned {
-            condition: if pivot > 0.0 {
-                1.0 / pivot
-            } else {
-                f64::INFINITY
+impl Fits<'_> {
+    /// The linear identification of (m, M, f) at the configured support.
+    fn linear(&self, poses: &[(Dwell, StaticPose)]) -> Result<IdentificationResult, IdentifyError> {
+        let (est, tare, options) = (self.est, self.tare, self.options);
+        let fit_error = |reason: String| IdentifyError::Fit {
+            fit: "the linear identification",
+            reason,
+        };
+        let mut linear = Identification::new(
+            &est.calibration,
+            &est.noise,
+            tare,
+            IdentificationOptions {
+                bias_across_gravity: false,
+                friction: options.friction,
             },
-            limit: options.max_condition,
-            what: format!("the support calibration cannot determine {unknown}"),
-        },
-        other => fit_error(other.to_string()),
-    })?;
-    check_condition(
-        fit.condition,
-        options.max_condition,
-        "the support calibration cannot tell m, M, B and f apart",
-    )?;
-    Ok(fit)
+        )
+        .map_err(|e| IdentifyError::Option(e.to_string()))?;
+        for (_, p) in poses {
+            linear.add(p).map_err(|e| fit_error(e.to_string()))?;
+        }
+        let linear = linear.solve().map_err(|e| match e {
+            IdentificationError::IllConditioned { condition, limit } => {
+                IdentifyError::IllConditioned {
+                    condition,
+                    limit,
+                    what: LINEAR_CANNOT_TELL.into(),
+                }
+            }
+            IdentificationError::TooFewRows { poses, needed, .. } => IdentifyError::TooFewPoses {
+                found: poses as usize,
+                needed: needed.div_ceil(2) as usize,
+                why: dwell_description(&options.dwell),
+            },
+            IdentificationError::NonPositiveMass { mass_kg } => fit_error(format!(
+                "it gives a mass of {mass_kg} kg: the poses cannot tell m from M"
+            )),
+            other => fit_error(other.to_string()),
+        })?;
+        check_condition(linear.condition, options.max_condition, LINEAR_CANNOT_TELL)?;
+        Ok(linear)
+    }
+
+    /// The support calibration of (m, M, B, f) over the `usable` poses (those
+    /// with a known slide when friction is estimated).
+    fn support(&self, usable: &[(Dwell, StaticPose)]) -> Result<SupportFit, IdentifyError> {
+        let (est, tare, options) = (self.est, self.tare, self.options);
+        if usable.len() > SUPPORT_CAPACITY {
+            return Err(IdentifyError::TooManyPoses {
+                found: usable.len(),
+                capacity: SUPPORT_CAPACITY,
+            });
+        }
+        let fit_error = |reason: String| IdentifyError::Fit {
+            fit: "the support calibration",
+            reason,
+        };
+        let support_options = SupportOptions {
+            friction: options.friction,
+            calibrate_support: options.calibrate_support,
+            max_chi2_dof: options.max_chi2_dof,
+            ..SupportOptions::default()
+        };
+        let mut support =
+            SupportCalibration::new(&est.calibration, &est.noise, tare, support_options)
+                .map_err(|e| IdentifyError::Option(e.to_string()))?;
+        for (_, p) in usable {
+            support.push(p).map_err(|e| fit_error(e.to_string()))?;
+        }
+        let fit = support.fit().map_err(|e| match e {
+            SupportError::PoorFit { chi2_dof, limit } => IdentifyError::PoorFit { chi2_dof, limit },
+            SupportError::TooFewPoses { poses, .. } => IdentifyError::TooFewPoses {
+                found: poses,
+                needed: unknowns(options) + 1,
+                why: format!(
+                    "{}, reached by a slide of the rod",
+                    dwell_description(&options.dwell)
+                ),
+            },
+            SupportError::Undetermined { unknown, pivot, .. } => IdentifyError::IllConditioned {
+                condition: if pivot > 0.0 {
+                    1.0 / pivot
+                } else {
+                    f64::INFINITY
+                },
+                limit: options.max_condition,
+                what: format!("the support calibration cannot determine {unknown}"),
+            },
+            other => fit_error(other.to_string()),
+        })?;
+        check_condition(
+            fit.condition,
+            options.max_condition,
+            "the support calibration cannot tell m, M, B and f apart",
+        )?;
+        Ok(fit)
+    }
 }
 
 /// The method, as the report names it: the fit, over how many poses, and
