@@ -1,19 +1,37 @@
-//! `sarctl`, the operator's tool: the daemon's state (`status`, `monitor`)
-//! and its commands (`reset`, `tare`, `move-tip`, `limits`), over iceoryx2;
-//! `workspace` (the reachable region) and `completions` (shell completions).
-//! Every command fails with a one-line reason when no daemon runs.
+//! `sarctl`, the operator's tool of the SAR daemon. This file parses the
+//! command line (clap) and dispatches; each subcommand's body is in
+//! `sarctl::cli::NAME` (`view`: `sarctl::view`). The subcommands:
+//!
+//! - `status`: the daemon's latest state, one line or one JSON object.
+//! - `monitor`: the live state, one line per sample (on a terminal, a view).
+//! - `reset`: leave Stop or Fault (faulted drives reset first).
+//! - `retreat`: the way back from a Stop: reset, drives, back out along the rod.
+//! - `tare`: the model-based tare of the force sensor.
+//! - `hold`: force control, the tip held while |F_tip| is below N.
+//! - `push`: force control, the force along the rod regulated to N.
+//! - `position`: the end of force control (the tip holds where it is).
+//! - `move-tip`: move the tip to (X, Y, Z); guarded with `--max-force`.
+//! - `limits`: the guard's force limits, shown or set.
+//! - `view`: the live view, served to Foxglove over a WebSocket.
+//! - `identify`: m and c (and the support) from a recording or live.
+//! - `replay`: the estimator over a recording's inputs, outputs compared.
+//! - `export`: a rosbag2 directory of a recording.
+//! - `recover`: a recording cut short rewritten with its summary and index.
+//! - `workspace`: the reachable region (read-only).
+//! - `completions`: shell completions for bash, zsh or fish.
+//! - `record`: start or stop the daemon's recording.
+//!
+//! The requests to the daemon and its state go over iceoryx2 (`sar-shm`):
+//! every one fails with a one-line reason when no daemon runs. The
+//! recording tools (`replay`, `export`, `recover`) need no daemon.
 
 use clap::{Parser, Subcommand, ValueEnum};
-use sar_estimator::guard::ForceLimits;
-use sar_msgs::wire::{
-    self, CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_state_name, reason_name,
-    recording_code, status_name,
-};
 use sar_shm::{Client, DEFAULT_PREFIX};
-use serde_json::json;
-use std::io::{IsTerminal, Write};
+use sarctl::cli::completions::CompletionShell;
+use sarctl::cli::limits::LimitOptions;
+use sarctl::cli::request::{self, Daemon};
+use sarctl::cli::{self, OUTPUT_CLOSED};
 use std::process::ExitCode;
-use std::time::Duration;
 
 /// The SAR operator's tool.
 #[derive(Debug, Parser)]
@@ -173,32 +191,11 @@ enum Cmd {
     },
 }
 
-/// The shells `sarctl completions` writes for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum CompletionShell {
-    Bash,
-    Zsh,
-    Fish,
-}
-
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 enum RecordAction {
     Start,
     Stop,
 }
-
-/// A write to stdout failed. A reader that went away (`sarctl monitor | head`)
-/// ends the command quietly; any other failure is reported.
-fn output_error(e: std::io::Error) -> String {
-    if e.kind() == std::io::ErrorKind::BrokenPipe {
-        OUTPUT_CLOSED.to_owned()
-    } else {
-        format!("cannot write the output: {e}")
-    }
-}
-
-/// The marker of a closed output (see [`output_error`]).
-const OUTPUT_CLOSED: &str = "output closed";
 
 fn main() -> ExitCode {
     // A closed output pipe (`sarctl status | head -0`) ends sarctl quietly
@@ -219,186 +216,10 @@ fn main() -> ExitCode {
     }
 }
 
-/// The options of `sarctl limits`: one per force limit, named after
-/// [`ForceLimits::NAMES`] (without `_n`, `-` for `_`; checked by a test).
-#[derive(clap::Args, Debug, Clone, Copy, PartialEq)]
-struct LimitOptions {
-    /// Warn limit on |F_tip|, N.
-    #[arg(long)]
-    warn_total: Option<f64>,
-    /// Stop limit on |F_tip|, N.
-    #[arg(long)]
-    stop_total: Option<f64>,
-    /// Warn limit on the axial part, N.
-    #[arg(long)]
-    warn_axial: Option<f64>,
-    /// Stop limit on the axial part, N.
-    #[arg(long)]
-    stop_axial: Option<f64>,
-    /// Warn limit on the lateral part, N.
-    #[arg(long)]
-    warn_lateral: Option<f64>,
-    /// Stop limit on the lateral part, N.
-    #[arg(long)]
-    stop_lateral: Option<f64>,
-}
-
-impl LimitOptions {
-    /// The wanted limits in the order of [`ForceLimits::to_array`] (the
-    /// wire's `limits_n`); `None` keeps the one in force.
-    fn wanted(&self) -> [Option<f64>; 6] {
-        let Self {
-            warn_total,
-            stop_total,
-            warn_axial,
-            stop_axial,
-            warn_lateral,
-            stop_lateral,
-        } = *self;
-        [
-            warn_total,
-            stop_total,
-            warn_axial,
-            stop_axial,
-            warn_lateral,
-            stop_lateral,
-        ]
-    }
-}
-
-/// The guard's six force limits by name ([`ForceLimits::NAMES`], the order
-/// of `limits_n`).
-fn limits_json(l: &[f64; 6]) -> serde_json::Value {
-    let fields = ForceLimits::NAMES
-        .iter()
-        .zip(l)
-        .map(|(name, v)| ((*name).to_owned(), json!(v)));
-    serde_json::Value::Object(fields.collect())
-}
-
-/// One symbol per tenth of a second: |F_tip| against the stop limit, in
-/// ninths (`@`: at or above the stop limit).
-const HISTORY_GLYPHS: [char; 10] = [' ', '.', ':', '-', '=', '+', '*', '#', '%', '@'];
-
-/// The legend printed above `monitor`'s history line.
-const HISTORY_LEGEND: &str = "history: one symbol per 0.1 s, |F_tip| as a share of the stop \
-     limit: ' ' under 1/9, then . : - = + * # % in ninths, @ at or above the stop limit";
-
-/// The glyph of |F_tip| = `norm` against the stop limit `stop`.
-fn history_glyph(norm: f64, stop: f64) -> char {
-    let level = ((norm / stop.max(1e-9)) * 9.0).clamp(0.0, 9.0) as usize;
-    HISTORY_GLYPHS.get(level).copied().unwrap_or('@')
-}
-
-fn state_json(s: &StateMsg) -> serde_json::Value {
-    json!({
-        "cycle": s.cycle,
-        "now_ns": s.now_ns,
-        "sensor_age_ns": (s.sensor_age_ns != u64::MAX).then_some(s.sensor_age_ns),
-        "joints_age_ns": (s.joints_age_ns != u64::MAX).then_some(s.joints_age_ns),
-        "q_m": s.q_m,
-        "q45_rad": (s.flags & flags::POSE != 0).then_some(s.q45_rad),
-        "ujoint_m": (s.flags & flags::POSE != 0).then_some(s.ujoint_m),
-        "tip_m": (s.flags & flags::POSE != 0).then_some(s.tip_m),
-        "support_distance_m": (s.flags & flags::POSE != 0).then_some(s.support_distance_m),
-        "ujoint_force_n": (s.flags & flags::ESTIMATE != 0).then_some(s.ujoint_force_n),
-        "tip_force_n": (s.flags & flags::ESTIMATE != 0).then_some(s.tip_force_n),
-        "tip_std_n": (s.flags & flags::ESTIMATE != 0).then_some(s.tip_std_n),
-        "observable": s.flags & flags::OBSERVABLE != 0,
-        "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
-        "sim_elapsed_ns": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_elapsed_ns),
-        "force_mode": match s.force_mode { 1 => "hold", 2 => "push", _ => "position" },
-        "force_setpoint_n": (s.force_mode != 0).then_some(s.force_setpoint_n),
-        "guarded_stop": (s.guarded_stop_cycle != 0).then(|| json!({
-            "cycle": s.guarded_stop_cycle,
-            "tip_m": s.guarded_stop_tip_m,
-            "force_n": s.guarded_stop_force_n,
-        })),
-        "guard": guard_state_name(s.guard_state),
-        "reason": reason_name(s.guard_reason),
-        "reason_code": s.guard_reason,
-        "halted": s.flags & flags::HALTED != 0,
-        "drive_state": s.drive_state,
-        "drive_state_name": wire::drive_state_name(s.drive_state),
-        "limits_n": s.limits_n,
-        "limits": limits_json(&s.limits_n),
-        "wakeup_ns": {"p50": s.wakeup_ns[0], "p99": s.wakeup_ns[1], "max": s.wakeup_ns[2]},
-        "compute_ns": {"p50": s.compute_ns[0], "p99": s.compute_ns[1], "max": s.compute_ns[2]},
-        "overruns": s.overruns,
-        "quick_stops": s.quick_stops,
-        "publish_queue_drops": s.queue_drops,
-        "publish_errors": s.publish_errors,
-        "recording": recording_code::state(s.recording) == recording_code::ON,
-        "recording_failed": (recording_code::state(s.recording) == recording_code::FAILED)
-            .then(|| sarctl::cli::record::recording_failure(s.recording)),
-        "recorder_drops": s.recorder_drops,
-    })
-}
-
-fn state_line(s: &StateMsg) -> String {
-    let f = s.tip_force_n;
-    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-    let force = if s.flags & flags::ESTIMATE != 0 {
-        format!(
-            "F_tip [{:+7.2} {:+7.2} {:+7.2}] N |F| {:6.2} N (std {:.2})",
-            f[0],
-            f[1],
-            f[2],
-            norm,
-            s.tip_std_n.iter().fold(0.0f64, |a, b| a.max(*b))
-        )
-    } else {
-        "F_tip -- (no estimate)".to_owned()
-    };
-    format!(
-        "cycle {:>8}  {force}  guard {:5} ({})  latency p99 {} us, {} overruns{}",
-        s.cycle,
-        guard_state_name(s.guard_state),
-        reason_name(s.guard_reason),
-        s.wakeup_ns[1] / 1000,
-        s.overruns,
-        if s.recording != 0 || s.recorder_drops != 0 {
-            format!(
-                ", recording {}, {} dropped",
-                match recording_code::state(s.recording) {
-                    recording_code::ON => "on".to_owned(),
-                    recording_code::FAILED => format!(
-                        "FAILED ({}; its file is incomplete)",
-                        sarctl::cli::record::recording_failure(s.recording)
-                    ),
-                    _ => "off".to_owned(),
-                },
-                s.recorder_drops
-            )
-        } else {
-            String::new()
-        }
-    )
-}
-
-/// A bar of |F| against the stop limit, for the terminal view.
-fn bar(s: &StateMsg) -> String {
-    let f = s.tip_force_n;
-    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-    let stop = s.limits_n[1].max(1e-9);
-    let width = 40usize;
-    let filled = ((norm / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
-    let warn_at = ((s.limits_n[0] / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
-    (0..width)
-        .map(|i| {
-            if i < filled {
-                '#'
-            } else if i == warn_at {
-                '|'
-            } else {
-                '.'
-            }
-        })
-        .collect()
-}
-
+/// Runs the subcommand.
 fn run(args: &Args) -> Result<(), String> {
     let json = args.format == Format::Json;
+    let config = args.config.as_deref();
     match &args.command {
         Cmd::Replay {
             input,
@@ -407,324 +228,87 @@ fn run(args: &Args) -> Result<(), String> {
             plot,
             from,
             to,
-        } => {
-            return sarctl::cli::replay::run(&sarctl::cli::replay::Args {
-                config: args.config.as_deref(),
-                input,
-                output: output.as_deref(),
-                compare: compare.as_deref(),
-                json,
-                plot: plot.as_deref(),
-                from_s: *from,
-                to_s: *to,
-            });
-        }
-        Cmd::Recover { file, output } => {
-            return sarctl::cli::recover::run(file, output.as_deref(), json);
-        }
+        } => cli::replay::run(&cli::replay::Args {
+            config,
+            input,
+            output: output.as_deref(),
+            compare: compare.as_deref(),
+            json,
+            plot: plot.as_deref(),
+            from_s: *from,
+            to_s: *to,
+        }),
+        Cmd::Recover { file, output } => cli::recover::run(file, output.as_deref(), json),
         Cmd::Export {
             rosbag2,
             recordings,
-        } => {
-            return sarctl::cli::export::run(rosbag2, recordings, json);
+        } => cli::export::run(rosbag2, recordings, json),
+        Cmd::Completions { shell } => {
+            check_config(args)?;
+            cli::completions::run(<Args as clap::CommandFactory>::command(), *shell)
         }
-        _ => {}
+        Cmd::Workspace => {
+            check_config(args)?;
+            cli::workspace::run(config, &args.prefix, json)
+        }
+        Cmd::Identify(a) => {
+            check_config(args)?;
+            cli::identify::run(config, json, &args.prefix, a)
+        }
+        Cmd::View { bind, scene_hz } => {
+            // Refused as every daemon command when no client can be made.
+            let _client = connect(args)?;
+            sarctl::view::run_cli(&args.prefix, config, bind, *scene_hz)
+        }
+        Cmd::Status => cli::status::run(&connect(args)?, json),
+        Cmd::Monitor { count } => cli::monitor::run(&connect(args)?, json, *count),
+        Cmd::Record { action } => {
+            cli::record::run(&connect(args)?, *action == RecordAction::Start, json)
+        }
+        Cmd::Reset => with_daemon(args, cli::reset::run),
+        Cmd::Retreat { distance } => with_daemon(args, |d| cli::retreat::run(d, *distance)),
+        Cmd::Tare => with_daemon(args, request::tare),
+        Cmd::Hold { max_force } => with_daemon(args, |d| request::hold(d, *max_force)),
+        Cmd::Push { axial } => with_daemon(args, |d| request::push(d, *axial)),
+        Cmd::Position => with_daemon(args, request::position),
+        Cmd::MoveTip { x, y, z, max_force } => {
+            with_daemon(args, |d| request::move_tip(d, [*x, *y, *z], *max_force))
+        }
+        Cmd::Limits { set } => with_daemon(args, |d| cli::limits::run(d, set)),
     }
+}
+
+/// The configuration given with `--config` must load (checked even where
+/// the subcommand does not use it).
+fn check_config(args: &Args) -> Result<(), String> {
     if let Some(path) = &args.config {
         sar_config::load(path).map_err(|e| e.to_string())?;
     }
-    if let Cmd::Completions { shell } = &args.command {
-        let mut cmd = <Args as clap::CommandFactory>::command();
-        let shell = match shell {
-            CompletionShell::Bash => clap_complete::Shell::Bash,
-            CompletionShell::Zsh => clap_complete::Shell::Zsh,
-            CompletionShell::Fish => clap_complete::Shell::Fish,
-        };
-        clap_complete::generate(shell, &mut cmd, "sarctl", &mut std::io::stdout());
-        return Ok(());
-    }
-    if let Cmd::Workspace = &args.command {
-        let cfg = match &args.config {
-            Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
-            None => sar_config::builtin().map_err(|e| e.to_string())?,
-        };
-        let present = Client::new(&args.prefix)
-            .and_then(|c| c.subscribe())
-            .map_err(|e| e.to_string())
-            .and_then(|sub| {
-                sub.latest(Duration::from_secs(2))
-                    .ok_or_else(|| "the daemon published nothing within 2 s".to_owned())
-            })
-            .and_then(|s| {
-                if s.flags & flags::POSE != 0 {
-                    Ok((s.q_m, s.tip_m))
-                } else {
-                    Err("the daemon has no pose now".to_owned())
-                }
-            });
-        let (present, why) = match present {
-            Ok(p) => (Some(p), String::new()),
-            Err(e) => (None, e),
-        };
-        return sarctl::cli::workspace::print(&cfg, present, &why, json);
-    }
-    if let Cmd::Identify(a) = &args.command {
-        let json = args.format == Format::Json;
-        return sarctl::cli::identify::run(args.config.as_deref(), json, &args.prefix, a);
-    }
-    let client = Client::new(&args.prefix).map_err(|e| e.to_string())?;
-    let command_with = |kind: u32, tip_m: [f64; 3], limits_n: [f64; 6]| {
-        client.command(
-            CommandMsg {
-                kind,
-                reserved: 0,
-                id: u64::from(std::process::id()),
-                tip_m,
-                limits_n,
-            },
-            Duration::from_secs(2),
-        )
-    };
-    let command = |kind: u32, tip_m: [f64; 3]| command_with(kind, tip_m, [0.0; 6]);
-    let report = |what: &str, r: &ReplyMsg| -> Result<(), String> {
-        let accepted = r.status == 0 || r.status == 1;
-        if args.format == Format::Json {
-            println!(
-                "{}",
-                json!({"command": what, "accepted": accepted, "status": status_name(r.status),
-                       "status_code": r.status, "reason": reason_name(r.reason),
-                       "reason_code": r.reason, "detail": r.detail_text(), "cycle": r.cycle})
-            );
-        } else if accepted {
-            println!("{what}: {} (cycle {})", status_name(r.status), r.cycle);
-        }
-        if accepted {
-            Ok(())
-        } else {
-            // The daemon's exact cause when it gave one, else the reason's name.
-            let detail = match r.detail_text() {
-                "" => reason_name(r.reason).to_owned(),
-                d => d.to_owned(),
-            };
-            Err(format!("{what}: {}: {detail}", status_name(r.status)))
-        }
-    };
-    match args.command {
-        Cmd::Replay { .. }
-        | Cmd::Recover { .. }
-        | Cmd::Export { .. }
-        | Cmd::Workspace
-        | Cmd::Completions { .. } => Ok(()),
-        Cmd::Record { action } => {
-            sarctl::cli::record::run(&client, action == RecordAction::Start, json)
-        }
-        Cmd::Status => {
-            let sub = client.subscribe().map_err(|e| e.to_string())?;
-            let s = sub
-                .latest(Duration::from_secs(2))
-                .ok_or("the daemon published nothing within 2 s")?;
-            if args.format == Format::Json {
-                println!("{}", state_json(&s));
-            } else {
-                println!("{}", state_line(&s));
-            }
-            Ok(())
-        }
-        Cmd::Monitor { count } => {
-            let sub = client.subscribe().map_err(|e| e.to_string())?;
-            let live = args.format == Format::Text && std::io::stdout().is_terminal();
-            let mut seen = 0u64;
-            let mut history: Vec<char> = Vec::new();
-            let mut stdout = std::io::stdout().lock();
-            let mut last_print = std::time::Instant::now();
-            let mut idle = std::time::Instant::now();
-            loop {
-                let mut batch: Vec<StateMsg> = Vec::new();
-                sub.wait(Duration::from_millis(200), |s| batch.push(*s));
-                if batch.is_empty() {
-                    if idle.elapsed() > Duration::from_secs(2) {
-                        return Err("the daemon stopped publishing".to_owned());
-                    }
-                    continue;
-                }
-                idle = std::time::Instant::now();
-                for s in &batch {
-                    seen += 1;
-                    if args.format == Format::Json {
-                        writeln!(stdout, "{}", state_json(s)).map_err(output_error)?;
-                    } else if !live {
-                        writeln!(stdout, "{}", state_line(s)).map_err(output_error)?;
-                    }
-                    if count.is_some_and(|c| seen >= c) {
-                        return Ok(());
-                    }
-                }
-                if live && last_print.elapsed() > Duration::from_millis(100) {
-                    last_print = std::time::Instant::now();
-                    if let Some(s) = batch.last() {
-                        let f = s.tip_force_n;
-                        let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-                        history.push(history_glyph(norm, s.limits_n[1]));
-                        if history.len() > 60 {
-                            history.remove(0);
-                        }
-                        let h: String = history.iter().collect();
-                        write!(
-                            stdout,
-                            "\x1b[2J\x1b[H{}\n|F_tip| {:6.2} N [{}] stop {:.1} N\n{HISTORY_LEGEND}\nhistory (10 s) [{h}]\n",
-                            state_line(s),
-                            norm,
-                            bar(s),
-                            s.limits_n[1]
-                        )
-                        .map_err(output_error)?;
-                        stdout.flush().map_err(output_error)?;
-                    }
-                }
-            }
-        }
-        Cmd::View { ref bind, scene_hz } => {
-            sarctl::view::run_cli(&args.prefix, args.config.as_deref(), bind, scene_hz)
-        }
-        Cmd::Identify(_) => Ok(()), // run above, without a daemon
-        Cmd::Reset => {
-            // Faulted drives are reset first: then the guard's reset.
-            let mut r = command(command_kind::RESET, [0.0; 3]).map_err(|e| e.to_string())?;
-            for _ in 0..10 {
-                if r.status != sar_msgs::wire::ReplyStatus::DrivesFaultReset as u32 {
-                    break;
-                }
-                std::thread::sleep(Duration::from_millis(100));
-                r = command(command_kind::RESET, [0.0; 3]).map_err(|e| e.to_string())?;
-            }
-            report("reset", &r)
-        }
-        Cmd::Retreat { distance } => {
-            let sub = client.subscribe().map_err(|e| e.to_string())?;
-            let latest = |what: &str| {
-                sub.latest(Duration::from_secs(2)).ok_or_else(|| {
-                    format!("retreat: the daemon published nothing within 2 s ({what})")
-                })
-            };
-            let s = latest("start")?;
-            if s.flags & flags::HALTED != 0 {
-                let r = command(command_kind::RESET, [0.0; 3]).map_err(|e| e.to_string())?;
-                report("retreat: reset", &r)?;
-            }
-            // The drives come back within a few cycles after the reset.
-            let deadline = std::time::Instant::now() + Duration::from_secs(5);
-            let s = loop {
-                let s = latest("waiting for the drives")?;
-                if s.drive_state == 2 && s.flags & flags::HALTED == 0 {
-                    break s;
-                }
-                if std::time::Instant::now() > deadline {
-                    return Err(format!(
-                        "retreat: the drives are not enabled after 5 s (guard {}: {})",
-                        guard_state_name(s.guard_state),
-                        reason_name(s.guard_reason)
-                    ));
-                }
-                std::thread::sleep(Duration::from_millis(20));
-            };
-            if !json {
-                println!(
-                    "retreat: guard {} ({}), backing out {distance} m along the rod",
-                    guard_state_name(s.guard_state),
-                    reason_name(s.guard_reason)
-                );
-            }
-            report(
-                "retreat: back out",
-                &command(command_kind::BACK_OUT, [distance, 0.0, 0.0])
-                    .map_err(|e| e.to_string())?,
-            )
-        }
-        Cmd::Tare => report(
-            "tare",
-            &command(command_kind::TARE, [0.0; 3]).map_err(|e| e.to_string())?,
-        ),
-        Cmd::Hold { max_force } => report(
-            "hold",
-            &command_with(
-                command_kind::HOLD,
-                [0.0; 3],
-                [max_force, 0.0, 0.0, 0.0, 0.0, 0.0],
-            )
-            .map_err(|e| e.to_string())?,
-        ),
-        Cmd::Push { axial } => report(
-            "push",
-            &command_with(
-                command_kind::PUSH,
-                [0.0; 3],
-                [axial, 0.0, 0.0, 0.0, 0.0, 0.0],
-            )
-            .map_err(|e| e.to_string())?,
-        ),
-        Cmd::Position => report(
-            "position",
-            &command(command_kind::POSITION, [0.0; 3]).map_err(|e| e.to_string())?,
-        ),
-        Cmd::MoveTip {
-            x,
-            y,
-            z,
-            max_force: None,
-        } => report(
-            "move-tip",
-            &command(command_kind::MOVE_TIP, [x, y, z]).map_err(|e| e.to_string())?,
-        ),
-        Cmd::MoveTip {
-            x,
-            y,
-            z,
-            max_force: Some(n),
-        } => report(
-            "move-tip (guarded)",
-            &command_with(
-                command_kind::GUARDED_MOVE,
-                [x, y, z],
-                [n, 0.0, 0.0, 0.0, 0.0, 0.0],
-            )
-            .map_err(|e| e.to_string())?,
-        ),
-        Cmd::Limits { set } => {
-            let mut r = command(command_kind::LIMITS, [0.0; 3]).map_err(|e| e.to_string())?;
-            let wanted = set.wanted();
-            if wanted.iter().any(Option::is_some) {
-                let mut limits_n = r.limits_n;
-                for (slot, value) in limits_n.iter_mut().zip(wanted) {
-                    if let Some(v) = value {
-                        *slot = v;
-                    }
-                }
-                r = command_with(command_kind::SET_LIMITS, [0.0; 3], limits_n)
-                    .map_err(|e| e.to_string())?;
-                if r.status != 0 {
-                    return Err(format!(
-                        "limits: {}: {}",
-                        status_name(r.status),
-                        r.detail_text()
-                    ));
-                }
-                r = command(command_kind::LIMITS, [0.0; 3]).map_err(|e| e.to_string())?;
-            }
-            let l = r.limits_n;
-            if args.format == Format::Json {
-                println!("{}", limits_json(&l));
-            } else {
-                println!("{}", ForceLimits::from_array(l));
-            }
-            let _ = wire::guard_code::OK;
-            Ok(())
-        }
-    }
+    Ok(())
+}
+
+/// The client of the daemon (after the configuration's check).
+fn connect(args: &Args) -> Result<Client, String> {
+    check_config(args)?;
+    Client::new(&args.prefix).map_err(|e| e.to_string())
+}
+
+/// Runs `f` with the daemon's command service.
+fn with_daemon(
+    args: &Args,
+    f: impl FnOnce(&Daemon<'_>) -> Result<(), String>,
+) -> Result<(), String> {
+    let client = connect(args)?;
+    f(&Daemon {
+        client: &client,
+        json: args.format == Format::Json,
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sar_estimator::guard::ForceLimits;
 
     #[test]
     #[allow(clippy::unwrap_used, clippy::panic, clippy::indexing_slicing)]
@@ -753,32 +337,18 @@ mod tests {
     }
 
     #[test]
-    fn the_limits_json_and_text_name_the_six_in_wire_order() {
-        let l = [1.0, 2.0, 3.5, 4.0, 5.0, 6.25];
-        assert_eq!(
-            limits_json(&l),
-            json!({"warn_total_n": 1.0, "stop_total_n": 2.0, "warn_axial_n": 3.5,
-                   "stop_axial_n": 4.0, "warn_lateral_n": 5.0, "stop_lateral_n": 6.25})
-        );
-        assert_eq!(
-            ForceLimits::from_array(l).to_string(),
-            "warn/stop total 1/2 N, axial 3.5/4 N, lateral 5/6.25 N"
-        );
-    }
-
-    #[test]
-    fn the_history_legend_matches_the_glyphs() {
-        // The glyphs between the blank and `@`, in order, then `@`.
-        let middle: Vec<String> = HISTORY_GLYPHS[1..9].iter().map(char::to_string).collect();
-        assert!(
-            HISTORY_LEGEND.contains(&middle.join(" ")),
-            "{HISTORY_LEGEND}"
-        );
-        assert!(HISTORY_LEGEND.contains("@ at or above"), "{HISTORY_LEGEND}");
-        assert_eq!(history_glyph(0.0, 15.0), ' ');
-        assert_eq!(history_glyph(15.0 / 9.0, 15.0), '.');
-        assert_eq!(history_glyph(14.9, 15.0), '%');
-        assert_eq!(history_glyph(15.0, 15.0), '@');
-        assert_eq!(history_glyph(100.0, 15.0), '@');
+    #[allow(clippy::unwrap_used)]
+    fn the_header_names_every_subcommand() {
+        let header: String = include_str!("main.rs")
+            .lines()
+            .take_while(|l| l.starts_with("//!"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let cmd = <Args as clap::CommandFactory>::command();
+        let names: Vec<&str> = cmd.get_subcommands().map(|c| c.get_name()).collect();
+        assert_eq!(names.len(), 18, "{names:?}");
+        for name in names {
+            assert!(header.contains(&format!("//! - `{name}`: ")), "{name}");
+        }
     }
 }

@@ -160,12 +160,13 @@ pub fn run(
 /// The live procedure against a running daemon.
 mod live {
     use super::IdentifyArgs;
+    use crate::cli::request::command_msg;
     use crate::identify::IdentifyOptions;
     use crate::identify::dwell::{Dwell, DwellFinder, SensorAverager};
     use crate::identify::poses::{self, PoseTarget};
     use sar_config::Config;
     use sar_kinematics::{Mat3, Vec3};
-    use sar_msgs::wire::{CommandMsg, StateMsg, command_kind, flags, guard_code};
+    use sar_msgs::wire::{StateMsg, command_kind, flags, guard_code};
     use sar_shm::{Client, StateSubscription};
     use std::io::{BufRead, Write};
     use std::time::{Duration, Instant};
@@ -316,62 +317,15 @@ mod live {
         let mut retries = 0u32;
         let mut warn_since: Option<Instant> = None;
         loop {
-            let reply = client
-                .command(
-                    CommandMsg {
-                        kind: command_kind::MOVE_TIP,
-                        reserved: 0,
-                        id: u64::from(std::process::id()),
-                        tip_m: t.tip_m.into(),
-                        limits_n: [0.0; 6],
-                    },
-                    Duration::from_secs(2),
-                )
-                .map_err(|e| e.to_string())?;
-            let in_warn = c.latest.is_some_and(|s| s.guard_state == guard_code::WARN);
-            if reply.status != 0 && !in_warn {
-                return Err(format!(
-                    "the daemon refused the move to {what} (tip {:?} m): status {}, reason {}",
-                    t.tip_m.as_slice(),
-                    reply.status,
-                    sar_msgs::wire::reason_name(reply.reason)
-                ));
-            }
-            // Until arrived, at rest short of it (0.3 s without 2 um of
-            // motion), or the deadline.
-            let mut rest: Option<([f64; 3], Instant)> = None;
-            loop {
-                if Instant::now() >= deadline {
-                    return Err(format!(
-                        "{what} (tip {:?} m) not reached in time ({retries} moves asked again after the guard's Warn braked them)",
-                        t.tip_m.as_slice()
-                    ));
-                }
-                c.follow(sub, Duration::from_millis(50), |_| true)?;
-                let Some(s) = c.latest else { continue };
-                if arrived(&s, t) {
-                    return Ok(());
-                }
-                if s.guard_state == guard_code::WARN {
-                    let since = *warn_since.get_or_insert_with(Instant::now);
-                    if since.elapsed() >= WARN_LIMIT {
-                        return Err(format!(
-                            "the guard stayed in Warn for {:.0} s on the way to {what} ({}): something touches the tip; {RECIPE}",
-                            WARN_LIMIT.as_secs_f64(),
-                            sar_msgs::wire::reason_name(s.guard_reason)
-                        ));
-                    }
-                    continue;
-                }
-                warn_since = None;
-                match rest {
-                    Some((q, at)) if s.q_m.iter().zip(q).all(|(a, b)| (a - b).abs() < 2e-6) => {
-                        if at.elapsed() >= Duration::from_millis(300) {
-                            break;
-                        }
-                    }
-                    _ => rest = Some((s.q_m, Instant::now())),
-                }
+            ask_move(c, client, t, what)?;
+            let watch = MoveWatch {
+                t,
+                what,
+                deadline,
+                retries,
+            };
+            if follow_move(c, sub, &watch, &mut warn_since)? == MoveEnd::Arrived {
+                return Ok(());
             }
             retries += 1;
             if retries > MAX_RETRIES {
@@ -379,6 +333,92 @@ mod live {
                     "{what} (tip {:?} m) not reached: the guard's Warn braked the move {MAX_RETRIES} times",
                     t.tip_m.as_slice()
                 ));
+            }
+        }
+    }
+
+    /// Asks the daemon to move the tip to `t`. A refusal is an error, unless
+    /// the guard is in Warn (the move is then asked again after it).
+    fn ask_move(c: &Collector, client: &Client, t: &PoseTarget, what: &str) -> Result<(), String> {
+        let reply = client
+            .command(
+                command_msg(command_kind::MOVE_TIP, t.tip_m.into(), [0.0; 6]),
+                Duration::from_secs(2),
+            )
+            .map_err(|e| e.to_string())?;
+        let in_warn = c.latest.is_some_and(|s| s.guard_state == guard_code::WARN);
+        if reply.status != 0 && !in_warn {
+            return Err(format!(
+                "the daemon refused the move to {what} (tip {:?} m): status {}, reason {}",
+                t.tip_m.as_slice(),
+                reply.status,
+                sar_msgs::wire::reason_name(reply.reason)
+            ));
+        }
+        Ok(())
+    }
+
+    /// One move being followed: to `t` (named `what`) by `deadline`, after
+    /// `retries` moves asked again.
+    struct MoveWatch<'a> {
+        t: &'a PoseTarget,
+        what: &'a str,
+        deadline: Instant,
+        retries: u32,
+    }
+
+    /// How a followed move ended.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    enum MoveEnd {
+        /// The joints are at the target.
+        Arrived,
+        /// The joints rest short of it (the guard's Warn braked the move).
+        AtRest,
+    }
+
+    /// Follows the state until the joints arrive, or rest short of the
+    /// target (0.3 s without 2 um of motion); the deadline passed, or a Warn
+    /// that lasts [`WARN_LIMIT`] (since `warn_since`), is an error.
+    fn follow_move(
+        c: &mut Collector,
+        sub: &StateSubscription,
+        m: &MoveWatch<'_>,
+        warn_since: &mut Option<Instant>,
+    ) -> Result<MoveEnd, String> {
+        let (t, what) = (m.t, m.what);
+        let mut rest: Option<([f64; 3], Instant)> = None;
+        loop {
+            if Instant::now() >= m.deadline {
+                return Err(format!(
+                    "{what} (tip {:?} m) not reached in time ({} moves asked again after the guard's Warn braked them)",
+                    t.tip_m.as_slice(),
+                    m.retries
+                ));
+            }
+            c.follow(sub, Duration::from_millis(50), |_| true)?;
+            let Some(s) = c.latest else { continue };
+            if arrived(&s, t) {
+                return Ok(MoveEnd::Arrived);
+            }
+            if s.guard_state == guard_code::WARN {
+                let since = *warn_since.get_or_insert_with(Instant::now);
+                if since.elapsed() >= WARN_LIMIT {
+                    return Err(format!(
+                        "the guard stayed in Warn for {:.0} s on the way to {what} ({}): something touches the tip; {RECIPE}",
+                        WARN_LIMIT.as_secs_f64(),
+                        sar_msgs::wire::reason_name(s.guard_reason)
+                    ));
+                }
+                continue;
+            }
+            *warn_since = None;
+            match rest {
+                Some((q, at)) if s.q_m.iter().zip(q).all(|(a, b)| (a - b).abs() < 2e-6) => {
+                    if at.elapsed() >= Duration::from_millis(300) {
+                        return Ok(MoveEnd::AtRest);
+                    }
+                }
+                _ => rest = Some((s.q_m, Instant::now())),
             }
         }
     }

@@ -9,28 +9,42 @@
 //! at most 2 s. The path is absolute (the daemon resolves `[record]
 //! directory` when it starts).
 
-use sar_msgs::wire::{CommandMsg, command_kind, recording_code, reply_code, status_name};
+use super::request::command_msg;
+use sar_msgs::wire::{ReplyMsg, StateMsg, command_kind, recording_code, reply_code, status_name};
 use sar_shm::Client;
 use serde_json::json;
 use std::time::{Duration, Instant};
 
 /// Runs the command; `start` false stops.
 pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
+    let what = if start { "record start" } else { "record stop" };
+    let reply = ask(client, start, what)?;
+    // The first file; a rotation continues in -0001.mcap, -0002.mcap, ...
+    let path = reply.detail_text().to_owned();
+    let s = wait_for_state(client, start, what, reply.cycle)?;
+    if json {
+        println!(
+            "{}",
+            json!({"command": what, "recording": start, "cycle": s.cycle,
+                   "recorder_drops": s.recorder_drops,
+                   "file": (!path.is_empty()).then_some(&path)})
+        );
+    } else {
+        print_text(&s, start, what, &path);
+    }
+    Ok(())
+}
+
+/// Asks the daemon to start (or stop) recording; its answer when it did.
+fn ask(client: &Client, start: bool, what: &str) -> Result<ReplyMsg, String> {
     let kind = if start {
         command_kind::RECORD_START
     } else {
         command_kind::RECORD_STOP
     };
-    let what = if start { "record start" } else { "record stop" };
     let reply = client
         .command(
-            CommandMsg {
-                kind,
-                reserved: 0,
-                id: u64::from(std::process::id()),
-                tip_m: [0.0; 3],
-                limits_n: [0.0; 6],
-            },
+            command_msg(kind, [0.0; 3], [0.0; 6]),
             // The daemon answers once the file is closed (synced to disk).
             sar_shm::RECORD_ANSWER_WAIT + Duration::from_secs(2),
         )
@@ -41,8 +55,18 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
     if reply.status != 0 {
         return Err(format!("{what}: {}", status_name(reply.status)));
     }
-    // The first file; a rotation continues in -0001.mcap, -0002.mcap, ...
-    let path = reply.detail_text().to_owned();
+    Ok(reply)
+}
+
+/// Waits (at most 2 s) until the published state says the daemon records
+/// (`start`) or no longer does; that state. A start whose recording failed
+/// at once (in a state after `reply_cycle`) is an error naming why.
+fn wait_for_state(
+    client: &Client,
+    start: bool,
+    what: &str,
+    reply_cycle: u64,
+) -> Result<StateMsg, String> {
     let sub = client.subscribe().map_err(|e| e.to_string())?;
     let deadline = Instant::now() + Duration::from_secs(2);
     let mut last = None;
@@ -53,7 +77,7 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
         // failure of an earlier recording is cleared before it).
         if start
             && let Some(s) = last
-            && s.cycle > reply.cycle
+            && s.cycle > reply_cycle
             && recording_code::state(s.recording) == recording_code::FAILED
         {
             return Err(format!("{what}: {}", recording_failure(s.recording)));
@@ -61,30 +85,7 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
         if let Some(s) = last
             && (recording_code::state(s.recording) == recording_code::ON) == start
         {
-            if json {
-                println!(
-                    "{}",
-                    json!({"command": what, "recording": start, "cycle": s.cycle,
-                           "recorder_drops": s.recorder_drops,
-                           "file": (!path.is_empty()).then_some(&path)})
-                );
-            } else {
-                println!(
-                    "{what}: {} (cycle {}, {} messages dropped so far)",
-                    if start { "recording" } else { "stopped" },
-                    s.cycle,
-                    s.recorder_drops
-                );
-                if path.is_empty() && !start {
-                    println!("(no recording ran)");
-                } else if !path.is_empty() {
-                    println!(
-                        "{} {path} (after a rotation: -0001.mcap, -0002.mcap, ... beside it)",
-                        if start { "file:" } else { "written to:" }
-                    );
-                }
-            }
-            return Ok(());
+            return Ok(s);
         }
     }
     Err(format!(
@@ -95,6 +96,25 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
             "stop recording"
         }
     ))
+}
+
+/// The text report of a start (stop) seen in state `s`; `path` is the
+/// recording's first file (empty: none).
+fn print_text(s: &StateMsg, start: bool, what: &str, path: &str) {
+    println!(
+        "{what}: {} (cycle {}, {} messages dropped so far)",
+        if start { "recording" } else { "stopped" },
+        s.cycle,
+        s.recorder_drops
+    );
+    if path.is_empty() && !start {
+        println!("(no recording ran)");
+    } else if !path.is_empty() {
+        println!(
+            "{} {path} (after a rotation: -0001.mcap, -0002.mcap, ... beside it)",
+            if start { "file:" } else { "written to:" }
+        );
+    }
 }
 
 /// Why the last recording failed: its OS error ("No space left on device

@@ -9,7 +9,9 @@
 //! article's Figure 9). Without `--config`, the configuration the recording
 //! carries (`sar_config` metadata, written by `sard`).
 
-use sar_record::replay::{ReplayOptions, ReplayReport, SeriesPoint, replay_files};
+use sar_record::replay::{
+    AxisError, Comparison, ReplayOptions, ReplayReport, SeriesPoint, replay_files,
+};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 
@@ -82,31 +84,7 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
 pub fn run(a: &Args<'_>) -> Result<(), String> {
     let inputs = input_files(a.input)?;
     let first = inputs.first().ok_or("replay needs --input REC.mcap")?;
-    let cfg = match a.config {
-        Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
-        None => {
-            let source = sar_record::replay::recorded_config(first)
-                .map_err(|e| match e {
-                    // These name the file themselves.
-                    sar_record::ReadError::Io { .. } | sar_record::ReadError::NotRegular { .. } => {
-                        e.to_string()
-                    }
-                    e => format!("{}: {e}", first.display()),
-                })?
-                .ok_or_else(|| {
-                    format!(
-                        "{}: the recording carries no configuration (not written by sard, or by an older one): give --config FILE",
-                        first.display()
-                    )
-                })?;
-            let origin = format!(
-                "the configuration recorded in {} (from {})",
-                first.display(),
-                source.origin
-            );
-            sar_config::parse(&source.toml, &origin).map_err(|e| e.to_string())?
-        }
-    };
+    let cfg = configuration(a.config, first)?;
     let options = ReplayOptions {
         output: a.output.map(Path::to_path_buf),
         compare: a.compare.map(str::to_owned),
@@ -115,7 +93,51 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
         to_s: a.to_s,
         ..ReplayOptions::from_config(&cfg)
     };
-    let shown = match inputs.as_slice() {
+    let shown = shown(&inputs);
+    let r = replay_files(&inputs, &options).map_err(|e| format!("{shown}: {e}"))?;
+    if let Some(plot) = a.plot {
+        plot_svg(plot, &r.series, a.compare)?;
+    }
+    if a.json {
+        println!("{}", report_json(&r));
+    } else {
+        print_text(&r, &shown);
+    }
+    verdict(&r, &shown, inputs.len())
+}
+
+/// The configuration at `path`, else the one recorded in `first` (the
+/// recording's first file); an error when it carries none.
+fn configuration(path: Option<&Path>, first: &Path) -> Result<sar_config::Config, String> {
+    if let Some(path) = path {
+        return sar_config::load(path).map_err(|e| e.to_string());
+    }
+    let source = sar_record::replay::recorded_config(first)
+        .map_err(|e| match e {
+            // These name the file themselves.
+            sar_record::ReadError::Io { .. } | sar_record::ReadError::NotRegular { .. } => {
+                e.to_string()
+            }
+            e => format!("{}: {e}", first.display()),
+        })?
+        .ok_or_else(|| {
+            format!(
+                "{}: the recording carries no configuration (not written by sard, or by an older one): give --config FILE",
+                first.display()
+            )
+        })?;
+    let origin = format!(
+        "the configuration recorded in {} (from {})",
+        first.display(),
+        source.origin
+    );
+    sar_config::parse(&source.toml, &origin).map_err(|e| e.to_string())
+}
+
+/// The inputs as the messages name them: the file, or the first and the
+/// last of several.
+fn shown(inputs: &[PathBuf]) -> String {
+    match inputs {
         [one] => one.display().to_string(),
         [first, .., last] => format!(
             "{} .. {} ({} files)",
@@ -124,68 +146,76 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
             inputs.len()
         ),
         [] => String::new(),
-    };
-    let r = replay_files(&inputs, &options).map_err(|e| format!("{shown}: {e}"))?;
-    if let Some(plot) = a.plot {
-        plot_svg(plot, &r.series, a.compare)?;
     }
-    if a.json {
-        println!("{}", report_json(&r));
-    } else {
+}
+
+/// The text report: what was replayed, compared and passed over.
+fn print_text(r: &ReplayReport, shown: &str) {
+    println!(
+        "{}: {} cycles replayed ({}), {} outputs{}",
+        shown,
+        r.cycles,
+        r.mode.name(),
+        r.outputs,
+        r.output
+            .as_ref()
+            .map(|p| format!(" written to {}", p.display()))
+            .unwrap_or_default()
+    );
+    if let Some(c) = r.from_snapshot {
         println!(
-            "{}: {} cycles replayed ({}), {} outputs{}",
-            shown,
-            r.cycles,
-            r.mode.name(),
-            r.outputs,
-            r.output
-                .as_ref()
-                .map(|p| format!(" written to {}", p.display()))
-                .unwrap_or_default()
+            "started from the snapshot after cycle {c} ({} earlier cycles in the file skipped)",
+            r.skipped_cycles
         );
-        if let Some(c) = r.from_snapshot {
-            println!(
-                "started from the snapshot after cycle {c} ({} earlier cycles in the file skipped)",
-                r.skipped_cycles
-            );
-        }
-        if r.snapshots_compared > 0 {
-            println!(
-                "{} recorded snapshots compared with the replayed state",
-                r.snapshots_compared
-            );
-        }
-        if r.compared > 0 || r.differences > 0 {
-            println!(
-                "compared with the recorded outputs: {} messages, {} differ",
-                r.compared, r.differences
-            );
-        }
-        if let Some(c) = &r.comparison {
-            println!(
-                "against {} ({} pairs, {} left out): e_ra {:.4} {:.4} {:.4}, RMS {:.3} {:.3} {:.3} N, max {:.3} {:.3} {:.3} N (X Y Z)",
-                c.topic,
-                c.pairs,
-                c.left_out,
-                c.axes[0].e_ra,
-                c.axes[1].e_ra,
-                c.axes[2].e_ra,
-                c.axes[0].rms_n,
-                c.axes[1].rms_n,
-                c.axes[2].rms_n,
-                c.axes[0].max_n,
-                c.axes[1].max_n,
-                c.axes[2].max_n
-            );
-        }
-        for g in &r.gaps {
-            println!("{}", gap_line(g));
-        }
-        if let Some(e) = &r.stopped {
-            println!("the input is cut short: replayed up to its last complete chunk ({e})");
-        }
     }
-    // Never exit 0 over a part not replayed.
+    if r.snapshots_compared > 0 {
+        println!(
+            "{} recorded snapshots compared with the replayed state",
+            r.snapshots_compared
+        );
+    }
+    if r.compared > 0 || r.differences > 0 {
+        println!(
+            "compared with the recorded outputs: {} messages, {} differ",
+            r.compared, r.differences
+        );
+    }
+    if let Some(c) = &r.comparison {
+        println!("{}", comparison_line(c));
+    }
+    for g in &r.gaps {
+        println!("{}", gap_line(g));
+    }
+    if let Some(e) = &r.stopped {
+        println!("the input is cut short: replayed up to its last complete chunk ({e})");
+    }
+}
+
+/// The error figures against the reference topic, X Y Z.
+fn comparison_line(c: &Comparison) -> String {
+    let xyz = |figure: fn(&AxisError) -> f64, digits: usize| {
+        let v: Vec<String> = c
+            .axes
+            .iter()
+            .map(|a| format!("{:.*}", digits, figure(a)))
+            .collect();
+        v.join(" ")
+    };
+    format!(
+        "against {} ({} pairs, {} left out): e_ra {}, RMS {} N, max {} N (X Y Z)",
+        c.topic,
+        c.pairs,
+        c.left_out,
+        xyz(|a| a.e_ra, 4),
+        xyz(|a| a.rms_n, 3),
+        xyz(|a| a.max_n, 3)
+    )
+}
+
+/// The exit: an error for a part not replayed (never exit 0 over one), an
+/// input cut short, no cycle replayable, or a difference from the
+/// recording (`files` inputs: with several, the file is named).
+fn verdict(r: &ReplayReport, shown: &str, files: usize) -> Result<(), String> {
     if let Some(g) = r.gaps.first() {
         return Err(format!(
             "{shown}: {} part(s) not replayed (corrupt, or cycles missing); the first: {}",
@@ -211,7 +241,7 @@ pub fn run(a: &Args<'_>) -> Result<(), String> {
             r.differences,
             d.file
                 .as_ref()
-                .filter(|_| inputs.len() > 1)
+                .filter(|_| files > 1)
                 .map(|f| format!("in {} ", f.display()))
                 .unwrap_or_default(),
             d.cycle,
@@ -325,6 +355,26 @@ pub fn plot_svg(
     use plotters::prelude::*;
     let err = |e: &dyn std::fmt::Display| format!("{}: cannot draw the plot: {e}", path.display());
     let t_max = series.last().map_or(1.0, |p| p.t_s).max(1e-3);
+    let (lo, hi) = force_range_n(series);
+    let pad = ((hi - lo) * 0.05).max(0.1);
+    let root = SVGBackend::new(path, (1200, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let panels = root.split_evenly((3, 1));
+    for (k, area) in panels.iter().enumerate() {
+        let panel = Panel {
+            k,
+            t_max,
+            force_n: (lo - pad)..(hi + pad),
+        };
+        draw_panel(area, &panel, series, reference).map_err(|e| err(&e))?;
+    }
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// (min, max) of the estimate and the reference over `series`, N
+/// ((-1, 1) when none is finite).
+fn force_range_n(series: &[SeriesPoint]) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for p in series {
         for v in p.estimate_n.iter().chain(p.reference_n.iter().flatten()) {
@@ -337,60 +387,66 @@ pub fn plot_svg(
     if !lo.is_finite() {
         (lo, hi) = (-1.0, 1.0);
     }
-    let pad = ((hi - lo) * 0.05).max(0.1);
-    let root = SVGBackend::new(path, (1200, 900)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| err(&e))?;
-    let panels = root.split_evenly((3, 1));
-    let colours = [RED, GREEN, BLUE];
-    let axes = ["X", "Y", "Z"];
-    for (k, area) in panels.iter().enumerate() {
-        let axis = axes.get(k).copied().unwrap_or("?");
-        let mut chart = ChartBuilder::on(area)
-            .caption(
-                format!("tip force F_tip {axis}, base frame (the article's Figure 9)"),
-                ("sans-serif", 16),
-            )
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(50)
-            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))
-            .map_err(|e| err(&e))?;
-        chart
-            .configure_mesh()
-            .x_desc("t (s)")
-            .y_desc(format!("F_{axis} (N)"))
-            .draw()
-            .map_err(|e| err(&e))?;
-        let colour = colours.get(k).copied().unwrap_or(BLACK);
-        if let Some(topic) = reference {
-            chart
-                .draw_series(LineSeries::new(
-                    series
-                        .iter()
-                        .filter_map(|p| Some((p.t_s, *p.reference_n?.get(k)?))),
-                    BLACK.stroke_width(2),
-                ))
-                .map_err(|e| err(&e))?
-                .label(format!("reference {topic}"))
-                .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
-        }
+    (lo, hi)
+}
+
+/// One panel of [`plot_svg`]: axis `k` (0 = X) over `0..t_max` s and the
+/// force range, N.
+struct Panel {
+    k: usize,
+    t_max: f64,
+    force_n: std::ops::Range<f64>,
+}
+
+/// Draws the force along one axis over time: the reference (when there is
+/// one), the estimate and the legend.
+fn draw_panel<DB: plotters::prelude::DrawingBackend>(
+    area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    panel: &Panel,
+    series: &[SeriesPoint],
+    reference: Option<&str>,
+) -> Result<(), plotters::prelude::DrawingAreaErrorKind<DB::ErrorType>> {
+    use plotters::prelude::*;
+    let k = panel.k;
+    let axis = ["X", "Y", "Z"].get(k).copied().unwrap_or("?");
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            format!("tip force F_tip {axis}, base frame (the article's Figure 9)"),
+            ("sans-serif", 16),
+        )
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..panel.t_max, panel.force_n.clone())?;
+    chart
+        .configure_mesh()
+        .x_desc("t (s)")
+        .y_desc(format!("F_{axis} (N)"))
+        .draw()?;
+    let colour = [RED, GREEN, BLUE].get(k).copied().unwrap_or(BLACK);
+    if let Some(topic) = reference {
         chart
             .draw_series(LineSeries::new(
                 series
                     .iter()
-                    .filter_map(|p| Some((p.t_s, *p.estimate_n.get(k)?))),
-                colour.mix(0.7),
-            ))
-            .map_err(|e| err(&e))?
-            .label("estimate (unfiltered, observable)")
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
+                    .filter_map(|p| Some((p.t_s, *p.reference_n?.get(k)?))),
+                BLACK.stroke_width(2),
+            ))?
+            .label(format!("reference {topic}"))
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
     }
-    root.present().map_err(|e| err(&e))?;
-    Ok(())
+    chart
+        .draw_series(LineSeries::new(
+            series
+                .iter()
+                .filter_map(|p| Some((p.t_s, *p.estimate_n.get(k)?))),
+            colour.mix(0.7),
+        ))?
+        .label("estimate (unfiltered, observable)")
+        .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
 }

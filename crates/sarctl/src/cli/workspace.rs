@@ -10,7 +10,11 @@
 
 use sar_config::Config;
 use sar_kinematics::{ActiveJoints, forward};
+use sar_msgs::wire::flags;
+use sar_shm::Client;
 use serde_json::json;
+use std::path::Path;
+use std::time::Duration;
 
 /// Steps of each axis's sweep (ends included).
 pub const SWEEP_STEPS: usize = 101;
@@ -55,6 +59,38 @@ pub fn sweep(cfg: &Config, q_m: [f64; 3]) -> [AxisSweep; 3] {
         }
     }
     out
+}
+
+/// Runs the command: the configuration at `config` (else the built-in one)
+/// and the present pose of the daemon with `prefix`, when one answers.
+pub fn run(config: Option<&Path>, prefix: &str, json: bool) -> Result<(), String> {
+    let cfg = match config {
+        Some(path) => sar_config::load(path).map_err(|e| e.to_string())?,
+        None => sar_config::builtin().map_err(|e| e.to_string())?,
+    };
+    let (present, why) = match present_pose(prefix) {
+        Ok(p) => (Some(p), String::new()),
+        Err(e) => (None, e),
+    };
+    print(&cfg, present, &why, json)
+}
+
+/// The daemon's joint positions and tip now; why not when it has none.
+fn present_pose(prefix: &str) -> Result<([f64; 3], [f64; 3]), String> {
+    Client::new(prefix)
+        .and_then(|c| c.subscribe())
+        .map_err(|e| e.to_string())
+        .and_then(|sub| {
+            sub.latest(Duration::from_secs(2))
+                .ok_or_else(|| "the daemon published nothing within 2 s".to_owned())
+        })
+        .and_then(|s| {
+            if s.flags & flags::POSE != 0 {
+                Ok((s.q_m, s.tip_m))
+            } else {
+                Err("the daemon has no pose now".to_owned())
+            }
+        })
 }
 
 /// Prints the region: `present` is the daemon's joint positions and tip

@@ -27,11 +27,14 @@ pub mod writeback;
 
 use dwell::{Dwell, DwellFinder, DwellOptions, SensorAverager};
 use sar_config::Config;
+use sar_estimator::cycle::EstimatorConfig;
 use sar_estimator::identification::{
     Identification, IdentificationError, IdentificationOptions, IdentificationResult,
 };
-use sar_estimator::support::{SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportOptions};
-use sar_estimator::{StaticPose, Vec3};
+use sar_estimator::support::{
+    SUPPORT_CAPACITY, SupportCalibration, SupportError, SupportFit, SupportOptions,
+};
+use sar_estimator::{Calibration, StaticPose, Vec3};
 use sar_kinematics::forward;
 use sar_msgs::msgs::{ActiveJointState, Topic, WrenchStamped};
 use sar_record::{McapReader, ReadError};
@@ -315,7 +318,9 @@ fn dwell_description(o: &DwellOptions) -> String {
     )
 }
 
-/// Identifies from dwells already found.
+/// Identifies from dwells already found: the poses of the dwells, the
+/// linear fit at the configured support, the support calibration (all of B
+/// held when it is kept), and the report of what was used.
 pub fn identify_dwells(
     dwells: &[Dwell],
     config: &Config,
@@ -324,86 +329,16 @@ pub fn identify_dwells(
     check_options(options)?;
     let est = &config.estimator;
     let cal = &est.calibration;
-    let profile = &est.profile;
-    if profile.offset_m() != 0.0 {
+    if est.profile.offset_m() != 0.0 {
         return Err(IdentifyError::Offset {
-            offset_m: profile.offset_m(),
+            offset_m: est.profile.offset_m(),
         });
     }
     let tare = Vec3::from(options.tare_n);
-    // The poses: A at the mean joints, the mean force.
-    let mut poses: Vec<(Dwell, StaticPose)> = Vec::new();
-    for d in dwells {
-        let Some(force) = d.mean_force_n() else {
-            continue;
-        };
-        let Ok(pose) = forward(cal, profile, &d.joints) else {
-            continue;
-        };
-        poses.push((
-            *d,
-            StaticPose {
-                ujoint_m: pose.ujoint_m,
-                mean_reading_n: Vec3::from(force),
-                samples: d.sensor_samples,
-                slide_sign: d.slide_sign,
-            },
-        ));
-    }
-    let unknowns = 2 + usize::from(options.friction);
-    if poses.len() < unknowns + 1 {
-        return Err(IdentifyError::TooFewPoses {
-            found: poses.len(),
-            needed: unknowns + 1,
-            why: dwell_description(&options.dwell),
-        });
-    }
-
+    let poses = static_poses(dwells, est, options)?;
     // 1. The linear fit at the configured support.
-    let mut linear = Identification::new(
-        cal,
-        &est.noise,
-        tare,
-        IdentificationOptions {
-            bias_across_gravity: false,
-            friction: options.friction,
-        },
-    )
-    .map_err(|e| IdentifyError::Option(e.to_string()))?;
-    for (_, p) in &poses {
-        linear.add(p).map_err(|e| IdentifyError::Fit {
-            fit: "the linear identification",
-            reason: e.to_string(),
-        })?;
-    }
-    let linear = linear.solve().map_err(|e| match e {
-        IdentificationError::IllConditioned { condition, limit } => IdentifyError::IllConditioned {
-            condition,
-            limit,
-            what: "the linear identification cannot tell m from M and f".into(),
-        },
-        IdentificationError::TooFewRows { poses, needed, .. } => IdentifyError::TooFewPoses {
-            found: poses as usize,
-            needed: needed.div_ceil(2) as usize,
-            why: dwell_description(&options.dwell),
-        },
-        IdentificationError::NonPositiveMass { mass_kg } => IdentifyError::Fit {
-            fit: "the linear identification",
-            reason: format!("it gives a mass of {mass_kg} kg: the poses cannot tell m from M"),
-        },
-        other => IdentifyError::Fit {
-            fit: "the linear identification",
-            reason: other.to_string(),
-        },
-    })?;
-    if linear.condition > options.max_condition {
-        return Err(IdentifyError::IllConditioned {
-            condition: linear.condition,
-            limit: options.max_condition,
-            what: "the linear identification cannot tell m from M and f".into(),
-        });
-    }
-
+    let fits = Fits { est, tare, options };
+    let linear = fits.linear(&poses)?;
     // 2. The support calibration (all of B held when it is kept).
     let usable: Vec<(Dwell, StaticPose)> = poses
         .iter()
@@ -411,110 +346,9 @@ pub fn identify_dwells(
         .filter(|(_, p)| !options.friction || p.slide_sign.is_known())
         .collect();
     let left_out = dwells.len() - usable.len();
-    if usable.len() > SUPPORT_CAPACITY {
-        return Err(IdentifyError::TooManyPoses {
-            found: usable.len(),
-            capacity: SUPPORT_CAPACITY,
-        });
-    }
-    let support_options = SupportOptions {
-        friction: options.friction,
-        calibrate_support: options.calibrate_support,
-        max_chi2_dof: options.max_chi2_dof,
-        ..SupportOptions::default()
-    };
-    let mut support = SupportCalibration::new(cal, &est.noise, tare, support_options)
-        .map_err(|e| IdentifyError::Option(e.to_string()))?;
-    for (_, p) in &usable {
-        support.push(p).map_err(|e| IdentifyError::Fit {
-            fit: "the support calibration",
-            reason: e.to_string(),
-        })?;
-    }
-    let fit = support.fit().map_err(|e| match e {
-        SupportError::PoorFit { chi2_dof, limit } => IdentifyError::PoorFit { chi2_dof, limit },
-        SupportError::TooFewPoses { poses, .. } => IdentifyError::TooFewPoses {
-            found: poses,
-            needed: unknowns + 1,
-            why: format!(
-                "{}, reached by a slide of the rod",
-                dwell_description(&options.dwell)
-            ),
-        },
-        SupportError::Undetermined { unknown, pivot, .. } => IdentifyError::IllConditioned {
-            condition: if pivot > 0.0 {
-                1.0 / pivot
-            } else {
-                f64::INFINITY
-            },
-            limit: options.max_condition,
-            what: format!("the support calibration cannot determine {unknown}"),
-        },
-        other => IdentifyError::Fit {
-            fit: "the support calibration",
-            reason: other.to_string(),
-        },
-    })?;
-    if fit.condition > options.max_condition {
-        return Err(IdentifyError::IllConditioned {
-            condition: fit.condition,
-            limit: options.max_condition,
-            what: "the support calibration cannot tell m, M, B and f apart".into(),
-        });
-    }
-
-    let names = ["B_x", "B_y", "B_z"];
-    let held: Vec<&str> = names
-        .iter()
-        .zip(fit.held)
-        .filter_map(|(n, h)| h.then_some(*n))
-        .collect();
-    let method = if options.calibrate_support {
-        format!(
-            "support calibration (MODEL.md 5.1): noise-weighted Levenberg-Marquardt of (m, M, B{}) over {} static poses{}, started from the linear fit at the configured B; {}",
-            if options.friction { ", f" } else { "" },
-            usable.len(),
-            if fit.from_search {
-                " (global search start)"
-            } else {
-                ""
-            },
-            if held.is_empty() {
-                "all of B determined".to_owned()
-            } else {
-                format!("{} held as configured", held.join(", "))
-            }
-        )
-    } else {
-        format!(
-            "weighted least squares of (m, M{}) over {} static poses at the configured B (MODEL.md 5)",
-            if options.friction { ", f" } else { "" },
-            usable.len()
-        )
-    };
-
-    let g = cal.gravity_mps2();
-    let used = usable
-        .iter()
-        .map(|(d, p)| {
-            let measured = sar_estimator::ujoint_force_n(cal, &p.mean_reading_n, &tare);
-            let r = fit.support_m - p.ujoint_m;
-            let a = r.norm();
-            let u = r / a;
-            let sigma = p.slide_sign.sigma().unwrap_or(0.0);
-            let model = -g * fit.mass_kg
-                + (g - u * g.dot(&u)) * (fit.moment_kgm / a)
-                + u * (sigma * fit.friction_n.unwrap_or(0.0));
-            UsedPose {
-                dwell: *d,
-                pose: *p,
-                support_distance_m: a,
-                measured_n: measured,
-                model_n: model,
-            }
-        })
-        .collect();
-
+    let fit = fits.support(&usable)?;
+    let method = method(options, usable.len(), &fit);
+    let used = used_poses(cal, tare, &fit, &usable);
     Ok(Identified {
         mass_kg: fit.mass_kg,
         mass_std_kg: fit.mass_std_kg,
@@ -534,8 +368,235 @@ pub fn identify_dwells(
         method,
         linear,
         used,
-        gravity_mps2: g.into(),
+        gravity_mps2: cal.gravity_mps2().into(),
     })
+}
+
+/// The unknowns of the fits besides B: m and M, and f with friction.
+fn unknowns(options: &IdentifyOptions) -> usize {
+    2 + usize::from(options.friction)
+}
+
+/// The static poses of the dwells (A at the mean joints, the mean force);
+/// a dwell without a force or a pose is left out. Too few for the
+/// unknowns is an error.
+fn static_poses(
+    dwells: &[Dwell],
+    est: &EstimatorConfig,
+    options: &IdentifyOptions,
+) -> Result<Vec<(Dwell, StaticPose)>, IdentifyError> {
+    let mut poses: Vec<(Dwell, StaticPose)> = Vec::new();
+    for d in dwells {
+        let Some(force) = d.mean_force_n() else {
+            continue;
+        };
+        let Ok(pose) = forward(&est.calibration, &est.profile, &d.joints) else {
+            continue;
+        };
+        poses.push((
+            *d,
+            StaticPose {
+                ujoint_m: pose.ujoint_m,
+                mean_reading_n: Vec3::from(force),
+                samples: d.sensor_samples,
+                slide_sign: d.slide_sign,
+            },
+        ));
+    }
+    let unknowns = unknowns(options);
+    if poses.len() < unknowns + 1 {
+        return Err(IdentifyError::TooFewPoses {
+            found: poses.len(),
+            needed: unknowns + 1,
+            why: dwell_description(&options.dwell),
+        });
+    }
+    Ok(poses)
+}
+
+/// A fit whose condition number is above `limit` cannot tell `what`.
+fn check_condition(condition: f64, limit: f64, what: &str) -> Result<(), IdentifyError> {
+    if condition > limit {
+        return Err(IdentifyError::IllConditioned {
+            condition,
+            limit,
+            what: what.into(),
+        });
+    }
+    Ok(())
+}
+
+/// What the linear fit cannot tell when it is ill-conditioned.
+const LINEAR_CANNOT_TELL: &str = "the linear identification cannot tell m from M and f";
+
+/// What both fits start from: the estimator's configuration (B, g, R_0s,
+/// the noise), the tare and the options.
+struct Fits<'a> {
+    est: &'a EstimatorConfig,
+    tare: Vec3,
+    options: &'a IdentifyOptions,
+}
+
+impl Fits<'_> {
+    /// The linear identification of (m, M, f) at the configured support.
+    fn linear(&self, poses: &[(Dwell, StaticPose)]) -> Result<IdentificationResult, IdentifyError> {
+        let (est, tare, options) = (self.est, self.tare, self.options);
+        let fit_error = |reason: String| IdentifyError::Fit {
+            fit: "the linear identification",
+            reason,
+        };
+        let mut linear = Identification::new(
+            &est.calibration,
+            &est.noise,
+            tare,
+            IdentificationOptions {
+                bias_across_gravity: false,
+                friction: options.friction,
+            },
+        )
+        .map_err(|e| IdentifyError::Option(e.to_string()))?;
+        for (_, p) in poses {
+            linear.add(p).map_err(|e| fit_error(e.to_string()))?;
+        }
+        let linear = linear.solve().map_err(|e| match e {
+            IdentificationError::IllConditioned { condition, limit } => {
+                IdentifyError::IllConditioned {
+                    condition,
+                    limit,
+                    what: LINEAR_CANNOT_TELL.into(),
+                }
+            }
+            IdentificationError::TooFewRows { poses, needed, .. } => IdentifyError::TooFewPoses {
+                found: poses as usize,
+                needed: needed.div_ceil(2) as usize,
+                why: dwell_description(&options.dwell),
+            },
+            IdentificationError::NonPositiveMass { mass_kg } => fit_error(format!(
+                "it gives a mass of {mass_kg} kg: the poses cannot tell m from M"
+            )),
+            other => fit_error(other.to_string()),
+        })?;
+        check_condition(linear.condition, options.max_condition, LINEAR_CANNOT_TELL)?;
+        Ok(linear)
+    }
+
+    /// The support calibration of (m, M, B, f) over the `usable` poses (those
+    /// with a known slide when friction is estimated).
+    fn support(&self, usable: &[(Dwell, StaticPose)]) -> Result<SupportFit, IdentifyError> {
+        let (est, tare, options) = (self.est, self.tare, self.options);
+        if usable.len() > SUPPORT_CAPACITY {
+            return Err(IdentifyError::TooManyPoses {
+                found: usable.len(),
+                capacity: SUPPORT_CAPACITY,
+            });
+        }
+        let fit_error = |reason: String| IdentifyError::Fit {
+            fit: "the support calibration",
+            reason,
+        };
+        let support_options = SupportOptions {
+            friction: options.friction,
+            calibrate_support: options.calibrate_support,
+            max_chi2_dof: options.max_chi2_dof,
+            ..SupportOptions::default()
+        };
+        let mut support =
+            SupportCalibration::new(&est.calibration, &est.noise, tare, support_options)
+                .map_err(|e| IdentifyError::Option(e.to_string()))?;
+        for (_, p) in usable {
+            support.push(p).map_err(|e| fit_error(e.to_string()))?;
+        }
+        let fit = support.fit().map_err(|e| match e {
+            SupportError::PoorFit { chi2_dof, limit } => IdentifyError::PoorFit { chi2_dof, limit },
+            SupportError::TooFewPoses { poses, .. } => IdentifyError::TooFewPoses {
+                found: poses,
+                needed: unknowns(options) + 1,
+                why: format!(
+                    "{}, reached by a slide of the rod",
+                    dwell_description(&options.dwell)
+                ),
+            },
+            SupportError::Undetermined { unknown, pivot, .. } => IdentifyError::IllConditioned {
+                condition: if pivot > 0.0 {
+                    1.0 / pivot
+                } else {
+                    f64::INFINITY
+                },
+                limit: options.max_condition,
+                what: format!("the support calibration cannot determine {unknown}"),
+            },
+            other => fit_error(other.to_string()),
+        })?;
+        check_condition(
+            fit.condition,
+            options.max_condition,
+            "the support calibration cannot tell m, M, B and f apart",
+        )?;
+        Ok(fit)
+    }
+}
+
+/// The method, as the report names it: the fit, over how many poses, and
+/// which components of B were held.
+fn method(options: &IdentifyOptions, poses: usize, fit: &SupportFit) -> String {
+    if !options.calibrate_support {
+        return format!(
+            "weighted least squares of (m, M{}) over {} static poses at the configured B (MODEL.md 5)",
+            if options.friction { ", f" } else { "" },
+            poses
+        );
+    }
+    let names = ["B_x", "B_y", "B_z"];
+    let held: Vec<&str> = names
+        .iter()
+        .zip(fit.held)
+        .filter_map(|(n, h)| h.then_some(*n))
+        .collect();
+    format!(
+        "support calibration (MODEL.md 5.1): noise-weighted Levenberg-Marquardt of (m, M, B{}) over {} static poses{}, started from the linear fit at the configured B; {}",
+        if options.friction { ", f" } else { "" },
+        poses,
+        if fit.from_search {
+            " (global search start)"
+        } else {
+            ""
+        },
+        if held.is_empty() {
+            "all of B determined".to_owned()
+        } else {
+            format!("{} held as configured", held.join(", "))
+        }
+    )
+}
+
+/// Each used pose with the force measured at A and the fitted model's.
+fn used_poses(
+    cal: &Calibration,
+    tare: Vec3,
+    fit: &SupportFit,
+    usable: &[(Dwell, StaticPose)],
+) -> Vec<UsedPose> {
+    let g = cal.gravity_mps2();
+    usable
+        .iter()
+        .map(|(d, p)| {
+            let measured = sar_estimator::ujoint_force_n(cal, &p.mean_reading_n, &tare);
+            let r = fit.support_m - p.ujoint_m;
+            let a = r.norm();
+            let u = r / a;
+            let sigma = p.slide_sign.sigma().unwrap_or(0.0);
+            let model = -g * fit.mass_kg
+                + (g - u * g.dot(&u)) * (fit.moment_kgm / a)
+                + u * (sigma * fit.friction_n.unwrap_or(0.0));
+            UsedPose {
+                dwell: *d,
+                pose: *p,
+                support_distance_m: a,
+                measured_n: measured,
+                model_n: model,
+            }
+        })
+        .collect()
 }
 
 impl Identified {

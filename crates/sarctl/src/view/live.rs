@@ -12,7 +12,7 @@ use sar_msgs::msgs::{Outgoing, Topic};
 use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 use sar_scene::geometry::SceneGeometry;
 use sar_scene::{SCENE_TOPIC, TF_TOPIC, draw as scene, topics};
-use sar_shm::Client;
+use sar_shm::{Client, StateSubscription};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -242,27 +242,59 @@ impl Publisher {
 /// daemon runs with `opts.prefix` or the address cannot be bound.
 pub fn run(opts: &ViewOptions, stop: impl Fn() -> bool) -> Result<(), String> {
     let client = Client::new(&opts.prefix).map_err(|e| e.to_string())?;
-    let mut sub = client.subscribe().map_err(|e| e.to_string())?;
+    let sub = client.subscribe().map_err(|e| e.to_string())?;
     let ctx = Context::new();
-    let records = RecordChannels::new(&ctx)?;
-    let scene = ctx.channel_builder(SCENE_TOPIC).build::<SceneUpdate>();
-    let tf = ctx.channel_builder(TF_TOPIC).build::<FrameTransforms>();
-    let status = ChannelBuilder::new(STATUS_TOPIC)
-        .message_encoding("json")
-        .schema(Schema::new(
-            "sar_view.Status",
-            "jsonschema",
-            STATUS_SCHEMA.as_bytes(),
-        ))
-        .context(&ctx)
-        .build_raw()
-        .map_err(|e| format!("cannot create the channel {STATUS_TOPIC}: {e}"))?;
+    let publisher = Publisher::new(&ctx, opts)?;
+    let server = serve(&ctx, opts)?;
+    follow(&client, sub, publisher, stop);
+    let _ = server.stop();
+    Ok(())
+}
+
+impl Publisher {
+    /// The view's channels in `ctx`, nothing published yet.
+    fn new(ctx: &Arc<Context>, opts: &ViewOptions) -> Result<Self, String> {
+        let records = RecordChannels::new(ctx)?;
+        let scene = ctx.channel_builder(SCENE_TOPIC).build::<SceneUpdate>();
+        let tf = ctx.channel_builder(TF_TOPIC).build::<FrameTransforms>();
+        let status = ChannelBuilder::new(STATUS_TOPIC)
+            .message_encoding("json")
+            .schema(Schema::new(
+                "sar_view.Status",
+                "jsonschema",
+                STATUS_SCHEMA.as_bytes(),
+            ))
+            .context(ctx)
+            .build_raw()
+            .map_err(|e| format!("cannot create the channel {STATUS_TOPIC}: {e}"))?;
+        Ok(Self {
+            records,
+            scene,
+            tf,
+            status,
+            geometry: opts.geometry,
+            scene_period_ns: (1e9 / opts.scene_hz) as u64,
+            next_scene_ns: 0,
+            previous: None,
+            lost: 0,
+            messages: Vec::with_capacity(8),
+            buf: Vec::with_capacity(512),
+        })
+    }
+}
+
+/// Starts the Foxglove server of `ctx` on loopback and the relay on
+/// `opts.bind` in front of it; prints the served URL.
+fn serve(
+    ctx: &Arc<Context>,
+    opts: &ViewOptions,
+) -> Result<foxglove::WebSocketServerHandle, String> {
     let server = WebSocketServer::new()
         .name(format!("sarctl view ({})", opts.prefix))
         // On loopback: clients connect to the relay.
         .bind("127.0.0.1", 0)
         .message_backlog_size(BACKLOG)
-        .context(&ctx)
+        .context(ctx)
         .start_blocking()
         .map_err(|e| format!("cannot start the Foxglove server: {e}"))?;
     let backend = SocketAddr::from(([127, 0, 0, 1], server.port()));
@@ -274,20 +306,18 @@ pub fn run(opts: &ViewOptions, stop: impl Fn() -> bool) -> Result<(), String> {
     );
     use std::io::Write;
     let _ = std::io::stdout().flush();
+    Ok(server)
+}
 
-    let mut publisher = Publisher {
-        records,
-        scene,
-        tf,
-        status,
-        geometry: opts.geometry,
-        scene_period_ns: (1e9 / opts.scene_hz) as u64,
-        next_scene_ns: 0,
-        previous: None,
-        lost: 0,
-        messages: Vec::with_capacity(8),
-        buf: Vec::with_capacity(512),
-    };
+/// Publishes each state of `sub` until `stop()`; a daemon silent for
+/// [`IDLE`] is said on stderr and subscribed to again (a restarted daemon
+/// has new services).
+fn follow(
+    client: &Client,
+    mut sub: StateSubscription,
+    mut publisher: Publisher,
+    stop: impl Fn() -> bool,
+) {
     let mut last = Instant::now();
     let mut waiting = false;
     while !stop() {
@@ -311,8 +341,6 @@ pub fn run(opts: &ViewOptions, stop: impl Fn() -> bool) -> Result<(), String> {
             last = Instant::now();
         }
     }
-    let _ = server.stop();
-    Ok(())
 }
 
 #[cfg(test)]

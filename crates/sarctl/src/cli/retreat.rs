@@ -1,0 +1,59 @@
+//! `sarctl retreat [--distance D]`: the way back from a Stop. It resets the
+//! guard when the daemon is halted (into Retreat while the force persists),
+//! waits until the drives are enabled (at most 5 s), then backs the tip out
+//! `D` m along the rod at the retreat speed.
+
+use super::request::Daemon;
+use sar_msgs::wire::{StateMsg, command_kind, flags, guard_state_name, reason_name};
+use sar_shm::StateSubscription;
+use std::time::{Duration, Instant};
+
+/// How long the drives may take to come back after the reset.
+const DRIVES_WAIT: Duration = Duration::from_secs(5);
+
+/// Runs the command.
+pub fn run(daemon: &Daemon<'_>, distance_m: f64) -> Result<(), String> {
+    let sub = daemon.client.subscribe().map_err(|e| e.to_string())?;
+    if latest(&sub, "start")?.flags & flags::HALTED != 0 {
+        let r = daemon.send_tip(command_kind::RESET, [0.0; 3])?;
+        daemon.report("retreat: reset", &r)?;
+    }
+    let s = wait_for_drives(&sub)?;
+    if !daemon.json {
+        println!(
+            "retreat: guard {} ({}), backing out {distance_m} m along the rod",
+            guard_state_name(s.guard_state),
+            reason_name(s.guard_reason)
+        );
+    }
+    daemon.report(
+        "retreat: back out",
+        &daemon.send_tip(command_kind::BACK_OUT, [distance_m, 0.0, 0.0])?,
+    )
+}
+
+/// The daemon's latest state; `what` names the step that waited for it.
+fn latest(sub: &StateSubscription, what: &str) -> Result<StateMsg, String> {
+    sub.latest(Duration::from_secs(2))
+        .ok_or_else(|| format!("retreat: the daemon published nothing within 2 s ({what})"))
+}
+
+/// Waits until the drives are enabled and the daemon not halted (they come
+/// back within a few cycles after the reset); that state.
+fn wait_for_drives(sub: &StateSubscription) -> Result<StateMsg, String> {
+    let deadline = Instant::now() + DRIVES_WAIT;
+    loop {
+        let s = latest(sub, "waiting for the drives")?;
+        if s.drive_state == 2 && s.flags & flags::HALTED == 0 {
+            return Ok(s);
+        }
+        if Instant::now() > deadline {
+            return Err(format!(
+                "retreat: the drives are not enabled after 5 s (guard {}: {})",
+                guard_state_name(s.guard_state),
+                reason_name(s.guard_reason)
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
