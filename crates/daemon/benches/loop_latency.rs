@@ -6,10 +6,12 @@
 
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
+mod support;
+
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::MonotonicClock;
-use sar_loop::control::{Controller, Operator};
+use sar_loop::control::Operator;
 use sar_loop::notify::Watchdog;
 use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::{Histogram, LoopStats};
@@ -33,20 +35,10 @@ fn bare() -> Histogram {
 fn daemon() -> LoopStats {
     let cfg = config::builtin().unwrap();
     let scenario = sim::demo_scenario().unwrap();
-    let (_sim, sensor, drives, bias) =
-        sim::simulated(&scenario, MonotonicClock::new().unwrap()).unwrap();
     let (log, thread, _q) = logq::channel(true);
-    let mut c = Controller::new(
-        &cfg.estimator,
-        bias,
-        cfg.step_config(),
-        sensor,
-        drives,
-        Operator::new(),
-        log.clone(),
-        true,
-    )
-    .unwrap();
+    let clock = MonotonicClock::new().unwrap();
+    let (_sim, mut c, _bias) =
+        support::sim_controller(&cfg, &scenario, clock, Operator::new(), log.clone());
     let mut stats = LoopStats::default();
     runloop::run(
         &mut c,

@@ -143,6 +143,25 @@ fn fresh_positions<C: embedded_can::nb::Can, K: Clock>(
     panic!("no valid positions in 100 cycles");
 }
 
+/// Asserts that the third drive of `sim` quick-stopped on the host's
+/// silence (QuickStopActive, at rest, EMCY 0x8130): its position now, m.
+fn assert_quick_stopped(sim: &Drives, clock: &MonotonicClock) -> f64 {
+    let (state, v, emcys, x) = {
+        let d = sim.drives.lock().unwrap();
+        let now = clock.now_ns().unwrap();
+        (
+            d[2].state(),
+            d[2].velocity_mps(now),
+            d[2].emcys().to_vec(),
+            d[2].position_m(now),
+        )
+    };
+    assert_eq!(state, Cia402State::QuickStopActive);
+    assert_eq!(v, 0.0);
+    assert!(emcys.contains(&0x8130), "{emcys:x?}");
+    x
+}
+
 #[test]
 #[ignore = "needs SocketCAN with vcan0 up: run .ci/vcan-tests"]
 fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
@@ -182,19 +201,7 @@ fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
     .unwrap();
     missed += cycles(&mut host, &clock, 100);
     clock.sleep_until_ns(clock.now_ns().unwrap() + 600 * MS);
-    let (state, v, emcys, x1) = {
-        let d = sim.drives.lock().unwrap();
-        let now = clock.now_ns().unwrap();
-        (
-            d[2].state(),
-            d[2].velocity_mps(now),
-            d[2].emcys().to_vec(),
-            d[2].position_m(now),
-        )
-    };
-    assert_eq!(state, Cia402State::QuickStopActive);
-    assert_eq!(v, 0.0);
-    assert!(emcys.contains(&0x8130), "{emcys:x?}");
+    let x1 = assert_quick_stopped(&sim, &clock);
     assert!(x1 > 0.25 + 0.01, "stopped short of the target: {x1}");
     eprintln!(
         "vcan0 test: {:.2} s, {} bus errors, {missed} of 700 cycles missed a TPDO",
@@ -280,19 +287,7 @@ fn drives_over_vcan0_follow_streamed_set_points_and_stop_when_the_stream_ends() 
     let last_m = set_point(n).q3_m;
     let silent_ns = clock.now_ns().unwrap();
     clock.sleep_until_ns(silent_ns + 800 * MS);
-    let (state, v, emcys, x) = {
-        let d = sim.drives.lock().unwrap();
-        let now = clock.now_ns().unwrap();
-        (
-            d[2].state(),
-            d[2].velocity_mps(now),
-            d[2].emcys().to_vec(),
-            d[2].position_m(now),
-        )
-    };
-    assert_eq!(state, Cia402State::QuickStopActive);
-    assert_eq!(v, 0.0);
-    assert!(emcys.contains(&0x8130), "{emcys:x?}");
+    let x = assert_quick_stopped(&sim, &clock);
     // It ran on past the last set point (extrapolating), and stopped within
     // the watchdog's time (200 ms, one heartbeat period, the VM's lateness:
     // 600 ms at most here) at 9.4 mm/s, plus the quick stop's ramp.

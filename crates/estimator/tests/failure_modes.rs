@@ -158,15 +158,7 @@ impl Rig {
                 stamp_ns: now_ns - 200_000,
                 valid: true,
             },
-            joints: JointSample {
-                joints: ActiveJoints {
-                    q1_m: q[0],
-                    q2_m: q[1],
-                    q3_m: q[2],
-                },
-                stamp_ns: now_ns - 100_000,
-                valid: true,
-            },
+            joints: joint_sample(q, now_ns - 100_000),
             command,
         };
         *self.estimator.cycle(&input)
