@@ -143,6 +143,20 @@ fn fresh_positions<C: embedded_can::nb::Can, K: Clock>(
     panic!("no valid positions in 100 cycles");
 }
 
+/// The three simulated drives served on the interface, and the host started
+/// on another socket of it, both on `clock`.
+fn drives_and_host(
+    clock: MonotonicClock,
+) -> (
+    Drives,
+    CanOpenDrives<canopen::socketcan::CanSocket, MonotonicClock>,
+) {
+    let sim = Drives::spawn(clock);
+    let socket = canopen::socketcan::open(&interface()).unwrap();
+    let host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    (sim, host)
+}
+
 /// Asserts that the third drive of `sim` quick-stopped on the host's
 /// silence (QuickStopActive, at rest, EMCY 0x8130): its position now, m.
 fn assert_quick_stopped(sim: &Drives, clock: &MonotonicClock) -> f64 {
@@ -167,9 +181,7 @@ fn assert_quick_stopped(sim: &Drives, clock: &MonotonicClock) -> f64 {
 fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
     let started = std::time::Instant::now();
     let clock = MonotonicClock::new().unwrap();
-    let sim = Drives::spawn(clock);
-    let socket = canopen::socketcan::open(&interface()).unwrap();
-    let mut host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    let (sim, mut host) = drives_and_host(clock);
     let mut missed = cycles(&mut host, &clock, 50);
     assert_eq!(host.state().unwrap(), DriveState::Ready);
     let p = fresh_positions(&mut host, &clock);
@@ -227,9 +239,7 @@ fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
 fn drives_over_vcan0_follow_streamed_set_points_and_stop_when_the_stream_ends() {
     let started = std::time::Instant::now();
     let clock = MonotonicClock::new().unwrap();
-    let sim = Drives::spawn(clock);
-    let socket = canopen::socketcan::open(&interface()).unwrap();
-    let mut host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    let (sim, mut host) = drives_and_host(clock);
     cycles(&mut host, &clock, 50);
     host.enable().unwrap();
     assert_eq!(
@@ -326,9 +336,7 @@ fn cycles_until<C: embedded_can::nb::Can, K: Clock>(
 #[ignore = "needs SocketCAN with vcan0 up: run .ci/vcan-tests"]
 fn drive_faults_over_vcan0_latch_the_hosts_fault() {
     let clock = MonotonicClock::new().unwrap();
-    let sim = Drives::spawn(clock);
-    let socket = canopen::socketcan::open(&interface()).unwrap();
-    let mut host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    let (sim, mut host) = drives_and_host(clock);
     cycles(&mut host, &clock, 50);
     host.enable().unwrap();
     let state = cycles_until(&mut host, &clock, DriveState::Enabled, 200);

@@ -251,15 +251,7 @@ fn the_same_sample_read_again_is_not_frozen() {
                 stamp_ns: now_ns - 400_000,
                 valid: true,
             },
-            joints: JointSample {
-                joints: ActiveJoints {
-                    q1_m: NOMINAL_Q[0],
-                    q2_m: NOMINAL_Q[1],
-                    q3_m: NOMINAL_Q[2],
-                },
-                stamp_ns: now_ns - 100_000,
-                valid: true,
-            },
+            joints: joint_sample(NOMINAL_Q, now_ns - 100_000),
             command: None,
         };
         *rig.estimator.cycle(&input)
