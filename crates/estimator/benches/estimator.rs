@@ -398,20 +398,22 @@ fn start(estimator: &mut Estimator, reading: &Vector3<f64>, torque: &Vector3<f64
 
 /// Benchmarks `name`: the full cycle of `estimator` on the good path (after
 /// [`start`]), one new input of `cycle_input` with `(reading, torque)` per
-/// iteration, keeping what `pick` takes of the output.
+/// iteration, keeping what `pick` takes of the output. Returns the last
+/// cycle number used.
 fn bench_good_path<O>(
     c: &mut Criterion,
     name: &str,
     estimator: &mut Estimator,
     (reading, torque): (&Vector3<f64>, &Vector3<f64>),
     pick: impl Fn(&CycleOutput) -> O,
-) {
+) -> u64 {
     let mut cycle = start(estimator, reading, torque);
     bench_both(c, name, || {
         cycle += 1;
         let input = cycle_input(cycle, reading, torque);
         black_box(pick(estimator.cycle(black_box(&input))))
     });
+    cycle
 }
 
 fn per_cycle(c: &mut Criterion) {
@@ -482,7 +484,7 @@ fn per_cycle(c: &mut Criterion) {
         };
         let mut estimator = Estimator::new(&config, bias_n).unwrap();
         // Leave the initial Fault (no input yet): the good path is measured.
-        bench_good_path(
+        let cycle = bench_good_path(
             c,
             &format!("full, {label} (kinematics + tip force + guard)"),
             &mut estimator,
