@@ -17,15 +17,14 @@ use common::*;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
-    EstimatorConfig, FrozenCheck, JointSample, MountingLimits, PlausibilityConfig,
-    PlausibilityLimits, SensorRange, SensorSample, SpikeLimits, TareLimits, TareRefused,
+    EstimatorConfig, FrozenCheck, MountingLimits, PlausibilityConfig, PlausibilityLimits,
+    SensorRange, SensorSample, SpikeLimits, TareLimits, TareRefused,
     frozen_false_alarms_in_ten_years, frozen_repeat_probability, frozen_repeats,
 };
 use sar_estimator::guard::{
     Axis, ForcePart, GuardState, REASONS, Reason, RestResidual, SensorChannel, reason_name,
     reduces_force,
 };
-use sar_kinematics::ActiveJoints;
 
 type V = Vector3<f64>;
 
