@@ -6,6 +6,8 @@
 
 #![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
 
+mod support;
+
 use sar_config as config;
 use sar_daemon::sim;
 use sar_drivers::MonotonicClock;
@@ -14,7 +16,6 @@ use sar_loop::notify::Watchdog;
 use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::{Histogram, LoopStats};
 use sar_loop::{logq, rt};
-use sar_test_support::rig::controller;
 
 const CYCLES: u64 = 3000;
 const PERIOD_NS: u64 = 1_000_000;
@@ -34,10 +35,10 @@ fn bare() -> Histogram {
 fn daemon() -> LoopStats {
     let cfg = config::builtin().unwrap();
     let scenario = sim::demo_scenario().unwrap();
-    let (_sim, sensor, drives, bias) =
-        sim::simulated(&scenario, MonotonicClock::new().unwrap()).unwrap();
     let (log, thread, _q) = logq::channel(true);
-    let mut c = controller(&cfg, bias, sensor, drives, Operator::new(), log.clone()).unwrap();
+    let clock = MonotonicClock::new().unwrap();
+    let (_sim, mut c, _bias) =
+        support::sim_controller(&cfg, &scenario, clock, Operator::new(), log.clone());
     let mut stats = LoopStats::default();
     runloop::run(
         &mut c,

@@ -35,6 +35,7 @@
 
 #[path = "../tests/common/mod.rs"]
 mod common;
+mod support;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use sar_config as config;
@@ -47,13 +48,36 @@ use sar_msgs::msgs::{CycleInput, Outgoing, RecorderDrops, RosMessage, Topic};
 use sar_record::convert;
 use sar_record::replay::{ReplayOptions, replay, replay_file};
 use sar_record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
-use sar_test_support::rig::controller;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 const HOUR_CYCLES: u64 = 3_600_000;
 const PERIOD_NS: u64 = 1_000_000;
+
+/// Every `/sar/cycle/input` of `reader` decoded through
+/// `McapReader::visit` (no copy), to the end: how many.
+fn visit_cycle_inputs(reader: &mut McapReader<'_>) -> u64 {
+    let mut id = None;
+    let mut count = 0u64;
+    let stopped = reader
+        .visit::<()>(&mut |channels, m| {
+            let input = *id.get_or_insert_with(|| {
+                channels
+                    .values()
+                    .find(|c| c.topic == Topic::CycleInput.name())
+                    .map(|c| c.id)
+            });
+            if Some(m.channel_id) == input {
+                black_box(CycleInput::decode(m.data).unwrap());
+                count += 1;
+            }
+            Ok(())
+        })
+        .unwrap();
+    assert!(stopped.is_none());
+    count
+}
 
 fn cycles() -> u64 {
     std::env::var("SAR_BENCH_REPLAY_CYCLES")
@@ -75,9 +99,9 @@ fn make_recording(path: &Path, n: u64) {
     let cfg = config::builtin().unwrap();
     let scenario = sim::demo_scenario().unwrap();
     let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
     let (log, _t, _q) = logq::channel(false);
-    let mut c = controller(&cfg, bias, sensor, drives, Operator::new(), log).unwrap();
+    let (_sim, mut c, bias) =
+        support::sim_controller(&cfg, &scenario, clock.clone(), Operator::new(), log);
     for k in 1..=100 {
         clock.advance_ns(PERIOD_NS);
         c.step(k, || Some(clock.now_ns()));
@@ -181,25 +205,7 @@ fn replay_bench(c: &mut Criterion) {
     g.bench_function("read_streamed", |b| {
         b.iter(|| {
             let mut reader = McapReader::open(&path).unwrap();
-            let mut id = None;
-            let mut count = 0u64;
-            let stopped = reader
-                .visit::<()>(&mut |channels, m| {
-                    let input = *id.get_or_insert_with(|| {
-                        channels
-                            .values()
-                            .find(|c| c.topic == Topic::CycleInput.name())
-                            .map(|c| c.id)
-                    });
-                    if Some(m.channel_id) == input {
-                        black_box(CycleInput::decode(m.data).unwrap());
-                        count += 1;
-                    }
-                    Ok(())
-                })
-                .unwrap();
-            assert!(stopped.is_none());
-            assert_eq!(count, n);
+            assert_eq!(visit_cycle_inputs(&mut reader), n);
         })
     });
     g.bench_function("read_step_streamed", |b| {
@@ -216,25 +222,7 @@ fn replay_bench(c: &mut Criterion) {
     g.bench_function("read_visit", |b| {
         b.iter(|| {
             let mut reader = McapReader::new(&bytes).unwrap();
-            let mut id = None;
-            let mut count = 0u64;
-            let stopped = reader
-                .visit::<()>(&mut |channels, m| {
-                    let input = *id.get_or_insert_with(|| {
-                        channels
-                            .values()
-                            .find(|c| c.topic == Topic::CycleInput.name())
-                            .map(|c| c.id)
-                    });
-                    if Some(m.channel_id) == input {
-                        black_box(CycleInput::decode(m.data).unwrap());
-                        count += 1;
-                    }
-                    Ok(())
-                })
-                .unwrap();
-            assert!(stopped.is_none());
-            assert_eq!(count, n);
+            assert_eq!(visit_cycle_inputs(&mut reader), n);
         })
     });
     let run = |o: &ReplayOptions| {

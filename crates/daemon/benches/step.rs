@@ -13,6 +13,8 @@
     missing_docs
 )]
 
+mod support;
+
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use sar_config as config;
 use sar_daemon::sim;
@@ -22,7 +24,6 @@ use sar_estimator::Vec3;
 use sar_loop::control::{Envelope, Operator, Request};
 use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopStep};
-use sar_test_support::rig::controller;
 use std::hint::black_box;
 
 /// Cycles measured per batch.
@@ -46,10 +47,10 @@ fn recorded(push: bool, warm: usize) -> (LoopStep, Vec<LoopInput>) {
         shifts: Vec::new(),
     }];
     let clock = SimClock::new(1_000_000_000);
-    let (_sim, sensor, drives, bias) = sim::simulated(&scenario, clock.clone()).unwrap();
     let operator = Operator::new();
     let (log, _t, _q) = logq::channel(false);
-    let mut c = controller(&cfg, bias, sensor, drives, operator.clone(), log).unwrap();
+    let (_sim, mut c, bias) =
+        support::sim_controller(&cfg, &scenario, clock.clone(), operator.clone(), log);
     let mut inputs = Vec::new();
     for cycle in 1..=(warm + N) as u64 {
         if push && cycle == 1200 {

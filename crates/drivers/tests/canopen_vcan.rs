@@ -143,14 +143,45 @@ fn fresh_positions<C: embedded_can::nb::Can, K: Clock>(
     panic!("no valid positions in 100 cycles");
 }
 
+/// The three simulated drives served on the interface, and the host started
+/// on another socket of it, both on `clock`.
+fn drives_and_host(
+    clock: MonotonicClock,
+) -> (
+    Drives,
+    CanOpenDrives<canopen::socketcan::CanSocket, MonotonicClock>,
+) {
+    let sim = Drives::spawn(clock);
+    let socket = canopen::socketcan::open(&interface()).unwrap();
+    let host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    (sim, host)
+}
+
+/// Asserts that the third drive of `sim` quick-stopped on the host's
+/// silence (QuickStopActive, at rest, EMCY 0x8130): its position now, m.
+fn assert_quick_stopped(sim: &Drives, clock: &MonotonicClock) -> f64 {
+    let (state, v, emcys, x) = {
+        let d = sim.drives.lock().unwrap();
+        let now = clock.now_ns().unwrap();
+        (
+            d[2].state(),
+            d[2].velocity_mps(now),
+            d[2].emcys().to_vec(),
+            d[2].position_m(now),
+        )
+    };
+    assert_eq!(state, Cia402State::QuickStopActive);
+    assert_eq!(v, 0.0);
+    assert!(emcys.contains(&0x8130), "{emcys:x?}");
+    x
+}
+
 #[test]
 #[ignore = "needs SocketCAN with vcan0 up: run .ci/vcan-tests"]
 fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
     let started = std::time::Instant::now();
     let clock = MonotonicClock::new().unwrap();
-    let sim = Drives::spawn(clock);
-    let socket = canopen::socketcan::open(&interface()).unwrap();
-    let mut host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    let (sim, mut host) = drives_and_host(clock);
     let mut missed = cycles(&mut host, &clock, 50);
     assert_eq!(host.state().unwrap(), DriveState::Ready);
     let p = fresh_positions(&mut host, &clock);
@@ -182,19 +213,7 @@ fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
     .unwrap();
     missed += cycles(&mut host, &clock, 100);
     clock.sleep_until_ns(clock.now_ns().unwrap() + 600 * MS);
-    let (state, v, emcys, x1) = {
-        let d = sim.drives.lock().unwrap();
-        let now = clock.now_ns().unwrap();
-        (
-            d[2].state(),
-            d[2].velocity_mps(now),
-            d[2].emcys().to_vec(),
-            d[2].position_m(now),
-        )
-    };
-    assert_eq!(state, Cia402State::QuickStopActive);
-    assert_eq!(v, 0.0);
-    assert!(emcys.contains(&0x8130), "{emcys:x?}");
+    let x1 = assert_quick_stopped(&sim, &clock);
     assert!(x1 > 0.25 + 0.01, "stopped short of the target: {x1}");
     eprintln!(
         "vcan0 test: {:.2} s, {} bus errors, {missed} of 700 cycles missed a TPDO",
@@ -220,9 +239,7 @@ fn drives_over_vcan0_start_move_and_stop_when_the_host_goes_silent() {
 fn drives_over_vcan0_follow_streamed_set_points_and_stop_when_the_stream_ends() {
     let started = std::time::Instant::now();
     let clock = MonotonicClock::new().unwrap();
-    let sim = Drives::spawn(clock);
-    let socket = canopen::socketcan::open(&interface()).unwrap();
-    let mut host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    let (sim, mut host) = drives_and_host(clock);
     cycles(&mut host, &clock, 50);
     host.enable().unwrap();
     assert_eq!(
@@ -280,19 +297,7 @@ fn drives_over_vcan0_follow_streamed_set_points_and_stop_when_the_stream_ends() 
     let last_m = set_point(n).q3_m;
     let silent_ns = clock.now_ns().unwrap();
     clock.sleep_until_ns(silent_ns + 800 * MS);
-    let (state, v, emcys, x) = {
-        let d = sim.drives.lock().unwrap();
-        let now = clock.now_ns().unwrap();
-        (
-            d[2].state(),
-            d[2].velocity_mps(now),
-            d[2].emcys().to_vec(),
-            d[2].position_m(now),
-        )
-    };
-    assert_eq!(state, Cia402State::QuickStopActive);
-    assert_eq!(v, 0.0);
-    assert!(emcys.contains(&0x8130), "{emcys:x?}");
+    let x = assert_quick_stopped(&sim, &clock);
     // It ran on past the last set point (extrapolating), and stopped within
     // the watchdog's time (200 ms, one heartbeat period, the VM's lateness:
     // 600 ms at most here) at 9.4 mm/s, plus the quick stop's ramp.
@@ -331,9 +336,7 @@ fn cycles_until<C: embedded_can::nb::Can, K: Clock>(
 #[ignore = "needs SocketCAN with vcan0 up: run .ci/vcan-tests"]
 fn drive_faults_over_vcan0_latch_the_hosts_fault() {
     let clock = MonotonicClock::new().unwrap();
-    let sim = Drives::spawn(clock);
-    let socket = canopen::socketcan::open(&interface()).unwrap();
-    let mut host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    let (sim, mut host) = drives_and_host(clock);
     cycles(&mut host, &clock, 50);
     host.enable().unwrap();
     let state = cycles_until(&mut host, &clock, DriveState::Enabled, 200);

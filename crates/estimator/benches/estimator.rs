@@ -18,14 +18,14 @@ use common::*;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use sar_estimator::cycle::{
-    CycleInput, Estimator, EstimatorConfig, JointSample, SensorSample, TipOutcome,
+    CycleInput, CycleOutput, Estimator, EstimatorConfig, JointSample, SensorSample, TipOutcome,
 };
 use sar_estimator::guard::{Guard, GuardConfig, GuardInput, GuardLimits, TipInput};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
 use sar_estimator::{Calibration, Profile, ProfileSpec, SensorNoise};
-use sar_kinematics::{ActiveJoints, forward};
+use sar_kinematics::{ActiveJoints, Pose, forward};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -53,9 +53,13 @@ fn manipulator2_offset(offset_m: f64) -> Profile {
     .unwrap()
 }
 
-/// The raw torque reading (R_0s = I, no torque bias) that goes with `reading_for`:
-/// (A - S) x (-F_A) - M_T n, with A - S = (0, -0.05, 0) on the example robot.
-fn torque_for(profile: &Profile, tip_force_n: &Vector3<f64>) -> Vector3<f64> {
+/// The example robot with `profile` at the joints `Q` under `tip_force_n`,
+/// from the independent simulator of `common`: the calibration, the pose,
+/// and the force F_A (N) and torsion M_T (N m) at the U-joint.
+fn ujoint_statics(
+    profile: &Profile,
+    tip_force_n: &Vector3<f64>,
+) -> (Calibration, Pose, Vector3<f64>, f64) {
     let cal = example_calibration();
     let pose = forward(&cal, profile, &joints()).unwrap();
     let truth = Truth {
@@ -70,6 +74,13 @@ fn torque_for(profile: &Profile, tip_force_n: &Vector3<f64>) -> Vector3<f64> {
         tip_force_n,
         0.0,
     );
+    (cal, pose, f_a, torsion_nm)
+}
+
+/// The raw torque reading (R_0s = I, no torque bias) that goes with `reading_for`:
+/// (A - S) x (-F_A) - M_T n, with A - S = (0, -0.05, 0) on the example robot.
+fn torque_for(profile: &Profile, tip_force_n: &Vector3<f64>) -> Vector3<f64> {
+    let (_, pose, f_a, torsion_nm) = ujoint_statics(profile, tip_force_n);
     let n = Vector3::y().cross(&pose.rod_dir.cross(&pose.rod_normal));
     Vector3::new(0.0, -0.05, 0.0).cross(&(-f_a)) - n * torsion_nm
 }
@@ -81,20 +92,7 @@ fn reading_for(
     tip_force_n: &Vector3<f64>,
     bias_n: &Vector3<f64>,
 ) -> Vector3<f64> {
-    let cal = example_calibration();
-    let pose = forward(&cal, profile, &joints()).unwrap();
-    let truth = Truth {
-        offset_m: profile.offset_m(),
-        ..manipulator2_truth()
-    };
-    let (f_a, _) = ujoint_force(
-        &truth,
-        &pose.ujoint_m,
-        &pose.rod_dir,
-        &pose.rod_normal,
-        tip_force_n,
-        0.0,
-    );
+    let (cal, _, f_a, _) = ujoint_statics(profile, tip_force_n);
     ideal_reading(&cal.sensor_rotation(), &f_a, bias_n)
 }
 
@@ -398,6 +396,26 @@ fn start(estimator: &mut Estimator, reading: &Vector3<f64>, torque: &Vector3<f64
     }
 }
 
+/// Benchmarks `name`: the full cycle of `estimator` on the good path (after
+/// [`start`]), one new input of `cycle_input` with `(reading, torque)` per
+/// iteration, keeping what `pick` takes of the output. Returns the last
+/// cycle number used.
+fn bench_good_path<O>(
+    c: &mut Criterion,
+    name: &str,
+    estimator: &mut Estimator,
+    (reading, torque): (&Vector3<f64>, &Vector3<f64>),
+    pick: impl Fn(&CycleOutput) -> O,
+) -> u64 {
+    let mut cycle = start(estimator, reading, torque);
+    bench_both(c, name, || {
+        cycle += 1;
+        let input = cycle_input(cycle, reading, torque);
+        black_box(pick(estimator.cycle(black_box(&input))))
+    });
+    cycle
+}
+
 fn per_cycle(c: &mut Criterion) {
     let bias_n = Vector3::new(0.4, -1.1, 0.25);
     let tip_n = Vector3::new(1.0, -0.5, 0.5);
@@ -433,15 +451,12 @@ fn per_cycle(c: &mut Criterion) {
             ..example_estimator_config()
         };
         let mut estimator = Estimator::new(&scripted, bias_n).unwrap();
-        let mut cycle = start(&mut estimator, &reading, &torque);
-        bench_both(
+        bench_good_path(
             c,
             &format!("full, {label}, scripted checks only (before issue 14)"),
-            || {
-                cycle += 1;
-                let input = cycle_input(cycle, &reading, &torque);
-                black_box(estimator.cycle(black_box(&input)).guard_state)
-            },
+            &mut estimator,
+            (&reading, &torque),
+            |out| out.guard_state,
         );
         // Every plausibility check on, the torque check included; the filter
         // (not a check: a display and recording output) is measured apart.
@@ -469,15 +484,12 @@ fn per_cycle(c: &mut Criterion) {
         };
         let mut estimator = Estimator::new(&config, bias_n).unwrap();
         // Leave the initial Fault (no input yet): the good path is measured.
-        let mut cycle = start(&mut estimator, &reading, &torque);
-        bench_both(
+        let cycle = bench_good_path(
             c,
             &format!("full, {label} (kinematics + tip force + guard)"),
-            || {
-                cycle += 1;
-                let input = cycle_input(cycle, &reading, &torque);
-                black_box(estimator.cycle(black_box(&input)).guard_state)
-            },
+            &mut estimator,
+            (&reading, &torque),
+            |out| out.guard_state,
         );
         let floor = Floor::new(&config, &limits, &bias_n);
         let reading_v: V = [reading.x, reading.y, reading.z];
@@ -511,12 +523,13 @@ fn per_cycle(c: &mut Criterion) {
             ..config
         };
         let mut estimator = Estimator::new(&filtered, bias_n).unwrap();
-        let mut cycle = start(&mut estimator, &reading, &torque);
-        bench_both(c, &format!("full + filter, {label}"), || {
-            cycle += 1;
-            let input = cycle_input(cycle, &reading, &torque);
-            black_box(estimator.cycle(black_box(&input)).filtered)
-        });
+        bench_good_path(
+            c,
+            &format!("full + filter, {label}"),
+            &mut estimator,
+            (&reading, &torque),
+            |out| out.filtered,
+        );
     }
 
     let cal = example_calibration();
@@ -570,21 +583,7 @@ fn per_cycle(c: &mut Criterion) {
 }
 
 fn identification(c: &mut Criterion) {
-    let truth = Truth {
-        friction_n: 0.3,
-        ..manipulator2_truth()
-    };
-    let cal = example_calibration();
-    let bias_n = Vector3::new(0.4, -1.1, 0.25);
-    let mut sensor = NoisySensor::new(SensorNoise::HEX6_STD_N, 11);
-    let poses = simulate_static_poses(
-        &truth,
-        &cal.sensor_rotation(),
-        &bias_n,
-        &cone_protocol(),
-        10,
-        &mut sensor,
-    );
+    let (_, cal, bias_n, poses) = cone_identification_inputs(11);
     let options = IdentificationOptions {
         bias_across_gravity: true,
         friction: true,

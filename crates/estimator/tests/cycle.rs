@@ -103,15 +103,7 @@ impl Rig {
                 stamp_ns: now_ns - 300_000,
                 valid: true,
             },
-            joints: JointSample {
-                joints: ActiveJoints {
-                    q1_m: q[0],
-                    q2_m: q[1],
-                    q3_m: q[2],
-                },
-                stamp_ns: now_ns - 100_000,
-                valid: true,
-            },
+            joints: joint_sample(q, now_ns - 100_000),
             command: None,
         }
     }
@@ -525,15 +517,7 @@ fn debounce_counts_new_samples_not_loop_cycles() {
                     stamp_ns,
                     valid: true,
                 },
-                joints: JointSample {
-                    joints: ActiveJoints {
-                        q1_m: NOMINAL_Q[0],
-                        q2_m: NOMINAL_Q[1],
-                        q3_m: NOMINAL_Q[2],
-                    },
-                    stamp_ns: now_ns - 50_000,
-                    valid: true,
-                },
+                joints: joint_sample(NOMINAL_Q, now_ns - 50_000),
                 command: None,
             };
             let out = *rig.estimator.cycle(&input);

@@ -17,15 +17,14 @@ use common::*;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
-    EstimatorConfig, FrozenCheck, JointSample, MountingLimits, PlausibilityConfig,
-    PlausibilityLimits, SensorRange, SensorSample, SpikeLimits, TareLimits, TareRefused,
+    EstimatorConfig, FrozenCheck, MountingLimits, PlausibilityConfig, PlausibilityLimits,
+    SensorRange, SensorSample, SpikeLimits, TareLimits, TareRefused,
     frozen_false_alarms_in_ten_years, frozen_repeat_probability, frozen_repeats,
 };
 use sar_estimator::guard::{
     Axis, ForcePart, GuardState, REASONS, Reason, RestResidual, SensorChannel, reason_name,
     reduces_force,
 };
-use sar_kinematics::ActiveJoints;
 
 type V = Vector3<f64>;
 
@@ -158,15 +157,7 @@ impl Rig {
                 stamp_ns: now_ns - 200_000,
                 valid: true,
             },
-            joints: JointSample {
-                joints: ActiveJoints {
-                    q1_m: q[0],
-                    q2_m: q[1],
-                    q3_m: q[2],
-                },
-                stamp_ns: now_ns - 100_000,
-                valid: true,
-            },
+            joints: joint_sample(q, now_ns - 100_000),
             command,
         };
         *self.estimator.cycle(&input)
@@ -259,15 +250,7 @@ fn the_same_sample_read_again_is_not_frozen() {
                 stamp_ns: now_ns - 400_000,
                 valid: true,
             },
-            joints: JointSample {
-                joints: ActiveJoints {
-                    q1_m: NOMINAL_Q[0],
-                    q2_m: NOMINAL_Q[1],
-                    q3_m: NOMINAL_Q[2],
-                },
-                stamp_ns: now_ns - 100_000,
-                valid: true,
-            },
+            joints: joint_sample(NOMINAL_Q, now_ns - 100_000),
             command: None,
         };
         *rig.estimator.cycle(&input)

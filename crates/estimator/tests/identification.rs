@@ -118,17 +118,10 @@ fn ideal_poses(
     protocol
         .iter()
         .map(|p| {
-            let a_m = truth.support_m - p.rod_dir * p.support_distance_m;
-            let q4 = p.rod_dir.x.atan2(p.rod_dir.z);
-            let q5 = p.rod_dir.y.asin();
-            let (u, w) = rod_frame(q4, q5);
-            let (f_a, _) = ujoint_force(truth, &a_m, &u, &w, &V3::zeros(), p.slide_sign);
-            StaticPose {
-                ujoint_m: a_m,
-                mean_reading_n: ideal_reading(rotation, &f_a, bias_n),
-                samples: 1,
-                slide_sign: slide_sign(p.slide_sign),
-            }
+            let (a_m, f_a) = pose_at_rest(truth, p, |_, _| {
+                truth.support_m - p.rod_dir * p.support_distance_m
+            });
+            static_pose(p, a_m, ideal_reading(rotation, &f_a, bias_n), 1)
         })
         .collect()
 }

@@ -74,8 +74,7 @@ use common::*;
 use nalgebra::Vector3;
 use sar_estimator::SensorNoise;
 use sar_estimator::cycle::{
-    Bias, Command, CycleInput, Estimator, JointSample, PlausibilityConfig, PlausibilityLimits,
-    SensorSample,
+    Bias, Command, CycleInput, Estimator, PlausibilityConfig, PlausibilityLimits, SensorSample,
 };
 use sar_estimator::guard::Reason;
 
@@ -85,7 +84,6 @@ thread_local! {
 }
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
-use sar_kinematics::ActiveJoints;
 
 /// Builds a scripted run (before counting): moving poses, pushes through Warn
 /// and Stop, a NaN sample, a stale sample, a degenerate pose, an unobservable
@@ -156,15 +154,7 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
                     stamp_ns: sensor_stamp_ns,
                     valid: true,
                 },
-                joints: JointSample {
-                    joints: ActiveJoints {
-                        q1_m: q[0],
-                        q2_m: q[1],
-                        q3_m: q[2],
-                    },
-                    stamp_ns: now_ns - 100_000,
-                    valid: true,
-                },
+                joints: joint_sample(q, now_ns - 100_000),
                 command,
             }
         })
@@ -267,21 +257,7 @@ fn the_per_cycle_path_allocates_nothing() {
 /// Identification updates and solves, and a support fit, allocate nothing either.
 #[test]
 fn identification_and_support_fit_allocate_nothing() {
-    let truth = Truth {
-        friction_n: 0.3,
-        ..manipulator2_truth()
-    };
-    let cal = example_calibration();
-    let bias_n = Vector3::new(0.4, -1.1, 0.25);
-    let mut sensor = NoisySensor::new(SensorNoise::HEX6_STD_N, 7);
-    let poses = simulate_static_poses(
-        &truth,
-        &cal.sensor_rotation(),
-        &bias_n,
-        &cone_protocol(),
-        10,
-        &mut sensor,
-    );
+    let (truth, cal, bias_n, poses) = cone_identification_inputs(7);
     let options = IdentificationOptions {
         bias_across_gravity: true,
         friction: true,

@@ -22,8 +22,6 @@ use sar_estimator::{
     SettingError, SlideSign, StaticPose,
 };
 
-const LENGTH_M: f64 = 0.35;
-
 fn true_support() -> Vector3<f64> {
     Vector3::new(0.45, 0.20, 0.0)
 }
@@ -38,16 +36,7 @@ fn tilted_sensor() -> Matrix3<f64> {
 }
 
 fn truth(manipulator: usize, friction_n: f64) -> Truth {
-    let (mass_kg, com_m) = TABLE2[manipulator];
-    Truth {
-        mass_kg,
-        com_m,
-        length_m: LENGTH_M,
-        offset_m: 0.0,
-        support_m: true_support(),
-        gravity_mps2: gravity(),
-        friction_n,
-    }
+    table2_truth(manipulator, friction_n)
 }
 
 fn calibration(rotation: Matrix3<f64>, support_m: Vector3<f64>) -> Calibration {
@@ -372,18 +361,11 @@ fn simulate_with_offset(
     protocol
         .iter()
         .map(|p| {
-            let q4 = p.rod_dir.x.atan2(p.rod_dir.z);
-            let q5 = p.rod_dir.y.asin();
-            let (u, w) = rod_frame(q4, q5);
-            let a_m = truth.support_m - w * truth.offset_m - u * p.support_distance_m;
-            let (f_a, _) = ujoint_force(truth, &a_m, &u, &w, &Vector3::zeros(), p.slide_sign);
+            let (a_m, f_a) = pose_at_rest(truth, p, |u, w| {
+                truth.support_m - w * truth.offset_m - u * p.support_distance_m
+            });
             let ideal = ideal_reading(&Matrix3::identity(), &f_a, &tare());
-            StaticPose {
-                ujoint_m: a_m,
-                mean_reading_n: sensor.mean(&ideal, samples),
-                samples,
-                slide_sign: slide_sign(p.slide_sign),
-            }
+            static_pose(p, a_m, sensor.mean(&ideal, samples), samples)
         })
         .collect()
 }

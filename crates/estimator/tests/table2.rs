@@ -21,7 +21,6 @@ use nalgebra::{Matrix3, Vector3};
 use sar_estimator::support::{SupportCalibration, SupportFit, SupportOptions};
 use sar_estimator::{Calibration, CalibrationSpec, SensorNoise};
 
-const LENGTH_M: f64 = 0.35;
 const FRICTION_N: f64 = 0.3;
 const SAMPLES: u32 = 10;
 
@@ -71,16 +70,7 @@ const CASES: [Case; 4] = [
 
 /// The same simulated poses for every case of one manipulator and protocol.
 fn poses(manipulator: usize, protocol: Protocol, samples: u32) -> Vec<sar_estimator::StaticPose> {
-    let (mass_kg, com_m) = TABLE2[manipulator];
-    let truth = Truth {
-        mass_kg,
-        com_m,
-        length_m: LENGTH_M,
-        offset_m: 0.0,
-        support_m: true_support(),
-        gravity_mps2: gravity(),
-        friction_n: FRICTION_N,
-    };
+    let truth = table2_truth(manipulator, FRICTION_N);
     let protocol_poses = match protocol {
         Protocol::Article => article_protocol(),
         Protocol::Cone => cone_protocol(),

@@ -13,20 +13,9 @@
 )]
 
 mod support;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
-use support::{SARCTL, SARD};
-
-struct Daemon(Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let _ = self.0.wait();
-    }
-}
+use support::{Daemon, SARCTL, sard};
 
 const CONFIG: &str = r#"# identify --live test
 [geometry]
@@ -74,18 +63,13 @@ fn identify_live_writes_back_the_simulated_manipulator() {
     std::fs::write(&scenario_path, scenario()).unwrap();
     let config_path = dir.join("robot.toml");
     std::fs::write(&config_path, CONFIG).unwrap();
-    let _daemon = Daemon(
-        Command::new(&*SARD)
+    let _daemon = Daemon::spawn(
+        sard(&prefix)
             .arg("--sim")
             .arg("--config")
             .arg(&config_path)
             .arg("--scenario")
-            .arg(&scenario_path)
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
+            .arg(&scenario_path),
     );
     let client = sar_shm::Client::new(&prefix).unwrap();
     let start = Instant::now();
@@ -133,18 +117,7 @@ fn identify_live_writes_back_the_simulated_manipulator() {
 
 /// Waits for the daemon under `prefix` to publish a state that `ok` accepts.
 fn wait_for(prefix: &str, ok: impl Fn(&sar_msgs::wire::StateMsg) -> bool) {
-    let client = sar_shm::Client::new(prefix).unwrap();
-    let start = Instant::now();
-    loop {
-        if let Ok(sub) = client.subscribe()
-            && let Some(s) = sub.latest(Duration::from_secs(1))
-            && ok(&s)
-        {
-            return;
-        }
-        assert!(start.elapsed() < Duration::from_secs(60), "never so");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    support::wait_for_state(prefix, "never so", ok);
 }
 
 /// The README's recipe: `sard --sim --scenario
@@ -161,16 +134,7 @@ fn identify_live_works_with_the_readme_recipe() {
     std::fs::write(&config_path, sar_config::DEFAULT_TOML).unwrap();
     let scenario = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../scenarios/identify_cone_manipulator_2.toml");
-    let _daemon = Daemon(
-        Command::new(&*SARD)
-            .args(["--sim", "--scenario"])
-            .arg(&scenario)
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    let _daemon = Daemon::spawn(sard(&prefix).args(["--sim", "--scenario"]).arg(&scenario));
     wait_for(&prefix, |s| s.guard_state == sar_msgs::wire::guard_code::OK);
     let out = Command::new(SARCTL)
         .arg("--config")
@@ -204,15 +168,7 @@ fn identify_live_works_with_the_readme_recipe() {
 #[test]
 fn identify_live_refuses_the_demo_contact_at_once() {
     let prefix = format!("sar-iddemo-{}", std::process::id());
-    let _daemon = Daemon(
-        Command::new(&*SARD)
-            .arg("--sim")
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+    let _daemon = Daemon::spawn(sard(&prefix).arg("--sim"));
     wait_for(&prefix, |s| {
         s.guard_state == sar_msgs::wire::guard_code::WARN
     });

@@ -15,10 +15,8 @@
     clippy::indexing_slicing
 )]
 
-#[path = "../../daemon/tests/common/mod.rs"]
-mod common;
 mod support;
-use support::{SARCTL, SARD};
+use support::{Daemon, SARCTL, sarctl, sard, text};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -26,39 +24,6 @@ use std::time::{Duration, Instant};
 
 fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/replay")
-}
-
-fn sarctl(prefix: &str, args: &[&str]) -> Output {
-    Command::new(SARCTL)
-        .args(args)
-        .env("SAR_SERVICE_PREFIX", prefix)
-        .output()
-        .unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-struct Daemon(std::process::Child);
-
-impl Daemon {
-    fn stop(mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let status = self.0.wait().unwrap();
-        assert!(status.success(), "sard ended with {status}");
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let _ = self.0.wait();
-    }
 }
 
 fn status_json(prefix: &str) -> serde_json::Value {
@@ -69,36 +34,13 @@ fn status_json(prefix: &str) -> serde_json::Value {
 
 #[test]
 fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
-    let dir = common::scratch("replay_cli_e2e");
-    let rec_dir = dir.join("rec");
-    let config = dir.join("sim.toml");
-    let toml = sar_config::DEFAULT_TOML
-        .replace("[record]\nenabled = false", "[record]\nenabled = true")
-        .replace(
-            "directory = \"recordings\"",
-            &format!("directory = {:?}", rec_dir.display().to_string()),
-        );
-    assert_ne!(toml, sar_config::DEFAULT_TOML);
-    std::fs::write(&config, toml).unwrap();
+    let dir = support::scratch("replay_cli_e2e");
+    let (config, rec_dir) = support::recording_config(&dir);
     let prefix = format!("sar-rec-{}", std::process::id());
-    let daemon = Daemon(
-        Command::new(&*SARD)
-            .args(["--sim", "--config"])
-            .arg(&config)
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
+    let daemon = Daemon::start(
+        sard(&prefix).args(["--sim", "--config"]).arg(&config),
+        &prefix,
     );
-    let start = Instant::now();
-    while !sarctl(&prefix, &["status"]).status.success() {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "sard did not come up"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
     let s = status_json(&prefix);
     assert_eq!(s["recording"], true, "{s}");
     assert!(s["recorder_drops"].is_u64(), "{s}");
@@ -185,7 +127,7 @@ fn sard_records_on_start_and_on_request_and_the_file_replays_bit_for_bit() {
 
 #[test]
 fn a_replay_that_differs_exits_non_zero_naming_the_first_cycle_and_field() {
-    let dir = common::scratch("replay_cli_differs");
+    let dir = support::scratch("replay_cli_differs");
     // Another sensor noise: the deviation differs from the first estimate on.
     let config = dir.join("other.toml");
     let toml = std::fs::read_to_string(fixtures().join("config.toml"))
@@ -222,7 +164,7 @@ fn a_replay_that_differs_exits_non_zero_naming_the_first_cycle_and_field() {
 
 #[test]
 fn compare_json_and_plot_on_the_contact_fixture() {
-    let dir = common::scratch("replay_cli_compare");
+    let dir = support::scratch("replay_cli_compare");
     let svg = dir.join("fig9.svg");
     let out = Command::new(SARCTL)
         .args([
@@ -260,7 +202,7 @@ fn compare_json_and_plot_on_the_contact_fixture() {
 
 #[test]
 fn recover_refuses_to_overwrite_its_input() {
-    let dir = common::scratch("replay_cli_recover");
+    let dir = support::scratch("replay_cli_recover");
     let cut = dir.join("cut.mcap");
     let bytes = std::fs::read(fixtures().join("fault_daemon.mcap")).unwrap();
     std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
@@ -348,7 +290,7 @@ impl Drop for Tmpfs {
 /// recovered and replays.
 #[test]
 fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomplete() {
-    let dir = common::scratch("replay_cli_full_disk");
+    let dir = support::scratch("replay_cli_full_disk");
     let rec_dir = dir.join("rec");
     let config = dir.join("sim.toml");
     let toml = sar_config::DEFAULT_TOML.replace(
@@ -359,24 +301,13 @@ fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomple
     let fs = Tmpfs::mount(&rec_dir, "ro,size=256m");
     let log = dir.join("sard.log");
     let prefix = format!("sar-full-{}", std::process::id());
-    let daemon = Daemon(
-        Command::new(&*SARD)
+    let daemon = Daemon::start(
+        sard(&prefix)
             .args(["--sim", "--config"])
             .arg(&config)
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .stdout(Stdio::null())
-            .stderr(std::fs::File::create(&log).unwrap())
-            .spawn()
-            .unwrap(),
+            .stderr(std::fs::File::create(&log).unwrap()),
+        &prefix,
     );
-    let start = Instant::now();
-    while !sarctl(&prefix, &["status"]).status.success() {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "sard did not come up"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
     // Read-only: refused, saying so.
     let out = sarctl(&prefix, &["record", "start"]);
     assert!(!out.status.success(), "{}", text(&out.stdout));
@@ -552,7 +483,7 @@ fn sarctl_bounded(args: &[&std::ffi::OsStr]) -> (Output, Duration) {
 /// refused at once by every tool that reads a file; a read error is named.
 #[test]
 fn bad_files_exit_non_zero_and_say_what_was_not_done() {
-    let dir = common::scratch("replay_cli_bad_files");
+    let dir = support::scratch("replay_cli_bad_files");
     let bytes = std::fs::read(fixtures().join("fault_daemon.mcap")).unwrap();
     let all = chunks(&bytes);
     assert!(all.len() > 10, "{} chunks", all.len());
@@ -692,13 +623,7 @@ fn bad_files_exit_non_zero_and_say_what_was_not_done() {
     );
     // A FIFO and a device: refused at once by every tool that reads a file.
     let fifo = dir.join("fifo.mcap");
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    support::mkfifo(&fifo);
     let bag2 = dir.join("bag2");
     let runs: [Vec<&std::ffi::OsStr>; 5] = [
         vec!["replay".as_ref(), "--input".as_ref(), fifo.as_os_str()],

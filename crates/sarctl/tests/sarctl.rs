@@ -13,14 +13,25 @@
 mod support;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use support::{SARCTL, SARD};
+use support::{Daemon, SARCTL, SARD, sarctl, sard};
 
-fn sarctl(prefix: &str, args: &[&str]) -> Output {
-    Command::new(SARCTL)
-        .args(args)
-        .env("SAR_SERVICE_PREFIX", prefix)
-        .output()
-        .unwrap()
+/// Starts `sard --sim` under `prefix` in `dir` (its log to `log`) and waits
+/// until `sarctl status` answers (deadline 30 s).
+fn start_daemon(prefix: &str, dir: &std::path::Path, extra: &[&str]) -> Daemon {
+    let log = std::fs::File::create(dir.join("sard.log")).unwrap();
+    Daemon::start(
+        sard(prefix)
+            .arg("--sim")
+            .args(extra)
+            .current_dir(dir)
+            .stderr(log),
+        prefix,
+    )
+}
+
+/// A fresh scratch directory under the target's tmp dir.
+fn scratch(name: &str) -> std::path::PathBuf {
+    support::scratch_in("sar-daemon-sarctl", name)
 }
 
 #[test]
@@ -43,37 +54,10 @@ fn every_command_fails_in_one_line_without_a_daemon() {
     }
 }
 
-struct Daemon(std::process::Child);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let _ = self.0.wait();
-    }
-}
-
 #[test]
 fn monitor_json_limits_status_and_commands_with_a_daemon() {
     let prefix = format!("sar-ctl-{}", std::process::id());
-    let _daemon = Daemon(
-        Command::new(&*SARD)
-            .arg("--sim")
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let start = Instant::now();
-    while !sarctl(&prefix, &["status"]).status.success() {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "sard did not come up"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let _daemon = Daemon::start(sard(&prefix).arg("--sim"), &prefix);
     let out = sarctl(&prefix, &["monitor", "--format", "json", "--count", "5"]);
     assert!(
         out.status.success(),
@@ -247,42 +231,6 @@ fn the_log_has_no_rust_debug_text() {
     }
 }
 
-/// Starts `sard --sim` under `prefix` in `dir` (its log to `log`) and waits
-/// until `sarctl status` answers (deadline 30 s).
-fn start_daemon(prefix: &str, dir: &std::path::Path, extra: &[&str]) -> Daemon {
-    let log = std::fs::File::create(dir.join("sard.log")).unwrap();
-    let daemon = Daemon(
-        Command::new(&*SARD)
-            .arg("--sim")
-            .args(extra)
-            .current_dir(dir)
-            .env("SAR_SERVICE_PREFIX", prefix)
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .unwrap(),
-    );
-    let start = Instant::now();
-    while !sarctl(prefix, &["status"]).status.success() {
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "sard did not come up"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    daemon
-}
-
-/// A fresh scratch directory under the target's tmp dir.
-fn scratch(name: &str) -> std::path::PathBuf {
-    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join("sar-daemon-sarctl")
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 #[test]
 fn record_start_and_stop_print_the_absolute_path() {
     let prefix = format!("sar-rec-{}", std::process::id());
@@ -403,20 +351,15 @@ fn sarctl_as(
 fn start_daemon_as_user(base: &std::path::Path, run: &std::path::Path, prefix: &str) -> Daemon {
     use std::os::unix::process::CommandExt;
     let log = std::fs::File::create(base.join("sard.log")).unwrap();
-    let daemon = Daemon(
-        Command::new(&*SARD)
+    let mut daemon = Daemon::spawn(
+        sard(prefix)
             .arg("--sim")
             .current_dir(base)
-            .env("SAR_SERVICE_PREFIX", prefix)
             .env("SAR_RUNTIME_DIR", run)
             .uid(DAEMON_UID)
             .gid(SAR_GID)
-            .stdout(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .unwrap(),
+            .stderr(log),
     );
-    let mut daemon = daemon;
     let start = Instant::now();
     loop {
         let out = sarctl_as(
@@ -644,13 +587,7 @@ fn a_damaged_management_file_is_named_within_a_second() {
     std::fs::create_dir_all(run.join("nodes/111")).unwrap();
     std::fs::write(run.join("nodes/iox2_111.node_monitor"), b"").unwrap();
     let fifo = run.join("nodes/111/iox2_node.details");
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    support::mkfifo(&fifo);
     let t = Instant::now();
     let out = sarctl_as(None, &run, &prefix, &["status"]);
     assert!(

@@ -17,19 +17,13 @@
     clippy::indexing_slicing
 )]
 
-#[path = "../../daemon/tests/common/mod.rs"]
-mod common;
 mod support;
-use support::{SARCTL, SARD};
+use support::{SARCTL, recordings, sard, text};
 
 use sar_record::McapReader;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Output};
 use std::time::{Duration, Instant};
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 fn sarctl(args: &[&str], paths: &[&Path]) -> Output {
     Command::new(SARCTL)
@@ -41,17 +35,6 @@ fn sarctl(args: &[&str], paths: &[&Path]) -> Output {
         )
         .output()
         .unwrap()
-}
-
-/// The recording files (not the scene companions) of `dir`, sorted.
-fn recordings(dir: &Path) -> Vec<PathBuf> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
-        .collect();
-    files.sort();
-    files
 }
 
 /// Messages on `topic` of `file`.
@@ -66,40 +49,15 @@ fn count(file: &Path, topic: &str) -> u64 {
     ids.iter().filter(|&&i| i == id).count() as u64
 }
 
-/// `sard --sim` for `cycles` with `[record] enabled` into `dir/rec`, with
-/// the built-in configuration saved as `dir/sim.toml` (as the README says
-/// to change it): the recording's file.
-pub fn sim_recording(dir: &Path, cycles: u64) -> PathBuf {
-    let rec_dir = dir.join("rec");
-    let config = dir.join("sim.toml");
-    let toml = sar_config::DEFAULT_TOML
-        .replace("[record]\nenabled = false", "[record]\nenabled = true")
-        .replace(
-            "directory = \"recordings\"",
-            &format!("directory = {:?}", rec_dir.display().to_string()),
-        );
-    assert_ne!(toml, sar_config::DEFAULT_TOML);
-    std::fs::write(&config, toml).unwrap();
-    let out = Command::new(&*SARD)
-        .args(["--sim", "--config"])
-        .arg(&config)
-        .args(["--max-cycles", &cycles.to_string()])
-        .env(
-            "SAR_SERVICE_PREFIX",
-            format!("sar-simrec-sard-{}", std::process::id()),
-        )
-        .stdout(Stdio::null())
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "sard: {}", text(&out.stderr));
-    let files = recordings(&rec_dir);
-    assert_eq!(files.len(), 1, "{files:?}");
-    files[0].clone()
+/// `sard --sim` for `cycles` recording into `dir/rec`: the recording's file.
+fn sim_recording(dir: &Path, cycles: u64) -> PathBuf {
+    let prefix = format!("sar-simrec-sard-{}", std::process::id());
+    support::sim_recording(dir, cycles, &prefix)
 }
 
 #[test]
 fn a_sim_recording_replays_without_a_configuration_and_compares_with_the_truth() {
-    let dir = common::scratch("simrec_replay");
+    let dir = support::scratch("simrec_replay");
     // 5 s: the demo's contact rises from 2 s (2.7 N along the rod at 5 s).
     let rec = sim_recording(&dir, 5000);
     // The sensor's samples at 500 Hz, every one recorded; one truth per
@@ -138,24 +96,15 @@ fn a_sim_recording_replays_without_a_configuration_and_compares_with_the_truth()
 
 #[test]
 fn a_record_start_of_the_builtin_configuration_names_it_when_replayed() {
-    let dir = common::scratch("simrec_builtin");
+    let dir = support::scratch("simrec_builtin");
     let prefix = format!("sar-simrec-b-{}", std::process::id());
     // Out of the box: no --config, recordings under the working directory.
-    let mut daemon = Command::new(&*SARD)
+    let mut daemon = sard(&prefix)
         .arg("--sim")
         .current_dir(&dir)
-        .env("SAR_SERVICE_PREFIX", &prefix)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let ctl = |args: &[&str]| {
-        Command::new(SARCTL)
-            .args(args)
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .output()
-            .unwrap()
-    };
+    let ctl = |args: &[&str]| support::sarctl(&prefix, args);
     let start = Instant::now();
     while !ctl(&["record", "start"]).status.success() {
         assert!(start.elapsed() < Duration::from_secs(30), "no daemon");
@@ -202,7 +151,7 @@ fn a_recording_without_a_configuration_needs_one() {
 
 #[test]
 fn export_refuses_bad_input_with_one_line() {
-    let dir = common::scratch("simrec_export_errors");
+    let dir = support::scratch("simrec_export_errors");
     let rec = dir.join("rec.mcap");
     std::fs::copy(
         Path::new(env!("CARGO_MANIFEST_DIR"))

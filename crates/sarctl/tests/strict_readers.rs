@@ -27,7 +27,7 @@
 #[path = "../../daemon/tests/common/mod.rs"]
 mod common;
 mod support;
-use support::SARD;
+use support::{Daemon, sard};
 
 use common::readers;
 use sar_record::McapReader;
@@ -161,40 +161,10 @@ fn a_replay_output_decodes_with_the_strict_readers() {
 #[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
 fn a_sard_recording_decodes_with_the_strict_readers() {
     let dir = common::scratch("strict_sard");
-    let rec_dir = dir.join("rec");
-    let config = dir.join("sim.toml");
-    let toml = sar_config::DEFAULT_TOML
-        .replace("[record]\nenabled = false", "[record]\nenabled = true")
-        .replace(
-            "directory = \"recordings\"",
-            &format!("directory = {:?}", rec_dir.display().to_string()),
-        );
-    assert_ne!(toml, sar_config::DEFAULT_TOML);
-    std::fs::write(&config, toml).unwrap();
-    // 3 s of the demo on the simulator, then sard ends and closes the file.
-    let out = Command::new(&*SARD)
-        .args(["--sim", "--config"])
-        .arg(&config)
-        .args(["--max-cycles", "3000"])
-        .env(
-            "SAR_SERVICE_PREFIX",
-            format!("sar-strict-{}", std::process::id()),
-        )
-        .stdout(Stdio::null())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "sard: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 1, "{files:?}");
+    // 3 s of the demo on the simulator, then sard ends and closes the file;
+    // the one recording of it.
+    let prefix = format!("sar-strict-{}", std::process::id());
+    let files = vec![support::sim_recording(&dir, 3000, &prefix)];
     let checked = check_strictly(&files, "sard --sim recording");
     assert_layout_paths(&checked[0]);
     let topics = checked[0]["topics"].as_object().unwrap();
@@ -242,18 +212,6 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     );
 }
 
-/// A child process ended with SIGTERM (then waited for) when dropped.
-struct Proc(std::process::Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let _ = self.0.wait();
-    }
-}
-
 /// The live view with `@foxglove/ws-protocol`'s client (its default
 /// subprotocol `foxglove.websocket.v1`): every advertised `ros2msg` schema
 /// parses, every CDR message received decodes, and every path of the layout
@@ -265,24 +223,8 @@ fn the_live_view_decodes_with_the_foxglove_client() {
     let prefix = format!("sar-strict-live-{}", std::process::id());
     // Install first: the daemon should not wait for npm.
     let _ = readers::ensure(readers::Part::Node);
-    let _daemon = Proc(
-        Command::new(&*SARD)
-            .arg("--sim")
-            .env("SAR_SERVICE_PREFIX", &prefix)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let client = sar_shm::Client::new(&prefix).unwrap();
-    let start = std::time::Instant::now();
-    while !client
-        .subscribe()
-        .is_ok_and(|s| s.latest(std::time::Duration::from_secs(1)).is_some())
-    {
-        assert!(start.elapsed().as_secs() < 60, "sard did not come up");
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
+    let _daemon = Daemon::spawn(sard(&prefix).arg("--sim"));
+    support::wait_for_state(&prefix, "sard did not come up", |_| true);
     let mut view = Command::new(support::SARCTL)
         .args(["--prefix", &prefix, "view", "--bind", "127.0.0.1:0"])
         .stdout(Stdio::piped())
@@ -292,7 +234,7 @@ fn the_live_view_decodes_with_the_foxglove_client() {
     BufReader::new(view.stdout.take().unwrap())
         .read_line(&mut line)
         .unwrap();
-    let _view = Proc(view);
+    let _view = Daemon(view);
     let url = line
         .split_whitespace()
         .find(|w| w.starts_with("ws://"))

@@ -252,20 +252,45 @@ pub fn simulate_static_poses(
     protocol
         .iter()
         .map(|p| {
-            let a_m = truth.support_m - p.rod_dir * p.support_distance_m;
-            let q4 = p.rod_dir.x.atan2(p.rod_dir.z);
-            let q5 = p.rod_dir.y.asin();
-            let (u, w) = rod_frame(q4, q5);
-            let (f_a, _) = ujoint_force(truth, &a_m, &u, &w, &Vector3::zeros(), p.slide_sign);
+            let (a_m, f_a) = pose_at_rest(truth, p, |_, _| {
+                truth.support_m - p.rod_dir * p.support_distance_m
+            });
             let ideal = ideal_reading(rotation, &f_a, bias_n);
-            StaticPose {
-                ujoint_m: a_m,
-                mean_reading_n: sensor.mean(&ideal, samples),
-                samples,
-                slide_sign: slide_sign(p.slide_sign),
-            }
+            static_pose(p, a_m, sensor.mean(&ideal, samples), samples)
         })
         .collect()
+}
+
+/// The protocol pose `p` at rest (no tip force): its U-joint centre A (m),
+/// placed by `ujoint` from the rod's frame (u, w) (MODEL.md 3), and the force
+/// F_A (N) there from the statics.
+pub fn pose_at_rest(
+    truth: &Truth,
+    p: &ProtocolPose,
+    ujoint: impl FnOnce(&Vector3<f64>, &Vector3<f64>) -> Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let q4 = p.rod_dir.x.atan2(p.rod_dir.z);
+    let q5 = p.rod_dir.y.asin();
+    let (u, w) = rod_frame(q4, q5);
+    let a_m = ujoint(&u, &w);
+    let (f_a, _) = ujoint_force(truth, &a_m, &u, &w, &Vector3::zeros(), p.slide_sign);
+    (a_m, f_a)
+}
+
+/// The static pose of the protocol pose `p` with the U-joint at `ujoint_m`
+/// and the mean reading `mean_reading_n` (N) of `samples`.
+pub fn static_pose(
+    p: &ProtocolPose,
+    ujoint_m: Vector3<f64>,
+    mean_reading_n: Vector3<f64>,
+    samples: u32,
+) -> StaticPose {
+    StaticPose {
+        ujoint_m,
+        mean_reading_n,
+        samples,
+        slide_sign: slide_sign(p.slide_sign),
+    }
 }
 
 /// The calibration of INTERFACES.md 2's example file (R_0s = I).
@@ -302,6 +327,18 @@ pub fn manipulator2_truth() -> Truth {
         support_m: Vector3::new(0.45, 0.20, 0.0),
         gravity_mps2: gravity(),
         friction_n: 0.0,
+    }
+}
+
+/// Manipulator `manipulator` (0-based) of Table 2 on the example robot
+/// (L = 0.35 m, d = 0, B = (0.45, 0.20, 0)) with `friction_n` of friction.
+pub fn table2_truth(manipulator: usize, friction_n: f64) -> Truth {
+    let (mass_kg, com_m) = TABLE2[manipulator];
+    Truth {
+        mass_kg,
+        com_m,
+        friction_n,
+        ..manipulator2_truth()
     }
 }
 
@@ -391,4 +428,47 @@ pub fn example_reading(
     let (_, w) = rod_frame(u.x.atan2(u.z), u.y.asin());
     let (f_a, _) = ujoint_force(&truth, &a_m, &u, &w, tip_force_n, 0.0);
     ideal_reading(&Matrix3::identity(), &f_a, bias_n)
+}
+
+/// The joints' sample of the active joints `q` (m), stamped `stamp_ns`, valid.
+pub fn joint_sample(q: [f64; 3], stamp_ns: u64) -> sar_estimator::cycle::JointSample {
+    sar_estimator::cycle::JointSample {
+        joints: sar_kinematics::ActiveJoints {
+            q1_m: q[0],
+            q2_m: q[1],
+            q3_m: q[2],
+        },
+        stamp_ns,
+        valid: true,
+    }
+}
+
+/// What an identification of manipulator 2 (with 0.3 N of friction) on the
+/// example calibration starts from: the truth, the calibration, the bias (N)
+/// and the cone protocol's poses, 10 samples each of a HEX-6 sensor seeded
+/// `seed`.
+pub fn cone_identification_inputs(
+    seed: u64,
+) -> (
+    Truth,
+    sar_estimator::Calibration,
+    Vector3<f64>,
+    Vec<StaticPose>,
+) {
+    let truth = Truth {
+        friction_n: 0.3,
+        ..manipulator2_truth()
+    };
+    let cal = example_calibration();
+    let bias_n = Vector3::new(0.4, -1.1, 0.25);
+    let mut sensor = NoisySensor::new(sar_estimator::SensorNoise::HEX6_STD_N, seed);
+    let poses = simulate_static_poses(
+        &truth,
+        &cal.sensor_rotation(),
+        &bias_n,
+        &cone_protocol(),
+        10,
+        &mut sensor,
+    );
+    (truth, cal, bias_n, poses)
 }
