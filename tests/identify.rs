@@ -429,16 +429,9 @@ fn the_fixtures_decode_with_the_python_reader() {
         .map(|f| f.name)
         .collect();
     let paths: Vec<PathBuf> = names.iter().map(|n| fixture(n)).collect();
-    let out = readers::python()
-        .arg("-c")
-        .arg(PY_READER)
-        .args(&paths)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "the Python reader failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = sar_test_support::process::run_ok(
+        readers::python().arg("-c").arg(PY_READER).args(&paths),
+        "the Python reader failed",
     );
     let stdout = String::from_utf8(out.stdout).unwrap();
     let lines: Vec<&str> = stdout.lines().collect();

@@ -54,15 +54,9 @@ fn temp_path(name: &str) -> PathBuf {
 #[test]
 fn the_robot_configuration_passes_check_config_and_names_the_real_devices() {
     let path = robot_toml();
-    let out = Command::new(SARD)
-        .arg("--check-config")
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = sar_test_support::process::run_ok(
+        Command::new(SARD).arg("--check-config").arg(&path),
+        "the command",
     );
     assert!(String::from_utf8_lossy(&out.stdout).contains("valid"));
     let c = config::load(&path).unwrap();

@@ -84,15 +84,9 @@ fn collect(sock: &UnixDatagram, limit: Duration, until: impl Fn(&[String]) -> bo
 fn check_config_accepts_a_good_file_and_names_the_key_of_a_bad_one() {
     let good = temp_path("good.toml");
     std::fs::write(&good, sar_config::DEFAULT_TOML).unwrap();
-    let out = Command::new(SARD)
-        .arg("--check-config")
-        .arg(&good)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    sar_test_support::process::run_ok(
+        Command::new(SARD).arg("--check-config").arg(&good),
+        "the command",
     );
     let bad = temp_path("bad.toml");
     std::fs::write(

@@ -624,15 +624,11 @@ fn a_full_file_system_is_a_write_error_naming_enospc_never_a_file_written() {
     let dir = sar_test_support::scratch!("full_file_system");
     let mount = dir.join("tiny");
     std::fs::create_dir_all(&mount).unwrap();
-    let out = std::process::Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=12k", "tmpfs"])
-        .arg(&mount)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "this test needs a tmpfs (mount, as root): {}",
-        String::from_utf8_lossy(&out.stderr)
+    sar_test_support::process::run_ok(
+        std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=12k", "tmpfs"])
+            .arg(&mount),
+        "this test needs a tmpfs (mount, as root)",
     );
     struct Unmount(std::path::PathBuf);
     impl Drop for Unmount {

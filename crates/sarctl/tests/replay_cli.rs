@@ -237,15 +237,11 @@ struct Tmpfs(PathBuf);
 impl Tmpfs {
     fn mount(dir: &Path, options: &str) -> Self {
         std::fs::create_dir_all(dir).unwrap();
-        let out = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", options, "tmpfs"])
-            .arg(dir)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "this test needs a tmpfs (mount, as root): mount -t tmpfs -o {options} failed: {}",
-            text(&out.stderr)
+        sar_test_support::process::run_ok(
+            Command::new("mount")
+                .args(["-t", "tmpfs", "-o", options, "tmpfs"])
+                .arg(dir),
+            "this test needs a tmpfs (mount, as root): mount -t tmpfs -o  failed",
         );
         Self(dir.to_path_buf())
     }
@@ -423,17 +419,12 @@ fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomple
         .unwrap();
     assert!(out.status.success(), "{}", text(&out.stderr));
     drop(fs);
-    let out = Command::new(SARCTL)
-        .arg("replay")
-        .arg("--input")
-        .arg(&recovered)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{} {}",
-        text(&out.stdout),
-        text(&out.stderr)
+    sar_test_support::process::run_ok(
+        Command::new(SARCTL)
+            .arg("replay")
+            .arg("--input")
+            .arg(&recovered),
+        "the command",
     );
 }
 

@@ -180,16 +180,12 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     }
     // The rosbag2 directory of it, as ROS 2's tools open one.
     let bag = dir.join("bag");
-    let out = Command::new(support::SARCTL)
-        .args(["export", "--rosbag2"])
-        .arg(&bag)
-        .arg(&files[0])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "sarctl export: {}",
-        String::from_utf8_lossy(&out.stderr)
+    sar_test_support::process::run_ok(
+        Command::new(support::SARCTL)
+            .args(["export", "--rosbag2"])
+            .arg(&bag)
+            .arg(&files[0]),
+        "sarctl export",
     );
     let py = readers::rosbags(std::slice::from_ref(&bag));
     let py_files = readers::assert_clean(&py, "rosbags (rosbag2 directory)");
@@ -240,17 +236,13 @@ fn the_live_view_decodes_with_the_foxglove_client() {
         .find(|w| w.starts_with("ws://"))
         .unwrap_or_else(|| panic!("no address in {line:?}"))
         .to_owned();
-    let out = readers::node()
-        .arg(readers::repo_root().join("scripts/test-readers/check_live.mjs"))
-        .arg("--layout")
-        .arg(readers::repo_root().join("deploy/foxglove-layout.json"))
-        .arg(&url)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "check_live.mjs: {}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = sar_test_support::process::run_ok(
+        readers::node()
+            .arg(readers::repo_root().join("scripts/test-readers/check_live.mjs"))
+            .arg("--layout")
+            .arg(readers::repo_root().join("deploy/foxglove-layout.json"))
+            .arg(&url),
+        "check_live.mjs",
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     eprintln!(

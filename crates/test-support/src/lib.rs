@@ -12,6 +12,7 @@
 //!   test binary declares it: `#[global_allocator] static GLOBAL:
 //!   sar_test_support::counting::Counting = sar_test_support::counting::Counting;`).
 //! - [`messages`]: deterministic messages of every topic, cycle by cycle.
+//! - [`process`]: a program run to its end that must succeed ([`process::run_ok`]).
 //! - [`files`]: scratch directories ([`scratch!`]), named pipes, a
 //!   configuration that records.
 
@@ -19,6 +20,7 @@ pub mod counting;
 pub mod drives;
 pub mod files;
 pub mod messages;
+pub mod process;
 pub mod rig;
 pub mod truth;
 

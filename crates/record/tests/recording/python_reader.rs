@@ -20,16 +20,9 @@ use std::path::Path;
 /// installs (on first use) under `target/test-readers/py`.
 fn python_read(file: &Path) -> Option<String> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/read_recording.py");
-    let out = crate::readers::python()
-        .arg(&script)
-        .arg(file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "the Python reader failed ({}): {}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
+    let out = sar_test_support::process::run_ok(
+        crate::readers::python().arg(&script).arg(file),
+        "the Python reader failed ()",
     );
     Some(String::from_utf8(out.stdout).unwrap())
 }
