@@ -7,11 +7,11 @@
 use sar_estimator::cycle::{
     Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig, SensorSample,
 };
-use sar_estimator::tip_force::TipForceConfig;
+use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::guard::{ForceLimits, GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
-use sar_estimator::filter::{FilterConfig, TipFilter};
+use sar_estimator::tip_force::TipForceConfig;
 use sar_estimator::{SensorNoise, SlideSign, StaticPose};
 use sar_kinematics::{
     ActiveJoints, Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3,
@@ -63,16 +63,10 @@ fn config() -> Option<EstimatorConfig> {
     })
 }
 
-/// One estimator cycle through a C ABI, so that the whole path is code-generated.
-/// Returns the guard state as a number, or -1.
-#[unsafe(no_mangle)]
-pub extern "C" fn sar_nostd_cycle(q1_m: f64, q2_m: f64, q3_m: f64, fx_n: f64, fy_n: f64, fz_n: f64) -> i32 {
-    let Some(config) = config() else { return -1 };
-    let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
-        return -1;
-    };
-    // The torque the model predicts: (A - S) x f with A - S = (0, -0.05, 0).
-    let force_n = Vec3::new(fx_n, fy_n, fz_n);
+/// The first cycle of `estimator` at `joints` with the reading `force_n`
+/// (and the torque the model predicts: (A - S) x f with A - S = (0, -0.05,
+/// 0)), a reset requested: the guard state as a number.
+fn reset_cycle(estimator: &mut Estimator, joints: ActiveJoints, force_n: Vec3) -> i32 {
     let out = estimator.cycle(&CycleInput {
         cycle: 1,
         now_ns: Some(1_000),
@@ -84,32 +78,67 @@ pub extern "C" fn sar_nostd_cycle(q1_m: f64, q2_m: f64, q3_m: f64, fx_n: f64, fy
             stamp_ns: 1_000,
             valid: true,
         },
-        joints: JointSample { joints: ActiveJoints { q1_m, q2_m, q3_m }, stamp_ns: 1_000, valid: true },
+        joints: JointSample {
+            joints,
+            stamp_ns: 1_000,
+            valid: true,
+        },
         command: Some(Command::Reset),
     });
     out.guard_state as i32
+}
+
+/// One estimator cycle through a C ABI, so that the whole path is code-generated.
+/// Returns the guard state as a number, or -1.
+#[unsafe(no_mangle)]
+pub extern "C" fn sar_nostd_cycle(
+    q1_m: f64,
+    q2_m: f64,
+    q3_m: f64,
+    fx_n: f64,
+    fy_n: f64,
+    fz_n: f64,
+) -> i32 {
+    let Some(config) = config() else { return -1 };
+    let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
+        return -1;
+    };
+    reset_cycle(
+        &mut estimator,
+        ActiveJoints { q1_m, q2_m, q3_m },
+        Vec3::new(fx_n, fy_n, fz_n),
+    )
 }
 
 /// One identification and one support fit over a single pose (which is too few:
 /// the point is only to compile them without std).
 #[unsafe(no_mangle)]
 pub extern "C" fn sar_nostd_identify(ax_m: f64, ay_m: f64, az_m: f64) -> f64 {
-    let Some(config) = config() else { return f64::NAN };
+    let Some(config) = config() else {
+        return f64::NAN;
+    };
     let pose = StaticPose {
         ujoint_m: Vec3::new(ax_m, ay_m, az_m),
         mean_reading_n: Vec3::new(0.0, -20.0, 0.0),
         samples: 10,
         slide_sign: SlideSign::Inserting,
     };
-    let options = IdentificationOptions { bias_across_gravity: false, friction: true };
-    let Ok(mut ident) = Identification::new(&config.calibration, &config.noise, Vec3::zeros(), options)
+    let options = IdentificationOptions {
+        bias_across_gravity: false,
+        friction: true,
+    };
+    let Ok(mut ident) =
+        Identification::new(&config.calibration, &config.noise, Vec3::zeros(), options)
     else {
         return f64::NAN;
     };
     let support_options = SupportOptions::default();
-    let Ok(mut support) =
-        SupportCalibration::new(&config.calibration, &config.noise, Vec3::zeros(), support_options)
-    else {
+    let Ok(mut support) = SupportCalibration::new(
+        &config.calibration,
+        &config.noise,
+        Vec3::zeros(),
+        support_options,
+    ) else {
         return f64::NAN;
     };
     if ident.add(&pose).is_err() || support.push(&pose).is_err() {
@@ -154,7 +183,9 @@ pub extern "C" fn sar_nostd_cycle_offset(
     fy_n: f64,
     fz_n: f64,
 ) -> i32 {
-    let Some(mut config) = config() else { return -1 };
+    let Some(mut config) = config() else {
+        return -1;
+    };
     let Ok(profile) = Profile::new(&ProfileSpec {
         length_m: 0.35,
         offset_m,
@@ -167,22 +198,11 @@ pub extern "C" fn sar_nostd_cycle_offset(
     let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
         return -1;
     };
-    let force_n = Vec3::new(fx_n, fy_n, fz_n);
-    let out = estimator.cycle(&CycleInput {
-        cycle: 1,
-        now_ns: Some(1_000),
-        sensor: SensorSample {
-            force_n,
-            torque_nm: Vec3::new(0.0, -0.05, 0.0).cross(&force_n),
-            counter: 1,
-            status: 0,
-            stamp_ns: 1_000,
-            valid: true,
-        },
-        joints: JointSample { joints: ActiveJoints { q1_m, q2_m, q3_m }, stamp_ns: 1_000, valid: true },
-        command: Some(Command::Reset),
-    });
-    out.guard_state as i32
+    reset_cycle(
+        &mut estimator,
+        ActiveJoints { q1_m, q2_m, q3_m },
+        Vec3::new(fx_n, fy_n, fz_n),
+    )
 }
 
 /// A snapshot of the estimator's decision state, taken and restored
