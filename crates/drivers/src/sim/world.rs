@@ -160,15 +160,18 @@ fn check_until(field: &'static str, from_ns: u64, until_ns: Option<u64>) -> Resu
     }
 }
 
+/// Checks that fault `index` names an axis (0 to 2).
+fn check_axis(index: usize, axis: usize) -> Result<(), SimError> {
+    if axis > 2 {
+        Err(SimError::FaultAxis { index, axis })
+    } else {
+        Ok(())
+    }
+}
+
 /// Checks one fault (index `index` in the list).
 pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
-    let axis_ok = |axis: usize| {
-        if axis > 2 {
-            Err(SimError::FaultAxis { index, axis })
-        } else {
-            Ok(())
-        }
-    };
+    let axis_ok = |axis: usize| check_axis(index, axis);
     match *fault {
         Fault::SensorSilent { from_ns, until_ns } => {
             check_until("faults.sensor_silent.until_ns", from_ns, until_ns)
@@ -188,13 +191,11 @@ pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
             ..
         } => {
             check_until("faults.sensor_saturated.until_ns", from_ns, until_ns)?;
-            let field = "faults.sensor_saturated.channels";
-            require(
-                channels.contains(&true),
-                field,
-                0.0,
+            let (field, why) = (
+                "faults.sensor_saturated.channels",
                 "must name at least one channel",
-            )
+            );
+            require(channels.contains(&true), field, 0.0, why)
         }
         Fault::SensorSpike {
             force_n,
@@ -225,12 +226,8 @@ pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
         }
         Fault::EncoderCountLoss { axis, counts, .. } => {
             axis_ok(axis)?;
-            require(
-                counts != 0,
-                "faults.encoder_count_loss.counts",
-                0.0,
-                "must not be 0",
-            )
+            let field = "faults.encoder_count_loss.counts";
+            require(counts != 0, field, 0.0, "must not be 0")
         }
         Fault::DriveHeartbeatLoss { axis, .. } => axis_ok(axis),
         Fault::DriveEmcy { axis, code, .. } => {
