@@ -1251,12 +1251,16 @@ fn sensor_driver(ctx: &Ctx<'_>, s: Option<&SensorDriverToml>) -> Result<SensorDr
     };
     match s.kind.as_str() {
         "sim" => {
-            let given = [
-                ("address", s.address.is_some()),
-                ("counts_per_n", s.counts_per_n.is_some()),
-                ("counts_per_nm", s.counts_per_nm.is_some()),
-            ];
-            refuse_given(ctx, "drivers.sensor", "the simulated sensor", &given)?;
+            refuse_given(
+                ctx,
+                "drivers.sensor",
+                "the simulated sensor",
+                &[
+                    ("address", s.address.is_some()),
+                    ("counts_per_n", s.counts_per_n.is_some()),
+                    ("counts_per_nm", s.counts_per_nm.is_some()),
+                ],
+            )?;
             Ok(SensorDriver::Sim)
         }
         "rdt" => {
@@ -1325,15 +1329,19 @@ fn axes_driver(
     };
     match a.kind.as_str() {
         "sim" => {
-            let given = [
-                ("interface", a.interface.is_some()),
-                ("node_ids", a.node_ids.is_some()),
-                ("lead_m", a.lead_m.is_some()),
-                ("counts_per_turn", a.counts_per_turn.is_some()),
-                ("quick_stop_decel_mps2", a.quick_stop_decel_mps2.is_some()),
-                ("max_torque_permille", a.max_torque_permille.is_some()),
-            ];
-            refuse_given(ctx, "drivers.axes", "the simulated axes", &given)?;
+            refuse_given(
+                ctx,
+                "drivers.axes",
+                "the simulated axes",
+                &[
+                    ("interface", a.interface.is_some()),
+                    ("node_ids", a.node_ids.is_some()),
+                    ("lead_m", a.lead_m.is_some()),
+                    ("counts_per_turn", a.counts_per_turn.is_some()),
+                    ("quick_stop_decel_mps2", a.quick_stop_decel_mps2.is_some()),
+                    ("max_torque_permille", a.max_torque_permille.is_some()),
+                ],
+            )?;
             Ok(AxesDriver::Sim)
         }
         "canopen" => canopen_axes(ctx, a, max_accel_mps2),

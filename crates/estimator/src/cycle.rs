@@ -30,7 +30,10 @@ use crate::guard::{
     SensorChannel, TipInput, Transition,
 };
 use crate::tip_force::{TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator};
-use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3};
+use crate::{
+    Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, at_least,
+    finite_non_negative, positive, require,
+};
 use sar_kinematics::{ActiveJoints, PoseError, forward};
 
 /// One force/torque sample as the sensor driver delivers it.
@@ -734,20 +737,8 @@ impl PlausibilityConfig {
     /// torque noise finite and > 0 per axis; max_sigma finite and >= 1.
     /// Then each optional check's settings, in the order of the fields.
     pub fn new(limits: PlausibilityLimits) -> Result<Self, SettingError> {
-        let v = limits.max_joint_speed_mps;
-        require(
-            v.is_finite() && v > 0.0,
-            "max_joint_speed_mps",
-            v,
-            "must be finite and > 0",
-        )?;
-        let m = limits.joint_margin_m;
-        require(
-            m.is_finite() && m >= 0.0,
-            "joint_margin_m",
-            m,
-            "must be finite and >= 0",
-        )?;
+        positive("max_joint_speed_mps", limits.max_joint_speed_mps)?;
+        finite_non_negative("joint_margin_m", limits.joint_margin_m)?;
         require(
             limits.max_counter_gap != 0,
             "max_counter_gap",
@@ -763,12 +754,7 @@ impl PlausibilityConfig {
         }
         if let Some(r) = limits.range {
             for &v in r.force_n.iter().chain(r.torque_nm.iter()) {
-                require(
-                    v.is_finite() && v > 0.0,
-                    "range",
-                    v,
-                    "must be finite and > 0",
-                )?;
+                positive("range", v)?;
             }
         }
         if let Some(sp) = limits.spikes {
@@ -787,37 +773,22 @@ impl PlausibilityConfig {
     }
 }
 
-/// `Ok` if `ok`, else the setting error naming `field`, its value and what
-/// it must be.
-fn require(
-    ok: bool,
-    field: &'static str,
-    value: f64,
-    why: &'static str,
-) -> Result<(), SettingError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(SettingError::Invalid { field, value, why })
-    }
+/// A count of samples that must be 1..=100000.
+fn window(field: &'static str, samples: u32) -> Result<(), SettingError> {
+    let ok = (1..=100_000).contains(&samples);
+    require(ok, field, f64::from(samples), "must be 1..=100000")
 }
 
 impl TorqueLimits {
     /// Noise finite and > 0 per axis; max_sigma finite and >= 1.
     fn check(&self) -> Result<(), SettingError> {
         for &n in self.noise_nm.iter() {
-            require(
-                n.is_finite() && n > 0.0,
-                "torque.noise_nm",
-                n,
-                "must be finite and > 0",
-            )?;
+            positive("torque.noise_nm", n)?;
         }
-        let m = self.max_sigma;
-        require(
-            m.is_finite() && m >= 1.0,
+        at_least(
             "torque.max_sigma",
-            m,
+            self.max_sigma,
+            1.0,
             "must be finite and >= 1",
         )
     }
@@ -826,15 +797,14 @@ impl TorqueLimits {
 impl SpikeLimits {
     /// Jump finite and >= 3 sigma; at least 2 spikes in a window of >= 1.
     fn check(&self) -> Result<(), SettingError> {
-        let j = self.jump_sigma;
-        require(
-            j.is_finite() && j >= 3.0,
+        at_least(
             "spikes.jump_sigma",
-            j,
+            self.jump_sigma,
+            3.0,
             "must be finite and >= 3",
         )?;
-        let n = self.max_spikes;
-        require(n >= 2, "spikes.max_spikes", f64::from(n), "must be >= 2")?;
+        let n = f64::from(self.max_spikes);
+        require(self.max_spikes >= 2, "spikes.max_spikes", n, "must be >= 2")?;
         require(
             self.window_samples != 0,
             "spikes.window_samples",
@@ -848,30 +818,20 @@ impl TareLimits {
     /// Drift finite and >= 0; an age bound > 0; a window of 1..=100000
     /// samples; a spread finite and >= 1.
     fn check(&self) -> Result<(), SettingError> {
-        let d = self.drift_n_per_s;
-        require(
-            d.is_finite() && d >= 0.0,
-            "tare.drift_n_per_s",
-            d,
-            "must be finite and >= 0",
-        )?;
+        finite_non_negative("tare.drift_n_per_s", self.drift_n_per_s)?;
         require(
             self.max_age_ns != Some(0),
             "tare.max_age",
             0.0,
             "must be > 0",
         )?;
-        let w = self.window_samples;
-        let ok = (1..=100_000).contains(&w);
-        require(
-            ok,
-            "tare.window_samples",
-            f64::from(w),
-            "must be 1..=100000",
-        )?;
-        let spread = self.max_spread;
-        let ok = spread.is_finite() && spread >= 1.0;
-        require(ok, "tare.max_spread", spread, "must be finite and >= 1")
+        window("tare.window_samples", self.window_samples)?;
+        at_least(
+            "tare.max_spread",
+            self.max_spread,
+            1.0,
+            "must be finite and >= 1",
+        )
     }
 }
 
@@ -879,24 +839,11 @@ impl MountingLimits {
     /// Sigma and friction finite and >= 0; tolerances finite and > 0; a
     /// rest of 1..=100000 samples.
     fn check(&self) -> Result<(), SettingError> {
-        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        let (ge0, gt0) = ("must be finite and >= 0", "must be finite and > 0");
-        require(non_negative(self.sigma), "mounting.sigma", self.sigma, ge0)?;
-        let f = self.friction_n;
-        require(non_negative(f), "mounting.friction_n", f, ge0)?;
-        let t = self.tolerance_n;
-        require(positive(t), "mounting.tolerance_n", t, gt0)?;
-        let t = self.tolerance_nm;
-        require(positive(t), "mounting.tolerance_nm", t, gt0)?;
-        let r = self.rest_samples;
-        let ok = (1..=100_000).contains(&r);
-        require(
-            ok,
-            "mounting.rest_samples",
-            f64::from(r),
-            "must be 1..=100000",
-        )
+        finite_non_negative("mounting.sigma", self.sigma)?;
+        finite_non_negative("mounting.friction_n", self.friction_n)?;
+        positive("mounting.tolerance_n", self.tolerance_n)?;
+        positive("mounting.tolerance_nm", self.tolerance_nm)?;
+        window("mounting.rest_samples", self.rest_samples)
     }
 }
 

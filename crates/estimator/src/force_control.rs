@@ -34,7 +34,7 @@
 //! stability bound ([`ForceControlConfig::phase_margin_deg`]).
 
 use crate::filter::{FilterConfig, TipFilter};
-use crate::{SettingError, Vec3};
+use crate::{SettingError, Vec3, positive};
 
 /// The admittance of one tip-frame part.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -124,14 +124,6 @@ pub struct ForceControlConfig {
 
 fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
     SettingError::Invalid { field, value, why }
-}
-
-fn positive(field: &'static str, value: f64) -> Result<(), SettingError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(field, value, "must be finite and > 0"))
-    }
 }
 
 impl ForceControlConfig {

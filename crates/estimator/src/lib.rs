@@ -49,6 +49,51 @@ pub enum SettingError {
     Filter(#[from] filter::FilterError),
 }
 
+/// `Ok` if `ok`, else the setting error naming `field`, its value and what
+/// it must be (`why`).
+pub(crate) fn require(
+    ok: bool,
+    field: &'static str,
+    value: f64,
+    why: &'static str,
+) -> Result<(), SettingError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(SettingError::Invalid { field, value, why })
+    }
+}
+
+/// A setting that must be finite and > 0.
+pub(crate) fn positive(field: &'static str, value: f64) -> Result<(), SettingError> {
+    require(
+        value.is_finite() && value > 0.0,
+        field,
+        value,
+        "must be finite and > 0",
+    )
+}
+
+/// A setting that must be finite and >= 0.
+pub(crate) fn finite_non_negative(field: &'static str, value: f64) -> Result<(), SettingError> {
+    require(
+        value.is_finite() && value >= 0.0,
+        field,
+        value,
+        "must be finite and >= 0",
+    )
+}
+
+/// A setting that must be finite and >= `lo` (`why` says so).
+pub(crate) fn at_least(
+    field: &'static str,
+    value: f64,
+    lo: f64,
+    why: &'static str,
+) -> Result<(), SettingError> {
+    require(value.is_finite() && value >= lo, field, value, why)
+}
+
 /// The force sensor's noise: one standard deviation per sensor axis, N
 /// (MODEL.md 7: the HEX-6 has 0.2, 0.2, 0.8).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -179,17 +179,30 @@ impl Table<'_, '_> {
         })
     }
 
+    /// Refuses `what` (a spike, a drift; given at `name`) of zero force and
+    /// zero torque: it changes nothing.
+    fn changes_something(
+        &self,
+        name: &str,
+        force: &Vec3,
+        torque: &Vec3,
+        what: &str,
+    ) -> Result<(), ConfigError> {
+        if *force == Vec3::zeros() && *torque == Vec3::zeros() {
+            return Err(self.ctx.err(
+                &self.key(name),
+                format!("{what} of zero force and zero torque changes nothing"),
+            ));
+        }
+        Ok(())
+    }
+
     /// `sensor_spike`: a force or a torque, for at least one sample.
     fn sensor_spike(&self) -> Result<Fault, ConfigError> {
         let at_ns = self.at()?.1;
         let force_n = Vec3::from(self.required("force_n", self.f.force_n)?);
         let torque_nm = Vec3::from(self.f.torque_nm.unwrap_or_default());
-        if force_n == Vec3::zeros() && torque_nm == Vec3::zeros() {
-            return Err(self.ctx.err(
-                &self.key("force_n"),
-                "a spike of zero force and zero torque changes nothing",
-            ));
-        }
+        self.changes_something("force_n", &force_n, &torque_nm, "a spike")?;
         let samples = self.f.samples.unwrap_or(1);
         if samples == 0 {
             return Err(self.ctx.err(&self.key("samples"), "must be >= 1, got 0"));
@@ -207,12 +220,7 @@ impl Table<'_, '_> {
         let from_ns = self.from()?.1;
         let drift_n_per_s = Vec3::from(self.required("drift_n_per_s", self.f.drift_n_per_s)?);
         let drift_nm_per_s = Vec3::from(self.f.drift_nm_per_s.unwrap_or_default());
-        if drift_n_per_s == Vec3::zeros() && drift_nm_per_s == Vec3::zeros() {
-            return Err(self.ctx.err(
-                &self.key("drift_n_per_s"),
-                "a drift of zero force and zero torque changes nothing",
-            ));
-        }
+        self.changes_something("drift_n_per_s", &drift_n_per_s, &drift_nm_per_s, "a drift")?;
         Ok(Fault::SensorDrift {
             from_ns,
             drift_n_per_s,

@@ -233,7 +233,7 @@ fn resolve_step(
         })?;
         return Ok((tip_key, q));
     }
-    rod_dir_target(ctx, machine, key, step)
+    rod_dir_target(ctx, cal, key, step)
 }
 
 /// Refuses a step with no target or several (of joints, ujoint, tip,
@@ -282,11 +282,10 @@ fn check_one_target(ctx: &Ctx<'_>, key: &str, step: &MotionToml) -> Result<(), C
 /// far from the support, back along the rod's direction.
 fn rod_dir_target(
     ctx: &Ctx<'_>,
-    machine: &Machine,
+    cal: &Calibration,
     key: &str,
     step: &MotionToml,
 ) -> Result<(String, ActiveJoints), ConfigError> {
-    let cal = &machine.calibration;
     let dir_key = format!("{key}.rod_dir");
     let u = Vec3::from(step.rod_dir.unwrap_or_default());
     let norm = u.norm();
