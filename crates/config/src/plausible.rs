@@ -277,22 +277,38 @@ fn check_manipulator(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     Ok(())
 }
 
+/// Refuses a noise component (`(key, values)`) above a tenth of the range's
+/// (`(key, values)`) on its axis, in `unit`.
+fn tenth_of_range(
+    ctx: &Ctx<'_>,
+    (noise_key, noise): (&str, &[f64; 3]),
+    (range_key, range): (&str, &[f64; 3]),
+    unit: &str,
+) -> Result<(), ConfigError> {
+    for (i, (noise, range)) in noise.iter().zip(range).enumerate() {
+        at_most(
+            ctx,
+            &format!("{noise_key}[{i}]"),
+            *noise,
+            (range / 10.0, unit),
+            &format!("a tenth of {range_key}[{i}]"),
+        )?;
+    }
+    Ok(())
+}
+
 /// `[sensor]`: noise and ranges, the noise at most a tenth of the range.
 fn check_sensor(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     let s = &f.sensor;
     components(ctx, "sensor.noise_n", &s.noise_n)?;
     components(ctx, "sensor.range_n", &s.range_n)?;
     components(ctx, "sensor.range_nm", &s.range_nm)?;
-    for (i, (noise, range)) in s.noise_n.iter().zip(s.range_n).enumerate() {
-        at_most(
-            ctx,
-            &format!("sensor.noise_n[{i}]"),
-            *noise,
-            (range / 10.0, "N"),
-            &format!("a tenth of sensor.range_n[{i}]"),
-        )?;
-    }
-    Ok(())
+    tenth_of_range(
+        ctx,
+        ("sensor.noise_n", &s.noise_n),
+        ("sensor.range_n", &s.range_n),
+        "N",
+    )
 }
 
 /// `[guard]`: each force limit given, at most the sensor's smallest force
@@ -342,16 +358,8 @@ fn check_plausibility(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     )?;
     value(ctx, "plausibility.joint_margin_m", p.joint_margin_m)?;
     components(ctx, "plausibility.torque_noise_nm", &p.torque_noise_nm)?;
-    for (i, (noise, range)) in p.torque_noise_nm.iter().zip(s.range_nm).enumerate() {
-        at_most(
-            ctx,
-            &format!("plausibility.torque_noise_nm[{i}]"),
-            *noise,
-            (range / 10.0, "N m"),
-            &format!("a tenth of sensor.range_nm[{i}]"),
-        )?;
-    }
-    Ok(())
+    let noise = ("plausibility.torque_noise_nm", &p.torque_noise_nm);
+    tenth_of_range(ctx, noise, ("sensor.range_nm", &s.range_nm), "N m")
 }
 
 /// `[tip]`'s observability limit; `[axes]`: each bound of each travel, the
