@@ -1250,19 +1250,8 @@ fn sensor_driver(ctx: &Ctx<'_>, s: Option<&SensorDriverToml>) -> Result<SensorDr
         return Ok(SensorDriver::Sim);
     };
     match s.kind.as_str() {
-        "sim" => {
-            refuse_given(
-                ctx,
-                "drivers.sensor",
-                "the simulated sensor",
-                &[
-                    ("address", s.address.is_some()),
-                    ("counts_per_n", s.counts_per_n.is_some()),
-                    ("counts_per_nm", s.counts_per_nm.is_some()),
-                ],
-            )?;
-            Ok(SensorDriver::Sim)
-        }
+        "sim" => refuse_given(ctx, "drivers.sensor", "the simulated sensor", &s.rdt_keys())
+            .map(|()| SensorDriver::Sim),
         "rdt" => {
             let address = s
                 .address
@@ -1301,6 +1290,34 @@ fn sensor_driver(ctx: &Ctx<'_>, s: Option<&SensorDriverToml>) -> Result<SensorDr
     }
 }
 
+impl SensorDriverToml {
+    /// The RDT sensor's keys, with whether each is given.
+    fn rdt_keys(&self) -> [(&'static str, bool); 3] {
+        [
+            ("address", self.address.is_some()),
+            ("counts_per_n", self.counts_per_n.is_some()),
+            ("counts_per_nm", self.counts_per_nm.is_some()),
+        ]
+    }
+}
+
+impl AxesDriverToml {
+    /// The CANopen drives' keys, with whether each is given.
+    fn canopen_keys(&self) -> [(&'static str, bool); 6] {
+        [
+            ("interface", self.interface.is_some()),
+            ("node_ids", self.node_ids.is_some()),
+            ("lead_m", self.lead_m.is_some()),
+            ("counts_per_turn", self.counts_per_turn.is_some()),
+            (
+                "quick_stop_decel_mps2",
+                self.quick_stop_decel_mps2.is_some(),
+            ),
+            ("max_torque_permille", self.max_torque_permille.is_some()),
+        ]
+    }
+}
+
 /// Refuses the first key of `given` (`(key, given)`, under `section`) that
 /// is given: not a key of `what` (the simulated device, `kind = "sim"`).
 fn refuse_given(
@@ -1328,22 +1345,8 @@ fn axes_driver(
         return Ok(AxesDriver::Sim);
     };
     match a.kind.as_str() {
-        "sim" => {
-            refuse_given(
-                ctx,
-                "drivers.axes",
-                "the simulated axes",
-                &[
-                    ("interface", a.interface.is_some()),
-                    ("node_ids", a.node_ids.is_some()),
-                    ("lead_m", a.lead_m.is_some()),
-                    ("counts_per_turn", a.counts_per_turn.is_some()),
-                    ("quick_stop_decel_mps2", a.quick_stop_decel_mps2.is_some()),
-                    ("max_torque_permille", a.max_torque_permille.is_some()),
-                ],
-            )?;
-            Ok(AxesDriver::Sim)
-        }
+        "sim" => refuse_given(ctx, "drivers.axes", "the simulated axes", &a.canopen_keys())
+            .map(|()| AxesDriver::Sim),
         "canopen" => canopen_axes(ctx, a, max_accel_mps2),
         other => Err(ctx.err(
             "drivers.axes.kind",
