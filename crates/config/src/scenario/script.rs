@@ -233,7 +233,9 @@ fn resolve_step(
         })?;
         return Ok((tip_key, q));
     }
-    rod_dir_target(ctx, cal, key, step)
+    let dir_key = format!("{key}.rod_dir");
+    let q = rod_dir_target(ctx, cal, key, &dir_key, step)?;
+    Ok((dir_key, q))
 }
 
 /// Refuses a step with no target or several (of joints, ujoint, tip,
@@ -279,18 +281,19 @@ fn check_one_target(ctx: &Ctx<'_>, key: &str, step: &MotionToml) -> Result<(), C
 }
 
 /// The target given as `rod_dir` and `support_distance_m`: the U-joint that
-/// far from the support, back along the rod's direction.
+/// far from the support, back along the rod's direction (`dir_key`: where
+/// the file gives the direction).
 fn rod_dir_target(
     ctx: &Ctx<'_>,
     cal: &Calibration,
     key: &str,
+    dir_key: &str,
     step: &MotionToml,
-) -> Result<(String, ActiveJoints), ConfigError> {
-    let dir_key = format!("{key}.rod_dir");
+) -> Result<ActiveJoints, ConfigError> {
     let u = Vec3::from(step.rod_dir.unwrap_or_default());
     let norm = u.norm();
     if norm < 1e-9 {
-        return Err(ctx.err(&dir_key, "must not be the zero vector"));
+        return Err(ctx.err(dir_key, "must not be the zero vector"));
     }
     let Some(a) = step.support_distance_m else {
         return Err(ctx.err(
@@ -300,7 +303,7 @@ fn rod_dir_target(
     };
     ctx.positive(&format!("{key}.support_distance_m"), a, "m")?;
     let ujoint_m = cal.support_m() - u * (a / norm);
-    Ok((dir_key, joints_for_ujoint(cal, &ujoint_m)))
+    Ok(joints_for_ujoint(cal, &ujoint_m))
 }
 
 /// Stream of the random motion: the seed mixed with a constant, so that it
