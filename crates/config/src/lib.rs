@@ -655,6 +655,13 @@ impl Ctx<'_> {
         }
     }
 
+    /// An integer within `lo..=hi` (both within `u32`) as a `u32`.
+    fn range_u32(&self, key: &str, v: i64, lo: u32, hi: u32) -> Result<u32, ConfigError> {
+        let v = self.range_i(key, v, i64::from(lo), i64::from(hi))?;
+        // In range by the check above.
+        Ok(u32::try_from(v).unwrap_or(lo))
+    }
+
     /// Seconds (> 0, at most an hour) to ns.
     fn seconds_ns(&self, key: &str, s: f64) -> Result<u64, ConfigError> {
         let s = self.range_f(key, s, 0.0, 3600.0, "s")?;
@@ -913,7 +920,7 @@ fn plausibility(
     sensor: &SensorToml,
     sensor_driver: &SensorDriver,
 ) -> Result<PlausibilityConfig, ConfigError> {
-    let gap = ctx.range_i(
+    let gap = ctx.range_u32(
         "plausibility.max_counter_gap",
         p.max_counter_gap,
         1,
@@ -930,114 +937,111 @@ fn plausibility(
     PlausibilityConfig::new(PlausibilityLimits {
         max_joint_speed_mps: p.max_joint_speed_mps,
         joint_margin_m: p.joint_margin_m,
-        max_counter_gap: u32::try_from(gap).unwrap_or(1),
+        max_counter_gap: gap,
         torque,
         frozen: frozen_check(ctx, p, sensor, torque.as_ref(), sensor_driver)?,
         range: Some(SensorRange {
             force_n: positive_vec3(ctx, "sensor.range_n", sensor.range_n)?,
             torque_nm: positive_vec3(ctx, "sensor.range_nm", sensor.range_nm)?,
         }),
-        spikes: if p.spike_check {
-            Some(SpikeLimits {
-                jump_sigma: ctx.range_f("plausibility.spike_sigma", p.spike_sigma, 3.0, 1e3, "")?,
-                max_spikes: u32::try_from(ctx.range_i(
-                    "plausibility.spike_max",
-                    p.spike_max,
-                    2,
-                    100_000,
-                )?)
-                .unwrap_or(2),
-                window_samples: u32::try_from(ctx.range_i(
-                    "plausibility.spike_window_samples",
-                    p.spike_window_samples,
-                    1,
-                    10_000_000,
-                )?)
-                .unwrap_or(1),
-            })
-        } else {
-            None
-        },
-        tare: TareLimits {
-            max_age_ns: {
-                let s = ctx.range_f(
-                    "sensor.max_tare_age_s",
-                    sensor.max_tare_age_s,
-                    0.0,
-                    7.0 * 86_400.0,
-                    "s (0: never)",
-                )?;
-                (s > 0.0).then(|| (s * 1e9).round() as u64)
-            },
-            drift_n_per_s: ctx.range_f(
-                "sensor.drift_n_per_s",
-                sensor.drift_n_per_s,
-                0.0,
-                10.0,
-                "N/s",
-            )?,
-            window_samples: u32::try_from(ctx.range_i(
-                "sensor.tare_window_samples",
-                sensor.tare_window_samples,
-                1,
-                100_000,
-            )?)
-            .unwrap_or(1),
-            max_spread: ctx.range_f(
-                "sensor.tare_max_spread",
-                sensor.tare_max_spread,
-                1.0,
-                100.0,
-                "(times the noise)",
-            )?,
-            min_interval_ns: {
-                let s = ctx.range_f(
-                    "sensor.tare_min_interval_s",
-                    sensor.tare_min_interval_s,
-                    0.0,
-                    3600.0,
-                    "s (0: no limit)",
-                )?;
-                (s * 1e9).round() as u64
-            },
-        },
-        mounting: if p.rest_check {
-            Some(MountingLimits {
-                sigma: ctx.range_f("plausibility.rest_sigma", p.rest_sigma, 0.0, 100.0, "")?,
-                friction_n: ctx.range_f(
-                    "plausibility.support_friction_n",
-                    p.support_friction_n,
-                    0.0,
-                    100.0,
-                    "N",
-                )?,
-                tolerance_n: ctx.range_f(
-                    "plausibility.rest_tolerance_n",
-                    p.rest_tolerance_n,
-                    1e-3,
-                    100.0,
-                    "N",
-                )?,
-                tolerance_nm: ctx.range_f(
-                    "plausibility.rest_tolerance_nm",
-                    p.rest_tolerance_nm,
-                    1e-4,
-                    10.0,
-                    "N m",
-                )?,
-                rest_samples: u32::try_from(ctx.range_i(
-                    "plausibility.rest_samples",
-                    p.rest_samples,
-                    1,
-                    100_000,
-                )?)
-                .unwrap_or(1),
-            })
-        } else {
-            None
-        },
+        spikes: spike_limits(ctx, p)?,
+        tare: tare_limits(ctx, sensor)?,
+        mounting: mounting_limits(ctx, p)?,
     })
     .map_err(|e| setting_error(ctx, "plausibility", &e))
+}
+
+/// The spike check (`plausibility.spike_*`), if on.
+fn spike_limits(ctx: &Ctx<'_>, p: &PlausibilityToml) -> Result<Option<SpikeLimits>, ConfigError> {
+    if !p.spike_check {
+        return Ok(None);
+    }
+    Ok(Some(SpikeLimits {
+        jump_sigma: ctx.range_f("plausibility.spike_sigma", p.spike_sigma, 3.0, 1e3, "")?,
+        max_spikes: ctx.range_u32("plausibility.spike_max", p.spike_max, 2, 100_000)?,
+        window_samples: ctx.range_u32(
+            "plausibility.spike_window_samples",
+            p.spike_window_samples,
+            1,
+            10_000_000,
+        )?,
+    }))
+}
+
+/// The tare's limits (`sensor.*tare*`, `sensor.drift_n_per_s`).
+fn tare_limits(ctx: &Ctx<'_>, sensor: &SensorToml) -> Result<TareLimits, ConfigError> {
+    let max_age_s = ctx.range_f(
+        "sensor.max_tare_age_s",
+        sensor.max_tare_age_s,
+        0.0,
+        7.0 * 86_400.0,
+        "s (0: never)",
+    )?;
+    let drift_n_per_s = ctx.range_f(
+        "sensor.drift_n_per_s",
+        sensor.drift_n_per_s,
+        0.0,
+        10.0,
+        "N/s",
+    )?;
+    let window_samples = ctx.range_u32(
+        "sensor.tare_window_samples",
+        sensor.tare_window_samples,
+        1,
+        100_000,
+    )?;
+    let max_spread = ctx.range_f(
+        "sensor.tare_max_spread",
+        sensor.tare_max_spread,
+        1.0,
+        100.0,
+        "(times the noise)",
+    )?;
+    let min_interval_s = ctx.range_f(
+        "sensor.tare_min_interval_s",
+        sensor.tare_min_interval_s,
+        0.0,
+        3600.0,
+        "s (0: no limit)",
+    )?;
+    Ok(TareLimits {
+        max_age_ns: (max_age_s > 0.0).then(|| (max_age_s * 1e9).round() as u64),
+        drift_n_per_s,
+        window_samples,
+        max_spread,
+        min_interval_ns: (min_interval_s * 1e9).round() as u64,
+    })
+}
+
+/// The check of the wrench at rest before the first reset
+/// (`plausibility.rest_*`), if on.
+fn mounting_limits(
+    ctx: &Ctx<'_>,
+    p: &PlausibilityToml,
+) -> Result<Option<MountingLimits>, ConfigError> {
+    if !p.rest_check {
+        return Ok(None);
+    }
+    let (sigma, friction) = (p.rest_sigma, p.support_friction_n);
+    Ok(Some(MountingLimits {
+        sigma: ctx.range_f("plausibility.rest_sigma", sigma, 0.0, 100.0, "")?,
+        friction_n: ctx.range_f("plausibility.support_friction_n", friction, 0.0, 100.0, "N")?,
+        tolerance_n: ctx.range_f(
+            "plausibility.rest_tolerance_n",
+            p.rest_tolerance_n,
+            1e-3,
+            100.0,
+            "N",
+        )?,
+        tolerance_nm: ctx.range_f(
+            "plausibility.rest_tolerance_nm",
+            p.rest_tolerance_nm,
+            1e-4,
+            10.0,
+            "N m",
+        )?,
+        rest_samples: ctx.range_u32("plausibility.rest_samples", p.rest_samples, 1, 100_000)?,
+    }))
 }
 
 /// `[tip]`: the observability limit, the sensor's rate and the filter.
@@ -1246,21 +1250,8 @@ fn sensor_driver(ctx: &Ctx<'_>, s: Option<&SensorDriverToml>) -> Result<SensorDr
         return Ok(SensorDriver::Sim);
     };
     match s.kind.as_str() {
-        "sim" => {
-            for (key, given) in [
-                ("address", s.address.is_some()),
-                ("counts_per_n", s.counts_per_n.is_some()),
-                ("counts_per_nm", s.counts_per_nm.is_some()),
-            ] {
-                if given {
-                    return Err(ctx.err(
-                        &format!("drivers.sensor.{key}"),
-                        "not a key of the simulated sensor (kind = \"sim\")",
-                    ));
-                }
-            }
-            Ok(SensorDriver::Sim)
-        }
+        "sim" => refuse_given(ctx, "drivers.sensor", "the simulated sensor", &s.rdt_keys())
+            .map(|()| SensorDriver::Sim),
         "rdt" => {
             let address = s
                 .address
@@ -1299,6 +1290,52 @@ fn sensor_driver(ctx: &Ctx<'_>, s: Option<&SensorDriverToml>) -> Result<SensorDr
     }
 }
 
+impl SensorDriverToml {
+    /// The RDT sensor's keys, with whether each is given.
+    fn rdt_keys(&self) -> [(&'static str, bool); 3] {
+        [
+            ("address", self.address.is_some()),
+            ("counts_per_n", self.counts_per_n.is_some()),
+            ("counts_per_nm", self.counts_per_nm.is_some()),
+        ]
+    }
+}
+
+impl AxesDriverToml {
+    /// The CANopen drives' keys, with whether each is given.
+    fn canopen_keys(&self) -> [(&'static str, bool); 6] {
+        [
+            ("interface", self.interface.is_some()),
+            ("node_ids", self.node_ids.is_some()),
+            ("lead_m", self.lead_m.is_some()),
+            ("counts_per_turn", self.counts_per_turn.is_some()),
+            (
+                "quick_stop_decel_mps2",
+                self.quick_stop_decel_mps2.is_some(),
+            ),
+            ("max_torque_permille", self.max_torque_permille.is_some()),
+        ]
+    }
+}
+
+/// Refuses the first key of `given` (`(key, given)`, under `section`) that
+/// is given: not a key of `what` (the simulated device, `kind = "sim"`).
+fn refuse_given(
+    ctx: &Ctx<'_>,
+    section: &str,
+    what: &str,
+    given: &[(&str, bool)],
+) -> Result<(), ConfigError> {
+    match given.iter().find(|(_, given)| *given) {
+        Some((key, _)) => Err(ctx.err(
+            &format!("{section}.{key}"),
+            format!("not a key of {what} (kind = \"sim\")"),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// `[drivers.axes]`: the simulated axes (the default) or CANopen drives.
 fn axes_driver(
     ctx: &Ctx<'_>,
     a: Option<&AxesDriverToml>,
@@ -1308,94 +1345,94 @@ fn axes_driver(
         return Ok(AxesDriver::Sim);
     };
     match a.kind.as_str() {
-        "sim" => {
-            for (key, given) in [
-                ("interface", a.interface.is_some()),
-                ("node_ids", a.node_ids.is_some()),
-                ("lead_m", a.lead_m.is_some()),
-                ("counts_per_turn", a.counts_per_turn.is_some()),
-                ("quick_stop_decel_mps2", a.quick_stop_decel_mps2.is_some()),
-                ("max_torque_permille", a.max_torque_permille.is_some()),
-            ] {
-                if given {
-                    return Err(ctx.err(
-                        &format!("drivers.axes.{key}"),
-                        "not a key of the simulated axes (kind = \"sim\")",
-                    ));
-                }
-            }
-            Ok(AxesDriver::Sim)
-        }
-        "canopen" => {
-            let interface = a
-                .interface
-                .clone()
-                .ok_or_else(|| ctx.err("drivers.axes.interface", "missing key"))?;
-            if interface.is_empty() || interface.len() > 15 {
-                return Err(ctx.err(
-                    "drivers.axes.interface",
-                    format!("must be a network interface name of 1 to 15 bytes, got {interface:?}"),
-                ));
-            }
-            let ids = a
-                .node_ids
-                .as_ref()
-                .ok_or_else(|| ctx.err("drivers.axes.node_ids", "missing key"))?;
-            let [q1, q2, q3] = ids.as_slice() else {
-                return Err(ctx.err(
-                    "drivers.axes.node_ids",
-                    format!("must name 3 nodes (q1, q2, q3), got {}", ids.len()),
-                ));
-            };
-            let mut node_ids = [0u8; 3];
-            for (i, (slot, &id)) in node_ids.iter_mut().zip([q1, q2, q3]).enumerate() {
-                let id = ctx.range_i(&format!("drivers.axes.node_ids[{i}]"), id, 1, 127)?;
-                *slot = u8::try_from(id).unwrap_or(1);
-            }
-            let [n1, n2, n3] = node_ids;
-            if n1 == n2 || n2 == n3 || n1 == n3 {
-                return Err(ctx.err(
-                    "drivers.axes.node_ids",
-                    format!("the three node ids must differ, got {node_ids:?}"),
-                ));
-            }
-            let lead_m = a
-                .lead_m
-                .ok_or_else(|| ctx.err("drivers.axes.lead_m", "missing key"))?;
-            let lead_m = ctx.range_f("drivers.axes.lead_m", lead_m, 1e-5, 1.0, "m")?;
-            let cpt = a
-                .counts_per_turn
-                .ok_or_else(|| ctx.err("drivers.axes.counts_per_turn", "missing key"))?;
-            let cpt = ctx.range_i("drivers.axes.counts_per_turn", cpt, 1, i64::from(u32::MAX))?;
-            // The drives' own quick stop brakes at least as hard as the
-            // planned moves accelerate.
-            let quick_stop_decel_mps2 = ctx.range_f(
-                "drivers.axes.quick_stop_decel_mps2",
-                a.quick_stop_decel_mps2
-                    .unwrap_or(DEFAULT_QUICK_STOP_DECEL_MPS2),
-                max_accel_mps2,
-                10.0,
-                "m/s^2 (at least [axes] max_accel_mps2)",
-            )?;
-            let torque = ctx.range_i(
-                "drivers.axes.max_torque_permille",
-                a.max_torque_permille
-                    .unwrap_or(i64::from(DEFAULT_MAX_TORQUE_PERMILLE)),
-                1,
-                3000,
-            )?;
-            Ok(AxesDriver::Canopen {
-                interface,
-                node_ids,
-                lead_m,
-                counts_per_turn: u32::try_from(cpt).unwrap_or(1),
-                quick_stop_decel_mps2,
-                max_torque_permille: u16::try_from(torque).unwrap_or(DEFAULT_MAX_TORQUE_PERMILLE),
-            })
-        }
+        "sim" => refuse_given(ctx, "drivers.axes", "the simulated axes", &a.canopen_keys())
+            .map(|()| AxesDriver::Sim),
+        "canopen" => canopen_axes(ctx, a, max_accel_mps2),
         other => Err(ctx.err(
             "drivers.axes.kind",
             format!("must be \"sim\" or \"canopen\", got {other:?}"),
         )),
     }
+}
+
+/// `[drivers.axes]` with `kind = "canopen"`: the bus, the nodes, the scale
+/// and the drives' own limits (`max_accel_mps2`: the planned moves'
+/// acceleration, which the drives' quick stop must at least match).
+fn canopen_axes(
+    ctx: &Ctx<'_>,
+    a: &AxesDriverToml,
+    max_accel_mps2: f64,
+) -> Result<AxesDriver, ConfigError> {
+    let interface = a
+        .interface
+        .clone()
+        .ok_or_else(|| ctx.err("drivers.axes.interface", "missing key"))?;
+    if interface.is_empty() || interface.len() > 15 {
+        return Err(ctx.err(
+            "drivers.axes.interface",
+            format!("must be a network interface name of 1 to 15 bytes, got {interface:?}"),
+        ));
+    }
+    let node_ids = canopen_node_ids(ctx, a)?;
+    let lead_m = a
+        .lead_m
+        .ok_or_else(|| ctx.err("drivers.axes.lead_m", "missing key"))?;
+    let lead_m = ctx.range_f("drivers.axes.lead_m", lead_m, 1e-5, 1.0, "m")?;
+    let cpt = a
+        .counts_per_turn
+        .ok_or_else(|| ctx.err("drivers.axes.counts_per_turn", "missing key"))?;
+    let cpt = ctx.range_i("drivers.axes.counts_per_turn", cpt, 1, i64::from(u32::MAX))?;
+    // The drives' own quick stop brakes at least as hard as the
+    // planned moves accelerate.
+    let quick_stop_decel_mps2 = ctx.range_f(
+        "drivers.axes.quick_stop_decel_mps2",
+        a.quick_stop_decel_mps2
+            .unwrap_or(DEFAULT_QUICK_STOP_DECEL_MPS2),
+        max_accel_mps2,
+        10.0,
+        "m/s^2 (at least [axes] max_accel_mps2)",
+    )?;
+    let torque = ctx.range_i(
+        "drivers.axes.max_torque_permille",
+        a.max_torque_permille
+            .unwrap_or(i64::from(DEFAULT_MAX_TORQUE_PERMILLE)),
+        1,
+        3000,
+    )?;
+    Ok(AxesDriver::Canopen {
+        interface,
+        node_ids,
+        lead_m,
+        counts_per_turn: u32::try_from(cpt).unwrap_or(1),
+        quick_stop_decel_mps2,
+        max_torque_permille: u16::try_from(torque).unwrap_or(DEFAULT_MAX_TORQUE_PERMILLE),
+    })
+}
+
+/// `drivers.axes.node_ids`: three distinct CANopen node ids (1 to 127),
+/// for q1, q2, q3.
+fn canopen_node_ids(ctx: &Ctx<'_>, a: &AxesDriverToml) -> Result<[u8; 3], ConfigError> {
+    let ids = a
+        .node_ids
+        .as_ref()
+        .ok_or_else(|| ctx.err("drivers.axes.node_ids", "missing key"))?;
+    let [q1, q2, q3] = ids.as_slice() else {
+        return Err(ctx.err(
+            "drivers.axes.node_ids",
+            format!("must name 3 nodes (q1, q2, q3), got {}", ids.len()),
+        ));
+    };
+    let mut node_ids = [0u8; 3];
+    for (i, (slot, &id)) in node_ids.iter_mut().zip([q1, q2, q3]).enumerate() {
+        let id = ctx.range_i(&format!("drivers.axes.node_ids[{i}]"), id, 1, 127)?;
+        *slot = u8::try_from(id).unwrap_or(1);
+    }
+    let [n1, n2, n3] = node_ids;
+    if n1 == n2 || n2 == n3 || n1 == n3 {
+        return Err(ctx.err(
+            "drivers.axes.node_ids",
+            format!("the three node ids must differ, got {node_ids:?}"),
+        ));
+    }
+    Ok(node_ids)
 }

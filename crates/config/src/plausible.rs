@@ -238,6 +238,18 @@ fn at_most(
 /// Every key of [`PLAUSIBLE`] the file gives (or defaults), in the file's
 /// order, then the relations between keys.
 pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
+    check_geometry(ctx, f)?;
+    check_manipulator(ctx, f)?;
+    check_sensor(ctx, f)?;
+    check_guard(ctx, f)?;
+    check_plausibility(ctx, f)?;
+    check_tip_and_axes(ctx, f)?;
+    check_force_control(ctx, f)?;
+    check_drivers(ctx, f)
+}
+
+/// `[geometry]`: |gravity| and each component of the points.
+fn check_geometry(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     let g = &f.geometry;
     let gravity_mps2 = g.gravity.iter().map(|x| x * x).sum::<f64>().sqrt();
     value(ctx, "geometry.gravity", gravity_mps2)?;
@@ -245,7 +257,11 @@ pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     components(ctx, "geometry.p_home", &g.p_home)?;
     components(ctx, "geometry.ujoint_offset", &g.ujoint_offset)?;
     components(ctx, "geometry.sensor_offset", &g.sensor_offset)?;
+    Ok(())
+}
 
+/// `[manipulator]`, with the centre of mass on the rod.
+fn check_manipulator(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     let m = &f.manipulator;
     value(ctx, "manipulator.length_m", m.length_m)?;
     value(ctx, "manipulator.offset_m", m.offset_m)?;
@@ -258,22 +274,48 @@ pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
         (m.length_m, "m"),
         "manipulator.length_m (the centre of mass is on the rod)",
     )?;
+    Ok(())
+}
 
+/// Refuses a noise component (`(key, values)`) above a tenth of the range's
+/// (`(key, values)`) on its axis, in `unit`.
+fn tenth_of_range(
+    ctx: &Ctx<'_>,
+    (noise_key, noise): (&str, &[f64; 3]),
+    (range_key, range): (&str, &[f64; 3]),
+    unit: &str,
+) -> Result<(), ConfigError> {
+    for (i, (noise, range)) in noise.iter().zip(range).enumerate() {
+        at_most(
+            ctx,
+            &format!("{noise_key}[{i}]"),
+            *noise,
+            (range / 10.0, unit),
+            &format!("a tenth of {range_key}[{i}]"),
+        )?;
+    }
+    Ok(())
+}
+
+/// `[sensor]`: noise and ranges, the noise at most a tenth of the range.
+fn check_sensor(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     let s = &f.sensor;
     components(ctx, "sensor.noise_n", &s.noise_n)?;
     components(ctx, "sensor.range_n", &s.range_n)?;
     components(ctx, "sensor.range_nm", &s.range_nm)?;
-    for (i, (noise, range)) in s.noise_n.iter().zip(s.range_n).enumerate() {
-        at_most(
-            ctx,
-            &format!("sensor.noise_n[{i}]"),
-            *noise,
-            (range / 10.0, "N"),
-            &format!("a tenth of sensor.range_n[{i}]"),
-        )?;
-    }
+    tenth_of_range(
+        ctx,
+        ("sensor.noise_n", &s.noise_n),
+        ("sensor.range_n", &s.range_n),
+        "N",
+    )
+}
 
+/// `[guard]`: each force limit given, at most the sensor's smallest force
+/// range (the sensor would saturate before the limit); the other keys.
+fn check_guard(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     let gt = &f.guard;
+    let s = &f.sensor;
     let smallest_range_n = s.range_n.iter().fold(f64::INFINITY, |a, b| a.min(*b));
     let limits = [
         ("guard.warn_total_n", Some(gt.warn_total_n)),
@@ -302,8 +344,13 @@ pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     value(ctx, "guard.max_sensor_age_s", gt.max_sensor_age_s)?;
     value(ctx, "guard.max_joints_age_s", gt.max_joints_age_s)?;
     value(ctx, "guard.retreat_rise_n", gt.retreat_rise_n)?;
+    Ok(())
+}
 
+/// `[plausibility]`, the torque noise at most a tenth of the torque range.
+fn check_plausibility(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     let p = &f.plausibility;
+    let s = &f.sensor;
     value(
         ctx,
         "plausibility.max_joint_speed_mps",
@@ -311,16 +358,13 @@ pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     )?;
     value(ctx, "plausibility.joint_margin_m", p.joint_margin_m)?;
     components(ctx, "plausibility.torque_noise_nm", &p.torque_noise_nm)?;
-    for (i, (noise, range)) in p.torque_noise_nm.iter().zip(s.range_nm).enumerate() {
-        at_most(
-            ctx,
-            &format!("plausibility.torque_noise_nm[{i}]"),
-            *noise,
-            (range / 10.0, "N m"),
-            &format!("a tenth of sensor.range_nm[{i}]"),
-        )?;
-    }
+    let noise = ("plausibility.torque_noise_nm", &p.torque_noise_nm);
+    tenth_of_range(ctx, noise, ("sensor.range_nm", &s.range_nm), "N m")
+}
 
+/// `[tip]`'s observability limit; `[axes]`: each bound of each travel, the
+/// speeds.
+fn check_tip_and_axes(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     value(ctx, "tip.max_std_n", f.tip.max_std_n)?;
 
     let a = &f.axes;
@@ -332,7 +376,11 @@ pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     }
     value(ctx, "axes.max_speed_mps", a.max_speed_mps)?;
     value(ctx, "axes.retreat_speed_mps", a.retreat_speed_mps)?;
+    Ok(())
+}
 
+/// `[force_control]`: each setting of the admittance law.
+fn check_force_control(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     let fc = &f.force_control;
     for (key, v) in [
         (
@@ -357,7 +405,11 @@ pub(crate) fn check(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     ] {
         value(ctx, key, v)?;
     }
+    Ok(())
+}
 
+/// `[drivers.sensor]`: the counts per unit, where given.
+fn check_drivers(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     if let Some(d) = &f.drivers.sensor {
         for (key, v) in [
             ("drivers.sensor.counts_per_n", d.counts_per_n),

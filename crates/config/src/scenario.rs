@@ -24,7 +24,7 @@ use crate::ConfigError;
 use crate::toml_file::{self, Ctx};
 use raw::FileToml;
 use sar_drivers::scenario::seconds_to_ns_saturating;
-use sar_drivers::sim::{AxesSpec, SimError, SimSpec};
+use sar_drivers::sim::{SimError, SimSpec};
 use script::{Machine, MotionFile};
 use std::path::Path;
 
@@ -115,14 +115,7 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
     }
     let calibration = robot::calibration(ctx, &file.robot)?;
     let profile = robot::profile(ctx, &file.manipulator)?;
-    let friction_n = match &file.support {
-        Some(s) => ctx.non_negative("support.friction_n", s.friction_n, "N")?,
-        None => 0.0,
-    };
-    let tip_mass_kg = match &file.tip_mass {
-        Some(t) => ctx.non_negative("tip_mass.mass_kg", t.mass_kg, "kg")?,
-        None => 0.0,
-    };
+    let (friction_n, tip_mass_kg) = loads(ctx, &file)?;
     let physics_step_ns = physics_step_ns(ctx, file.physics_step_s)?;
     let axes = devices::axes(ctx, &file.axes.unwrap_or_default())?;
     let machine = Machine {
@@ -144,25 +137,13 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
     )?;
     let contact = contact::keys(ctx, &file.contact)?;
     let tissue = contact::tissues(ctx, &file.tissue)?;
-    let faults = fault::faults(
-        ctx,
-        &file.fault,
-        axes.lead_m_per_turn / f64::from(axes.counts_per_turn),
-    )?;
+    let faults = fault::faults(ctx, &file.fault, axes.count_m())?;
     let spec = SimSpec {
         seed: file.seed,
         calibration,
         profile,
         friction_n,
-        axes: AxesSpec {
-            max_speed_mps: axes.max_speed_mps,
-            max_accel_mps2: axes.max_accel_mps2,
-            lead_m_per_turn: axes.lead_m_per_turn,
-            counts_per_turn: axes.counts_per_turn,
-            position_period_ns: axes.position_period_ns,
-            travel_m: axes.travel_m,
-            start,
-        },
+        axes: axes.spec(start),
         sensor,
         contact,
         tissue,
@@ -188,6 +169,20 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
             max_accel_mps2: axes.max_accel_mps2,
         },
     })
+}
+
+/// The support's friction, N, and the tip's mass, kg (each 0 when its table
+/// is not given).
+fn loads(ctx: &Ctx<'_>, file: &FileToml) -> Result<(f64, f64), ConfigError> {
+    let friction_n = match &file.support {
+        Some(s) => ctx.non_negative("support.friction_n", s.friction_n, "N")?,
+        None => 0.0,
+    };
+    let tip_mass_kg = match &file.tip_mass {
+        Some(t) => ctx.non_negative("tip_mass.mass_kg", t.mass_kg, "kg")?,
+        None => 0.0,
+    };
+    Ok((friction_n, tip_mass_kg))
 }
 
 /// `physics_step_s` (default [`DEFAULT_PHYSICS_STEP_S`]) as ns.

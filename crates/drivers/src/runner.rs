@@ -10,7 +10,7 @@
 //! shortly after a drive fault, and says which.
 
 use crate::motion::{SlideSign, SlideTracker, move_time_s};
-use crate::scenario::MotionScript;
+use crate::scenario::{MotionScript, MotionStep};
 use crate::{
     AxisDrives, Clock, ClockError, DriveState, Error, ErrorKind, ForceSensor, JointPositions,
     WrenchSample,
@@ -387,6 +387,8 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
         Ok(self.run)
     }
 
+    /// The script's steps in turn (each commanded, arrived at, held), until
+    /// it ends, a drive faults or the deadline comes.
     fn execute(mut self) -> Result<Run, RunError> {
         self.poll()?;
         let steps = self.script.steps.iter().enumerate();
@@ -394,74 +396,111 @@ impl<S: ForceSensor, D: AxisDrives, C: Clock> Runner<'_, S, D, C> {
             if let Some(code) = self.fault {
                 return Ok(self.end_after_fault(code)?);
             }
-            if let Err(e) = self.drives.set_targets(step.target) {
-                // A fault that the drives report only now still ends the run
-                // as a drive fault, not as a refused target.
-                if let Ok(DriveState::Fault { code, .. }) = self.drives.state() {
-                    if self.fault.is_none() {
-                        self.fault = Some(code);
-                        let at_ns = self.clock.now_ns()?;
-                        self.run.events.push(RunEvent::DriveFault { at_ns, code });
-                    }
-                    return Ok(self.end_after_fault(code)?);
-                }
-                return Err(RunError::Target {
-                    step: index,
-                    key: step.key.clone(),
-                    kind: e.kind(),
-                    message: e.to_string(),
-                });
-            }
-            let commanded_ns = self.clock.now_ns()?;
-            let from = self.latest.map_or(self.script.start, |p| p.joints);
-            let move_s = move_time_s(
-                &from,
-                &step.target,
-                self.script.max_speed_mps,
-                self.script.max_accel_mps2,
-            );
-            let timeout_ns = ((1.5 * move_s * 1e9) as u64).saturating_add(ARRIVAL_MARGIN_NS);
-            let target = step.target;
-            let arrival = self.wait(commanded_ns.saturating_add(timeout_ns), |r| {
-                r.arrived(&target)
-            })?;
-            let arrived = self.arrived(&target);
-            let now = self.clock.now_ns()?;
-            self.run.steps.push(StepRecord {
-                step: index,
-                commanded_ns,
-                arrived_ns: arrived.then_some(now),
-            });
-            match arrival {
+            let ended = match self.command(index, step)? {
+                Some(code) => Wait::Fault(code),
+                None => match self.arrive(index, step)? {
+                    Ok((arrived, now)) => self.hold(index, step, now, arrived)?,
+                    Err(ended) => ended,
+                },
+            };
+            match ended {
                 Wait::Done => {}
                 Wait::Deadline => return Ok(self.finish(EndReason::MaxDuration)?),
                 Wait::Fault(code) => return Ok(self.end_after_fault(code)?),
-            }
-            if !arrived {
-                self.run.events.push(RunEvent::ArrivalTimeout {
-                    at_ns: now,
-                    step: index,
-                });
-            }
-            let start_ns = now;
-            let end_ns = start_ns.saturating_add(step.hold_ns);
-            let slide_sign = self.tracker.sign();
-            match self.wait(end_ns, |_| false)? {
-                Wait::Done => {}
-                Wait::Deadline => return Ok(self.finish(EndReason::MaxDuration)?),
-                Wait::Fault(code) => return Ok(self.end_after_fault(code)?),
-            }
-            if step.hold_ns > 0 {
-                self.run.holds.push(HoldSegment {
-                    step: index,
-                    start_ns,
-                    end_ns: self.clock.now_ns()?,
-                    slide_sign,
-                    arrived,
-                });
             }
         }
         Ok(self.finish(EndReason::ScriptDone)?)
+    }
+
+    /// Commands the step's target. A refused target ends the run with an
+    /// error, unless the drives report a fault only now: then it ends as a
+    /// drive fault (`Some` with its code), not as a refused target.
+    fn command(&mut self, index: usize, step: &MotionStep) -> Result<Option<u16>, RunError> {
+        let Err(e) = self.drives.set_targets(step.target) else {
+            return Ok(None);
+        };
+        if let Ok(DriveState::Fault { code, .. }) = self.drives.state() {
+            if self.fault.is_none() {
+                self.fault = Some(code);
+                let at_ns = self.clock.now_ns()?;
+                self.run.events.push(RunEvent::DriveFault { at_ns, code });
+            }
+            return Ok(Some(code));
+        }
+        Err(RunError::Target {
+            step: index,
+            key: step.key.clone(),
+            kind: e.kind(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Waits until every axis is at the step's target (at most 1.5 times the
+    /// move's nominal time plus a margin) and records the step. `Err` with
+    /// how the wait ended if that ends the run; else whether the target was
+    /// reached (a time-out is an event, and the hold goes on) and when.
+    fn arrive(
+        &mut self,
+        index: usize,
+        step: &MotionStep,
+    ) -> Result<Result<(bool, u64), Wait>, ClockError> {
+        let commanded_ns = self.clock.now_ns()?;
+        let from = self.latest.map_or(self.script.start, |p| p.joints);
+        let move_s = move_time_s(
+            &from,
+            &step.target,
+            self.script.max_speed_mps,
+            self.script.max_accel_mps2,
+        );
+        let timeout_ns = ((1.5 * move_s * 1e9) as u64).saturating_add(ARRIVAL_MARGIN_NS);
+        let target = step.target;
+        let arrival = self.wait(commanded_ns.saturating_add(timeout_ns), |r| {
+            r.arrived(&target)
+        })?;
+        let arrived = self.arrived(&target);
+        let now = self.clock.now_ns()?;
+        self.run.steps.push(StepRecord {
+            step: index,
+            commanded_ns,
+            arrived_ns: arrived.then_some(now),
+        });
+        if !matches!(arrival, Wait::Done) {
+            return Ok(Err(arrival));
+        }
+        if !arrived {
+            self.run.events.push(RunEvent::ArrivalTimeout {
+                at_ns: now,
+                step: index,
+            });
+        }
+        Ok(Ok((arrived, now)))
+    }
+
+    /// Holds the step's hold time from `start_ns`, and records the hold
+    /// (with the slide's sign at its start) if it has one.
+    fn hold(
+        &mut self,
+        index: usize,
+        step: &MotionStep,
+        start_ns: u64,
+        arrived: bool,
+    ) -> Result<Wait, ClockError> {
+        let end_ns = start_ns.saturating_add(step.hold_ns);
+        let slide_sign = self.tracker.sign();
+        let held = self.wait(end_ns, |_| false)?;
+        if !matches!(held, Wait::Done) {
+            return Ok(held);
+        }
+        if step.hold_ns > 0 {
+            self.run.holds.push(HoldSegment {
+                step: index,
+                start_ns,
+                end_ns: self.clock.now_ns()?,
+                slide_sign,
+                arrived,
+            });
+        }
+        Ok(Wait::Done)
     }
 }
 

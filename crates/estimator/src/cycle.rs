@@ -30,7 +30,10 @@ use crate::guard::{
     SensorChannel, TipInput, Transition,
 };
 use crate::tip_force::{TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator};
-use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3};
+use crate::{
+    Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, at_least,
+    finite_non_negative, positive, require,
+};
 use sar_kinematics::{ActiveJoints, PoseError, forward};
 
 /// One force/torque sample as the sensor driver delivers it.
@@ -732,126 +735,34 @@ pub struct PlausibilityConfig {
 impl PlausibilityConfig {
     /// Checks: speed finite and > 0; margin finite and >= 0; counter gap >= 1;
     /// torque noise finite and > 0 per axis; max_sigma finite and >= 1.
+    /// Then each optional check's settings, in the order of the fields.
     pub fn new(limits: PlausibilityLimits) -> Result<Self, SettingError> {
-        let invalid = |field, value, why| SettingError::Invalid { field, value, why };
-        let v = limits.max_joint_speed_mps;
-        if !(v.is_finite() && v > 0.0) {
-            return Err(invalid("max_joint_speed_mps", v, "must be finite and > 0"));
-        }
-        let m = limits.joint_margin_m;
-        if !(m.is_finite() && m >= 0.0) {
-            return Err(invalid("joint_margin_m", m, "must be finite and >= 0"));
-        }
-        if limits.max_counter_gap == 0 {
-            return Err(invalid("max_counter_gap", 0.0, "must be >= 1"));
-        }
+        positive("max_joint_speed_mps", limits.max_joint_speed_mps)?;
+        finite_non_negative("joint_margin_m", limits.joint_margin_m)?;
+        require(
+            limits.max_counter_gap != 0,
+            "max_counter_gap",
+            0.0,
+            "must be >= 1",
+        )?;
         if let Some(t) = limits.torque {
-            for &n in t.noise_nm.iter() {
-                if !(n.is_finite() && n > 0.0) {
-                    return Err(invalid("torque.noise_nm", n, "must be finite and > 0"));
-                }
-            }
-            if !(t.max_sigma.is_finite() && t.max_sigma >= 1.0) {
-                return Err(invalid(
-                    "torque.max_sigma",
-                    t.max_sigma,
-                    "must be finite and >= 1",
-                ));
-            }
+            t.check()?;
         }
-        if let FrozenCheck::On { repeats } = limits.frozen
-            && !(1..=FrozenCheck::MAX_REPEATS).contains(&repeats)
-        {
-            return Err(invalid(
-                "frozen.repeats",
-                f64::from(repeats),
-                "must be 1..=1000",
-            ));
+        if let FrozenCheck::On { repeats } = limits.frozen {
+            let ok = (1..=FrozenCheck::MAX_REPEATS).contains(&repeats);
+            require(ok, "frozen.repeats", f64::from(repeats), "must be 1..=1000")?;
         }
         if let Some(r) = limits.range {
             for &v in r.force_n.iter().chain(r.torque_nm.iter()) {
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(invalid("range", v, "must be finite and > 0"));
-                }
+                positive("range", v)?;
             }
         }
         if let Some(sp) = limits.spikes {
-            if !(sp.jump_sigma.is_finite() && sp.jump_sigma >= 3.0) {
-                return Err(invalid(
-                    "spikes.jump_sigma",
-                    sp.jump_sigma,
-                    "must be finite and >= 3",
-                ));
-            }
-            if sp.max_spikes < 2 {
-                return Err(invalid(
-                    "spikes.max_spikes",
-                    f64::from(sp.max_spikes),
-                    "must be >= 2",
-                ));
-            }
-            if sp.window_samples == 0 {
-                return Err(invalid("spikes.window_samples", 0.0, "must be >= 1"));
-            }
+            sp.check()?;
         }
-        let d = limits.tare.drift_n_per_s;
-        if !(d.is_finite() && d >= 0.0) {
-            return Err(invalid("tare.drift_n_per_s", d, "must be finite and >= 0"));
-        }
-        if limits.tare.max_age_ns == Some(0) {
-            return Err(invalid("tare.max_age", 0.0, "must be > 0"));
-        }
-        if !(1..=100_000).contains(&limits.tare.window_samples) {
-            return Err(invalid(
-                "tare.window_samples",
-                f64::from(limits.tare.window_samples),
-                "must be 1..=100000",
-            ));
-        }
-        let spread = limits.tare.max_spread;
-        if !(spread.is_finite() && spread >= 1.0) {
-            return Err(invalid(
-                "tare.max_spread",
-                spread,
-                "must be finite and >= 1",
-            ));
-        }
+        limits.tare.check()?;
         if let Some(m) = limits.mounting {
-            if !(m.sigma.is_finite() && m.sigma >= 0.0) {
-                return Err(invalid(
-                    "mounting.sigma",
-                    m.sigma,
-                    "must be finite and >= 0",
-                ));
-            }
-            if !(m.friction_n.is_finite() && m.friction_n >= 0.0) {
-                return Err(invalid(
-                    "mounting.friction_n",
-                    m.friction_n,
-                    "must be finite and >= 0",
-                ));
-            }
-            if !(m.tolerance_n.is_finite() && m.tolerance_n > 0.0) {
-                return Err(invalid(
-                    "mounting.tolerance_n",
-                    m.tolerance_n,
-                    "must be finite and > 0",
-                ));
-            }
-            if !(m.tolerance_nm.is_finite() && m.tolerance_nm > 0.0) {
-                return Err(invalid(
-                    "mounting.tolerance_nm",
-                    m.tolerance_nm,
-                    "must be finite and > 0",
-                ));
-            }
-            if !(1..=100_000).contains(&m.rest_samples) {
-                return Err(invalid(
-                    "mounting.rest_samples",
-                    f64::from(m.rest_samples),
-                    "must be 1..=100000",
-                ));
-            }
+            m.check()?;
         }
         Ok(Self { limits })
     }
@@ -859,6 +770,80 @@ impl PlausibilityConfig {
     /// The checked limits.
     pub fn limits(&self) -> PlausibilityLimits {
         self.limits
+    }
+}
+
+/// A count of samples that must be 1..=100000.
+fn window(field: &'static str, samples: u32) -> Result<(), SettingError> {
+    let ok = (1..=100_000).contains(&samples);
+    require(ok, field, f64::from(samples), "must be 1..=100000")
+}
+
+impl TorqueLimits {
+    /// Noise finite and > 0 per axis; max_sigma finite and >= 1.
+    fn check(&self) -> Result<(), SettingError> {
+        for &n in self.noise_nm.iter() {
+            positive("torque.noise_nm", n)?;
+        }
+        at_least(
+            "torque.max_sigma",
+            self.max_sigma,
+            1.0,
+            "must be finite and >= 1",
+        )
+    }
+}
+
+impl SpikeLimits {
+    /// Jump finite and >= 3 sigma; at least 2 spikes in a window of >= 1.
+    fn check(&self) -> Result<(), SettingError> {
+        at_least(
+            "spikes.jump_sigma",
+            self.jump_sigma,
+            3.0,
+            "must be finite and >= 3",
+        )?;
+        let n = f64::from(self.max_spikes);
+        require(self.max_spikes >= 2, "spikes.max_spikes", n, "must be >= 2")?;
+        require(
+            self.window_samples != 0,
+            "spikes.window_samples",
+            0.0,
+            "must be >= 1",
+        )
+    }
+}
+
+impl TareLimits {
+    /// Drift finite and >= 0; an age bound > 0; a window of 1..=100000
+    /// samples; a spread finite and >= 1.
+    fn check(&self) -> Result<(), SettingError> {
+        finite_non_negative("tare.drift_n_per_s", self.drift_n_per_s)?;
+        require(
+            self.max_age_ns != Some(0),
+            "tare.max_age",
+            0.0,
+            "must be > 0",
+        )?;
+        window("tare.window_samples", self.window_samples)?;
+        at_least(
+            "tare.max_spread",
+            self.max_spread,
+            1.0,
+            "must be finite and >= 1",
+        )
+    }
+}
+
+impl MountingLimits {
+    /// Sigma and friction finite and >= 0; tolerances finite and > 0; a
+    /// rest of 1..=100000 samples.
+    fn check(&self) -> Result<(), SettingError> {
+        finite_non_negative("mounting.sigma", self.sigma)?;
+        finite_non_negative("mounting.friction_n", self.friction_n)?;
+        positive("mounting.tolerance_n", self.tolerance_n)?;
+        positive("mounting.tolerance_nm", self.tolerance_nm)?;
+        window("mounting.rest_samples", self.rest_samples)
     }
 }
 
@@ -1805,44 +1790,68 @@ impl Estimator {
                 .map_err(|value| CommandRefused::BiasNonFinite { value })?;
         }
         if let Command::SetLimits(limits) = command {
-            return match self.guard.set_force_limits(&limits) {
-                Ok(previous) => Ok(CommandAccepted::LimitsSet { previous, limits }),
-                Err(SettingError::Invalid { field, value, why }) => {
-                    Err(CommandRefused::Limits { field, value, why })
-                }
-                Err(_) => Err(CommandRefused::Limits {
-                    field: "limits",
-                    value: f64::NAN,
-                    why: "refused",
-                }),
-            };
+            return self.set_limits(limits);
         }
         if command == Command::Reset {
-            // The first reset: the wrench at rest must match the model,
-            // unless a fault blocks it anyway (the guard then names it).
-            let fault_blocks = self
-                .guard
-                .reset_blocker()
-                .is_some_and(|r| !matches!(r, Reason::AboveStop { .. }));
-            if self.guard.awaiting_first_reset()
-                && self.guard.state().is_halting()
-                && !fault_blocks
-                && let Some(limits) = self.limits.mounting
-                && let Some(reason) = self.mounting_verdict(&limits)
-            {
-                return Err(CommandRefused::Reset { reason });
-            }
-            return match self.guard.reset(input.cycle) {
-                Ok(Some(t)) => {
-                    self.last.transition = Some(t);
-                    Ok(CommandAccepted::Reset)
-                }
-                Ok(None) => Ok(CommandAccepted::NothingToReset),
-                Err(e) => Err(CommandRefused::Reset { reason: e.reason }),
-            };
+            return self.reset(input);
         }
-        // Tare or bias: only in Ok (or the Warn of a due tare), below every
-        // warn limit, on this cycle's estimate.
+        let pose = self.bias_allowed()?;
+        let bias = match command {
+            Command::SetBias(bias) => bias,
+            _ => self.tare_now(&pose, input, now_ns)?,
+        };
+        let previous = self.bias;
+        self.bias = bias;
+        // The tare's age restarts (a clock is known: the guard is not Ok
+        // without one).
+        self.tare_ns = now_ns.or(self.tare_ns);
+        Ok(CommandAccepted::BiasSet { previous, bias })
+    }
+
+    /// The operator's new force limits, handed to the guard.
+    fn set_limits(&mut self, limits: ForceLimits) -> Result<CommandAccepted, CommandRefused> {
+        match self.guard.set_force_limits(&limits) {
+            Ok(previous) => Ok(CommandAccepted::LimitsSet { previous, limits }),
+            Err(SettingError::Invalid { field, value, why }) => {
+                Err(CommandRefused::Limits { field, value, why })
+            }
+            Err(_) => Err(CommandRefused::Limits {
+                field: "limits",
+                value: f64::NAN,
+                why: "refused",
+            }),
+        }
+    }
+
+    /// The operator's reset. The first one: the wrench at rest must match
+    /// the model, unless a fault blocks it anyway (the guard then names it).
+    fn reset(&mut self, input: &CycleInput) -> Result<CommandAccepted, CommandRefused> {
+        let fault_blocks = self
+            .guard
+            .reset_blocker()
+            .is_some_and(|r| !matches!(r, Reason::AboveStop { .. }));
+        if self.guard.awaiting_first_reset()
+            && self.guard.state().is_halting()
+            && !fault_blocks
+            && let Some(limits) = self.limits.mounting
+            && let Some(reason) = self.mounting_verdict(&limits)
+        {
+            return Err(CommandRefused::Reset { reason });
+        }
+        match self.guard.reset(input.cycle) {
+            Ok(Some(t)) => {
+                self.last.transition = Some(t);
+                Ok(CommandAccepted::Reset)
+            }
+            Ok(None) => Ok(CommandAccepted::NothingToReset),
+            Err(e) => Err(CommandRefused::Reset { reason: e.reason }),
+        }
+    }
+
+    /// Whether a tare or a bias may be set now: only in Ok (or the Warn of a
+    /// due tare), below every warn limit, on this cycle's estimate (whose
+    /// pose it returns).
+    fn bias_allowed(&self) -> Result<Pose, CommandRefused> {
         let state = self.guard.state();
         let tare_warn =
             state == GuardState::Warn && matches!(self.guard.reason(), Reason::TareDue { .. });
@@ -1858,37 +1867,35 @@ impl Estimator {
         let (TipOutcome::Estimate(_), Some(pose)) = (self.last.tip, self.last.pose) else {
             return Err(CommandRefused::NoEstimate);
         };
-        let bias = match command {
-            Command::SetBias(bias) => bias,
-            _ => {
-                let reading = match self.tare_reading(&input.sensor, now_ns) {
-                    Ok(reading) => reading,
-                    Err(refused) => {
-                        // Not at rest: the mean starts again (its spread
-                        // would otherwise remember the motion for a few
-                        // windows), so the next tare needs a fresh window.
-                        if matches!(refused, TareRefused::NotSteady { .. }) {
-                            self.tare_mean = TareMean {
-                                joints: self.tare_mean.joints,
-                                ..TareMean::EMPTY
-                            };
-                        }
-                        return Err(CommandRefused::Tare(refused));
-                    }
-                };
-                let bias = self
-                    .tare(&pose, &reading)
-                    .ok_or(CommandRefused::Unsolvable)?;
-                self.last_tare_ns = now_ns.or(self.last_tare_ns);
-                bias
+        Ok(pose)
+    }
+
+    /// The tare's bias at `pose` from the reading at rest. Not at rest: the
+    /// mean starts again (its spread would otherwise remember the motion for
+    /// a few windows), so the next tare needs a fresh window.
+    fn tare_now(
+        &mut self,
+        pose: &Pose,
+        input: &CycleInput,
+        now_ns: Option<u64>,
+    ) -> Result<Bias, CommandRefused> {
+        let reading = match self.tare_reading(&input.sensor, now_ns) {
+            Ok(reading) => reading,
+            Err(refused) => {
+                if matches!(refused, TareRefused::NotSteady { .. }) {
+                    self.tare_mean = TareMean {
+                        joints: self.tare_mean.joints,
+                        ..TareMean::EMPTY
+                    };
+                }
+                return Err(CommandRefused::Tare(refused));
             }
         };
-        let previous = self.bias;
-        self.bias = bias;
-        // The tare's age restarts (a clock is known: the guard is not Ok
-        // without one).
-        self.tare_ns = now_ns.or(self.tare_ns);
-        Ok(CommandAccepted::BiasSet { previous, bias })
+        let bias = self
+            .tare(pose, &reading)
+            .ok_or(CommandRefused::Unsolvable)?;
+        self.last_tare_ns = now_ns.or(self.last_tare_ns);
+        Ok(bias)
     }
 
     /// The bias for which this reading (the mean at rest) gives zero tip

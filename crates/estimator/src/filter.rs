@@ -295,6 +295,9 @@ impl TipFilter {
         self.step(force_n, std_n, Some(counter))
     }
 
+    /// One step: the sample checked (an invalid one resets the filter), the
+    /// next state computed from it, and stored only if its output is
+    /// finite (else the filter resets and the overflow is named).
     fn step(
         &mut self,
         force_n: &Vec3,
@@ -316,52 +319,10 @@ impl TipFilter {
                 .all(|v| v.is_finite())),
             "a stored filter state with a non-finite output"
         );
-        let c = self.coef;
         let var_n2 = std_n.component_mul(std_n);
         let state = match self.state {
-            None => {
-                // Restart at this sample: the steady state of a constant input
-                // equal to it, the whole noise of this one sample in the state.
-                let out = Filtered {
-                    force_n: *force_n,
-                    std_n: *std_n,
-                };
-                State {
-                    s1: force_n * c.ss1,
-                    s2: force_n * c.ss2,
-                    p11: var_n2 * (c.ss1 * c.ss1),
-                    p12: var_n2 * (c.ss1 * c.ss2),
-                    p22: var_n2 * (c.ss2 * c.ss2),
-                    last: out,
-                    counter,
-                }
-            }
-            Some(s) => {
-                // y = b0 x + s1; s1' = k1 x - a1 s1 + s2; s2' = k2 x - a2 s1.
-                let y = force_n * c.b0 + s.s1;
-                let s1 = force_n * c.k1 - s.s1 * c.a1 + s.s2;
-                let s2 = force_n * c.k2 - s.s1 * c.a2;
-                // var y = p11 + b0^2 var x (the state holds only past samples,
-                // independent of this one); P' = A P A^T + k k^T var x with
-                // A = [[-a1, 1], [-a2, 0]].
-                let var_y = s.p11 + var_n2 * (c.b0 * c.b0);
-                let p11 =
-                    s.p11 * (c.a1 * c.a1) - s.p12 * (2.0 * c.a1) + s.p22 + var_n2 * (c.k1 * c.k1);
-                let p12 = s.p11 * (c.a1 * c.a2) - s.p12 * c.a2 + var_n2 * (c.k1 * c.k2);
-                let p22 = s.p11 * (c.a2 * c.a2) + var_n2 * (c.k2 * c.k2);
-                State {
-                    s1,
-                    s2,
-                    p11,
-                    p12,
-                    p22,
-                    last: Filtered {
-                        force_n: y,
-                        std_n: var_y.map(|v| ComplexField::sqrt(v.max(0.0))),
-                    },
-                    counter,
-                }
-            }
+            None => self.coef.restart(force_n, std_n, &var_n2, counter),
+            Some(s) => self.coef.advance(&s, force_n, &var_n2, counter),
         };
         let out = state.last;
         let bad = out
@@ -388,6 +349,56 @@ impl TipFilter {
             }
         }
         Ok(())
+    }
+}
+
+impl Biquad {
+    /// The state restarted at this sample: the steady state of a constant
+    /// input equal to it, the whole noise of this one sample in the state.
+    fn restart(&self, force_n: &Vec3, std_n: &Vec3, var_n2: &Vec3, counter: Option<u32>) -> State {
+        let c = self;
+        let out = Filtered {
+            force_n: *force_n,
+            std_n: *std_n,
+        };
+        State {
+            s1: force_n * c.ss1,
+            s2: force_n * c.ss2,
+            p11: var_n2 * (c.ss1 * c.ss1),
+            p12: var_n2 * (c.ss1 * c.ss2),
+            p22: var_n2 * (c.ss2 * c.ss2),
+            last: out,
+            counter,
+        }
+    }
+
+    /// The state `s` advanced by one sample (transposed direct form II per
+    /// axis), with the output's variance propagated beside it.
+    fn advance(&self, s: &State, force_n: &Vec3, var_n2: &Vec3, counter: Option<u32>) -> State {
+        let c = self;
+        // y = b0 x + s1; s1' = k1 x - a1 s1 + s2; s2' = k2 x - a2 s1.
+        let y = force_n * c.b0 + s.s1;
+        let s1 = force_n * c.k1 - s.s1 * c.a1 + s.s2;
+        let s2 = force_n * c.k2 - s.s1 * c.a2;
+        // var y = p11 + b0^2 var x (the state holds only past samples,
+        // independent of this one); P' = A P A^T + k k^T var x with
+        // A = [[-a1, 1], [-a2, 0]].
+        let var_y = s.p11 + var_n2 * (c.b0 * c.b0);
+        let p11 = s.p11 * (c.a1 * c.a1) - s.p12 * (2.0 * c.a1) + s.p22 + var_n2 * (c.k1 * c.k1);
+        let p12 = s.p11 * (c.a1 * c.a2) - s.p12 * c.a2 + var_n2 * (c.k1 * c.k2);
+        let p22 = s.p11 * (c.a2 * c.a2) + var_n2 * (c.k2 * c.k2);
+        State {
+            s1,
+            s2,
+            p11,
+            p12,
+            p22,
+            last: Filtered {
+                force_n: y,
+                std_n: var_y.map(|v| ComplexField::sqrt(v.max(0.0))),
+            },
+            counter,
+        }
     }
 }
 

@@ -34,7 +34,7 @@
 //! stability bound ([`ForceControlConfig::phase_margin_deg`]).
 
 use crate::filter::{FilterConfig, TipFilter};
-use crate::{SettingError, Vec3};
+use crate::{SettingError, Vec3, positive};
 
 /// The admittance of one tip-frame part.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -124,14 +124,6 @@ pub struct ForceControlConfig {
 
 fn invalid(field: &'static str, value: f64, why: &'static str) -> SettingError {
     SettingError::Invalid { field, value, why }
-}
-
-fn positive(field: &'static str, value: f64) -> Result<(), SettingError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(field, value, "must be finite and > 0"))
-    }
 }
 
 impl ForceControlConfig {
@@ -361,66 +353,19 @@ impl ForceController {
             return Err(ControlError::BadRodDirection);
         }
         let u = rod_dir;
-        let l = &self.config.limits;
-        let error = match mode {
-            ForceMode::Push { axial_n } => u * (axial_n - f.dot(u)),
-            ForceMode::Hold { max_force_n } => {
-                let m = f.norm();
-                if m > max_force_n {
-                    -f * ((m - max_force_n) / m)
-                } else {
-                    Vec3::zeros()
-                }
-            }
-        };
+        let error = force_error(mode, &f, u);
         // The commanded offset of the last period (a push drops a lateral
         // part the rod's turn may have left in it).
         let previous_m = self.offset_m;
-        let (ea, el) = split(&error, u);
-        let (xa, xl) = split(&self.offset_m, u);
-        let (va, vl) = split(&self.velocity_mps, u);
-        let part = |a: &Admittance, e: Vec3, x: Vec3, v: Vec3, k: f64| {
-            (e - v * a.damping_n_s_per_m - x * k) / a.mass_kg
-        };
-        let accel = match mode {
-            // No return stiffness (it must settle at its setpoint), and the
-            // lateral position is held: no lateral motion at all.
-            ForceMode::Push { .. } => {
-                self.offset_m = xa;
-                self.velocity_mps = va;
-                part(&l.axial, ea, xa, va, 0.0)
-            }
-            ForceMode::Hold { .. } => {
-                let k = l.hold_return_n_per_m;
-                part(&l.axial, ea, xa, va, k) + part(&l.lateral, el, xl, vl, k)
-            }
-        };
+        let accel = self.admittance_accel_mps2(mode, &error, u);
+        let l = &self.config.limits;
         let dt = l.period_s;
         let accel = clamp_norm(&accel, l.max_accel_mps2);
         let mut v = clamp_norm(&(self.velocity_mps + accel * dt), l.max_speed_mps);
         if let Some(g) = no_deeper_along {
-            let along = v.dot(g);
-            if along > 0.0 {
-                v = match mode {
-                    // Axial only: the one axial velocity with no part
-                    // along the force is none (unless the force is
-                    // across the rod, where `along` is 0).
-                    ForceMode::Push { .. } => Vec3::zeros(),
-                    ForceMode::Hold { .. } => v - g * (along / g.norm_squared()),
-                };
-            }
+            v = no_velocity_along(mode, v, g);
         }
-        let mut x = self.offset_m + v * dt;
-        let reach = x.norm();
-        let mut at_limit = reach >= l.max_excursion_m;
-        if at_limit {
-            // At the bound: back onto it, and no speed outward.
-            x *= l.max_excursion_m / reach;
-            let outward = v.dot(&x);
-            if outward > 0.0 {
-                v -= x * (outward / x.norm_squared());
-            }
-        }
+        let (mut x, mut v, mut at_limit) = onto_excursion_bound(self.offset_m + v * dt, v, l);
         // Pulled back onto the bound, the tip may move along the force:
         // then it stays where it is.
         if let Some(g) = no_deeper_along
@@ -441,6 +386,83 @@ impl ForceController {
             at_excursion_limit: at_limit,
         })
     }
+
+    /// The admittance law's acceleration for the force error `error`, the
+    /// axial (along `u`) and lateral parts each through their own
+    /// admittance. A push keeps only the axial parts of the offset and the
+    /// velocity (no lateral motion at all, no return stiffness: it must
+    /// settle at its setpoint); a hold pulls both parts back with the
+    /// return stiffness.
+    fn admittance_accel_mps2(&mut self, mode: ForceMode, error: &Vec3, u: &Vec3) -> Vec3 {
+        let l = &self.config.limits;
+        let (ea, el) = split(error, u);
+        let (xa, xl) = split(&self.offset_m, u);
+        let (va, vl) = split(&self.velocity_mps, u);
+        let part = |a: &Admittance, e: Vec3, x: Vec3, v: Vec3, k: f64| {
+            (e - v * a.damping_n_s_per_m - x * k) / a.mass_kg
+        };
+        match mode {
+            ForceMode::Push { .. } => {
+                self.offset_m = xa;
+                self.velocity_mps = va;
+                part(&l.axial, ea, xa, va, 0.0)
+            }
+            ForceMode::Hold { .. } => {
+                let k = l.hold_return_n_per_m;
+                part(&l.axial, ea, xa, va, k) + part(&l.lateral, el, xl, vl, k)
+            }
+        }
+    }
+}
+
+/// The force error the mode regulates, {0}, N: a push's axial setpoint
+/// minus the axial force (along `u`); a hold's excess of |F| over its
+/// bound, against the force (none under the bound).
+fn force_error(mode: ForceMode, f: &Vec3, u: &Vec3) -> Vec3 {
+    match mode {
+        ForceMode::Push { axial_n } => u * (axial_n - f.dot(u)),
+        ForceMode::Hold { max_force_n } => {
+            let m = f.norm();
+            if m > max_force_n {
+                -f * ((m - max_force_n) / m)
+            } else {
+                Vec3::zeros()
+            }
+        }
+    }
+}
+
+/// The velocity `v` with no part along the force `g` (the guard's Warn):
+/// unchanged if it does not go along `g`; else a hold drops the part along
+/// it, and a push (axial only: the one axial velocity with no part along
+/// the force is none, unless the force is across the rod, where the part
+/// along it is 0) stops.
+fn no_velocity_along(mode: ForceMode, v: Vec3, g: &Vec3) -> Vec3 {
+    let along = v.dot(g);
+    if along > 0.0 {
+        match mode {
+            ForceMode::Push { .. } => Vec3::zeros(),
+            ForceMode::Hold { .. } => v - g * (along / g.norm_squared()),
+        }
+    } else {
+        v
+    }
+}
+
+/// The offset `x` and velocity `v` held to the excursion bound: at or past
+/// it, `x` back onto it and no speed outward. Returns them and whether the
+/// bound was reached.
+fn onto_excursion_bound(mut x: Vec3, mut v: Vec3, l: &ForceControlLimits) -> (Vec3, Vec3, bool) {
+    let reach = x.norm();
+    let at_limit = reach >= l.max_excursion_m;
+    if at_limit {
+        x *= l.max_excursion_m / reach;
+        let outward = v.dot(&x);
+        if outward > 0.0 {
+            v -= x * (outward / x.norm_squared());
+        }
+    }
+    (x, v, at_limit)
 }
 
 /// `v` scaled down to norm `max` if longer (a NaN stays NaN).

@@ -385,51 +385,8 @@ impl Identification {
         let force_a_n =
             crate::ujoint_force_n(&self.calibration, &pose.mean_reading_n, &self.bias_n);
         check_finite(&force_a_n, non_finite("F_A"))?;
-
-        // G: rows p1.(u x v), p2.(u x v), u.v; orthonormal.
-        let (p1, p2) = basis_across(&u);
-        let g_rows = Mat3::from_rows(&[
-            p1.cross(&u).transpose(), // p1.(u x v) = v.(p1 x u)
-            p2.cross(&u).transpose(),
-            u.transpose(),
-        ]);
-        let measured = g_rows * force_a_n;
-        let gravity_rows = g_rows * self.gravity_mps2;
-        let g_r = g_rows * self.calibration.sensor_rotation();
-        let [e1, e2] = self.bias_basis_s;
-        let bias = |e: &Vec3| {
-            if self.options.bias_across_gravity {
-                -(g_r * e)
-            } else {
-                Vec3::zeros()
-            }
-        };
-        // Columns m, M, f, bias e1, bias e2, rhs; the moment rows carry M / a,
-        // the axial row does not; only the axial row carries f.
-        let design = SMatrix::<f64, 3, WIDTH>::from_columns(&[
-            -gravity_rows,
-            Vec3::new(gravity_rows.x / a, gravity_rows.y / a, 0.0),
-            Vec3::new(0.0, 0.0, friction_coef),
-            bias(&e1),
-            bias(&e2),
-            measured,
-        ]);
-
-        // Whitening: covariance of the rows = G R diag(std^2 / K) R^T G^T. Its
-        // lower Cholesky factor is lower triangular, so the first two whitened
-        // rows do not depend on the third: dropping the axial row is exact.
-        let per_sample = Mat3::from_diagonal(&(self.variance_n2 / f64::from(pose.samples)));
-        let covariance = g_r * per_sample * g_r.transpose();
-        let cholesky = covariance
-            .cholesky()
-            .ok_or(IdentificationError::DegenerateNoise {
-                samples: pose.samples,
-            })?;
-        let whitened = cholesky.l().solve_lower_triangular(&design).ok_or(
-            IdentificationError::DegenerateNoise {
-                samples: pose.samples,
-            },
-        )?;
+        let (design, g_r) = self.design_rows(&u, a, friction_coef, &force_a_n);
+        let whitened = self.whiten(&g_r, &design, pose.samples)?;
 
         let mut weighted = self.weighted;
         let mut unweighted = self.unweighted;
@@ -451,6 +408,66 @@ impl Identification {
         self.poses = poses;
         self.rows = rows;
         Ok(())
+    }
+
+    /// One pose's rows of the design, `[A y]` (columns m, M, f, bias e1,
+    /// bias e2, rhs), and `G R` (the rows' map from the sensor frame). G:
+    /// rows p1.(u x v), p2.(u x v), u.v; orthonormal. The moment rows carry
+    /// M / a, the axial row does not; only the axial row carries f.
+    fn design_rows(
+        &self,
+        u: &Vec3,
+        a: f64,
+        friction_coef: f64,
+        force_a_n: &Vec3,
+    ) -> (SMatrix<f64, 3, WIDTH>, Mat3) {
+        let (p1, p2) = basis_across(u);
+        let g_rows = Mat3::from_rows(&[
+            p1.cross(u).transpose(), // p1.(u x v) = v.(p1 x u)
+            p2.cross(u).transpose(),
+            u.transpose(),
+        ]);
+        let measured = g_rows * force_a_n;
+        let gravity_rows = g_rows * self.gravity_mps2;
+        let g_r = g_rows * self.calibration.sensor_rotation();
+        let [e1, e2] = self.bias_basis_s;
+        let bias = |e: &Vec3| {
+            if self.options.bias_across_gravity {
+                -(g_r * e)
+            } else {
+                Vec3::zeros()
+            }
+        };
+        let design = SMatrix::<f64, 3, WIDTH>::from_columns(&[
+            -gravity_rows,
+            Vec3::new(gravity_rows.x / a, gravity_rows.y / a, 0.0),
+            Vec3::new(0.0, 0.0, friction_coef),
+            bias(&e1),
+            bias(&e2),
+            measured,
+        ]);
+        (design, g_r)
+    }
+
+    /// The rows whitened: covariance of the rows = G R diag(std^2 / K) R^T
+    /// G^T. Its lower Cholesky factor is lower triangular, so the first two
+    /// whitened rows do not depend on the third: dropping the axial row is
+    /// exact.
+    fn whiten(
+        &self,
+        g_r: &Mat3,
+        design: &SMatrix<f64, 3, WIDTH>,
+        samples: u32,
+    ) -> Result<SMatrix<f64, 3, WIDTH>, IdentificationError> {
+        let per_sample = Mat3::from_diagonal(&(self.variance_n2 / f64::from(samples)));
+        let covariance = g_r * per_sample * g_r.transpose();
+        let cholesky = covariance
+            .cholesky()
+            .ok_or(IdentificationError::DegenerateNoise { samples })?;
+        cholesky
+            .l()
+            .solve_lower_triangular(design)
+            .ok_or(IdentificationError::DegenerateNoise { samples })
     }
 
     /// Poses accumulated.
@@ -487,22 +504,7 @@ impl Identification {
         let rhs: Unknowns = weighted
             .fixed_view::<MAX_UNKNOWNS, 1>(0, MAX_UNKNOWNS)
             .into_owned();
-        let norms = Unknowns::from_iterator(r5.column_iter().map(|c| c.norm()));
-        if norms.iter().any(|n| !(n.is_finite() && *n > 0.0)) {
-            return Err(ill(f64::INFINITY));
-        }
-        let scaled = r5 * Square::from_diagonal(&norms.map(|n| 1.0 / n));
-        let Some(scaled_inv) = scaled.solve_upper_triangular(&Square::identity()) else {
-            return Err(ill(f64::INFINITY));
-        };
-        let condition = linalg::condition_from_gram(
-            &(scaled.transpose() * scaled),
-            &(scaled_inv.transpose() * scaled_inv),
-        );
-        if condition.is_nan() || condition > MAX_CONDITION {
-            return Err(ill(condition));
-        }
-
+        let condition = scaled_condition(&r5).map_err(ill)?;
         let theta = r5.solve_upper_triangular(&rhs).ok_or(ill(condition))?;
         let r_inv = r5
             .solve_upper_triangular(&Square::identity())
@@ -519,6 +521,27 @@ impl Identification {
         // Never claim more than the noise model, nor less than the scatter shows.
         let scale = if dof > 0 { chi2_dof.max(1.0) } else { 1.0 };
         let covariance = unit_covariance * scale;
+        let fit = Fit {
+            theta: [mass_kg, moment_kgm, friction_n, bias1_n, bias2_n],
+            covariance,
+            chi2_dof,
+            residual_rms_n: ComplexField::sqrt(unweighted_ss / f64::from(self.rows)),
+            condition,
+        };
+        self.result(fit)
+    }
+
+    /// The result of a fit: the deviations from its covariance, the centre
+    /// of mass from the mass and the moment; refused if the mass is not
+    /// positive or a value is not finite.
+    fn result(&self, fit: Fit) -> Result<IdentificationResult, IdentificationError> {
+        let Fit {
+            theta: [mass_kg, moment_kgm, friction_n, bias1_n, bias2_n],
+            covariance,
+            chi2_dof,
+            residual_rms_n,
+            condition,
+        } = fit;
         let [var_m, var_mm, var_f, var_b1, var_b2]: [f64; MAX_UNKNOWNS] =
             covariance.diagonal().map(non_negative).into();
         // Column 0 of the covariance: (m, m), (M, m), ...
@@ -543,7 +566,7 @@ impl Identification {
             bias_across_std_n: bias.then(|| [std(var_b1), std(var_b2)]),
             friction_n: friction.then_some(friction_n),
             friction_std_n: friction.then(|| std(var_f)),
-            residual_rms_n: ComplexField::sqrt(unweighted_ss / f64::from(self.rows)),
+            residual_rms_n,
             chi2_dof,
             condition,
             poses: self.poses,
@@ -552,6 +575,39 @@ impl Identification {
         check_result(&result)?;
         Ok(result)
     }
+}
+
+/// A solved fit, before its checks: the unknowns (m, M, f, bias e1, bias
+/// e2), their covariance (scaled by the scatter), and its figures.
+struct Fit {
+    theta: [f64; MAX_UNKNOWNS],
+    covariance: Square,
+    chi2_dof: f64,
+    residual_rms_n: f64,
+    condition: f64,
+}
+
+/// The condition number of the triangular factor `r5` with its columns
+/// scaled to unit norm; `Err` with the condition (infinite when a column is
+/// zero or not finite, or the factor singular) if it is beyond
+/// [`MAX_CONDITION`] or NaN.
+fn scaled_condition(r5: &Square) -> Result<f64, f64> {
+    let norms = Unknowns::from_iterator(r5.column_iter().map(|c| c.norm()));
+    if norms.iter().any(|n| !(n.is_finite() && *n > 0.0)) {
+        return Err(f64::INFINITY);
+    }
+    let scaled = r5 * Square::from_diagonal(&norms.map(|n| 1.0 / n));
+    let Some(scaled_inv) = scaled.solve_upper_triangular(&Square::identity()) else {
+        return Err(f64::INFINITY);
+    };
+    let condition = linalg::condition_from_gram(
+        &(scaled.transpose() * scaled),
+        &(scaled_inv.transpose() * scaled_inv),
+    );
+    if condition.is_nan() || condition > MAX_CONDITION {
+        return Err(condition);
+    }
+    Ok(condition)
 }
 
 fn check_result(r: &IdentificationResult) -> Result<(), IdentificationError> {

@@ -49,6 +49,51 @@ pub enum SettingError {
     Filter(#[from] filter::FilterError),
 }
 
+/// `Ok` if `ok`, else the setting error naming `field`, its value and what
+/// it must be (`why`).
+pub(crate) fn require(
+    ok: bool,
+    field: &'static str,
+    value: f64,
+    why: &'static str,
+) -> Result<(), SettingError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(SettingError::Invalid { field, value, why })
+    }
+}
+
+/// A setting that must be finite and > 0.
+pub(crate) fn positive(field: &'static str, value: f64) -> Result<(), SettingError> {
+    require(
+        value.is_finite() && value > 0.0,
+        field,
+        value,
+        "must be finite and > 0",
+    )
+}
+
+/// A setting that must be finite and >= 0.
+pub(crate) fn finite_non_negative(field: &'static str, value: f64) -> Result<(), SettingError> {
+    require(
+        value.is_finite() && value >= 0.0,
+        field,
+        value,
+        "must be finite and >= 0",
+    )
+}
+
+/// A setting that must be finite and >= `lo` (`why` says so).
+pub(crate) fn at_least(
+    field: &'static str,
+    value: f64,
+    lo: f64,
+    why: &'static str,
+) -> Result<(), SettingError> {
+    require(value.is_finite() && value >= lo, field, value, why)
+}
+
 /// The force sensor's noise: one standard deviation per sensor axis, N
 /// (MODEL.md 7: the HEX-6 has 0.2, 0.2, 0.8).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -181,21 +226,7 @@ pub(crate) fn com_std_m(
     nalgebra::ComplexField::sqrt(non_negative(var_m2))
 }
 
-/// `Err(error(value))` for the first NaN or infinite `value` among `values`.
-#[inline]
-pub(crate) fn check_finite<'a, E>(
-    values: impl IntoIterator<Item = &'a f64>,
-    error: impl FnOnce(f64) -> E,
-) -> Result<(), E> {
-    // A plain loop: `find` on nalgebra's iterators cost 12 ns on the per-cycle
-    // path (tip force, d = 0).
-    for &value in values {
-        if !value.is_finite() {
-            return Err(error(value));
-        }
-    }
-    Ok(())
-}
+pub(crate) use sar_kinematics::check_finite;
 
 #[cfg(test)]
 mod tests {

@@ -489,18 +489,25 @@ impl TipForceEstimator {
             beta * fz + pz * fa_u + qz * fa_v + g_along * uz - weight_arm * g.z,
         );
         let torsion_nm = d * fa_v * inv_n_u;
-        // diag(J C J^T)_i = |F^T J^T e_i|^2 = |beta F_i + p_i a + q_i b|^2 with
-        // F_i the rows of F, a = F^T u, b = F^T v.
+        let v = Vec3::new(vx, vy, vz);
+        let var_n2 = self.offset_variance_n2(u, &v, beta, [px, py, pz], [qx, qy, qz]);
+        self.finish(u, force_n, var_n2, lever_m, *f_a, torsion_nm)
+    }
+
+    /// The per-axis variance of `with_offset`'s F_tip, N^2, for its Jacobian
+    /// `J = beta I + p u^T + q v^T`: diag(J C J^T)_i = |F^T J^T e_i|^2 =
+    /// |beta F_i + p_i a + q_i b|^2 with F_i the rows of the noise factor F,
+    /// a = F^T u, b = F^T v.
+    fn offset_variance_n2(&self, u: &Vec3, v: &Vec3, beta: f64, p: [f64; 3], q: [f64; 3]) -> Vec3 {
         let f = &self.noise_factor;
         let a = f.tr_mul(u);
-        let b = f.tr_mul(&Vec3::new(vx, vy, vz));
+        let b = f.tr_mul(v);
         let row = |fi: Vec3, p: f64, q: f64| (fi * beta + a * p + b * q).norm_squared();
-        let var_n2 = Vec3::new(
-            row(Vec3::new(f.m11, f.m12, f.m13), px, qx),
-            row(Vec3::new(f.m21, f.m22, f.m23), py, qy),
-            row(Vec3::new(f.m31, f.m32, f.m33), pz, qz),
-        );
-        self.finish(u, force_n, var_n2, lever_m, *f_a, torsion_nm)
+        Vec3::new(
+            row(Vec3::new(f.m11, f.m12, f.m13), p[0], q[0]),
+            row(Vec3::new(f.m21, f.m22, f.m23), p[1], q[1]),
+            row(Vec3::new(f.m31, f.m32, f.m33), p[2], q[2]),
+        )
     }
 
     /// Why w failed the unit tests of `with_offset` (`unit_error` = |w|^2 - 1,

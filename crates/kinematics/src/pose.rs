@@ -131,6 +131,26 @@ pub fn rod_frame(q4_rad: f64, q5_rad: f64) -> (Vec3, Vec3) {
 /// Below this ratio r_h / rho the rod counts as vertical.
 const VERTICAL_RATIO: f64 = 1e-9;
 
+/// The rod's u and w, and s (from A's foot to the support along u, m), from
+/// r (the U-joint to the support), rho = |r|, its horizontal part r_h and
+/// the offset d. q4 = atan2(rx, rz); q5 = alpha + beta with alpha =
+/// atan2(ry, r_h) and beta = asin(d / rho) (MODEL.md 3). Their sines and
+/// cosines follow from r without trigonometry; the angles themselves are
+/// Pose::q4_rad/q5_rad.
+#[inline]
+fn rod_axes(r: &Vec3, rho: f64, r_h: f64, d: f64) -> (Vec3, Vec3, f64) {
+    let (inv_rho, inv_r_h) = (1.0 / rho, 1.0 / r_h);
+    let (s4, c4) = (r.x * inv_r_h, r.z * inv_r_h);
+    let (s_alpha, c_alpha) = (r.y * inv_rho, r_h * inv_rho);
+    let s = sqrt(rho * rho - d * d);
+    let (s_beta, c_beta) = (d * inv_rho, s * inv_rho);
+    let s5 = s_alpha * c_beta + c_alpha * s_beta;
+    let c5 = c_alpha * c_beta - s_alpha * s_beta;
+    let rod_dir = Vec3::new(s4 * c5, s5, c4 * c5);
+    let rod_normal = Vec3::new(s4 * s5, -c5, c4 * s5);
+    (rod_dir, rod_normal, s)
+}
+
 /// Closed-form forward kinematics: active joints -> passive joints, points, u.
 #[inline]
 pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result<Pose, PoseError> {
@@ -161,18 +181,7 @@ pub fn forward(cal: &Calibration, profile: &Profile, q: &ActiveJoints) -> Result
     if r_h <= VERTICAL_RATIO * rho {
         return Err(PoseError::VerticalRod { horizontal_m: r_h });
     }
-    // q4 = atan2(rx, rz); q5 = alpha + beta with alpha = atan2(ry, r_h) and
-    // beta = asin(d / rho) (MODEL.md 3). Their sines and cosines follow from r
-    // without trigonometry; the angles themselves are Pose::q4_rad/q5_rad.
-    let (inv_rho, inv_r_h) = (1.0 / rho, 1.0 / r_h);
-    let (s4, c4) = (r.x * inv_r_h, r.z * inv_r_h);
-    let (s_alpha, c_alpha) = (r.y * inv_rho, r_h * inv_rho);
-    let s = sqrt(rho * rho - d * d);
-    let (s_beta, c_beta) = (d * inv_rho, s * inv_rho);
-    let s5 = s_alpha * c_beta + c_alpha * s_beta;
-    let c5 = c_alpha * c_beta - s_alpha * s_beta;
-    let rod_dir = Vec3::new(s4 * c5, s5, c4 * c5);
-    let rod_normal = Vec3::new(s4 * s5, -c5, c4 * s5);
+    let (rod_dir, rod_normal, s) = rod_axes(&r, rho, r_h, d);
     let margin_m = profile.length_m() - s;
     if margin_m.abs() < MIN_DISTANCE_M {
         return Err(PoseError::TipAtSupport { margin_m });

@@ -84,9 +84,34 @@ pub(super) fn tissues(ctx: &Ctx<'_>, file: &[TissueToml]) -> Result<Vec<Tissue>,
         .collect()
 }
 
+/// One `[[tissue]]`: its direction, stiffness model, damping, breathing
+/// and shifts, each checked under its key.
 fn tissue(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<Tissue, ConfigError> {
     let k = |name: &str| format!("{key}.{name}");
     let direction = unit(ctx, &k("direction"), t.direction)?;
+    let model = tissue_model(ctx, key, t)?;
+    let damping_n_s_per_m = t.damping_n_s_per_m.unwrap_or(0.0);
+    if !(0.0..=MAX_DAMPING_N_S_PER_M).contains(&damping_n_s_per_m) {
+        return Err(ctx.err(
+            &k("damping_n_s_per_m"),
+            format!("must be in [0, {MAX_DAMPING_N_S_PER_M}] N s/m, got {damping_n_s_per_m} N s/m"),
+        ));
+    }
+    let breathing = breathing(ctx, key, t, direction)?;
+    let shifts = shifts(ctx, key, t)?;
+    Ok(Tissue {
+        direction,
+        rest_m: Vec3::from(t.rest_m),
+        model,
+        damping_n_s_per_m,
+        breathing,
+        shifts,
+    })
+}
+
+/// The tissue's stiffness: linear, or exponential with its `beta_per_m`.
+fn tissue_model(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<TissueModel, ConfigError> {
+    let k = |name: &str| format!("{key}.{name}");
     let stiffness_n_per_m = in_range(
         ctx,
         &k("stiffness_n_per_m"),
@@ -113,13 +138,18 @@ fn tissue(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<Tissue, ConfigErro
             beta_per_m: in_range(ctx, &k("beta_per_m"), beta, MAX_BETA_PER_M, "1/m")?,
         },
     };
-    let damping_n_s_per_m = t.damping_n_s_per_m.unwrap_or(0.0);
-    if !(0.0..=MAX_DAMPING_N_S_PER_M).contains(&damping_n_s_per_m) {
-        return Err(ctx.err(
-            &k("damping_n_s_per_m"),
-            format!("must be in [0, {MAX_DAMPING_N_S_PER_M}] N s/m, got {damping_n_s_per_m} N s/m"),
-        ));
-    }
+    Ok(model)
+}
+
+/// The breathing: both its amplitude and its rate, or neither (and then no
+/// direction); along the tissue's `direction` unless it names its own.
+fn breathing(
+    ctx: &Ctx<'_>,
+    key: &str,
+    t: &TissueToml,
+    direction: Vec3,
+) -> Result<Option<Breathing>, ConfigError> {
+    let k = |name: &str| format!("{key}.{name}");
     let breathing = match (t.breathing_amplitude_m, t.breathing_hz) {
         (None, None) => {
             if t.breathing_direction.is_some() {
@@ -157,6 +187,13 @@ fn tissue(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<Tissue, ConfigErro
             },
         }),
     };
+    Ok(breathing)
+}
+
+/// The shifts of the rest position, sorted by time, each within
+/// [`MAX_SHIFT_M`].
+fn shifts(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<Vec<TissueShift>, ConfigError> {
+    let k = |name: &str| format!("{key}.{name}");
     let mut shifts = Vec::with_capacity(t.shift.len());
     let mut last_t: Option<(f64, usize)> = None;
     for (i, shift) in t.shift.iter().enumerate() {
@@ -188,12 +225,5 @@ fn tissue(ctx: &Ctx<'_>, key: &str, t: &TissueToml) -> Result<Tissue, ConfigErro
             offset_m: shift.offset_m,
         });
     }
-    Ok(Tissue {
-        direction,
-        rest_m: Vec3::from(t.rest_m),
-        model,
-        damping_n_s_per_m,
-        breathing,
-        shifts,
-    })
+    Ok(shifts)
 }

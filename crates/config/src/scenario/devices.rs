@@ -10,7 +10,8 @@ use super::{
 };
 use crate::toml_file::Ctx;
 use sar_drivers::Vec3;
-use sar_drivers::sim::SensorSpec;
+use sar_drivers::sim::{AxesSpec, SensorSpec};
+use sar_kinematics::ActiveJoints;
 
 /// `[axes]`, checked (the start is checked later, against the kinematics).
 pub(super) struct Axes {
@@ -21,6 +22,26 @@ pub(super) struct Axes {
     pub position_period_ns: u64,
     pub travel_m: [(f64, f64); 3],
     pub start: Option<[f64; 3]>,
+}
+
+impl Axes {
+    /// One encoder count, m.
+    pub fn count_m(&self) -> f64 {
+        self.lead_m_per_turn / f64::from(self.counts_per_turn)
+    }
+
+    /// The simulator's axes, starting at `start`.
+    pub fn spec(&self, start: ActiveJoints) -> AxesSpec {
+        AxesSpec {
+            max_speed_mps: self.max_speed_mps,
+            max_accel_mps2: self.max_accel_mps2,
+            lead_m_per_turn: self.lead_m_per_turn,
+            counts_per_turn: self.counts_per_turn,
+            position_period_ns: self.position_period_ns,
+            travel_m: self.travel_m,
+            start,
+        }
+    }
 }
 
 /// `[axes]` with its defaults.

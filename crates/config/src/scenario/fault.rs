@@ -142,6 +142,145 @@ impl Table<'_, '_> {
         }
         Ok(channels)
     }
+
+    /// `encoder_jump`: a non-zero jump of at most [`MAX_ENCODER_OFFSET_M`].
+    fn encoder_jump(&self) -> Result<Fault, ConfigError> {
+        let at_ns = self.at()?.1;
+        let axis = self.axis()?;
+        let jump_m = self.required("jump_m", self.f.jump_m)?;
+        if jump_m == 0.0 || jump_m.abs() > MAX_ENCODER_OFFSET_M {
+            return Err(self.ctx.err(
+                &self.key("jump_m"),
+                format!("must be non-zero and at most 1 m in size, got {jump_m} m"),
+            ));
+        }
+        Ok(Fault::EncoderJump {
+            at_ns,
+            axis,
+            jump_m,
+        })
+    }
+
+    /// `sensor_saturated`: one or more channels, pinned to a rail or to the
+    /// side of their reading.
+    fn sensor_saturated(&self) -> Result<Fault, ConfigError> {
+        let (from_s, from_ns) = self.from()?;
+        let until_ns = self.until("from_s", from_s)?;
+        let channels = self.channels()?;
+        let rail = self.f.rail.map(|r| match r {
+            RailName::Positive => Rail::Positive,
+            RailName::Negative => Rail::Negative,
+        });
+        Ok(Fault::SensorSaturated {
+            from_ns,
+            until_ns,
+            channels,
+            rail,
+        })
+    }
+
+    /// Refuses `what` (a spike, a drift; given at `name`) of zero force and
+    /// zero torque: it changes nothing.
+    fn changes_something(
+        &self,
+        name: &str,
+        force: &Vec3,
+        torque: &Vec3,
+        what: &str,
+    ) -> Result<(), ConfigError> {
+        if *force == Vec3::zeros() && *torque == Vec3::zeros() {
+            return Err(self.ctx.err(
+                &self.key(name),
+                format!("{what} of zero force and zero torque changes nothing"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `sensor_spike`: a force or a torque, for at least one sample.
+    fn sensor_spike(&self) -> Result<Fault, ConfigError> {
+        let at_ns = self.at()?.1;
+        let force_n = Vec3::from(self.required("force_n", self.f.force_n)?);
+        let torque_nm = Vec3::from(self.f.torque_nm.unwrap_or_default());
+        self.changes_something("force_n", &force_n, &torque_nm, "a spike")?;
+        let samples = self.f.samples.unwrap_or(1);
+        if samples == 0 {
+            return Err(self.ctx.err(&self.key("samples"), "must be >= 1, got 0"));
+        }
+        Ok(Fault::SensorSpike {
+            at_ns,
+            force_n,
+            torque_nm,
+            samples,
+        })
+    }
+
+    /// `sensor_drift`: a drift of force or of torque.
+    fn sensor_drift(&self) -> Result<Fault, ConfigError> {
+        let from_ns = self.from()?.1;
+        let drift_n_per_s = Vec3::from(self.required("drift_n_per_s", self.f.drift_n_per_s)?);
+        let drift_nm_per_s = Vec3::from(self.f.drift_nm_per_s.unwrap_or_default());
+        self.changes_something("drift_n_per_s", &drift_n_per_s, &drift_nm_per_s, "a drift")?;
+        Ok(Fault::SensorDrift {
+            from_ns,
+            drift_n_per_s,
+            drift_nm_per_s,
+        })
+    }
+
+    /// `sensor_scale`: a gain within [`MAX_SCALE_FACTOR`] either way.
+    fn sensor_scale(&self) -> Result<Fault, ConfigError> {
+        let from_ns = self.from()?.1;
+        let factor = self.required("factor", self.f.factor)?;
+        if !(1.0 / MAX_SCALE_FACTOR..=MAX_SCALE_FACTOR).contains(&factor) {
+            return Err(self.ctx.err(
+                &self.key("factor"),
+                format!(
+                    "must be in [{}, {MAX_SCALE_FACTOR}], got {factor}",
+                    1.0 / MAX_SCALE_FACTOR
+                ),
+            ));
+        }
+        Ok(Fault::SensorScale { from_ns, factor })
+    }
+
+    /// `encoder_count_loss`: a non-zero loss of at most
+    /// [`MAX_ENCODER_OFFSET_M`] of travel (`count_m`: one count, m).
+    fn encoder_count_loss(&self, count_m: f64) -> Result<Fault, ConfigError> {
+        let at_ns = self.at()?.1;
+        let axis = self.axis()?;
+        let counts = self.required("counts", self.f.counts)?;
+        let offset_m = f64::from(counts) * count_m;
+        if counts == 0 || offset_m.abs() > MAX_ENCODER_OFFSET_M {
+            return Err(self.ctx.err(
+                &self.key("counts"),
+                format!(
+                    "must be non-zero and at most 1 m of travel in size ({:.0} counts), got \
+                     {counts}",
+                    (MAX_ENCODER_OFFSET_M / count_m).floor()
+                ),
+            ));
+        }
+        Ok(Fault::EncoderCountLoss {
+            at_ns,
+            axis,
+            counts,
+        })
+    }
+
+    /// `drive_emcy`: an EMCY with a non-zero code.
+    fn drive_emcy(&self) -> Result<Fault, ConfigError> {
+        let at_ns = self.at()?.1;
+        let axis = self.axis()?;
+        let code = self.required("code", self.f.code)?;
+        if code == 0 {
+            return Err(self.ctx.err(
+                &self.key("code"),
+                "must not be 0 (an EMCY with code 0 says the error is gone)",
+            ));
+        }
+        Ok(Fault::DriveEmcy { at_ns, axis, code })
+    }
 }
 
 /// Checks that a `[[fault]]` gives exactly the keys its kind takes, and each value.
@@ -151,6 +290,52 @@ fn resolve_fault(
     f: &FaultToml,
     count_m: f64,
 ) -> Result<Fault, ConfigError> {
+    check_keys(ctx, key, f)?;
+    let t = Table { ctx, key, f };
+    Ok(match f.kind {
+        FaultKind::SensorSilent => {
+            let (from_s, from_ns) = t.from()?;
+            let until_ns = t.until("from_s", from_s)?;
+            Fault::SensorSilent { from_ns, until_ns }
+        }
+        FaultKind::NanSample => Fault::NanSample { at_ns: t.at()?.1 },
+        FaultKind::EncoderJump => t.encoder_jump()?,
+        FaultKind::DriveFault => {
+            let at_ns = t.at()?.1;
+            let code = t.required("code", f.code)?;
+            Fault::DriveFault { at_ns, code }
+        }
+        FaultKind::SensorFrozen => {
+            let (from_s, from_ns) = t.from()?;
+            let until_ns = t.until("from_s", from_s)?;
+            Fault::SensorFrozen { from_ns, until_ns }
+        }
+        FaultKind::SensorSaturated => t.sensor_saturated()?,
+        FaultKind::SensorSpike => t.sensor_spike()?,
+        FaultKind::SensorDrift => t.sensor_drift()?,
+        FaultKind::SensorScale => t.sensor_scale()?,
+        FaultKind::EncoderFrozen => {
+            let (at_s, at_ns) = t.at()?;
+            let axis = t.axis()?;
+            let until_ns = t.until("at_s", at_s)?;
+            Fault::EncoderFrozen {
+                at_ns,
+                axis,
+                until_ns,
+            }
+        }
+        FaultKind::EncoderCountLoss => t.encoder_count_loss(count_m)?,
+        FaultKind::DriveHeartbeatLoss => {
+            let at_ns = t.at()?.1;
+            let axis = t.axis()?;
+            Fault::DriveHeartbeatLoss { at_ns, axis }
+        }
+        FaultKind::DriveEmcy => t.drive_emcy()?,
+    })
+}
+
+/// Refuses a key the fault's kind does not take.
+fn check_keys(ctx: &Ctx<'_>, key: &str, f: &FaultToml) -> Result<(), ConfigError> {
     let present = [
         ("from_s", f.from_s.is_some()),
         ("until_s", f.until_s.is_some()),
@@ -181,153 +366,5 @@ fn resolve_fault(
             ),
         ));
     }
-    let t = Table { ctx, key, f };
-    Ok(match f.kind {
-        FaultKind::SensorSilent => {
-            let (from_s, from_ns) = t.from()?;
-            let until_ns = t.until("from_s", from_s)?;
-            Fault::SensorSilent { from_ns, until_ns }
-        }
-        FaultKind::NanSample => Fault::NanSample { at_ns: t.at()?.1 },
-        FaultKind::EncoderJump => {
-            let at_ns = t.at()?.1;
-            let axis = t.axis()?;
-            let jump_m = t.required("jump_m", f.jump_m)?;
-            if jump_m == 0.0 || jump_m.abs() > MAX_ENCODER_OFFSET_M {
-                return Err(ctx.err(
-                    &t.key("jump_m"),
-                    format!("must be non-zero and at most 1 m in size, got {jump_m} m"),
-                ));
-            }
-            Fault::EncoderJump {
-                at_ns,
-                axis,
-                jump_m,
-            }
-        }
-        FaultKind::DriveFault => {
-            let at_ns = t.at()?.1;
-            let code = t.required("code", f.code)?;
-            Fault::DriveFault { at_ns, code }
-        }
-        FaultKind::SensorFrozen => {
-            let (from_s, from_ns) = t.from()?;
-            let until_ns = t.until("from_s", from_s)?;
-            Fault::SensorFrozen { from_ns, until_ns }
-        }
-        FaultKind::SensorSaturated => {
-            let (from_s, from_ns) = t.from()?;
-            let until_ns = t.until("from_s", from_s)?;
-            let channels = t.channels()?;
-            let rail = f.rail.map(|r| match r {
-                RailName::Positive => Rail::Positive,
-                RailName::Negative => Rail::Negative,
-            });
-            Fault::SensorSaturated {
-                from_ns,
-                until_ns,
-                channels,
-                rail,
-            }
-        }
-        FaultKind::SensorSpike => {
-            let at_ns = t.at()?.1;
-            let force_n = Vec3::from(t.required("force_n", f.force_n)?);
-            let torque_nm = Vec3::from(f.torque_nm.unwrap_or_default());
-            if force_n == Vec3::zeros() && torque_nm == Vec3::zeros() {
-                return Err(ctx.err(
-                    &t.key("force_n"),
-                    "a spike of zero force and zero torque changes nothing",
-                ));
-            }
-            let samples = f.samples.unwrap_or(1);
-            if samples == 0 {
-                return Err(ctx.err(&t.key("samples"), "must be >= 1, got 0"));
-            }
-            Fault::SensorSpike {
-                at_ns,
-                force_n,
-                torque_nm,
-                samples,
-            }
-        }
-        FaultKind::SensorDrift => {
-            let from_ns = t.from()?.1;
-            let drift_n_per_s = Vec3::from(t.required("drift_n_per_s", f.drift_n_per_s)?);
-            let drift_nm_per_s = Vec3::from(f.drift_nm_per_s.unwrap_or_default());
-            if drift_n_per_s == Vec3::zeros() && drift_nm_per_s == Vec3::zeros() {
-                return Err(ctx.err(
-                    &t.key("drift_n_per_s"),
-                    "a drift of zero force and zero torque changes nothing",
-                ));
-            }
-            Fault::SensorDrift {
-                from_ns,
-                drift_n_per_s,
-                drift_nm_per_s,
-            }
-        }
-        FaultKind::SensorScale => {
-            let from_ns = t.from()?.1;
-            let factor = t.required("factor", f.factor)?;
-            if !(1.0 / MAX_SCALE_FACTOR..=MAX_SCALE_FACTOR).contains(&factor) {
-                return Err(ctx.err(
-                    &t.key("factor"),
-                    format!(
-                        "must be in [{}, {MAX_SCALE_FACTOR}], got {factor}",
-                        1.0 / MAX_SCALE_FACTOR
-                    ),
-                ));
-            }
-            Fault::SensorScale { from_ns, factor }
-        }
-        FaultKind::EncoderFrozen => {
-            let (at_s, at_ns) = t.at()?;
-            let axis = t.axis()?;
-            let until_ns = t.until("at_s", at_s)?;
-            Fault::EncoderFrozen {
-                at_ns,
-                axis,
-                until_ns,
-            }
-        }
-        FaultKind::EncoderCountLoss => {
-            let at_ns = t.at()?.1;
-            let axis = t.axis()?;
-            let counts = t.required("counts", f.counts)?;
-            let offset_m = f64::from(counts) * count_m;
-            if counts == 0 || offset_m.abs() > MAX_ENCODER_OFFSET_M {
-                return Err(ctx.err(
-                    &t.key("counts"),
-                    format!(
-                        "must be non-zero and at most 1 m of travel in size ({:.0} counts), got \
-                         {counts}",
-                        (MAX_ENCODER_OFFSET_M / count_m).floor()
-                    ),
-                ));
-            }
-            Fault::EncoderCountLoss {
-                at_ns,
-                axis,
-                counts,
-            }
-        }
-        FaultKind::DriveHeartbeatLoss => {
-            let at_ns = t.at()?.1;
-            let axis = t.axis()?;
-            Fault::DriveHeartbeatLoss { at_ns, axis }
-        }
-        FaultKind::DriveEmcy => {
-            let at_ns = t.at()?.1;
-            let axis = t.axis()?;
-            let code = t.required("code", f.code)?;
-            if code == 0 {
-                return Err(ctx.err(
-                    &t.key("code"),
-                    "must not be 0 (an EMCY with code 0 says the error is gone)",
-                ));
-            }
-            Fault::DriveEmcy { at_ns, axis, code }
-        }
-    })
+    Ok(())
 }

@@ -212,6 +212,35 @@ fn resolve_step(
     key: &str,
     step: &MotionToml,
 ) -> Result<(String, ActiveJoints), ConfigError> {
+    check_one_target(ctx, key, step)?;
+    let cal = &machine.calibration;
+    if let Some(q) = step.joints {
+        return Ok((format!("{key}.joints"), joints_from_array(q)));
+    }
+    if let Some(a) = step.ujoint {
+        return Ok((
+            format!("{key}.ujoint"),
+            joints_for_ujoint(cal, &Vec3::from(a)),
+        ));
+    }
+    if let Some(d) = step.tip {
+        let tip_key = format!("{key}.tip");
+        let q = inverse(cal, &machine.profile, &Vec3::from(d)).map_err(|e| {
+            ctx.err(
+                &tip_key,
+                format!("the kinematics cannot put the tip there: {e}"),
+            )
+        })?;
+        return Ok((tip_key, q));
+    }
+    let dir_key = format!("{key}.rod_dir");
+    let q = rod_dir_target(ctx, cal, key, &dir_key, step)?;
+    Ok((dir_key, q))
+}
+
+/// Refuses a step with no target or several (of joints, ujoint, tip,
+/// rod_dir), and a support distance without a rod direction.
+fn check_one_target(ctx: &Ctx<'_>, key: &str, step: &MotionToml) -> Result<(), ConfigError> {
     let given: Vec<&str> = [
         ("joints", step.joints.is_some()),
         ("ujoint", step.ujoint.is_some()),
@@ -248,31 +277,23 @@ fn resolve_step(
             "only allowed with rod_dir",
         ));
     }
-    let cal = &machine.calibration;
-    if let Some(q) = step.joints {
-        return Ok((format!("{key}.joints"), joints_from_array(q)));
-    }
-    if let Some(a) = step.ujoint {
-        return Ok((
-            format!("{key}.ujoint"),
-            joints_for_ujoint(cal, &Vec3::from(a)),
-        ));
-    }
-    if let Some(d) = step.tip {
-        let tip_key = format!("{key}.tip");
-        let q = inverse(cal, &machine.profile, &Vec3::from(d)).map_err(|e| {
-            ctx.err(
-                &tip_key,
-                format!("the kinematics cannot put the tip there: {e}"),
-            )
-        })?;
-        return Ok((tip_key, q));
-    }
-    let dir_key = format!("{key}.rod_dir");
+    Ok(())
+}
+
+/// The target given as `rod_dir` and `support_distance_m`: the U-joint that
+/// far from the support, back along the rod's direction (`dir_key`: where
+/// the file gives the direction).
+fn rod_dir_target(
+    ctx: &Ctx<'_>,
+    cal: &Calibration,
+    key: &str,
+    dir_key: &str,
+    step: &MotionToml,
+) -> Result<ActiveJoints, ConfigError> {
     let u = Vec3::from(step.rod_dir.unwrap_or_default());
     let norm = u.norm();
     if norm < 1e-9 {
-        return Err(ctx.err(&dir_key, "must not be the zero vector"));
+        return Err(ctx.err(dir_key, "must not be the zero vector"));
     }
     let Some(a) = step.support_distance_m else {
         return Err(ctx.err(
@@ -282,7 +303,7 @@ fn resolve_step(
     };
     ctx.positive(&format!("{key}.support_distance_m"), a, "m")?;
     let ujoint_m = cal.support_m() - u * (a / norm);
-    Ok((dir_key, joints_for_ujoint(cal, &ujoint_m)))
+    Ok(joints_for_ujoint(cal, &ujoint_m))
 }
 
 /// Stream of the random motion: the seed mixed with a constant, so that it

@@ -172,29 +172,37 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
             me.boot(node)?;
             me.configure(node)?;
         }
-        me.send_heartbeat()?;
-        for node in ids {
-            me.send(COB_NMT, &[nmt::START, node])?;
+        me.go_operational()?;
+        Ok(me)
+    }
+
+    /// Starts the configured drives (NMT start, after the host's first
+    /// heartbeat) and waits, at most a drive heartbeat time-out, until each
+    /// drive's heartbeat says operational.
+    fn go_operational(&mut self) -> Result<(), CanOpenError> {
+        self.send_heartbeat()?;
+        for node in self.config.node_ids {
+            self.send(COB_NMT, &[nmt::START, node])?;
         }
         // The start is confirmed by each drive's heartbeat saying operational.
-        for a in &mut me.axes {
+        for a in &mut self.axes {
             a.nmt_state = heartbeat::PRE_OPERATIONAL;
         }
-        let timeout_ns = u64::from(me.config.drive_heartbeat_timeout_ms) * 1_000_000;
+        let timeout_ns = u64::from(self.config.drive_heartbeat_timeout_ms) * 1_000_000;
         let operational = |me: &Self| {
             me.axes
                 .iter()
                 .all(|a| a.nmt_state == heartbeat::OPERATIONAL)
         };
-        if !operational(&me) && !me.wait(timeout_ns, |me, _| operational(me)) {
-            let node = me
+        if !operational(self) && !self.wait(timeout_ns, |me, _| operational(me)) {
+            let node = self
                 .axes
                 .iter()
                 .find(|a| a.nmt_state != heartbeat::OPERATIONAL)
                 .map_or(0, |a| a.node);
             return Err(CanOpenError::NotOperational { node, timeout_ns });
         }
-        Ok(me)
+        Ok(())
     }
 
     /// The configuration.

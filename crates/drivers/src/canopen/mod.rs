@@ -90,6 +90,11 @@ pub struct CanOpenConfig {
     pub max_torque_permille: u16,
 }
 
+/// The error naming a bad setting and its value.
+fn invalid(field: &'static str, value: String) -> Result<(), CanOpenError> {
+    Err(CanOpenError::InvalidConfig { field, value })
+}
+
 impl CanOpenConfig {
     /// The configuration with the file's keys and defaults for the rest:
     /// host node 127, 1 kHz SYNC, 0.05 m/s and 0.5 m/s^2, travel ±1 m, host
@@ -126,41 +131,66 @@ impl CanOpenConfig {
 
     /// Checks the values; the first bad one is named.
     pub fn validate(&self) -> Result<(), CanOpenError> {
-        let bad =
-            |field: &'static str, value: String| Err(CanOpenError::InvalidConfig { field, value });
+        self.check_nodes()?;
+        self.check_scale()?;
+        self.check_timing()?;
+        self.check_motion()?;
+        self.check_heartbeats()?;
+        self.check_drive_limits()
+    }
+
+    /// Three distinct drive node ids and the host's, all 1 to 127.
+    fn check_nodes(&self) -> Result<(), CanOpenError> {
         let ids = self.node_ids;
         if ids.iter().any(|&n| n == 0 || n > 127)
             || ids[0] == ids[1]
             || ids[1] == ids[2]
             || ids[0] == ids[2]
         {
-            return bad("node_ids", format!("{ids:?}"));
+            return invalid("node_ids", format!("{ids:?}"));
         }
         if self.host_node_id == 0 || self.host_node_id > 127 || ids.contains(&self.host_node_id) {
-            return bad("host_node_id", self.host_node_id.to_string());
+            return invalid("host_node_id", self.host_node_id.to_string());
         }
+        Ok(())
+    }
+
+    /// A positive lead and counts per turn.
+    fn check_scale(&self) -> Result<(), CanOpenError> {
         if !(self.lead_m.is_finite() && self.lead_m > 0.0) {
-            return bad("lead_m", self.lead_m.to_string());
+            return invalid("lead_m", self.lead_m.to_string());
         }
         if self.counts_per_turn == 0 {
-            return bad("counts_per_turn", "0".into());
+            return invalid("counts_per_turn", "0".into());
         }
+        Ok(())
+    }
+
+    /// The SYNC period (0.1 ms to 1 s), the TPDOs' wait within it, the bus polled
+    /// at least once in that wait.
+    fn check_timing(&self) -> Result<(), CanOpenError> {
         if !(100_000..=1_000_000_000).contains(&self.sync_period_ns) {
-            return bad("sync_period_ns", self.sync_period_ns.to_string());
+            return invalid("sync_period_ns", self.sync_period_ns.to_string());
         }
         // The TPDOs of a SYNC are awaited within its period, or positions of
         // two SYNCs could mix; the bus is polled at least once in that wait.
         if !(1..self.sync_period_ns).contains(&self.pdo_wait_ns) {
-            return bad("pdo_wait_ns", self.pdo_wait_ns.to_string());
+            return invalid("pdo_wait_ns", self.pdo_wait_ns.to_string());
         }
         if !(1..=self.pdo_wait_ns).contains(&self.poll_interval_ns) {
-            return bad("poll_interval_ns", self.poll_interval_ns.to_string());
+            return invalid("poll_interval_ns", self.poll_interval_ns.to_string());
         }
+        Ok(())
+    }
+
+    /// The host's speed and acceleration positive; each travel finite, not
+    /// empty, and within the drives' i32 counts.
+    fn check_motion(&self) -> Result<(), CanOpenError> {
         if !(self.max_speed_mps.is_finite() && self.max_speed_mps > 0.0) {
-            return bad("max_speed_mps", self.max_speed_mps.to_string());
+            return invalid("max_speed_mps", self.max_speed_mps.to_string());
         }
         if !(self.max_accel_mps2.is_finite() && self.max_accel_mps2 > 0.0) {
-            return bad("max_accel_mps2", self.max_accel_mps2.to_string());
+            return invalid("max_accel_mps2", self.max_accel_mps2.to_string());
         }
         for (lo, hi) in self.travel_m {
             // Every target in travel must fit the drives' i32 counts (a cast
@@ -168,11 +198,16 @@ impl CanOpenConfig {
             let widest_counts = lo.abs().max(hi.abs()) / self.m_per_count();
             if !(lo.is_finite() && hi.is_finite() && lo < hi) || widest_counts > f64::from(i32::MAX)
             {
-                return bad("travel_m", format!("{:?}", self.travel_m));
+                return invalid("travel_m", format!("{:?}", self.travel_m));
             }
         }
+        Ok(())
+    }
+
+    /// Each heartbeat period non-zero and below its time-out.
+    fn check_heartbeats(&self) -> Result<(), CanOpenError> {
         if self.host_heartbeat_ms == 0 || self.host_heartbeat_timeout_ms <= self.host_heartbeat_ms {
-            return bad(
+            return invalid(
                 "host_heartbeat_timeout_ms",
                 self.host_heartbeat_timeout_ms.to_string(),
             );
@@ -180,17 +215,24 @@ impl CanOpenConfig {
         if self.drive_heartbeat_ms == 0
             || self.drive_heartbeat_timeout_ms <= self.drive_heartbeat_ms
         {
-            return bad(
+            return invalid(
                 "drive_heartbeat_timeout_ms",
                 self.drive_heartbeat_timeout_ms.to_string(),
             );
         }
+        Ok(())
+    }
+
+    /// The drive's own limits: its quick stop at least the host's acceleration,
+    /// its speed above the host's plans, a following window of at least one
+    /// count, all within the drive's u32 units; the torque 1 to 10000 per mille.
+    fn check_drive_limits(&self) -> Result<(), CanOpenError> {
         let per_s = |v: f64| v / self.m_per_count();
         if !(self.quick_stop_decel_mps2.is_finite()
             && self.quick_stop_decel_mps2 >= self.max_accel_mps2
             && per_s(self.quick_stop_decel_mps2) <= f64::from(u32::MAX))
         {
-            return bad(
+            return invalid(
                 "quick_stop_decel_mps2",
                 self.quick_stop_decel_mps2.to_string(),
             );
@@ -202,17 +244,17 @@ impl CanOpenConfig {
             && self.drive_max_speed_mps >= self.max_speed_mps + rounding_mps
             && per_s(self.drive_max_speed_mps) <= f64::from(u32::MAX))
         {
-            return bad("drive_max_speed_mps", self.drive_max_speed_mps.to_string());
+            return invalid("drive_max_speed_mps", self.drive_max_speed_mps.to_string());
         }
         if !(self.following_window_m.is_finite()
             && self.following_window_m >= self.m_per_count()
             // 0xFFFF_FFFF switches a CiA 402 drive's following check off.
             && per_s(self.following_window_m) < f64::from(u32::MAX))
         {
-            return bad("following_window_m", self.following_window_m.to_string());
+            return invalid("following_window_m", self.following_window_m.to_string());
         }
         if !(1..=10_000).contains(&self.max_torque_permille) {
-            return bad("max_torque_permille", self.max_torque_permille.to_string());
+            return invalid("max_torque_permille", self.max_torque_permille.to_string());
         }
         Ok(())
     }

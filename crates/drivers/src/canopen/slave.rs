@@ -998,7 +998,30 @@ impl SimCia402Drive {
                 }
                 pdo.transmission = value as u8;
             }
-            (od::RPDO1_MAP | od::TPDO1_MAP, 0) => {
+            (od::RPDO1_MAP | od::TPDO1_MAP, _) => self.write_pdo_map(index, sub, value, pre_op)?,
+            (od::ABORT_CONNECTION, 0) => self.abort_option = value as u16 as i16,
+            (od::QUICK_STOP_OPTION, 0) => self.quick_stop_option = value as u16 as i16,
+            (od::CONTROLWORD, 0) => self.controlword_pending = Some(value as u16),
+            (od::MODES_OF_OPERATION, 0) => {
+                let mode = value as u8 as i8;
+                if mode != MODE_CSP {
+                    return Err(SDO_ABORT_RANGE);
+                }
+                self.mode = mode;
+            }
+            (od::TARGET_POSITION, 0) => self.target_counts = value as i32,
+            _ => return Err(SDO_ABORT_NO_OBJECT),
+        }
+        Ok(())
+    }
+
+    /// A write to a PDO's mapping (`index`: RPDO1's or TPDO1's): its count
+    /// (sub 0; in pre-operational with the PDO off, every entry known and at
+    /// most 64 bits) or one entry (subs 1 to 8; in pre-operational with the
+    /// count 0).
+    fn write_pdo_map(&mut self, index: u16, sub: u8, value: u32, pre_op: bool) -> Result<(), u32> {
+        match sub {
+            0 => {
                 let tx = index == od::TPDO1_MAP;
                 let pdo = self.pdo_mut(index).ok_or(SDO_ABORT_NO_OBJECT)?;
                 if !pre_op || pdo.cob_id & 0x8000_0000 == 0 {
@@ -1017,7 +1040,7 @@ impl SimCia402Drive {
                 }
                 pdo.count = value as u8;
             }
-            (od::RPDO1_MAP | od::TPDO1_MAP, 1..=8) => {
+            1..=8 => {
                 let pdo = self.pdo_mut(index).ok_or(SDO_ABORT_NO_OBJECT)?;
                 if !pre_op || pdo.count != 0 {
                     return Err(SDO_ABORT_STATE);
@@ -1028,17 +1051,6 @@ impl SimCia402Drive {
                     .ok_or(SDO_ABORT_NO_OBJECT)?;
                 *slot = value;
             }
-            (od::ABORT_CONNECTION, 0) => self.abort_option = value as u16 as i16,
-            (od::QUICK_STOP_OPTION, 0) => self.quick_stop_option = value as u16 as i16,
-            (od::CONTROLWORD, 0) => self.controlword_pending = Some(value as u16),
-            (od::MODES_OF_OPERATION, 0) => {
-                let mode = value as u8 as i8;
-                if mode != MODE_CSP {
-                    return Err(SDO_ABORT_RANGE);
-                }
-                self.mode = mode;
-            }
-            (od::TARGET_POSITION, 0) => self.target_counts = value as i32,
             _ => return Err(SDO_ABORT_NO_OBJECT),
         }
         Ok(())

@@ -300,19 +300,9 @@ impl State {
         out
     }
 
-    /// Produces one packet (if streaming) and sends what the script says.
-    fn produce(&mut self, socket: &UdpSocket) -> bool {
-        let Some(client) = self.client.filter(|_| self.streaming) else {
-            return false;
-        };
-        let index = self.produced;
-        self.produced += 1;
-        let action = self.script.get(&index).copied();
-        if action == Some(Action::RestartStream) {
-            self.rdt_sequence = 0;
-        }
-        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
-        self.counter = self.counter.wrapping_add(1);
+    /// The counts packet `index` carries: the reading less the bias, or
+    /// (while a frozen fault lasts) the counts it froze at.
+    fn packet_counts(&mut self, index: u64) -> [i32; 6] {
         let bias = self.bias.unwrap_or([0; 6]);
         let mut counts = self.reading(index);
         for (c, b) in counts.iter_mut().zip(bias) {
@@ -330,6 +320,23 @@ impl State {
             self.frozen_counts = None;
         }
         self.last_counts = Some(counts);
+        counts
+    }
+
+    /// Produces one packet (if streaming) and sends what the script says.
+    fn produce(&mut self, socket: &UdpSocket) -> bool {
+        let Some(client) = self.client.filter(|_| self.streaming) else {
+            return false;
+        };
+        let index = self.produced;
+        self.produced += 1;
+        let action = self.script.get(&index).copied();
+        if action == Some(Action::RestartStream) {
+            self.rdt_sequence = 0;
+        }
+        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
+        self.counter = self.counter.wrapping_add(1);
+        let counts = self.packet_counts(index);
         let response = Response {
             rdt_sequence: self.rdt_sequence,
             sample_counter: self.counter,

@@ -16,7 +16,7 @@
 //! reverses only after the support's pre-sliding displacement
 //! ([`crate::motion::SLIDE_THRESHOLD_M`]), as the runner's does.
 
-use super::spec::{ContactKey, Fault, SimSpec, Tissue, TissueModel};
+use super::spec::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec, Tissue, TissueModel};
 use super::statics::{self, Equilibrium, Loads};
 use super::{STATUS_OUT_OF_MODEL, SimError, tissue};
 use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
@@ -126,6 +126,16 @@ fn check_non_negative(field: &'static str, value: f64) -> Result<(), SimError> {
     }
 }
 
+/// `Ok` if `ok`, else the spec error naming `field`, its value and what it
+/// must be.
+fn require(ok: bool, field: &'static str, value: f64, why: &'static str) -> Result<(), SimError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(SimError::InvalidSpec { field, value, why })
+    }
+}
+
 fn check_period(field: &'static str, ns: u64, max_ns: u64) -> Result<(), SimError> {
     if (MIN_PERIOD_NS..=max_ns).contains(&ns) {
         Ok(())
@@ -150,15 +160,18 @@ fn check_until(field: &'static str, from_ns: u64, until_ns: Option<u64>) -> Resu
     }
 }
 
+/// Checks that fault `index` names an axis (0 to 2).
+fn check_axis(index: usize, axis: usize) -> Result<(), SimError> {
+    if axis > 2 {
+        Err(SimError::FaultAxis { index, axis })
+    } else {
+        Ok(())
+    }
+}
+
 /// Checks one fault (index `index` in the list).
 pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
-    let axis_ok = |axis: usize| {
-        if axis > 2 {
-            Err(SimError::FaultAxis { index, axis })
-        } else {
-            Ok(())
-        }
-    };
+    let axis_ok = |axis: usize| check_axis(index, axis);
     match *fault {
         Fault::SensorSilent { from_ns, until_ns } => {
             check_until("faults.sensor_silent.until_ns", from_ns, until_ns)
@@ -178,15 +191,11 @@ pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
             ..
         } => {
             check_until("faults.sensor_saturated.until_ns", from_ns, until_ns)?;
-            if channels.contains(&true) {
-                Ok(())
-            } else {
-                Err(SimError::InvalidSpec {
-                    field: "faults.sensor_saturated.channels",
-                    value: 0.0,
-                    why: "must name at least one channel",
-                })
-            }
+            let (field, why) = (
+                "faults.sensor_saturated.channels",
+                "must name at least one channel",
+            );
+            require(channels.contains(&true), field, 0.0, why)
         }
         Fault::SensorSpike {
             force_n,
@@ -217,26 +226,14 @@ pub(crate) fn check_fault(index: usize, fault: &Fault) -> Result<(), SimError> {
         }
         Fault::EncoderCountLoss { axis, counts, .. } => {
             axis_ok(axis)?;
-            if counts == 0 {
-                return Err(SimError::InvalidSpec {
-                    field: "faults.encoder_count_loss.counts",
-                    value: 0.0,
-                    why: "must not be 0",
-                });
-            }
-            Ok(())
+            let field = "faults.encoder_count_loss.counts";
+            require(counts != 0, field, 0.0, "must not be 0")
         }
         Fault::DriveHeartbeatLoss { axis, .. } => axis_ok(axis),
         Fault::DriveEmcy { axis, code, .. } => {
             axis_ok(axis)?;
-            if code == 0 {
-                return Err(SimError::InvalidSpec {
-                    field: "faults.drive_emcy.code",
-                    value: 0.0,
-                    why: "must not be 0 (an EMCY with code 0 says the error is gone)",
-                });
-            }
-            Ok(())
+            let why = "must not be 0 (an EMCY with code 0 says the error is gone)";
+            require(code != 0, "faults.drive_emcy.code", 0.0, why)
         }
     }
 }
@@ -358,7 +355,21 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
     check_non_negative("friction_n", spec.friction_n)?;
     check_non_negative("tip_mass_kg", spec.tip_mass_kg)?;
     check_period("physics_step_ns", spec.physics_step_ns, MAX_PHYSICS_STEP_NS)?;
-    let axes = &spec.axes;
+    check_axes(&spec.axes)?;
+    check_sensor(&spec.sensor)?;
+    for tissue in &spec.tissue {
+        check_tissue(tissue)?;
+    }
+    check_contact(&spec.contact)?;
+    for (index, fault) in spec.faults.iter().enumerate() {
+        check_fault(index, fault)?;
+    }
+    Ok(())
+}
+
+/// The axes' limits positive, each travel finite and not empty, and each
+/// start within its travel.
+fn check_axes(axes: &AxesSpec) -> Result<(), SimError> {
     check_positive("axes.max_speed_mps", axes.max_speed_mps)?;
     check_positive("axes.max_accel_mps2", axes.max_accel_mps2)?;
     check_positive("axes.lead_m_per_turn", axes.lead_m_per_turn)?;
@@ -367,23 +378,23 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
     for (&(min_m, max_m), start_m) in axes.travel_m.iter().zip(joints_to_array(&axes.start)) {
         check_finite("axes.travel_m", min_m)?;
         check_finite("axes.travel_m", max_m)?;
-        if min_m >= max_m {
-            return Err(SimError::InvalidSpec {
-                field: "axes.travel_m",
-                value: max_m,
-                why: "the upper end must be above the lower end",
-            });
-        }
+        let why = "the upper end must be above the lower end";
+        require(min_m < max_m, "axes.travel_m", max_m, why)?;
         check_finite("axes.start", start_m)?;
-        if !(min_m..=max_m).contains(&start_m) {
-            return Err(SimError::InvalidSpec {
-                field: "axes.start",
-                value: start_m,
-                why: "must be within the axis' travel",
-            });
-        }
+        let within = (min_m..=max_m).contains(&start_m);
+        require(
+            within,
+            "axes.start",
+            start_m,
+            "must be within the axis' travel",
+        )?;
     }
-    let sensor = &spec.sensor;
+    Ok(())
+}
+
+/// The sensor's period, its latency (at most [`MAX_IN_FLIGHT`] samples in
+/// flight), its noise (>= 0), bias and drift (finite) and range (> 0).
+fn check_sensor(sensor: &SensorSpec) -> Result<(), SimError> {
     check_period("sensor.period_ns", sensor.period_ns, u64::MAX)?;
     let in_flight = sensor.latency_ns / sensor.period_ns + 1;
     if in_flight > MAX_IN_FLIGHT {
@@ -408,11 +419,13 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
     for &x in sensor.range_nm.iter() {
         check_positive("sensor.range_nm", x)?;
     }
-    for tissue in &spec.tissue {
-        check_tissue(tissue)?;
-    }
+    Ok(())
+}
+
+/// The contact keys' forces finite and their times in order.
+fn check_contact(contact: &[ContactKey]) -> Result<(), SimError> {
     let mut previous_ns = 0;
-    for (index, key) in spec.contact.iter().enumerate() {
+    for (index, key) in contact.iter().enumerate() {
         check_vec("contact.force_n", &key.force_n)?;
         if key.t_ns < previous_ns {
             return Err(SimError::ContactNotSorted {
@@ -422,9 +435,6 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
             });
         }
         previous_ns = key.t_ns;
-    }
-    for (index, fault) in spec.faults.iter().enumerate() {
-        check_fault(index, fault)?;
     }
     Ok(())
 }

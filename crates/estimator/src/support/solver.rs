@@ -222,43 +222,56 @@ where
                     .and_then(|()| problem.normal(trial))
             },
         )?;
-        match search {
-            Damped::Accepted { scaled_step, gain } => {
+        match accepted_step(search, tolerance)? {
+            Some((scaled_step, converged)) => {
                 last_step = scaled_step;
                 accepted = accepted.saturating_add(1);
-                if gain <= tolerance || scaled_step <= STEP_TOL {
+                if converged {
                     return Ok((accepted, PassEnd::Converged));
                 }
             }
             // Rounding: no smaller step can matter.
-            Damped::Rounding { region: None } => return Ok((accepted, PassEnd::Converged)),
-            // The fit keeps pushing B out of its allowed region.
-            Damped::Rounding {
-                region: Some(error),
-            }
-            | Damped::Exhausted {
-                region: Some(error),
-                ..
-            } => return Err(error),
-            // No downhill step even with the heaviest damping.
-            Damped::Exhausted {
-                trials,
-                lambda,
-                step,
-                region: None,
-            } => {
-                return Err(SupportError::DampingExhausted {
-                    trials,
-                    lambda,
-                    step,
-                });
-            }
+            None => return Ok((accepted, PassEnd::Converged)),
         }
     }
     Err(SupportError::NotConverged {
         iterations: pass.max_iterations,
         step: last_step,
     })
+}
+
+/// What one damped search means for a pass: an accepted step's norm in
+/// column-scaled units and whether the pass has converged with it (it
+/// gained at most `tolerance`, or was below [`STEP_TOL`]); `None` when
+/// rounding ends the pass (converged, no step); else why the pass fails.
+fn accepted_step(search: Damped, tolerance: f64) -> Result<Option<(f64, bool)>, SupportError> {
+    match search {
+        Damped::Accepted { scaled_step, gain } => Ok(Some((
+            scaled_step,
+            gain <= tolerance || scaled_step <= STEP_TOL,
+        ))),
+        // Rounding: no smaller step can matter.
+        Damped::Rounding { region: None } => Ok(None),
+        // The fit keeps pushing B out of its allowed region.
+        Damped::Rounding {
+            region: Some(error),
+        }
+        | Damped::Exhausted {
+            region: Some(error),
+            ..
+        } => Err(error),
+        // No downhill step even with the heaviest damping.
+        Damped::Exhausted {
+            trials,
+            lambda,
+            step,
+            region: None,
+        } => Err(SupportError::DampingExhausted {
+            trials,
+            lambda,
+            step,
+        }),
+    }
 }
 
 /// How one damped search for a downhill step ended ([`damped_search`]).
