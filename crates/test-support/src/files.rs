@@ -36,3 +36,14 @@ pub fn recording_config(dir: &Path) -> (PathBuf, PathBuf) {
     std::fs::write(&config, toml).unwrap();
     (config, rec_dir)
 }
+
+/// The recording files (not the scene companions) of `dir`, sorted.
+pub fn recordings(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
+        .collect();
+    files.sort();
+    files
+}

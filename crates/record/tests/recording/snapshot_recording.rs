@@ -138,13 +138,7 @@ fn session(name: &str) -> Vec<PathBuf> {
     assert_eq!(switch.dropped(), 0);
     publisher.release();
     manager.finish();
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
-        .collect();
-    files.sort();
-    files
+    sar_test_support::files::recordings(&dir)
 }
 
 /// The `/sar/cycle/snapshot` messages of a file (after_cycle), and the cycle

@@ -139,33 +139,7 @@ pub fn wait_for_state(prefix: &str, what: &str, ok: impl Fn(&sar_msgs::wire::Sta
     }
 }
 
-/// The built-in configuration with `[record] enabled` into `dir/rec`, saved
-/// as `dir/sim.toml` (as the README says to change it): the configuration's
-/// path and the recordings' directory.
-pub fn recording_config(dir: &Path) -> (PathBuf, PathBuf) {
-    let rec_dir = dir.join("rec");
-    let config = dir.join("sim.toml");
-    let toml = sar_config::DEFAULT_TOML
-        .replace("[record]\nenabled = false", "[record]\nenabled = true")
-        .replace(
-            "directory = \"recordings\"",
-            &format!("directory = {:?}", rec_dir.display().to_string()),
-        );
-    assert_ne!(toml, sar_config::DEFAULT_TOML);
-    std::fs::write(&config, toml).unwrap();
-    (config, rec_dir)
-}
-
-/// The recording files (not the scene companions) of `dir`, sorted.
-pub fn recordings(dir: &Path) -> Vec<PathBuf> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
-        .collect();
-    files.sort();
-    files
-}
+pub use sar_test_support::files::{recording_config, recordings};
 
 /// `sard --sim` under `prefix` for `cycles` with the configuration of
 /// [`recording_config`]: the one recording's file.
