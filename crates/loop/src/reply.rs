@@ -25,8 +25,7 @@ pub struct Reply {
     pub cycle: u64,
     /// What became of it.
     pub status: ReplyStatus,
-    /// The guard's reason code ([`crate::step::reason_code`]) behind a
-    /// refusal, 0 otherwise.
+    /// The guard's reason code behind a refusal, 0 otherwise.
     pub reason: u16,
     /// The exact cause (what `sarctl` prints).
     pub detail: ReplyDetail,
