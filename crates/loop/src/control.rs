@@ -8,6 +8,7 @@
 //! nothing (proved by `tests/no_alloc.rs`).
 
 use crate::logq::{LogEvent, LogSender};
+pub use crate::reply::{Envelope, Reply};
 use crate::step::{
     DriveAction, LoopInput, LoopOutput, LoopStep, Release, StepConfig, StepConfigError,
 };
@@ -23,32 +24,6 @@ use std::sync::Arc;
 
 /// Capacity of the operator request queue and of the reply queue.
 pub const QUEUE_CAPACITY: usize = 16;
-
-/// A request with the caller's id (echoed in the reply).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Envelope {
-    /// The caller's id.
-    pub id: u64,
-    /// The request.
-    pub request: Request,
-}
-
-/// The reply to a request.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Reply {
-    /// The request's id.
-    pub id: u64,
-    /// The request.
-    pub request: Request,
-    /// The cycle that judged it.
-    pub cycle: u64,
-    /// What became of it.
-    pub status: ReplyStatus,
-    /// The guard's reason code ([`reason_code`]) behind a refusal, 0 otherwise.
-    pub reason: u16,
-    /// The exact cause (what `sarctl` prints).
-    pub detail: crate::step::ReplyDetail,
-}
 
 /// The operator's ends of the request and reply queues.
 #[derive(Debug, Clone)]
@@ -330,7 +305,51 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     /// it is called once, after the inputs are gathered, so that no input is
     /// stamped after the cycle's time.
     pub fn step(&mut self, cycle: u64, now: impl FnOnce() -> Option<u64>) -> &CycleOutput {
-        // Gather: every sample for the recorder, the newest for the step.
+        // Gather: the cycle's input (and the request's envelope, for the
+        // reply).
+        let envelope = self.gather(cycle, now);
+        // Decide: the pure step.
+        self.step.step(&self.last_input);
+        // Act: a halting state stops the drives in this very cycle.
+        self.report(cycle);
+        self.carry_out(cycle);
+        self.answer(cycle, envelope);
+        &self.step.last().estimate
+    }
+
+    /// Gathers the cycle's input into `last_input`: every sensor sample for
+    /// the recorder and the newest for the step, the drives' positions and
+    /// state, the operator's request, the publishing thread's silence, and
+    /// last the clock. Returns the request's envelope.
+    fn gather(&mut self, cycle: u64, now: impl FnOnce() -> Option<u64>) -> Option<Envelope> {
+        self.drain_sensor();
+        self.poll_sensor(cycle);
+        self.read_joints(cycle);
+        let drive_state = self.read_drive_state(cycle);
+        let envelope = self.operator.requests.pop();
+        let request = match envelope {
+            Some(e) => Some(e.request),
+            None => self.auto_reset.then_some(Request::Reset),
+        };
+        let beats = self.operator.publisher.read();
+        let now_ns = now();
+        let publisher_idle_ns = self.publisher_idle_ns(beats, now_ns);
+        self.last_input = LoopInput {
+            cycle,
+            now_ns,
+            sensor: self.last_input.sensor,
+            joints: self.last_input.joints,
+            drive_state,
+            request,
+            publisher_idle_ns,
+        };
+        envelope
+    }
+
+    /// Every sensor sample received since the previous cycle, for the
+    /// recorder ([`Controller::sensor_samples`]), counting those the driver
+    /// lost.
+    fn drain_sensor(&mut self) {
         self.drained_count = match self.sensor.drain(&mut self.drained) {
             Ok(d) => {
                 if d.lost > 0 {
@@ -340,6 +359,11 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             }
             Err(_) => 0,
         };
+    }
+
+    /// The newest sensor sample into the input (kept when there is none; a
+    /// failed poll marks it invalid and is logged with its cause).
+    fn poll_sensor(&mut self, cycle: u64) {
         match self.sensor.poll() {
             Ok(Some(s)) => self.last_input.sensor = sensor_sample(&s),
             Ok(None) => {}
@@ -353,11 +377,15 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 });
             }
         }
+    }
+
+    /// The drives' per-cycle hook, then their positions into the input (a
+    /// failed reading marks them invalid).
+    fn read_joints(&mut self, cycle: u64) {
         if let Some(hook) = self.drives_cycle
             && let Err(what) = hook(&mut self.drives)
         {
-            self.counts.drive_errors += 1;
-            self.log.send(LogEvent::DeviceError { cycle, what });
+            self.drive_error(cycle, what);
         }
         match self.drives.positions() {
             Ok(p) => {
@@ -369,13 +397,14 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             }
             Err(_) => {
                 self.last_input.joints.valid = false;
-                self.counts.drive_errors += 1;
-                self.log.send(LogEvent::DeviceError {
-                    cycle,
-                    what: "drive positions",
-                });
+                self.drive_error(cycle, "drive positions");
             }
         }
+    }
+
+    /// The drives' state (`None`: unreadable), logged when it changed since
+    /// the last cycle.
+    fn read_drive_state(&mut self, cycle: u64) -> Option<DriveState> {
         let drive_state = self.drives.state().ok();
         if drive_state != self.last_input.drive_state {
             self.log.send(LogEvent::DriveState {
@@ -383,108 +412,104 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 state: drive_state,
             });
         }
-        let envelope = self.operator.requests.pop();
-        let request = match envelope {
-            Some(e) => Some(e.request),
-            None => self.auto_reset.then_some(Request::Reset),
-        };
-        let beats = self.operator.publisher.read();
-        let now_ns = now();
-        let publisher_idle_ns = self.publisher_idle_ns(beats, now_ns);
-        let input = LoopInput {
-            cycle,
-            now_ns,
-            sensor: self.last_input.sensor,
-            joints: self.last_input.joints,
-            drive_state,
-            request,
-            publisher_idle_ns,
-        };
-        self.last_input = input;
+        drive_state
+    }
 
-        // Decide.
-        let period_ns = self.step.config().period_ns;
-        let decision = self.step.step(&input);
-        let out = &decision.estimate;
-
-        // Act: a halting state stops the drives in this very cycle.
-        let entered_halt = out.transition.is_some_and(|t| t.to.is_halting());
+    /// Logs what the guard did this cycle: a guarded move's stop, a
+    /// transition (counting the entries into Stop or Fault).
+    fn report(&mut self, cycle: u64) {
+        let decision = self.step.last();
         if let Some(g) = decision.guarded_stop
-            && g.cycle == input.cycle
+            && g.cycle == cycle
         {
             self.log.send(LogEvent::GuardedStop(g));
         }
-        if let Some(t) = out.transition {
+        if let Some(t) = decision.estimate.transition {
             self.log.send(LogEvent::Transition(t));
-            if entered_halt {
+            if t.to.is_halting() {
                 self.counts.halting_transitions += 1;
             }
         }
-        match decision.action {
+    }
+
+    /// Tells the drives the step's [`DriveAction`]; a failure is counted
+    /// and logged.
+    fn carry_out(&mut self, cycle: u64) {
+        let decision = self.step.last();
+        let entered_halt = decision
+            .estimate
+            .transition
+            .is_some_and(|t| t.to.is_halting());
+        let action = decision.action;
+        match action {
             DriveAction::None => {}
-            DriveAction::QuickStop => {
-                let ok = self.drives.quick_stop().is_ok();
-                if entered_halt {
-                    self.counts.quick_stops += 1;
-                    self.counts.stops_in_same_cycle += 1;
-                    self.log.send(LogEvent::QuickStop { cycle, ok });
-                } else {
-                    // The drives still report Enabled after a quick stop
-                    // (refused, lost, or they came up enabled): repeated
-                    // every cycle until they stop.
-                    self.counts.quick_stop_retries += 1;
-                    if !ok {
-                        self.log.send(LogEvent::QuickStop { cycle, ok });
-                    }
-                }
-            }
+            DriveAction::QuickStop => self.quick_stop(cycle, entered_halt),
             DriveAction::Release(how) => {
-                let ok = match how {
-                    Release::Enable => self.drives.enable().is_ok(),
-                    Release::DisableEnable => {
-                        self.drives.disable().is_ok() && self.drives.enable().is_ok()
-                    }
-                    Release::FaultResetEnable => {
-                        self.drives.fault_reset().is_ok() && self.drives.enable().is_ok()
-                    }
-                };
-                if !ok {
-                    self.counts.drive_errors += 1;
-                    self.log.send(LogEvent::DeviceError {
-                        cycle,
-                        what: "drive release",
-                    });
+                if !self.release(how) {
+                    self.drive_error(cycle, "drive release");
                 }
             }
             DriveAction::Setpoint(q) => {
                 if self.drives.set_targets(q).is_err() {
-                    self.counts.drive_errors += 1;
-                    self.log.send(LogEvent::DeviceError {
-                        cycle,
-                        what: "drive setpoint",
-                    });
+                    self.drive_error(cycle, "drive setpoint");
                 }
             }
             DriveAction::FaultReset => {
                 if self.drives.fault_reset().is_err() {
-                    self.counts.drive_errors += 1;
-                    self.log.send(LogEvent::DeviceError {
-                        cycle,
-                        what: "drive fault reset",
-                    });
+                    self.drive_error(cycle, "drive fault reset");
                 }
             }
             DriveAction::Stream(q) => {
+                let period_ns = self.step.config().period_ns;
                 if self.drives.stream(q, period_ns).is_err() {
-                    self.counts.drive_errors += 1;
-                    self.log.send(LogEvent::DeviceError {
-                        cycle,
-                        what: "drive stream set point",
-                    });
+                    self.drive_error(cycle, "drive stream set point");
                 }
             }
         }
-        if let Some(ev) = out.command {
+    }
+
+    /// A quick stop: the one of the cycle that entered Stop or Fault, or a
+    /// repeat while the drives still report Enabled (refused, lost, or they
+    /// came up enabled), repeated every cycle until they stop.
+    fn quick_stop(&mut self, cycle: u64, entered_halt: bool) {
+        let ok = self.drives.quick_stop().is_ok();
+        if entered_halt {
+            self.counts.quick_stops += 1;
+            self.counts.stops_in_same_cycle += 1;
+            self.log.send(LogEvent::QuickStop { cycle, ok });
+        } else {
+            self.counts.quick_stop_retries += 1;
+            if !ok {
+                self.log.send(LogEvent::QuickStop { cycle, ok });
+            }
+        }
+    }
+
+    /// Brings the drives back after an accepted reset; `false` when a call
+    /// failed.
+    fn release(&mut self, how: Release) -> bool {
+        match how {
+            Release::Enable => self.drives.enable().is_ok(),
+            Release::DisableEnable => self.drives.disable().is_ok() && self.drives.enable().is_ok(),
+            Release::FaultResetEnable => {
+                self.drives.fault_reset().is_ok() && self.drives.enable().is_ok()
+            }
+        }
+    }
+
+    /// A failed drive call: counted and logged.
+    fn drive_error(&mut self, cycle: u64, what: &'static str) {
+        self.counts.drive_errors += 1;
+        self.log.send(LogEvent::DeviceError { cycle, what });
+    }
+
+    /// The operator's side: an operator's estimator command logged, the
+    /// demo's automatic reset ended by an accepted reset, and the reply to
+    /// the request queued (a full queue loses its oldest reply, never
+    /// blocks the loop) and logged.
+    fn answer(&mut self, cycle: u64, envelope: Option<Envelope>) {
+        let decision = self.step.last();
+        if let Some(ev) = decision.estimate.command {
             if envelope.is_some() {
                 self.log.send(LogEvent::Command(ev));
             }
@@ -501,10 +526,8 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 reason,
                 detail: decision.reply_detail,
             };
-            // A full reply queue loses its oldest reply, never blocks the loop.
             let _ = self.operator.replies.force_push(reply);
             self.log.send(LogEvent::Reply(reply));
         }
-        &self.step.last().estimate
     }
 }

@@ -5,6 +5,8 @@
 //! - [`step`]: the pure step, a function of the cycle's recorded inputs.
 //! - [`control`]: the controller: gathers a cycle's inputs from the drivers,
 //!   runs the step, carries out its outputs.
+//! - [`reply`]: what the operator's queues carry (a request with its id,
+//!   the loop's reply).
 //! - [`logq`]: the bounded queue of log events the loop hands off.
 //! - [`stats`]: the loop's timing statistics.
 //! - [`notify`]: the guard's transitions as operator notifications.
@@ -19,6 +21,7 @@ pub mod control;
 pub mod logq;
 pub mod notify;
 pub mod publish;
+pub mod reply;
 pub mod rt;
 pub mod runloop;
 pub mod sink;

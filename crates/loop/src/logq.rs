@@ -3,7 +3,7 @@
 //! pops them and writes them with `tracing`. A full queue drops the event and
 //! counts it, never blocks the loop.
 
-use crate::control::Reply;
+use crate::reply::Reply;
 use crossbeam_queue::ArrayQueue;
 use sar_estimator::cycle::CommandEvent;
 use sar_estimator::guard::Transition;

@@ -3,11 +3,11 @@
 //! [`CommandMsg`] as a loop [`Request`], a [`Reply`] as a [`ReplyMsg`]. The
 //! payloads themselves know nothing of the loop.
 
-use crate::control::Reply;
+use crate::reply::Reply;
 use crate::stats::LoopStats;
 use crate::step::{LoopInput, LoopOutput, Request, reason_code};
 use sar_estimator::Vec3;
-use sar_estimator::cycle::TipOutcome;
+use sar_estimator::cycle::{CycleOutput, TipOutcome};
 use sar_msgs::wire::{
     CommandMsg, ReplyMsg, StateMsg, command_kind, drive_state_code, flags, guard_state_code,
 };
@@ -53,87 +53,107 @@ pub type SimTruthFn = Box<dyn FnMut() -> Option<SimTruth>>;
 
 /// One cycle as published.
 pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
-    {
-        let (i, o) = (p.input, &p.decision.estimate);
-        // Halted: the guard's Stop or Fault (quick-stopped or never released).
-        let halted = o.guard_state.is_halting();
-        let mut m = StateMsg {
-            cycle: o.cycle,
-            now_ns: i.now_ns.unwrap_or(0),
-            sensor_stamp_ns: i.sensor.stamp_ns,
-            joints_stamp_ns: i.joints.stamp_ns,
-            sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
-            joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
-            q_m: [
-                i.joints.joints.q1_m,
-                i.joints.joints.q2_m,
-                i.joints.joints.q3_m,
-            ],
-            guard_state: guard_state_code(o.guard_state),
-            guard_reason: u32::from(reason_code(&o.guard_reason)),
-            drive_state: drive_state_code(i.drive_state),
-            limits_n: p.decision.limits.to_array(),
-            wakeup_ns: [
-                p.stats.wakeup.quantile_ns(0.5),
-                p.stats.wakeup.quantile_ns(0.99),
-                p.stats.wakeup.max_ns(),
-            ],
-            compute_ns: [
-                p.stats.compute.quantile_ns(0.5),
-                p.stats.compute.quantile_ns(0.99),
-                p.stats.compute.max_ns(),
-            ],
-            overruns: p.stats.overruns,
-            quick_stops: p.quick_stops,
-            recorder_drops: p.recorder_drops,
-            recording: p.recording,
-            ..StateMsg::default()
-        };
-        if let Some(pose) = o.pose {
-            m.flags |= flags::POSE;
-            m.q45_rad = [pose.q4_rad(), pose.q5_rad()];
-            m.ujoint_m = arr(&pose.ujoint_m);
-            m.tip_m = arr(&pose.tip_m);
-            m.support_distance_m = pose.support_distance_m;
+    let o = &p.decision.estimate;
+    let mut m = state_base(p);
+    add_pose(&mut m, o);
+    add_estimate(&mut m, o);
+    if o.new_sample {
+        m.flags |= flags::NEW_SAMPLE;
+    }
+    add_force_control(&mut m, p.decision);
+    // Halted: the guard's Stop or Fault (quick-stopped or never released).
+    if o.guard_state.is_halting() {
+        m.flags |= flags::HALTED;
+    }
+    if let Some(t) = p.truth {
+        m.flags |= flags::SIM_TRUTH;
+        m.truth_tip_force_n = arr(&t.tip_force_n);
+        m.truth_elapsed_ns = t.elapsed_ns;
+    }
+    m
+}
+
+/// The fields every published cycle has: stamps, ages, joints, the guard's
+/// and the drives' state, the limits, the loop's measurements and counters.
+fn state_base(p: &StateParts<'_>) -> StateMsg {
+    let (i, o) = (p.input, &p.decision.estimate);
+    StateMsg {
+        cycle: o.cycle,
+        now_ns: i.now_ns.unwrap_or(0),
+        sensor_stamp_ns: i.sensor.stamp_ns,
+        joints_stamp_ns: i.joints.stamp_ns,
+        sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
+        joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
+        q_m: [
+            i.joints.joints.q1_m,
+            i.joints.joints.q2_m,
+            i.joints.joints.q3_m,
+        ],
+        guard_state: guard_state_code(o.guard_state),
+        guard_reason: u32::from(reason_code(&o.guard_reason)),
+        drive_state: drive_state_code(i.drive_state),
+        limits_n: p.decision.limits.to_array(),
+        wakeup_ns: [
+            p.stats.wakeup.quantile_ns(0.5),
+            p.stats.wakeup.quantile_ns(0.99),
+            p.stats.wakeup.max_ns(),
+        ],
+        compute_ns: [
+            p.stats.compute.quantile_ns(0.5),
+            p.stats.compute.quantile_ns(0.99),
+            p.stats.compute.max_ns(),
+        ],
+        overruns: p.stats.overruns,
+        quick_stops: p.quick_stops,
+        recorder_drops: p.recorder_drops,
+        recording: p.recording,
+        ..StateMsg::default()
+    }
+}
+
+/// The pose, when there is one.
+fn add_pose(m: &mut StateMsg, o: &CycleOutput) {
+    if let Some(pose) = o.pose {
+        m.flags |= flags::POSE;
+        m.q45_rad = [pose.q4_rad(), pose.q5_rad()];
+        m.ujoint_m = arr(&pose.ujoint_m);
+        m.tip_m = arr(&pose.tip_m);
+        m.support_distance_m = pose.support_distance_m;
+    }
+}
+
+/// The tip-force estimate, when there is one.
+fn add_estimate(m: &mut StateMsg, o: &CycleOutput) {
+    if let TipOutcome::Estimate(e) = o.tip {
+        m.flags |= flags::ESTIMATE;
+        if e.observable {
+            m.flags |= flags::OBSERVABLE;
         }
-        if let TipOutcome::Estimate(e) = o.tip {
-            m.flags |= flags::ESTIMATE;
-            if e.observable {
-                m.flags |= flags::OBSERVABLE;
-            }
-            m.ujoint_force_n = arr(&e.ujoint_force_n);
-            m.tip_force_n = arr(&e.force_n);
-            m.tip_std_n = arr(&e.std_n);
-            m.tip_axial_lateral_n = [e.axial_n, e.lateral_n];
+        m.ujoint_force_n = arr(&e.ujoint_force_n);
+        m.tip_force_n = arr(&e.force_n);
+        m.tip_std_n = arr(&e.std_n);
+        m.tip_axial_lateral_n = [e.axial_n, e.lateral_n];
+    }
+}
+
+/// Force control: the mode and its setpoint, and the last guarded move's
+/// stop.
+fn add_force_control(m: &mut StateMsg, decision: &LoopOutput) {
+    match decision.force_mode {
+        Some(sar_estimator::force_control::ForceMode::Hold { max_force_n }) => {
+            m.force_mode = 1;
+            m.force_setpoint_n = max_force_n;
         }
-        if o.new_sample {
-            m.flags |= flags::NEW_SAMPLE;
+        Some(sar_estimator::force_control::ForceMode::Push { axial_n }) => {
+            m.force_mode = 2;
+            m.force_setpoint_n = axial_n;
         }
-        match p.decision.force_mode {
-            Some(sar_estimator::force_control::ForceMode::Hold { max_force_n }) => {
-                m.force_mode = 1;
-                m.force_setpoint_n = max_force_n;
-            }
-            Some(sar_estimator::force_control::ForceMode::Push { axial_n }) => {
-                m.force_mode = 2;
-                m.force_setpoint_n = axial_n;
-            }
-            None => {}
-        }
-        if let Some(g) = p.decision.guarded_stop {
-            m.guarded_stop_cycle = g.cycle;
-            m.guarded_stop_tip_m = arr(&g.tip_m);
-            m.guarded_stop_force_n = arr(&g.force_n);
-        }
-        if halted {
-            m.flags |= flags::HALTED;
-        }
-        if let Some(t) = p.truth {
-            m.flags |= flags::SIM_TRUTH;
-            m.truth_tip_force_n = arr(&t.tip_force_n);
-            m.truth_elapsed_ns = t.elapsed_ns;
-        }
-        m
+        None => {}
+    }
+    if let Some(g) = decision.guarded_stop {
+        m.guarded_stop_cycle = g.cycle;
+        m.guarded_stop_tip_m = arr(&g.tip_m);
+        m.guarded_stop_force_n = arr(&g.force_n);
     }
 }
 

@@ -53,6 +53,7 @@ use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
     EstimatorConfig, FollowingReference, JointSample, SensorSample, TipOutcome,
 };
+use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::force_control::{ForceControlConfig, ForceController, ForceMode};
 use sar_estimator::guard::{ForceLimits, GuardState, Reason, reduces_force};
 use sar_estimator::{SettingError, Vec3};
@@ -225,6 +226,27 @@ fn drive_state_words(s: &DriveState) -> &'static str {
     }
 }
 
+/// [`ReplyDetail::OutsideTravel`] in words: by how much, beyond which end.
+fn outside_travel(
+    f: &mut core::fmt::Formatter<'_>,
+    axis: u8,
+    value_m: f64,
+    min_m: f64,
+    max_m: f64,
+) -> core::fmt::Result {
+    let (by_m, end) = if value_m < min_m {
+        (min_m - value_m, "below its lower end")
+    } else {
+        (value_m - max_m, "above its upper end")
+    };
+    write!(
+        f,
+        "q{axis} would be {value_m:.4} m, outside its travel {min_m:.4}..{max_m:.4} m \
+         ([axes] travel_m) by {by_m:.4} m {end}; sarctl workspace shows the \
+         reachable region"
+    )
+}
+
 impl core::fmt::Display for ReplyDetail {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
@@ -236,19 +258,7 @@ impl core::fmt::Display for ReplyDetail {
                 value_m,
                 min_m,
                 max_m,
-            } => {
-                let (by_m, end) = if value_m < min_m {
-                    (min_m - value_m, "below its lower end")
-                } else {
-                    (value_m - max_m, "above its upper end")
-                };
-                write!(
-                    f,
-                    "q{axis} would be {value_m:.4} m, outside its travel {min_m:.4}..{max_m:.4} m \
-                     ([axes] travel_m) by {by_m:.4} m {end}; sarctl workspace shows the \
-                     reachable region"
-                )
-            }
+            } => outside_travel(f, *axis, *value_m, *min_m, *max_m),
             Self::NoPose(e) => write!(
                 f,
                 "no pose of the rod through the support reaches it: {e} (sarctl workspace \
@@ -554,17 +564,54 @@ pub struct LoopStep {
     snapshot_fingerprint: u64,
 }
 
-impl LoopStep {
-    /// Builds the step: the estimator with the sensor's bias, no trajectory
-    /// (the guard starts in Fault; the first accepted reset holds the axes
-    /// where they are).
-    pub fn new(
-        estimator: &EstimatorConfig,
-        bias: Bias,
-        config: StepConfig,
-    ) -> Result<Self, StepConfigError> {
+/// A reply's status and its exact cause.
+type Answer = (ReplyStatus, ReplyDetail);
+
+/// What a cycle has decided so far (the step's phases fill it in).
+#[derive(Debug, Clone, Copy)]
+struct Decision {
+    /// What the drives are told.
+    action: DriveAction,
+    /// The reply to the cycle's request.
+    reply: Option<Answer>,
+    /// A new plan (a move, or a brake) whose end point goes to the drives.
+    planned: bool,
+    /// An accepted move's replaced trajectory (restored when the move does
+    /// not go to the drives in this cycle).
+    undo_move: Option<Option<Trajectory>>,
+}
+
+/// Why a reset is held back from the estimator in this cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum HeldReset {
+    /// The drives are in Fault: their fault is reset first (their positions
+    /// are invalid until then, so the guard cannot judge the reset).
+    DrivesFaulted,
+    /// The axes still move: the reset waits until they are at rest.
+    AxesMoving,
+}
+
+/// A move judged acceptable, to be planned.
+#[derive(Debug, Clone, Copy)]
+struct AcceptedMove {
+    /// The trajectory it starts from.
+    from: Trajectory,
+    /// The cycle's clock, ns.
+    now_ns: u64,
+    /// The tip it ends at, base frame, m.
+    tip_m: Vec3,
+    /// The axes there, m.
+    q: ActiveJoints,
+    /// A guarded move's force limit, N.
+    max_force_n: Option<f64>,
+}
+
+impl StepConfig {
+    /// The loop's settings checked one by one (the first out of range is
+    /// the error).
+    fn check(&self) -> Result<(), StepConfigError> {
         let invalid = |field, value, why| StepConfigError::Invalid { field, value, why };
-        let l = config.axis_limits;
+        let l = self.axis_limits;
         if !(l.max_speed_mps.is_finite() && l.max_speed_mps > 0.0) {
             return Err(invalid(
                 "max_speed_mps",
@@ -579,7 +626,7 @@ impl LoopStep {
                 "must be finite and > 0",
             ));
         }
-        let t = config.following_tolerance_m;
+        let t = self.following_tolerance_m;
         if !(t.is_finite() && t > 0.0) {
             return Err(invalid(
                 "following_tolerance_m",
@@ -587,12 +634,12 @@ impl LoopStep {
                 "must be finite and > 0",
             ));
         }
-        for &(lo, hi) in &config.travel_m {
+        for &(lo, hi) in &self.travel_m {
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
                 return Err(invalid("travel_m", lo, "must be finite with min < max"));
             }
         }
-        let r = config.retreat_speed_mps;
+        let r = self.retreat_speed_mps;
         if !(r.is_finite() && r > 0.0 && r <= l.max_speed_mps) {
             return Err(invalid(
                 "retreat_speed_mps",
@@ -600,32 +647,38 @@ impl LoopStep {
                 "must be finite, > 0 and at most max_speed_mps",
             ));
         }
-        if config.period_ns == 0 {
+        if self.period_ns == 0 {
             return Err(invalid("period_ns", 0.0, "must be > 0"));
         }
-        if config.publisher_stall_ns == 0 {
+        if self.publisher_stall_ns == 0 {
             return Err(invalid("publisher_stall_ns", 0.0, "must be > 0"));
         }
-        let (calibration, profile) = (estimator.calibration, estimator.profile);
-        let filter = estimator.filter;
-        let estimator = Estimator::with_bias(estimator, bias)?;
-        // (The estimator has checked the filter; refused here the same way.)
-        let (guarded_lag_s, sample_period_s) = match filter {
-            Some(f) => match sar_estimator::filter::TipFilter::new(f) {
-                Ok(t) => (t.group_delay_s(), f.sample_period_s),
-                Err(_) => {
-                    return Err(invalid(
-                        "filter_cutoff_hz",
-                        f.cutoff_hz,
-                        "not a valid filter of the sensor's samples",
-                    ));
-                }
-            },
-            // No filter: the guarded force is the estimate, whose rate is
-            // its noise; no anticipation (a period of 0 marks it).
-            None => (0.0, 0.0),
-        };
-        let out = LoopOutput {
+        Ok(())
+    }
+}
+
+/// The guarded force's filter: its group delay and sample period, s. The
+/// estimator has checked the filter; refused here the same way. No filter:
+/// the guarded force is the estimate, whose rate is its noise; no
+/// anticipation (a period of 0 marks it).
+fn guarded_filter(filter: Option<FilterConfig>) -> Result<(f64, f64), StepConfigError> {
+    let Some(f) = filter else {
+        return Ok((0.0, 0.0));
+    };
+    match TipFilter::new(f) {
+        Ok(t) => Ok((t.group_delay_s(), f.sample_period_s)),
+        Err(_) => Err(StepConfigError::Invalid {
+            field: "filter_cutoff_hz",
+            value: f.cutoff_hz,
+            why: "not a valid filter of the sensor's samples",
+        }),
+    }
+}
+
+impl LoopOutput {
+    /// The output before the first cycle: the estimator's, nothing decided.
+    fn first(estimator: &Estimator) -> Self {
+        Self {
             estimate: *estimator.last(),
             reference: None,
             action: DriveAction::None,
@@ -634,7 +687,25 @@ impl LoopStep {
             limits: estimator.guard_config().force_limits(),
             guarded_stop: None,
             force_mode: None,
-        };
+        }
+    }
+}
+
+impl LoopStep {
+    /// Builds the step: the estimator with the sensor's bias, no trajectory
+    /// (the guard starts in Fault; the first accepted reset holds the axes
+    /// where they are).
+    pub fn new(
+        estimator: &EstimatorConfig,
+        bias: Bias,
+        config: StepConfig,
+    ) -> Result<Self, StepConfigError> {
+        config.check()?;
+        let (calibration, profile) = (estimator.calibration, estimator.profile);
+        let filter = estimator.filter;
+        let estimator = Estimator::with_bias(estimator, bias)?;
+        let (guarded_lag_s, sample_period_s) = guarded_filter(filter)?;
+        let out = LoopOutput::first(&estimator);
         let mut step = Self {
             calibration,
             profile,
@@ -676,42 +747,106 @@ impl LoopStep {
     /// Decides one cycle (see the module documentation). The result stays
     /// readable as [`LoopStep::last`] until the next cycle.
     pub fn step(&mut self, input: &LoopInput) -> &LoopOutput {
-        // The trajectory at the joint sample's stamp.
+        // Gather: what the estimator judges (a held reset is not passed on).
+        let reference = self.following_reference(input);
+        self.measure_speed(&input.joints);
+        let held = self.held_reset(input);
+        let mut cycle_input = input.cycle_input();
+        if held.is_some() {
+            cycle_input.command = None;
+        }
+        let host_fault = self.host_fault(input);
+        // Judge: the estimator and its guard.
+        let estimate = *self
+            .estimator
+            .cycle_checked(&cycle_input, reference.as_ref(), host_fault);
+        // Decide: the answer to the guard, then to the request, force
+        // control's period, a brake.
+        let mut d = Decision {
+            action: self.halt(input, &estimate, held),
+            reply: held.map(|h| self.held_reply(h, input)),
+            planned: false,
+            undo_move: None,
+        };
+        self.command_outcome(input, &estimate, &mut d);
+        self.observe_force(input, &estimate);
+        self.answer_request(input, &estimate, &mut d);
+        if self.force.mode().is_some() && !estimate.guard_state.is_halting() {
+            self.force_period(input, &estimate);
+        }
+        self.update_guarded_rate(input, &estimate);
+        d.planned |= self.brake_if_due(input, &estimate);
+        // Act: what the drives are told of the trajectory.
+        self.motion_action(input, &estimate, &mut d);
+        self.undo_move_not_carried_out(&mut d);
+        self.finish(estimate, reference, d)
+    }
+
+    /// The trajectory at the joint sample's stamp, which the estimator
+    /// checks the joints against (following error); none without a
+    /// trajectory or a valid sample.
+    fn following_reference(&self, input: &LoopInput) -> Option<FollowingReference> {
         let tolerance_m = self.config.following_tolerance_m;
-        let reference =
-            self.trajectory
-                .filter(|_| input.joints.valid)
-                .map(|t| FollowingReference {
-                    joints: t.position(input.joints.stamp_ns),
-                    tolerance_m,
-                });
-        // The axes' speed, from the joint samples.
-        let q = &input.joints.joints;
-        if input.joints.valid && [q.q1_m, q.q2_m, q.q3_m].iter().all(|v| v.is_finite()) {
+        self.trajectory
+            .filter(|_| input.joints.valid)
+            .map(|t| FollowingReference {
+                joints: t.position(input.joints.stamp_ns),
+                tolerance_m,
+            })
+    }
+
+    /// The axes' speed, from the last two valid joint samples.
+    fn measure_speed(&mut self, joints: &JointSample) {
+        let q = &joints.joints;
+        if joints.valid && [q.q1_m, q.q2_m, q.q3_m].iter().all(|v| v.is_finite()) {
             if let Some((p, stamp_ns)) = self.last_joints
-                && input.joints.stamp_ns > stamp_ns
+                && joints.stamp_ns > stamp_ns
             {
-                let dt_s = (input.joints.stamp_ns - stamp_ns) as f64 * 1e-9;
+                let dt_s = (joints.stamp_ns - stamp_ns) as f64 * 1e-9;
                 self.speed_mps = [q.q1_m - p.q1_m, q.q2_m - p.q2_m, q.q3_m - p.q3_m]
                     .iter()
                     .fold(0.0, |m: f64, d| m.max(d.abs() / dt_s));
             }
-            self.last_joints = Some((*q, input.joints.stamp_ns));
+            self.last_joints = Some((*q, joints.stamp_ns));
         }
-        // A reset waits until the axes are at rest: it is not passed on.
-        // With the drives in Fault it resets their fault first (their
-        // positions are invalid until then, so the guard cannot judge it).
-        let mut cycle_input = input.cycle_input();
-        let reset_while_moving =
-            input.request == Some(Request::Reset) && self.speed_mps > REST_SPEED_MPS;
-        let drives_faulted = matches!(input.drive_state, Some(DriveState::Fault { .. }));
-        let reset_drives_first = input.request == Some(Request::Reset) && drives_faulted;
-        if reset_while_moving || reset_drives_first {
-            cycle_input.command = None;
+    }
+
+    /// Whether the cycle's reset is held back from the estimator: with the
+    /// drives in Fault (their fault is reset first), or while the axes move.
+    fn held_reset(&self, input: &LoopInput) -> Option<HeldReset> {
+        if input.request != Some(Request::Reset) {
+            return None;
         }
-        // The host's own faults: the publishing thread stalled; the drives
-        // entering Fault (latched by the guard in that cycle only: the
-        // reset that leaves it is what resets the drives).
+        if matches!(input.drive_state, Some(DriveState::Fault { .. })) {
+            Some(HeldReset::DrivesFaulted)
+        } else if self.speed_mps > REST_SPEED_MPS {
+            Some(HeldReset::AxesMoving)
+        } else {
+            None
+        }
+    }
+
+    /// The reply to a held reset.
+    fn held_reply(&self, held: HeldReset, input: &LoopInput) -> Answer {
+        match held {
+            HeldReset::DrivesFaulted => (
+                ReplyStatus::DrivesFaultReset,
+                ReplyDetail::DrivesNotEnabled(input.drive_state),
+            ),
+            HeldReset::AxesMoving => (
+                ReplyStatus::AxesMoving,
+                ReplyDetail::AxesMoving {
+                    speed_mps: self.speed_mps,
+                },
+            ),
+        }
+    }
+
+    /// The host's own faults: the publishing thread stalled; the drives
+    /// entering Fault (latched by the guard in that cycle only: the reset
+    /// that leaves it is what resets the drives). Remembers the drives'
+    /// state for the next cycle.
+    fn host_fault(&mut self, input: &LoopInput) -> Option<Reason> {
         let drive_fault = match (self.last_drive_state, input.drive_state) {
             (Some(DriveState::Fault { .. }), _) => None,
             (_, Some(DriveState::Fault { axis, code })) => Some(Reason::DriveFault {
@@ -721,61 +856,56 @@ impl LoopStep {
             _ => None,
         };
         self.last_drive_state = input.drive_state;
-        let host_fault = (input.publisher_idle_ns > self.config.publisher_stall_ns)
+        (input.publisher_idle_ns > self.config.publisher_stall_ns)
             .then(|| Reason::PublisherStalled {
                 stalled_ms: u32::try_from(input.publisher_idle_ns / 1_000_000).unwrap_or(u32::MAX),
             })
-            .or(drive_fault);
-        let estimate = *self
-            .estimator
-            .cycle_checked(&cycle_input, reference.as_ref(), host_fault);
-        let mut action = DriveAction::None;
-        let mut reply = if reset_drives_first {
-            Some((
-                ReplyStatus::DrivesFaultReset,
-                ReplyDetail::DrivesNotEnabled(input.drive_state),
-            ))
-        } else {
-            reset_while_moving.then_some((
-                ReplyStatus::AxesMoving,
-                ReplyDetail::AxesMoving {
-                    speed_mps: self.speed_mps,
-                },
-            ))
-        };
+            .or(drive_fault)
+    }
 
-        let halting = estimate.guard_state.is_halting();
+    /// In Stop or Fault the trajectory is dropped and the drives get a
+    /// quick stop in the cycle that enters it and whenever they report
+    /// `Enabled`; else, for a reset held by their fault, a fault reset.
+    fn halt(
+        &mut self,
+        input: &LoopInput,
+        estimate: &CycleOutput,
+        held: Option<HeldReset>,
+    ) -> DriveAction {
+        if !estimate.guard_state.is_halting() {
+            return DriveAction::None;
+        }
+        self.trajectory = None;
         let entered_halt = estimate.transition.is_some_and(|t| t.to.is_halting());
-        if halting {
-            self.trajectory = None;
-            if entered_halt || input.drive_state == Some(DriveState::Enabled) {
-                action = DriveAction::QuickStop;
-            } else if reset_drives_first {
-                action = DriveAction::FaultReset;
-            }
+        if entered_halt || input.drive_state == Some(DriveState::Enabled) {
+            DriveAction::QuickStop
+        } else if held == Some(HeldReset::DrivesFaulted) {
+            DriveAction::FaultReset
+        } else {
+            DriveAction::None
         }
+    }
 
-        // The estimator's commands: their event is the reply.
-        if let Some(ev) = estimate.command {
-            reply = Some(command_reply(&ev.result));
-            if matches!(ev.result, Ok(CommandAccepted::Reset)) {
-                action = match input.drive_state {
-                    Some(DriveState::QuickStop) => DriveAction::Release(Release::DisableEnable),
-                    Some(DriveState::Fault { .. }) => {
-                        DriveAction::Release(Release::FaultResetEnable)
-                    }
-                    Some(DriveState::Ready) => DriveAction::Release(Release::Enable),
-                    _ => DriveAction::None,
-                };
-                self.trajectory = match (input.now_ns, input.joints.valid) {
-                    (Some(now_ns), true) => Some(Trajectory::hold(now_ns, &input.joints.joints)),
-                    _ => None,
-                };
-            }
+    /// The estimator's command event is the reply; an accepted reset
+    /// releases the drives (the way depends on their state) and holds the
+    /// axes where they were measured.
+    fn command_outcome(&mut self, input: &LoopInput, estimate: &CycleOutput, d: &mut Decision) {
+        let Some(ev) = estimate.command else {
+            return;
+        };
+        d.reply = Some(command_reply(&ev.result));
+        if matches!(ev.result, Ok(CommandAccepted::Reset)) {
+            d.action = release(input.drive_state);
+            self.trajectory = match (input.now_ns, input.joints.valid) {
+                (Some(now_ns), true) => Some(Trajectory::hold(now_ns, &input.joints.joints)),
+                _ => None,
+            };
         }
+    }
 
-        // Force control: its filter sees every cycle's estimate; a halt or a
-        // Retreat ends any mode at once; an accepted move ends it too (below).
+    /// Force control's filter sees every cycle's estimate; a halt or a
+    /// Retreat ends any mode at once.
+    fn observe_force(&mut self, input: &LoopInput, estimate: &CycleOutput) {
         match &estimate.tip {
             TipOutcome::Estimate(e) => {
                 self.force
@@ -783,89 +913,80 @@ impl LoopStep {
             }
             _ => self.force.observe(None),
         }
-        if halting || estimate.guard_state == GuardState::Retreat {
+        if estimate.guard_state.is_halting() || estimate.guard_state == GuardState::Retreat {
             self.force.stop();
         }
-        match input.request {
+    }
+
+    /// Answers the loop's own requests: force control and moves (the
+    /// estimator's commands are answered by their event).
+    fn answer_request(&mut self, input: &LoopInput, estimate: &CycleOutput, d: &mut Decision) {
+        let target = match input.request {
             Some(Request::Hold { max_force_n }) => {
-                reply = Some(self.start_force(input, &estimate, ForceMode::Hold { max_force_n }));
+                d.reply = Some(self.start_force(input, estimate, ForceMode::Hold { max_force_n }));
+                return;
             }
             Some(Request::Push { axial_n }) => {
-                reply = Some(self.start_force(input, &estimate, ForceMode::Push { axial_n }));
+                d.reply = Some(self.start_force(input, estimate, ForceMode::Push { axial_n }));
+                return;
             }
             Some(Request::Position) => {
                 self.end_force(input.now_ns);
-                reply = Some((ReplyStatus::Accepted, ReplyDetail::None));
+                d.reply = Some((ReplyStatus::Accepted, ReplyDetail::None));
+                return;
             }
-            _ => {}
-        }
-
-        let before_move = self.trajectory;
-        let mut planned = false;
-        let move_target = match input.request {
-            Some(Request::MoveTip { tip_m }) => Some(MoveTarget::Tip(tip_m, None)),
+            Some(Request::MoveTip { tip_m }) => MoveTarget::Tip(tip_m, None),
             Some(Request::GuardedMove { tip_m, max_force_n }) => {
-                Some(MoveTarget::Tip(tip_m, Some(max_force_n)))
+                MoveTarget::Tip(tip_m, Some(max_force_n))
             }
-            Some(Request::BackOut { distance_m }) => Some(MoveTarget::BackOut(distance_m)),
+            Some(Request::BackOut { distance_m }) => MoveTarget::BackOut(distance_m),
+            Some(Request::Reset | Request::Tare | Request::SetLimits(_)) | None => return,
+        };
+        let before_move = self.trajectory;
+        let answer = self.plan_move(input, estimate, target);
+        // An accepted move ends force control (it was planned from the last
+        // set point); a refused one leaves the mode as it was.
+        if answer.0 == ReplyStatus::Accepted {
+            d.undo_move = Some(before_move);
+            d.planned = true;
+            self.force.stop();
+        }
+        d.reply = Some(answer);
+    }
+
+    /// The force-control mode's period: the law's commanded tip, through
+    /// the inverse kinematics, streamed to the drives (one set point per
+    /// period, which the following check then holds the axes to). Under the
+    /// warn rule no motion goes deeper along the force. No estimate, no
+    /// pose or an unreachable tip ends the mode, holding the last set point.
+    fn force_period(&mut self, input: &LoopInput, estimate: &CycleOutput) {
+        let next = match (
+            input.now_ns,
+            estimate.pose,
+            input.drive_state,
+            no_deeper_along(estimate),
+        ) {
+            (Some(now_ns), Some(pose), Some(DriveState::Enabled), Ok(along)) => self
+                .force
+                .step(&pose.rod_dir, along.as_ref())
+                .ok()
+                .and_then(|out| self.reachable(&out.tip_m).ok())
+                .map(|q| (now_ns, q)),
             _ => None,
         };
-        let mut move_accepted = false;
-        if let Some(target) = move_target {
-            let r = self.plan_move(input, &estimate, target);
-            move_accepted = r.0 == ReplyStatus::Accepted;
-            planned = move_accepted;
-            reply = Some(r);
-            // An accepted move ends force control (it was planned from the
-            // last set point); a refused one leaves the mode as it was.
-            if move_accepted {
-                self.force.stop();
+        match next {
+            Some((now_ns, q)) => {
+                let mut t = Trajectory::hold(now_ns, &q);
+                t.streamed = true;
+                self.trajectory = Some(t);
             }
+            None => self.end_force(input.now_ns),
         }
+    }
 
-        // The force-control mode's period: the law's commanded tip, through
-        // the inverse kinematics, streamed to the drives (one set point per
-        // period, which the following check then holds the axes to). The
-        // guard's Warn removes any motion deeper along the force. No
-        // estimate, no pose or an unreachable tip ends the mode, holding the
-        // last set point.
-        if self.force.mode().is_some() && !halting {
-            // In Warn, the force the guard judged (this cycle's estimate,
-            // the one a move is judged against); a Warn without one ends the
-            // mode.
-            let warn = estimate.guard_state == GuardState::Warn
-                && !matches!(estimate.guard_reason, Reason::TareDue { .. });
-            let no_deeper_along = match (warn, &estimate.tip) {
-                (false, _) => Ok(None),
-                (true, TipOutcome::Estimate(e)) => Ok(Some(e.force_n)),
-                (true, _) => Err(()),
-            };
-            let next = match (
-                input.now_ns,
-                estimate.pose,
-                input.drive_state,
-                no_deeper_along,
-            ) {
-                (Some(now_ns), Some(pose), Some(DriveState::Enabled), Ok(along)) => self
-                    .force
-                    .step(&pose.rod_dir, along.as_ref())
-                    .ok()
-                    .and_then(|out| self.reachable(&out.tip_m).ok())
-                    .map(|q| (now_ns, q)),
-                _ => None,
-            };
-            match next {
-                Some((now_ns, q)) => {
-                    let mut t = Trajectory::hold(now_ns, &q);
-                    t.streamed = true;
-                    self.trajectory = Some(t);
-                }
-                None => self.end_force(input.now_ns),
-            }
-        }
-
-        // The guarded force's rate, per new sensor sample.
-        match guarded_force(&estimate).filter(|_| self.sample_period_s > 0.0) {
+    /// The guarded force's rate, per new sensor sample.
+    fn update_guarded_rate(&mut self, input: &LoopInput, estimate: &CycleOutput) {
+        match guarded_force(estimate).filter(|_| self.sample_period_s > 0.0) {
             Some(f) => {
                 let counter = input.sensor.counter;
                 let m = f.norm();
@@ -891,102 +1012,120 @@ impl LoopStep {
                 self.guarded_rate_n_per_s = 0.0;
             }
         }
-        // A guarded move under way is braked in the cycle its force is
-        // anticipated to reach the limit: the magnitude of the filtered tip
-        // force when the filter is on (the unfiltered one's noise would stop
-        // it early at random), plus its rise over the filter's lag and the
-        // braking (at the planned deceleration, v / 2a at the mean speed).
-        if let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
-            && let Some(max_force_n) = t.max_force_n
-            && now_ns < t.end_ns
-            && let (Some(force_n), Some(pose)) = (guarded_force(&estimate), estimate.pose)
-            && {
-                let speed_mps = t
-                    .at(now_ns)
-                    .iter()
-                    .fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
-                let horizon_s =
-                    self.guarded_lag_s + speed_mps / (2.0 * self.config.axis_limits.max_accel_mps2);
-                // Anticipated once in contact (a quarter of the limit), so
-                // that the rate's noise in free space brakes nothing.
-                let m = force_n.norm();
-                let rise_n = if m >= 0.25 * max_force_n {
-                    self.guarded_rate_n_per_s.max(0.0) * horizon_s
-                } else {
-                    0.0
-                };
-                m + rise_n >= max_force_n
-            }
-        {
-            let limits = self.config.axis_limits;
-            let states = t.at(now_ns);
-            let axes = states.map(|s| AxisPlan::brake(now_ns, s, limits));
-            let mut braked = Trajectory::from_plans(now_ns, axes, None);
-            braked.streamed = t.streamed;
-            self.trajectory = Some(braked);
+    }
+
+    /// Brakes a move under way whose force stops it: a guarded move's force
+    /// anticipated to reach its limit, or, under the warn rule, a move
+    /// toward a tip further along the force. A guarded move braked either
+    /// way records where and at what force. `true` when braked (a new plan).
+    fn brake_if_due(&mut self, input: &LoopInput, estimate: &CycleOutput) -> bool {
+        let (Some(t), Some(now_ns), Some(pose)) = (self.trajectory, input.now_ns, estimate.pose)
+        else {
+            return false;
+        };
+        if now_ns >= t.end_ns {
+            return false;
+        }
+        let Some(force_n) = self
+            .guarded_limit_reached(&t, now_ns, estimate)
+            .or_else(|| pushes_along_warned_force(&t, &pose.tip_m, estimate))
+        else {
+            return false;
+        };
+        self.brake(&t, now_ns);
+        if let Some(max_force_n) = t.max_force_n {
             self.guarded_stop = Some(GuardedStop {
                 cycle: input.cycle,
                 tip_m: pose.tip_m,
                 force_n,
                 max_force_n,
             });
-            planned = true;
         }
+        true
+    }
 
-        // A move under way that pushes further along a force above the warn
-        // limit is braked (a Warn for a due tare has no force to push along).
-        if estimate.guard_state == GuardState::Warn
-            && !matches!(estimate.guard_reason, Reason::TareDue { .. })
-            && let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
-            && let (Some(target), Some(pose), TipOutcome::Estimate(e)) =
-                (t.target_tip_m, estimate.pose, estimate.tip)
-            && now_ns < t.end_ns
-            && (target - pose.tip_m).dot(&e.force_n) > 0.0
-        {
-            let limits = self.config.axis_limits;
-            let states = t.at(now_ns);
-            let axes = states.map(|s| AxisPlan::brake(now_ns, s, limits));
-            let mut braked = Trajectory::from_plans(now_ns, axes, None);
-            braked.streamed = t.streamed;
-            self.trajectory = Some(braked);
-            // A guarded move braked by the warn limit before its own: said
-            // the same way (its force is what stopped it).
-            if let Some(max_force_n) = t.max_force_n {
-                self.guarded_stop = Some(GuardedStop {
-                    cycle: input.cycle,
-                    tip_m: pose.tip_m,
-                    force_n: e.force_n,
-                    max_force_n,
-                });
-            }
-            planned = true;
-        }
+    /// A guarded move's force, when it is anticipated to reach the move's
+    /// limit: the magnitude of the filtered tip force when the filter is on
+    /// (the unfiltered one's noise would stop it early at random), plus its
+    /// rise over the filter's lag and the braking (at the planned
+    /// deceleration, v / 2a at the mean speed).
+    fn guarded_limit_reached(
+        &self,
+        t: &Trajectory,
+        now_ns: u64,
+        estimate: &CycleOutput,
+    ) -> Option<Vec3> {
+        let max_force_n = t.max_force_n?;
+        let force_n = guarded_force(estimate)?;
+        let speed_mps = t
+            .at(now_ns)
+            .iter()
+            .fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
+        let horizon_s =
+            self.guarded_lag_s + speed_mps / (2.0 * self.config.axis_limits.max_accel_mps2);
+        // Anticipated once in contact (a quarter of the limit), so that the
+        // rate's noise in free space brakes nothing.
+        let m = force_n.norm();
+        let rise_n = if m >= 0.25 * max_force_n {
+            self.guarded_rate_n_per_s.max(0.0) * horizon_s
+        } else {
+            0.0
+        };
+        (m + rise_n >= max_force_n).then_some(force_n)
+    }
 
+    /// The one brake: the trajectory under way stopped at the planned
+    /// deceleration from where it is at `now_ns` (streamed if it was).
+    fn brake(&mut self, t: &Trajectory, now_ns: u64) {
+        let limits = self.config.axis_limits;
+        let axes = t.at(now_ns).map(|s| AxisPlan::brake(now_ns, s, limits));
+        let mut braked = Trajectory::from_plans(now_ns, axes, None);
+        braked.streamed = t.streamed;
+        self.trajectory = Some(braked);
+    }
+
+    /// What the drives are told of the trajectory when nothing else is said
+    /// to them (not halting, the drives enabled): a streamed trajectory one
+    /// period ahead, every cycle until the period after its end; a new plan
+    /// its end point, once.
+    fn motion_action(&self, input: &LoopInput, estimate: &CycleOutput, d: &mut Decision) {
         let enabled = input.drive_state == Some(DriveState::Enabled);
-        if !halting
-            && action == DriveAction::None
+        if !estimate.guard_state.is_halting()
+            && d.action == DriveAction::None
             && enabled
             && let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns)
         {
             if t.streamed {
-                // Streamed: the trajectory one period ahead, every cycle
-                // until the period after its end.
                 let ahead_ns = now_ns.saturating_add(self.config.period_ns);
                 if now_ns <= t.end_ns.saturating_add(self.config.period_ns) {
-                    action = DriveAction::Stream(t.position(ahead_ns));
+                    d.action = DriveAction::Stream(t.position(ahead_ns));
                 }
-            } else if planned {
-                // A new plan: its end point to the drives.
+            } else if d.planned {
                 let [q1_m, q2_m, q3_m] = t.axes.map(|p| p.end_m());
-                action = DriveAction::Setpoint(ActiveJoints { q1_m, q2_m, q3_m });
+                d.action = DriveAction::Setpoint(ActiveJoints { q1_m, q2_m, q3_m });
             }
         }
-        // "Accepted" only for a move that goes to the drives now.
-        if move_accepted && !matches!(action, DriveAction::Setpoint(_) | DriveAction::Stream(_)) {
-            self.trajectory = before_move;
-            reply = Some((ReplyStatus::NotCarriedOut, ReplyDetail::NotCarriedOut));
-        }
+    }
 
+    /// "Accepted" only for a move that goes to the drives now: else the
+    /// trajectory it replaced is restored and the reply says so.
+    fn undo_move_not_carried_out(&mut self, d: &mut Decision) {
+        if let Some(before_move) = d.undo_move
+            && !matches!(d.action, DriveAction::Setpoint(_) | DriveAction::Stream(_))
+        {
+            self.trajectory = before_move;
+            d.reply = Some((ReplyStatus::NotCarriedOut, ReplyDetail::NotCarriedOut));
+        }
+    }
+
+    /// The cycle's output, readable as [`LoopStep::last`].
+    fn finish(
+        &mut self,
+        estimate: CycleOutput,
+        reference: Option<FollowingReference>,
+        d: Decision,
+    ) -> &LoopOutput {
+        let reply = d.reply;
         let (reply, reply_detail) = match reply {
             Some((status, detail)) => (Some((status, detail.reason_code())), detail),
             None => (None, ReplyDetail::None),
@@ -994,7 +1133,7 @@ impl LoopStep {
         self.out = LoopOutput {
             estimate,
             reference: reference.map(|r| r.joints),
-            action,
+            action: d.action,
             reply,
             reply_detail,
             limits: self.estimator.guard_config().force_limits(),
@@ -1088,123 +1227,192 @@ impl LoopStep {
         input: &LoopInput,
         estimate: &CycleOutput,
         target: MoveTarget,
-    ) -> (ReplyStatus, ReplyDetail) {
+    ) -> Answer {
+        match self.judge_move(input, estimate, target) {
+            Ok(accepted) => {
+                self.trajectory = Some(self.planned_move(&accepted, estimate));
+                (ReplyStatus::Accepted, ReplyDetail::None)
+            }
+            Err(refused) => refused,
+        }
+    }
+
+    /// Judges a move: not halted, with a trajectory to start from, the
+    /// drives enabled, the target's tip (a guarded move's limit checked)
+    /// reachable within the travel, and its direction allowed (the warn
+    /// rule, Retreat).
+    fn judge_move(
+        &self,
+        input: &LoopInput,
+        estimate: &CycleOutput,
+        target: MoveTarget,
+    ) -> Result<AcceptedMove, Answer> {
         let halted = estimate.guard_state.is_halting();
-        let (Some(trajectory), Some(now_ns), false) = (self.trajectory, input.now_ns, halted)
-        else {
-            return (
+        let (Some(from), Some(now_ns), false) = (self.trajectory, input.now_ns, halted) else {
+            return Err((
                 ReplyStatus::Halted,
                 ReplyDetail::Reason(estimate.guard_reason),
-            );
+            ));
         };
         if input.drive_state != Some(DriveState::Enabled) {
-            return (
+            return Err((
                 ReplyStatus::DrivesRefused,
                 ReplyDetail::DrivesNotEnabled(input.drive_state),
-            );
+            ));
         }
-        let mut guard_n = None;
-        let tip_m = match target {
-            MoveTarget::Tip(tip_m, max_force_n) => {
-                if let Some(max_force_n) = max_force_n {
-                    let stop_n = self.estimator.guard_config().force_limits().stop_total_n;
-                    if !(max_force_n > 0.0 && max_force_n <= stop_n) {
-                        return (
-                            ReplyStatus::BadArgument,
-                            ReplyDetail::BadMaxForce {
-                                max_force_n,
-                                stop_n,
-                            },
-                        );
-                    }
-                    let Some(force_n) = guarded_force(estimate) else {
-                        return (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate);
-                    };
-                    if force_n.norm() >= max_force_n {
-                        return (
-                            ReplyStatus::Refused,
-                            ReplyDetail::AlreadyAtForce {
-                                force_n: force_n.norm(),
-                                max_force_n,
-                            },
-                        );
-                    }
-                    guard_n = Some(max_force_n);
-                }
-                tip_m
+        let (tip_m, max_force_n) = match target {
+            MoveTarget::Tip(tip_m, None) => (tip_m, None),
+            MoveTarget::Tip(tip_m, Some(max_force_n)) => {
+                (tip_m, Some(self.judge_guarded(estimate, max_force_n)?))
             }
-            MoveTarget::BackOut(distance_m) => {
-                if !(distance_m > 0.0 && distance_m <= MAX_BACK_OUT_M) {
-                    return (
-                        ReplyStatus::BadArgument,
-                        ReplyDetail::BadDistance { distance_m },
-                    );
-                }
-                let Some(pose) = estimate.pose else {
-                    return (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate);
-                };
-                pose.tip_m - pose.rod_dir * distance_m
-            }
+            MoveTarget::BackOut(distance_m) => (back_out_tip(estimate, distance_m)?, None),
         };
-        let target = match inverse(&self.calibration, &self.profile, &tip_m) {
-            Ok(q) => q,
-            Err(e) => return (ReplyStatus::Unreachable, ReplyDetail::NoPose(e)),
-        };
-        let q = [target.q1_m, target.q2_m, target.q3_m];
-        for (i, (v, (lo, hi))) in q.iter().zip(self.config.travel_m.iter()).enumerate() {
-            if !(v >= lo && v <= hi) {
-                return (
-                    ReplyStatus::Unreachable,
-                    ReplyDetail::OutsideTravel {
-                        axis: u8::try_from(i + 1).unwrap_or(0),
-                        value_m: *v,
-                        min_m: *lo,
-                        max_m: *hi,
-                    },
-                );
-            }
+        let q = self
+            .reachable(&tip_m)
+            .map_err(|detail| (ReplyStatus::Unreachable, detail))?;
+        judge_direction(estimate, &tip_m)?;
+        Ok(AcceptedMove {
+            from,
+            now_ns,
+            tip_m,
+            q,
+            max_force_n,
+        })
+    }
+
+    /// A guarded move's limit: within 0 < N <= the total stop limit, above
+    /// the force now.
+    fn judge_guarded(&self, estimate: &CycleOutput, max_force_n: f64) -> Result<f64, Answer> {
+        let stop_n = self.estimator.guard_config().force_limits().stop_total_n;
+        if !(max_force_n > 0.0 && max_force_n <= stop_n) {
+            return Err((
+                ReplyStatus::BadArgument,
+                ReplyDetail::BadMaxForce {
+                    max_force_n,
+                    stop_n,
+                },
+            ));
         }
+        let Some(force_n) = guarded_force(estimate) else {
+            return Err((ReplyStatus::NoEstimate, ReplyDetail::NoEstimate));
+        };
+        if force_n.norm() >= max_force_n {
+            return Err((
+                ReplyStatus::Refused,
+                ReplyDetail::AlreadyAtForce {
+                    force_n: force_n.norm(),
+                    max_force_n,
+                },
+            ));
+        }
+        Ok(max_force_n)
+    }
+
+    /// An accepted move's trajectory: one time-optimal plan per axis from
+    /// where the trajectory is now (at the retreat speed in Retreat). A
+    /// retreat move, or any move while a streamed one runs, streams.
+    fn planned_move(&self, m: &AcceptedMove, estimate: &CycleOutput) -> Trajectory {
         let retreat = estimate.guard_state == GuardState::Retreat;
-        // Above the warn limit, only moves that do not push the tip further
-        // along its force are allowed; in Retreat only those that reduce it.
-        let warn = estimate.guard_state == GuardState::Warn
-            && !matches!(estimate.guard_reason, Reason::TareDue { .. });
-        if warn || retreat {
-            let (TipOutcome::Estimate(e), Some(pose)) = (estimate.tip, estimate.pose) else {
-                return (ReplyStatus::NoEstimate, ReplyDetail::NoEstimate);
-            };
-            let step_m = tip_m - pose.tip_m;
-            if warn && step_m.dot(&e.force_n) > 0.0 {
-                return (
-                    ReplyStatus::TowardForce,
-                    ReplyDetail::Reason(estimate.guard_reason),
-                );
-            }
-            if retreat && !reduces_force(&e.force_n, &pose.rod_dir, &step_m) {
-                return (
-                    ReplyStatus::NotReducing,
-                    ReplyDetail::NotReducing {
-                        step_m,
-                        force_n: e.force_n,
-                    },
-                );
-            }
-        }
+        let now_ns = m.now_ns;
         let mut limits = self.config.axis_limits;
         if retreat {
             limits.max_speed_mps = self.config.retreat_speed_mps;
         }
-        let states = trajectory.at(now_ns);
+        let states = m.from.at(now_ns);
         let mut axes = [AxisPlan::hold(now_ns, 0.0); 3];
-        for ((plan, state), target_m) in axes.iter_mut().zip(states).zip(q) {
+        for ((plan, state), target_m) in axes.iter_mut().zip(states).zip(joints_array(&m.q)) {
             *plan = AxisPlan::to_target(now_ns, state, target_m, limits);
         }
-        let mut planned = Trajectory::from_plans(now_ns, axes, Some(tip_m));
-        // A retreat move, or any move while a streamed one runs, streams.
-        planned.streamed = retreat || trajectory.streamed && now_ns <= trajectory.end_ns;
-        planned.max_force_n = guard_n;
-        self.trajectory = Some(planned);
-        (ReplyStatus::Accepted, ReplyDetail::None)
+        let mut planned = Trajectory::from_plans(now_ns, axes, Some(m.tip_m));
+        planned.streamed = retreat || m.from.streamed && now_ns <= m.from.end_ns;
+        planned.max_force_n = m.max_force_n;
+        planned
+    }
+}
+
+/// The warn rule: the guard's Warn for a force above a warn limit (a Warn
+/// for a due tare has no force to push along). Under it no move, set point
+/// or trajectory goes further along the tip force.
+fn warned_by_force(estimate: &CycleOutput) -> bool {
+    estimate.guard_state == GuardState::Warn
+        && !matches!(estimate.guard_reason, Reason::TareDue { .. })
+}
+
+/// The force force control must not go deeper along: under the warn rule,
+/// the force the guard judged (this cycle's estimate, the one a move is
+/// judged against; `Err` without one: it ends the mode); `Ok(None)` else.
+fn no_deeper_along(estimate: &CycleOutput) -> Result<Option<Vec3>, ()> {
+    match (warned_by_force(estimate), &estimate.tip) {
+        (false, _) => Ok(None),
+        (true, TipOutcome::Estimate(e)) => Ok(Some(e.force_n)),
+        (true, _) => Err(()),
+    }
+}
+
+/// Under the warn rule, a move under way toward a tip further along the
+/// tip force (from `tip_m`, the tip now): that force.
+fn pushes_along_warned_force(t: &Trajectory, tip_m: &Vec3, estimate: &CycleOutput) -> Option<Vec3> {
+    let (true, Some(target), TipOutcome::Estimate(e)) =
+        (warned_by_force(estimate), t.target_tip_m, estimate.tip)
+    else {
+        return None;
+    };
+    ((target - tip_m).dot(&e.force_n) > 0.0).then_some(e.force_n)
+}
+
+/// A move's direction: under the warn rule not further along the tip
+/// force; in Retreat only one that reduces it (against the force, or back
+/// along the rod).
+fn judge_direction(estimate: &CycleOutput, tip_m: &Vec3) -> Result<(), Answer> {
+    let retreat = estimate.guard_state == GuardState::Retreat;
+    let warn = warned_by_force(estimate);
+    if !(warn || retreat) {
+        return Ok(());
+    }
+    let (TipOutcome::Estimate(e), Some(pose)) = (estimate.tip, estimate.pose) else {
+        return Err((ReplyStatus::NoEstimate, ReplyDetail::NoEstimate));
+    };
+    let step_m = tip_m - pose.tip_m;
+    if warn && step_m.dot(&e.force_n) > 0.0 {
+        return Err((
+            ReplyStatus::TowardForce,
+            ReplyDetail::Reason(estimate.guard_reason),
+        ));
+    }
+    if retreat && !reduces_force(&e.force_n, &pose.rod_dir, &step_m) {
+        return Err((
+            ReplyStatus::NotReducing,
+            ReplyDetail::NotReducing {
+                step_m,
+                force_n: e.force_n,
+            },
+        ));
+    }
+    Ok(())
+}
+
+/// A back-out's tip: `distance_m` (0 < d <= [`MAX_BACK_OUT_M`]) back along
+/// the rod from the tip now.
+fn back_out_tip(estimate: &CycleOutput, distance_m: f64) -> Result<Vec3, Answer> {
+    if !(distance_m > 0.0 && distance_m <= MAX_BACK_OUT_M) {
+        return Err((
+            ReplyStatus::BadArgument,
+            ReplyDetail::BadDistance { distance_m },
+        ));
+    }
+    let Some(pose) = estimate.pose else {
+        return Err((ReplyStatus::NoEstimate, ReplyDetail::NoEstimate));
+    };
+    Ok(pose.tip_m - pose.rod_dir * distance_m)
+}
+
+/// How the drives are released after an accepted reset, from their state.
+fn release(drive_state: Option<DriveState>) -> DriveAction {
+    match drive_state {
+        Some(DriveState::QuickStop) => DriveAction::Release(Release::DisableEnable),
+        Some(DriveState::Fault { .. }) => DriveAction::Release(Release::FaultResetEnable),
+        Some(DriveState::Ready) => DriveAction::Release(Release::Enable),
+        _ => DriveAction::None,
     }
 }
 
