@@ -618,20 +618,12 @@ code_enum!(
         GuardReset = 1,
         /// Tare the sensor (values: the bias, N).
         Tare = 2,
-        /// Clear the tare.
-        ClearTare = 3,
-        /// Enable the drives.
-        Enable = 4,
-        /// Disable the drives.
-        Disable = 5,
-        /// Quick stop.
-        QuickStop = 6,
-        /// Reset a drive fault.
-        FaultReset = 7,
-        /// Move to a target (values: q1..q3, m).
-        MoveTo = 8,
+        // 3..=8 (`COMMAND_CLEAR_TARE`, `COMMAND_ENABLE`, `COMMAND_DISABLE`,
+        // `COMMAND_QUICK_STOP`, `COMMAND_FAULT_RESET`, `COMMAND_MOVE_TO` of
+        // the .msg) are reserved: no version of `sard` wrote them.
         /// Set the sensor's bias (values: force x, y, z in N, then torque
-        /// x, y, z in N m; sensor frame).
+        /// x, y, z in N m; sensor frame). Written by older versions of
+        /// `sard`; read, it gives no request.
         SetBias = 9,
         /// Move the tip (`move_tip_m`, base frame, m).
         MoveTip = 10,

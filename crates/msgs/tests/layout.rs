@@ -422,7 +422,15 @@ fn each_msg_constant_is_the_shared_code() {
     }
     let cycle = msg_constants("CycleInput");
     assert_code_list(&cycle, "DRIVE", &values!(DriveStateCode), &[]);
-    assert_code_list(&cycle, "COMMAND", &values!(CommandKindCode), &[]);
+    let reserved = [
+        "COMMAND_CLEAR_TARE",
+        "COMMAND_DISABLE",
+        "COMMAND_ENABLE",
+        "COMMAND_FAULT_RESET",
+        "COMMAND_MOVE_TO",
+        "COMMAND_QUICK_STOP",
+    ];
+    assert_code_list(&cycle, "COMMAND", &values!(CommandKindCode), &reserved);
     assert_code_list(&cycle, "ACTION", &values!(DriveActionCode), &[]);
     assert_code_list(&cycle, "CLOCK", &values!(ClockStatusCode), &[]);
     let state = msg_constants("EstimatorState");
