@@ -252,6 +252,24 @@ impl Default for StateMsg {
     }
 }
 
+impl StateMsg {
+    /// |F_tip|, the total tip force, N.
+    pub fn tip_force_norm_n(&self) -> f64 {
+        let [x, y, z] = self.tip_force_n;
+        (x * x + y * y + z * z).sqrt()
+    }
+
+    /// The guard's limits in use, named (from [`StateMsg::limits_n`]).
+    pub fn limits(&self) -> sar_estimator::guard::ForceLimits {
+        sar_estimator::guard::ForceLimits::from_array(self.limits_n)
+    }
+
+    /// The drives follow targets ([`drive_code::ENABLED`]).
+    pub fn drives_enabled(&self) -> bool {
+        self.drive_state == drive_code::ENABLED
+    }
+}
+
 /// Command kinds of [`CommandMsg::kind`]: one list with the recording's.
 /// A command the loop steps is recorded (`command_kind` of
 /// `CycleInput.msg`) and its wire kind is its recorded code
@@ -383,6 +401,14 @@ pub mod recording_code {
     /// The state of a code: [`OFF`], [`ON`] or [`FAILED`].
     pub const fn state(code: u64) -> u64 {
         code & 0xffff_ffff
+    }
+    /// Whether a recording runs.
+    pub const fn is_on(code: u64) -> bool {
+        state(code) == ON
+    }
+    /// Whether the last recording failed.
+    pub const fn is_failed(code: u64) -> bool {
+        state(code) == FAILED
     }
     /// The OS error of a failed recording's code (0: none named).
     pub const fn errno(code: u64) -> u32 {

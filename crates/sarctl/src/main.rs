@@ -307,8 +307,8 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "observable": s.flags & flags::OBSERVABLE != 0,
         "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
         "sim_elapsed_ns": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_elapsed_ns),
-        "force_mode": match s.force_mode { 1 => "hold", 2 => "push", _ => "position" },
-        "force_setpoint_n": (s.force_mode != 0).then_some(s.force_setpoint_n),
+        "force_mode": wire::force_mode::name(s.force_mode),
+        "force_setpoint_n": (s.force_mode != wire::force_mode::POSITION).then_some(s.force_setpoint_n),
         "guarded_stop": (s.guarded_stop_cycle != 0).then(|| json!({
             "cycle": s.guarded_stop_cycle,
             "tip_m": s.guarded_stop_tip_m,
@@ -328,8 +328,8 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "quick_stops": s.quick_stops,
         "publish_queue_drops": s.queue_drops,
         "publish_errors": s.publish_errors,
-        "recording": recording_code::state(s.recording) == recording_code::ON,
-        "recording_failed": (recording_code::state(s.recording) == recording_code::FAILED)
+        "recording": recording_code::is_on(s.recording),
+        "recording_failed": recording_code::is_failed(s.recording)
             .then(|| sarctl::cli::record::recording_failure(s.recording)),
         "recorder_drops": s.recorder_drops,
     })
@@ -337,7 +337,7 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
 
 fn state_line(s: &StateMsg) -> String {
     let f = s.tip_force_n;
-    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+    let norm = s.tip_force_norm_n();
     let force = if s.flags & flags::ESTIMATE != 0 {
         format!(
             "F_tip [{:+7.2} {:+7.2} {:+7.2}] N |F| {:6.2} N (std {:.2})",
@@ -378,12 +378,12 @@ fn state_line(s: &StateMsg) -> String {
 
 /// A bar of |F| against the stop limit, for the terminal view.
 fn bar(s: &StateMsg) -> String {
-    let f = s.tip_force_n;
-    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-    let stop = s.limits_n[1].max(1e-9);
+    let norm = s.tip_force_norm_n();
+    let stop = s.limits().stop_total_n.max(1e-9);
     let width = 40usize;
     let filled = ((norm / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
-    let warn_at = ((s.limits_n[0] / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
+    let warn_at =
+        ((s.limits().warn_total_n / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
     (0..width)
         .map(|i| {
             if i < filled {
@@ -562,9 +562,8 @@ fn run(args: &Args) -> Result<(), String> {
                 if live && last_print.elapsed() > Duration::from_millis(100) {
                     last_print = std::time::Instant::now();
                     if let Some(s) = batch.last() {
-                        let f = s.tip_force_n;
-                        let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-                        history.push(history_glyph(norm, s.limits_n[1]));
+                        let norm = s.tip_force_norm_n();
+                        history.push(history_glyph(norm, s.limits().stop_total_n));
                         if history.len() > 60 {
                             history.remove(0);
                         }
@@ -575,7 +574,7 @@ fn run(args: &Args) -> Result<(), String> {
                             state_line(s),
                             norm,
                             bar(s),
-                            s.limits_n[1]
+                            s.limits().stop_total_n
                         )
                         .map_err(output_error)?;
                         stdout.flush().map_err(output_error)?;
@@ -615,7 +614,7 @@ fn run(args: &Args) -> Result<(), String> {
             let deadline = std::time::Instant::now() + Duration::from_secs(5);
             let s = loop {
                 let s = latest("waiting for the drives")?;
-                if s.drive_state == 2 && s.flags & flags::HALTED == 0 {
+                if s.drives_enabled() && s.flags & flags::HALTED == 0 {
                     break s;
                 }
                 if std::time::Instant::now() > deadline {

@@ -54,12 +54,12 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
         if start
             && let Some(s) = last
             && s.cycle > reply.cycle
-            && recording_code::state(s.recording) == recording_code::FAILED
+            && recording_code::is_failed(s.recording)
         {
             return Err(format!("{what}: {}", recording_failure(s.recording)));
         }
         if let Some(s) = last
-            && (recording_code::state(s.recording) == recording_code::ON) == start
+            && recording_code::is_on(s.recording) == start
         {
             if json {
                 println!(
