@@ -185,7 +185,7 @@ pub struct StateMsg {
     pub quick_stops: u64,
     /// States the loop dropped so far because the publishing thread's queue
     /// was full (those states were never published).
-    pub queue_drops: u64,
+    pub publish_queue_drops: u64,
     /// States the publishing thread failed to send so far.
     pub publish_errors: u64,
     /// Messages the recorder dropped so far (queue full or disk failed).
@@ -238,7 +238,7 @@ impl Default for StateMsg {
             compute_ns: [0; 3],
             overruns: 0,
             quick_stops: 0,
-            queue_drops: 0,
+            publish_queue_drops: 0,
             publish_errors: 0,
             recorder_drops: 0,
             recording: 0,

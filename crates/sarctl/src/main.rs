@@ -326,7 +326,7 @@ fn state_json(s: &StateMsg) -> serde_json::Value {
         "compute_ns": {"p50": s.compute_ns[0], "p99": s.compute_ns[1], "max": s.compute_ns[2]},
         "overruns": s.overruns,
         "quick_stops": s.quick_stops,
-        "publish_queue_drops": s.queue_drops,
+        "publish_queue_drops": s.publish_queue_drops,
         "publish_errors": s.publish_errors,
         "recording": recording_code::is_on(s.recording),
         "recording_failed": recording_code::is_failed(s.recording)
