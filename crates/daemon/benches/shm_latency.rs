@@ -172,7 +172,7 @@ fn latency(c: &mut Criterion) {
         println!(
             "daemon path: {} published, {} dropped, {} publish errors",
             shm.published(),
-            shm.queue_drops(),
+            shm.publish_queue_drops(),
             shm.publish_errors()
         );
     }

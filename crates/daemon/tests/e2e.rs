@@ -156,7 +156,7 @@ fn sard_sim_end_to_end() {
             if s.guard_state == guard_code::STOP && seen_stop.is_none() {
                 seen_stop = Some(*s);
             }
-            if seen_stop.is_some() && s.drive_state == 3 {
+            if seen_stop.is_some() && s.drive_state == sar_msgs::wire::drive_code::QUICK_STOP {
                 after_stop_drive_quick_stop = true;
             }
             // Estimate against truth, where both exist and the force is steady.
@@ -210,7 +210,11 @@ fn sard_sim_end_to_end() {
     };
     assert_eq!(later.guard_state, guard_code::OK, "{later:?}");
     assert_eq!(later.flags & flags::HALTED, 0);
-    assert_eq!(later.drive_state, 2, "drives not enabled again");
+    assert_eq!(
+        later.drive_state,
+        sar_msgs::wire::drive_code::ENABLED,
+        "drives not enabled again"
+    );
     drop(daemon);
     let _ = std::fs::remove_file(path);
 }

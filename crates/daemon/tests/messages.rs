@@ -265,7 +265,7 @@ prop_compose! {
             drive_fault_code: ints[6] as u16,
             target_q_m: f[3],
             target_valid: bools[2],
-            command_kind: CommandKindCode::from_code(codes.2).unwrap(),
+            command_kind: CommandKindCode::ALL[usize::from(codes.2) % CommandKindCode::ALL.len()],
             command_values: [f[4][0], f[4][1], f[4][2], bias[0], bias[1], bias[2]],
             command_arg: ints[7],
             move_tip_m: more[0],

@@ -610,275 +610,420 @@ impl fmt::Display for Axis {
     }
 }
 
-/// Why the guard is in its state, or why a reset was refused. Carries the facts
-/// (values, limits, which part or field); its `Display` is a short sentence.
-///
-/// Deliberately not `#[non_exhaustive]`: every crate that turns a reason into
-/// a code, a name or a sentence matches it exhaustively, so a new reason
-/// fails to compile until it is given a code ([`Reason::code`]) and a row in
-/// [`REASONS`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Reason {
-    /// No input has been stepped yet (the initial state).
-    NoInputYet,
-    /// The cycle number did not increase.
-    CycleOutOfOrder {
-        /// The largest cycle accepted before.
-        previous: u64,
-        /// The cycle received.
-        got: u64,
-    },
-    /// The clock could not be read this cycle (no time, no age, no trust).
-    ClockFailed,
-    /// The clock did not advance since the previous cycle (stuck, or gone
-    /// back): every age would be meaningless.
-    ClockNotAdvancing {
-        /// The largest time seen before, ns.
-        previous_ns: u64,
-        /// The time of this cycle, ns.
-        now_ns: u64,
-    },
-    /// The sensor's counter jumped by more than the accepted gap (samples
-    /// lost, or the counter went back, which wraps to a huge gap).
-    SensorCounterGap {
-        /// The previous counter.
-        previous: u32,
-        /// This cycle's counter.
-        got: u32,
-        /// The largest accepted step.
-        max_gap: u32,
-    },
-    /// The sensor's device status word is not 0 (all good).
-    SensorStatus {
-        /// The status word.
-        status: u32,
-    },
-    /// A joint moved between two joint samples by more than the axes' speed
-    /// limit allows over their stamp difference plus the margin (an encoder
-    /// jump, a slipping axis), or the joint stamp went back.
-    JointJump {
-        /// 1, 2 or 3 (q1, q2, q3).
-        axis: u8,
-        /// How far it moved, m (absolute value).
-        moved_m: f64,
-        /// How far it may move, m.
-        allowed_m: f64,
-    },
-    /// The joint sample's stamp is older than the previous joint sample's.
-    JointsStampBackwards {
-        /// The previous stamp, ns.
-        previous_ns: u64,
-        /// This cycle's stamp, ns.
-        got_ns: u64,
-    },
-    /// The sensor torque differs from the model's prediction by more than the
-    /// configured multiple of its standard deviation (an untared or faulty
-    /// sensor, a wrong geometry; with d != 0 also a wrong support or contact
-    /// along the shaft).
-    TorqueImplausible {
-        /// Which sensor-frame axis (the first beyond the limit).
-        axis: Axis,
-        /// Measured minus predicted torque on that axis, N m.
-        residual_nm: f64,
-        /// Its standard deviation, N m.
-        std_nm: f64,
-        /// The configured multiple.
-        max_sigma: f64,
-    },
-    /// A joint left the commanded trajectory by more than the tolerance (a
-    /// jumping encoder, a slipping axis, a collision), or the reference it is
-    /// compared with is not finite.
-    FollowingError {
-        /// 1, 2 or 3 (q1, q2, q3).
-        axis: u8,
-        /// |measured - commanded|, m (NaN when a value is not finite).
-        error_m: f64,
-        /// The accepted error, m.
-        tolerance_m: f64,
-    },
-    /// A reset named another cycle than the one just stepped (it must be
-    /// judged on the input of the current cycle).
-    ResetNotCurrent {
-        /// The cycle last stepped.
-        last: u64,
-        /// The cycle the reset named.
-        got: u64,
-    },
-    /// The force sensor flagged its reading invalid.
-    SensorInvalid,
-    /// The force sensor reading is too old.
-    SensorStale {
-        /// Its age, ns.
-        age_ns: u64,
-        /// The largest accepted age, ns.
-        max_age_ns: u64,
-    },
-    /// The joint positions are flagged invalid.
-    JointsInvalid,
-    /// The joint positions are too old.
-    JointsStale {
-        /// Their age, ns.
-        age_ns: u64,
-        /// The largest accepted age, ns.
-        max_age_ns: u64,
-    },
-    /// The kinematics refused the pose.
-    PoseInvalid,
-    /// A component of the estimate is NaN or infinite.
-    NonFinite {
-        /// Which vector.
-        field: TipField,
-        /// Which component.
-        axis: Axis,
-    },
-    /// A standard deviation is negative.
-    NegativeStd {
-        /// Which component.
-        axis: Axis,
-        /// Its value, N.
-        std_n: f64,
-    },
-    /// The rod direction is not a unit vector (within
-    /// [`ROD_DIR_UNIT_TOLERANCE`]).
-    RodDirNotUnit {
-        /// Its norm (finite or +inf, never NaN).
-        norm: f64,
-    },
-    /// The estimator said the tip force is not observable.
-    EstimatorNotObservable,
-    /// The tip force is not observable: the estimator flagged it (a standard
-    /// deviation above its observability limit).
-    NotObservable {
-        /// The largest per-axis standard deviation, N.
-        std_max_n: f64,
-        /// The estimator's observability limit, N.
-        max_std_n: f64,
-    },
-    /// A part of the tip force is at or above its stop limit.
-    AboveStop {
-        /// Which part.
-        part: ForcePart,
-        /// Its value plus the margin `std_margin |std_n|`, N (finite or +inf,
-        /// never NaN).
-        force_n: f64,
-        /// Its stop limit, N.
-        limit_n: f64,
-    },
-    /// A part of the tip force is at or above its warn limit.
-    AboveWarn {
-        /// Which part.
-        part: ForcePart,
-        /// Its value plus the margin `std_margin |std_n|`, N (finite or +inf,
-        /// never NaN).
-        force_n: f64,
-        /// Its warn limit, N.
-        limit_n: f64,
-    },
-    /// Every part has been below its warn limit minus the hysteresis for the
-    /// debounce time.
-    BelowWarn,
-    /// An accepted reset.
-    Reset,
-    /// The initial latch after good input: nothing faults, the guard waits
-    /// for the operator's first reset (`sarctl reset`) before the robot may
-    /// move.
-    AwaitingFirstReset,
-    /// The sensor's six readings repeated bit for bit over `repeats` new
-    /// samples while its counter advanced (a frozen, stuck-at sensor: a live
-    /// one always shows noise).
-    SensorFrozen {
-        /// Consecutive new samples identical to the one before them.
-        repeats: u32,
-    },
-    /// A raw reading (before bias removal) is at or beyond the sensor's
-    /// measuring range: the true force is unknown.
-    SensorSaturated {
-        /// Which sensor channel.
-        channel: SensorChannel,
-        /// The reading, N or N m.
-        value: f64,
-        /// The range of that channel, N or N m.
-        range: f64,
-    },
-    /// Too many single-sample jumps far beyond the noise within a window of
-    /// new samples (an unreliable sensor: interference, a loose connector).
-    SensorSpikes {
-        /// Spikes counted in the window.
-        spikes: u32,
-        /// The window, new samples.
-        window: u32,
-    },
-    /// The last tare is older than the configured age: the bias may have
-    /// drifted; a tare is due (a Warn).
-    TareDue {
-        /// Time since the last tare, s.
-        age_s: f64,
-        /// The configured largest age, s.
-        max_age_s: f64,
-    },
-    /// A tare was accepted while a tare was due: back to Ok.
-    Tared,
-    /// The first reset was refused: at rest, with the tip free, the measured
-    /// wrench differs from the model (the mean estimated tip force and the
-    /// mean torque residual over the samples at rest are the residuals): a
-    /// sensor mounted or scaled otherwise than configured, an untared
-    /// sensor, another manipulator than the configured one, or something
-    /// touching the tip.
-    MountingMismatch {
-        /// Which residual.
-        residual: RestResidual,
-        /// Its magnitude (mean over the samples at rest), N or N m.
-        value: f64,
-        /// What is accepted (noise of the mean, friction, tolerance), N or N m.
-        allowed: f64,
-    },
-    /// A reset accepted while a part is still at or above its stop limit:
-    /// the guard enters `Retreat` (only motions that reduce the force).
-    RetreatEntered {
-        /// The part at or above its stop limit.
-        part: ForcePart,
-        /// Its value with the margin, N.
-        force_n: f64,
-        /// Its stop limit, N.
-        limit_n: f64,
-    },
-    /// In `Retreat` the (filtered) force rose above the bound: back to Stop.
-    ForceRising {
-        /// Which part.
-        part: ForcePart,
-        /// Its filtered value, N.
-        force_n: f64,
-        /// The bound it passed: max(stop limit, lowest since entry + rise
-        /// allowance), N.
-        bound_n: f64,
-    },
-    /// A host fault that the daemon passes in (its publishing thread, which
-    /// carries the operator's commands and the published state, has made no
-    /// progress for too long).
-    PublisherStalled {
-        /// How long without progress, ms.
-        stalled_ms: u32,
-    },
-    /// The drives reported a fault (a drive's own fault, an EMCY, a lost
-    /// heartbeat on the CANopen path): the guard latches Fault in the cycle
-    /// the drives enter it; an accepted reset brings them back (fault reset,
-    /// enable).
-    DriveFault {
-        /// 1, 2 or 3 (q1, q2, q3); 0 when the drives cannot tell.
-        axis: u8,
-        /// The device's fault code.
-        code: u16,
-    },
-    /// The first reset came before the mean of the wrench at rest was
-    /// complete (the daemon has just started, or the robot moved): the
-    /// mounting check's stated tolerances hold only for the full mean, so
-    /// the first reset is refused until the robot has been still that long.
-    RestIncomplete {
-        /// Samples at rest so far.
-        samples: u32,
-        /// Samples the mean needs (`[plausibility] rest_samples`).
-        needed: u32,
-    },
+/// Defines [`Reason`] from one list, a row per reason: the variant (its docs
+/// and fields), `= code, "name"`, and `=> sentence` (its `Display`, written
+/// to the formatter named in `formatter`, with the fields bound by name).
+/// From the rows: the enum, [`REASONS`] (code and name, in code order),
+/// [`Reason::code`] and `Display`, and the snapshot's `Snap` (tagged by the
+/// code, the fields in their listed order). The codes must rise from row to
+/// row and fit the recordings' `uint8` below `REASON_OTHER` (checked at
+/// compile time).
+macro_rules! reasons {
+    (
+        formatter $f:ident;
+        $(#[$m:meta])*
+        pub enum $name:ident {
+            $(
+                $(#[$vm:meta])*
+                $v:ident $({ $( $(#[$fm:meta])* $field:ident: $fty:ty ),* $(,)? })?
+                    = $code:literal, $rname:literal => $text:expr
+            ),* $(,)?
+        }
+    ) => {
+        $(#[$m])*
+        pub enum $name {
+            $( $(#[$vm])* $v $({ $( $(#[$fm])* $field: $fty ),* })?, )*
+        }
+
+        /// Every reason's stable code and name, in code order (recordings,
+        /// the wire and `sarctl` use the codes; SAFETY.md names every
+        /// reason). Codes never change meaning; a new reason gets the next
+        /// free code.
+        pub const REASONS: [(u16, &str); [$($code),*].len()] = [$(($code, $rname)),*];
+
+        // Codes rise from row to row (so they are unique and `REASONS` is in
+        // code order) and stay below `REASON_OTHER`.
+        const _: () = assert!(codes_rise_below(&REASONS, CODE_OTHER as u16));
+
+        impl $name {
+            /// The stable numeric code (see [`REASONS`]): the one place a
+            /// reason's code is computed. Exhaustive: a new variant does not
+            /// compile until it has one.
+            pub const fn code(&self) -> u16 {
+                match self {
+                    $( Self::$v { .. } => $code, )*
+                }
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, $f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                match *self {
+                    $( Self::$v $({ $($field),* })? => $text, )*
+                }
+            }
+        }
+
+        // Snapshots (issue 17): the tag of a reason is its code.
+        sar_snapshot::snap_enum!($name {
+            $( $code => $v $({ $($field),* })?, )*
+        });
+    };
+}
+
+reasons! {
+    formatter f;
+    /// Why the guard is in its state, or why a reset was refused. Carries the facts
+    /// (values, limits, which part or field); its `Display` is a short sentence.
+    ///
+    /// Deliberately not `#[non_exhaustive]`: every crate that turns a reason into
+    /// a code, a name or a sentence matches it exhaustively, so a new reason
+    /// fails to compile until it is given a code ([`Reason::code`]) and a row in
+    /// [`REASONS`].
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub enum Reason {
+        /// No input has been stepped yet (the initial state).
+        NoInputYet = 1, "no_input_yet" => f.write_str("no input has been received yet"),
+        /// The cycle number did not increase.
+        CycleOutOfOrder {
+            /// The largest cycle accepted before.
+            previous: u64,
+            /// The cycle received.
+            got: u64,
+        } = 2, "cycle_out_of_order" => write!(f, "cycle {got} does not follow cycle {previous}"),
+        /// The clock could not be read this cycle (no time, no age, no trust).
+        ClockFailed = 3, "clock_failed" => f.write_str("the clock could not be read"),
+        /// The clock did not advance since the previous cycle (stuck, or gone
+        /// back): every age would be meaningless.
+        ClockNotAdvancing {
+            /// The largest time seen before, ns.
+            previous_ns: u64,
+            /// The time of this cycle, ns.
+            now_ns: u64,
+        } = 4, "clock_not_advancing" => write!(
+            f,
+            "the clock did not advance: {now_ns} ns after {previous_ns} ns"
+        ),
+        /// The sensor's counter jumped by more than the accepted gap (samples
+        /// lost, or the counter went back, which wraps to a huge gap).
+        SensorCounterGap {
+            /// The previous counter.
+            previous: u32,
+            /// This cycle's counter.
+            got: u32,
+            /// The largest accepted step.
+            max_gap: u32,
+        } = 5, "sensor_counter_gap" => write!(
+            f,
+            "the sensor counter went from {previous} to {got} (max step {max_gap})"
+        ),
+        /// The sensor's device status word is not 0 (all good).
+        SensorStatus {
+            /// The status word.
+            status: u32,
+        } = 6, "sensor_status" => write!(f, "the force sensor reports status {status:#x}"),
+        /// A joint moved between two joint samples by more than the axes' speed
+        /// limit allows over their stamp difference plus the margin (an encoder
+        /// jump, a slipping axis), or the joint stamp went back.
+        JointJump {
+            /// 1, 2 or 3 (q1, q2, q3).
+            axis: u8,
+            /// How far it moved, m (absolute value).
+            moved_m: f64,
+            /// How far it may move, m.
+            allowed_m: f64,
+        } = 7, "joint_jump" => write!(
+            f,
+            "q{axis} moved {moved_m:.6} m between two samples (max {allowed_m:.6} m)"
+        ),
+        /// The joint sample's stamp is older than the previous joint sample's.
+        JointsStampBackwards {
+            /// The previous stamp, ns.
+            previous_ns: u64,
+            /// This cycle's stamp, ns.
+            got_ns: u64,
+        } = 8, "joints_stamp_backwards" => write!(
+            f,
+            "the joint stamp went back from {previous_ns} ns to {got_ns} ns"
+        ),
+        /// The sensor torque differs from the model's prediction by more than the
+        /// configured multiple of its standard deviation (an untared or faulty
+        /// sensor, a wrong geometry; with d != 0 also a wrong support or contact
+        /// along the shaft).
+        TorqueImplausible {
+            /// Which sensor-frame axis (the first beyond the limit).
+            axis: Axis,
+            /// Measured minus predicted torque on that axis, N m.
+            residual_nm: f64,
+            /// Its standard deviation, N m.
+            std_nm: f64,
+            /// The configured multiple.
+            max_sigma: f64,
+        } = 9, "torque_implausible" => write!(
+            f,
+            "sensor torque {axis} is {residual_nm:.4} N m off the model (std {std_nm:.4} N m, \
+             max {max_sigma} std)"
+        ),
+        /// A reset named another cycle than the one just stepped (it must be
+        /// judged on the input of the current cycle).
+        ResetNotCurrent {
+            /// The cycle last stepped.
+            last: u64,
+            /// The cycle the reset named.
+            got: u64,
+        } = 10, "reset_not_current" => write!(
+            f,
+            "a reset for cycle {got} is not a reset of the current cycle {last}"
+        ),
+        /// The force sensor flagged its reading invalid.
+        SensorInvalid = 11, "sensor_invalid" => f.write_str("the force sensor reading is invalid"),
+        /// The force sensor reading is too old.
+        SensorStale {
+            /// Its age, ns.
+            age_ns: u64,
+            /// The largest accepted age, ns.
+            max_age_ns: u64,
+        } = 12, "sensor_stale" => write!(
+            f,
+            "the force sensor reading is {age_ns} ns old (max {max_age_ns} ns)"
+        ),
+        /// The joint positions are flagged invalid.
+        JointsInvalid = 13, "joints_invalid" => f.write_str("the joint positions are invalid"),
+        /// The joint positions are too old.
+        JointsStale {
+            /// Their age, ns.
+            age_ns: u64,
+            /// The largest accepted age, ns.
+            max_age_ns: u64,
+        } = 14, "joints_stale" => write!(
+            f,
+            "the joint positions are {age_ns} ns old (max {max_age_ns} ns)"
+        ),
+        /// The kinematics refused the pose.
+        PoseInvalid = 15, "pose_invalid" => f.write_str("the kinematics refused the pose"),
+        /// A component of the estimate is NaN or infinite.
+        NonFinite {
+            /// Which vector.
+            field: TipField,
+            /// Which component.
+            axis: Axis,
+        } = 16, "non_finite" => write!(f, "{field}.{axis} of the tip estimate is not finite"),
+        /// A standard deviation is negative.
+        NegativeStd {
+            /// Which component.
+            axis: Axis,
+            /// Its value, N.
+            std_n: f64,
+        } = 17, "negative_std" => write!(f, "std_n.{axis} = {std_n} N is negative"),
+        /// The rod direction is not a unit vector (within
+        /// [`ROD_DIR_UNIT_TOLERANCE`]).
+        RodDirNotUnit {
+            /// Its norm (finite or +inf, never NaN).
+            norm: f64,
+        } = 18, "rod_dir_not_unit" => write!(f, "the rod direction has norm {norm}, not 1"),
+        /// The estimator said the tip force is not observable.
+        EstimatorNotObservable = 19, "estimator_not_observable" => {
+            f.write_str("the estimator says the tip force is not observable")
+        },
+        /// The tip force is not observable: the estimator flagged it (a standard
+        /// deviation above its observability limit).
+        NotObservable {
+            /// The largest per-axis standard deviation, N.
+            std_max_n: f64,
+            /// The estimator's observability limit, N.
+            max_std_n: f64,
+        } = 20, "not_observable" => write!(
+            f,
+            "the tip force is not observable: std {std_max_n:.3} N > limit {max_std_n:.3} N"
+        ),
+        /// A part of the tip force is at or above its stop limit.
+        AboveStop {
+            /// Which part.
+            part: ForcePart,
+            /// Its value plus the margin `std_margin |std_n|`, N (finite or +inf,
+            /// never NaN).
+            force_n: f64,
+            /// Its stop limit, N.
+            limit_n: f64,
+        } = 21, "above_stop" => write!(
+            f,
+            "{part} tip force {force_n:.3} N is at or above the stop limit {limit_n:.3} N"
+        ),
+        /// A part of the tip force is at or above its warn limit.
+        AboveWarn {
+            /// Which part.
+            part: ForcePart,
+            /// Its value plus the margin `std_margin |std_n|`, N (finite or +inf,
+            /// never NaN).
+            force_n: f64,
+            /// Its warn limit, N.
+            limit_n: f64,
+        } = 22, "above_warn" => write!(
+            f,
+            "{part} tip force {force_n:.3} N is at or above the warn limit {limit_n:.3} N"
+        ),
+        /// Every part has been below its warn limit minus the hysteresis for the
+        /// debounce time.
+        BelowWarn = 23, "below_warn" => {
+            f.write_str("every tip force part is below its warn limit minus the hysteresis")
+        },
+        /// An accepted reset.
+        Reset = 24, "reset" => f.write_str("reset accepted"),
+        /// A joint left the commanded trajectory by more than the tolerance (a
+        /// jumping encoder, a slipping axis, a collision), or the reference it is
+        /// compared with is not finite.
+        FollowingError {
+            /// 1, 2 or 3 (q1, q2, q3).
+            axis: u8,
+            /// |measured - commanded|, m (NaN when a value is not finite).
+            error_m: f64,
+            /// The accepted error, m.
+            tolerance_m: f64,
+        } = 25, "following_error" => write!(
+            f,
+            "q{axis} is {:.3} mm off the commanded trajectory (tolerance {:.3} mm)",
+            error_m * 1e3,
+            tolerance_m * 1e3
+        ),
+        /// The initial latch after good input: nothing faults, the guard waits
+        /// for the operator's first reset (`sarctl reset`) before the robot may
+        /// move.
+        AwaitingFirstReset = 26, "awaiting_first_reset" => f.write_str(
+            "waiting for the first reset: check that the tip is free, then reset (sarctl reset)",
+        ),
+        /// The sensor's six readings repeated bit for bit over `repeats` new
+        /// samples while its counter advanced (a frozen, stuck-at sensor: a live
+        /// one always shows noise).
+        SensorFrozen {
+            /// Consecutive new samples identical to the one before them.
+            repeats: u32,
+        } = 27, "sensor_frozen" => write!(
+            f,
+            "the force sensor is frozen: {repeats} new samples repeated the same six values"
+        ),
+        /// A raw reading (before bias removal) is at or beyond the sensor's
+        /// measuring range: the true force is unknown.
+        SensorSaturated {
+            /// Which sensor channel.
+            channel: SensorChannel,
+            /// The reading, N or N m.
+            value: f64,
+            /// The range of that channel, N or N m.
+            range: f64,
+        } = 28, "sensor_saturated" => write!(
+            f,
+            "the force sensor is saturated: {channel} reads {value:.3}, range {range:.3}"
+        ),
+        /// Too many single-sample jumps far beyond the noise within a window of
+        /// new samples (an unreliable sensor: interference, a loose connector).
+        SensorSpikes {
+            /// Spikes counted in the window.
+            spikes: u32,
+            /// The window, new samples.
+            window: u32,
+        } = 29, "sensor_spikes" => write!(
+            f,
+            "the force sensor is unreliable: {spikes} spikes within {window} samples"
+        ),
+        /// The last tare is older than the configured age: the bias may have
+        /// drifted; a tare is due (a Warn).
+        TareDue {
+            /// Time since the last tare, s.
+            age_s: f64,
+            /// The configured largest age, s.
+            max_age_s: f64,
+        } = 30, "tare_due" => write!(
+            f,
+            "a tare is due: the last one is {age_s:.0} s old (max {max_age_s:.0} s)"
+        ),
+        /// A tare was accepted while a tare was due: back to Ok.
+        Tared = 31, "tared" => f.write_str("tare accepted"),
+        /// The first reset was refused: at rest, with the tip free, the measured
+        /// wrench differs from the model (the mean estimated tip force and the
+        /// mean torque residual over the samples at rest are the residuals): a
+        /// sensor mounted or scaled otherwise than configured, an untared
+        /// sensor, another manipulator than the configured one, or something
+        /// touching the tip.
+        MountingMismatch {
+            /// Which residual.
+            residual: RestResidual,
+            /// Its magnitude (mean over the samples at rest), N or N m.
+            value: f64,
+            /// What is accepted (noise of the mean, friction, tolerance), N or N m.
+            allowed: f64,
+        } = 32, "mounting_mismatch" => write!(
+            f,
+            "at rest the {residual} differs from the model by {value:.3} (allowed \
+             {allowed:.3}): free the tip, tare the sensor with the rod detached, check \
+             sensor_rotation, counts_per_n and the manipulator profile"
+        ),
+        /// A reset accepted while a part is still at or above its stop limit:
+        /// the guard enters `Retreat` (only motions that reduce the force).
+        RetreatEntered {
+            /// The part at or above its stop limit.
+            part: ForcePart,
+            /// Its value with the margin, N.
+            force_n: f64,
+            /// Its stop limit, N.
+            limit_n: f64,
+        } = 33, "retreat_entered" => write!(
+            f,
+            "retreat: {part} tip force {force_n:.2} N is above the stop limit {limit_n:.2} N; \
+             only motions that reduce it are accepted"
+        ),
+        /// In `Retreat` the (filtered) force rose above the bound: back to Stop.
+        ForceRising {
+            /// Which part.
+            part: ForcePart,
+            /// Its filtered value, N.
+            force_n: f64,
+            /// The bound it passed: max(stop limit, lowest since entry + rise
+            /// allowance), N.
+            bound_n: f64,
+        } = 34, "force_rising" => write!(
+            f,
+            "the {part} tip force rose to {force_n:.2} N during the retreat (bound {bound_n:.2} N)"
+        ),
+        /// A host fault that the daemon passes in (its publishing thread, which
+        /// carries the operator's commands and the published state, has made no
+        /// progress for too long).
+        PublisherStalled {
+            /// How long without progress, ms.
+            stalled_ms: u32,
+        } = 35, "publisher_stalled" => write!(
+            f,
+            "the publishing thread made no progress for {stalled_ms} ms: no commands, no state"
+        ),
+        /// The drives reported a fault (a drive's own fault, an EMCY, a lost
+        /// heartbeat on the CANopen path): the guard latches Fault in the cycle
+        /// the drives enter it; an accepted reset brings them back (fault reset,
+        /// enable).
+        DriveFault {
+            /// 1, 2 or 3 (q1, q2, q3); 0 when the drives cannot tell.
+            axis: u8,
+            /// The device's fault code.
+            code: u16,
+        } = 36, "drive_fault" => {
+            if axis == 0 {
+                write!(f, "the drives faulted (code {code:#06x})")
+            } else {
+                write!(f, "the drive of q{axis} faulted (code {code:#06x})")
+            }
+        },
+        /// The first reset came before the mean of the wrench at rest was
+        /// complete (the daemon has just started, or the robot moved): the
+        /// mounting check's stated tolerances hold only for the full mean, so
+        /// the first reset is refused until the robot has been still that long.
+        RestIncomplete {
+            /// Samples at rest so far.
+            samples: u32,
+            /// Samples the mean needs (`[plausibility] rest_samples`).
+            needed: u32,
+        } = 37, "rest_incomplete" => write!(
+            f,
+            "the wrench at rest is still being measured ({samples} of {needed} samples): keep the robot still and reset again"
+        ),
+    }
 }
 
 /// A residual of the wrench at rest against the model (the first reset's
@@ -939,97 +1084,40 @@ impl fmt::Display for SensorChannel {
     }
 }
 
-/// Every reason's stable code and name, in code order (recordings, the wire
-/// and `sarctl` use the codes; SAFETY.md names every reason). Codes never
-/// change meaning; a new reason gets the next free code.
-pub const REASONS: [(u16, &str); 37] = [
-    (1, "no_input_yet"),
-    (2, "cycle_out_of_order"),
-    (3, "clock_failed"),
-    (4, "clock_not_advancing"),
-    (5, "sensor_counter_gap"),
-    (6, "sensor_status"),
-    (7, "joint_jump"),
-    (8, "joints_stamp_backwards"),
-    (9, "torque_implausible"),
-    (10, "reset_not_current"),
-    (11, "sensor_invalid"),
-    (12, "sensor_stale"),
-    (13, "joints_invalid"),
-    (14, "joints_stale"),
-    (15, "pose_invalid"),
-    (16, "non_finite"),
-    (17, "negative_std"),
-    (18, "rod_dir_not_unit"),
-    (19, "estimator_not_observable"),
-    (20, "not_observable"),
-    (21, "above_stop"),
-    (22, "above_warn"),
-    (23, "below_warn"),
-    (24, "reset"),
-    (25, "following_error"),
-    (26, "awaiting_first_reset"),
-    (27, "sensor_frozen"),
-    (28, "sensor_saturated"),
-    (29, "sensor_spikes"),
-    (30, "tare_due"),
-    (31, "tared"),
-    (32, "mounting_mismatch"),
-    (33, "retreat_entered"),
-    (34, "force_rising"),
-    (35, "publisher_stalled"),
-    (36, "drive_fault"),
-    (37, "rest_incomplete"),
-];
+/// Whether the codes of `rows` rise from row to row, from above 0 to below
+/// `end` (the compile-time check of the reason table).
+const fn codes_rise_below(mut rows: &[(u16, &str)], end: u16) -> bool {
+    let mut previous = 0;
+    while let [(code, _), rest @ ..] = rows {
+        if *code <= previous || *code >= end {
+            return false;
+        }
+        previous = *code;
+        rows = rest;
+    }
+    true
+}
+
+/// The recordings' byte for a code that does not fit one (`REASON_OTHER`
+/// of `GuardEvent.msg`; no reason has one: the codes stay below it).
+pub const CODE_OTHER: u8 = 255;
+
+/// A reason code as the recordings' `uint8` carries it: the same number
+/// (every code is below [`CODE_OTHER`]); a number beyond is [`CODE_OTHER`].
+pub fn recorded_code(code: u32) -> u8 {
+    u8::try_from(code).unwrap_or(CODE_OTHER)
+}
 
 impl Reason {
-    /// The stable numeric code (see [`REASONS`]). Exhaustive: a new variant
-    /// does not compile until it has one.
-    pub const fn code(&self) -> u16 {
-        match self {
-            Self::NoInputYet => 1,
-            Self::CycleOutOfOrder { .. } => 2,
-            Self::ClockFailed => 3,
-            Self::ClockNotAdvancing { .. } => 4,
-            Self::SensorCounterGap { .. } => 5,
-            Self::SensorStatus { .. } => 6,
-            Self::JointJump { .. } => 7,
-            Self::JointsStampBackwards { .. } => 8,
-            Self::TorqueImplausible { .. } => 9,
-            Self::ResetNotCurrent { .. } => 10,
-            Self::SensorInvalid => 11,
-            Self::SensorStale { .. } => 12,
-            Self::JointsInvalid => 13,
-            Self::JointsStale { .. } => 14,
-            Self::PoseInvalid => 15,
-            Self::NonFinite { .. } => 16,
-            Self::NegativeStd { .. } => 17,
-            Self::RodDirNotUnit { .. } => 18,
-            Self::EstimatorNotObservable => 19,
-            Self::NotObservable { .. } => 20,
-            Self::AboveStop { .. } => 21,
-            Self::AboveWarn { .. } => 22,
-            Self::BelowWarn => 23,
-            Self::Reset => 24,
-            Self::FollowingError { .. } => 25,
-            Self::AwaitingFirstReset => 26,
-            Self::SensorFrozen { .. } => 27,
-            Self::SensorSaturated { .. } => 28,
-            Self::SensorSpikes { .. } => 29,
-            Self::TareDue { .. } => 30,
-            Self::Tared => 31,
-            Self::MountingMismatch { .. } => 32,
-            Self::RetreatEntered { .. } => 33,
-            Self::ForceRising { .. } => 34,
-            Self::PublisherStalled { .. } => 35,
-            Self::DriveFault { .. } => 36,
-            Self::RestIncomplete { .. } => 37,
-        }
-    }
-
     /// The stable name of the reason (snake case, as in [`REASONS`]).
     pub fn name(&self) -> &'static str {
         reason_name(self.code())
+    }
+
+    /// [`Reason::code`] as the recordings' `uint8` carries it (the same
+    /// number, [`recorded_code`]).
+    pub fn recorded_code(&self) -> u8 {
+        recorded_code(u32::from(self.code()))
     }
 }
 
@@ -1039,191 +1127,6 @@ pub fn reason_name(code: u16) -> &'static str {
         .iter()
         .find(|(c, _)| *c == code)
         .map_or("unknown", |(_, name)| name)
-}
-
-impl fmt::Display for Reason {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match *self {
-            Self::NoInputYet => f.write_str("no input has been received yet"),
-            Self::CycleOutOfOrder { previous, got } => {
-                write!(f, "cycle {got} does not follow cycle {previous}")
-            }
-            Self::ClockFailed => f.write_str("the clock could not be read"),
-            Self::ClockNotAdvancing {
-                previous_ns,
-                now_ns,
-            } => write!(
-                f,
-                "the clock did not advance: {now_ns} ns after {previous_ns} ns"
-            ),
-            Self::SensorCounterGap {
-                previous,
-                got,
-                max_gap,
-            } => write!(
-                f,
-                "the sensor counter went from {previous} to {got} (max step {max_gap})"
-            ),
-            Self::FollowingError {
-                axis,
-                error_m,
-                tolerance_m,
-            } => write!(
-                f,
-                "q{axis} is {:.3} mm off the commanded trajectory (tolerance {:.3} mm)",
-                error_m * 1e3,
-                tolerance_m * 1e3
-            ),
-            Self::SensorStatus { status } => {
-                write!(f, "the force sensor reports status {status:#x}")
-            }
-            Self::JointJump {
-                axis,
-                moved_m,
-                allowed_m,
-            } => write!(
-                f,
-                "q{axis} moved {moved_m:.6} m between two samples (max {allowed_m:.6} m)"
-            ),
-            Self::JointsStampBackwards {
-                previous_ns,
-                got_ns,
-            } => write!(
-                f,
-                "the joint stamp went back from {previous_ns} ns to {got_ns} ns"
-            ),
-            Self::TorqueImplausible {
-                axis,
-                residual_nm,
-                std_nm,
-                max_sigma,
-            } => write!(
-                f,
-                "sensor torque {axis} is {residual_nm:.4} N m off the model (std {std_nm:.4} N m, \
-                 max {max_sigma} std)"
-            ),
-            Self::ResetNotCurrent { last, got } => write!(
-                f,
-                "a reset for cycle {got} is not a reset of the current cycle {last}"
-            ),
-            Self::SensorInvalid => f.write_str("the force sensor reading is invalid"),
-            Self::SensorStale { age_ns, max_age_ns } => write!(
-                f,
-                "the force sensor reading is {age_ns} ns old (max {max_age_ns} ns)"
-            ),
-            Self::JointsInvalid => f.write_str("the joint positions are invalid"),
-            Self::JointsStale { age_ns, max_age_ns } => write!(
-                f,
-                "the joint positions are {age_ns} ns old (max {max_age_ns} ns)"
-            ),
-            Self::PoseInvalid => f.write_str("the kinematics refused the pose"),
-            Self::NonFinite { field, axis } => {
-                write!(f, "{field}.{axis} of the tip estimate is not finite")
-            }
-            Self::NegativeStd { axis, std_n } => {
-                write!(f, "std_n.{axis} = {std_n} N is negative")
-            }
-            Self::RodDirNotUnit { norm } => {
-                write!(f, "the rod direction has norm {norm}, not 1")
-            }
-            Self::EstimatorNotObservable => {
-                f.write_str("the estimator says the tip force is not observable")
-            }
-            Self::NotObservable {
-                std_max_n,
-                max_std_n,
-            } => write!(
-                f,
-                "the tip force is not observable: std {std_max_n:.3} N > limit {max_std_n:.3} N"
-            ),
-            Self::AboveStop {
-                part,
-                force_n,
-                limit_n,
-            } => write!(
-                f,
-                "{part} tip force {force_n:.3} N is at or above the stop limit {limit_n:.3} N"
-            ),
-            Self::AboveWarn {
-                part,
-                force_n,
-                limit_n,
-            } => write!(
-                f,
-                "{part} tip force {force_n:.3} N is at or above the warn limit {limit_n:.3} N"
-            ),
-            Self::BelowWarn => {
-                f.write_str("every tip force part is below its warn limit minus the hysteresis")
-            }
-            Self::Reset => f.write_str("reset accepted"),
-            Self::AwaitingFirstReset => f.write_str(
-                "waiting for the first reset: check that the tip is free, then reset (sarctl reset)",
-            ),
-            Self::SensorFrozen { repeats } => write!(
-                f,
-                "the force sensor is frozen: {repeats} new samples repeated the same six values"
-            ),
-            Self::SensorSaturated {
-                channel,
-                value,
-                range,
-            } => write!(
-                f,
-                "the force sensor is saturated: {channel} reads {value:.3}, range {range:.3}"
-            ),
-            Self::SensorSpikes { spikes, window } => write!(
-                f,
-                "the force sensor is unreliable: {spikes} spikes within {window} samples"
-            ),
-            Self::TareDue { age_s, max_age_s } => write!(
-                f,
-                "a tare is due: the last one is {age_s:.0} s old (max {max_age_s:.0} s)"
-            ),
-            Self::Tared => f.write_str("tare accepted"),
-            Self::MountingMismatch {
-                residual,
-                value,
-                allowed,
-            } => write!(
-                f,
-                "at rest the {residual} differs from the model by {value:.3} (allowed \
-                 {allowed:.3}): free the tip, tare the sensor with the rod detached, check \
-                 sensor_rotation, counts_per_n and the manipulator profile"
-            ),
-            Self::RetreatEntered {
-                part,
-                force_n,
-                limit_n,
-            } => write!(
-                f,
-                "retreat: {part} tip force {force_n:.2} N is above the stop limit {limit_n:.2} N; \
-                 only motions that reduce it are accepted"
-            ),
-            Self::ForceRising {
-                part,
-                force_n,
-                bound_n,
-            } => write!(
-                f,
-                "the {part} tip force rose to {force_n:.2} N during the retreat (bound {bound_n:.2} N)"
-            ),
-            Self::PublisherStalled { stalled_ms } => write!(
-                f,
-                "the publishing thread made no progress for {stalled_ms} ms: no commands, no state"
-            ),
-            Self::DriveFault { axis, code } => {
-                if axis == 0 {
-                    write!(f, "the drives faulted (code {code:#06x})")
-                } else {
-                    write!(f, "the drive of q{axis} faulted (code {code:#06x})")
-                }
-            }
-            Self::RestIncomplete { samples, needed } => write!(
-                f,
-                "the wrench at rest is still being measured ({samples} of {needed} samples): keep the robot still and reset again"
-            ),
-        }
-    }
 }
 
 /// A change of state.
@@ -1408,25 +1311,14 @@ impl Guard {
         );
     }
 
-    /// [`Guard::step`] without the invariants' check.
+    /// [`Guard::step`] without the invariants' check: judge the input (a
+    /// fault condition latches Fault), count the votes of its force parts,
+    /// then decide the move of the state it is in.
     #[inline]
     fn step_state(&mut self, input: &GuardInput) -> Option<Transition> {
         let cycle = input.cycle;
         let parts_n = match self.evaluate(input) {
-            Err(fault) => {
-                self.blocker = Some(fault);
-                self.above_warn = Some(fault);
-                self.smoothed_parts_n = None;
-                self.stop_count = 0;
-                self.warn_count = 0;
-                self.clear_count = 0;
-                if self.initial && self.state == GuardState::Fault {
-                    // The initial latch shows what blocks the first reset now.
-                    self.reason = fault;
-                    return None;
-                }
-                return self.enter(GuardState::Fault, fault, cycle);
-            }
+            Err(fault) => return self.on_fault(fault, cycle),
             Ok(parts_n) => parts_n,
         };
         if self.initial && self.state == GuardState::Fault {
@@ -1438,16 +1330,49 @@ impl Guard {
             }
             _ => None,
         };
-        let cfg = &self.config;
-        let stop_hit = first_at_or_above(&parts_n, &cfg.stop_n);
-        let warn_hit = first_at_or_above(&parts_n, &cfg.warn_n);
-        let clear = parts_n
-            .iter()
-            .zip(cfg.clear_n.iter())
-            .all(|(value, limit)| *value < *limit);
-        let debounce = cfg.limits.debounce_samples;
+        let hits = self.count_votes(&parts_n, input.new_sample);
+        match self.state {
+            GuardState::Stop | GuardState::Fault => None,
+            GuardState::Retreat => self.step_retreat(&parts_n, hits.clear, cycle),
+            GuardState::Ok | GuardState::Warn => self.step_ok_warn(&hits, input.tare_due, cycle),
+        }
+    }
 
-        if input.new_sample {
+    /// A fault condition in this cycle's input: it blocks a reset and a
+    /// tare, clears the votes and the filtered parts, and latches Fault (in
+    /// the initial latch it becomes the reason shown, without a transition).
+    #[inline]
+    fn on_fault(&mut self, fault: Reason, cycle: u64) -> Option<Transition> {
+        self.blocker = Some(fault);
+        self.above_warn = Some(fault);
+        self.smoothed_parts_n = None;
+        self.stop_count = 0;
+        self.warn_count = 0;
+        self.clear_count = 0;
+        if self.initial && self.state == GuardState::Fault {
+            // The initial latch shows what blocks the first reset now.
+            self.reason = fault;
+            return None;
+        }
+        self.enter(GuardState::Fault, fault, cycle)
+    }
+
+    /// Compares the parts (margin included) with the stop, warn and clear
+    /// limits; a new sample moves each up/down count by one; what is at or
+    /// above a stop (warn) limit becomes what blocks a reset (a tare).
+    #[inline]
+    fn count_votes(&mut self, parts_n: &[f64; 3], new_sample: bool) -> Hits {
+        let cfg = &self.config;
+        let hits = Hits {
+            stop: first_at_or_above(parts_n, &cfg.stop_n),
+            warn: first_at_or_above(parts_n, &cfg.warn_n),
+            clear: parts_n
+                .iter()
+                .zip(cfg.clear_n.iter())
+                .all(|(value, limit)| *value < *limit),
+        };
+        let debounce = cfg.limits.debounce_samples;
+        if new_sample {
             let vote = |count: u32, holds: bool| {
                 if holds {
                     count.saturating_add(1).min(debounce)
@@ -1455,65 +1380,71 @@ impl Guard {
                     count.saturating_sub(1)
                 }
             };
-            self.stop_count = vote(self.stop_count, stop_hit.is_some());
-            self.warn_count = vote(self.warn_count, warn_hit.is_some());
-            self.clear_count = vote(self.clear_count, clear);
+            self.stop_count = vote(self.stop_count, hits.stop.is_some());
+            self.warn_count = vote(self.warn_count, hits.warn.is_some());
+            self.clear_count = vote(self.clear_count, hits.clear);
         }
-        self.blocker = stop_hit.map(|(part, force_n, limit_n)| Reason::AboveStop {
+        self.blocker = hits.stop.map(|(part, force_n, limit_n)| Reason::AboveStop {
             part,
             force_n,
             limit_n,
         });
-        self.above_warn = warn_hit.map(|(part, force_n, limit_n)| Reason::AboveWarn {
+        self.above_warn = hits.warn.map(|(part, force_n, limit_n)| Reason::AboveWarn {
             part,
             force_n,
             limit_n,
         });
+        hits
+    }
 
-        match self.state {
-            GuardState::Stop | GuardState::Fault => None,
-            GuardState::Retreat => self.step_retreat(&parts_n, clear, cycle),
-            GuardState::Ok | GuardState::Warn => {
-                if let Some((part, force_n, limit_n)) = stop_hit
-                    && self.stop_count >= debounce
-                {
-                    let reason = Reason::AboveStop {
-                        part,
-                        force_n,
-                        limit_n,
-                    };
-                    return self.enter(GuardState::Stop, reason, cycle);
-                }
-                let warn_due = warn_hit.filter(|_| self.warn_count >= debounce);
-                let tare_warn = matches!(self.reason, Reason::TareDue { .. });
-                if self.state == GuardState::Ok || tare_warn {
-                    if let Some((part, force_n, limit_n)) = warn_due {
-                        let reason = Reason::AboveWarn {
-                            part,
-                            force_n,
-                            limit_n,
-                        };
-                        // Leaving Warn needs a fresh run of clear samples.
-                        self.clear_count = 0;
-                        return self.enter_reason(GuardState::Warn, reason, cycle);
-                    }
-                    return match (self.state, input.tare_due) {
-                        (GuardState::Ok, Some(due)) => self.enter(GuardState::Warn, due, cycle),
-                        // The tare was done: the tare warning is over.
-                        (GuardState::Warn, None) => {
-                            self.enter(GuardState::Ok, Reason::Tared, cycle)
-                        }
-                        _ => None,
-                    };
-                }
-                if clear && self.clear_count >= debounce {
-                    // Re-entering Warn needs a fresh run of warn samples.
-                    self.warn_count = 0;
-                    return self.enter(GuardState::Ok, Reason::BelowWarn, cycle);
-                }
-                None
-            }
+    /// `Ok` or `Warn`: Stop once a stop limit is debounced; from Ok (or a
+    /// tare's Warn) Warn once a warn limit is debounced, else the tare's
+    /// warning begins or ends; from a force's Warn, Ok once every part is
+    /// debounced clear.
+    #[inline]
+    fn step_ok_warn(
+        &mut self,
+        hits: &Hits,
+        tare_due: Option<Reason>,
+        cycle: u64,
+    ) -> Option<Transition> {
+        let debounce = self.config.limits.debounce_samples;
+        if let Some((part, force_n, limit_n)) = hits.stop
+            && self.stop_count >= debounce
+        {
+            let reason = Reason::AboveStop {
+                part,
+                force_n,
+                limit_n,
+            };
+            return self.enter(GuardState::Stop, reason, cycle);
         }
+        let warn_due = hits.warn.filter(|_| self.warn_count >= debounce);
+        let tare_warn = matches!(self.reason, Reason::TareDue { .. });
+        if self.state == GuardState::Ok || tare_warn {
+            if let Some((part, force_n, limit_n)) = warn_due {
+                let reason = Reason::AboveWarn {
+                    part,
+                    force_n,
+                    limit_n,
+                };
+                // Leaving Warn needs a fresh run of clear samples.
+                self.clear_count = 0;
+                return self.enter_reason(GuardState::Warn, reason, cycle);
+            }
+            return match (self.state, tare_due) {
+                (GuardState::Ok, Some(due)) => self.enter(GuardState::Warn, due, cycle),
+                // The tare was done: the tare warning is over.
+                (GuardState::Warn, None) => self.enter(GuardState::Ok, Reason::Tared, cycle),
+                _ => None,
+            };
+        }
+        if hits.clear && self.clear_count >= debounce {
+            // Re-entering Warn needs a fresh run of warn samples.
+            self.warn_count = 0;
+            return self.enter(GuardState::Ok, Reason::BelowWarn, cycle);
+        }
+        None
     }
 
     /// `Retreat`: Stop when a filtered part rises above
@@ -1645,8 +1576,10 @@ impl Guard {
         })
     }
 
-    /// The first fault condition of `input` in the fixed order, or the force
-    /// parts. Records the cycle if it is in order.
+    /// The first fault condition of `input` in the fixed order (cycle
+    /// order, the caller's input fault, the samples' validity and age, the
+    /// estimate), or the force parts with their margin. Records the cycle if
+    /// it is in order.
     #[inline]
     fn evaluate(&mut self, input: &GuardInput) -> Result<[f64; 3], Reason> {
         if let Some(previous) = self.last_cycle
@@ -1658,71 +1591,9 @@ impl Guard {
             });
         }
         self.last_cycle = Some(input.cycle);
-
-        if let Some(fault) = input.input_fault {
-            return Err(fault);
-        }
+        check_samples(input, &self.config.limits)?;
+        let (force_n, std_n, rod_dir) = check_estimate(&input.tip)?;
         let limits = &self.config.limits;
-        if !input.sensor_valid {
-            return Err(Reason::SensorInvalid);
-        }
-        if input.sensor_age_ns > limits.max_sensor_age_ns {
-            return Err(Reason::SensorStale {
-                age_ns: input.sensor_age_ns,
-                max_age_ns: limits.max_sensor_age_ns,
-            });
-        }
-        if !input.joints_valid {
-            return Err(Reason::JointsInvalid);
-        }
-        if input.joints_age_ns > limits.max_joints_age_ns {
-            return Err(Reason::JointsStale {
-                age_ns: input.joints_age_ns,
-                max_age_ns: limits.max_joints_age_ns,
-            });
-        }
-        let (force_n, std_n, rod_dir, observable, max_std_n) = match input.tip {
-            TipInput::PoseInvalid => return Err(Reason::PoseInvalid),
-            TipInput::NotObservable => return Err(Reason::EstimatorNotObservable),
-            TipInput::Estimate {
-                force_n,
-                std_n,
-                rod_dir,
-                observable,
-                max_std_n,
-            } => (force_n, std_n, rod_dir, observable, max_std_n),
-        };
-        for (field, vector) in [
-            (TipField::Force, &force_n),
-            (TipField::Std, &std_n),
-            (TipField::RodDir, &rod_dir),
-        ] {
-            for (axis, value) in Axis::ALL.iter().zip(vector.iter()) {
-                if !value.is_finite() {
-                    return Err(Reason::NonFinite { field, axis: *axis });
-                }
-            }
-        }
-        for (axis, value) in Axis::ALL.iter().zip(std_n.iter()) {
-            if *value < 0.0 {
-                return Err(Reason::NegativeStd {
-                    axis: *axis,
-                    std_n: *value,
-                });
-            }
-        }
-        let norm2 = rod_dir.norm_squared();
-        if !(ROD_DIR_NORM2_MIN..=ROD_DIR_NORM2_MAX).contains(&norm2) {
-            return Err(Reason::RodDirNotUnit {
-                norm: rod_dir.norm(),
-            });
-        }
-        if !observable {
-            return Err(Reason::NotObservable {
-                std_max_n: std_n.x.max(std_n.y).max(std_n.z),
-                max_std_n,
-            });
-        }
         // The margin: k |std| bounds k standard deviations of every part.
         let mut margin_n = if limits.std_margin > 0.0 {
             limits.std_margin * std_n.norm()
@@ -1737,6 +1608,94 @@ impl Guard {
         };
         Ok(force_parts_n(&force_n, &rod_dir).map(|part_n| part_n + margin_n))
     }
+}
+
+/// What one cycle's force parts hit: the first part at or above its stop
+/// limit and the first at or above its warn limit (part, value, limit), and
+/// whether every part is below its clear limit.
+struct Hits {
+    stop: Option<(ForcePart, f64, f64)>,
+    warn: Option<(ForcePart, f64, f64)>,
+    clear: bool,
+}
+
+/// The samples' fault conditions in the fixed order: the caller's input
+/// fault, the sensor's validity and age, the joints' validity and age.
+#[inline]
+fn check_samples(input: &GuardInput, limits: &GuardLimits) -> Result<(), Reason> {
+    if let Some(fault) = input.input_fault {
+        return Err(fault);
+    }
+    if !input.sensor_valid {
+        return Err(Reason::SensorInvalid);
+    }
+    if input.sensor_age_ns > limits.max_sensor_age_ns {
+        return Err(Reason::SensorStale {
+            age_ns: input.sensor_age_ns,
+            max_age_ns: limits.max_sensor_age_ns,
+        });
+    }
+    if !input.joints_valid {
+        return Err(Reason::JointsInvalid);
+    }
+    if input.joints_age_ns > limits.max_joints_age_ns {
+        return Err(Reason::JointsStale {
+            age_ns: input.joints_age_ns,
+            max_age_ns: limits.max_joints_age_ns,
+        });
+    }
+    Ok(())
+}
+
+/// The estimate's fault conditions in the fixed order: a refused pose, the
+/// estimator's unobservable flag, a non-finite number, a negative standard
+/// deviation, a rod direction not of unit length, an unobservable force.
+/// Else its force, standard deviation and rod direction.
+#[inline]
+fn check_estimate(tip: &TipInput) -> Result<(Vec3, Vec3, Vec3), Reason> {
+    let (force_n, std_n, rod_dir, observable, max_std_n) = match *tip {
+        TipInput::PoseInvalid => return Err(Reason::PoseInvalid),
+        TipInput::NotObservable => return Err(Reason::EstimatorNotObservable),
+        TipInput::Estimate {
+            force_n,
+            std_n,
+            rod_dir,
+            observable,
+            max_std_n,
+        } => (force_n, std_n, rod_dir, observable, max_std_n),
+    };
+    for (field, vector) in [
+        (TipField::Force, &force_n),
+        (TipField::Std, &std_n),
+        (TipField::RodDir, &rod_dir),
+    ] {
+        for (axis, value) in Axis::ALL.iter().zip(vector.iter()) {
+            if !value.is_finite() {
+                return Err(Reason::NonFinite { field, axis: *axis });
+            }
+        }
+    }
+    for (axis, value) in Axis::ALL.iter().zip(std_n.iter()) {
+        if *value < 0.0 {
+            return Err(Reason::NegativeStd {
+                axis: *axis,
+                std_n: *value,
+            });
+        }
+    }
+    let norm2 = rod_dir.norm_squared();
+    if !(ROD_DIR_NORM2_MIN..=ROD_DIR_NORM2_MAX).contains(&norm2) {
+        return Err(Reason::RodDirNotUnit {
+            norm: rod_dir.norm(),
+        });
+    }
+    if !observable {
+        return Err(Reason::NotObservable {
+            std_max_n: std_n.x.max(std_n.y).max(std_n.z),
+            max_std_n,
+        });
+    }
+    Ok((force_n, std_n, rod_dir))
 }
 
 #[cfg(test)]
@@ -1836,7 +1795,7 @@ mod tests {
 
 // Snapshots (issue 17): the guard is stored whole, its limits included
 // (an operator may change them at run time). The tags of `Reason` are its
-// codes ([`REASONS`]).
+// codes ([`REASONS`]; its `Snap` is made by `reasons!`).
 // `GuardLimits` stores its `ForceLimits` first: the same bytes as when
 // the six were its own first fields.
 sar_snapshot::snap_struct!(GuardLimits {
@@ -1894,46 +1853,6 @@ impl sar_snapshot::Snap for RestResidual {
         }
     }
 }
-
-sar_snapshot::snap_enum!(Reason {
-    1 => NoInputYet,
-    2 => CycleOutOfOrder { previous, got },
-    3 => ClockFailed,
-    4 => ClockNotAdvancing { previous_ns, now_ns },
-    5 => SensorCounterGap { previous, got, max_gap },
-    6 => SensorStatus { status },
-    7 => JointJump { axis, moved_m, allowed_m },
-    8 => JointsStampBackwards { previous_ns, got_ns },
-    9 => TorqueImplausible { axis, residual_nm, std_nm, max_sigma },
-    10 => ResetNotCurrent { last, got },
-    11 => SensorInvalid,
-    12 => SensorStale { age_ns, max_age_ns },
-    13 => JointsInvalid,
-    14 => JointsStale { age_ns, max_age_ns },
-    15 => PoseInvalid,
-    16 => NonFinite { field, axis },
-    17 => NegativeStd { axis, std_n },
-    18 => RodDirNotUnit { norm },
-    19 => EstimatorNotObservable,
-    20 => NotObservable { std_max_n, max_std_n },
-    21 => AboveStop { part, force_n, limit_n },
-    22 => AboveWarn { part, force_n, limit_n },
-    23 => BelowWarn,
-    24 => Reset,
-    25 => FollowingError { axis, error_m, tolerance_m },
-    26 => AwaitingFirstReset,
-    27 => SensorFrozen { repeats },
-    28 => SensorSaturated { channel, value, range },
-    29 => SensorSpikes { spikes, window },
-    30 => TareDue { age_s, max_age_s },
-    31 => Tared,
-    32 => MountingMismatch { residual, value, allowed },
-    33 => RetreatEntered { part, force_n, limit_n },
-    34 => ForceRising { part, force_n, bound_n },
-    35 => PublisherStalled { stalled_ms },
-    36 => DriveFault { axis, code },
-    37 => RestIncomplete { samples, needed },
-});
 
 sar_snapshot::snap_struct!(Guard {
     config,

@@ -141,11 +141,11 @@ fn add_estimate(m: &mut StateMsg, o: &CycleOutput) {
 fn add_force_control(m: &mut StateMsg, decision: &LoopOutput) {
     match decision.force_mode {
         Some(sar_estimator::force_control::ForceMode::Hold { max_force_n }) => {
-            m.force_mode = 1;
+            m.force_mode = sar_msgs::wire::force_mode::HOLD;
             m.force_setpoint_n = max_force_n;
         }
         Some(sar_estimator::force_control::ForceMode::Push { axial_n }) => {
-            m.force_mode = 2;
+            m.force_mode = sar_msgs::wire::force_mode::PUSH;
             m.force_setpoint_n = axial_n;
         }
         None => {}

@@ -66,7 +66,7 @@ pub struct SinkHealth {
     /// or failed with its OS error) (the recorder).
     pub recording: u64,
     /// States the publisher's queue dropped so far (the publisher).
-    pub publisher_queue_drops: u64,
+    pub publish_queue_drops: u64,
 }
 
 /// Something the loop hands each cycle to.

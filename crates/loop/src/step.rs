@@ -328,9 +328,9 @@ pub fn reason_code(reason: &Reason) -> u16 {
 }
 
 /// [`reason_code`] in a recording's `uint8` field (`sar_msgs` `REASON_*`:
-/// the same numbers; a code beyond 254 would be `REASON_OTHER`, 255).
+/// the same numbers): the estimator's `Reason::recorded_code`.
 pub fn recorded_reason_code(reason: &Reason) -> u8 {
-    u8::try_from(reason.code()).unwrap_or(u8::MAX)
+    reason.recorded_code()
 }
 
 /// Everything one cycle decides from.

@@ -507,6 +507,17 @@ macro_rules! code_enum {
             $($(#[$vm])* $v = $c),*
         }
         impl $name {
+            /// Every value, in code order (a test checks each against the
+            /// `.msg` file's constant of its name).
+            pub const ALL: &'static [Self] = &[Self::$first $(, Self::$v)*];
+            /// The value's name as written (`QuickStop`; the `.msg`
+            /// constant's is its upper snake case, `DRIVE_QUICK_STOP`).
+            pub const fn name(self) -> &'static str {
+                match self {
+                    Self::$first => stringify!($first),
+                    $(Self::$v => stringify!($v),)*
+                }
+            }
             /// The numeric code of the `.msg` file.
             #[inline]
             pub fn code(self) -> u8 {
@@ -607,20 +618,12 @@ code_enum!(
         GuardReset = 1,
         /// Tare the sensor (values: the bias, N).
         Tare = 2,
-        /// Clear the tare.
-        ClearTare = 3,
-        /// Enable the drives.
-        Enable = 4,
-        /// Disable the drives.
-        Disable = 5,
-        /// Quick stop.
-        QuickStop = 6,
-        /// Reset a drive fault.
-        FaultReset = 7,
-        /// Move to a target (values: q1..q3, m).
-        MoveTo = 8,
+        // 3..=8 (`COMMAND_CLEAR_TARE`, `COMMAND_ENABLE`, `COMMAND_DISABLE`,
+        // `COMMAND_QUICK_STOP`, `COMMAND_FAULT_RESET`, `COMMAND_MOVE_TO` of
+        // the .msg) are reserved: no version of `sard` wrote them.
         /// Set the sensor's bias (values: force x, y, z in N, then torque
-        /// x, y, z in N m; sensor frame).
+        /// x, y, z in N m; sensor frame). Written by older versions of
+        /// `sard`; read, it gives no request.
         SetBias = 9,
         /// Move the tip (`move_tip_m`, base frame, m).
         MoveTip = 10,
@@ -663,16 +666,13 @@ code_enum!(
 pub const REPLY_NONE: u8 = 255;
 
 /// The guard reason codes (`REASON_*` of `GuardEvent.msg`): the estimator's
-/// one table (`sar_estimator::guard::REASONS`, `Reason::code`), which the
-/// wire and `sarctl` use too; the `.msg` constants are checked against it by
-/// a test (`tests/messages.rs`). Here only what the table has not.
+/// one table (`sar_estimator::guard::REASONS`, `Reason::code`, and
+/// `Reason::recorded_code` for this `uint8`), which the wire and `sarctl`
+/// use too; the `.msg` constants are checked against it by a test
+/// (`tests/messages.rs`). Here only what the table has not.
 pub mod reason {
     /// A code too large for the recording's `uint8` (none today).
-    pub const OTHER: u8 = 255;
-    /// A code of the table.
-    pub fn code(reason: &sar_estimator::guard::Reason) -> u8 {
-        u8::try_from(reason.code()).unwrap_or(OTHER)
-    }
+    pub const OTHER: u8 = sar_estimator::guard::CODE_OTHER;
 }
 
 /// Bits of `EstimatorState::flags` (`FLAG_*`).

@@ -67,14 +67,31 @@ pub fn reason_name(code: u32) -> &'static str {
     }
 }
 
-/// Drive state codes: 0 unknown, 1 ready, 2 enabled, 3 quick stop, 4 fault.
+/// Drive state codes: the recording's (`DRIVE_*` of `CycleInput.msg`,
+/// [`crate::msgs::DriveStateCode`]), one numbering for the wire, the recording and
+/// `sarctl`.
+pub mod drive_code {
+    use crate::msgs::DriveStateCode;
+    /// Powered, not following targets.
+    pub const READY: u32 = DriveStateCode::Ready as u32;
+    /// Following targets.
+    pub const ENABLED: u32 = DriveStateCode::Enabled as u32;
+    /// Quick stop.
+    pub const QUICK_STOP: u32 = DriveStateCode::QuickStop as u32;
+    /// Fault.
+    pub const FAULT: u32 = DriveStateCode::Fault as u32;
+    /// Unknown: not read in this cycle.
+    pub const UNREAD: u32 = DriveStateCode::Unread as u32;
+}
+
+/// The drive state's code ([`drive_code`]).
 pub fn drive_state_code(s: Option<DriveState>) -> u32 {
     match s {
-        None => 0,
-        Some(DriveState::Ready) => 1,
-        Some(DriveState::Enabled) => 2,
-        Some(DriveState::QuickStop) => 3,
-        Some(DriveState::Fault { .. }) => 4,
+        None => drive_code::UNREAD,
+        Some(DriveState::Ready) => drive_code::READY,
+        Some(DriveState::Enabled) => drive_code::ENABLED,
+        Some(DriveState::QuickStop) => drive_code::QUICK_STOP,
+        Some(DriveState::Fault { .. }) => drive_code::FAULT,
     }
 }
 
@@ -82,12 +99,32 @@ pub fn drive_state_code(s: Option<DriveState>) -> u32 {
 /// "quick_stop", "fault" (anything else: "invalid").
 pub fn drive_state_name(code: u32) -> &'static str {
     match code {
-        0 => "unknown",
-        1 => "ready",
-        2 => "enabled",
-        3 => "quick_stop",
-        4 => "fault",
+        drive_code::UNREAD => "unknown",
+        drive_code::READY => "ready",
+        drive_code::ENABLED => "enabled",
+        drive_code::QUICK_STOP => "quick_stop",
+        drive_code::FAULT => "fault",
         _ => "invalid",
+    }
+}
+
+/// Force control modes of [`StateMsg::force_mode`].
+pub mod force_mode {
+    /// Position control (no force control).
+    pub const POSITION: u32 = 0;
+    /// A compliant hold.
+    pub const HOLD: u32 = 1;
+    /// An axial push.
+    pub const PUSH: u32 = 2;
+
+    /// The mode's name: "position", "hold", "push" (anything else:
+    /// "position").
+    pub fn name(mode: u32) -> &'static str {
+        match mode {
+            HOLD => "hold",
+            PUSH => "push",
+            _ => "position",
+        }
     }
 }
 
@@ -148,7 +185,7 @@ pub struct StateMsg {
     pub quick_stops: u64,
     /// States the loop dropped so far because the publishing thread's queue
     /// was full (those states were never published).
-    pub queue_drops: u64,
+    pub publish_queue_drops: u64,
     /// States the publishing thread failed to send so far.
     pub publish_errors: u64,
     /// Messages the recorder dropped so far (queue full or disk failed).
@@ -167,7 +204,7 @@ pub struct StateMsg {
     pub guarded_stop_tip_m: [f64; 3],
     /// The tip force that stopped it, base frame, N.
     pub guarded_stop_force_n: [f64; 3],
-    /// Force control: 0 position, 1 hold, 2 push.
+    /// Force control: [`force_mode`].
     pub force_mode: u32,
     /// Its setpoint, N (hold: the force; push: the axial force).
     pub force_setpoint_n: f64,
@@ -195,13 +232,13 @@ impl Default for StateMsg {
             flags: 0,
             guard_state: guard_code::FAULT,
             guard_reason: 0,
-            drive_state: 0,
+            drive_state: drive_code::UNREAD,
             limits_n: [0.0; 6],
             wakeup_ns: [0; 3],
             compute_ns: [0; 3],
             overruns: 0,
             quick_stops: 0,
-            queue_drops: 0,
+            publish_queue_drops: 0,
             publish_errors: 0,
             recorder_drops: 0,
             recording: 0,
@@ -215,35 +252,61 @@ impl Default for StateMsg {
     }
 }
 
-/// Command kinds of [`CommandMsg::kind`].
+impl StateMsg {
+    /// |F_tip|, the total tip force, N.
+    pub fn tip_force_norm_n(&self) -> f64 {
+        let [x, y, z] = self.tip_force_n;
+        (x * x + y * y + z * z).sqrt()
+    }
+
+    /// The guard's limits in use, named (from [`StateMsg::limits_n`]).
+    pub fn limits(&self) -> sar_estimator::guard::ForceLimits {
+        sar_estimator::guard::ForceLimits::from_array(self.limits_n)
+    }
+
+    /// The drives follow targets ([`drive_code::ENABLED`]).
+    pub fn drives_enabled(&self) -> bool {
+        self.drive_state == drive_code::ENABLED
+    }
+}
+
+/// Command kinds of [`CommandMsg::kind`]: one list with the recording's.
+/// A command the loop steps is recorded (`command_kind` of
+/// `CycleInput.msg`) and its wire kind is its recorded code
+/// ([`crate::msgs::CommandKindCode`], `COMMAND_*`); the kinds that are never recorded as
+/// themselves (answered without the loop, or recorded as another kind) are
+/// 128 and up, apart from every recorded code (a `uint8` below 128).
 pub mod command_kind {
+    use crate::msgs::CommandKindCode;
     /// Reset the guard.
-    pub const RESET: u32 = 1;
+    pub const RESET: u32 = CommandKindCode::GuardReset as u32;
     /// Tare.
-    pub const TARE: u32 = 2;
+    pub const TARE: u32 = CommandKindCode::Tare as u32;
     /// Move the tip to `tip_m`.
-    pub const MOVE_TIP: u32 = 3;
-    /// Read the guard's limits.
-    pub const LIMITS: u32 = 4;
+    pub const MOVE_TIP: u32 = CommandKindCode::MoveTip as u32;
     /// Set the guard's force limits to `limits_n` (within the configured
     /// ceilings).
-    pub const SET_LIMITS: u32 = 5;
-    /// Start recording (`sarctl record start`).
-    pub const RECORD_START: u32 = 6;
-    /// Stop recording (`sarctl record stop`).
-    pub const RECORD_STOP: u32 = 7;
+    pub const SET_LIMITS: u32 = CommandKindCode::SetLimits as u32;
     /// Back the tip out along the rod by `tip_m[0]` metres (`sarctl
     /// retreat`).
-    pub const BACK_OUT: u32 = 8;
-    /// A guarded move to `tip_m`, stopped when the tip force reaches
-    /// `limits_n[0]` N (`sarctl move-tip --max-force`).
-    pub const GUARDED_MOVE: u32 = 9;
+    pub const BACK_OUT: u32 = CommandKindCode::BackOut as u32;
     /// Force control: a compliant hold at `limits_n[0]` N (`sarctl hold`).
-    pub const HOLD: u32 = 10;
+    pub const HOLD: u32 = CommandKindCode::Hold as u32;
     /// Force control: an axial push of `limits_n[0]` N (`sarctl push`).
-    pub const PUSH: u32 = 11;
+    pub const PUSH: u32 = CommandKindCode::Push as u32;
     /// End force control (`sarctl position`).
-    pub const POSITION: u32 = 12;
+    pub const POSITION: u32 = CommandKindCode::Position as u32;
+
+    /// Read the guard's limits (answered without the loop; not recorded).
+    pub const LIMITS: u32 = 128;
+    /// Start recording (`sarctl record start`; not recorded).
+    pub const RECORD_START: u32 = 129;
+    /// Stop recording (`sarctl record stop`; not recorded).
+    pub const RECORD_STOP: u32 = 130;
+    /// A guarded move to `tip_m`, stopped when the tip force reaches
+    /// `limits_n[0]` N (`sarctl move-tip --max-force`; recorded as
+    /// `COMMAND_MOVE_TIP` with its force limit).
+    pub const GUARDED_MOVE: u32 = 131;
 }
 
 /// An operator command.
@@ -338,6 +401,14 @@ pub mod recording_code {
     /// The state of a code: [`OFF`], [`ON`] or [`FAILED`].
     pub const fn state(code: u64) -> u64 {
         code & 0xffff_ffff
+    }
+    /// Whether a recording runs.
+    pub const fn is_on(code: u64) -> bool {
+        state(code) == ON
+    }
+    /// Whether the last recording failed.
+    pub const fn is_failed(code: u64) -> bool {
+        state(code) == FAILED
     }
     /// The OS error of a failed recording's code (0: none named).
     pub const fn errno(code: u64) -> u32 {

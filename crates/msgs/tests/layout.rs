@@ -354,3 +354,138 @@ fn the_schemas_and_field_lists_are_the_msg_files() {
         ]
     );
 }
+
+/// The constants of a `.msg` file (`uint8 DRIVE_READY=0`), by name.
+fn msg_constants(name: &str) -> std::collections::BTreeMap<String, i64> {
+    msg_file(name)
+        .lines()
+        .filter_map(|l| l.split_once('='))
+        .filter_map(|(decl, value)| {
+            let (_, key) = decl.split_once(' ')?;
+            Some((key.trim().to_owned(), value.trim().parse().ok()?))
+        })
+        .collect()
+}
+
+/// `QuickStop` as a `.msg` constant's name: `QUICK_STOP`.
+fn upper_snake(name: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in name.chars().enumerate() {
+        if c.is_ascii_uppercase() && i > 0 {
+            out.push('_');
+        }
+        out.push(c.to_ascii_uppercase());
+    }
+    out
+}
+
+/// Every value of `values` is the constant `PREFIX_NAME` of `constants`
+/// with its code, and the file has no other constant of that prefix but
+/// `reserved` (codes no value of the type carries).
+fn assert_code_list(
+    constants: &std::collections::BTreeMap<String, i64>,
+    prefix: &str,
+    values: &[(&str, u8)],
+    reserved: &[&str],
+) {
+    for (name, code) in values {
+        let key = format!("{prefix}_{}", upper_snake(name));
+        assert_eq!(constants.get(&key), Some(&i64::from(*code)), "{key}");
+    }
+    let mut in_file: Vec<&str> = constants
+        .keys()
+        .filter(|k| k.starts_with(&format!("{prefix}_")))
+        .map(String::as_str)
+        .collect();
+    in_file.retain(|k| {
+        !values
+            .iter()
+            .any(|(name, _)| *k == format!("{prefix}_{}", upper_snake(name)))
+    });
+    assert_eq!(in_file, reserved, "{prefix}_* of the .msg without a value");
+}
+
+/// One numbering per code: each `.msg` constant (`DRIVE_*`, `COMMAND_*`,
+/// `ACTION_*`, `CLOCK_*`, `TIP_*`, `GUARD_*`) equals the shared constant
+/// of its name (the recording's code types, and through them the wire's
+/// `drive_code`, `command_kind` and `guard_code`, which `sarctl` reads).
+#[test]
+fn each_msg_constant_is_the_shared_code() {
+    use sar_msgs::wire::{command_kind, drive_code, guard_code};
+    macro_rules! values {
+        ($t:ty) => {
+            <$t>::ALL
+                .iter()
+                .map(|v| (v.name(), v.code()))
+                .collect::<Vec<_>>()
+        };
+    }
+    let cycle = msg_constants("CycleInput");
+    assert_code_list(&cycle, "DRIVE", &values!(DriveStateCode), &[]);
+    let reserved = [
+        "COMMAND_CLEAR_TARE",
+        "COMMAND_DISABLE",
+        "COMMAND_ENABLE",
+        "COMMAND_FAULT_RESET",
+        "COMMAND_MOVE_TO",
+        "COMMAND_QUICK_STOP",
+    ];
+    assert_code_list(&cycle, "COMMAND", &values!(CommandKindCode), &reserved);
+    assert_code_list(&cycle, "ACTION", &values!(DriveActionCode), &[]);
+    assert_code_list(&cycle, "CLOCK", &values!(ClockStatusCode), &[]);
+    let state = msg_constants("EstimatorState");
+    assert_code_list(&state, "TIP", &values!(TipOutcomeCode), &[]);
+    let guard_values = values!(GuardStateCode);
+    let event = msg_constants("GuardEvent");
+    assert_code_list(&event, "GUARD", &guard_values, &[]);
+    // EstimatorState.msg was written before Retreat: the others, the same.
+    let before_retreat: Vec<_> = guard_values
+        .into_iter()
+        .filter(|v| v.0 != "Retreat")
+        .collect();
+    assert_code_list(&state, "GUARD", &before_retreat, &[]);
+    assert_eq!(event.get("REASON_OTHER"), Some(&i64::from(reason::OTHER)));
+
+    // The wire's constants are the recording's numbers.
+    let drive = [
+        ("DRIVE_READY", drive_code::READY),
+        ("DRIVE_ENABLED", drive_code::ENABLED),
+        ("DRIVE_QUICK_STOP", drive_code::QUICK_STOP),
+        ("DRIVE_FAULT", drive_code::FAULT),
+        ("DRIVE_UNREAD", drive_code::UNREAD),
+    ];
+    let commands = [
+        ("COMMAND_GUARD_RESET", command_kind::RESET),
+        ("COMMAND_TARE", command_kind::TARE),
+        ("COMMAND_MOVE_TIP", command_kind::MOVE_TIP),
+        ("COMMAND_SET_LIMITS", command_kind::SET_LIMITS),
+        ("COMMAND_BACK_OUT", command_kind::BACK_OUT),
+        ("COMMAND_HOLD", command_kind::HOLD),
+        ("COMMAND_PUSH", command_kind::PUSH),
+        ("COMMAND_POSITION", command_kind::POSITION),
+    ];
+    for (key, code) in drive.into_iter().chain(commands) {
+        assert_eq!(cycle.get(key), Some(&i64::from(code)), "{key}");
+    }
+    let guard = [
+        ("GUARD_OK", guard_code::OK),
+        ("GUARD_WARN", guard_code::WARN),
+        ("GUARD_STOP", guard_code::STOP),
+        ("GUARD_FAULT", guard_code::FAULT),
+        ("GUARD_RETREAT", guard_code::RETREAT),
+    ];
+    for (key, code) in guard {
+        assert_eq!(event.get(key), Some(&i64::from(code)), "{key}");
+    }
+    // The kinds never recorded as themselves are apart from every recorded
+    // code.
+    for kind in [
+        command_kind::LIMITS,
+        command_kind::RECORD_START,
+        command_kind::RECORD_STOP,
+        command_kind::GUARDED_MOVE,
+    ] {
+        assert!(kind >= 128, "{kind}");
+        assert!(CommandKindCode::from_code(u8::try_from(kind).unwrap()).is_err());
+    }
+}

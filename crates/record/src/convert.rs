@@ -18,7 +18,7 @@ use sar_estimator::Vec3;
 use sar_estimator::cycle::{Bias, CycleInput, CycleOutput, JointSample, SensorSample, TipOutcome};
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_kinematics::ActiveJoints;
-use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request, recorded_reason_code};
+use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request};
 use sar_msgs::msgs::{
     ActiveJointState, ClockStatusCode, CommandKindCode, CycleInput as CycleInputMsg,
     DriveActionCode, DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
@@ -92,7 +92,7 @@ pub fn outputs(input: &CycleInput, output: &CycleOutput, mut emit: impl FnMut(Ou
             cycle: t.cycle,
             from_state: guard_code(t.from),
             to_state: guard_code(t.to),
-            reason_code: recorded_reason_code(&t.reason),
+            reason_code: t.reason.recorded_code(),
             reason_text,
         }));
     }
@@ -172,7 +172,7 @@ pub fn estimator_state(input: &CycleInput, o: &CycleOutput) -> EstimatorState {
         sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
         joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
         guard_state: guard_code(o.guard_state),
-        guard_reason_code: recorded_reason_code(&o.guard_reason),
+        guard_reason_code: o.guard_reason.recorded_code(),
         guard_reason_text: reason_text,
         ..EstimatorState::default()
     };

@@ -128,15 +128,6 @@ impl RecordSwitch {
             *a = Some((ticket, answer));
         }
     }
-    /// The state to publish (`StateMsg::recording`): on, off, or failed
-    /// with the OS error (`sar_msgs::wire::recording_code`).
-    pub fn state_code(&self) -> u64 {
-        if self.recording() {
-            sar_msgs::wire::recording_code::ON
-        } else {
-            self.failure.load(Ordering::Relaxed)
-        }
-    }
     /// The first file of the present or last recording (`None`: none yet).
     pub fn current_path(&self) -> Option<PathBuf> {
         self.current.lock().ok().and_then(|c| c.clone())

@@ -113,7 +113,7 @@ fn monitor_json_limits_status_and_commands_with_a_daemon() {
     assert_eq!(v["limits"]["stop_axial_n"], 11.5);
     assert_eq!(v["limits"]["stop_total_n"], v["limits_n"][1]);
     assert_eq!(v["limits"]["warn_lateral_n"], v["limits_n"][4]);
-    let names = ["unknown", "ready", "enabled", "quick_stop", "fault"];
+    let names = ["ready", "enabled", "quick_stop", "fault", "unknown"];
     let code = usize::try_from(v["drive_state"].as_u64().unwrap()).unwrap();
     assert_eq!(v["drive_state_name"], names[code], "{v}");
 

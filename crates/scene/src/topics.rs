@@ -29,9 +29,9 @@ pub fn guard_state(code: u32) -> GuardStateCode {
 }
 
 /// The recording's reason code of a wire code (one numbering; beyond a byte:
-/// `REASON_OTHER`).
+/// `REASON_OTHER`): the guard's [`sar_estimator::guard::recorded_code`].
 pub fn reason_code(code: u32) -> u8 {
-    u8::try_from(code).unwrap_or(msgs::reason::OTHER)
+    sar_estimator::guard::recorded_code(code)
 }
 
 fn reason_text(code: u32) -> ReasonText {

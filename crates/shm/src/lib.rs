@@ -350,7 +350,7 @@ pub const RECORD_ANSWER_WAIT: Duration = Duration::from_secs(8);
 /// wait-free single-producer single-consumer ring ([`STATE_QUEUE`] entries,
 /// allocated here, once) and wakes the publishing thread (`unpark`: an atomic
 /// swap, and a futex wake only when the thread sleeps); a full ring drops the
-/// state and counts it ([`StateMsg::queue_drops`]). The publishing thread
+/// state and counts it ([`StateMsg::publish_queue_drops`]). The publishing thread
 /// (`sard-shm`, see [`ShmWorker`]) owns every iceoryx2 port: it sends the
 /// states, notifies the event, takes operator commands into the controller's
 /// bounded request queue and sends the replies the loop leaves in its reply
@@ -840,7 +840,7 @@ impl DaemonShm {
     }
 
     /// States dropped so far because the publishing thread's queue was full.
-    pub fn queue_drops(&self) -> u64 {
+    pub fn publish_queue_drops(&self) -> u64 {
         self.queue_drops
     }
 
@@ -881,9 +881,9 @@ impl Sink for DaemonShm {
             recording: health.recording,
             truth: c.truth,
         });
-        state.queue_drops = self.queue_drops;
+        state.publish_queue_drops = self.queue_drops;
         self.push_state(state);
-        health.publisher_queue_drops = self.queue_drops;
+        health.publish_queue_drops = self.queue_drops;
     }
 }
 

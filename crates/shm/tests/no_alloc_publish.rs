@@ -260,7 +260,7 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
     assert_eq!(replies.len(), 4);
     assert!(replies[1..].iter().all(|r| r.cycle > 0), "{replies:?}");
     assert!(stats.cycles > 300);
-    assert_eq!(shm.queue_drops(), 0);
+    assert_eq!(shm.publish_queue_drops(), 0);
     assert_eq!(
         after - before,
         0,

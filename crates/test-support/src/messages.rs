@@ -52,7 +52,7 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             drive_fault_code: if k % 4 == 3 { 0x2310 } else { 0 },
             target_q_m: v3(k + 3),
             target_valid: k.is_multiple_of(2),
-            command_kind: CommandKindCode::from_code((k % 13) as u8).unwrap(),
+            command_kind: CommandKindCode::ALL[(k % CommandKindCode::ALL.len() as u64) as usize],
             command_values: {
                 let (a, b) = (v3(k + 4), v3(k + 5));
                 [a[0], a[1], a[2], b[0], b[1], b[2]]

@@ -444,7 +444,7 @@ impl Run<'_> {
             stats.overruns,
             stats.skipped_periods,
             controller.counts().quick_stops,
-            health.publisher_queue_drops,
+            health.publish_queue_drops,
             health.recorder_drops,
         );
         Ok(())

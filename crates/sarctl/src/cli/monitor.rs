@@ -93,9 +93,9 @@ impl Monitor {
         let Some(s) = batch.last() else {
             return Ok(());
         };
-        let f = s.tip_force_n;
-        let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-        self.history.push(history_glyph(norm, s.limits_n[1]));
+        let norm = s.tip_force_norm_n();
+        self.history
+            .push(history_glyph(norm, s.limits().stop_total_n));
         if self.history.len() > 60 {
             self.history.remove(0);
         }
@@ -106,7 +106,7 @@ impl Monitor {
             state_line(s),
             norm,
             bar(s),
-            s.limits_n[1]
+            s.limits().stop_total_n
         )
         .map_err(output_error)?;
         out.flush().map_err(output_error)
@@ -129,12 +129,12 @@ fn history_glyph(norm: f64, stop: f64) -> char {
 
 /// A bar of |F| against the stop limit, for the terminal view.
 fn bar(s: &StateMsg) -> String {
-    let f = s.tip_force_n;
-    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-    let stop = s.limits_n[1].max(1e-9);
+    let norm = s.tip_force_norm_n();
+    let stop = s.limits().stop_total_n.max(1e-9);
     let width = 40usize;
     let filled = ((norm / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
-    let warn_at = ((s.limits_n[0] / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
+    let warn_at =
+        ((s.limits().warn_total_n / stop).clamp(0.0, 1.0) * width as f64).round() as usize;
     (0..width)
         .map(|i| {
             if i < filled {

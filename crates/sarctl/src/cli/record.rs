@@ -78,12 +78,12 @@ fn wait_for_state(
         if start
             && let Some(s) = last
             && s.cycle > reply_cycle
-            && recording_code::state(s.recording) == recording_code::FAILED
+            && recording_code::is_failed(s.recording)
         {
             return Err(format!("{what}: {}", recording_failure(s.recording)));
         }
         if let Some(s) = last
-            && (recording_code::state(s.recording) == recording_code::ON) == start
+            && recording_code::is_on(s.recording) == start
         {
             return Ok(s);
         }

@@ -44,7 +44,7 @@ fn wait_for_drives(sub: &StateSubscription) -> Result<StateMsg, String> {
     let deadline = Instant::now() + DRIVES_WAIT;
     loop {
         let s = latest(sub, "waiting for the drives")?;
-        if s.drive_state == 2 && s.flags & flags::HALTED == 0 {
+        if s.drives_enabled() && s.flags & flags::HALTED == 0 {
             return Ok(s);
         }
         if Instant::now() > deadline {

@@ -39,8 +39,8 @@ pub fn state_json(s: &StateMsg) -> serde_json::Value {
         "observable": s.flags & flags::OBSERVABLE != 0,
         "truth_tip_force_n": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_tip_force_n),
         "sim_elapsed_ns": (s.flags & flags::SIM_TRUTH != 0).then_some(s.truth_elapsed_ns),
-        "force_mode": match s.force_mode { 1 => "hold", 2 => "push", _ => "position" },
-        "force_setpoint_n": (s.force_mode != 0).then_some(s.force_setpoint_n),
+        "force_mode": wire::force_mode::name(s.force_mode),
+        "force_setpoint_n": (s.force_mode != wire::force_mode::POSITION).then_some(s.force_setpoint_n),
         "guarded_stop": (s.guarded_stop_cycle != 0).then(|| json!({
             "cycle": s.guarded_stop_cycle,
             "tip_m": s.guarded_stop_tip_m,
@@ -58,10 +58,10 @@ pub fn state_json(s: &StateMsg) -> serde_json::Value {
         "compute_ns": {"p50": s.compute_ns[0], "p99": s.compute_ns[1], "max": s.compute_ns[2]},
         "overruns": s.overruns,
         "quick_stops": s.quick_stops,
-        "publish_queue_drops": s.queue_drops,
+        "publish_queue_drops": s.publish_queue_drops,
         "publish_errors": s.publish_errors,
-        "recording": recording_code::state(s.recording) == recording_code::ON,
-        "recording_failed": (recording_code::state(s.recording) == recording_code::FAILED)
+        "recording": recording_code::is_on(s.recording),
+        "recording_failed": recording_code::is_failed(s.recording)
             .then(|| super::record::recording_failure(s.recording)),
         "recorder_drops": s.recorder_drops,
     })
@@ -70,7 +70,7 @@ pub fn state_json(s: &StateMsg) -> serde_json::Value {
 /// The state as one line of text (`status`, `monitor`).
 pub fn state_line(s: &StateMsg) -> String {
     let f = s.tip_force_n;
-    let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+    let norm = s.tip_force_norm_n();
     let force = if s.flags & flags::ESTIMATE != 0 {
         format!(
             "F_tip [{:+7.2} {:+7.2} {:+7.2}] N |F| {:6.2} N (std {:.2})",

@@ -68,7 +68,7 @@ fn subscribers_that_never_read_or_hold_samples_never_slow_the_loop() {
         shm.push_state(state(cycle));
         assert_eq!(worker.pump(), 1, "cycle {cycle} not sent");
     }
-    assert_eq!(shm.queue_drops(), 0);
+    assert_eq!(shm.publish_queue_drops(), 0);
     assert_eq!(shm.publish_errors(), 0);
     assert_eq!(shm.published(), cycle);
 
@@ -100,19 +100,19 @@ fn a_full_queue_to_the_publishing_thread_drops_and_counts_without_waiting() {
     for cycle in 1..=(STATE_QUEUE + extra) as u64 {
         shm.push_state(state(cycle));
     }
-    assert_eq!(shm.queue_drops(), extra as u64);
+    assert_eq!(shm.publish_queue_drops(), extra as u64);
     // When it runs again it sends the queued states (the oldest ones: the
     // newest were dropped), then the next cycle's, which carries the count.
     assert_eq!(worker.pump(), STATE_QUEUE);
     let next = (STATE_QUEUE + extra + 1) as u64;
     let mut next_state = state(next);
-    next_state.queue_drops = shm.queue_drops();
+    next_state.publish_queue_drops = shm.publish_queue_drops();
     shm.push_state(next_state);
     assert_eq!(worker.pump(), 1);
     let mut last = StateMsg::default();
     let n = sub.drain(|s| last = *s);
     assert_eq!(n, STATE_BUFFER);
     assert_eq!(last.cycle, next);
-    assert_eq!(last.queue_drops, extra as u64);
+    assert_eq!(last.publish_queue_drops, extra as u64);
     assert_eq!(last.publish_errors, 0);
 }
