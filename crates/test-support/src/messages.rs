@@ -1,6 +1,6 @@
 //! Deterministic messages of every topic, cycle by cycle (the recording's
 //! tests push them), and the simulator's contact pulses.
-#![allow(clippy::unwrap_used)]
+#![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
 use sar_drivers::sim::ContactKey;
 use sar_msgs::cdr::FixedStr;
