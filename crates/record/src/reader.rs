@@ -598,19 +598,30 @@ impl<'a> McapReader<'a> {
             )?;
         }
         while !self.done {
-            match self.step_with(f)? {
-                Ok(true) => {}
-                Ok(false) => {
-                    self.done = true;
-                    self.complete = true;
-                }
-                Err(e) => {
-                    self.done = true;
-                    return Ok(Some(e));
-                }
+            let stepped = self.step_with(f)?;
+            if let Some(e) = self.after_step(stepped) {
+                return Ok(Some(e));
             }
         }
         Ok(None)
+    }
+
+    /// How a record's step ended, noted: the end of the data section (the
+    /// file complete), or where the file stops (`Some`: cut or corrupt).
+    #[inline]
+    fn after_step(&mut self, stepped: Result<bool, ReadError>) -> Option<ReadError> {
+        match stepped {
+            Ok(true) => None,
+            Ok(false) => {
+                self.done = true;
+                self.complete = true;
+                None
+            }
+            Err(e) => {
+                self.done = true;
+                Some(e)
+            }
+        }
     }
 
     /// Reads the next record, handing its messages to `on_msg`; Ok(Ok(false))
@@ -668,11 +679,6 @@ impl<'a> McapReader<'a> {
         let (op_byte, body, needed) = record_parts(rest, offset, available)?;
         // Whole in the file: a corrupt one can be passed over.
         self.current = Some((offset, needed));
-        let corrupt = |source| ReadError::Corrupt {
-            offset,
-            opcode: op_byte,
-            source,
-        };
         match op_byte {
             op::FOOTER | op::DATA_END => {
                 self.pos += RECORD_PREFIX + body.len();
@@ -685,7 +691,7 @@ impl<'a> McapReader<'a> {
                 return Ok(sent.map(|()| true));
             }
             op::HEADER | op::SCHEMA | op::CHANNEL | op::METADATA => {
-                let record = mcap::parse_record(op_byte, body).map_err(corrupt)?;
+                let record = mcap::parse_record(op_byte, body).map_err(corrupt(offset, op_byte))?;
                 self.apply(record);
             }
             _ => {}
@@ -703,13 +709,8 @@ impl<'a> McapReader<'a> {
         offset: u64,
         on_msg: &mut F,
     ) -> Result<Result<bool, E>, ReadError> {
-        let corrupt = |source| ReadError::Corrupt {
-            offset,
-            opcode: op::CHUNK,
-            source,
-        };
         let Record::Chunk { header, data } =
-            mcap::parse_record(op::CHUNK, body).map_err(corrupt)?
+            mcap::parse_record(op::CHUNK, body).map_err(corrupt(offset, op::CHUNK))?
         else {
             // Not a chunk after all: skip the record (never read the
             // same one again).
@@ -765,11 +766,7 @@ impl<'a> McapReader<'a> {
                 }
             } else if matches!(inner_op, op::SCHEMA | op::CHANNEL) {
                 let record =
-                    mcap::parse_record(inner_op, body).map_err(|source| ReadError::Corrupt {
-                        offset,
-                        opcode: op::CHUNK,
-                        source,
-                    })?;
+                    mcap::parse_record(inner_op, body).map_err(corrupt(offset, op::CHUNK))?;
                 self.apply(record);
             }
             at += RECORD_PREFIX + body.len();
@@ -899,18 +896,21 @@ impl Iterator for McapReader<'_> {
             if self.done {
                 return None;
             }
-            match self.step() {
-                Ok(true) => {}
-                Ok(false) => {
-                    self.done = true;
-                    self.complete = true;
-                }
-                Err(e) => {
-                    self.done = true;
-                    return Some(Err(e));
-                }
+            let stepped = self.step();
+            if let Some(e) = self.after_step(stepped) {
+                return Some(Err(e));
             }
         }
+    }
+}
+
+/// The error of a record (`opcode`, at `offset`) the mcap crate's parser
+/// refused.
+fn corrupt(offset: u64, opcode: u8) -> impl Fn(mcap::McapError) -> ReadError {
+    move |source| ReadError::Corrupt {
+        offset,
+        opcode,
+        source,
     }
 }
 
