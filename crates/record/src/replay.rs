@@ -1123,7 +1123,7 @@ impl FileVisit {
 
     /// The topic of channel `id` (looked up once per channel, which is
     /// also when the reference channel of `compare` is found).
-    #[inline]
+    #[inline(always)]
     fn topic(
         &mut self,
         channels: &BTreeMap<u16, ChannelInfo>,
@@ -1259,7 +1259,7 @@ impl<'o> SetReplay<'o> {
     /// One message: the reference of `--compare`, a cycle input, a
     /// snapshot, an inputs-only message, the recorder's drops, or a
     /// recorded output (to compare).
-    #[inline]
+    #[inline(always)]
     fn message(
         &mut self,
         file: &mut FileVisit,
@@ -1329,6 +1329,7 @@ impl<'o> SetReplay<'o> {
     /// it made a gap, skipped while the state is unknown, else stepped and
     /// the recorded message compared with the one rebuilt from its input
     /// and the replayed decision.
+    #[inline(always)]
     fn cycle_input(
         &mut self,
         file: &mut FileVisit,
