@@ -287,11 +287,24 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
         reply_status: REPLY_NONE,
         ..CycleInputMsg::default()
     };
-    match input.request {
+    record_request(&mut m, input.request, input.cycle);
+    m.publisher_idle_ns = input.publisher_idle_ns;
+    (m.drive_action, m.setpoint_q_m) = drive_action_fields(decision.action);
+    if let Some((status, reason)) = decision.reply {
+        m.reply_status = u8::try_from(status as u16).unwrap_or(REPLY_NONE);
+        m.reply_reason = reason;
+    }
+    m
+}
+
+/// The operator's request of a cycle in its `/sar/cycle/input` fields
+/// (command kind and arguments; a reset carries the cycle).
+fn record_request(m: &mut CycleInputMsg, request: Option<Request>, cycle: u64) {
+    match request {
         None => {}
         Some(Request::Reset) => {
             m.command_kind = CommandKindCode::GuardReset;
-            m.command_arg = input.cycle;
+            m.command_arg = cycle;
         }
         Some(Request::Tare) => m.command_kind = CommandKindCode::Tare,
         Some(Request::MoveTip { tip_m }) => {
@@ -321,8 +334,12 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
         }
         Some(Request::Position) => m.command_kind = CommandKindCode::Position,
     }
-    m.publisher_idle_ns = input.publisher_idle_ns;
-    (m.drive_action, m.setpoint_q_m) = match decision.action {
+}
+
+/// The step's drive action as recorded: its code and set point (zero
+/// without one).
+fn drive_action_fields(action: DriveAction) -> (DriveActionCode, [f64; 3]) {
+    match action {
         DriveAction::None => (DriveActionCode::None, [0.0; 3]),
         DriveAction::QuickStop => (DriveActionCode::QuickStop, [0.0; 3]),
         DriveAction::Release(Release::Enable) => (DriveActionCode::ReleaseEnable, [0.0; 3]),
@@ -335,12 +352,7 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
         DriveAction::Setpoint(q) => (DriveActionCode::Setpoint, joints_arr(&q)),
         DriveAction::Stream(q) => (DriveActionCode::Stream, joints_arr(&q)),
         DriveAction::FaultReset => (DriveActionCode::FaultReset, [0.0; 3]),
-    };
-    if let Some((status, reason)) = decision.reply {
-        m.reply_status = u8::try_from(status as u16).unwrap_or(REPLY_NONE);
-        m.reply_reason = reason;
     }
-    m
 }
 
 /// The loop step's input recorded in a `/sar/cycle/input` message (the

@@ -598,19 +598,30 @@ impl<'a> McapReader<'a> {
             )?;
         }
         while !self.done {
-            match self.step_with(f)? {
-                Ok(true) => {}
-                Ok(false) => {
-                    self.done = true;
-                    self.complete = true;
-                }
-                Err(e) => {
-                    self.done = true;
-                    return Ok(Some(e));
-                }
+            let stepped = self.step_with(f)?;
+            if let Some(e) = self.after_step(stepped) {
+                return Ok(Some(e));
             }
         }
         Ok(None)
+    }
+
+    /// How a record's step ended, noted: the end of the data section (the
+    /// file complete), or where the file stops (`Some`: cut or corrupt).
+    #[inline]
+    fn after_step(&mut self, stepped: Result<bool, ReadError>) -> Option<ReadError> {
+        match stepped {
+            Ok(true) => None,
+            Ok(false) => {
+                self.done = true;
+                self.complete = true;
+                None
+            }
+            Err(e) => {
+                self.done = true;
+                Some(e)
+            }
+        }
     }
 
     /// Reads the next record, handing its messages to `on_msg`; Ok(Ok(false))
@@ -665,79 +676,60 @@ impl<'a> McapReader<'a> {
     ) -> Result<Result<bool, E>, ReadError> {
         let offset = self.pos as u64;
         self.current = None;
-        if rest.is_empty() {
-            return Err(ReadError::Unfinished { offset });
-        }
-        let opcode = rest.first().copied();
-        let Some((prefix, after)) = rest.split_first_chunk::<RECORD_PREFIX>() else {
-            return Err(ReadError::Truncated {
-                offset,
-                opcode,
-                needed: RECORD_PREFIX as u64,
-                available,
-            });
-        };
-        let [op_byte, len_bytes @ ..] = *prefix;
-        let len = u64::from_le_bytes(len_bytes);
-        let needed = len.saturating_add(RECORD_PREFIX as u64);
-        let body = usize::try_from(len)
-            .ok()
-            .and_then(|n| after.get(..n))
-            .ok_or_else(|| ReadError::Truncated {
-                offset,
-                opcode,
-                needed,
-                available,
-            })?;
+        let (op_byte, body, needed) = record_parts(rest, offset, available)?;
         // Whole in the file: a corrupt one can be passed over.
         self.current = Some((offset, needed));
-        let corrupt = |source| ReadError::Corrupt {
-            offset,
-            opcode: op_byte,
-            source,
-        };
         match op_byte {
             op::FOOTER | op::DATA_END => {
                 self.pos += RECORD_PREFIX + body.len();
                 return Ok(Ok(false));
             }
-            op::CHUNK => {
-                let Record::Chunk { header, data } =
-                    mcap::parse_record(op_byte, body).map_err(corrupt)?
-                else {
-                    // Not a chunk after all: skip the record (never read the
-                    // same one again).
-                    self.pos += RECORD_PREFIX + body.len();
-                    return Ok(Ok(true));
-                };
-                // A corrupt size must not make us allocate it.
-                if header.uncompressed_size > MAX_CHUNK_BYTES {
-                    return Err(ReadError::ChunkTooLarge {
-                        offset,
-                        uncompressed_size: header.uncompressed_size,
-                        limit: MAX_CHUNK_BYTES,
-                    });
-                }
-                // The whole chunk, checked, before any of it is given out.
-                let mut content = std::mem::take(&mut self.chunk);
-                decompress(&mut self.zstd, &header, &data, offset, &mut content)?;
-                let result = self.chunk_records(&content, offset, body.len(), on_msg);
-                self.chunk = content;
-                return result;
-            }
+            op::CHUNK => return self.chunk(body, offset, on_msg),
             op::MESSAGE => {
                 let sent = self.message(body, offset, op_byte, on_msg)?;
                 self.pos += RECORD_PREFIX + body.len();
                 return Ok(sent.map(|()| true));
             }
             op::HEADER | op::SCHEMA | op::CHANNEL | op::METADATA => {
-                let record = mcap::parse_record(op_byte, body).map_err(corrupt)?;
+                let record = mcap::parse_record(op_byte, body).map_err(corrupt(offset, op_byte))?;
                 self.apply(record);
             }
             _ => {}
         }
         self.pos += RECORD_PREFIX + body.len();
         Ok(Ok(true))
+    }
+
+    /// A chunk record's `body` at `offset`: the whole chunk decompressed
+    /// and checked before any of its messages is given out, then its
+    /// records.
+    fn chunk<E, F: OnMessage<E> + ?Sized>(
+        &mut self,
+        body: &[u8],
+        offset: u64,
+        on_msg: &mut F,
+    ) -> Result<Result<bool, E>, ReadError> {
+        let Record::Chunk { header, data } =
+            mcap::parse_record(op::CHUNK, body).map_err(corrupt(offset, op::CHUNK))?
+        else {
+            // Not a chunk after all: skip the record (never read the
+            // same one again).
+            self.pos += RECORD_PREFIX + body.len();
+            return Ok(Ok(true));
+        };
+        // A corrupt size must not make us allocate it.
+        if header.uncompressed_size > MAX_CHUNK_BYTES {
+            return Err(ReadError::ChunkTooLarge {
+                offset,
+                uncompressed_size: header.uncompressed_size,
+                limit: MAX_CHUNK_BYTES,
+            });
+        }
+        let mut content = std::mem::take(&mut self.chunk);
+        decompress(&mut self.zstd, &header, &data, offset, &mut content)?;
+        let result = self.chunk_records(&content, offset, body.len(), on_msg);
+        self.chunk = content;
+        result
     }
 
     /// The records of a chunk (`content`, decompressed and checked) of
@@ -774,11 +766,7 @@ impl<'a> McapReader<'a> {
                 }
             } else if matches!(inner_op, op::SCHEMA | op::CHANNEL) {
                 let record =
-                    mcap::parse_record(inner_op, body).map_err(|source| ReadError::Corrupt {
-                        offset,
-                        opcode: op::CHUNK,
-                        source,
-                    })?;
+                    mcap::parse_record(inner_op, body).map_err(corrupt(offset, op::CHUNK))?;
                 self.apply(record);
             }
             at += RECORD_PREFIX + body.len();
@@ -792,45 +780,29 @@ impl<'a> McapReader<'a> {
     /// (`/sar/cycle/snapshot`, variable length: decode the raw message with
     /// [`sar_msgs::msgs::StateSnapshot`]).
     pub fn decoded(self) -> impl Iterator<Item = Result<(Topic, u64, Outgoing), ReadError>> + 'a {
-        let mut reader = self;
-        let mut failed = false;
-        std::iter::from_fn(move || {
-            if failed {
-                return None;
+        self.picked(|channel, msg| {
+            let Some(topic) = Topic::from_name(&channel.topic) else {
+                return Pick::Skip;
+            };
+            if topic == Topic::StateSnapshot {
+                return Pick::Skip;
             }
-            loop {
-                let msg = match reader.next()? {
-                    Ok(m) => m,
-                    Err(e) => {
-                        failed = true;
-                        return Some(Err(e));
-                    }
-                };
-                let channel = reader.channels.get(&msg.channel_id)?;
-                let Some(topic) = Topic::from_name(&channel.topic) else {
-                    continue;
-                };
-                if topic == Topic::StateSnapshot {
-                    continue;
-                }
-                if channel.schema_name != topic.type_name() {
-                    failed = true;
-                    return Some(Err(ReadError::WrongType {
+            if channel.schema_name != topic.type_name() {
+                return Pick::Fail(ReadError::WrongType {
+                    topic: channel.topic.clone(),
+                    expected: topic.type_name(),
+                    found: channel.schema_name.clone(),
+                });
+            }
+            Pick::Give(
+                Outgoing::decode(topic, &msg.data)
+                    .map(|m| (topic, msg.log_time_ns, m))
+                    .map_err(|source| ReadError::Decode {
                         topic: channel.topic.clone(),
-                        expected: topic.type_name(),
-                        found: channel.schema_name.clone(),
-                    }));
-                }
-                return Some(
-                    Outgoing::decode(topic, &msg.data)
-                        .map(|m| (topic, msg.log_time_ns, m))
-                        .map_err(|source| ReadError::Decode {
-                            topic: channel.topic.clone(),
-                            log_time_ns: msg.log_time_ns,
-                            source,
-                        }),
-                );
-            }
+                        log_time_ns: msg.log_time_ns,
+                        source,
+                    }),
+            )
         })
     }
 
@@ -840,8 +812,41 @@ impl<'a> McapReader<'a> {
         self,
         topic: &'a str,
     ) -> impl Iterator<Item = Result<(u64, M), ReadError>> + 'a {
-        let mut reader = self;
         let mut checked: Option<u16> = None;
+        self.picked(move |channel, msg| {
+            if channel.topic != topic {
+                return Pick::Skip;
+            }
+            if checked != Some(msg.channel_id) {
+                if channel.schema_name != M::TYPE_NAME {
+                    return Pick::Fail(ReadError::WrongType {
+                        topic: topic.to_owned(),
+                        expected: M::TYPE_NAME,
+                        found: channel.schema_name.clone(),
+                    });
+                }
+                checked = Some(msg.channel_id);
+            }
+            Pick::Give(
+                M::decode(&msg.data)
+                    .map(|m| (msg.log_time_ns, m))
+                    .map_err(|source| ReadError::Decode {
+                        topic: topic.to_owned(),
+                        log_time_ns: msg.log_time_ns,
+                        source,
+                    }),
+            )
+        })
+    }
+
+    /// Every message with its channel handed to `pick`, which skips it,
+    /// gives an item, or fails; a failure, as a read error, is the last
+    /// item.
+    fn picked<T: 'a>(
+        self,
+        mut pick: impl FnMut(&ChannelInfo, &RawMessage) -> Pick<T> + 'a,
+    ) -> impl Iterator<Item = Result<T, ReadError>> + 'a {
+        let mut reader = self;
         let mut failed = false;
         std::iter::from_fn(move || {
             if failed {
@@ -856,30 +861,28 @@ impl<'a> McapReader<'a> {
                     }
                 };
                 let channel = reader.channels.get(&msg.channel_id)?;
-                if channel.topic != topic {
-                    continue;
-                }
-                if checked != Some(msg.channel_id) {
-                    if channel.schema_name != M::TYPE_NAME {
+                match pick(channel, &msg) {
+                    Pick::Skip => {}
+                    Pick::Give(item) => return Some(item),
+                    Pick::Fail(e) => {
                         failed = true;
-                        return Some(Err(ReadError::WrongType {
-                            topic: topic.to_owned(),
-                            expected: M::TYPE_NAME,
-                            found: channel.schema_name.clone(),
-                        }));
+                        return Some(Err(e));
                     }
-                    checked = Some(msg.channel_id);
                 }
-                return Some(M::decode(&msg.data).map(|m| (msg.log_time_ns, m)).map_err(
-                    |source| ReadError::Decode {
-                        topic: topic.to_owned(),
-                        log_time_ns: msg.log_time_ns,
-                        source,
-                    },
-                ));
             }
         })
     }
+}
+
+/// What [`McapReader::picked`]'s choice makes of a message.
+enum Pick<T> {
+    /// Not wanted: the next one.
+    Skip,
+    /// An item (one that cannot be decoded is an error item, and the
+    /// iteration goes on).
+    Give(Result<T, ReadError>),
+    /// An error that ends the iteration.
+    Fail(ReadError),
 }
 
 impl Iterator for McapReader<'_> {
@@ -893,19 +896,53 @@ impl Iterator for McapReader<'_> {
             if self.done {
                 return None;
             }
-            match self.step() {
-                Ok(true) => {}
-                Ok(false) => {
-                    self.done = true;
-                    self.complete = true;
-                }
-                Err(e) => {
-                    self.done = true;
-                    return Some(Err(e));
-                }
+            let stepped = self.step();
+            if let Some(e) = self.after_step(stepped) {
+                return Some(Err(e));
             }
         }
     }
+}
+
+/// The error of a record (`opcode`, at `offset`) the mcap crate's parser
+/// refused.
+fn corrupt(offset: u64, opcode: u8) -> impl Fn(mcap::McapError) -> ReadError {
+    move |source| ReadError::Corrupt {
+        offset,
+        opcode,
+        source,
+    }
+}
+
+/// The record at the start of `rest` (at `offset`, with `available` bytes
+/// left in the file): its opcode, its body and its length with the prefix,
+/// or why it is not whole.
+fn record_parts(rest: &[u8], offset: u64, available: u64) -> Result<(u8, &[u8], u64), ReadError> {
+    if rest.is_empty() {
+        return Err(ReadError::Unfinished { offset });
+    }
+    let opcode = rest.first().copied();
+    let Some((prefix, after)) = rest.split_first_chunk::<RECORD_PREFIX>() else {
+        return Err(ReadError::Truncated {
+            offset,
+            opcode,
+            needed: RECORD_PREFIX as u64,
+            available,
+        });
+    };
+    let [op_byte, len_bytes @ ..] = *prefix;
+    let len = u64::from_le_bytes(len_bytes);
+    let needed = len.saturating_add(RECORD_PREFIX as u64);
+    let body = usize::try_from(len)
+        .ok()
+        .and_then(|n| after.get(..n))
+        .ok_or_else(|| ReadError::Truncated {
+            offset,
+            opcode,
+            needed,
+            available,
+        })?;
+    Ok((op_byte, body, needed))
 }
 
 /// The largest record read from a file (a chunk's compressed bytes and its
@@ -1097,29 +1134,6 @@ pub enum RecoverError {
 /// with its channel, sequence and times, its metadata, and metadata
 /// `sar_recover` saying where and why the input stopped.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
-    /// The channel `c` (and its schema) under the same ids.
-    fn copy_channel<W: std::io::Write + std::io::Seek>(
-        w: &mut mcap::Writer<W>,
-        c: &ChannelInfo,
-    ) -> Result<(), mcap::McapError> {
-        if c.schema_id != 0 {
-            w.add_schema_with_id(
-                c.schema_id,
-                &c.schema_name,
-                &c.schema_encoding,
-                &c.schema_data,
-            )?;
-        }
-        w.add_channel_with_id(
-            c.id,
-            c.schema_id,
-            &c.topic,
-            &c.message_encoding,
-            &c.metadata,
-        )?;
-        Ok(())
-    }
-
     // The same file by another spelling (./x.mcap, a link) counts too: the
     // output is truncated first, which would lose the input.
     let same_file = std::fs::canonicalize(output)
@@ -1128,125 +1142,217 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
     if input == output || same_file {
         return Err(RecoverError::SamePath(output.to_path_buf()));
     }
-    let mut reader = McapReader::open(input)?;
-    let mcap_err = |source| RecoverError::Mcap {
+    let reader = McapReader::open(input)?;
+    let io = |source| RecoverError::Io {
         path: output.to_path_buf(),
         source,
     };
-    let (file, handle, _) = CountingFile::create(output).map_err(|source| RecoverError::Io {
-        path: output.to_path_buf(),
-        source,
-    })?;
-    let options = FileOptions::new(".", "recovered").mcap_options();
-    let mut stopped = None;
-    let mut skipped: Vec<Skipped> = Vec::new();
-    let mut messages = 0u64;
-    let mut writer = None;
-    let mut file = Some(file);
-    let mut known = BTreeMap::new();
-    // Metadata records already copied: those before the first message are
-    // copied at the start (where readers such as replay look for them).
-    let mut metadata_copied = 0usize;
-    loop {
-        let msg = match reader.next() {
-            None => break,
-            Some(Ok(m)) => m,
-            Some(Err(e)) => match reader.skip_bad_record(&e) {
-                // A corrupt chunk: the good ones after it are kept.
-                Some(s) => {
-                    skipped.push(s);
-                    continue;
-                }
-                None => {
-                    stopped = Some(e);
-                    break;
-                }
-            },
-        };
-        let w = match (&mut writer, file.take()) {
-            (Some(w), _) => w,
-            (None, Some(f)) => {
-                let profile = reader.profile().unwrap_or("").to_owned();
-                let w = writer.insert(
-                    mcap::Writer::with_options(f, options.clone().profile(profile))
-                        .map_err(mcap_err)?,
-                );
-                for m in reader.metadata() {
-                    w.write_metadata(m).map_err(mcap_err)?;
-                }
-                metadata_copied = reader.metadata().len();
-                w
+    let (file, handle, _) = CountingFile::create(output).map_err(io)?;
+    let mut recovery = Recovery {
+        reader,
+        output,
+        options: FileOptions::new(".", "recovered").mcap_options(),
+        file: Some(file),
+        writer: None,
+        known: BTreeMap::new(),
+        metadata_copied: 0,
+        messages: 0,
+        skipped: Vec::new(),
+        stopped: None,
+    };
+    recovery.copy_messages()?;
+    recovery.finish(input)?;
+    handle.sync_all().map_err(io)?;
+    Ok(recovery.report())
+}
+
+/// A [`recover`] under way: the input's reader, the output (its writer made
+/// at the input's first message, when the input's profile and the metadata
+/// before it are known), and what was copied and passed over.
+struct Recovery<'p> {
+    reader: McapReader<'static>,
+    output: &'p Path,
+    options: mcap::WriteOptions,
+    /// The output file, until its writer is made.
+    file: Option<CountingFile>,
+    writer: Option<mcap::Writer<CountingFile>>,
+    /// The channels copied.
+    known: BTreeMap<u16, ()>,
+    /// Metadata records already copied: those before the first message are
+    /// copied at the start (where readers such as replay look for them).
+    metadata_copied: usize,
+    messages: u64,
+    skipped: Vec<Skipped>,
+    stopped: Option<ReadError>,
+}
+
+/// The channel `c` (and its schema) under the same ids.
+fn copy_channel<W: std::io::Write + std::io::Seek>(
+    w: &mut mcap::Writer<W>,
+    c: &ChannelInfo,
+) -> Result<(), mcap::McapError> {
+    if c.schema_id != 0 {
+        w.add_schema_with_id(
+            c.schema_id,
+            &c.schema_name,
+            &c.schema_encoding,
+            &c.schema_data,
+        )?;
+    }
+    w.add_channel_with_id(
+        c.id,
+        c.schema_id,
+        &c.topic,
+        &c.message_encoding,
+        &c.metadata,
+    )?;
+    Ok(())
+}
+
+impl Recovery<'_> {
+    /// The MCAP writer's error, on the output.
+    fn mcap_err(&self) -> impl Fn(mcap::McapError) -> RecoverError + use<> {
+        let path = self.output.to_path_buf();
+        move |source| RecoverError::Mcap {
+            path: path.clone(),
+            source,
+        }
+    }
+
+    /// The input's next message: a corrupt chunk is passed over (the good
+    /// ones after it are kept); `None` at its end or where it is cut short
+    /// (noted in `stopped`).
+    fn next_message(&mut self) -> Option<RawMessage> {
+        loop {
+            match self.reader.next()? {
+                Ok(m) => return Some(m),
+                Err(e) => match self.reader.skip_bad_record(&e) {
+                    Some(s) => self.skipped.push(s),
+                    None => {
+                        self.stopped = Some(e);
+                        return None;
+                    }
+                },
             }
-            (None, None) => break,
+        }
+    }
+
+    /// The output's writer, with the input's profile (`None` once made).
+    fn make_writer(&mut self) -> Result<Option<mcap::Writer<CountingFile>>, RecoverError> {
+        let Some(f) = self.file.take() else {
+            return Ok(None);
         };
-        if let std::collections::btree_map::Entry::Vacant(slot) = known.entry(msg.channel_id)
-            && let Some(c) = reader.channels().get(&msg.channel_id)
-        {
-            copy_channel(w, c).map_err(mcap_err)?;
-            slot.insert(());
+        let profile = self.reader.profile().unwrap_or("").to_owned();
+        mcap::Writer::with_options(f, self.options.clone().profile(profile))
+            .map(Some)
+            .map_err(self.mcap_err())
+    }
+
+    /// Every message of the input's complete chunks, with its channel,
+    /// sequence and times (the writer made at the first, with the metadata
+    /// read so far).
+    fn copy_messages(&mut self) -> Result<(), RecoverError> {
+        let mcap_err = self.mcap_err();
+        while let Some(msg) = self.next_message() {
+            if self.writer.is_none() {
+                let Some(mut w) = self.make_writer()? else {
+                    break;
+                };
+                for m in self.reader.metadata() {
+                    w.write_metadata(m).map_err(&mcap_err)?;
+                }
+                self.metadata_copied = self.reader.metadata().len();
+                self.writer = Some(w);
+            }
+            let Some(w) = self.writer.as_mut() else {
+                break;
+            };
+            if let std::collections::btree_map::Entry::Vacant(slot) =
+                self.known.entry(msg.channel_id)
+                && let Some(c) = self.reader.channels().get(&msg.channel_id)
+            {
+                copy_channel(w, c).map_err(&mcap_err)?;
+                slot.insert(());
+            }
+            let header = mcap::records::MessageHeader {
+                channel_id: msg.channel_id,
+                sequence: msg.sequence,
+                log_time: msg.log_time_ns,
+                publish_time: msg.publish_time_ns,
+            };
+            w.write_to_known_channel(&header, &msg.data)
+                .map_err(&mcap_err)?;
+            self.messages += 1;
         }
-        let header = mcap::records::MessageHeader {
-            channel_id: msg.channel_id,
-            sequence: msg.sequence,
-            log_time: msg.log_time_ns,
-            publish_time: msg.publish_time_ns,
+        Ok(())
+    }
+
+    /// The output completed: the channels without messages (kept too), the
+    /// metadata not copied yet, `sar_recover`, the summary and indexes.
+    fn finish(&mut self, input: &Path) -> Result<(), RecoverError> {
+        let mcap_err = self.mcap_err();
+        let mut w = match self.writer.take() {
+            Some(w) => w,
+            None => self
+                .make_writer()?
+                .ok_or_else(|| RecoverError::SamePath(self.output.to_path_buf()))?,
         };
-        w.write_to_known_channel(&header, &msg.data)
-            .map_err(mcap_err)?;
-        messages += 1;
-    }
-    let mut w = match (writer, file) {
-        (Some(w), _) => w,
-        (None, Some(f)) => {
-            let profile = reader.profile().unwrap_or("").to_owned();
-            mcap::Writer::with_options(f, options.profile(profile)).map_err(mcap_err)?
+        for c in self.reader.channels().values() {
+            if !self.known.contains_key(&c.id) {
+                copy_channel(&mut w, c).map_err(&mcap_err)?;
+            }
         }
-        (None, None) => return Err(RecoverError::SamePath(output.to_path_buf())),
-    };
-    // Channels without messages are kept too.
-    for c in reader.channels().values() {
-        if !known.contains_key(&c.id) {
-            copy_channel(&mut w, c).map_err(mcap_err)?;
+        for m in self.reader.metadata().iter().skip(self.metadata_copied) {
+            w.write_metadata(m).map_err(&mcap_err)?;
+        }
+        w.write_metadata(&self.recover_metadata(input))
+            .map_err(&mcap_err)?;
+        w.finish().map_err(&mcap_err)?;
+        Ok(())
+    }
+
+    /// `sar_recover`: the source, what was copied and read, where and why
+    /// the input stopped, the corrupt records passed over.
+    fn recover_metadata(&self, input: &Path) -> mcap::records::Metadata {
+        let mut info = BTreeMap::from([
+            ("source".to_owned(), input.display().to_string()),
+            ("messages".to_owned(), self.messages.to_string()),
+            (
+                "read_up_to_byte".to_owned(),
+                self.reader.offset().to_string(),
+            ),
+            (
+                "input_bytes".to_owned(),
+                self.reader.total_bytes().to_string(),
+            ),
+        ]);
+        if let Some(e) = &self.stopped {
+            info.insert("stopped".to_owned(), e.to_string());
+        }
+        if !self.skipped.is_empty() {
+            info.insert(
+                "skipped".to_owned(),
+                self.skipped
+                    .iter()
+                    .map(|s| format!("{} bytes at byte {}: {}", s.bytes, s.offset, s.why))
+                    .collect::<Vec<_>>()
+                    .join("; "),
+            );
+        }
+        mcap::records::Metadata {
+            name: "sar_recover".into(),
+            metadata: info,
         }
     }
-    for m in reader.metadata().iter().skip(metadata_copied) {
-        w.write_metadata(m).map_err(mcap_err)?;
+
+    /// What was done.
+    fn report(self) -> RecoverReport {
+        RecoverReport {
+            messages: self.messages,
+            channels: self.reader.channels().len(),
+            input_complete: self.reader.is_complete() && self.skipped.is_empty(),
+            stopped: self.stopped,
+            skipped: self.skipped,
+        }
     }
-    let mut info = BTreeMap::from([
-        ("source".to_owned(), input.display().to_string()),
-        ("messages".to_owned(), messages.to_string()),
-        ("read_up_to_byte".to_owned(), reader.offset().to_string()),
-        ("input_bytes".to_owned(), reader.total_bytes().to_string()),
-    ]);
-    if let Some(e) = &stopped {
-        info.insert("stopped".to_owned(), e.to_string());
-    }
-    if !skipped.is_empty() {
-        info.insert(
-            "skipped".to_owned(),
-            skipped
-                .iter()
-                .map(|s| format!("{} bytes at byte {}: {}", s.bytes, s.offset, s.why))
-                .collect::<Vec<_>>()
-                .join("; "),
-        );
-    }
-    w.write_metadata(&mcap::records::Metadata {
-        name: "sar_recover".into(),
-        metadata: info,
-    })
-    .map_err(mcap_err)?;
-    w.finish().map_err(mcap_err)?;
-    drop(w);
-    handle.sync_all().map_err(|source| RecoverError::Io {
-        path: output.to_path_buf(),
-        source,
-    })?;
-    Ok(RecoverReport {
-        messages,
-        channels: reader.channels().len(),
-        input_complete: reader.is_complete() && skipped.is_empty(),
-        stopped,
-        skipped,
-    })
 }

@@ -260,48 +260,13 @@ impl PendingWriter {
     }
 
     fn run(mut self) -> Result<RecordingReport, RecorderError> {
-        let mut last_ns = 0u64;
-        let mut next_status_ns: Option<u64> = None;
-        let mut error: Option<RecorderError> = None;
+        let mut progress = Progress::default();
         loop {
             // Read the flag before draining: whatever was pushed before stop()
             // is drained in this pass. A recorder dropped without stop() ends
             // the same way (its producer is gone).
             let stopping = self.shared.stop.load(Ordering::Acquire) || self.consumer.is_abandoned();
-            let mut drained = 0usize;
-            while let Ok(msg) = self.consumer.pop() {
-                drained += 1;
-                if error.is_some() {
-                    self.shared.dropped.fetch_add(1, Ordering::Relaxed);
-                    continue;
-                }
-                // The status of the file a rotation closes: up to the last
-                // message written, not this one.
-                let status = self.status(last_ns);
-                if let Err(e) = self.files.write(&msg, &status) {
-                    self.shared.dropped.fetch_add(1, Ordering::Relaxed);
-                    // One message that cannot be encoded (a stamp beyond the
-                    // format's range) is dropped and counted; the recording
-                    // goes on. A failing file ends it.
-                    if !matches!(e, WriteError::Encode { .. }) {
-                        error = Some(self.fail(e));
-                    }
-                    continue;
-                }
-                last_ns = last_ns.max(msg.stamp_ns());
-                let due = *next_status_ns.get_or_insert(last_ns + self.config.status_interval_ns);
-                if last_ns >= due {
-                    next_status_ns = Some(last_ns + self.config.status_interval_ns);
-                    let status = self.status(last_ns);
-                    let result = self
-                        .files
-                        .write(&Outgoing::RecorderDrops(status), &status)
-                        .and_then(|()| self.files.sync());
-                    if let Err(e) = result {
-                        error = Some(self.fail(e));
-                    }
-                }
-            }
+            let drained = self.drain(&mut progress);
             if stopping {
                 break;
             }
@@ -309,8 +274,63 @@ impl PendingWriter {
                 std::thread::park_timeout(self.config.idle_wait);
             }
         }
+        self.finish(progress)
+    }
+
+    /// Writes what is queued; returns how many messages it took (after a
+    /// failure each is dropped and counted).
+    fn drain(&mut self, progress: &mut Progress) -> usize {
+        let mut drained = 0usize;
+        while let Ok(msg) = self.consumer.pop() {
+            drained += 1;
+            if progress.error.is_some() {
+                self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
+            self.write(&msg, progress);
+        }
+        drained
+    }
+
+    /// One message written, then the status and a sync to disk when due.
+    fn write(&mut self, msg: &Outgoing, progress: &mut Progress) {
+        // The status of the file a rotation closes: up to the last
+        // message written, not this one.
+        let status = self.status(progress.last_ns);
+        if let Err(e) = self.files.write(msg, &status) {
+            self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+            // One message that cannot be encoded (a stamp beyond the
+            // format's range) is dropped and counted; the recording
+            // goes on. A failing file ends it.
+            if !matches!(e, WriteError::Encode { .. }) {
+                progress.error = Some(self.fail(e));
+            }
+            return;
+        }
+        progress.last_ns = progress.last_ns.max(msg.stamp_ns());
+        let interval_ns = self.config.status_interval_ns;
+        let due = *progress
+            .next_status_ns
+            .get_or_insert(progress.last_ns + interval_ns);
+        if progress.last_ns >= due {
+            progress.next_status_ns = Some(progress.last_ns + interval_ns);
+            let status = self.status(progress.last_ns);
+            let result = self
+                .files
+                .write(&Outgoing::RecorderDrops(status), &status)
+                .and_then(|()| self.files.sync());
+            if let Err(e) = result {
+                progress.error = Some(self.fail(e));
+            }
+        }
+    }
+
+    /// The last file closed with the final status (unless writing failed):
+    /// the report, or the failure with the drop count at the end.
+    fn finish(mut self, progress: Progress) -> Result<RecordingReport, RecorderError> {
+        let mut error = progress.error;
         if error.is_none() {
-            let status = self.status(last_ns);
+            let status = self.status(progress.last_ns);
             if let Err(e) = self.files.close(&status) {
                 error = Some(self.fail(e));
             }
@@ -332,4 +352,15 @@ impl PendingWriter {
             }),
         }
     }
+}
+
+/// What the writer thread has done so far.
+#[derive(Default)]
+struct Progress {
+    /// The newest stamp written, ns.
+    last_ns: u64,
+    /// When the next status and sync are due (log time, ns).
+    next_status_ns: Option<u64>,
+    /// The failure that ended writing (every later message is dropped).
+    error: Option<RecorderError>,
 }

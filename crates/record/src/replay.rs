@@ -137,6 +137,21 @@ pub struct Difference {
     pub file: Option<PathBuf>,
 }
 
+impl Difference {
+    /// A replayed message `m` of `topic` at `cycle` without its recorded
+    /// counterpart.
+    fn not_recorded(topic: Topic, cycle: u64, m: &Outgoing) -> Self {
+        Self {
+            file: None,
+            cycle,
+            topic: topic.name(),
+            field: "message".into(),
+            recorded: "(none)".into(),
+            replayed: format!("{m:?}"),
+        }
+    }
+}
+
 /// Error figures of one axis (MODEL.md 6).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AxisError {
@@ -223,6 +238,31 @@ pub struct ReplayReport {
     pub gaps: Vec<Gap>,
 }
 
+impl ReplayReport {
+    /// The report before the first cycle.
+    fn start(output: Option<PathBuf>, from_first_cycle: Option<bool>) -> Self {
+        Self {
+            mode: Mode::CycleInput,
+            cycles: 0,
+            outputs: 0,
+            compared: 0,
+            differences: 0,
+            first_difference: None,
+            recorder_dropped: 0,
+            input_complete: false,
+            stopped: None,
+            comparison: None,
+            series: Vec::new(),
+            output,
+            from_first_cycle,
+            from_snapshot: None,
+            skipped_cycles: 0,
+            snapshots_compared: 0,
+            gaps: Vec::new(),
+        }
+    }
+}
+
 /// A corrupt part of a recording that replay passed over.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Gap {
@@ -242,6 +282,23 @@ pub struct Gap {
 }
 
 impl Gap {
+    /// A gap in `file` after `last_cycle_before` (what follows it is noted
+    /// as reading goes on).
+    fn new(
+        file: Option<PathBuf>,
+        skipped: super::reader::Skipped,
+        last_cycle_before: Option<u64>,
+    ) -> Self {
+        Self {
+            file,
+            skipped,
+            last_cycle_before,
+            first_cycle_after: None,
+            cycles_not_replayed: 0,
+            resumed_after_cycle: None,
+        }
+    }
+
     /// Cycles lost in it (by their numbers on either side).
     pub fn cycles_lost(&self) -> Option<u64> {
         Some(
@@ -389,6 +446,16 @@ struct Tally {
 }
 
 impl Tally {
+    /// Nothing counted yet; the estimates kept with `keep_estimates`.
+    fn new(keep_estimates: bool) -> Self {
+        Self {
+            first_ns: None,
+            estimates: Vec::new(),
+            left_out: 0,
+            keep_estimates,
+        }
+    }
+
     /// One cycle stamped `stamp_ns` ([`convert::cycle_stamp_ns`]): counted in
     /// `report`, its stamp noted, its estimate kept (`--compare`, `--plot`).
     fn cycle(&mut self, report: &mut ReplayReport, stamp_ns: u64, out: &CycleOutput) {
@@ -406,6 +473,108 @@ impl Tally {
 }
 
 impl Replayer {
+    /// A replayer at the start of a set: the estimator and the step from
+    /// the configuration and the set's start bias, the output opened.
+    fn new(options: &ReplayOptions, start: &SetStart) -> Result<Self, ReplayError> {
+        let estimator = Estimator::with_bias(&options.config, start.bias)
+            .map_err(|e| ReplayError::Setting(e.to_string()))?;
+        let step = LoopStep::new(&options.config, start.bias, options.step)
+            .map_err(|e| ReplayError::Setting(e.to_string()))?;
+        let writer = output_writer(options, start.metadata.as_ref())?;
+        Ok(Self {
+            scratch: Vec::with_capacity(8),
+            estimator,
+            step,
+            sink: Sink {
+                writer,
+                status: RecorderDrops::default(),
+            },
+            report: ReplayReport::start(options.output.clone(), start.from_first_cycle),
+            replayed: BTreeMap::new(),
+            recorded: BTreeMap::new(),
+            comparing: options.check_recorded,
+            lacking: Vec::new(),
+            tally: Tally::new(options.compare.is_some() || options.keep_series),
+            references: Vec::new(),
+            last_cycle: 0,
+            // A recording whose files start with snapshots waits for one,
+            // unless it holds the daemon's first cycle; one without steps
+            // from its first cycle (as before snapshots; it may differ if
+            // it started mid-run, and says so).
+            anchored: start.from_first_cycle == Some(true) || !start.with_snapshots,
+            snapshot: Box::new(sar_snapshot::Snapshot::new()),
+            quiet: false,
+            stepped: false,
+        })
+    }
+
+    /// The recording is an inputs-only one: nothing to compare.
+    fn inputs_only_mode(&mut self) {
+        self.report.mode = Mode::InputsOnly;
+        self.comparing = false;
+        self.replayed.clear();
+        self.recorded.clear();
+    }
+
+    /// Cycles missing from the recording before `cycle` (dropped by its
+    /// recorder, or a corrupt chunk `sarctl recover` passed over): a gap,
+    /// as a corrupt chunk is.
+    fn missing_cycles(&mut self, file: Option<PathBuf>, cycle: u64) {
+        let skipped = super::reader::Skipped {
+            offset: 0,
+            bytes: 0,
+            log_time_ns: None,
+            why: format!(
+                "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
+                self.last_cycle + 1,
+                cycle - 1
+            ),
+        };
+        self.gap(Gap::new(file, skipped, Some(self.last_cycle)), false);
+    }
+
+    /// A corrupt record of `file` passed over.
+    fn corrupt_part(&mut self, file: Option<PathBuf>, skipped: super::reader::Skipped) {
+        let last_cycle_before =
+            (self.anchored || self.report.cycles > 0).then_some(self.last_cycle);
+        self.gap(Gap::new(file, skipped, last_cycle_before), true);
+    }
+
+    /// Whether a recorded cycle is replayed: not while the state is
+    /// unknown (before the first snapshot, or after a gap before the next
+    /// one), counted then as skipped or not replayed.
+    fn replayable(&mut self, cycle: u64) -> bool {
+        if let Some(gap) = self.report.gaps.last_mut() {
+            gap.first_cycle_after.get_or_insert(cycle);
+            if !self.anchored {
+                // After a corrupt part, before a snapshot.
+                gap.cycles_not_replayed += 1;
+                return false;
+            }
+        }
+        if !self.anchored {
+            // Before the first snapshot: the state is unknown.
+            self.report.skipped_cycles += 1;
+            return false;
+        }
+        true
+    }
+
+    /// The tip-force series (`--plot`): each kept estimate with the
+    /// reference at or before it.
+    fn series(&self) -> Vec<SeriesPoint> {
+        let t0 = self.tally.first_ns.unwrap_or(0);
+        self.tally
+            .estimates
+            .iter()
+            .map(|(t, e)| SeriesPoint {
+                t_s: t.saturating_sub(t0) as f64 * 1e-9,
+                estimate_n: *e,
+                reference_n: reference_at(&self.references, *t),
+            })
+            .collect()
+    }
+
     /// One cycle of a daemon recording: the loop step.
     fn loop_cycle(&mut self, input: &LoopInput) -> Result<(), ReplayError> {
         let needs_messages = self.needs_messages();
@@ -521,14 +690,9 @@ impl Replayer {
                 // this topic is no longer compared.
                 if let Some((cycle, m, _)) = rep.pop_front() {
                     self.report.differences += 1;
-                    self.report.first_difference.get_or_insert(Difference {
-                        file: None,
-                        cycle,
-                        topic: topic.name(),
-                        field: "message".into(),
-                        recorded: "(none)".into(),
-                        replayed: format!("{m:?}"),
-                    });
+                    self.report
+                        .first_difference
+                        .get_or_insert_with(|| Difference::not_recorded(topic, cycle, &m));
                 }
                 rep.clear();
                 self.lacking.push(topic);
@@ -648,14 +812,7 @@ impl Replayer {
                 for (cycle, m, _) in rep {
                     // A file cut short may lack its last cycle's outputs.
                     if complete || *cycle < last_cycle {
-                        leftovers.push(Difference {
-                            file: None,
-                            cycle: *cycle,
-                            topic: topic.name(),
-                            field: "message".into(),
-                            recorded: "(none)".into(),
-                            replayed: format!("{m:?}"),
-                        });
+                        leftovers.push(Difference::not_recorded(topic, *cycle, m));
                     }
                 }
             }
@@ -767,11 +924,8 @@ pub fn recorded_config(path: &Path) -> Result<Option<sar_config::ConfigSource>, 
 
 /// The `sar_replay` bias of a recording (zero when absent).
 fn start_bias(reader: &McapReader<'_>) -> Bias {
-    reader
-        .metadata()
-        .iter()
-        .find(|m| m.name == REPLAY_METADATA)
-        .and_then(|m| bias_from_metadata(&m.metadata))
+    replay_metadata(reader)
+        .and_then(bias_from_metadata)
         .unwrap_or(Bias::force_only(Vec3::zeros()))
 }
 
@@ -826,20 +980,30 @@ impl<'b> Input<'b> {
     }
 }
 
-/// The `sar_replay` metadata of a file: read up to its first message.
-fn file_metadata(input: &Input<'_>) -> Result<Option<BTreeMap<String, String>>, ReplayError> {
+/// A file opened and read up to its first message: the metadata written
+/// at a file's start (`sar_replay`, `sar_config`) is then known.
+fn probe<'b>(input: &Input<'b>) -> Result<McapReader<'b>, ReadError> {
     let mut probe = input.open()?;
     let _ = probe.next();
-    Ok(probe
+    Ok(probe)
+}
+
+/// The `sar_replay` metadata a reader has seen.
+fn replay_metadata<'r>(reader: &'r McapReader<'_>) -> Option<&'r BTreeMap<String, String>> {
+    reader
         .metadata()
         .iter()
         .find(|m| m.name == REPLAY_METADATA)
-        .map(|m| m.metadata.clone()))
+        .map(|m| &m.metadata)
 }
 
-/// The replay of `inputs`, in order, as one.
-fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
-    let count = inputs.len();
+/// How a file is named in errors and reports.
+fn display_name(path: Option<&PathBuf>) -> String {
+    path.map_or_else(|| "the input".to_owned(), |p| p.display().to_string())
+}
+
+/// `--from`/`--to`: times >= 0, in order.
+fn check_range(options: &ReplayOptions) -> Result<(), ReplayError> {
     for v in [options.from_s, options.to_s].into_iter().flatten() {
         if !(v.is_finite() && v >= 0.0) {
             return Err(ReplayError::Range(format!("{v} s is not a time >= 0")));
@@ -852,347 +1016,426 @@ fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayRe
             "--from {a} s is after --to {b} s"
         )));
     }
-    let first = inputs.first().ok_or(ReplayError::NoInputs)?;
-    // The metadata is written at the start of a file: read up to the first
-    // message to find it.
-    let mut probe = first.open()?;
-    let _ = probe.next();
-    let bias = start_bias(&probe);
-    let metadata = probe
-        .metadata()
-        .iter()
-        .find(|m| m.name == REPLAY_METADATA)
-        .map(|m| (m.name.clone(), m.metadata.clone()));
-    let from_first_cycle = metadata.as_ref().map(|(_, m)| {
-        m.get("from_first_cycle").is_some_and(|v| v == "true")
-            && m.get("file_index").is_none_or(|i| i == "0")
-    });
-    let with_snapshots = metadata
-        .as_ref()
-        .is_some_and(|(_, m)| m.contains_key(convert::SNAPSHOT_FORMAT_KEY));
-    let estimator = Estimator::with_bias(&options.config, bias)
-        .map_err(|e| ReplayError::Setting(e.to_string()))?;
-    let step = LoopStep::new(&options.config, bias, options.step)
-        .map_err(|e| ReplayError::Setting(e.to_string()))?;
-    let writer = match &options.output {
-        Some(path) => {
-            let mut o = FileOptions::single(path);
-            // The replayed file holds every cycle of its input.
-            o.metadata = metadata.clone().into_iter().collect();
-            // The live view's scene, as the daemon's recorder writes it
-            // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
-            // (With the cargo feature `scene` only.)
-            o.scene = cfg!(feature = "scene").then(|| super::SceneOptions {
-                geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
-                limits_n: options.config.guard.force_limits().to_array(),
-                period_ns: SCENE_PERIOD_NS,
-            });
-            Some(RotatingWriter::new(o)?)
-        }
-        None => None,
-    };
-    let mut r = Replayer {
-        scratch: Vec::with_capacity(8),
-        estimator,
-        step,
-        sink: Sink {
-            writer,
-            status: RecorderDrops::default(),
-        },
-        report: ReplayReport {
-            mode: Mode::CycleInput,
-            cycles: 0,
-            outputs: 0,
-            compared: 0,
-            differences: 0,
-            first_difference: None,
-            recorder_dropped: 0,
-            input_complete: false,
-            stopped: None,
-            comparison: None,
-            series: Vec::new(),
-            output: options.output.clone(),
+    Ok(())
+}
+
+/// What the first file says of the whole set (its `sar_replay` metadata,
+/// written at its start).
+struct SetStart {
+    /// The estimator's bias at the start (zero without the metadata).
+    bias: Bias,
+    /// The metadata itself (copied into the output).
+    metadata: Option<BTreeMap<String, String>>,
+    /// Whether the set holds the daemon's first cycle
+    /// ([`ReplayReport::from_first_cycle`]).
+    from_first_cycle: Option<bool>,
+    /// Whether its files start with snapshots.
+    with_snapshots: bool,
+}
+
+impl SetStart {
+    /// Read from the first file, up to its first message.
+    fn read(first: &Input<'_>) -> Result<Self, ReplayError> {
+        let probe = probe(first)?;
+        let metadata = replay_metadata(&probe).cloned();
+        let from_first_cycle = metadata.as_ref().map(|m| {
+            m.get("from_first_cycle").is_some_and(|v| v == "true")
+                && m.get("file_index").is_none_or(|i| i == "0")
+        });
+        let with_snapshots = metadata
+            .as_ref()
+            .is_some_and(|m| m.contains_key(convert::SNAPSHOT_FORMAT_KEY));
+        Ok(Self {
+            bias: start_bias(&probe),
+            metadata,
             from_first_cycle,
-            from_snapshot: None,
-            skipped_cycles: 0,
-            snapshots_compared: 0,
-            gaps: Vec::new(),
-        },
-        replayed: BTreeMap::new(),
-        recorded: BTreeMap::new(),
-        comparing: options.check_recorded,
-        lacking: Vec::new(),
-        tally: Tally {
-            first_ns: None,
-            estimates: Vec::new(),
-            left_out: 0,
-            keep_estimates: options.compare.is_some() || options.keep_series,
-        },
-        references: Vec::new(),
-        last_cycle: 0,
-        // A recording whose files start with snapshots waits for one, unless
-        // it holds the daemon's first cycle; one without steps from its
-        // first cycle (as before snapshots; it may differ if it started
-        // mid-run, and says so).
-        anchored: from_first_cycle == Some(true) || !with_snapshots,
-        snapshot: Box::new(sar_snapshot::Snapshot::new()),
-        quiet: false,
-        stepped: false,
+            with_snapshots,
+        })
+    }
+}
+
+/// The output file of a replay (`options.output`; `None`: not written).
+fn output_writer(
+    options: &ReplayOptions,
+    metadata: Option<&BTreeMap<String, String>>,
+) -> Result<Option<RotatingWriter>, WriteError> {
+    let Some(path) = &options.output else {
+        return Ok(None);
     };
-    let range_ns = |s: Option<f64>| s.map(|v| (v * 1e9).round() as u64);
-    let (from_ns, to_ns) = (range_ns(options.from_s), range_ns(options.to_s));
-    let mut first_stamp_ns: Option<u64> = None;
-    // Per file: channel ids are the file's own.
-    let mut saw_cycle_input = false;
-    let mut inputs_only = InputsOnly::new();
-    let mut recovered_from_cut = false;
-    let mut complete = true;
-    let mut previous_index: Option<u64> = None;
-    let mut reached_end_of_range = false;
-    for i in 0..count {
-        let Some(input) = inputs.get(i) else {
-            break;
-        };
-        let path = input.path();
-        let name = || {
-            path.as_ref()
-                .map_or_else(|| "the input".to_owned(), |p| p.display().to_string())
-        };
-        if count > 1 {
-            // The files chain: one rotation, in order.
-            let index = file_metadata(input)?
-                .and_then(|m| m.get("file_index").and_then(|v| v.parse::<u64>().ok()));
-            if let (Some(prev), Some(index)) = (previous_index, index)
-                && index != prev + 1
-            {
-                return Err(ReplayError::Chain {
-                    file: name(),
-                    why: if index == 0 {
-                        "it starts another recording (file_index 0): give the files of one recording (NAME-0000.mcap, NAME-0001.mcap, ...)".to_owned()
-                    } else {
-                        format!("its file_index is {index}, the previous file's {prev}")
-                    },
-                });
-            }
-            previous_index = index;
+    let mut o = FileOptions::single(path);
+    // The replayed file holds every cycle of its input.
+    o.metadata = metadata
+        .map(|m| (REPLAY_METADATA.to_owned(), m.clone()))
+        .into_iter()
+        .collect();
+    // The live view's scene, as the daemon's recorder writes it
+    // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
+    // (With the cargo feature `scene` only.)
+    o.scene = cfg!(feature = "scene").then(|| super::SceneOptions {
+        geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
+        limits_n: options.config.guard.force_limits().to_array(),
+        period_ns: SCENE_PERIOD_NS,
+    });
+    Ok(Some(RotatingWriter::new(o)?))
+}
+
+/// The replay of a set of files across them: the replayer, and what
+/// reading the files in turn carries from one to the next.
+struct SetReplay<'o> {
+    r: Replayer,
+    options: &'o ReplayOptions,
+    /// `--from` and `--to`, ns after the first cycle.
+    from_ns: Option<u64>,
+    to_ns: Option<u64>,
+    /// The stamp of the recording's first cycle, ns.
+    first_stamp_ns: Option<u64>,
+    /// Whether a `/sar/cycle/input` was read (a daemon recording).
+    saw_cycle_input: bool,
+    /// The window of an inputs-only recording.
+    inputs_only: InputsOnly,
+    /// Whether a file is a recovered one whose input was cut short.
+    recovered_from_cut: bool,
+    /// Whether every file was read to its end.
+    complete: bool,
+    /// The previous file's `file_index`.
+    previous_index: Option<u64>,
+    /// Whether the replay reached `--to`.
+    reached_end_of_range: bool,
+}
+
+/// One file's reading state (channel ids are the file's own).
+struct FileVisit {
+    path: Option<PathBuf>,
+    /// Topic per channel id (the index), looked up once per channel:
+    /// `None` for a channel not seen yet.
+    topics: Vec<Option<Option<Topic>>>,
+    /// The channel of `--compare`'s reference topic.
+    reference_channel: Option<u16>,
+    /// The cycle the file must start with (after the previous file's).
+    expect_cycle: Option<u64>,
+}
+
+impl FileVisit {
+    /// How the file is named in errors and reports.
+    fn name(&self) -> String {
+        display_name(self.path.as_ref())
+    }
+
+    /// The topic of channel `id` (looked up once per channel, which is
+    /// also when the reference channel of `compare` is found).
+    #[inline(always)]
+    fn topic(
+        &mut self,
+        channels: &BTreeMap<u16, ChannelInfo>,
+        id: u16,
+        compare: Option<&String>,
+    ) -> Option<Topic> {
+        if let Some(Some(t)) = self.topics.get(usize::from(id)) {
+            return *t;
         }
+        let channel = channels.get(&id);
+        let topic = channel.and_then(|c| Topic::from_name(&c.topic));
+        if let (Some(c), Some(reference)) = (channel, compare)
+            && &c.topic == reference
+        {
+            self.reference_channel = Some(id);
+        }
+        let at = usize::from(id);
+        if self.topics.len() <= at {
+            self.topics.resize(at + 1, None);
+        }
+        if let Some(slot) = self.topics.get_mut(at) {
+            *slot = Some(topic);
+        }
+        topic
+    }
+
+    /// The file's first cycle must be the one after the previous file's
+    /// last.
+    fn check_start(&mut self, cycle: u64) -> Result<(), ReplayError> {
+        if let Some(want) = self.expect_cycle.take()
+            && cycle != want
+        {
+            return Err(ReplayError::Chain {
+                file: self.name(),
+                why: format!(
+                    "it starts at cycle {}, the previous file ends at cycle {}",
+                    cycle,
+                    want.saturating_sub(1)
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
+impl<'o> SetReplay<'o> {
+    /// Opens the set: the first file's metadata read, the estimator, the
+    /// step and the output made.
+    fn open(first: &Input<'_>, options: &'o ReplayOptions) -> Result<Self, ReplayError> {
+        let start = SetStart::read(first)?;
+        let range_ns = |s: Option<f64>| s.map(|v| (v * 1e9).round() as u64);
+        Ok(Self {
+            r: Replayer::new(options, &start)?,
+            options,
+            from_ns: range_ns(options.from_s),
+            to_ns: range_ns(options.to_s),
+            first_stamp_ns: None,
+            saw_cycle_input: false,
+            inputs_only: InputsOnly::new(),
+            recovered_from_cut: false,
+            complete: true,
+            previous_index: None,
+            reached_end_of_range: false,
+        })
+    }
+
+    /// A file of a set of several must follow the previous one: one
+    /// rotation, in order (its `file_index` the next).
+    fn chain(&mut self, input: &Input<'_>) -> Result<(), ReplayError> {
+        let probe = probe(input)?;
+        let index = replay_metadata(&probe)
+            .and_then(|m| m.get("file_index").and_then(|v| v.parse::<u64>().ok()));
+        if let (Some(prev), Some(index)) = (self.previous_index, index)
+            && index != prev + 1
+        {
+            return Err(ReplayError::Chain {
+                file: display_name(input.path().as_ref()),
+                why: if index == 0 {
+                    "it starts another recording (file_index 0): give the files of one recording (NAME-0000.mcap, NAME-0001.mcap, ...)".to_owned()
+                } else {
+                    format!("its file_index is {index}, the previous file's {prev}")
+                },
+            });
+        }
+        self.previous_index = index;
+        Ok(())
+    }
+
+    /// The `index`th file of the set: its messages replayed in order, a
+    /// corrupt part passed over (reading goes on after it; the state is
+    /// unknown until the next snapshot), how it ended noted.
+    fn visit_file(&mut self, index: usize, input: &Input<'_>) -> Result<(), ReplayError> {
         let mut reader = input.open()?;
-        // Topic per channel id (the index), looked up once per channel:
-        // `None` for a channel not seen yet.
-        let mut topics: Vec<Option<Option<Topic>>> = Vec::new();
-        let mut reference_channel: Option<u16> = None;
-        // The cycle the file must start with (after the previous file's).
-        let mut expect_cycle = (i > 0 && r.anchored).then_some(r.last_cycle.saturating_add(1));
+        let mut file = FileVisit {
+            path: input.path(),
+            topics: Vec::new(),
+            reference_channel: None,
+            expect_cycle: (index > 0 && self.r.anchored)
+                .then_some(self.r.last_cycle.saturating_add(1)),
+        };
         let result = loop {
-            let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
-                               msg: MessageRef<'_>|
-             -> Result<(), ReplayError> {
-                let id = msg.channel_id;
-                let topic = match topics.get(usize::from(id)) {
-                    Some(Some(t)) => *t,
-                    _ => {
-                        let channel = channels.get(&id);
-                        let topic = channel.and_then(|c| Topic::from_name(&c.topic));
-                        if let (Some(c), Some(reference)) = (channel, &options.compare)
-                            && &c.topic == reference
-                        {
-                            reference_channel = Some(id);
-                        }
-                        let at = usize::from(id);
-                        if topics.len() <= at {
-                            topics.resize(at + 1, None);
-                        }
-                        if let Some(slot) = topics.get_mut(at) {
-                            *slot = Some(topic);
-                        }
-                        topic
-                    }
-                };
-                let decode_err = |source| ReadError::Decode {
-                    topic: topic.map_or("?", |t| t.name()).to_owned(),
-                    log_time_ns: msg.log_time_ns,
-                    source,
-                };
-                if reference_channel == Some(id) {
-                    let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
-                    r.references.push((w.stamp_ns, w.force_n));
-                    return Ok(());
-                }
-                match topic {
-                    Some(Topic::CycleInput) => {
-                        if !saw_cycle_input {
-                            if inputs_only.started {
-                                return Err(ReplayError::LateCycleInput {
-                                    log_time_ns: msg.log_time_ns,
-                                    window: INPUT_WINDOW,
-                                });
-                            }
-                            saw_cycle_input = true;
-                            inputs_only.discard();
-                        }
-                        let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
-                        if let Some(want) = expect_cycle.take()
-                            && m.cycle != want
-                        {
-                            return Err(ReplayError::Chain {
-                                file: name(),
-                                why: format!(
-                                    "it starts at cycle {}, the previous file ends at cycle {}",
-                                    m.cycle,
-                                    want.saturating_sub(1)
-                                ),
-                            });
-                        }
-                        let t0 = *first_stamp_ns.get_or_insert(m.stamp_ns);
-                        let t = m.stamp_ns.saturating_sub(t0);
-                        if to_ns.is_some_and(|to| t > to) {
-                            return Err(ReplayError::EndOfRange);
-                        }
-                        r.quiet = from_ns.is_some_and(|from| t < from);
-                        // Cycles missing from the recording (dropped by its
-                        // recorder, or a corrupt chunk `sarctl recover`
-                        // passed over): a gap, as a corrupt chunk is.
-                        if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
-                            r.gap(Gap {
-                                file: path.clone(),
-                                skipped: super::reader::Skipped {
-                                    offset: 0,
-                                    bytes: 0,
-                                    log_time_ns: None,
-                                    why: format!(
-                                        "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
-                                        r.last_cycle + 1,
-                                        m.cycle - 1
-                                    ),
-                                },
-                                last_cycle_before: Some(r.last_cycle),
-                                first_cycle_after: None,
-                                cycles_not_replayed: 0,
-                                resumed_after_cycle: None,
-                            }, false);
-                        }
-                        if let Some(gap) = r.report.gaps.last_mut() {
-                            gap.first_cycle_after.get_or_insert(m.cycle);
-                            if !r.anchored {
-                                // After a corrupt part, before a snapshot.
-                                gap.cycles_not_replayed += 1;
-                                return Ok(());
-                            }
-                        }
-                        if !r.anchored {
-                            // Before the first snapshot: the state is unknown.
-                            r.report.skipped_cycles += 1;
-                            return Ok(());
-                        }
-                        // The recorded message is compared with the one rebuilt from
-                        // its input and the replayed decision.
-                        r.recorded_output(Topic::CycleInput, msg.data);
-                        r.loop_cycle(&convert::loop_input(&m))?;
-                    }
-                    Some(Topic::StateSnapshot) => {
-                        let m = StateSnapshot::decode(msg.data).map_err(decode_err)?;
-                        r.snapshot(&m)?;
-                    }
-                    Some(Topic::SensorWrench) if !saw_cycle_input => {
-                        let w =
-                            sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
-                        inputs_only.push(&mut r, msg.log_time_ns, InputItem::Sensor(w))?;
-                    }
-                    Some(Topic::Joints) if !saw_cycle_input => {
-                        let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
-                        inputs_only.push(&mut r, msg.log_time_ns, InputItem::Joints(j))?;
-                    }
-                    Some(Topic::RecorderDrops) => {
-                        let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
-                        r.report.recorder_dropped = r.report.recorder_dropped.max(d.dropped);
-                    }
-                    Some(t) if OUTPUT_TOPICS.contains(&t) => r.recorded_output(t, msg.data),
-                    _ => {}
-                }
-                Ok(())
-            };
-            let result = match reader.visit(&mut visitor) {
-                Err(ReplayError::EndOfRange) => {
-                    reached_end_of_range = true;
-                    Ok(None)
-                }
-                other => other,
-            };
-            // A corrupt part: passed over, reading goes on after it (the
-            // state is unknown until the next snapshot).
+            let result = self.visit_records(&mut reader, &mut file);
             if let Ok(Some(e)) = &result
                 && let Some(skipped) = reader.skip_bad_record(e)
             {
-                r.gap(
-                    Gap {
-                        file: path.clone(),
-                        skipped,
-                        last_cycle_before: (r.anchored || r.report.cycles > 0)
-                            .then_some(r.last_cycle),
-                        first_cycle_after: None,
-                        cycles_not_replayed: 0,
-                        resumed_after_cycle: None,
-                    },
-                    true,
-                );
+                self.r.corrupt_part(file.path.clone(), skipped);
                 continue;
             }
             break result;
         };
-        if let Some(d) = &mut r.report.first_difference
+        self.end_file(&reader, &file, result)
+    }
+
+    /// The file's records up to its end, a cut or a corrupt part
+    /// (`Ok(Some)`), or `--to` (noted, `Ok(None)`).
+    fn visit_records(
+        &mut self,
+        reader: &mut McapReader<'_>,
+        file: &mut FileVisit,
+    ) -> Result<Option<ReadError>, ReplayError> {
+        let mut visitor = |channels: &BTreeMap<u16, ChannelInfo>,
+                           msg: MessageRef<'_>|
+         -> Result<(), ReplayError> { self.message(file, channels, msg) };
+        match reader.visit(&mut visitor) {
+            Err(ReplayError::EndOfRange) => {
+                self.reached_end_of_range = true;
+                Ok(None)
+            }
+            other => other,
+        }
+    }
+
+    /// One message: the reference of `--compare`, a cycle input, a
+    /// snapshot, an inputs-only message, the recorder's drops, or a
+    /// recorded output (to compare).
+    #[inline(always)]
+    fn message(
+        &mut self,
+        file: &mut FileVisit,
+        channels: &BTreeMap<u16, ChannelInfo>,
+        msg: MessageRef<'_>,
+    ) -> Result<(), ReplayError> {
+        let id = msg.channel_id;
+        let topic = file.topic(channels, id, self.options.compare.as_ref());
+        let decode_err = |source| ReadError::Decode {
+            topic: topic.map_or("?", |t| t.name()).to_owned(),
+            log_time_ns: msg.log_time_ns,
+            source,
+        };
+        if file.reference_channel == Some(id) {
+            let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+            self.r.references.push((w.stamp_ns, w.force_n));
+            return Ok(());
+        }
+        match topic {
+            Some(Topic::CycleInput) => {
+                self.start_cycle_inputs(msg.log_time_ns)?;
+                let m = CycleInputMsg::decode(msg.data).map_err(decode_err)?;
+                self.cycle_input(file, &m, msg.data)?;
+            }
+            Some(Topic::StateSnapshot) => {
+                let m = StateSnapshot::decode(msg.data).map_err(decode_err)?;
+                self.r.snapshot(&m)?;
+            }
+            Some(Topic::SensorWrench) if !self.saw_cycle_input => {
+                let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
+                let item = InputItem::Sensor(w);
+                self.inputs_only.push(&mut self.r, msg.log_time_ns, item)?;
+            }
+            Some(Topic::Joints) if !self.saw_cycle_input => {
+                let j = ActiveJointState::decode(msg.data).map_err(decode_err)?;
+                let item = InputItem::Joints(j);
+                self.inputs_only.push(&mut self.r, msg.log_time_ns, item)?;
+            }
+            Some(Topic::RecorderDrops) => {
+                let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
+                self.r.report.recorder_dropped = self.r.report.recorder_dropped.max(d.dropped);
+            }
+            Some(t) if OUTPUT_TOPICS.contains(&t) => self.r.recorded_output(t, msg.data),
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// The first `/sar/cycle/input` makes the recording a daemon one: the
+    /// inputs-only window is forgotten (refused once its cycles have run).
+    fn start_cycle_inputs(&mut self, log_time_ns: u64) -> Result<(), ReplayError> {
+        if !self.saw_cycle_input {
+            if self.inputs_only.started {
+                return Err(ReplayError::LateCycleInput {
+                    log_time_ns,
+                    window: INPUT_WINDOW,
+                });
+            }
+            self.saw_cycle_input = true;
+            self.inputs_only.discard();
+        }
+        Ok(())
+    }
+
+    /// One cycle of a daemon recording (`data`: its recorded bytes): its
+    /// place in the file and the time range checked, cycles missing before
+    /// it made a gap, skipped while the state is unknown, else stepped and
+    /// the recorded message compared with the one rebuilt from its input
+    /// and the replayed decision.
+    #[inline(always)]
+    fn cycle_input(
+        &mut self,
+        file: &mut FileVisit,
+        m: &CycleInputMsg,
+        data: &[u8],
+    ) -> Result<(), ReplayError> {
+        file.check_start(m.cycle)?;
+        self.r.quiet = self.before_range(m.stamp_ns)?;
+        let r = &mut self.r;
+        if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
+            r.missing_cycles(file.path.clone(), m.cycle);
+        }
+        if !r.replayable(m.cycle) {
+            return Ok(());
+        }
+        r.recorded_output(Topic::CycleInput, data);
+        r.loop_cycle(&convert::loop_input(m))
+    }
+
+    /// Whether a cycle stamped `stamp_ns` comes before `--from` (stepped
+    /// quietly); [`ReplayError::EndOfRange`] after `--to`.
+    fn before_range(&mut self, stamp_ns: u64) -> Result<bool, ReplayError> {
+        let t0 = *self.first_stamp_ns.get_or_insert(stamp_ns);
+        let t = stamp_ns.saturating_sub(t0);
+        if self.to_ns.is_some_and(|to| t > to) {
+            return Err(ReplayError::EndOfRange);
+        }
+        Ok(self.from_ns.is_some_and(|from| t < from))
+    }
+
+    /// A file read (`result`: how reading ended): the first difference
+    /// named by its file, a cut noted, whether it was complete.
+    fn end_file(
+        &mut self,
+        reader: &McapReader<'_>,
+        file: &FileVisit,
+        result: Result<Option<ReadError>, ReplayError>,
+    ) -> Result<(), ReplayError> {
+        if let Some(d) = &mut self.r.report.first_difference
             && d.file.is_none()
         {
-            d.file = path.clone();
+            d.file = file.path.clone();
         }
         if let Some(e) = result? {
-            r.report.stopped = Some(format!("{}: {e}", name()));
+            self.r.report.stopped = Some(format!("{}: {e}", file.name()));
         }
-        complete &= reader.is_complete();
-        recovered_from_cut |= reader
+        self.complete &= reader.is_complete();
+        self.recovered_from_cut |= reader
             .metadata()
             .iter()
             .any(|m| m.name == "sar_recover" && m.metadata.contains_key("stopped"));
-        if r.report.stopped.is_some() || reached_end_of_range {
-            // A file cut short ends the set: what follows cannot chain.
+        Ok(())
+    }
+
+    /// Whether the set ends here: a file cut short (what follows cannot
+    /// chain), or `--to` reached.
+    fn ended(&self) -> bool {
+        self.r.report.stopped.is_some() || self.reached_end_of_range
+    }
+
+    /// Every file read: what is pending compared (a daemon recording) or
+    /// the inputs-only window replayed; the comparison with the reference,
+    /// the series; the output closed.
+    fn finish(mut self) -> Result<ReplayReport, ReplayError> {
+        let r = &mut self.r;
+        r.report.input_complete = self.complete;
+        if self.saw_cycle_input {
+            r.finish_comparison(
+                self.complete && !self.recovered_from_cut && !self.reached_end_of_range,
+            );
+        } else {
+            if self.inputs_only.sensors_seen == 0 {
+                return Err(ReplayError::NoInputs);
+            }
+            r.inputs_only_mode();
+            self.inputs_only.finish(r)?;
+        }
+        if let Some(topic) = &self.options.compare {
+            r.report.comparison = Some(compare(r, topic)?);
+        }
+        if self.options.keep_series {
+            r.report.series = r.series();
+        }
+        if let Some(w) = &mut r.sink.writer {
+            w.close(&r.sink.status)?;
+        }
+        Ok(self.r.report)
+    }
+}
+
+/// The replay of `inputs`, in order, as one: the set opened from its first
+/// file, each file chained to the previous one and visited, then finished.
+fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
+    check_range(options)?;
+    let first = inputs.first().ok_or(ReplayError::NoInputs)?;
+    let mut set = SetReplay::open(first, options)?;
+    for (index, input) in inputs.iter().enumerate() {
+        if inputs.len() > 1 {
+            set.chain(input)?;
+        }
+        set.visit_file(index, input)?;
+        if set.ended() {
             break;
         }
     }
-    r.report.input_complete = complete;
-    if saw_cycle_input {
-        r.finish_comparison(
-            r.report.input_complete && !recovered_from_cut && !reached_end_of_range,
-        );
-    } else {
-        if inputs_only.sensors_seen == 0 {
-            return Err(ReplayError::NoInputs);
-        }
-        r.report.mode = Mode::InputsOnly;
-        r.comparing = false;
-        r.replayed.clear();
-        r.recorded.clear();
-        inputs_only.finish(&mut r)?;
-    }
-    if let Some(topic) = &options.compare {
-        r.report.comparison = Some(compare(&mut r, topic)?);
-    }
-    if options.keep_series {
-        let t0 = r.tally.first_ns.unwrap_or(0);
-        let refs = &r.references;
-        r.report.series = r
-            .tally
-            .estimates
-            .iter()
-            .map(|(t, e)| SeriesPoint {
-                t_s: t.saturating_sub(t0) as f64 * 1e-9,
-                estimate_n: *e,
-                reference_n: reference_at(refs, *t),
-            })
-            .collect();
-    }
-    if let Some(w) = &mut r.sink.writer {
-        w.close(&r.sink.status)?;
-    }
-    Ok(r.report)
+    set.finish()
 }
 
 /// The most inputs-only messages (`/sar/sensor/wrench`, `/sar/joints`) held
@@ -1307,12 +1550,8 @@ impl InputsOnly {
             && let Some(std::cmp::Reverse(first)) = self.window.pop()
         {
             if !self.started {
-                // The recording is an inputs-only one: nothing to compare.
                 self.started = true;
-                r.report.mode = Mode::InputsOnly;
-                r.comparing = false;
-                r.replayed.clear();
-                r.recorded.clear();
+                r.inputs_only_mode();
             }
             self.run(r, first)?;
         }

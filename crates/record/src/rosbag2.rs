@@ -136,61 +136,109 @@ fn count(path: &Path, topics: &mut Vec<TopicCount>) -> Result<FileCount, ExportE
         path: path.to_path_buf(),
         source,
     };
+    let not_ros2 = |why| ExportError::NotRos2 {
+        path: path.to_path_buf(),
+        why,
+    };
     let bytes = super::reader::read_file(path).map_err(read)?;
     let mut reader = McapReader::new(&bytes).map_err(read)?;
-    let mut per_channel: BTreeMap<u16, u64> = BTreeMap::new();
-    let (mut first, mut last, mut messages) = (u64::MAX, 0u64, 0u64);
-    for m in reader.by_ref() {
-        let m = m.map_err(|source| ExportError::NotRos2 {
-            path: path.to_path_buf(),
-            why: format!("{source}; `sarctl recover` rewrites a file cut short"),
-        })?;
-        *per_channel.entry(m.channel_id).or_default() += 1;
-        first = first.min(m.log_time_ns);
-        last = last.max(m.log_time_ns);
-        messages += 1;
+    let data = DataCount::read(&mut reader).map_err(|source| {
+        not_ros2(format!(
+            "{source}; `sarctl recover` rewrites a file cut short"
+        ))
+    })?;
+    check_summary(&bytes).map_err(not_ros2)?;
+    check_ros2(&reader).map_err(not_ros2)?;
+    add_topics(&reader, &data.per_channel, topics);
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let messages = data.messages;
+    Ok(FileCount {
+        name,
+        start_ns: if messages > 0 { data.first_ns } else { 0 },
+        duration_ns: if messages > 0 {
+            data.last_ns - data.first_ns
+        } else {
+            0
+        },
+        messages,
+    })
+}
+
+/// The messages of a file's data section: per channel, in all, and the
+/// first and last log times.
+struct DataCount {
+    per_channel: BTreeMap<u16, u64>,
+    first_ns: u64,
+    last_ns: u64,
+    messages: u64,
+}
+
+impl DataCount {
+    /// Every message of the data section, which must be whole.
+    fn read(reader: &mut McapReader<'_>) -> Result<Self, ReadError> {
+        let mut c = Self {
+            per_channel: BTreeMap::new(),
+            first_ns: u64::MAX,
+            last_ns: 0,
+            messages: 0,
+        };
+        for m in reader.by_ref() {
+            let m = m?;
+            *c.per_channel.entry(m.channel_id).or_default() += 1;
+            c.first_ns = c.first_ns.min(m.log_time_ns);
+            c.last_ns = c.last_ns.max(m.log_time_ns);
+            c.messages += 1;
+        }
+        Ok(c)
     }
-    // The data section is whole; the summary and the footer must be too:
-    // ROS 2's and Python's readers start there (a file cut inside its
-    // summary is refused by them).
-    match mcap::Summary::read(&bytes) {
-        Ok(Some(_)) => {}
+}
+
+/// The data section is whole; the summary and the footer must be too:
+/// ROS 2's and Python's readers start there (a file cut inside its
+/// summary is refused by them).
+fn check_summary(bytes: &[u8]) -> Result<(), String> {
+    match mcap::Summary::read(bytes) {
+        Ok(Some(_)) => Ok(()),
         Ok(None) => {
-            return Err(ExportError::NotRos2 {
-                path: path.to_path_buf(),
-                why: "the file has no summary section: `sarctl recover` rewrites it with one"
-                    .to_owned(),
-            });
+            Err("the file has no summary section: `sarctl recover` rewrites it with one".to_owned())
         }
-        Err(e) => {
-            return Err(ExportError::NotRos2 {
-                path: path.to_path_buf(),
-                why: format!(
-                    "truncated or corrupt after its data section (it ends at byte {} inside its summary or footer: {e}): `sarctl recover` rewrites it",
-                    bytes.len()
-                ),
-            });
-        }
+        Err(e) => Err(format!(
+            "truncated or corrupt after its data section (it ends at byte {} inside its summary or footer: {e}): `sarctl recover` rewrites it",
+            bytes.len()
+        )),
     }
+}
+
+/// The file's profile is `ros2` and every channel `cdr`/`ros2msg`.
+fn check_ros2(reader: &McapReader<'_>) -> Result<(), String> {
     let profile = reader.profile().unwrap_or_default();
     if profile != "ros2" {
-        return Err(ExportError::NotRos2 {
-            path: path.to_path_buf(),
-            why: format!(
-                "MCAP profile {profile:?}, not \"ros2\" (a scene companion NAME.scene.mcap is not part of a rosbag2 directory)"
-            ),
-        });
+        return Err(format!(
+            "MCAP profile {profile:?}, not \"ros2\" (a scene companion NAME.scene.mcap is not part of a rosbag2 directory)"
+        ));
     }
     for c in reader.channels().values() {
         if c.message_encoding != "cdr" || c.schema_encoding != "ros2msg" {
-            return Err(ExportError::NotRos2 {
-                path: path.to_path_buf(),
-                why: format!(
-                    "channel {} is {}/{}, not cdr/ros2msg",
-                    c.topic, c.message_encoding, c.schema_encoding
-                ),
-            });
+            return Err(format!(
+                "channel {} is {}/{}, not cdr/ros2msg",
+                c.topic, c.message_encoding, c.schema_encoding
+            ));
         }
+    }
+    Ok(())
+}
+
+/// Each channel's messages added to its topic's count (a topic of another
+/// file with the same type adds up), with the channel's offered QoS.
+fn add_topics(
+    reader: &McapReader<'_>,
+    per_channel: &BTreeMap<u16, u64>,
+    topics: &mut Vec<TopicCount>,
+) {
+    for c in reader.channels().values() {
         let n = per_channel.get(&c.id).copied().unwrap_or(0);
         let qos = c
             .metadata
@@ -210,16 +258,6 @@ fn count(path: &Path, topics: &mut Vec<TopicCount>) -> Result<FileCount, ExportE
             }),
         }
     }
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    Ok(FileCount {
-        name,
-        start_ns: if messages > 0 { first } else { 0 },
-        duration_ns: if messages > 0 { last - first } else { 0 },
-        messages,
-    })
 }
 
 /// A YAML double-quoted scalar (JSON's string syntax is a subset of it).
