@@ -13,6 +13,9 @@
 #   sim: on the simulator (`sard --sim`); rdt: the RDT sensor against its
 #   emulator (the example rdt_emulator, one packet a millisecond), the axes
 #   simulated; both (default): one after the other.
+# After the CPU's measurement (no client connected meanwhile), a client
+# (the example shm_probe) measures the state's publish-to-receive latency and
+# the commands' round trip, with and without a subscriber.
 # SARD=PATH measures another build of sard (e.g. an older one, to compare);
 # by default this tree's, built in release.
 # Needs cc, and cyclictest (Debian/Ubuntu: apt-get install rt-tests) for the
@@ -28,9 +31,9 @@ if [ -z "${SARD:-}" ]; then
   cargo build --release --locked -p sar-daemon --bin sard >/dev/null
   SARD=$PWD/target/release/sard
 fi
-if [ "$which" != sim ]; then
-  cargo build --release --locked -p sar-daemon --example rdt_emulator >/dev/null
-fi
+# The RDT emulator and the client's probe (the state's publish-to-receive
+# latency, the commands' round trip: after the CPU's measurement).
+cargo build --release --locked -p sar-daemon --example rdt_emulator --example shm_probe >/dev/null
 dir=$(mktemp -d)
 pids=()
 trap 'for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; rm -rf "$dir"' EXIT
@@ -80,6 +83,7 @@ measure() {
   local t1; t1=$(date +%s.%N)
   wait "$bare"
   grep -E '^(VmRSS|VmHWM|Threads)' "/proc/$pid/status" | tr -s '\t ' ' '
+  target/release/examples/shm_probe "sar-footprint-$$" 5 | sed 's/^/  /' || true
   kill -TERM "$pid"; wait "$pid" || true
   local sard_p99
   sard_p99=$(sed -n 's/.*wake-up latency p50 [0-9]* us p99 \([0-9]*\) us.*/\1/p' "$dir/log")

@@ -445,6 +445,85 @@ fn exists(prefix: &str, service: &str, e: impl std::fmt::Debug) -> ShmError {
     }
 }
 
+/// The command service (request-response) and its one server.
+fn command_server(
+    node: &Node<SarIpc>,
+    names: &Names,
+    prefix: &str,
+) -> Result<CommandServer, ShmError> {
+    node.service_builder(&service_name(&names.command)?)
+        .request_response::<CommandMsg, ReplyMsg>()
+        .max_servers(1)
+        .max_clients(MAX_CLIENTS)
+        .max_active_requests_per_client(1)
+        .max_response_buffer_size(1)
+        .enable_safe_overflow_for_requests(true)
+        .enable_safe_overflow_for_responses(true)
+        .create()
+        .map_err(|e| exists(prefix, &names.command, e))?
+        .server_builder()
+        .create()
+        .map_err(|e| port("cannot create the command server", e))
+}
+
+/// The state's service (publish-subscribe) and its one publisher.
+fn state_publisher(
+    node: &Node<SarIpc>,
+    names: &Names,
+    prefix: &str,
+) -> Result<(StateService, StatePublisher), ShmError> {
+    let state = node
+        .service_builder(&service_name(&names.state)?)
+        .publish_subscribe::<StateMsg>()
+        .max_publishers(1)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .subscriber_max_buffer_size(STATE_BUFFER)
+        .subscriber_max_borrowed_samples(STATE_BORROWED)
+        .history_size(STATE_HISTORY)
+        .enable_safe_overflow(true)
+        .create()
+        .map_err(|e| exists(prefix, &names.state, e))?;
+    let publisher = state
+        .publisher_builder()
+        .max_loaned_samples(1)
+        // Never retry towards a full subscriber (with safe overflow its
+        // oldest sample is replaced anyway).
+        .backpressure_strategy(BackpressureStrategy::DiscardData)
+        .create()
+        .map_err(|e| port("cannot create the state publisher", e))?;
+    Ok((state, publisher))
+}
+
+/// The state event's notifier (the daemon tells the subscribers) and the
+/// wake-up's listener (the clients tell the daemon).
+fn events(
+    node: &Node<SarIpc>,
+    names: &Names,
+    prefix: &str,
+) -> Result<(Notifier<SarIpc>, Listener<SarIpc>), ShmError> {
+    let notifier = node
+        .service_builder(&service_name(&names.event)?)
+        .event()
+        .max_notifiers(1)
+        .max_listeners(MAX_SUBSCRIBERS)
+        .create()
+        .map_err(|e| exists(prefix, &names.event, e))?
+        .notifier_builder()
+        .create()
+        .map_err(|e| port("cannot create the state notifier", e))?;
+    let wake = node
+        .service_builder(&service_name(&names.wake)?)
+        .event()
+        .max_notifiers(MAX_CLIENTS + MAX_SUBSCRIBERS)
+        .max_listeners(1)
+        .create()
+        .map_err(|e| exists(prefix, &names.wake, e))?
+        .listener_builder()
+        .create()
+        .map_err(|e| port("cannot create the wake-up listener", e))?;
+    Ok((notifier, wake))
+}
+
 impl ShmWorker {
     /// Cleans dead nodes' resources, then creates the services under
     /// `prefix`; refuses when a living daemon has them.
@@ -471,61 +550,9 @@ impl ShmWorker {
         let node = node_in(dir, Side::Daemon)?;
         // The command service first: a client that finds the state finds
         // the command server too.
-        let command = node
-            .service_builder(&service_name(&names.command)?)
-            .request_response::<CommandMsg, ReplyMsg>()
-            .max_servers(1)
-            .max_clients(MAX_CLIENTS)
-            .max_active_requests_per_client(1)
-            .max_response_buffer_size(1)
-            .enable_safe_overflow_for_requests(true)
-            .enable_safe_overflow_for_responses(true)
-            .create()
-            .map_err(|e| exists(prefix, &names.command, e))?;
-        let server = command
-            .server_builder()
-            .create()
-            .map_err(|e| port("cannot create the command server", e))?;
-        let state = node
-            .service_builder(&service_name(&names.state)?)
-            .publish_subscribe::<StateMsg>()
-            .max_publishers(1)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .subscriber_max_buffer_size(STATE_BUFFER)
-            .subscriber_max_borrowed_samples(STATE_BORROWED)
-            .history_size(STATE_HISTORY)
-            .enable_safe_overflow(true)
-            .create()
-            .map_err(|e| exists(prefix, &names.state, e))?;
-        let publisher = state
-            .publisher_builder()
-            .max_loaned_samples(1)
-            // Never retry towards a full subscriber (with safe overflow its
-            // oldest sample is replaced anyway).
-            .backpressure_strategy(BackpressureStrategy::DiscardData)
-            .create()
-            .map_err(|e| port("cannot create the state publisher", e))?;
-        let event = node
-            .service_builder(&service_name(&names.event)?)
-            .event()
-            .max_notifiers(1)
-            .max_listeners(MAX_SUBSCRIBERS)
-            .create()
-            .map_err(|e| exists(prefix, &names.event, e))?;
-        let notifier = event
-            .notifier_builder()
-            .create()
-            .map_err(|e| port("cannot create the state notifier", e))?;
-        let wake = node
-            .service_builder(&service_name(&names.wake)?)
-            .event()
-            .max_notifiers(MAX_CLIENTS + MAX_SUBSCRIBERS)
-            .max_listeners(1)
-            .create()
-            .map_err(|e| exists(prefix, &names.wake, e))?
-            .listener_builder()
-            .create()
-            .map_err(|e| port("cannot create the wake-up listener", e))?;
+        let server = command_server(&node, &names, prefix)?;
+        let (state, publisher) = state_publisher(&node, &names, prefix)?;
+        let (notifier, wake) = events(&node, &names, prefix)?;
         // The daemon's files: its user's and group's only (as every later
         // one, from the publishing thread).
         access::fence_own_files(dir, access::FENCE_LIMIT);
