@@ -1,7 +1,9 @@
 //! Logging off the loop thread: the loop pushes small `Copy` events into a
 //! bounded lock-free queue (no allocation, no lock, no I/O); a logging thread
 //! pops them and writes them with `tracing`. A full queue drops the event and
-//! counts it, never blocks the loop.
+//! counts it, never blocks the loop. The logging thread sleeps until a thread
+//! that wakes anyway (`sard`'s publishing thread) finds events queued and
+//! wakes it ([`LogWaker`]); the loop never wakes it (a system call).
 
 use crate::reply::Reply;
 use crossbeam_queue::ArrayQueue;
@@ -14,6 +16,9 @@ use std::time::Duration;
 
 /// Capacity of the queue, events.
 pub const CAPACITY: usize = 1024;
+/// The logging thread's longest sleep when nothing wakes it (the warning of
+/// dropped events, a logging thread nobody wakes).
+pub const LOG_WAIT: Duration = Duration::from_secs(1);
 
 /// What the loop reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,6 +100,25 @@ impl LogSender {
 pub struct LogThread {
     stop: Arc<AtomicBool>,
     handle: Option<JoinHandle<()>>,
+    waker: Option<LogWaker>,
+}
+
+/// Wakes the logging thread when events are queued: for a thread that wakes
+/// anyway (never the loop: a wake-up is a system call).
+#[derive(Debug, Clone)]
+pub struct LogWaker {
+    queue: LogQueue,
+    thread: std::thread::Thread,
+}
+
+impl LogWaker {
+    /// Wakes the logging thread when the queue holds events (a drop comes
+    /// with a full queue); two loads when there are none.
+    pub fn wake_if_pending(&self) {
+        if !self.queue.is_empty() {
+            self.thread.unpark();
+        }
+    }
 }
 
 /// Makes the queue (allocated here, once) and, when `spawn`, the thread
@@ -114,21 +138,38 @@ pub fn channel(spawn: bool) -> (LogSender, Option<LogThread>, LogQueue) {
             .name("sard-log".to_owned())
             .spawn(move || log_loop(&q, &s, &dropped))
             .ok();
-        LogThread { stop, handle }
+        let waker = handle.as_ref().map(|h| LogWaker {
+            queue: Arc::clone(&queue),
+            thread: h.thread().clone(),
+        });
+        LogThread {
+            stop,
+            handle,
+            waker,
+        }
     });
     (sender, thread, queue)
 }
 
 impl LogThread {
+    /// The thread's waker (`None`: the thread did not start).
+    pub fn waker(&self) -> Option<LogWaker> {
+        self.waker.clone()
+    }
+
     /// Writes what is left and ends the thread.
     pub fn finish(mut self) {
         self.stop.store(true, Ordering::SeqCst);
         if let Some(h) = self.handle.take() {
+            h.thread().unpark();
             let _ = h.join();
         }
     }
 }
 
+/// The logging thread's body: writes the queued events and says how many
+/// were dropped, then sleeps until woken ([`LogWaker`], [`LogThread::finish`])
+/// or for at most [`LOG_WAIT`].
 fn log_loop(queue: &ArrayQueue<LogEvent>, stop: &AtomicBool, dropped: &AtomicU64) {
     let mut reported_dropped = 0;
     loop {
@@ -144,7 +185,7 @@ fn log_loop(queue: &ArrayQueue<LogEvent>, stop: &AtomicBool, dropped: &AtomicU64
         if stopping {
             return;
         }
-        std::thread::sleep(Duration::from_millis(5));
+        std::thread::park_timeout(LOG_WAIT);
     }
 }
 

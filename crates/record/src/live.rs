@@ -77,6 +77,9 @@ pub struct RecordSwitch {
     /// The first file of the present or last recording.
     /// Locked by the command server and the manager thread, never the loop.
     current: std::sync::Mutex<Option<PathBuf>>,
+    /// The manager thread, woken by the requests (set by
+    /// [`RecordManager::start`]).
+    manager: std::sync::OnceLock<std::thread::Thread>,
 }
 
 impl Default for RecordSwitch {
@@ -101,6 +104,13 @@ impl RecordSwitch {
             answer: std::sync::Mutex::new(None),
             directory: std::sync::OnceLock::new(),
             current: std::sync::Mutex::new(None),
+            manager: std::sync::OnceLock::new(),
+        }
+    }
+    /// Wakes the manager thread (a request for it).
+    fn wake_manager(&self) {
+        if let Some(t) = self.manager.get() {
+            t.unpark();
         }
     }
     /// Asks for a recording to start (no effect while one runs): the
@@ -109,6 +119,7 @@ impl RecordSwitch {
         let ticket = self.tickets.fetch_add(1, Ordering::AcqRel) + 1;
         self.start_ticket.store(ticket, Ordering::Release);
         self.want.store(WANT_START, Ordering::Release);
+        self.wake_manager();
         ticket
     }
     /// The manager's answer to request `ticket`, once given (the first
@@ -148,6 +159,7 @@ impl RecordSwitch {
         let ticket = self.tickets.fetch_add(1, Ordering::AcqRel) + 1;
         self.stop_ticket.store(ticket, Ordering::Release);
         self.want.store(WANT_STOP, Ordering::Release);
+        self.wake_manager();
         ticket
     }
     /// Whether the loop records now.
@@ -386,6 +398,7 @@ impl RecordManager {
                 })
                 .map_err(|e| format!("cannot start the recording thread: {e}"))?
         };
+        let _ = switch.manager.set(thread.thread().clone());
         Ok((
             Self {
                 stop,
@@ -410,6 +423,7 @@ impl RecordManager {
     pub fn finish(mut self) {
         self.stop.store(true, Ordering::Release);
         if let Some(t) = self.thread.take() {
+            t.thread().unpark();
             let _ = t.join();
         }
     }
@@ -500,6 +514,17 @@ fn close(rec: Recorder, first: Option<&Path>) -> (RecordAnswer, u32) {
     }
 }
 
+/// The manager thread's longest sleep: it is woken by the requests
+/// ([`RecordSwitch::request_start`], [`RecordSwitch::request_stop`]) and at
+/// the end; this is the most a recording the loop gave up (a failed writer)
+/// waits to be closed, and the drop warnings' period.
+pub const MANAGER_WAIT: Duration = Duration::from_secs(1);
+/// The manager thread's sleep while the loop has a request or a recording
+/// to take or hand back (one to a few cycles).
+pub const MANAGER_POLL: Duration = Duration::from_millis(5);
+
+/// The manager thread's body: closes what the loop hands back and answers
+/// the stops, opens what is asked for, sleeps until there is work.
 fn manage(
     settings: &RecordSettings,
     scene: Option<SceneOptions>,
@@ -509,39 +534,83 @@ fn manage(
     outgoing: &ArrayQueue<Recorder>,
     stop: &AtomicBool,
 ) {
-    // The drops the log has told of, and when (at most one line a second).
-    let mut told = (0u64, std::time::Instant::now());
-    // What the last recording came to (`None`: none closed yet).
-    let mut last: Option<RecordAnswer> = None;
+    let mut m = Manager {
+        settings,
+        scene,
+        bias,
+        switch,
+        incoming,
+        outgoing,
+        told: (0, std::time::Instant::now()),
+        last: None,
+    };
     loop {
-        let dropped = switch.dropped();
-        if dropped > told.0 && told.1.elapsed() >= Duration::from_secs(1) {
+        m.warn_drops();
+        let stopping = stop.load(Ordering::Acquire);
+        m.close_handed_back();
+        if stopping {
+            // Never handed to the loop: close it too.
+            while let Some(rec) = incoming.pop() {
+                let _ = close(rec, switch.current_path().as_deref());
+            }
+            return;
+        }
+        m.start_if_asked();
+        m.sleep();
+    }
+}
+
+/// What the manager thread works with and remembers.
+struct Manager<'a> {
+    settings: &'a RecordSettings,
+    scene: Option<SceneOptions>,
+    bias: &'a Bias,
+    switch: &'a RecordSwitch,
+    incoming: &'a ArrayQueue<Recorder>,
+    outgoing: &'a ArrayQueue<Recorder>,
+    /// The drops the log has told of, and when (at most one line a second).
+    told: (u64, std::time::Instant),
+    /// What the last recording came to (`None`: none closed yet).
+    last: Option<RecordAnswer>,
+}
+
+impl Manager<'_> {
+    /// Warns of the messages the recorder dropped since the last warning
+    /// (at most once a second).
+    fn warn_drops(&mut self) {
+        let dropped = self.switch.dropped();
+        if dropped > self.told.0 && self.told.1.elapsed() >= Duration::from_secs(1) {
             tracing::warn!(
                 "the recorder dropped {} messages ({dropped} so far): its writer does not keep \
                  up (disk stalled or full); the loop goes on, the recording has gaps",
-                dropped - told.0
+                dropped - self.told.0
             );
-            told = (dropped, std::time::Instant::now());
+            self.told = (dropped, std::time::Instant::now());
         }
-        let stopping = stop.load(Ordering::Acquire);
+    }
+
+    /// Closes the recordings the loop handed back, then answers a stop the
+    /// loop took.
+    fn close_handed_back(&mut self) {
+        let switch = self.switch;
         // Read before closing: a stop taken by the loop with the recording
         // handed back (the flag falls after the hand-over) is answered below.
         let stop_ticket = switch.stop_ticket.load(Ordering::Acquire);
         let stop_taken = stop_ticket != 0 && switch.want.load(Ordering::Acquire) != WANT_STOP;
         let idle = !switch.recording();
-        while let Some(rec) = outgoing.pop() {
+        while let Some(rec) = self.outgoing.pop() {
             let (answer, errno) = close(rec, switch.current_path().as_deref());
             let code = match &answer {
                 Ok(_) => 0,
                 Err(_) => sar_msgs::wire::recording_code::failed(errno),
             };
             switch.failure.store(code, Ordering::Relaxed);
-            last = Some(answer);
+            self.last = Some(answer);
         }
         if stop_taken && idle {
             // Taken: a later stop with nothing recorded is answered "no
             // recording ran", not with this recording's outcome again.
-            let answer = last.take().unwrap_or_else(|| Ok(String::new()));
+            let answer = self.last.take().unwrap_or_else(|| Ok(String::new()));
             switch.give_answer(stop_ticket, answer);
             let _ = switch.stop_ticket.compare_exchange(
                 stop_ticket,
@@ -550,32 +619,49 @@ fn manage(
                 Ordering::Acquire,
             );
         }
-        if stopping {
-            // Never handed to the loop: close it too.
-            while let Some(rec) = incoming.pop() {
-                let _ = close(rec, switch.current_path().as_deref());
-            }
+    }
+
+    /// Opens a recording when one was asked for (the request is taken
+    /// first, atomically, then judged) and answers the request.
+    fn start_if_asked(&mut self) {
+        let switch = self.switch;
+        if !switch.take_start() {
             return;
         }
-        // The request is taken first (atomically), then judged.
-        if switch.take_start() {
-            let ticket = switch.start_ticket.swap(0, Ordering::AcqRel);
-            // The name chosen with the request, taken even when the request
-            // has no effect (a recording runs or is being handed over).
-            let name = recording_name();
-            let answer = if switch.recording() || !incoming.is_empty() {
-                Ok(switch
-                    .current_path()
-                    .map_or_else(String::new, |p| p.display().to_string()))
-            } else {
-                start_one(settings, scene, bias, switch, incoming, &name)
-            };
-            if let Err(e) = &answer {
-                tracing::error!("cannot start recording: {e}");
-            }
-            switch.give_answer(ticket, answer);
+        let ticket = switch.start_ticket.swap(0, Ordering::AcqRel);
+        // The name chosen with the request, taken even when the request
+        // has no effect (a recording runs or is being handed over).
+        let name = recording_name();
+        let answer = if switch.recording() || !self.incoming.is_empty() {
+            Ok(switch
+                .current_path()
+                .map_or_else(String::new, |p| p.display().to_string()))
+        } else {
+            start_one(
+                self.settings,
+                self.scene,
+                self.bias,
+                switch,
+                self.incoming,
+                &name,
+            )
+        };
+        if let Err(e) = &answer {
+            tracing::error!("cannot start recording: {e}");
         }
-        std::thread::sleep(Duration::from_millis(5));
+        switch.give_answer(ticket, answer);
+    }
+
+    /// Sleeps until a request or the end wakes it: [`MANAGER_POLL`] while
+    /// the loop has something to take or hand back, else at most
+    /// [`MANAGER_WAIT`].
+    fn sleep(&self) {
+        let switch = self.switch;
+        let settling = switch.want.load(Ordering::Acquire) != WANT_NONE
+            || switch.stop_ticket.load(Ordering::Acquire) != 0
+            || !self.incoming.is_empty()
+            || !self.outgoing.is_empty();
+        std::thread::park_timeout(if settling { MANAGER_POLL } else { MANAGER_WAIT });
     }
 }
 

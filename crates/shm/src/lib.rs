@@ -9,6 +9,9 @@
 //!   [`STATE_BORROWED`], history [`STATE_HISTORY`].
 //! - `PREFIX/state_event`: an event notified after each batch of states, so
 //!   that a subscriber blocks on its listener instead of spinning.
+//! - `PREFIX/wake`: an event the clients notify after they send a command or
+//!   subscribe, so that the publishing thread sleeps until there is work
+//!   (one listener: the daemon).
 //! - `PREFIX/command`: request-response of [`CommandMsg`] to [`ReplyMsg`]
 //!   (reset, tare, move-tip, limits). The loop takes at most one command per
 //!   cycle and replies from the cycle that judged it.
@@ -31,6 +34,7 @@
 
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
+use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
@@ -64,8 +68,18 @@ pub const STATE_BORROWED: usize = 2;
 /// States queued from the loop to the publishing thread at most (cycles of
 /// slack: 256 ms at 1 kHz); beyond, the loop drops and counts.
 pub const STATE_QUEUE: usize = 256;
-/// The publishing thread's longest sleep when the loop does not wake it.
-pub const WORKER_WAIT: Duration = Duration::from_millis(10);
+/// The publishing thread's longest sleep when nobody subscribes and no
+/// client wakes it (`PREFIX/wake`): its heartbeat's period then (the loop
+/// faults after 500 ms of silence), and the states it sends in one batch
+/// (far below [`STATE_QUEUE`]).
+pub const WORKER_WAIT: Duration = Duration::from_millis(20);
+/// The publishing thread's sleep while a subscriber is connected: the states
+/// go out in batches of this period (the loop never wakes the thread), the
+/// most a live view's state waits.
+pub const BATCH_WAIT: Duration = Duration::from_millis(4);
+/// The publishing thread's sleep while a command's reply (the loop answers
+/// in its next cycle) or a recorder's answer is awaited.
+pub const REPLY_WAIT: Duration = Duration::from_millis(1);
 
 /// The service names under `prefix`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -76,6 +90,8 @@ pub struct Names {
     pub event: String,
     /// Commands.
     pub command: String,
+    /// The clients' wake-up of the publishing thread.
+    pub wake: String,
 }
 
 impl Names {
@@ -85,6 +101,7 @@ impl Names {
             state: format!("{prefix}/state"),
             event: format!("{prefix}/state_event"),
             command: format!("{prefix}/command"),
+            wake: format!("{prefix}/wake"),
         }
     }
 }
@@ -299,6 +316,8 @@ pub fn clean_dead_nodes() -> usize {
 }
 
 type StatePublisher = Publisher<SarIpc, StateMsg, ()>;
+type StateService =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<SarIpc, StateMsg, ()>;
 type CommandServer = Server<SarIpc, CommandMsg, (), ReplyMsg, ()>;
 type CommandRequest = ActiveRequest<SarIpc, CommandMsg, (), ReplyMsg, ()>;
 
@@ -315,6 +334,8 @@ struct Shared {
     published: AtomicU64,
     /// Where `record start|stop` go (unset: refused as unknown).
     record_switch: std::sync::OnceLock<Arc<dyn RecordCommands>>,
+    /// The logging thread, woken at each round when the loop queued events.
+    log: std::sync::OnceLock<sar_loop::logq::LogWaker>,
 }
 
 /// Where the commands `record start|stop` go: the recording's switch, wired
@@ -348,16 +369,18 @@ pub const RECORD_ANSWER_WAIT: Duration = Duration::from_secs(8);
 /// it sends (and more when a new client connects): none of that may run on
 /// the loop thread. So the loop only copies its [`StateMsg`] into a bounded
 /// wait-free single-producer single-consumer ring ([`STATE_QUEUE`] entries,
-/// allocated here, once) and wakes the publishing thread (`unpark`: an atomic
-/// swap, and a futex wake only when the thread sleeps); a full ring drops the
-/// state and counts it ([`StateMsg::publish_queue_drops`]). The publishing thread
-/// (`sard-shm`, see [`ShmWorker`]) owns every iceoryx2 port: it sends the
-/// states, notifies the event, takes operator commands into the controller's
-/// bounded request queue and sends the replies the loop leaves in its reply
-/// queue. The loop never waits for it.
+/// allocated here, once); it never wakes the publishing thread (a wake-up
+/// is a system call on the loop's path). A full ring drops the state and
+/// counts it ([`StateMsg::publish_queue_drops`]). The publishing thread (`sard-shm`,
+/// see [`ShmWorker`]) owns every iceoryx2 port and sleeps until it has
+/// work ([`ShmWorker::sleep`]): it sends the states in batches, notifies the
+/// event, takes operator commands into the controller's bounded request
+/// queue and sends the replies the loop leaves in its reply queue. The loop
+/// never waits for it.
 pub struct DaemonShm {
     states: rtrb::Producer<StateMsg>,
-    /// The publishing thread to wake (`None` with a worker driven by hand).
+    /// The publishing thread, woken at the end (`None` with a worker driven
+    /// by hand).
     wake: Option<std::thread::Thread>,
     thread: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Shared>,
@@ -382,8 +405,12 @@ pub struct ShmWorker {
     _node: Node<SarIpc>,
     /// The runtime directory (fenced every `access::FENCE_PERIOD`).
     dir: std::path::PathBuf,
+    /// The state's service (how many subscribe).
+    state: StateService,
     publisher: StatePublisher,
     notifier: Notifier<SarIpc>,
+    /// Notified by the clients (`PREFIX/wake`): a command, a subscriber.
+    wake: Listener<SarIpc>,
     server: CommandServer,
     operator: Operator,
     states: rtrb::Consumer<StateMsg>,
@@ -418,6 +445,85 @@ fn exists(prefix: &str, service: &str, e: impl std::fmt::Debug) -> ShmError {
     }
 }
 
+/// The command service (request-response) and its one server.
+fn command_server(
+    node: &Node<SarIpc>,
+    names: &Names,
+    prefix: &str,
+) -> Result<CommandServer, ShmError> {
+    node.service_builder(&service_name(&names.command)?)
+        .request_response::<CommandMsg, ReplyMsg>()
+        .max_servers(1)
+        .max_clients(MAX_CLIENTS)
+        .max_active_requests_per_client(1)
+        .max_response_buffer_size(1)
+        .enable_safe_overflow_for_requests(true)
+        .enable_safe_overflow_for_responses(true)
+        .create()
+        .map_err(|e| exists(prefix, &names.command, e))?
+        .server_builder()
+        .create()
+        .map_err(|e| port("cannot create the command server", e))
+}
+
+/// The state's service (publish-subscribe) and its one publisher.
+fn state_publisher(
+    node: &Node<SarIpc>,
+    names: &Names,
+    prefix: &str,
+) -> Result<(StateService, StatePublisher), ShmError> {
+    let state = node
+        .service_builder(&service_name(&names.state)?)
+        .publish_subscribe::<StateMsg>()
+        .max_publishers(1)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .subscriber_max_buffer_size(STATE_BUFFER)
+        .subscriber_max_borrowed_samples(STATE_BORROWED)
+        .history_size(STATE_HISTORY)
+        .enable_safe_overflow(true)
+        .create()
+        .map_err(|e| exists(prefix, &names.state, e))?;
+    let publisher = state
+        .publisher_builder()
+        .max_loaned_samples(1)
+        // Never retry towards a full subscriber (with safe overflow its
+        // oldest sample is replaced anyway).
+        .backpressure_strategy(BackpressureStrategy::DiscardData)
+        .create()
+        .map_err(|e| port("cannot create the state publisher", e))?;
+    Ok((state, publisher))
+}
+
+/// The state event's notifier (the daemon tells the subscribers) and the
+/// wake-up's listener (the clients tell the daemon).
+fn events(
+    node: &Node<SarIpc>,
+    names: &Names,
+    prefix: &str,
+) -> Result<(Notifier<SarIpc>, Listener<SarIpc>), ShmError> {
+    let notifier = node
+        .service_builder(&service_name(&names.event)?)
+        .event()
+        .max_notifiers(1)
+        .max_listeners(MAX_SUBSCRIBERS)
+        .create()
+        .map_err(|e| exists(prefix, &names.event, e))?
+        .notifier_builder()
+        .create()
+        .map_err(|e| port("cannot create the state notifier", e))?;
+    let wake = node
+        .service_builder(&service_name(&names.wake)?)
+        .event()
+        .max_notifiers(MAX_CLIENTS + MAX_SUBSCRIBERS)
+        .max_listeners(1)
+        .create()
+        .map_err(|e| exists(prefix, &names.wake, e))?
+        .listener_builder()
+        .create()
+        .map_err(|e| port("cannot create the wake-up listener", e))?;
+    Ok((notifier, wake))
+}
+
 impl ShmWorker {
     /// Cleans dead nodes' resources, then creates the services under
     /// `prefix`; refuses when a living daemon has them.
@@ -444,59 +550,19 @@ impl ShmWorker {
         let node = node_in(dir, Side::Daemon)?;
         // The command service first: a client that finds the state finds
         // the command server too.
-        let command = node
-            .service_builder(&service_name(&names.command)?)
-            .request_response::<CommandMsg, ReplyMsg>()
-            .max_servers(1)
-            .max_clients(MAX_CLIENTS)
-            .max_active_requests_per_client(1)
-            .max_response_buffer_size(1)
-            .enable_safe_overflow_for_requests(true)
-            .enable_safe_overflow_for_responses(true)
-            .create()
-            .map_err(|e| exists(prefix, &names.command, e))?;
-        let server = command
-            .server_builder()
-            .create()
-            .map_err(|e| port("cannot create the command server", e))?;
-        let state = node
-            .service_builder(&service_name(&names.state)?)
-            .publish_subscribe::<StateMsg>()
-            .max_publishers(1)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .subscriber_max_buffer_size(STATE_BUFFER)
-            .subscriber_max_borrowed_samples(STATE_BORROWED)
-            .history_size(STATE_HISTORY)
-            .enable_safe_overflow(true)
-            .create()
-            .map_err(|e| exists(prefix, &names.state, e))?;
-        let publisher = state
-            .publisher_builder()
-            .max_loaned_samples(1)
-            // Never retry towards a full subscriber (with safe overflow its
-            // oldest sample is replaced anyway).
-            .backpressure_strategy(BackpressureStrategy::DiscardData)
-            .create()
-            .map_err(|e| port("cannot create the state publisher", e))?;
-        let event = node
-            .service_builder(&service_name(&names.event)?)
-            .event()
-            .max_notifiers(1)
-            .max_listeners(MAX_SUBSCRIBERS)
-            .create()
-            .map_err(|e| exists(prefix, &names.event, e))?;
-        let notifier = event
-            .notifier_builder()
-            .create()
-            .map_err(|e| port("cannot create the state notifier", e))?;
+        let server = command_server(&node, &names, prefix)?;
+        let (state, publisher) = state_publisher(&node, &names, prefix)?;
+        let (notifier, wake) = events(&node, &names, prefix)?;
         // The daemon's files: its user's and group's only (as every later
         // one, from the publishing thread).
         access::fence_own_files(dir, access::FENCE_LIMIT);
         Ok(Self {
             _node: node,
             dir: dir.to_owned(),
+            state,
             publisher,
             notifier,
+            wake,
             server,
             operator,
             states,
@@ -667,10 +733,30 @@ impl ShmWorker {
         }
     }
 
-    /// The thread's body: pumps, then sleeps until woken by the loop or for
-    /// at most [`WORKER_WAIT`] (commands arrive without the loop; a stalled
-    /// loop still gets its LIMITS queries answered). Ends when the daemon
-    /// side is dropped, after sending what is queued.
+    /// Sleeps until there is work, never woken by the loop (its wake-up
+    /// would be a system call on the loop's path):
+    /// - a command's reply or a recorder's answer awaited: [`REPLY_WAIT`]
+    ///   (the loop answers in its next cycle);
+    /// - a subscriber connected: [`BATCH_WAIT`], then the states queued
+    ///   meanwhile go out in one batch; a client's wake-up is taken along;
+    /// - else until a client notifies `PREFIX/wake` (a command, a new
+    ///   subscriber), for at most [`WORKER_WAIT`] (the heartbeat, the states
+    ///   queued meanwhile, the fence).
+    pub fn sleep(&self) {
+        if self.in_flight.is_some() || self.waiting.is_some() || self.record_pending.is_some() {
+            std::thread::park_timeout(REPLY_WAIT);
+        } else if self.state.dynamic_config().number_of_subscribers() > 0 {
+            std::thread::park_timeout(BATCH_WAIT);
+            let _ = self.wake.try_wait(|_| {});
+        } else {
+            let _ = self.wake.timed_wait(|_| {}, WORKER_WAIT);
+        }
+    }
+
+    /// The thread's body: pumps, then sleeps until there is work
+    /// ([`ShmWorker::sleep`]; a stalled loop still gets its LIMITS queries
+    /// answered). Ends when the daemon side is dropped, after sending what
+    /// is queued.
     fn run(mut self) {
         self.operator.publisher.watch();
         let mut fenced = std::time::Instant::now();
@@ -679,16 +765,19 @@ impl ShmWorker {
                 access::fence_own_files(&self.dir, access::FENCE_LIMIT);
                 fenced = std::time::Instant::now();
             }
-            // A sign of life per wake-up (the loop wakes it every cycle):
-            // the loop faults when it stops (`Reason::PublisherStalled`).
+            // A sign of life per wake-up (at least every WORKER_WAIT): the
+            // loop faults when it stops (`Reason::PublisherStalled`).
             self.operator.publisher.beat();
             self.pump();
+            if let Some(log) = self.shared.log.get() {
+                log.wake_if_pending();
+            }
             if self.shared.stop.load(Ordering::Acquire) {
                 self.pump();
                 self.send_replies(true);
                 return;
             }
-            std::thread::park_timeout(WORKER_WAIT);
+            self.sleep();
         }
     }
 }
@@ -829,6 +918,12 @@ impl DaemonShm {
         self
     }
 
+    /// Wakes the logging thread of `log` at each round that finds events in
+    /// its queue (the logging thread then sleeps until there are some).
+    pub fn wake_log(&self, log: sar_loop::logq::LogWaker) {
+        let _ = self.shared.log.set(log);
+    }
+
     /// States the publishing thread failed to send so far.
     pub fn publish_errors(&self) -> u64 {
         self.shared.publish_errors.load(Ordering::Relaxed)
@@ -844,14 +939,12 @@ impl DaemonShm {
         self.queue_drops
     }
 
-    /// Queues one state for the publishing thread and wakes it; a full queue
-    /// drops the state and counts it. Wait-free, allocation-free.
+    /// Queues one state for the publishing thread (which takes it at its
+    /// next wake-up: [`ShmWorker::sleep`]); a full queue drops the state and
+    /// counts it. Wait-free, allocation-free, no system call.
     pub fn push_state(&mut self, state: StateMsg) {
         if self.states.push(state).is_err() {
             self.queue_drops = self.queue_drops.saturating_add(1);
-        }
-        if let Some(t) = &self.wake {
-            t.unpark();
         }
     }
 }
@@ -951,6 +1044,27 @@ impl Client {
         }
     }
 
+    /// Wakes the daemon's publishing thread (`PREFIX/wake`) so that it
+    /// takes a command or a new subscriber now, not at its next round; a
+    /// daemon without the service (an older one) finds it at its next round.
+    fn wake_daemon(&self) {
+        let Ok(node) = self.node(&self.names.wake) else {
+            return;
+        };
+        let notifier = service_name(&self.names.wake).ok().and_then(|name| {
+            node.service_builder(&name)
+                .event()
+                .open()
+                .ok()?
+                .notifier_builder()
+                .create()
+                .ok()
+        });
+        if let Some(n) = notifier {
+            let _ = n.notify();
+        }
+    }
+
     /// Subscribes to the state; `Err` when no daemon runs.
     pub fn subscribe(&self) -> Result<StateSubscription, ClientError> {
         let state = self
@@ -975,6 +1089,7 @@ impl Client {
             .create()
             .map_err(|e| port("cannot listen to the state event", e))?;
         access::fence_own_files(&self.dir, access::FENCE_LIMIT);
+        self.wake_daemon();
         Ok(StateSubscription {
             subscriber,
             listener,
@@ -996,6 +1111,7 @@ impl Client {
         let pending = client
             .send_copy(command)
             .map_err(|e| port("cannot send the command", e))?;
+        self.wake_daemon();
         let start = std::time::Instant::now();
         let mut fenced = false;
         while start.elapsed() < timeout {

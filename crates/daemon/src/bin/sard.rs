@@ -4,6 +4,7 @@
 use clap::Parser;
 use sar_config as config;
 use sar_daemon::{devices, sim};
+use sar_drivers::rdt::RdtSensor;
 use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::Bias;
@@ -54,6 +55,9 @@ struct Args {
     stall_after_cycles: Option<u64>,
 }
 
+/// The simulated parts on the monotonic clock.
+type Simulated = sim::Simulated<MonotonicClock>;
+
 /// A real sensor must send its first sample within this at start, ns.
 const FIRST_SAMPLE_TIMEOUT_NS: u64 = 2_000_000_000;
 
@@ -78,6 +82,8 @@ fn main() -> ExitCode {
     }
 }
 
+/// The daemon: the configuration and its devices, the shared memory and
+/// the recording, then the loop on the devices the configuration names.
 fn run(args: &Args) -> Result<(), String> {
     if let Some(path) = &args.check_config {
         return check_config(path);
@@ -85,81 +91,15 @@ fn run(args: &Args) -> Result<(), String> {
     let cfg = configuration(args)?;
     let (rdt, canopen) = chosen_devices(args, &cfg)?;
     rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
-
     // The sensor first: its receive thread keeps the normal priority.
-    let real_sensor = match rdt {
-        Some(c) => {
-            let mut sensor = devices::connect_rdt(c)?;
-            devices::first_sample(&mut sensor, FIRST_SAMPLE_TIMEOUT_NS)?;
-            Some(sensor)
-        }
-        None => None,
-    };
-    // The simulator only for the parts that are simulated (none on the
-    // real robot).
-    let mut scenario_name = String::new();
-    let simulated = if real_sensor.is_some() && canopen.is_some() {
-        if let Some(path) = &args.scenario {
-            return Err(format!(
-                "--scenario {}: nothing is simulated ({} names a real sensor and real axes)",
-                path.display(),
-                cfg.origin
-            ));
-        }
-        None
-    } else {
-        let scenario = scenario(args, &cfg)?;
-        scenario_name = scenario.name.clone();
-        let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
-        Some(sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?)
-    };
-    // The start bias, decided once for the estimator and the recordings: a
-    // real sensor starts with none (the operator tares), the simulated one
-    // with the scenario's, as if measured beforehand.
-    let bias = match (&real_sensor, &simulated) {
-        (None, Some((_, _, _, sim_bias))) => *sim_bias,
-        _ => Bias::force_only(Vec3::zeros()),
-    };
-    // The simulator's true tip force only where the sensor is simulated.
-    let truth = match (&real_sensor, &simulated) {
-        (None, Some((simulator, ..))) => Some(truth_of(simulator.clone())),
-        _ => None,
-    };
+    let real_sensor = rdt.map(connect_sensor).transpose()?;
+    let (simulated, scenario_name) = simulator(args, &cfg, real_sensor.is_some(), &canopen)?;
+    let (bias, truth) = start_bias(real_sensor.is_some(), simulated.as_ref());
     let operator = Operator::new();
-    // The shared memory in the runtime directory (`SAR_RUNTIME_DIR`, default
-    // /run/sar: the access model, README "Access"); a SIGTERM while iceoryx2
-    // is stuck on a damaged file still ends sard.
-    let shm = match DaemonShm::create_in(
-        &sar_shm::runtime_dir(),
-        &args.prefix,
-        operator.clone(),
-        cfg.estimator.guard.force_limits().to_array(),
-        &rt::stop_requested,
-    ) {
-        Ok(shm) => shm,
-        Err(sar_shm::ShmError::Stopped) => {
-            tracing::info!(
-                "sard: stopped while creating the shared-memory services (the loop never ran)"
-            );
-            return Ok(());
-        }
-        Err(e) => return Err(e.to_string()),
+    let Some(shm) = start_shm(args, &cfg, &operator)? else {
+        return Ok(());
     };
-    // Recording (`[record]`, `sarctl record start|stop`): its manager thread
-    // (which opens and closes the files, never the loop) starts here, before
-    // the real-time settings, so that it and the writer threads it starts
-    // keep the normal priority and every CPU.
-    tracing::info!(
-        "recordings go to {} ([record] directory)",
-        cfg.record.directory.display()
-    );
-    let switch = std::sync::Arc::new(RecordSwitch::new(cfg.loop_.period_ns));
-    let (recording, recorder) = RecordManager::start(
-        cfg.record.clone(),
-        SceneOptions::from_config(&cfg),
-        bias,
-        std::sync::Arc::clone(&switch),
-    )?;
+    let (recording, recorder, switch) = start_recording(&cfg, bias)?;
     let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
     real_time(&cfg);
     let run = Run {
@@ -173,10 +113,115 @@ fn run(args: &Args) -> Result<(), String> {
         bias,
         auto_reset: args.sim,
     };
-    let sensor_what = match (&real_sensor, &simulated) {
-        (Some(s), _) => format!("the RDT sensor at {}", s.config().address),
-        _ => format!("the simulated sensor of {scenario_name:?}"),
+    let sensor_what = match &real_sensor {
+        Some(s) => format!("the RDT sensor at {}", s.config().address),
+        None => format!("the simulated sensor of {scenario_name:?}"),
     };
+    run_on(run, real_sensor, canopen, simulated, &sensor_what)
+}
+
+/// The RDT sensor, connected and streaming (its first sample came in time).
+fn connect_sensor(config: sar_drivers::rdt::RdtConfig) -> Result<RdtSensor, String> {
+    let mut sensor = devices::connect_rdt(config)?;
+    devices::first_sample(&mut sensor, FIRST_SAMPLE_TIMEOUT_NS)?;
+    Ok(sensor)
+}
+
+/// The simulator for the parts that are simulated (none on the real robot:
+/// a `--scenario` is then refused), and its scenario's name.
+fn simulator(
+    args: &Args,
+    cfg: &config::Config,
+    real_sensor: bool,
+    canopen: &Option<(String, sar_drivers::canopen::CanOpenConfig)>,
+) -> Result<(Option<Simulated>, String), String> {
+    if real_sensor && canopen.is_some() {
+        if let Some(path) = &args.scenario {
+            return Err(format!(
+                "--scenario {}: nothing is simulated ({} names a real sensor and real axes)",
+                path.display(),
+                cfg.origin
+            ));
+        }
+        return Ok((None, String::new()));
+    }
+    let scenario = scenario(args, cfg)?;
+    let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
+    let simulated =
+        sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
+    Ok((Some(simulated), scenario.name))
+}
+
+/// The start bias, decided once for the estimator and the recordings (a
+/// real sensor starts with none, the operator tares; the simulated one with
+/// the scenario's, as if measured beforehand), and the simulator's true tip
+/// force where the sensor is simulated.
+fn start_bias(real_sensor: bool, simulated: Option<&Simulated>) -> (Bias, Option<SimTruthFn>) {
+    match simulated {
+        Some((simulator, _, _, sim_bias)) if !real_sensor => {
+            (*sim_bias, Some(truth_of(simulator.clone())))
+        }
+        _ => (Bias::force_only(Vec3::zeros()), None),
+    }
+}
+
+/// The shared memory in the runtime directory (`SAR_RUNTIME_DIR`, default
+/// /run/sar: the access model, README "Access"); `None` when a SIGTERM
+/// came while iceoryx2 was stuck on a damaged file (sard then ends).
+fn start_shm(
+    args: &Args,
+    cfg: &config::Config,
+    operator: &Operator,
+) -> Result<Option<DaemonShm>, String> {
+    match DaemonShm::create_in(
+        &sar_shm::runtime_dir(),
+        &args.prefix,
+        operator.clone(),
+        cfg.estimator.guard.force_limits().to_array(),
+        &rt::stop_requested,
+    ) {
+        Ok(shm) => Ok(Some(shm)),
+        Err(sar_shm::ShmError::Stopped) => {
+            tracing::info!(
+                "sard: stopped while creating the shared-memory services (the loop never ran)"
+            );
+            Ok(None)
+        }
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+/// Recording (`[record]`, `sarctl record start|stop`): its manager thread
+/// (which opens and closes the files, never the loop) starts here, before
+/// the real-time settings, so that it and the writer threads it starts keep
+/// the normal priority and every CPU.
+fn start_recording(
+    cfg: &config::Config,
+    bias: Bias,
+) -> Result<(RecordManager, LiveRecorder, std::sync::Arc<RecordSwitch>), String> {
+    tracing::info!(
+        "recordings go to {} ([record] directory)",
+        cfg.record.directory.display()
+    );
+    let switch = std::sync::Arc::new(RecordSwitch::new(cfg.loop_.period_ns));
+    let (recording, recorder) = RecordManager::start(
+        cfg.record.clone(),
+        SceneOptions::from_config(cfg),
+        bias,
+        std::sync::Arc::clone(&switch),
+    )?;
+    Ok((recording, recorder, switch))
+}
+
+/// Runs the loop on the sensor and the drives: the real ones the
+/// configuration names, the simulated ones for the rest.
+fn run_on(
+    run: Run<'_>,
+    real_sensor: Option<RdtSensor>,
+    canopen: Option<(String, sar_drivers::canopen::CanOpenConfig)>,
+    simulated: Option<Simulated>,
+    sensor_what: &str,
+) -> Result<(), String> {
     match (real_sensor, canopen, simulated) {
         (None, None, Some((_, sensor, drives, _))) => run.run(
             sensor,
@@ -206,7 +251,7 @@ fn run(args: &Args) -> Result<(), String> {
         #[cfg(not(all(feature = "socketcan", target_os = "linux")))]
         (_, Some((interface, _)), _) => Err(format!(
             "{}: CANopen drives on {interface} need the `socketcan` feature",
-            cfg.origin
+            run.cfg.origin
         )),
         (_, None, None) => Err(NO_SIMULATOR.to_owned()),
     }
@@ -364,6 +409,8 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
+    /// Runs the loop until its end (a signal, `--max-cycles`), then stops
+    /// every thread and says how it went.
     fn run<S: ForceSensor, D: AxisDrives>(
         mut self,
         sensor: S,
@@ -373,23 +420,12 @@ impl Run<'_> {
     ) -> Result<(), String> {
         let cfg = self.cfg;
         let (log, log_thread, _queue) = logq::channel(true);
-        let mut controller = Controller::new(
-            &cfg.estimator,
-            self.bias,
-            cfg.step_config(),
-            sensor,
-            drives,
-            self.operator,
-            log.clone(),
-            self.auto_reset,
-        )
-        .map_err(|e| format!("{}: {e}", cfg.origin))?;
-        if let Some(hook) = drives_cycle {
-            controller = controller.with_drives_cycle(hook);
+        // The publishing thread wakes the logging thread when the loop
+        // queued events (the loop wakes nobody).
+        if let Some(waker) = log_thread.as_ref().and_then(logq::LogThread::waker) {
+            self.shm.wake_log(waker);
         }
-        // Ping systemd's watchdog ten times a second from the loop.
-        let every = (cfg.loop_.rate_hz / 10.0).round().max(1.0) as u64;
-        let mut watchdog = Watchdog::new(Notifier::from_env(), every);
+        let mut controller = self.controller(sensor, drives, drives_cycle, &log)?;
         let mut stats = LoopStats::default();
         tracing::info!(
             "sard: running {} ({}) at {} Hz with {what}",
@@ -397,24 +433,7 @@ impl Run<'_> {
             cfg.origin,
             cfg.loop_.rate_hz,
         );
-        // The sinks' last counters: said in the stop line below.
-        let health = runloop::run(
-            &mut controller,
-            &cfg.loop_,
-            RunLimits {
-                max_cycles: self.args.max_cycles,
-                stall_after_cycles: self.args.stall_after_cycles,
-            },
-            &mut stats,
-            Edges {
-                // The recorder first: the publisher puts its counters in
-                // the published state.
-                sinks: (&mut self.recorder, &mut self.shm),
-                truth: self.truth.take(),
-                watchdog: &mut watchdog,
-                log: &log,
-            },
-        );
+        let health = self.run_loop(&mut controller, &mut stats, &log);
         // Which signal ended the loop (SIGTERM, SIGHUP, ...: the same clean
         // stop for each), said before the recording is closed.
         let by = match rt::stop_signal() {
@@ -431,22 +450,90 @@ impl Run<'_> {
         if let Some(t) = log_thread {
             t.finish();
         }
-        let out = controller.output();
-        tracing::info!(
-            "sard: stopped after {} cycles{by}, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns ({} periods skipped); {} quick stops; {} states dropped by the publisher's queue; {} messages dropped by the recorder",
-            stats.cycles,
-            out.guard_state,
-            out.guard_reason,
-            stats.wakeup.quantile_ns(0.5) / 1000,
-            stats.wakeup.quantile_ns(0.99) / 1000,
-            stats.wakeup.max_ns() / 1000,
-            stats.compute.quantile_ns(0.99) / 1000,
-            stats.overruns,
-            stats.skipped_periods,
-            controller.counts().quick_stops,
-            health.publish_queue_drops,
-            health.recorder_drops,
-        );
+        say_stopped(&controller, &stats, &health, &by);
         Ok(())
     }
+
+    /// The controller on the sensor and the drives, with the operator's
+    /// queues and the log.
+    fn controller<S: ForceSensor, D: AxisDrives>(
+        &mut self,
+        sensor: S,
+        drives: D,
+        drives_cycle: Option<DrivesCycle<D>>,
+        log: &logq::LogSender,
+    ) -> Result<Controller<S, D>, String> {
+        let cfg = self.cfg;
+        let controller = Controller::new(
+            &cfg.estimator,
+            self.bias,
+            cfg.step_config(),
+            sensor,
+            drives,
+            self.operator.clone(),
+            log.clone(),
+            self.auto_reset,
+        )
+        .map_err(|e| format!("{}: {e}", cfg.origin))?;
+        Ok(match drives_cycle {
+            Some(hook) => controller.with_drives_cycle(hook),
+            None => controller,
+        })
+    }
+
+    /// The fixed-rate loop with its sinks (the recorder, the shared memory)
+    /// and systemd's watchdog: the sinks' last counters.
+    fn run_loop<S: ForceSensor, D: AxisDrives>(
+        &mut self,
+        controller: &mut Controller<S, D>,
+        stats: &mut LoopStats,
+        log: &logq::LogSender,
+    ) -> sar_loop::sink::SinkHealth {
+        let cfg = self.cfg;
+        // Ping systemd's watchdog ten times a second from the loop.
+        let every = (cfg.loop_.rate_hz / 10.0).round().max(1.0) as u64;
+        let mut watchdog = Watchdog::new(Notifier::from_env(), every);
+        runloop::run(
+            controller,
+            &cfg.loop_,
+            RunLimits {
+                max_cycles: self.args.max_cycles,
+                stall_after_cycles: self.args.stall_after_cycles,
+            },
+            stats,
+            Edges {
+                // The recorder first: the publisher puts its counters in
+                // the published state.
+                sinks: (&mut self.recorder, &mut self.shm),
+                truth: self.truth.take(),
+                watchdog: &mut watchdog,
+                log,
+            },
+        )
+    }
+}
+
+/// The stop line: cycles, the guard, the wake-up latency and the counters.
+fn say_stopped<S: ForceSensor, D: AxisDrives>(
+    controller: &Controller<S, D>,
+    stats: &LoopStats,
+    health: &sar_loop::sink::SinkHealth,
+    by: &str,
+) {
+    let out = controller.output();
+    tracing::info!(
+        "sard: stopped after {} cycles{by}, drives halted; guard {} ({}); wake-up latency p50 {} us p99 {} us max {} us; compute p99 {} us; {} overruns ({} periods skipped); {} quick stops; {} states dropped by the publisher's queue; {} messages dropped by the recorder",
+        stats.cycles,
+        out.guard_state,
+        out.guard_reason,
+        stats.wakeup.quantile_ns(0.5) / 1000,
+        stats.wakeup.quantile_ns(0.99) / 1000,
+        stats.wakeup.max_ns() / 1000,
+        stats.compute.quantile_ns(0.99) / 1000,
+        stats.overruns,
+        stats.skipped_periods,
+        controller.counts().quick_stops,
+        health.publish_queue_drops,
+        health.recorder_drops,
+    );
 }
