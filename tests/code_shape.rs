@@ -16,8 +16,10 @@ use std::path::{Path, PathBuf};
 /// A function longer than this many lines is long.
 const MAX_LINES: usize = 70;
 
-/// At most this many long functions in all of `crates/*/src`.
-const MAX_LONG: usize = 20;
+/// At most this many long functions in all of `crates/*/src` (issue 27's
+/// bound was 20; after it, two remained: the scene's drawing, which issue 28
+/// rewrites, and the test support's table of generated messages).
+const MAX_LONG: usize = 5;
 
 /// The path's sources, where no function may be long unless [`ALLOWED`]
 /// says why: a directory (ending in `/`) or a file, from the repository's
@@ -27,6 +29,8 @@ const ON_THE_PATH: &[&str] = &[
     "crates/loop/src/",
     "crates/record/src/",
     "crates/sarctl/src/",
+    "crates/shm/src/",
+    "crates/daemon/src/",
     "crates/estimator/src/cycle.rs",
     "crates/estimator/src/guard.rs",
     "crates/estimator/src/tip_force.rs",
@@ -302,7 +306,6 @@ fn on_the_path(file: &str) -> bool {
 }
 
 #[test]
-#[ignore = "enabled by the lead after issue 27's merge"]
 fn no_long_function_on_the_path_and_few_elsewhere() {
     let long = long_functions();
     println!("functions over {MAX_LINES} lines in crates/*/src:");
