@@ -39,7 +39,7 @@ use sar_estimator::cycle::{
     Bias, Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig,
     PlausibilityLimits, SensorSample, TipOutcome, TorqueLimits,
 };
-use sar_estimator::guard::{ForceLimits, GuardConfig, GuardLimits, GuardState, Reason};
+use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState, Reason};
 use sar_estimator::identification::{Identification, IdentificationOptions, IdentificationResult};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::TipForceConfig;
@@ -366,21 +366,7 @@ fn a_reversal_below_the_pre_sliding_threshold_flips_neither_the_runner_nor_the_f
 /// Guard limits for the closed-loop tests: total 10/15 N, axial 8/12 N, lateral
 /// 6/10 N, hysteresis 1 N, debounce 3 samples, inputs at most 5 ms old.
 fn guard_limits() -> GuardLimits {
-    GuardLimits {
-        force: ForceLimits {
-            warn_total_n: 10.0,
-            stop_total_n: 15.0,
-            warn_axial_n: 8.0,
-            stop_axial_n: 12.0,
-            warn_lateral_n: 6.0,
-            stop_lateral_n: 10.0,
-        },
-        hysteresis_n: 1.0,
-        debounce_samples: 3,
-        max_sensor_age_ns: 5_000_000,
-        max_joints_age_ns: 5_000_000,
-        std_margin: 0.0,
-    }
+    GuardLimits::EXAMPLE
 }
 
 /// The estimator with the scenario's TRUE geometry and profile, its sensor

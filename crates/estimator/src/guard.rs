@@ -78,6 +78,28 @@ pub struct GuardLimits {
     pub std_margin: f64,
 }
 
+impl GuardLimits {
+    /// Example limits, for tests and examples (a robot's come from its
+    /// configuration): total 10/15 N, axial 8/12 N, lateral 6/10 N (the
+    /// default configuration's force limits), hysteresis 1 N, debounce 3 new
+    /// samples, inputs at most 5 ms old, no margin.
+    pub const EXAMPLE: GuardLimits = GuardLimits {
+        force: ForceLimits {
+            warn_total_n: 10.0,
+            stop_total_n: 15.0,
+            warn_axial_n: 8.0,
+            stop_axial_n: 12.0,
+            warn_lateral_n: 6.0,
+            stop_lateral_n: 10.0,
+        },
+        hysteresis_n: 1.0,
+        debounce_samples: 3,
+        max_sensor_age_ns: 5_000_000,
+        max_joints_age_ns: 5_000_000,
+        std_margin: 0.0,
+    };
+}
+
 /// The six force limits of the guard, the one type that holds them: in the
 /// guard's limits ([`GuardLimits::force`]), what an operator may change at
 /// run time ([`crate::cycle::Command::SetLimits`], within the ceilings

@@ -8,7 +8,7 @@ use sar_estimator::cycle::{
     Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig, SensorSample,
 };
 use sar_estimator::filter::{FilterConfig, TipFilter};
-use sar_estimator::guard::{ForceLimits, GuardConfig, GuardLimits};
+use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::TipForceConfig;
@@ -27,22 +27,7 @@ fn config() -> Option<EstimatorConfig> {
         gravity_mps2: Vec3::new(0.0, -9.80665, 0.0),
     })
     .ok()?;
-    let guard = GuardConfig::new(GuardLimits {
-        force: ForceLimits {
-            warn_total_n: 10.0,
-            stop_total_n: 15.0,
-            warn_axial_n: 8.0,
-            stop_axial_n: 12.0,
-            warn_lateral_n: 6.0,
-            stop_lateral_n: 10.0,
-        },
-        hysteresis_n: 1.0,
-        debounce_samples: 3,
-        max_sensor_age_ns: 5_000_000,
-        max_joints_age_ns: 5_000_000,
-        std_margin: 0.0,
-    })
-    .ok()?;
+    let guard = GuardConfig::new(GuardLimits::EXAMPLE).ok()?;
     Some(EstimatorConfig {
         calibration,
         profile: Profile::new(&ProfileSpec {

@@ -345,21 +345,7 @@ pub fn table2_truth(manipulator: usize, friction_n: f64) -> Truth {
 /// Guard limits for tests: total 10/15 N, axial 8/12 N, lateral 6/10 N,
 /// hysteresis 1 N, debounce 3 new samples, inputs at most 5 ms old.
 pub fn test_guard_limits() -> sar_estimator::guard::GuardLimits {
-    sar_estimator::guard::GuardLimits {
-        force: sar_estimator::guard::ForceLimits {
-            warn_total_n: 10.0,
-            stop_total_n: 15.0,
-            warn_axial_n: 8.0,
-            stop_axial_n: 12.0,
-            warn_lateral_n: 6.0,
-            stop_lateral_n: 10.0,
-        },
-        hysteresis_n: 1.0,
-        debounce_samples: 3,
-        max_sensor_age_ns: 5_000_000,
-        max_joints_age_ns: 5_000_000,
-        std_margin: 0.0,
-    }
+    sar_estimator::guard::GuardLimits::EXAMPLE
 }
 
 /// The per-cycle estimator of the example robot with manipulator 2 and HEX-6 noise.
