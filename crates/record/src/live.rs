@@ -25,7 +25,7 @@
 
 use super::convert;
 use super::file::{FileOptions, SceneOptions};
-use super::recorder::{Recorder, RecorderConfig};
+use super::recorder::{FailureWatch, Recorder, RecorderConfig};
 use crossbeam_queue::ArrayQueue;
 use sar_config::RecordSettings;
 use sar_estimator::cycle::Bias;
@@ -515,9 +515,10 @@ fn close(rec: Recorder, first: Option<&Path>) -> (RecordAnswer, u32) {
 }
 
 /// The manager thread's longest sleep: it is woken by the requests
-/// ([`RecordSwitch::request_start`], [`RecordSwitch::request_stop`]) and at
-/// the end; this is the most a recording the loop gave up (a failed writer)
-/// waits to be closed, and the drop warnings' period.
+/// ([`RecordSwitch::request_start`], [`RecordSwitch::request_stop`]), by a
+/// writer that fails ([`Recorder::failure_watch`]: then it polls until the
+/// loop hands the recording back, and closes it and says why at once) and
+/// at the end; the drop warnings' period.
 pub const MANAGER_WAIT: Duration = Duration::from_secs(1);
 /// The manager thread's sleep while the loop has a request or a recording
 /// to take or hand back (one to a few cycles).
@@ -543,6 +544,7 @@ fn manage(
         outgoing,
         told: (0, std::time::Instant::now()),
         last: None,
+        watch: None,
     };
     loop {
         m.warn_drops();
@@ -572,6 +574,8 @@ struct Manager<'a> {
     told: (u64, std::time::Instant),
     /// What the last recording came to (`None`: none closed yet).
     last: Option<RecordAnswer>,
+    /// The failure of the recording started last, until it is closed.
+    watch: Option<FailureWatch>,
 }
 
 impl Manager<'_> {
@@ -606,6 +610,7 @@ impl Manager<'_> {
             };
             switch.failure.store(code, Ordering::Relaxed);
             self.last = Some(answer);
+            self.watch = None;
         }
         if stop_taken && idle {
             // Taken: a later stop with nothing recorded is answered "no
@@ -644,6 +649,7 @@ impl Manager<'_> {
                 switch,
                 self.incoming,
                 &name,
+                &mut self.watch,
             )
         };
         if let Err(e) = &answer {
@@ -660,7 +666,8 @@ impl Manager<'_> {
         let settling = switch.want.load(Ordering::Acquire) != WANT_NONE
             || switch.stop_ticket.load(Ordering::Acquire) != 0
             || !self.incoming.is_empty()
-            || !self.outgoing.is_empty();
+            || !self.outgoing.is_empty()
+            || self.watch.as_ref().is_some_and(FailureWatch::failed);
         std::thread::park_timeout(if settling { MANAGER_POLL } else { MANAGER_WAIT });
     }
 }
@@ -673,6 +680,7 @@ fn start_one(
     switch: &RecordSwitch,
     incoming: &ArrayQueue<Recorder>,
     name: &str,
+    watch: &mut Option<FailureWatch>,
 ) -> RecordAnswer {
     check_directory(&settings.directory, switch.bytes_per_minute())?;
     let rec = Recorder::start(recorder_config(settings, scene, name, bias, false))
@@ -683,6 +691,7 @@ fn start_one(
     );
     switch.set_current(&settings.directory, name);
     switch.failure.store(0, Ordering::Relaxed);
+    *watch = Some(rec.failure_watch(std::thread::current()));
     let _ = incoming.push(rec);
     Ok(first_file(&settings.directory, name).display().to_string())
 }

@@ -56,6 +56,20 @@ struct Shared {
     failed: AtomicBool,
     /// The OS error of the failure (0: none named), set before `failed`.
     errno: std::sync::atomic::AtomicU32,
+    /// Woken when the writer fails (the thread that manages the recording).
+    on_fail: std::sync::OnceLock<std::thread::Thread>,
+}
+
+/// Tells another thread than the loop's whether a recorder's writer has
+/// failed ([`Recorder::failure_watch`]).
+#[derive(Debug, Clone)]
+pub struct FailureWatch(Arc<Shared>);
+
+impl FailureWatch {
+    /// Whether the writer has failed.
+    pub fn failed(&self) -> bool {
+        self.0.failed.load(Ordering::Acquire)
+    }
 }
 
 /// What a finished recording wrote.
@@ -213,6 +227,15 @@ impl Recorder {
         self.shared.failed.load(Ordering::Acquire)
     }
 
+    /// A watch of this recorder's failure for `waker`, the thread that
+    /// closes it, which the writer wakes when it fails: so the failure is
+    /// closed and said at once, and nobody polls for it (the loop only
+    /// hands the recorder back).
+    pub fn failure_watch(&self, waker: std::thread::Thread) -> FailureWatch {
+        let _ = self.shared.on_fail.set(waker);
+        FailureWatch(Arc::clone(&self.shared))
+    }
+
     /// The OS error the writer failed with (ENOSPC: a full disk); 0 when
     /// it has not failed or the failure named none.
     pub fn os_error(&self) -> u32 {
@@ -254,6 +277,9 @@ impl PendingWriter {
         let errno = source.os_error().map_or(0, i32::unsigned_abs);
         self.shared.errno.store(errno, Ordering::Relaxed);
         self.shared.failed.store(true, Ordering::Release);
+        if let Some(t) = self.shared.on_fail.get() {
+            t.unpark();
+        }
         RecorderError::Write {
             written: self.files.written(),
             dropped: self.shared.dropped.load(Ordering::Relaxed),

@@ -366,12 +366,17 @@ fn a_recording_on_a_full_disk_is_refused_or_stops_at_once_and_stop_says_incomple
         .unwrap_or_default()
         .to_owned();
     assert!(why.contains("No space left on device"), "{failed}");
-    // In the log at once, before any stop.
-    let logged = std::fs::read_to_string(&log).unwrap();
-    assert!(
-        logged.contains("No space left on device") && logged.contains("incomplete"),
-        "{logged}"
-    );
+    // In the log, before any stop: the manager closes the failed recording
+    // as soon as the loop hands it back (its writer wakes it), a few
+    // milliseconds after the state says failed; waited for, not raced.
+    let said = |text: &str| text.contains("No space left on device") && text.contains("incomplete");
+    let logged_by = Instant::now() + Duration::from_secs(5);
+    let mut logged = std::fs::read_to_string(&log).unwrap();
+    while !said(&logged) && Instant::now() < logged_by {
+        std::thread::sleep(Duration::from_millis(5));
+        logged = std::fs::read_to_string(&log).unwrap();
+    }
+    assert!(said(&logged), "{logged}");
     let out = sarctl(&prefix, &["status"]);
     assert!(
         text(&out.stdout).contains("recording FAILED"),
