@@ -58,6 +58,14 @@ pub enum RtError {
         /// The errno.
         errno: i32,
     },
+    /// The wake-up latency request (`/dev/cpu_dma_latency`) failed.
+    #[error(
+        "cannot hold the CPUs' wake-up latency (/dev/cpu_dma_latency): errno {errno} (needs root)"
+    )]
+    Latency {
+        /// The errno.
+        errno: i32,
+    },
     /// `sched_setaffinity` failed.
     #[error("cannot pin the loop to CPU {cpu}: errno {errno}")]
     Pin {
@@ -81,6 +89,24 @@ pub fn lock_memory() -> Result<(), RtError> {
     } else {
         Err(RtError::Mlock { errno: errno() })
     }
+}
+
+/// Holds the CPUs' wake-up latency at `max_us` microseconds for as long as
+/// the returned file stays open: the kernel's PM QoS request
+/// (`/dev/cpu_dma_latency`), which keeps the CPUs out of the idle states that
+/// are slow to leave, as `cyclictest` does by default. Without it, the loop's
+/// wake-up waits for an idle CPU to come back (tens of microseconds).
+pub fn hold_wakeup_latency(max_us: i32) -> Result<std::fs::File, RtError> {
+    use std::io::Write;
+    let latency = |e: std::io::Error| RtError::Latency {
+        errno: e.raw_os_error().unwrap_or(0),
+    };
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency")
+        .map_err(latency)?;
+    file.write_all(&max_us.to_ne_bytes()).map_err(latency)?;
+    Ok(file)
 }
 
 /// Runs the calling thread at SCHED_FIFO `priority`.

@@ -101,7 +101,7 @@ fn run(args: &Args) -> Result<(), String> {
     };
     let (recording, recorder, switch) = start_recording(&cfg, bias)?;
     let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
-    real_time(&cfg);
+    let _latency = real_time(&cfg);
     let run = Run {
         args,
         cfg: &cfg,
@@ -341,8 +341,12 @@ fn truth_of(simulator: sar_drivers::sim::Simulator<MonotonicClock>) -> SimTruthF
 
 /// Real-time settings: said once, here, when they cannot be applied. After
 /// the publishing and recording threads have started, so that they keep the
-/// normal priority and every CPU.
-fn real_time(cfg: &config::Config) {
+/// normal priority and every CPU. The returned file holds the CPUs' wake-up
+/// latency at 0 us while it is open (keep it for the run).
+fn real_time(cfg: &config::Config) -> Option<std::fs::File> {
+    let latency = rt::hold_wakeup_latency(0)
+        .map_err(|e| tracing::warn!("{e}; the loop wakes up later from idle CPUs"))
+        .ok();
     if let Err(e) = rt::lock_memory() {
         tracing::warn!("{e}; running without locked memory");
     }
@@ -354,6 +358,7 @@ fn real_time(cfg: &config::Config) {
     {
         tracing::warn!("{e}; running unpinned");
     }
+    latency
 }
 
 /// Opens the CAN interface, starts the drives and brings them to `Ready`.
