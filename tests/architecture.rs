@@ -428,6 +428,26 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
+/// The library and binary sources of every crate (`crates/NAME/src/...`),
+/// each with its path from the root.
+fn source_files() -> Vec<(PathBuf, String)> {
+    let root = root();
+    let mut files = Vec::new();
+    rust_files(&root.join("crates"), &mut files);
+    files
+        .into_iter()
+        .map(|path| {
+            let rel = path
+                .strip_prefix(&root)
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            (path, rel)
+        })
+        .filter(|(_, rel)| rel.split('/').nth(2) == Some("src") && rel.split('/').count() >= 4)
+        .collect()
+}
+
 fn is_ident(s: &str) -> bool {
     let mut c = s.chars();
     c.next()
@@ -459,19 +479,8 @@ fn defined() -> Defined {
             .extend(m.dependencies.iter().chain(&m.dev_dependencies).cloned());
     }
     d.packages.insert("sard".to_owned());
-    let mut files = Vec::new();
-    rust_files(&root.join("crates"), &mut files);
-    for path in files {
-        let rel = path
-            .strip_prefix(&root)
-            .unwrap()
-            .to_string_lossy()
-            .into_owned();
-        // crates/NAME/src/...: only library and binary sources.
+    for (path, rel) in source_files() {
         let parts: Vec<&str> = rel.split('/').collect();
-        if parts.len() < 4 || parts[2] != "src" {
-            continue;
-        }
         let manifest = manifest(
             &std::fs::read_to_string(root.join("crates").join(parts[1]).join("Cargo.toml"))
                 .unwrap(),
@@ -878,20 +887,9 @@ fn the_name_check_refuses_a_stale_name() {
 /// The top-level modules of each crate and the ones each imports
 /// (`crate::NAME` in code, outside comments and `#[cfg(test)]` modules).
 fn module_imports() -> BTreeMap<String, BTreeMap<String, BTreeSet<String>>> {
-    let root = root();
     let mut out: BTreeMap<String, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
-    let mut files = Vec::new();
-    rust_files(&root.join("crates"), &mut files);
-    for path in files {
-        let rel = path
-            .strip_prefix(&root)
-            .unwrap()
-            .to_string_lossy()
-            .into_owned();
+    for (path, rel) in source_files() {
         let parts: Vec<&str> = rel.split('/').collect();
-        if parts.len() < 4 || parts[2] != "src" {
-            continue;
-        }
         let module = parts[3].trim_end_matches(".rs");
         if matches!(module, "lib" | "main" | "bin") {
             continue;

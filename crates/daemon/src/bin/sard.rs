@@ -101,6 +101,14 @@ fn run(args: &Args) -> Result<(), String> {
     };
     let (recording, recorder, switch) = start_recording(&cfg, bias)?;
     let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
+    // The logging thread before the real-time settings, so that it keeps the
+    // normal priority (it writes to stderr: never at the loop's priority).
+    let (log, log_thread, _queue) = logq::channel(true);
+    // The publishing thread wakes the logging thread when the loop queued
+    // events (the loop wakes nobody).
+    if let Some(waker) = log_thread.as_ref().and_then(logq::LogThread::waker) {
+        shm.wake_log(waker);
+    }
     let _latency = real_time(&cfg);
     let run = Run {
         args,
@@ -112,6 +120,8 @@ fn run(args: &Args) -> Result<(), String> {
         recording,
         bias,
         auto_reset: args.sim,
+        log,
+        log_thread,
     };
     let sensor_what = match &real_sensor {
         Some(s) => format!("the RDT sensor at {}", s.config().address),
@@ -411,6 +421,10 @@ struct Run<'a> {
     /// The start bias (decided once in `run`).
     bias: Bias,
     auto_reset: bool,
+    /// The loop's side of the log queue.
+    log: logq::LogSender,
+    /// The logging thread (started before the loop took its priority).
+    log_thread: Option<logq::LogThread>,
 }
 
 impl Run<'_> {
@@ -424,12 +438,8 @@ impl Run<'_> {
         what: &str,
     ) -> Result<(), String> {
         let cfg = self.cfg;
-        let (log, log_thread, _queue) = logq::channel(true);
-        // The publishing thread wakes the logging thread when the loop
-        // queued events (the loop wakes nobody).
-        if let Some(waker) = log_thread.as_ref().and_then(logq::LogThread::waker) {
-            self.shm.wake_log(waker);
-        }
+        let log = self.log.clone();
+        let log_thread = self.log_thread.take();
         let mut controller = self.controller(sensor, drives, drives_cycle, &log)?;
         let mut stats = LoopStats::default();
         tracing::info!(
