@@ -4,7 +4,9 @@
 //! borrowed sample, and is killed with SIGKILL (no destructor runs). A new
 //! daemon with the same prefix then starts in this process, and a client
 //! receives its state. (`crates/daemon/tests/e2e.rs` does the same with `sard`
-//! itself.)
+//! itself.) The test has a runtime directory of its own: the other tests
+//! of this binary create daemons too, and a daemon's start cleans every dead
+//! node of its directory, which would race this test's own cleaning.
 
 #![allow(
     clippy::unwrap_used,
@@ -20,10 +22,13 @@ mod shm_slow_subscriber;
 use sar_loop::control::Operator;
 use sar_msgs::wire::StateMsg;
 use sar_shm::{Client, DaemonShm};
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const CHILD_ENV: &str = "SAR_SHM_CRASH_CHILD_PREFIX";
+/// The child's runtime directory (the parent's own, given to the child).
+const CHILD_DIR_ENV: &str = "SAR_SHM_CRASH_CHILD_DIR";
 /// The child's states carry this in `cycle`'s high bits; the new daemon's
 /// do not.
 const CHILD_MARK: u64 = 1 << 40;
@@ -32,13 +37,15 @@ const CHILD_MARK: u64 = 1 << 40;
 /// every millisecond until killed (at most 60 s, should the parent die).
 #[test]
 fn child_daemon() {
-    let Ok(prefix) = std::env::var(CHILD_ENV) else {
+    let (Ok(prefix), Some(dir)) = (std::env::var(CHILD_ENV), std::env::var_os(CHILD_DIR_ENV))
+    else {
         return;
     };
-    let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]).unwrap();
+    let dir = PathBuf::from(dir);
+    let mut shm = create_in(&dir, &prefix).unwrap();
     // A subscriber of its own that holds a sample: the child's node owns
     // ports of every kind when it dies.
-    let client = Client::new(&prefix).unwrap();
+    let client = Client::in_dir(&dir, &prefix).unwrap();
     let sub = client.subscribe().unwrap();
     let start = Instant::now();
     let mut cycle = 0;
@@ -51,6 +58,11 @@ fn child_daemon() {
         sub.drain(|_| {});
         std::thread::sleep(Duration::from_millis(1));
     }
+}
+
+/// A daemon's shared memory in the runtime directory `dir`.
+fn create_in(dir: &Path, prefix: &str) -> Result<DaemonShm, sar_shm::ShmError> {
+    DaemonShm::create_in(dir, prefix, Operator::new(), [1.0; 6], &|| false)
 }
 
 /// Waits (bounded) for a state for which `wanted` holds.
@@ -82,18 +94,21 @@ fn wait_state(client: &Client, wanted: impl Fn(&StateMsg) -> bool) -> StateMsg {
 #[test]
 fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     let prefix = format!("sar-crash-{}", std::process::id());
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(&prefix);
+    let _ = std::fs::remove_dir_all(&dir);
     let mut child = Command::new(std::env::current_exe().unwrap())
         .args(["--exact", "child_daemon", "--nocapture", "--test-threads=1"])
         .env(CHILD_ENV, &prefix)
+        .env(CHILD_DIR_ENV, &dir)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let client = Client::new(&prefix).unwrap();
+    let client = Client::in_dir(&dir, &prefix).unwrap();
     let s = wait_state(&client, |s| s.cycle > CHILD_MARK);
     assert!(s.cycle > CHILD_MARK);
     // While the child lives, a second daemon with its prefix is refused.
-    let refused = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]);
+    let refused = create_in(&dir, &prefix);
     assert!(
         matches!(refused, Err(sar_shm::ShmError::DaemonRuns { .. })),
         "a second daemon started beside a living one: {:?}",
@@ -112,13 +127,14 @@ fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     // that the daemon runs first at start finds and removes them (iceoryx2's
     // own cleaning when a node is made depends on its configuration file;
     // this one does not).
-    let cleaned = sar_shm::clean_dead_nodes();
+    let cleaned = sar_shm::clean_dead_nodes_in(&dir);
     assert!(cleaned >= 1, "no dead node cleaned");
     // Then a new daemon creates its services on the same prefix.
-    let mut shm = DaemonShm::create(&prefix, Operator::new(), [1.0; 6]).unwrap();
+    let mut shm = create_in(&dir, &prefix).unwrap();
     let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
+    let reader_dir = dir.clone();
     let reader = std::thread::spawn(move || {
-        let client = Client::new(&prefix).unwrap();
+        let client = Client::in_dir(&reader_dir, &prefix).unwrap();
         let s = wait_state(&client, |s| s.cycle < CHILD_MARK && s.cycle > 0);
         done_tx.send(()).unwrap();
         s
@@ -136,4 +152,6 @@ fn after_a_sigkill_a_new_daemon_cleans_the_stale_services_and_publishes() {
     let got = reader.join().unwrap();
     assert!(got.cycle >= 1 && got.cycle <= cycle, "{got:?}");
     assert_eq!(shm.publish_errors(), 0);
+    drop(shm);
+    let _ = std::fs::remove_dir_all(&dir);
 }
