@@ -223,7 +223,7 @@ pub enum CommandRefused {
         value: f64,
     },
     /// Force limits that are not valid, or above their ceiling.
-    #[error("limits refused: {field} = {value}: {why}")]
+    #[error("limits refused: {field} = {} N: {why}", sar_kinematics::Shown(*.value))]
     Limits {
         /// The offending limit.
         field: &'static str,

@@ -836,7 +836,7 @@ reasons! {
             axis: Axis,
             /// Its value, N.
             std_n: f64,
-        } = 17, "negative_std" => write!(f, "std_n.{axis} = {std_n} N is negative"),
+        } = 17, "negative_std" => write!(f, "std_n.{axis} = {} N is negative", sar_kinematics::Shown(std_n)),
         /// The rod direction is not a unit vector (within
         /// [`ROD_DIR_UNIT_TOLERANCE`]).
         RodDirNotUnit {

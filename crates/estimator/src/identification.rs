@@ -33,6 +33,7 @@ use crate::{
     check_finite, com_std_m, non_negative,
 };
 use nalgebra::{ComplexField, SMatrix, SVector};
+use sar_kinematics::Shown;
 
 /// Largest accepted condition number of the weighted design matrix after its
 /// columns are scaled to unit norm. Above it the problem is reported as rank
@@ -72,7 +73,10 @@ pub enum IdentificationError {
     #[error(transparent)]
     Pose(#[from] PoseInputError),
     /// The U-joint centre A is (almost) at the support B: u is undefined.
-    #[error("the U-joint centre is {distance_m:e} m from the support, below {min_m} m")]
+    #[error(
+        "the U-joint centre is {} m from the support, below {min_m} m",
+        Shown(*.distance_m)
+    )]
     SupportTooClose {
         /// |B - A|, m.
         distance_m: f64,
@@ -117,7 +121,7 @@ pub enum IdentificationError {
         limit: f64,
     },
     /// The estimated mass is zero or negative: c = M / m is not defined.
-    #[error("the estimated mass is {mass_kg} kg, not positive")]
+    #[error("the estimated mass is {} kg, not positive", Shown(*.mass_kg))]
     NonPositiveMass {
         /// The estimate, kg.
         mass_kg: f64,
@@ -131,7 +135,8 @@ pub enum IdentificationError {
     /// The line fit refuses a pose whose rod is not horizontal (with d = 0 this
     /// is the same as A not at the support's height).
     #[error(
-        "the rod is tilted {tilt_rad} rad from horizontal, above the tolerance {tolerance_rad} rad"
+        "the rod is tilted {} rad from horizontal, above the tolerance {tolerance_rad} rad",
+        Shown(*.tilt_rad)
     )]
     NotHorizontal {
         /// The rod's angle from the horizontal plane, rad.

@@ -16,6 +16,7 @@
 
 use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, check_finite};
 use nalgebra::ComplexField;
+use sar_kinematics::Shown;
 
 /// How far |u|^2 (and |w|^2, u . w) of a pose may stray from 1 (and 0).
 pub const POSE_UNIT_TOLERANCE: f64 = 1e-6;
@@ -62,8 +63,10 @@ pub enum TipForceError {
     /// deviation is merely above the limit is an estimate flagged
     /// [`TipForceEstimate::observable`] = false, not this error.
     #[error(
-        "tip force not observable: standard deviation {std_max_n} N above the limit \
-         (tip {lever_m} m beyond the support)"
+        "tip force not observable: standard deviation {} N above the limit \
+         (tip {} m beyond the support)",
+        Shown(*.std_max_n),
+        Shown(*.lever_m)
     )]
     NotObservable {
         /// L - s: the tip's distance beyond the support along the rod, m.

@@ -16,10 +16,12 @@
 pub mod calibration;
 pub mod dh;
 pub mod pose;
+pub mod shown;
 pub mod slide;
 
 pub use calibration::{Calibration, CalibrationSpec, ConfigError, Profile, ProfileSpec};
 pub use pose::{ActiveJoints, Pose, PoseError, forward, inverse, rod_frame};
+pub use shown::{Shown, ShownAll};
 pub use slide::{SLIDE_THRESHOLD_M, SlideDirection, SlideSign, SlideTracker};
 
 /// A 3-vector of `f64` in some named frame (the name of the variable says which).

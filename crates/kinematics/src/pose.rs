@@ -6,6 +6,7 @@
 //! within the rod offset, a vertical rod, the tip at the support, a support the
 //! rod does not reach.
 
+use crate::shown::Shown;
 use crate::{Calibration, MIN_DISTANCE_M, Profile, Vec3, check_finite};
 use libm::{atan2, cos, sin, sqrt};
 
@@ -22,13 +23,17 @@ pub enum PoseError {
         value: f64,
     },
     /// A (the U-joint centre) is at the support B.
-    #[error("the U-joint centre is at the support ({distance_m:e} m away)")]
+    #[error("the U-joint centre is at the support ({} m away)", Shown(*.distance_m))]
     UJointAtSupport {
         /// |B - A|.
         distance_m: f64,
     },
     /// rho = |B - A| <= |d|: no rod line through B at offset d from A.
-    #[error("the support is {distance_m} m from the U-joint, within the rod offset {offset_m} m")]
+    #[error(
+        "the support is {} m from the U-joint, within the rod offset {} m",
+        Shown(*.distance_m),
+        Shown(*.offset_m)
+    )]
     SupportWithinOffset {
         /// |B - A|.
         distance_m: f64,
@@ -37,7 +42,10 @@ pub enum PoseError {
     },
     /// B is straight above or below A: q4 is undefined. From [`inverse`] with
     /// d != 0 also: the rod is so near vertical that A to B heads against it.
-    #[error("the rod is vertical (horizontal distance {horizontal_m:e} m): heading undefined")]
+    #[error(
+        "the rod is vertical (horizontal distance {} m): heading undefined",
+        Shown(*.horizontal_m)
+    )]
     VerticalRod {
         /// Horizontal distance from A to B along the rod's heading, m:
         /// sqrt(rx^2 + rz^2) from [`forward`]; s c5 + d s5 (negative on the
@@ -45,13 +53,13 @@ pub enum PoseError {
         horizontal_m: f64,
     },
     /// The tip is at the support: the statics are singular there.
-    #[error("the tip is at the support ({margin_m:e} m away)")]
+    #[error("the tip is at the support ({} m away)", Shown(*.margin_m))]
     TipAtSupport {
         /// L - s, the distance from the support to the tip along the rod.
         margin_m: f64,
     },
     /// The support lies beyond the tip: the rod does not pass through it.
-    #[error("the rod does not reach the support: tip {short_m} m short of it")]
+    #[error("the rod does not reach the support: tip {} m short of it", Shown(*.short_m))]
     SupportBeyondTip {
         /// s - L.
         short_m: f64,

@@ -57,7 +57,7 @@ use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::force_control::{ForceControlConfig, ForceController, ForceMode};
 use sar_estimator::guard::{ForceLimits, GuardState, Reason, reduces_force};
 use sar_estimator::{SettingError, Vec3};
-use sar_kinematics::{ActiveJoints, Calibration, PoseError, Profile, inverse};
+use sar_kinematics::{ActiveJoints, Calibration, PoseError, Profile, Shown, inverse};
 
 /// An operator request, applied in the cycle whose input carries it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -241,9 +241,12 @@ fn outside_travel(
     };
     write!(
         f,
-        "q{axis} would be {value_m:.4} m, outside its travel {min_m:.4}..{max_m:.4} m \
-         ([axes] travel_m) by {by_m:.4} m {end}; sarctl workspace shows the \
-         reachable region"
+        "q{axis} would be {} m, outside its travel {}..{} m ([axes] travel_m) by {} m \
+         {end}; sarctl workspace shows the reachable region",
+        Shown(value_m),
+        Shown(min_m),
+        Shown(max_m),
+        Shown(by_m)
     )
 }
 
@@ -252,7 +255,7 @@ impl core::fmt::Display for ReplyDetail {
         match self {
             Self::None => Ok(()),
             Self::Reason(r) => write!(f, "{r}"),
-            Self::Limits { field, value, why } => write!(f, "{field} = {value} N: {why}"),
+            Self::Limits { field, value, why } => write!(f, "{field} = {} N: {why}", Shown(*value)),
             Self::OutsideTravel {
                 axis,
                 value_m,
@@ -281,7 +284,9 @@ impl core::fmt::Display for ReplyDetail {
             ),
             Self::BadDistance { distance_m } => write!(
                 f,
-                "the back-out distance must be within 0 < d <= 0.1 m, got {distance_m} m"
+                "the back-out distance must be within 0 < d <= {} m, got {} m",
+                Shown(MAX_BACK_OUT_M),
+                Shown(*distance_m)
             ),
             Self::NoEstimate => f.write_str("no tip-force estimate or pose in this cycle"),
             Self::NotCarriedOut => f.write_str("the move could not be given to the drives"),
@@ -290,11 +295,15 @@ impl core::fmt::Display for ReplyDetail {
                 stop_n,
             } => write!(
                 f,
-                "the guarded move's force must be within 0 < N <= {stop_n} N (the total stop limit), got {max_force_n} N"
+                "the guarded move's force must be within 0 < N <= {} N (the total stop limit), got {} N",
+                Shown(*stop_n),
+                Shown(*max_force_n)
             ),
             Self::BadForce { force_n, max_n } => write!(
                 f,
-                "the force must be within 0 < N < {max_n} N (a warn limit), got {force_n} N"
+                "the force must be within 0 < N < {} N (a warn limit), got {} N",
+                Shown(*max_n),
+                Shown(*force_n)
             ),
             // Without CommandRefused's own "tare refused: " (sarctl says it).
             Self::Tare(refusal) => write!(f, "{refusal}"),
@@ -307,7 +316,8 @@ impl core::fmt::Display for ReplyDetail {
                 max_force_n,
             } => write!(
                 f,
-                "the tip force is already {force_n:.2} N, at or above the move's {max_force_n} N"
+                "the tip force is already {force_n:.2} N, at or above the move's {} N",
+                Shown(*max_force_n)
             ),
         }
     }

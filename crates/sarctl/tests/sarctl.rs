@@ -174,17 +174,26 @@ fn monitor_json_limits_status_and_commands_with_a_daemon() {
     assert!(err.contains("cannot be reached"), "{err}");
     assert!(err.contains("sarctl workspace"), "{err}");
     assert_eq!(err.lines().count(), 1);
+    // Its numbers to six significant digits (issue 28: this refusal printed
+    // "tip 0.10000000000000003 m short of it").
+    let out = sarctl(&prefix, &["move-tip", "0.9", "0.2", "0"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("the rod does not reach the support: tip 0.1 m short of it"),
+        "{err}"
+    );
     // A target beyond q3's travel: the axis, its range and by how much.
     let out = sarctl(&prefix, &["move-tip", "0.3", "0.2", "0.0"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
-        err.contains("q3 would be 0.6500 m, outside its travel 0.0000..0.6000 m"),
+        err.contains("q3 would be 0.65 m, outside its travel 0..0.6 m"),
         "{err}"
     );
     assert!(
-        err.contains("[axes] travel_m) by 0.0500 m above its upper end"),
+        err.contains("[axes] travel_m) by 0.05 m above its upper end"),
         "{err}"
     );
     assert!(err.contains("sarctl workspace"), "{err}");

@@ -14,7 +14,7 @@ use rand_chacha::ChaCha8Rng;
 use sar_drivers::Vec3;
 use sar_drivers::motion::{SlideTracker, axis_progress_m, move_time_s};
 use sar_kinematics::{
-    ActiveJoints, Calibration, MIN_DISTANCE_M, PoseError, Profile, forward, inverse,
+    ActiveJoints, Calibration, MIN_DISTANCE_M, PoseError, Profile, ShownAll, forward, inverse,
 };
 
 /// The motion part of a file.
@@ -356,7 +356,10 @@ fn random_steps(
             inverse(&machine.calibration, &machine.profile, &tip_m).map_err(|e: PoseError| {
                 ctx.err(
                     &key,
-                    format!("the kinematics cannot reach tip {tip_m:?}: {e}"),
+                    format!(
+                        "the kinematics cannot reach tip {} m: {e}",
+                        ShownAll(tip_m.as_slice())
+                    ),
                 )
             })?;
         machine.check_pose(ctx, &key, &q)?;

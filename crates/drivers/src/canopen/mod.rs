@@ -406,7 +406,12 @@ pub enum CanOpenError {
         state: crate::DriveState,
     },
     /// A target is not finite or outside the travel.
-    #[error("target of axis {axis} = {value_m} m is not finite or outside [{min_m}, {max_m}]")]
+    #[error(
+        "target of axis {axis} = {} m is not finite or outside [{}, {}]",
+        sar_kinematics::Shown(*.value_m),
+        sar_kinematics::Shown(*.min_m),
+        sar_kinematics::Shown(*.max_m)
+    )]
     InvalidTarget {
         /// 0 = q1, 1 = q2, 2 = q3.
         axis: u8,

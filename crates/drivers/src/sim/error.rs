@@ -2,7 +2,7 @@
 //! its sensor and drives, each with the [`ErrorKind`] generic code acts on.
 
 use crate::{DriveState, Error, ErrorKind};
-use sar_kinematics::PoseError;
+use sar_kinematics::{PoseError, Shown};
 
 /// Why the simulator refused a specification or a command.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
@@ -93,7 +93,12 @@ pub enum SimError {
         value_m: f64,
     },
     /// A target is outside the axis' travel.
-    #[error("target of axis {axis} = {target_m} m is outside the travel {min_m}..{max_m} m")]
+    #[error(
+        "target of axis {axis} = {} m is outside the travel {}..{} m",
+        Shown(*.target_m),
+        Shown(*.min_m),
+        Shown(*.max_m)
+    )]
     TargetOutOfTravel {
         /// 0 = q1, 1 = q2, 2 = q3.
         axis: usize,
@@ -109,8 +114,10 @@ pub enum SimError {
     TargetPose(PoseError),
     /// A streamed set point is farther than the axis can go in one period.
     #[error(
-        "set point of axis {axis} is {distance_m} m away, more than the {reach_m} m the speed \
-         limit allows in one period"
+        "set point of axis {axis} is {} m away, more than the {} m the speed \
+         limit allows in one period",
+        Shown(*.distance_m),
+        Shown(*.reach_m)
     )]
     SetPointTooFar {
         /// 0 = q1, 1 = q2, 2 = q3.

@@ -48,6 +48,7 @@ use crate::{
 };
 use model::{Free, N_UNKNOWNS, Normal, Params, Problem};
 use nalgebra::{Cholesky, ComplexField};
+use sar_kinematics::Shown;
 use solver::{Pass, PassEnd};
 
 /// How many static poses a [`SupportCalibration`] holds at most: the cone set
@@ -130,7 +131,8 @@ pub enum SupportError {
     },
     /// A U-joint centre is too close to the support point (configured or fitted).
     #[error(
-        "pose {pose}: the U-joint centre is {distance_m} m from the support, below {MIN_SUPPORT_DISTANCE_M} m"
+        "pose {pose}: the U-joint centre is {} m from the support, below {MIN_SUPPORT_DISTANCE_M} m",
+        Shown(*.distance_m)
     )]
     UJointAtSupport {
         /// Index of the pose.
@@ -140,7 +142,10 @@ pub enum SupportError {
     },
     /// The fit ran away: non-finite values, or B moved further than
     /// [`MAX_SUPPORT_SHIFT_M`] from its configured value.
-    #[error("the fit diverged: the support moved {shift_m} m from its configured value")]
+    #[error(
+        "the fit diverged: the support moved {} m from its configured value",
+        Shown(*.shift_m)
+    )]
     Diverged {
         /// |B_fit - B_configured| (NaN-free: infinity when non-finite).
         shift_m: f64,
@@ -178,7 +183,7 @@ pub enum SupportError {
         value: f64,
     },
     /// The fitted mass is not positive, so c = M / m is meaningless.
-    #[error("the fitted mass is {mass_kg} kg: not positive")]
+    #[error("the fitted mass is {} kg: not positive", Shown(*.mass_kg))]
     NonPositiveMass {
         /// The fitted m.
         mass_kg: f64,

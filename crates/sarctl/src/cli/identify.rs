@@ -330,8 +330,8 @@ mod live {
             retries += 1;
             if retries > MAX_RETRIES {
                 return Err(format!(
-                    "{what} (tip {:?} m) not reached: the guard's Warn braked the move {MAX_RETRIES} times",
-                    t.tip_m.as_slice()
+                    "{what} (tip {} m) not reached: the guard's Warn braked the move {MAX_RETRIES} times",
+                    sar_kinematics::ShownAll(t.tip_m.as_slice())
                 ));
             }
         }
@@ -349,8 +349,8 @@ mod live {
         let in_warn = c.latest.is_some_and(|s| s.guard_state == guard_code::WARN);
         if reply.status != 0 && !in_warn {
             return Err(format!(
-                "the daemon refused the move to {what} (tip {:?} m): status {}, reason {}",
-                t.tip_m.as_slice(),
+                "the daemon refused the move to {what} (tip {} m): status {}, reason {}",
+                sar_kinematics::ShownAll(t.tip_m.as_slice()),
                 reply.status,
                 sar_msgs::wire::reason_name(reply.reason)
             ));
@@ -390,8 +390,8 @@ mod live {
         loop {
             if Instant::now() >= m.deadline {
                 return Err(format!(
-                    "{what} (tip {:?} m) not reached in time ({} moves asked again after the guard's Warn braked them)",
-                    t.tip_m.as_slice(),
+                    "{what} (tip {} m) not reached in time ({} moves asked again after the guard's Warn braked them)",
+                    sar_kinematics::ShownAll(t.tip_m.as_slice()),
                     m.retries
                 ));
             }

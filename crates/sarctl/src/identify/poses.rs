@@ -16,6 +16,7 @@
 use sar_config::Config;
 use sar_estimator::tip_force::TipForceEstimator;
 use sar_kinematics::{ActiveJoints, Vec3, forward};
+use sar_kinematics::{Shown, ShownAll};
 
 /// The cone's half angle of MODEL.md 5.1, degrees.
 pub const CONE_DEG: f64 = 35.0;
@@ -130,9 +131,13 @@ pub fn cone_set(config: &Config) -> Result<Vec<PoseTarget>, String> {
         angle -= 5.0;
     }
     Err(format!(
-        "no cone set fits the travel {:?} m around the support {:?} m (tried cones of 35 to 10 degrees, distances down to half of 0.04..0.30 m)",
-        config.axes.travel_m,
-        config.estimator.calibration.support_m().as_slice()
+        "no cone set fits the travel {} m around the support {} m (tried cones of 35 to 10 degrees, distances down to half of 0.04..0.30 m)",
+        config
+            .axes
+            .travel_m
+            .map(|(lo, hi)| format!("{}..{}", Shown(lo), Shown(hi)))
+            .join(", "),
+        ShownAll(config.estimator.calibration.support_m().as_slice())
     ))
 }
 
