@@ -14,6 +14,7 @@ mod contact;
 mod ctx;
 mod devices;
 mod fault;
+mod plant;
 mod raw;
 mod robot;
 mod script;
@@ -56,6 +57,14 @@ pub const DEFAULT_RANGE_N: [f64; 3] = [200.0, 200.0, 200.0];
 /// Default measuring range of the torque channels (x, y, z), N m: the HEX-E
 /// QC's nominal capacity, Txy 10 N m and Tz 13 N m (same datasheet).
 pub const DEFAULT_RANGE_NM: [f64; 3] = [10.0, 10.0, 13.0];
+/// Default bandwidth (natural frequency) of an axis's servo, Hz, once any
+/// servo key is given (issue 26; opt-in until the estimator compensates).
+pub const DEFAULT_SERVO_BANDWIDTH_HZ: f64 = 30.0;
+/// Default damping ratio of an axis's servo, once any servo key is given.
+pub const DEFAULT_SERVO_DAMPING: f64 = 0.7;
+/// Default acceleration limit of an axis's servo, m/s^2, once any servo key
+/// is given.
+pub const DEFAULT_SERVO_MAX_ACCEL_MPS2: f64 = 5.0;
 /// Default step of the physics integration, s.
 pub const DEFAULT_PHYSICS_STEP_S: f64 = 1e-4;
 /// Longest time a file may name, s (about 11.6 days): keeps ns in range.
@@ -117,6 +126,7 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
     let profile = robot::profile(ctx, &file.manipulator)?;
     let (friction_n, tip_mass_kg) = loads(ctx, &file)?;
     let physics_step_ns = physics_step_ns(ctx, file.physics_step_s)?;
+    let plant = plant::plant(ctx, &file, &profile)?;
     let axes = devices::axes(ctx, &file.axes.unwrap_or_default())?;
     let machine = Machine {
         calibration,
@@ -150,6 +160,7 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
         tip_mass_kg,
         faults,
         physics_step_ns,
+        plant,
     };
     // The simulator's own checks (e.g. more samples in flight than it holds,
     // times equal once in ns), so that it never refuses a loaded file later

@@ -21,7 +21,7 @@ use sar_drivers::canopen::{
     CanOpenConfig, CanOpenDrives, CanOpenError, FOLLOWING_WINDOW_M, MemBus, MemBusError, MemCan,
     SimCia402Drive, SimDriveFault, SimDriveSpec,
 };
-use sar_drivers::sim::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec, Simulator};
+use sar_drivers::sim::{AxesSpec, ContactKey, Fault, PlantSpec, SensorSpec, SimSpec, Simulator};
 use sar_drivers::{AxisDrives, DriveState, Error, ErrorKind, SimClock};
 use sar_kinematics::{ActiveJoints, Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec};
 
@@ -724,6 +724,7 @@ fn fault_file_spec(seed: u64, fault: Fault) -> SimSpec {
         tip_mass_kg: 0.0,
         faults: vec![fault],
         physics_step_ns: 100_000,
+        plant: PlantSpec::default(),
     }
 }
 

@@ -12,8 +12,8 @@ mod conformance;
 use conformance::{Capability, DrivesHarness, SensorHarness, TareCheck};
 use nalgebra::{Matrix3, Vector3};
 use sar_drivers::sim::{
-    AxesSpec, Breathing, ContactKey, Fault, SensorSpec, SimDrives, SimError, SimSensor, SimSpec,
-    Simulator, Tissue, TissueModel, TissueShift, Truth,
+    AxesSpec, Breathing, ContactKey, Fault, PlantSpec, RodInertia, SensorSpec, ServoSpec,
+    SimDrives, SimError, SimSensor, SimSpec, Simulator, Tissue, TissueModel, TissueShift, Truth,
 };
 use sar_drivers::{
     AxisDrives, Clock, Drained, DriveState, Error, ErrorKind, ForceSensor, JointPositions, Rail,
@@ -116,6 +116,7 @@ fn base_spec() -> SimSpec {
         tip_mass_kg: 0.0,
         faults: Vec::new(),
         physics_step_ns: 100_000,
+        plant: PlantSpec::default(),
     }
 }
 

@@ -64,6 +64,8 @@ pub(super) struct ManipulatorToml {
     pub offset_m: f64,
     pub mass_kg: f64,
     pub com_m: f64,
+    pub inertia_perp_kgm2: Option<f64>,
+    pub inertia_axial_kgm2: Option<f64>,
 }
 
 /// `[support]`: the support's friction.
@@ -86,6 +88,10 @@ pub(super) struct AxesToml {
     pub travel_m: Option<[[f64; 2]; 3]>,
     #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub start: Option<[f64; 3]>,
+    pub servo_bandwidth_hz: Option<f64>,
+    pub servo_damping: Option<f64>,
+    pub servo_max_accel_mps2: Option<f64>,
+    pub quick_stop_decel_mps2: Option<f64>,
 }
 
 /// `[sensor]`: every key optional (defaults: the HEX-6 of the article).
@@ -109,6 +115,7 @@ pub(super) struct SensorToml {
     pub range_n: Option<[f64; 3]>,
     #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub range_nm: Option<[f64; 3]>,
+    pub adapter_mass_kg: Option<f64>,
 }
 
 /// `[[motion]]`: one step; exactly one target.

@@ -206,6 +206,20 @@ impl AxisPlan {
         }
     }
 
+    /// The acceleration at `t_ns` (>= the plan's start), m/s^2: that of the
+    /// phase [`AxisPlan::at`] evaluates there (a phase's end belongs to it),
+    /// 0 once the plan holds.
+    pub fn accel_at(&self, t_ns: u64) -> f64 {
+        let mut left_s = ns_to_s(t_ns.saturating_sub(self.start_ns));
+        for phase in &self.phases {
+            if left_s <= phase.duration_s {
+                return phase.accel_mps2;
+            }
+            left_s -= phase.duration_s;
+        }
+        0.0
+    }
+
     /// Where the plan ends (and holds), m.
     pub fn end_m(&self) -> f64 {
         self.end_m

@@ -43,7 +43,9 @@
 //! simulated drive fault is gone at once, so `fault_reset` always succeeds from
 //! `Fault`. Positions are `valid: false` while in `Fault`.
 
+mod dynamics;
 mod error;
+mod servo;
 pub mod spec;
 mod statics;
 mod tissue;
@@ -51,7 +53,8 @@ mod world;
 
 pub use error::SimError;
 pub use spec::{
-    AxesSpec, Breathing, ContactKey, Fault, SensorSpec, SimSpec, Tissue, TissueModel, TissueShift,
+    AxesSpec, Breathing, ContactKey, Fault, PlantSpec, RodInertia, SensorSpec, ServoSpec, SimSpec,
+    Tissue, TissueModel, TissueShift,
 };
 pub use world::{DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS, validate};
 
@@ -80,6 +83,8 @@ pub struct Truth {
     pub joints: ActiveJoints,
     /// The true joint speeds (q1, q2, q3), m/s.
     pub joint_speeds_mps: [f64; 3],
+    /// The true joint accelerations (q1, q2, q3), m/s^2.
+    pub joint_accels_mps2: [f64; 3],
     /// The true pose, from the true calibration and profile (A, u, w, a, s, ...).
     pub pose: Pose,
     /// F_A: what the robot applies to the rod at A, N.
@@ -176,6 +181,7 @@ impl<C: Clock + Clone> Simulator<C> {
                 drive_state: w.state(),
                 joints: p.joints,
                 joint_speeds_mps: p.speeds_mps,
+                joint_accels_mps2: p.accels_mps2,
                 pose: p.pose,
                 ujoint_force_n: p.equilibrium.ujoint_force_n,
                 torsion_nm: p.equilibrium.torsion_nm,

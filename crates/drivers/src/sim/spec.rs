@@ -39,6 +39,49 @@ pub struct SimSpec {
     /// Step of the physics integration, ns (e.g. 100_000). Results do not depend
     /// on when the simulator is polled, only on this grid.
     pub physics_step_ns: u64,
+    /// The plant in motion (issue 26): the rod's inertia, the axes' servos,
+    /// the drives' quick-stop deceleration. Each part is opt-in: the default
+    /// (all `None`) is the plant without inertia and with ideal axes.
+    pub plant: PlantSpec,
+}
+
+/// The plant in motion; each `None` keeps the plant of before issue 26.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PlantSpec {
+    /// The rod's inertia and the adapter's mass: the sensor reads the
+    /// Newton-Euler wrench (MODEL.md 10) instead of the statics (MODEL.md 4).
+    pub inertia: Option<RodInertia>,
+    /// Each axis a second-order position loop that lags its set point;
+    /// `None`: ideal axes on their closed-form profiles.
+    pub servo: Option<ServoSpec>,
+    /// The drives' quick-stop deceleration (CiA 402 0x6085), m/s^2; `None`:
+    /// a quick stop brakes at `axes.max_accel_mps2`.
+    pub quick_stop_decel_mps2: Option<f64>,
+}
+
+/// The rod's inertia about its centre of mass and the adapter's mass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RodInertia {
+    /// I_perp: about any axis across the rod through C, kg m^2 (>= 0).
+    pub inertia_perp_kgm2: f64,
+    /// I_axial: about the rod's axis, kg m^2 (>= 0).
+    pub inertia_axial_kgm2: f64,
+    /// m_s: the mass between the sensor and the U-joint, lumped at A, kg
+    /// (>= 0); its weight is in the bias, its inertia reads -m_s A''.
+    pub adapter_mass_kg: f64,
+}
+
+/// A servo per axis: `x'' = wn^2 (r - x) - 2 zeta wn x'` with
+/// `wn = 2 pi bandwidth_hz`, the acceleration clipped to +-`max_accel_mps2`,
+/// sampled every physics step (constant acceleration over the step).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoSpec {
+    /// Natural frequency of the loop, Hz (> 0).
+    pub bandwidth_hz: f64,
+    /// Damping ratio (> 0).
+    pub damping: f64,
+    /// The servo's own acceleration limit, m/s^2 (> 0).
+    pub max_accel_mps2: f64,
 }
 
 /// The three prismatic axes (q1, q2, q3; index 0, 1, 2 in arrays).

@@ -16,8 +16,11 @@
 //! ```
 //!
 //! with F_D = -F_tip, m_x the mass hung at the tip and F_fr = -slide f u the
-//! support's friction on the rod.
+//! support's friction on the rod. In motion ([`equilibrium_in_motion`]) the
+//! same six equations are Newton-Euler's, the inertial terms of
+//! [`super::dynamics`] on the known side.
 
+use super::dynamics::Inertial;
 use crate::Vec3;
 use nalgebra::{Matrix6, Vector6};
 use sar_kinematics::{Calibration, Pose, Profile};
@@ -55,10 +58,6 @@ pub(crate) fn equilibrium(
     loads: &Loads,
 ) -> Option<Equilibrium> {
     let g = cal.gravity_mps2();
-    let u = pose.rod_dir;
-    let e1 = pose.rod_normal;
-    let e2 = u.cross(&e1);
-    let n = -Vec3::new(pose.q4_rad().sin(), 0.0, pose.q4_rad().cos());
     let r_b = cal.support_m() - pose.ujoint_m;
     let r_c = pose.com_m - pose.ujoint_m;
     let r_d = pose.tip_m - pose.ujoint_m;
@@ -66,6 +65,45 @@ pub(crate) fn equilibrium(
     let tip_load = -loads.tip_force_n + g * loads.tip_mass_kg;
     let known_force = rod_weight + tip_load + loads.friction_n;
     let known_moment = r_c.cross(&rod_weight) + r_d.cross(&tip_load) + r_b.cross(&loads.friction_n);
+    solve(cal, pose, &known_force, &known_moment)
+}
+
+/// The Newton-Euler equations of the rod in motion (MODEL.md 10), as the
+/// six equations of [`equilibrium`] with the inertial terms moved to the
+/// known side (d'Alembert): the rod's `m a_C` and `H_C' + (C - A) x m a_C`,
+/// and the inertia of the mass hung at the tip. `None` as [`equilibrium`].
+pub(crate) fn equilibrium_in_motion(
+    cal: &Calibration,
+    profile: &Profile,
+    pose: &Pose,
+    loads: &Loads,
+    inertial: &Inertial,
+) -> Option<Equilibrium> {
+    let g = cal.gravity_mps2();
+    let r_b = cal.support_m() - pose.ujoint_m;
+    let r_c = pose.com_m - pose.ujoint_m;
+    let r_d = pose.tip_m - pose.ujoint_m;
+    let rod_weight = g * profile.mass_kg();
+    let tip_load = -loads.tip_force_n + (g - inertial.tip_accel_mps2) * loads.tip_mass_kg;
+    let known_force = rod_weight + tip_load + loads.friction_n - inertial.force_n;
+    let known_moment = r_c.cross(&rod_weight) + r_d.cross(&tip_load) + r_b.cross(&loads.friction_n)
+        - inertial.moment_a_nm;
+    solve(cal, pose, &known_force, &known_moment)
+}
+
+/// Solves for F_A, the support's reaction across u and M_T given the sum
+/// of the known forces on the rod and of their moments about A.
+fn solve(
+    cal: &Calibration,
+    pose: &Pose,
+    known_force: &Vec3,
+    known_moment: &Vec3,
+) -> Option<Equilibrium> {
+    let u = pose.rod_dir;
+    let e1 = pose.rod_normal;
+    let e2 = u.cross(&e1);
+    let n = -Vec3::new(pose.q4_rad().sin(), 0.0, pose.q4_rad().cos());
+    let r_b = cal.support_m() - pose.ujoint_m;
     let m1 = r_b.cross(&e1);
     let m2 = r_b.cross(&e2);
     let stack = |f: &Vec3, m: &Vec3| Vector6::new(f.x, f.y, f.z, m.x, m.y, m.z);
@@ -78,7 +116,7 @@ pub(crate) fn equilibrium(
         stack(&e2, &m2),
         stack(&zero, &n),
     ]);
-    let rhs = -stack(&known_force, &known_moment);
+    let rhs = -stack(known_force, known_moment);
     let x = k.lu().solve(&rhs)?;
     if !x.iter().all(|v| v.is_finite()) {
         return None;
@@ -97,6 +135,22 @@ pub(crate) fn equilibrium(
 pub(crate) fn ideal_wrench(cal: &Calibration, pose: &Pose, eq: &Equilibrium) -> (Vec3, Vec3) {
     let r_t = cal.sensor_rotation().transpose();
     let on_sensor = -eq.ujoint_force_n;
+    let lever = pose.ujoint_m - pose.sensor_m;
+    let torque = lever.cross(&on_sensor) - eq.torsion_axis * eq.torsion_nm;
+    (r_t * on_sensor, r_t * torque)
+}
+
+/// [`ideal_wrench`] with the adapter's inertia: the adapter (lumped at A)
+/// adds `adapter_force_n` (-m_s A'') to the force on the sensor, and its
+/// moment about S.
+pub(crate) fn ideal_wrench_in_motion(
+    cal: &Calibration,
+    pose: &Pose,
+    eq: &Equilibrium,
+    adapter_force_n: &Vec3,
+) -> (Vec3, Vec3) {
+    let r_t = cal.sensor_rotation().transpose();
+    let on_sensor = -eq.ujoint_force_n + adapter_force_n;
     let lever = pose.ujoint_m - pose.sensor_m;
     let torque = lever.cross(&on_sensor) - eq.torsion_axis * eq.torsion_nm;
     (r_t * on_sensor, r_t * torque)

@@ -11,14 +11,20 @@
 //! the simulator is polled.
 //!
 //! The axes move along closed-form profiles ([`crate::motion`]), exact at any
-//! instant. The physics step follows what has memory: the direction of the
+//! instant; with a servo ([`super::servo`], issue 26) those profiles are the
+//! servos' references and each axis follows its own with a lag, sampled at
+//! every physics step, except while the drives brake on their own (a quick
+//! stop, a disable, a fault), when the axes follow the braking ramp itself. The physics step follows what has memory: the direction of the
 //! last slide of the rod in the support, which fixes the (locked) friction and
 //! reverses only after the support's pre-sliding displacement
 //! ([`crate::motion::SLIDE_THRESHOLD_M`]), as the runner's does.
 
-use super::spec::{AxesSpec, ContactKey, Fault, SensorSpec, SimSpec, Tissue, TissueModel};
+use super::servo::ServoAxis;
+use super::spec::{
+    AxesSpec, ContactKey, Fault, PlantSpec, SensorSpec, ServoSpec, SimSpec, Tissue, TissueModel,
+};
 use super::statics::{self, Equilibrium, Loads};
-use super::{STATUS_OUT_OF_MODEL, SimError, tissue};
+use super::{STATUS_OUT_OF_MODEL, SimError, dynamics, tissue};
 use crate::convert::{joints_from_array, joints_to_array, ns_to_s};
 use crate::drives::FAULT_HEARTBEAT_LOST as FAULT_LOST;
 use crate::motion::{AxisPlan, AxisState, Limits, SlideDirection, SlideSign};
@@ -79,6 +85,8 @@ pub(crate) struct Physics {
     /// The tissues' part of `loads.tip_force_n`, {0}, N.
     pub tissue_force_n: Vec3,
     pub equilibrium: Equilibrium,
+    /// The axes' accelerations (q1, q2, q3), m/s^2.
+    pub accels_mps2: [f64; 3],
     /// Noise-free reading with the bias, before the tare, sensor frame.
     pub reading_n: Vec3,
     pub reading_nm: Vec3,
@@ -361,6 +369,7 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
         check_tissue(tissue)?;
     }
     check_contact(&spec.contact)?;
+    check_plant(&spec.plant, spec.physics_step_ns)?;
     for (index, fault) in spec.faults.iter().enumerate() {
         check_fault(index, fault)?;
     }
@@ -422,6 +431,30 @@ fn check_sensor(sensor: &SensorSpec) -> Result<(), SimError> {
     Ok(())
 }
 
+/// The plant in motion: inertias and the adapter's mass >= 0, the servo's
+/// gains and limits and the quick-stop deceleration > 0, and a servo that
+/// the physics step samples often enough (wn dt <= 0.2).
+fn check_plant(plant: &PlantSpec, physics_step_ns: u64) -> Result<(), SimError> {
+    if let Some(i) = &plant.inertia {
+        check_non_negative("manipulator.inertia_perp_kgm2", i.inertia_perp_kgm2)?;
+        check_non_negative("manipulator.inertia_axial_kgm2", i.inertia_axial_kgm2)?;
+        check_non_negative("sensor.adapter_mass_kg", i.adapter_mass_kg)?;
+    }
+    if let Some(servo) = &plant.servo {
+        let field = "axes.servo_bandwidth_hz";
+        check_positive(field, servo.bandwidth_hz)?;
+        let wn_dt = core::f64::consts::TAU * servo.bandwidth_hz * ns_to_s(physics_step_ns);
+        let why = "must be at most 0.2 / (2 pi physics_step_s): the physics step samples the servo";
+        require(wn_dt <= 0.2, field, servo.bandwidth_hz, why)?;
+        check_positive("axes.servo_damping", servo.damping)?;
+        check_positive("axes.servo_max_accel_mps2", servo.max_accel_mps2)?;
+    }
+    if let Some(decel) = plant.quick_stop_decel_mps2 {
+        check_positive("axes.quick_stop_decel_mps2", decel)?;
+    }
+    Ok(())
+}
+
 /// The contact keys' forces finite and their times in order.
 fn check_contact(contact: &[ContactKey]) -> Result<(), SimError> {
     let mut previous_ns = 0;
@@ -439,6 +472,18 @@ fn check_contact(contact: &[ContactKey]) -> Result<(), SimError> {
     Ok(())
 }
 
+/// The servos of the three axes (with a [`ServoSpec`]): their state at the
+/// last physics step, and whether the axes follow their plans directly
+/// (the drives' own braking ramp) instead.
+#[derive(Debug)]
+struct Servos {
+    gains: ServoSpec,
+    /// The last physics step, ns from start.
+    t_ns: u64,
+    axes: [ServoAxis; 3],
+    direct: bool,
+}
+
 /// The simulated world. See the module doc.
 #[derive(Debug)]
 pub(crate) struct World<C> {
@@ -453,7 +498,9 @@ pub(crate) struct World<C> {
     next_step: u64,
     next_measurement: u64,
     next_report: u64,
+    /// The axes' plans: their motion, or with servos their references.
     plans: [AxisPlan; 3],
+    servos: Option<Servos>,
     state: DriveState,
     /// The direction of the last slide, from s (A's foot on the rod axis to B).
     slide: SlideDirection,
@@ -499,6 +546,12 @@ impl<C: Clock> World<C> {
             next_measurement: 0,
             next_report: 0,
             plans: start.map(|x| AxisPlan::hold(0, x)),
+            servos: spec.plant.servo.map(|gains| Servos {
+                gains,
+                t_ns: 0,
+                axes: start.map(ServoAxis::rest),
+                direct: false,
+            }),
             state: DriveState::Ready,
             slide: SlideDirection::new(),
             rng: ChaCha8Rng::seed_from_u64(spec.seed),
@@ -621,18 +674,78 @@ impl<C: Clock> World<C> {
         }
         if let Some(state) = state_now {
             self.state = state;
-            self.brake_all(t_ns);
+            self.brake_all(t_ns, self.limits.max_accel_mps2);
         }
     }
 
-    /// The axes' states at `t_ns` (>= the plans' start).
+    /// The axes' states at `t_ns` (>= the plans' start and the last physics
+    /// step).
     fn axes_at(&self, t_ns: u64) -> [AxisState; 3] {
+        match &self.servos {
+            Some(s) if !s.direct => s.axes.map(|a| a.after(t_ns.saturating_sub(s.t_ns))),
+            _ => self.plans.map(|p| p.at(t_ns)),
+        }
+    }
+
+    /// The axes' accelerations at `t_ns`, m/s^2 (as [`World::axes_at`]).
+    fn accels_at(&self, t_ns: u64) -> [f64; 3] {
+        match &self.servos {
+            Some(s) if !s.direct => s.axes.map(|a| a.a_mps2),
+            _ => self.plans.map(|p| p.accel_at(t_ns)),
+        }
+    }
+
+    /// The plans' states at `t_ns`: the axes' own without servos, else the
+    /// servos' references (the drives' set-point profiles).
+    fn reference_at(&self, t_ns: u64) -> [AxisState; 3] {
         self.plans.map(|p| p.at(t_ns))
     }
 
-    fn brake_all(&mut self, t_ns: u64) {
-        let limits = self.limits;
+    /// Every axis brakes from its present state at `decel_mps2` and holds;
+    /// servos follow the ramp directly (the drive's own).
+    fn brake_all(&mut self, t_ns: u64, decel_mps2: f64) {
+        let limits = Limits {
+            max_accel_mps2: decel_mps2,
+            ..self.limits
+        };
         self.plans = self.axes_at(t_ns).map(|s| AxisPlan::brake(t_ns, s, limits));
+        if let Some(s) = &mut self.servos {
+            s.direct = true;
+        }
+    }
+
+    /// Servos that followed a braking ramp take over from it at `t_ns`
+    /// (a new set point after a stop).
+    fn servos_follow(&mut self, t_ns: u64) {
+        let states = self.reference_at(t_ns);
+        let accels = self.plans.map(|p| p.accel_at(t_ns));
+        if let Some(s) = &mut self.servos
+            && s.direct
+        {
+            s.t_ns = t_ns;
+            s.direct = false;
+            for ((axis, state), a_mps2) in s.axes.iter_mut().zip(states).zip(accels) {
+                *axis = ServoAxis {
+                    x_m: state.x_m,
+                    v_mps: state.v_mps,
+                    a_mps2,
+                };
+            }
+        }
+    }
+
+    /// Samples the servos at the physics step `t_ns`.
+    fn step_servos(&mut self, t_ns: u64) {
+        let references = self.reference_at(t_ns);
+        if let Some(s) = &mut self.servos
+            && !s.direct
+        {
+            let dt_ns = t_ns.saturating_sub(s.t_ns);
+            for (axis, r) in s.axes.iter_mut().zip(references) {
+                axis.step(dt_ns, r.x_m, &s.gains);
+            }
+            s.t_ns = t_ns;
+        }
     }
 
     /// The physics step at `t_ns`: follows the slide of the rod in the
@@ -641,6 +754,7 @@ impl<C: Clock> World<C> {
     /// support) shrinks s; a reversal counts once s has come back by more than
     /// the pre-sliding displacement.
     fn physics_step(&mut self, t_ns: u64) {
+        self.step_servos(t_ns);
         let joints = joints_from_array(self.axes_at(t_ns).map(|s| s.x_m));
         let cal = &self.spec.calibration;
         let a_m = cal.p_home_m() + joints.displacement_m() + cal.ujoint_offset_m();
@@ -710,13 +824,14 @@ impl<C: Clock> World<C> {
             friction_n: pose.rod_dir
                 * (-self.slide.sign().sigma().unwrap_or(0.0) * spec.friction_n),
         };
-        let equilibrium = statics::equilibrium(&spec.calibration, &spec.profile, &pose, &loads)
-            .ok_or(SimError::StaticsSingular)?;
-        let (ideal_n, ideal_nm) = statics::ideal_wrench(&spec.calibration, &pose, &equilibrium);
+        let accels_mps2 = self.accels_at(t_ns);
+        let (equilibrium, ideal_n, ideal_nm) =
+            self.rod_wrench(&pose, &loads, states.map(|s| s.v_mps), accels_mps2)?;
         let (bias_n, bias_nm) = self.bias_at(t_ns);
         Ok(Physics {
             joints,
             speeds_mps: states.map(|s| s.v_mps),
+            accels_mps2,
             pose,
             loads,
             tissue_force_n,
@@ -726,6 +841,33 @@ impl<C: Clock> World<C> {
             bias_n,
             bias_nm,
         })
+    }
+
+    /// The rod's equilibrium and the ideal sensor's wrench: the statics
+    /// (MODEL.md 4) without a rod inertia, else Newton-Euler (MODEL.md 10)
+    /// at the axes' speeds and accelerations.
+    fn rod_wrench(
+        &self,
+        pose: &Pose,
+        loads: &Loads,
+        speeds_mps: [f64; 3],
+        accels_mps2: [f64; 3],
+    ) -> Result<(Equilibrium, Vec3, Vec3), SimError> {
+        let (cal, profile) = (&self.spec.calibration, &self.spec.profile);
+        let Some(inertia) = &self.spec.plant.inertia else {
+            let eq =
+                statics::equilibrium(cal, profile, pose, loads).ok_or(SimError::StaticsSingular)?;
+            let (ideal_n, ideal_nm) = statics::ideal_wrench(cal, pose, &eq);
+            return Ok((eq, ideal_n, ideal_nm));
+        };
+        let a_dot = joints_from_array(speeds_mps).displacement_m();
+        let a_ddot = joints_from_array(accels_mps2).displacement_m();
+        let inertial = dynamics::inertial(cal, profile, pose, &a_dot, &a_ddot, inertia);
+        let eq = statics::equilibrium_in_motion(cal, profile, pose, loads, &inertial)
+            .ok_or(SimError::StaticsSingular)?;
+        let (ideal_n, ideal_nm) =
+            statics::ideal_wrench_in_motion(cal, pose, &eq, &inertial.adapter_force_n);
+        Ok((eq, ideal_n, ideal_nm))
     }
 
     fn silent_at(&self, t_ns: u64) -> bool {
@@ -1106,7 +1248,7 @@ impl<C: Clock> World<C> {
         match self.state {
             DriveState::Enabled | DriveState::QuickStop => {
                 self.state = DriveState::Ready;
-                self.brake_all(self.done_ns);
+                self.brake_all(self.done_ns, self.limits.max_accel_mps2);
                 Ok(())
             }
             DriveState::Ready => Ok(()),
@@ -1122,7 +1264,8 @@ impl<C: Clock> World<C> {
         let wanted = self.check_targets("set_targets", targets)?;
         let now = self.done_ns;
         let limits = self.limits;
-        let states = self.axes_at(now);
+        self.servos_follow(now);
+        let states = self.reference_at(now);
         for ((plan, state), target) in self.plans.iter_mut().zip(states).zip(wanted) {
             *plan = AxisPlan::to_target(now, state, target, limits);
         }
@@ -1131,12 +1274,13 @@ impl<C: Clock> World<C> {
 
     /// A cyclic set point (only while `Enabled`): each axis moves at constant
     /// speed from where it is to its set point in `period_ns` and holds
-    /// there (an ideal CSP servo). A set point beyond the speed limit over
-    /// the period is refused.
+    /// there (an ideal CSP servo; with servos, their reference). A set point
+    /// beyond the speed limit over the period (from the reference) is refused.
     pub fn stream(&mut self, targets: &ActiveJoints, period_ns: u64) -> Result<(), SimError> {
         let wanted = self.check_targets("stream", targets)?;
         let now = self.done_ns;
-        let states = self.axes_at(now);
+        self.servos_follow(now);
+        let states = self.reference_at(now);
         let reach_m = self.limits.max_speed_mps * ns_to_s(period_ns.max(1)) * (1.0 + 1e-9);
         for (axis, (state, target)) in states.iter().zip(wanted).enumerate() {
             if (target - state.x_m).abs() > reach_m {
@@ -1189,11 +1333,13 @@ impl<C: Clock> World<C> {
         Ok(wanted)
     }
 
-    /// Quick stop: brake at the limit and hold (a fault stays a fault).
+    /// Quick stop: brake at the quick-stop deceleration (the acceleration
+    /// limit when none is given) and hold (a fault stays a fault).
     pub fn quick_stop(&mut self) -> Result<(), SimError> {
         if !matches!(self.state, DriveState::Fault { .. }) {
             self.state = DriveState::QuickStop;
-            self.brake_all(self.done_ns);
+            let decel = self.spec.plant.quick_stop_decel_mps2;
+            self.brake_all(self.done_ns, decel.unwrap_or(self.limits.max_accel_mps2));
         }
         Ok(())
     }
