@@ -12,8 +12,8 @@ mod conformance;
 use conformance::{Capability, DrivesHarness, SensorHarness, TareCheck};
 use nalgebra::{Matrix3, Vector3};
 use sar_drivers::sim::{
-    AxesSpec, Breathing, ContactKey, Fault, PlantSpec, RodInertia, SensorSpec, ServoSpec,
-    SimDrives, SimError, SimSensor, SimSpec, Simulator, Tissue, TissueModel, TissueShift, Truth,
+    AxesSpec, Breathing, ContactKey, Fault, PlantSpec, SensorSpec, SimDrives, SimError, SimSensor,
+    SimSpec, Simulator, Tissue, TissueModel, TissueShift, Truth,
 };
 use sar_drivers::{
     AxisDrives, Clock, Drained, DriveState, Error, ErrorKind, ForceSensor, JointPositions, Rail,
@@ -2324,3 +2324,7 @@ fn results_do_not_depend_on_how_often_the_simulator_is_polled() {
         assert_eq!(p.valid, f.valid);
     }
 }
+
+// The plant in motion (issue 26).
+#[path = "sim/plant.rs"]
+mod plant;
