@@ -19,7 +19,9 @@ use sar_drivers::motion::{
     SLIDE_THRESHOLD_M, SlideTracker, axis_move_time_s, axis_progress_m, move_time_s,
 };
 use sar_drivers::runner::{EndReason, RunError, RunEvent, RunOptions, run};
-use sar_drivers::sim::{Breathing, Fault, Simulator, Tissue, TissueModel, TissueShift};
+use sar_drivers::sim::{
+    Breathing, Fault, PlantSpec, RodInertia, ServoSpec, Simulator, Tissue, TissueModel, TissueShift,
+};
 use sar_drivers::{
     AxisDrives, DriveState, ErrorKind, ForceSensor, JointPositions, Rail, SensorStatus, SimClock,
     Vec3, WrenchSample,
@@ -1176,7 +1178,121 @@ fn bad_files() -> Vec<(&'static str, String, &'static str, &'static str)> {
             "fault",
             "until_ns",
         ),
+        (
+            "negative rod inertia",
+            replaced(
+                "com_m = 0.103\n",
+                "com_m = 0.103\ninertia_perp_kgm2 = -0.01\n",
+            ),
+            "manipulator.inertia_perp_kgm2",
+            "must be >= 0",
+        ),
+        (
+            "infinite axial inertia",
+            replaced(
+                "com_m = 0.103\n",
+                "com_m = 0.103\ninertia_axial_kgm2 = inf\n",
+            ),
+            "manipulator.inertia_axial_kgm2",
+            "finite",
+        ),
+        (
+            "negative adapter mass",
+            replaced(
+                "noise_n = [0.2, 0.2, 0.8]",
+                "noise_n = [0.2, 0.2, 0.8]\nadapter_mass_kg = -0.1",
+            ),
+            "sensor.adapter_mass_kg",
+            "must be >= 0",
+        ),
+        (
+            "servo without bandwidth",
+            format!("{MINIMAL}\n[axes]\nservo_bandwidth_hz = 0.0\n"),
+            "axes.servo_bandwidth_hz",
+            "must be > 0",
+        ),
+        (
+            "servo faster than the physics step samples",
+            format!("{MINIMAL}\n[axes]\nservo_bandwidth_hz = 1000.0\n"),
+            "axes.servo_bandwidth_hz",
+            "physics step",
+        ),
+        (
+            "servo without damping",
+            format!("{MINIMAL}\n[axes]\nservo_damping = -0.7\n"),
+            "axes.servo_damping",
+            "must be > 0",
+        ),
+        (
+            "servo without acceleration",
+            format!("{MINIMAL}\n[axes]\nservo_max_accel_mps2 = 0.0\n"),
+            "axes.servo_max_accel_mps2",
+            "must be > 0",
+        ),
+        (
+            "quick stop without deceleration",
+            format!("{MINIMAL}\n[axes]\nquick_stop_decel_mps2 = 0.0\n"),
+            "axes.quick_stop_decel_mps2",
+            "must be > 0",
+        ),
     ]
+}
+
+/// The plant in motion is opt-in: without its keys, none of it; with one
+/// key of a group, the group with its stated defaults (I_perp = m L^2 / 12).
+#[test]
+fn the_plant_keys_are_opt_in_with_stated_defaults() {
+    assert_eq!(
+        parse(MINIMAL, ORIGIN).unwrap().spec.plant,
+        PlantSpec::default()
+    );
+    let adapter = replaced(
+        "noise_n = [0.2, 0.2, 0.8]",
+        "noise_n = [0.2, 0.2, 0.8]\nadapter_mass_kg = 0.2",
+    );
+    let text = format!("{adapter}\n[axes]\nservo_damping = 0.8\n");
+    let plant = parse(&text, ORIGIN).unwrap().spec.plant;
+    assert_eq!(
+        plant.inertia,
+        Some(RodInertia {
+            inertia_perp_kgm2: 2.593 * 0.35f64.powi(2) / 12.0,
+            inertia_axial_kgm2: 0.0,
+            adapter_mass_kg: 0.2,
+        })
+    );
+    assert_eq!(
+        plant.servo,
+        Some(ServoSpec {
+            bandwidth_hz: 30.0,
+            damping: 0.8,
+            max_accel_mps2: 5.0,
+        })
+    );
+    assert_eq!(plant.quick_stop_decel_mps2, None);
+    let every = replaced(
+        "com_m = 0.103\n",
+        "com_m = 0.103\ninertia_perp_kgm2 = 0.03\ninertia_axial_kgm2 = 0.001\n",
+    );
+    let text = format!(
+        "{every}\n[axes]\nservo_bandwidth_hz = 20.0\nservo_max_accel_mps2 = 8.0\nquick_stop_decel_mps2 = 2.0\n"
+    );
+    let plant = parse(&text, ORIGIN).unwrap().spec.plant;
+    assert_eq!(
+        plant,
+        PlantSpec {
+            inertia: Some(RodInertia {
+                inertia_perp_kgm2: 0.03,
+                inertia_axial_kgm2: 0.001,
+                adapter_mass_kg: 0.0,
+            }),
+            servo: Some(ServoSpec {
+                bandwidth_hz: 20.0,
+                damping: 0.7,
+                max_accel_mps2: 8.0,
+            }),
+            quick_stop_decel_mps2: Some(2.0),
+        }
+    );
 }
 
 #[test]
