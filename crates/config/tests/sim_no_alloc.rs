@@ -2,7 +2,8 @@
 //! tissues acting: `sard --sim` runs it on the loop's path, so its sensor and
 //! drives calls are counted under a counting global allocator (the daemon's
 //! no-alloc tests run the demo scenario; this one runs every failure mode
-//! and a breathing, shifting, damped tissue). One test in this binary, so
+//! and a breathing, shifting, damped tissue, then the plant in motion: the
+//! rod's inertia, the servos and the quick stop). One test in this binary, so
 //! that no other test's allocations count. (Here, beside the scenario
 //! loader, since `sar-drivers` reads no scenario file.)
 #![allow(
@@ -12,7 +13,9 @@
     clippy::panic
 )]
 
-use sar_drivers::sim::{Breathing, Fault, Simulator, Tissue, TissueModel, TissueShift};
+use sar_drivers::sim::{
+    Breathing, Fault, PlantSpec, RodInertia, ServoSpec, Simulator, Tissue, TissueModel, TissueShift,
+};
 use sar_drivers::{AxisDrives, DriveState, ForceSensor, SimClock, Vec3, WrenchSample};
 use sar_kinematics::ActiveJoints;
 use sar_test_support::counting::{Counting, process_allocations};
@@ -160,4 +163,64 @@ fn the_simulator_with_every_fault_and_a_tissue_allocates_nothing_per_cycle() {
     assert!(faults_seen >= 1);
     assert!(drive_faults > 0);
     assert!(sim.truth().unwrap().tissue_force_n.x > 0.0);
+    plant_in_motion_allocates_nothing(&path);
+}
+
+/// The plant in motion (issue 26): the Newton-Euler wrench with every
+/// inertia, the servos (planned moves, streamed set points) and the drives'
+/// own braking ramp, under the same count.
+fn plant_in_motion_allocates_nothing(path: &Path) {
+    let scenario = sar_config::scenario::load(path).unwrap();
+    let mut spec = scenario.spec;
+    spec.plant = PlantSpec {
+        inertia: Some(RodInertia {
+            inertia_perp_kgm2: 0.03,
+            inertia_axial_kgm2: 0.001,
+            adapter_mass_kg: 0.2,
+        }),
+        servo: Some(ServoSpec {
+            bandwidth_hz: 30.0,
+            damping: 0.7,
+            max_accel_mps2: 5.0,
+        }),
+        quick_stop_decel_mps2: Some(2.0),
+    };
+    let clock = SimClock::new(1_000_000_000);
+    let sim = Simulator::new(spec, clock.clone()).unwrap();
+    let (mut sensor, mut drives) = (sim.sensor(), sim.drives());
+    let start = scenario.script.start;
+    drives.enable().unwrap();
+    let before = process_allocations();
+    let mut moving_accel = 0.0f64;
+    for cycle in 0..400u64 {
+        clock.advance_ns(MS);
+        let _ = sensor.poll().unwrap();
+        let _ = drives.positions().unwrap();
+        let t = sim.truth().unwrap();
+        moving_accel = moving_accel.max(t.joint_accels_mps2[2].abs());
+        match cycle {
+            10 => drives
+                .set_targets(ActiveJoints {
+                    q3_m: start.q3_m + 0.004,
+                    ..start
+                })
+                .unwrap(),
+            // Streamed set points from where the planned move ended.
+            200..=299 => {
+                let q = ActiveJoints {
+                    q3_m: start.q3_m + 0.004 + 4e-5 * (cycle - 199) as f64,
+                    ..start
+                };
+                drives.stream(q, MS).unwrap();
+            }
+            300 => drives.quick_stop().unwrap(),
+            _ => {}
+        }
+    }
+    let allocations = process_allocations() - before;
+    assert_eq!(
+        allocations, 0,
+        "{allocations} allocations in 400 cycles in motion"
+    );
+    assert!(moving_accel > 0.1, "{moving_accel}");
 }

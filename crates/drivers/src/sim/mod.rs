@@ -4,7 +4,9 @@
 //! What it simulates (from a [`SimSpec`]):
 //! - three axes that follow their targets with a speed and an acceleration
 //!   limit (time-optimal trapezoids, exact arrival, no overshoot), reported at a
-//!   fixed period and quantised to `lead / counts_per_turn`;
+//!   fixed period and quantised to `lead / counts_per_turn`; with a
+//!   [`ServoSpec`] (opt-in, issue 26) each axis is a second-order position
+//!   loop that follows that profile with a lag;
 //! - the rod's statics, by the simulator's own forward solution of the six
 //!   equilibrium equations of MODEL.md 4 (F_A, the support's reaction across u,
 //!   the U-joint torsion), independent of the estimator's inverse solution, with
@@ -14,6 +16,10 @@
 //!   slide, locked at its last value when the rod stops, zero before any slide;
 //!   it reverses only once the rod has slid the support's pre-sliding
 //!   displacement, [`crate::motion::SLIDE_THRESHOLD_M`], the other way);
+//! - with a [`RodInertia`] (opt-in, issue 26) the rod's Newton-Euler wrench
+//!   instead (MODEL.md 10): the same six equations with the inertial terms of
+//!   the axes' true velocity and acceleration (any offset d), and the
+//!   adapter's -m_s A'' on the sensor; at rest, the statics bit for bit;
 //! - the force/torque sensor: the wrench of MODEL.md 4 in the sensor frame plus
 //!   a bias with linear drift and seeded normal noise per sensor axis (ChaCha8),
 //!   clipped to its measuring range, sampled at a fixed period and received
@@ -36,8 +42,10 @@
 //! times) give the same samples bit for bit, however often it is polled.
 //! Single-threaded: the handles share the world through `Rc<RefCell<_>>`.
 //!
-//! Drive states follow [`DriveState`]'s doc, with these choices: `disable` and
-//! `quick_stop` brake at the acceleration limit, then hold; a drive fault brakes
+//! Drive states follow [`DriveState`]'s doc, with these choices: `disable`
+//! brakes at the acceleration limit, `quick_stop` at the quick-stop
+//! deceleration ([`PlantSpec`], the acceleration limit when none), then hold
+//! (with servos, the axes follow that ramp itself); a drive fault brakes
 //! likewise; `quick_stop` in `Fault` is accepted and leaves the state `Fault`
 //! (so that a fault is never cleared without `fault_reset`); the cause of a
 //! simulated drive fault is gone at once, so `fault_reset` always succeeds from
