@@ -119,8 +119,8 @@ fn per_cycle(c: &mut Criterion) {
         g.bench_function(name, |b| {
             b.iter(|| {
                 // Back and forth by 10 mm every second: moving most of the time.
-                if cycle % 1000 == 0 {
-                    let forth = (cycle / 1000) % 2 == 0;
+                if cycle.is_multiple_of(1000) {
+                    let forth = (cycle / 1000).is_multiple_of(2);
                     let q3_m = start().q3_m + if forth { 0.01 } else { 0.0 };
                     drives
                         .set_targets(ActiveJoints { q3_m, ..start() })
