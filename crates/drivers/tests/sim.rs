@@ -288,6 +288,21 @@ impl SimDrivesHarness {
             can_fault: true,
         }
     }
+
+    /// The plant in motion (issue 26): the rod's inertia, servos at their
+    /// defaults, a 2 m/s^2 quick stop.
+    fn in_motion() -> Self {
+        let mut spec = base_spec();
+        spec.plant = PlantSpec {
+            inertia: Some(plant::inertia(0.0265, 0.0, 0.2)),
+            servo: Some(plant::SERVO),
+            quick_stop_decel_mps2: Some(2.0),
+        };
+        Self {
+            rig: Rig::new(spec),
+            can_fault: true,
+        }
+    }
 }
 
 impl DrivesHarness for SimDrivesHarness {
@@ -352,7 +367,10 @@ impl DrivesHarness for SimDrivesHarness {
 /// One `#[test]` per conformance check, each with a fresh harness.
 macro_rules! conformance_tests {
     ($suite:ident, $harness:expr, [$($check:ident),* $(,)?]) => {
-        mod $suite {
+        conformance_tests!($suite as $suite, $harness, [$($check),*]);
+    };
+    ($suite:ident as $name:ident, $harness:expr, [$($check:ident),* $(,)?]) => {
+        mod $name {
             use super::*;
             $(
                 #[test]
@@ -384,6 +402,22 @@ conformance_tests!(
 conformance_tests!(
     drives,
     SimDrivesHarness::new(),
+    [
+        starts_ready_and_refuses_targets,
+        enable_accepts_targets_and_disable_refuses_them,
+        invalid_targets_are_invalid_arguments,
+        quick_stop_from_ready_and_back,
+        quick_stop_while_moving_stops_and_holds,
+        fault_reset_outside_fault_is_invalid_state,
+        positions_are_stamped_fresh_and_in_order,
+        reaches_a_reachable_target_and_holds,
+        transient_fault_is_reported_and_reset,
+    ]
+);
+
+conformance_tests!(
+    drives as drives_in_motion,
+    SimDrivesHarness::in_motion(),
     [
         starts_ready_and_refuses_targets,
         enable_accepts_targets_and_disable_refuses_them,
@@ -2226,7 +2260,11 @@ fn busy_spec(seed: u64) -> SimSpec {
 /// Runs the busy script, polling every `poll_ns`; commands at fixed times
 /// (multiples of 7 ms and of 0.1 ms). Returns the samples and position reports.
 fn run_busy(seed: u64, poll_ns: u64) -> (Vec<WrenchSample>, Vec<JointPositions>) {
-    let mut rig = Rig::new(busy_spec(seed));
+    run_busy_spec(busy_spec(seed), poll_ns)
+}
+
+fn run_busy_spec(spec: SimSpec, poll_ns: u64) -> (Vec<WrenchSample>, Vec<JointPositions>) {
+    let mut rig = Rig::new(spec);
     let mut samples = Vec::new();
     let mut reports = Vec::new();
     let mut commands = vec![
@@ -2302,8 +2340,20 @@ fn same_seed_and_script_give_the_same_samples_bit_for_bit() {
 
 #[test]
 fn results_do_not_depend_on_how_often_the_simulator_is_polled() {
-    let (fine, fine_reports) = run_busy(3, 100_000);
-    let (coarse, coarse_reports) = run_busy(3, 7 * MS);
+    polling_does_not_change_the_results(busy_spec(3));
+    // The plant in motion too: the servos are sampled on the physics grid.
+    let mut spec = busy_spec(3);
+    spec.plant = PlantSpec {
+        inertia: Some(plant::inertia(0.0265, 0.001, 0.2)),
+        servo: Some(plant::SERVO),
+        quick_stop_decel_mps2: Some(2.0),
+    };
+    polling_does_not_change_the_results(spec);
+}
+
+fn polling_does_not_change_the_results(spec: SimSpec) {
+    let (fine, fine_reports) = run_busy_spec(spec.clone(), 100_000);
+    let (coarse, coarse_reports) = run_busy_spec(spec, 7 * MS);
     // Fine polling returns every sample; coarse polling only the newest ones.
     assert!(fine.len() > 2 * coarse.len() && coarse.len() > 50);
     let by_counter: std::collections::HashMap<u32, &WrenchSample> =

@@ -12,7 +12,7 @@ use sar_kinematics::{Pose, forward};
 /// positions, ~4 eps |C| m / h^2, about 5e-8 N).
 const H_NS: u64 = 100_000;
 
-fn inertia(perp: f64, axial: f64, adapter: f64) -> RodInertia {
+pub(super) fn inertia(perp: f64, axial: f64, adapter: f64) -> RodInertia {
     RodInertia {
         inertia_perp_kgm2: perp,
         inertia_axial_kgm2: axial,
@@ -287,7 +287,7 @@ fn joints(q: [f64; 3]) -> ActiveJoints {
     }
 }
 
-const SERVO: ServoSpec = ServoSpec {
+pub(super) const SERVO: ServoSpec = ServoSpec {
     bandwidth_hz: 30.0,
     damping: 0.7,
     max_accel_mps2: 5.0,
