@@ -539,7 +539,13 @@ impl RotatingWriter {
         if let Outgoing::SnapshotChunk(chunk) = msg {
             return self.write_chunk(chunk, status);
         }
-        let log_ns = msg.stamp_ns();
+        self.rotate_if_due(msg.stamp_ns(), status)?;
+        self.write_raw(msg)
+    }
+
+    /// Closes the current file before a message logged at `log_ns` when
+    /// it is full (waiting for a snapshot up to the grace).
+    fn rotate_if_due(&mut self, log_ns: u64, status: &RecorderDrops) -> Result<(), WriteError> {
         if let Some(file) = &self.current
             && self.must_rotate(file, log_ns)
         {
@@ -554,7 +560,24 @@ impl RotatingWriter {
                 self.close(status)?;
             }
         }
-        self.write_raw(msg)
+        Ok(())
+    }
+
+    /// Writes one `/sar/cycle/batch` (the lean mode's, `crate::lean`),
+    /// logged at its stamp, rotating first as [`RotatingWriter::write`].
+    pub fn write_batch(
+        &mut self,
+        batch: &sar_msgs::msgs::CycleBatch,
+        status: &RecorderDrops,
+    ) -> Result<(), WriteError> {
+        self.rotate_if_due(batch.stamp_ns, status)?;
+        batch
+            .encode(&mut self.buf)
+            .map_err(|source| WriteError::Encode {
+                topic: Topic::CycleBatch.name(),
+                source,
+            })?;
+        self.write_encoded(Topic::CycleBatch, batch.stamp_ns)
     }
 
     /// Joins a snapshot's chunks; writes it when complete. A chunk out of

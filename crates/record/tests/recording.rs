@@ -11,6 +11,8 @@
 
 // The other recording tests, in this binary (one binary: less to link); the
 // strict readers of the tests (shared with sar-daemon's and sar-tests' tests).
+#[path = "recording/lean_recording.rs"]
+mod lean_recording;
 #[path = "recording/python_reader.rs"]
 mod python_reader;
 #[path = "../../daemon/tests/common/readers.rs"]
