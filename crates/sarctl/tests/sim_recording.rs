@@ -94,6 +94,49 @@ fn a_sim_recording_replays_without_a_configuration_and_compares_with_the_truth()
     assert!(out.status.success(), "{}", text(&out.stderr));
 }
 
+/// The lean mode (`[record] mode = "inputs"`, issue 28) on the real
+/// `sard --sim`: the file replays without error (its guard events and
+/// snapshots compared), `replay --output` makes a full file of it that
+/// replays bit for bit itself, and it takes a fraction of a full
+/// recording's bytes per cycle (the full one of the same length beside it).
+#[test]
+fn a_lean_sim_recording_replays_and_makes_the_full_one() {
+    let dir = support::scratch("simrec_lean");
+    let cycles = 3000u64;
+    let prefix = format!("sar-simrec-lean-{}", std::process::id());
+    let lean = support::sim_lean_recording(&dir.join("lean"), cycles, &prefix);
+    let full = support::sim_recording(&dir.join("full"), cycles, &prefix);
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len() as f64 / cycles as f64;
+    let (lean_b, full_b) = (size(&lean), size(&full));
+    eprintln!(
+        "sard --sim, {cycles} cycles: lean {lean_b:.1} bytes a cycle ({:.0} MB/h at 1 kHz), full {full_b:.1} ({:.0} MB/h)",
+        lean_b * 3.6,
+        full_b * 3.6
+    );
+    assert!(lean_b * 4.0 < full_b, "lean {lean_b}, full {full_b}");
+    assert!(count(&lean, "/sar/cycle/batch") >= cycles / 100);
+    assert_eq!(count(&lean, "/sar/estimate/state"), 0);
+    let out = sarctl(&["--format", "json", "replay", "--input"], &[&lean]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    assert_eq!(v["cycles"], cycles, "{v}");
+    let made = dir.join("made-full.mcap");
+    let out = sarctl(
+        &["replay", "--input"],
+        &[&lean, Path::new("--output"), &made],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(count(&made, "/sar/estimate/state"), cycles);
+    // The sensor's samples at 500 Hz, given back from the batches.
+    assert!(count(&made, "/sar/sensor/wrench") >= cycles / 2 - 50);
+    let out = sarctl(&["--format", "json", "replay", "--input"], &[&made]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    assert_eq!(v["cycles"], cycles, "{v}");
+}
+
 #[test]
 fn a_record_start_of_the_builtin_configuration_names_it_when_replayed() {
     let dir = support::scratch("simrec_builtin");

@@ -188,16 +188,16 @@ batch_message! {
         drive_fault_axis: Vec<i8>,
         /// The fault code per cycle.
         drive_fault_code: Vec<u16>,
+        /// The place of each command's cycle.
+        command_cycles: Vec<u32>,
+        /// The cycles with a command, whole.
+        commands: Vec<CycleInput>,
         /// The place of each extra sensor message's cycle.
         extra_cycles: Vec<u32>,
         /// Each extra sensor message's stamp, ns.
         extra_stamp_ns: Vec<u64>,
         /// Six per extra sensor message.
         extra_wrench: Vec<f64>,
-        /// The place of each command's cycle.
-        command_cycles: Vec<u32>,
-        /// The cycles with a command, whole.
-        commands: Vec<CycleInput>,
     }
 }
 
