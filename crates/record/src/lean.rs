@@ -23,9 +23,10 @@
 
 use super::convert;
 use super::file::{RotatingWriter, WriteError};
+use sar_msgs::cdr::CdrError;
 use sar_msgs::msgs::{
     ActiveJointState, ClockStatusCode, CommandKindCode, CycleBatch, CycleInput as CycleInputMsg,
-    DriveStateCode, GuardEvent, Outgoing, RecorderDrops, WrenchStamped, batch_flags as flag,
+    DriveStateCode, GuardEvent, Outgoing, RecorderDrops, Topic, WrenchStamped, batch_flags as flag,
 };
 
 /// The `sar_replay` metadata key of a lean file: `record_mode = "inputs"`
@@ -214,8 +215,12 @@ impl BatchBuilder {
         b.cycle.push(diff_u64(m.cycle, p.cycle));
         b.now_ns.push(diff_u64(m.now_ns, p.now_ns));
         b.clock_status.push(m.clock_status as u8);
-        b.publisher_idle_ns
-            .push(diff_u64(m.publisher_idle_ns, p.publisher_idle_ns));
+        // The idle time grows with now while the publisher's heartbeat
+        // does not change: the difference of both is 0 then.
+        b.publisher_idle_ns.push(
+            diff_u64(m.publisher_idle_ns, p.publisher_idle_ns)
+                .wrapping_sub(diff_u64(m.now_ns, p.now_ns)),
+        );
         b.sensor_counter
             .push(m.sensor_counter.wrapping_sub(p.sensor_counter) as i32);
         b.sensor_status.push(m.sensor_status);
@@ -378,6 +383,17 @@ impl LeanWriter {
         match msg {
             Outgoing::CycleInput(m) => {
                 self.end_cycle();
+                // A stamp beyond the format's range (2^31 s): the cycle is
+                // dropped and counted, as the full mode drops its messages,
+                // never the batch it would go into.
+                if m.stamp_ns / 1_000_000_000 > i32::MAX as u64 {
+                    return Err(WriteError::Encode {
+                        topic: Topic::CycleInput.name(),
+                        source: CdrError::StampTooLarge {
+                            stamp_ns: m.stamp_ns,
+                        },
+                    });
+                }
                 if self.builder.cycles >= CYCLES_PER_BATCH {
                     self.flush(files, status)?;
                 }
@@ -558,7 +574,8 @@ fn unbatch_one(
     m.now_ns = undiff_u64(at(&b.now_ns, i, c, short)?, p.now_ns);
     m.clock_status = ClockStatusCode::from_code(at(&b.clock_status, i, c, short)?)
         .map_err(|_| c.err("a clock status out of range"))?;
-    m.publisher_idle_ns = undiff_u64(at(&b.publisher_idle_ns, i, c, short)?, p.publisher_idle_ns);
+    let idle_d = at(&b.publisher_idle_ns, i, c, short)?.wrapping_add(diff_u64(m.now_ns, p.now_ns));
+    m.publisher_idle_ns = undiff_u64(idle_d, p.publisher_idle_ns);
     m.sensor_counter = p
         .sensor_counter
         .wrapping_add(at(&b.sensor_counter, i, c, short)? as u32);

@@ -164,7 +164,7 @@ batch_message! {
         now_ns: Vec<i64>,
         /// The clock's status per cycle.
         clock_status: Vec<u8>,
-        /// Differences of the publisher's idle time, ns.
+        /// Differences of the publisher's idle time less those of now, ns.
         publisher_idle_ns: Vec<i64>,
         /// Differences of the sample counter.
         sensor_counter: Vec<i32>,

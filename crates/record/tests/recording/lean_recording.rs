@@ -229,3 +229,224 @@ fn a_lean_recording_replays_to_the_full_one_message_for_message() {
         "lean {lean_size} bytes, full {full_size}"
     );
 }
+
+/// splitmix64.
+fn mix(x: &mut u64) -> u64 {
+    *x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    let mut z = *x;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce5_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Cycles whose every input field is drawn (seeded) from what the devices
+/// give (counts of the RDT's and the encoders' scales, repeats) and what
+/// they should never give (any f64 bits: NaN, -0.0, infinities; stamps,
+/// counters and idle times anywhere in their range, wrapping), with
+/// commands, extra sensor messages and joint messages: the lean writer's
+/// batches give every one back bit for bit (`unbatch`), in batches of at
+/// most 100 cycles, with the guard events after their batch.
+#[test]
+fn batches_give_back_every_input_bit_for_bit() {
+    use sar_msgs::msgs::{
+        ClockStatusCode, CommandKindCode, CycleBatch, CycleInput, DriveStateCode, GuardEvent,
+        Outgoing, WrenchStamped,
+    };
+    use sar_record::lean::{LeanScales, LeanWriter, unbatch};
+    let dir = sar_test_support::scratch!("lean_batches");
+    let scales = LeanScales {
+        force_counts_per_n: 10_000.0,
+        torque_counts_per_nm: 100_000.0,
+        joint_m_per_count: 0.01 / 4096.0,
+    };
+    let mut seed = 28u64;
+    let mut want: Vec<(CycleInput, Vec<WrenchStamped>, bool)> = Vec::new();
+    let mut prev = CycleInput::default();
+    for k in 0..2500u64 {
+        let r = &mut seed;
+        let any = |r: &mut u64| f64::from_bits(mix(r));
+        let mut m = prev;
+        m.cycle = if mix(r) % 50 == 0 {
+            mix(r)
+        } else {
+            prev.cycle + 1
+        };
+        m.now_ns = prev.now_ns.wrapping_add(1_000_000 + mix(r) % 50_000);
+        if mix(r) % 300 == 0 {
+            // Anywhere a header stamp can say (< 2^31 s).
+            m.now_ns = mix(r) % (i32::MAX as u64 * 1_000_000_000);
+        }
+        m.clock_status =
+            [ClockStatusCode::Ok, ClockStatusCode::ReadFailed][usize::from(mix(r) % 97 == 0)];
+        m.publisher_idle_ns = match mix(r) % 10 {
+            0 => 0,
+            1 => mix(r),
+            _ => prev
+                .publisher_idle_ns
+                .wrapping_add(m.now_ns.wrapping_sub(prev.now_ns)),
+        };
+        if mix(r) % 2 == 0 {
+            m.sensor_counter = prev.sensor_counter.wrapping_add(1);
+            m.sensor_stamp_ns = m.now_ns.wrapping_sub(mix(r) % 100_000);
+            for (i, v) in m
+                .sensor_force_n
+                .iter_mut()
+                .chain(m.sensor_torque_nm.iter_mut())
+                .enumerate()
+            {
+                let per = if i < 3 { 10_000.0 } else { 100_000.0 };
+                *v = match mix(r) % 40 {
+                    0 => any(r),
+                    1 => -0.0,
+                    2 => f64::NAN,
+                    _ => f64::from((mix(r) % 400_000) as i32 - 200_000) / per,
+                };
+            }
+        }
+        m.sensor_status = if mix(r) % 200 == 0 { mix(r) as u32 } else { 0 };
+        m.sensor_valid = mix(r) % 100 != 0;
+        if mix(r) % 3 == 0 {
+            m.joints_stamp_ns = m.now_ns;
+            for q in &mut m.joints_q_m {
+                *q = match mix(r) % 30 {
+                    0 => any(r),
+                    _ => f64::from((mix(r) % 100_000) as i32) * (0.01 / 4096.0),
+                };
+            }
+        }
+        m.joints_valid = mix(r) % 100 != 0;
+        m.drive_state = DriveStateCode::from_code((mix(r) % 5) as u8).unwrap();
+        m.drive_fault_axis = (mix(r) % 4) as i8 - 1;
+        m.drive_fault_code = (mix(r) % 3) as u16;
+        m.command_kind = CommandKindCode::None;
+        m.command_values = [0.0; 6];
+        m.move_tip_m = [0.0; 3];
+        m.back_out_m = 0.0;
+        if mix(r) % 40 == 0 {
+            m.command_kind = CommandKindCode::MoveTip;
+            m.move_tip_m = [any(r), 0.2, -0.0];
+            m.back_out_m = any(r);
+        }
+        m.stamp_ns =
+            sar_record::convert::cycle_stamp_ns(&sar_record::convert::loop_input(&m).cycle_input());
+        // The sensor's messages: extras before the cycle's own sample.
+        let mut sensors = Vec::new();
+        for _ in 0..mix(r) % 3 {
+            sensors.push(WrenchStamped::sensor(
+                mix(r),
+                [any(r), 1.0, 2.0],
+                [3.0, any(r), 4.0],
+            ));
+        }
+        if mix(r) % 2 == 0 {
+            sensors.push(WrenchStamped::sensor(
+                m.sensor_stamp_ns,
+                m.sensor_force_n,
+                m.sensor_torque_nm,
+            ));
+        }
+        let joints = mix(r) % 2 == 0;
+        want.push((m, sensors, joints));
+        prev = m;
+        let _ = k;
+    }
+    let path = dir.join("batches.mcap");
+    let mut files =
+        sar_record::RotatingWriter::new(sar_record::FileOptions::single(&path)).unwrap();
+    let mut writer = LeanWriter::new(scales);
+    let status = RecorderDrops::default();
+    for (k, (m, sensors, joints)) in want.iter().enumerate() {
+        writer
+            .write(&mut files, &Outgoing::CycleInput(*m), &status)
+            .unwrap();
+        for w in sensors {
+            writer
+                .write(&mut files, &Outgoing::SensorWrench(*w), &status)
+                .unwrap();
+        }
+        if *joints {
+            let j = sar_record::lean::joints_msg_of(m);
+            writer
+                .write(&mut files, &Outgoing::Joints(j), &status)
+                .unwrap();
+        }
+        if k % 700 == 0 {
+            let e = GuardEvent {
+                stamp_ns: m.stamp_ns,
+                cycle: m.cycle,
+                ..GuardEvent::default()
+            };
+            writer
+                .write(&mut files, &Outgoing::GuardEvent(e), &status)
+                .unwrap();
+        }
+    }
+    // A cycle whose stamp the format cannot say is refused (the recorder
+    // drops and counts it), not the batch it would have gone into.
+    let mut late = want[0].0;
+    late.now_ns = u64::MAX - 5;
+    late.stamp_ns = late.now_ns;
+    assert!(
+        writer
+            .write(&mut files, &Outgoing::CycleInput(late), &status)
+            .is_err()
+    );
+    writer.flush(&mut files, &status).unwrap();
+    files.close(&status).unwrap();
+    let bytes = read_file(&path).unwrap();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let mut got = Vec::new();
+    let mut order = Vec::new();
+    while let Some(msg) = reader.next() {
+        let msg = msg.unwrap();
+        let topic = reader.channels()[&msg.channel_id].topic.clone();
+        order.push(topic.clone());
+        if topic == Topic::CycleBatch.name() {
+            let b = CycleBatch::decode(&msg.data).unwrap();
+            assert!(b.flags.len() <= 100);
+            got.extend(unbatch(&b).unwrap());
+        }
+    }
+    assert_eq!(got.len(), want.len());
+    for (k, (g, (m, sensors, joints))) in got.iter().zip(&want).enumerate() {
+        // Every input field (the decision's are the replay's): the message
+        // rebuilt by `convert::loop_input` must be the same.
+        let (a, b) = (
+            sar_record::convert::loop_input(&g.input),
+            sar_record::convert::loop_input(m),
+        );
+        assert_eq!(format!("{a:?}"), format!("{b:?}"), "cycle {k}");
+        for (x, y) in g
+            .input
+            .sensor_force_n
+            .iter()
+            .chain(&g.input.sensor_torque_nm)
+            .zip(m.sensor_force_n.iter().chain(&m.sensor_torque_nm))
+        {
+            assert_eq!(x.to_bits(), y.to_bits(), "cycle {k}");
+        }
+        for (x, y) in g.input.joints_q_m.iter().zip(&m.joints_q_m) {
+            assert_eq!(x.to_bits(), y.to_bits(), "cycle {k}");
+        }
+        assert_eq!(g.input.stamp_ns, m.stamp_ns, "cycle {k}");
+        assert_eq!(g.sensors.len(), sensors.len(), "cycle {k}");
+        for (x, y) in g.sensors.iter().zip(sensors) {
+            assert_eq!(x.stamp_ns, y.stamp_ns);
+            for (a, b) in x
+                .force_n
+                .iter()
+                .chain(&x.torque_nm)
+                .zip(y.force_n.iter().chain(&y.torque_nm))
+            {
+                assert_eq!(a.to_bits(), b.to_bits(), "cycle {k}");
+            }
+        }
+        assert_eq!(g.joints_message, *joints, "cycle {k}");
+    }
+    // Each guard event after the batch of its cycle.
+    let first_event = order
+        .iter()
+        .position(|t| t == Topic::GuardEvents.name())
+        .unwrap();
+    assert_eq!(order[first_event - 1], Topic::CycleBatch.name());
+}
