@@ -704,3 +704,43 @@ fn joints_of(
     p.joints = Some(q);
     Ok(q)
 }
+
+/// Why a lean recording's cycles cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum LeanReadError {
+    /// The file.
+    #[error(transparent)]
+    Read(#[from] super::reader::ReadError),
+    /// A batch.
+    #[error(transparent)]
+    Batch(#[from] BatchError),
+}
+
+/// Whether the recording `reader` opens is a lean one (its `sar_replay`
+/// metadata says `record_mode`; read up to its first message).
+pub fn is_lean(mut reader: super::reader::McapReader<'_>) -> bool {
+    let _ = reader.next();
+    reader
+        .metadata()
+        .iter()
+        .any(|m| m.name == convert::REPLAY_METADATA && m.metadata.contains_key(RECORD_MODE_KEY))
+}
+
+/// The cycles of a lean recording, streamed batch by batch (what `sarctl
+/// identify` reads of one instead of `/sar/joints` and
+/// `/sar/sensor/wrench`).
+pub fn cycles<'a>(
+    reader: super::reader::McapReader<'a>,
+) -> impl Iterator<Item = Result<LeanCycle, LeanReadError>> + 'a {
+    reader
+        .typed::<CycleBatch>(Topic::CycleBatch.name())
+        .flat_map(|item| {
+            match item
+                .map_err(LeanReadError::from)
+                .and_then(|(_, b)| unbatch(&b).map_err(LeanReadError::from))
+            {
+                Ok(v) => v.into_iter().map(Ok).collect::<Vec<_>>(),
+                Err(e) => vec![Err(e)],
+            }
+        })
+}

@@ -135,6 +135,26 @@ fn a_lean_sim_recording_replays_and_makes_the_full_one() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["identical"], true, "{v}");
     assert_eq!(v["cycles"], cycles, "{v}");
+    // `sarctl identify` reads the joint and sensor messages of a lean file
+    // from its batches: the same answer as from the full file made of it
+    // (here: the demo at rest is one static pose, too few).
+    let (config, _) = support::recording_config(&dir.join("identify"));
+    let identify = |rec: &Path| {
+        let out = sarctl(
+            &["--format", "json", "--config"],
+            &[
+                &config,
+                Path::new("identify"),
+                Path::new("--dry-run"),
+                Path::new("--input"),
+                rec,
+            ],
+        );
+        (out.status.code(), text(&out.stdout), text(&out.stderr))
+    };
+    let (from_lean, from_full) = (identify(&lean), identify(&made));
+    assert!(from_lean.2.contains("static pose"), "{from_lean:?}");
+    assert_eq!(from_lean, from_full);
 }
 
 #[test]
