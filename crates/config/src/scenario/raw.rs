@@ -109,6 +109,8 @@ pub(super) struct SensorToml {
     pub range_n: Option<[f64; 3]>,
     #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub range_nm: Option<[f64; 3]>,
+    pub counts_per_n: Option<f64>,
+    pub counts_per_nm: Option<f64>,
 }
 
 /// `[[motion]]`: one step; exactly one target.

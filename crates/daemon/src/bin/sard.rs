@@ -221,6 +221,12 @@ fn start_recording(
     if let (config::AxesDriver::Sim, Some((sim, ..))) = (&cfg.axes_driver, simulated) {
         settings.scales.joint_m_per_count = sim.encoder_m_per_count().map_err(|e| e.to_string())?;
     }
+    // And the simulated sensor's counts (the demo's: the HEX-E's).
+    if let (config::SensorDriver::Sim, Some((sim, ..))) = (&cfg.sensor_driver, simulated) {
+        let (per_n, per_nm) = sim.sensor_counts().map_err(|e| e.to_string())?;
+        settings.scales.force_counts_per_n = per_n;
+        settings.scales.torque_counts_per_nm = per_nm;
+    }
     let switch = std::sync::Arc::new(RecordSwitch::new(cfg.loop_.period_ns));
     let (recording, recorder) = RecordManager::start(
         settings,

@@ -167,6 +167,14 @@ impl<C: Clock + Clone> Simulator<C> {
         Ok(axes.lead_m_per_turn / f64::from(axes.counts_per_turn))
     }
 
+    /// The sensor's counts per newton and per newton metre (0: its floats
+    /// are not quantised): a reported force is `counts / counts_per_n`.
+    pub fn sensor_counts(&self) -> Result<(f64, f64), SimError> {
+        let w = self.world.try_borrow().map_err(|_| SimError::Busy)?;
+        let sensor = &w.spec().sensor;
+        Ok((sensor.counts_per_n, sensor.counts_per_nm))
+    }
+
     /// Adds a fault on demand. Its start (`at_ns`, `from_ns`; ns from the
     /// simulator's start) must be after the present time.
     pub fn inject_fault(&self, fault: Fault) -> Result<(), SimError> {

@@ -34,7 +34,7 @@ use std::sync::Arc;
 fn recording(
     dir: &Path,
     mode: RecordMode,
-    m_per_count: f64,
+    scales: config::DeviceScales,
     bias: sar_estimator::cycle::Bias,
 ) -> (RecordManager, LiveRecorder, Arc<RecordSwitch>) {
     let switch = Arc::new(RecordSwitch::default());
@@ -51,10 +51,7 @@ fn recording(
                 toml: config::DEFAULT_TOML.into(),
             })),
             mode,
-            scales: config::DeviceScales {
-                joint_m_per_count: m_per_count,
-                ..config::DeviceScales::default()
-            },
+            scales,
         },
         None,
         bias,
@@ -86,11 +83,17 @@ fn run_both(name: &str) -> (PathBuf, PathBuf) {
         2_900_000_000,
     ]))
     .build();
-    let m_per_count = sim.encoder_m_per_count().unwrap();
-    let (full_mgr, mut full, full_switch) =
-        recording(&full_dir, RecordMode::Full, m_per_count, bias);
-    let (lean_mgr, mut lean, lean_switch) =
-        recording(&lean_dir, RecordMode::Inputs, m_per_count, bias);
+    // The devices' scales as `sard --sim` gives them: the demo reports
+    // counts (its sensor the HEX-E's, its encoders the axes').
+    let (force_counts_per_n, torque_counts_per_nm) = sim.sensor_counts().unwrap();
+    assert!(force_counts_per_n > 0.0 && torque_counts_per_nm > 0.0);
+    let scales = config::DeviceScales {
+        force_counts_per_n,
+        torque_counts_per_nm,
+        joint_m_per_count: sim.encoder_m_per_count().unwrap(),
+    };
+    let (full_mgr, mut full, full_switch) = recording(&full_dir, RecordMode::Full, scales, bias);
+    let (lean_mgr, mut lean, lean_switch) = recording(&lean_dir, RecordMode::Inputs, scales, bias);
     let stats = LoopStats::default();
     let configured = cfg.estimator.guard.force_limits();
     let lower = sar_estimator::guard::ForceLimits {
@@ -266,18 +269,18 @@ fn batches_give_back_every_input_bit_for_bit() {
         let r = &mut seed;
         let any = |r: &mut u64| f64::from_bits(mix(r));
         let mut m = prev;
-        m.cycle = if mix(r) % 50 == 0 {
+        m.cycle = if mix(r).is_multiple_of(50) {
             mix(r)
         } else {
             prev.cycle + 1
         };
         m.now_ns = prev.now_ns.wrapping_add(1_000_000 + mix(r) % 50_000);
-        if mix(r) % 300 == 0 {
+        if mix(r).is_multiple_of(300) {
             // Anywhere a header stamp can say (< 2^31 s).
             m.now_ns = mix(r) % (i32::MAX as u64 * 1_000_000_000);
         }
-        m.clock_status =
-            [ClockStatusCode::Ok, ClockStatusCode::ReadFailed][usize::from(mix(r) % 97 == 0)];
+        m.clock_status = [ClockStatusCode::Ok, ClockStatusCode::ReadFailed]
+            [usize::from(mix(r).is_multiple_of(97))];
         m.publisher_idle_ns = match mix(r) % 10 {
             0 => 0,
             1 => mix(r),
@@ -285,7 +288,7 @@ fn batches_give_back_every_input_bit_for_bit() {
                 .publisher_idle_ns
                 .wrapping_add(m.now_ns.wrapping_sub(prev.now_ns)),
         };
-        if mix(r) % 2 == 0 {
+        if mix(r).is_multiple_of(2) {
             m.sensor_counter = prev.sensor_counter.wrapping_add(1);
             m.sensor_stamp_ns = m.now_ns.wrapping_sub(mix(r) % 100_000);
             for (i, v) in m
@@ -303,9 +306,13 @@ fn batches_give_back_every_input_bit_for_bit() {
                 };
             }
         }
-        m.sensor_status = if mix(r) % 200 == 0 { mix(r) as u32 } else { 0 };
-        m.sensor_valid = mix(r) % 100 != 0;
-        if mix(r) % 3 == 0 {
+        m.sensor_status = if mix(r).is_multiple_of(200) {
+            mix(r) as u32
+        } else {
+            0
+        };
+        m.sensor_valid = !mix(r).is_multiple_of(100);
+        if mix(r).is_multiple_of(3) {
             m.joints_stamp_ns = m.now_ns;
             for q in &mut m.joints_q_m {
                 *q = match mix(r) % 30 {
@@ -314,7 +321,7 @@ fn batches_give_back_every_input_bit_for_bit() {
                 };
             }
         }
-        m.joints_valid = mix(r) % 100 != 0;
+        m.joints_valid = !mix(r).is_multiple_of(100);
         m.drive_state = DriveStateCode::from_code((mix(r) % 5) as u8).unwrap();
         m.drive_fault_axis = (mix(r) % 4) as i8 - 1;
         m.drive_fault_code = (mix(r) % 3) as u16;
@@ -322,7 +329,7 @@ fn batches_give_back_every_input_bit_for_bit() {
         m.command_values = [0.0; 6];
         m.move_tip_m = [0.0; 3];
         m.back_out_m = 0.0;
-        if mix(r) % 40 == 0 {
+        if mix(r).is_multiple_of(40) {
             m.command_kind = CommandKindCode::MoveTip;
             m.move_tip_m = [any(r), 0.2, -0.0];
             m.back_out_m = any(r);
@@ -338,14 +345,14 @@ fn batches_give_back_every_input_bit_for_bit() {
                 [3.0, any(r), 4.0],
             ));
         }
-        if mix(r) % 2 == 0 {
+        if mix(r).is_multiple_of(2) {
             sensors.push(WrenchStamped::sensor(
                 m.sensor_stamp_ns,
                 m.sensor_force_n,
                 m.sensor_torque_nm,
             ));
         }
-        let joints = mix(r) % 2 == 0;
+        let joints = mix(r).is_multiple_of(2);
         want.push((m, sensors, joints));
         prev = m;
         let _ = k;
@@ -372,7 +379,7 @@ fn batches_give_back_every_input_bit_for_bit() {
                 .write(&mut files, &Outgoing::Joints(j), &status)
                 .unwrap();
         }
-        if k % 700 == 0 {
+        if k.is_multiple_of(700) {
             let e = GuardEvent {
                 stamp_ns: m.stamp_ns,
                 cycle: m.cycle,
