@@ -1343,7 +1343,7 @@ impl<'o> SetReplay<'o> {
             }
             Some(Topic::CycleBatch) => {
                 self.start_cycle_inputs(msg.log_time_ns)?;
-                self.cycle_batch(file, msg.data)?;
+                self.cycle_batch(file, &msg)?;
             }
             Some(Topic::SensorWrench) if !self.saw_cycle_input => {
                 let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
@@ -1416,10 +1416,14 @@ impl<'o> SetReplay<'o> {
     /// recorded `/sar/cycle/input` is, with its sensor and joint messages
     /// written after it. Only the guard events and the snapshots are
     /// compared (the other outputs are not in a lean file).
-    fn cycle_batch(&mut self, file: &mut FileVisit, data: &[u8]) -> Result<(), ReplayError> {
-        let batch = CycleBatch::decode(data).map_err(|source| ReadError::Decode {
+    fn cycle_batch(
+        &mut self,
+        file: &mut FileVisit,
+        msg: &MessageRef<'_>,
+    ) -> Result<(), ReplayError> {
+        let batch = CycleBatch::decode(msg.data).map_err(|source| ReadError::Decode {
             topic: Topic::CycleBatch.name().to_owned(),
-            log_time_ns: 0,
+            log_time_ns: msg.log_time_ns,
             source,
         })?;
         let cycles = lean::unbatch(&batch)?;
