@@ -332,7 +332,9 @@ fn recorder_config(
     if let Some(source) = &settings.config_source {
         files.metadata.push(convert::config_metadata(source));
     }
-    files.scene = scene;
+    // The lean mode records what replay needs: no scene (`replay
+    // --output` draws it).
+    files.scene = if lean { None } else { scene };
     // Rotation waits for the next snapshot, or rotates anyway after twice
     // its period and a second more (snapshots dropped).
     files.rotate_at_snapshots_grace_ns = Some(
