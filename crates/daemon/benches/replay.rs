@@ -20,7 +20,11 @@
 //!
 //! `replay_lean/*` (issue 28): that recording and its lean file
 //! (`[record] mode = "inputs"`) replayed in the same run, compared and
-//! written ([`replay_lean_bench`]).
+//! written ([`replay_lean_bench`]). Measured with 200 000 cycles (103.4
+//! bytes a cycle full, 24.1 lean: this recording has no outputs): compared
+//! as `sarctl replay` does, full 256 ms, lean 190 ms; written (`--output`),
+//! full 1.13 s, lean 2.06 s (its output holds the sensor and joint
+//! messages too, 1.5 a cycle more, which a full input's output leaves out).
 //!
 //! `SAR_BENCH_REPLAY_CYCLES` shortens the recording (default 3 600 000).
 //!
