@@ -599,6 +599,23 @@ fn unbatch_one(
     p.sensor_stamp_ns = m.sensor_stamp_ns;
     p.joints_stamp_ns = m.joints_stamp_ns;
     m.stamp_ns = convert::cycle_stamp_ns(&convert::loop_input(&m).cycle_input());
+    Ok(LeanCycle {
+        sensors: sensor_messages_of(b, i, f, &m, c)?,
+        input: m,
+        joints_message: f & flag::JOINTS_MESSAGE != 0,
+    })
+}
+
+/// A cycle's `/sar/sensor/wrench` messages: its extras, then its own
+/// sample when it was recorded.
+fn sensor_messages_of(
+    b: &CycleBatch,
+    i: usize,
+    f: u8,
+    m: &CycleInputMsg,
+    c: &mut Cursor<'_>,
+) -> Result<Vec<WrenchStamped>, BatchError> {
+    let short = "an array is shorter than the flags";
     let mut sensors = Vec::new();
     while let Some(&k) = b.extra_cycles.get(c.extra)
         && k as usize == i
@@ -620,11 +637,7 @@ fn unbatch_one(
             m.sensor_torque_nm,
         ));
     }
-    Ok(LeanCycle {
-        input: m,
-        sensors,
-        joints_message: f & flag::JOINTS_MESSAGE != 0,
-    })
+    Ok(sensors)
 }
 
 /// A cycle's force and torque (repeated, raw or counts).
