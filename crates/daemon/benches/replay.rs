@@ -289,6 +289,7 @@ fn lean_of(full: &[u8], path: &Path) {
             (m.name.clone(), kv)
         })
         .collect();
+    o.lean = true;
     let mut w = RotatingWriter::new(o).unwrap();
     let mut writer = lean::LeanWriter::new(lean::LeanScales::default());
     let status = RecorderDrops::default();

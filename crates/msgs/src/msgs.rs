@@ -1016,6 +1016,22 @@ impl Topic {
         Topic::CycleBatch,
     ];
 
+    /// The channels of a full recording: every topic but the lean mode's
+    /// `/sar/cycle/batch` (only a lean file has that channel).
+    pub const FULL: [Topic; 11] = [
+        Topic::SensorWrench,
+        Topic::Joints,
+        Topic::TipWrench,
+        Topic::TipWrenchFiltered,
+        Topic::PassiveJoints,
+        Topic::EstimatorState,
+        Topic::GuardEvents,
+        Topic::CycleInput,
+        Topic::RecorderDrops,
+        Topic::SimTipWrenchTruth,
+        Topic::StateSnapshot,
+    ];
+
     /// The topic name.
     pub fn name(self) -> &'static str {
         match self {

@@ -183,6 +183,9 @@ pub struct FileOptions {
     /// due (all dropped), the file rotates at the next message anyway (that
     /// file then starts without one). `None`: rotate at any message.
     pub rotate_at_snapshots_grace_ns: Option<u64>,
+    /// A lean file (`crate::lean`): the `/sar/cycle/batch` channel too
+    /// (a full file has the channels of [`Topic::FULL`]).
+    pub lean: bool,
 }
 
 impl FileOptions {
@@ -199,6 +202,7 @@ impl FileOptions {
             first_path: None,
             scene: None,
             rotate_at_snapshots_grace_ns: None,
+            lean: false,
         }
     }
 
@@ -357,6 +361,9 @@ struct OpenFile {
     first_log_ns: Option<u64>,
 }
 
+/// A topic without a channel in the file (`OpenFile::channel_ids`).
+const NO_CHANNEL: u16 = u16::MAX;
+
 fn topic_index(topic: Topic) -> usize {
     Topic::ALL.iter().position(|t| *t == topic).unwrap_or(0)
 }
@@ -433,9 +440,13 @@ impl RotatingWriter {
             })?;
         let mut writer = mcap::Writer::with_options(file, self.options.mcap_options())
             .map_err(mcap_err(&path))?;
-        let mut channel_ids = [0u16; Topic::ALL.len()];
+        // (NO_CHANNEL: a topic this file has no channel of.)
+        let mut channel_ids = [NO_CHANNEL; Topic::ALL.len()];
         let qos = BTreeMap::from([(QOS_METADATA_KEY.to_owned(), OFFERED_QOS_PROFILES.to_owned())]);
         for (id, topic) in channel_ids.iter_mut().zip(Topic::ALL) {
+            if topic == Topic::CycleBatch && !self.options.lean {
+                continue;
+            }
             let schema = writer
                 .add_schema(topic.type_name(), "ros2msg", topic.schema().as_bytes())
                 .map_err(mcap_err(&path))?;
@@ -638,9 +649,17 @@ impl RotatingWriter {
         let Some(file) = self.current.as_mut() else {
             return Ok(());
         };
+        let channel_id = file.channel_ids.get(i).copied().unwrap_or(NO_CHANNEL);
+        if channel_id == NO_CHANNEL {
+            return Err(WriteError::Setting {
+                field: "lean",
+                value: 0,
+                why: "/sar/cycle/batch is written only into a lean file",
+            });
+        }
         file.first_log_ns.get_or_insert(log_ns);
         let header = mcap::records::MessageHeader {
-            channel_id: file.channel_ids.get(i).copied().unwrap_or(0),
+            channel_id,
             sequence,
             log_time: log_ns,
             publish_time: log_ns,

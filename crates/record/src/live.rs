@@ -335,6 +335,7 @@ fn recorder_config(
     // The lean mode records what replay needs: no scene (`replay
     // --output` draws it).
     files.scene = if lean { None } else { scene };
+    files.lean = lean;
     // Rotation waits for the next snapshot, or rotates anyway after twice
     // its period and a second more (snapshots dropped).
     files.rotate_at_snapshots_grace_ns = Some(

@@ -361,6 +361,7 @@ fn batches_give_back_every_input_bit_for_bit() {
     let mut options = sar_record::FileOptions::single(&path);
     // Small chunks: a cut file keeps most of them.
     options.chunk_size_bytes = 8 * 1024;
+    options.lean = true;
     let mut files = sar_record::RotatingWriter::new(options).unwrap();
     let mut writer = LeanWriter::new(scales);
     let status = RecorderDrops::default();
