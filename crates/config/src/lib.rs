@@ -167,6 +167,7 @@ struct RecordToml {
     queue_capacity: i64,
     scene_hz: f64,
     snapshot_s: f64,
+    mode: String,
 }
 
 impl Default for RecordToml {
@@ -179,6 +180,7 @@ impl Default for RecordToml {
             queue_capacity: 65536,
             scene_hz: 30.0,
             snapshot_s: 10.0,
+            mode: "full".to_owned(),
         }
     }
 }
@@ -577,6 +579,79 @@ pub struct RecordSettings {
     /// recording (`sar_config` metadata) so that it replays without one
     /// (`None`: not written).
     pub config_source: Option<std::sync::Arc<ConfigSource>>,
+    /// What a recording holds (`[record] mode`).
+    pub mode: RecordMode,
+    /// How the devices make floats of counts (the lean mode stores counts
+    /// where they give back the floats bit for bit): the configured RDT
+    /// sensor's and CANopen drives'; `sard` sets the simulator's encoders.
+    pub scales: DeviceScales,
+}
+
+/// How the devices' drivers make floats of counts; 0: not known (floats
+/// stored as they are).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DeviceScales {
+    /// force = counts / this, N (the RDT driver's `counts_per_n`).
+    pub force_counts_per_n: f64,
+    /// torque = counts / this, N m (`counts_per_nm`).
+    pub torque_counts_per_nm: f64,
+    /// position = counts * this, m (the encoders' `lead_m /
+    /// counts_per_turn`).
+    pub joint_m_per_count: f64,
+}
+
+impl DeviceScales {
+    /// The scales of the configured drivers (the simulator's: 0).
+    pub fn of_drivers(sensor: &SensorDriver, axes: &AxesDriver) -> Self {
+        let mut s = Self::default();
+        if let SensorDriver::Rdt {
+            counts_per_n,
+            counts_per_nm,
+            ..
+        } = sensor
+        {
+            s.force_counts_per_n = *counts_per_n;
+            s.torque_counts_per_nm = *counts_per_nm;
+        }
+        if let AxesDriver::Canopen {
+            lead_m,
+            counts_per_turn,
+            ..
+        } = axes
+        {
+            s.joint_m_per_count = lead_m / f64::from(*counts_per_turn);
+        }
+        s
+    }
+}
+
+/// What a recording holds (`[record] mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RecordMode {
+    /// `"full"`: every topic of INTERFACES.md 1, outputs included.
+    #[default]
+    Full,
+    /// `"inputs"`: the lean mode, what replay needs (the cycles' inputs
+    /// in `/sar/cycle/batch`, the snapshots, the guard events, the
+    /// recorder's drops, the configuration); `sarctl replay --output`
+    /// makes the full recording of it.
+    Inputs,
+}
+
+impl RecordMode {
+    /// Its name in the configuration.
+    pub fn name(self) -> &'static str {
+        match self {
+            RecordMode::Full => "full",
+            RecordMode::Inputs => "inputs",
+        }
+    }
+    /// The mode named `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [RecordMode::Full, RecordMode::Inputs]
+            .into_iter()
+            .find(|m| m.name() == name)
+    }
 }
 
 /// When a recording starts a new file. A file is closed before the message
@@ -757,8 +832,9 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let plausibility = plausibility(ctx, &f.plausibility, &f.sensor, &sensor_driver)?;
     let tip = tip(ctx, &f.tip)?;
     let loop_ = loop_config(ctx, &f.loop_)?;
-    let record = record(ctx, &f.record)?;
+    let mut record = record(ctx, &f.record)?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
+    record.scales = DeviceScales::of_drivers(&sensor_driver, &axes_driver);
     let force_control = force_control(ctx, &f.force_control, tip.sample_rate_hz, loop_.rate_hz)?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
@@ -1115,7 +1191,15 @@ fn record(ctx: &Ctx<'_>, rec: &RecordToml) -> Result<RecordSettings, ConfigError
     let queue_capacity = ctx.range_i("record.queue_capacity", rec.queue_capacity, 1024, 1 << 24)?;
     let scene_hz = ctx.range_f("record.scene_hz", rec.scene_hz, 0.0, 1000.0, "Hz")?;
     let snapshot_s = ctx.range_f("record.snapshot_s", rec.snapshot_s, 0.01, 3600.0, "s")?;
+    let mode = RecordMode::from_name(&rec.mode).ok_or_else(|| {
+        ctx.err(
+            "record.mode",
+            format!("must be \"full\" or \"inputs\", got {:?}", rec.mode),
+        )
+    })?;
     Ok(RecordSettings {
+        mode,
+        scales: DeviceScales::default(),
         enabled: rec.enabled,
         directory: std::path::PathBuf::from(&rec.directory),
         rotation: Rotation {

@@ -244,6 +244,40 @@ fn bad_limits_are_refused() {
     expect(&text, "manipulator.length_m", Some("length_m"), "> 0");
 }
 
+/// `[record] mode`: "full" by default, "inputs" the lean mode (with the
+/// configured devices' scales), anything else refused naming the key, its
+/// line and the values.
+#[test]
+fn the_record_mode_is_full_or_inputs() {
+    let c = config::parse(MINIMUM, "robot.toml").unwrap();
+    assert_eq!(c.record.mode, config::RecordMode::Full);
+    assert_eq!(c.record.scales, config::DeviceScales::default());
+    let text = format!(
+        "{MINIMUM}\n[record]\nmode = \"inputs\"\n[drivers.sensor]\nkind = \"rdt\"\naddress = \"10.0.0.1:49152\"\ncounts_per_n = 10000.0\ncounts_per_nm = 100000.0\n[drivers.axes]\nkind = \"canopen\"\ninterface = \"can0\"\nnode_ids = [1, 2, 3]\nlead_m = 0.01\ncounts_per_turn = 4096\n"
+    );
+    let c = config::parse(&text, "robot.toml").unwrap();
+    assert_eq!(c.record.mode, config::RecordMode::Inputs);
+    assert_eq!(
+        c.record.scales,
+        config::DeviceScales {
+            force_counts_per_n: 10000.0,
+            torque_counts_per_nm: 100000.0,
+            joint_m_per_count: 0.01 / 4096.0,
+        }
+    );
+    for v in ["\"lean\"", "\"Inputs\"", "\"\""] {
+        let text = format!("{MINIMUM}\n[record]\nmode = {v}\n");
+        expect(
+            &text,
+            "record.mode",
+            Some("mode ="),
+            "must be \"full\" or \"inputs\"",
+        );
+    }
+    let text = format!("{MINIMUM}\n[record]\nmode = 1\n");
+    expect(&text, "record.mode", Some("mode ="), "string");
+}
+
 #[test]
 fn driver_keys_are_checked() {
     let text = format!(

@@ -18,6 +18,14 @@
 //! - `read_step_write`: and every output topic written to a new MCAP file;
 //! - `read_step_streamed`: `read_step` from the file (`replay_file`).
 //!
+//! `replay_lean/*` (issue 28): that recording and its lean file
+//! (`[record] mode = "inputs"`) replayed in the same run, compared and
+//! written ([`replay_lean_bench`]). Measured with 200 000 cycles (103.4
+//! bytes a cycle full, 24.1 lean: this recording has no outputs): compared
+//! as `sarctl replay` does, full 256 ms, lean 190 ms; written (`--output`),
+//! full 1.13 s, lean 2.06 s (its output holds the sensor and joint
+//! messages too, 1.5 a cycle more, which a full input's output leaves out).
+//!
 //! `SAR_BENCH_REPLAY_CYCLES` shortens the recording (default 3 600 000).
 //!
 //! `recorder_4khz/writer_cpu_per_s`: the recorder fed in real time at 4 kHz
@@ -45,9 +53,9 @@ use sar_loop::control::{Operator, Request};
 use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopStep};
 use sar_msgs::msgs::{CycleInput, Outgoing, RecorderDrops, RosMessage, Topic};
-use sar_record::convert;
 use sar_record::replay::{ReplayOptions, replay, replay_file};
 use sar_record::{FileOptions, McapReader, Recorder, RecorderConfig, RotatingWriter};
+use sar_record::{convert, lean};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -265,6 +273,83 @@ fn replay_bench(c: &mut Criterion) {
     let _ = std::fs::remove_file(dir.join("out.mcap"));
 }
 
+/// The lean file of the same cycles (`[record] mode = "inputs"`): the
+/// hour recording's messages through the lean mode's writer, as the
+/// recorder's thread writes them (its metadata, marked lean).
+fn lean_of(full: &[u8], path: &Path) {
+    let mut probe = McapReader::new(full).unwrap();
+    let _ = probe.next();
+    let mut o = FileOptions::single(path);
+    o.metadata = probe
+        .metadata()
+        .iter()
+        .map(|m| {
+            let mut kv = m.metadata.clone();
+            kv.insert(lean::RECORD_MODE_KEY.to_owned(), "inputs".to_owned());
+            (m.name.clone(), kv)
+        })
+        .collect();
+    o.lean = true;
+    let mut w = RotatingWriter::new(o).unwrap();
+    let mut writer = lean::LeanWriter::new(lean::LeanScales::default());
+    let status = RecorderDrops::default();
+    for item in McapReader::new(full).unwrap().decoded() {
+        let (_, _, m) = item.unwrap();
+        writer.write(&mut w, &m, &status).unwrap();
+    }
+    writer.flush(&mut w, &status).unwrap();
+    w.close(&status).unwrap();
+}
+
+/// `replay_lean/*` (issue 28): the same cycles replayed from the full
+/// recording and from its lean file, in the same run: `*_compare` as
+/// `sarctl replay` (the recorded outputs compared: the cycle inputs of the
+/// full file, the guard events and snapshots of the lean one), `*_write`
+/// with an output file (the lean one's output is the full file: sensor
+/// and joint messages too).
+fn replay_lean_bench(c: &mut Criterion) {
+    let (dir, full, n) = recording();
+    let lean_path = dir.join(format!("hour-v1-{n}.lean.mcap"));
+    if !lean_path.exists() {
+        lean_of(&full, &dir.join("making-lean.mcap"));
+        std::fs::rename(dir.join("making-lean.mcap"), &lean_path).unwrap();
+    }
+    let lean_bytes = std::fs::read(&lean_path).unwrap();
+    eprintln!(
+        "{n} cycles: full {:.1} bytes a cycle, lean {:.1}",
+        full.len() as f64 / n as f64,
+        lean_bytes.len() as f64 / n as f64
+    );
+    let cfg = config::builtin().unwrap();
+    let base = ReplayOptions::from_config(&cfg);
+    let mut g = c.benchmark_group("replay_lean");
+    g.sample_size(10);
+    g.measurement_time(Duration::from_secs(30));
+    g.throughput(Throughput::Elements(n));
+    for (name, bytes) in [("full", &full), ("lean", &lean_bytes)] {
+        g.bench_function(format!("{name}_compare"), |b| {
+            b.iter(|| {
+                let r = replay(bytes, &base).unwrap();
+                assert_eq!(r.cycles, n);
+                black_box(r);
+            })
+        });
+        let o = ReplayOptions {
+            output: Some(dir.join("out-lean.mcap")),
+            ..base.clone()
+        };
+        g.bench_function(format!("{name}_write"), |b| {
+            b.iter(|| {
+                let r = replay(bytes, &o).unwrap();
+                assert_eq!(r.cycles, n);
+                black_box(r);
+            })
+        });
+    }
+    g.finish();
+    let _ = std::fs::remove_file(dir.join("out-lean.mcap"));
+}
+
 /// CPU time of every thread of the process but the calling one, ns.
 fn other_threads_cpu_ns() -> u64 {
     let me = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap();
@@ -320,5 +405,5 @@ fn recorder_4khz(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, replay_bench, recorder_4khz);
+criterion_group!(benches, replay_bench, replay_lean_bench, recorder_4khz);
 criterion_main!(benches);

@@ -82,6 +82,17 @@ fn every_message_type_round_trips() {
     m.encode(&mut bytes).unwrap();
     assert_eq!(StateSnapshot::decode(&bytes).unwrap(), m);
     assert!(Outgoing::decode(Topic::StateSnapshot, &bytes).is_err());
+    // A lean recording's batch (variable length: its own decoder).
+    let batch = CycleBatch {
+        stamp_ns: 29,
+        flags: vec![3],
+        cycle: vec![31],
+        ..CycleBatch::default()
+    };
+    batch.encode(&mut bytes).unwrap();
+    assert_eq!(CycleBatch::decode(&bytes).unwrap(), batch);
+    assert!(Outgoing::decode(Topic::CycleBatch, &bytes).is_err());
+    seen.insert(Topic::CycleBatch);
     assert_eq!(seen.len(), Topic::ALL.len());
 }
 

@@ -230,6 +230,8 @@ fn rdt_at_2_khz_against_a_1_khz_loop_records_every_sample() {
             scene_period_ns: None,
             snapshot_period_ns: 1_000_000_000,
             config_source: None,
+            mode: sar_config::RecordMode::Full,
+            scales: sar_config::DeviceScales::default(),
         },
         None,
         sar_estimator::cycle::Bias::force_only(Vec3::zeros()),

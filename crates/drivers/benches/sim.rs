@@ -70,6 +70,8 @@ fn spec(plant: PlantSpec) -> SimSpec {
             has_tare: true,
             range_n: Vector3::new(200.0, 200.0, 200.0),
             range_nm: Vector3::new(10.0, 10.0, 13.0),
+            counts_per_n: 0.0,
+            counts_per_nm: 0.0,
         },
         contact: Vec::new(),
         tissue: Vec::new(),

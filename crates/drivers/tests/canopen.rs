@@ -715,6 +715,8 @@ fn fault_file_spec(seed: u64, fault: Fault) -> SimSpec {
             has_tare: true,
             range_n: Vec3::new(200.0, 200.0, 200.0),
             range_nm: Vec3::new(10.0, 10.0, 13.0),
+            counts_per_n: 0.0,
+            counts_per_nm: 0.0,
         },
         contact: vec![ContactKey {
             t_ns: 0,

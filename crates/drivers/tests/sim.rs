@@ -110,6 +110,8 @@ fn base_spec() -> SimSpec {
             has_tare: true,
             range_n: Vec3::new(200.0, 200.0, 200.0),
             range_nm: Vec3::new(10.0, 10.0, 13.0),
+            counts_per_n: 0.0,
+            counts_per_nm: 0.0,
         },
         contact: Vec::new(),
         tissue: Vec::new(),

@@ -176,6 +176,11 @@ impl<'a> CdrWriter<'a> {
         self.align(8);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
+    /// An i64, aligned to 8.
+    pub fn i64(&mut self, v: i64) {
+        self.align(8);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
     /// An f64, aligned to 8.
     pub fn f64(&mut self, v: f64) {
         self.align(8);
@@ -317,6 +322,12 @@ impl<'a> CdrReader<'a> {
     pub fn u64(&mut self) -> Result<u64, CdrError> {
         self.align(8)?;
         Ok(u64::from_le_bytes(self.array()?))
+    }
+    /// An i64.
+    #[inline(always)]
+    pub fn i64(&mut self) -> Result<i64, CdrError> {
+        self.align(8)?;
+        Ok(i64::from_le_bytes(self.array()?))
     }
     /// An f64.
     #[inline(always)]
@@ -526,6 +537,7 @@ primitive_field! {
     u32, "uint32";
     i32, "int32";
     u64, "uint64";
+    i64, "int64";
     f64, "float64";
 }
 

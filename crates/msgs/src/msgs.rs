@@ -993,11 +993,32 @@ pub enum Topic {
     SimTipWrenchTruth,
     /// `/sar/cycle/snapshot`, [`StateSnapshot`]: the loop's decision state.
     StateSnapshot,
+    /// `/sar/cycle/batch`, [`CycleBatch`]: consecutive cycles' inputs (the
+    /// lean recording's form of `/sar/cycle/input`, `/sar/sensor/wrench`
+    /// and `/sar/joints`).
+    CycleBatch,
 }
 
 impl Topic {
     /// Every topic, in channel order.
-    pub const ALL: [Topic; 11] = [
+    pub const ALL: [Topic; 12] = [
+        Topic::SensorWrench,
+        Topic::Joints,
+        Topic::TipWrench,
+        Topic::TipWrenchFiltered,
+        Topic::PassiveJoints,
+        Topic::EstimatorState,
+        Topic::GuardEvents,
+        Topic::CycleInput,
+        Topic::RecorderDrops,
+        Topic::SimTipWrenchTruth,
+        Topic::StateSnapshot,
+        Topic::CycleBatch,
+    ];
+
+    /// The channels of a full recording: every topic but the lean mode's
+    /// `/sar/cycle/batch` (only a lean file has that channel).
+    pub const FULL: [Topic; 11] = [
         Topic::SensorWrench,
         Topic::Joints,
         Topic::TipWrench,
@@ -1025,6 +1046,7 @@ impl Topic {
             Topic::RecorderDrops => "/sar/recorder/drops",
             Topic::SimTipWrenchTruth => "/sar/sim/tip_wrench_truth",
             Topic::StateSnapshot => "/sar/cycle/snapshot",
+            Topic::CycleBatch => "/sar/cycle/batch",
         }
     }
 
@@ -1046,6 +1068,7 @@ impl Topic {
             Topic::CycleInput => CycleInput::TYPE_NAME,
             Topic::RecorderDrops => RecorderDrops::TYPE_NAME,
             Topic::StateSnapshot => StateSnapshot::TYPE_NAME,
+            Topic::CycleBatch => CycleBatch::TYPE_NAME,
         }
     }
 
@@ -1062,6 +1085,7 @@ impl Topic {
             Topic::CycleInput => CycleInput::SCHEMA,
             Topic::RecorderDrops => RecorderDrops::SCHEMA,
             Topic::StateSnapshot => StateSnapshot::SCHEMA,
+            Topic::CycleBatch => CycleBatch::SCHEMA,
         }
     }
 }
@@ -1162,8 +1186,12 @@ impl Outgoing {
             Topic::CycleInput => Outgoing::CycleInput(CycleInput::decode(bytes)?),
             Topic::RecorderDrops => Outgoing::RecorderDrops(RecorderDrops::decode(bytes)?),
             Topic::SimTipWrenchTruth => Outgoing::SimTruth(WrenchStamped::decode(bytes)?),
-            // Variable-length: read it with `StateSnapshot::decode`.
-            Topic::StateSnapshot => return Err(CdrError::NotAMessage),
+            // Variable-length: read them with `StateSnapshot::decode`,
+            // `CycleBatch::decode`.
+            Topic::StateSnapshot | Topic::CycleBatch => return Err(CdrError::NotAMessage),
         })
     }
 }
+
+mod batch;
+pub use batch::{BATCH_SEQ_MAX, CycleBatch, SeqElem, batch_flags};

@@ -359,7 +359,7 @@ fn the_schemas_and_field_lists_are_the_msg_files() {
 fn msg_constants(name: &str) -> std::collections::BTreeMap<String, i64> {
     msg_file(name)
         .lines()
-        .filter_map(|l| l.split_once('='))
+        .filter_map(|l| l.split('#').next()?.split_once('='))
         .filter_map(|(decl, value)| {
             let (_, key) = decl.split_once(' ')?;
             Some((key.trim().to_owned(), value.trim().parse().ok()?))
@@ -487,5 +487,83 @@ fn each_msg_constant_is_the_shared_code() {
     ] {
         assert!(kind >= 128, "{kind}");
         assert!(CommandKindCode::from_code(u8::try_from(kind).unwrap()).is_err());
+    }
+}
+
+/// `sar_msgs/msg/CycleBatch` (the lean recording's): its schema is its
+/// `.msg` file, the header's sections and the nested `CycleInput`'s
+/// section; its field list is the file's; its flags are the file's
+/// constants; a batch round-trips, and every cut of it is an error.
+#[test]
+fn the_cycle_batch_is_its_msg_file_and_round_trips() {
+    let msg = msg_file("CycleBatch");
+    assert_eq!(CycleBatch::TYPE_NAME, "sar_msgs/msg/CycleBatch");
+    let sep = "=".repeat(80);
+    assert_eq!(
+        CycleBatch::SCHEMA,
+        format!(
+            "{msg}{HEADER_SECTIONS}{sep}\nMSG: sar_msgs/CycleInput\n{}",
+            msg_file("CycleInput")
+        )
+    );
+    let listed: Vec<String> = CycleBatch::MSG_FIELDS
+        .iter()
+        .map(|f| f.to_string())
+        .collect();
+    assert_eq!(listed, field_lines(&msg));
+    let constants = msg_constants("CycleBatch");
+    for (name, value) in [
+        ("FLAG_SENSOR_VALID", batch_flags::SENSOR_VALID),
+        ("FLAG_JOINTS_VALID", batch_flags::JOINTS_VALID),
+        ("FLAG_JOINTS_MESSAGE", batch_flags::JOINTS_MESSAGE),
+        ("FLAG_SENSOR_MESSAGE", batch_flags::SENSOR_MESSAGE),
+        ("FLAG_SENSOR_RAW", batch_flags::SENSOR_RAW),
+        ("FLAG_JOINTS_RAW", batch_flags::JOINTS_RAW),
+        ("FLAG_SENSOR_REPEAT", batch_flags::SENSOR_REPEAT),
+        ("FLAG_JOINTS_REPEAT", batch_flags::JOINTS_REPEAT),
+    ] {
+        assert_eq!(constants.get(name), Some(&i64::from(value)), "{name}");
+    }
+    assert_eq!(constants.len(), 8);
+    let Outgoing::CycleInput(command) = samples()[0].1 else {
+        panic!("the first sample is a cycle input")
+    };
+    let b = CycleBatch {
+        stamp_ns: 1_000_000_007,
+        force_counts_per_n: 10_000.0,
+        torque_counts_per_nm: 100_000.0,
+        joint_m_per_count: 1e-6,
+        flags: vec![1, 2, 255],
+        cycle: vec![7, 1, -1],
+        now_ns: vec![i64::MAX, 1_000_000, i64::MIN],
+        clock_status: vec![0, 1, 2],
+        publisher_idle_ns: vec![0, 5, -5],
+        sensor_counter: vec![1, -1, i32::MAX],
+        sensor_status: vec![0, 3, u32::MAX],
+        sensor_stamp_ns: vec![1, 2, 3],
+        sensor_counts: (0..18).map(|i| i - 9).collect(),
+        sensor_raw: vec![0.5, -0.25, f64::NAN, 1e300, -0.0, 7.0],
+        joints_stamp_ns: vec![4, 5, 6],
+        joint_counts: (0..9).collect(),
+        joints_raw: vec![0.1, 0.2, 0.3],
+        drive_state: vec![0, 1, 3],
+        drive_fault_axis: vec![-1, -1, 2],
+        drive_fault_code: vec![0, 0, 0x2310],
+        extra_cycles: vec![1],
+        extra_stamp_ns: vec![u64::MAX],
+        extra_wrench: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        command_cycles: vec![2],
+        commands: vec![command],
+    };
+    let mut bytes = Vec::new();
+    b.encode(&mut bytes).unwrap();
+    let back = CycleBatch::decode(&bytes).unwrap();
+    // (NaN != NaN: compared as bits.)
+    assert_eq!(format!("{back:?}"), format!("{b:?}"));
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&back.sensor_raw), bits(&b.sensor_raw));
+    assert_eq!(back.commands, b.commands);
+    for cut in 0..bytes.len() {
+        assert!(CycleBatch::decode(&bytes[..cut]).is_err(), "cut at {cut}");
     }
 }

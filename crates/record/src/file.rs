@@ -183,6 +183,9 @@ pub struct FileOptions {
     /// due (all dropped), the file rotates at the next message anyway (that
     /// file then starts without one). `None`: rotate at any message.
     pub rotate_at_snapshots_grace_ns: Option<u64>,
+    /// A lean file (`crate::lean`): the `/sar/cycle/batch` channel too
+    /// (a full file has the channels of [`Topic::FULL`]).
+    pub lean: bool,
 }
 
 impl FileOptions {
@@ -199,6 +202,7 @@ impl FileOptions {
             first_path: None,
             scene: None,
             rotate_at_snapshots_grace_ns: None,
+            lean: false,
         }
     }
 
@@ -357,6 +361,9 @@ struct OpenFile {
     first_log_ns: Option<u64>,
 }
 
+/// A topic without a channel in the file (`OpenFile::channel_ids`).
+const NO_CHANNEL: u16 = u16::MAX;
+
 fn topic_index(topic: Topic) -> usize {
     Topic::ALL.iter().position(|t| *t == topic).unwrap_or(0)
 }
@@ -433,9 +440,13 @@ impl RotatingWriter {
             })?;
         let mut writer = mcap::Writer::with_options(file, self.options.mcap_options())
             .map_err(mcap_err(&path))?;
-        let mut channel_ids = [0u16; Topic::ALL.len()];
+        // (NO_CHANNEL: a topic this file has no channel of.)
+        let mut channel_ids = [NO_CHANNEL; Topic::ALL.len()];
         let qos = BTreeMap::from([(QOS_METADATA_KEY.to_owned(), OFFERED_QOS_PROFILES.to_owned())]);
         for (id, topic) in channel_ids.iter_mut().zip(Topic::ALL) {
+            if topic == Topic::CycleBatch && !self.options.lean {
+                continue;
+            }
             let schema = writer
                 .add_schema(topic.type_name(), "ros2msg", topic.schema().as_bytes())
                 .map_err(mcap_err(&path))?;
@@ -539,7 +550,13 @@ impl RotatingWriter {
         if let Outgoing::SnapshotChunk(chunk) = msg {
             return self.write_chunk(chunk, status);
         }
-        let log_ns = msg.stamp_ns();
+        self.rotate_if_due(msg.stamp_ns(), status)?;
+        self.write_raw(msg)
+    }
+
+    /// Closes the current file before a message logged at `log_ns` when
+    /// it is full (waiting for a snapshot up to the grace).
+    fn rotate_if_due(&mut self, log_ns: u64, status: &RecorderDrops) -> Result<(), WriteError> {
         if let Some(file) = &self.current
             && self.must_rotate(file, log_ns)
         {
@@ -554,7 +571,24 @@ impl RotatingWriter {
                 self.close(status)?;
             }
         }
-        self.write_raw(msg)
+        Ok(())
+    }
+
+    /// Writes one `/sar/cycle/batch` (the lean mode's, `crate::lean`),
+    /// logged at its stamp, rotating first as [`RotatingWriter::write`].
+    pub fn write_batch(
+        &mut self,
+        batch: &sar_msgs::msgs::CycleBatch,
+        status: &RecorderDrops,
+    ) -> Result<(), WriteError> {
+        self.rotate_if_due(batch.stamp_ns, status)?;
+        batch
+            .encode(&mut self.buf)
+            .map_err(|source| WriteError::Encode {
+                topic: Topic::CycleBatch.name(),
+                source,
+            })?;
+        self.write_encoded(Topic::CycleBatch, batch.stamp_ns)
     }
 
     /// Joins a snapshot's chunks; writes it when complete. A chunk out of
@@ -615,9 +649,17 @@ impl RotatingWriter {
         let Some(file) = self.current.as_mut() else {
             return Ok(());
         };
+        let channel_id = file.channel_ids.get(i).copied().unwrap_or(NO_CHANNEL);
+        if channel_id == NO_CHANNEL {
+            return Err(WriteError::Setting {
+                field: "lean",
+                value: 0,
+                why: "/sar/cycle/batch is written only into a lean file",
+            });
+        }
         file.first_log_ns.get_or_insert(log_ns);
         let header = mcap::records::MessageHeader {
-            channel_id: file.channel_ids.get(i).copied().unwrap_or(0),
+            channel_id,
             sequence,
             log_time: log_ns,
             publish_time: log_ns,

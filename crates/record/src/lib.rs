@@ -10,11 +10,13 @@
 //! - [`reader`]: reading (up to the last complete chunk) and [`recover`].
 //! - [`rosbag2`]: a rosbag2 directory (`metadata.yaml`) of recordings.
 //! - [`convert`]: the loop's cycle as recorded messages, and back.
+//! - [`lean`]: the lean recording mode's batches of cycle inputs.
 //! - [`live`]: the loop's recording sink and the recordings' manager.
 //! - [`replay`]: bit-exact replay of recordings and rotated sets.
 
 pub mod convert;
 pub mod file;
+pub mod lean;
 pub mod live;
 pub mod reader;
 pub mod recorder;

@@ -320,11 +320,22 @@ fn recorder_config(
         convert::SNAPSHOT_FORMAT_KEY.to_owned(),
         sar_snapshot::VERSION.to_string(),
     );
+    let lean = settings.mode == sar_config::RecordMode::Inputs;
+    if lean {
+        // A lean file (`crate::lean`): replay reads its batches.
+        replay.1.insert(
+            crate::lean::RECORD_MODE_KEY.to_owned(),
+            settings.mode.name().to_owned(),
+        );
+    }
     files.metadata = vec![replay];
     if let Some(source) = &settings.config_source {
         files.metadata.push(convert::config_metadata(source));
     }
-    files.scene = scene;
+    // The lean mode records what replay needs: no scene (`replay
+    // --output` draws it).
+    files.scene = if lean { None } else { scene };
+    files.lean = lean;
     // Rotation waits for the next snapshot, or rotates anyway after twice
     // its period and a second more (snapshots dropped).
     files.rotate_at_snapshots_grace_ns = Some(
@@ -335,6 +346,7 @@ fn recorder_config(
     );
     let mut c = RecorderConfig::new(files);
     c.queue_capacity = settings.queue_capacity;
+    c.lean = lean.then_some(settings.scales);
     c
 }
 

@@ -784,7 +784,7 @@ impl<'a> McapReader<'a> {
             let Some(topic) = Topic::from_name(&channel.topic) else {
                 return Pick::Skip;
             };
-            if topic == Topic::StateSnapshot {
+            if matches!(topic, Topic::StateSnapshot | Topic::CycleBatch) {
                 return Pick::Skip;
             }
             if channel.schema_name != topic.type_name() {

@@ -12,6 +12,7 @@
 //! nothing).
 
 use super::file::{FileOptions, RotatingWriter, WriteError};
+use super::lean::{LeanScales, LeanWriter};
 use sar_msgs::msgs::{Outgoing, RecorderDrops};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -33,6 +34,9 @@ pub struct RecorderConfig {
     /// How long the writer sleeps when the queue is empty (the loop never
     /// wakes it: it drains what came meanwhile in one batch; a stop wakes it).
     pub idle_wait: Duration,
+    /// The lean mode (`[record] mode = "inputs"`, [`crate::lean`]) with
+    /// the devices' scales; `None`: the full recording.
+    pub lean: Option<LeanScales>,
 }
 
 impl RecorderConfig {
@@ -44,6 +48,7 @@ impl RecorderConfig {
             queue_capacity: 65536,
             status_interval_ns: 1_000_000_000,
             idle_wait: Duration::from_millis(10),
+            lean: None,
         }
     }
 }
@@ -144,6 +149,8 @@ pub struct PendingWriter {
     shared: Arc<Shared>,
     config: RecorderConfig,
     files: RotatingWriter,
+    /// The lean mode's batching (`None`: every message written as it is).
+    lean: Option<LeanWriter>,
 }
 
 impl Recorder {
@@ -186,6 +193,7 @@ impl Recorder {
             pending: Some(PendingWriter {
                 consumer,
                 shared,
+                lean: config.lean.map(LeanWriter::new),
                 config,
                 files,
             }),
@@ -325,7 +333,11 @@ impl PendingWriter {
         // The status of the file a rotation closes: up to the last
         // message written, not this one.
         let status = self.status(progress.last_ns);
-        if let Err(e) = self.files.write(msg, &status) {
+        let result = match &mut self.lean {
+            Some(lean) => lean.write(&mut self.files, msg, &status),
+            None => self.files.write(msg, &status),
+        };
+        if let Err(e) = result {
             self.shared.dropped.fetch_add(1, Ordering::Relaxed);
             // One message that cannot be encoded (a stamp beyond the
             // format's range) is dropped and counted; the recording
@@ -359,7 +371,11 @@ impl PendingWriter {
         let mut error = progress.error;
         if error.is_none() {
             let status = self.status(progress.last_ns);
-            if let Err(e) = self.files.close(&status) {
+            let flushed = match &mut self.lean {
+                Some(lean) => lean.flush(&mut self.files, &status),
+                None => Ok(()),
+            };
+            if let Err(e) = flushed.and_then(|()| self.files.close(&status)) {
                 error = Some(self.fail(e));
             }
         }

@@ -24,6 +24,7 @@
 
 use super::convert::{self, REPLAY_METADATA, bias_from_metadata};
 use super::file::{FileOptions, RotatingWriter, WriteError};
+use super::lean;
 use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
@@ -33,7 +34,7 @@ use sar_estimator::cycle::{
 use sar_kinematics::ActiveJoints;
 use sar_loop::step::{LoopInput, LoopStep, StepConfig};
 use sar_msgs::msgs::{
-    ActiveJointState, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage,
+    ActiveJointState, CycleBatch, CycleInput as CycleInputMsg, Outgoing, RecorderDrops, RosMessage,
     SnapshotChunk, StateSnapshot, Topic,
 };
 use std::collections::{BTreeMap, VecDeque};
@@ -322,6 +323,9 @@ pub enum ReplayError {
     /// The estimator refused the configuration.
     #[error("the configuration: {0}")]
     Setting(String),
+    /// A lean recording's batch does not hold what it says.
+    #[error("{0}")]
+    Lean(#[from] lean::BatchError),
     /// Neither `/sar/cycle/input` nor `/sar/sensor/wrench` messages.
     #[error("no inputs: the recording has no /sar/cycle/input and no /sar/sensor/wrench messages")]
     NoInputs,
@@ -480,7 +484,7 @@ impl Replayer {
             .map_err(|e| ReplayError::Setting(e.to_string()))?;
         let step = LoopStep::new(&options.config, start.bias, options.step)
             .map_err(|e| ReplayError::Setting(e.to_string()))?;
-        let writer = output_writer(options, start.metadata.as_ref())?;
+        let writer = output_writer(options, start)?;
         Ok(Self {
             scratch: Vec::with_capacity(8),
             estimator,
@@ -506,6 +510,18 @@ impl Replayer {
             quiet: false,
             stepped: false,
         })
+    }
+
+    /// The recording is a lean one: of the outputs, only the guard
+    /// events are in it to compare (and the snapshots).
+    fn lean_comparison(&mut self) {
+        for topic in OUTPUT_TOPICS {
+            if topic != Topic::GuardEvents && !self.lacking.contains(&topic) {
+                self.lacking.push(topic);
+                self.replayed.remove(&topic);
+                self.recorded.remove(&topic);
+            }
+        }
     }
 
     /// The recording is an inputs-only one: nothing to compare.
@@ -575,8 +591,11 @@ impl Replayer {
             .collect()
     }
 
-    /// One cycle of a daemon recording: the loop step.
-    fn loop_cycle(&mut self, input: &LoopInput) -> Result<(), ReplayError> {
+    /// One cycle of a daemon recording: the loop step. `between`: the
+    /// cycle's input messages a lean recording gives back
+    /// (`/sar/sensor/wrench`, `/sar/joints`), written after its
+    /// `/sar/cycle/input` (not compared).
+    fn loop_cycle(&mut self, input: &LoopInput, between: &[Outgoing]) -> Result<(), ReplayError> {
         let needs_messages = self.needs_messages();
         let out = self.step.step(input);
         self.last_cycle = input.cycle;
@@ -599,6 +618,9 @@ impl Replayer {
         let out = *out;
         let m = Outgoing::CycleInput(convert::cycle_input_msg(input, &out));
         self.emit(input.cycle, m)?;
+        for m in between {
+            self.sink.write(m)?;
+        }
         self.emit_outputs(&input.cycle_input(), &out.estimate)
     }
 
@@ -1031,6 +1053,11 @@ struct SetStart {
     from_first_cycle: Option<bool>,
     /// Whether its files start with snapshots.
     with_snapshots: bool,
+    /// Whether it is a lean recording (`record_mode = "inputs"`).
+    lean: bool,
+    /// Its `sar_config` metadata (copied into the full file made of a
+    /// lean one).
+    config: Option<BTreeMap<String, String>>,
 }
 
 impl SetStart {
@@ -1045,11 +1072,21 @@ impl SetStart {
         let with_snapshots = metadata
             .as_ref()
             .is_some_and(|m| m.contains_key(convert::SNAPSHOT_FORMAT_KEY));
+        let lean = metadata
+            .as_ref()
+            .is_some_and(|m| m.contains_key(lean::RECORD_MODE_KEY));
+        let config = probe
+            .metadata()
+            .iter()
+            .find(|m| m.name == convert::CONFIG_METADATA)
+            .map(|m| m.metadata.clone());
         Ok(Self {
             bias: start_bias(&probe),
             metadata,
             from_first_cycle,
             with_snapshots,
+            lean,
+            config,
         })
     }
 }
@@ -1057,17 +1094,30 @@ impl SetStart {
 /// The output file of a replay (`options.output`; `None`: not written).
 fn output_writer(
     options: &ReplayOptions,
-    metadata: Option<&BTreeMap<String, String>>,
+    start: &SetStart,
 ) -> Result<Option<RotatingWriter>, WriteError> {
     let Some(path) = &options.output else {
         return Ok(None);
     };
     let mut o = FileOptions::single(path);
     // The replayed file holds every cycle of its input.
-    o.metadata = metadata
+    o.metadata = start
+        .metadata
+        .as_ref()
         .map(|m| (REPLAY_METADATA.to_owned(), m.clone()))
         .into_iter()
         .collect();
+    if start.lean {
+        // The full file of a lean one: its metadata as the full mode
+        // writes it (the configuration too).
+        for (_, m) in &mut o.metadata {
+            m.remove(lean::RECORD_MODE_KEY);
+        }
+        if let Some(c) = &start.config {
+            o.metadata
+                .push((convert::CONFIG_METADATA.to_owned(), c.clone()));
+        }
+    }
     // The live view's scene, as the daemon's recorder writes it
     // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
     // (With the cargo feature `scene` only.)
@@ -1101,6 +1151,8 @@ struct SetReplay<'o> {
     previous_index: Option<u64>,
     /// Whether the replay reached `--to`.
     reached_end_of_range: bool,
+    /// Whether the recording is a lean one (`/sar/cycle/batch` read).
+    lean: bool,
 }
 
 /// One file's reading state (channel ids are the file's own).
@@ -1187,6 +1239,7 @@ impl<'o> SetReplay<'o> {
             complete: true,
             previous_index: None,
             reached_end_of_range: false,
+            lean: start.lean,
         })
     }
 
@@ -1288,6 +1341,10 @@ impl<'o> SetReplay<'o> {
                 let m = StateSnapshot::decode(msg.data).map_err(decode_err)?;
                 self.r.snapshot(&m)?;
             }
+            Some(Topic::CycleBatch) => {
+                self.start_cycle_inputs(msg.log_time_ns)?;
+                self.cycle_batch(file, &msg)?;
+            }
             Some(Topic::SensorWrench) if !self.saw_cycle_input => {
                 let w = sar_msgs::msgs::WrenchStamped::decode(msg.data).map_err(decode_err)?;
                 let item = InputItem::Sensor(w);
@@ -1301,6 +1358,12 @@ impl<'o> SetReplay<'o> {
             Some(Topic::RecorderDrops) => {
                 let d = RecorderDrops::decode(msg.data).map_err(decode_err)?;
                 self.r.report.recorder_dropped = self.r.report.recorder_dropped.max(d.dropped);
+                if self.lean {
+                    // The full file made of a lean one says its drops.
+                    let s = &mut self.r.sink.status;
+                    s.dropped = s.dropped.max(d.dropped);
+                    s.queue_capacity = d.queue_capacity;
+                }
             }
             Some(t) if OUTPUT_TOPICS.contains(&t) => self.r.recorded_output(t, msg.data),
             _ => {}
@@ -1346,7 +1409,48 @@ impl<'o> SetReplay<'o> {
             return Ok(());
         }
         r.recorded_output(Topic::CycleInput, data);
-        r.loop_cycle(&convert::loop_input(m))
+        r.loop_cycle(&convert::loop_input(m), &[])
+    }
+
+    /// A lean recording's `/sar/cycle/batch`: its cycles, each as a
+    /// recorded `/sar/cycle/input` is, with its sensor and joint messages
+    /// written after it. Only the guard events and the snapshots are
+    /// compared (the other outputs are not in a lean file).
+    fn cycle_batch(
+        &mut self,
+        file: &mut FileVisit,
+        msg: &MessageRef<'_>,
+    ) -> Result<(), ReplayError> {
+        let batch = CycleBatch::decode(msg.data).map_err(|source| ReadError::Decode {
+            topic: Topic::CycleBatch.name().to_owned(),
+            log_time_ns: msg.log_time_ns,
+            source,
+        })?;
+        let cycles = lean::unbatch(&batch)?;
+        self.lean = true;
+        if !self.r.lacking.contains(&Topic::CycleInput) {
+            self.r.lean_comparison();
+        }
+        let mut between = Vec::with_capacity(4);
+        for c in &cycles {
+            let m = &c.input;
+            file.check_start(m.cycle)?;
+            self.r.quiet = self.before_range(m.stamp_ns)?;
+            let r = &mut self.r;
+            if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
+                r.missing_cycles(file.path.clone(), m.cycle);
+            }
+            if !r.replayable(m.cycle) {
+                continue;
+            }
+            between.clear();
+            between.extend(c.sensors.iter().map(|w| Outgoing::SensorWrench(*w)));
+            if c.joints_message {
+                between.push(Outgoing::Joints(lean::joints_msg_of(m)));
+            }
+            r.loop_cycle(&convert::loop_input(m), &between)?;
+        }
+        Ok(())
     }
 
     /// Whether a cycle stamped `stamp_ns` comes before `--from` (stepped

@@ -64,6 +64,8 @@ fn recording_allocates_nothing_on_the_loop_and_replays_bit_for_bit() {
             // A snapshot every 100 ms: the loop takes and pushes 45.
             snapshot_period_ns: 100_000_000,
             config_source: None,
+            mode: sar_config::RecordMode::Full,
+            scales: sar_config::DeviceScales::default(),
         },
         None,
         bias,

@@ -11,6 +11,8 @@
 
 // The other recording tests, in this binary (one binary: less to link); the
 // strict readers of the tests (shared with sar-daemon's and sar-tests' tests).
+#[path = "recording/lean_recording.rs"]
+mod lean_recording;
 #[path = "recording/python_reader.rs"]
 mod python_reader;
 #[path = "../../daemon/tests/common/readers.rs"]
@@ -79,9 +81,10 @@ fn recording_reads_back_bit_for_bit() {
     assert!(end.is_none(), "{end:?}");
     assert!(reader.is_complete());
     assert_eq!(reader.profile(), Some("ros2"));
-    // Every topic has its channel, with its schema, in every file.
-    assert_eq!(reader.channels().len(), Topic::ALL.len());
-    for t in Topic::ALL {
+    // Every topic has its channel, with its schema, in every file (the
+    // lean mode's batches only in a lean file).
+    assert_eq!(reader.channels().len(), Topic::FULL.len());
+    for t in Topic::FULL {
         let c = reader.channel_of(t.name()).unwrap();
         assert_eq!(c.message_encoding, "cdr");
         assert_eq!(c.schema_encoding, "ros2msg");
@@ -305,7 +308,12 @@ fn read_files(files: &[std::path::PathBuf]) -> Vec<(String, RawMessage)> {
         let bytes = read_file(f).unwrap();
         let (msgs, end, reader) = read_all(&bytes);
         assert!(end.is_none(), "{}: {end:?}", f.display());
-        assert_eq!(reader.channels().len(), Topic::ALL.len(), "{}", f.display());
+        assert_eq!(
+            reader.channels().len(),
+            Topic::FULL.len(),
+            "{}",
+            f.display()
+        );
         assert!(mcap::Summary::read(&bytes).unwrap().is_some());
         all.extend(msgs);
     }
@@ -330,7 +338,7 @@ fn rotation_by_size() {
         let len = std::fs::metadata(f).unwrap().len();
         // Closed before the chunk that passed the limit, plus the summary;
         // and the channels' QoS text, at the start and in the summary.
-        let qos = 2 * Topic::ALL.len() as u64 * sar_record::OFFERED_QOS_PROFILES.len() as u64;
+        let qos = 2 * Topic::FULL.len() as u64 * sar_record::OFFERED_QOS_PROFILES.len() as u64;
         assert!(len < 24 * 1024 + 16 * 1024 + qos, "{}: {len}", f.display());
     }
     let all = read_files(&report.files);

@@ -94,6 +94,71 @@ fn a_sim_recording_replays_without_a_configuration_and_compares_with_the_truth()
     assert!(out.status.success(), "{}", text(&out.stderr));
 }
 
+/// The lean mode (`[record] mode = "inputs"`, issue 28) on the real
+/// `sard --sim`: the file replays without error (its guard events and
+/// snapshots compared), `replay --output` makes a full file of it that
+/// replays bit for bit itself, and it takes a fraction of a full
+/// recording's bytes per cycle (the full one of the same length beside it).
+#[test]
+fn a_lean_sim_recording_replays_and_makes_the_full_one() {
+    let dir = support::scratch("simrec_lean");
+    let cycles = 3000u64;
+    let prefix = format!("sar-simrec-lean-{}", std::process::id());
+    for sub in ["lean", "full", "identify"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+    }
+    let lean = support::sim_lean_recording(&dir.join("lean"), cycles, &prefix);
+    let full = support::sim_recording(&dir.join("full"), cycles, &prefix);
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len() as f64 / cycles as f64;
+    let (lean_b, full_b) = (size(&lean), size(&full));
+    // (A short file: the start's snapshot, schemas and configuration weigh
+    // in its bytes a cycle.)
+    eprintln!("sard --sim, {cycles} cycles: lean {lean_b:.1} bytes a cycle, full {full_b:.1}");
+    assert!(lean_b * 4.0 < full_b, "lean {lean_b}, full {full_b}");
+    assert!(count(&lean, "/sar/cycle/batch") >= cycles / 100);
+    assert_eq!(count(&lean, "/sar/estimate/state"), 0);
+    let out = sarctl(&["--format", "json", "replay", "--input"], &[&lean]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    assert_eq!(v["cycles"], cycles, "{v}");
+    let made = dir.join("made-full.mcap");
+    let out = sarctl(
+        &["replay", "--input"],
+        &[&lean, Path::new("--output"), &made],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(count(&made, "/sar/estimate/state"), cycles);
+    // The sensor's samples at 500 Hz, given back from the batches.
+    assert!(count(&made, "/sar/sensor/wrench") >= cycles / 2 - 50);
+    let out = sarctl(&["--format", "json", "replay", "--input"], &[&made]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
+    assert_eq!(v["cycles"], cycles, "{v}");
+    // `sarctl identify` reads the joint and sensor messages of a lean file
+    // from its batches: the same answer as from the full file made of it
+    // (here: the demo at rest is one static pose, too few).
+    let (config, _) = support::recording_config(&dir.join("identify"));
+    let identify = |rec: &Path| {
+        let out = sarctl(
+            &["--format", "json", "--config"],
+            &[
+                &config,
+                Path::new("identify"),
+                Path::new("--dry-run"),
+                Path::new("--input"),
+                rec,
+            ],
+        );
+        let said = text(&out.stderr).replace(&rec.display().to_string(), "REC");
+        (out.status.code(), text(&out.stdout), said)
+    };
+    let (from_lean, from_full) = (identify(&lean), identify(&made));
+    assert!(from_lean.2.contains("static pose"), "{from_lean:?}");
+    assert_eq!(from_lean, from_full);
+}
+
 #[test]
 fn a_record_start_of_the_builtin_configuration_names_it_when_replayed() {
     let dir = support::scratch("simrec_builtin");

@@ -37,6 +37,16 @@ pub fn recording_config(dir: &Path) -> (PathBuf, PathBuf) {
     (config, rec_dir)
 }
 
+/// [`recording_config`] in the lean mode (`[record] mode = "inputs"`).
+pub fn lean_recording_config(dir: &Path) -> (PathBuf, PathBuf) {
+    let (config, rec_dir) = recording_config(dir);
+    let toml = std::fs::read_to_string(&config).unwrap();
+    let lean = toml.replace("mode = \"full\"", "mode = \"inputs\"");
+    assert_ne!(lean, toml);
+    std::fs::write(&config, lean).unwrap();
+    (config, rec_dir)
+}
+
 /// The recording files (not the scene companions) of `dir`, sorted.
 pub fn recordings(dir: &Path) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)

@@ -133,6 +133,14 @@ pub(super) fn sensor(ctx: &Ctx<'_>, sensor: &SensorToml) -> Result<SensorSpec, C
             sensor.range_nm.unwrap_or(DEFAULT_RANGE_NM),
             "N m",
         )?,
+        counts_per_n: match sensor.counts_per_n {
+            Some(v) => ctx.positive("sensor.counts_per_n", v, "counts/N")?,
+            None => 0.0,
+        },
+        counts_per_nm: match sensor.counts_per_nm {
+            Some(v) => ctx.positive("sensor.counts_per_nm", v, "counts/(N m)")?,
+            None => 0.0,
+        },
     })
 }
 

@@ -116,6 +116,8 @@ pub(super) struct SensorToml {
     #[serde(default, deserialize_with = "crate::exact::option_array")]
     pub range_nm: Option<[f64; 3]>,
     pub adapter_mass_kg: Option<f64>,
+    pub counts_per_n: Option<f64>,
+    pub counts_per_nm: Option<f64>,
 }
 
 /// `[[motion]]`: one step; exactly one target.

@@ -99,7 +99,7 @@ fn run(args: &Args) -> Result<(), String> {
     let Some(shm) = start_shm(args, &cfg, &operator)? else {
         return Ok(());
     };
-    let (recording, recorder, switch) = start_recording(&cfg, bias)?;
+    let (recording, recorder, switch) = start_recording(&cfg, simulated.as_ref(), bias)?;
     let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
     // The logging thread before the real-time settings, so that it keeps the
     // normal priority (it writes to stderr: never at the loop's priority).
@@ -207,15 +207,29 @@ fn start_shm(
 /// the normal priority and every CPU.
 fn start_recording(
     cfg: &config::Config,
+    simulated: Option<&Simulated>,
     bias: Bias,
 ) -> Result<(RecordManager, LiveRecorder, std::sync::Arc<RecordSwitch>), String> {
     tracing::info!(
-        "recordings go to {} ([record] directory)",
-        cfg.record.directory.display()
+        "recordings go to {} ([record] directory, mode {:?})",
+        cfg.record.directory.display(),
+        cfg.record.mode.name()
     );
+    let mut settings = cfg.record.clone();
+    // The simulated encoders' counts, for the lean mode (the simulator
+    // reports q = round(x / m) * m, m = lead / counts per turn).
+    if let (config::AxesDriver::Sim, Some((sim, ..))) = (&cfg.axes_driver, simulated) {
+        settings.scales.joint_m_per_count = sim.encoder_m_per_count().map_err(|e| e.to_string())?;
+    }
+    // And the simulated sensor's counts (the demo's: the HEX-E's).
+    if let (config::SensorDriver::Sim, Some((sim, ..))) = (&cfg.sensor_driver, simulated) {
+        let (per_n, per_nm) = sim.sensor_counts().map_err(|e| e.to_string())?;
+        settings.scales.force_counts_per_n = per_n;
+        settings.scales.torque_counts_per_nm = per_nm;
+    }
     let switch = std::sync::Arc::new(RecordSwitch::new(cfg.loop_.period_ns));
     let (recording, recorder) = RecordManager::start(
-        cfg.record.clone(),
+        settings,
         SceneOptions::from_config(cfg),
         bias,
         std::sync::Arc::clone(&switch),

@@ -171,6 +171,23 @@ impl<C: Clock + Clone> Simulator<C> {
         }
     }
 
+    /// The encoders' metres per count: a reported position is
+    /// `round(x / m) * m` of this `m` (`lead_m_per_turn / counts_per_turn`).
+    pub fn encoder_m_per_count(&self) -> Result<f64, SimError> {
+        // Read only: the world is not advanced.
+        let w = self.world.try_borrow().map_err(|_| SimError::Busy)?;
+        let axes = &w.spec().axes;
+        Ok(axes.lead_m_per_turn / f64::from(axes.counts_per_turn))
+    }
+
+    /// The sensor's counts per newton and per newton metre (0: its floats
+    /// are not quantised): a reported force is `counts / counts_per_n`.
+    pub fn sensor_counts(&self) -> Result<(f64, f64), SimError> {
+        let w = self.world.try_borrow().map_err(|_| SimError::Busy)?;
+        let sensor = &w.spec().sensor;
+        Ok((sensor.counts_per_n, sensor.counts_per_nm))
+    }
+
     /// Adds a fault on demand. Its start (`at_ns`, `from_ns`; ns from the
     /// simulator's start) must be after the present time.
     pub fn inject_fault(&self, fault: Fault) -> Result<(), SimError> {

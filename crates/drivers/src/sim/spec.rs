@@ -127,6 +127,12 @@ pub struct SensorSpec {
     pub range_n: Vec3,
     /// Measuring range of the torque channels, N m (> 0).
     pub range_nm: Vec3,
+    /// The device's counts per newton (>= 0; 0: the forces reported as
+    /// computed): each force channel is reported as `counts / counts_per_n`
+    /// with the counts rounded, as the RDT driver makes its floats.
+    pub counts_per_n: f64,
+    /// Counts per newton metre of the torque channels (0: as computed).
+    pub counts_per_nm: f64,
 }
 
 /// How a tissue's spring stiffens with the penetration delta (m, > 0 inside).

@@ -416,6 +416,8 @@ fn check_sensor(sensor: &SensorSpec) -> Result<(), SimError> {
     for &x in sensor.noise_n.iter() {
         check_non_negative("sensor.noise_n", x)?;
     }
+    check_non_negative("sensor.counts_per_n", sensor.counts_per_n)?;
+    check_non_negative("sensor.counts_per_nm", sensor.counts_per_nm)?;
     for &x in sensor.noise_nm.iter() {
         check_non_negative("sensor.noise_nm", x)?;
     }
@@ -1003,6 +1005,7 @@ impl<C: Clock> World<C> {
                 *o = range.copysign(r) - tare;
             }
         }
+        quantise(&mut out, sensor.counts_per_n, sensor.counts_per_nm);
         out
     }
 
@@ -1355,6 +1358,22 @@ impl<C: Clock> World<C> {
                 command: "fault_reset",
                 state,
             }),
+        }
+    }
+}
+
+/// The device's counts (`[sensor] counts_per_n`, `counts_per_nm`; 0: none):
+/// each channel as `counts / per` with the counts rounded to an i32, as
+/// the RDT driver makes its floats (`f64::from(counts) / per`); a value that
+/// is not finite stays as it is.
+fn quantise(out: &mut [f64; 6], counts_per_n: f64, counts_per_nm: f64) {
+    for (k, v) in out.iter_mut().enumerate() {
+        let per = if k < 3 { counts_per_n } else { counts_per_nm };
+        if per > 0.0 && v.is_finite() {
+            let counts = (*v * per)
+                .round()
+                .clamp(f64::from(i32::MIN), f64::from(i32::MAX));
+            *v = counts / per;
         }
     }
 }

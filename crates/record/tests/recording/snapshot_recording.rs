@@ -63,6 +63,8 @@ fn session(name: &str) -> Vec<PathBuf> {
             scene_period_ns: None,
             snapshot_period_ns: 250_000_000,
             config_source: None,
+            mode: sar_config::RecordMode::Full,
+            scales: sar_config::DeviceScales::default(),
         },
         None,
         bias,

@@ -91,6 +91,9 @@ pub enum IdentifyError {
     /// The recording could not be read.
     #[error("the recording cannot be read: {0}")]
     Read(#[from] ReadError),
+    /// A lean recording's batches cannot be read.
+    #[error("the recording cannot be read: {0}")]
+    Lean(#[from] sar_record::lean::LeanReadError),
     /// The recording lacks a topic.
     #[error(
         "the recording has no {topic} messages: identify needs the sensor's readings and the joints"
@@ -244,6 +247,17 @@ fn find_dwells_in<'a>(
 ) -> Result<Vec<Dwell>, IdentifyError> {
     options.check().map_err(IdentifyError::Option)?;
     let mut finder = DwellFinder::new(&config.estimator.calibration, *options);
+    // A lean recording (`[record] mode = "inputs"`) holds the joint and
+    // sensor messages in its batches.
+    let lean = sar_record::lean::is_lean(open()?);
+    if lean {
+        for c in sar_record::lean::cycles(open()?) {
+            let c = c?;
+            if c.joints_message {
+                finder.push(c.input.joints_stamp_ns, c.input.joints_q_m);
+            }
+        }
+    }
     for item in open()?.typed::<ActiveJointState>(Topic::Joints.name()) {
         let (_, js) = item?;
         finder.push(js.stamp_ns, js.q_m);
@@ -254,6 +268,13 @@ fn find_dwells_in<'a>(
         });
     }
     let mut averager = SensorAverager::new(finder.finish());
+    if lean {
+        for c in sar_record::lean::cycles(open()?) {
+            for w in c?.sensors {
+                averager.push(w.stamp_ns, w.force_n);
+            }
+        }
+    }
     for item in open()?.typed::<WrenchStamped>(Topic::SensorWrench.name()) {
         let (_, w) = item?;
         averager.push(w.stamp_ns, w.force_n);

@@ -139,12 +139,21 @@ pub fn wait_for_state(prefix: &str, what: &str, ok: impl Fn(&sar_msgs::wire::Sta
     }
 }
 
-pub use sar_test_support::files::{recording_config, recordings};
+pub use sar_test_support::files::{lean_recording_config, recording_config, recordings};
 
 /// `sard --sim` under `prefix` for `cycles` with the configuration of
 /// [`recording_config`]: the one recording's file.
 pub fn sim_recording(dir: &Path, cycles: u64, prefix: &str) -> PathBuf {
-    let (config, rec_dir) = recording_config(dir);
+    sim_recording_of(recording_config(dir), cycles, prefix)
+}
+
+/// [`sim_recording`] in the lean mode (`[record] mode = "inputs"`).
+pub fn sim_lean_recording(dir: &Path, cycles: u64, prefix: &str) -> PathBuf {
+    sim_recording_of(lean_recording_config(dir), cycles, prefix)
+}
+
+/// `sard --sim` with the configuration and recordings' directory given.
+fn sim_recording_of((config, rec_dir): (PathBuf, PathBuf), cycles: u64, prefix: &str) -> PathBuf {
     let out = Command::new(&*SARD)
         .args(["--sim", "--config"])
         .arg(&config)
