@@ -8,12 +8,14 @@
 //! With [`FileOptions::scene`], the live view's 3D scene is drawn from the
 //! recorded messages of a cycle, decimated, on the writer's thread, and
 //! written into the recording itself, CDR like every channel: `/sar/scene`
-//! (`visualization_msgs/msg/MarkerArray`), `/tf` (the moving frames) and
+//! (`visualization_msgs/msg/MarkerArray`), `/sar/scene/status` (the guard's
+//! figures, `sar_msgs/msg/SceneStatus`), `/tf` (the moving frames) and
 //! `/tf_static` (`tf2_msgs/msg/TFMessage`, `world` -> `base`, written at the
 //! start of every file with transient-local durability, so that each file
 //! of a rotation opens alone with its 3D scene).
 
 use sar_config::Rotation;
+use sar_msgs::msgs::SceneStatus;
 use sar_msgs::msgs::{
     EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
     StateSnapshot, Topic,
@@ -114,17 +116,17 @@ pub const OFFERED_QOS_PROFILES: &str = "- history: keep_last
 /// [`OFFERED_QOS_PROFILES`] with transient-local durability: `/tf_static`'s,
 /// as ROS 2's static transform broadcaster offers it (a late subscriber
 /// still gets the fixed frames).
-pub const OFFERED_QOS_PROFILES_LATCHED: &str = "- history: 3
-  depth: 0
-  reliability: 1
-  durability: 1
+pub const OFFERED_QOS_PROFILES_LATCHED: &str = "- history: keep_last
+  depth: 1
+  reliability: reliable
+  durability: transient_local
   deadline:
     sec: 9223372036
     nsec: 854775807
   lifespan:
     sec: 9223372036
     nsec: 854775807
-  liveliness: 1
+  liveliness: automatic
   liveliness_lease_duration:
     sec: 9223372036
     nsec: 854775807
@@ -339,6 +341,8 @@ struct SceneCycle {
     stamp_ns: u64,
     estimator: Option<EstimatorState>,
     passive: Option<PassiveJointState>,
+    /// The simulator's true F_tip (`/sar/sim/tip_wrench_truth`), N.
+    truth_n: Option<[f64; 3]>,
 }
 
 /// The scene's channels in one recording file.
@@ -346,6 +350,7 @@ struct SceneChannels {
     scene: u16,
     tf: u16,
     tf_static: u16,
+    status: u16,
     /// The scenes written to this file (`/sar/scene`'s and `/tf`'s sequence).
     sequence: u32,
     /// `/tf_static` is written before the file's first scene.
@@ -605,10 +610,12 @@ impl RotatingWriter {
             stamp_ns,
             estimator: None,
             passive: None,
+            truth_n: None,
         });
         match msg {
             Outgoing::EstimatorState(e) => cycle.estimator = Some(*e),
             Outgoing::PassiveJoints(p) => cycle.passive = Some(*p),
+            Outgoing::SimTruth(t) => cycle.truth_n = Some(t.force_n),
             Outgoing::CycleInput(c) => {
                 if c.limits_in_use_n.iter().all(|v| v.is_finite() && *v > 0.0) {
                     state.limits_n = c.limits_in_use_n;
@@ -632,6 +639,7 @@ impl RotatingWriter {
             stamp_ns: log_ns,
             estimator: Some(estimator),
             passive,
+            truth_n,
         }) = state.cycle.take()
         else {
             return Ok(());
@@ -651,12 +659,16 @@ impl RotatingWriter {
             stamp_ns: estimator.joints_stamp_ns,
             q_m: state.q_m,
         };
-        let published = sar_scene::topics::state_from_recorded(
+        let mut published = sar_scene::topics::state_from_recorded(
             &estimator,
             &joints,
             passive.as_ref(),
             state.limits_n,
         );
+        if let Some(truth_n) = truth_n {
+            published.truth_tip_force_n = truth_n;
+            published.flags |= sar_msgs::wire::flags::SIM_TRUTH;
+        }
         let geometry = &state.options.geometry;
         let mut out = SceneOut {
             writer: &mut file.writer,
@@ -678,6 +690,8 @@ impl RotatingWriter {
             channels.sequence,
             &scene::moving_frames(&published, geometry),
         )?;
+        let status = sar_scene::topics::scene_status(&published);
+        out.status(channels.status, channels.sequence, &status)?;
         channels.sequence = channels.sequence.wrapping_add(1);
         Ok(())
     }
@@ -760,6 +774,13 @@ fn scene_channels(
             TfMessage::SCHEMA.as_bytes(),
         )
         .map_err(mcap_err)?;
+    let status = writer
+        .add_schema(
+            SceneStatus::TYPE_NAME,
+            "ros2msg",
+            SceneStatus::SCHEMA.as_bytes(),
+        )
+        .map_err(mcap_err)?;
     Ok(SceneChannels {
         scene: writer
             .add_channel(
@@ -778,6 +799,14 @@ fn scene_channels(
                 sar_scene::TF_STATIC_TOPIC,
                 "cdr",
                 &qos(OFFERED_QOS_PROFILES_LATCHED),
+            )
+            .map_err(mcap_err)?,
+        status: writer
+            .add_channel(
+                status,
+                sar_scene::SCENE_STATUS_TOPIC,
+                "cdr",
+                &qos(OFFERED_QOS_PROFILES),
             )
             .map_err(mcap_err)?,
         sequence: 0,
@@ -814,6 +843,19 @@ impl SceneOut<'_> {
     ) -> Result<(), WriteError> {
         m.encode(self.buf).map_err(|source| WriteError::Encode {
             topic: sar_scene::SCENE_TOPIC,
+            source,
+        })?;
+        self.write(channel_id, sequence)
+    }
+
+    fn status(
+        &mut self,
+        channel_id: u16,
+        sequence: u32,
+        m: &SceneStatus,
+    ) -> Result<(), WriteError> {
+        m.encode(self.buf).map_err(|source| WriteError::Encode {
+            topic: sar_scene::SCENE_STATUS_TOPIC,
             source,
         })?;
         self.write(channel_id, sequence)

@@ -274,10 +274,13 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
     assert!(paths.len() > 10, "{paths:?}");
     let served = sarctl::view::served_topics();
     let schema_of = |topic: &str| -> &'static str {
+        use sar_msgs::msgs::RosMessage;
         use sar_msgs::msgs::Topic;
         match Topic::from_name(topic) {
             Some(t) => t.schema(),
             None if topic == sarctl::view::STATUS_TOPIC => sarctl::view::STATUS_SCHEMA,
+            None if topic == sar_scene::SCENE_STATUS_TOPIC => sar_msgs::msgs::SceneStatus::SCHEMA,
+            None if topic == sar_scene::SCENE_TOPIC => MarkerArray::SCHEMA,
             None => "",
         }
     };
@@ -298,8 +301,8 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
     // The plot of F_tip per axis, the guard's state and the 3D scene.
     for wanted in [
         "/sar/estimate/tip_wrench.wrench.force.x",
-        "/sar/view/status.stop_total_n",
-        "/sar/view/status.guard_code",
+        "/sar/scene/status.stop_total_n",
+        "/sar/scene/status.guard_state",
         sar_scene::SCENE_TOPIC,
     ] {
         assert!(paths.iter().any(|p| p == wanted), "{wanted}");

@@ -18,6 +18,8 @@ pub mod topics;
 
 /// The 3D scene's topic (`visualization_msgs/msg/MarkerArray`).
 pub const SCENE_TOPIC: &str = "/sar/scene";
+/// The guard's figures at the scene's rate (`sar_msgs/msg/SceneStatus`).
+pub const SCENE_STATUS_TOPIC: &str = "/sar/scene/status";
 /// The fixed frames (`tf2_msgs/msg/TFMessage`, transient local): `world` ->
 /// `base`.
 pub const TF_STATIC_TOPIC: &str = "/tf_static";

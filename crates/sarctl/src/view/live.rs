@@ -5,11 +5,13 @@ use super::front;
 pub use super::{DEFAULT_BIND, DEFAULT_SCENE_HZ};
 use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer};
 use sar_estimator::guard::ForceLimits;
-use sar_msgs::msgs::{Outgoing, Topic};
+use sar_msgs::msgs::{Outgoing, RosMessage, SceneStatus, Topic};
 use sar_msgs::scene::{MarkerArray, TfMessage};
 use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 use sar_scene::geometry::SceneGeometry;
-use sar_scene::{SCENE_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, draw as scene, topics};
+use sar_scene::{
+    SCENE_STATUS_TOPIC, SCENE_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, draw as scene, topics,
+};
 use sar_shm::{Client, StateSubscription};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -36,7 +38,13 @@ pub const RECORD_TOPICS: [Topic; 5] = [
 /// Every topic the view serves.
 pub fn served_topics() -> Vec<&'static str> {
     let mut t: Vec<&'static str> = RECORD_TOPICS.iter().map(|t| t.name()).collect();
-    t.extend([SCENE_TOPIC, TF_TOPIC, TF_STATIC_TOPIC, STATUS_TOPIC]);
+    t.extend([
+        SCENE_TOPIC,
+        SCENE_STATUS_TOPIC,
+        TF_TOPIC,
+        TF_STATIC_TOPIC,
+        STATUS_TOPIC,
+    ]);
     t
 }
 
@@ -189,6 +197,7 @@ struct Publisher {
     scene: Arc<RawChannel>,
     tf: Arc<RawChannel>,
     tf_static: Arc<RawChannel>,
+    scene_status: Arc<RawChannel>,
     status: Arc<RawChannel>,
     geometry: SceneGeometry,
     scene_period_ns: u64,
@@ -246,6 +255,11 @@ impl Publisher {
             {
                 self.tf_static.log_with_meta(&self.buf, meta());
             }
+            if self.scene_status.has_sinks()
+                && topics::scene_status(s).encode(&mut self.buf).is_ok()
+            {
+                self.scene_status.log_with_meta(&self.buf, meta());
+            }
             if self.status.has_sinks()
                 && let Ok(bytes) = serde_json::to_vec(&status_json(s, self.lost))
             {
@@ -280,6 +294,12 @@ impl Publisher {
             MarkerArray::SCHEMA,
         )?;
         let tf = ros2_channel(ctx, TF_TOPIC, TfMessage::TYPE_NAME, TfMessage::SCHEMA)?;
+        let scene_status = ros2_channel(
+            ctx,
+            SCENE_STATUS_TOPIC,
+            SceneStatus::TYPE_NAME,
+            SceneStatus::SCHEMA,
+        )?;
         let tf_static = ros2_channel(
             ctx,
             TF_STATIC_TOPIC,
@@ -301,6 +321,7 @@ impl Publisher {
             scene,
             tf,
             tf_static,
+            scene_status,
             status,
             geometry: opts.geometry,
             scene_period_ns: (1e9 / opts.scene_hz) as u64,
