@@ -1,12 +1,12 @@
-//! The live view's 3D scene beside recordings: `sarctl replay --output
-//! OUT.mcap` (and the daemon's recorder, which shares the writer) writes
-//! `/sar/scene` (`foxglove.SceneUpdate`) and `/sar/scene/tf` into the companion
-//! file `OUT.scene.mcap`, never into the `ros2` file (whose channels stay all
-//! `cdr` with `ros2msg` schemas and `offered_qos_profiles`), at 30 Hz
-//! of log time, each scene drawn from the cycle it is stamped with: the
-//! U-joint where the cycle's recorded state puts it, the force arrow in the
-//! guard's colour, the limit spheres of the limits in use. The topics
-//! themselves still replay bit for bit.
+//! The 3D scene in recordings: `sarctl replay --output OUT.mcap` (and the
+//! daemon's recorder, which shares the writer) writes `/sar/scene`
+//! (`visualization_msgs/msg/MarkerArray`), `/tf` and `/tf_static`
+//! (`tf2_msgs/msg/TFMessage`) into the `ros2` file itself (every channel
+//! `cdr` with a `ros2msg` schema and `offered_qos_profiles`; `/tf_static`
+//! transient local), at 30 Hz of log time, each scene drawn from the cycle
+//! it is stamped with: the U-joint where the cycle's recorded state puts it,
+//! the rod from A's foot to the tip, the force arrow |F_tip| x scale long in
+//! the guard's colour. The topics themselves still replay bit for bit.
 
 #![allow(
     clippy::unwrap_used,
@@ -15,11 +15,11 @@
     clippy::indexing_slicing
 )]
 
-use foxglove::Decode;
-use foxglove::messages::SceneUpdate;
 use sar_msgs::msgs::{EstimatorState, RosMessage};
+use sar_msgs::scene::{MarkerArray, TfMessage, action};
 use sar_record::replay::{ReplayOptions, replay_file};
-use sar_scene::draw::{guard_color, ids};
+use sar_scene::draw::{FRAME_BASE, FRAME_WORLD, guard_color, ids};
+use sar_scene::geometry::SceneGeometry;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -42,47 +42,43 @@ fn replay_outputs_carry_the_scene_of_their_cycles() {
 
     let bytes = std::fs::read(&out).unwrap();
     let mut states: BTreeMap<u64, EstimatorState> = BTreeMap::new();
-    let mut scenes: Vec<(u64, SceneUpdate)> = Vec::new();
-    let mut tf = 0;
+    let mut scenes: Vec<(u64, MarkerArray)> = Vec::new();
+    let (mut tf, mut tf_static) = (0, Vec::new());
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         // The `ros2` file: CDR only, every channel with its QoS.
         assert_eq!(m.channel.message_encoding, "cdr", "{}", m.channel.topic);
-        assert_eq!(
-            m.channel.schema.as_ref().unwrap().encoding,
-            "ros2msg",
-            "{}",
-            m.channel.topic
-        );
-        assert_eq!(
-            m.channel
-                .metadata
-                .get("offered_qos_profiles")
-                .map(String::as_str),
-            Some(sar_record::OFFERED_QOS_PROFILES),
-            "{}",
-            m.channel.topic
-        );
-        if m.channel.topic == "/sar/estimate/state" {
-            states.insert(m.log_time, EstimatorState::decode(&m.data).unwrap());
-        }
-    }
-    let scene_file = dir.join("out.scene.mcap");
-    assert_eq!(sar_record::scene_path(&out), scene_file);
-    let scene_bytes = std::fs::read(&scene_file).unwrap();
-    for m in mcap::MessageStream::new(&scene_bytes).unwrap() {
-        let m = m.unwrap();
+        let schema = m.channel.schema.as_ref().unwrap();
+        assert_eq!(schema.encoding, "ros2msg", "{}", m.channel.topic);
+        let qos = m
+            .channel
+            .metadata
+            .get("offered_qos_profiles")
+            .map(String::as_str);
+        let expected_qos = if m.channel.topic == "/tf_static" {
+            sar_record::OFFERED_QOS_PROFILES_LATCHED
+        } else {
+            sar_record::OFFERED_QOS_PROFILES
+        };
+        assert_eq!(qos, Some(expected_qos), "{}", m.channel.topic);
         match m.channel.topic.as_str() {
-            "/sar/scene" => {
-                let schema = m.channel.schema.as_ref().unwrap();
-                assert_eq!(schema.name, "foxglove.SceneUpdate");
-                assert_eq!(m.channel.message_encoding, "protobuf");
-                scenes.push((m.log_time, SceneUpdate::decode(&m.data[..]).unwrap()));
+            "/sar/estimate/state" => {
+                states.insert(m.log_time, EstimatorState::decode(&m.data).unwrap());
             }
-            "/sar/scene/tf" => tf += 1,
+            "/sar/scene" => {
+                assert_eq!(schema.name, "visualization_msgs/msg/MarkerArray");
+                scenes.push((m.log_time, MarkerArray::decode(&m.data).unwrap()));
+            }
+            "/tf" => {
+                assert_eq!(schema.name, "tf2_msgs/msg/TFMessage");
+                TfMessage::decode(&m.data).unwrap();
+                tf += 1;
+            }
+            "/tf_static" => tf_static.push((m.log_time, TfMessage::decode(&m.data).unwrap())),
             _ => {}
         }
     }
+    assert!(!dir.join("out.scene.mcap").exists(), "no companion file");
     let first = *states.keys().next().unwrap();
     let last = *states.keys().last().unwrap();
     let expected = (last - first) as f64 / 33_333_333.0;
@@ -92,28 +88,60 @@ fn replay_outputs_carry_the_scene_of_their_cycles() {
         scenes.len()
     );
     assert_eq!(tf, scenes.len());
+    // The fixed frame once, before the first scene: world -> base.
+    assert_eq!(tf_static.len(), 1);
+    assert!(tf_static[0].0 <= scenes[0].0);
+    let fixed = &tf_static[0].1.transforms[0];
+    assert_eq!(
+        (fixed.parent.as_str(), fixed.child.as_str()),
+        (FRAME_WORLD, FRAME_BASE)
+    );
+    let g = SceneGeometry::from_config(&cfg.estimator);
     let mut colours = std::collections::BTreeSet::new();
     for (t, scene) in &scenes {
         let state = states.get(t).expect("a scene at a cycle's stamp");
-        let entity = |id: &str| scene.entities.iter().find(|e| e.id == id).unwrap();
-        let ujoint = entity(ids::UJOINT);
-        if state.flags & sar_msgs::msgs::flags::POSE_VALID != 0 {
-            let p = ujoint.spheres[0]
-                .pose
-                .as_ref()
+        let marker = |ns: &str, id: i32| {
+            scene
+                .markers
+                .iter()
+                .find(|m| m.ns == ns && m.id == id)
                 .unwrap()
-                .position
-                .as_ref()
-                .unwrap();
-            for (a, b) in [p.x, p.y, p.z].iter().zip(state.ujoint_m) {
+        };
+        let ujoint = marker(ids::UJOINT, 0);
+        let rod = marker(ids::ROD, 0);
+        if state.flags & sar_msgs::msgs::flags::POSE_VALID != 0 {
+            assert_eq!(ujoint.action, action::ADD);
+            for (a, b) in ujoint.position_m.iter().zip(state.ujoint_m) {
                 assert!((a - b).abs() < 1e-12, "at {t}: {a} vs {b}");
             }
+            // The rod: a cylinder L long, centred between A's foot (A here:
+            // d = 0) and the tip.
+            assert_eq!(rod.scale_m[2], g.length_m);
+            for k in 0..3 {
+                let mid = 0.5 * (state.ujoint_m[k] + state.tip_m[k]);
+                assert!((rod.position_m[k] - mid).abs() < 1e-9, "at {t}");
+            }
+        } else {
+            assert_eq!(ujoint.action, action::DELETE);
         }
-        let force = entity(ids::TIP_FORCE);
-        if let Some(arrow) = force.arrows.first() {
-            let c = arrow.color.as_ref().unwrap();
-            let (r, g, b) = guard_color(u32::from(state.guard_state.code()));
-            assert_eq!((c.r, c.g, c.b), (r, g, b), "at {t}");
+        let arrow = marker(ids::TIP_FORCE, 0);
+        if arrow.action == action::ADD {
+            assert_eq!(
+                arrow.color,
+                guard_color(u32::from(state.guard_state.code())),
+                "at {t}"
+            );
+            let [from, to] = [arrow.points_m[0], arrow.points_m[1]];
+            let length_m = (0..3)
+                .map(|k| (to[k] - from[k]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let f = state.tip_force_n;
+            let force_n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+            assert!(
+                (length_m - force_n * g.force_scale_m_per_n).abs() < 1e-12,
+                "at {t}"
+            );
             colours.insert(state.guard_state.code());
         }
     }

@@ -186,6 +186,11 @@ impl<'a> CdrWriter<'a> {
         self.align(8);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
+    /// An f32, aligned to 4.
+    pub fn f32(&mut self, v: f32) {
+        self.align(4);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
     /// A fixed array of f64 (no count).
     pub fn f64_array(&mut self, v: &[f64]) {
         for x in v {
@@ -334,6 +339,12 @@ impl<'a> CdrReader<'a> {
     pub fn f64(&mut self) -> Result<f64, CdrError> {
         self.align(8)?;
         Ok(f64::from_le_bytes(self.array()?))
+    }
+    /// An f32.
+    #[inline(always)]
+    pub fn f32(&mut self) -> Result<f32, CdrError> {
+        self.align(4)?;
+        Ok(f32::from_le_bytes(self.array()?))
     }
     /// A fixed array of N f64.
     #[inline(always)]

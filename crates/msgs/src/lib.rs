@@ -6,10 +6,12 @@
 //! - [`cdr`]: the ROS 2 CDR encoder and decoder.
 //! - [`msgs`]: the recording's ROS 2 messages, their `.msg` schemas
 //!   (`msg/`) and topics.
+//! - [`scene`]: the 3D scene's ROS 2 messages (`MarkerArray`, `TFMessage`).
 //!
 //! No I/O, no threads: the transport (iceoryx2) and the files (MCAP) are
 //! above this crate.
 
 pub mod cdr;
 pub mod msgs;
+pub mod scene;
 pub mod wire;

@@ -776,6 +776,49 @@ ros_message! {
 }
 
 ros_message! {
+    /// `sar_msgs/msg/SceneStatus` (`msg/SceneStatus.msg`): the guard's
+    /// figures at the 3D scene's rate (`/sar/scene/status`).
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct SceneStatus: "sar_msgs/msg/SceneStatus",
+        concat!(include_str!("../msg/SceneStatus.msg"), header_sections!());
+    header {
+        /// `header.stamp` = now of the cycle, frame `base`.
+        stamp_ns,
+        frame_id = FRAME_BASE,
+    }
+    fields {
+        /// The cycle.
+        cycle: u64,
+        /// The guard's state.
+        guard_state: GuardStateCode,
+        /// Its name.
+        guard: ReasonText,
+        /// The guard's reason, in words.
+        reason: ReasonText,
+        /// |F_tip|, N (NaN without an estimate).
+        force_total_n: f64,
+        /// F_tip along the rod, N.
+        axial_n: f64,
+        /// F_tip across the rod, N.
+        lateral_n: f64,
+        /// The warn limit on |F_tip|, N.
+        warn_total_n: f64,
+        /// The stop limit on |F_tip|, N.
+        stop_total_n: f64,
+        /// The warn limit on the axial part, N.
+        warn_axial_n: f64,
+        /// The stop limit on the axial part, N.
+        stop_axial_n: f64,
+        /// The warn limit on the lateral part, N.
+        warn_lateral_n: f64,
+        /// The stop limit on the lateral part, N.
+        stop_lateral_n: f64,
+        /// The simulator's true F_tip, base frame, N (NaN on a robot).
+        truth_tip_force_n: [f64; 3],
+    }
+}
+
+ros_message! {
     /// `sar_msgs/msg/CycleInput` (`msg/CycleInput.msg`): what one cycle consumed.
     #[derive(Debug, Clone, Copy, PartialEq, Default)]
     pub struct CycleInput: "sar_msgs/msg/CycleInput",

@@ -300,7 +300,7 @@ fn field_lines(msg: &str) -> Vec<String> {
 /// file's field lines, in order.
 #[test]
 fn the_schemas_and_field_lists_are_the_msg_files() {
-    let types: [(&str, &str, &str, &[MsgField]); 5] = [
+    let types: [(&str, &str, &str, &[MsgField]); 6] = [
         (
             "CycleInput",
             CycleInput::TYPE_NAME,
@@ -330,6 +330,12 @@ fn the_schemas_and_field_lists_are_the_msg_files() {
             StateSnapshot::TYPE_NAME,
             StateSnapshot::SCHEMA,
             StateSnapshot::MSG_FIELDS,
+        ),
+        (
+            "SceneStatus",
+            SceneStatus::TYPE_NAME,
+            SceneStatus::SCHEMA,
+            SceneStatus::MSG_FIELDS,
         ),
     ];
     for (name, type_name, schema, fields) in types {

@@ -5,21 +5,22 @@
 //! Every channel carries `offered_qos_profiles` metadata, the YAML text ROS 2's
 //! recorder (Jazzy) writes there ([`OFFERED_QOS_PROFILES`]).
 //!
-//! With [`FileOptions::scene`], the live view's 3D scene (`/sar/scene`,
-//! `foxglove.SceneUpdate`, and `/sar/scene/tf`, protobuf) is drawn from the
+//! With [`FileOptions::scene`], the live view's 3D scene is drawn from the
 //! recorded messages of a cycle, decimated, on the writer's thread, and
-//! written into a companion file beside each recording ([`scene_path`]:
-//! `NAME.scene.mcap`, no profile), never into the `ros2` file itself: a
-//! protobuf channel breaks the `ros2` profile (ROS 2 tools and Python
-//! `rosbags` refuse the whole file). Opened together in Foxglove, the two
-//! files look as the live view does.
+//! written into the recording itself, CDR like every channel: `/sar/scene`
+//! (`visualization_msgs/msg/MarkerArray`), `/sar/scene/status` (the guard's
+//! figures, `sar_msgs/msg/SceneStatus`), `/tf` (the moving frames) and
+//! `/tf_static` (`tf2_msgs/msg/TFMessage`, `world` -> `base`, written at the
+//! start of every file with transient-local durability, so that each file
+//! of a rotation opens alone with its 3D scene).
 
 use sar_config::Rotation;
+use sar_msgs::msgs::SceneStatus;
 use sar_msgs::msgs::{
     EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
     StateSnapshot, Topic,
 };
-#[cfg(feature = "scene")]
+use sar_msgs::scene::{MarkerArray, TfMessage};
 use sar_scene::draw as scene;
 use sar_scene::geometry::SceneGeometry;
 use std::collections::BTreeMap;
@@ -112,16 +113,29 @@ pub const OFFERED_QOS_PROFILES: &str = "- history: keep_last
     nsec: 854775807
   avoid_ros_namespace_conventions: false";
 
+/// [`OFFERED_QOS_PROFILES`] with transient-local durability: `/tf_static`'s,
+/// as ROS 2's static transform broadcaster offers it (a late subscriber
+/// still gets the fixed frames).
+pub const OFFERED_QOS_PROFILES_LATCHED: &str = "- history: keep_last
+  depth: 1
+  reliability: reliable
+  durability: transient_local
+  deadline:
+    sec: 9223372036
+    nsec: 854775807
+  lifespan:
+    sec: 9223372036
+    nsec: 854775807
+  liveliness: automatic
+  liveliness_lease_duration:
+    sec: 9223372036
+    nsec: 854775807
+  avoid_ros_namespace_conventions: false";
+
 /// The metadata key of [`OFFERED_QOS_PROFILES`].
 pub const QOS_METADATA_KEY: &str = "offered_qos_profiles";
 
-/// The companion file that holds the 3D scene of the recording at `path`
-/// (`rec-0000.mcap` -> `rec-0000.scene.mcap`).
-pub fn scene_path(path: &Path) -> PathBuf {
-    path.with_extension("scene.mcap")
-}
-
-/// The 3D scene written beside the recorded topics.
+/// The 3D scene written with the recorded topics.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SceneOptions {
     /// The robot and manipulator as drawn (from the configuration).
@@ -135,17 +149,10 @@ pub struct SceneOptions {
 
 impl SceneOptions {
     /// The scene the configuration asks for (`[record] scene_hz`), drawn
-    /// from its geometry and limits. `None` when it asks for none, or when
-    /// this build has no cargo feature `scene` (the Foxglove SDK): `sard` is
-    /// built without it and writes none (said once in the log, here).
+    /// from its geometry and limits. `None` when it asks for none
+    /// (`scene_hz = 0`).
     pub fn from_config(config: &sar_config::Config) -> Option<Self> {
         let period_ns = config.record.scene_period_ns?;
-        if !cfg!(feature = "scene") {
-            tracing::info!(
-                "[record] scene_hz: no 3D scene beside recordings (NAME.scene.mcap): this build has no `scene` feature"
-            );
-            return None;
-        }
         Some(Self {
             geometry: SceneGeometry::from_config(&config.estimator),
             limits_n: config.estimator.guard.force_limits().to_array(),
@@ -175,7 +182,7 @@ pub struct FileOptions {
     /// The exact path of the first file (instead of `{prefix}-0000.mcap`;
     /// later files of a rotation keep the numbered names).
     pub first_path: Option<PathBuf>,
-    /// The live view's 3D scene beside the topics (`None`: not written).
+    /// The live view's 3D scene with the topics (`None`: not written).
     pub scene: Option<SceneOptions>,
     /// Rotation waits for a snapshot (`/sar/cycle/snapshot`), which then
     /// starts the new file, so that every file replays on its own; when no
@@ -321,7 +328,6 @@ pub struct RotatingWriter {
 /// What the scene is drawn from: the messages of one cycle (all stamped with
 /// the cycle's `now`), gathered until a message of a later cycle (or the
 /// file's end) closes it, whatever their order.
-#[cfg_attr(not(feature = "scene"), allow(dead_code))]
 struct SceneState {
     options: SceneOptions,
     next_ns: Option<u64>,
@@ -339,16 +345,20 @@ struct SceneCycle {
     stamp_ns: u64,
     estimator: Option<EstimatorState>,
     passive: Option<PassiveJointState>,
+    /// The simulator's true F_tip (`/sar/sim/tip_wrench_truth`), N.
+    truth_n: Option<[f64; 3]>,
 }
 
-/// The companion file of the scene beside one recording file.
-#[cfg_attr(not(feature = "scene"), allow(dead_code))]
-struct SceneFile {
-    path: PathBuf,
-    writer: mcap::Writer<BufWriter<File>>,
+/// The scene's channels in one recording file.
+struct SceneChannels {
     scene: u16,
     tf: u16,
+    tf_static: u16,
+    status: u16,
+    /// The scenes written to this file (`/sar/scene`'s and `/tf`'s sequence).
     sequence: u32,
+    /// `/tf_static` is written before the file's first scene.
+    static_written: bool,
 }
 
 struct OpenFile {
@@ -357,7 +367,7 @@ struct OpenFile {
     handle: File,
     position: Arc<AtomicU64>,
     channel_ids: [u16; Topic::ALL.len()],
-    scene: Option<SceneFile>,
+    scene: Option<SceneChannels>,
     first_log_ns: Option<u64>,
 }
 
@@ -455,7 +465,7 @@ impl RotatingWriter {
                 .map_err(mcap_err(&path))?;
         }
         let scene = match &self.scene {
-            Some(_) => Some(self.open_scene(&path)?),
+            Some(_) => Some(scene_channels(&mut writer, &path)?),
             None => None,
         };
         // Each file says which of the rotation it is (`file_index`, 0 for
@@ -481,55 +491,6 @@ impl RotatingWriter {
             scene,
             first_log_ns: None,
         }))
-    }
-
-    /// The scene needs the cargo feature `scene` (the configuration gives no
-    /// scene without it; a caller that asks for one anyway is refused).
-    #[cfg(not(feature = "scene"))]
-    fn open_scene(&self, _path: &Path) -> Result<SceneFile, WriteError> {
-        Err(WriteError::Setting {
-            field: "scene",
-            value: 1,
-            why: "this build has no 3D scene (cargo feature `scene`)",
-        })
-    }
-
-    /// Creates the scene's companion file of the recording file at `path`.
-    #[cfg(feature = "scene")]
-    fn open_scene(&self, path: &Path) -> Result<SceneFile, WriteError> {
-        let path = scene_path(path);
-        let mcap_err = |source| WriteError::mcap(path.clone(), source);
-        let file = File::create(&path).map_err(|source| WriteError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        // No profile: protobuf channels, as the live view sends them.
-        let options = self.options.mcap_options().profile("");
-        let mut writer =
-            mcap::Writer::with_options(BufWriter::with_capacity(1 << 16, file), options)
-                .map_err(mcap_err)?;
-        let none = BTreeMap::new();
-        let s = scene::schema();
-        let schema = writer
-            .add_schema(&s.name, &s.encoding, &s.data)
-            .map_err(mcap_err)?;
-        let scene = writer
-            .add_channel(schema, sar_scene::SCENE_TOPIC, &s.message_encoding, &none)
-            .map_err(mcap_err)?;
-        let t = scene::tf_schema();
-        let schema = writer
-            .add_schema(&t.name, &t.encoding, &t.data)
-            .map_err(mcap_err)?;
-        let tf = writer
-            .add_channel(schema, sar_scene::TF_TOPIC, &t.message_encoding, &none)
-            .map_err(mcap_err)?;
-        Ok(SceneFile {
-            path,
-            writer,
-            scene,
-            tf,
-            sequence: 0,
-        })
     }
 
     fn must_rotate(&self, file: &OpenFile, log_ns: u64) -> bool {
@@ -691,10 +652,12 @@ impl RotatingWriter {
             stamp_ns,
             estimator: None,
             passive: None,
+            truth_n: None,
         });
         match msg {
             Outgoing::EstimatorState(e) => cycle.estimator = Some(*e),
             Outgoing::PassiveJoints(p) => cycle.passive = Some(*p),
+            Outgoing::SimTruth(t) => cycle.truth_n = Some(t.force_n),
             Outgoing::CycleInput(c) => {
                 if c.limits_in_use_n.iter().all(|v| v.is_finite() && *v > 0.0) {
                     state.limits_n = c.limits_in_use_n;
@@ -707,15 +670,9 @@ impl RotatingWriter {
         Ok(())
     }
 
-    /// No scene without the cargo feature `scene` (never opened).
-    #[cfg(not(feature = "scene"))]
-    fn flush_scene(&mut self) -> Result<(), WriteError> {
-        Ok(())
-    }
-
     /// Closes the cycle gathered: writes its scene when one is due (at most
-    /// one per period of log time, keeping the phase).
-    #[cfg(feature = "scene")]
+    /// one per period of log time, keeping the phase), after the file's
+    /// `/tf_static` when it is the file's first.
     fn flush_scene(&mut self) -> Result<(), WriteError> {
         let (Some(state), Some(file)) = (self.scene.as_mut(), self.current.as_mut()) else {
             return Ok(());
@@ -724,6 +681,7 @@ impl RotatingWriter {
             stamp_ns: log_ns,
             estimator: Some(estimator),
             passive,
+            truth_n,
         }) = state.cycle.take()
         else {
             return Ok(());
@@ -739,44 +697,44 @@ impl RotatingWriter {
         let Some(channels) = file.scene.as_mut() else {
             return Ok(());
         };
-        let SceneFile {
-            path,
-            writer,
-            scene: scene_channel,
-            tf: tf_channel,
-            sequence,
-        } = channels;
         let joints = sar_msgs::msgs::ActiveJointState {
             stamp_ns: estimator.joints_stamp_ns,
             q_m: state.q_m,
         };
-        let published = sar_scene::topics::state_from_recorded(
+        let mut published = sar_scene::topics::state_from_recorded(
             &estimator,
             &joints,
             passive.as_ref(),
             state.limits_n,
         );
-        let update = scene::scene(&published, &state.options.geometry);
-        let mut write = |channel_id: u16, bytes: &[u8]| {
-            let header = mcap::records::MessageHeader {
-                channel_id,
-                sequence: *sequence,
-                log_time: log_ns,
-                publish_time: log_ns,
-            };
-            writer
-                .write_to_known_channel(&header, bytes)
-                .map_err(|source| WriteError::mcap(path.clone(), source))
+        if let Some(truth_n) = truth_n {
+            published.truth_tip_force_n = truth_n;
+            published.flags |= sar_msgs::wire::flags::SIM_TRUTH;
+        }
+        let geometry = &state.options.geometry;
+        let mut out = SceneOut {
+            writer: &mut file.writer,
+            path: &file.path,
+            buf: &mut state.buf,
+            log_ns,
         };
-        // Encoding into a Vec does not fail; a scene that did would be
-        // skipped, not end the recording.
-        if scene::encode(&update, &mut state.buf).is_ok() {
-            write(*scene_channel, &state.buf)?;
+        if !channels.static_written {
+            out.tf(channels.tf_static, 0, &scene::static_frames(log_ns))?;
+            channels.static_written = true;
         }
-        if scene::encode_tf(&scene::frame_transforms(log_ns), &mut state.buf).is_ok() {
-            write(*tf_channel, &state.buf)?;
-        }
-        *sequence = sequence.wrapping_add(1);
+        out.markers(
+            channels.scene,
+            channels.sequence,
+            &scene::scene(&published, geometry),
+        )?;
+        out.tf(
+            channels.tf,
+            channels.sequence,
+            &scene::moving_frames(&published, geometry),
+        )?;
+        let status = sar_scene::topics::scene_status(&published);
+        out.status(channels.status, channels.sequence, &status)?;
+        channels.sequence = channels.sequence.wrapping_add(1);
         Ok(())
     }
 
@@ -788,14 +746,6 @@ impl RotatingWriter {
                 .flush()
                 .map_err(|source| WriteError::mcap(file.path.clone(), source))?;
             file.sync()?;
-            // The scene's file is not synced (it is drawn from the recording
-            // and can be drawn again); its chunk goes to the kernel.
-            if let Some(scene) = &mut file.scene {
-                scene
-                    .writer
-                    .flush()
-                    .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
-            }
         }
         Ok(())
     }
@@ -841,22 +791,124 @@ impl RotatingWriter {
             path: path.clone(),
             source,
         })?;
-        if let Some(mut scene) = file.scene.take() {
-            scene
-                .writer
-                .finish()
-                .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
-            let inner = scene.writer.into_inner();
-            let file = inner.into_inner().map_err(|e| WriteError::Io {
-                path: scene.path.clone(),
-                source: e.into_error(),
-            })?;
-            file.sync_all().map_err(|source| WriteError::Io {
-                path: scene.path,
-                source,
-            })?;
-        }
         Ok(())
+    }
+}
+
+/// Adds the scene's schemas and channels to a new recording file.
+fn scene_channels(
+    writer: &mut mcap::Writer<CountingFile>,
+    path: &Path,
+) -> Result<SceneChannels, WriteError> {
+    let mcap_err = |source| WriteError::mcap(path.to_path_buf(), source);
+    let qos = |profiles: &str| BTreeMap::from([(QOS_METADATA_KEY.to_owned(), profiles.to_owned())]);
+    let markers = writer
+        .add_schema(
+            MarkerArray::TYPE_NAME,
+            "ros2msg",
+            MarkerArray::SCHEMA.as_bytes(),
+        )
+        .map_err(mcap_err)?;
+    let tf = writer
+        .add_schema(
+            TfMessage::TYPE_NAME,
+            "ros2msg",
+            TfMessage::SCHEMA.as_bytes(),
+        )
+        .map_err(mcap_err)?;
+    let status = writer
+        .add_schema(
+            SceneStatus::TYPE_NAME,
+            "ros2msg",
+            SceneStatus::SCHEMA.as_bytes(),
+        )
+        .map_err(mcap_err)?;
+    Ok(SceneChannels {
+        scene: writer
+            .add_channel(
+                markers,
+                sar_scene::SCENE_TOPIC,
+                "cdr",
+                &qos(OFFERED_QOS_PROFILES),
+            )
+            .map_err(mcap_err)?,
+        tf: writer
+            .add_channel(tf, sar_scene::TF_TOPIC, "cdr", &qos(OFFERED_QOS_PROFILES))
+            .map_err(mcap_err)?,
+        tf_static: writer
+            .add_channel(
+                tf,
+                sar_scene::TF_STATIC_TOPIC,
+                "cdr",
+                &qos(OFFERED_QOS_PROFILES_LATCHED),
+            )
+            .map_err(mcap_err)?,
+        status: writer
+            .add_channel(
+                status,
+                sar_scene::SCENE_STATUS_TOPIC,
+                "cdr",
+                &qos(OFFERED_QOS_PROFILES),
+            )
+            .map_err(mcap_err)?,
+        sequence: 0,
+        static_written: false,
+    })
+}
+
+/// Where one scene's messages go: the open file, at the cycle's log time.
+struct SceneOut<'a> {
+    writer: &'a mut mcap::Writer<CountingFile>,
+    path: &'a Path,
+    buf: &'a mut Vec<u8>,
+    log_ns: u64,
+}
+
+impl SceneOut<'_> {
+    fn write(&mut self, channel_id: u16, sequence: u32) -> Result<(), WriteError> {
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence,
+            log_time: self.log_ns,
+            publish_time: self.log_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, self.buf)
+            .map_err(|source| WriteError::mcap(self.path.to_path_buf(), source))
+    }
+
+    fn markers(
+        &mut self,
+        channel_id: u16,
+        sequence: u32,
+        m: &MarkerArray,
+    ) -> Result<(), WriteError> {
+        m.encode(self.buf).map_err(|source| WriteError::Encode {
+            topic: sar_scene::SCENE_TOPIC,
+            source,
+        })?;
+        self.write(channel_id, sequence)
+    }
+
+    fn status(
+        &mut self,
+        channel_id: u16,
+        sequence: u32,
+        m: &SceneStatus,
+    ) -> Result<(), WriteError> {
+        m.encode(self.buf).map_err(|source| WriteError::Encode {
+            topic: sar_scene::SCENE_STATUS_TOPIC,
+            source,
+        })?;
+        self.write(channel_id, sequence)
+    }
+
+    fn tf(&mut self, channel_id: u16, sequence: u32, t: &TfMessage) -> Result<(), WriteError> {
+        t.encode(self.buf).map_err(|source| WriteError::Encode {
+            topic: sar_scene::TF_TOPIC,
+            source,
+        })?;
+        self.write(channel_id, sequence)
     }
 }
 

@@ -24,8 +24,8 @@ pub mod replay;
 pub mod rosbag2;
 
 pub use file::{
-    FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, SceneOptions, WriteError,
-    scene_path,
+    FileOptions, OFFERED_QOS_PROFILES, OFFERED_QOS_PROFILES_LATCHED, QOS_METADATA_KEY,
+    RotatingWriter, SceneOptions, WriteError,
 };
 pub use reader::{
     McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,

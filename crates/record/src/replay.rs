@@ -78,6 +78,10 @@ pub struct ReplayOptions {
     pub from_s: Option<f64>,
     /// Stop after the cycles up to this time, s after the first cycle.
     pub to_s: Option<f64>,
+    /// The 3D scene in the output: at most one per this much log time, ns
+    /// (the configuration's `[record] scene_hz`, as the daemon's recorder
+    /// writes it; `None`: no scene).
+    pub scene_period_ns: Option<u64>,
 }
 
 impl ReplayOptions {
@@ -93,13 +97,10 @@ impl ReplayOptions {
             check_recorded: true,
             from_s: None,
             to_s: None,
+            scene_period_ns: config.record.scene_period_ns,
         }
     }
 }
-
-/// The scene's period in replay outputs, ns (30 Hz, as the recorder's
-/// default).
-pub const SCENE_PERIOD_NS: u64 = 33_333_333;
 
 /// How the recording was replayed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -1118,14 +1119,14 @@ fn output_writer(
                 .push((convert::CONFIG_METADATA.to_owned(), c.clone()));
         }
     }
-    // The live view's scene, as the daemon's recorder writes it
-    // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
-    // (With the cargo feature `scene` only.)
-    o.scene = cfg!(feature = "scene").then(|| super::SceneOptions {
-        geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
-        limits_n: options.config.guard.force_limits().to_array(),
-        period_ns: SCENE_PERIOD_NS,
-    });
+    // The 3D scene, as the daemon's recorder writes it.
+    o.scene = options
+        .scene_period_ns
+        .map(|period_ns| super::SceneOptions {
+            geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
+            limits_n: options.config.guard.force_limits().to_array(),
+            period_ns,
+        });
     Ok(Some(RotatingWriter::new(o)?))
 }
 

@@ -9,8 +9,8 @@
 //! The files of one recording (a rotation's `-0000.mcap`, `-0001.mcap`,
 //! ...) go into one directory in the order given. Only complete `ros2`
 //! files are taken: a file cut short, even inside its summary (the data
-//! section whole), is refused (`sarctl recover` first),
-//! and so is a scene companion (`NAME.scene.mcap`, protobuf, no profile).
+//! section whole), is refused (`sarctl recover` first). The 3D scene is in
+//! the files themselves, CDR like every channel.
 
 use super::reader::{McapReader, ReadError};
 use std::collections::BTreeMap;
@@ -217,7 +217,7 @@ fn check_ros2(reader: &McapReader<'_>) -> Result<(), String> {
     let profile = reader.profile().unwrap_or_default();
     if profile != "ros2" {
         return Err(format!(
-            "MCAP profile {profile:?}, not \"ros2\" (a scene companion NAME.scene.mcap is not part of a rosbag2 directory)"
+            "MCAP profile {profile:?}, not \"ros2\" (ROS 2 tools refuse it; an older build's scene companion NAME.scene.mcap is not part of a rosbag2 directory)"
         ));
     }
     for c in reader.channels().values() {

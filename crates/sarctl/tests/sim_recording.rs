@@ -250,7 +250,7 @@ fn export_refuses_bad_input_with_one_line() {
     let junk = dir.join("junk.mcap");
     std::fs::write(&junk, "not mcap").unwrap();
     refused(&["export", "--rosbag2"], &[&bag, &junk], "not an MCAP file");
-    // A scene companion (protobuf, no profile).
+    // A file of another profile (as the scene companions of older builds).
     let scene = dir.join("rec.scene.mcap");
     let mut w = mcap::WriteOptions::new()
         .profile("")

@@ -36,8 +36,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-/// The layout's paths on the recorded topics (the live-only
-/// `/sar/view/status` and the scene are not in `ros2` recordings).
+/// The layout's paths on the topics that every recording with outputs
+/// carries (the fixtures, recorded before the scene was, lack the scene's).
 const RECORDED_PREFIXES: [&str; 2] = ["/sar/estimate/", "/sar/guard/"];
 
 fn fixtures() -> Vec<PathBuf> {
@@ -119,6 +119,83 @@ fn assert_layout_paths(file: &serde_json::Value) {
     }
 }
 
+/// Every path of the layout (plots, indicator, 3D panel's topics) is found
+/// in this one file: it opens alone with every panel.
+fn assert_every_layout_path(file: &serde_json::Value) {
+    let layout = file["layout"].as_object().unwrap();
+    for wanted in [
+        "/sar/scene",
+        "/tf",
+        "/tf_static",
+        "/sar/scene/status.guard_state",
+    ] {
+        assert!(layout.contains_key(wanted), "{wanted} not in the layout");
+    }
+    for (p, status) in layout {
+        assert_eq!(status, "ok", "{p} in {}", file["path"]);
+    }
+}
+
+/// The scene as Python `rosbags` decodes it (types from the file alone):
+/// the scene's types are ROS 2 Jazzy's, the rod runs from the U-joint to
+/// the tip of the same cycle's `/sar/estimate/state`, and the arrow starts
+/// at the tip and is |F_tip| x the scale long (`force_scale_m_per_n`).
+fn assert_scene_by_rosbags(file: &Path, cfg: &sar_config::Config) {
+    let py = readers::rosbags_scene(std::slice::from_ref(&file.to_path_buf()));
+    let f = &readers::assert_clean(&py, "rosbags --scene")[0];
+    assert_eq!(f["jazzy"], serde_json::json!([]), "not ROS 2 Jazzy's types");
+    let g = sar_scene::geometry::SceneGeometry::from_config(&cfg.estimator);
+    assert_eq!(cfg.estimator.profile.offset_m(), 0.0, "A is A's foot");
+    let v = |x: &serde_json::Value| -> [f64; 3] { std::array::from_fn(|k| x[k].as_f64().unwrap()) };
+    let close = |a: [f64; 3], b: [f64; 3]| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-9);
+    let mut checked = 0;
+    for scene in f["scene"].as_array().unwrap() {
+        let Some(state) = scene["state"].as_object() else {
+            continue;
+        };
+        let marker = |ns: &str, id: i64| {
+            scene["markers"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|m| m["ns"] == ns && m["id"] == id)
+                .unwrap()
+                .clone()
+        };
+        let (a, d, force) = (
+            v(&state["ujoint_m"]),
+            v(&state["tip_m"]),
+            v(&state["tip_force_n"]),
+        );
+        // The rod: a cylinder (type 3) along its z, L high.
+        let rod = marker("rod", 0);
+        assert_eq!(rod["type"], 3);
+        let q: [f64; 4] = std::array::from_fn(|k| rod["orientation"][k].as_f64().unwrap());
+        let axis = sar_scene::draw::rotate(q, [0.0, 0.0, 1.0]);
+        let (c, h) = (v(&rod["position"]), rod["scale"][2].as_f64().unwrap());
+        let near: [f64; 3] = std::array::from_fn(|k| c[k] - 0.5 * h * axis[k]);
+        let far: [f64; 3] = std::array::from_fn(|k| c[k] + 0.5 * h * axis[k]);
+        assert!(
+            close(near, a) && close(far, d),
+            "rod {near:?}..{far:?} vs {a:?}..{d:?}"
+        );
+        // The arrow (type 0) from the tip.
+        let arrow = marker("tip_force", 0);
+        assert_eq!(arrow["type"], 0);
+        let (from, to) = (v(&arrow["points"][0]), v(&arrow["points"][1]));
+        assert!(close(from, d), "{from:?} vs {d:?}");
+        let length = (0..3)
+            .map(|k| (to[k] - from[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let magnitude = force.iter().map(|x| x * x).sum::<f64>().sqrt();
+        assert!((length - magnitude * g.force_scale_m_per_n).abs() < 1e-12);
+        checked += 1;
+    }
+    assert!(checked >= 5, "{checked} scenes checked: {f}");
+    eprintln!("rosbags: {checked} MarkerArrays checked against their cycles");
+}
+
 #[test]
 #[cfg_attr(sar_skip_python, ignore = "SAR_SKIP_PYTHON=1")]
 #[cfg_attr(sar_skip_node, ignore = "SAR_SKIP_NODE=1")]
@@ -153,7 +230,8 @@ fn a_replay_output_decodes_with_the_strict_readers() {
     .unwrap();
     assert!(report.first_difference.is_none(), "{report:?}");
     let files = check_strictly(std::slice::from_ref(&out), "replay output");
-    assert_layout_paths(&files[0]);
+    assert_every_layout_path(&files[0]);
+    assert_scene_by_rosbags(&out, &cfg);
 }
 
 #[test]
@@ -166,7 +244,7 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     let prefix = format!("sar-strict-{}", std::process::id());
     let files = vec![support::sim_recording(&dir, 3000, &prefix)];
     let checked = check_strictly(&files, "sard --sim recording");
-    assert_layout_paths(&checked[0]);
+    assert_every_layout_path(&checked[0]);
     let topics = checked[0]["topics"].as_object().unwrap();
     for t in [
         "/sar/sensor/wrench",
@@ -174,9 +252,19 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
         "/sar/estimate/tip_wrench",
         "/sar/estimate/state",
         "/sar/cycle/input",
+        "/sar/scene",
+        "/sar/scene/status",
+        "/tf",
+        "/tf_static",
     ] {
-        // 3000 cycles at 1 kHz; the sensor's samples at its own rate.
-        assert!(topics[t].as_u64().unwrap() >= 1000, "{t}: {topics:?}");
+        // 3000 cycles at 1 kHz; the sensor's samples at its own rate; the
+        // scene at 30 Hz; the fixed frames once.
+        let least = match t {
+            "/tf_static" => 1,
+            "/sar/scene" | "/sar/scene/status" | "/tf" => 60,
+            _ => 1000,
+        };
+        assert!(topics[t].as_u64().unwrap() >= least, "{t}: {topics:?}");
     }
     // The rosbag2 directory of it, as ROS 2's tools open one.
     let bag = dir.join("bag");
@@ -198,9 +286,10 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
         .collect();
     assert_eq!(theirs, ours, "rosbag2 directory vs ours");
     // Every channel in metadata.yaml, the empty ones too.
+    // (The recorded topics and the scene's four.)
     assert_eq!(
         py_files[0]["channels"].as_u64().unwrap(),
-        sar_record::Topic::FULL.len() as u64
+        sar_record::Topic::FULL.len() as u64 + 4
     );
     let (_, schemas, messages, failures) = readers::totals(&py);
     eprintln!(

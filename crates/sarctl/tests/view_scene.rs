@@ -1,10 +1,9 @@
-//! The live view's scene as a pure function (no processes): the rod's ends
-//! against `sar_kinematics::forward` also with a rod offset d != 0, the
-//! arrow's direction for a force opposite to the arrow's own axis (the
-//! half-turn case), a state without a pose draws no rod, tip, force nor
-//! limits (and no NaN anywhere), the colours follow the guard, and the
-//! scene written to an MCAP file with [`scene::schema`] and
-//! [`scene::encode`] reads back (the recorder's future scene topic).
+//! The 3D scene as a pure function (no processes): the rod's ends against
+//! `sar_kinematics::forward` also with a rod offset d != 0, the arrow from
+//! the tip along the force, |F_tip| x scale long, a state without a pose
+//! deletes the rod, tip, force and limits (and no NaN anywhere), the colours
+//! follow the guard, the frames (`/tf`: carriage, rod, tip) agree with the
+//! markers, and the layout names only what a recording and the view carry.
 
 #![allow(
     clippy::unwrap_used,
@@ -13,13 +12,11 @@
     clippy::indexing_slicing
 )]
 
-use foxglove::Decode;
-use foxglove::messages::{SceneEntity, SceneUpdate};
 use sar_kinematics::{ActiveJoints, Profile, ProfileSpec, forward};
+use sar_msgs::scene::{Marker, MarkerArray, action, kind};
 use sar_msgs::wire::{StateMsg, flags, guard_code};
 use sar_scene::draw::{self as scene, ids};
 use sar_scene::geometry::SceneGeometry;
-use std::collections::BTreeMap;
 
 type V3 = [f64; 3];
 
@@ -31,12 +28,8 @@ fn close(a: V3, b: V3, tol: f64) -> bool {
     (0..3).all(|k| (a[k] - b[k]).abs() <= tol)
 }
 
-fn v3(v: &foxglove::messages::Vector3) -> V3 {
-    [v.x, v.y, v.z]
-}
-
-fn entity<'a>(s: &'a SceneUpdate, id: &str) -> &'a SceneEntity {
-    s.entities.iter().find(|e| e.id == id).unwrap()
+fn marker<'a>(s: &'a MarkerArray, ns: &str, id: i32) -> &'a Marker {
+    s.markers.iter().find(|m| m.ns == ns && m.id == id).unwrap()
 }
 
 /// The built-in configuration with the rod offset `d`.
@@ -95,27 +88,35 @@ fn rod_ends_are_the_kinematics_with_and_without_offset() {
                 q3_m: q[2],
             };
             let pose = forward(&cfg.calibration, &cfg.profile, &joints).unwrap();
-            let rod = &entity(&update, ids::ROD).cylinders[0];
-            let (p, size) = (rod.pose.unwrap(), rod.size.unwrap());
-            let axis = scene::rotate(&p.orientation.unwrap(), [0.0, 0.0, 1.0]);
-            let c = v3(&p.position.unwrap());
-            let near: V3 = std::array::from_fn(|k| c[k] - 0.5 * size.z * axis[k]);
-            let far: V3 = std::array::from_fn(|k| c[k] + 0.5 * size.z * axis[k]);
+            let rod = marker(&update, ids::ROD, 0);
+            assert_eq!((rod.kind, rod.action), (kind::CYLINDER, action::ADD));
+            let axis = scene::rotate(rod.orientation, [0.0, 0.0, 1.0]);
+            let (c, height) = (rod.position_m, rod.scale_m[2]);
+            let near: V3 = std::array::from_fn(|k| c[k] - 0.5 * height * axis[k]);
+            let far: V3 = std::array::from_fn(|k| c[k] + 0.5 * height * axis[k]);
             let a = arr(pose.ujoint_m);
             let w = arr(pose.rod_normal);
             let foot: V3 = std::array::from_fn(|k| a[k] + d * w[k]);
             assert!(close(near, foot, 1e-12), "d {d} q {q:?}: {near:?} {foot:?}");
             assert!(close(far, arr(pose.tip_m), 1e-12), "d {d} q {q:?}");
             // The carriage P = P_home + (q3, q2, q1).
-            let cube = &entity(&update, ids::CARRIAGE).cubes[0];
+            let cube = marker(&update, ids::CARRIAGE, 0);
             let home = arr(cfg.calibration.p_home_m());
             let p_expected = [home[0] + q[2], home[1] + q[1], home[2] + q[0]];
-            assert!(close(
-                v3(&cube.pose.unwrap().position.unwrap()),
-                p_expected,
-                1e-12
-            ));
+            assert!(close(cube.position_m, p_expected, 1e-12));
             assert!(close(arr(pose.carriage_m), p_expected, 1e-12));
+            // The frames: base -> carriage at P, base -> rod at A's foot with
+            // x along u, rod -> tip L along x: the tip where the markers put it.
+            let tf = scene::moving_frames(&s, &g);
+            let names: Vec<_> = tf.transforms.iter().map(|t| t.child.as_str()).collect();
+            assert_eq!(names, ["carriage", "rod", "tip"]);
+            assert!(close(tf.transforms[0].translation_m, p_expected, 1e-12));
+            let rod_frame = &tf.transforms[1];
+            assert!(close(rod_frame.translation_m, foot, 1e-12));
+            let along = scene::rotate(rod_frame.rotation, [g.length_m, 0.0, 0.0]);
+            let tip: V3 = std::array::from_fn(|k| rod_frame.translation_m[k] + along[k]);
+            assert!(close(tip, arr(pose.tip_m), 1e-12));
+            assert_eq!(tf.transforms[2].translation_m, [g.length_m, 0.0, 0.0]);
         }
     }
 }
@@ -134,17 +135,22 @@ fn arrow_points_along_the_force_in_every_direction() {
     for f in forces {
         let s = state(&cfg, POSES[0], f, guard_code::WARN);
         let update = scene::scene(&s, &g);
-        let arrow = &entity(&update, ids::TIP_FORCE).arrows[0];
-        let dir = scene::rotate(&arrow.pose.unwrap().orientation.unwrap(), [1.0, 0.0, 0.0]);
+        let arrow = marker(&update, ids::TIP_FORCE, 0);
+        assert_eq!((arrow.kind, arrow.action), (kind::ARROW, action::ADD));
+        let [from, to] = [arrow.points_m[0], arrow.points_m[1]];
+        assert_eq!(from, s.tip_m);
+        let d: V3 = std::array::from_fn(|k| to[k] - from[k]);
+        let length = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        let dir: V3 = std::array::from_fn(|k| d[k] / length);
         assert!(
             close(dir, [f[0] / n, f[1] / n, f[2] / n], 1e-12),
             "{f:?}: {dir:?}"
         );
-        assert!((arrow.shaft_length + arrow.head_length - n * g.force_scale_m_per_n).abs() < 1e-12);
-        assert!(arrow.shaft_length > 0.0);
-        let c = arrow.color.unwrap();
-        assert_eq!((c.r, c.g, c.b), scene::guard_color(guard_code::WARN));
+        assert!((length - n * g.force_scale_m_per_n).abs() < 1e-12);
+        // The head is shorter than the arrow.
+        assert!(arrow.scale_m[2] > 0.0 && arrow.scale_m[2] < length);
+        assert_eq!(arrow.color, scene::guard_color(guard_code::WARN));
     }
 }
 
@@ -163,7 +169,7 @@ fn guard_colours_differ() {
     }
 }
 
-fn all_finite(update: &SceneUpdate) -> bool {
+fn all_finite(update: &MarkerArray) -> bool {
     let bytes = format!("{update:?}");
     !bytes.contains("NaN") && !bytes.contains("inf")
 }
@@ -179,25 +185,30 @@ fn a_state_without_pose_or_estimate_draws_no_rod_and_no_arrow() {
     s.q45_rad = [f64::NAN; 2];
     s.tip_force_n = [f64::NAN; 3];
     let update = scene::scene(&s, &g);
-    let got: Vec<&str> = update.entities.iter().map(|e| e.id.as_str()).collect();
-    assert_eq!(got, ids::ALL);
-    for id in [ids::UJOINT, ids::ROD, ids::TIP_FORCE, ids::FORCE_LIMITS] {
-        let e = entity(&update, id);
-        assert!(
-            e.arrows.is_empty() && e.cylinders.is_empty() && e.spheres.is_empty(),
-            "{id}"
-        );
+    // Every marker every time, in the namespaces' order.
+    assert_eq!(update.markers.len(), scene::MARKERS);
+    let mut namespaces: Vec<&str> = update.markers.iter().map(|m| m.ns.as_str()).collect();
+    namespaces.dedup();
+    assert_eq!(namespaces, ids::ALL);
+    for m in &update.markers {
+        let shown = m.action == action::ADD;
+        match m.ns.as_str() {
+            ns if ns == ids::BASE_FRAME || ns == ids::SUPPORT => assert!(shown, "{m:?}"),
+            // The carriage cube (its joints are valid), not its bracket to A.
+            ns if ns == ids::CARRIAGE => assert_eq!(shown, m.id == 0, "{m:?}"),
+            _ => assert_eq!(m.action, action::DELETE, "{m:?}"),
+        }
     }
-    assert_eq!(entity(&update, ids::BASE_FRAME).arrows.len(), 3);
-    assert_eq!(entity(&update, ids::SUPPORT).lines.len(), 1);
     assert!(all_finite(&update), "{update:?}");
+    // No frames of the rod or the tip without a pose.
+    assert_eq!(scene::moving_frames(&s, &g).transforms.len(), 1);
 
     // A pose but no estimate: the rod, no arrow.
     let mut s = state(&cfg, POSES[1], [2.0, 0.0, 0.0], guard_code::FAULT);
     s.flags = flags::POSE;
     let update = scene::scene(&s, &g);
-    assert_eq!(entity(&update, ids::ROD).cylinders.len(), 1);
-    assert!(entity(&update, ids::TIP_FORCE).arrows.is_empty());
+    assert_eq!(marker(&update, ids::ROD, 0).action, action::ADD);
+    assert_eq!(marker(&update, ids::TIP_FORCE, 0).action, action::DELETE);
     assert!(all_finite(&update));
 }
 
@@ -207,12 +218,14 @@ fn support_ring_is_around_b_across_the_rod() {
     let g = SceneGeometry::from_config(&cfg);
     let s = state(&cfg, POSES[2], [0.0; 3], guard_code::OK);
     let update = scene::scene(&s, &g);
-    let ring = &entity(&update, ids::SUPPORT).lines[0];
+    let ring = marker(&update, ids::SUPPORT, 0);
     let b = arr(cfg.calibration.support_m());
     let (u, _) = sar_kinematics::rod_frame(s.q45_rad[0], s.q45_rad[1]);
-    assert!(ring.points.len() >= 16);
-    for p in &ring.points {
-        let r = [p.x - b[0], p.y - b[1], p.z - b[2]];
+    assert!(ring.points_m.len() >= 16);
+    // Closed: the last point is the first.
+    assert_eq!(ring.points_m.first(), ring.points_m.last());
+    for p in &ring.points_m {
+        let r = [p[0] - b[0], p[1] - b[1], p[2] - b[2]];
         let radius = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
         assert!((radius - g.support_radius_m).abs() < 1e-12);
         assert!((r[0] * u.x + r[1] * u.y + r[2] * u.z).abs() < 1e-12);
@@ -220,60 +233,17 @@ fn support_ring_is_around_b_across_the_rod() {
 }
 
 #[test]
-fn the_scene_goes_into_an_mcap_file_and_back() {
+fn the_scene_encodes_and_decodes_as_drawn() {
     let cfg = config(0.0);
     let g = SceneGeometry::from_config(&cfg);
     let s = state(&cfg, POSES[0], [4.0, 1.0, 0.0], guard_code::OK);
     let update = scene::scene(&s, &g);
-    let schema = scene::schema();
-    assert_eq!(schema.name, "foxglove.SceneUpdate");
-    assert_eq!(schema.encoding, "protobuf");
-    assert_eq!(schema.message_encoding, "protobuf");
-    assert!(!schema.data.is_empty());
-
-    let mut file = Vec::new();
-    {
-        let mut w = mcap::Writer::new(std::io::Cursor::new(&mut file)).unwrap();
-        let id = w
-            .add_schema(&schema.name, &schema.encoding, &schema.data)
-            .unwrap();
-        let ch = w
-            .add_channel(
-                id,
-                sar_scene::SCENE_TOPIC,
-                &schema.message_encoding,
-                &BTreeMap::new(),
-            )
-            .unwrap();
-        let mut buf = Vec::new();
-        scene::encode(&update, &mut buf).unwrap();
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: 0,
-                log_time: s.now_ns,
-                publish_time: s.now_ns,
-            },
-            &buf,
-        )
-        .unwrap();
-        w.finish().unwrap();
+    let mut buf = Vec::new();
+    update.encode(&mut buf).unwrap();
+    assert_eq!(MarkerArray::decode(&buf).unwrap(), update);
+    for m in &update.markers {
+        assert_eq!((m.stamp_ns, m.frame_id.as_str()), (s.now_ns, "base"));
     }
-    let msgs: Vec<_> = mcap::MessageStream::new(&file)
-        .unwrap()
-        .collect::<Result<_, _>>()
-        .unwrap();
-    assert_eq!(msgs.len(), 1);
-    let m = &msgs[0];
-    assert_eq!(m.channel.topic, sar_scene::SCENE_TOPIC);
-    assert_eq!(m.log_time, s.now_ns);
-    let schema_back = m.channel.schema.as_ref().unwrap();
-    assert_eq!(schema_back.name, "foxglove.SceneUpdate");
-    assert_eq!(SceneUpdate::decode(&m.data[..]).unwrap(), update);
-    assert_eq!(
-        entity(&update, ids::ROD).timestamp.unwrap().total_nanos(),
-        s.now_ns
-    );
 }
 
 /// Every string of the layout that names a topic.
@@ -304,10 +274,13 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
     assert!(paths.len() > 10, "{paths:?}");
     let served = sarctl::view::served_topics();
     let schema_of = |topic: &str| -> &'static str {
+        use sar_msgs::msgs::RosMessage;
         use sar_msgs::msgs::Topic;
         match Topic::from_name(topic) {
             Some(t) => t.schema(),
             None if topic == sarctl::view::STATUS_TOPIC => sarctl::view::STATUS_SCHEMA,
+            None if topic == sar_scene::SCENE_STATUS_TOPIC => sar_msgs::msgs::SceneStatus::SCHEMA,
+            None if topic == sar_scene::SCENE_TOPIC => MarkerArray::SCHEMA,
             None => "",
         }
     };
@@ -328,8 +301,8 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
     // The plot of F_tip per axis, the guard's state and the 3D scene.
     for wanted in [
         "/sar/estimate/tip_wrench.wrench.force.x",
-        "/sar/view/status.stop_total_n",
-        "/sar/view/status.guard_code",
+        "/sar/scene/status.stop_total_n",
+        "/sar/scene/status.guard_state",
         sar_scene::SCENE_TOPIC,
     ] {
         assert!(paths.iter().any(|p| p == wanted), "{wanted}");

@@ -1,24 +1,27 @@
-//! The 3D scene (`sar-scene`): pure drawing, no I/O. The live view
-//! (`sarctl view`) and the recordings' companion files (`NAME.scene.mcap`)
-//! both draw it from the same functions, so a recording looks as the live
-//! view did.
+//! The 3D scene (`sar-scene`): pure drawing, no I/O. Every recording
+//! (`sar-record`, on the recorder's thread) and the live view (`sarctl
+//! view`) draw it from the same functions, as the same ROS 2 messages, so a
+//! recording looks as the live view did.
 //!
 //! - [`geometry`]: the robot and manipulator as drawn, from the
-//!   configuration (always built: the recording's settings carry it).
+//!   configuration.
 //! - [`draw`]: one published state and the geometry to a
-//!   `foxglove.SceneUpdate`, and its MCAP schema and encoding (cargo feature
-//!   `draw`: the Foxglove SDK's message types, which bring prost; `sard` is
-//!   built without it).
+//!   `visualization_msgs/MarkerArray` ([`SCENE_TOPIC`]) and the frames as
+//!   `tf2_msgs/TFMessage` ([`TF_STATIC_TOPIC`], [`TF_TOPIC`]); the messages
+//!   are `sar_msgs::scene`'s.
 //! - [`topics`]: the recordings' messages made from the published state, and
 //!   a state made from recorded messages.
 
+pub mod draw;
 pub mod geometry;
 pub mod topics;
 
-#[cfg(feature = "draw")]
-pub mod draw;
-
-/// The 3D scene's topic.
+/// The 3D scene's topic (`visualization_msgs/msg/MarkerArray`).
 pub const SCENE_TOPIC: &str = "/sar/scene";
-/// The scene's transform `world` -> `base`.
-pub const TF_TOPIC: &str = "/sar/scene/tf";
+/// The guard's figures at the scene's rate (`sar_msgs/msg/SceneStatus`).
+pub const SCENE_STATUS_TOPIC: &str = "/sar/scene/status";
+/// The fixed frames (`tf2_msgs/msg/TFMessage`, transient local): `world` ->
+/// `base`.
+pub const TF_STATIC_TOPIC: &str = "/tf_static";
+/// The moving frames (`tf2_msgs/msg/TFMessage`): `carriage`, `rod`, `tip`.
+pub const TF_TOPIC: &str = "/tf";

@@ -15,9 +15,9 @@
 
 use sar_msgs::msgs::{
     self, ActiveJointState, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
-    PassiveJointState, ReasonText, TipOutcomeCode, WrenchStamped,
+    PassiveJointState, ReasonText, SceneStatus, TipOutcomeCode, WrenchStamped,
 };
-use sar_msgs::wire::{StateMsg, flags, reason_name};
+use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 
 /// The recording's guard state of a wire code (the same numbers; an unknown
 /// one is Fault).
@@ -165,5 +165,43 @@ pub fn state_from_recorded(
         guard_reason: u32::from(est.guard_reason_code),
         limits_n,
         ..StateMsg::default()
+    }
+}
+
+/// `/sar/scene/status` of a published state: the guard's state and reason,
+/// |F_tip| and its axial and lateral parts (NaN without an estimate), the
+/// limits in use, and the simulator's truth (NaN without one).
+pub fn scene_status(s: &StateMsg) -> SceneStatus {
+    let estimate = s.flags & flags::ESTIMATE != 0;
+    let or_nan = |v: f64| if estimate { v } else { f64::NAN };
+    let f = s.tip_force_n;
+    let [
+        warn_total_n,
+        stop_total_n,
+        warn_axial_n,
+        stop_axial_n,
+        warn_lateral_n,
+        stop_lateral_n,
+    ] = s.limits_n;
+    SceneStatus {
+        stamp_ns: s.now_ns,
+        cycle: s.cycle,
+        guard_state: guard_state(s.guard_state),
+        guard: ReasonText::truncating(guard_state_name(s.guard_state)),
+        reason: reason_text(s.guard_reason),
+        force_total_n: or_nan((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()),
+        axial_n: or_nan(s.tip_axial_lateral_n[0]),
+        lateral_n: or_nan(s.tip_axial_lateral_n[1]),
+        warn_total_n,
+        stop_total_n,
+        warn_axial_n,
+        stop_axial_n,
+        warn_lateral_n,
+        stop_lateral_n,
+        truth_tip_force_n: if s.flags & flags::SIM_TRUTH != 0 {
+            s.truth_tip_force_n
+        } else {
+            [f64::NAN; 3]
+        },
     }
 }

@@ -121,6 +121,18 @@ pub fn rosbags(files: &[PathBuf]) -> serde_json::Value {
     run_json(cmd, "check_rosbags.py")
 }
 
+/// [`rosbags`] with `--scene`: each file also with "scene" (decoded
+/// `/sar/scene` messages with the arrow shown, and the state of the same log
+/// time) and "jazzy" (the scene's nested types that differ from rosbags'
+/// ROS 2 Jazzy definitions).
+pub fn rosbags_scene(files: &[PathBuf]) -> serde_json::Value {
+    let mut cmd = python();
+    cmd.arg(repo_root().join("scripts/test-readers/check_rosbags.py"))
+        .arg("--scene")
+        .args(files);
+    run_json(cmd, "check_rosbags.py --scene")
+}
+
 /// The Foxglove parsers over `files`, with the layout's message paths
 /// looked up: as [`rosbags`], with "profile" and "layout".
 pub fn foxglove(files: &[PathBuf]) -> serde_json::Value {

@@ -3,15 +3,15 @@
 use super::front;
 #[allow(unused_imports)]
 pub use super::{DEFAULT_BIND, DEFAULT_SCENE_HZ};
-use foxglove::messages::{FrameTransforms, SceneUpdate};
-use foxglove::{
-    Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
-};
+use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer};
 use sar_estimator::guard::ForceLimits;
-use sar_msgs::msgs::{Outgoing, Topic};
+use sar_msgs::msgs::{Outgoing, RosMessage, SceneStatus, Topic};
+use sar_msgs::scene::{MarkerArray, TfMessage};
 use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 use sar_scene::geometry::SceneGeometry;
-use sar_scene::{SCENE_TOPIC, TF_TOPIC, draw as scene, topics};
+use sar_scene::{
+    SCENE_STATUS_TOPIC, SCENE_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, draw as scene, topics,
+};
 use sar_shm::{Client, StateSubscription};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -38,7 +38,13 @@ pub const RECORD_TOPICS: [Topic; 5] = [
 /// Every topic the view serves.
 pub fn served_topics() -> Vec<&'static str> {
     let mut t: Vec<&'static str> = RECORD_TOPICS.iter().map(|t| t.name()).collect();
-    t.extend([SCENE_TOPIC, TF_TOPIC, STATUS_TOPIC]);
+    t.extend([
+        SCENE_TOPIC,
+        SCENE_STATUS_TOPIC,
+        TF_TOPIC,
+        TF_STATIC_TOPIC,
+        STATUS_TOPIC,
+    ]);
     t
 }
 
@@ -93,20 +99,26 @@ struct RecordChannels {
     channels: Vec<(Topic, Arc<RawChannel>)>,
 }
 
+/// A channel of CDR messages with a `ros2msg` schema, as in a recording.
+fn ros2_channel(
+    ctx: &Arc<Context>,
+    topic: &str,
+    type_name: &str,
+    schema: &'static str,
+) -> Result<Arc<RawChannel>, String> {
+    ChannelBuilder::new(topic)
+        .message_encoding("cdr")
+        .schema(Schema::new(type_name, "ros2msg", schema.as_bytes()))
+        .context(ctx)
+        .build_raw()
+        .map_err(|e| format!("cannot create the channel {topic}: {e}"))
+}
+
 impl RecordChannels {
     fn new(ctx: &Arc<Context>) -> Result<Self, String> {
         let mut channels = Vec::new();
         for topic in RECORD_TOPICS {
-            let channel = ChannelBuilder::new(topic.name())
-                .message_encoding("cdr")
-                .schema(Schema::new(
-                    topic.type_name(),
-                    "ros2msg",
-                    topic.schema().as_bytes(),
-                ))
-                .context(ctx)
-                .build_raw()
-                .map_err(|e| format!("cannot create the channel {}: {e}", topic.name()))?;
+            let channel = ros2_channel(ctx, topic.name(), topic.type_name(), topic.schema())?;
             channels.push((topic, channel));
         }
         Ok(Self { channels })
@@ -182,8 +194,10 @@ fn status_json(s: &StateMsg, lost: u64) -> serde_json::Value {
 /// The view's state between two published states.
 struct Publisher {
     records: RecordChannels,
-    scene: Channel<SceneUpdate>,
-    tf: Channel<FrameTransforms>,
+    scene: Arc<RawChannel>,
+    tf: Arc<RawChannel>,
+    tf_static: Arc<RawChannel>,
+    scene_status: Arc<RawChannel>,
     status: Arc<RawChannel>,
     geometry: SceneGeometry,
     scene_period_ns: u64,
@@ -220,13 +234,31 @@ impl Publisher {
             if self.next_scene_ns <= s.now_ns {
                 self.next_scene_ns = s.now_ns.saturating_add(self.scene_period_ns);
             }
-            if self.scene.has_sinks() {
-                self.scene
-                    .log_with_meta(&scene::scene(s, &self.geometry), meta());
+            // The same messages as a recording's; `/tf_static` with every
+            // scene, so that a client that joins later has the fixed frames.
+            if self.scene.has_sinks()
+                && scene::scene(s, &self.geometry)
+                    .encode(&mut self.buf)
+                    .is_ok()
+            {
+                self.scene.log_with_meta(&self.buf, meta());
             }
-            if self.tf.has_sinks() {
-                self.tf
-                    .log_with_meta(&scene::frame_transforms(s.now_ns), meta());
+            if self.tf.has_sinks()
+                && scene::moving_frames(s, &self.geometry)
+                    .encode(&mut self.buf)
+                    .is_ok()
+            {
+                self.tf.log_with_meta(&self.buf, meta());
+            }
+            if self.tf_static.has_sinks()
+                && scene::static_frames(s.now_ns).encode(&mut self.buf).is_ok()
+            {
+                self.tf_static.log_with_meta(&self.buf, meta());
+            }
+            if self.scene_status.has_sinks()
+                && topics::scene_status(s).encode(&mut self.buf).is_ok()
+            {
+                self.scene_status.log_with_meta(&self.buf, meta());
             }
             if self.status.has_sinks()
                 && let Ok(bytes) = serde_json::to_vec(&status_json(s, self.lost))
@@ -255,8 +287,25 @@ impl Publisher {
     /// The view's channels in `ctx`, nothing published yet.
     fn new(ctx: &Arc<Context>, opts: &ViewOptions) -> Result<Self, String> {
         let records = RecordChannels::new(ctx)?;
-        let scene = ctx.channel_builder(SCENE_TOPIC).build::<SceneUpdate>();
-        let tf = ctx.channel_builder(TF_TOPIC).build::<FrameTransforms>();
+        let scene = ros2_channel(
+            ctx,
+            SCENE_TOPIC,
+            MarkerArray::TYPE_NAME,
+            MarkerArray::SCHEMA,
+        )?;
+        let tf = ros2_channel(ctx, TF_TOPIC, TfMessage::TYPE_NAME, TfMessage::SCHEMA)?;
+        let scene_status = ros2_channel(
+            ctx,
+            SCENE_STATUS_TOPIC,
+            SceneStatus::TYPE_NAME,
+            SceneStatus::SCHEMA,
+        )?;
+        let tf_static = ros2_channel(
+            ctx,
+            TF_STATIC_TOPIC,
+            TfMessage::TYPE_NAME,
+            TfMessage::SCHEMA,
+        )?;
         let status = ChannelBuilder::new(STATUS_TOPIC)
             .message_encoding("json")
             .schema(Schema::new(
@@ -271,6 +320,8 @@ impl Publisher {
             records,
             scene,
             tf,
+            tf_static,
+            scene_status,
             status,
             geometry: opts.geometry,
             scene_period_ns: (1e9 / opts.scene_hz) as u64,

@@ -10,9 +10,12 @@
 //! - the recordings' topics (INTERFACES.md 1, `ros2msg` schemas and `cdr`
 //!   messages from [`sar_msgs::msgs`]) that the state holds, every
 //!   state ([`topics`]);
-//! - `sar_scene::SCENE_TOPIC` (`foxglove.SceneUpdate`, protobuf, drawn by
-//!   `sar_scene::draw`) and `sar_scene::TF_TOPIC` (`foxglove.FrameTransforms`: `world` -> `base`, Y0 up),
-//!   decimated to `scene_hz` by the state's clock;
+//! - the 3D scene as in every recording: `sar_scene::SCENE_TOPIC`
+//!   (`visualization_msgs/msg/MarkerArray`, drawn by `sar_scene::draw`),
+//!   `sar_scene::TF_TOPIC` and `sar_scene::TF_STATIC_TOPIC`
+//!   (`tf2_msgs/msg/TFMessage`; the fixed frames again with every scene, for
+//!   a client that joins later), CDR, decimated to `scene_hz` by the
+//!   state's clock;
 //! - [`STATUS_TOPIC`] (JSON: |F_tip|, the guard's limits and state, the
 //!   loop's figures, the states the view lost), at the scene's rate.
 //!
@@ -21,7 +24,7 @@
 //! or parameters. Messages for a client wait in the SDK's per-client queue
 //! (`BACKLOG` messages; a stalled client loses the oldest).
 //!
-//! The Foxglove SDK brings tokio, prost and tungstenite: only `sarctl`
+//! The Foxglove SDK's server brings tokio and tungstenite: only `sarctl`
 //! links them (`sard` is another crate, which does not depend on this one).
 
 pub mod front;
