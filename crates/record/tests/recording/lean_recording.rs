@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// A recording of `mode` into `dir`, from the first cycle on, with a
-/// snapshot every 250 ms.
+/// snapshot every 250 ms and the 3D scene at 30 Hz.
 fn recording(
     dir: &Path,
     mode: RecordMode,
@@ -44,7 +44,7 @@ fn recording(
             directory: dir.to_path_buf(),
             rotation: Rotation::default(),
             queue_capacity: 1 << 20,
-            scene_period_ns: None,
+            scene_period_ns: Some(33_333_333),
             snapshot_period_ns: 250_000_000,
             config_source: Some(Arc::new(config::ConfigSource {
                 origin: "the built-in configuration".into(),
@@ -53,7 +53,9 @@ fn recording(
             mode,
             scales,
         },
-        None,
+        // The 3D scene as `sard` writes it (the lean mode writes none; its
+        // replay draws it into the full file).
+        sar_record::SceneOptions::from_config(&config::builtin().unwrap()),
         bias,
         Arc::clone(&switch),
     )
