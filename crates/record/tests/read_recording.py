@@ -38,6 +38,9 @@ def flatten(prefix, value, out):
         out.append(f"{prefix}=i:{value}")
     elif isinstance(value, str):
         out.append(f"{prefix}=s:{value.encode('utf-8').hex()}")
+    elif isinstance(value, (bytes, bytearray)):
+        # A uint8[] (e.g. a Marker's empty texture data).
+        out.append(f"{prefix}=x:{bytes(value).hex()}")
     elif isinstance(value, (list, tuple)) or hasattr(value, "tolist"):
         items = value.tolist() if hasattr(value, "tolist") else value
         for i, v in enumerate(items):
