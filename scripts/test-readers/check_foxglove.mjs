@@ -1,7 +1,9 @@
 // A strict check of MCAP recordings with the parsers Foxglove and Lichtblick
 // use: @mcap/core's indexed reader (zstd by @mcap/support), every `ros2msg`
-// schema parsed by @foxglove/rosmsg `parse(text, { ros2: true })`, every
-// message decoded by @foxglove/rosmsg2-serialization's MessageReader. With
+// schema parsed by @foxglove/rosmsg `parse(text, { ros2: true })` and by
+// Lichtblick's @lichtblick/rosmsg, every message decoded by
+// @foxglove/rosmsg2-serialization's MessageReader with the definitions of
+// each parser. With
 // `--layout FILE`, every message path of the Foxglove layout whose topic is in
 // a file (`/topic.field.sub[0]`) is looked up in that topic's decoded
 // messages.
@@ -22,12 +24,13 @@ if (!dir) {
   console.error("SAR_READERS_NODE is not set (scripts/setup-test-readers.sh)");
   process.exit(3);
 }
-let McapIndexedReader, loadDecompressHandlers, parse, MessageReader;
+let McapIndexedReader, loadDecompressHandlers, parse, parseLichtblick, MessageReader;
 try {
   const require = createRequire(path.join(path.resolve(dir), "node_modules", "x.js"));
   ({ McapIndexedReader } = require("@mcap/core"));
   ({ loadDecompressHandlers } = require("@mcap/support"));
   ({ parse } = require("@foxglove/rosmsg"));
+  ({ parse: parseLichtblick } = require("@lichtblick/rosmsg"));
   ({ MessageReader } = require("@foxglove/rosmsg2-serialization"));
 } catch (e) {
   console.error(`missing npm package: ${e.message} (scripts/setup-test-readers.sh)`);
@@ -97,6 +100,7 @@ async function check(file, paths) {
     });
     out.profile = reader.header.profile;
     const readers = new Map();
+    const lichtblick = new Map();
     const samples = new Map();
     for (const [id, schema] of reader.schemasById) {
       out.schemas += 1;
@@ -104,11 +108,18 @@ async function check(file, paths) {
         fail(`schema ${schema.name}: encoding ${schema.encoding}`);
         continue;
       }
+      const text = new TextDecoder().decode(schema.data);
       try {
-        const defs = parse(new TextDecoder().decode(schema.data), { ros2: true });
+        const defs = parse(text, { ros2: true });
         readers.set(id, new MessageReader(defs));
       } catch (e) {
         fail(`schema ${schema.name}: ${e.message}`);
+      }
+      try {
+        const defs = parseLichtblick(text, { ros2: true });
+        lichtblick.set(id, new MessageReader(defs));
+      } catch (e) {
+        fail(`schema ${schema.name} (@lichtblick/rosmsg): ${e.message}`);
       }
     }
     for (const channel of reader.channelsById.values()) {
@@ -138,6 +149,11 @@ async function check(file, paths) {
         }
       } catch (e) {
         fail(`${channel.topic}: message ${message.sequence}: ${e.message}`);
+      }
+      try {
+        lichtblick.get(channel.schemaId)?.readMessage(message.data);
+      } catch (e) {
+        fail(`${channel.topic}: message ${message.sequence} (@lichtblick/rosmsg): ${e.message}`);
       }
     }
     const topics = new Set([...reader.channelsById.values()].map((c) => c.topic));

@@ -2,8 +2,9 @@
 //! this project's code: Python `rosbags` (the file opened by
 //! `rosbags.rosbag2.Reader`, a type store built only from the schemas the
 //! file embeds) and the parsers Foxglove and Lichtblick use (`@mcap/core`,
-//! `@foxglove/rosmsg` `parse(.., {ros2: true})`,
-//! `@foxglove/rosmsg2-serialization`), each decoding every schema and every
+//! `@foxglove/rosmsg` `parse(.., {ros2: true})`, Lichtblick's
+//! `@lichtblick/rosmsg`, `@foxglove/rosmsg2-serialization`), each decoding
+//! every schema and every
 //! message with 0 failures, on
 //! - every fixture under `tests/fixtures/`,
 //! - a `sarctl replay` output,
