@@ -719,21 +719,23 @@ impl RotatingWriter {
             log_ns,
         };
         if !channels.static_written {
-            out.tf(channels.tf_static, 0, &scene::static_frames(log_ns))?;
+            let frames = scene::static_frames(log_ns);
+            out.put((channels.tf_static, 0), sar_scene::TF_STATIC_TOPIC, |b| {
+                frames.encode(b)
+            })?;
             channels.static_written = true;
         }
-        out.markers(
-            channels.scene,
-            channels.sequence,
-            &scene::scene(&published, geometry),
-        )?;
-        out.tf(
-            channels.tf,
-            channels.sequence,
-            &scene::moving_frames(&published, geometry),
-        )?;
+        let at = |channel| (channel, channels.sequence);
+        let markers = scene::scene(&published, geometry);
+        out.put(at(channels.scene), sar_scene::SCENE_TOPIC, |b| {
+            markers.encode(b)
+        })?;
+        let frames = scene::moving_frames(&published, geometry);
+        out.put(at(channels.tf), sar_scene::TF_TOPIC, |b| frames.encode(b))?;
         let status = sar_scene::topics::scene_status(&published);
-        out.status(channels.status, channels.sequence, &status)?;
+        out.put(at(channels.status), sar_scene::SCENE_STATUS_TOPIC, |b| {
+            status.encode(b)
+        })?;
         channels.sequence = channels.sequence.wrapping_add(1);
         Ok(())
     }
@@ -865,7 +867,15 @@ struct SceneOut<'a> {
 }
 
 impl SceneOut<'_> {
-    fn write(&mut self, channel_id: u16, sequence: u32) -> Result<(), WriteError> {
+    /// Encodes one message of `topic` (by `encode`, into the reused buffer)
+    /// and writes it on `channel_id`.
+    fn put(
+        &mut self,
+        (channel_id, sequence): (u16, u32),
+        topic: &'static str,
+        encode: impl FnOnce(&mut Vec<u8>) -> Result<(), sar_msgs::cdr::CdrError>,
+    ) -> Result<(), WriteError> {
+        encode(self.buf).map_err(|source| WriteError::Encode { topic, source })?;
         let header = mcap::records::MessageHeader {
             channel_id,
             sequence,
@@ -875,40 +885,6 @@ impl SceneOut<'_> {
         self.writer
             .write_to_known_channel(&header, self.buf)
             .map_err(|source| WriteError::mcap(self.path.to_path_buf(), source))
-    }
-
-    fn markers(
-        &mut self,
-        channel_id: u16,
-        sequence: u32,
-        m: &MarkerArray,
-    ) -> Result<(), WriteError> {
-        m.encode(self.buf).map_err(|source| WriteError::Encode {
-            topic: sar_scene::SCENE_TOPIC,
-            source,
-        })?;
-        self.write(channel_id, sequence)
-    }
-
-    fn status(
-        &mut self,
-        channel_id: u16,
-        sequence: u32,
-        m: &SceneStatus,
-    ) -> Result<(), WriteError> {
-        m.encode(self.buf).map_err(|source| WriteError::Encode {
-            topic: sar_scene::SCENE_STATUS_TOPIC,
-            source,
-        })?;
-        self.write(channel_id, sequence)
-    }
-
-    fn tf(&mut self, channel_id: u16, sequence: u32, t: &TfMessage) -> Result<(), WriteError> {
-        t.encode(self.buf).map_err(|source| WriteError::Encode {
-            topic: sar_scene::TF_TOPIC,
-            source,
-        })?;
-        self.write(channel_id, sequence)
     }
 }
 
