@@ -171,6 +171,11 @@ impl<'a> CdrWriter<'a> {
         self.align(4);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
+    /// An f32, aligned to 4.
+    pub fn f32(&mut self, v: f32) {
+        self.align(4);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
     /// A u64, aligned to 8.
     pub fn u64(&mut self, v: u64) {
         self.align(8);
@@ -311,6 +316,12 @@ impl<'a> CdrReader<'a> {
     pub fn i32(&mut self) -> Result<i32, CdrError> {
         self.align(4)?;
         Ok(i32::from_le_bytes(self.array()?))
+    }
+    /// An f32.
+    #[inline(always)]
+    pub fn f32(&mut self) -> Result<f32, CdrError> {
+        self.align(4)?;
+        Ok(f32::from_le_bytes(self.array()?))
     }
     /// A u64.
     #[inline(always)]
