@@ -15,7 +15,7 @@ use crate::cdr::{CdrError, CdrReader, CdrWriter, FixedStr};
 use crate::msgs::{FrameId, RosMessage};
 
 /// Markers in one [`MarkerArray`] at most.
-pub const MAX_MARKERS: usize = 16;
+pub const MAX_MARKERS: usize = 24;
 /// Points of one [`Marker`] at most.
 pub const MAX_POINTS: usize = 40;
 /// Transforms in one [`TfMessage`] at most.

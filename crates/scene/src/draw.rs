@@ -1,74 +1,80 @@
-//! The 3D scene of the live view and of the recordings: a pure
-//! function of one published state ([`StateMsg`]) and the robot's geometry
-//! ([`SceneGeometry`], from the configuration's calibration and profile) to a
-//! `foxglove.SceneUpdate`, everything in the frame `base` ({0}, MODEL.md 2).
+//! The 3D scene of the live view and of the recordings: a pure function of
+//! one published state ([`StateMsg`]) and the robot's geometry
+//! ([`SceneGeometry`]) to a `visualization_msgs/msg/MarkerArray`
+//! ([`scene`]), everything in the frame `base` ({0}, MODEL.md 2), and the
+//! frames as `tf2_msgs/msg/TFMessage` ([`static_transforms`]: `world` ->
+//! `base`; [`moving_transforms`]: `base` -> `carriage`, `base` -> `tip`).
 //!
-//! Entities (ids in [`ids`]; each update replaces them all, an entity with
-//! nothing to show is sent empty):
-//! - the base frame: X0, Y0, Z0 as red, green, blue arrows at the origin;
+//! Markers (namespace and id in [`ids`]; every scene carries every one of
+//! them, and one with nothing to show is sent with action DELETE):
+//! - the base frame: X0, Y0, Z0 as red, green, blue arrows at the origin,
+//!   with their names;
 //! - the carriage P = P_home + (q3, q2, q1) (a cube) and its bracket to A;
-//! - the U-joint A (a sphere);
-//! - the rod: a cylinder of the configured length L from A's foot on the rod
-//!   axis (A + d w) along u (from the published q4, q5) to the tip, through B;
+//! - the U-joint A (a sphere) and its offset d to the rod axis;
+//! - the rod: a line of the configured length L and the rod's diameter from
+//!   A's foot on the rod axis (A + d w) along u to the tip D, through B; the
+//!   tip a sphere;
 //! - the support B as a ring around the rod axis;
 //! - F_tip as an arrow from the tip D, `force_scale_m_per_n` metres per
-//!   newton, coloured by the guard's state (ok green, warn amber, stop red,
-//!   fault magenta);
-//! - the limits as translucent spheres at the tip: radius = the total warn and
-//!   stop limits at the same scale (the arrow reaching a sphere is the force
-//!   reaching that limit).
+//!   newton (points: tail, head), coloured by the guard's state (ok green,
+//!   warn amber, stop red, fault magenta), and its magnitude as text;
+//! - the limits as translucent spheres at the tip: radius = the total warn
+//!   and stop limits at the same scale (the arrow reaching a sphere is the
+//!   force reaching that limit).
 //!
-//! The rod, the tip and the limits need the pose ([`flags::POSE`]); the arrow
-//! needs an estimate ([`flags::ESTIMATE`]).
-//!
-//! [`frame_transforms`] gives the transform `world` -> `base` that shows Y0
-//! up in Foxglove (whose 3D view has Z up). [`encode`] and [`schema`] give
-//! the bytes and the schema for an MCAP channel (protobuf, the SDK's
-//! built-in descriptor).
+//! The rod, the tip and the limits need the pose ([`flags::POSE`]); the
+//! arrow needs an estimate ([`flags::ESTIMATE`]). Nothing here allocates.
 
 use crate::geometry::SceneGeometry;
-use foxglove::Encode;
-use foxglove::messages::{
-    ArrowPrimitive, Color, CubePrimitive, CylinderPrimitive, FrameTransform, FrameTransforms,
-    KeyValuePair, LinePrimitive, Point3, Pose, Quaternion, SceneEntity, SceneUpdate,
-    SpherePrimitive, TextPrimitive, Timestamp, Vector3, line_primitive,
+use core::fmt::Write as _;
+use sar_msgs::msgs::FrameId;
+use sar_msgs::viz::{
+    Marker, MarkerArray, MarkerNs, MarkerText, Pose, TfMessage, TransformStamped, marker_action,
+    marker_type,
 };
 use sar_msgs::wire::{StateMsg, flags, guard_code};
 
 /// The frame id of the base frame {0} (as in the recordings).
 pub const FRAME_BASE: &str = "base";
-/// The frame id of the display frame, Z up (Foxglove's convention).
+/// The frame id of the display frame, Z up (rviz's and Foxglove's
+/// convention).
 pub const FRAME_WORLD: &str = "world";
+/// The carriage's frame (at P, axes of {0}).
+pub const FRAME_CARRIAGE: &str = "carriage";
+/// The tip's frame (at D, x along the rod axis u).
+pub const FRAME_TIP: &str = "tip";
 
-/// The entity ids.
+/// The markers' namespaces and ids.
 pub mod ids {
-    /// The base frame's axes.
+    /// The base frame's axes (ids 0..=2: X0, Y0, Z0) and names (3..=5).
     pub const BASE_FRAME: &str = "base_frame";
-    /// The carriage P and its bracket to A.
+    /// The carriage P (id 0) and its bracket to A (id 1).
     pub const CARRIAGE: &str = "carriage";
-    /// The U-joint A.
+    /// The U-joint A (id 0) and its offset to the rod axis (id 1).
     pub const UJOINT: &str = "ujoint";
-    /// The rod.
+    /// The rod (id 0: a line from A's foot to the tip) and the tip (id 1).
     pub const ROD: &str = "rod";
-    /// The support B.
+    /// The support B (id 0: a closed line).
     pub const SUPPORT: &str = "support";
-    /// The tip force.
+    /// The tip force (id 0: an arrow by its points, tail at the tip; id 1:
+    /// its magnitude as text).
     pub const TIP_FORCE: &str = "tip_force";
-    /// The force limits.
+    /// The force limits (id 0: warn, id 1: stop).
     pub const FORCE_LIMITS: &str = "force_limits";
-    /// Every id, in the order of the update's entities.
-    pub const ALL: [&str; 7] = [
-        BASE_FRAME,
-        CARRIAGE,
-        UJOINT,
-        ROD,
-        SUPPORT,
-        TIP_FORCE,
-        FORCE_LIMITS,
+    /// Every namespace, in the array's order, with its number of ids.
+    pub const ALL: [(&str, i32); 7] = [
+        (BASE_FRAME, 6),
+        (CARRIAGE, 2),
+        (UJOINT, 2),
+        (ROD, 2),
+        (SUPPORT, 1),
+        (TIP_FORCE, 2),
+        (FORCE_LIMITS, 2),
     ];
 }
 
 type V3 = [f64; 3];
+type Rgba = [f32; 4];
 
 fn add(a: V3, b: V3) -> V3 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
@@ -93,98 +99,33 @@ fn finite(a: V3) -> bool {
     a.iter().all(|x| x.is_finite())
 }
 
-/// The rotation taking `from` (unit) onto `to` (unit), as a quaternion; a
-/// half turn about `across` (unit, perpendicular to `from`) when they are
-/// opposite.
-fn rotation_between(from: V3, to: V3, across: V3) -> Quaternion {
+/// The rotation taking `from` (unit) onto `to` (unit), as a quaternion
+/// (x, y, z, w); a half turn about `across` (unit, perpendicular to `from`)
+/// when they are opposite.
+fn rotation_between(from: V3, to: V3, across: V3) -> [f64; 4] {
     let w = 1.0 + dot(from, to);
     if w < 1e-9 {
-        return Quaternion {
-            x: across[0],
-            y: across[1],
-            z: across[2],
-            w: 0.0,
-        };
+        return [across[0], across[1], across[2], 0.0];
     }
     let c = cross(from, to);
     let n = (w * w + dot(c, c)).sqrt();
-    Quaternion {
-        x: c[0] / n,
-        y: c[1] / n,
-        z: c[2] / n,
-        w: w / n,
-    }
+    [c[0] / n, c[1] / n, c[2] / n, w / n]
 }
 
-/// Rotates `v` by the unit quaternion `q`.
-pub fn rotate(q: &Quaternion, v: V3) -> V3 {
-    let u = [q.x, q.y, q.z];
+/// Rotates `v` by the unit quaternion `q` (x, y, z, w).
+pub fn rotate(q: &[f64; 4], v: V3) -> V3 {
+    let u = [q[0], q[1], q[2]];
     let t = scale(cross(u, v), 2.0);
-    add(add(v, scale(t, q.w)), cross(u, t))
-}
-
-fn vec3(a: V3) -> Vector3 {
-    Vector3 {
-        x: a[0],
-        y: a[1],
-        z: a[2],
-    }
-}
-fn point(a: V3) -> Point3 {
-    Point3 {
-        x: a[0],
-        y: a[1],
-        z: a[2],
-    }
-}
-fn pose(at: V3, orientation: Quaternion) -> Option<Pose> {
-    Some(Pose {
-        position: Some(vec3(at)),
-        orientation: Some(orientation),
-    })
-}
-fn identity() -> Quaternion {
-    Quaternion {
-        x: 0.0,
-        y: 0.0,
-        z: 0.0,
-        w: 1.0,
-    }
-}
-fn color(r: f64, g: f64, b: f64, a: f64) -> Option<Color> {
-    Some(Color { r, g, b, a })
+    add(add(v, scale(t, q[3])), cross(u, t))
 }
 
 /// The colour of a guard state (alpha 1).
-pub fn guard_color(code: u32) -> (f64, f64, f64) {
+pub fn guard_color(code: u32) -> Rgba {
     match code {
-        guard_code::OK => (0.1, 0.75, 0.2),
-        guard_code::WARN => (1.0, 0.65, 0.0),
-        guard_code::STOP => (0.9, 0.1, 0.1),
-        _ => (0.8, 0.0, 0.8),
-    }
-}
-
-/// The foxglove timestamp of a monotonic stamp, ns.
-pub fn timestamp(ns: u64) -> Timestamp {
-    let sec = u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX);
-    // Below 1e9: fits.
-    let nsec = u32::try_from(ns % 1_000_000_000).unwrap_or(0);
-    Timestamp::new(sec, nsec)
-}
-
-/// An arrow from `from` along `dir` (any length > 0), `length` long.
-fn arrow(from: V3, dir: V3, length: f64, diameter: f64, c: Option<Color>) -> ArrowPrimitive {
-    let n = norm(dir);
-    let d = scale(dir, 1.0 / n);
-    let head = (0.25 * length).min(4.0 * diameter);
-    ArrowPrimitive {
-        pose: pose(from, rotation_between([1.0, 0.0, 0.0], d, [0.0, 0.0, 1.0])),
-        shaft_length: length - head,
-        shaft_diameter: diameter,
-        head_length: head,
-        head_diameter: 2.5 * diameter,
-        color: c,
+        guard_code::OK => [0.1, 0.75, 0.2, 1.0],
+        guard_code::WARN => [1.0, 0.65, 0.0, 1.0],
+        guard_code::STOP => [0.9, 0.1, 0.1, 1.0],
+        _ => [0.8, 0.0, 0.8, 1.0],
     }
 }
 
@@ -199,8 +140,8 @@ fn perpendicular(u: V3) -> V3 {
     scale(p, 1.0 / norm(p))
 }
 
-/// Points of the support ring.
-const RING_POINTS: usize = 32;
+/// Points of the support ring (closed: the first again at the end).
+pub const RING_POINTS: usize = 32;
 
 /// u and w of MODEL.md 3 from q4, q5.
 fn rod_frame(q45_rad: [f64; 2]) -> (V3, V3) {
@@ -208,265 +149,403 @@ fn rod_frame(q45_rad: [f64; 2]) -> (V3, V3) {
     ([u.x, u.y, u.z], [w.x, w.y, w.z])
 }
 
-fn entity(id: &str, stamp: &Timestamp) -> SceneEntity {
-    SceneEntity {
-        timestamp: Some(*stamp),
-        frame_id: FRAME_BASE.to_owned(),
-        id: id.to_owned(),
-        ..SceneEntity::default()
-    }
+const GREY: Rgba = [0.6, 0.6, 0.65, 1.0];
+const DARK: Rgba = [0.3, 0.3, 0.35, 1.0];
+const ROD: Rgba = [0.85, 0.85, 0.9, 1.0];
+const RING: Rgba = [0.95, 0.8, 0.2, 1.0];
+const WARN_SPHERE: Rgba = [1.0, 0.65, 0.0, 0.08];
+const STOP_SPHERE: Rgba = [0.9, 0.1, 0.1, 0.12];
+
+/// What one scene is drawn from, worked out once.
+struct Frame<'a> {
+    s: &'a StateMsg,
+    g: &'a SceneGeometry,
+    has_pose: bool,
+    has_force: bool,
+    u: V3,
+    w: V3,
 }
 
-/// The scene of one published state.
-pub fn scene(s: &StateMsg, g: &SceneGeometry) -> SceneUpdate {
-    let stamp = timestamp(s.now_ns);
-    let has_pose = s.flags & flags::POSE != 0
-        && finite(s.ujoint_m)
-        && finite(s.tip_m)
-        && s.q45_rad.iter().all(|x| x.is_finite());
-    let has_force = has_pose && s.flags & flags::ESTIMATE != 0 && finite(s.tip_force_n);
-    let (u, w) = rod_frame(s.q45_rad);
-    let (gr, gg, gb) = guard_color(s.guard_state);
-
-    // The base frame.
-    let mut base = entity(ids::BASE_FRAME, &stamp);
-    let axes = [
-        ([1.0, 0.0, 0.0], "X0", color(0.9, 0.1, 0.1, 1.0)),
-        ([0.0, 1.0, 0.0], "Y0", color(0.1, 0.8, 0.1, 1.0)),
-        ([0.0, 0.0, 1.0], "Z0", color(0.1, 0.3, 0.9, 1.0)),
-    ];
-    for (dir, name, c) in axes {
-        base.arrows
-            .push(arrow([0.0; 3], dir, g.axis_length_m, 0.004, c));
-        base.texts.push(TextPrimitive {
-            pose: pose(scale(dir, 1.15 * g.axis_length_m), identity()),
-            billboard: true,
-            font_size: 12.0,
-            scale_invariant: true,
-            color: c,
-            text: name.to_owned(),
-        });
-    }
-
-    // The carriage P and its bracket to A.
-    let mut carriage = entity(ids::CARRIAGE, &stamp);
-    let p = add(g.p_home_m, [s.q_m[2], s.q_m[1], s.q_m[0]]);
-    if finite(p) {
-        carriage.cubes.push(CubePrimitive {
-            pose: pose(p, identity()),
-            size: Some(vec3([0.04, 0.04, 0.04])),
-            color: color(0.6, 0.6, 0.65, 1.0),
-        });
-        if has_pose {
-            carriage.lines.push(LinePrimitive {
-                r#type: line_primitive::Type::LineStrip as i32,
-                pose: pose([0.0; 3], identity()),
-                thickness: 0.006,
-                scale_invariant: false,
-                points: vec![point(p), point(s.ujoint_m)],
-                color: color(0.6, 0.6, 0.65, 1.0),
-                ..LinePrimitive::default()
-            });
+impl<'a> Frame<'a> {
+    fn new(s: &'a StateMsg, g: &'a SceneGeometry) -> Self {
+        let has_pose = s.flags & flags::POSE != 0
+            && finite(s.ujoint_m)
+            && finite(s.tip_m)
+            && s.q45_rad.iter().all(|x| x.is_finite());
+        let has_force = has_pose && s.flags & flags::ESTIMATE != 0 && finite(s.tip_force_n);
+        let (u, w) = rod_frame(s.q45_rad);
+        Self {
+            s,
+            g,
+            has_pose,
+            has_force,
+            u,
+            w,
         }
     }
 
-    // The U-joint A, the rod, the tip.
-    let mut ujoint = entity(ids::UJOINT, &stamp);
-    let mut rod = entity(ids::ROD, &stamp);
-    if has_pose {
-        ujoint.spheres.push(SpherePrimitive {
-            pose: pose(s.ujoint_m, identity()),
-            size: Some(vec3([0.02, 0.02, 0.02])),
-            color: color(0.3, 0.3, 0.35, 1.0),
-        });
-        let foot = add(s.ujoint_m, scale(w, g.offset_m));
-        if g.offset_m != 0.0 {
-            ujoint.lines.push(LinePrimitive {
-                r#type: line_primitive::Type::LineStrip as i32,
-                pose: pose([0.0; 3], identity()),
-                thickness: 0.004,
-                points: vec![point(s.ujoint_m), point(foot)],
-                color: color(0.3, 0.3, 0.35, 1.0),
-                ..LinePrimitive::default()
-            });
+    /// A marker of `ns`/`id` to add, of `kind`.
+    fn marker(&self, ns: &str, id: i32, kind: i32, color: Rgba) -> Marker {
+        Marker {
+            stamp_ns: self.s.now_ns,
+            frame_id: FrameId::truncating(FRAME_BASE),
+            ns: MarkerNs::truncating(ns),
+            id,
+            kind,
+            action: marker_action::ADD,
+            color,
+            ..Marker::default()
         }
-        let centre = add(foot, scale(u, 0.5 * g.length_m));
-        rod.cylinders.push(CylinderPrimitive {
-            pose: pose(
-                centre,
-                rotation_between([0.0, 0.0, 1.0], u, [1.0, 0.0, 0.0]),
-            ),
-            size: Some(vec3([g.rod_diameter_m, g.rod_diameter_m, g.length_m])),
-            bottom_scale: 1.0,
-            top_scale: 1.0,
-            color: color(0.85, 0.85, 0.9, 1.0),
-        });
-        rod.spheres.push(SpherePrimitive {
-            pose: pose(s.tip_m, identity()),
-            size: Some(vec3([1.6 * g.rod_diameter_m; 3])),
-            color: color(gr, gg, gb, 1.0),
-        });
-        rod.metadata.push(KeyValuePair {
-            key: "cycle".to_owned(),
-            value: s.cycle.to_string(),
-        });
     }
 
-    // The support ring around the rod axis (or around X0 without a pose).
-    let mut support = entity(ids::SUPPORT, &stamp);
-    let axis = if has_pose { u } else { [1.0, 0.0, 0.0] };
-    let e1 = perpendicular(axis);
-    let e2 = cross(axis, e1);
-    let points = (0..RING_POINTS)
-        .map(|k| {
-            let t = std::f64::consts::TAU * k as f64 / RING_POINTS as f64;
-            let r = add(scale(e1, t.cos()), scale(e2, t.sin()));
-            point(add(g.support_m, scale(r, g.support_radius_m)))
-        })
-        .collect();
-    support.lines.push(LinePrimitive {
-        r#type: line_primitive::Type::LineLoop as i32,
-        pose: pose([0.0; 3], identity()),
-        thickness: 0.004,
-        points,
-        color: color(0.95, 0.8, 0.2, 1.0),
-        ..LinePrimitive::default()
-    });
-
-    // F_tip from the tip.
-    let mut force = entity(ids::TIP_FORCE, &stamp);
-    let magnitude = norm(s.tip_force_n);
-    if has_force {
-        let length = magnitude * g.force_scale_m_per_n;
-        if length > 1e-6 {
-            force.arrows.push(arrow(
-                s.tip_m,
-                s.tip_force_n,
-                length,
-                0.005,
-                color(gr, gg, gb, 1.0),
-            ));
+    /// The marker of `ns`/`id` deleted (nothing to show).
+    fn deleted(&self, ns: &str, id: i32) -> Marker {
+        Marker {
+            action: marker_action::DELETE,
+            ..self.marker(ns, id, marker_type::SPHERE, [0.0; 4])
         }
-        let observable = if s.flags & flags::OBSERVABLE != 0 {
-            ""
-        } else {
-            " (not observable)"
+    }
+
+    /// A sphere of diameter `d` at `at`.
+    fn sphere(&self, ns: &str, id: i32, at: V3, d: f64, color: Rgba) -> Marker {
+        Marker {
+            pose: Pose {
+                position_m: at,
+                ..Pose::default()
+            },
+            scale_m: [d; 3],
+            ..self.marker(ns, id, marker_type::SPHERE, color)
+        }
+    }
+
+    /// A line through `points`, `width` wide (`None`: a point did not fit).
+    fn line(&self, ns: &str, id: i32, points: &[V3], width: f64, color: Rgba) -> Marker {
+        let mut m = Marker {
+            scale_m: [width, 0.0, 0.0],
+            ..self.marker(ns, id, marker_type::LINE_STRIP, color)
         };
-        force.texts.push(TextPrimitive {
-            pose: pose(add(s.tip_m, [0.0, 0.03, 0.0]), identity()),
-            billboard: true,
-            font_size: 14.0,
-            scale_invariant: true,
-            color: color(gr, gg, gb, 1.0),
-            text: format!(
-                "|F| {magnitude:.2} N, {}{observable}",
-                sar_msgs::wire::guard_state_name(s.guard_state)
-            ),
-        });
-    }
-
-    // The total limits as spheres at the tip.
-    let mut limits = entity(ids::FORCE_LIMITS, &stamp);
-    if has_pose {
-        let spheres = [
-            (s.limits_n[0], color(1.0, 0.65, 0.0, 0.08)),
-            (s.limits_n[1], color(0.9, 0.1, 0.1, 0.12)),
-        ];
-        for (limit_n, c) in spheres {
-            let d = 2.0 * limit_n * g.force_scale_m_per_n;
-            if d.is_finite() && d > 0.0 {
-                limits.spheres.push(SpherePrimitive {
-                    pose: pose(s.tip_m, identity()),
-                    size: Some(vec3([d, d, d])),
-                    color: c,
-                });
+        for p in points {
+            if m.points_m.push(*p).is_err() {
+                return self.deleted(ns, id);
             }
         }
+        m
     }
 
-    SceneUpdate {
-        deletions: Vec::new(),
-        entities: vec![base, carriage, ujoint, rod, support, force, limits],
+    /// An arrow from `from` to `to` (points form), shaft `diameter` wide.
+    fn arrow(&self, ns: &str, id: i32, from: V3, to: V3, diameter: f64, color: Rgba) -> Marker {
+        let mut m = Marker {
+            scale_m: [
+                diameter,
+                2.5 * diameter,
+                (0.25 * norm(add(to, scale(from, -1.0)))).min(4.0 * diameter),
+            ],
+            ..self.marker(ns, id, marker_type::ARROW, color)
+        };
+        // Two points: within MAX_POINTS.
+        let _ = m.points_m.push(from);
+        let _ = m.points_m.push(to);
+        m
+    }
+
+    /// A text at `at`, `height` m tall.
+    fn text(
+        &self,
+        ns: &str,
+        id: i32,
+        at: V3,
+        height: f64,
+        text: MarkerText,
+        color: Rgba,
+    ) -> Marker {
+        Marker {
+            pose: Pose {
+                position_m: at,
+                ..Pose::default()
+            },
+            scale_m: [0.0, 0.0, height],
+            text,
+            ..self.marker(ns, id, marker_type::TEXT_VIEW_FACING, color)
+        }
     }
 }
 
-/// The transform `world` (Z up) -> `base` ({0}, Y up): a quarter turn about
-/// X, so that Y0 shows up and Z0 towards the viewer.
-pub fn frame_transforms(now_ns: u64) -> FrameTransforms {
+/// Appends `m`: the array holds every marker of [`ids::ALL`] (a test
+/// checks), so it never fills.
+fn put(out: &mut MarkerArray, m: Marker) {
+    let _ = out.markers.push(m);
+}
+
+/// X0, Y0, Z0 and their names.
+fn base_frame(f: &Frame<'_>, out: &mut MarkerArray) {
+    let axes: [(V3, &str, Rgba); 3] = [
+        ([1.0, 0.0, 0.0], "X0", [0.9, 0.1, 0.1, 1.0]),
+        ([0.0, 1.0, 0.0], "Y0", [0.1, 0.8, 0.1, 1.0]),
+        ([0.0, 0.0, 1.0], "Z0", [0.1, 0.3, 0.9, 1.0]),
+    ];
+    let length = f.g.axis_length_m;
+    for (id, (dir, _, c)) in (0..).zip(axes) {
+        put(
+            out,
+            f.arrow(ids::BASE_FRAME, id, [0.0; 3], scale(dir, length), 0.004, c),
+        );
+    }
+    for (id, (dir, name, c)) in (3..).zip(axes) {
+        let at = scale(dir, 1.15 * length);
+        put(
+            out,
+            f.text(
+                ids::BASE_FRAME,
+                id,
+                at,
+                0.02,
+                MarkerText::truncating(name),
+                c,
+            ),
+        );
+    }
+}
+
+/// The carriage P and its bracket to A.
+fn carriage(f: &Frame<'_>, out: &mut MarkerArray) {
+    let q = f.s.q_m;
+    let p = add(f.g.p_home_m, [q[2], q[1], q[0]]);
+    if !finite(p) {
+        put(out, f.deleted(ids::CARRIAGE, 0));
+        put(out, f.deleted(ids::CARRIAGE, 1));
+        return;
+    }
+    let cube = Marker {
+        pose: Pose {
+            position_m: p,
+            ..Pose::default()
+        },
+        scale_m: [0.04; 3],
+        ..f.marker(ids::CARRIAGE, 0, marker_type::CUBE, GREY)
+    };
+    put(out, cube);
+    let bracket = if f.has_pose {
+        f.line(ids::CARRIAGE, 1, &[p, f.s.ujoint_m], 0.006, GREY)
+    } else {
+        f.deleted(ids::CARRIAGE, 1)
+    };
+    put(out, bracket);
+}
+
+/// A's foot on the rod axis, A + d w.
+fn rod_foot(f: &Frame<'_>) -> V3 {
+    add(f.s.ujoint_m, scale(f.w, f.g.offset_m))
+}
+
+/// The U-joint A, its offset, the rod and the tip.
+fn ujoint_and_rod(f: &Frame<'_>, out: &mut MarkerArray) {
+    if !f.has_pose {
+        for (ns, id) in [
+            (ids::UJOINT, 0),
+            (ids::UJOINT, 1),
+            (ids::ROD, 0),
+            (ids::ROD, 1),
+        ] {
+            put(out, f.deleted(ns, id));
+        }
+        return;
+    }
+    let a = f.s.ujoint_m;
+    let foot = rod_foot(f);
+    put(out, f.sphere(ids::UJOINT, 0, a, 0.02, DARK));
+    let offset = if f.g.offset_m != 0.0 {
+        f.line(ids::UJOINT, 1, &[a, foot], 0.004, DARK)
+    } else {
+        f.deleted(ids::UJOINT, 1)
+    };
+    put(out, offset);
+    let end = add(foot, scale(f.u, f.g.length_m));
+    put(
+        out,
+        f.line(ids::ROD, 0, &[foot, end], f.g.rod_diameter_m, ROD),
+    );
+    let tip = guard_color(f.s.guard_state);
+    put(
+        out,
+        f.sphere(ids::ROD, 1, f.s.tip_m, 1.6 * f.g.rod_diameter_m, tip),
+    );
+}
+
+/// The support ring around the rod axis (or around X0 without a pose).
+fn support(f: &Frame<'_>, out: &mut MarkerArray) {
+    let axis = if f.has_pose { f.u } else { [1.0, 0.0, 0.0] };
+    let e1 = perpendicular(axis);
+    let e2 = cross(axis, e1);
+    let mut points = [[0.0; 3]; RING_POINTS + 1];
+    for (k, p) in points.iter_mut().enumerate() {
+        let t = std::f64::consts::TAU * (k % RING_POINTS) as f64 / RING_POINTS as f64;
+        let r = add(scale(e1, t.cos()), scale(e2, t.sin()));
+        *p = add(f.g.support_m, scale(r, f.g.support_radius_m));
+    }
+    put(out, f.line(ids::SUPPORT, 0, &points, 0.004, RING));
+}
+
+/// F_tip from the tip, and its magnitude as text.
+fn tip_force(f: &Frame<'_>, out: &mut MarkerArray) {
+    let force = f.s.tip_force_n;
+    let magnitude = norm(force);
+    let length = magnitude * f.g.force_scale_m_per_n;
+    if !f.has_force {
+        put(out, f.deleted(ids::TIP_FORCE, 0));
+        put(out, f.deleted(ids::TIP_FORCE, 1));
+        return;
+    }
+    let c = guard_color(f.s.guard_state);
+    let arrow = if length > 1e-6 {
+        let head = add(f.s.tip_m, scale(force, f.g.force_scale_m_per_n));
+        f.arrow(ids::TIP_FORCE, 0, f.s.tip_m, head, 0.005, c)
+    } else {
+        f.deleted(ids::TIP_FORCE, 0)
+    };
+    put(out, arrow);
+    let observable = if f.s.flags & flags::OBSERVABLE != 0 {
+        ""
+    } else {
+        " (not observable)"
+    };
+    let mut text = MarkerText::EMPTY;
+    let state = sar_msgs::wire::guard_state_name(f.s.guard_state);
+    // Cut at the capacity, never fails.
+    let _ = write!(text, "|F| {magnitude:.2} N, {state}{observable}");
+    let at = add(f.s.tip_m, [0.0, 0.03, 0.0]);
+    put(out, f.text(ids::TIP_FORCE, 1, at, 0.02, text, c));
+}
+
+/// The total warn and stop limits as spheres at the tip.
+fn force_limits(f: &Frame<'_>, out: &mut MarkerArray) {
+    let spheres = [
+        (f.s.limits_n[0], WARN_SPHERE),
+        (f.s.limits_n[1], STOP_SPHERE),
+    ];
+    for (id, (limit_n, c)) in (0..).zip(spheres) {
+        let d = 2.0 * limit_n * f.g.force_scale_m_per_n;
+        let m = if f.has_pose && d.is_finite() && d > 0.0 {
+            f.sphere(ids::FORCE_LIMITS, id, f.s.tip_m, d, c)
+        } else {
+            f.deleted(ids::FORCE_LIMITS, id)
+        };
+        put(out, m);
+    }
+}
+
+/// The scene of one published state into `out` (cleared first).
+pub fn scene(s: &StateMsg, g: &SceneGeometry, out: &mut MarkerArray) {
+    out.markers.clear();
+    let f = Frame::new(s, g);
+    base_frame(&f, out);
+    carriage(&f, out);
+    ujoint_and_rod(&f, out);
+    support(&f, out);
+    tip_force(&f, out);
+    force_limits(&f, out);
+}
+
+fn transform(
+    stamp_ns: u64,
+    parent: &str,
+    child: &str,
+    at: V3,
+    rotation: [f64; 4],
+) -> TransformStamped {
+    TransformStamped {
+        stamp_ns,
+        frame_id: FrameId::truncating(parent),
+        child_frame_id: FrameId::truncating(child),
+        translation_m: at,
+        rotation,
+    }
+}
+
+/// `/tf_static`: `world` (Z up) -> `base` ({0}, Y up), a quarter turn
+/// about X, so that Y0 shows up and Z0 towards the viewer.
+pub fn static_transforms(stamp_ns: u64) -> TfMessage {
     let h = std::f64::consts::FRAC_1_SQRT_2;
-    FrameTransforms {
-        transforms: vec![FrameTransform {
-            timestamp: Some(timestamp(now_ns)),
-            parent_frame_id: FRAME_WORLD.to_owned(),
-            child_frame_id: FRAME_BASE.to_owned(),
-            translation: Some(vec3([0.0; 3])),
-            rotation: Some(Quaternion {
-                x: h,
-                y: 0.0,
-                z: 0.0,
-                w: h,
-            }),
-        }],
+    let mut tf = TfMessage::default();
+    // One transform: within MAX_TRANSFORMS.
+    let _ = tf.transforms.push(transform(
+        stamp_ns,
+        FRAME_WORLD,
+        FRAME_BASE,
+        [0.0; 3],
+        [h, 0.0, 0.0, h],
+    ));
+    tf
+}
+
+/// `/tf`: `base` -> `carriage` (at P, axes of {0}) and, with a pose, `base`
+/// -> `tip` (at D, x along the rod axis u).
+pub fn moving_transforms(s: &StateMsg, g: &SceneGeometry) -> TfMessage {
+    let f = Frame::new(s, g);
+    let mut tf = TfMessage::default();
+    let p = add(g.p_home_m, [s.q_m[2], s.q_m[1], s.q_m[0]]);
+    if finite(p) {
+        let _ = tf.transforms.push(transform(
+            s.now_ns,
+            FRAME_BASE,
+            FRAME_CARRIAGE,
+            p,
+            [0.0, 0.0, 0.0, 1.0],
+        ));
     }
-}
-
-/// A schema for an MCAP channel: name, encoding, data.
-#[derive(Debug, Clone, PartialEq)]
-pub struct McapSchema {
-    /// The schema's name (`foxglove.SceneUpdate`).
-    pub name: String,
-    /// Its encoding (`protobuf`).
-    pub encoding: String,
-    /// The binary `FileDescriptorSet`.
-    pub data: Vec<u8>,
-    /// The channel's message encoding (`protobuf`).
-    pub message_encoding: String,
-}
-
-/// The MCAP schema of the scene topic.
-pub fn schema() -> McapSchema {
-    let (name, encoding, data) = match SceneUpdate::get_schema() {
-        Some(s) => (s.name, s.encoding, s.data.into_owned()),
-        None => (String::new(), String::new(), Vec::new()),
-    };
-    McapSchema {
-        name,
-        encoding,
-        data,
-        message_encoding: SceneUpdate::get_message_encoding(),
+    if f.has_pose {
+        let q = rotation_between([1.0, 0.0, 0.0], f.u, [0.0, 0.0, 1.0]);
+        let _ = tf
+            .transforms
+            .push(transform(s.now_ns, FRAME_BASE, FRAME_TIP, s.tip_m, q));
     }
+    tf
 }
 
-/// Encodes a scene for an MCAP message (protobuf) into `buf` (cleared
-/// first).
-pub fn encode(update: &SceneUpdate, buf: &mut Vec<u8>) -> Result<(), EncodeError> {
-    buf.clear();
-    Encode::encode(update, buf)
-}
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::*;
 
-/// Why a scene could not be encoded (into a `Vec`: never in practice).
-pub type EncodeError = <SceneUpdate as Encode>::Error;
-
-/// The MCAP schema of the scene's frame transform topic.
-pub fn tf_schema() -> McapSchema {
-    let (name, encoding, data) = match FrameTransforms::get_schema() {
-        Some(s) => (s.name, s.encoding, s.data.into_owned()),
-        None => (String::new(), String::new(), Vec::new()),
-    };
-    McapSchema {
-        name,
-        encoding,
-        data,
-        message_encoding: FrameTransforms::get_message_encoding(),
+    #[test]
+    fn every_scene_carries_every_marker_once_in_order() {
+        let g = SceneGeometry {
+            p_home_m: [0.1, 0.2, 0.3],
+            support_m: [0.5, 0.0, 0.0],
+            length_m: 0.4,
+            offset_m: 0.01,
+            force_scale_m_per_n: 0.01,
+            rod_diameter_m: 0.008,
+            support_radius_m: 0.012,
+            axis_length_m: 0.1,
+        };
+        let expected: Vec<(String, i32)> = ids::ALL
+            .iter()
+            .flat_map(|(ns, n)| (0..*n).map(move |id| ((*ns).to_owned(), id)))
+            .collect();
+        assert!(expected.len() <= sar_msgs::viz::MAX_MARKERS);
+        let mut out = MarkerArray::default();
+        for s in [
+            StateMsg::default(),
+            StateMsg {
+                flags: flags::POSE | flags::ESTIMATE,
+                tip_force_n: [1.0, 2.0, 3.0],
+                tip_m: [0.9, 0.0, 0.0],
+                ..StateMsg::default()
+            },
+        ] {
+            scene(&s, &g, &mut out);
+            let got: Vec<(String, i32)> = out
+                .markers
+                .as_slice()
+                .iter()
+                .map(|m| (m.ns.as_str().to_owned(), m.id))
+                .collect();
+            assert_eq!(got, expected);
+        }
+        let arrow = &out.markers.as_slice()[13];
+        assert_eq!(arrow.action, marker_action::ADD);
+        let p = arrow.points_m.as_slice();
+        let length = norm(add(p[1], scale(p[0], -1.0)));
+        assert!((length - 14f64.sqrt() * 0.01).abs() < 1e-12, "{length}");
     }
-}
-
-/// Encodes the frame transforms for an MCAP message (protobuf) into `buf`
-/// (cleared first).
-pub fn encode_tf(
-    tf: &FrameTransforms,
-    buf: &mut Vec<u8>,
-) -> Result<(), <FrameTransforms as Encode>::Error> {
-    buf.clear();
-    Encode::encode(tf, buf)
 }

@@ -1,6 +1,5 @@
 //! The robot's geometry as the 3D scene draws it ([`SceneGeometry`]), from a
-//! configuration: always built (the configuration's `[record] scene_hz`
-//! holds it), while the scene itself needs the cargo feature `view`.
+//! configuration.
 
 use sar_estimator::cycle::EstimatorConfig;
 
