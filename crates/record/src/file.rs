@@ -5,23 +5,14 @@
 //! Every channel carries `offered_qos_profiles` metadata, the YAML text ROS 2's
 //! recorder (Jazzy) writes there ([`OFFERED_QOS_PROFILES`]).
 //!
-//! With [`FileOptions::scene`], the live view's 3D scene (`/sar/scene`,
-//! `foxglove.SceneUpdate`, and `/sar/scene/tf`, protobuf) is drawn from the
-//! recorded messages of a cycle, decimated, on the writer's thread, and
-//! written into a companion file beside each recording ([`scene_path`]:
-//! `NAME.scene.mcap`, no profile), never into the `ros2` file itself: a
-//! protobuf channel breaks the `ros2` profile (ROS 2 tools and Python
-//! `rosbags` refuse the whole file). Opened together in Foxglove, the two
-//! files look as the live view does.
+//! With [`FileOptions::scene`], the 3D scene (`/sar/scene`, `/tf`,
+//! `/tf_static`: [`crate::scene`]) is drawn from the recorded messages of a
+//! cycle, decimated, on the writer's thread, into the file itself.
 
+pub use crate::scene::SceneOptions;
+use crate::scene::{SceneChannels, SceneState};
 use sar_config::Rotation;
-use sar_msgs::msgs::{
-    EstimatorState, Outgoing, PassiveJointState, RecorderDrops, RosMessage, SnapshotChunk,
-    StateSnapshot, Topic,
-};
-#[cfg(feature = "scene")]
-use sar_scene::draw as scene;
-use sar_scene::geometry::SceneGeometry;
+use sar_msgs::msgs::{Outgoing, RecorderDrops, RosMessage, SnapshotChunk, StateSnapshot, Topic};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -115,45 +106,6 @@ pub const OFFERED_QOS_PROFILES: &str = "- history: keep_last
 /// The metadata key of [`OFFERED_QOS_PROFILES`].
 pub const QOS_METADATA_KEY: &str = "offered_qos_profiles";
 
-/// The companion file that holds the 3D scene of the recording at `path`
-/// (`rec-0000.mcap` -> `rec-0000.scene.mcap`).
-pub fn scene_path(path: &Path) -> PathBuf {
-    path.with_extension("scene.mcap")
-}
-
-/// The 3D scene written beside the recorded topics.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SceneOptions {
-    /// The robot and manipulator as drawn (from the configuration).
-    pub geometry: SceneGeometry,
-    /// The force limits drawn until a cycle records others (warn, stop of
-    /// total, axial, lateral), N.
-    pub limits_n: [f64; 6],
-    /// At most one scene per this much log time, ns (33 333 333: 30 Hz).
-    pub period_ns: u64,
-}
-
-impl SceneOptions {
-    /// The scene the configuration asks for (`[record] scene_hz`), drawn
-    /// from its geometry and limits. `None` when it asks for none, or when
-    /// this build has no cargo feature `scene` (the Foxglove SDK): `sard` is
-    /// built without it and writes none (said once in the log, here).
-    pub fn from_config(config: &sar_config::Config) -> Option<Self> {
-        let period_ns = config.record.scene_period_ns?;
-        if !cfg!(feature = "scene") {
-            tracing::info!(
-                "[record] scene_hz: no 3D scene beside recordings (NAME.scene.mcap): this build has no `scene` feature"
-            );
-            return None;
-        }
-        Some(Self {
-            geometry: SceneGeometry::from_config(&config.estimator),
-            limits_n: config.estimator.guard.force_limits().to_array(),
-            period_ns,
-        })
-    }
-}
-
 /// How files are written.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FileOptions {
@@ -175,7 +127,7 @@ pub struct FileOptions {
     /// The exact path of the first file (instead of `{prefix}-0000.mcap`;
     /// later files of a rotation keep the numbered names).
     pub first_path: Option<PathBuf>,
-    /// The live view's 3D scene beside the topics (`None`: not written).
+    /// The 3D scene in the file (`None`: not written).
     pub scene: Option<SceneOptions>,
     /// Rotation waits for a snapshot (`/sar/cycle/snapshot`), which then
     /// starts the new file, so that every file replays on its own; when no
@@ -314,46 +266,13 @@ pub struct RotatingWriter {
     rotation_due_ns: Option<u64>,
 }
 
-/// What the scene is drawn from: the messages of one cycle (all stamped with
-/// the cycle's `now`), gathered until a message of a later cycle (or the
-/// file's end) closes it, whatever their order.
-#[cfg_attr(not(feature = "scene"), allow(dead_code))]
-struct SceneState {
-    options: SceneOptions,
-    next_ns: Option<u64>,
-    cycle: Option<SceneCycle>,
-    /// The limits in use (the last `/sar/cycle/input`'s).
-    limits_n: [f64; 6],
-    /// The last joints (`/sar/cycle/input` or `/sar/joints`).
-    q_m: [f64; 3],
-    buf: Vec<u8>,
-}
-
-/// One cycle's messages as the scene needs them.
-#[derive(Debug, Clone, Copy)]
-struct SceneCycle {
-    stamp_ns: u64,
-    estimator: Option<EstimatorState>,
-    passive: Option<PassiveJointState>,
-}
-
-/// The companion file of the scene beside one recording file.
-#[cfg_attr(not(feature = "scene"), allow(dead_code))]
-struct SceneFile {
-    path: PathBuf,
-    writer: mcap::Writer<BufWriter<File>>,
-    scene: u16,
-    tf: u16,
-    sequence: u32,
-}
-
 struct OpenFile {
     path: PathBuf,
     writer: mcap::Writer<CountingFile>,
     handle: File,
     position: Arc<AtomicU64>,
     channel_ids: [u16; Topic::ALL.len()],
-    scene: Option<SceneFile>,
+    scene: Option<SceneChannels>,
     first_log_ns: Option<u64>,
 }
 
@@ -389,14 +308,7 @@ impl RotatingWriter {
             sequence: [0; Topic::ALL.len()],
             buf: Vec::with_capacity(1024),
             written: 0,
-            scene: options.scene.map(|o| SceneState {
-                options: o,
-                next_ns: None,
-                cycle: None,
-                limits_n: o.limits_n,
-                q_m: [0.0; 3],
-                buf: Vec::with_capacity(4096),
-            }),
+            scene: options.scene.map(SceneState::new),
             options,
             joining: None,
             snapshot: StateSnapshot {
@@ -444,7 +356,7 @@ impl RotatingWriter {
                 .map_err(mcap_err(&path))?;
         }
         let scene = match &self.scene {
-            Some(_) => Some(self.open_scene(&path)?),
+            Some(_) => Some(crate::scene::add_channels(&mut writer).map_err(mcap_err(&path))?),
             None => None,
         };
         // Each file says which of the rotation it is (`file_index`, 0 for
@@ -470,55 +382,6 @@ impl RotatingWriter {
             scene,
             first_log_ns: None,
         }))
-    }
-
-    /// The scene needs the cargo feature `scene` (the configuration gives no
-    /// scene without it; a caller that asks for one anyway is refused).
-    #[cfg(not(feature = "scene"))]
-    fn open_scene(&self, _path: &Path) -> Result<SceneFile, WriteError> {
-        Err(WriteError::Setting {
-            field: "scene",
-            value: 1,
-            why: "this build has no 3D scene (cargo feature `scene`)",
-        })
-    }
-
-    /// Creates the scene's companion file of the recording file at `path`.
-    #[cfg(feature = "scene")]
-    fn open_scene(&self, path: &Path) -> Result<SceneFile, WriteError> {
-        let path = scene_path(path);
-        let mcap_err = |source| WriteError::mcap(path.clone(), source);
-        let file = File::create(&path).map_err(|source| WriteError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        // No profile: protobuf channels, as the live view sends them.
-        let options = self.options.mcap_options().profile("");
-        let mut writer =
-            mcap::Writer::with_options(BufWriter::with_capacity(1 << 16, file), options)
-                .map_err(mcap_err)?;
-        let none = BTreeMap::new();
-        let s = scene::schema();
-        let schema = writer
-            .add_schema(&s.name, &s.encoding, &s.data)
-            .map_err(mcap_err)?;
-        let scene = writer
-            .add_channel(schema, sar_scene::SCENE_TOPIC, &s.message_encoding, &none)
-            .map_err(mcap_err)?;
-        let t = scene::tf_schema();
-        let schema = writer
-            .add_schema(&t.name, &t.encoding, &t.data)
-            .map_err(mcap_err)?;
-        let tf = writer
-            .add_channel(schema, sar_scene::TF_TOPIC, &t.message_encoding, &none)
-            .map_err(mcap_err)?;
-        Ok(SceneFile {
-            path,
-            writer,
-            scene,
-            tf,
-            sequence: 0,
-        })
     }
 
     fn must_rotate(&self, file: &OpenFile, log_ns: u64) -> bool {
@@ -611,6 +474,7 @@ impl RotatingWriter {
         let sequence = self.sequence.get(i).copied().unwrap_or(0);
         if self.current.is_none() {
             self.open()?;
+            self.write_scene_static(log_ns)?;
         }
         let Some(file) = self.current.as_mut() else {
             return Ok(());
@@ -635,107 +499,42 @@ impl RotatingWriter {
     /// Follows the cycles' messages: a message of a later cycle closes the
     /// one gathered, whose scene is then written if one is due.
     fn write_scene(&mut self, msg: &Outgoing) -> Result<(), WriteError> {
-        let Some(state) = self.scene.as_mut() else {
+        let Some(state) = self.scene.as_ref() else {
             return Ok(());
         };
-        let stamp_ns = msg.stamp_ns();
-        if state.cycle.is_some_and(|c| c.stamp_ns != stamp_ns) {
+        if state.closes(msg.stamp_ns()) {
             self.flush_scene()?;
         }
-        let Some(state) = self.scene.as_mut() else {
-            return Ok(());
-        };
-        let cycle = state.cycle.get_or_insert(SceneCycle {
-            stamp_ns,
-            estimator: None,
-            passive: None,
-        });
-        match msg {
-            Outgoing::EstimatorState(e) => cycle.estimator = Some(*e),
-            Outgoing::PassiveJoints(p) => cycle.passive = Some(*p),
-            Outgoing::CycleInput(c) => {
-                if c.limits_in_use_n.iter().all(|v| v.is_finite() && *v > 0.0) {
-                    state.limits_n = c.limits_in_use_n;
-                }
-                state.q_m = c.joints_q_m;
-            }
-            Outgoing::Joints(j) => state.q_m = j.q_m,
-            _ => {}
+        if let Some(state) = self.scene.as_mut() {
+            state.follow(msg);
         }
         Ok(())
     }
 
-    /// No scene without the cargo feature `scene` (never opened).
-    #[cfg(not(feature = "scene"))]
-    fn flush_scene(&mut self) -> Result<(), WriteError> {
-        Ok(())
+    /// `/tf_static` at the start of the file just opened.
+    fn write_scene_static(&mut self, log_ns: u64) -> Result<(), WriteError> {
+        let (Some(state), Some(file)) = (self.scene.as_mut(), self.current.as_mut()) else {
+            return Ok(());
+        };
+        let Some(channels) = file.scene else {
+            return Ok(());
+        };
+        state.write_static(channels, log_ns, &mut |channel, log_ns, sequence, bytes| {
+            file.write_other(channel, log_ns, sequence, bytes)
+        })
     }
 
-    /// Closes the cycle gathered: writes its scene when one is due (at most
-    /// one per period of log time, keeping the phase).
-    #[cfg(feature = "scene")]
+    /// Closes the cycle gathered: writes its scene when one is due.
     fn flush_scene(&mut self) -> Result<(), WriteError> {
         let (Some(state), Some(file)) = (self.scene.as_mut(), self.current.as_mut()) else {
             return Ok(());
         };
-        let Some(SceneCycle {
-            stamp_ns: log_ns,
-            estimator: Some(estimator),
-            passive,
-        }) = state.cycle.take()
-        else {
+        let Some(channels) = file.scene else {
             return Ok(());
         };
-        if state.next_ns.is_some_and(|next| log_ns < next) {
-            return Ok(());
-        }
-        let period = state.options.period_ns.max(1);
-        state.next_ns = Some(match state.next_ns {
-            Some(next) => next + (log_ns - next) / period * period + period,
-            None => log_ns + period,
-        });
-        let Some(channels) = file.scene.as_mut() else {
-            return Ok(());
-        };
-        let SceneFile {
-            path,
-            writer,
-            scene: scene_channel,
-            tf: tf_channel,
-            sequence,
-        } = channels;
-        let joints = sar_msgs::msgs::ActiveJointState {
-            stamp_ns: estimator.joints_stamp_ns,
-            q_m: state.q_m,
-        };
-        let published = sar_scene::topics::state_from_recorded(
-            &estimator,
-            &joints,
-            passive.as_ref(),
-            state.limits_n,
-        );
-        let update = scene::scene(&published, &state.options.geometry);
-        let mut write = |channel_id: u16, bytes: &[u8]| {
-            let header = mcap::records::MessageHeader {
-                channel_id,
-                sequence: *sequence,
-                log_time: log_ns,
-                publish_time: log_ns,
-            };
-            writer
-                .write_to_known_channel(&header, bytes)
-                .map_err(|source| WriteError::mcap(path.clone(), source))
-        };
-        // Encoding into a Vec does not fail; a scene that did would be
-        // skipped, not end the recording.
-        if scene::encode(&update, &mut state.buf).is_ok() {
-            write(*scene_channel, &state.buf)?;
-        }
-        if scene::encode_tf(&scene::frame_transforms(log_ns), &mut state.buf).is_ok() {
-            write(*tf_channel, &state.buf)?;
-        }
-        *sequence = sequence.wrapping_add(1);
-        Ok(())
+        state.flush(channels, &mut |channel, log_ns, sequence, bytes| {
+            file.write_other(channel, log_ns, sequence, bytes)
+        })
     }
 
     /// Ends the current chunk and hands the bytes to the disk (fsync): what was
@@ -746,14 +545,6 @@ impl RotatingWriter {
                 .flush()
                 .map_err(|source| WriteError::mcap(file.path.clone(), source))?;
             file.sync()?;
-            // The scene's file is not synced (it is drawn from the recording
-            // and can be drawn again); its chunk goes to the kernel.
-            if let Some(scene) = &mut file.scene {
-                scene
-                    .writer
-                    .flush()
-                    .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
-            }
         }
         Ok(())
     }
@@ -799,26 +590,30 @@ impl RotatingWriter {
             path: path.clone(),
             source,
         })?;
-        if let Some(mut scene) = file.scene.take() {
-            scene
-                .writer
-                .finish()
-                .map_err(|source| WriteError::mcap(scene.path.clone(), source))?;
-            let inner = scene.writer.into_inner();
-            let file = inner.into_inner().map_err(|e| WriteError::Io {
-                path: scene.path.clone(),
-                source: e.into_error(),
-            })?;
-            file.sync_all().map_err(|source| WriteError::Io {
-                path: scene.path,
-                source,
-            })?;
-        }
         Ok(())
     }
 }
 
 impl OpenFile {
+    /// Writes `bytes` on a channel beside the recorded topics (the scene's).
+    fn write_other(
+        &mut self,
+        channel_id: u16,
+        log_ns: u64,
+        sequence: u32,
+        bytes: &[u8],
+    ) -> Result<(), WriteError> {
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence,
+            log_time: log_ns,
+            publish_time: log_ns,
+        };
+        self.writer
+            .write_to_known_channel(&header, bytes)
+            .map_err(|source| WriteError::mcap(self.path.clone(), source))
+    }
+
     fn writer_position(&self) -> u64 {
         self.position.load(Ordering::Relaxed)
     }

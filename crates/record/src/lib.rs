@@ -9,6 +9,7 @@
 //! - [`recorder`]: the bounded queue and the writer thread.
 //! - [`reader`]: reading (up to the last complete chunk) and [`recover`].
 //! - [`rosbag2`]: a rosbag2 directory (`metadata.yaml`) of recordings.
+//! - [`scene`]: the 3D scene in every file (`/sar/scene`, `/tf`, `/tf_static`).
 //! - [`convert`]: the loop's cycle as recorded messages, and back.
 //! - [`live`]: the loop's recording sink and the recordings' manager.
 //! - [`replay`]: bit-exact replay of recordings and rotated sets.
@@ -20,10 +21,10 @@ pub mod reader;
 pub mod recorder;
 pub mod replay;
 pub mod rosbag2;
+pub mod scene;
 
 pub use file::{
     FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, SceneOptions, WriteError,
-    scene_path,
 };
 pub use reader::{
     McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,

@@ -1068,10 +1068,8 @@ fn output_writer(
         .map(|m| (REPLAY_METADATA.to_owned(), m.clone()))
         .into_iter()
         .collect();
-    // The live view's scene, as the daemon's recorder writes it
-    // (in the companion file `OUT.scene.mcap`, not in the `ros2` file).
-    // (With the cargo feature `scene` only.)
-    o.scene = cfg!(feature = "scene").then(|| super::SceneOptions {
+    // The 3D scene, as the daemon's recorder writes it (in the file).
+    o.scene = Some(super::SceneOptions {
         geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
         limits_n: options.config.guard.force_limits().to_array(),
         period_ns: SCENE_PERIOD_NS,
