@@ -3,15 +3,13 @@
 use super::front;
 #[allow(unused_imports)]
 pub use super::{DEFAULT_BIND, DEFAULT_SCENE_HZ};
-use foxglove::messages::{FrameTransforms, SceneUpdate};
-use foxglove::{
-    Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
-};
+use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer};
 use sar_estimator::guard::ForceLimits;
-use sar_msgs::msgs::{Outgoing, Topic};
+use sar_msgs::msgs::{Outgoing, RosMessage, Topic};
+use sar_msgs::viz::{MarkerArray, TfMessage};
 use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 use sar_scene::geometry::SceneGeometry;
-use sar_scene::{SCENE_TOPIC, TF_TOPIC, draw as scene, topics};
+use sar_scene::{SCENE_TOPIC, TF_STATIC_TOPIC, TF_TOPIC, draw as scene, topics};
 use sar_shm::{Client, StateSubscription};
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -38,7 +36,7 @@ pub const RECORD_TOPICS: [Topic; 5] = [
 /// Every topic the view serves.
 pub fn served_topics() -> Vec<&'static str> {
     let mut t: Vec<&'static str> = RECORD_TOPICS.iter().map(|t| t.name()).collect();
-    t.extend([SCENE_TOPIC, TF_TOPIC, STATUS_TOPIC]);
+    t.extend([SCENE_TOPIC, TF_TOPIC, TF_STATIC_TOPIC, STATUS_TOPIC]);
     t
 }
 
@@ -88,6 +86,29 @@ pub fn run_cli(
     )
 }
 
+/// A channel of ROS 2 messages (`ros2msg` schema, `cdr`), as in the
+/// recordings.
+fn ros2_channel(
+    ctx: &Arc<Context>,
+    topic: &str,
+    type_name: &str,
+    schema: &'static str,
+) -> Result<Arc<RawChannel>, String> {
+    ChannelBuilder::new(topic)
+        .message_encoding("cdr")
+        .schema(Schema::new(type_name, "ros2msg", schema.as_bytes()))
+        .context(ctx)
+        .build_raw()
+        .map_err(|e| format!("cannot create the channel {topic}: {e}"))
+}
+
+/// Encodes `m` into `buf` and logs it on `channel` if anyone listens.
+fn log_ros2<M: RosMessage>(channel: &RawChannel, m: &M, buf: &mut Vec<u8>, log_ns: u64) {
+    if channel.has_sinks() && m.encode(buf).is_ok() {
+        channel.log_with_meta(buf, PartialMetadata::with_log_time(log_ns));
+    }
+}
+
 /// The channels of the recordings' topics this view serves.
 struct RecordChannels {
     channels: Vec<(Topic, Arc<RawChannel>)>,
@@ -97,16 +118,7 @@ impl RecordChannels {
     fn new(ctx: &Arc<Context>) -> Result<Self, String> {
         let mut channels = Vec::new();
         for topic in RECORD_TOPICS {
-            let channel = ChannelBuilder::new(topic.name())
-                .message_encoding("cdr")
-                .schema(Schema::new(
-                    topic.type_name(),
-                    "ros2msg",
-                    topic.schema().as_bytes(),
-                ))
-                .context(ctx)
-                .build_raw()
-                .map_err(|e| format!("cannot create the channel {}: {e}", topic.name()))?;
+            let channel = ros2_channel(ctx, topic.name(), topic.type_name(), topic.schema())?;
             channels.push((topic, channel));
         }
         Ok(Self { channels })
@@ -182,8 +194,10 @@ fn status_json(s: &StateMsg, lost: u64) -> serde_json::Value {
 /// The view's state between two published states.
 struct Publisher {
     records: RecordChannels,
-    scene: Channel<SceneUpdate>,
-    tf: Channel<FrameTransforms>,
+    scene: Arc<RawChannel>,
+    tf: Arc<RawChannel>,
+    tf_static: Arc<RawChannel>,
+    markers: Box<MarkerArray>,
     status: Arc<RawChannel>,
     geometry: SceneGeometry,
     scene_period_ns: u64,
@@ -220,14 +234,14 @@ impl Publisher {
             if self.next_scene_ns <= s.now_ns {
                 self.next_scene_ns = s.now_ns.saturating_add(self.scene_period_ns);
             }
-            if self.scene.has_sinks() {
-                self.scene
-                    .log_with_meta(&scene::scene(s, &self.geometry), meta());
-            }
-            if self.tf.has_sinks() {
-                self.tf
-                    .log_with_meta(&scene::frame_transforms(s.now_ns), meta());
-            }
+            scene::scene(s, &self.geometry, &mut self.markers);
+            log_ros2(&self.scene, &*self.markers, &mut self.buf, s.now_ns);
+            let tf = scene::moving_transforms(s, &self.geometry);
+            log_ros2(&self.tf, &tf, &mut self.buf, s.now_ns);
+            // A WebSocket has no transient_local: the fixed frames with
+            // every scene, for a client that joins later.
+            let tf_static = scene::static_transforms(s.now_ns);
+            log_ros2(&self.tf_static, &tf_static, &mut self.buf, s.now_ns);
             if self.status.has_sinks()
                 && let Ok(bytes) = serde_json::to_vec(&status_json(s, self.lost))
             {
@@ -255,8 +269,19 @@ impl Publisher {
     /// The view's channels in `ctx`, nothing published yet.
     fn new(ctx: &Arc<Context>, opts: &ViewOptions) -> Result<Self, String> {
         let records = RecordChannels::new(ctx)?;
-        let scene = ctx.channel_builder(SCENE_TOPIC).build::<SceneUpdate>();
-        let tf = ctx.channel_builder(TF_TOPIC).build::<FrameTransforms>();
+        let scene = ros2_channel(
+            ctx,
+            SCENE_TOPIC,
+            MarkerArray::TYPE_NAME,
+            MarkerArray::SCHEMA,
+        )?;
+        let tf = ros2_channel(ctx, TF_TOPIC, TfMessage::TYPE_NAME, TfMessage::SCHEMA)?;
+        let tf_static = ros2_channel(
+            ctx,
+            TF_STATIC_TOPIC,
+            TfMessage::TYPE_NAME,
+            TfMessage::SCHEMA,
+        )?;
         let status = ChannelBuilder::new(STATUS_TOPIC)
             .message_encoding("json")
             .schema(Schema::new(
@@ -271,6 +296,8 @@ impl Publisher {
             records,
             scene,
             tf,
+            tf_static,
+            markers: Box::default(),
             status,
             geometry: opts.geometry,
             scene_period_ns: (1e9 / opts.scene_hz) as u64,

@@ -10,8 +10,11 @@
 //! - the recordings' topics (INTERFACES.md 1, `ros2msg` schemas and `cdr`
 //!   messages from [`sar_msgs::msgs`]) that the state holds, every
 //!   state ([`topics`]);
-//! - `sar_scene::SCENE_TOPIC` (`foxglove.SceneUpdate`, protobuf, drawn by
-//!   `sar_scene::draw`) and `sar_scene::TF_TOPIC` (`foxglove.FrameTransforms`: `world` -> `base`, Y0 up),
+//! - the 3D scene as the recordings hold it (`ros2msg`/`cdr`, drawn by
+//!   `sar_scene::draw`): `sar_scene::SCENE_TOPIC`
+//!   (`visualization_msgs/msg/MarkerArray`), `sar_scene::TF_TOPIC` and
+//!   `sar_scene::TF_STATIC_TOPIC` (`tf2_msgs/msg/TFMessage`; the fixed
+//!   frames with every scene: a WebSocket has no transient_local),
 //!   decimated to `scene_hz` by the state's clock;
 //! - [`STATUS_TOPIC`] (JSON: |F_tip|, the guard's limits and state, the
 //!   loop's figures, the states the view lost), at the scene's rate.
