@@ -35,7 +35,7 @@ try {
 }
 
 /// Message paths of a Foxglove layout: every string value that starts with a
-/// topic ("/...").
+/// topic ("/..."), and every key that does (the 3D panel's topics).
 function layoutPaths(layout) {
   const out = new Set();
   const walk = (v) => {
@@ -44,6 +44,7 @@ function layoutPaths(layout) {
     } else if (Array.isArray(v)) {
       v.forEach(walk);
     } else if (v && typeof v === "object") {
+      Object.keys(v).forEach((k) => k.startsWith("/") && out.add(k));
       Object.values(v).forEach(walk);
     }
   };

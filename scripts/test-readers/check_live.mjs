@@ -54,7 +54,11 @@ if (layoutFile) {
     if (typeof v === "string") {
       if (v.startsWith("/")) paths.push(v);
     } else if (Array.isArray(v)) v.forEach(walk);
-    else if (v && typeof v === "object") Object.values(v).forEach(walk);
+    else if (v && typeof v === "object") {
+      // Keys too: the 3D panel's topics.
+      Object.keys(v).forEach((k) => k.startsWith("/") && paths.push(k));
+      Object.values(v).forEach(walk);
+    }
   };
   walk(JSON.parse(await readFile(layoutFile, "utf8")));
 }

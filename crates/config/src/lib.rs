@@ -564,10 +564,10 @@ pub struct RecordSettings {
     pub rotation: Rotation,
     /// Messages the queue holds.
     pub queue_capacity: usize,
-    /// The live view's 3D scene in a companion file beside each file, at
-    /// most one per this much log time, ns (`[record] scene_hz`;
-    /// `NAME.scene.mcap`; `None`: none). The recording draws it from the
-    /// rest of the configuration.
+    /// The 3D scene in each recording file (`/sar/scene`, `/tf`,
+    /// `/tf_static`), at most one per this much log time, ns (`[record]
+    /// scene_hz`; `None`: none). The recording draws it from the rest of
+    /// the configuration.
     pub scene_period_ns: Option<u64>,
     /// A snapshot of the loop's decision state every this much time, ns
     /// (`[record] snapshot_s`); one also starts every recording and every

@@ -10,7 +10,7 @@
 //! ...) go into one directory in the order given. Only complete `ros2`
 //! files are taken: a file cut short, even inside its summary (the data
 //! section whole), is refused (`sarctl recover` first),
-//! and so is a scene companion (`NAME.scene.mcap`, protobuf, no profile).
+//! and so is an MCAP file of another profile.
 
 use super::reader::{McapReader, ReadError};
 use std::collections::BTreeMap;
@@ -216,9 +216,7 @@ fn check_summary(bytes: &[u8]) -> Result<(), String> {
 fn check_ros2(reader: &McapReader<'_>) -> Result<(), String> {
     let profile = reader.profile().unwrap_or_default();
     if profile != "ros2" {
-        return Err(format!(
-            "MCAP profile {profile:?}, not \"ros2\" (a scene companion NAME.scene.mcap is not part of a rosbag2 directory)"
-        ));
+        return Err(format!("MCAP profile {profile:?}, not \"ros2\""));
     }
     for c in reader.channels().values() {
         if c.message_encoding != "cdr" || c.schema_encoding != "ros2msg" {

@@ -185,8 +185,8 @@ fn export_refuses_bad_input_with_one_line() {
     let junk = dir.join("junk.mcap");
     std::fs::write(&junk, "not mcap").unwrap();
     refused(&["export", "--rosbag2"], &[&bag, &junk], "not an MCAP file");
-    // A scene companion (protobuf, no profile).
-    let scene = dir.join("rec.scene.mcap");
+    // An MCAP file of another profile (protobuf, no profile).
+    let scene = dir.join("other.mcap");
     let mut w = mcap::WriteOptions::new()
         .profile("")
         .create(std::io::BufWriter::new(

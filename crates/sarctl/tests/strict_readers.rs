@@ -13,7 +13,12 @@
 //!
 //! and every message path of `deploy/foxglove-layout.json` on a recorded
 //! topic found in the decoded messages of the replay output and of the
-//! daemon's recording. The readers are installed on first use by
+//! daemon's recording, the 3D panel's topics (`/sar/scene`, `/tf`,
+//! `/tf_static`) included: each file opens alone with the scene. The
+//! scene's schemas match ROS 2 Jazzy's types (rosbags' `Stores.ROS2_JAZZY`),
+//! and one `MarkerArray` decoded by `rosbags` draws the rod from A's foot to
+//! the recorded tip and F_tip |F_tip| x the scale long
+//! (`scripts/test-readers/check_scene.py`). The readers are installed on first use by
 //! `scripts/setup-test-readers.sh` (`common::readers`); `SAR_SKIP_PYTHON=1`
 //! or `SAR_SKIP_NODE=1` at build time mark these tests ignored.
 
@@ -37,8 +42,79 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 /// The layout's paths on the recorded topics (the live-only
-/// `/sar/view/status` and the scene are not in `ros2` recordings).
+/// `/sar/view/status` is not in recordings; the fixtures predate the scene).
 const RECORDED_PREFIXES: [&str; 2] = ["/sar/estimate/", "/sar/guard/"];
+
+/// The 3D panel's topics, in every fresh recording and replay output.
+const SCENE_PATHS: [&str; 3] = ["/sar/scene", "/tf", "/tf_static"];
+
+/// Every path of the layout resolves on this one file, but the live view's
+/// own status (`/sar/view/status`, JSON, never recorded).
+fn assert_every_layout_path(file: &serde_json::Value) {
+    let layout = file["layout"].as_object().unwrap();
+    for p in SCENE_PATHS {
+        assert_eq!(layout.get(p), Some(&"ok".into()), "{p} in {}", file["path"]);
+    }
+    for (p, status) in layout {
+        if !p.starts_with("/sar/view/status") && !p.starts_with("/sar/guard/") {
+            assert_eq!(status, "ok", "{p} in {}", file["path"]);
+        }
+    }
+}
+
+/// The scene of `file` as `rosbags` decodes it: Jazzy's types, the rod's
+/// ends and the arrow against the recorded state of the same cycle.
+fn check_scene_with_rosbags(file: &Path) {
+    let out = sar_test_support::process::run_ok(
+        readers::python()
+            .arg(readers::repo_root().join("scripts/test-readers/check_scene.py"))
+            .arg(file),
+        "check_scene.py",
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["mismatches"], serde_json::json!([]), "{v}");
+    // MarkerArray, Marker, Header, Time, Pose, Point, Quaternion, Vector3,
+    // ColorRGBA, Duration, CompressedImage, UVCoordinate, MeshFile;
+    // TFMessage, TransformStamped, Transform.
+    assert_eq!(v["types"], 16, "{v}");
+    assert_eq!(
+        v["tf_static"],
+        serde_json::json!([["world", "base"]]),
+        "{v}"
+    );
+    let xyz =
+        |x: &serde_json::Value| -> [f64; 3] { std::array::from_fn(|i| x[i].as_f64().unwrap()) };
+    let (scene, state) = (&v["scene"], &v["state"]);
+    assert_eq!(scene["frame_id"], "base");
+    let (ujoint, tip, force) = (
+        xyz(&state["ujoint_m"]),
+        xyz(&state["tip_m"]),
+        xyz(&state["tip_force_n"]),
+    );
+    let dist = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let cfg = sar_config::builtin().unwrap();
+    let geometry = sar_scene::geometry::SceneGeometry::from_config(&cfg.estimator);
+    // The rod: A's foot on the rod axis (|d| from A), then the tip D, L apart.
+    let (foot, end) = (xyz(&scene["rod"][0]), xyz(&scene["rod"][1]));
+    assert!(dist(end, tip) < 1e-9, "{v}");
+    assert!(
+        (dist(foot, ujoint) - geometry.offset_m.abs()).abs() < 1e-9,
+        "{v}"
+    );
+    assert!((dist(foot, end) - geometry.length_m).abs() < 1e-9, "{v}");
+    // The arrow: from D, |F_tip| x the scale long, along F_tip.
+    let (tail, head) = (xyz(&scene["arrow"][0]), xyz(&scene["arrow"][1]));
+    assert!(dist(tail, tip) < 1e-12, "{v}");
+    let magnitude = dist(force, [0.0; 3]);
+    assert!(magnitude > 0.0);
+    assert!(
+        (dist(head, tail) - magnitude * geometry.force_scale_m_per_n).abs() < 1e-12,
+        "{v}"
+    );
+    let along: [f64; 3] =
+        std::array::from_fn(|i| tail[i] + force[i] * geometry.force_scale_m_per_n);
+    assert!(dist(head, along) < 1e-12, "{v}");
+}
 
 fn fixtures() -> Vec<PathBuf> {
     let root = readers::repo_root().join("tests/fixtures");
@@ -154,6 +230,7 @@ fn a_replay_output_decodes_with_the_strict_readers() {
     assert!(report.first_difference.is_none(), "{report:?}");
     let files = check_strictly(std::slice::from_ref(&out), "replay output");
     assert_layout_paths(&files[0]);
+    assert_every_layout_path(&files[0]);
 }
 
 #[test]
@@ -167,6 +244,8 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
     let files = vec![support::sim_recording(&dir, 3000, &prefix)];
     let checked = check_strictly(&files, "sard --sim recording");
     assert_layout_paths(&checked[0]);
+    assert_every_layout_path(&checked[0]);
+    check_scene_with_rosbags(&files[0]);
     let topics = checked[0]["topics"].as_object().unwrap();
     for t in [
         "/sar/sensor/wrench",
@@ -197,11 +276,14 @@ fn a_sard_recording_decodes_with_the_strict_readers() {
         .map(|(k, n)| (k.clone(), n.as_u64().unwrap()))
         .collect();
     assert_eq!(theirs, ours, "rosbag2 directory vs ours");
-    // Every channel in metadata.yaml, the empty ones too.
+    // Every channel in metadata.yaml, the empty ones too, and the scene's.
     assert_eq!(
         py_files[0]["channels"].as_u64().unwrap(),
-        sar_record::Topic::ALL.len() as u64
+        sar_record::Topic::ALL.len() as u64 + SCENE_PATHS.len() as u64
     );
+    for t in SCENE_PATHS {
+        assert!(theirs.get(t).is_some_and(|n| *n >= 1), "{t}: {theirs:?}");
+    }
     let (_, schemas, messages, failures) = readers::totals(&py);
     eprintln!(
         "rosbag2 directory: rosbags decoded {messages} messages, {schemas} schemas, {failures} failures"

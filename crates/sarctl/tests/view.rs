@@ -26,9 +26,8 @@
 )]
 
 mod support;
-use foxglove::Decode;
-use foxglove::messages::SceneUpdate;
 use sar_msgs::msgs::{RosMessage, WrenchStamped};
+use sar_msgs::viz::{MarkerArray, marker_action, marker_type};
 use sar_msgs::wire::{StateMsg, flags};
 use sar_scene::draw::{self as scene, ids};
 use sar_scene::geometry::SceneGeometry;
@@ -376,10 +375,6 @@ fn close(a: [f64; 3], b: [f64; 3], tol: f64) -> bool {
     (0..3).all(|k| (a[k] - b[k]).abs() <= tol)
 }
 
-fn v3(v: &foxglove::messages::Vector3) -> [f64; 3] {
-    [v.x, v.y, v.z]
-}
-
 #[test]
 fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
     let _serial = serial();
@@ -419,11 +414,10 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
                 tips.push(w);
             }
         } else {
-            let s = SceneUpdate::decode(payload.as_slice()).unwrap();
-            let has_arrow = s
-                .entities
-                .iter()
-                .any(|e| e.id == ids::TIP_FORCE && !e.arrows.is_empty());
+            let s = MarkerArray::decode(&payload).unwrap();
+            let has_arrow = s.markers.as_slice().iter().any(|m| {
+                m.ns.as_str() == ids::TIP_FORCE && m.id == 0 && m.action == marker_action::ADD
+            });
             if has_arrow {
                 scenes.push((log_time, s));
             }
@@ -460,29 +454,28 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
         let d = [pose.tip_m.x, pose.tip_m.y, pose.tip_m.z];
         let u = [pose.rod_dir.x, pose.rod_dir.y, pose.rod_dir.z];
         let w = [pose.rod_normal.x, pose.rod_normal.y, pose.rod_normal.z];
-        let entity = |id: &str| {
-            s.entities
+        let marker = |ns: &str, id: i32| {
+            *s.markers
+                .as_slice()
                 .iter()
-                .find(|e| e.id == id)
-                .unwrap_or_else(|| panic!("no entity {id}"))
+                .find(|m| m.ns.as_str() == ns && m.id == id)
+                .unwrap_or_else(|| panic!("no marker {ns} {id}"))
         };
-        for e in &s.entities {
-            assert_eq!(e.frame_id, "base");
+        for m in s.markers.as_slice() {
+            assert_eq!(m.frame_id.as_str(), "base");
         }
-        let uj = entity(ids::UJOINT).spheres[0].pose.unwrap();
-        assert!(close(v3(&uj.position.unwrap()), a, 1e-9));
-        // The rod: a cylinder of length L along its local z; its ends are
-        // A's foot (A + d w) and the tip D.
-        let rod = &entity(ids::ROD).cylinders[0];
-        let (p, size) = (rod.pose.unwrap(), rod.size.unwrap());
-        assert!((size.z - prof.length_m()).abs() < 1e-12);
-        let axis = scene::rotate(&p.orientation.unwrap(), [0.0, 0.0, 1.0]);
-        let c = v3(&p.position.unwrap());
-        let near: [f64; 3] = std::array::from_fn(|k| c[k] - 0.5 * size.z * axis[k]);
-        let far: [f64; 3] = std::array::from_fn(|k| c[k] + 0.5 * size.z * axis[k]);
+        let uj = marker(ids::UJOINT, 0);
+        assert!(close(uj.pose.position_m, a, 1e-9));
+        // The rod: a line from A's foot (A + d w) to the tip D, L long.
+        let rod = marker(ids::ROD, 0);
+        assert_eq!(rod.kind, marker_type::LINE_STRIP);
+        let ends = rod.points_m.as_slice();
+        let (near, far) = (ends[0], ends[1]);
         let foot: [f64; 3] = std::array::from_fn(|k| a[k] + prof.offset_m() * w[k]);
         assert!(close(near, foot, 1e-9), "{near:?} {foot:?}");
         assert!(close(far, d, 1e-9), "{far:?} {d:?}");
+        let rod_vec: [f64; 3] = std::array::from_fn(|k| far[k] - near[k]);
+        assert!((norm(rod_vec) - prof.length_m()).abs() < 1e-12);
         // B on the rod's axis.
         let b = cal.support_m();
         let fb = [b.x - foot[0], b.y - foot[1], b.z - foot[2]];
@@ -490,29 +483,27 @@ fn view_serves_the_tip_force_and_the_scene_of_the_published_state() {
         let off: [f64; 3] = std::array::from_fn(|k| fb[k] - along * u[k]);
         assert!(norm(off) < 1e-9 && along > 0.0 && along < prof.length_m());
         // The arrow: from D along F_tip, |F| * scale long, the guard's colour.
-        let arrow = &entity(ids::TIP_FORCE).arrows[0];
-        let ap = arrow.pose.unwrap();
-        assert!(close(v3(&ap.position.unwrap()), d, 1e-9));
-        let dir = scene::rotate(&ap.orientation.unwrap(), [1.0, 0.0, 0.0]);
+        let arrow = marker(ids::TIP_FORCE, 0);
+        assert_eq!(arrow.kind, marker_type::ARROW);
+        let ends = arrow.points_m.as_slice();
+        assert!(close(ends[0], d, 1e-9));
+        let v: [f64; 3] = std::array::from_fn(|k| ends[1][k] - ends[0][k]);
         let f = st.tip_force_n;
         let n = norm(f);
-        assert!(close(dir, [f[0] / n, f[1] / n, f[2] / n], 1e-9));
-        let length = arrow.shaft_length + arrow.head_length;
-        assert!((length - n * geometry.force_scale_m_per_n).abs() < 1e-12);
-        let col = arrow.color.unwrap();
+        assert!(close(v, f.map(|x| x * geometry.force_scale_m_per_n), 1e-12));
+        assert!((norm(v) - n * geometry.force_scale_m_per_n).abs() < 1e-12);
         assert_eq!(
-            (col.r, col.g, col.b),
+            arrow.color,
             scene::guard_color(st.guard_state),
             "guard {}",
             st.guard_state
         );
         // The stop limit's sphere at the tip.
-        let limits = entity(ids::FORCE_LIMITS);
-        assert!(limits.spheres.iter().any(|sp| {
-            let size = sp.size.unwrap();
-            (size.x - 2.0 * st.limits_n[1] * geometry.force_scale_m_per_n).abs() < 1e-12
-                && close(v3(&sp.pose.unwrap().position.unwrap()), d, 1e-12)
-        }));
+        let stop = marker(ids::FORCE_LIMITS, 1);
+        assert!(
+            (stop.scale_m[0] - 2.0 * st.limits_n[1] * geometry.force_scale_m_per_n).abs() < 1e-12
+        );
+        assert!(close(stop.pose.position_m, d, 1e-12));
         checked += 1;
     }
     assert!(checked >= scenes.len() / 2, "{checked} of {}", scenes.len());

@@ -1,10 +1,9 @@
-//! The live view's scene as a pure function (no processes): the rod's ends
-//! against `sar_kinematics::forward` also with a rod offset d != 0, the
-//! arrow's direction for a force opposite to the arrow's own axis (the
-//! half-turn case), a state without a pose draws no rod, tip, force nor
-//! limits (and no NaN anywhere), the colours follow the guard, and the
-//! scene written to an MCAP file with [`scene::schema`] and
-//! [`scene::encode`] reads back (the recorder's future scene topic).
+//! The 3D scene as a pure function (no processes): the rod's ends against
+//! `sar_kinematics::forward` also with a rod offset d != 0, the arrow along
+//! the force in every direction and |F_tip| x the scale long, a state
+//! without a pose sends the rod, tip, force and limits as DELETE (and no
+//! NaN anywhere), the colours follow the guard, the static frame shows Y0
+//! up, and the MarkerArray decodes to what was drawn.
 
 #![allow(
     clippy::unwrap_used,
@@ -13,13 +12,12 @@
     clippy::indexing_slicing
 )]
 
-use foxglove::Decode;
-use foxglove::messages::{SceneEntity, SceneUpdate};
 use sar_kinematics::{ActiveJoints, Profile, ProfileSpec, forward};
+use sar_msgs::msgs::RosMessage;
+use sar_msgs::viz::{Marker, MarkerArray, TfMessage, marker_action};
 use sar_msgs::wire::{StateMsg, flags, guard_code};
 use sar_scene::draw::{self as scene, ids};
 use sar_scene::geometry::SceneGeometry;
-use std::collections::BTreeMap;
 
 type V3 = [f64; 3];
 
@@ -31,12 +29,18 @@ fn close(a: V3, b: V3, tol: f64) -> bool {
     (0..3).all(|k| (a[k] - b[k]).abs() <= tol)
 }
 
-fn v3(v: &foxglove::messages::Vector3) -> V3 {
-    [v.x, v.y, v.z]
+fn marker(s: &MarkerArray, ns: &str, id: i32) -> Marker {
+    *s.markers
+        .as_slice()
+        .iter()
+        .find(|m| m.ns.as_str() == ns && m.id == id)
+        .unwrap_or_else(|| panic!("no marker {ns} {id}"))
 }
 
-fn entity<'a>(s: &'a SceneUpdate, id: &str) -> &'a SceneEntity {
-    s.entities.iter().find(|e| e.id == id).unwrap()
+fn drawn(s: &StateMsg, g: &SceneGeometry) -> MarkerArray {
+    let mut out = MarkerArray::default();
+    scene::scene(s, g, &mut out);
+    out
 }
 
 /// The built-in configuration with the rod offset `d`.
@@ -88,33 +92,25 @@ fn rod_ends_are_the_kinematics_with_and_without_offset() {
         let g = SceneGeometry::from_config(&cfg);
         for q in POSES {
             let s = state(&cfg, q, [1.0, 2.0, -0.5], guard_code::OK);
-            let update = scene::scene(&s, &g);
+            let update = drawn(&s, &g);
             let joints = ActiveJoints {
                 q1_m: q[0],
                 q2_m: q[1],
                 q3_m: q[2],
             };
             let pose = forward(&cfg.calibration, &cfg.profile, &joints).unwrap();
-            let rod = &entity(&update, ids::ROD).cylinders[0];
-            let (p, size) = (rod.pose.unwrap(), rod.size.unwrap());
-            let axis = scene::rotate(&p.orientation.unwrap(), [0.0, 0.0, 1.0]);
-            let c = v3(&p.position.unwrap());
-            let near: V3 = std::array::from_fn(|k| c[k] - 0.5 * size.z * axis[k]);
-            let far: V3 = std::array::from_fn(|k| c[k] + 0.5 * size.z * axis[k]);
+            let rod = marker(&update, ids::ROD, 0);
+            let (near, far) = (rod.points_m.as_slice()[0], rod.points_m.as_slice()[1]);
             let a = arr(pose.ujoint_m);
             let w = arr(pose.rod_normal);
             let foot: V3 = std::array::from_fn(|k| a[k] + d * w[k]);
             assert!(close(near, foot, 1e-12), "d {d} q {q:?}: {near:?} {foot:?}");
             assert!(close(far, arr(pose.tip_m), 1e-12), "d {d} q {q:?}");
             // The carriage P = P_home + (q3, q2, q1).
-            let cube = &entity(&update, ids::CARRIAGE).cubes[0];
+            let cube = marker(&update, ids::CARRIAGE, 0);
             let home = arr(cfg.calibration.p_home_m());
             let p_expected = [home[0] + q[2], home[1] + q[1], home[2] + q[0]];
-            assert!(close(
-                v3(&cube.pose.unwrap().position.unwrap()),
-                p_expected,
-                1e-12
-            ));
+            assert!(close(cube.pose.position_m, p_expected, 1e-12));
             assert!(close(arr(pose.carriage_m), p_expected, 1e-12));
         }
     }
@@ -125,7 +121,7 @@ fn arrow_points_along_the_force_in_every_direction() {
     let cfg = config(0.0);
     let g = SceneGeometry::from_config(&cfg);
     let forces = [
-        [-3.0, 0.0, 0.0], // opposite to the arrow's own +x
+        [-3.0, 0.0, 0.0],
         [3.0, 0.0, 0.0],
         [0.0, -7.0, 0.0],
         [0.0, 0.0, 2.0],
@@ -133,18 +129,16 @@ fn arrow_points_along_the_force_in_every_direction() {
     ];
     for f in forces {
         let s = state(&cfg, POSES[0], f, guard_code::WARN);
-        let update = scene::scene(&s, &g);
-        let arrow = &entity(&update, ids::TIP_FORCE).arrows[0];
-        let dir = scene::rotate(&arrow.pose.unwrap().orientation.unwrap(), [1.0, 0.0, 0.0]);
-        let n = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        let arrow = marker(&drawn(&s, &g), ids::TIP_FORCE, 0);
+        let p = arrow.points_m.as_slice();
+        assert!(close(p[0], s.tip_m, 0.0));
+        let v: V3 = std::array::from_fn(|k| p[1][k] - p[0][k]);
         assert!(
-            close(dir, [f[0] / n, f[1] / n, f[2] / n], 1e-12),
-            "{f:?}: {dir:?}"
+            close(v, f.map(|x| x * g.force_scale_m_per_n), 1e-15),
+            "{f:?}: {v:?}"
         );
-        assert!((arrow.shaft_length + arrow.head_length - n * g.force_scale_m_per_n).abs() < 1e-12);
-        assert!(arrow.shaft_length > 0.0);
-        let c = arrow.color.unwrap();
-        assert_eq!((c.r, c.g, c.b), scene::guard_color(guard_code::WARN));
+        assert!(arrow.scale_m.iter().all(|x| *x > 0.0));
+        assert_eq!(arrow.color, scene::guard_color(guard_code::WARN));
     }
 }
 
@@ -163,13 +157,13 @@ fn guard_colours_differ() {
     }
 }
 
-fn all_finite(update: &SceneUpdate) -> bool {
+fn all_finite(update: &MarkerArray) -> bool {
     let bytes = format!("{update:?}");
     !bytes.contains("NaN") && !bytes.contains("inf")
 }
 
 #[test]
-fn a_state_without_pose_or_estimate_draws_no_rod_and_no_arrow() {
+fn a_state_without_pose_or_estimate_deletes_the_rod_and_the_arrow() {
     let cfg = config(0.0);
     let g = SceneGeometry::from_config(&cfg);
     let mut s = state(&cfg, POSES[1], [2.0, 0.0, 0.0], guard_code::FAULT);
@@ -178,26 +172,24 @@ fn a_state_without_pose_or_estimate_draws_no_rod_and_no_arrow() {
     s.tip_m = [f64::NAN; 3];
     s.q45_rad = [f64::NAN; 2];
     s.tip_force_n = [f64::NAN; 3];
-    let update = scene::scene(&s, &g);
-    let got: Vec<&str> = update.entities.iter().map(|e| e.id.as_str()).collect();
-    assert_eq!(got, ids::ALL);
-    for id in [ids::UJOINT, ids::ROD, ids::TIP_FORCE, ids::FORCE_LIMITS] {
-        let e = entity(&update, id);
-        assert!(
-            e.arrows.is_empty() && e.cylinders.is_empty() && e.spheres.is_empty(),
-            "{id}"
-        );
+    let update = drawn(&s, &g);
+    for ns in [ids::UJOINT, ids::ROD, ids::TIP_FORCE, ids::FORCE_LIMITS] {
+        assert_eq!(marker(&update, ns, 0).action, marker_action::DELETE, "{ns}");
     }
-    assert_eq!(entity(&update, ids::BASE_FRAME).arrows.len(), 3);
-    assert_eq!(entity(&update, ids::SUPPORT).lines.len(), 1);
+    for (ns, id) in [(ids::BASE_FRAME, 0), (ids::SUPPORT, 0), (ids::CARRIAGE, 0)] {
+        assert_eq!(marker(&update, ns, id).action, marker_action::ADD, "{ns}");
+    }
     assert!(all_finite(&update), "{update:?}");
 
     // A pose but no estimate: the rod, no arrow.
     let mut s = state(&cfg, POSES[1], [2.0, 0.0, 0.0], guard_code::FAULT);
     s.flags = flags::POSE;
-    let update = scene::scene(&s, &g);
-    assert_eq!(entity(&update, ids::ROD).cylinders.len(), 1);
-    assert!(entity(&update, ids::TIP_FORCE).arrows.is_empty());
+    let update = drawn(&s, &g);
+    assert_eq!(marker(&update, ids::ROD, 0).action, marker_action::ADD);
+    assert_eq!(
+        marker(&update, ids::TIP_FORCE, 0).action,
+        marker_action::DELETE
+    );
     assert!(all_finite(&update));
 }
 
@@ -206,13 +198,14 @@ fn support_ring_is_around_b_across_the_rod() {
     let cfg = config(0.0);
     let g = SceneGeometry::from_config(&cfg);
     let s = state(&cfg, POSES[2], [0.0; 3], guard_code::OK);
-    let update = scene::scene(&s, &g);
-    let ring = &entity(&update, ids::SUPPORT).lines[0];
+    let ring = marker(&drawn(&s, &g), ids::SUPPORT, 0);
     let b = arr(cfg.calibration.support_m());
     let (u, _) = sar_kinematics::rod_frame(s.q45_rad[0], s.q45_rad[1]);
-    assert!(ring.points.len() >= 16);
-    for p in &ring.points {
-        let r = [p.x - b[0], p.y - b[1], p.z - b[2]];
+    let points = ring.points_m.as_slice();
+    assert!(points.len() >= 16);
+    assert_eq!(points.first(), points.last(), "closed");
+    for p in points {
+        let r = [p[0] - b[0], p[1] - b[1], p[2] - b[2]];
         let radius = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
         assert!((radius - g.support_radius_m).abs() < 1e-12);
         assert!((r[0] * u.x + r[1] * u.y + r[2] * u.z).abs() < 1e-12);
@@ -220,69 +213,40 @@ fn support_ring_is_around_b_across_the_rod() {
 }
 
 #[test]
-fn the_scene_goes_into_an_mcap_file_and_back() {
-    let cfg = config(0.0);
+fn the_scene_and_its_frames_decode_to_what_was_drawn() {
+    let cfg = config(0.01);
     let g = SceneGeometry::from_config(&cfg);
-    let s = state(&cfg, POSES[0], [4.0, 1.0, 0.0], guard_code::OK);
-    let update = scene::scene(&s, &g);
-    let schema = scene::schema();
-    assert_eq!(schema.name, "foxglove.SceneUpdate");
-    assert_eq!(schema.encoding, "protobuf");
-    assert_eq!(schema.message_encoding, "protobuf");
-    assert!(!schema.data.is_empty());
-
-    let mut file = Vec::new();
-    {
-        let mut w = mcap::Writer::new(std::io::Cursor::new(&mut file)).unwrap();
-        let id = w
-            .add_schema(&schema.name, &schema.encoding, &schema.data)
-            .unwrap();
-        let ch = w
-            .add_channel(
-                id,
-                sar_scene::SCENE_TOPIC,
-                &schema.message_encoding,
-                &BTreeMap::new(),
-            )
-            .unwrap();
-        let mut buf = Vec::new();
-        scene::encode(&update, &mut buf).unwrap();
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: 0,
-                log_time: s.now_ns,
-                publish_time: s.now_ns,
-            },
-            &buf,
-        )
-        .unwrap();
-        w.finish().unwrap();
-    }
-    let msgs: Vec<_> = mcap::MessageStream::new(&file)
-        .unwrap()
-        .collect::<Result<_, _>>()
-        .unwrap();
-    assert_eq!(msgs.len(), 1);
-    let m = &msgs[0];
-    assert_eq!(m.channel.topic, sar_scene::SCENE_TOPIC);
-    assert_eq!(m.log_time, s.now_ns);
-    let schema_back = m.channel.schema.as_ref().unwrap();
-    assert_eq!(schema_back.name, "foxglove.SceneUpdate");
-    assert_eq!(SceneUpdate::decode(&m.data[..]).unwrap(), update);
-    assert_eq!(
-        entity(&update, ids::ROD).timestamp.unwrap().total_nanos(),
-        s.now_ns
-    );
+    let s = state(&cfg, POSES[3], [1.0, -2.0, 0.5], guard_code::STOP);
+    let update = drawn(&s, &g);
+    let mut buf = Vec::new();
+    update.encode(&mut buf).unwrap();
+    assert_eq!(MarkerArray::decode(&buf).unwrap(), update);
+    let tf = scene::static_transforms(s.now_ns);
+    tf.encode(&mut buf).unwrap();
+    let back = TfMessage::decode(&buf).unwrap();
+    assert_eq!(back, tf);
+    // world -> base: Y0 shows up (world's Z), Z0 towards the viewer.
+    let t = back.transforms.as_slice()[0];
+    assert!(close(
+        scene::rotate(&t.rotation, [0.0, 1.0, 0.0]),
+        [0.0, 0.0, 1.0],
+        1e-15
+    ));
+    let moving = scene::moving_transforms(&s, &g);
+    let tip = moving.transforms.as_slice()[1];
+    assert_eq!(tip.child_frame_id.as_str(), scene::FRAME_TIP);
+    assert!(close(tip.translation_m, s.tip_m, 0.0));
 }
 
 /// Every string of the layout that names a topic.
 fn topic_paths(v: &serde_json::Value, out: &mut Vec<String>) {
     match v {
-        serde_json::Value::String(s) if s.starts_with("/sar/") => out.push(s.clone()),
+        serde_json::Value::String(s) if s.starts_with("/sar/") || s.starts_with("/tf") => {
+            out.push(s.clone())
+        }
         serde_json::Value::Array(a) => a.iter().for_each(|x| topic_paths(x, out)),
         serde_json::Value::Object(o) => o.iter().for_each(|(k, x)| {
-            if k.starts_with("/sar/") {
+            if k.starts_with("/sar/") || k.starts_with("/tf") {
                 out.push(k.clone());
             }
             topic_paths(x, out)
@@ -308,6 +272,8 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
         match Topic::from_name(topic) {
             Some(t) => t.schema(),
             None if topic == sarctl::view::STATUS_TOPIC => sarctl::view::STATUS_SCHEMA,
+            None if topic == sar_scene::SCENE_TOPIC => MarkerArray::SCHEMA,
+            None if topic.starts_with("/tf") => TfMessage::SCHEMA,
             None => "",
         }
     };
@@ -331,6 +297,8 @@ fn the_foxglove_layout_uses_only_what_the_view_serves() {
         "/sar/view/status.stop_total_n",
         "/sar/view/status.guard_code",
         sar_scene::SCENE_TOPIC,
+        sar_scene::TF_TOPIC,
+        sar_scene::TF_STATIC_TOPIC,
     ] {
         assert!(paths.iter().any(|p| p == wanted), "{wanted}");
     }
@@ -362,7 +330,7 @@ fn the_recorded_messages_of_a_cycle_draw_the_same_scene() {
             passive.as_ref(),
             s.limits_n,
         );
-        assert_eq!(scene::scene(&back, &g), scene::scene(&s, &g), "pose {k}");
+        assert_eq!(drawn(&back, &g), drawn(&s, &g), "pose {k}");
     }
 }
 
