@@ -302,7 +302,6 @@ fn sighup_and_sigusr1_stop_cleanly_with_the_recording_complete() {
         let files: Vec<PathBuf> = std::fs::read_dir(&rec_dir)
             .unwrap()
             .map(|e| e.unwrap().path())
-            .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
             .collect();
         assert_eq!(files.len(), 1, "{files:?}");
         let bytes = std::fs::read(&files[0]).unwrap();

@@ -37,12 +37,11 @@ pub fn recording_config(dir: &Path) -> (PathBuf, PathBuf) {
     (config, rec_dir)
 }
 
-/// The recording files (not the scene companions) of `dir`, sorted.
+/// The recording files of `dir`, sorted.
 pub fn recordings(dir: &Path) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| !p.to_string_lossy().ends_with(".scene.mcap"))
         .collect();
     files.sort();
     files

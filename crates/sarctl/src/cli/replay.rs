@@ -21,7 +21,7 @@ pub struct Args<'a> {
     /// The configuration (`None`: the one the recording carries).
     pub config: Option<&'a Path>,
     /// The recording: files of one rotated set in order, or directories
-    /// (their `*.mcap` files by name, scene files left out).
+    /// (their `*.mcap` files by name, older builds' `*.scene.mcap` left out).
     pub input: &'a [PathBuf],
     /// The outputs.
     pub output: Option<&'a Path>,
@@ -316,7 +316,9 @@ fn gap_line(g: &sar_record::replay::Gap) -> String {
 
 /// The files to replay: each input as given, a directory as its `*.mcap`
 /// files sorted by name (the recorder's `NAME-0000.mcap`, `NAME-0001.mcap`,
-/// ...), without the scene companions. A directory with none is an error.
+/// ...), without the `*.scene.mcap` companions that builds before issue 28
+/// wrote beside them (protobuf, no profile: the scene is in each file now).
+/// A directory with none is an error.
 pub fn input_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, String> {
     let mut out = Vec::new();
     for input in inputs {
