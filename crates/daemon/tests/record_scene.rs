@@ -55,7 +55,7 @@ fn replay_outputs_carry_the_scene_of_their_cycles() {
             m.channel.topic
         );
         let qos = if m.channel.topic == "/tf_static" {
-            sar_record::scene::OFFERED_QOS_PROFILES_STATIC
+            sar_record::OFFERED_QOS_PROFILES_STATIC
         } else {
             sar_record::OFFERED_QOS_PROFILES
         };

@@ -10,9 +10,10 @@
 //! cycle, decimated, on the writer's thread, into the file itself.
 
 pub use crate::scene::SceneOptions;
-use crate::scene::{SceneChannels, SceneState};
+use crate::scene::{SceneEncodeError, SceneState};
 use sar_config::Rotation;
 use sar_msgs::msgs::{Outgoing, RecorderDrops, RosMessage, SnapshotChunk, StateSnapshot, Topic};
+use sar_msgs::viz::{MarkerArray, TfMessage};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -105,6 +106,65 @@ pub const OFFERED_QOS_PROFILES: &str = "- history: keep_last
 
 /// The metadata key of [`OFFERED_QOS_PROFILES`].
 pub const QOS_METADATA_KEY: &str = "offered_qos_profiles";
+
+/// The `offered_qos_profiles` of `/tf_static`: as [`OFFERED_QOS_PROFILES`]
+/// but `transient_local` with a depth of 1 (a late subscriber gets the
+/// fixed frames: what `ros2 bag play` offers again, and the viewers read).
+pub const OFFERED_QOS_PROFILES_STATIC: &str = "- history: keep_last
+  depth: 1
+  reliability: reliable
+  durability: transient_local
+  deadline:
+    sec: 9223372036
+    nsec: 854775807
+  lifespan:
+    sec: 9223372036
+    nsec: 854775807
+  liveliness: automatic
+  liveliness_lease_duration:
+    sec: 9223372036
+    nsec: 854775807
+  avoid_ros_namespace_conventions: false";
+
+/// The scene's channels in one file.
+#[derive(Debug, Clone, Copy)]
+struct SceneChannels {
+    scene: u16,
+    tf: u16,
+    tf_static: u16,
+}
+
+/// Adds the scene's schemas and channels to a file being opened.
+fn add_scene_channels<W: Write + std::io::Seek>(
+    writer: &mut mcap::Writer<W>,
+) -> Result<SceneChannels, mcap::McapError> {
+    let qos = |text: &str| BTreeMap::from([(QOS_METADATA_KEY.to_owned(), text.to_owned())]);
+    let markers = writer.add_schema(
+        MarkerArray::TYPE_NAME,
+        "ros2msg",
+        MarkerArray::SCHEMA.as_bytes(),
+    )?;
+    let tf = writer.add_schema(
+        TfMessage::TYPE_NAME,
+        "ros2msg",
+        TfMessage::SCHEMA.as_bytes(),
+    )?;
+    Ok(SceneChannels {
+        scene: writer.add_channel(
+            markers,
+            sar_scene::SCENE_TOPIC,
+            "cdr",
+            &qos(OFFERED_QOS_PROFILES),
+        )?,
+        tf: writer.add_channel(tf, sar_scene::TF_TOPIC, "cdr", &qos(OFFERED_QOS_PROFILES))?,
+        tf_static: writer.add_channel(
+            tf,
+            sar_scene::TF_STATIC_TOPIC,
+            "cdr",
+            &qos(OFFERED_QOS_PROFILES_STATIC),
+        )?,
+    })
+}
 
 /// How files are written.
 #[derive(Debug, Clone, PartialEq)]
@@ -276,6 +336,10 @@ struct OpenFile {
     first_log_ns: Option<u64>,
 }
 
+fn scene_encode_error((topic, source): SceneEncodeError) -> WriteError {
+    WriteError::Encode { topic, source }
+}
+
 fn topic_index(topic: Topic) -> usize {
     Topic::ALL.iter().position(|t| *t == topic).unwrap_or(0)
 }
@@ -356,7 +420,7 @@ impl RotatingWriter {
                 .map_err(mcap_err(&path))?;
         }
         let scene = match &self.scene {
-            Some(_) => Some(crate::scene::add_channels(&mut writer).map_err(mcap_err(&path))?),
+            Some(_) => Some(add_scene_channels(&mut writer).map_err(mcap_err(&path))?),
             None => None,
         };
         // Each file says which of the rotation it is (`file_index`, 0 for
@@ -519,9 +583,8 @@ impl RotatingWriter {
         let Some(channels) = file.scene else {
             return Ok(());
         };
-        state.write_static(channels, log_ns, &mut |channel, log_ns, sequence, bytes| {
-            file.write_other(channel, log_ns, sequence, bytes)
-        })
+        let bytes = state.static_message(log_ns).map_err(scene_encode_error)?;
+        file.write_other(channels.tf_static, log_ns, 0, bytes)
     }
 
     /// Closes the cycle gathered: writes its scene when one is due.
@@ -532,9 +595,11 @@ impl RotatingWriter {
         let Some(channels) = file.scene else {
             return Ok(());
         };
-        state.flush(channels, &mut |channel, log_ns, sequence, bytes| {
-            file.write_other(channel, log_ns, sequence, bytes)
-        })
+        let Some(d) = state.flush().map_err(scene_encode_error)? else {
+            return Ok(());
+        };
+        file.write_other(channels.scene, d.log_ns, d.sequence, d.markers)?;
+        file.write_other(channels.tf, d.log_ns, d.sequence, d.tf)
     }
 
     /// Ends the current chunk and hands the bytes to the disk (fsync): what was

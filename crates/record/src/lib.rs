@@ -24,7 +24,8 @@ pub mod rosbag2;
 pub mod scene;
 
 pub use file::{
-    FileOptions, OFFERED_QOS_PROFILES, QOS_METADATA_KEY, RotatingWriter, SceneOptions, WriteError,
+    FileOptions, OFFERED_QOS_PROFILES, OFFERED_QOS_PROFILES_STATIC, QOS_METADATA_KEY,
+    RotatingWriter, SceneOptions, WriteError,
 };
 pub use reader::{
     McapReader, MessageRef, RawMessage, ReadError, RecoverError, RecoverReport, read_file, recover,

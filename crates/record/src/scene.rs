@@ -7,32 +7,11 @@
 //! `transient_local`, as ROS 2's recorder writes it), so each file opens
 //! alone with its frames.
 
-use crate::file::{OFFERED_QOS_PROFILES, QOS_METADATA_KEY, WriteError};
+use sar_msgs::cdr::CdrError;
 use sar_msgs::msgs::{ActiveJointState, EstimatorState, Outgoing, PassiveJointState, RosMessage};
-use sar_msgs::viz::{MarkerArray, TfMessage};
+use sar_msgs::viz::MarkerArray;
 use sar_scene::draw;
 use sar_scene::geometry::SceneGeometry;
-use std::collections::BTreeMap;
-use std::io::Write;
-
-/// The `offered_qos_profiles` of `/tf_static`: as [`OFFERED_QOS_PROFILES`]
-/// but `transient_local` with a depth of 1 (a late subscriber gets the
-/// fixed frames: what `ros2 bag play` offers again, and the viewers read).
-pub const OFFERED_QOS_PROFILES_STATIC: &str = "- history: keep_last
-  depth: 1
-  reliability: reliable
-  durability: transient_local
-  deadline:
-    sec: 9223372036
-    nsec: 854775807
-  lifespan:
-    sec: 9223372036
-    nsec: 854775807
-  liveliness: automatic
-  liveliness_lease_duration:
-    sec: 9223372036
-    nsec: 854775807
-  avoid_ros_namespace_conventions: false";
 
 /// The 3D scene written into the recordings.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,46 +39,6 @@ impl SceneOptions {
     }
 }
 
-/// The scene's channels in one file.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct SceneChannels {
-    scene: u16,
-    tf: u16,
-    tf_static: u16,
-}
-
-/// Adds the scene's schemas and channels to a file being opened.
-pub(crate) fn add_channels<W: Write + std::io::Seek>(
-    writer: &mut mcap::Writer<W>,
-) -> Result<SceneChannels, mcap::McapError> {
-    let qos = |text: &str| BTreeMap::from([(QOS_METADATA_KEY.to_owned(), text.to_owned())]);
-    let markers = writer.add_schema(
-        MarkerArray::TYPE_NAME,
-        "ros2msg",
-        MarkerArray::SCHEMA.as_bytes(),
-    )?;
-    let tf = writer.add_schema(
-        TfMessage::TYPE_NAME,
-        "ros2msg",
-        TfMessage::SCHEMA.as_bytes(),
-    )?;
-    Ok(SceneChannels {
-        scene: writer.add_channel(
-            markers,
-            sar_scene::SCENE_TOPIC,
-            "cdr",
-            &qos(OFFERED_QOS_PROFILES),
-        )?,
-        tf: writer.add_channel(tf, sar_scene::TF_TOPIC, "cdr", &qos(OFFERED_QOS_PROFILES))?,
-        tf_static: writer.add_channel(
-            tf,
-            sar_scene::TF_STATIC_TOPIC,
-            "cdr",
-            &qos(OFFERED_QOS_PROFILES_STATIC),
-        )?,
-    })
-}
-
 /// One cycle's messages as the scene needs them.
 #[derive(Debug, Clone, Copy)]
 struct SceneCycle {
@@ -121,20 +60,29 @@ pub(crate) struct SceneState {
     q_m: [f64; 3],
     markers: Box<MarkerArray>,
     buf: Vec<u8>,
+    tf_buf: Vec<u8>,
     sequence: u32,
 }
 
-/// What to write on the scene's channels: `(channel, log time, bytes)`.
-pub(crate) type Emit<'a> = dyn FnMut(u16, u64, u32, &[u8]) -> Result<(), WriteError> + 'a;
+/// Why a scene message could not be encoded, and on which topic.
+pub(crate) type SceneEncodeError = (&'static str, CdrError);
 
 fn encoded<'b, M: RosMessage>(
     m: &M,
     buf: &'b mut Vec<u8>,
     topic: &'static str,
-) -> Result<&'b [u8], WriteError> {
-    m.encode(buf)
-        .map_err(|source| WriteError::Encode { topic, source })?;
+) -> Result<&'b [u8], SceneEncodeError> {
+    m.encode(buf).map_err(|e| (topic, e))?;
     Ok(buf)
+}
+
+/// One cycle's scene, encoded: its log time, sequence number, and the
+/// `/sar/scene` and `/tf` messages.
+pub(crate) struct Drawn<'a> {
+    pub(crate) log_ns: u64,
+    pub(crate) sequence: u32,
+    pub(crate) markers: &'a [u8],
+    pub(crate) tf: &'a [u8],
 }
 
 impl SceneState {
@@ -147,6 +95,7 @@ impl SceneState {
             q_m: [0.0; 3],
             markers: Box::default(),
             buf: Vec::with_capacity(8192),
+            tf_buf: Vec::with_capacity(256),
             sequence: 0,
         }
     }
@@ -178,35 +127,26 @@ impl SceneState {
         }
     }
 
-    /// `/tf_static` at `log_ns`, the start of a file.
-    pub(crate) fn write_static(
-        &mut self,
-        channels: SceneChannels,
-        log_ns: u64,
-        emit: &mut Emit<'_>,
-    ) -> Result<(), WriteError> {
+    /// `/tf_static` at `log_ns`, the start of a file, encoded.
+    pub(crate) fn static_message(&mut self, log_ns: u64) -> Result<&[u8], SceneEncodeError> {
         let tf = draw::static_transforms(log_ns);
-        let bytes = encoded(&tf, &mut self.buf, sar_scene::TF_STATIC_TOPIC)?;
-        emit(channels.tf_static, log_ns, 0, bytes)
+        encoded(&tf, &mut self.buf, sar_scene::TF_STATIC_TOPIC)
     }
 
-    /// Closes the cycle gathered: writes its scene and moving frames when
-    /// one is due (at most one per period of log time, keeping the phase).
-    pub(crate) fn flush(
-        &mut self,
-        channels: SceneChannels,
-        emit: &mut Emit<'_>,
-    ) -> Result<(), WriteError> {
+    /// Closes the cycle gathered: its scene and moving frames drawn and
+    /// encoded when one is due (at most one per period of log time,
+    /// keeping the phase), else `None`.
+    pub(crate) fn flush(&mut self) -> Result<Option<Drawn<'_>>, SceneEncodeError> {
         let Some(SceneCycle {
             stamp_ns: log_ns,
             estimator: Some(estimator),
             passive,
         }) = self.cycle.take()
         else {
-            return Ok(());
+            return Ok(None);
         };
         if self.next_ns.is_some_and(|next| log_ns < next) {
-            return Ok(());
+            return Ok(None);
         }
         let period = self.options.period_ns.max(1);
         self.next_ns = Some(match self.next_ns {
@@ -227,10 +167,14 @@ impl SceneState {
         draw::scene(&state, &g, &mut self.markers);
         let sequence = self.sequence;
         self.sequence = sequence.wrapping_add(1);
-        let bytes = encoded(&*self.markers, &mut self.buf, sar_scene::SCENE_TOPIC)?;
-        emit(channels.scene, log_ns, sequence, bytes)?;
         let tf = draw::moving_transforms(&state, &g);
-        let bytes = encoded(&tf, &mut self.buf, sar_scene::TF_TOPIC)?;
-        emit(channels.tf, log_ns, sequence, bytes)
+        encoded(&tf, &mut self.tf_buf, sar_scene::TF_TOPIC)?;
+        encoded(&*self.markers, &mut self.buf, sar_scene::SCENE_TOPIC)?;
+        Ok(Some(Drawn {
+            log_ns,
+            sequence,
+            markers: &self.buf,
+            tf: &self.tf_buf,
+        }))
     }
 }
