@@ -2,7 +2,9 @@
 //! side (accepted, and dropped on a full queue), and the writer's throughput
 //! on a 4 kHz daemon recording (CycleInput and the outputs of each cycle,
 //! about seven messages a cycle) with zstd chunks, beside two baselines:
-//! encoding alone, and writing uncompressed chunks.
+//! encoding alone, and writing uncompressed chunks; and with zstd and the 3D
+//! scene at 30 Hz (`/sar/scene`, `/tf`, `/tf_static` drawn on the writer's
+//! thread), the cost of the scene beside the zstd run.
 #![allow(
     missing_docs,
     clippy::unwrap_used,
@@ -94,12 +96,23 @@ fn writer(c: &mut Criterion) {
             }
         })
     });
-    for (name, compress) in [("uncompressed", false), ("zstd", true)] {
+    let cfg = sar_config::builtin().unwrap();
+    let scene = sar_record::SceneOptions::from_config(&cfg);
+    assert!(
+        scene.is_some(),
+        "the built-in configuration draws the scene"
+    );
+    for (name, compress, scene) in [
+        ("uncompressed", false, None),
+        ("zstd", true, None),
+        ("zstd_scene_30Hz", true, scene),
+    ] {
         g.bench_function(name, |b| {
             b.iter_batched(
                 || {
                     let mut o = FileOptions::new(&dir, name);
                     o.compress = compress;
+                    o.scene = scene;
                     RotatingWriter::new(o).unwrap()
                 },
                 |mut w| {
@@ -114,7 +127,7 @@ fn writer(c: &mut Criterion) {
         });
     }
     g.finish();
-    for name in ["uncompressed", "zstd"] {
+    for name in ["uncompressed", "zstd", "zstd_scene_30Hz"] {
         let path = FileOptions::new(&dir, name).path(0);
         let len = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
         println!(
