@@ -29,6 +29,7 @@ use crate::guard::{
     Axis, ForceLimits, Guard, GuardConfig, GuardInput, GuardState, Reason, RestResidual,
     SensorChannel, TipInput, Transition,
 };
+use crate::motion::CarriageMotion;
 use crate::tip_force::{TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator};
 use crate::{
     Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, at_least,
@@ -1160,6 +1161,22 @@ impl Estimator {
         reference: Option<&FollowingReference>,
         host_fault: Option<Reason>,
     ) -> &CycleOutput {
+        self.cycle_in_motion(input, reference, host_fault, &CarriageMotion::REST)
+    }
+
+    /// [`Estimator::cycle_checked`] with the carriage's commanded motion at
+    /// the sensor sample's stamp (MODEL.md 10): the tip force is compensated
+    /// for the rod's inertia with it. The loop derives `motion` from the
+    /// trajectory it commands (a pure function of the recorded inputs).
+    pub fn cycle_in_motion(
+        &mut self,
+        input: &CycleInput,
+        reference: Option<&FollowingReference>,
+        host_fault: Option<Reason>,
+        motion: &CarriageMotion,
+    ) -> &CycleOutput {
+        // Issue 26: the compensation is not wired yet (the motion is unused).
+        let _ = motion;
         let checks = self.check_inputs(input, reference);
         let sensor = &input.sensor;
         let joints = &input.joints;

@@ -18,6 +18,7 @@ pub mod guard;
 pub mod identification;
 mod linalg;
 pub mod line_fit;
+pub mod motion;
 pub mod support;
 pub mod tip_force;
 
