@@ -422,6 +422,8 @@ struct AxesToml {
     max_accel_mps2: f64,
     following_tolerance_m: f64,
     retreat_speed_mps: f64,
+    servo_bandwidth_hz: f64,
+    servo_damping: f64,
 }
 
 impl Default for AxesToml {
@@ -432,6 +434,8 @@ impl Default for AxesToml {
             max_accel_mps2: 0.2,
             following_tolerance_m: 0.001,
             retreat_speed_mps: 0.005,
+            servo_bandwidth_hz: scenario::DEFAULT_SERVO_BANDWIDTH_HZ,
+            servo_damping: scenario::DEFAULT_SERVO_DAMPING,
         }
     }
 }
@@ -834,7 +838,12 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let mut record = record(ctx, &f.record)?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
     record.scales = DeviceScales::of_drivers(&sensor_driver, &axes_driver);
-    let force_control = force_control(ctx, &f.force_control, tip.sample_rate_hz, loop_.rate_hz)?;
+    let force_control = force_control(
+        ctx,
+        &f.force_control,
+        (tip.sample_rate_hz, loop_.rate_hz),
+        (f.axes.servo_bandwidth_hz, f.axes.servo_damping),
+    )?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
     plausible::check(ctx, &f)?;
@@ -1232,13 +1241,14 @@ impl Config {
 }
 
 /// `[force_control]`: the law's settings, with the sensor's and the loop's
-/// periods; refused (naming the key) when out of range or not stable at
+/// rates and the axes' servo (`[axes] servo_bandwidth_hz`, `servo_damping`);
+/// refused (naming the key) when out of range or not stable at
 /// `max_stiffness_n_per_m` with `min_phase_margin_deg`.
 fn force_control(
     ctx: &Ctx<'_>,
     t: &ForceControlToml,
-    sample_rate_hz: f64,
-    rate_hz: f64,
+    (sample_rate_hz, rate_hz): (f64, f64),
+    (servo_bandwidth_hz, servo_damping): (f64, f64),
 ) -> Result<sar_estimator::force_control::ForceControlConfig, ConfigError> {
     use sar_estimator::force_control::{Admittance, ForceControlConfig, ForceControlLimits};
     let limits = ForceControlLimits {
@@ -1260,6 +1270,8 @@ fn force_control(
         other_delay_s: t.other_delay_s,
         max_stiffness_n_per_m: t.max_stiffness_n_per_m,
         min_phase_margin_deg: t.min_phase_margin_deg,
+        servo_bandwidth_hz,
+        servo_damping,
     };
     ForceControlConfig::new(limits).map_err(|e| {
         let field = match &e {
@@ -1271,6 +1283,8 @@ fn force_control(
             "axial.damping_n_s_per_m" => "axial_damping_n_s_per_m",
             "lateral.mass_kg" => "lateral_mass_kg",
             "lateral.damping_n_s_per_m" => "lateral_damping_n_s_per_m",
+            "servo_bandwidth_hz" => return ctx.err("axes.servo_bandwidth_hz", e.to_string()),
+            "servo_damping" => return ctx.err("axes.servo_damping", e.to_string()),
             other => other,
         };
         ctx.err(&join("force_control", key), e.to_string())

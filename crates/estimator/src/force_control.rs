@@ -79,14 +79,22 @@ pub struct ForceControlLimits {
     pub max_stiffness_n_per_m: f64,
     /// The smallest accepted phase margin at that stiffness, degrees.
     pub min_phase_margin_deg: f64,
+    /// The axes' position loop (issue 26): its natural frequency, Hz
+    /// (finite, > 0; the configuration's `[axes] servo_bandwidth_hz`). The
+    /// carriage follows a set point through `wn^2 / (s^2 + 2 zeta wn s +
+    /// wn^2)`, whose phase is part of the stability bound.
+    pub servo_bandwidth_hz: f64,
+    /// Its damping ratio zeta (finite, > 0; `[axes] servo_damping`).
+    pub servo_damping: f64,
 }
 
 impl Default for ForceControlLimits {
     /// The defaults of FORCE_CONTROL.md: axial D 80 N s/m, M 0.2 kg;
     /// lateral D 150 N s/m, M 0.4 kg; the hold's return 50 N/m; 6 mm/s,
-    /// 0.2 m/s^2, 40 mm; a 20 Hz filter of 500 Hz samples; 1 kHz; 3 ms of
-    /// other delays; stable to 5000 N/m with at least 25 degrees of phase
-    /// margin.
+    /// 0.2 m/s^2, 40 mm; a 25 Hz filter of 500 Hz samples; 1 kHz; 3 ms of
+    /// other delays; the axes' servos at 30 Hz, damping 0.7; stable to
+    /// 4000 N/m with at least 25 degrees of phase margin (issue 26: the
+    /// servos' lag took 5000 N/m's margin, FORCE_CONTROL.md).
     fn default() -> Self {
         Self {
             axial: Admittance {
@@ -101,12 +109,14 @@ impl Default for ForceControlLimits {
             max_accel_mps2: 0.2,
             max_excursion_m: 0.04,
             hold_return_n_per_m: 50.0,
-            filter_cutoff_hz: 20.0,
+            filter_cutoff_hz: 25.0,
             sample_period_s: 0.002,
             period_s: 0.001,
             other_delay_s: 0.003,
-            max_stiffness_n_per_m: 5000.0,
+            max_stiffness_n_per_m: 4000.0,
             min_phase_margin_deg: 25.0,
+            servo_bandwidth_hz: 30.0,
+            servo_damping: 0.7,
         }
     }
 }
@@ -152,6 +162,8 @@ impl ForceControlConfig {
                 "must be finite and >= 0",
             ));
         }
+        positive("servo_bandwidth_hz", limits.servo_bandwidth_hz)?;
+        positive("servo_damping", limits.servo_damping)?;
         let pm = limits.min_phase_margin_deg;
         if !(pm.is_finite() && (0.0..90.0).contains(&pm)) {
             return Err(invalid("min_phase_margin_deg", pm, "must be within 0..90"));
@@ -175,7 +187,9 @@ impl ForceControlConfig {
                     field,
                     a.damping_n_s_per_m,
                     "too small for the stiffest tissue: the loop would not keep its phase \
-                     margin (raise the damping, or the filter's cutoff)",
+                     margin with the filter's, the other delays' and the axes' servo lag \
+                     (filter_cutoff_hz, other_delay_s, [axes] servo_bandwidth_hz and \
+                     servo_damping; raise the damping, or the filter's cutoff)",
                 ));
             }
         }
@@ -193,13 +207,32 @@ impl ForceControlConfig {
         self.filter_delay_s + self.limits.other_delay_s
     }
 
+    /// The axes' servo's low-frequency group delay `2 zeta / wn`, s (30 Hz,
+    /// 0.7: 7.4 ms): the delay its phase amounts to well below `wn`.
+    pub fn servo_delay_s(&self) -> f64 {
+        2.0 * self.limits.servo_damping / (core::f64::consts::TAU * self.limits.servo_bandwidth_hz)
+    }
+
+    /// The phase lag of the axes' servo `wn^2 / (s^2 + 2 zeta wn s + wn^2)`
+    /// at `w` rad/s, radians: `atan2(2 zeta w / wn, 1 - (w / wn)^2)`
+    /// (about `w 2 zeta / wn` well below `wn`; a little more above).
+    pub fn servo_phase_lag_rad(&self, w: f64) -> f64 {
+        let wn = core::f64::consts::TAU * self.limits.servo_bandwidth_hz;
+        let x = w / wn;
+        libm::atan2(2.0 * self.limits.servo_damping * x, 1.0 - x * x)
+    }
+
     /// The phase margin, degrees, of the force loop of part `a` on a tissue
-    /// of stiffness `k` (N/m): the loop `k / (s (M s + D)) e^(-s T)` crosses
-    /// over near `w = k / D` (where M w << D), with the phase
-    /// `-90 - atan(w M / D) - w T` degrees there (T: [`Self::loop_delay_s`]).
+    /// of stiffness `k` (N/m): the loop
+    /// `k / (s (M s + D)) e^(-s T) G_servo(s)` crosses over near `w = k / D`
+    /// (where M w << D), with the phase
+    /// `-90 - atan(w M / D) - w T - servo(w)` degrees there (T:
+    /// [`Self::loop_delay_s`]; servo: [`Self::servo_phase_lag_rad`]).
     pub fn phase_margin_deg(&self, a: &Admittance, k: f64) -> f64 {
         let w = k / a.damping_n_s_per_m;
-        let lag_rad = libm::atan(w * a.mass_kg / a.damping_n_s_per_m) + w * self.loop_delay_s();
+        let lag_rad = libm::atan(w * a.mass_kg / a.damping_n_s_per_m)
+            + w * self.loop_delay_s()
+            + self.servo_phase_lag_rad(w);
         90.0 - lag_rad.to_degrees()
     }
 
@@ -495,6 +528,8 @@ sar_snapshot::config_struct!(ForceControlLimits {
     other_delay_s,
     max_stiffness_n_per_m,
     min_phase_margin_deg,
+    servo_bandwidth_hz,
+    servo_damping,
 });
 sar_snapshot::config_struct!(Admittance {
     mass_kg,

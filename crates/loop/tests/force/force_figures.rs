@@ -26,13 +26,35 @@
     clippy::indexing_slicing
 )]
 
-use crate::rig::{Rig, TIP_M, rms, tissue};
+use crate::rig::{Plant, Rig, TIP_M, rms, tissue};
 use sar_drivers::sim::TissueShift;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{ReplyStatus, Request};
 
 const STIFFNESSES: [f64; 4] = [100.0, 300.0, 1000.0, 3000.0];
+
+/// The plant of every figure (issue 26): the axes' servos (30 Hz, damping
+/// 0.7), without the rod's inertia: what the loop sees once the estimator
+/// compensates the inertia with the motion the loop commands (issue 26's
+/// comp26 and brake26; with both merged this becomes [`Plant::Moving`]).
+/// [`axial_regulation_at_3_n`] also runs [`Plant::Moving`] uncompensated.
+const PLANT: Plant = Plant::Servo;
+
+/// The demo robot on [`PLANT`], a tissue of stiffness `k` whose surface is
+/// `gap_m` ahead of the tip, breathing `breath_m`.
+fn moving_rig(k: f64, gap_m: f64, breath_m: f64) -> Rig {
+    rig_on(PLANT, k, gap_m, breath_m)
+}
+
+/// [`moving_rig`] on `plant`.
+fn rig_on(plant: Plant, k: f64, gap_m: f64, breath_m: f64) -> Rig {
+    Rig::with_plant(
+        vec![tissue(k, gap_m, breath_m, Vec::new())],
+        Vec::new(),
+        plant,
+    )
+}
 const BREATH_M: f64 = 0.003;
 
 /// What one run saw, from the request on.
@@ -96,7 +118,7 @@ fn run(mut rig: Rig, request: Option<Request>, ms: usize) -> (Rig, Run) {
 /// contact), the tip then moved `depth_m` into it along the rod (position
 /// mode, 20 mm/s) and left there.
 fn pressed(k: f64, depth_m: f64, breath_m: f64, shifts: Vec<TissueShift>) -> Rig {
-    let mut rig = Rig::with(vec![tissue(k, 0.0, breath_m, shifts)], Vec::new());
+    let mut rig = Rig::with_plant(vec![tissue(k, 0.0, breath_m, shifts)], Vec::new(), PLANT);
     let target = Vec3::new(TIP_M[0] + depth_m, TIP_M[1], TIP_M[2]);
     let r = rig.request(9, Request::MoveTip { tip_m: target });
     assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
@@ -130,45 +152,87 @@ fn step_figures(axial_n: &[f64], n: f64, band: f64) -> (f64, f64, f64, f64) {
 
 #[test]
 fn axial_regulation_at_3_n() {
-    let n = 3.0;
     for k in STIFFNESSES {
-        // The step on the still tissue; 25 s (the softest needs 30 mm at
-        // 6 mm/s, and then its slow integral).
-        let (_, still) = run(
-            Rig::new(k, 0.0, 0.0, Vec::new()),
-            Some(Request::Push { axial_n: n }),
-            25_000,
+        let f = push_figures(PLANT, k);
+        assert_eq!(f.warn_ms, 0, "k {k}");
+        assert!(f.overshoot < 10.0, "k {k}: overshoot {:.1} %", f.overshoot);
+        assert!(f.pp_n < 0.6, "k {k}: p-p {:.2} N", f.pp_n);
+        // Issue 26's goal.
+        assert!(f.rms_n <= 0.3, "k {k}: RMS {:.3} N", f.rms_n);
+        assert!(
+            f.settling_s < 15.0,
+            "k {k}: settling (0.2 N) {:.2} s",
+            f.settling_s
         );
-        assert_eq!(still.stop_ms, None, "k {k}");
-        let (overshoot, settling_s, pp_n, _) = step_figures(&still.axial_n, n, 0.15);
-        // Under breathing: RMS after settling (the second half of 25 s).
-        let (_, breathing) = run(
-            Rig::new(k, 0.0, BREATH_M, Vec::new()),
-            Some(Request::Push { axial_n: n }),
-            25_000,
+        // The rod's inertia uncompensated (the estimator of before issue
+        // 26): its phantom force while the law accelerates.
+        let u = push_figures(Plant::Moving, k);
+        assert!(u.rms_n <= 0.3, "k {k}: RMS {:.3} N uncompensated", u.rms_n);
+        assert!(
+            u.overshoot < 15.0,
+            "k {k}: {:.1} % uncompensated",
+            u.overshoot
         );
-        assert_eq!(breathing.stop_ms, None, "k {k}");
-        let (_, _, _, rms_n) = step_figures(&breathing.axial_n, n, 0.15);
-        // Position mode: the tip held where the still tissue gives 3 N,
-        // the tissue breathing.
-        let (_, position) = run(pressed(k, n / k, BREATH_M, Vec::new()), None, 25_000);
-        println!(
-            "push {n} N, {k} N/m: step: overshoot {overshoot:.1} %, settling (+/-0.15 N) {settling_s:.2} s, p-p over the last 5 s {pp_n:.2} N; breathing 3 mm: RMS error {rms_n:.3} N (12.5-25 s), largest {:.2} N, {} warn ms | position mode at the 3 N depth, breathing: largest {:.2} N, {} warn ms, Stop {} {:?}",
-            breathing.largest_n(),
-            breathing.warn_ms,
-            position.largest_n(),
-            position.warn_ms,
-            position.stop_ms.map_or("none".to_string(), |t| format!(
-                "after {:.2} s",
-                t as f64 * 1e-3
-            )),
-            position.reasons,
-        );
-        assert_eq!(breathing.warn_ms, 0, "k {k}");
-        assert!(overshoot < 10.0, "k {k}: overshoot {overshoot:.1} %");
-        assert!(pp_n < 0.6, "k {k}: p-p {pp_n:.2} N");
-        assert!(rms_n < 0.4, "k {k}: RMS {rms_n:.3} N");
-        assert!(settling_s < 15.0, "k {k}: settling {settling_s:.2} s");
+    }
+}
+
+/// A push's figures on one plant and stiffness.
+struct PushFigures {
+    overshoot: f64,
+    /// Into +/-0.2 N for good, s. Into +/-0.15 N (printed) one noise
+    /// sample late in the run can set it: the true force's noise is up to
+    /// 0.3 N p-p at 3000 N/m.
+    settling_s: f64,
+    pp_n: f64,
+    rms_n: f64,
+    warn_ms: usize,
+}
+
+/// Pushes 3 N into a still and into a breathing tissue of stiffness `k` on
+/// `plant`, beside position mode under the breathing, and prints the
+/// figures.
+fn push_figures(plant: Plant, k: f64) -> PushFigures {
+    let n = 3.0;
+    // The step on the still tissue; 25 s (the softest needs 30 mm at
+    // 6 mm/s, and then its slow integral).
+    let (_, still) = run(
+        rig_on(plant, k, 0.0, 0.0),
+        Some(Request::Push { axial_n: n }),
+        25_000,
+    );
+    assert_eq!(still.stop_ms, None, "k {k}");
+    let (overshoot, settling_s, pp_n, _) = step_figures(&still.axial_n, n, 0.15);
+    // The settling into +/-0.2 N: the step's own, apart from the noise.
+    let (_, settling_02_s, _, _) = step_figures(&still.axial_n, n, 0.2);
+    // Under breathing: RMS after settling (the second half of 25 s).
+    let (_, breathing) = run(
+        rig_on(plant, k, 0.0, BREATH_M),
+        Some(Request::Push { axial_n: n }),
+        25_000,
+    );
+    assert_eq!(breathing.stop_ms, None, "k {k}");
+    let (_, _, _, rms_n) = step_figures(&breathing.axial_n, n, 0.15);
+    // Position mode: the tip held where the still tissue gives 3 N, the
+    // tissue breathing.
+    let (_, position) = run(pressed(k, n / k, BREATH_M, Vec::new()), None, 25_000);
+    println!(
+        "{plant:?}: push {n} N, {k} N/m: step: overshoot {overshoot:.1} %, settling (+/-0.15 N) {settling_s:.2} s (+/-0.2 N: {settling_02_s:.2} s), p-p over the last 5 s {pp_n:.2} N; breathing 3 mm: RMS error {rms_n:.3} N (12.5-25 s), largest {:.2} N, {} warn ms | position mode at the 3 N depth, breathing: largest {:.2} N, {} warn ms, Stop {} {:?}",
+        breathing.largest_n(),
+        breathing.warn_ms,
+        position.largest_n(),
+        position.warn_ms,
+        position.stop_ms.map_or("none".to_string(), |t| format!(
+            "after {:.2} s",
+            t as f64 * 1e-3
+        )),
+        position.reasons,
+    );
+    PushFigures {
+        overshoot,
+        settling_s: settling_02_s,
+        pp_n,
+        rms_n,
+        warn_ms: breathing.warn_ms,
     }
 }
 
@@ -228,7 +292,7 @@ fn guarded_move_into_breathing_tissue() {
         let depth_m = 1.5 * max_force_n / k + 0.005;
         let target = Vec3::new(TIP_M[0] + gap_m + depth_m, TIP_M[1], TIP_M[2]);
         let (rig, guarded) = run(
-            Rig::new(k, gap_m, BREATH_M, Vec::new()),
+            moving_rig(k, gap_m, BREATH_M),
             Some(Request::GuardedMove {
                 tip_m: target,
                 max_force_n,
@@ -248,7 +312,7 @@ fn guarded_move_into_breathing_tissue() {
         let until = (braked_ms + 500).min(guarded.total_n.len());
         let move_n = guarded.total_n[..until].iter().copied().fold(0.0, f64::max);
         let (_, position) = run(
-            Rig::new(k, gap_m, BREATH_M, Vec::new()),
+            moving_rig(k, gap_m, BREATH_M),
             Some(Request::MoveTip { tip_m: target }),
             8000,
         );
@@ -303,7 +367,7 @@ fn sudden_tissue_shifts_under_push_and_hold() {
             offset_m: 0.003,
         },
     ];
-    let rig = Rig::with(vec![tissue(k, 0.0, 0.0, shifts)], Vec::new());
+    let rig = Rig::with_plant(vec![tissue(k, 0.0, 0.0, shifts)], Vec::new(), PLANT);
     // Index i of a run is the cycle (ms) start_ms + i.
     let start_ms = rig.cycle as usize + 2;
     let (rig_after, push) = run(rig, Some(Request::Push { axial_n: 3.0 }), 23_000);
@@ -395,7 +459,7 @@ fn ten_minutes_of_breathing_without_a_stop() {
     let minutes_ms = 600_000;
     for k in STIFFNESSES {
         let (_, push) = run(
-            Rig::new(k, 0.0, BREATH_M, Vec::new()),
+            moving_rig(k, 0.0, BREATH_M),
             Some(Request::Push { axial_n: 3.0 }),
             minutes_ms,
         );

@@ -6,7 +6,10 @@
 
 use sar_daemon::sim;
 use sar_drivers::SimClock;
-use sar_drivers::sim::{Breathing, ContactKey, SimDrives, Tissue, TissueModel, TissueShift};
+use sar_drivers::sim::{
+    Breathing, ContactKey, PlantSpec, RodInertia, ServoSpec, SimDrives, SimSpec, Tissue,
+    TissueModel, TissueShift,
+};
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_test_support::rig::{RigBuilder, SimRig};
@@ -39,6 +42,51 @@ pub fn tissue(k_n_per_m: f64, gap_m: f64, breath_m: f64, shifts: Vec<TissueShift
     }
 }
 
+/// The simulator's plant under the rig.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Plant {
+    /// The demo scenario's plant as it is (none of issue 26's parts: no
+    /// inertia, ideal axes).
+    Demo,
+    /// Issue 26's plant in motion: the rod's inertia (the slender rod's
+    /// m L^2 / 12, no adapter) and each axis a servo of 30 Hz, damping 0.7,
+    /// 5 m/s^2 (the scenario keys' defaults).
+    Moving,
+    /// The servos of [`Plant::Moving`] without the rod's inertia: the lag
+    /// alone (what the loop sees once the estimator compensates the
+    /// inertia exactly).
+    Servo,
+}
+
+impl Plant {
+    /// The simulator's plant for `spec`'s rod.
+    pub fn spec(self, spec: &SimSpec) -> PlantSpec {
+        match self {
+            Plant::Demo => spec.plant,
+            Plant::Moving => {
+                let p = &spec.profile;
+                PlantSpec {
+                    inertia: Some(RodInertia {
+                        inertia_perp_kgm2: p.mass_kg() * p.length_m().powi(2) / 12.0,
+                        inertia_axial_kgm2: 0.0,
+                        adapter_mass_kg: 0.0,
+                    }),
+                    ..Plant::Servo.spec(spec)
+                }
+            }
+            Plant::Servo => PlantSpec {
+                inertia: None,
+                servo: Some(ServoSpec {
+                    bandwidth_hz: 30.0,
+                    damping: 0.7,
+                    max_accel_mps2: 5.0,
+                }),
+                ..spec.plant
+            },
+        }
+    }
+}
+
 /// The demo robot on the simulator, ready (see [`SimRig`]).
 pub struct Rig(pub SimRig<SimDrives<SimClock>>);
 
@@ -58,6 +106,11 @@ impl Rig {
     /// The demo robot with these tissues and contact script, reset after
     /// the mean at rest ([`READY_MS`]).
     pub fn with(tissues: Vec<Tissue>, contact: Vec<ContactKey>) -> Self {
+        Self::with_plant(tissues, contact, Plant::Demo)
+    }
+
+    /// [`Rig::with`] on the plant `plant`.
+    pub fn with_plant(tissues: Vec<Tissue>, contact: Vec<ContactKey>, plant: Plant) -> Self {
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = if contact.is_empty() {
             vec![ContactKey {
@@ -68,6 +121,7 @@ impl Rig {
             contact
         };
         scenario.spec.tissue = tissues;
+        scenario.spec.plant = plant.spec(&scenario.spec);
         let mut rig = Self(RigBuilder::new(&scenario).build());
         for _ in 0..READY_MS {
             rig.step();
