@@ -22,7 +22,9 @@
 //! - `[axes]`: `travel_m`, (min, max) of q1, q2, q3 ([[-0.3, 0.3], [0, 0.6], [0, 0.6]]),
 //!   `max_speed_mps` (0.02) and `max_accel_mps2` (0.2) for moves the daemon
 //!   plans, `following_tolerance_m` (0.001: an axis farther than this from
-//!   the commanded trajectory is a Fault).
+//!   the commanded trajectory is a Fault), `servo_bandwidth_hz` (30) and
+//!   `servo_damping` (0.7): the drives' position loop, whose lag is part of
+//!   `[force_control]`'s stability check (FORCE_CONTROL.md).
 //! - `[record]`: recording from the daemon's start (`sarctl record start|stop`
 //!   at any time): `enabled` (false), `directory` ("recordings", relative to
 //!   the working directory `sard` starts in; `sard` makes it absolute at

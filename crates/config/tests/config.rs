@@ -349,6 +349,29 @@ fn force_control_settings_are_checked_by_key() {
     );
     let c = config::parse(&with("max_speed_mps = 0.004"), "robot.toml").unwrap();
     assert_eq!(c.force_control.limits().max_speed_mps, 0.004);
+    // The axes' servo (issue 26): its lag is part of the margin; a slow
+    // one is refused naming the damping and the servo's keys, a bad one
+    // under its own key.
+    let limits = *config::parse(MINIMUM, "robot.toml")
+        .unwrap()
+        .force_control
+        .limits();
+    assert_eq!(
+        (limits.servo_bandwidth_hz, limits.servo_damping),
+        (30.0, 0.7)
+    );
+    let axes = |line: &str| format!("{MINIMUM}\n[axes]\n{line}\n");
+    let text = axes("servo_bandwidth_hz = 10.0");
+    expect(
+        &text,
+        "force_control.axial_damping_n_s_per_m",
+        None,
+        "[axes] servo_bandwidth_hz and servo_damping",
+    );
+    let text = axes("servo_damping = 0.0");
+    expect(&text, "axes.servo_damping", Some("servo_damping"), "> 0");
+    let c = config::parse(&axes("servo_bandwidth_hz = 60.0"), "robot.toml").unwrap();
+    assert_eq!(c.force_control.limits().servo_bandwidth_hz, 60.0);
 }
 
 #[test]
