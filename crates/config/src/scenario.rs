@@ -18,6 +18,7 @@ mod plant;
 mod raw;
 mod robot;
 mod script;
+mod support;
 
 pub use sar_drivers::scenario::{MotionScript, MotionStep, Scenario};
 
@@ -148,6 +149,7 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
     let contact = contact::keys(ctx, &file.contact)?;
     let tissue = contact::tissues(ctx, &file.tissue)?;
     let faults = fault::faults(ctx, &file.fault, axes.count_m())?;
+    let support_shifts = support::support_shifts(ctx, &file.support_shift)?;
     let spec = SimSpec {
         seed: file.seed,
         calibration,
@@ -161,6 +163,7 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
         faults,
         physics_step_ns,
         plant,
+        support_shifts,
     };
     // The simulator's own checks (e.g. more samples in flight than it holds,
     // times equal once in ns), so that it never refuses a loaded file later

@@ -79,6 +79,7 @@ fn spec(plant: PlantSpec) -> SimSpec {
         faults: Vec::new(),
         physics_step_ns: 100_000,
         plant,
+        support_shifts: Vec::new(),
     }
 }
 

@@ -727,6 +727,7 @@ fn fault_file_spec(seed: u64, fault: Fault) -> SimSpec {
         faults: vec![fault],
         physics_step_ns: 100_000,
         plant: PlantSpec::default(),
+        support_shifts: Vec::new(),
     }
 }
 

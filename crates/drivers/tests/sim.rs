@@ -119,6 +119,7 @@ fn base_spec() -> SimSpec {
         faults: Vec::new(),
         physics_step_ns: 100_000,
         plant: PlantSpec::default(),
+        support_shifts: Vec::new(),
     }
 }
 

@@ -18,6 +18,8 @@ mod force_figures;
 mod force_properties;
 #[path = "force/rig.rs"]
 mod rig;
+#[path = "force/support_shift.rs"]
+mod support_shift;
 use rig::{Rig, TIP_M, rms};
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;

@@ -34,6 +34,8 @@ pub(super) struct FileToml {
     pub tip_mass: Option<TipMassToml>,
     #[serde(default)]
     pub fault: Vec<FaultToml>,
+    #[serde(default)]
+    pub support_shift: Vec<SupportShiftToml>,
 }
 
 /// `[robot]`: the true geometry, with the keys of INTERFACES.md 2 `[geometry]`.
@@ -162,6 +164,17 @@ pub(super) struct ContactToml {
 pub(super) enum TissueModelName {
     Linear,
     Exponential,
+}
+
+/// `[[support_shift]]`: the true support point moving (issue 26).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SupportShiftToml {
+    pub t_s: f64,
+    #[serde(deserialize_with = "crate::exact::array")]
+    pub shift_m: [f64; 3],
+    #[serde(default)]
+    pub duration_s: f64,
 }
 
 /// `[[tissue.shift]]`: a sudden shift of the tissue's rest point.

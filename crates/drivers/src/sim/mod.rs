@@ -61,8 +61,8 @@ mod world;
 
 pub use error::SimError;
 pub use spec::{
-    AxesSpec, Breathing, ContactKey, Fault, PlantSpec, RodInertia, SensorSpec, ServoSpec, SimSpec,
-    Tissue, TissueModel, TissueShift,
+    AxesSpec, Breathing, ContactKey, Fault, MAX_SUPPORT_SHIFT_M, PlantSpec, RodInertia, SensorSpec,
+    ServoSpec, SimSpec, SupportShift, Tissue, TissueModel, TissueShift,
 };
 pub use world::{DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS, validate};
 

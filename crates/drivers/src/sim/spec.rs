@@ -43,6 +43,46 @@ pub struct SimSpec {
     /// the drives' quick-stop deceleration. Each part is opt-in: the default
     /// (all `None`) is the plant without inertia and with ideal axes.
     pub plant: PlantSpec,
+    /// The support moving (issue 26, MODEL.md 10: the patient shifts): the
+    /// true B is `calibration`'s plus the sum of these shifts, each ramped
+    /// in over its duration; the daemon's configured B does not move.
+    /// Empty: B stays where `calibration` has it (bit for bit as before).
+    pub support_shifts: Vec<SupportShift>,
+}
+
+/// The true support point B moving by `shift_m` from `t_ns` on, along a
+/// smooth ramp (`(1 - cos(pi s)) / 2` of the way at the fraction s of
+/// `duration_ns`; a step when 0), then staying there. Shifts add up. The
+/// rod's inertial terms (MODEL.md 10) take the support as still: its own
+/// velocity and acceleration (at most `pi^2 / 2 |shift| / duration^2`) are
+/// not in them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupportShift {
+    /// When the shift starts, ns.
+    pub t_ns: u64,
+    /// The displacement of B once done, {0}, m (finite, at most
+    /// [`MAX_SUPPORT_SHIFT_M`] long).
+    pub shift_m: Vec3,
+    /// How long it takes, ns (0: at once).
+    pub duration_ns: u64,
+}
+
+/// The longest support shift the simulator accepts, m.
+pub const MAX_SUPPORT_SHIFT_M: f64 = 0.1;
+
+impl SupportShift {
+    /// Its displacement at `t_ns`, m.
+    pub fn at(&self, t_ns: u64) -> Vec3 {
+        if t_ns < self.t_ns {
+            return Vec3::zeros();
+        }
+        let since_ns = t_ns - self.t_ns;
+        if since_ns >= self.duration_ns {
+            return self.shift_m;
+        }
+        let s = since_ns as f64 / self.duration_ns as f64;
+        self.shift_m * (0.5 * (1.0 - (core::f64::consts::PI * s).cos()))
+    }
 }
 
 /// The plant in motion; each `None` keeps the plant of before issue 26.

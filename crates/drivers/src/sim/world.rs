@@ -21,7 +21,8 @@
 
 use super::servo::ServoAxis;
 use super::spec::{
-    AxesSpec, ContactKey, Fault, PlantSpec, SensorSpec, ServoSpec, SimSpec, Tissue, TissueModel,
+    AxesSpec, ContactKey, Fault, MAX_SUPPORT_SHIFT_M, PlantSpec, SensorSpec, ServoSpec, SimSpec,
+    SupportShift, Tissue, TissueModel,
 };
 use super::statics::{self, Equilibrium, Loads};
 use super::{STATUS_OUT_OF_MODEL, SimError, dynamics, tissue};
@@ -32,7 +33,7 @@ use crate::{Clock, DriveState, JointPositions, Rail, SensorStatus, Vec3, WrenchS
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use sar_kinematics::{ActiveJoints, Pose, forward};
+use sar_kinematics::{ActiveJoints, Calibration, Pose, forward};
 use std::collections::VecDeque;
 
 /// Shortest accepted period of anything (physics step, samples, positions), ns.
@@ -289,6 +290,17 @@ fn drive_fault_event(fault: &Fault) -> Option<(u64, DriveState)> {
     }
 }
 
+/// Checks one support shift: finite, at most [`MAX_SUPPORT_SHIFT_M`] long.
+fn check_support_shift(shift: &SupportShift) -> Result<(), SimError> {
+    check_vec("support_shift.shift_m", &shift.shift_m)?;
+    require(
+        shift.shift_m.norm() <= MAX_SUPPORT_SHIFT_M,
+        "support_shift.shift_m",
+        shift.shift_m.norm(),
+        "must be at most 0.1 m long",
+    )
+}
+
 /// Checks one tissue.
 fn check_tissue(tissue: &Tissue) -> Result<(), SimError> {
     check_vec("tissue.direction", &tissue.direction)?;
@@ -370,6 +382,9 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
     }
     check_contact(&spec.contact)?;
     check_plant(&spec.plant, spec.physics_step_ns)?;
+    for shift in &spec.support_shifts {
+        check_support_shift(shift)?;
+    }
     for (index, fault) in spec.faults.iter().enumerate() {
         check_fault(index, fault)?;
     }
@@ -758,7 +773,7 @@ impl<C: Clock> World<C> {
     fn physics_step(&mut self, t_ns: u64) {
         self.step_servos(t_ns);
         let joints = joints_from_array(self.axes_at(t_ns).map(|s| s.x_m));
-        let cal = &self.spec.calibration;
+        let cal = &self.calibration_at(t_ns);
         let a_m = cal.p_home_m() + joints.displacement_m() + cal.ujoint_offset_m();
         let r = cal.support_m() - a_m;
         let d = self.spec.profile.offset_m();
@@ -767,6 +782,19 @@ impl<C: Clock> World<C> {
             return;
         }
         self.slide.update(along_sq.sqrt());
+    }
+
+    /// The true geometry at `t_ns`: the support B moved by the support
+    /// shifts so far (none: the spec's calibration as it is).
+    fn calibration_at(&self, t_ns: u64) -> Calibration {
+        let cal = self.spec.calibration;
+        if self.spec.support_shifts.is_empty() {
+            return cal;
+        }
+        let shift_m: Vec3 = self.spec.support_shifts.iter().map(|s| s.at(t_ns)).sum();
+        // `with_support` refuses only a non-finite B: the shifts are checked
+        // finite and bounded at construction, so the `or` is never taken.
+        cal.with_support(cal.support_m() + shift_m).unwrap_or(cal)
     }
 
     /// The sensor bias at `t_ns` (force drifts linearly; `sensor_drift`
@@ -797,20 +825,15 @@ impl<C: Clock> World<C> {
         let states = self.axes_at(t_ns);
         let joints = joints_from_array(states.map(|s| s.x_m));
         let spec = &self.spec;
-        let pose =
-            forward(&spec.calibration, &spec.profile, &joints).map_err(SimError::PoseOutOfModel)?;
+        let cal = self.calibration_at(t_ns);
+        let pose = forward(&cal, &spec.profile, &joints).map_err(SimError::PoseOutOfModel)?;
         let contact_n = contact_at(&spec.contact, t_ns);
         let tissue_force_n = if spec.tissue.is_empty() {
             Vec3::zeros()
         } else {
             let speeds_mps = states.map(|s| s.v_mps);
-            let tip_velocity_mps = tissue::tip_velocity_mps(
-                &spec.calibration,
-                &spec.profile,
-                &joints,
-                speeds_mps,
-                &pose.tip_m,
-            );
+            let tip_velocity_mps =
+                tissue::tip_velocity_mps(&cal, &spec.profile, &joints, speeds_mps, &pose.tip_m);
             tissue::force_n(&spec.tissue, t_ns, &pose.tip_m, &tip_velocity_mps)
         };
         let loads = Loads {
@@ -828,7 +851,7 @@ impl<C: Clock> World<C> {
         };
         let accels_mps2 = self.accels_at(t_ns);
         let (equilibrium, ideal_n, ideal_nm) =
-            self.rod_wrench(&pose, &loads, states.map(|s| s.v_mps), accels_mps2)?;
+            self.rod_wrench(&cal, &pose, &loads, (states.map(|s| s.v_mps), accels_mps2))?;
         let (bias_n, bias_nm) = self.bias_at(t_ns);
         Ok(Physics {
             joints,
@@ -850,12 +873,12 @@ impl<C: Clock> World<C> {
     /// at the axes' speeds and accelerations.
     fn rod_wrench(
         &self,
+        cal: &Calibration,
         pose: &Pose,
         loads: &Loads,
-        speeds_mps: [f64; 3],
-        accels_mps2: [f64; 3],
+        (speeds_mps, accels_mps2): ([f64; 3], [f64; 3]),
     ) -> Result<(Equilibrium, Vec3, Vec3), SimError> {
-        let (cal, profile) = (&self.spec.calibration, &self.spec.profile);
+        let profile = &self.spec.profile;
         let Some(inertia) = &self.spec.plant.inertia else {
             let eq =
                 statics::equilibrium(cal, profile, pose, loads).ok_or(SimError::StaticsSingular)?;
@@ -1331,8 +1354,12 @@ impl<C: Clock> World<C> {
                 });
             }
         }
-        forward(&self.spec.calibration, &self.spec.profile, targets)
-            .map_err(SimError::TargetPose)?;
+        forward(
+            &self.calibration_at(self.done_ns),
+            &self.spec.profile,
+            targets,
+        )
+        .map_err(SimError::TargetPose)?;
         Ok(wanted)
     }
 

@@ -7,8 +7,8 @@
 use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_drivers::sim::{
-    Breathing, ContactKey, PlantSpec, RodInertia, ServoSpec, SimDrives, SimSpec, Tissue,
-    TissueModel, TissueShift,
+    Breathing, ContactKey, PlantSpec, RodInertia, ServoSpec, SimDrives, SimSpec, SupportShift,
+    Tissue, TissueModel, TissueShift,
 };
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
@@ -111,7 +111,19 @@ impl Rig {
 
     /// [`Rig::with`] on the plant `plant`.
     pub fn with_plant(tissues: Vec<Tissue>, contact: Vec<ContactKey>, plant: Plant) -> Self {
+        Self::with_support_shifts(tissues, contact, plant, Vec::new())
+    }
+
+    /// [`Rig::with_plant`] with the true support moving by `support_shifts`
+    /// (the configured one stays).
+    pub fn with_support_shifts(
+        tissues: Vec<Tissue>,
+        contact: Vec<ContactKey>,
+        plant: Plant,
+        support_shifts: Vec<SupportShift>,
+    ) -> Self {
         let mut scenario = sim::demo_scenario().unwrap();
+        scenario.spec.support_shifts = support_shifts;
         scenario.spec.contact = if contact.is_empty() {
             vec![ContactKey {
                 t_ns: 0,
