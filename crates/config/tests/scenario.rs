@@ -1862,3 +1862,59 @@ fn runner_refuses_bad_options_and_reports_drives_that_refuse() {
     );
     assert!(e.to_string().contains("motion[0]"));
 }
+
+/// `[[support_shift]]` (issue 26): the true support moving; none by
+/// default; each key checked under its name.
+#[test]
+fn support_shifts_are_read_and_checked() {
+    assert!(parse(MINIMAL, ORIGIN).unwrap().spec.support_shifts.is_empty());
+    let text = format!(
+        "{MINIMAL}\n[[support_shift]]\nt_s = 2.0\nshift_m = [0.0, 0.005, 0.0]\nduration_s = 0.5\n\n[[support_shift]]\nt_s = 4.0\nshift_m = [0.0, 0.0, -0.02]\n"
+    );
+    let shifts = parse(&text, ORIGIN).unwrap().spec.support_shifts;
+    assert_eq!(
+        shifts,
+        vec![
+            sar_drivers::sim::SupportShift {
+                t_ns: 2_000_000_000,
+                shift_m: Vec3::new(0.0, 0.005, 0.0),
+                duration_ns: 500_000_000,
+            },
+            sar_drivers::sim::SupportShift {
+                t_ns: 4_000_000_000,
+                shift_m: Vec3::new(0.0, 0.0, -0.02),
+                duration_ns: 0,
+            },
+        ]
+    );
+    // Half-way through its ramp, half of it; done, all of it.
+    assert!((shifts[0].at(2_250_000_000) - shifts[0].shift_m * 0.5).norm() < 1e-15);
+    assert_eq!(shifts[0].at(1_999_999_999), Vec3::zeros());
+    assert_eq!(shifts[1].at(4_000_000_000), shifts[1].shift_m);
+    for (body, key, problem) in [
+        (
+            "t_s = 1.0\nshift_m = [0.2, 0.0, 0.0]\n",
+            "support_shift[0].shift_m",
+            "at most 0.1 m",
+        ),
+        (
+            "t_s = -1.0\nshift_m = [0.0, 0.0, 0.0]\n",
+            "support_shift[0].t_s",
+            "must be >= 0",
+        ),
+        (
+            "t_s = 1.0\nshift_m = [0.0, 0.0, 0.0]\nduration_s = -0.5\n",
+            "support_shift[0].duration_s",
+            "must be >= 0",
+        ),
+        (
+            "t_s = 1.0\nshift_m = [0.0, 0.0]\n",
+            "support_shift[0].shift_m",
+            "",
+        ),
+    ] {
+        let e = refused(&format!("{MINIMAL}\n[[support_shift]]\n{body}"));
+        assert_eq!(e.key(), Some(key), "{e}");
+        assert!(e.to_string().contains(problem), "{e}");
+    }
+}
