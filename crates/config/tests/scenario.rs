@@ -1867,7 +1867,13 @@ fn runner_refuses_bad_options_and_reports_drives_that_refuse() {
 /// default; each key checked under its name.
 #[test]
 fn support_shifts_are_read_and_checked() {
-    assert!(parse(MINIMAL, ORIGIN).unwrap().spec.support_shifts.is_empty());
+    assert!(
+        parse(MINIMAL, ORIGIN)
+            .unwrap()
+            .spec
+            .support_shifts
+            .is_empty()
+    );
     let text = format!(
         "{MINIMAL}\n[[support_shift]]\nt_s = 2.0\nshift_m = [0.0, 0.005, 0.0]\nduration_s = 0.5\n\n[[support_shift]]\nt_s = 4.0\nshift_m = [0.0, 0.0, -0.02]\n"
     );

@@ -12,6 +12,8 @@
 
 // The force-control rig, and the other force-control tests in this binary
 // (one binary: less to link).
+#[path = "force/drive_decel.rs"]
+mod drive_decel;
 #[path = "force/force_figures.rs"]
 mod force_figures;
 #[path = "force/force_properties.rs"]

@@ -23,7 +23,7 @@ pub(super) fn support_shifts(
         let duration_ns = ctx.time_ns(&key("duration_s"), s.duration_s)?;
         let shift_m = Vec3::from(s.shift_m);
         let length_m = shift_m.norm();
-        if !(length_m <= MAX_SUPPORT_SHIFT_M) {
+        if !(length_m.is_finite() && length_m <= MAX_SUPPORT_SHIFT_M) {
             return Err(ctx.err(
                 &key("shift_m"),
                 format!(

@@ -7,8 +7,8 @@
 use sar_daemon::sim;
 use sar_drivers::SimClock;
 use sar_drivers::sim::{
-    Breathing, ContactKey, PlantSpec, RodInertia, ServoSpec, SimDrives, SimSpec, SupportShift,
-    Tissue, TissueModel, TissueShift,
+    Breathing, ContactKey, PlantSpec, RodInertia, ServoSpec, SimDrives, SimSpec, Tissue,
+    TissueModel, TissueShift,
 };
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
@@ -111,19 +111,18 @@ impl Rig {
 
     /// [`Rig::with`] on the plant `plant`.
     pub fn with_plant(tissues: Vec<Tissue>, contact: Vec<ContactKey>, plant: Plant) -> Self {
-        Self::with_support_shifts(tissues, contact, plant, Vec::new())
+        Self::with_scenario(tissues, contact, plant, |_| {})
     }
 
-    /// [`Rig::with_plant`] with the true support moving by `support_shifts`
-    /// (the configured one stays).
-    pub fn with_support_shifts(
+    /// [`Rig::with_plant`] with the scenario's spec changed by `edit` (the
+    /// support moving, the drives' quick stop, ...) after the rig's parts.
+    pub fn with_scenario(
         tissues: Vec<Tissue>,
         contact: Vec<ContactKey>,
         plant: Plant,
-        support_shifts: Vec<SupportShift>,
+        edit: impl FnOnce(&mut SimSpec),
     ) -> Self {
         let mut scenario = sim::demo_scenario().unwrap();
-        scenario.spec.support_shifts = support_shifts;
         scenario.spec.contact = if contact.is_empty() {
             vec![ContactKey {
                 t_ns: 0,
@@ -134,6 +133,7 @@ impl Rig {
         };
         scenario.spec.tissue = tissues;
         scenario.spec.plant = plant.spec(&scenario.spec);
+        edit(&mut scenario.spec);
         let mut rig = Self(RigBuilder::new(&scenario).build());
         for _ in 0..READY_MS {
             rig.step();

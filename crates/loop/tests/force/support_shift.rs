@@ -66,7 +66,7 @@ fn sigma(out: &CycleOutput) -> Option<f64> {
 /// the rod) at the planned speed, 1 s.
 fn run(shift_m: Vec3, contact_n: Vec3) -> ShiftFigures {
     let key = |t_ns: u64, force_n: Vec3| ContactKey { t_ns, force_n };
-    let mut rig = Rig::with_support_shifts(
+    let mut rig = Rig::with_scenario(
         Vec::new(),
         vec![
             key(0, Vec3::zeros()),
@@ -74,11 +74,13 @@ fn run(shift_m: Vec3, contact_n: Vec3) -> ShiftFigures {
             key(2_300_000_000, contact_n),
         ],
         Plant::Demo,
-        vec![SupportShift {
-            t_ns: SHIFT_AT_NS,
-            shift_m,
-            duration_ns: RAMP_NS,
-        }],
+        |spec| {
+            spec.support_shifts = vec![SupportShift {
+                t_ns: SHIFT_AT_NS,
+                shift_m,
+                duration_ns: RAMP_NS,
+            }];
+        },
     );
     let mut verdict = None;
     let note = |verdict: &mut Option<(GuardState, String)>, out: &CycleOutput| {
