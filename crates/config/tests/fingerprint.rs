@@ -11,7 +11,7 @@ use sar_estimator::cycle::Bias;
 use sar_loop::step::LoopStep;
 
 /// The fingerprint of the built-in configuration's loop step.
-const DEFAULT_FINGERPRINT: u64 = 0xe958_2929_24a4_4308;
+const DEFAULT_FINGERPRINT: u64 = 0x015f_6a66_ac54_9740;
 
 fn step_of(cfg: &sar_config::Config, bias: Bias) -> LoopStep {
     LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap()
