@@ -185,6 +185,12 @@ fn plant_in_motion_allocates_nothing(path: &Path) {
         }),
         quick_stop_decel_mps2: Some(2.0),
     };
+    // The support moving under it (issue 26), ramped over the moves.
+    spec.support_shifts = vec![sar_drivers::sim::SupportShift {
+        t_ns: 50_000_000,
+        shift_m: sar_drivers::Vec3::new(0.0, 0.005, -0.002),
+        duration_ns: 200_000_000,
+    }];
     let clock = SimClock::new(1_000_000_000);
     let sim = Simulator::new(spec, clock.clone()).unwrap();
     let (mut sensor, mut drives) = (sim.sensor(), sim.drives());
