@@ -53,9 +53,10 @@ pub struct SimSpec {
 /// The true support point B moving by `shift_m` from `t_ns` on, along a
 /// smooth ramp (`(1 - cos(pi s)) / 2` of the way at the fraction s of
 /// `duration_ns`; a step when 0), then staying there. Shifts add up. The
-/// rod's inertial terms (MODEL.md 10) take the support as still: its own
-/// velocity and acceleration (at most `pi^2 / 2 |shift| / duration^2`) are
-/// not in them.
+/// rod's inertial terms (MODEL.md 10) and the tissues' damping (the tip's
+/// velocity from the joints') take the support as still: its own velocity
+/// and acceleration (at most `pi / 2 |shift| / duration` and
+/// `pi^2 / 2 |shift| / duration^2`) are not in them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SupportShift {
     /// When the shift starts, ns.
