@@ -59,7 +59,8 @@ struct Run {
     tip_m: Vec<V>,
 }
 
-/// Runs `mode` for `seconds` from the tip at `start_m`, rod along +x.
+/// Runs `mode` for `seconds` from the tip at `start_m`, rod along +x,
+/// the drive a 30 Hz, 0.7 servo.
 fn run(
     config: ForceControlConfig,
     mode: ForceMode,
@@ -69,13 +70,33 @@ fn run(
     noise_n: f64,
     seed: u64,
 ) -> Run {
+    let servo = Some((2.0 * std::f64::consts::PI * 30.0, 0.7));
+    run_on(
+        config,
+        mode,
+        tissue,
+        (start_m, seconds),
+        (noise_n, seed),
+        servo,
+    )
+}
+
+/// [`run`] with the drive's servo `(wn, zeta)`, or none: the tip at the
+/// last set point (an ideal CSP drive, one period late).
+fn run_on(
+    config: ForceControlConfig,
+    mode: ForceMode,
+    tissue: &Tissue,
+    (start_m, seconds): (V, f64),
+    (noise_n, seed): (f64, u64),
+    servo: Option<(f64, f64)>,
+) -> Run {
     let u = V::x();
     let mut c = ForceController::new(config).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noise = Normal::new(0.0, noise_n.max(1e-300)).unwrap();
     let mut commanded = start_m;
-    // The servo's position and velocity (30 Hz, 0.7).
-    let (wn, zeta) = (2.0 * std::f64::consts::PI * 30.0, 0.7);
+    // The servo's position and velocity.
     let (mut servo_m, mut servo_mps) = (start_m, V::zeros());
     let mut pending: Option<V> = None;
     let mut counter = 0u32;
@@ -86,12 +107,17 @@ fn run(
     for k in 0..cycles {
         let t_s = k as f64 * 1e-3;
         // The drive follows the last set point through its servo.
-        for _ in 0..10 {
-            let accel = (commanded - servo_m) * (wn * wn) - servo_mps * (2.0 * zeta * wn);
-            servo_mps += accel * 1e-4;
-            servo_m += servo_mps * 1e-4;
-        }
-        let tip = servo_m;
+        let tip = match servo {
+            Some((wn, zeta)) => {
+                for _ in 0..10 {
+                    let accel = (commanded - servo_m) * (wn * wn) - servo_mps * (2.0 * zeta * wn);
+                    servo_mps += accel * 1e-4;
+                    servo_m += servo_mps * 1e-4;
+                }
+                servo_m
+            }
+            None => commanded,
+        };
         let truth = tissue.force(&tip, t_s);
         // A new sample every 2 ms, 1 ms old.
         if k % 2 == 0 {
@@ -463,4 +489,61 @@ fn without_a_mode_or_a_force_nothing_moves() {
     assert_eq!(c.step(&V::x(), None), Err(ControlError::NoForce));
     c.stop();
     assert_eq!(c.mode(), None);
+}
+
+/// The margin with the servo's lag predicts where a push on a still tissue
+/// starts to ring (a limit cycle after settling, noise-free), on the
+/// servo's plant; without the servo's term it would claim thousands of N/m
+/// more. Stiffness in steps of 250 N/m.
+#[test]
+fn the_margin_with_the_servo_predicts_where_a_push_starts_to_ring() {
+    let loose = |servo_bandwidth_hz: f64| {
+        ForceControlConfig::new(ForceControlLimits {
+            min_phase_margin_deg: 0.0,
+            max_stiffness_n_per_m: 1.0,
+            servo_bandwidth_hz,
+            ..ForceControlLimits::default()
+        })
+        .unwrap()
+    };
+    let (with_servo, without) = (loose(30.0), loose(1e9));
+    let axial = with_servo.limits().axial;
+    let stiffnesses = (16..=48).map(|i| f64::from(i) * 250.0);
+    let predicted = |c: &ForceControlConfig| {
+        stiffnesses
+            .clone()
+            .find(|k| c.phase_margin_deg(&axial, *k) < 0.0)
+            .unwrap()
+    };
+    let rings_from = |servo: Option<(f64, f64)>| {
+        stiffnesses
+            .clone()
+            .find(|k| {
+                let r = run_on(
+                    with_servo,
+                    ForceMode::Push { axial_n: 3.0 },
+                    &tissue(*k, 0.0),
+                    (V::new(0.6, 0.2, 0.0), 8.0),
+                    (0.0, 1),
+                    servo,
+                );
+                let late = &r.axial_n[4_000..];
+                let pp = late.iter().fold(f64::MIN, |a, b| a.max(*b))
+                    - late.iter().fold(f64::MAX, |a, b| a.min(*b));
+                pp > 0.05
+            })
+            .unwrap()
+    };
+    let servo = Some((2.0 * std::f64::consts::PI * 30.0, 0.7));
+    let (observed, observed_ideal) = (rings_from(servo), rings_from(None));
+    let (predicted_servo, predicted_without) = (predicted(&with_servo), predicted(&without));
+    println!(
+        "a push rings from {observed} N/m on the 30 Hz servo (margin 0 predicted at {predicted_servo} N/m with the servo's term, {predicted_without} N/m without it); on the ideal drive from {observed_ideal} N/m"
+    );
+    assert!(
+        (observed - predicted_servo).abs() <= 500.0,
+        "{observed} vs {predicted_servo}"
+    );
+    assert!(predicted_without > observed + 1000.0, "{predicted_without}");
+    assert!(observed_ideal > observed, "{observed_ideal}");
 }
