@@ -124,6 +124,8 @@ pub const PLAUSIBLE: &[Plausible] = &[
     each("axes.travel_m", -2.0, 2.0, "m"),
     row("axes.max_speed_mps", 1e-4, 1.0, "m/s"),
     row("axes.retreat_speed_mps", 1e-5, 1.0, "m/s"),
+    row("axes.servo_bandwidth_hz", 1.0, 1000.0, "Hz"),
+    row("axes.servo_damping", 0.1, 10.0, "(ratio)"),
     row("force_control.axial_damping_n_s_per_m", 1.0, 1e5, "N s/m"),
     row("force_control.axial_mass_kg", 1e-3, 100.0, "kg"),
     row("force_control.lateral_damping_n_s_per_m", 1.0, 1e5, "N s/m"),
@@ -376,6 +378,8 @@ fn check_tip_and_axes(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     }
     value(ctx, "axes.max_speed_mps", a.max_speed_mps)?;
     value(ctx, "axes.retreat_speed_mps", a.retreat_speed_mps)?;
+    value(ctx, "axes.servo_bandwidth_hz", a.servo_bandwidth_hz)?;
+    value(ctx, "axes.servo_damping", a.servo_damping)?;
     Ok(())
 }
 
