@@ -16,6 +16,7 @@ pub mod filter;
 pub mod force_control;
 pub mod guard;
 pub mod identification;
+pub mod inertial;
 mod linalg;
 pub mod line_fit;
 pub mod motion;
