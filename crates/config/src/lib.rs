@@ -843,7 +843,6 @@ fn vec3(v: [f64; 3]) -> Vec3 {
 fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let calibration = geometry(ctx, &f.geometry)?;
     let profile = manipulator(ctx, &f.manipulator)?;
-    let (inertia, inertia_measured) = inertia(ctx, &f.manipulator, &f.sensor, &profile)?;
     let noise = SensorNoise::new(vec3(f.sensor.noise_n))
         .map_err(|e| ctx.err("sensor.noise_n", e.to_string()))?;
     let axes = axes(ctx, &f.axes, f.plausibility.max_joint_speed_mps)?;
@@ -860,6 +859,9 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     // range), then the geometry against the travel.
     plausible::check(ctx, &f)?;
     check_reach(ctx, &calibration, &profile, &axes.travel_m)?;
+    // After the plausible ranges: the slender rod's default is m L^2 / 12
+    // of a plausible rod.
+    let (inertia, inertia_measured) = inertia(ctx, &f.manipulator, &f.sensor, &profile)?;
     Ok(Config {
         origin: ctx.origin.to_owned(),
         manipulator_name: f.manipulator.name.clone(),
