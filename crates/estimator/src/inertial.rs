@@ -80,7 +80,11 @@
 //! too, dF/dI_perp = T_H(omega'_perp - (u . omega) omega x u) (for d = 0,
 //! -u''_perp / lever), so it gains sigma_I^2 (dF_i/dI_perp)^2. The
 //! uncertainties of m, c, I_axial and m_s are not counted (MODEL.md 10
-//! "Accuracy": m's enters as its error times A'').
+//! "Accuracy": m's enters as its error times A''), nor is the torsion's
+//! (the torque check's deviation is the static one).
+//!
+//! As in the static estimate, the support's friction along the rod (MODEL.md
+//! 10's f_axial) is not modelled: it reads as an axial tip force.
 
 use crate::motion::CarriageMotion;
 use crate::{Pose, Profile, SettingError, Vec3, finite_non_negative};
