@@ -341,15 +341,17 @@ impl General {
         let zero = Vec3::zeros();
         let (mut force_n, mut torsion_nm) = self.loads(rod, &self.omega_dot_vel, &zero, true);
         let mut sum_sq = Vec3::zeros();
+        let mut omega_dot = self.omega_dot_vel;
         let accel = &motion.accel_mps2;
         for (e, a_j) in [Vec3::x(), Vec3::y(), Vec3::z()].iter().zip(accel.iter()) {
-            let (col, col_torsion) = self.loads(rod, &self.omega_dot_lin(e), e, false);
+            let omega_dot_j = self.omega_dot_lin(e);
+            let (col, col_torsion) = self.loads(rod, &omega_dot_j, e, false);
             force_n += col * *a_j;
             torsion_nm += col_torsion * *a_j;
+            omega_dot += omega_dot_j * *a_j;
             sum_sq += col.component_mul(&col);
         }
         // dF/dI_perp = T_H(omega'_perp - (u . omega) omega x u).
-        let omega_dot = self.omega_dot_vel + self.omega_dot_lin(accel);
         let om = &self.omega;
         let u = &self.u;
         let d_h = omega_dot - u * u.dot(&omega_dot) - om.cross(u) * u.dot(om);
