@@ -1599,6 +1599,9 @@ impl Estimator {
                         &self.bias,
                         estimate.torsion_nm,
                     );
+                    let residual = widened(residual, estimate.torsion_std_nm, || {
+                        self.frame.torsion_axis_s(out_pose)
+                    });
                     torque_fault = torque_verdict(check, &residual);
                     out.torque = Some(residual);
                 }
@@ -2088,6 +2091,25 @@ fn torque_residual(
             std([l.m21, l.m22, l.m23], n_s.y, tv.y),
             std([l.m31, l.m32, l.m33], n_s.z, tv.z),
         ),
+    }
+}
+
+/// `r` with the torsion's standard deviation in motion, `torsion_std_nm`
+/// along the torsion axis `axis_s` (sensor frame), added to its deviation
+/// per sensor axis; unchanged when it is 0 (at rest: to the bit).
+fn widened(
+    r: TorqueResidual,
+    torsion_std_nm: f64,
+    axis_s: impl FnOnce() -> Vec3,
+) -> TorqueResidual {
+    if torsion_std_nm == 0.0 {
+        return r;
+    }
+    let spread = axis_s() * torsion_std_nm;
+    TorqueResidual {
+        std_nm: (r.std_nm.component_mul(&r.std_nm) + spread.component_mul(&spread))
+            .map(nalgebra::ComplexField::sqrt),
+        ..r
     }
 }
 

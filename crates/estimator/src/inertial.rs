@@ -80,8 +80,9 @@
 //! too, dF/dI_perp = T_H(omega'_perp - (u . omega) omega x u) (for d = 0,
 //! -u''_perp / lever), so it gains sigma_I^2 (dF_i/dI_perp)^2. The
 //! uncertainties of m, c, I_axial and m_s are not counted (MODEL.md 10
-//! "Accuracy": m's enters as its error times A''), nor is the torsion's
-//! (the torque check's deviation is the static one).
+//! "Accuracy": m's enters as its error times A''). The torsion's change is
+//! affine in A'' too: its standard deviation sigma_a |dM_T/dA''| widens the
+//! torque check's (only where it is not 0: d != 0 with I_axial or m_s).
 //!
 //! As in the static estimate, the support's friction along the rod (MODEL.md
 //! 10's f_axial) is not modelled: it reads as an axial tip force.
@@ -158,6 +159,8 @@ pub(crate) struct Compensation {
     pub adapter_n: Vec3,
     /// dM_T, added to the static torsion, N m.
     pub torsion_nm: f64,
+    /// What A'''s uncertainty gives the torsion: its standard deviation, N m.
+    pub torsion_std_nm: f64,
 }
 
 /// The rod's constants the compensation needs.
@@ -218,6 +221,7 @@ fn slender(rod: &Rod, pose: &Pose, motion: &CarriageMotion) -> Compensation {
         var_n2,
         adapter_n: accel * m_s,
         torsion_nm: 0.0,
+        torsion_std_nm: 0.0,
     }
 }
 
@@ -341,6 +345,7 @@ impl General {
         let zero = Vec3::zeros();
         let (mut force_n, mut torsion_nm) = self.loads(rod, &self.omega_dot_vel, &zero, true);
         let mut sum_sq = Vec3::zeros();
+        let mut torsion_sum_sq = 0.0;
         let mut omega_dot = self.omega_dot_vel;
         let accel = &motion.accel_mps2;
         for (e, a_j) in [Vec3::x(), Vec3::y(), Vec3::z()].iter().zip(accel.iter()) {
@@ -350,6 +355,7 @@ impl General {
             torsion_nm += col_torsion * *a_j;
             omega_dot += omega_dot_j * *a_j;
             sum_sq += col.component_mul(&col);
+            torsion_sum_sq += col_torsion * col_torsion;
         }
         // dF/dI_perp = T_H(omega'_perp - (u . omega) omega x u).
         let om = &self.omega;
@@ -362,6 +368,7 @@ impl General {
             var_n2: sum_sq * sigma_a2 + d_inertia.component_mul(&d_inertia),
             adapter_n: accel * rod.inertia.adapter_mass_kg,
             torsion_nm,
+            torsion_std_nm: motion.accel_std_mps2 * torsion_sum_sq.sqrt(),
         }
     }
 }

@@ -119,6 +119,10 @@ pub struct TipForceEstimate {
     pub ujoint_force_n: Vec3,
     /// M_T: the U-joint's torsion on the rod along n = -(s4, 0, c4), N m (0 when d = 0).
     pub torsion_nm: f64,
+    /// The standard deviation that the carriage's uncertain acceleration
+    /// gives `torsion_nm` in motion ([`TipForceEstimator::estimate_in_motion`];
+    /// 0 at rest and where the motion does not change M_T), N m.
+    pub torsion_std_nm: f64,
     /// Every standard deviation is within the observability limit
     /// ([`TipForceConfig::max_std_n`]). When false the number is still what the
     /// model gives, but the guard must not trust it (a Fault).
@@ -311,12 +315,20 @@ impl TipForceEstimator {
             var_n2,
             adapter_n,
             torsion_nm,
+            torsion_std_nm,
         } = compensation(&rod, pose, motion);
         raw.force_n += force_n;
         raw.var_n2 += var_n2;
         raw.ujoint_force_n -= adapter_n;
         raw.torsion_nm += torsion_nm;
-        self.finish(&pose.rod_dir, raw)
+        let estimate = self.finish(&pose.rod_dir, raw)?;
+        if !torsion_std_nm.is_finite() {
+            return Err(TipForceError::NonFiniteResult);
+        }
+        Ok(TipForceEstimate {
+            torsion_std_nm,
+            ..estimate
+        })
     }
 
     /// The checks of `estimate` and the static model's number and variance.
@@ -391,6 +403,7 @@ impl TipForceEstimator {
             lateral_n,
             ujoint_force_n,
             torsion_nm,
+            torsion_std_nm: 0.0,
             observable,
         })
     }

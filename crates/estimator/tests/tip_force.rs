@@ -1525,6 +1525,7 @@ fn std_grows_with_the_acceleration_and_inertia_uncertainty() {
         );
         assert_eq!(uncertain.force_n, exact.force_n);
         let mut expected = exact.std_n.component_mul(&exact.std_n);
+        let mut torsion_var = 0.0;
         for e in [Vector3::x(), Vector3::y(), Vector3::z()] {
             let moved = run(
                 base,
@@ -1535,7 +1536,19 @@ fn std_grows_with_the_acceleration_and_inertia_uncertainty() {
             );
             let col = (moved.force_n - exact.force_n) * sigma_a;
             expected += col.component_mul(&col);
+            let torsion = (moved.torsion_nm - exact.torsion_nm) * sigma_a;
+            torsion_var += torsion * torsion;
         }
+        // The torsion's deviation likewise (with d != 0 the adapter moves
+        // M_T; with d = 0 and no axial inertia nothing does).
+        assert!(
+            (uncertain.torsion_std_nm - torsion_var.sqrt()).abs() <= 1e-12,
+            "d {d}: {} vs {}",
+            uncertain.torsion_std_nm,
+            torsion_var.sqrt()
+        );
+        assert_eq!(exact.torsion_std_nm, 0.0);
+        assert_eq!(uncertain.torsion_std_nm > 0.0, d != 0.0);
         let got = uncertain.std_n.component_mul(&uncertain.std_n);
         assert!(
             (got - expected).amax() < 1e-9 * expected.amax(),

@@ -491,6 +491,7 @@ fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
     // The same inputs without the motion: the static model.
     let mut uncompensated = Estimator::with_bias(&config, bias).unwrap();
     let mut largest_still_n: f64 = 0.0;
+    let mut widened = 0;
     let mut rig = Rig::new(spec);
     let mut moving = 0;
     let mut largest_n: f64 = 0.0;
@@ -527,7 +528,19 @@ fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
         if let (true, sar_estimator::cycle::TipOutcome::Estimate(e)) = (k >= 50, still.tip) {
             largest_still_n = largest_still_n.max(e.force_n.norm());
         }
-        let out = compensated.cycle_in_motion(&input, None, None, &carriage_motion(&truth));
+        let still_torque_std = still.torque.map(|t| t.std_nm);
+        // A'' known to 0.05 m/s^2: the adapter (d != 0) makes M_T uncertain.
+        let motion = sar_estimator::motion::CarriageMotion {
+            accel_std_mps2: 0.05,
+            ..carriage_motion(&truth)
+        };
+        let out = compensated.cycle_in_motion(&input, None, None, &motion);
+        if let (Some(a), Some(b)) = (out.torque.map(|t| t.std_nm), still_torque_std) {
+            assert!((a - b).min() >= 0.0, "{a:?} vs {b:?}");
+            if (a - b).max() > 0.0 {
+                widened += 1;
+            }
+        }
         if k >= 50 {
             assert_eq!(
                 out.guard_state,
@@ -548,6 +561,8 @@ fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
          uncompensated {largest_still_n:.2} N"
     );
     assert!(largest_n < 3.0, "{largest_n}");
+    // The torque check's deviation grew by the torsion's in motion.
+    assert!(widened > 20, "{widened}");
     assert!(largest_still_n > 4.0, "{largest_still_n}");
     assert!(moving > 20, "{moving} samples at 2 m/s^2");
 }
