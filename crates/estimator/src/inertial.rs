@@ -368,7 +368,7 @@ impl General {
             var_n2: sum_sq * sigma_a2 + d_inertia.component_mul(&d_inertia),
             adapter_n: accel * rod.inertia.adapter_mass_kg,
             torsion_nm,
-            torsion_std_nm: motion.accel_std_mps2 * torsion_sum_sq.sqrt(),
+            torsion_std_nm: motion.accel_std_mps2 * nalgebra::ComplexField::sqrt(torsion_sum_sq),
         }
     }
 }
