@@ -4,6 +4,13 @@
 //! Only `[geometry]`, `[manipulator]` and `[sensor]` are required. Every other
 //! section has documented defaults ([`DEFAULT_TOML`] shows them all):
 //!
+//! - `[manipulator]`'s optional keys, the rod's inertia (MODEL.md 10):
+//!   `inertia_perp_kgm2` (I_perp about the centre of mass; absent: the
+//!   slender rod's m L^2 / 12, a stated default, not a measurement:
+//!   [`Config::inertia_measured`] is false), `inertia_perp_std_kgm2` (its
+//!   standard deviation; absent: 50 % of the default, 5 % of a given value),
+//!   `inertia_axial_kgm2` (0); `[sensor] adapter_mass_kg`, the mass between
+//!   the sensor and the U-joint (0).
 //! - `[loop]`: `rate_hz` (1000; 100..=10000), `priority` (SCHED_FIFO priority,
 //!   80; 1..=99), `cpu` (the CPU the loop thread is pinned to; absent: none).
 //! - `[guard]`: warn/stop limits in N on the total (10/15), axial (8/12) and
@@ -81,6 +88,7 @@ use sar_estimator::cycle::{
 };
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::guard::{ForceLimits, GuardConfig, GuardLimits};
+use sar_estimator::inertial::RodInertia;
 use sar_estimator::tip_force::TipForceConfig;
 use sar_kinematics::{Calibration, CalibrationSpec, Mat3, Profile, ProfileSpec, Vec3};
 use sar_loop::runloop::LoopConfig;
@@ -212,6 +220,12 @@ struct ManipulatorToml {
     offset_m: f64,
     mass_kg: f64,
     com_m: f64,
+    #[serde(default)]
+    inertia_perp_kgm2: Option<f64>,
+    #[serde(default)]
+    inertia_perp_std_kgm2: Option<f64>,
+    #[serde(default)]
+    inertia_axial_kgm2: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -235,6 +249,8 @@ struct SensorToml {
     tare_max_spread: f64,
     #[serde(default = "default_tare_min_interval_s")]
     tare_min_interval_s: f64,
+    #[serde(default)]
+    adapter_mass_kg: Option<f64>,
 }
 
 fn default_tare_window_samples() -> i64 {
@@ -559,6 +575,10 @@ pub struct Config {
     pub record: RecordSettings,
     /// Force control (`[force_control]`), checked for stability.
     pub force_control: sar_estimator::force_control::ForceControlConfig,
+    /// Whether `[manipulator] inertia_perp_kgm2` was given (measured, e.g. by
+    /// `sarctl identify --dynamic`); false: the estimator uses the slender
+    /// rod's m L^2 / 12, a stated default, not a measurement.
+    pub inertia_measured: bool,
 }
 
 /// The recording's settings (`[record]`).
@@ -850,6 +870,9 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     // range), then the geometry against the travel.
     plausible::check(ctx, &f)?;
     check_reach(ctx, &calibration, &profile, &axes.travel_m)?;
+    // After the plausible ranges: the slender rod's default is m L^2 / 12
+    // of a plausible rod.
+    let (inertia, inertia_measured) = inertia(ctx, &f.manipulator, &f.sensor, &profile)?;
     Ok(Config {
         origin: ctx.origin.to_owned(),
         manipulator_name: f.manipulator.name.clone(),
@@ -863,6 +886,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
             guard,
             plausibility,
             filter: tip.filter,
+            inertia,
         },
         loop_,
         axes,
@@ -870,6 +894,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         axes_driver,
         record,
         force_control,
+        inertia_measured,
     })
 }
 
@@ -915,6 +940,54 @@ fn manipulator(ctx: &Ctx<'_>, m: &ManipulatorToml) -> Result<Profile, ConfigErro
         com_m: m.com_m,
     })
     .map_err(|e| ctx.err(&join("manipulator", e.field()), e.to_string()))
+}
+
+/// The rod's inertia (`[manipulator] inertia_perp_kgm2`,
+/// `inertia_perp_std_kgm2`, `inertia_axial_kgm2`) and the adapter's mass
+/// (`[sensor] adapter_mass_kg`), MODEL.md 10, and whether I_perp was given.
+/// Without I_perp: the slender rod's m L^2 / 12 with a 50 % standard
+/// deviation (a stated default); I_perp without its standard deviation: 5 %
+/// of it; a standard deviation without I_perp is refused.
+fn inertia(
+    ctx: &Ctx<'_>,
+    m: &ManipulatorToml,
+    s: &SensorToml,
+    profile: &Profile,
+) -> Result<(RodInertia, bool), ConfigError> {
+    let (perp_kgm2, fraction) = match m.inertia_perp_kgm2 {
+        Some(v) => (v, RodInertia::GIVEN_STD_FRACTION),
+        None => {
+            if m.inertia_perp_std_kgm2.is_some() {
+                return Err(ctx.err(
+                    "manipulator.inertia_perp_std_kgm2",
+                    "given without manipulator.inertia_perp_kgm2 (the default m L^2 / 12 \
+                     has its own)",
+                ));
+            }
+            (
+                RodInertia::slender_rod_kgm2(profile),
+                RodInertia::SLENDER_ROD_STD_FRACTION,
+            )
+        }
+    };
+    let inertia = RodInertia {
+        inertia_perp_kgm2: perp_kgm2,
+        inertia_perp_std_kgm2: m.inertia_perp_std_kgm2.unwrap_or(perp_kgm2 * fraction),
+        inertia_axial_kgm2: m.inertia_axial_kgm2.unwrap_or(0.0),
+        adapter_mass_kg: s.adapter_mass_kg.unwrap_or(0.0),
+    };
+    inertia.check().map_err(|e| match e {
+        sar_estimator::SettingError::Invalid { field, .. } => {
+            let section = if field == "adapter_mass_kg" {
+                "sensor"
+            } else {
+                "manipulator"
+            };
+            setting_error(ctx, section, &e)
+        }
+        _ => setting_error(ctx, "manipulator", &e),
+    })?;
+    Ok((inertia, m.inertia_perp_kgm2.is_some()))
 }
 
 /// `[axes]` (the planned speed at most the plausibility's joint speed).

@@ -92,12 +92,16 @@ pub const PLAUSIBLE: &[Plausible] = &[
         row("manipulator.com_m", 0.0, 1.5, "m"),
         "at most length_m (within the rod)",
     ),
+    row("manipulator.inertia_perp_kgm2", 0.0, 2.0, "kg m^2"),
+    row("manipulator.inertia_perp_std_kgm2", 0.0, 2.0, "kg m^2"),
+    row("manipulator.inertia_axial_kgm2", 0.0, 0.1, "kg m^2"),
     also(
         each("sensor.noise_n", 1e-4, 10.0, "N"),
         "at most a tenth of sensor.range_n",
     ),
     each("sensor.range_n", 1.0, 10_000.0, "N"),
     each("sensor.range_nm", 0.01, 1000.0, "N m"),
+    row("sensor.adapter_mass_kg", 0.0, 5.0, "kg"),
     also(row("guard.warn_total_n", 0.1, 100.0, "N"), BELOW_RANGE),
     also(row("guard.stop_total_n", 0.1, 100.0, "N"), BELOW_RANGE),
     also(row("guard.warn_axial_n", 0.1, 100.0, "N"), BELOW_RANGE),
@@ -276,6 +280,15 @@ fn check_manipulator(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
         (m.length_m, "m"),
         "manipulator.length_m (the centre of mass is on the rod)",
     )?;
+    for (key, v) in [
+        ("manipulator.inertia_perp_kgm2", m.inertia_perp_kgm2),
+        ("manipulator.inertia_perp_std_kgm2", m.inertia_perp_std_kgm2),
+        ("manipulator.inertia_axial_kgm2", m.inertia_axial_kgm2),
+    ] {
+        if let Some(v) = v {
+            value(ctx, key, v)?;
+        }
+    }
     Ok(())
 }
 
@@ -305,6 +318,9 @@ fn check_sensor(ctx: &Ctx<'_>, f: &FileToml) -> Result<(), ConfigError> {
     components(ctx, "sensor.noise_n", &s.noise_n)?;
     components(ctx, "sensor.range_n", &s.range_n)?;
     components(ctx, "sensor.range_nm", &s.range_nm)?;
+    if let Some(v) = s.adapter_mass_kg {
+        value(ctx, "sensor.adapter_mass_kg", v)?;
+    }
     tenth_of_range(
         ctx,
         ("sensor.noise_n", &s.noise_n),

@@ -618,6 +618,7 @@ fn estimator_for_torque(s: &Scenario) -> Estimator {
         })
         .unwrap(),
         filter: None,
+        inertia: sar_estimator::inertial::RodInertia::slender_rod(&s.spec.profile),
     };
     let bias = Bias {
         force_n: s.spec.sensor.bias_n,

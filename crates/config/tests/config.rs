@@ -773,3 +773,87 @@ fn the_canopen_drives_own_limits_have_defaults_and_ranges() {
         "not a key of the simulated axes",
     );
 }
+
+/// The rod's inertia (MODEL.md 10): the slender rod's m L^2 / 12 with a 50 %
+/// standard deviation when I_perp is not given (a stated default, flagged
+/// not measured), 5 % of a given I_perp without its own, I_axial and the
+/// adapter 0 by default; every key's error names it, with its line.
+#[test]
+fn the_inertia_keys_have_stated_defaults_and_are_checked_by_key() {
+    let c = config::parse(MINIMUM, "robot.toml").unwrap();
+    let i = c.estimator.inertia;
+    let slender = 2.593 * 0.35 * 0.35 / 12.0;
+    assert!(!c.inertia_measured);
+    assert_eq!(i.inertia_perp_kgm2, slender);
+    assert_eq!(i.inertia_perp_std_kgm2, slender * 0.5);
+    assert_eq!((i.inertia_axial_kgm2, i.adapter_mass_kg), (0.0, 0.0));
+    assert!(!config::builtin().unwrap().inertia_measured);
+    let manipulator =
+        |lines: &str| MINIMUM.replace("com_m = 0.103\n", &format!("com_m = 0.103\n{lines}\n"));
+    let c = config::parse(&manipulator("inertia_perp_kgm2 = 0.031"), "robot.toml").unwrap();
+    assert!(c.inertia_measured);
+    assert_eq!(c.estimator.inertia.inertia_perp_kgm2, 0.031);
+    assert_eq!(c.estimator.inertia.inertia_perp_std_kgm2, 0.031 * 0.05);
+    let text = manipulator(
+        "inertia_perp_kgm2 = 0.031\ninertia_perp_std_kgm2 = 0.0004\ninertia_axial_kgm2 = 0.0002",
+    );
+    let sensor = |text: &str, line: &str| {
+        text.replace(
+            "noise_n = [0.2, 0.2, 0.8]\n",
+            &format!("noise_n = [0.2, 0.2, 0.8]\n{line}\n"),
+        )
+    };
+    let c = config::parse(&sensor(&text, "adapter_mass_kg = 0.12"), "robot.toml").unwrap();
+    let i = c.estimator.inertia;
+    assert_eq!(
+        [
+            i.inertia_perp_std_kgm2,
+            i.inertia_axial_kgm2,
+            i.adapter_mass_kg
+        ],
+        [0.0004, 0.0002, 0.12]
+    );
+    // Errors name the key and its line.
+    let text = manipulator("inertia_perp_kgm2 = -0.01");
+    expect(
+        &text,
+        "manipulator.inertia_perp_kgm2",
+        Some("inertia_perp_kgm2"),
+        "within 0..=2 kg m^2, got -0.01",
+    );
+    let text = manipulator("inertia_perp_std_kgm2 = 0.001");
+    expect(
+        &text,
+        "manipulator.inertia_perp_std_kgm2",
+        Some("inertia_perp_std_kgm2"),
+        "without manipulator.inertia_perp_kgm2",
+    );
+    let text = manipulator("inertia_perp_kgm2 = 30.0");
+    expect(
+        &text,
+        "manipulator.inertia_perp_kgm2",
+        Some("inertia_perp_kgm2"),
+        "0..=2 kg m^2",
+    );
+    let text = manipulator("inertia_axial_kgm2 = 0.5");
+    expect(
+        &text,
+        "manipulator.inertia_axial_kgm2",
+        Some("inertia_axial_kgm2"),
+        "0..=0.1 kg m^2",
+    );
+    let text = sensor(MINIMUM, "adapter_mass_kg = 120.0");
+    expect(
+        &text,
+        "sensor.adapter_mass_kg",
+        Some("adapter_mass_kg"),
+        "(a value in g? 120 g is 0.12 kg)",
+    );
+    let text = sensor(MINIMUM, "adapter_mass_kg = -1.0");
+    expect(
+        &text,
+        "sensor.adapter_mass_kg",
+        Some("adapter_mass_kg"),
+        "within 0..=5 kg, got -1",
+    );
+}

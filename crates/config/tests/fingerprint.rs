@@ -11,7 +11,7 @@ use sar_estimator::cycle::Bias;
 use sar_loop::step::LoopStep;
 
 /// The fingerprint of the built-in configuration's loop step.
-const DEFAULT_FINGERPRINT: u64 = 0x015f_6a66_ac54_9740;
+const DEFAULT_FINGERPRINT: u64 = 0xf340_a2f1_abcc_4bb1;
 
 fn step_of(cfg: &sar_config::Config, bias: Bias) -> LoopStep {
     LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap()
@@ -60,7 +60,7 @@ fn every_part_of_the_configuration_changes_it() {
     let cfg = sar_config::builtin().unwrap();
     let base = fingerprint_of(&cfg);
     type Edit = fn(&mut sar_config::Config);
-    let edits: [(&str, Edit); 5] = [
+    let edits: [(&str, Edit); 9] = [
         ("axes.following_tolerance_m", |c| {
             c.axes.following_tolerance_m *= 2.0;
         }),
@@ -84,6 +84,18 @@ fn every_part_of_the_configuration_changes_it() {
         }),
         ("the tip estimator's observability limit", |c| {
             c.estimator.tip.max_std_n *= 1.5;
+        }),
+        ("the rod's I_perp", |c| {
+            c.estimator.inertia.inertia_perp_kgm2 *= 1.1;
+        }),
+        ("the rod's I_perp std", |c| {
+            c.estimator.inertia.inertia_perp_std_kgm2 *= 1.1;
+        }),
+        ("the rod's I_axial", |c| {
+            c.estimator.inertia.inertia_axial_kgm2 = 1e-4;
+        }),
+        ("the adapter's mass", |c| {
+            c.estimator.inertia.adapter_mass_kg = 0.1;
         }),
     ];
     for (what, edit) in edits {

@@ -1,8 +1,9 @@
 //! Criterion benchmarks of the estimator: the full per-cycle path (the 1 kHz
 //! loop's budget) with d = 0 and with d != 0, a floor (plain f64 code giving the
 //! same outputs with no validation, measured in the same run so that the
-//! cycle/floor ratio can be read off), the cycle's parts, and the
-//! identification update, solve and support fit.
+//! cycle/floor ratio can be read off), the cycle in motion (MODEL.md 10's
+//! compensation) beside the one at rest, the cycle's parts (the tip force at
+//! rest and in motion), and the identification update, solve and support fit.
 #![allow(
     missing_docs,
     clippy::unwrap_used,
@@ -22,6 +23,7 @@ use sar_estimator::cycle::{
 };
 use sar_estimator::guard::{Guard, GuardConfig, GuardInput, GuardLimits, TipInput};
 use sar_estimator::identification::{Identification, IdentificationOptions};
+use sar_estimator::motion::CarriageMotion;
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
 use sar_estimator::{Calibration, Profile, ProfileSpec, SensorNoise};
@@ -416,6 +418,36 @@ fn bench_good_path<O>(
     cycle
 }
 
+/// The carriage's motion of the "in motion" benchmarks: a move at about
+/// 0.6 m/s^2 with an uncertain acceleration (MODEL.md 10), small enough that
+/// the compensated force stays on the good path.
+const MOTION: CarriageMotion = CarriageMotion {
+    velocity_mps: Vector3::new(0.02, 0.01, -0.01),
+    accel_mps2: Vector3::new(0.5, -0.3, 0.2),
+    accel_std_mps2: 0.05,
+};
+
+/// [`bench_good_path`] with the carriage moving ([`MOTION`]): the cycle's
+/// tip force compensated for the rod's inertia.
+fn bench_good_path_in_motion(
+    c: &mut Criterion,
+    name: &str,
+    estimator: &mut Estimator,
+    (reading, torque): (&Vector3<f64>, &Vector3<f64>),
+) {
+    let mut cycle = start(estimator, reading, torque);
+    bench_both(c, name, || {
+        cycle += 1;
+        let input = cycle_input(cycle, reading, torque);
+        let out = estimator.cycle_in_motion(black_box(&input), None, None, black_box(&MOTION));
+        black_box(out.guard_state)
+    });
+    assert_eq!(
+        estimator.last().guard_state,
+        sar_estimator::guard::GuardState::Ok
+    );
+}
+
 fn per_cycle(c: &mut Criterion) {
     let bias_n = Vector3::new(0.4, -1.1, 0.25);
     let tip_n = Vector3::new(1.0, -0.5, 0.5);
@@ -491,6 +523,14 @@ fn per_cycle(c: &mut Criterion) {
             (&reading, &torque),
             |out| out.guard_state,
         );
+        // The same, in motion (MODEL.md 10's compensation), in the same run.
+        let mut moving = Estimator::new(&config, bias_n).unwrap();
+        bench_good_path_in_motion(
+            c,
+            &format!("full, {label}, in motion (compensated)"),
+            &mut moving,
+            (&reading, &torque),
+        );
         let floor = Floor::new(&config, &limits, &bias_n);
         let reading_v: V = [reading.x, reading.y, reading.z];
         let cycle_fn = if profile.offset_m() == 0.0 {
@@ -551,6 +591,14 @@ fn per_cycle(c: &mut Criterion) {
         .unwrap();
         bench_both(c, &format!("part: tip force, {label}"), || {
             black_box(tip.estimate(black_box(&pose), black_box(&reading), &bias_n))
+        });
+        bench_both(c, &format!("part: tip force in motion, {label}"), || {
+            black_box(tip.estimate_in_motion(
+                black_box(&pose),
+                black_box(&reading),
+                &bias_n,
+                black_box(&MOTION),
+            ))
         });
     }
     let pose = forward(&cal, &manipulator2(), &joints()).unwrap();

@@ -29,6 +29,7 @@ use crate::guard::{
     Axis, ForceLimits, Guard, GuardConfig, GuardInput, GuardState, Reason, RestResidual,
     SensorChannel, TipInput, Transition,
 };
+use crate::inertial::RodInertia;
 use crate::motion::CarriageMotion;
 use crate::tip_force::{TipForceConfig, TipForceError, TipForceEstimate, TipForceEstimator};
 use crate::{
@@ -867,6 +868,10 @@ pub struct EstimatorConfig {
     /// The tip-force low-pass beside the unfiltered estimate (`None`: none).
     /// Its `sample_period_s` is the sensor's sample period.
     pub filter: Option<FilterConfig>,
+    /// The rod's inertia and the adapter's mass, for the tip force in motion
+    /// ([`Estimator::cycle_in_motion`], MODEL.md 10). The stated default when
+    /// nothing was measured: [`RodInertia::slender_rod`].
+    pub inertia: RodInertia,
 }
 
 /// The torque check, fixed at construction.
@@ -1105,7 +1110,8 @@ impl Estimator {
                 &config.profile,
                 &config.noise,
                 config.tip,
-            )?,
+            )?
+            .with_inertia(config.inertia)?,
             frame: SensorFrame::new(&config.calibration),
             filter,
             guard,
@@ -1166,7 +1172,12 @@ impl Estimator {
 
     /// [`Estimator::cycle_checked`] with the carriage's commanded motion at
     /// the sensor sample's stamp (MODEL.md 10): the tip force is compensated
-    /// for the rod's inertia with it. The loop derives `motion` from the
+    /// for the rod's inertia with it
+    /// ([`crate::tip_force::TipForceEstimator::estimate_in_motion`]; its
+    /// standard deviation, which the guard's margin uses, grows with the
+    /// acceleration's and the inertia's), and so is the torsion in the
+    /// torque check's prediction. With [`CarriageMotion::REST`] exactly
+    /// [`Estimator::cycle_checked`]. The loop derives `motion` from the
     /// trajectory it commands (a pure function of the recorded inputs).
     pub fn cycle_in_motion(
         &mut self,
@@ -1175,8 +1186,6 @@ impl Estimator {
         host_fault: Option<Reason>,
         motion: &CarriageMotion,
     ) -> &CycleOutput {
-        // Issue 26: the compensation is not wired yet (the motion is unused).
-        let _ = motion;
         let checks = self.check_inputs(input, reference);
         let sensor = &input.sensor;
         let joints = &input.joints;
@@ -1188,6 +1197,7 @@ impl Estimator {
             fresh.joints_valid,
             fresh.sensor_valid,
             sensor,
+            motion,
         );
         self.step_filter(checks.lost_samples, sensor.counter);
         if checks.new_sample && self.guard.awaiting_first_reset() {
@@ -1548,6 +1558,7 @@ impl Estimator {
         joints_valid: bool,
         sensor_valid: bool,
         sensor: &SensorSample,
+        motion: &CarriageMotion,
     ) -> (TipInput, Option<Reason>) {
         let out = &mut self.last;
         let pose = if joints_valid {
@@ -1575,7 +1586,7 @@ impl Estimator {
         }
         match self
             .tip
-            .estimate(out_pose, &sensor.force_n, &self.bias.force_n)
+            .estimate_in_motion(out_pose, &sensor.force_n, &self.bias.force_n, motion)
         {
             Ok(estimate) => {
                 out.tip = TipOutcome::Estimate(estimate);
@@ -1588,6 +1599,9 @@ impl Estimator {
                         &self.bias,
                         estimate.torsion_nm,
                     );
+                    let residual = widened(residual, estimate.torsion_std_nm, || {
+                        self.frame.torsion_axis_s(out_pose)
+                    });
                     torque_fault = torque_verdict(check, &residual);
                     out.torque = Some(residual);
                 }
@@ -2077,6 +2091,25 @@ fn torque_residual(
             std([l.m21, l.m22, l.m23], n_s.y, tv.y),
             std([l.m31, l.m32, l.m33], n_s.z, tv.z),
         ),
+    }
+}
+
+/// `r` with the torsion's standard deviation in motion, `torsion_std_nm`
+/// along the torsion axis `axis_s` (sensor frame), added to its deviation
+/// per sensor axis; unchanged when it is 0 (at rest: to the bit).
+fn widened(
+    r: TorqueResidual,
+    torsion_std_nm: f64,
+    axis_s: impl FnOnce() -> Vec3,
+) -> TorqueResidual {
+    if torsion_std_nm == 0.0 {
+        return r;
+    }
+    let spread = axis_s() * torsion_std_nm;
+    TorqueResidual {
+        std_nm: (r.std_nm.component_mul(&r.std_nm) + spread.component_mul(&spread))
+            .map(nalgebra::ComplexField::sqrt),
+        ..r
     }
 }
 

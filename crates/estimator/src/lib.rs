@@ -1,5 +1,7 @@
 //! The SAR's estimator core: tip force, identification of mass and centre of
-//! mass, support calibration and the force-limit guard (MODEL.md 4-6).
+//! mass, support calibration and the force-limit guard (MODEL.md 4-6), and
+//! the tip force in motion with the rod's inertia compensated (MODEL.md 10,
+//! [`inertial`]).
 //!
 //! Invariants (see `ARCHITECTURE.md`):
 //! - `#![no_std]`, no `alloc`, no I/O, no panics on any input. All state is
@@ -16,6 +18,7 @@ pub mod filter;
 pub mod force_control;
 pub mod guard;
 pub mod identification;
+pub mod inertial;
 mod linalg;
 pub mod line_fit;
 pub mod motion;

@@ -7,6 +7,10 @@
 //!   eliminated by hand into a closed form (derived at `with_offset`); the dense
 //!   6x6 solve is the tests' reference.
 //!
+//! - In motion ([`TipForceEstimator::estimate_in_motion`]): the same, plus
+//!   what the rod's inertia and the adapter's mass add (MODEL.md 10,
+//!   [`crate::inertial`]); at rest, exactly [`TipForceEstimator::estimate`].
+//!
 //! Both return the number with its standard deviation, and flag it as not
 //! observable ([`TipForceEstimate::observable`] false) when a standard deviation
 //! exceeds the configured limit: near the singularity (tip at the support) the
@@ -14,6 +18,8 @@
 //! keeps the number. Only where there is no number at all (the tip at or behind
 //! the support, a singular system) is the answer [`TipForceError::NotObservable`].
 
+use crate::inertial::{Compensation, Rod, RodInertia, compensation};
+use crate::motion::CarriageMotion;
 use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, SettingError, Vec3, check_finite};
 use nalgebra::ComplexField;
 use sar_kinematics::Shown;
@@ -83,6 +89,15 @@ pub enum TipForceError {
         /// Its value.
         value: f64,
     },
+    /// The carriage's motion is not one the compensation can use (a
+    /// negative or non-finite standard deviation of the acceleration).
+    #[error("invalid motion: {quantity} = {value}")]
+    InvalidMotion {
+        /// Which value: `"accel_std_mps2"`.
+        quantity: &'static str,
+        /// Its value.
+        value: f64,
+    },
     /// The inputs are finite but so large that the result overflows.
     #[error("the tip force overflows (inputs far out of range)")]
     NonFiniteResult,
@@ -104,6 +119,10 @@ pub struct TipForceEstimate {
     pub ujoint_force_n: Vec3,
     /// M_T: the U-joint's torsion on the rod along n = -(s4, 0, c4), N m (0 when d = 0).
     pub torsion_nm: f64,
+    /// The standard deviation that the carriage's uncertain acceleration
+    /// gives `torsion_nm` in motion ([`TipForceEstimator::estimate_in_motion`];
+    /// 0 at rest and where the motion does not change M_T), N m.
+    pub torsion_std_nm: f64,
     /// Every standard deviation is within the observability limit
     /// ([`TipForceConfig::max_std_n`]). When false the number is still what the
     /// model gives, but the guard must not trust it (a Fault).
@@ -123,10 +142,24 @@ pub struct TipForceEstimator {
     noise_factor: Mat3,
     /// m g, N.
     weight_n: Vec3,
+    /// m, kg.
+    mass_kg: f64,
     length_m: f64,
     com_m: f64,
     offset_m: f64,
     max_std_n: f64,
+    /// The rod's inertia and the adapter's mass (MODEL.md 10).
+    inertia: RodInertia,
+}
+
+/// An estimate before its standard deviation is checked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Raw {
+    force_n: Vec3,
+    var_n2: Vec3,
+    lever_m: f64,
+    ujoint_force_n: Vec3,
+    torsion_nm: f64,
 }
 
 /// A symmetric 3x3 matrix by its six entries: its product with a vector is
@@ -210,11 +243,26 @@ impl TipForceEstimator {
             covariance_diag_n2: covariance_n2.diagonal(),
             noise_factor: cal.sensor_rotation() * Mat3::from_diagonal(&noise.std_n()),
             weight_n: cal.gravity_mps2() * profile.mass_kg(),
+            mass_kg: profile.mass_kg(),
             length_m: profile.length_m(),
             com_m: profile.com_m(),
             offset_m: profile.offset_m(),
             max_std_n,
+            inertia: RodInertia::slender_rod(profile),
         })
+    }
+
+    /// The same estimator with the rod's inertia and the adapter's mass
+    /// `inertia` (default [`RodInertia::slender_rod`]); each value must be
+    /// finite and >= 0.
+    pub fn with_inertia(self, inertia: RodInertia) -> Result<Self, SettingError> {
+        inertia.check()?;
+        Ok(Self { inertia, ..self })
+    }
+
+    /// The rod's inertia and the adapter's mass in use.
+    pub fn inertia(&self) -> &RodInertia {
+        &self.inertia
     }
 
     /// The limit on the standard deviation, N.
@@ -233,6 +281,58 @@ impl TipForceEstimator {
         reading_n: &Vec3,
         bias_n: &Vec3,
     ) -> Result<TipForceEstimate, TipForceError> {
+        let raw = self.raw(pose, reading_n, bias_n)?;
+        self.finish(&pose.rod_dir, raw)
+    }
+
+    /// The tip force for one reading taken while the carriage moves with
+    /// `motion` (MODEL.md 10): [`TipForceEstimator::estimate`] with the rod's
+    /// inertia and the adapter's mass compensated ([`crate::inertial`]), its
+    /// variance grown by what the acceleration's and I_perp's standard
+    /// deviations give. With [`CarriageMotion::REST`] exactly `estimate`'s
+    /// result, to the bit.
+    pub fn estimate_in_motion(
+        &self,
+        pose: &Pose,
+        reading_n: &Vec3,
+        bias_n: &Vec3,
+        motion: &CarriageMotion,
+    ) -> Result<TipForceEstimate, TipForceError> {
+        if motion.is_rest() {
+            return self.estimate(pose, reading_n, bias_n);
+        }
+        check_motion(motion)?;
+        let mut raw = self.raw(pose, reading_n, bias_n)?;
+        let rod = Rod {
+            mass_kg: self.mass_kg,
+            com_m: self.com_m,
+            length_m: self.length_m,
+            offset_m: self.offset_m,
+            inertia: self.inertia,
+        };
+        let Compensation {
+            force_n,
+            var_n2,
+            adapter_n,
+            torsion_nm,
+            torsion_std_nm,
+        } = compensation(&rod, pose, motion);
+        raw.force_n += force_n;
+        raw.var_n2 += var_n2;
+        raw.ujoint_force_n -= adapter_n;
+        raw.torsion_nm += torsion_nm;
+        let estimate = self.finish(&pose.rod_dir, raw)?;
+        if !torsion_std_nm.is_finite() {
+            return Err(TipForceError::NonFiniteResult);
+        }
+        Ok(TipForceEstimate {
+            torsion_std_nm,
+            ..estimate
+        })
+    }
+
+    /// The checks of `estimate` and the static model's number and variance.
+    fn raw(&self, pose: &Pose, reading_n: &Vec3, bias_n: &Vec3) -> Result<Raw, TipForceError> {
         check_finite(reading_n, |value| TipForceError::NonFinite {
             input: "reading_n",
             value,
@@ -264,15 +364,14 @@ impl TipForceEstimator {
 
     /// Checks the standard deviation (from the per-axis variance `var_n2`) and
     /// the result, and assembles the estimate.
-    fn finish(
-        &self,
-        u: &Vec3,
-        force_n: Vec3,
-        var_n2: Vec3,
-        lever_m: f64,
-        ujoint_force_n: Vec3,
-        torsion_nm: f64,
-    ) -> Result<TipForceEstimate, TipForceError> {
+    fn finish(&self, u: &Vec3, raw: Raw) -> Result<TipForceEstimate, TipForceError> {
+        let Raw {
+            force_n,
+            var_n2,
+            lever_m,
+            ujoint_force_n,
+            torsion_nm,
+        } = raw;
         let std_n = var_n2.map(std_of_variance);
         // NaN never counts as within the limit; an infinite deviation means no
         // number at all.
@@ -304,17 +403,13 @@ impl TipForceEstimator {
             lateral_n,
             ujoint_force_n,
             torsion_nm,
+            torsion_std_nm: 0.0,
             observable,
         })
     }
 
     /// MODEL.md 4.1 (d = 0).
-    fn closed_form(
-        &self,
-        pose: &Pose,
-        u: &Vec3,
-        f_a: &Vec3,
-    ) -> Result<TipForceEstimate, TipForceError> {
+    fn closed_form(&self, pose: &Pose, u: &Vec3, f_a: &Vec3) -> Result<Raw, TipForceError> {
         let a = pose.support_distance_m;
         check_finite(&[a], |value| TipForceError::NonFinite {
             input: "pose.support_distance_m",
@@ -348,7 +443,13 @@ impl TipForceEstimator {
         let p = 1.0 + k;
         let var_n2 = self.covariance_diag_n2 * (k * k) - u.component_mul(&cu) * (2.0 * k * p)
             + u.component_mul(u) * (p * p * ucu);
-        self.finish(u, force_n, var_n2, lever_m, *f_a, 0.0)
+        Ok(Raw {
+            force_n,
+            var_n2,
+            lever_m,
+            ujoint_force_n: *f_a,
+            torsion_nm: 0.0,
+        })
     }
 
     /// MODEL.md 4.3 (d != 0) in closed form: the six equilibrium equations
@@ -434,12 +535,7 @@ impl TipForceEstimator {
     /// The basis is taken as orthonormal: u and w are checked unit and
     /// perpendicular to [`POSE_UNIT_TOLERANCE`], which the forward kinematics
     /// meet to round-off.
-    fn with_offset(
-        &self,
-        pose: &Pose,
-        u: &Vec3,
-        f_a: &Vec3,
-    ) -> Result<TipForceEstimate, TipForceError> {
+    fn with_offset(&self, pose: &Pose, u: &Vec3, f_a: &Vec3) -> Result<Raw, TipForceError> {
         let w = pose.rod_normal;
         let s = pose.support_along_rod_m;
         // One test each on the way of a good pose; which input is wrong, and
@@ -494,7 +590,13 @@ impl TipForceEstimator {
         let torsion_nm = d * fa_v * inv_n_u;
         let v = Vec3::new(vx, vy, vz);
         let var_n2 = self.offset_variance_n2(u, &v, beta, [px, py, pz], [qx, qy, qz]);
-        self.finish(u, force_n, var_n2, lever_m, *f_a, torsion_nm)
+        Ok(Raw {
+            force_n,
+            var_n2,
+            lever_m,
+            ujoint_force_n: *f_a,
+            torsion_nm,
+        })
     }
 
     /// The per-axis variance of `with_offset`'s F_tip, N^2, for its Jacobian
@@ -571,6 +673,8 @@ sar_snapshot::config_struct!(TipForceEstimator {
     com_m,
     offset_m,
     max_std_n,
+    mass_kg,
+    inertia,
 });
 sar_snapshot::config_struct!(Symmetric3 {
     xx,
@@ -580,3 +684,24 @@ sar_snapshot::config_struct!(Symmetric3 {
     xz,
     yz
 });
+
+/// The motion's values finite, its acceleration's deviation >= 0.
+fn check_motion(motion: &CarriageMotion) -> Result<(), TipForceError> {
+    check_finite(&motion.velocity_mps, |value| TipForceError::NonFinite {
+        input: "motion.velocity_mps",
+        value,
+    })?;
+    check_finite(&motion.accel_mps2, |value| TipForceError::NonFinite {
+        input: "motion.accel_mps2",
+        value,
+    })?;
+    let std = motion.accel_std_mps2;
+    if std.is_finite() && std >= 0.0 {
+        Ok(())
+    } else {
+        Err(TipForceError::InvalidMotion {
+            quantity: "accel_std_mps2",
+            value: std,
+        })
+    }
+}

@@ -1295,3 +1295,59 @@ fn force_limits_change_at_run_time_within_their_ceiling() {
         })
     ));
 }
+
+/// MODEL.md 10 in the cycle: with `CarriageMotion::REST` the cycle in motion
+/// is the plain cycle to the bit (a recording made without the motion
+/// replays the same); in motion the guard judges the compensated force with
+/// the grown standard deviation. A reading without the rod's inertial part
+/// while the loop says the carriage accelerates at 4 m/s^2 along the rod is
+/// a tip force of m A'' = 10.4 N against the rod: the guard acts on it.
+#[test]
+fn in_motion_the_guard_judges_the_compensated_force() {
+    use sar_estimator::motion::CarriageMotion;
+    let mut plain = Rig::armed();
+    let mut moving = Rig::armed();
+    let mut rest = Rig::armed();
+    let accel = CarriageMotion {
+        velocity_mps: Vector3::new(0.05, 0.0, 0.0),
+        accel_mps2: Vector3::new(4.0, 0.0, 0.0),
+        accel_std_mps2: 0.2,
+    };
+    let mut last = None;
+    for _ in 0..6 {
+        let input = plain.at_rest();
+        let expected = *plain.estimator.cycle(&input);
+        let out = *rest
+            .estimator
+            .cycle_in_motion(&input, None, None, &CarriageMotion::REST);
+        assert_eq!(out, expected);
+        assert_eq!(format!("{out:?}"), format!("{expected:?}"));
+        last = Some((
+            *moving.estimator.cycle_in_motion(&input, None, None, &accel),
+            expected,
+        ));
+    }
+    let (out, still) = last.unwrap();
+    let (e, s) = (estimate(&out), estimate(&still));
+    let m = example_estimator_config().profile.mass_kg();
+    // Along the rod (u = X0 at the nominal pose): -m A''.
+    assert!(
+        (e.force_n.x - (s.force_n.x - m * 4.0)).abs() < 1e-9,
+        "{:?}",
+        e.force_n
+    );
+    // Its std: the acceleration's 0.2 m/s^2 times M = m along the rod.
+    let expected_x = (s.std_n.x * s.std_n.x + (m * 0.2) * (m * 0.2)).sqrt();
+    assert!(
+        (e.std_n.x - expected_x).abs() < 1e-9,
+        "{} vs {expected_x}",
+        e.std_n.x
+    );
+    assert_eq!(still.guard_state, GuardState::Ok);
+    assert!(
+        matches!(out.guard_state, GuardState::Warn | GuardState::Stop),
+        "{:?} {:?}",
+        out.guard_state,
+        out.guard_reason
+    );
+}

@@ -317,18 +317,34 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
             ..PlausibilityLimits::default()
         })
         .unwrap(),
+        // The compensation's general path (d != 0, I_axial, an adapter).
+        inertia: sar_estimator::inertial::RodInertia {
+            inertia_axial_kgm2: 0.001,
+            adapter_mass_kg: 0.1,
+            ..sar_estimator::inertial::RodInertia::slender_rod(&example_estimator_config().profile)
+        },
         ..example_estimator_config()
     };
     let mut estimator = Estimator::new(&config, Vector3::new(0.4, -1.1, 0.25)).unwrap();
+    // d = 0: the slender rod's closed form, beside it.
+    let mut slender = Estimator::new(&example_estimator_config(), Vector3::zeros()).unwrap();
     let mut seen = [false; 5];
     let mut estimates = 0u32;
     let (_, allocations) = allocations_in(|| {
-        for input in inputs.iter_mut() {
+        for (i, input) in inputs.iter_mut().enumerate() {
             // After a Stop or Fault the next cycle carries a reset.
             if estimator.last().guard_state.is_halting() && input.command.is_none() {
                 input.command = Some(Command::Reset);
             }
-            let out = estimator.cycle(input);
+            // The carriage in motion, every cycle a different one.
+            let phase = i as f64 * 0.01;
+            let motion = sar_estimator::motion::CarriageMotion {
+                velocity_mps: Vector3::new(0.02 * phase.cos(), 0.01, -0.01),
+                accel_mps2: Vector3::new(2.0 * phase.sin(), -0.5, 1.0 * phase.cos()),
+                accel_std_mps2: 0.1,
+            };
+            slender.cycle_in_motion(input, None, None, &motion);
+            let out = estimator.cycle_in_motion(input, None, None, &motion);
             if let sar_estimator::cycle::TipOutcome::Estimate(e) = out.tip {
                 estimates += 1;
                 assert!(out.torque.is_some());

@@ -1116,3 +1116,540 @@ fn offset_vertical_rod_is_singular() {
         }
     }
 }
+
+// ---------------------------------------------------------------------------
+// In motion (MODEL.md 10): the compensation against a second, independent
+// formulation, from positions only.
+
+use sar_estimator::inertial::RodInertia;
+use sar_estimator::motion::CarriageMotion;
+
+/// A smooth carriage trajectory: each joint a constant plus a sum of sines
+/// (amplitude m, angular frequency rad/s, phase rad).
+struct SineTrajectory {
+    q0: [f64; 3],
+    sines: [[(f64, f64, f64); 3]; 3],
+}
+
+impl SineTrajectory {
+    /// q, q' or q'' (`order` 0, 1, 2) at `t_s`.
+    fn joints(&self, t_s: f64, order: u32) -> [f64; 3] {
+        let mut q = if order == 0 { self.q0 } else { [0.0; 3] };
+        for (qi, sines) in q.iter_mut().zip(&self.sines) {
+            for &(amp, om, phase) in sines {
+                let x = om * t_s + phase;
+                *qi += match order {
+                    0 => amp * x.sin(),
+                    1 => amp * om * x.cos(),
+                    _ => -amp * om * om * x.sin(),
+                };
+            }
+        }
+        q
+    }
+
+    fn pose(&self, cal: &Calibration, profile: &Profile, t_s: f64) -> Pose {
+        let [q1_m, q2_m, q3_m] = self.joints(t_s, 0);
+        forward(cal, profile, &ActiveJoints { q1_m, q2_m, q3_m }).unwrap()
+    }
+
+    /// A' and A'' = (q3', q2', q1') and (q3'', q2'', q1''), exact.
+    fn motion(&self, t_s: f64) -> CarriageMotion {
+        let [v1, v2, v3] = self.joints(t_s, 1);
+        let [a1, a2, a3] = self.joints(t_s, 2);
+        CarriageMotion {
+            velocity_mps: Vector3::new(v3, v2, v1),
+            accel_mps2: Vector3::new(a3, a2, a1),
+            accel_std_mps2: 0.0,
+        }
+    }
+}
+
+/// The 8th-order centred stencils, offsets 1..=4: first and second
+/// derivative (the second's centre weight apart).
+const D1: [f64; 4] = [4.0 / 5.0, -1.0 / 5.0, 4.0 / 105.0, -1.0 / 280.0];
+const D2: [f64; 4] = [8.0 / 5.0, -1.0 / 5.0, 8.0 / 315.0, -1.0 / 560.0];
+const D2_CENTRE: f64 = -205.0 / 72.0;
+const STEP_S: f64 = 1e-3;
+
+/// d/dt of `f` at `t_s` by the centred stencil.
+fn d1<T>(f: &impl Fn(f64) -> T, t_s: f64) -> T
+where
+    T: core::ops::Sub<Output = T> + core::ops::Mul<f64, Output = T> + core::ops::Add<Output = T>,
+{
+    let mut sum = (f(t_s + STEP_S) - f(t_s - STEP_S)) * (D1[0] / STEP_S);
+    for (k, c) in D1.iter().enumerate().skip(1) {
+        let h = (k + 1) as f64 * STEP_S;
+        sum = sum + (f(t_s + h) - f(t_s - h)) * (c / STEP_S);
+    }
+    sum
+}
+
+/// d2/dt2 of `f` at `t_s` by the centred stencil.
+fn d2(f: &impl Fn(f64) -> Vector3<f64>, t_s: f64) -> Vector3<f64> {
+    let mut sum = f(t_s) * D2_CENTRE;
+    for (k, c) in D2.iter().enumerate() {
+        let h = (k + 1) as f64 * STEP_S;
+        sum += (f(t_s + h) + f(t_s - h)) * *c;
+    }
+    sum / (STEP_S * STEP_S)
+}
+
+/// The rod's frame [u w v] at a pose: R' R^T = [omega]x.
+fn rod_rotation(pose: &Pose) -> Matrix3<f64> {
+    let (u, w) = (pose.rod_dir, pose.rod_normal);
+    Matrix3::from_columns(&[u, w, u.cross(&w)])
+}
+
+/// From positions only: the COM's acceleration and H_C' (the rod's angular
+/// velocity from the frame's rotation, its angular momentum differentiated).
+fn inertial_by_differences(
+    traj: &SineTrajectory,
+    cal: &Calibration,
+    profile: &Profile,
+    inertia: &RodInertia,
+    t_s: f64,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let com = |t: f64| traj.pose(cal, profile, t).com_m;
+    let momentum = |t: f64| {
+        let rot = |tau: f64| rod_rotation(&traj.pose(cal, profile, tau));
+        let skew = d1(&rot, t) * rot(t).transpose();
+        let omega = Vector3::new(
+            skew[(2, 1)] - skew[(1, 2)],
+            skew[(0, 2)] - skew[(2, 0)],
+            skew[(1, 0)] - skew[(0, 1)],
+        ) * 0.5;
+        let u = traj.pose(cal, profile, t).rod_dir;
+        let along = u.dot(&omega);
+        (omega - u * along) * inertia.inertia_perp_kgm2 + u * (along * inertia.inertia_axial_kgm2)
+    };
+    (d2(&com, t_s), d1(&momentum, t_s))
+}
+
+/// Newton-Euler with moments about A (the reference, a dense solve): with
+/// the tip applying `tip_n`, the rod's F_A, the torsion M_T, and the raw
+/// reading f = R_0s^T (-F_A - m_s A'') + b.
+#[allow(clippy::too_many_arguments)]
+fn reading_in_motion(
+    cal: &Calibration,
+    profile: &Profile,
+    inertia: &RodInertia,
+    pose: &Pose,
+    (com_accel, h_dot): (Vector3<f64>, Vector3<f64>),
+    accel: &Vector3<f64>,
+    tip_n: &Vector3<f64>,
+    bias_n: &Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>, f64) {
+    let a = pose.ujoint_m;
+    let (w, v) = (pose.rod_normal, pose.rod_dir.cross(&pose.rod_normal));
+    let n = Vector3::y().cross(&v);
+    let (r_b, r_c, r_d) = (cal.support_m() - a, pose.com_m - a, pose.tip_m - a);
+    let m = profile.mass_kg();
+    let weight = cal.gravity_mps2() * m;
+    let f_d = -tip_n;
+    // b1 (r_b x w) + b2 (r_b x v) + M_T n = H' + r_c x m (a_C - g) - r_d x F_D
+    let k = Matrix3::from_columns(&[r_b.cross(&w), r_b.cross(&v), n]);
+    let rhs = h_dot + r_c.cross(&(com_accel * m - weight)) - r_d.cross(&f_d);
+    let x = k.lu().solve(&rhs).unwrap();
+    let f_b = w * x[0] + v * x[1];
+    let f_a = com_accel * m - weight - f_d - f_b;
+    let on_sensor = -f_a - accel * inertia.adapter_mass_kg;
+    (
+        cal.sensor_rotation().transpose() * on_sensor + bias_n,
+        f_a,
+        x[2],
+    )
+}
+
+/// A calibration with a turned sensor (the reading's frame matters).
+fn turned_calibration() -> Calibration {
+    Calibration::new(&CalibrationSpec {
+        sensor_rotation: *Rotation3::from_euler_angles(0.3, -0.2, 0.5).matrix(),
+        ..common::example_calibration().spec()
+    })
+    .unwrap()
+}
+
+fn profile_with_offset(offset_m: f64) -> Profile {
+    Profile::new(&ProfileSpec {
+        offset_m,
+        ..common::manipulator2().spec()
+    })
+    .unwrap()
+}
+
+/// Joints that put A at `a_m` with the example calibration (A = A(0) +
+/// (q3, q2, q1)).
+fn joints_at(cal: &Calibration, profile: &Profile, a_m: Vector3<f64>) -> [f64; 3] {
+    let q = a_m - cal.p_home_m() - cal.ujoint_offset_m();
+    let [q1_m, q2_m, q3_m] = [q.z, q.y, q.x];
+    let pose = forward(cal, profile, &ActiveJoints { q1_m, q2_m, q3_m }).unwrap();
+    assert!((pose.ujoint_m - a_m).norm() < 1e-12);
+    [q1_m, q2_m, q3_m]
+}
+
+fn in_motion_estimator(
+    cal: &Calibration,
+    profile: &Profile,
+    inertia: RodInertia,
+) -> TipForceEstimator {
+    TipForceEstimator::new(
+        cal,
+        profile,
+        &SensorNoise::hex6(),
+        TipForceConfig { max_std_n: 1e9 },
+    )
+    .unwrap()
+    .with_inertia(inertia)
+    .unwrap()
+}
+
+/// The compensated estimate recovers the imposed tip force, F_A and the
+/// torsion along a smooth trajectory (up to 3 m/s^2, 0.25 m/s), for d = 0
+/// and d != 0, with I_axial and an adapter: the estimator's closed forms
+/// against finite differences of positions and a dense Newton-Euler solve.
+#[test]
+fn compensation_matches_differences_of_positions() {
+    let cal = turned_calibration();
+    let bias = Vector3::new(1.5, -2.0, 0.7);
+    let tip = Vector3::new(2.0, -1.5, 0.8);
+    let cases = [
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.35),
+        (0.0, 0.002, 0.0),
+        (0.01, 0.0, 0.0),
+        (-0.008, 0.003, 0.35),
+    ];
+    let mut worst_n: f64 = 0.0;
+    for (d, i_axial, m_s) in cases {
+        let profile = profile_with_offset(d);
+        let inertia = RodInertia {
+            inertia_perp_kgm2: 0.031,
+            inertia_perp_std_kgm2: 0.0,
+            inertia_axial_kgm2: i_axial,
+            adapter_mass_kg: m_s,
+        };
+        let est = in_motion_estimator(&cal, &profile, inertia);
+        let traj = SineTrajectory {
+            q0: joints_at(&cal, &profile, Vector3::new(0.23, 0.17, 0.03)),
+            sines: [
+                [(0.02, 9.0, 0.3), (0.005, 17.0, 1.0), (0.0, 1.0, 0.0)],
+                [(0.015, 11.0, -0.5), (0.004, 5.0, 2.0), (0.0, 1.0, 0.0)],
+                [(0.02, 7.0, 1.3), (0.006, 13.0, -1.0), (0.0, 1.0, 0.0)],
+            ],
+        };
+        for k in 0..12 {
+            let t = 0.037 * f64::from(k);
+            let pose = traj.pose(&cal, &profile, t);
+            let motion = traj.motion(t);
+            // The trajectory's A' is the U-joint's velocity.
+            let a_dot = d1(&|t| traj.pose(&cal, &profile, t).ujoint_m, t);
+            assert!((a_dot - motion.velocity_mps).norm() < 1e-9);
+            let loads = inertial_by_differences(&traj, &cal, &profile, &inertia, t);
+            let (reading, f_a, torsion) = reading_in_motion(
+                &cal,
+                &profile,
+                &inertia,
+                &pose,
+                loads,
+                &motion.accel_mps2,
+                &tip,
+                &bias,
+            );
+            let out = est
+                .estimate_in_motion(&pose, &reading, &bias, &motion)
+                .unwrap();
+            let err = (out.force_n - tip).norm();
+            worst_n = worst_n.max(err);
+            assert!(
+                err < 1e-6,
+                "d {d} I_axial {i_axial} m_s {m_s} t {t}: {err} N"
+            );
+            assert!((out.ujoint_force_n - f_a).norm() < 1e-6);
+            assert!(
+                (out.torsion_nm - torsion).abs() < 1e-7,
+                "{} vs {torsion}",
+                out.torsion_nm
+            );
+            // The motion is large: uncompensated, the same reading is far off.
+            let still = est.estimate(&pose, &reading, &bias).unwrap();
+            assert!((still.force_n - tip).norm() > 0.3, "{:?}", still.force_n);
+        }
+    }
+    println!("compensation vs differences of positions: worst {worst_n:.2e} N");
+}
+
+/// The example robot's nominal pose (A = (0.25, 0.2, 0), u = X0, a = 0.2 m).
+fn nominal(profile: &Profile) -> (Calibration, Pose) {
+    let cal = common::example_calibration();
+    let [q1_m, q2_m, q3_m] = joints_at(&cal, profile, Vector3::new(0.25, 0.2, 0.0));
+    let pose = forward(&cal, profile, &ActiveJoints { q1_m, q2_m, q3_m }).unwrap();
+    assert!((pose.rod_dir - Vector3::x()).norm() < 1e-12);
+    (cal, pose)
+}
+
+/// The reading at the nominal pose at rest in velocity, accelerating at
+/// `accel`, nothing at the tip (I_perp, H' and a_C in closed form:
+/// u'' = -A''_perp / a, a_C = A'' + c u'', H' = I_perp u x u'').
+fn nominal_reading(
+    profile: &Profile,
+    inertia: &RodInertia,
+    accel: Vector3<f64>,
+) -> (Calibration, Pose, Vector3<f64>) {
+    let (cal, pose) = nominal(profile);
+    let u = pose.rod_dir;
+    let u2 = -(accel - u * u.dot(&accel)) / pose.support_distance_m;
+    let loads = (
+        accel + u2 * profile.com_m(),
+        u.cross(&u2) * inertia.inertia_perp_kgm2,
+    );
+    let zero = Vector3::zeros();
+    let (reading, _, _) =
+        reading_in_motion(&cal, profile, inertia, &pose, loads, &accel, &zero, &zero);
+    (cal, pose, reading)
+}
+
+fn accelerating(accel: Vector3<f64>, accel_std_mps2: f64) -> CarriageMotion {
+    CarriageMotion {
+        velocity_mps: Vector3::zeros(),
+        accel_mps2: accel,
+        accel_std_mps2,
+    }
+}
+
+/// MODEL.md 10's table: at the nominal pose the static closed form reads
+/// 2.59 N per m/s^2 along X0 and 1.70 across (0.81 + 33.3 I_perp); the
+/// compensation reads nothing.
+#[test]
+fn phantom_tip_force_of_model_10_is_compensated() {
+    let profile = common::manipulator2();
+    let inertia = RodInertia::slender_rod(&profile);
+    for (accel, phantom_n) in [
+        (Vector3::x(), 2.59),
+        (Vector3::y(), 1.70),
+        (Vector3::z(), 1.70),
+    ] {
+        let (cal, pose, reading) = nominal_reading(&profile, &inertia, accel);
+        let est = in_motion_estimator(&cal, &profile, inertia);
+        let zero = Vector3::zeros();
+        let still = est.estimate(&pose, &reading, &zero).unwrap();
+        assert!(
+            (still.force_n.norm() - phantom_n).abs() < 0.005,
+            "{accel:?}: {:?}",
+            still.force_n
+        );
+        let across = 0.81 + 33.3 * inertia.inertia_perp_kgm2;
+        if accel.x == 0.0 {
+            assert!((still.force_n.norm() - across).abs() < 0.01);
+        }
+        let moving = est
+            .estimate_in_motion(&pose, &reading, &zero, &accelerating(accel, 0.0))
+            .unwrap();
+        assert!(moving.force_n.norm() < 1e-12, "{:?}", moving.force_n);
+    }
+}
+
+/// MODEL.md 10 "Accuracy": I_perp off by 5 % and m by 0.2 % leave about
+/// 0.01 N along the rod and 0.1 N across it at a 2 m/s^2 stop at the
+/// nominal pose (beyond what the same errors give at rest).
+#[test]
+fn compensation_error_is_its_inputs_error() {
+    let truth_profile = common::manipulator2();
+    let truth = RodInertia::slender_rod(&truth_profile);
+    let wrong_profile = Profile::new(&ProfileSpec {
+        mass_kg: truth_profile.mass_kg() * 1.002,
+        ..truth_profile.spec()
+    })
+    .unwrap();
+    let wrong = RodInertia {
+        inertia_perp_kgm2: truth.inertia_perp_kgm2 * 1.05,
+        ..truth
+    };
+    let mut residual_n = [0.0; 2];
+    for (i, direction) in [Vector3::x(), Vector3::y()].into_iter().enumerate() {
+        let stop = direction * -2.0;
+        let (cal, pose, reading) = nominal_reading(&truth_profile, &truth, stop);
+        let (_, _, at_rest) = nominal_reading(&truth_profile, &truth, Vector3::zeros());
+        let est = in_motion_estimator(&cal, &wrong_profile, wrong);
+        let zero = Vector3::zeros();
+        let moving = est
+            .estimate_in_motion(&pose, &reading, &zero, &accelerating(stop, 0.0))
+            .unwrap();
+        let still = est.estimate(&pose, &at_rest, &zero).unwrap();
+        residual_n[i] = (moving.force_n - still.force_n).norm();
+    }
+    println!("2 m/s^2 stop, m +0.2 %, I_perp +5 %: {residual_n:?} N (along, across)");
+    assert!((residual_n[0] - 0.0104).abs() < 0.001, "{residual_n:?}");
+    assert!(
+        residual_n[1] > 0.05 && residual_n[1] < 0.12,
+        "{residual_n:?}"
+    );
+}
+
+/// The standard deviation grows with the acceleration's and I_perp's, by the
+/// exact Jacobians (F_tip is affine in A'' and linear in I_perp: their
+/// differences are exact), for d = 0 and d != 0.
+#[test]
+fn std_grows_with_the_acceleration_and_inertia_uncertainty() {
+    let cal = turned_calibration();
+    let bias = Vector3::new(0.5, 1.0, -2.0);
+    let reading = Vector3::new(3.0, 22.0, -1.0);
+    for d in [0.0, 0.006] {
+        let profile = profile_with_offset(d);
+        let [q1_m, q2_m, q3_m] = joints_at(&cal, &profile, Vector3::new(0.22, 0.15, 0.04));
+        let pose = forward(&cal, &profile, &ActiveJoints { q1_m, q2_m, q3_m }).unwrap();
+        let base = RodInertia {
+            inertia_perp_std_kgm2: 0.0,
+            adapter_mass_kg: 0.2,
+            ..RodInertia::slender_rod(&profile)
+        };
+        let motion = CarriageMotion {
+            velocity_mps: Vector3::new(0.05, -0.02, 0.03),
+            accel_mps2: Vector3::new(1.5, -0.7, 0.9),
+            accel_std_mps2: 0.0,
+        };
+        let run = |inertia: RodInertia, m: CarriageMotion| {
+            in_motion_estimator(&cal, &profile, inertia)
+                .estimate_in_motion(&pose, &reading, &bias, &m)
+                .unwrap()
+        };
+        let exact = run(base, motion);
+        // A'' known to 0.3 m/s^2 per component.
+        let sigma_a = 0.3;
+        let uncertain = run(
+            base,
+            CarriageMotion {
+                accel_std_mps2: sigma_a,
+                ..motion
+            },
+        );
+        assert_eq!(uncertain.force_n, exact.force_n);
+        let mut expected = exact.std_n.component_mul(&exact.std_n);
+        let mut torsion_var = 0.0;
+        for e in [Vector3::x(), Vector3::y(), Vector3::z()] {
+            let moved = run(
+                base,
+                CarriageMotion {
+                    accel_mps2: motion.accel_mps2 + e,
+                    ..motion
+                },
+            );
+            let col = (moved.force_n - exact.force_n) * sigma_a;
+            expected += col.component_mul(&col);
+            let torsion = (moved.torsion_nm - exact.torsion_nm) * sigma_a;
+            torsion_var += torsion * torsion;
+        }
+        // The torsion's deviation likewise (with d != 0 the adapter moves
+        // M_T; with d = 0 and no axial inertia nothing does).
+        assert!(
+            (uncertain.torsion_std_nm - torsion_var.sqrt()).abs() <= 1e-12,
+            "d {d}: {} vs {}",
+            uncertain.torsion_std_nm,
+            torsion_var.sqrt()
+        );
+        assert_eq!(exact.torsion_std_nm, 0.0);
+        assert_eq!(uncertain.torsion_std_nm > 0.0, d != 0.0);
+        let got = uncertain.std_n.component_mul(&uncertain.std_n);
+        assert!(
+            (got - expected).amax() < 1e-9 * expected.amax(),
+            "d {d}: {got:?} vs {expected:?}"
+        );
+        assert!(
+            uncertain.std_n.min() > exact.std_n.min(),
+            "{:?}",
+            uncertain.std_n
+        );
+        // I_perp known to 0.01 kg m^2.
+        let sigma_i = 0.01;
+        let unsure = run(
+            RodInertia {
+                inertia_perp_std_kgm2: sigma_i,
+                ..base
+            },
+            motion,
+        );
+        let heavier = run(
+            RodInertia {
+                inertia_perp_kgm2: base.inertia_perp_kgm2 + 1.0,
+                ..base
+            },
+            motion,
+        );
+        let col = (heavier.force_n - exact.force_n) * sigma_i;
+        let expected = exact.std_n.component_mul(&exact.std_n) + col.component_mul(&col);
+        let got = unsure.std_n.component_mul(&unsure.std_n);
+        assert!(
+            (got - expected).amax() < 1e-9 * expected.amax(),
+            "d {d}: {got:?} vs {expected:?}"
+        );
+        assert!(col.amax() > 1e-4, "{col:?}");
+    }
+}
+
+/// At rest the motion path is the static one, to the bit; a motion that is
+/// not finite, or a negative deviation, is refused with its name.
+#[test]
+fn rest_is_the_static_estimate_and_bad_motion_is_refused() {
+    let cal = turned_calibration();
+    let profile = profile_with_offset(0.004);
+    let [q1_m, q2_m, q3_m] = joints_at(&cal, &profile, Vector3::new(0.22, 0.15, 0.04));
+    let pose = forward(&cal, &profile, &ActiveJoints { q1_m, q2_m, q3_m }).unwrap();
+    let est = in_motion_estimator(&cal, &profile, RodInertia::slender_rod(&profile));
+    let (reading, bias) = (Vector3::new(3.0, 22.0, -1.0), Vector3::new(0.1, 0.2, 0.3));
+    assert_eq!(
+        est.estimate_in_motion(&pose, &reading, &bias, &CarriageMotion::REST),
+        est.estimate(&pose, &reading, &bias)
+    );
+    let bad = [
+        CarriageMotion {
+            accel_std_mps2: -0.1,
+            ..CarriageMotion::REST
+        },
+        CarriageMotion {
+            accel_std_mps2: f64::NAN,
+            ..CarriageMotion::REST
+        },
+        CarriageMotion {
+            accel_mps2: Vector3::new(0.0, f64::INFINITY, 0.0),
+            ..CarriageMotion::REST
+        },
+        CarriageMotion {
+            velocity_mps: Vector3::new(f64::NAN, 0.0, 0.0),
+            ..CarriageMotion::REST
+        },
+    ];
+    for m in bad {
+        let out = est.estimate_in_motion(&pose, &reading, &bias, &m);
+        assert!(
+            matches!(
+                out,
+                Err(TipForceError::InvalidMotion {
+                    quantity: "accel_std_mps2",
+                    ..
+                }) | Err(TipForceError::NonFinite {
+                    input: "motion.accel_mps2" | "motion.velocity_mps",
+                    ..
+                })
+            ),
+            "{m:?}: {out:?}"
+        );
+    }
+    let refused = TipForceEstimator::new(
+        &cal,
+        &profile,
+        &SensorNoise::hex6(),
+        TipForceConfig::default(),
+    )
+    .unwrap()
+    .with_inertia(RodInertia {
+        adapter_mass_kg: -1.0,
+        ..RodInertia::NONE
+    });
+    assert!(matches!(
+        refused,
+        Err(SettingError::Invalid {
+            field: "adapter_mass_kg",
+            ..
+        })
+    ));
+}

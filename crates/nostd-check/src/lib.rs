@@ -10,6 +10,8 @@ use sar_estimator::cycle::{
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::guard::{GuardConfig, GuardLimits};
 use sar_estimator::identification::{Identification, IdentificationOptions};
+use sar_estimator::inertial::RodInertia;
+use sar_estimator::motion::CarriageMotion;
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::TipForceConfig;
 use sar_estimator::{SensorNoise, SlideSign, StaticPose};
@@ -28,15 +30,16 @@ fn config() -> Option<EstimatorConfig> {
     })
     .ok()?;
     let guard = GuardConfig::new(GuardLimits::EXAMPLE).ok()?;
+    let profile = Profile::new(&ProfileSpec {
+        length_m: 0.35,
+        offset_m: 0.0,
+        mass_kg: 2.593,
+        com_m: 0.103,
+    })
+    .ok()?;
     Some(EstimatorConfig {
         calibration,
-        profile: Profile::new(&ProfileSpec {
-            length_m: 0.35,
-            offset_m: 0.0,
-            mass_kg: 2.593,
-            com_m: 0.103,
-        })
-        .ok()?,
+        profile,
         noise: SensorNoise::hex6(),
         tip: TipForceConfig::default(),
         guard,
@@ -45,6 +48,7 @@ fn config() -> Option<EstimatorConfig> {
             cutoff_hz: 5.0,
             sample_period_s: 0.002,
         }),
+        inertia: RodInertia::slender_rod(&profile),
     })
 }
 
@@ -188,6 +192,68 @@ pub extern "C" fn sar_nostd_cycle_offset(
         ActiveJoints { q1_m, q2_m, q3_m },
         Vec3::new(fx_n, fy_n, fz_n),
     )
+}
+
+/// One estimator cycle while the carriage accelerates at (`ax_mps2`, 0, 0)
+/// with the rod's axis `offset_m` from the U-joint centre, an axial inertia
+/// and an adapter (MODEL.md 10: the compensation's general path, or the
+/// slender rod's with everything 0). Returns the guard state as a number, or -1.
+#[unsafe(no_mangle)]
+pub extern "C" fn sar_nostd_cycle_in_motion(
+    offset_m: f64,
+    inertia_axial_kgm2: f64,
+    ax_mps2: f64,
+    q1_m: f64,
+    q2_m: f64,
+    q3_m: f64,
+) -> i32 {
+    let Some(mut config) = config() else {
+        return -1;
+    };
+    let Ok(profile) = Profile::new(&ProfileSpec {
+        offset_m,
+        ..config.profile.spec()
+    }) else {
+        return -1;
+    };
+    config.profile = profile;
+    config.inertia = RodInertia {
+        inertia_axial_kgm2,
+        adapter_mass_kg: 0.1,
+        ..RodInertia::slender_rod(&profile)
+    };
+    let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
+        return -1;
+    };
+    let motion = CarriageMotion {
+        velocity_mps: Vec3::new(0.01, 0.0, 0.0),
+        accel_mps2: Vec3::new(ax_mps2, 0.0, 0.0),
+        accel_std_mps2: 0.05,
+    };
+    let out = estimator.cycle_in_motion(
+        &CycleInput {
+            cycle: 1,
+            now_ns: Some(1_000),
+            sensor: SensorSample {
+                force_n: Vec3::new(0.0, 20.0, 0.0),
+                torque_nm: Vec3::zeros(),
+                counter: 1,
+                status: 0,
+                stamp_ns: 1_000,
+                valid: true,
+            },
+            joints: JointSample {
+                joints: ActiveJoints { q1_m, q2_m, q3_m },
+                stamp_ns: 1_000,
+                valid: true,
+            },
+            command: None,
+        },
+        None,
+        None,
+        &motion,
+    );
+    out.guard_state as i32
 }
 
 /// A snapshot of the estimator's decision state, taken and restored

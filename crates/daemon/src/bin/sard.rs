@@ -89,6 +89,7 @@ fn run(args: &Args) -> Result<(), String> {
         return check_config(path);
     }
     let cfg = configuration(args)?;
+    say_inertia(&cfg);
     let (rdt, canopen) = chosen_devices(args, &cfg)?;
     rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
     // The sensor first: its receive thread keeps the normal priority.
@@ -313,6 +314,24 @@ fn configuration(args: &Args) -> Result<config::Config, String> {
         cfg.record.directory = cwd.join(&cfg.record.directory);
     }
     Ok(cfg)
+}
+
+/// The rod's inertia the tip force in motion is compensated with (MODEL.md
+/// 10), and whether it was measured or is the slender rod's stated default.
+fn say_inertia(cfg: &config::Config) {
+    let i = &cfg.estimator.inertia;
+    let source = if cfg.inertia_measured {
+        "[manipulator] inertia_perp_kgm2"
+    } else {
+        "DEFAULT m L^2 / 12 of a slender rod, not a measurement: run `sarctl identify --dynamic`"
+    };
+    tracing::info!(
+        "rod inertia: I_perp {:.6} +- {:.6} kg m^2 ({source}), I_axial {} kg m^2, adapter {} kg",
+        i.inertia_perp_kgm2,
+        i.inertia_perp_std_kgm2,
+        i.inertia_axial_kgm2,
+        i.adapter_mass_kg,
+    );
 }
 
 /// The real sensor and drives a configuration names (`None`: simulated).

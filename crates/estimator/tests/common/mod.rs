@@ -373,6 +373,7 @@ pub fn example_estimator_config() -> sar_estimator::cycle::EstimatorConfig {
             cutoff_hz: 20.0,
             sample_period_s: 0.001,
         }),
+        inertia: sar_estimator::inertial::RodInertia::slender_rod(&manipulator2()),
     }
 }
 
