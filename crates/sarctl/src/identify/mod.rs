@@ -23,6 +23,7 @@
 pub mod dwell;
 pub mod plot;
 pub mod poses;
+pub mod smooth;
 pub mod writeback;
 
 use dwell::{Dwell, DwellFinder, DwellOptions, SensorAverager};
