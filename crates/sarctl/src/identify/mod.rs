@@ -21,7 +21,9 @@
 //! ([`IdentifyOptions::tare_n`]).
 
 pub mod dwell;
+pub mod dynamic;
 pub mod plot;
+pub mod plot_dynamic;
 pub mod poses;
 pub mod smooth;
 pub mod writeback;

@@ -119,7 +119,7 @@ fn median_step_s(stamps: &[u64]) -> Option<f64> {
         .collect();
     steps.sort_unstable();
     let mid = *steps.get(steps.len() / 2)?;
-    (mid > 0).then(|| mid as f64 * 1e-9)
+    (mid > 0).then_some(mid as f64 * 1e-9)
 }
 
 /// Smooths `samples` (stamp ns ascending, q per axis): every sample with a
