@@ -22,6 +22,7 @@
 
 pub mod dwell;
 pub mod dynamic;
+pub mod excitation;
 pub mod plot;
 pub mod plot_dynamic;
 pub mod poses;

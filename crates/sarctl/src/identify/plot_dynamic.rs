@@ -44,18 +44,16 @@ pub fn svg(result: &DynamicIdentified, gravity_mps2: [f64; 3]) -> Result<String,
             f.inertia_perp_kgm2, f.mass_kg, f.com_m
         );
         let mut fit = chart(&upper, caption, t_window, y, "F_A up (N)").map_err(err)?;
-        fit
-            .draw_series(
-                pts.iter()
-                    .map(|&(t, m, _)| Circle::new((t, m), 1, BLUE.filled())),
-            )
-            .map_err(err)?;
-        fit
-            .draw_series(LineSeries::new(
-                pts.iter().map(|&(t, _, model)| (t, model)),
-                RED.stroke_width(2),
-            ))
-            .map_err(err)?;
+        fit.draw_series(
+            pts.iter()
+                .map(|&(t, m, _)| Circle::new((t, m), 1, BLUE.filled())),
+        )
+        .map_err(err)?;
+        fit.draw_series(LineSeries::new(
+            pts.iter().map(|&(t, _, model)| (t, model)),
+            RED.stroke_width(2),
+        ))
+        .map_err(err)?;
         let caption = format!(
             "residuals (measured - model, x y z), RMS {:.3} N, chi2/dof {:.2}",
             f.residual_rms_n, f.chi2_dof
