@@ -38,6 +38,10 @@
 //!   max torque (0x6072) in per mille of the motor's rated torque. The
 //!   drives' other limits come from `[axes]` and `[plausibility]` (see
 //!   `sar-daemon`'s `devices::canopen_config`).
+//! - `[identify]`: the limits of `sarctl identify --dynamic`'s excitation
+//!   (not the operator's move limits): `excitation_max_speed_mps` (0.04;
+//!   below `[plausibility] max_joint_speed_mps`), `excitation_max_accel_mps2`
+//!   (1; at most 5), `excitation_duration_s` (60; 10..=600).
 //!
 //! Every error names the file, the dotted key, the line where the file has it,
 //! and the problem ([`ConfigError`]), on one line of at most about 700
@@ -63,6 +67,7 @@
 //! machinery and the same error type.
 
 mod exact;
+mod identify;
 mod locate;
 mod plausible;
 pub mod scenario;
@@ -86,6 +91,8 @@ use serde::Deserialize;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use toml_file::Ctx;
+
+pub use identify::IdentifySettings;
 
 /// The configuration of the built-in demo (`sard --sim` without `--config`):
 /// the example robot of INTERFACES.md 2, every optional section written out
@@ -117,6 +124,8 @@ struct FileToml {
     record: RecordToml,
     #[serde(default)]
     force_control: ForceControlToml,
+    #[serde(default)]
+    identify: identify::IdentifyToml,
 }
 
 /// `[force_control]` (FORCE_CONTROL.md): the admittance law's settings.
@@ -553,6 +562,8 @@ pub struct Config {
     pub record: RecordSettings,
     /// Force control (`[force_control]`), checked for stability.
     pub force_control: sar_estimator::force_control::ForceControlConfig,
+    /// The limits of `sarctl identify --dynamic`'s excitation (`[identify]`).
+    pub identify: IdentifySettings,
 }
 
 /// The recording's settings (`[record]`).
@@ -835,6 +846,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
     record.scales = DeviceScales::of_drivers(&sensor_driver, &axes_driver);
     let force_control = force_control(ctx, &f.force_control, tip.sample_rate_hz, loop_.rate_hz)?;
+    let identify = identify::identify(ctx, &f.identify, f.plausibility.max_joint_speed_mps)?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
     plausible::check(ctx, &f)?;
@@ -859,6 +871,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         axes_driver,
         record,
         force_control,
+        identify,
     })
 }
 
