@@ -21,7 +21,7 @@
 use crate::identify::dwell::DwellOptions;
 use crate::identify::dynamic::DynamicOptions;
 use crate::identify::smooth::SmootherSpec;
-use crate::identify::{self, IdentifyOptions, plot, plot_dynamic, writeback};
+use crate::identify::{self, IdentifyOptions, excitation, plot, plot_dynamic, writeback};
 use std::path::{Path, PathBuf};
 
 /// The arguments of `sarctl identify` (besides the global `--config` and `--format`).
@@ -44,6 +44,23 @@ pub struct IdentifyArgs {
     /// With --dynamic: the mass between the sensor and the U-joint, kg.
     #[arg(long, default_value_t = 0.0, value_name = "KG", requires = "dynamic")]
     pub adapter_mass_kg: f64,
+    /// With --dynamic: print the excitation of `[identify]`'s limits, its
+    /// condition number and the accuracy it promises, and move nothing.
+    #[arg(long, requires = "dynamic", conflicts_with_all = ["input", "live"])]
+    pub plan: bool,
+    /// With --dynamic --plan: the excitation's centre, joints Q1,Q2,Q3, m
+    /// (default: the U-joint 0.2 m behind the support along X0).
+    #[arg(
+        long,
+        value_name = "Q1,Q2,Q3",
+        value_delimiter = ',',
+        requires = "plan",
+        allow_hyphen_values = true
+    )]
+    pub centre_m: Option<Vec<f64>>,
+    /// With --dynamic --plan: the sensor's sample rate, Hz.
+    #[arg(long, default_value_t = 500.0, value_name = "HZ", requires = "plan")]
+    pub sensor_rate_hz: f64,
     /// Do not estimate the support's friction (assume a frictionless support).
     #[arg(long)]
     pub no_friction: bool,
@@ -51,7 +68,7 @@ pub struct IdentifyArgs {
     #[arg(
         long,
         value_name = "REC.mcap",
-        required_unless_present = "live",
+        required_unless_present_any = ["live", "plan"],
         conflicts_with = "live"
     )]
     pub input: Option<PathBuf>,
@@ -141,6 +158,7 @@ impl IdentifyArgs {
             adapter_mass_kg: self.adapter_mass_kg,
             friction: !self.no_friction,
             max_condition: self.max_condition,
+            max_chi2_dof: self.max_chi2_dof,
             ..DynamicOptions::default()
         })
     }
@@ -222,6 +240,9 @@ fn run_dynamic(
     json: bool,
     args: &IdentifyArgs,
 ) -> Result<(), String> {
+    if args.plan {
+        return print_plan(config, json, args);
+    }
     let options = args.dynamic_options()?;
     let Some(input) = &args.input else {
         return Err("identify --dynamic --live is not available yet: record an excitation (sines per axis, the tip free) and run identify --dynamic --input REC.mcap".into());
@@ -246,6 +267,27 @@ fn run_dynamic(
         result.to_text(written.as_deref())
     };
     println!("{out}");
+    Ok(())
+}
+
+/// `sarctl identify --dynamic --plan`: the excitation and its promise.
+fn print_plan(config: &sar_config::Config, json: bool, args: &IdentifyArgs) -> Result<(), String> {
+    let centre_m = match args.centre_m.as_deref() {
+        None => excitation::default_centre_m(&config.estimator.calibration),
+        Some(&[q1, q2, q3]) => [q1, q2, q3],
+        Some(other) => {
+            return Err(format!(
+                "--centre-m needs 3 values Q1,Q2,Q3, got {}",
+                other.len()
+            ));
+        }
+    };
+    let plan = excitation::Plan::new(config, centre_m, args.sensor_rate_hz)?;
+    if json {
+        println!("{}", plan.to_json());
+    } else {
+        println!("{}", plan.to_text());
+    }
     Ok(())
 }
 

@@ -56,6 +56,8 @@ pub struct DynamicOptions {
     pub friction: bool,
     /// Largest accepted condition number.
     pub max_condition: f64,
+    /// Largest accepted chi-square per degree of freedom.
+    pub max_chi2_dof: f64,
     /// Smallest peak acceleration that counts as an excitation, m/s^2.
     pub min_peak_accel_mps2: f64,
 }
@@ -69,6 +71,7 @@ impl Default for DynamicOptions {
             adapter_mass_kg: 0.0,
             friction: true,
             max_condition: DEFAULT_MAX_CONDITION,
+            max_chi2_dof: super::SupportOptions::DEFAULT_MAX_CHI2_DOF,
             min_peak_accel_mps2: DEFAULT_MIN_PEAK_ACCEL_MPS2,
         }
     }
@@ -125,6 +128,26 @@ pub enum DynamicError {
         condition: f64,
         /// The limit.
         limit: f64,
+    },
+    /// The model does not explain the readings.
+    #[error(
+        "the model in motion does not fit the recording: chi-square per degree of freedom {chi2_dof:.2} above {limit} (the support B off? the sensor not tared with the rod detached? an offset d? the sensor's latency? a contact at the tip?); calibrate the support (sarctl identify) and record the excitation again"
+    )]
+    PoorFit {
+        /// chi2 / dof.
+        chi2_dof: f64,
+        /// The limit.
+        limit: f64,
+    },
+    /// The inertia came out not positive: the motion does not show it.
+    #[error(
+        "the fit gives I_perp = {inertia_kgm2:.5} +- {std_kgm2:.5} kg m^2, not positive: the motion does not show the rod's inertia; excite every axis with sines of distinct frequencies, the rod turning (README)"
+    )]
+    NonPositiveInertia {
+        /// I_perp, kg m^2.
+        inertia_kgm2: f64,
+        /// Its standard error, kg m^2.
+        std_kgm2: f64,
     },
     /// Any other refusal of the estimator.
     #[error("the dynamic identification refused: {0}")]
@@ -244,6 +267,9 @@ fn check_options(config: &Config, o: &DynamicOptions) -> Result<(), DynamicError
     if !(o.adapter_mass_kg.is_finite() && o.adapter_mass_kg >= 0.0) {
         return Err(bad("the adapter mass (kg, >= 0)", o.adapter_mass_kg));
     }
+    if o.max_chi2_dof.is_nan() || o.max_chi2_dof <= 0.0 {
+        return Err(bad("the chi-square limit (> 0)", o.max_chi2_dof));
+    }
     if o.max_condition.is_nan() || o.max_condition < 1.0 {
         return Err(bad("the condition limit (>= 1)", o.max_condition));
     }
@@ -320,6 +346,7 @@ pub fn identify_series(
         });
     }
     let fit = id.solve(options.max_condition)?;
+    check_fit(&fit, options)?;
     let points = figure_points(cal, &fit, options, &used, &stamps)?;
     Ok(DynamicIdentified {
         fit,
@@ -329,6 +356,23 @@ pub fn identify_series(
         method: method(options, used.len()),
         points,
     })
+}
+
+/// Refuses an inertia that is not positive, then a poor fit.
+fn check_fit(fit: &DynamicResult, options: &DynamicOptions) -> Result<(), DynamicError> {
+    if fit.inertia_perp_kgm2 <= 0.0 {
+        return Err(DynamicError::NonPositiveInertia {
+            inertia_kgm2: fit.inertia_perp_kgm2,
+            std_kgm2: fit.inertia_perp_std_kgm2,
+        });
+    }
+    if fit.chi2_dof > options.max_chi2_dof {
+        return Err(DynamicError::PoorFit {
+            chi2_dof: fit.chi2_dof,
+            limit: options.max_chi2_dof,
+        });
+    }
+    Ok(())
 }
 
 fn method(o: &DynamicOptions, samples: usize) -> String {

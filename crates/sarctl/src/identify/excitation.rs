@@ -243,3 +243,105 @@ impl Excitation {
         id.solve(max_condition).map_err(|e| e.to_string())
     }
 }
+
+/// The default centre of the excitation, joints (q1, q2, q3), m: the
+/// U-joint [`DEFAULT_SUPPORT_DISTANCE_M`] behind the support along X0, the
+/// rod horizontal (for the example robot, MODEL.md 10's nominal pose).
+pub fn default_centre_m(cal: &Calibration) -> [f64; 3] {
+    let a = cal.support_m() - Vec3::new(DEFAULT_SUPPORT_DISTANCE_M, 0.0, 0.0);
+    let q = a - cal.p_home_m() - cal.ujoint_offset_m();
+    [q.z, q.y, q.x]
+}
+
+/// The default centre's distance from the support, m.
+pub const DEFAULT_SUPPORT_DISTANCE_M: f64 = 0.2;
+
+/// The planned excitation and its promise, as `identify --dynamic --plan`
+/// prints it before anything moves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plan {
+    /// The excitation.
+    pub excitation: Excitation,
+    /// The configured rod the promise is computed for (I_perp: m L^2 / 12).
+    pub rod: InertialParameters,
+    /// The expected fit (its `*_model_*` standard errors and condition).
+    pub expected: DynamicResult,
+}
+
+impl Plan {
+    /// The excitation of `[identify]`'s limits about `centre_m` for the
+    /// configured rod, at `sensor_rate_hz`.
+    pub fn new(config: &Config, centre_m: [f64; 3], sensor_rate_hz: f64) -> Result<Self, String> {
+        let limits = &config.identify;
+        let spec = ExcitationSpec::around(
+            centre_m,
+            limits.excitation_duration_s,
+            limits.excitation_max_speed_mps,
+            limits.excitation_max_accel_mps2,
+        );
+        let excitation = Excitation::plan(&spec, config)?;
+        let p = &config.estimator.profile;
+        let rod = InertialParameters {
+            mass_kg: p.mass_kg(),
+            com_m: p.com_m(),
+            inertia_perp_kgm2: p.mass_kg() * p.length_m() * p.length_m() / 12.0,
+            friction_n: 0.0,
+        };
+        let expected = excitation.expected(config, &rod, sensor_rate_hz, f64::INFINITY)?;
+        Ok(Self {
+            excitation,
+            rod,
+            expected,
+        })
+    }
+
+    /// The JSON object.
+    pub fn to_json(&self) -> serde_json::Value {
+        let e = &self.excitation;
+        let x = &self.expected;
+        serde_json::json!({
+            "centre_m": e.spec.centre_m,
+            "freq_hz": e.spec.sines.map(|s| s.freq_hz),
+            "amplitude_m": e.amplitude_m,
+            "peak_speed_mps": e.peak_speed_mps,
+            "peak_accel_mps2": e.peak_accel_mps2,
+            "duration_s": e.spec.duration_s,
+            "condition": x.condition,
+            "expected_inertia_perp_std_kgm2": x.inertia_perp_model_std_kgm2,
+            "expected_inertia_perp_std_rel": x.inertia_perp_model_std_kgm2 / self.rod.inertia_perp_kgm2,
+            "expected_mass_std_kg": x.mass_std_kg,
+            "expected_com_std_m": x.com_std_m,
+            "assumed_inertia_perp_kgm2": self.rod.inertia_perp_kgm2,
+        })
+    }
+
+    /// The human report.
+    pub fn to_text(&self) -> String {
+        let e = &self.excitation;
+        let x = &self.expected;
+        let axes: Vec<String> = (0..3)
+            .filter_map(|i| {
+                Some(format!(
+                    "  q{}: {:.4} m +- {:.4} m at {} Hz (peak {:.3} m/s, {:.3} m/s^2)",
+                    i + 1,
+                    e.spec.centre_m.get(i)?,
+                    e.amplitude_m.get(i)?,
+                    e.spec.sines.get(i)?.freq_hz,
+                    e.peak_speed_mps.get(i)?,
+                    e.peak_accel_mps2.get(i)?
+                ))
+            })
+            .collect();
+        format!(
+            "excitation: {} s, sines per axis faded in and out over {} s:\n{}\ncondition number {:.1}; expected standard errors (sensor noise only, I_perp assumed {:.5} kg m^2 = m L^2 / 12): I_perp {:.2} %, m {:.3} %, c {:.3} %",
+            e.spec.duration_s,
+            e.spec.fade_s,
+            axes.join("\n"),
+            x.condition,
+            self.rod.inertia_perp_kgm2,
+            100.0 * x.inertia_perp_model_std_kgm2 / self.rod.inertia_perp_kgm2,
+            100.0 * x.mass_std_kg / self.rod.mass_kg,
+            100.0 * x.com_std_m / self.rod.com_m
+        )
+    }
+}
