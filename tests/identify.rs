@@ -571,6 +571,37 @@ mod dynamic {
         }
     }
 
+    /// The spread over seeds (measured once for the README, `--ignored
+    /// --nocapture`): the mean I_perp error against its standard error.
+    #[test]
+    #[ignore]
+    fn inertia_error_over_seeds() {
+        let dir = scratch("seeds");
+        let config = config(TRUE_B);
+        let (m, _, l) = ROD;
+        let ex = excitation(&config, 60.0);
+        for factor in [0.7, 1.0] {
+            let i_true = factor * m * l * l / 12.0;
+            let mut errs = Vec::new();
+            for seed in 2700..2710 {
+                let text = dynamic_recordings::scenario_text(i_true, seed);
+                let path = dynamic_recordings::write(&text, &ex, &dir, &format!("seed_{seed}"));
+                let r = identify_file(&path, &config, &options()).unwrap();
+                errs.push(r.fit.inertia_perp_kgm2 / i_true - 1.0);
+                std::fs::remove_file(&path).unwrap();
+            }
+            let n = errs.len() as f64;
+            let mean = errs.iter().sum::<f64>() / n;
+            let sd = (errs.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            println!(
+                "I_perp x{factor}: mean error {:+.3} %, spread {:.3} % over {} seeds",
+                100.0 * mean,
+                100.0 * sd,
+                errs.len()
+            );
+        }
+    }
+
     /// A recording at rest: "the recording holds no excitation"; a sweep
     /// along the rod only (the rod never turns): refused with its condition
     /// number. Each message is one line.
