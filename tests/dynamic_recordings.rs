@@ -36,8 +36,9 @@ pub const CENTRE_M: [f64; 3] = [0.0, 0.28, 0.25];
 
 /// The scenario: manipulator 2 with `I_perp = inertia_perp_kgm2`, the
 /// support's friction 0.3 N, HEX-6 noise, the sensor tared (no bias),
-/// servos on, starting at [`CENTRE_M`] (one motion step: stay there).
-pub fn scenario_text(inertia_perp_kgm2: f64, seed: u64) -> String {
+/// servos on, starting at [`CENTRE_M`] (one motion step: stay there), and
+/// `adapter_mass_kg` between the sensor and the U-joint.
+pub fn scenario_text(inertia_perp_kgm2: f64, adapter_mass_kg: f64, seed: u64) -> String {
     format!(
         r#"name = "excitation-manipulator-2"
 seed = {seed}
@@ -72,6 +73,7 @@ rate_hz = 500.0
 latency_s = {SENSOR_LATENCY_S}
 noise_n = [0.2, 0.2, 0.8]
 noise_nm = [0.01, 0.01, 0.002]
+adapter_mass_kg = {adapter_mass_kg}
 
 [[motion]]
 joints = [{}, {}, {}]

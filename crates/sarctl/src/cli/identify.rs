@@ -245,7 +245,7 @@ fn run_dynamic(
     }
     let options = args.dynamic_options()?;
     let Some(input) = &args.input else {
-        return Err("identify --dynamic --live is not available yet: record an excitation (sines per axis, the tip free) and run identify --dynamic --input REC.mcap".into());
+        return Err("identify --dynamic --live is not available yet (the daemon cannot stream the excitation): record an excitation (sines per axis, the tip free; identify --dynamic --plan prints one) and run identify --dynamic --input REC.mcap".into());
     };
     let result = identify::dynamic::identify_file(input, config, &options)
         .map_err(|e| format!("{}: {e}", input.display()))?;
