@@ -578,6 +578,15 @@ mod dynamic {
                 (0.8..1.25).contains(&ratio),
                 "planned vs achieved std: {ratio}"
             );
+            let svg = sarctl::identify::plot_dynamic::svg(
+                &r,
+                config.estimator.calibration.gravity_mps2().into(),
+            )
+            .unwrap();
+            assert!(
+                svg.starts_with("<svg") && svg.contains("I_perp ="),
+                "the figure"
+            );
             std::fs::remove_file(&path).unwrap();
         }
     }
