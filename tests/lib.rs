@@ -13,6 +13,7 @@ pub fn scenarios_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
 }
 
+pub mod dynamic_recordings;
 pub mod identify_fixtures;
 
 /// The folder of the replay fixtures (`tests/fixtures/replay`).

@@ -47,6 +47,10 @@
 //!   max torque (0x6072) in per mille of the motor's rated torque. The
 //!   drives' other limits come from `[axes]` and `[plausibility]` (see
 //!   `sar-daemon`'s `devices::canopen_config`).
+//! - `[identify]`: the limits of `sarctl identify --dynamic`'s excitation
+//!   (not the operator's move limits): `excitation_max_speed_mps` (0.04;
+//!   below `[plausibility] max_joint_speed_mps`), `excitation_max_accel_mps2`
+//!   (1; at most 5), `excitation_duration_s` (60; 10..=600).
 //!
 //! Every error names the file, the dotted key, the line where the file has it,
 //! and the problem ([`ConfigError`]), on one line of at most about 700
@@ -72,6 +76,7 @@
 //! machinery and the same error type.
 
 mod exact;
+mod identify;
 mod locate;
 mod plausible;
 pub mod scenario;
@@ -96,6 +101,8 @@ use serde::Deserialize;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use toml_file::Ctx;
+
+pub use identify::IdentifySettings;
 
 /// The configuration of the built-in demo (`sard --sim` without `--config`):
 /// the example robot of INTERFACES.md 2, every optional section written out
@@ -127,6 +134,8 @@ struct FileToml {
     record: RecordToml,
     #[serde(default)]
     force_control: ForceControlToml,
+    #[serde(default)]
+    identify: identify::IdentifyToml,
 }
 
 /// `[force_control]` (FORCE_CONTROL.md): the admittance law's settings.
@@ -579,6 +588,8 @@ pub struct Config {
     /// `sarctl identify --dynamic`); false: the estimator uses the slender
     /// rod's m L^2 / 12, a stated default, not a measurement.
     pub inertia_measured: bool,
+    /// The limits of `sarctl identify --dynamic`'s excitation (`[identify]`).
+    pub identify: IdentifySettings,
 }
 
 /// The recording's settings (`[record]`).
@@ -866,6 +877,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         (tip.sample_rate_hz, loop_.rate_hz),
         (f.axes.servo_bandwidth_hz, f.axes.servo_damping),
     )?;
+    let identify = identify::identify(ctx, &f.identify, f.plausibility.max_joint_speed_mps)?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
     plausible::check(ctx, &f)?;
@@ -895,6 +907,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         record,
         force_control,
         inertia_measured,
+        identify,
     })
 }
 

@@ -857,3 +857,38 @@ fn the_inertia_keys_have_stated_defaults_and_are_checked_by_key() {
         "within 0..=5 kg, got -1",
     );
 }
+
+/// `[identify]` (issue 26): defaults, a value read, and each key's refusal
+/// naming it (the speed must stay below the plausibility check's).
+#[test]
+fn the_identify_keys() {
+    let c = config::parse(MINIMUM, "robot.toml").unwrap();
+    assert_eq!(c.identify, config::IdentifySettings::default());
+    assert_eq!(c.identify.excitation_max_speed_mps, 0.04);
+    let c = config::parse(
+        &format!("{MINIMUM}\n[identify]\nexcitation_duration_s = 30.0\n"),
+        "robot.toml",
+    )
+    .unwrap();
+    assert_eq!(c.identify.excitation_duration_s, 30.0);
+    for (line, key) in [
+        (
+            "excitation_max_speed_mps = 0.05",
+            "identify.excitation_max_speed_mps",
+        ),
+        (
+            "excitation_max_accel_mps2 = 0.0",
+            "identify.excitation_max_accel_mps2",
+        ),
+        (
+            "excitation_duration_s = 5.0",
+            "identify.excitation_duration_s",
+        ),
+    ] {
+        let e = config::parse(&format!("{MINIMUM}\n[identify]\n{line}\n"), "robot.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key), "{e}");
+    }
+    assert!(config::DEFAULT_TOML.contains("\n[identify]"));
+}

@@ -27,6 +27,8 @@
 //! gets the exact row "it is 0" at construction, which leaves it 0 and the
 //! others as if it did not exist (the factor stays block diagonal).
 
+pub mod dynamic;
+
 use crate::linalg;
 use crate::{
     Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, StaticPose, Vec3,

@@ -1370,3 +1370,163 @@ fn unknown_slide_sign_leaves_the_pose_out_of_the_friction_fit() {
         "{e:?}"
     );
 }
+
+// ---------------------------------------------------------------------------
+// Identification of the inertia (MODEL.md 10, identification::dynamic).
+
+mod dynamic {
+    use super::*;
+    use sar_estimator::identification::dynamic::{DynamicIdentification, MotionSample};
+
+    /// The excitation: per axis (amplitude m, frequency Hz, phase rad)
+    /// around the nominal A = (0.25, 0.2, 0) of manipulator 2 (MODEL.md 10),
+    /// speeds up to 0.04 m/s: a slow sweep of 8 cm along the rod (a from
+    /// 0.12 to 0.28 m, which tells m from M as the static poses do) and
+    /// faster sines across it (the rod's turning, which tells J_A).
+    const SINES: [(f64, f64, f64); 3] = [
+        (0.08, 0.07, 0.0),
+        (0.04 / (2.0 * core::f64::consts::PI * 1.7), 1.7, 0.7),
+        (0.04 / (2.0 * core::f64::consts::PI * 2.3), 2.3, 1.9),
+    ];
+
+    fn nominal_a() -> V3 {
+        V3::new(0.25, 0.2, 0.0)
+    }
+
+    /// A(t), A'(t), A''(t).
+    fn carriage(t: f64) -> (V3, V3, V3) {
+        let mut p = nominal_a();
+        let (mut v, mut a) = (V3::zeros(), V3::zeros());
+        for (k, (amp, f, phase)) in SINES.iter().enumerate() {
+            let w = 2.0 * core::f64::consts::PI * f;
+            let arg = w * t + phase;
+            p[k] += amp * (arg.sin() - phase.sin());
+            v[k] = amp * w * arg.cos();
+            a[k] = -amp * w * w * arg.sin();
+        }
+        (p, v, a)
+    }
+
+    /// An independent Newton-Euler: the COM's acceleration and the change of
+    /// the angular momentum about the COM by central differences of
+    /// positions only, moments about the COM (not A as the identification
+    /// writes them). Returns F_A, {0}.
+    fn newton_euler_force_a(t: f64, m: f64, c: f64, i_perp: f64, b: &V3, g: &V3) -> V3 {
+        let u_at = |t: f64| {
+            let r = b - carriage(t).0;
+            r / r.norm()
+        };
+        let com_at = |t: f64| carriage(t).0 + u_at(t) * c;
+        let h = 1e-4;
+        let a_c = (com_at(t + h) - com_at(t) * 2.0 + com_at(t - h)) / (h * h);
+        let u_dot = |t: f64| (u_at(t + h) - u_at(t - h)) / (2.0 * h);
+        let momentum = |t: f64| u_at(t).cross(&u_dot(t)) * i_perp;
+        let h_dot = (momentum(t + h) - momentum(t - h)) / (2.0 * h);
+        let u = u_at(t);
+        let rho = (b - carriage(t).0).norm();
+        let k = (a_c - g) * m; // F_A + F_B
+        // Moments about C: (A - C) x F_A + (B - C) x F_B = H', F_A = K - F_B.
+        let rhs = h_dot + u.cross(&k) * c;
+        let f_b = (rhs / rho).cross(&u);
+        k - f_b
+    }
+
+    /// Identifies a rod with I_perp = `factor` m L^2 / 12 from 60 s of the
+    /// excitation at 500 Hz, HEX-6 noise in a mounted sensor, seeded.
+    fn run(factor: f64, seed: u64) -> (f64, sar_estimator::identification::dynamic::DynamicResult) {
+        let (m, c, l) = (2.593, 0.103, 0.35);
+        let i_perp = factor * m * l * l / 12.0;
+        let rotation = mounted_rotation();
+        let cal = calibration(support(), rotation, gravity());
+        let mut id =
+            DynamicIdentification::new(&cal, &SensorNoise::hex6(), V3::zeros(), 0.0, false)
+                .unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noise: Vec<Normal<f64>> = SensorNoise::HEX6_STD_N
+            .iter()
+            .map(|&s| Normal::new(0.0, s).unwrap())
+            .collect();
+        for k in 0..30_000 {
+            let t = f64::from(k) * 0.002;
+            let (p, v, a) = carriage(t);
+            let f_a = newton_euler_force_a(t, m, c, i_perp, &support(), &gravity());
+            let mut reading = rotation.transpose() * (-f_a);
+            for (x, n) in reading.iter_mut().zip(&noise) {
+                *x += n.sample(&mut rng);
+            }
+            id.add(&MotionSample {
+                ujoint_m: p,
+                velocity_mps: v,
+                accel_mps2: a,
+                reading_n: reading,
+            })
+            .unwrap();
+        }
+        (i_perp, id.solve(1e8).unwrap())
+    }
+
+    /// Three rods whose I_perp is m L^2 / 12 times 0.7, 1 and 1.5 (seeds
+    /// 2601, 2602, 2603): I_perp within 5 % and within 3 standard errors;
+    /// m and c within 3 standard errors and within 0.1 %
+    /// (the static identification's accuracy, MODEL.md 5.1: 0.1 %, 0.07 %).
+    #[test]
+    fn three_rods_from_an_independent_newton_euler_with_hex6_noise() {
+        for (factor, seed) in [(0.7, 2601), (1.0, 2602), (1.5, 2603)] {
+            let (i_true, r) = run(factor, seed);
+            let i_err = r.inertia_perp_kgm2 / i_true - 1.0;
+            let m_err = r.mass_kg / 2.593 - 1.0;
+            let c_err = r.com_m / 0.103 - 1.0;
+            println!(
+                "I_perp x{factor}: I {:.5} (true {i_true:.5}) err {:+.2} % std {:.2} % (model {:.2} %), m err {:+.3} % std {:.3} %, c err {:+.3} % std {:.3} %, condition {:.1}, chi2/dof {:.3}, residual {:.3} N",
+                r.inertia_perp_kgm2,
+                100.0 * i_err,
+                100.0 * r.inertia_perp_std_kgm2 / i_true,
+                100.0 * r.inertia_perp_model_std_kgm2 / i_true,
+                100.0 * m_err,
+                100.0 * r.mass_std_kg / 2.593,
+                100.0 * c_err,
+                100.0 * r.com_std_m / 0.103,
+                r.condition,
+                r.chi2_dof,
+                r.residual_rms_n
+            );
+            assert!(i_err.abs() < 0.05, "I_perp x{factor}: {i_err}");
+            assert!(
+                (r.inertia_perp_kgm2 - i_true).abs() < 3.0 * r.inertia_perp_std_kgm2,
+                "I_perp x{factor}"
+            );
+            assert!(
+                (r.mass_kg - 2.593).abs() < 3.0 * r.mass_std_kg,
+                "m x{factor}"
+            );
+            assert!((r.com_m - 0.103).abs() < 3.0 * r.com_std_m, "c x{factor}");
+            assert!(m_err.abs() < 1e-3 && c_err.abs() < 1e-3, "m, c x{factor}");
+            assert!((r.chi2_dof - 1.0).abs() < 0.05, "chi2/dof {}", r.chi2_dof);
+        }
+    }
+
+    /// No motion: J_A has no information: refused with its condition number.
+    #[test]
+    fn no_motion_is_refused_as_ill_conditioned() {
+        let cal = calibration(support(), M3::identity(), gravity());
+        let mut id =
+            DynamicIdentification::new(&cal, &SensorNoise::hex6(), V3::zeros(), 0.0, false)
+                .unwrap();
+        for k in 0..100 {
+            let p = nominal_a() + V3::new(0.001 * f64::from(k % 7), 0.0, 0.0);
+            id.add(&MotionSample {
+                ujoint_m: p,
+                velocity_mps: V3::zeros(),
+                accel_mps2: V3::zeros(),
+                reading_n: V3::new(0.0, 25.0, 0.0),
+            })
+            .unwrap();
+        }
+        match id.solve(1e8) {
+            Err(IdentificationError::IllConditioned { condition, .. }) => {
+                assert!(condition > 1e8, "{condition}")
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}

@@ -173,3 +173,47 @@ fn a_tare_given_on_the_command_line() {
     assert!(stderr.contains("--tare-n needs 3 values"), "{stderr}");
     std::fs::remove_dir_all(config.parent().unwrap()).unwrap();
 }
+
+/// `sarctl identify --dynamic` as a process (issue 26): `--plan --format
+/// json` prints the excitation of `[identify]`'s limits with its condition
+/// number and promised accuracy, moving nothing; a recording whose rod never
+/// turns (the article's protocol: A moves along the rod only; the fixture's
+/// plant has no inertia) is refused in one line, and the file is left alone.
+#[test]
+fn dynamic_plan_and_a_refused_recording() {
+    let config = temp_config("dynamic");
+    let out = Command::new(env!("CARGO_BIN_EXE_sarctl"))
+        .arg("--config")
+        .arg(&config)
+        .args(["--format", "json", "identify", "--dynamic", "--plan"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let condition = json["condition"].as_f64().unwrap();
+    let rel = json["expected_inertia_perp_std_rel"].as_f64().unwrap();
+    assert!(condition > 1.0 && condition < 100.0, "{json}");
+    assert!(rel > 0.0 && rel < 0.05, "{json}");
+    for (v, limit) in json["peak_speed_mps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip([0.04; 3])
+    {
+        assert!(v.as_f64().unwrap() <= limit + 1e-12, "{json}");
+    }
+
+    let before = std::fs::read_to_string(&config).unwrap();
+    let out = sarctl(&config, &fixture("identify_manipulator_2"), &["--dynamic"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("not positive"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(&config).unwrap(), before);
+    std::fs::remove_dir_all(config.parent().unwrap()).unwrap();
+}

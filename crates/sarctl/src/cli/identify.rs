@@ -19,17 +19,56 @@
 //! which pose it is at and about how long is left.
 
 use crate::identify::dwell::DwellOptions;
-use crate::identify::{self, IdentifyOptions, plot, writeback};
+use crate::identify::dynamic::DynamicOptions;
+use crate::identify::smooth::SmootherSpec;
+use crate::identify::{self, IdentifyOptions, excitation, plot, plot_dynamic, writeback};
 use std::path::{Path, PathBuf};
 
 /// The arguments of `sarctl identify` (besides the global `--config` and `--format`).
 #[derive(Debug, Clone, clap::Args)]
 pub struct IdentifyArgs {
+    /// Identify the rod's inertia I_perp (with m and c) from an excitation
+    /// motion instead of m, c and B from static poses (MODEL.md 10).
+    #[arg(long)]
+    pub dynamic: bool,
+    /// With --dynamic: the order of the encoders' centred smoothing polynomial.
+    #[arg(long, default_value_t = SmootherSpec::default().order, value_name = "N", requires = "dynamic")]
+    pub smoother_order: usize,
+    /// With --dynamic: the span of the smoothing window, s.
+    #[arg(long, default_value_t = SmootherSpec::default().span_s, value_name = "S", requires = "dynamic")]
+    pub smoother_span_s: f64,
+    /// With --dynamic: the sensor's latency (a sample's stamp less this is
+    /// when it was measured), s.
+    #[arg(long, default_value_t = 0.0, value_name = "S", requires = "dynamic")]
+    pub sensor_latency_s: f64,
+    /// With --dynamic: the mass between the sensor and the U-joint, kg.
+    #[arg(long, default_value_t = 0.0, value_name = "KG", requires = "dynamic")]
+    pub adapter_mass_kg: f64,
+    /// With --dynamic: print the excitation of `[identify]`'s limits, its
+    /// condition number and the accuracy it promises, and move nothing.
+    #[arg(long, requires = "dynamic", conflicts_with_all = ["input", "live"])]
+    pub plan: bool,
+    /// With --dynamic --plan: the excitation's centre, joints Q1,Q2,Q3, m
+    /// (default: the U-joint 0.2 m behind the support along X0).
+    #[arg(
+        long,
+        value_name = "Q1,Q2,Q3",
+        value_delimiter = ',',
+        requires = "plan",
+        allow_hyphen_values = true
+    )]
+    pub centre_m: Option<Vec<f64>>,
+    /// With --dynamic --plan: the sensor's sample rate, Hz.
+    #[arg(long, default_value_t = 500.0, value_name = "HZ", requires = "plan")]
+    pub sensor_rate_hz: f64,
+    /// Do not estimate the support's friction (assume a frictionless support).
+    #[arg(long)]
+    pub no_friction: bool,
     /// The recording of the procedure (MCAP with /sar/sensor/wrench and /sar/joints).
     #[arg(
         long,
         value_name = "REC.mcap",
-        required_unless_present = "live",
+        required_unless_present_any = ["live", "plan"],
         conflicts_with = "live"
     )]
     pub input: Option<PathBuf>,
@@ -100,9 +139,27 @@ impl IdentifyArgs {
             },
             tare_n,
             calibrate_support: !self.keep_support,
+            friction: !self.no_friction,
             max_chi2_dof: self.max_chi2_dof,
             max_condition: self.max_condition,
-            ..IdentifyOptions::default()
+        })
+    }
+
+    /// The options of `--dynamic` these arguments give.
+    pub fn dynamic_options(&self) -> Result<DynamicOptions, String> {
+        let static_options = self.options()?;
+        Ok(DynamicOptions {
+            tare_n: static_options.tare_n,
+            smoother: SmootherSpec {
+                order: self.smoother_order,
+                span_s: self.smoother_span_s,
+            },
+            sensor_latency_s: self.sensor_latency_s,
+            adapter_mass_kg: self.adapter_mass_kg,
+            friction: !self.no_friction,
+            max_condition: self.max_condition,
+            max_chi2_dof: self.max_chi2_dof,
+            ..DynamicOptions::default()
         })
     }
 }
@@ -120,6 +177,9 @@ pub fn run(
     let text = sar_config::read_text(config_path).map_err(|e| e.to_string())?;
     let config =
         sar_config::parse(&text, &config_path.display().to_string()).map_err(|e| e.to_string())?;
+    if args.dynamic {
+        return run_dynamic(config_path, &text, &config, json, args);
+    }
     let options = args.options()?;
     let result = match &args.input {
         Some(input) => identify::identify_file(input, &config, &options)
@@ -154,6 +214,80 @@ pub fn run(
         result.to_text(written.as_deref())
     };
     println!("{out}");
+    Ok(())
+}
+
+/// Writes `new` over the configuration at `path` once it parses (through
+/// a temporary file and a rename); returns the path written.
+fn replace_config(path: &Path, new: &str) -> Result<String, String> {
+    // The new text must still be a valid configuration before it replaces the old.
+    sar_config::parse(new, &path.display().to_string())
+        .map_err(|e| format!("the written configuration would be refused: {e}"))?;
+    let tmp = path.with_extension("toml.identify-tmp");
+    std::fs::write(&tmp, new).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(path.display().to_string())
+}
+
+/// `sarctl identify --dynamic`: I_perp, m and c from a recording of an
+/// excitation (`--input`), printed, drawn (`--plot`) and, unless
+/// `--dry-run`, written back as `[manipulator] inertia_perp_kgm2` and
+/// `inertia_perp_std_kgm2`.
+fn run_dynamic(
+    config_path: &Path,
+    text: &str,
+    config: &sar_config::Config,
+    json: bool,
+    args: &IdentifyArgs,
+) -> Result<(), String> {
+    if args.plan {
+        return print_plan(config, json, args);
+    }
+    let options = args.dynamic_options()?;
+    let Some(input) = &args.input else {
+        return Err("identify --dynamic --live is not available yet (the daemon cannot stream the excitation): record an excitation (sines per axis, the tip free; identify --dynamic --plan prints one) and run identify --dynamic --input REC.mcap".into());
+    };
+    let result = identify::dynamic::identify_file(input, config, &options)
+        .map_err(|e| format!("{}: {e}", input.display()))?;
+    if let Some(path) = &args.plot {
+        let svg = plot_dynamic::svg(&result, config.estimator.calibration.gravity_mps2().into())?;
+        std::fs::write(path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    let written = if args.dry_run {
+        None
+    } else {
+        let f = &result.fit;
+        let new = writeback::write_inertia(text, f.inertia_perp_kgm2, f.inertia_perp_std_kgm2)
+            .map_err(|e| format!("{}: {e}", config_path.display()))?;
+        Some(replace_config(config_path, &new)?)
+    };
+    let out = if json {
+        result.to_json(written.as_deref()).to_string()
+    } else {
+        result.to_text(written.as_deref())
+    };
+    println!("{out}");
+    Ok(())
+}
+
+/// `sarctl identify --dynamic --plan`: the excitation and its promise.
+fn print_plan(config: &sar_config::Config, json: bool, args: &IdentifyArgs) -> Result<(), String> {
+    let centre_m = match args.centre_m.as_deref() {
+        None => excitation::default_centre_m(&config.estimator.calibration),
+        Some(&[q1, q2, q3]) => [q1, q2, q3],
+        Some(other) => {
+            return Err(format!(
+                "--centre-m needs 3 values Q1,Q2,Q3, got {}",
+                other.len()
+            ));
+        }
+    };
+    let plan = excitation::Plan::new(config, centre_m, args.sensor_rate_hz)?;
+    if json {
+        println!("{}", plan.to_json());
+    } else {
+        println!("{}", plan.to_text());
+    }
     Ok(())
 }
 

@@ -21,8 +21,12 @@
 //! ([`IdentifyOptions::tare_n`]).
 
 pub mod dwell;
+pub mod dynamic;
+pub mod excitation;
 pub mod plot;
+pub mod plot_dynamic;
 pub mod poses;
+pub mod smooth;
 pub mod writeback;
 
 use dwell::{Dwell, DwellFinder, DwellOptions, SensorAverager};

@@ -8,12 +8,12 @@
 use super::Identified;
 use plotters::prelude::*;
 
-fn err(e: impl std::fmt::Display) -> String {
+pub(super) fn err(e: impl std::fmt::Display) -> String {
     format!("the figure could not be drawn: {e}")
 }
 
 /// (min, max) widened by 5 % of the span on each side (and never empty).
-fn range(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+pub(super) fn range(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
     let lo = values.clone().fold(f64::INFINITY, f64::min);
     let hi = values.fold(f64::NEG_INFINITY, f64::max);
     if !(lo.is_finite() && hi.is_finite()) {

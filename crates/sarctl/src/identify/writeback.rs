@@ -80,6 +80,30 @@ pub fn write_back(
     Ok(doc.to_string())
 }
 
+/// Rounding of the written inertia: 1e-7 kg m^2 (far below its standard error).
+const INERTIA_STEP_KGM2: f64 = 1e-7;
+
+/// The configuration text with `[manipulator] inertia_perp_kgm2` and
+/// `inertia_perp_std_kgm2` replaced (or appended to the table), the rest kept.
+pub fn write_inertia(text: &str, inertia_kgm2: f64, std_kgm2: f64) -> Result<String, String> {
+    let mut doc: DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| format!("not valid TOML: {}", e.message()))?;
+    set_float(
+        &mut doc,
+        "manipulator",
+        "inertia_perp_kgm2",
+        rounded(inertia_kgm2, INERTIA_STEP_KGM2),
+    )?;
+    set_float(
+        &mut doc,
+        "manipulator",
+        "inertia_perp_std_kgm2",
+        rounded(std_kgm2, INERTIA_STEP_KGM2),
+    )?;
+    Ok(doc.to_string())
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -92,6 +116,26 @@ mod tests {
         assert_eq!(
             out,
             "# robot\n[geometry]\nsupport = [0.451235, 0.198765, 0.0]   # B, measured by hand\ngravity = [0.0, -9.80665, 0.0]\n\n[manipulator]\nname = \"m2\"\nmass_kg = 2.60123                        # m\ncom_m = 0.104123 # c\n"
+        );
+    }
+
+    #[test]
+    fn the_inertia_is_written_and_replaced_keeping_comments() {
+        let text = "[manipulator]\nname = \"m2\"\nmass_kg = 2.593 # m\n\n[sensor]\nnoise_n = [0.2, 0.2, 0.8]\n";
+        let out = write_inertia(text, 0.026471234, 0.000091234).unwrap();
+        assert_eq!(
+            out,
+            "[manipulator]\nname = \"m2\"\nmass_kg = 2.593 # m\ninertia_perp_kgm2 = 0.0264712\ninertia_perp_std_kgm2 = 0.0000912\n\n[sensor]\nnoise_n = [0.2, 0.2, 0.8]\n"
+        );
+        let again = write_inertia(
+            "[manipulator]\ninertia_perp_kgm2 = 0.02   # I_perp\ninertia_perp_std_kgm2 = 0.001\n",
+            0.03,
+            0.0002,
+        )
+        .unwrap();
+        assert_eq!(
+            again,
+            "[manipulator]\ninertia_perp_kgm2 = 0.03   # I_perp\ninertia_perp_std_kgm2 = 0.0002\n"
         );
     }
 }

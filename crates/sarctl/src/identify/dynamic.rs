@@ -1,0 +1,477 @@
+//! `sarctl identify --dynamic`'s pure parts (MODEL.md 10, issue 26 section 3):
+//! the rod's inertia I_perp, with m and c again, from a recording of an
+//! excitation motion with the tip free.
+//!
+//! 1. `/sar/joints` is smoothed without phase lag ([`super::smooth`], a
+//!    centred Savitzky–Golay of order 6 over 0.2 s that keeps the
+//!    acceleration's gain) into q, q', q'' per joint sample;
+//! 2. at each `/sar/sensor/wrench` sample's stamp (less the sensor's
+//!    latency) they are interpolated linearly between the two neighbouring
+//!    joint samples, giving A, A', A'' (A = P_home + (q3, q2, q1) + a_off);
+//! 3. each sample feeds the estimator's accumulator
+//!    ([`sar_estimator::identification::dynamic`]): (m, M, J_A), and the
+//!    support's friction f unless `--no-friction`, weighted by the sensor's
+//!    noise; I_perp = J_A - M^2 / m.
+//!
+//! A recording whose carriage never accelerates is refused ("the recording
+//! holds no excitation"), and so is a fit whose condition number is above
+//! the limit.
+
+use super::smooth::{self, Smoothed, SmootherSpec};
+use sar_config::Config;
+use sar_estimator::identification::IdentificationError;
+use sar_estimator::identification::dynamic::{
+    DynamicIdentification, DynamicResult, MotionSample, model_force_n, rod_motion,
+};
+use sar_estimator::{Calibration, Vec3};
+use sar_msgs::msgs::{ActiveJointState, Topic, WrenchStamped};
+use sar_record::{McapReader, ReadError};
+use serde_json::json;
+
+/// Default largest condition number of the dynamic fit (column-scaled), the
+/// static identification's ([`super::DEFAULT_MAX_CONDITION`], one
+/// `--max-condition` for both): an excitation of the README gives about 7.
+pub const DEFAULT_MAX_CONDITION: f64 = super::DEFAULT_MAX_CONDITION;
+
+/// Default smallest peak acceleration of the carriage that counts as an
+/// excitation, m/s^2 (the excitation of the README reaches 0.4).
+pub const DEFAULT_MIN_PEAK_ACCEL_MPS2: f64 = 0.05;
+
+/// Samples of the fit kept for the figure (evenly spaced).
+const FIGURE_POINTS: usize = 4000;
+
+/// How to identify the inertia.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DynamicOptions {
+    /// The sensor's force bias measured with the rod detached (sensor frame, N).
+    pub tare_n: [f64; 3],
+    /// The encoders' smoother.
+    pub smoother: SmootherSpec,
+    /// The sensor's latency: a sample's stamp less this is when it was
+    /// measured, s.
+    pub sensor_latency_s: f64,
+    /// The mass between the sensor and the U-joint, kg.
+    pub adapter_mass_kg: f64,
+    /// Estimate the support's Coulomb friction.
+    pub friction: bool,
+    /// Largest accepted condition number.
+    pub max_condition: f64,
+    /// Largest accepted chi-square per degree of freedom.
+    pub max_chi2_dof: f64,
+    /// Smallest peak acceleration that counts as an excitation, m/s^2.
+    pub min_peak_accel_mps2: f64,
+}
+
+impl Default for DynamicOptions {
+    fn default() -> Self {
+        Self {
+            tare_n: [0.0; 3],
+            smoother: SmootherSpec::default(),
+            sensor_latency_s: 0.0,
+            adapter_mass_kg: 0.0,
+            friction: true,
+            max_condition: DEFAULT_MAX_CONDITION,
+            max_chi2_dof: super::SupportOptions::DEFAULT_MAX_CHI2_DOF,
+            min_peak_accel_mps2: DEFAULT_MIN_PEAK_ACCEL_MPS2,
+        }
+    }
+}
+
+/// Why no result: one line each.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DynamicError {
+    /// An option is out of range.
+    #[error("{0}")]
+    Option(String),
+    /// The recording could not be read.
+    #[error("the recording cannot be read: {0}")]
+    Read(#[from] ReadError),
+    /// A lean recording's batches cannot be read.
+    #[error("the recording cannot be read: {0}")]
+    Lean(#[from] sar_record::lean::LeanReadError),
+    /// The recording lacks a topic.
+    #[error(
+        "the recording has no {topic} messages: identify --dynamic needs the sensor's readings and the joints"
+    )]
+    MissingTopic {
+        /// The topic.
+        topic: &'static str,
+    },
+    /// d != 0 is not modelled.
+    #[error(
+        "the configured manipulator has offset_m = {offset_m}: identify --dynamic models d = 0"
+    )]
+    Offset {
+        /// d, m.
+        offset_m: f64,
+    },
+    /// The joints could not be smoothed, or no sensor sample lies inside them.
+    #[error("the joints cannot give the carriage's acceleration: {0}")]
+    Smoothing(String),
+    /// The carriage never accelerates.
+    #[error(
+        "the recording holds no excitation: the carriage's largest acceleration is {peak_mps2:.3} m/s^2, below {min_mps2} m/s^2; record sines per axis with the tip free (sarctl identify --dynamic --live, README)"
+    )]
+    NoExcitation {
+        /// The largest |A''| over the samples, m/s^2.
+        peak_mps2: f64,
+        /// The limit.
+        min_mps2: f64,
+    },
+    /// The fit cannot tell the unknowns apart.
+    #[error(
+        "the excitation cannot tell m, m c and the inertia apart: condition number {condition:.3e} above {limit:.1e}; excite every axis with sines of distinct frequencies, the rod's direction sweeping (README)"
+    )]
+    IllConditioned {
+        /// The condition number (may be infinite).
+        condition: f64,
+        /// The limit.
+        limit: f64,
+    },
+    /// The model does not explain the readings.
+    #[error(
+        "the model in motion does not fit the recording: chi-square per degree of freedom {chi2_dof:.2} above {limit} (the support B off? the sensor not tared with the rod detached? an offset d? the sensor's latency? a contact at the tip?); calibrate the support (sarctl identify) and record the excitation again"
+    )]
+    PoorFit {
+        /// chi2 / dof.
+        chi2_dof: f64,
+        /// The limit.
+        limit: f64,
+    },
+    /// The inertia came out not positive: the motion does not show it.
+    #[error(
+        "the fit gives I_perp = {inertia_kgm2:.5} +- {std_kgm2:.5} kg m^2, not positive: the motion does not show the rod's inertia; excite every axis with sines of distinct frequencies, the rod turning (README)"
+    )]
+    NonPositiveInertia {
+        /// I_perp, kg m^2.
+        inertia_kgm2: f64,
+        /// Its standard error, kg m^2.
+        std_kgm2: f64,
+    },
+    /// Any other refusal of the estimator.
+    #[error("the dynamic identification refused: {0}")]
+    Fit(IdentificationError),
+}
+
+impl From<IdentificationError> for DynamicError {
+    fn from(e: IdentificationError) -> Self {
+        match e {
+            IdentificationError::IllConditioned { condition, limit } => {
+                Self::IllConditioned { condition, limit }
+            }
+            other => Self::Fit(other),
+        }
+    }
+}
+
+/// One sample of the fit kept for the figure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitPoint {
+    /// Time since the first sample, s.
+    pub t_s: f64,
+    /// F_A measured (adapter removed), base frame, N.
+    pub measured_n: Vec3,
+    /// F_A of the fitted model, base frame, N.
+    pub model_n: Vec3,
+    /// The carriage's acceleration, m/s^2.
+    pub accel_mps2: Vec3,
+}
+
+/// The result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DynamicIdentified {
+    /// The estimator's result.
+    pub fit: DynamicResult,
+    /// Sensor samples outside the smoothed joints (the first and last
+    /// 0.1 s, gaps), left out.
+    pub left_out: usize,
+    /// The largest |A''| over the samples used, m/s^2.
+    pub peak_accel_mps2: f64,
+    /// The joints' sample period, s.
+    pub joints_period_s: f64,
+    /// What was done, one line.
+    pub method: String,
+    /// Evenly spaced samples of the fit, for the figure.
+    pub points: Vec<FitPoint>,
+}
+
+/// The recording's joints and sensor forces, in stamp order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Series {
+    /// (stamp ns, q1, q2, q3 m).
+    pub joints: Vec<(u64, [f64; 3])>,
+    /// (stamp ns, force in the sensor frame N).
+    pub sensor: Vec<(u64, [f64; 3])>,
+}
+
+/// Reads the joints and the sensor's forces of a recording file (full or lean).
+pub fn read_series(path: &std::path::Path) -> Result<Series, DynamicError> {
+    let open = || McapReader::open(path);
+    let mut s = Series::default();
+    if sar_record::lean::is_lean(open()?) {
+        for c in sar_record::lean::cycles(open()?) {
+            let c = c?;
+            if c.joints_message {
+                s.joints.push((c.input.joints_stamp_ns, c.input.joints_q_m));
+            }
+            s.sensor
+                .extend(c.sensors.iter().map(|w| (w.stamp_ns, w.force_n)));
+        }
+    }
+    for item in open()?.typed::<ActiveJointState>(Topic::Joints.name()) {
+        let (_, js) = item?;
+        s.joints.push((js.stamp_ns, js.q_m));
+    }
+    for item in open()?.typed::<WrenchStamped>(Topic::SensorWrench.name()) {
+        let (_, w) = item?;
+        s.sensor.push((w.stamp_ns, w.force_n));
+    }
+    for (v, topic) in [
+        (&mut s.joints, Topic::Joints.name()),
+        (&mut s.sensor, Topic::SensorWrench.name()),
+    ] {
+        if v.is_empty() {
+            return Err(DynamicError::MissingTopic { topic });
+        }
+        v.sort_by_key(|x| x.0);
+        v.dedup_by_key(|x| x.0);
+    }
+    Ok(s)
+}
+
+/// Identifies from a recording file (`sarctl identify --dynamic --input`).
+pub fn identify_file(
+    path: &std::path::Path,
+    config: &Config,
+    options: &DynamicOptions,
+) -> Result<DynamicIdentified, DynamicError> {
+    identify_series(&read_series(path)?, config, options)
+}
+
+fn check_options(config: &Config, o: &DynamicOptions) -> Result<(), DynamicError> {
+    let offset_m = config.estimator.profile.offset_m();
+    if offset_m != 0.0 {
+        return Err(DynamicError::Offset { offset_m });
+    }
+    let bad = |what: &str, x: f64| DynamicError::Option(format!("{what} {x} is out of range"));
+    if !o.tare_n.iter().all(|x| x.is_finite()) {
+        return Err(DynamicError::Option(format!(
+            "the tare must be finite, got {:?}",
+            o.tare_n
+        )));
+    }
+    if !(o.sensor_latency_s.is_finite() && o.sensor_latency_s >= 0.0) {
+        return Err(bad("the sensor latency (s, >= 0)", o.sensor_latency_s));
+    }
+    if !(o.adapter_mass_kg.is_finite() && o.adapter_mass_kg >= 0.0) {
+        return Err(bad("the adapter mass (kg, >= 0)", o.adapter_mass_kg));
+    }
+    if o.max_chi2_dof.is_nan() || o.max_chi2_dof <= 0.0 {
+        return Err(bad("the chi-square limit (> 0)", o.max_chi2_dof));
+    }
+    if o.max_condition.is_nan() || o.max_condition < 1.0 {
+        return Err(bad("the condition limit (>= 1)", o.max_condition));
+    }
+    if !(o.min_peak_accel_mps2.is_finite() && o.min_peak_accel_mps2 >= 0.0) {
+        return Err(bad(
+            "the excitation's least peak acceleration (m/s^2, >= 0)",
+            o.min_peak_accel_mps2,
+        ));
+    }
+    Ok(())
+}
+
+/// A, A', A'' ({0}) from smoothed joints: A = P_home + (q3, q2, q1) + a_off.
+fn carriage(cal: &Calibration, s: &Smoothed) -> (Vec3, Vec3, Vec3) {
+    let swap = |q: [f64; 3]| Vec3::new(q[2], q[1], q[0]);
+    (
+        cal.p_home_m() + swap(s.q_m) + cal.ujoint_offset_m(),
+        swap(s.v_mps),
+        swap(s.a_mps2),
+    )
+}
+
+/// Identifies from a recording's joints and sensor forces.
+pub fn identify_series(
+    series: &Series,
+    config: &Config,
+    options: &DynamicOptions,
+) -> Result<DynamicIdentified, DynamicError> {
+    check_options(config, options)?;
+    let est = &config.estimator;
+    let cal = &est.calibration;
+    let (smoothed, period_s) =
+        smooth::smooth(&series.joints, &options.smoother).map_err(DynamicError::Smoothing)?;
+    let latency_ns = (options.sensor_latency_s * 1e9).round() as u64;
+    let tare = Vec3::from(options.tare_n);
+    let mut id = DynamicIdentification::new(
+        cal,
+        &est.noise,
+        tare,
+        options.adapter_mass_kg,
+        options.friction,
+    )?;
+    let mut used: Vec<MotionSample> = Vec::new();
+    let mut stamps: Vec<u64> = Vec::new();
+    let mut hint = 0;
+    for &(stamp_ns, force) in &series.sensor {
+        let measured_ns = stamp_ns.saturating_sub(latency_ns);
+        let Some(s) = smooth::interpolate(&smoothed, measured_ns, period_s, &mut hint) else {
+            continue;
+        };
+        let (a, v, acc) = carriage(cal, &s);
+        let sample = MotionSample {
+            ujoint_m: a,
+            velocity_mps: v,
+            accel_mps2: acc,
+            reading_n: Vec3::from(force),
+        };
+        id.add(&sample)?;
+        used.push(sample);
+        stamps.push(measured_ns);
+    }
+    if used.is_empty() {
+        return Err(DynamicError::Smoothing(format!(
+            "no sensor sample lies within the smoothed joints ({} joint samples, {} sensor samples)",
+            series.joints.len(),
+            series.sensor.len()
+        )));
+    }
+    let peak = used.iter().map(|s| s.accel_mps2.norm()).fold(0.0, f64::max);
+    if peak < options.min_peak_accel_mps2 {
+        return Err(DynamicError::NoExcitation {
+            peak_mps2: peak,
+            min_mps2: options.min_peak_accel_mps2,
+        });
+    }
+    let fit = id.solve(options.max_condition)?;
+    check_fit(&fit, options)?;
+    let points = figure_points(cal, &fit, options, &used, &stamps)?;
+    Ok(DynamicIdentified {
+        fit,
+        left_out: series.sensor.len() - used.len(),
+        peak_accel_mps2: peak,
+        joints_period_s: period_s,
+        method: method(options, used.len()),
+        points,
+    })
+}
+
+/// Refuses an inertia that is not positive, then a poor fit.
+fn check_fit(fit: &DynamicResult, options: &DynamicOptions) -> Result<(), DynamicError> {
+    if fit.inertia_perp_kgm2 <= 0.0 {
+        return Err(DynamicError::NonPositiveInertia {
+            inertia_kgm2: fit.inertia_perp_kgm2,
+            std_kgm2: fit.inertia_perp_std_kgm2,
+        });
+    }
+    if fit.chi2_dof > options.max_chi2_dof {
+        return Err(DynamicError::PoorFit {
+            chi2_dof: fit.chi2_dof,
+            limit: options.max_chi2_dof,
+        });
+    }
+    Ok(())
+}
+
+fn method(o: &DynamicOptions, samples: usize) -> String {
+    format!(
+        "noise-weighted least squares of (m, m c, J_A = I_perp + m c^2{}) over {samples} sensor samples' force rows (MODEL.md 10, d = 0), A'' from the encoders smoothed by a centred polynomial of order {} over {} s",
+        if o.friction { ", f" } else { "" },
+        o.smoother.order,
+        o.smoother.span_s
+    )
+}
+
+/// Evenly spaced samples with the measured and the fitted F_A.
+fn figure_points(
+    cal: &Calibration,
+    fit: &DynamicResult,
+    options: &DynamicOptions,
+    used: &[MotionSample],
+    stamps: &[u64],
+) -> Result<Vec<FitPoint>, DynamicError> {
+    let step = used.len().div_ceil(FIGURE_POINTS).max(1);
+    let t0 = stamps.first().copied().unwrap_or(0);
+    let params = fit.parameters();
+    let tare = Vec3::from(options.tare_n);
+    let mut out = Vec::new();
+    for (s, &t) in used.iter().zip(stamps).step_by(step) {
+        let rod = rod_motion(
+            &cal.support_m(),
+            &s.ujoint_m,
+            &s.velocity_mps,
+            &s.accel_mps2,
+        )?;
+        out.push(FitPoint {
+            t_s: (t - t0) as f64 * 1e-9,
+            measured_n: sar_estimator::ujoint_force_n(cal, &s.reading_n, &tare)
+                - s.accel_mps2 * options.adapter_mass_kg,
+            model_n: model_force_n(&params, &rod, &s.accel_mps2, &cal.gravity_mps2()),
+            accel_mps2: s.accel_mps2,
+        });
+    }
+    Ok(out)
+}
+
+impl DynamicIdentified {
+    /// The JSON object (README, `identify --dynamic`).
+    pub fn to_json(&self, written: Option<&str>) -> serde_json::Value {
+        let f = &self.fit;
+        json!({
+            "inertia_perp_kgm2": f.inertia_perp_kgm2,
+            "inertia_perp_std_kgm2": f.inertia_perp_std_kgm2,
+            "expected_inertia_perp_std_kgm2": f.inertia_perp_model_std_kgm2,
+            "inertia_a_kgm2": f.inertia_a_kgm2,
+            "mass_kg": f.mass_kg,
+            "mass_std_kg": f.mass_std_kg,
+            "com_m": f.com_m,
+            "com_std_m": f.com_std_m,
+            "friction_n": f.friction_n,
+            "friction_std_n": f.friction_std_n,
+            "chi2_dof": f.chi2_dof,
+            "condition": f.condition,
+            "residual_rms_n": f.residual_rms_n,
+            "samples": f.samples,
+            "samples_left_out": self.left_out,
+            "peak_accel_mps2": self.peak_accel_mps2,
+            "method": self.method,
+            "written": written,
+        })
+    }
+
+    /// The human report, several lines.
+    pub fn to_text(&self, written: Option<&str>) -> String {
+        let f = &self.fit;
+        let pct = |s: f64, x: f64| 100.0 * s / x.abs();
+        let friction = match (f.friction_n, f.friction_std_n) {
+            (Some(x), Some(s)) => format!("friction f = {x:.3} +- {s:.3} N"),
+            _ => "friction not estimated".to_owned(),
+        };
+        let written = match written {
+            Some(path) => format!(
+                "written to {path}: manipulator.inertia_perp_kgm2, manipulator.inertia_perp_std_kgm2"
+            ),
+            None => "dry run: the configuration is unchanged".to_owned(),
+        };
+        format!(
+            "inertia I_perp = {:.5} +- {:.5} kg m^2 ({:.2} %; the excitation promised {:.2} %)\nmass  m = {:.4} +- {:.4} kg\ncentre c = {:.5} +- {:.5} m\n{friction}\nchi2/dof {:.2}, residual RMS {:.3} N, condition {:.1}, {} samples ({} left out), peak acceleration {:.3} m/s^2\nmethod: {}\n{written}",
+            f.inertia_perp_kgm2,
+            f.inertia_perp_std_kgm2,
+            pct(f.inertia_perp_std_kgm2, f.inertia_perp_kgm2),
+            pct(f.inertia_perp_model_std_kgm2, f.inertia_perp_kgm2),
+            f.mass_kg,
+            f.mass_std_kg,
+            f.com_m,
+            f.com_std_m,
+            f.chi2_dof,
+            f.residual_rms_n,
+            f.condition,
+            f.samples,
+            self.left_out,
+            self.peak_accel_mps2,
+            self.method
+        )
+    }
+}

@@ -1,0 +1,347 @@
+//! The excitation of `sarctl identify --dynamic` (MODEL.md 10, issue 26
+//! section 3): a sine per axis around a centre pose, of distinct frequencies,
+//! faded in and out by a raised cosine so that it starts and ends at rest,
+//! scaled so that no axis exceeds the excitation's own speed and
+//! acceleration limits, and checked inside the travel. [`Excitation::plan`]
+//! gives, before anything moves, the condition number and the standard
+//! errors that the fit will have: the covariance of the least squares on the
+//! planned trajectory with the sensor's noise (noise-free readings of the
+//! configured rod, I_perp the slender rod's m L^2 / 12 unless given).
+//!
+//! The default (about manipulator 2's nominal pose): a slow sweep of up to
+//! 8 cm along the rod's direction (q3, 0.07 Hz: the support distance
+//! varies, which tells m from m c as the static poses do) and faster sines
+//! across it (q1 at 1.3 Hz, q2 at 1.7 Hz: the rod turns, which tells the
+//! inertia), each at up to the speed limit.
+
+use sar_config::Config;
+use sar_estimator::identification::dynamic::{
+    DynamicIdentification, DynamicResult, InertialParameters, MotionSample, model_force_n,
+    rod_motion,
+};
+use sar_estimator::{Calibration, Vec3};
+
+/// One axis's sine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisSine {
+    /// Frequency, Hz (> 0).
+    pub freq_hz: f64,
+    /// The largest amplitude wanted, m (the plan may scale it down).
+    pub amplitude_m: f64,
+}
+
+/// The excitation's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExcitationSpec {
+    /// The centre pose, joints (q1, q2, q3), m.
+    pub centre_m: [f64; 3],
+    /// The sine of q1, q2, q3.
+    pub sines: [AxisSine; 3],
+    /// Duration, s, with the fades.
+    pub duration_s: f64,
+    /// Fade in and out, s each.
+    pub fade_s: f64,
+    /// Largest joint speed, m/s.
+    pub max_speed_mps: f64,
+    /// Largest joint acceleration, m/s^2.
+    pub max_accel_mps2: f64,
+}
+
+impl ExcitationSpec {
+    /// The default sines about `centre_m` (see the module's doc).
+    pub fn around(
+        centre_m: [f64; 3],
+        duration_s: f64,
+        max_speed_mps: f64,
+        max_accel_mps2: f64,
+    ) -> Self {
+        Self {
+            centre_m,
+            sines: [
+                AxisSine {
+                    freq_hz: 1.3,
+                    amplitude_m: 0.01,
+                },
+                AxisSine {
+                    freq_hz: 1.7,
+                    amplitude_m: 0.01,
+                },
+                AxisSine {
+                    freq_hz: 0.07,
+                    amplitude_m: 0.08,
+                },
+            ],
+            duration_s,
+            fade_s: 3.0,
+            max_speed_mps,
+            max_accel_mps2,
+        }
+    }
+}
+
+/// A planned excitation: the amplitudes after scaling.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Excitation {
+    /// The settings.
+    pub spec: ExcitationSpec,
+    /// Each axis's amplitude as planned, m.
+    pub amplitude_m: [f64; 3],
+    /// Each axis's peak speed as planned, m/s.
+    pub peak_speed_mps: [f64; 3],
+    /// Each axis's peak acceleration as planned, m/s^2.
+    pub peak_accel_mps2: [f64; 3],
+}
+
+/// The fade's value and its first and second derivatives at `t`.
+fn fade(t: f64, spec: &ExcitationSpec) -> (f64, f64, f64) {
+    let (tf, d) = (spec.fade_s, spec.duration_s);
+    let k = std::f64::consts::PI / tf;
+    let rise = |x: f64| {
+        let (s, c) = (k * x).sin_cos();
+        (0.5 * (1.0 - c), 0.5 * k * s, 0.5 * k * k * c)
+    };
+    if t <= 0.0 || t >= d {
+        (0.0, 0.0, 0.0)
+    } else if t < tf {
+        rise(t)
+    } else if t > d - tf {
+        let (e, e1, e2) = rise(d - t);
+        (e, -e1, e2)
+    } else {
+        (1.0, 0.0, 0.0)
+    }
+}
+
+/// Position offset, speed and acceleration of one axis of unit amplitude at `t`.
+fn unit_axis(t: f64, freq_hz: f64, spec: &ExcitationSpec) -> (f64, f64, f64) {
+    let w = 2.0 * std::f64::consts::PI * freq_hz;
+    let (s, c) = (w * t).sin_cos();
+    let (e, e1, e2) = fade(t, spec);
+    (
+        e * s,
+        e1 * s + e * w * c,
+        e2 * s + 2.0 * e1 * w * c - e * w * w * s,
+    )
+}
+
+/// Time step of the plan's scans, s.
+const SCAN_STEP_S: f64 = 1e-3;
+
+impl Excitation {
+    /// Scales each axis's amplitude down to its speed and acceleration
+    /// limits (its peaks over the whole run, fades included) and checks the
+    /// sweep in the configured travel.
+    pub fn plan(spec: &ExcitationSpec, config: &Config) -> Result<Self, String> {
+        let ok = |x: f64| x.is_finite() && x > 0.0;
+        if !(ok(spec.duration_s)
+            && ok(spec.fade_s)
+            && 2.0 * spec.fade_s <= spec.duration_s
+            && ok(spec.max_speed_mps)
+            && ok(spec.max_accel_mps2))
+        {
+            return Err(format!(
+                "the excitation needs a duration of at least two fades ({} s, fade {} s) and positive limits ({} m/s, {} m/s^2)",
+                spec.duration_s, spec.fade_s, spec.max_speed_mps, spec.max_accel_mps2
+            ));
+        }
+        let mut amplitude_m = [0.0; 3];
+        let mut peak_speed_mps = [0.0; 3];
+        let mut peak_accel_mps2 = [0.0; 3];
+        let travel = config.axes.travel_m;
+        for i in 0..3 {
+            let (Some(sine), Some(centre), Some(range)) =
+                (spec.sines.get(i), spec.centre_m.get(i), travel.get(i))
+            else {
+                continue;
+            };
+            if !(ok(sine.freq_hz) && sine.amplitude_m.is_finite() && sine.amplitude_m >= 0.0) {
+                return Err(format!(
+                    "axis q{}: frequency and amplitude out of range",
+                    i + 1
+                ));
+            }
+            let steps = (spec.duration_s / SCAN_STEP_S).ceil() as u64;
+            let (mut v, mut a) = (0.0f64, 0.0f64);
+            for k in 0..=steps {
+                let (_, vk, ak) = unit_axis(k as f64 * SCAN_STEP_S, sine.freq_hz, spec);
+                v = v.max(vk.abs());
+                a = a.max(ak.abs());
+            }
+            let amp = sine
+                .amplitude_m
+                .min(spec.max_speed_mps / v)
+                .min(spec.max_accel_mps2 / a);
+            let (lo, hi) = *range;
+            if centre - amp < lo || centre + amp > hi {
+                return Err(format!(
+                    "axis q{}: the excitation {centre} +- {amp:.4} m leaves the travel [{lo}, {hi}] m",
+                    i + 1
+                ));
+            }
+            if let (Some(x), Some(pv), Some(pa)) = (
+                amplitude_m.get_mut(i),
+                peak_speed_mps.get_mut(i),
+                peak_accel_mps2.get_mut(i),
+            ) {
+                (*x, *pv, *pa) = (amp, amp * v, amp * a);
+            }
+        }
+        Ok(Self {
+            spec: *spec,
+            amplitude_m,
+            peak_speed_mps,
+            peak_accel_mps2,
+        })
+    }
+
+    /// The joints (q1, q2, q3) at `t`, their speeds and accelerations.
+    pub fn at(&self, t_s: f64) -> ([f64; 3], [f64; 3], [f64; 3]) {
+        let mut q = self.spec.centre_m;
+        let (mut v, mut a) = ([0.0; 3], [0.0; 3]);
+        for (i, (sine, amp)) in self.spec.sines.iter().zip(self.amplitude_m).enumerate() {
+            let (x, xv, xa) = unit_axis(t_s, sine.freq_hz, &self.spec);
+            if let (Some(q), Some(v), Some(a)) = (q.get_mut(i), v.get_mut(i), a.get_mut(i)) {
+                *q += amp * x;
+                *v = amp * xv;
+                *a = amp * xa;
+            }
+        }
+        (q, v, a)
+    }
+
+    /// The fit this excitation promises: noise-free readings of `truth` at
+    /// `sensor_rate_hz`, fitted with the configured noise; its
+    /// `*_model_*` standard errors and condition number are the expected ones.
+    pub fn expected(
+        &self,
+        config: &Config,
+        truth: &InertialParameters,
+        sensor_rate_hz: f64,
+        max_condition: f64,
+    ) -> Result<DynamicResult, String> {
+        let est = &config.estimator;
+        let cal: &Calibration = &est.calibration;
+        let mut id = DynamicIdentification::new(cal, &est.noise, Vec3::zeros(), 0.0, false)
+            .map_err(|e| e.to_string())?;
+        let n = (self.spec.duration_s * sensor_rate_hz).floor() as u64;
+        for k in 0..n {
+            let (q, v, a) = self.at(k as f64 / sensor_rate_hz);
+            let swap = |q: [f64; 3]| Vec3::new(q[2], q[1], q[0]);
+            let ujoint_m = cal.p_home_m() + swap(q) + cal.ujoint_offset_m();
+            let (velocity_mps, accel_mps2) = (swap(v), swap(a));
+            let rod = rod_motion(&cal.support_m(), &ujoint_m, &velocity_mps, &accel_mps2)
+                .map_err(|e| e.to_string())?;
+            let force_a_n = model_force_n(truth, &rod, &accel_mps2, &cal.gravity_mps2());
+            let sample = MotionSample {
+                ujoint_m,
+                velocity_mps,
+                accel_mps2,
+                reading_n: -(cal.sensor_rotation().transpose() * force_a_n),
+            };
+            id.add(&sample).map_err(|e| e.to_string())?;
+        }
+        id.solve(max_condition).map_err(|e| e.to_string())
+    }
+}
+
+/// The default centre of the excitation, joints (q1, q2, q3), m: the
+/// U-joint [`DEFAULT_SUPPORT_DISTANCE_M`] behind the support along X0, the
+/// rod horizontal (for the example robot, MODEL.md 10's nominal pose).
+pub fn default_centre_m(cal: &Calibration) -> [f64; 3] {
+    let a = cal.support_m() - Vec3::new(DEFAULT_SUPPORT_DISTANCE_M, 0.0, 0.0);
+    let q = a - cal.p_home_m() - cal.ujoint_offset_m();
+    [q.z, q.y, q.x]
+}
+
+/// The default centre's distance from the support, m.
+pub const DEFAULT_SUPPORT_DISTANCE_M: f64 = 0.2;
+
+/// The planned excitation and its promise, as `identify --dynamic --plan`
+/// prints it before anything moves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plan {
+    /// The excitation.
+    pub excitation: Excitation,
+    /// The configured rod the promise is computed for (I_perp: m L^2 / 12).
+    pub rod: InertialParameters,
+    /// The expected fit (its `*_model_*` standard errors and condition).
+    pub expected: DynamicResult,
+}
+
+impl Plan {
+    /// The excitation of `[identify]`'s limits about `centre_m` for the
+    /// configured rod, at `sensor_rate_hz`.
+    pub fn new(config: &Config, centre_m: [f64; 3], sensor_rate_hz: f64) -> Result<Self, String> {
+        let limits = &config.identify;
+        let spec = ExcitationSpec::around(
+            centre_m,
+            limits.excitation_duration_s,
+            limits.excitation_max_speed_mps,
+            limits.excitation_max_accel_mps2,
+        );
+        let excitation = Excitation::plan(&spec, config)?;
+        let p = &config.estimator.profile;
+        let rod = InertialParameters {
+            mass_kg: p.mass_kg(),
+            com_m: p.com_m(),
+            inertia_perp_kgm2: p.mass_kg() * p.length_m() * p.length_m() / 12.0,
+            friction_n: 0.0,
+        };
+        let expected = excitation.expected(config, &rod, sensor_rate_hz, f64::INFINITY)?;
+        Ok(Self {
+            excitation,
+            rod,
+            expected,
+        })
+    }
+
+    /// The JSON object.
+    pub fn to_json(&self) -> serde_json::Value {
+        let e = &self.excitation;
+        let x = &self.expected;
+        serde_json::json!({
+            "centre_m": e.spec.centre_m,
+            "freq_hz": e.spec.sines.map(|s| s.freq_hz),
+            "amplitude_m": e.amplitude_m,
+            "peak_speed_mps": e.peak_speed_mps,
+            "peak_accel_mps2": e.peak_accel_mps2,
+            "duration_s": e.spec.duration_s,
+            "condition": x.condition,
+            "expected_inertia_perp_std_kgm2": x.inertia_perp_model_std_kgm2,
+            "expected_inertia_perp_std_rel": x.inertia_perp_model_std_kgm2 / self.rod.inertia_perp_kgm2,
+            "expected_mass_std_kg": x.mass_std_kg,
+            "expected_com_std_m": x.com_std_m,
+            "assumed_inertia_perp_kgm2": self.rod.inertia_perp_kgm2,
+        })
+    }
+
+    /// The human report.
+    pub fn to_text(&self) -> String {
+        let e = &self.excitation;
+        let x = &self.expected;
+        let axes: Vec<String> = (0..3)
+            .filter_map(|i| {
+                Some(format!(
+                    "  q{}: {:.4} m +- {:.4} m at {} Hz (peak {:.3} m/s, {:.3} m/s^2)",
+                    i + 1,
+                    e.spec.centre_m.get(i)?,
+                    e.amplitude_m.get(i)?,
+                    e.spec.sines.get(i)?.freq_hz,
+                    e.peak_speed_mps.get(i)?,
+                    e.peak_accel_mps2.get(i)?
+                ))
+            })
+            .collect();
+        format!(
+            "excitation: {} s, sines per axis faded in and out over {} s:\n{}\ncondition number {:.1}; expected standard errors (sensor noise only, I_perp assumed {:.5} kg m^2 = m L^2 / 12): I_perp {:.2} %, m {:.3} %, c {:.3} %",
+            e.spec.duration_s,
+            e.spec.fade_s,
+            axes.join("\n"),
+            x.condition,
+            self.rod.inertia_perp_kgm2,
+            100.0 * x.inertia_perp_model_std_kgm2 / self.rod.inertia_perp_kgm2,
+            100.0 * x.mass_std_kg / self.rod.mass_kg,
+            100.0 * x.com_std_m / self.rod.com_m
+        )
+    }
+}
