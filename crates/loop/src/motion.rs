@@ -1,0 +1,315 @@
+//! The carriage's commanded motion (issue 26, MODEL.md 10): what the loop
+//! hands the estimator each cycle ([`CarriageMotion`]) so that the tip force
+//! is compensated for the rod's inertia. It follows from the loop's own
+//! state and the cycle's recorded inputs only, never from the encoders
+//! differentiated twice, so a recording replays to it bit for bit:
+//!
+//! - While a trajectory is commanded to enabled drives (planned moves,
+//!   streamed set points, holds), the drives' response to it: a model of
+//!   their position loop ([`ServoAxis`]: `x'' = wn^2 (r - x) - 2 zeta wn x'`,
+//!   the simulator's servo, sampled every [`MODEL_STEP_NS`] with the
+//!   acceleration held between samples) driven by the trajectory's
+//!   position; with `servo_bandwidth_hz = 0` (ideal drives) the trajectory
+//!   itself.
+//! - During a halt (Stop or Fault: the drives' own quick stop, the
+//!   trajectory dropped), each axis decelerates from its modelled velocity
+//!   at the halt at the drives' quick-stop deceleration until at rest
+//!   ([`AxesMotion::start_halt`]).
+//! - When the plan is unknown (the drives not enabled nor in the quick stop
+//!   the loop commanded, no trajectory): at rest, exactly when the encoders
+//!   say the axes are at rest ([`crate::step::REST_SPEED_MPS`]), else with
+//!   the standard deviation [`MotionConfig::unknown_accel_std_mps2`] (the
+//!   hardest the drives brake).
+//!
+//! The standard deviation of a known motion is [`ACCEL_STD_FRACTION`] of
+//! its acceleration plus [`ACCEL_STD_FLOOR_MPS2`] (the model's residual
+//! against the simulated servo: README, "The robot in motion").
+//!
+//! Fixed-size state; no allocation, no panic.
+
+use sar_drivers::DriveState;
+use sar_drivers::motion::{AxisPlan, AxisState, Limits};
+use sar_estimator::Vec3;
+use sar_estimator::motion::CarriageMotion;
+
+/// The servo model's sampling step, ns (a drive's position loop at 10 kHz,
+/// the simulator's physics step).
+pub const MODEL_STEP_NS: u64 = 100_000;
+
+/// A gap longer than this between two evaluations (samples lost, the first
+/// cycle) restarts the model on the trajectory, ns.
+pub const MAX_MODEL_GAP_NS: u64 = 50_000_000;
+
+/// The standard deviation of a known acceleration: this fraction of it...
+pub const ACCEL_STD_FRACTION: f64 = 0.1;
+
+/// ... plus this, m/s^2.
+pub const ACCEL_STD_FLOOR_MPS2: f64 = 0.02;
+
+/// The drives as the loop models them (`[axes] servo_bandwidth_hz`,
+/// `servo_damping`, `brake_decel_mps2`, `[drivers.axes]
+/// quick_stop_decel_mps2`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionConfig {
+    /// The bandwidth of their position loop, Hz (finite, >= 0; 0: ideal
+    /// drives, no model).
+    pub servo_bandwidth_hz: f64,
+    /// Its damping ratio (finite, > 0).
+    pub servo_damping: f64,
+    /// Their own quick stop's deceleration (CiA 402 0x6085), m/s^2 (finite,
+    /// > 0).
+    pub quick_stop_decel_mps2: f64,
+    /// A guarded move's brake, streamed to the drives, m/s^2 (at least the
+    /// planned acceleration, at most the quick stop's).
+    pub brake_decel_mps2: f64,
+}
+
+impl MotionConfig {
+    /// The position loop's natural frequency, rad/s (0 without a model).
+    pub fn servo_wn_rad_s(&self) -> f64 {
+        core::f64::consts::TAU * self.servo_bandwidth_hz
+    }
+
+    /// The drives' lag behind a ramp of their reference, `2 zeta / wn`, s
+    /// (0 without a model).
+    pub fn servo_lag_s(&self) -> f64 {
+        let wn = self.servo_wn_rad_s();
+        if wn > 0.0 {
+            2.0 * self.servo_damping / wn
+        } else {
+            0.0
+        }
+    }
+
+    /// The standard deviation of the acceleration when the plan is unknown
+    /// and the axes move: the hardest the drives are known to brake, m/s^2.
+    pub fn unknown_accel_std_mps2(&self, planned_accel_mps2: f64) -> f64 {
+        self.quick_stop_decel_mps2.max(planned_accel_mps2)
+    }
+
+    /// The settings checked (the first out of range is the error:
+    /// `(field, value, why)`), against the planned moves' acceleration.
+    pub fn check(&self, max_accel_mps2: f64) -> Result<(), (&'static str, f64, &'static str)> {
+        let bw = self.servo_bandwidth_hz;
+        if !(bw.is_finite() && bw >= 0.0) {
+            return Err(("servo_bandwidth_hz", bw, "must be finite and >= 0"));
+        }
+        let z = self.servo_damping;
+        if !(z.is_finite() && z > 0.0) {
+            return Err(("servo_damping", z, "must be finite and > 0"));
+        }
+        // Sampled at MODEL_STEP_NS, as the simulator checks its own.
+        if self.servo_wn_rad_s() * MODEL_STEP_NS as f64 * 1e-9 > 0.2 {
+            return Err((
+                "servo_bandwidth_hz",
+                bw,
+                "must be at most 0.2 / (2 pi 100 us) (the model's sampling)",
+            ));
+        }
+        let q = self.quick_stop_decel_mps2;
+        if !(q.is_finite() && q > 0.0) {
+            return Err(("quick_stop_decel_mps2", q, "must be finite and > 0"));
+        }
+        let b = self.brake_decel_mps2;
+        if !(b >= max_accel_mps2 && b <= q) {
+            return Err((
+                "brake_decel_mps2",
+                b,
+                "must be at least max_accel_mps2 and at most quick_stop_decel_mps2",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One axis of the servo model: position and velocity at its last sample
+/// and the acceleration it applies from there to the next.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoAxis {
+    /// m.
+    pub x_m: f64,
+    /// m/s.
+    pub v_mps: f64,
+    /// m/s^2.
+    pub a_mps2: f64,
+}
+
+impl ServoAxis {
+    /// A plan's state at `t_ns` (the drives exactly on it).
+    fn on(plan: &AxisPlan, t_ns: u64) -> Self {
+        let s = plan.at(t_ns);
+        Self {
+            x_m: s.x_m,
+            v_mps: s.v_mps,
+            a_mps2: plan.accel_at(t_ns),
+        }
+    }
+
+    /// Position and velocity `dt_ns` after its sample, the acceleration
+    /// held.
+    fn after(&self, dt_ns: u64) -> Self {
+        let dt = dt_ns as f64 * 1e-9;
+        Self {
+            x_m: self.x_m + self.v_mps * dt + 0.5 * self.a_mps2 * dt * dt,
+            v_mps: self.v_mps + self.a_mps2 * dt,
+            a_mps2: self.a_mps2,
+        }
+    }
+
+    /// Moves `dt_ns` on and samples the loop there against `reference_m`.
+    fn step(&mut self, dt_ns: u64, reference_m: f64, wn: f64, damping: f64) {
+        let now = self.after(dt_ns);
+        *self = Self {
+            a_mps2: wn * wn * (reference_m - now.x_m) - 2.0 * damping * wn * now.v_mps,
+            ..now
+        };
+    }
+}
+
+/// The servo model of the three axes at `t_ns` (on the model's grid).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoModel {
+    /// The last sample, ns.
+    pub t_ns: u64,
+    /// q1, q2, q3.
+    pub axes: [ServoAxis; 3],
+}
+
+/// The loop's knowledge of how the axes move (see the module doc).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AxesMotion {
+    /// The servo model (`None`: restarted on the trajectory when next
+    /// evaluated).
+    pub servo: Option<ServoModel>,
+    /// The drives' own quick stop since a halt: each axis's braking ramp.
+    pub halt: Option<[AxisPlan; 3]>,
+}
+
+/// How the axes move at an instant: q1, q2, q3.
+type Axes = [ServoAxis; 3];
+
+impl AxesMotion {
+    /// The servo model advanced along `plans` to `t_ns` and evaluated there
+    /// (the plans themselves without a model).
+    fn follow(&mut self, cfg: &MotionConfig, plans: &[AxisPlan; 3], t_ns: u64) -> Axes {
+        let wn = cfg.servo_wn_rad_s();
+        let on_plans = plans.map(|p| ServoAxis::on(&p, t_ns));
+        if wn <= 0.0 {
+            self.servo = None;
+            return on_plans;
+        }
+        let mut model = match self.servo {
+            Some(m) if t_ns >= m.t_ns && t_ns - m.t_ns <= MAX_MODEL_GAP_NS => m,
+            _ => ServoModel {
+                t_ns,
+                axes: on_plans,
+            },
+        };
+        while t_ns - model.t_ns >= MODEL_STEP_NS {
+            model.t_ns += MODEL_STEP_NS;
+            for (axis, plan) in model.axes.iter_mut().zip(plans) {
+                axis.step(
+                    MODEL_STEP_NS,
+                    plan.at(model.t_ns).x_m,
+                    wn,
+                    cfg.servo_damping,
+                );
+            }
+        }
+        self.servo = Some(model);
+        model.axes.map(|a| a.after(t_ns - model.t_ns))
+    }
+
+    /// The carriage's motion at `stamp_ns` (the sensor sample's): along the
+    /// commanded `plans` while the drives are enabled, on the halt's ramps
+    /// during the drives' quick stop, else unknown (at rest when the axes
+    /// are: `at_rest`, from the encoders).
+    pub fn motion(
+        &mut self,
+        cfg: &MotionConfig,
+        planned_accel_mps2: f64,
+        plans: Option<&[AxisPlan; 3]>,
+        drive_state: Option<DriveState>,
+        stamp_ns: u64,
+        at_rest: bool,
+    ) -> CarriageMotion {
+        let axes = match (self.halt, plans, drive_state) {
+            (Some(ramps), _, Some(DriveState::QuickStop | DriveState::Enabled)) => {
+                ramps.map(|p| ServoAxis::on(&p, stamp_ns))
+            }
+            (None, Some(plans), Some(DriveState::Enabled)) => self.follow(cfg, plans, stamp_ns),
+            _ => {
+                self.servo = None;
+                let std = if at_rest {
+                    0.0
+                } else {
+                    cfg.unknown_accel_std_mps2(planned_accel_mps2)
+                };
+                return CarriageMotion {
+                    accel_std_mps2: std,
+                    ..CarriageMotion::REST
+                };
+            }
+        };
+        carriage(&axes)
+    }
+
+    /// The drives' quick stop commanded at `now_ns` (once per halt): each
+    /// axis brakes from its modelled state then (the trajectory `plans`
+    /// advanced to `now_ns`; at rest without one) at `decel_mps2`.
+    pub fn start_halt(&mut self, cfg: &MotionConfig, plans: Option<&[AxisPlan; 3]>, now_ns: u64) {
+        if self.halt.is_some() {
+            return;
+        }
+        let axes = match plans {
+            Some(plans) => self.follow(cfg, plans, now_ns),
+            None => {
+                [ServoAxis {
+                    x_m: 0.0,
+                    v_mps: 0.0,
+                    a_mps2: 0.0,
+                }; 3]
+            }
+        };
+        let limits = Limits {
+            max_speed_mps: f64::MAX,
+            max_accel_mps2: cfg.quick_stop_decel_mps2,
+        };
+        self.halt = Some(axes.map(|a| {
+            let state = AxisState {
+                x_m: a.x_m,
+                v_mps: a.v_mps,
+            };
+            AxisPlan::brake(now_ns, state, limits)
+        }));
+        self.servo = None;
+    }
+
+    /// The drives released (or the plan replaced from where the axes were
+    /// measured): the halt is over, the model restarts on the next plan.
+    pub fn restart(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// The axes' motion as the carriage's, base frame (A' = (q3', q2', q1')),
+/// with its standard deviation.
+fn carriage(axes: &Axes) -> CarriageMotion {
+    let [q1, q2, q3] = axes;
+    let accel_mps2 = Vec3::new(q3.a_mps2, q2.a_mps2, q1.a_mps2);
+    CarriageMotion {
+        velocity_mps: Vec3::new(q3.v_mps, q2.v_mps, q1.v_mps),
+        accel_mps2,
+        accel_std_mps2: ACCEL_STD_FRACTION * accel_mps2.norm() + ACCEL_STD_FLOOR_MPS2,
+    }
+}
+
+sar_snapshot::snap_struct!(ServoAxis { x_m, v_mps, a_mps2 });
+sar_snapshot::snap_struct!(ServoModel { t_ns, axes });
+sar_snapshot::snap_struct!(AxesMotion { servo, halt });
+sar_snapshot::config_struct!(MotionConfig {
+    servo_bandwidth_hz,
+    servo_damping,
+    quick_stop_decel_mps2,
+    brake_decel_mps2,
+});
