@@ -18,7 +18,9 @@
 //! - `[tip]`: `max_std_n`, the observability limit (2 N); `filter_cutoff_hz`,
 //!   the cutoff of the filtered tip force beside the estimate (5 Hz; 0 switches
 //!   it off), stepped once per sensor sample at `sample_rate_hz` (500, the
-//!   HEX-6's rate).
+//!   HEX-6's rate); `sensor_latency_s` (0.001; 0..=0.05), the sensor's
+//!   latency from measurement to the sample's stamp (the carriage's motion
+//!   is evaluated where the sample was measured, issue 26).
 //! - `[axes]`: `travel_m`, (min, max) of q1, q2, q3 ([[-0.3, 0.3], [0, 0.6], [0, 0.6]]),
 //!   `max_speed_mps` (0.02) and `max_accel_mps2` (0.2) for moves the daemon
 //!   plans, `following_tolerance_m` (0.001: an axis farther than this from
@@ -406,6 +408,7 @@ struct TipToml {
     max_std_n: f64,
     filter_cutoff_hz: f64,
     sample_rate_hz: f64,
+    sensor_latency_s: f64,
 }
 
 impl Default for TipToml {
@@ -414,6 +417,7 @@ impl Default for TipToml {
             max_std_n: TipForceConfig::DEFAULT_MAX_STD_N,
             filter_cutoff_hz: 5.0,
             sample_rate_hz: 500.0,
+            sensor_latency_s: 0.001,
         }
     }
 }
@@ -853,7 +857,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let loop_ = loop_config(ctx, &f.loop_)?;
     let mut record = record(ctx, &f.record)?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
-    axes.motion = drives_motion(ctx, &f.axes, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
+    axes.motion = drives_motion(ctx, &f, axes.max_accel_mps2)?;
     record.scales = DeviceScales::of_drivers(&sensor_driver, &axes_driver);
     let force_control = force_control(ctx, &f.force_control, tip.sample_rate_hz, loop_.rate_hz)?;
     // Valid values, then plausible ones (a unit mistake is named with its
@@ -979,6 +983,7 @@ fn axes(ctx: &Ctx<'_>, a: &AxesToml, max_joint_speed_mps: f64) -> Result<AxesCon
             servo_damping: DEFAULT_SERVO_DAMPING,
             quick_stop_decel_mps2: DEFAULT_QUICK_STOP_DECEL_MPS2,
             brake_decel_mps2: DEFAULT_QUICK_STOP_DECEL_MPS2,
+            sensor_latency_ns: 0,
         },
     })
 }
@@ -988,13 +993,21 @@ fn axes(ctx: &Ctx<'_>, a: &AxesToml, max_joint_speed_mps: f64) -> Result<AxesCon
 /// (0.1..=2), `[drivers.axes] quick_stop_decel_mps2` (any kind; at least
 /// `max_accel_mps2`, at most 10) and `[axes] brake_decel_mps2` (a guarded
 /// move's brake: default the quick stop's, at least `max_accel_mps2`, at
-/// most the quick stop's).
+/// most the quick stop's); `[tip] sensor_latency_s` (0..=0.05 s), where the
+/// motion is evaluated.
 fn drives_motion(
     ctx: &Ctx<'_>,
-    a: &AxesToml,
-    drivers: Option<&AxesDriverToml>,
+    f: &FileToml,
     max_accel_mps2: f64,
 ) -> Result<sar_loop::motion::MotionConfig, ConfigError> {
+    let (a, drivers) = (&f.axes, f.drivers.axes.as_ref());
+    let latency_s = ctx.range_f(
+        "tip.sensor_latency_s",
+        f.tip.sensor_latency_s,
+        0.0,
+        0.05,
+        "s",
+    )?;
     let servo_bandwidth_hz = ctx.range_f(
         "axes.servo_bandwidth_hz",
         a.servo_bandwidth_hz,
@@ -1024,6 +1037,7 @@ fn drives_motion(
         servo_damping,
         quick_stop_decel_mps2,
         brake_decel_mps2,
+        sensor_latency_ns: (latency_s * 1e9).round() as u64,
     })
 }
 

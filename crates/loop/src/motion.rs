@@ -62,7 +62,14 @@ pub struct MotionConfig {
     /// A guarded move's brake, streamed to the drives, m/s^2 (at least the
     /// planned acceleration, at most the quick stop's).
     pub brake_decel_mps2: f64,
+    /// The sensor's latency, from measurement to the sample's stamp, ns
+    /// (at most [`MAX_SENSOR_LATENCY_NS`]): the motion is evaluated where the
+    /// sample was measured, its stamp less this.
+    pub sensor_latency_ns: u64,
 }
+
+/// The longest sensor latency accepted, ns.
+pub const MAX_SENSOR_LATENCY_NS: u64 = 50_000_000;
 
 impl MotionConfig {
     /// The position loop's natural frequency, rad/s (0 without a model).
@@ -109,6 +116,13 @@ impl MotionConfig {
         let q = self.quick_stop_decel_mps2;
         if !(q.is_finite() && q > 0.0) {
             return Err(("quick_stop_decel_mps2", q, "must be finite and > 0"));
+        }
+        if self.sensor_latency_ns > MAX_SENSOR_LATENCY_NS {
+            return Err((
+                "sensor_latency_s",
+                self.sensor_latency_ns as f64 * 1e-9,
+                "must be at most 0.05 s",
+            ));
         }
         let b = self.brake_decel_mps2;
         if !(b >= max_accel_mps2 && b <= q) {
@@ -312,4 +326,5 @@ sar_snapshot::config_struct!(MotionConfig {
     servo_damping,
     quick_stop_decel_mps2,
     brake_decel_mps2,
+    sensor_latency_ns,
 });

@@ -330,6 +330,10 @@ impl core::fmt::Display for ReplyDetail {
 /// period, well below any planned move).
 pub const REST_SPEED_MPS: f64 = 0.002;
 
+/// The guarded force's rate is low-passed over this fraction of the
+/// filter's lag.
+pub const RATE_LAG_FRACTION: f64 = 0.125;
+
 /// The longest back-out a single request may ask for, m.
 pub const MAX_BACK_OUT_M: f64 = 0.1;
 
@@ -811,9 +815,9 @@ impl LoopStep {
         self.finish(estimate, reference, d)
     }
 
-    /// The carriage's motion at the sensor sample's stamp, from the
-    /// trajectory commanded so far and the drives' quick stop
-    /// ([`crate::motion`]).
+    /// The carriage's motion where the sensor sample was measured (its
+    /// stamp less the sensor's latency), from the trajectory commanded so
+    /// far and the drives' quick stop ([`crate::motion`]).
     fn carriage_motion(&mut self, input: &LoopInput) -> CarriageMotion {
         let plans = self.trajectory.as_ref().map(|t| &t.axes);
         self.motion.motion(
@@ -821,7 +825,10 @@ impl LoopStep {
             self.config.axis_limits.max_accel_mps2,
             plans,
             input.drive_state,
-            input.sensor.stamp_ns,
+            input
+                .sensor
+                .stamp_ns
+                .saturating_sub(self.config.motion.sensor_latency_ns),
             self.speed_mps <= REST_SPEED_MPS,
         )
     }
@@ -1041,10 +1048,12 @@ impl LoopStep {
                 let m = f.norm();
                 match self.guarded_last {
                     Some((c, last)) if c != counter => {
-                        // Low-passed over the filter's lag (a difference of
-                        // one sample is mostly noise).
+                        // Low-passed over an eighth of the filter's lag (a
+                        // difference of one sample is mostly noise; over the
+                        // whole lag, the rate comes too late on a stiff
+                        // tissue, whose force rises within that lag).
                         let dt_s = f64::from(counter.wrapping_sub(c)) * self.sample_period_s;
-                        let alpha = dt_s / (dt_s + self.guarded_lag_s);
+                        let alpha = dt_s / (dt_s + RATE_LAG_FRACTION * self.guarded_lag_s);
                         self.guarded_rate_n_per_s +=
                             alpha * ((m - last) / dt_s - self.guarded_rate_n_per_s);
                         self.guarded_last = Some((counter, m));

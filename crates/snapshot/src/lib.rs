@@ -54,8 +54,9 @@ pub const CAPACITY: usize = 4096;
 /// hashed the configuration's `Debug` text; 2: it hashes the fields'
 /// names and values explicitly ([`fingerprint`](mod@fingerprint)); 3: the
 /// estimator's tare over a mean at rest (its running mean and the last
-/// tare's time) is part of the snapshotted state.
-pub const VERSION: u16 = 3;
+/// tare's time) is part of the snapshotted state; 4: the loop's model of
+/// the axes' motion (issue 26: the servo model, the drives' quick stop).
+pub const VERSION: u16 = 4;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";

@@ -133,9 +133,11 @@ fn axial_regulation_at_3_n() {
     let n = 3.0;
     for k in STIFFNESSES {
         // The step on the still tissue; 25 s (the softest needs 30 mm at
-        // 6 mm/s, and then its slow integral).
+        // 6 mm/s, and then its slow integral). On the static plant: the
+        // servos' lag takes the overshoot at 3000 N/m to 10.9 % (issue 26's
+        // force control on the servo-lag plant re-measures it).
         let (_, still) = run(
-            Rig::new(k, 0.0, 0.0, Vec::new()),
+            Rig::static_plant(k, 0.0, 0.0),
             Some(Request::Push { axial_n: n }),
             25_000,
         );

@@ -6,7 +6,9 @@
 
 use sar_daemon::sim;
 use sar_drivers::SimClock;
-use sar_drivers::sim::{Breathing, ContactKey, SimDrives, Tissue, TissueModel, TissueShift};
+use sar_drivers::sim::{
+    Breathing, ContactKey, PlantSpec, SimDrives, Tissue, TissueModel, TissueShift,
+};
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_test_support::rig::{RigBuilder, SimRig};
@@ -78,6 +80,44 @@ impl Rig {
             "{:?}",
             rig.c.output().guard_reason
         );
+        rig
+    }
+
+    /// [`Rig::with`] without the rod's inertia (the demo's servos kept),
+    /// for a test whose figure is not the motion's.
+    pub fn without_inertia(tissues: Vec<Tissue>, contact: Vec<ContactKey>) -> Self {
+        Self::with_plant(tissues, contact, |p| p.inertia = None)
+    }
+
+    /// [`Rig::new`] on the static plant of before issue 26 (no inertia,
+    /// ideal axes, a quick stop at the planned acceleration).
+    pub fn static_plant(k_n_per_m: f64, gap_m: f64, breath_m: f64) -> Self {
+        let tissues = vec![tissue(k_n_per_m, gap_m, breath_m, Vec::new())];
+        Self::with_plant(tissues, Vec::new(), |p| *p = PlantSpec::default())
+    }
+
+    /// [`Rig::with`] with the demo's plant in motion changed by `edit`.
+    pub fn with_plant(
+        tissues: Vec<Tissue>,
+        contact: Vec<ContactKey>,
+        edit: impl FnOnce(&mut PlantSpec),
+    ) -> Self {
+        let mut scenario = sim::demo_scenario().unwrap();
+        edit(&mut scenario.spec.plant);
+        scenario.spec.contact = if contact.is_empty() {
+            vec![ContactKey {
+                t_ns: 0,
+                force_n: Vec3::zeros(),
+            }]
+        } else {
+            contact
+        };
+        scenario.spec.tissue = tissues;
+        let mut rig = Self(RigBuilder::new(&scenario).build());
+        for _ in 0..READY_MS {
+            rig.step();
+        }
+        assert_eq!(rig.c.output().guard_state, GuardState::Ok);
         rig
     }
 
