@@ -22,8 +22,9 @@
 //!   hardest the drives brake).
 //!
 //! The standard deviation of a known motion is [`ACCEL_STD_FRACTION`] of
-//! its acceleration plus [`ACCEL_STD_FLOOR_MPS2`] (the model's residual
-//! against the simulated servo: README, "The robot in motion").
+//! its acceleration plus, while the axes move, [`ACCEL_STD_FLOOR_MPS2`]
+//! (for real drives, which the model only approximates; against the
+//! simulated servo its residual is 0: README, "The robot in motion").
 //!
 //! Fixed-size state; no allocation, no panic.
 
@@ -43,8 +44,16 @@ pub const MAX_MODEL_GAP_NS: u64 = 50_000_000;
 /// The standard deviation of a known acceleration: this fraction of it...
 pub const ACCEL_STD_FRACTION: f64 = 0.1;
 
-/// ... plus this, m/s^2.
+/// ... plus this while the axes move (0 at rest: a hold the drives have
+/// settled on), m/s^2.
 pub const ACCEL_STD_FLOOR_MPS2: f64 = 0.02;
+
+/// Below this speed and [`SETTLED_ACCEL_MPS2`] on every axis the modelled
+/// axes have settled (no floor in the standard deviation), m/s.
+pub const SETTLED_SPEED_MPS: f64 = 1e-6;
+
+/// See [`SETTLED_SPEED_MPS`], m/s^2.
+pub const SETTLED_ACCEL_MPS2: f64 = 1e-4;
 
 /// The drives as the loop models them (`[axes] servo_bandwidth_hz`,
 /// `servo_damping`, `brake_decel_mps2`, `[drivers.axes]
@@ -311,10 +320,14 @@ impl AxesMotion {
 fn carriage(axes: &Axes) -> CarriageMotion {
     let [q1, q2, q3] = axes;
     let accel_mps2 = Vec3::new(q3.a_mps2, q2.a_mps2, q1.a_mps2);
+    let moving = axes
+        .iter()
+        .any(|a| a.v_mps.abs() > SETTLED_SPEED_MPS || a.a_mps2.abs() > SETTLED_ACCEL_MPS2);
+    let floor = if moving { ACCEL_STD_FLOOR_MPS2 } else { 0.0 };
     CarriageMotion {
         velocity_mps: Vec3::new(q3.v_mps, q2.v_mps, q1.v_mps),
         accel_mps2,
-        accel_std_mps2: ACCEL_STD_FRACTION * accel_mps2.norm() + ACCEL_STD_FLOOR_MPS2,
+        accel_std_mps2: ACCEL_STD_FRACTION * accel_mps2.norm() + floor,
     }
 }
 
@@ -328,3 +341,141 @@ sar_snapshot::config_struct!(MotionConfig {
     brake_decel_mps2,
     sensor_latency_ns,
 });
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::*;
+
+    const CFG: MotionConfig = MotionConfig {
+        servo_bandwidth_hz: 30.0,
+        servo_damping: 0.7,
+        quick_stop_decel_mps2: 2.0,
+        brake_decel_mps2: 2.0,
+        sensor_latency_ns: 1_000_000,
+    };
+
+    fn cruise(v_mps: f64) -> [AxisPlan; 3] {
+        let limits = Limits {
+            max_speed_mps: v_mps,
+            max_accel_mps2: 0.2,
+        };
+        let rest = AxisState {
+            x_m: 0.1,
+            v_mps: 0.0,
+        };
+        [
+            AxisPlan::to_target(0, rest, 0.5, limits),
+            AxisPlan::hold(0, 0.2),
+            AxisPlan::hold(0, 0.3),
+        ]
+    }
+
+    /// A ramp of the reference: the model lags it by 2 zeta / wn and
+    /// reaches its speed; the carriage's A' is (q3', q2', q1').
+    #[test]
+    fn the_model_lags_a_ramp_by_two_zeta_over_wn() {
+        let plans = cruise(0.02);
+        let mut m = AxesMotion::default();
+        let mut last = CarriageMotion::REST;
+        for k in 0..=1000u64 {
+            last = m.motion(
+                &CFG,
+                0.2,
+                Some(&plans),
+                Some(DriveState::Enabled),
+                k * 1_000_000,
+                true,
+            );
+        }
+        assert!((last.velocity_mps.z - 0.02).abs() < 1e-9, "{last:?}");
+        assert_eq!(last.velocity_mps.x, 0.0);
+        let model_x = m.servo.unwrap().axes[0].x_m;
+        let lag_m = plans[0].at(1_000_000_000).x_m - model_x;
+        assert!(
+            (lag_m / (CFG.servo_lag_s() * 0.02) - 1.0).abs() < 0.02,
+            "{lag_m}"
+        );
+        // Cruising, settled on the ramp: the floor, as the axes move.
+        assert!((last.accel_std_mps2 - ACCEL_STD_FLOOR_MPS2).abs() < 1e-3);
+    }
+
+    /// The drives' quick stop: each axis brakes from its modelled speed
+    /// at the configured deceleration until at rest; the plan unknown
+    /// when the drives are in neither state the loop commanded.
+    #[test]
+    fn a_halt_brakes_at_the_quick_stop_and_an_unknown_plan_says_so() {
+        let plans = cruise(0.02);
+        let mut m = AxesMotion::default();
+        for k in 0..=1000u64 {
+            m.motion(
+                &CFG,
+                0.2,
+                Some(&plans),
+                Some(DriveState::Enabled),
+                k * 1_000_000,
+                true,
+            );
+        }
+        m.start_halt(&CFG, Some(&plans), 1_000_000_000);
+        let braking = m.motion(
+            &CFG,
+            0.2,
+            None,
+            Some(DriveState::QuickStop),
+            1_005_000_000,
+            false,
+        );
+        assert_eq!(braking.accel_mps2.z, -2.0);
+        assert!((braking.velocity_mps.z - (0.02 - 2.0 * 0.005)).abs() < 1e-6);
+        let rest = m.motion(
+            &CFG,
+            0.2,
+            None,
+            Some(DriveState::QuickStop),
+            1_020_000_000,
+            true,
+        );
+        assert_eq!(rest, CarriageMotion::REST);
+        // A second quick stop (the drives reported Enabled) keeps the ramp.
+        let ramp = m.halt;
+        m.start_halt(&CFG, None, 1_010_000_000);
+        assert_eq!(m.halt, ramp);
+        // Faulted drives: unknown; at rest by the encoders, exactly.
+        let fault = Some(DriveState::Fault {
+            axis: None,
+            code: 1,
+        });
+        let unknown = m.motion(&CFG, 0.2, None, fault, 1_021_000_000, false);
+        assert_eq!(unknown.accel_mps2, Vec3::zeros());
+        assert_eq!(unknown.accel_std_mps2, 2.0);
+        assert_eq!(
+            m.motion(&CFG, 0.2, None, fault, 1_022_000_000, true),
+            CarriageMotion::REST
+        );
+        m.restart();
+        assert_eq!(m, AxesMotion::default());
+    }
+
+    #[test]
+    fn the_settings_are_checked() {
+        assert_eq!(CFG.check(0.2), Ok(()));
+        let bad = |f: fn(&mut MotionConfig)| {
+            let mut c = CFG;
+            f(&mut c);
+            c.check(0.2).unwrap_err().0
+        };
+        assert_eq!(bad(|c| c.brake_decel_mps2 = 3.0), "brake_decel_mps2");
+        assert_eq!(bad(|c| c.brake_decel_mps2 = 0.1), "brake_decel_mps2");
+        assert_eq!(bad(|c| c.servo_bandwidth_hz = 400.0), "servo_bandwidth_hz");
+        assert_eq!(bad(|c| c.servo_damping = 0.0), "servo_damping");
+        assert_eq!(
+            bad(|c| c.quick_stop_decel_mps2 = f64::NAN),
+            "quick_stop_decel_mps2"
+        );
+        assert_eq!(
+            bad(|c| c.sensor_latency_ns = 60_000_000),
+            "sensor_latency_s"
+        );
+    }
+}

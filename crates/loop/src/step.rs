@@ -37,6 +37,12 @@
 //!   retreat_speed_mps` and streamed to the drives one set point per period
 //!   ([`DriveAction::Stream`], cyclic synchronous position), so that they
 //!   move at that speed. The guard stops again if the force rises.
+//! - The carriage's motion (issue 26, [`crate::motion`]): each cycle the
+//!   estimator is handed the velocity and acceleration of the commanded
+//!   trajectory through a model of the drives' servo (the drives' own quick
+//!   stop during a halt), where the sensor sample was measured. A guarded
+//!   move brakes hard (`[axes] brake_decel_mps2`), streamed; the warn
+//!   rule's brake stays at the planned deceleration.
 //! - A host fault: the publishing thread (the operator's commands and the
 //!   published state) without progress for longer than the configured
 //!   stall time is a Fault ([`Reason::PublisherStalled`]), from the
@@ -83,11 +89,12 @@ pub enum Request {
         distance_m: f64,
     },
     /// A guarded move (force control, issue 15): as `MoveTip`, but braked
-    /// (at the planned deceleration) in the cycle in which the magnitude of
-    /// the tip force (filtered when the filter is on) is anticipated to
-    /// reach `max_force_n`: the force plus its rise (its rate, low-passed)
-    /// over the filter's lag and the braking, once it is a quarter of the
-    /// limit; where and at what force is reported
+    /// (hard: at `[axes] brake_decel_mps2`, streamed; issue 26) in the cycle
+    /// in which the magnitude of the tip force (filtered when the filter is
+    /// on) is anticipated to reach `max_force_n`: the force plus its rise
+    /// (its rate, low-passed) over the filter's lag, the drives' lag and the
+    /// braking, once it is a quarter of the limit; where and at what force
+    /// is reported
     /// ([`LoopOutput::guarded_stop`]).
     GuardedMove {
         /// The wanted tip, base frame, m.
