@@ -21,6 +21,8 @@
 //! figure is printed, its goal asserted only when the compensation is
 //! there, [`compensates`]).
 
+#![allow(clippy::indexing_slicing)]
+
 use crate::rig::{Rig, TIP_M, rms};
 use sar_config as config;
 use sar_drivers::sim::Tissue;
