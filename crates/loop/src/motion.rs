@@ -198,14 +198,26 @@ pub struct ServoModel {
     pub axes: [ServoAxis; 3],
 }
 
+/// The drives' own quick stop since a halt.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Halt {
+    /// When it was commanded, ns: a sample measured at that instant or
+    /// before saw the axes as they were ([`Halt::before`]).
+    pub start_ns: u64,
+    /// The axes then, as modelled.
+    pub before: [ServoAxis; 3],
+    /// Each axis's braking ramp from there.
+    pub ramps: [AxisPlan; 3],
+}
+
 /// The loop's knowledge of how the axes move (see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AxesMotion {
     /// The servo model (`None`: restarted on the trajectory when next
     /// evaluated).
     pub servo: Option<ServoModel>,
-    /// The drives' own quick stop since a halt: each axis's braking ramp.
-    pub halt: Option<[AxisPlan; 3]>,
+    /// The drives' own quick stop since a halt.
+    pub halt: Option<Halt>,
 }
 
 /// How the axes move at an instant: q1, q2, q3.
@@ -257,8 +269,12 @@ impl AxesMotion {
         at_rest: bool,
     ) -> CarriageMotion {
         let axes = match (self.halt, plans, drive_state) {
-            (Some(ramps), _, Some(DriveState::QuickStop | DriveState::Enabled)) => {
-                ramps.map(|p| ServoAxis::on(&p, stamp_ns))
+            (Some(h), _, Some(DriveState::QuickStop | DriveState::Enabled)) => {
+                if stamp_ns <= h.start_ns {
+                    h.before
+                } else {
+                    h.ramps.map(|p| ServoAxis::on(&p, stamp_ns))
+                }
             }
             (None, Some(plans), Some(DriveState::Enabled)) => self.follow(cfg, plans, stamp_ns),
             _ => {
@@ -298,13 +314,17 @@ impl AxesMotion {
             max_speed_mps: f64::MAX,
             max_accel_mps2: cfg.quick_stop_decel_mps2,
         };
-        self.halt = Some(axes.map(|a| {
-            let state = AxisState {
-                x_m: a.x_m,
-                v_mps: a.v_mps,
-            };
-            AxisPlan::brake(now_ns, state, limits)
-        }));
+        self.halt = Some(Halt {
+            start_ns: now_ns,
+            before: axes,
+            ramps: axes.map(|a| {
+                let state = AxisState {
+                    x_m: a.x_m,
+                    v_mps: a.v_mps,
+                };
+                AxisPlan::brake(now_ns, state, limits)
+            }),
+        });
         self.servo = None;
     }
 
@@ -333,6 +353,11 @@ fn carriage(axes: &Axes) -> CarriageMotion {
 
 sar_snapshot::snap_struct!(ServoAxis { x_m, v_mps, a_mps2 });
 sar_snapshot::snap_struct!(ServoModel { t_ns, axes });
+sar_snapshot::snap_struct!(Halt {
+    start_ns,
+    before,
+    ramps
+});
 sar_snapshot::snap_struct!(AxesMotion { servo, halt });
 sar_snapshot::config_struct!(MotionConfig {
     servo_bandwidth_hz,
@@ -418,14 +443,13 @@ mod tests {
             );
         }
         m.start_halt(&CFG, Some(&plans), 1_000_000_000);
-        let braking = m.motion(
-            &CFG,
-            0.2,
-            None,
-            Some(DriveState::QuickStop),
-            1_005_000_000,
-            false,
-        );
+        // A sample measured when the quick stop was commanded saw the axes
+        // cruising (the drives act on it after that instant).
+        let qs = Some(DriveState::QuickStop);
+        let before = m.motion(&CFG, 0.2, None, qs, 1_000_000_000, false);
+        assert!(before.accel_mps2.z.abs() < 1e-3, "{before:?}");
+        assert!((before.velocity_mps.z - 0.02).abs() < 1e-6);
+        let braking = m.motion(&CFG, 0.2, None, qs, 1_005_000_000, false);
         assert_eq!(braking.accel_mps2.z, -2.0);
         assert!((braking.velocity_mps.z - (0.02 - 2.0 * 0.005)).abs() < 1e-6);
         let rest = m.motion(
