@@ -210,6 +210,74 @@ pub struct Halt {
     pub ramps: [AxisPlan; 3],
 }
 
+/// How many streamed set points the drives' reference is kept over.
+pub const STREAMED: usize = 4;
+
+/// The last set points streamed to the drives (cyclic synchronous
+/// position): their reference moves from one to the next at constant speed
+/// over a period (as the simulator's drives do), not in a staircase.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Streamed {
+    /// When each was streamed, ns, oldest first (`len` used).
+    pub at_ns: [u64; STREAMED],
+    /// Each set point, q1, q2, q3, m.
+    pub q_m: [[f64; 3]; STREAMED],
+    /// How many are kept (0: none: the drives run their own planner).
+    pub len: u8,
+    /// The reference when the oldest was streamed, m.
+    pub from_m: [f64; 3],
+    /// The loop's period, ns (the set points' spacing).
+    pub period_ns: u64,
+}
+
+impl Streamed {
+    /// The drives' reference at `t_ns` (`None` without streamed set points).
+    fn reference(&self, t_ns: u64) -> Option<[f64; 3]> {
+        let n = usize::from(self.len).min(STREAMED);
+        if n == 0 {
+            return None;
+        }
+        let Some(i) = self.at_ns.iter().take(n).rposition(|&at| at <= t_ns) else {
+            return Some(self.from_m);
+        };
+        let prev = match i.checked_sub(1) {
+            Some(p) => self.q_m.get(p).copied().unwrap_or(self.from_m),
+            None => self.from_m,
+        };
+        let to = self.q_m.get(i).copied().unwrap_or(prev);
+        let at = self.at_ns.get(i).copied().unwrap_or(t_ns);
+        let frac = ((t_ns - at) as f64 / self.period_ns.max(1) as f64).min(1.0);
+        let [p1, p2, p3] = prev;
+        let [t1, t2, t3] = to;
+        Some([
+            p1 + (t1 - p1) * frac,
+            p2 + (t2 - p2) * frac,
+            p3 + (t3 - p3) * frac,
+        ])
+    }
+
+    /// A set point streamed at `at_ns`; `before_m`: the drives' reference
+    /// then when none was streamed before.
+    fn push(&mut self, at_ns: u64, q_m: [f64; 3], before_m: [f64; 3], period_ns: u64) {
+        let n = usize::from(self.len).min(STREAMED);
+        if n == 0 {
+            self.from_m = before_m;
+        }
+        if n == STREAMED {
+            self.from_m = self.q_m.first().copied().unwrap_or(before_m);
+            self.at_ns.rotate_left(1);
+            self.q_m.rotate_left(1);
+        }
+        let last = n.min(STREAMED - 1);
+        if let (Some(at), Some(q)) = (self.at_ns.get_mut(last), self.q_m.get_mut(last)) {
+            *at = at_ns;
+            *q = q_m;
+        }
+        self.len = u8::try_from(last + 1).unwrap_or(0);
+        self.period_ns = period_ns;
+    }
+}
+
 /// The loop's knowledge of how the axes move (see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AxesMotion {
@@ -218,6 +286,8 @@ pub struct AxesMotion {
     pub servo: Option<ServoModel>,
     /// The drives' own quick stop since a halt.
     pub halt: Option<Halt>,
+    /// The set points streamed to the drives (the servo's reference then).
+    pub streamed: Streamed,
 }
 
 /// How the axes move at an instant: q1, q2, q3.
@@ -242,13 +312,12 @@ impl AxesMotion {
         };
         while t_ns - model.t_ns >= MODEL_STEP_NS {
             model.t_ns += MODEL_STEP_NS;
-            for (axis, plan) in model.axes.iter_mut().zip(plans) {
-                axis.step(
-                    MODEL_STEP_NS,
-                    plan.at(model.t_ns).x_m,
-                    wn,
-                    cfg.servo_damping,
-                );
+            let reference = self
+                .streamed
+                .reference(model.t_ns)
+                .unwrap_or_else(|| plans.map(|p| p.at(model.t_ns).x_m));
+            for (axis, r) in model.axes.iter_mut().zip(reference) {
+                axis.step(MODEL_STEP_NS, r, wn, cfg.servo_damping);
             }
         }
         self.servo = Some(model);
@@ -328,6 +397,33 @@ impl AxesMotion {
         self.servo = None;
     }
 
+    /// What the drives were told at `now_ns`: a streamed set point is
+    /// their reference's next goal (`plans`: the trajectory before it, the
+    /// reference when none was streamed before); anything else ends the
+    /// streaming (their own planner, a quick stop, a release).
+    pub fn commanded(
+        &mut self,
+        action: &crate::step::DriveAction,
+        now_ns: u64,
+        plans: Option<&[AxisPlan; 3]>,
+        period_ns: u64,
+    ) {
+        use crate::step::DriveAction;
+        match action {
+            DriveAction::Stream(q) => {
+                let set_m = [q.q1_m, q.q2_m, q.q3_m];
+                let before = self
+                    .streamed
+                    .reference(now_ns)
+                    .or_else(|| plans.map(|p| p.map(|a| a.at(now_ns).x_m)))
+                    .unwrap_or(set_m);
+                self.streamed.push(now_ns, set_m, before, period_ns);
+            }
+            DriveAction::None | DriveAction::FaultReset => {}
+            _ => self.streamed = Streamed::default(),
+        }
+    }
+
     /// The drives released (or the plan replaced from where the axes were
     /// measured): the halt is over, the model restarts on the next plan.
     pub fn restart(&mut self) {
@@ -358,7 +454,18 @@ sar_snapshot::snap_struct!(Halt {
     before,
     ramps
 });
-sar_snapshot::snap_struct!(AxesMotion { servo, halt });
+sar_snapshot::snap_struct!(Streamed {
+    at_ns,
+    q_m,
+    len,
+    from_m,
+    period_ns
+});
+sar_snapshot::snap_struct!(AxesMotion {
+    servo,
+    halt,
+    streamed
+});
 sar_snapshot::config_struct!(MotionConfig {
     servo_bandwidth_hz,
     servo_damping,

@@ -794,6 +794,7 @@ impl LoopStep {
         }
         let host_fault = self.host_fault(input);
         let motion = self.carriage_motion(input);
+        let plans_before = self.trajectory.map(|t| t.axes);
         // Judge: the estimator and its guard.
         let estimate =
             *self
@@ -819,6 +820,11 @@ impl LoopStep {
         // Act: what the drives are told of the trajectory.
         self.motion_action(input, &estimate, &mut d);
         self.undo_move_not_carried_out(&mut d);
+        if let Some(now_ns) = input.now_ns {
+            let period_ns = self.config.period_ns;
+            self.motion
+                .commanded(&d.action, now_ns, plans_before.as_ref(), period_ns);
+        }
         self.finish(estimate, reference, d)
     }
 
