@@ -17,7 +17,7 @@
 //!   ([`AxesMotion::start_halt`]).
 //! - When the plan is unknown (the drives not enabled nor in the quick stop
 //!   the loop commanded, no trajectory): at rest, exactly when the encoders
-//!   say the axes are at rest ([`crate::step::REST_SPEED_MPS`]), else with
+//!   say the axes are at rest (the step's `REST_SPEED_MPS`), else with
 //!   the standard deviation [`MotionConfig::unknown_accel_std_mps2`] (the
 //!   hardest the drives brake).
 //!
@@ -278,6 +278,17 @@ impl Streamed {
     }
 }
 
+/// What the drives were told in a cycle, as the servo model needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Told {
+    /// A streamed set point, q1, q2, q3, m.
+    Streamed([f64; 3]),
+    /// Nothing about their motion (or a fault reset).
+    Nothing,
+    /// Their own planner's end point, a quick stop or a release.
+    Other,
+}
+
 /// The loop's knowledge of how the axes move (see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AxesMotion {
@@ -397,21 +408,20 @@ impl AxesMotion {
         self.servo = None;
     }
 
-    /// What the drives were told at `now_ns`: a streamed set point is
-    /// their reference's next goal (`plans`: the trajectory before it, the
-    /// reference when none was streamed before); anything else ends the
-    /// streaming (their own planner, a quick stop, a release).
+    /// What the drives were told at `now_ns`: a streamed set point
+    /// (`Told::Streamed`) is their reference's next goal (`plans`: the
+    /// trajectory before it, the reference when none was streamed before);
+    /// their own planner, a quick stop or a release (`Told::Other`) ends the
+    /// streaming.
     pub fn commanded(
         &mut self,
-        action: &crate::step::DriveAction,
+        told: Told,
         now_ns: u64,
         plans: Option<&[AxisPlan; 3]>,
         period_ns: u64,
     ) {
-        use crate::step::DriveAction;
-        match action {
-            DriveAction::Stream(q) => {
-                let set_m = [q.q1_m, q.q2_m, q.q3_m];
+        match told {
+            Told::Streamed(set_m) => {
                 let before = self
                     .streamed
                     .reference(now_ns)
@@ -419,8 +429,8 @@ impl AxesMotion {
                     .unwrap_or(set_m);
                 self.streamed.push(now_ns, set_m, before, period_ns);
             }
-            DriveAction::None | DriveAction::FaultReset => {}
-            _ => self.streamed = Streamed::default(),
+            Told::Nothing => {}
+            Told::Other => self.streamed = Streamed::default(),
         }
     }
 

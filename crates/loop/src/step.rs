@@ -53,7 +53,7 @@
 //!
 //! Fixed-size state; no allocation, no panic.
 
-use crate::motion::{AxesMotion, MotionConfig};
+use crate::motion::{AxesMotion, MotionConfig, Told};
 use sar_drivers::DriveState;
 use sar_drivers::motion::{AxisPlan, AxisState, Limits};
 use sar_estimator::cycle::{
@@ -822,8 +822,15 @@ impl LoopStep {
         self.undo_move_not_carried_out(&mut d);
         if let Some(now_ns) = input.now_ns {
             let period_ns = self.config.period_ns;
+            let told = match d.action {
+                DriveAction::Stream(q) => Told::Streamed(joints_array(&q)),
+                DriveAction::None | DriveAction::FaultReset => Told::Nothing,
+                DriveAction::Setpoint(_) | DriveAction::QuickStop | DriveAction::Release(_) => {
+                    Told::Other
+                }
+            };
             self.motion
-                .commanded(&d.action, now_ns, plans_before.as_ref(), period_ns);
+                .commanded(told, now_ns, plans_before.as_ref(), period_ns);
         }
         self.finish(estimate, reference, d)
     }
