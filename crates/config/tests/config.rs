@@ -369,7 +369,12 @@ fn force_control_settings_are_checked_by_key() {
         "[axes] servo_bandwidth_hz and servo_damping",
     );
     let text = axes("servo_damping = 0.0");
-    expect(&text, "axes.servo_damping", Some("servo_damping"), "within 0.1..=2");
+    expect(
+        &text,
+        "axes.servo_damping",
+        Some("servo_damping"),
+        "within 0.1..=2",
+    );
     let c = config::parse(&axes("servo_bandwidth_hz = 60.0"), "robot.toml").unwrap();
     assert_eq!(c.force_control.limits().servo_bandwidth_hz, 60.0);
 }
