@@ -89,7 +89,6 @@ fn run(args: &Args) -> Result<(), String> {
         return check_config(path);
     }
     let cfg = configuration(args)?;
-    say_inertia(&cfg);
     let (rdt, canopen) = chosen_devices(args, &cfg)?;
     rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
     // The sensor first: its receive thread keeps the normal priority.
@@ -111,6 +110,8 @@ fn run(args: &Args) -> Result<(), String> {
         shm.wake_log(waker);
     }
     let _latency = real_time(&cfg);
+    // Once the devices are up: a refusal at start stays one line.
+    say_inertia(&cfg);
     let run = Run {
         args,
         cfg: &cfg,
