@@ -208,6 +208,10 @@ pub struct Halt {
     pub before: [ServoAxis; 3],
     /// Each axis's braking ramp from there.
     pub ramps: [AxisPlan; 3],
+    /// Whether the axes' state at the halt was known (a trajectory was
+    /// commanded): only then are the ramps' positions a reference for the
+    /// following check ([`AxesMotion::halt_position`]).
+    pub known: bool,
 }
 
 /// How many streamed set points the drives' reference is kept over.
@@ -380,6 +384,7 @@ impl AxesMotion {
         if self.halt.is_some() {
             return;
         }
+        let known = plans.is_some();
         let axes = match plans {
             Some(plans) => self.follow(cfg, plans, now_ns),
             None => {
@@ -404,6 +409,7 @@ impl AxesMotion {
                 };
                 AxisPlan::brake(now_ns, state, limits)
             }),
+            known,
         });
         self.servo = None;
     }
@@ -434,6 +440,21 @@ impl AxesMotion {
         }
     }
 
+    /// Where the drives' own quick stop puts the axes at `t_ns` (q1, q2, q3,
+    /// m): each axis braking from its modelled state at the halt at the
+    /// configured quick-stop deceleration. `None` without a halt, or when
+    /// the halt began without a commanded trajectory (the state unknown).
+    /// The following check's reference during a halt: a drive that brakes
+    /// weaker than configured runs on beyond it (SAFETY.md D5).
+    pub fn halt_position(&self, t_ns: u64) -> Option<[f64; 3]> {
+        let h = self.halt.filter(|h| h.known)?;
+        Some(if t_ns <= h.start_ns {
+            h.before.map(|a| a.x_m)
+        } else {
+            h.ramps.map(|p| p.at(t_ns).x_m)
+        })
+    }
+
     /// The drives released (or the plan replaced from where the axes were
     /// measured): the halt is over, the model restarts on the next plan.
     pub fn restart(&mut self) {
@@ -462,7 +483,8 @@ sar_snapshot::snap_struct!(ServoModel { t_ns, axes });
 sar_snapshot::snap_struct!(Halt {
     start_ns,
     before,
-    ramps
+    ramps,
+    known
 });
 sar_snapshot::snap_struct!(Streamed {
     at_ns,

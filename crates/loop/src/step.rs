@@ -28,7 +28,11 @@
 //!   move under way that would push further along the force once the force
 //!   is above the warn limit is braked.
 //! - Following error: the measured joints against the trajectory at their
-//!   stamp, beyond the tolerance, is a Fault ([`Reason::FollowingError`]).
+//!   stamp, beyond the tolerance, is a Fault ([`Reason::FollowingError`]);
+//!   during the drives' own quick stop (a halt begun under a trajectory),
+//!   against the quick stop's profile at the configured deceleration
+//!   ([`crate::motion::AxesMotion::halt_position`]): a drive that brakes
+//!   weaker runs on beyond it and faults.
 //! - Retreat (issue 14: the way back from a Stop whose force persists): a
 //!   reset above the stop limit puts the guard in `Retreat`; then a move is
 //!   accepted only when it reduces the tip force
@@ -440,7 +444,8 @@ pub struct LoopOutput {
     /// The estimator's output (tip force, guard, command event).
     pub estimate: CycleOutput,
     /// The commanded trajectory at the joint sample's stamp, which the joints
-    /// were checked against (`None`: no trajectory: halted, or not yet
+    /// were checked against; during the drives' quick stop its profile
+    /// (`None`: no trajectory nor quick stop of a known state, or not yet
     /// released).
     pub reference: Option<ActiveJoints>,
     /// What the drives are told.
@@ -854,14 +859,29 @@ impl LoopStep {
     }
 
     /// The trajectory at the joint sample's stamp, which the estimator
-    /// checks the joints against (following error); none without a
-    /// trajectory or a valid sample.
+    /// checks the joints against (following error), or during the drives'
+    /// quick stop its profile; none without either or a valid sample.
     fn following_reference(&self, input: &LoopInput) -> Option<FollowingReference> {
         let tolerance_m = self.config.following_tolerance_m;
-        self.trajectory
-            .filter(|_| input.joints.valid)
-            .map(|t| FollowingReference {
-                joints: t.position(input.joints.stamp_ns),
+        if !input.joints.valid {
+            return None;
+        }
+        let stamp_ns = input.joints.stamp_ns;
+        if let Some(t) = self.trajectory {
+            return Some(FollowingReference {
+                joints: t.position(stamp_ns),
+                tolerance_m,
+            });
+        }
+        // During the drives' own quick stop: its profile at the configured
+        // deceleration (a drive that brakes weaker runs on beyond it).
+        if input.drive_state != Some(DriveState::QuickStop) {
+            return None;
+        }
+        self.motion
+            .halt_position(stamp_ns)
+            .map(|[q1_m, q2_m, q3_m]| FollowingReference {
+                joints: ActiveJoints { q1_m, q2_m, q3_m },
                 tolerance_m,
             })
     }
