@@ -122,7 +122,7 @@ fn run(seed: u64) {
         .step_config(step_config)
         .build_with(|drives| Hooked::new(drives, Flaky { seed, calls: 0 }));
     let mut recorded: Vec<(LoopInput, LoopOutput)> = Vec::new();
-    let mut previous: Option<(GuardState, Option<ActiveJoints>)> = None;
+    let mut previous: Option<(Option<DriveState>, Option<ActiveJoints>)> = None;
     let (mut moves, mut stops, mut warns, mut warn_moves) = (0, 0, 0, 0);
     // The simulated clock advances 1 ms per cycle.
     let step_m = step_config.axis_limits.max_speed_mps * 1e-3;
@@ -178,8 +178,14 @@ fn run(seed: u64) {
             }
         }
         // The trajectory (sampled at the joint stamps, 1 ms apart) moves at
-        // most at the planned speed, and the drives follow it.
-        if let (Some(r), Some((_, Some(p)))) = (d.reference, previous) {
+        // most at the planned speed, and the drives follow it. Entering a
+        // halt, the reference becomes the drives' quick stop from their
+        // modelled state (behind the trajectory by the servo's lag), once
+        // the drives report their quick stop: compared within the
+        // trajectory, or within the quick stop, not across.
+        if let (Some(r), Some((was, Some(p)))) = (d.reference, previous)
+            && was == input.drive_state
+        {
             for (a, b) in [r.q1_m, r.q2_m, r.q3_m]
                 .iter()
                 .zip([p.q1_m, p.q2_m, p.q3_m])
@@ -231,7 +237,7 @@ fn run(seed: u64) {
                 }
             }
         }
-        previous = Some((out.guard_state, d.reference));
+        previous = Some((input.drive_state, d.reference));
     }
     // The run did something worth checking.
     assert!(
