@@ -1324,6 +1324,10 @@ impl Config {
             period_ns: self.loop_.period_ns,
             publisher_stall_ns: self.loop_.publisher_stall_ns,
             force_control: self.force_control,
+            excite: sar_loop::excite::ExciteLimits {
+                max_speed_mps: self.identify.excitation_max_speed_mps,
+                max_accel_mps2: self.identify.excitation_max_accel_mps2,
+            },
         }
     }
 }

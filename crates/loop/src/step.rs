@@ -37,6 +37,12 @@
 //!   retreat_speed_mps` and streamed to the drives one set point per period
 //!   ([`DriveAction::Stream`], cyclic synchronous position), so that they
 //!   move at that speed. The guard stops again if the force rises.
+//! - An excitation (issue 26, [`Request::Excite`], [`crate::excite`]):
+//!   accepted in Ok with the drives enabled and the axes at rest, within
+//!   `[identify]`'s limits and the travel; streamed one period ahead about
+//!   where the axes rest. A Warn, a Stop or a new move ends it (braked from
+//!   its position and velocity, or quick-stopped); so does a commanded
+//!   speed or acceleration above the limits.
 //! - A host fault: the publishing thread (the operator's commands and the
 //!   published state) without progress for longer than the configured
 //!   stall time is a Fault ([`Reason::PublisherStalled`]), from the
@@ -47,6 +53,7 @@
 //!
 //! Fixed-size state; no allocation, no panic.
 
+use crate::excite::{ExciteLimits, ExciteRequest, Excitation};
 use sar_drivers::DriveState;
 use sar_drivers::motion::{AxisPlan, AxisState, Limits};
 use sar_estimator::cycle::{
@@ -107,6 +114,9 @@ pub enum Request {
     },
     /// End force control: hold the tip where it is (position control).
     Position,
+    /// The dynamic identification's excitation about where the axes rest
+    /// (issue 26, [`crate::excite`]).
+    Excite(ExciteRequest),
 }
 
 /// Where a guarded move stopped, and why.
@@ -203,6 +213,26 @@ pub enum ReplyDetail {
         force_n: f64,
         /// The move's limit, N.
         max_force_n: f64,
+    },
+    /// An excitation's parameter out of range.
+    BadExcitation {
+        /// 1, 2 or 3 (q1, q2, q3); 0 for the duration and the fade.
+        axis: u8,
+        /// The parameter.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// An excitation's peak speed or acceleration above `[identify]`'s.
+    ExcitationAboveLimit {
+        /// 1, 2 or 3 (q1, q2, q3).
+        axis: u8,
+        /// The `[identify]` key.
+        key: &'static str,
+        /// The peak, m/s or m/s^2.
+        value: f64,
+        /// The key's value.
+        limit: f64,
     },
 }
 
@@ -319,6 +349,37 @@ impl core::fmt::Display for ReplyDetail {
                 "the tip force is already {force_n:.2} N, at or above the move's {} N",
                 Shown(*max_force_n)
             ),
+            Self::BadExcitation { axis, field, value } => write!(
+                f,
+                "the excitation's {field}{} = {} is out of range (amplitude >= 0, \
+                 frequency > 0, 0 < 2 fade <= duration <= {} s)",
+                AxisSuffix(*axis),
+                Shown(*value),
+                Shown(crate::excite::MAX_DURATION_S)
+            ),
+            Self::ExcitationAboveLimit {
+                axis,
+                key,
+                value,
+                limit,
+            } => write!(
+                f,
+                "the excitation of q{axis} peaks at {}, above [identify] {key} = {}",
+                Shown(*value),
+                Shown(*limit)
+            ),
+        }
+    }
+}
+
+/// " of qN" after a parameter's name (nothing for axis 0).
+struct AxisSuffix(u8);
+
+impl core::fmt::Display for AxisSuffix {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.0 {
+            0 => Ok(()),
+            n => write!(f, " of q{n}"),
         }
     }
 }
@@ -382,7 +443,8 @@ impl LoopInput {
                     | Request::GuardedMove { .. }
                     | Request::Hold { .. }
                     | Request::Push { .. }
-                    | Request::Position,
+                    | Request::Position
+                    | Request::Excite(_),
                 )
                 | None => None,
             },
@@ -463,6 +525,8 @@ pub struct StepConfig {
     pub publisher_stall_ns: u64,
     /// Force control's settings (`[force_control]`).
     pub force_control: ForceControlConfig,
+    /// An excitation's limits (`[identify]`, issue 26).
+    pub excite: ExciteLimits,
 }
 
 /// Why a [`StepConfig`] cannot be used.
@@ -497,6 +561,9 @@ struct Trajectory {
     /// A guarded move's force limit, N (braked when the force is
     /// anticipated to reach it).
     max_force_n: Option<f64>,
+    /// An excitation under way: then it is the trajectory (`axes` hold
+    /// its centre).
+    excite: Option<Excitation>,
 }
 
 impl Trajectory {
@@ -507,11 +574,15 @@ impl Trajectory {
             end_ns: now_ns,
             streamed: false,
             max_force_n: None,
+            excite: None,
         }
     }
 
     fn at(&self, t_ns: u64) -> [AxisState; 3] {
-        self.axes.map(|p| p.at(t_ns))
+        match &self.excite {
+            Some(e) => e.at(t_ns).0,
+            None => self.axes.map(|p| p.at(t_ns)),
+        }
     }
 
     fn position(&self, t_ns: u64) -> ActiveJoints {
@@ -533,6 +604,7 @@ impl Trajectory {
             end_ns,
             streamed: false,
             max_force_n: None,
+            excite: None,
         }
     }
 }
@@ -786,6 +858,7 @@ impl LoopStep {
         }
         self.update_guarded_rate(input, &estimate);
         d.planned |= self.brake_if_due(input, &estimate);
+        self.end_excitation_if_due(input, &estimate);
         // Act: what the drives are told of the trajectory.
         self.motion_action(input, &estimate, &mut d);
         self.undo_move_not_carried_out(&mut d);
@@ -943,6 +1016,15 @@ impl LoopStep {
             Some(Request::Position) => {
                 self.end_force(input.now_ns);
                 d.reply = Some((ReplyStatus::Accepted, ReplyDetail::None));
+                return;
+            }
+            Some(Request::Excite(r)) => {
+                let before = self.trajectory;
+                let answer = self.start_excitation(input, estimate, &r);
+                if answer.0 == ReplyStatus::Accepted {
+                    d.undo_move = Some(before);
+                }
+                d.reply = Some(answer);
                 return;
             }
             Some(Request::MoveTip { tip_m }) => MoveTarget::Tip(tip_m, None),
@@ -1197,6 +1279,88 @@ impl LoopStep {
         };
         self.force.start(mode, pose.tip_m);
         (ReplyStatus::Accepted, ReplyDetail::None)
+    }
+
+    /// Starts an excitation ([`crate::excite`]): Ok only, the drives
+    /// enabled, the axes at rest; within `[identify]`'s limits and the
+    /// travel about where they rest. It ends force control.
+    fn start_excitation(
+        &mut self,
+        input: &LoopInput,
+        estimate: &CycleOutput,
+        request: &ExciteRequest,
+    ) -> Answer {
+        let halted = estimate.guard_state.is_halting();
+        let (Some(from), Some(now_ns), false) = (self.trajectory, input.now_ns, halted) else {
+            return (
+                ReplyStatus::Halted,
+                ReplyDetail::Reason(estimate.guard_reason),
+            );
+        };
+        if estimate.guard_state != GuardState::Ok {
+            return (
+                ReplyStatus::NotOk,
+                ReplyDetail::NotInOk(estimate.guard_state),
+            );
+        }
+        if input.drive_state != Some(DriveState::Enabled) {
+            return (
+                ReplyStatus::DrivesRefused,
+                ReplyDetail::DrivesNotEnabled(input.drive_state),
+            );
+        }
+        let planned_mps = from.at(now_ns).iter().fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
+        let speed_mps = self.speed_mps.max(planned_mps);
+        if speed_mps > REST_SPEED_MPS || planned_mps > 0.0 {
+            return (ReplyStatus::AxesMoving, ReplyDetail::AxesMoving { speed_mps });
+        }
+        let centre_m = joints_array(&from.position(now_ns));
+        if let Err(detail) = crate::excite::judge(
+            request,
+            &centre_m,
+            &self.config.travel_m,
+            &self.config.excite,
+        ) {
+            let status = match detail {
+                ReplyDetail::OutsideTravel { .. } => ReplyStatus::Unreachable,
+                _ => ReplyStatus::BadArgument,
+            };
+            return (status, detail);
+        }
+        let excite = Excitation {
+            request: *request,
+            centre_m,
+            start_ns: now_ns,
+        };
+        let mut t = Trajectory::hold(now_ns, &from.position(now_ns));
+        t.end_ns = excite.end_ns();
+        t.streamed = true;
+        t.excite = Some(excite);
+        self.trajectory = Some(t);
+        self.force.stop();
+        (ReplyStatus::Accepted, ReplyDetail::None)
+    }
+
+    /// An excitation under way is braked (from its position and velocity,
+    /// at the planned deceleration) under a Warn or when its commanded
+    /// speed or acceleration is above the limits; at its end it becomes a
+    /// hold at its centre.
+    fn end_excitation_if_due(&mut self, input: &LoopInput, estimate: &CycleOutput) {
+        let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns) else {
+            return;
+        };
+        let Some(e) = t.excite else {
+            return;
+        };
+        if now_ns >= t.end_ns {
+            let mut hold = Trajectory::hold(now_ns, &t.position(now_ns));
+            (hold.streamed, hold.end_ns) = (true, t.end_ns);
+            self.trajectory = Some(hold);
+        } else if estimate.guard_state == GuardState::Warn
+            || !e.within_limits(now_ns, &self.config.excite)
+        {
+            self.brake(&t, now_ns);
+        }
     }
 
     /// Ends force control, holding the last set point.
@@ -1497,6 +1661,7 @@ sar_snapshot::snap_struct!(Trajectory {
     end_ns,
     streamed,
     max_force_n,
+    excite,
 });
 // The configuration fingerprint (names and values, never `Debug`).
 sar_snapshot::config_struct!(StepConfig {
@@ -1507,6 +1672,7 @@ sar_snapshot::config_struct!(StepConfig {
     period_ns,
     publisher_stall_ns,
     force_control,
+    excite,
 });
 sar_snapshot::snap_state!(LoopStep {
     state: [
