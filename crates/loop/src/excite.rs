@@ -198,8 +198,14 @@ pub fn judge(
                 limit,
             })
         };
-        if let Some(e) = above(a_m * w, limits.max_speed_mps, "excitation_max_speed_mps")
-            .or_else(|| above(a_m * w * w, limits.max_accel_mps2, "excitation_max_accel_mps2"))
+        if let Some(e) =
+            above(a_m * w, limits.max_speed_mps, "excitation_max_speed_mps").or_else(|| {
+                above(
+                    a_m * w * w,
+                    limits.max_accel_mps2,
+                    "excitation_max_accel_mps2",
+                )
+            })
         {
             return Err(e);
         }

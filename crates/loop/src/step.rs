@@ -53,7 +53,7 @@
 //!
 //! Fixed-size state; no allocation, no panic.
 
-use crate::excite::{ExciteLimits, ExciteRequest, Excitation};
+use crate::excite::{Excitation, ExciteLimits, ExciteRequest};
 use sar_drivers::DriveState;
 use sar_drivers::motion::{AxisPlan, AxisState, Limits};
 use sar_estimator::cycle::{
@@ -1309,10 +1309,16 @@ impl LoopStep {
                 ReplyDetail::DrivesNotEnabled(input.drive_state),
             );
         }
-        let planned_mps = from.at(now_ns).iter().fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
+        let planned_mps = from
+            .at(now_ns)
+            .iter()
+            .fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
         let speed_mps = self.speed_mps.max(planned_mps);
         if speed_mps > REST_SPEED_MPS || planned_mps > 0.0 {
-            return (ReplyStatus::AxesMoving, ReplyDetail::AxesMoving { speed_mps });
+            return (
+                ReplyStatus::AxesMoving,
+                ReplyDetail::AxesMoving { speed_mps },
+            );
         }
         let centre_m = joints_array(&from.position(now_ns));
         if let Err(detail) = crate::excite::judge(
