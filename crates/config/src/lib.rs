@@ -1327,6 +1327,7 @@ impl Config {
             excite: sar_loop::excite::ExciteLimits {
                 max_speed_mps: self.identify.excitation_max_speed_mps,
                 max_accel_mps2: self.identify.excitation_max_accel_mps2,
+                axes_max_speed_mps: self.axes.max_speed_mps,
             },
         }
     }

@@ -8,7 +8,8 @@
 //! A request is judged by [`judge`]: its parameters finite and in range, each
 //! axis's peak speed and acceleration of the middle part (`A w`, `A w^2`)
 //! within `[identify] excitation_max_speed_mps`, `excitation_max_accel_mps2`
-//! (with [`PEAK_ALLOWANCE`] for the planner's sampled peaks), and the sweep
+//! (with [`PEAK_ALLOWANCE`] for the planner's sampled peaks) and the peak
+//! speed within the drives' `[axes] max_speed_mps`, and the sweep
 //! (`centre +- A`: the fade never exceeds 1) within the travel. The fades'
 //! own peaks are checked every cycle ([`Excitation::within_limits`]): above
 //! the limits the excitation is braked.
@@ -23,6 +24,9 @@ pub struct ExciteLimits {
     pub max_speed_mps: f64,
     /// The largest joint acceleration, m/s^2.
     pub max_accel_mps2: f64,
+    /// The drives' speed limit (`[axes] max_speed_mps`: a streamed set
+    /// point further than this over a period is refused by them), m/s.
+    pub axes_max_speed_mps: f64,
 }
 
 /// The relative allowance over the limits for the excitation planner's
@@ -132,9 +136,8 @@ impl Excitation {
     pub fn within_limits(&self, t_ns: u64, limits: &ExciteLimits) -> bool {
         let (states, accel_mps2) = self.at(t_ns);
         let k = 1.0 + PEAK_ALLOWANCE;
-        states
-            .iter()
-            .all(|s| s.v_mps.abs() <= k * limits.max_speed_mps)
+        let max_speed_mps = limits.max_speed_mps.min(limits.axes_max_speed_mps);
+        states.iter().all(|s| s.v_mps.abs() <= k * max_speed_mps)
             && accel_mps2
                 .iter()
                 .all(|a| a.abs() <= k * limits.max_accel_mps2)
@@ -191,21 +194,25 @@ pub fn judge(
         }
         let w = 2.0 * core::f64::consts::PI * f_hz;
         let above = |value: f64, limit: f64, key: &'static str| {
+            let unit = if key.contains("accel") {
+                "m/s^2"
+            } else {
+                "m/s"
+            };
             (value > k * limit).then_some(ReplyDetail::ExcitationAboveLimit {
                 axis,
                 key,
+                unit,
                 value,
                 limit,
             })
         };
-        if let Some(e) =
-            above(a_m * w, limits.max_speed_mps, "excitation_max_speed_mps").or_else(|| {
-                above(
-                    a_m * w * w,
-                    limits.max_accel_mps2,
-                    "excitation_max_accel_mps2",
-                )
-            })
+        let speed_mps = a_m * w;
+        let speed_key = "[identify] excitation_max_speed_mps";
+        let accel_key = "[identify] excitation_max_accel_mps2";
+        if let Some(e) = above(speed_mps, limits.max_speed_mps, speed_key)
+            .or_else(|| above(speed_mps, limits.axes_max_speed_mps, "[axes] max_speed_mps"))
+            .or_else(|| above(a_m * w * w, limits.max_accel_mps2, accel_key))
         {
             return Err(e);
         }
@@ -237,4 +244,5 @@ sar_snapshot::snap_struct!(Excitation {
 sar_snapshot::config_struct!(ExciteLimits {
     max_speed_mps,
     max_accel_mps2,
+    axes_max_speed_mps,
 });

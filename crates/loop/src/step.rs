@@ -223,12 +223,15 @@ pub enum ReplyDetail {
         /// Its value.
         value: f64,
     },
-    /// An excitation's peak speed or acceleration above `[identify]`'s.
+    /// An excitation's peak speed or acceleration above `[identify]`'s (or
+    /// above the drives' speed).
     ExcitationAboveLimit {
         /// 1, 2 or 3 (q1, q2, q3).
         axis: u8,
-        /// The `[identify]` key.
+        /// The key, with its section.
         key: &'static str,
+        /// The unit: m/s or m/s^2.
+        unit: &'static str,
         /// The peak, m/s or m/s^2.
         value: f64,
         /// The key's value.
@@ -360,12 +363,12 @@ impl core::fmt::Display for ReplyDetail {
             Self::ExcitationAboveLimit {
                 axis,
                 key,
+                unit,
                 value,
                 limit,
             } => write!(
                 f,
-                "the excitation of q{axis} peaks at {}, above [identify] {key} = {}",
-                Shown(*value),
+                "the excitation of q{axis} peaks at {value:.4} {unit}, above {key} = {} {unit}",
                 Shown(*limit)
             ),
         }
