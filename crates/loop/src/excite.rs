@@ -14,8 +14,90 @@
 //! own peaks are checked every cycle ([`Excitation::within_limits`]): above
 //! the limits the excitation is braked.
 
-use crate::step::ReplyDetail;
 use sar_drivers::motion::AxisState;
+use sar_kinematics::Shown;
+
+/// Why an excitation is refused ([`judge`]); its `Display` is the reply's
+/// detail.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ExciteRefusal {
+    /// A parameter out of range.
+    Bad {
+        /// 1, 2 or 3 (q1, q2, q3); 0 for the duration and the fade.
+        axis: u8,
+        /// The parameter.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A peak speed or acceleration above a limit.
+    AboveLimit {
+        /// 1, 2 or 3 (q1, q2, q3).
+        axis: u8,
+        /// The key, with its section.
+        key: &'static str,
+        /// The unit: m/s or m/s^2.
+        unit: &'static str,
+        /// The peak, m/s or m/s^2.
+        value: f64,
+        /// The key's value.
+        limit: f64,
+    },
+    /// The sweep leaves an axis's travel.
+    OutsideTravel {
+        /// 1, 2 or 3 (q1, q2, q3).
+        axis: u8,
+        /// The axis position the sweep reaches, m.
+        value_m: f64,
+        /// The travel, m.
+        min_m: f64,
+        /// The travel, m.
+        max_m: f64,
+    },
+}
+
+impl core::fmt::Display for ExciteRefusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Bad { axis, field, value } => {
+                write!(f, "the excitation's {field}")?;
+                if *axis != 0 {
+                    write!(f, " of q{axis}")?;
+                }
+                write!(
+                    f,
+                    " = {} is out of range (amplitude >= 0, frequency > 0, 0 < 2 fade <= \
+                     duration <= {} s)",
+                    Shown(*value),
+                    Shown(MAX_DURATION_S)
+                )
+            }
+            Self::AboveLimit {
+                axis,
+                key,
+                unit,
+                value,
+                limit,
+            } => write!(
+                f,
+                "the excitation of q{axis} peaks at {value:.4} {unit}, above {key} = {} {unit}",
+                Shown(*limit)
+            ),
+            Self::OutsideTravel {
+                axis,
+                value_m,
+                min_m,
+                max_m,
+            } => write!(
+                f,
+                "the excitation of q{axis} reaches {} m, outside its travel {}..{} m",
+                Shown(*value_m),
+                Shown(*min_m),
+                Shown(*max_m)
+            ),
+        }
+    }
+}
 
 /// The loop's limits of an excitation (`[identify]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,86 +227,87 @@ impl Excitation {
 }
 
 /// Judges a request about `centre_m` (see the module's doc): the first
-/// parameter out of range or limit exceeded is the refusal's detail.
+/// parameter out of range or limit exceeded is the refusal.
 pub fn judge(
     request: &ExciteRequest,
     centre_m: &[f64; 3],
     travel_m: &[(f64, f64); 3],
     limits: &ExciteLimits,
-) -> Result<(), ReplyDetail> {
+) -> Result<(), ExciteRefusal> {
     let (d, f) = (request.duration_s, request.fade_s);
+    let bad = |field, value| ExciteRefusal::Bad {
+        axis: 0,
+        field,
+        value,
+    };
     if !(d.is_finite() && d > 0.0 && d <= MAX_DURATION_S) {
-        return Err(ReplyDetail::BadExcitation {
-            axis: 0,
-            field: "duration_s",
-            value: d,
-        });
+        return Err(bad("duration_s", d));
     }
     if !(f.is_finite() && f > 0.0 && 2.0 * f <= d) {
-        return Err(ReplyDetail::BadExcitation {
-            axis: 0,
-            field: "fade_s",
-            value: f,
-        });
+        return Err(bad("fade_s", f));
     }
-    let k = 1.0 + PEAK_ALLOWANCE;
-    for i in 0..3 {
+    for (i, (((&a_m, &f_hz), &c_m), &travel)) in request
+        .amplitude_m
+        .iter()
+        .zip(&request.freq_hz)
+        .zip(centre_m)
+        .zip(travel_m)
+        .enumerate()
+    {
         let axis = u8::try_from(i + 1).unwrap_or(0);
-        let (Some(&a_m), Some(&f_hz), Some(&c_m), Some(&(lo, hi))) = (
-            request.amplitude_m.get(i),
-            request.freq_hz.get(i),
-            centre_m.get(i),
-            travel_m.get(i),
-        ) else {
-            continue;
+        judge_axis(axis, (a_m, f_hz, c_m), travel, limits)?;
+    }
+    Ok(())
+}
+
+/// One axis of [`judge`]: its amplitude and frequency in range, its peaks
+/// within the limits, its sweep within the travel.
+fn judge_axis(
+    axis: u8,
+    (a_m, f_hz, c_m): (f64, f64, f64),
+    (lo, hi): (f64, f64),
+    limits: &ExciteLimits,
+) -> Result<(), ExciteRefusal> {
+    let bad = |field, value| ExciteRefusal::Bad { axis, field, value };
+    if !(a_m.is_finite() && a_m >= 0.0) {
+        return Err(bad("amplitude_m", a_m));
+    }
+    if !(f_hz.is_finite() && f_hz > 0.0) {
+        return Err(bad("freq_hz", f_hz));
+    }
+    let w = 2.0 * core::f64::consts::PI * f_hz;
+    let k = 1.0 + PEAK_ALLOWANCE;
+    let above = |value: f64, limit: f64, key: &'static str| {
+        let unit = if key.contains("accel") {
+            "m/s^2"
+        } else {
+            "m/s"
         };
-        if !(a_m.is_finite() && a_m >= 0.0) {
-            return Err(ReplyDetail::BadExcitation {
+        (value > k * limit).then_some(ExciteRefusal::AboveLimit {
+            axis,
+            key,
+            unit,
+            value,
+            limit,
+        })
+    };
+    let speed_mps = a_m * w;
+    let speed_key = "[identify] excitation_max_speed_mps";
+    let accel_key = "[identify] excitation_max_accel_mps2";
+    if let Some(e) = above(speed_mps, limits.max_speed_mps, speed_key)
+        .or_else(|| above(speed_mps, limits.axes_max_speed_mps, "[axes] max_speed_mps"))
+        .or_else(|| above(a_m * w * w, limits.max_accel_mps2, accel_key))
+    {
+        return Err(e);
+    }
+    for value_m in [c_m - a_m, c_m + a_m] {
+        if !(value_m >= lo && value_m <= hi) {
+            return Err(ExciteRefusal::OutsideTravel {
                 axis,
-                field: "amplitude_m",
-                value: a_m,
+                value_m,
+                min_m: lo,
+                max_m: hi,
             });
-        }
-        if !(f_hz.is_finite() && f_hz > 0.0) {
-            return Err(ReplyDetail::BadExcitation {
-                axis,
-                field: "freq_hz",
-                value: f_hz,
-            });
-        }
-        let w = 2.0 * core::f64::consts::PI * f_hz;
-        let above = |value: f64, limit: f64, key: &'static str| {
-            let unit = if key.contains("accel") {
-                "m/s^2"
-            } else {
-                "m/s"
-            };
-            (value > k * limit).then_some(ReplyDetail::ExcitationAboveLimit {
-                axis,
-                key,
-                unit,
-                value,
-                limit,
-            })
-        };
-        let speed_mps = a_m * w;
-        let speed_key = "[identify] excitation_max_speed_mps";
-        let accel_key = "[identify] excitation_max_accel_mps2";
-        if let Some(e) = above(speed_mps, limits.max_speed_mps, speed_key)
-            .or_else(|| above(speed_mps, limits.axes_max_speed_mps, "[axes] max_speed_mps"))
-            .or_else(|| above(a_m * w * w, limits.max_accel_mps2, accel_key))
-        {
-            return Err(e);
-        }
-        for value_m in [c_m - a_m, c_m + a_m] {
-            if !(value_m >= lo && value_m <= hi) {
-                return Err(ReplyDetail::OutsideTravel {
-                    axis,
-                    value_m,
-                    min_m: lo,
-                    max_m: hi,
-                });
-            }
         }
     }
     Ok(())

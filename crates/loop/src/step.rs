@@ -53,7 +53,7 @@
 //!
 //! Fixed-size state; no allocation, no panic.
 
-use crate::excite::{Excitation, ExciteLimits, ExciteRequest};
+use crate::excite::{Excitation, ExciteLimits, ExciteRefusal, ExciteRequest};
 use sar_drivers::DriveState;
 use sar_drivers::motion::{AxisPlan, AxisState, Limits};
 use sar_estimator::cycle::{
@@ -204,7 +204,8 @@ pub enum ReplyDetail {
     /// A force-control mode asked for outside Ok.
     NotInOk(GuardState),
     /// A tare refused by its mean at rest or its rate limit (not at rest
-    /// long enough, not steady, too soon after the last).
+    /// long enough, not steady, too soon after the last). Shown without
+    /// CommandRefused's own "tare refused: " (sarctl says it).
     Tare(sar_estimator::cycle::TareRefused),
     /// A guarded move asked for while the tip force already reaches its
     /// limit.
@@ -214,29 +215,9 @@ pub enum ReplyDetail {
         /// The move's limit, N.
         max_force_n: f64,
     },
-    /// An excitation's parameter out of range.
-    BadExcitation {
-        /// 1, 2 or 3 (q1, q2, q3); 0 for the duration and the fade.
-        axis: u8,
-        /// The parameter.
-        field: &'static str,
-        /// Its value.
-        value: f64,
-    },
-    /// An excitation's peak speed or acceleration above `[identify]`'s (or
-    /// above the drives' speed).
-    ExcitationAboveLimit {
-        /// 1, 2 or 3 (q1, q2, q3).
-        axis: u8,
-        /// The key, with its section.
-        key: &'static str,
-        /// The unit: m/s or m/s^2.
-        unit: &'static str,
-        /// The peak, m/s or m/s^2.
-        value: f64,
-        /// The key's value.
-        limit: f64,
-    },
+    /// An excitation refused by its parameters or limits
+    /// ([`crate::excite::judge`]).
+    Excitation(ExciteRefusal),
 }
 
 impl ReplyDetail {
@@ -338,7 +319,6 @@ impl core::fmt::Display for ReplyDetail {
                 Shown(*max_n),
                 Shown(*force_n)
             ),
-            // Without CommandRefused's own "tare refused: " (sarctl says it).
             Self::Tare(refusal) => write!(f, "{refusal}"),
             Self::NotInOk(state) => write!(
                 f,
@@ -352,37 +332,7 @@ impl core::fmt::Display for ReplyDetail {
                 "the tip force is already {force_n:.2} N, at or above the move's {} N",
                 Shown(*max_force_n)
             ),
-            Self::BadExcitation { axis, field, value } => write!(
-                f,
-                "the excitation's {field}{} = {} is out of range (amplitude >= 0, \
-                 frequency > 0, 0 < 2 fade <= duration <= {} s)",
-                AxisSuffix(*axis),
-                Shown(*value),
-                Shown(crate::excite::MAX_DURATION_S)
-            ),
-            Self::ExcitationAboveLimit {
-                axis,
-                key,
-                unit,
-                value,
-                limit,
-            } => write!(
-                f,
-                "the excitation of q{axis} peaks at {value:.4} {unit}, above {key} = {} {unit}",
-                Shown(*limit)
-            ),
-        }
-    }
-}
-
-/// " of qN" after a parameter's name (nothing for axis 0).
-struct AxisSuffix(u8);
-
-impl core::fmt::Display for AxisSuffix {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self.0 {
-            0 => Ok(()),
-            n => write!(f, " of q{n}"),
+            Self::Excitation(refusal) => write!(f, "{refusal}"),
         }
     }
 }
@@ -1293,12 +1243,10 @@ impl LoopStep {
         estimate: &CycleOutput,
         request: &ExciteRequest,
     ) -> Answer {
+        use ReplyStatus::Halted;
         let halted = estimate.guard_state.is_halting();
         let (Some(from), Some(now_ns), false) = (self.trajectory, input.now_ns, halted) else {
-            return (
-                ReplyStatus::Halted,
-                ReplyDetail::Reason(estimate.guard_reason),
-            );
+            return (Halted, ReplyDetail::Reason(estimate.guard_reason));
         };
         if estimate.guard_state != GuardState::Ok {
             return (
@@ -1324,17 +1272,9 @@ impl LoopStep {
             );
         }
         let centre_m = joints_array(&from.position(now_ns));
-        if let Err(detail) = crate::excite::judge(
-            request,
-            &centre_m,
-            &self.config.travel_m,
-            &self.config.excite,
-        ) {
-            let status = match detail {
-                ReplyDetail::OutsideTravel { .. } => ReplyStatus::Unreachable,
-                _ => ReplyStatus::BadArgument,
-            };
-            return (status, detail);
+        let c = &self.config;
+        if let Err(refusal) = crate::excite::judge(request, &centre_m, &c.travel_m, &c.excite) {
+            return excite_refused(refusal);
         }
         let excite = Excitation {
             request: *request,
@@ -1587,6 +1527,28 @@ fn back_out_tip(estimate: &CycleOutput, distance_m: f64) -> Result<Vec3, Answer>
         return Err((ReplyStatus::NoEstimate, ReplyDetail::NoEstimate));
     };
     Ok(pose.tip_m - pose.rod_dir * distance_m)
+}
+
+/// The answer to an excitation refused by [`crate::excite::judge`]: outside
+/// the travel as a move's, else a bad argument.
+fn excite_refused(refusal: ExciteRefusal) -> Answer {
+    match refusal {
+        ExciteRefusal::OutsideTravel {
+            axis,
+            value_m,
+            min_m,
+            max_m,
+        } => (
+            ReplyStatus::Unreachable,
+            ReplyDetail::OutsideTravel {
+                axis,
+                value_m,
+                min_m,
+                max_m,
+            },
+        ),
+        refusal => (ReplyStatus::BadArgument, ReplyDetail::Excitation(refusal)),
+    }
 }
 
 /// How the drives are released after an accepted reset, from their state.
