@@ -25,13 +25,19 @@
 //! - `[tip]`: `max_std_n`, the observability limit (2 N); `filter_cutoff_hz`,
 //!   the cutoff of the filtered tip force beside the estimate (5 Hz; 0 switches
 //!   it off), stepped once per sensor sample at `sample_rate_hz` (500, the
-//!   HEX-6's rate).
+//!   HEX-6's rate); `sensor_latency_s` (0.001; 0..=0.05), the sensor's
+//!   latency from measurement to the sample's stamp (the carriage's motion
+//!   is evaluated where the sample was measured, issue 26).
 //! - `[axes]`: `travel_m`, (min, max) of q1, q2, q3 ([[-0.3, 0.3], [0, 0.6], [0, 0.6]]),
 //!   `max_speed_mps` (0.02) and `max_accel_mps2` (0.2) for moves the daemon
 //!   plans, `following_tolerance_m` (0.001: an axis farther than this from
 //!   the commanded trajectory is a Fault), `servo_bandwidth_hz` (30) and
 //!   `servo_damping` (0.7): the drives' position loop, whose lag is part of
-//!   `[force_control]`'s stability check (FORCE_CONTROL.md).
+//!   `[force_control]`'s stability check (FORCE_CONTROL.md) and which the
+//!   loop models (issue 26, `sar_loop::motion`: the motion handed to the
+//!   estimator); `brake_decel_mps2`, a guarded move's brake (default: the
+//!   quick stop's; at least `max_accel_mps2`, at most `[drivers.axes]
+//!   quick_stop_decel_mps2`).
 //! - `[record]`: recording from the daemon's start (`sarctl record start|stop`
 //!   at any time): `enabled` (false), `directory` ("recordings", relative to
 //!   the working directory `sard` starts in; `sard` makes it absolute at
@@ -39,11 +45,12 @@
 //!   `max_file_s` (600; 0: no time rotation), `queue_capacity` (65536
 //!   messages, about 2.7 s of disk stall at 4 kHz; 1024..=16777216).
 //! - `[drivers.sensor]` and `[drivers.axes]`: `kind = "sim"` (default) or a real
-//!   device (`rdt`, `canopen`) with its keys (INTERFACES.md 2). `canopen`
+//!   device (`rdt`, `canopen`) with its keys (INTERFACES.md 2). Every kind
+//!   takes `quick_stop_decel_mps2` (2; at least `[axes] max_accel_mps2`, at
+//!   most 10), the deceleration of the drives' own quick stop (CiA 402
+//!   0x6085; `sard --sim` sets the simulated drives' from it). `canopen`
 //!   also takes the drives' own limits that no other key gives (beyond
-//!   INTERFACES.md): `quick_stop_decel_mps2` (1; at least `[axes]
-//!   max_accel_mps2`, at most 10), the deceleration of the drives' own quick
-//!   stop (CiA 402 0x6085), and `max_torque_permille` (1000; 1..=3000), their
+//!   INTERFACES.md): `max_torque_permille` (1000; 1..=3000), their
 //!   max torque (0x6072) in per mille of the motor's rated torque. The
 //!   drives' other limits come from `[axes]` and `[plausibility]` (see
 //!   `sar-daemon`'s `devices::canopen_config`).
@@ -428,6 +435,7 @@ struct TipToml {
     max_std_n: f64,
     filter_cutoff_hz: f64,
     sample_rate_hz: f64,
+    sensor_latency_s: f64,
 }
 
 impl Default for TipToml {
@@ -436,6 +444,7 @@ impl Default for TipToml {
             max_std_n: TipForceConfig::DEFAULT_MAX_STD_N,
             filter_cutoff_hz: 5.0,
             sample_rate_hz: 500.0,
+            sensor_latency_s: 0.001,
         }
     }
 }
@@ -451,6 +460,7 @@ struct AxesToml {
     retreat_speed_mps: f64,
     servo_bandwidth_hz: f64,
     servo_damping: f64,
+    brake_decel_mps2: Option<f64>,
 }
 
 impl Default for AxesToml {
@@ -463,6 +473,7 @@ impl Default for AxesToml {
             retreat_speed_mps: 0.005,
             servo_bandwidth_hz: scenario::DEFAULT_SERVO_BANDWIDTH_HZ,
             servo_damping: scenario::DEFAULT_SERVO_DAMPING,
+            brake_decel_mps2: None,
         }
     }
 }
@@ -514,6 +525,11 @@ pub struct AxesConfig {
     /// The speed of the moves in `Retreat` (only motions that reduce the
     /// tip force), m/s (> 0, at most `max_speed_mps`).
     pub retreat_speed_mps: f64,
+    /// The drives as the loop models them (issue 26): their position
+    /// loop (`servo_bandwidth_hz`, 0: ideal; `servo_damping`), their quick
+    /// stop (`[drivers.axes] quick_stop_decel_mps2`, every kind) and a
+    /// guarded move's brake (`brake_decel_mps2`).
+    pub motion: sar_loop::motion::MotionConfig,
 }
 
 /// The force/torque sensor's driver.
@@ -558,8 +574,9 @@ pub enum AxesDriver {
     },
 }
 
-/// Default of `[drivers.axes] quick_stop_decel_mps2`, m/s^2.
-pub const DEFAULT_QUICK_STOP_DECEL_MPS2: f64 = 1.0;
+/// Default of `[drivers.axes] quick_stop_decel_mps2`, m/s^2 (every kind).
+pub const DEFAULT_QUICK_STOP_DECEL_MPS2: f64 = 2.0;
+
 /// Default of `[drivers.axes] max_torque_permille`.
 pub const DEFAULT_MAX_TORQUE_PERMILLE: u16 = 1000;
 
@@ -862,7 +879,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let profile = manipulator(ctx, &f.manipulator)?;
     let noise = SensorNoise::new(vec3(f.sensor.noise_n))
         .map_err(|e| ctx.err("sensor.noise_n", e.to_string()))?;
-    let axes = axes(ctx, &f.axes, f.plausibility.max_joint_speed_mps)?;
+    let mut axes = axes(ctx, &f.axes, f.plausibility.max_joint_speed_mps)?;
     let guard = guard(ctx, &f.guard)?;
     let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
     let plausibility = plausibility(ctx, &f.plausibility, &f.sensor, &sensor_driver)?;
@@ -870,6 +887,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let loop_ = loop_config(ctx, &f.loop_)?;
     let mut record = record(ctx, &f.record)?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
+    axes.motion = drives_motion(ctx, &f, axes.max_accel_mps2)?;
     record.scales = DeviceScales::of_drivers(&sensor_driver, &axes_driver);
     let force_control = force_control(
         ctx,
@@ -1049,6 +1067,67 @@ fn axes(ctx: &Ctx<'_>, a: &AxesToml, max_joint_speed_mps: f64) -> Result<AxesCon
         max_accel_mps2: accel,
         following_tolerance_m,
         retreat_speed_mps,
+        // Set from `[drivers.axes]` too (drives_motion).
+        motion: sar_loop::motion::MotionConfig {
+            servo_bandwidth_hz: 0.0,
+            servo_damping: scenario::DEFAULT_SERVO_DAMPING,
+            quick_stop_decel_mps2: DEFAULT_QUICK_STOP_DECEL_MPS2,
+            brake_decel_mps2: DEFAULT_QUICK_STOP_DECEL_MPS2,
+            sensor_latency_ns: 0,
+        },
+    })
+}
+
+/// The drives as the loop models them (issue 26): `[axes]
+/// servo_bandwidth_hz` (0..=300 Hz; 0: ideal drives), `servo_damping`
+/// (0.1..=2), `[drivers.axes] quick_stop_decel_mps2` (any kind; at least
+/// `max_accel_mps2`, at most 10) and `[axes] brake_decel_mps2` (a guarded
+/// move's brake: default the quick stop's, at least `max_accel_mps2`, at
+/// most the quick stop's); `[tip] sensor_latency_s` (0..=0.05 s), where the
+/// motion is evaluated.
+fn drives_motion(
+    ctx: &Ctx<'_>,
+    f: &FileToml,
+    max_accel_mps2: f64,
+) -> Result<sar_loop::motion::MotionConfig, ConfigError> {
+    let (a, drivers) = (&f.axes, f.drivers.axes.as_ref());
+    let latency_s = ctx.range_f(
+        "tip.sensor_latency_s",
+        f.tip.sensor_latency_s,
+        0.0,
+        0.05,
+        "s",
+    )?;
+    let servo_bandwidth_hz = ctx.range_f(
+        "axes.servo_bandwidth_hz",
+        a.servo_bandwidth_hz,
+        0.0,
+        300.0,
+        "Hz",
+    )?;
+    let servo_damping = ctx.range_f("axes.servo_damping", a.servo_damping, 0.1, 2.0, "")?;
+    let quick_stop_decel_mps2 = ctx.range_f(
+        "drivers.axes.quick_stop_decel_mps2",
+        drivers
+            .and_then(|d| d.quick_stop_decel_mps2)
+            .unwrap_or(DEFAULT_QUICK_STOP_DECEL_MPS2),
+        max_accel_mps2,
+        10.0,
+        "m/s^2 (at least [axes] max_accel_mps2)",
+    )?;
+    let brake_decel_mps2 = ctx.range_f(
+        "axes.brake_decel_mps2",
+        a.brake_decel_mps2.unwrap_or(quick_stop_decel_mps2),
+        max_accel_mps2,
+        quick_stop_decel_mps2,
+        "m/s^2 (at least [axes] max_accel_mps2, at most [drivers.axes] quick_stop_decel_mps2)",
+    )?;
+    Ok(sar_loop::motion::MotionConfig {
+        servo_bandwidth_hz,
+        servo_damping,
+        quick_stop_decel_mps2,
+        brake_decel_mps2,
+        sensor_latency_ns: (latency_s * 1e9).round() as u64,
     })
 }
 
@@ -1324,6 +1403,7 @@ impl Config {
             period_ns: self.loop_.period_ns,
             publisher_stall_ns: self.loop_.publisher_stall_ns,
             force_control: self.force_control,
+            motion: self.axes.motion,
             excite: sar_loop::excite::ExciteLimits {
                 max_speed_mps: self.identify.excitation_max_speed_mps,
                 max_accel_mps2: self.identify.excitation_max_accel_mps2,
@@ -1535,8 +1615,15 @@ fn axes_driver(
         return Ok(AxesDriver::Sim);
     };
     match a.kind.as_str() {
-        "sim" => refuse_given(ctx, "drivers.axes", "the simulated axes", &a.canopen_keys())
-            .map(|()| AxesDriver::Sim),
+        "sim" => refuse_given(
+            ctx,
+            "drivers.axes",
+            "the simulated axes",
+            // The quick stop's deceleration is every drive's (drives_motion).
+            &a.canopen_keys()
+                .map(|(key, given)| (key, given && key != "quick_stop_decel_mps2")),
+        )
+        .map(|()| AxesDriver::Sim),
         "canopen" => canopen_axes(ctx, a, max_accel_mps2),
         other => Err(ctx.err(
             "drivers.axes.kind",

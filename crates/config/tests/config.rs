@@ -369,7 +369,12 @@ fn force_control_settings_are_checked_by_key() {
         "[axes] servo_bandwidth_hz and servo_damping",
     );
     let text = axes("servo_damping = 0.0");
-    expect(&text, "axes.servo_damping", Some("servo_damping"), "> 0");
+    expect(
+        &text,
+        "axes.servo_damping",
+        Some("servo_damping"),
+        "within 0.1..=2",
+    );
     let c = config::parse(&axes("servo_bandwidth_hz = 60.0"), "robot.toml").unwrap();
     assert_eq!(c.force_control.limits().servo_bandwidth_hz, 60.0);
 }
@@ -733,11 +738,45 @@ fn the_canopen_drives_own_limits_have_defaults_and_ranges() {
     assert!(matches!(
         c.axes_driver,
         AxesDriver::Canopen {
-            quick_stop_decel_mps2: 1.0,
+            quick_stop_decel_mps2: 2.0,
             max_torque_permille: 1000,
             ..
         }
     ));
+    // Issue 26: the loop's model of the drives takes the same quick stop;
+    // a guarded move brakes at it unless told otherwise.
+    assert_eq!(c.axes.motion.quick_stop_decel_mps2, 2.0);
+    assert_eq!(c.axes.motion.brake_decel_mps2, 2.0);
+    assert_eq!(c.axes.motion.servo_bandwidth_hz, 30.0);
+    assert_eq!(c.axes.motion.servo_damping, 0.7);
+    assert_eq!(c.axes.motion.sensor_latency_ns, 1_000_000);
+    // Every kind takes the quick stop (the simulated drives too).
+    let sim = "[drivers.axes]\nkind = \"sim\"\nquick_stop_decel_mps2 = 3.0\n";
+    let c = config::parse(&format!("{MINIMUM}\n{sim}"), "robot.toml").unwrap();
+    assert_eq!(c.axes.motion.quick_stop_decel_mps2, 3.0);
+    assert_eq!(c.axes.motion.brake_decel_mps2, 3.0);
+    assert_eq!(c.step_config().motion, c.axes.motion);
+    // The brake: between the planned acceleration and the quick stop.
+    for bad in ["0.1", "2.5"] {
+        let text = format!("{MINIMUM}\n[axes]\nbrake_decel_mps2 = {bad}\n");
+        expect(
+            &text,
+            "axes.brake_decel_mps2",
+            Some("brake_decel_mps2"),
+            "at most [drivers.axes] quick_stop_decel_mps2",
+        );
+    }
+    let text = format!("{MINIMUM}\n[axes]\nbrake_decel_mps2 = 1.0\nservo_bandwidth_hz = 0.0\n");
+    let c = config::parse(&text, "robot.toml").unwrap();
+    assert_eq!(c.axes.motion.brake_decel_mps2, 1.0);
+    assert_eq!(c.axes.motion.servo_bandwidth_hz, 0.0);
+    let text = format!("{MINIMUM}\n[axes]\nservo_damping = 0.0\n");
+    expect(
+        &text,
+        "axes.servo_damping",
+        Some("servo_damping"),
+        "0.1..=2",
+    );
     let text =
         format!("{MINIMUM}\n{canopen}quick_stop_decel_mps2 = 2.5\nmax_torque_permille = 800\n");
     let c = config::parse(&text, "robot.toml").unwrap();

@@ -3,7 +3,10 @@
 //! 1000 recorded cycles stepped from a cloned state, per batch. Beside them
 //! (issue 17): taking a snapshot of the step's whole decision state (what
 //! the recorder does on the loop at a recording's start and every
-//! `[record] snapshot_s`), and restoring one (what replay does).
+//! `[record] snapshot_s`), and restoring one (what replay does). Beside
+//! the push (issue 26): the same inputs through a step without the model of
+//! the drives' servo (`[axes] servo_bandwidth_hz = 0`), the baseline of the
+//! model's cost (ten samples of its loop per cycle).
 
 #![allow(
     clippy::unwrap_used,
@@ -33,6 +36,16 @@ const N: usize = 1000;
 /// the tip along the rod, 300 N/m), with a push of 3 N from cycle 1200 when
 /// `push`; the step's state after `warm` cycles and the `N` inputs after.
 fn recorded(push: bool, warm: usize) -> (LoopStep, Vec<LoopInput>) {
+    recorded_with(push, warm, |_| {})
+}
+
+/// [`recorded`], the step built from the built-in configuration changed by
+/// `edit` (the run recorded with the built-in one).
+fn recorded_with(
+    push: bool,
+    warm: usize,
+    edit: impl FnOnce(&mut config::Config),
+) -> (LoopStep, Vec<LoopInput>) {
     let cfg = config::builtin().unwrap();
     let mut scenario = sim::demo_scenario().unwrap();
     scenario.spec.contact = Vec::new();
@@ -62,7 +75,9 @@ fn recorded(push: bool, warm: usize) -> (LoopStep, Vec<LoopInput>) {
         while operator.replies.pop().is_some() {}
         inputs.push(*c.loop_input());
     }
-    let mut step = LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap();
+    let mut step_cfg = cfg.clone();
+    edit(&mut step_cfg);
+    let mut step = LoopStep::new(&step_cfg.estimator, bias, step_cfg.step_config()).unwrap();
     for input in &inputs[..warm] {
         step.step(input);
     }
@@ -73,11 +88,17 @@ fn recorded(push: bool, warm: usize) -> (LoopStep, Vec<LoopInput>) {
 fn per_cycle(c: &mut Criterion) {
     let mut g = c.benchmark_group("step");
     g.throughput(criterion::Throughput::Elements(N as u64));
-    for (name, push) in [
-        ("position (1000 cycles)", false),
-        ("push 3 N (1000 cycles)", true),
+    let no_model = |c: &mut config::Config| c.axes.motion.servo_bandwidth_hz = 0.0;
+    for (name, push, model) in [
+        ("position (1000 cycles)", false, true),
+        ("push 3 N (1000 cycles)", true, true),
+        ("push 3 N, no servo model (1000 cycles)", true, false),
     ] {
-        let (state, inputs) = recorded(push, 5000);
+        let (state, inputs) = if model {
+            recorded(push, 5000)
+        } else {
+            recorded_with(push, 5000, no_model)
+        };
         g.bench_function(name, |b| {
             b.iter_batched(
                 || state.clone(),

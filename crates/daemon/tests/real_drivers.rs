@@ -432,7 +432,8 @@ impl CanRig {
             can_config.following_window_m,
             2.0 * file.axes.following_tolerance_m
         );
-        assert_eq!(can_config.quick_stop_decel_mps2, 1.0);
+        assert_eq!(can_config.quick_stop_decel_mps2, 2.0);
+        assert_eq!(file.axes.motion.quick_stop_decel_mps2, 2.0);
         assert!(can_config.quick_stop_decel_mps2 >= file.axes.max_accel_mps2);
         assert_eq!(can_config.max_torque_permille, 1000);
         let limits = can_config.clone();
@@ -461,7 +462,7 @@ impl CanRig {
                 let (lo, hi) = d.position_limits_m();
                 let (t_lo, t_hi) = limits.travel_m[axis];
                 assert!(lo <= t_lo && hi >= t_hi && t_lo - lo < 1e-5 && hi - t_hi < 1e-5);
-                assert!((d.quick_stop_decel_mps2() - 1.0).abs() < 1e-5);
+                assert!((d.quick_stop_decel_mps2() - 2.0).abs() < 1e-5);
                 assert!((d.max_velocity_mps() - limits.drive_max_speed_mps).abs() < 1e-5);
             })
             .unwrap();

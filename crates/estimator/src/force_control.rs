@@ -162,7 +162,15 @@ impl ForceControlConfig {
                 "must be finite and >= 0",
             ));
         }
-        positive("servo_bandwidth_hz", limits.servo_bandwidth_hz)?;
+        // 0: ideal drives (no servo lag in the margin).
+        let bw = limits.servo_bandwidth_hz;
+        if !(bw.is_finite() && bw >= 0.0) {
+            return Err(invalid(
+                "servo_bandwidth_hz",
+                bw,
+                "must be finite and >= 0 (0: ideal drives)",
+            ));
+        }
         positive("servo_damping", limits.servo_damping)?;
         let pm = limits.min_phase_margin_deg;
         if !(pm.is_finite() && (0.0..90.0).contains(&pm)) {
@@ -210,6 +218,9 @@ impl ForceControlConfig {
     /// The axes' servo's low-frequency group delay `2 zeta / wn`, s (30 Hz,
     /// 0.7: 7.4 ms): the delay its phase amounts to well below `wn`.
     pub fn servo_delay_s(&self) -> f64 {
+        if self.limits.servo_bandwidth_hz == 0.0 {
+            return 0.0;
+        }
         2.0 * self.limits.servo_damping / (core::f64::consts::TAU * self.limits.servo_bandwidth_hz)
     }
 
@@ -217,6 +228,9 @@ impl ForceControlConfig {
     /// at `w` rad/s, radians: `atan2(2 zeta w / wn, 1 - (w / wn)^2)`
     /// (about `w 2 zeta / wn` well below `wn`; a little more above).
     pub fn servo_phase_lag_rad(&self, w: f64) -> f64 {
+        if self.limits.servo_bandwidth_hz == 0.0 {
+            return 0.0;
+        }
         let wn = core::f64::consts::TAU * self.limits.servo_bandwidth_hz;
         let x = w / wn;
         libm::atan2(2.0 * self.limits.servo_damping * x, 1.0 - x * x)

@@ -13,8 +13,16 @@
 //! (`centre +- A`: the fade never exceeds 1) within the travel. The fades'
 //! own peaks are checked every cycle ([`Excitation::within_limits`]): above
 //! the limits the excitation is braked.
+//!
+//! The estimator is handed its motion as any streamed motion's
+//! ([`crate::motion`]: the servo model follows the streamed set points);
+//! with ideal drives (no servo model) its analytic velocity and
+//! acceleration ([`Excitation::carriage_motion`]).
 
+use crate::motion::{ACCEL_STD_FLOOR_MPS2, ACCEL_STD_FRACTION};
 use sar_drivers::motion::AxisState;
+use sar_estimator::Vec3;
+use sar_estimator::motion::CarriageMotion;
 use sar_kinematics::Shown;
 
 /// Why an excitation is refused ([`judge`]); its `Display` is the reply's
@@ -211,6 +219,22 @@ impl Excitation {
             *accel = a_m * a;
         }
         (states, accel_mps2)
+    }
+
+    /// The carriage's motion at `t_ns` as commanded (A' = (q3', q2', q1')),
+    /// with the standard deviation of [`crate::motion`]'s known motions: for
+    /// ideal drives, which follow the streamed set points exactly.
+    pub fn carriage_motion(&self, t_ns: u64) -> CarriageMotion {
+        let ([q1, q2, q3], [a1, a2, a3]) = self.at(t_ns);
+        let accel_mps2 = Vec3::new(a3, a2, a1);
+        let velocity_mps = Vec3::new(q3.v_mps, q2.v_mps, q1.v_mps);
+        let moving = velocity_mps.norm() > 0.0 || accel_mps2.norm() > 0.0;
+        let floor = if moving { ACCEL_STD_FLOOR_MPS2 } else { 0.0 };
+        CarriageMotion {
+            velocity_mps,
+            accel_mps2,
+            accel_std_mps2: ACCEL_STD_FRACTION * accel_mps2.norm() + floor,
+        }
     }
 
     /// Whether the excitation at `t_ns` is within the limits (with

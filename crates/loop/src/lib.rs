@@ -9,6 +9,8 @@
 //! - [`reply`]: what the operator's queues carry (a request with its id,
 //!   the loop's reply).
 //! - [`logq`]: the bounded queue of log events the loop hands off.
+//! - [`motion`]: the carriage's commanded motion handed to the estimator
+//!   (the trajectory through a model of the drives' servo; their quick stop).
 //! - [`stats`]: the loop's timing statistics.
 //! - [`notify`]: the guard's transitions as operator notifications.
 //! - [`rt`]: real-time setup (SCHED_FIFO, mlockall), the monotonic clock,
@@ -21,6 +23,7 @@
 pub mod control;
 pub mod excite;
 pub mod logq;
+pub mod motion;
 pub mod notify;
 pub mod publish;
 pub mod reply;

@@ -37,6 +37,12 @@
 //!   retreat_speed_mps` and streamed to the drives one set point per period
 //!   ([`DriveAction::Stream`], cyclic synchronous position), so that they
 //!   move at that speed. The guard stops again if the force rises.
+//! - The carriage's motion (issue 26, [`crate::motion`]): each cycle the
+//!   estimator is handed the velocity and acceleration of the commanded
+//!   trajectory through a model of the drives' servo (the drives' own quick
+//!   stop during a halt), where the sensor sample was measured. A guarded
+//!   move brakes hard (`[axes] brake_decel_mps2`), streamed; the warn
+//!   rule's brake stays at the planned deceleration.
 //! - An excitation (issue 26, [`Request::Excite`], [`crate::excite`]):
 //!   accepted in Ok with the drives enabled and the axes at rest, within
 //!   `[identify]`'s limits and the travel; streamed one period ahead about
@@ -54,6 +60,7 @@
 //! Fixed-size state; no allocation, no panic.
 
 use crate::excite::{Excitation, ExciteLimits, ExciteRefusal, ExciteRequest};
+use crate::motion::{AxesMotion, MotionConfig, Told};
 use sar_drivers::DriveState;
 use sar_drivers::motion::{AxisPlan, AxisState, Limits};
 use sar_estimator::cycle::{
@@ -63,6 +70,7 @@ use sar_estimator::cycle::{
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::force_control::{ForceControlConfig, ForceController, ForceMode};
 use sar_estimator::guard::{ForceLimits, GuardState, Reason, reduces_force};
+use sar_estimator::motion::CarriageMotion;
 use sar_estimator::{SettingError, Vec3};
 use sar_kinematics::{ActiveJoints, Calibration, PoseError, Profile, Shown, inverse};
 
@@ -88,11 +96,12 @@ pub enum Request {
         distance_m: f64,
     },
     /// A guarded move (force control, issue 15): as `MoveTip`, but braked
-    /// (at the planned deceleration) in the cycle in which the magnitude of
-    /// the tip force (filtered when the filter is on) is anticipated to
-    /// reach `max_force_n`: the force plus its rise (its rate, low-passed)
-    /// over the filter's lag and the braking, once it is a quarter of the
-    /// limit; where and at what force is reported
+    /// (hard: at `[axes] brake_decel_mps2`, streamed; issue 26) in the cycle
+    /// in which the magnitude of the tip force (filtered when the filter is
+    /// on) is anticipated to reach `max_force_n`: the force plus its rise
+    /// (its rate, low-passed) over the filter's lag, the drives' lag and the
+    /// braking, once it is a quarter of the limit; where and at what force
+    /// is reported
     /// ([`LoopOutput::guarded_stop`]).
     GuardedMove {
         /// The wanted tip, base frame, m.
@@ -342,6 +351,10 @@ impl core::fmt::Display for ReplyDetail {
 /// period, well below any planned move).
 pub const REST_SPEED_MPS: f64 = 0.002;
 
+/// The guarded force's rate is low-passed over this fraction of the
+/// filter's lag.
+pub const RATE_LAG_FRACTION: f64 = 0.125;
+
 /// The longest back-out a single request may ask for, m.
 pub const MAX_BACK_OUT_M: f64 = 0.1;
 
@@ -458,6 +471,9 @@ pub struct LoopOutput {
     pub guarded_stop: Option<GuardedStop>,
     /// The force-control mode after this cycle (`None`: position control).
     pub force_mode: Option<ForceMode>,
+    /// The carriage's motion handed to the estimator in this cycle
+    /// ([`crate::motion`]).
+    pub motion: CarriageMotion,
 }
 
 /// The loop's settings beyond the estimator's.
@@ -478,6 +494,9 @@ pub struct StepConfig {
     pub publisher_stall_ns: u64,
     /// Force control's settings (`[force_control]`).
     pub force_control: ForceControlConfig,
+    /// The drives as the loop models them: their servo, quick stop, and a
+    /// guarded move's brake ([`crate::motion`]).
+    pub motion: MotionConfig,
     /// An excitation's limits (`[identify]`, issue 26).
     pub excite: ExciteLimits,
 }
@@ -593,6 +612,8 @@ pub struct LoopStep {
     sample_period_s: f64,
     /// Force control (its filter runs in every cycle; a mode when active).
     force: ForceController,
+    /// How the axes move: the servo model, the drives' quick stop.
+    motion: AxesMotion,
     out: LoopOutput,
     /// The fingerprint of the configuration parts, for snapshots (computed
     /// at construction: the configuration never changes after it).
@@ -614,6 +635,8 @@ struct Decision {
     /// An accepted move's replaced trajectory (restored when the move does
     /// not go to the drives in this cycle).
     undo_move: Option<Option<Trajectory>>,
+    /// The carriage's motion handed to the estimator.
+    motion: CarriageMotion,
 }
 
 /// Why a reset is held back from the estimator in this cycle.
@@ -688,7 +711,9 @@ impl StepConfig {
         if self.publisher_stall_ns == 0 {
             return Err(invalid("publisher_stall_ns", 0.0, "must be > 0"));
         }
-        Ok(())
+        self.motion
+            .check(l.max_accel_mps2)
+            .map_err(|(field, value, why)| invalid(field, value, why))
     }
 }
 
@@ -722,6 +747,7 @@ impl LoopOutput {
             limits: estimator.guard_config().force_limits(),
             guarded_stop: None,
             force_mode: None,
+            motion: CarriageMotion::REST,
         }
     }
 }
@@ -756,6 +782,7 @@ impl LoopStep {
             guarded_lag_s,
             sample_period_s,
             force: ForceController::new(config.force_control)?,
+            motion: AxesMotion::default(),
             out,
             snapshot_fingerprint: 0,
         };
@@ -791,10 +818,13 @@ impl LoopStep {
             cycle_input.command = None;
         }
         let host_fault = self.host_fault(input);
+        let motion = self.carriage_motion(input);
+        let plans_before = self.trajectory.map(|t| t.axes);
         // Judge: the estimator and its guard.
-        let estimate = *self
-            .estimator
-            .cycle_checked(&cycle_input, reference.as_ref(), host_fault);
+        let estimate =
+            *self
+                .estimator
+                .cycle_in_motion(&cycle_input, reference.as_ref(), host_fault, &motion);
         // Decide: the answer to the guard, then to the request, force
         // control's period, a brake.
         let mut d = Decision {
@@ -802,6 +832,7 @@ impl LoopStep {
             reply: held.map(|h| self.held_reply(h, input)),
             planned: false,
             undo_move: None,
+            motion,
         };
         self.command_outcome(input, &estimate, &mut d);
         self.observe_force(input, &estimate);
@@ -815,7 +846,51 @@ impl LoopStep {
         // Act: what the drives are told of the trajectory.
         self.motion_action(input, &estimate, &mut d);
         self.undo_move_not_carried_out(&mut d);
+        if let Some(now_ns) = input.now_ns {
+            let period_ns = self.config.period_ns;
+            let told = match d.action {
+                DriveAction::Stream(q) => Told::Streamed(joints_array(&q)),
+                DriveAction::None | DriveAction::FaultReset => Told::Nothing,
+                DriveAction::Setpoint(_) | DriveAction::QuickStop | DriveAction::Release(_) => {
+                    Told::Other
+                }
+            };
+            self.motion
+                .commanded(told, now_ns, plans_before.as_ref(), period_ns);
+        }
         self.finish(estimate, reference, d)
+    }
+
+    /// The carriage's motion where the sensor sample was measured (its
+    /// stamp less the sensor's latency), from the trajectory commanded so
+    /// far and the drives' quick stop ([`crate::motion`]).
+    fn carriage_motion(&mut self, input: &LoopInput) -> CarriageMotion {
+        if let Some(m) = self.excitation_motion(input) {
+            return m;
+        }
+        let plans = self.trajectory.as_ref().map(|t| &t.axes);
+        self.motion.motion(
+            &self.config.motion,
+            self.config.axis_limits.max_accel_mps2,
+            plans,
+            input.drive_state,
+            input
+                .sensor
+                .stamp_ns
+                .saturating_sub(self.config.motion.sensor_latency_ns),
+            self.speed_mps <= REST_SPEED_MPS,
+        )
+    }
+
+    /// An excitation's own motion for ideal drives (no servo model, which
+    /// otherwise follows its streamed set points), at the sensor sample's
+    /// instant; `None` otherwise.
+    fn excitation_motion(&self, input: &LoopInput) -> Option<CarriageMotion> {
+        let e = self.trajectory?.excite?;
+        let ideal = self.config.motion.servo_wn_rad_s() <= 0.0;
+        let enabled = input.drive_state == Some(DriveState::Enabled);
+        let stamp_ns = (input.sensor.stamp_ns).saturating_sub(self.config.motion.sensor_latency_ns);
+        (ideal && enabled && self.motion.halt.is_none()).then(|| e.carriage_motion(stamp_ns))
     }
 
     /// The trajectory at the joint sample's stamp, which the estimator
@@ -911,9 +986,13 @@ impl LoopStep {
         if !estimate.guard_state.is_halting() {
             return DriveAction::None;
         }
-        self.trajectory = None;
+        let plans = self.trajectory.take().map(|t| t.axes);
         let entered_halt = estimate.transition.is_some_and(|t| t.to.is_halting());
         if entered_halt || input.drive_state == Some(DriveState::Enabled) {
+            if let Some(now_ns) = input.now_ns {
+                self.motion
+                    .start_halt(&self.config.motion, plans.as_ref(), now_ns);
+            }
             DriveAction::QuickStop
         } else if held == Some(HeldReset::DrivesFaulted) {
             DriveAction::FaultReset
@@ -932,6 +1011,7 @@ impl LoopStep {
         d.reply = Some(command_reply(&ev.result));
         if matches!(ev.result, Ok(CommandAccepted::Reset)) {
             d.action = release(input.drive_state);
+            self.motion.restart();
             self.trajectory = match (input.now_ns, input.joints.valid) {
                 (Some(now_ns), true) => Some(Trajectory::hold(now_ns, &input.joints.joints)),
                 _ => None,
@@ -1037,10 +1117,12 @@ impl LoopStep {
                 let m = f.norm();
                 match self.guarded_last {
                     Some((c, last)) if c != counter => {
-                        // Low-passed over the filter's lag (a difference of
-                        // one sample is mostly noise).
+                        // Low-passed over an eighth of the filter's lag (a
+                        // difference of one sample is mostly noise; over the
+                        // whole lag, the rate comes too late on a stiff
+                        // tissue, whose force rises within that lag).
                         let dt_s = f64::from(counter.wrapping_sub(c)) * self.sample_period_s;
-                        let alpha = dt_s / (dt_s + self.guarded_lag_s);
+                        let alpha = dt_s / (dt_s + RATE_LAG_FRACTION * self.guarded_lag_s);
                         self.guarded_rate_n_per_s +=
                             alpha * ((m - last) / dt_s - self.guarded_rate_n_per_s);
                         self.guarded_last = Some((counter, m));
@@ -1071,13 +1153,13 @@ impl LoopStep {
         if now_ns >= t.end_ns {
             return false;
         }
-        let Some(force_n) = self
-            .guarded_limit_reached(&t, now_ns, estimate)
-            .or_else(|| pushes_along_warned_force(&t, &pose.tip_m, estimate))
+        let guarded = self.guarded_limit_reached(&t, now_ns, estimate);
+        let Some(force_n) =
+            guarded.or_else(|| pushes_along_warned_force(&t, &pose.tip_m, estimate))
         else {
             return false;
         };
-        self.brake(&t, now_ns);
+        self.brake(&t, now_ns, guarded.is_some());
         if let Some(max_force_n) = t.max_force_n {
             self.guarded_stop = Some(GuardedStop {
                 cycle: input.cycle,
@@ -1092,8 +1174,8 @@ impl LoopStep {
     /// A guarded move's force, when it is anticipated to reach the move's
     /// limit: the magnitude of the filtered tip force when the filter is on
     /// (the unfiltered one's noise would stop it early at random), plus its
-    /// rise over the filter's lag and the braking (at the planned
-    /// deceleration, v / 2a at the mean speed).
+    /// rise over the filter's lag, the drives' lag (`2 zeta / wn`) and the
+    /// braking (at `brake_decel_mps2`, v / 2a at the mean speed).
     fn guarded_limit_reached(
         &self,
         t: &Trajectory,
@@ -1106,8 +1188,9 @@ impl LoopStep {
             .at(now_ns)
             .iter()
             .fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
+        let drives = &self.config.motion;
         let horizon_s =
-            self.guarded_lag_s + speed_mps / (2.0 * self.config.axis_limits.max_accel_mps2);
+            self.guarded_lag_s + drives.servo_lag_s() + speed_mps / (2.0 * drives.brake_decel_mps2);
         // Anticipated once in contact (a quarter of the limit), so that the
         // rate's noise in free space brakes nothing.
         let m = force_n.norm();
@@ -1119,13 +1202,19 @@ impl LoopStep {
         (m + rise_n >= max_force_n).then_some(force_n)
     }
 
-    /// The one brake: the trajectory under way stopped at the planned
-    /// deceleration from where it is at `now_ns` (streamed if it was).
-    fn brake(&mut self, t: &Trajectory, now_ns: u64) {
-        let limits = self.config.axis_limits;
+    /// The one brake: the trajectory under way stopped from where it is at
+    /// `now_ns`: `hard` (a guarded move's force) at `[axes]
+    /// brake_decel_mps2`, streamed to the drives (their own planner runs the
+    /// planned acceleration); else (the warn rule) at the planned
+    /// deceleration, streamed if the move was.
+    fn brake(&mut self, t: &Trajectory, now_ns: u64, hard: bool) {
+        let mut limits = self.config.axis_limits;
+        if hard {
+            limits.max_accel_mps2 = self.config.motion.brake_decel_mps2;
+        }
         let axes = t.at(now_ns).map(|s| AxisPlan::brake(now_ns, s, limits));
         let mut braked = Trajectory::from_plans(now_ns, axes, None);
-        braked.streamed = t.streamed;
+        braked.streamed = t.streamed || hard;
         self.trajectory = Some(braked);
     }
 
@@ -1184,6 +1273,7 @@ impl LoopStep {
             limits: self.estimator.guard_config().force_limits(),
             guarded_stop: self.guarded_stop,
             force_mode: self.force.mode(),
+            motion: d.motion,
         };
         &self.out
     }
@@ -1308,7 +1398,7 @@ impl LoopStep {
         } else if estimate.guard_state == GuardState::Warn
             || !e.within_limits(now_ns, &self.config.excite)
         {
-            self.brake(&t, now_ns);
+            self.brake(&t, now_ns, false);
         }
     }
 
@@ -1643,6 +1733,7 @@ sar_snapshot::config_struct!(StepConfig {
     period_ns,
     publisher_stall_ns,
     force_control,
+    motion,
     excite,
 });
 sar_snapshot::snap_state!(LoopStep {
@@ -1654,6 +1745,7 @@ sar_snapshot::snap_state!(LoopStep {
         guarded_stop,
         guarded_last,
         guarded_rate_n_per_s,
+        motion,
     ],
     nested: [estimator, force],
     config: [calibration, profile, config, guarded_lag_s, sample_period_s],

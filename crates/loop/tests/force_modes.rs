@@ -18,6 +18,8 @@ mod drive_decel;
 mod force_figures;
 #[path = "force/force_properties.rs"]
 mod force_properties;
+#[path = "force/motion_figures.rs"]
+mod motion_figures;
 #[path = "force/rig.rs"]
 mod rig;
 #[path = "force/support_shift.rs"]
@@ -343,7 +345,10 @@ fn a_guarded_move_in_free_space_is_not_braked_by_the_noise() {
     .into_iter()
     .enumerate()
     {
-        let mut rig = Rig::with(Vec::new(), Vec::new());
+        // The static plant: the rod's phantom force while it accelerates
+        // (MODEL.md 10) is the estimator's compensation's to remove (issue
+        // 26), not this test's noise.
+        let mut rig = Rig::without_inertia(Vec::new(), Vec::new());
         let target = Vec3::new(TIP_M[0], TIP_M[1], TIP_M[2]) + step;
         let r = rig.request(
             1,

@@ -138,9 +138,12 @@ fn a_planned_move_follows_its_trajectory_and_arrives() {
         assert!((m - t).abs() < 2e-6, "ended at {end:?}, target {target:?}");
     }
     // The same profile on both sides: what is left is the encoder's
-    // quantisation and the sample's age (under 2 % of the 1 mm tolerance).
+    // quantisation and the sample's age (under 2 % of the 1 mm tolerance),
+    // and the servos' lag behind the profile (issue 26: the demo's axes are
+    // servos of 30 Hz, 0.7: 2 zeta / wn at the planned speed, 0.15 mm).
+    let lag_m = cfg.axes.motion.servo_lag_s() * cfg.axes.max_speed_mps;
     assert!(
-        worst_error_m < 0.02 * cfg.axes.following_tolerance_m,
+        worst_error_m < 0.02 * cfg.axes.following_tolerance_m + lag_m,
         "worst following error {worst_error_m} m"
     );
     // The speed limit of planned moves (0.02 m/s) with the encoder's

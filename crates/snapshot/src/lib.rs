@@ -54,8 +54,9 @@ pub const CAPACITY: usize = 4096;
 /// hashed the configuration's `Debug` text; 2: it hashes the fields'
 /// names and values explicitly ([`fingerprint`](mod@fingerprint)); 3: the
 /// estimator's tare over a mean at rest (its running mean and the last
-/// tare's time) is part of the snapshotted state.
-pub const VERSION: u16 = 3;
+/// tare's time) is part of the snapshotted state; 4: the loop's model of
+/// the axes' motion (issue 26: the servo model, the drives' quick stop).
+pub const VERSION: u16 = 4;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";
@@ -899,7 +900,7 @@ mod tests {
         let n = snap.as_bytes().len();
         let mut bytes = [0u8; CAPACITY];
         bytes[..n].copy_from_slice(snap.as_bytes());
-        assert_eq!(bytes[8..10], 3u16.to_le_bytes());
+        assert_eq!(bytes[8..10], VERSION.to_le_bytes());
         bytes[8..10].copy_from_slice(&1u16.to_le_bytes());
         let crc = crc32(&bytes[..n - 4]);
         bytes[n - 4..n].copy_from_slice(&crc.to_le_bytes());
@@ -909,7 +910,7 @@ mod tests {
             e,
             SnapshotError::Version {
                 got: 1,
-                expected: 3
+                expected: VERSION
             }
         );
         assert_eq!(dst.a.x, 5.0);
@@ -917,7 +918,7 @@ mod tests {
         fmt::write(&mut text, format_args!("{e}")).unwrap();
         assert_eq!(
             text.as_str(),
-            "snapshot format version 1; this build reads version 3"
+            "snapshot format version 1; this build reads version 4"
         );
     }
 

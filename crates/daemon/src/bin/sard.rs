@@ -360,11 +360,25 @@ fn chosen_devices(args: &Args, cfg: &config::Config) -> Result<RealDevices, Stri
 
 /// The scenario of the simulated parts, its drives running the configured
 /// profile as configured drives would (the loop's plan is then the
-/// trajectory they follow).
+/// trajectory they follow), and braking in their quick stop at the
+/// configured `[drivers.axes] quick_stop_decel_mps2` unless a scenario
+/// file sets its own (a drive that does not brake as configured).
 fn scenario(args: &Args, cfg: &config::Config) -> Result<config::scenario::Scenario, String> {
+    let quick_stop_mps2 = cfg.axes.motion.quick_stop_decel_mps2;
     let mut scenario = match &args.scenario {
-        Some(path) => config::scenario::load(path).map_err(|e| e.to_string())?,
-        None => sim::demo_scenario().map_err(|e| e.to_string())?,
+        Some(path) => {
+            let mut s = config::scenario::load(path).map_err(|e| e.to_string())?;
+            s.spec
+                .plant
+                .quick_stop_decel_mps2
+                .get_or_insert(quick_stop_mps2);
+            s
+        }
+        None => {
+            let mut s = sim::demo_scenario().map_err(|e| e.to_string())?;
+            s.spec.plant.quick_stop_decel_mps2 = Some(quick_stop_mps2);
+            s
+        }
     };
     scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
     scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;

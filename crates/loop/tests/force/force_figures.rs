@@ -39,7 +39,7 @@ const STIFFNESSES: [f64; 4] = [100.0, 300.0, 1000.0, 3000.0];
 /// compensates the inertia with the motion the loop commands (issue 26's
 /// comp26 and brake26; with both merged this becomes [`Plant::Moving`]).
 /// [`axial_regulation_at_3_n`] also runs [`Plant::Moving`] uncompensated.
-const PLANT: Plant = Plant::Servo;
+const PLANT: Plant = Plant::Moving;
 
 /// The demo robot on [`PLANT`], a tissue of stiffness `k` whose surface is
 /// `gap_m` ahead of the tip, breathing `breath_m`.
@@ -328,7 +328,10 @@ fn guarded_move_into_breathing_tissue() {
         // The filter's lag and the braking distance times the stiffness,
         // plus the breathing (FORCE_CONTROL.md); below the stop limit.
         assert!(move_n < 12.0, "k {k}: {move_n:.2} N");
-        assert!(move_n <= position.largest_n() + 1e-9, "k {k}");
+        // At 3000 N/m the breathing, not the move, sets both peaks (10.24 N
+        // each, to round-off): the guarded move is never worse than position
+        // mode by more than that.
+        assert!(move_n <= position.largest_n() + 0.01, "k {k}");
     }
 }
 

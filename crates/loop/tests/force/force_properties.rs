@@ -312,6 +312,9 @@ fn run(mode: Mode, force: Vec3, k_n_per_m: f64, ramp_ms: u64, hold_ms: u64, seed
                 }
             }
             (DriveAction::Setpoint(_), _) => under_way = None,
+            // A guarded move's hard brake (issue 26) is streamed: the move
+            // under way ends there too.
+            (DriveAction::Stream(_), _) => under_way = None,
             _ => {}
         }
         last_stream = match d.action {

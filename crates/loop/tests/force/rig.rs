@@ -147,6 +147,21 @@ impl Rig {
         rig
     }
 
+    /// [`Rig::with`] without the rod's inertia (the demo's servos kept),
+    /// for a test whose figure is not the motion's.
+    pub fn without_inertia(tissues: Vec<Tissue>, contact: Vec<ContactKey>) -> Self {
+        Self::with_scenario(tissues, contact, Plant::Demo, |s| s.plant.inertia = None)
+    }
+
+    /// [`Rig::new`] on the static plant of before issue 26 (no inertia,
+    /// ideal axes, a quick stop at the planned acceleration).
+    pub fn static_plant(k_n_per_m: f64, gap_m: f64, breath_m: f64) -> Self {
+        let tissues = vec![tissue(k_n_per_m, gap_m, breath_m, Vec::new())];
+        Self::with_scenario(tissues, Vec::new(), Plant::Demo, |s| {
+            s.plant = PlantSpec::default();
+        })
+    }
+
     /// The true F_tip, base frame, N.
     pub fn true_force_n(&self) -> Vec3 {
         self.sim.truth().unwrap().tip_force_n

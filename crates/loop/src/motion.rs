@@ -1,0 +1,622 @@
+//! The carriage's commanded motion (issue 26, MODEL.md 10): what the loop
+//! hands the estimator each cycle ([`CarriageMotion`]) so that the tip force
+//! is compensated for the rod's inertia. It follows from the loop's own
+//! state and the cycle's recorded inputs only, never from the encoders
+//! differentiated twice, so a recording replays to it bit for bit:
+//!
+//! - While a trajectory is commanded to enabled drives (planned moves,
+//!   streamed set points, holds), the drives' response to it: a model of
+//!   their position loop ([`ServoAxis`]: `x'' = wn^2 (r - x) - 2 zeta wn x'`,
+//!   the simulator's servo, sampled every [`MODEL_STEP_NS`] with the
+//!   acceleration held between samples) driven by the trajectory's
+//!   position; with `servo_bandwidth_hz = 0` (ideal drives) the trajectory
+//!   itself.
+//! - During a halt (Stop or Fault: the drives' own quick stop, the
+//!   trajectory dropped), each axis decelerates from its modelled velocity
+//!   at the halt at the drives' quick-stop deceleration until at rest
+//!   ([`AxesMotion::start_halt`]).
+//! - When the plan is unknown (the drives not enabled nor in the quick stop
+//!   the loop commanded, no trajectory): at rest, exactly when the encoders
+//!   say the axes are at rest (the step's `REST_SPEED_MPS`), else with
+//!   the standard deviation [`MotionConfig::unknown_accel_std_mps2`] (the
+//!   hardest the drives brake).
+//!
+//! The standard deviation of a known motion is [`ACCEL_STD_FRACTION`] of
+//! its acceleration plus, while the axes move, [`ACCEL_STD_FLOOR_MPS2`]
+//! (for real drives, which the model only approximates; against the
+//! simulated servo its residual is 0: README, "The robot in motion").
+//!
+//! Fixed-size state; no allocation, no panic.
+
+use sar_drivers::DriveState;
+use sar_drivers::motion::{AxisPlan, AxisState, Limits};
+use sar_estimator::Vec3;
+use sar_estimator::motion::CarriageMotion;
+
+/// The servo model's sampling step, ns (a drive's position loop at 10 kHz,
+/// the simulator's physics step).
+pub const MODEL_STEP_NS: u64 = 100_000;
+
+/// A gap longer than this between two evaluations (samples lost, the first
+/// cycle) restarts the model on the trajectory, ns.
+pub const MAX_MODEL_GAP_NS: u64 = 50_000_000;
+
+/// The standard deviation of a known acceleration: this fraction of it...
+pub const ACCEL_STD_FRACTION: f64 = 0.1;
+
+/// ... plus this while the axes move (0 at rest: a hold the drives have
+/// settled on), m/s^2.
+pub const ACCEL_STD_FLOOR_MPS2: f64 = 0.02;
+
+/// Below this speed and [`SETTLED_ACCEL_MPS2`] on every axis the modelled
+/// axes have settled (no floor in the standard deviation), m/s.
+pub const SETTLED_SPEED_MPS: f64 = 1e-6;
+
+/// See [`SETTLED_SPEED_MPS`], m/s^2.
+pub const SETTLED_ACCEL_MPS2: f64 = 1e-4;
+
+/// The drives as the loop models them (`[axes] servo_bandwidth_hz`,
+/// `servo_damping`, `brake_decel_mps2`, `[drivers.axes]
+/// quick_stop_decel_mps2`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionConfig {
+    /// The bandwidth of their position loop, Hz (finite, >= 0; 0: ideal
+    /// drives, no model).
+    pub servo_bandwidth_hz: f64,
+    /// Its damping ratio (finite, > 0).
+    pub servo_damping: f64,
+    /// Their own quick stop's deceleration (CiA 402 0x6085), m/s^2 (finite,
+    /// > 0).
+    pub quick_stop_decel_mps2: f64,
+    /// A guarded move's brake, streamed to the drives, m/s^2 (at least the
+    /// planned acceleration, at most the quick stop's).
+    pub brake_decel_mps2: f64,
+    /// The sensor's latency, from measurement to the sample's stamp, ns
+    /// (at most [`MAX_SENSOR_LATENCY_NS`]): the motion is evaluated where the
+    /// sample was measured, its stamp less this.
+    pub sensor_latency_ns: u64,
+}
+
+/// The longest sensor latency accepted, ns.
+pub const MAX_SENSOR_LATENCY_NS: u64 = 50_000_000;
+
+impl MotionConfig {
+    /// The position loop's natural frequency, rad/s (0 without a model).
+    pub fn servo_wn_rad_s(&self) -> f64 {
+        core::f64::consts::TAU * self.servo_bandwidth_hz
+    }
+
+    /// The drives' lag behind a ramp of their reference, `2 zeta / wn`, s
+    /// (0 without a model).
+    pub fn servo_lag_s(&self) -> f64 {
+        let wn = self.servo_wn_rad_s();
+        if wn > 0.0 {
+            2.0 * self.servo_damping / wn
+        } else {
+            0.0
+        }
+    }
+
+    /// The standard deviation of the acceleration when the plan is unknown
+    /// and the axes move: the hardest the drives are known to brake, m/s^2.
+    pub fn unknown_accel_std_mps2(&self, planned_accel_mps2: f64) -> f64 {
+        self.quick_stop_decel_mps2.max(planned_accel_mps2)
+    }
+
+    /// The settings checked (the first out of range is the error:
+    /// `(field, value, why)`), against the planned moves' acceleration.
+    pub fn check(&self, max_accel_mps2: f64) -> Result<(), (&'static str, f64, &'static str)> {
+        let bw = self.servo_bandwidth_hz;
+        if !(bw.is_finite() && bw >= 0.0) {
+            return Err(("servo_bandwidth_hz", bw, "must be finite and >= 0"));
+        }
+        let z = self.servo_damping;
+        if !(z.is_finite() && z > 0.0) {
+            return Err(("servo_damping", z, "must be finite and > 0"));
+        }
+        // Sampled at MODEL_STEP_NS, as the simulator checks its own.
+        if self.servo_wn_rad_s() * MODEL_STEP_NS as f64 * 1e-9 > 0.2 {
+            return Err((
+                "servo_bandwidth_hz",
+                bw,
+                "must be at most 0.2 / (2 pi 100 us) (the model's sampling)",
+            ));
+        }
+        let q = self.quick_stop_decel_mps2;
+        if !(q.is_finite() && q > 0.0) {
+            return Err(("quick_stop_decel_mps2", q, "must be finite and > 0"));
+        }
+        if self.sensor_latency_ns > MAX_SENSOR_LATENCY_NS {
+            return Err((
+                "sensor_latency_s",
+                self.sensor_latency_ns as f64 * 1e-9,
+                "must be at most 0.05 s",
+            ));
+        }
+        let b = self.brake_decel_mps2;
+        if !(b >= max_accel_mps2 && b <= q) {
+            return Err((
+                "brake_decel_mps2",
+                b,
+                "must be at least max_accel_mps2 and at most quick_stop_decel_mps2",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One axis of the servo model: position and velocity at its last sample
+/// and the acceleration it applies from there to the next.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoAxis {
+    /// m.
+    pub x_m: f64,
+    /// m/s.
+    pub v_mps: f64,
+    /// m/s^2.
+    pub a_mps2: f64,
+}
+
+impl ServoAxis {
+    /// A plan's state at `t_ns` (the drives exactly on it).
+    fn on(plan: &AxisPlan, t_ns: u64) -> Self {
+        let s = plan.at(t_ns);
+        Self {
+            x_m: s.x_m,
+            v_mps: s.v_mps,
+            a_mps2: plan.accel_at(t_ns),
+        }
+    }
+
+    /// Position and velocity `dt_ns` after its sample, the acceleration
+    /// held.
+    fn after(&self, dt_ns: u64) -> Self {
+        let dt = dt_ns as f64 * 1e-9;
+        Self {
+            x_m: self.x_m + self.v_mps * dt + 0.5 * self.a_mps2 * dt * dt,
+            v_mps: self.v_mps + self.a_mps2 * dt,
+            a_mps2: self.a_mps2,
+        }
+    }
+
+    /// Moves `dt_ns` on and samples the loop there against `reference_m`.
+    fn step(&mut self, dt_ns: u64, reference_m: f64, wn: f64, damping: f64) {
+        let now = self.after(dt_ns);
+        *self = Self {
+            a_mps2: wn * wn * (reference_m - now.x_m) - 2.0 * damping * wn * now.v_mps,
+            ..now
+        };
+    }
+}
+
+/// The servo model of the three axes at `t_ns` (on the model's grid).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoModel {
+    /// The last sample, ns.
+    pub t_ns: u64,
+    /// q1, q2, q3.
+    pub axes: [ServoAxis; 3],
+}
+
+/// The drives' own quick stop since a halt.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Halt {
+    /// When it was commanded, ns: a sample measured at that instant or
+    /// before saw the axes as they were ([`Halt::before`]).
+    pub start_ns: u64,
+    /// The axes then, as modelled.
+    pub before: [ServoAxis; 3],
+    /// Each axis's braking ramp from there.
+    pub ramps: [AxisPlan; 3],
+}
+
+/// How many streamed set points the drives' reference is kept over.
+pub const STREAMED: usize = 4;
+
+/// The last set points streamed to the drives (cyclic synchronous
+/// position): their reference moves from one to the next at constant speed
+/// over a period (as the simulator's drives do), not in a staircase.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Streamed {
+    /// When each was streamed, ns, oldest first (`len` used).
+    pub at_ns: [u64; STREAMED],
+    /// Each set point, q1, q2, q3, m.
+    pub q_m: [[f64; 3]; STREAMED],
+    /// How many are kept (0: none: the drives run their own planner).
+    pub len: u8,
+    /// The reference when the oldest was streamed, m.
+    pub from_m: [f64; 3],
+    /// The loop's period, ns (the set points' spacing).
+    pub period_ns: u64,
+}
+
+impl Streamed {
+    /// The drives' reference at `t_ns` (`None` without streamed set points).
+    fn reference(&self, t_ns: u64) -> Option<[f64; 3]> {
+        let n = usize::from(self.len).min(STREAMED);
+        if n == 0 {
+            return None;
+        }
+        let Some(i) = self.at_ns.iter().take(n).rposition(|&at| at <= t_ns) else {
+            return Some(self.from_m);
+        };
+        let prev = match i.checked_sub(1) {
+            Some(p) => self.q_m.get(p).copied().unwrap_or(self.from_m),
+            None => self.from_m,
+        };
+        let to = self.q_m.get(i).copied().unwrap_or(prev);
+        let at = self.at_ns.get(i).copied().unwrap_or(t_ns);
+        let frac = ((t_ns - at) as f64 / self.period_ns.max(1) as f64).min(1.0);
+        let [p1, p2, p3] = prev;
+        let [t1, t2, t3] = to;
+        Some([
+            p1 + (t1 - p1) * frac,
+            p2 + (t2 - p2) * frac,
+            p3 + (t3 - p3) * frac,
+        ])
+    }
+
+    /// A set point streamed at `at_ns`; `before_m`: the drives' reference
+    /// then when none was streamed before.
+    fn push(&mut self, at_ns: u64, q_m: [f64; 3], before_m: [f64; 3], period_ns: u64) {
+        let n = usize::from(self.len).min(STREAMED);
+        if n == 0 {
+            self.from_m = before_m;
+        }
+        if n == STREAMED {
+            self.from_m = self.q_m.first().copied().unwrap_or(before_m);
+            self.at_ns.rotate_left(1);
+            self.q_m.rotate_left(1);
+        }
+        let last = n.min(STREAMED - 1);
+        if let (Some(at), Some(q)) = (self.at_ns.get_mut(last), self.q_m.get_mut(last)) {
+            *at = at_ns;
+            *q = q_m;
+        }
+        self.len = u8::try_from(last + 1).unwrap_or(0);
+        self.period_ns = period_ns;
+    }
+}
+
+/// What the drives were told in a cycle, as the servo model needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Told {
+    /// A streamed set point, q1, q2, q3, m.
+    Streamed([f64; 3]),
+    /// Nothing about their motion (or a fault reset).
+    Nothing,
+    /// Their own planner's end point, a quick stop or a release.
+    Other,
+}
+
+/// The loop's knowledge of how the axes move (see the module doc).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AxesMotion {
+    /// The servo model (`None`: restarted on the trajectory when next
+    /// evaluated).
+    pub servo: Option<ServoModel>,
+    /// The drives' own quick stop since a halt.
+    pub halt: Option<Halt>,
+    /// The set points streamed to the drives (the servo's reference then).
+    pub streamed: Streamed,
+}
+
+/// How the axes move at an instant: q1, q2, q3.
+type Axes = [ServoAxis; 3];
+
+impl AxesMotion {
+    /// The servo model advanced along `plans` to `t_ns` and evaluated there
+    /// (the plans themselves without a model).
+    fn follow(&mut self, cfg: &MotionConfig, plans: &[AxisPlan; 3], t_ns: u64) -> Axes {
+        let wn = cfg.servo_wn_rad_s();
+        let on_plans = plans.map(|p| ServoAxis::on(&p, t_ns));
+        if wn <= 0.0 {
+            self.servo = None;
+            return on_plans;
+        }
+        let mut model = match self.servo {
+            Some(m) if t_ns >= m.t_ns && t_ns - m.t_ns <= MAX_MODEL_GAP_NS => m,
+            _ => ServoModel {
+                t_ns,
+                axes: on_plans,
+            },
+        };
+        while t_ns - model.t_ns >= MODEL_STEP_NS {
+            model.t_ns += MODEL_STEP_NS;
+            let reference = self
+                .streamed
+                .reference(model.t_ns)
+                .unwrap_or_else(|| plans.map(|p| p.at(model.t_ns).x_m));
+            for (axis, r) in model.axes.iter_mut().zip(reference) {
+                axis.step(MODEL_STEP_NS, r, wn, cfg.servo_damping);
+            }
+        }
+        self.servo = Some(model);
+        model.axes.map(|a| a.after(t_ns - model.t_ns))
+    }
+
+    /// The carriage's motion at `stamp_ns` (the sensor sample's): along the
+    /// commanded `plans` while the drives are enabled, on the halt's ramps
+    /// during the drives' quick stop, else unknown (at rest when the axes
+    /// are: `at_rest`, from the encoders).
+    pub fn motion(
+        &mut self,
+        cfg: &MotionConfig,
+        planned_accel_mps2: f64,
+        plans: Option<&[AxisPlan; 3]>,
+        drive_state: Option<DriveState>,
+        stamp_ns: u64,
+        at_rest: bool,
+    ) -> CarriageMotion {
+        let axes = match (self.halt, plans, drive_state) {
+            (Some(h), _, Some(DriveState::QuickStop | DriveState::Enabled)) => {
+                if stamp_ns <= h.start_ns {
+                    h.before
+                } else {
+                    h.ramps.map(|p| ServoAxis::on(&p, stamp_ns))
+                }
+            }
+            (None, Some(plans), Some(DriveState::Enabled)) => self.follow(cfg, plans, stamp_ns),
+            _ => {
+                self.servo = None;
+                let std = if at_rest {
+                    0.0
+                } else {
+                    cfg.unknown_accel_std_mps2(planned_accel_mps2)
+                };
+                return CarriageMotion {
+                    accel_std_mps2: std,
+                    ..CarriageMotion::REST
+                };
+            }
+        };
+        carriage(&axes)
+    }
+
+    /// The drives' quick stop commanded at `now_ns` (once per halt): each
+    /// axis brakes from its modelled state then (the trajectory `plans`
+    /// advanced to `now_ns`; at rest without one) at `decel_mps2`.
+    pub fn start_halt(&mut self, cfg: &MotionConfig, plans: Option<&[AxisPlan; 3]>, now_ns: u64) {
+        if self.halt.is_some() {
+            return;
+        }
+        let axes = match plans {
+            Some(plans) => self.follow(cfg, plans, now_ns),
+            None => {
+                [ServoAxis {
+                    x_m: 0.0,
+                    v_mps: 0.0,
+                    a_mps2: 0.0,
+                }; 3]
+            }
+        };
+        let limits = Limits {
+            max_speed_mps: f64::MAX,
+            max_accel_mps2: cfg.quick_stop_decel_mps2,
+        };
+        self.halt = Some(Halt {
+            start_ns: now_ns,
+            before: axes,
+            ramps: axes.map(|a| {
+                let state = AxisState {
+                    x_m: a.x_m,
+                    v_mps: a.v_mps,
+                };
+                AxisPlan::brake(now_ns, state, limits)
+            }),
+        });
+        self.servo = None;
+    }
+
+    /// What the drives were told at `now_ns`: a streamed set point
+    /// (`Told::Streamed`) is their reference's next goal (`plans`: the
+    /// trajectory before it, the reference when none was streamed before);
+    /// their own planner, a quick stop or a release (`Told::Other`) ends the
+    /// streaming.
+    pub fn commanded(
+        &mut self,
+        told: Told,
+        now_ns: u64,
+        plans: Option<&[AxisPlan; 3]>,
+        period_ns: u64,
+    ) {
+        match told {
+            Told::Streamed(set_m) => {
+                let before = self
+                    .streamed
+                    .reference(now_ns)
+                    .or_else(|| plans.map(|p| p.map(|a| a.at(now_ns).x_m)))
+                    .unwrap_or(set_m);
+                self.streamed.push(now_ns, set_m, before, period_ns);
+            }
+            Told::Nothing => {}
+            Told::Other => self.streamed = Streamed::default(),
+        }
+    }
+
+    /// The drives released (or the plan replaced from where the axes were
+    /// measured): the halt is over, the model restarts on the next plan.
+    pub fn restart(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// The axes' motion as the carriage's, base frame (A' = (q3', q2', q1')),
+/// with its standard deviation.
+fn carriage(axes: &Axes) -> CarriageMotion {
+    let [q1, q2, q3] = axes;
+    let accel_mps2 = Vec3::new(q3.a_mps2, q2.a_mps2, q1.a_mps2);
+    let moving = axes
+        .iter()
+        .any(|a| a.v_mps.abs() > SETTLED_SPEED_MPS || a.a_mps2.abs() > SETTLED_ACCEL_MPS2);
+    let floor = if moving { ACCEL_STD_FLOOR_MPS2 } else { 0.0 };
+    CarriageMotion {
+        velocity_mps: Vec3::new(q3.v_mps, q2.v_mps, q1.v_mps),
+        accel_mps2,
+        accel_std_mps2: ACCEL_STD_FRACTION * accel_mps2.norm() + floor,
+    }
+}
+
+sar_snapshot::snap_struct!(ServoAxis { x_m, v_mps, a_mps2 });
+sar_snapshot::snap_struct!(ServoModel { t_ns, axes });
+sar_snapshot::snap_struct!(Halt {
+    start_ns,
+    before,
+    ramps
+});
+sar_snapshot::snap_struct!(Streamed {
+    at_ns,
+    q_m,
+    len,
+    from_m,
+    period_ns
+});
+sar_snapshot::snap_struct!(AxesMotion {
+    servo,
+    halt,
+    streamed
+});
+sar_snapshot::config_struct!(MotionConfig {
+    servo_bandwidth_hz,
+    servo_damping,
+    quick_stop_decel_mps2,
+    brake_decel_mps2,
+    sensor_latency_ns,
+});
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::*;
+
+    const CFG: MotionConfig = MotionConfig {
+        servo_bandwidth_hz: 30.0,
+        servo_damping: 0.7,
+        quick_stop_decel_mps2: 2.0,
+        brake_decel_mps2: 2.0,
+        sensor_latency_ns: 1_000_000,
+    };
+
+    fn cruise(v_mps: f64) -> [AxisPlan; 3] {
+        let limits = Limits {
+            max_speed_mps: v_mps,
+            max_accel_mps2: 0.2,
+        };
+        let rest = AxisState {
+            x_m: 0.1,
+            v_mps: 0.0,
+        };
+        [
+            AxisPlan::to_target(0, rest, 0.5, limits),
+            AxisPlan::hold(0, 0.2),
+            AxisPlan::hold(0, 0.3),
+        ]
+    }
+
+    /// A ramp of the reference: the model lags it by 2 zeta / wn and
+    /// reaches its speed; the carriage's A' is (q3', q2', q1').
+    #[test]
+    fn the_model_lags_a_ramp_by_two_zeta_over_wn() {
+        let plans = cruise(0.02);
+        let mut m = AxesMotion::default();
+        let mut last = CarriageMotion::REST;
+        for k in 0..=1000u64 {
+            last = m.motion(
+                &CFG,
+                0.2,
+                Some(&plans),
+                Some(DriveState::Enabled),
+                k * 1_000_000,
+                true,
+            );
+        }
+        assert!((last.velocity_mps.z - 0.02).abs() < 1e-9, "{last:?}");
+        assert_eq!(last.velocity_mps.x, 0.0);
+        let model_x = m.servo.unwrap().axes[0].x_m;
+        let lag_m = plans[0].at(1_000_000_000).x_m - model_x;
+        assert!(
+            (lag_m / (CFG.servo_lag_s() * 0.02) - 1.0).abs() < 0.02,
+            "{lag_m}"
+        );
+        // Cruising, settled on the ramp: the floor, as the axes move.
+        assert!((last.accel_std_mps2 - ACCEL_STD_FLOOR_MPS2).abs() < 1e-3);
+    }
+
+    /// The drives' quick stop: each axis brakes from its modelled speed
+    /// at the configured deceleration until at rest; the plan unknown
+    /// when the drives are in neither state the loop commanded.
+    #[test]
+    fn a_halt_brakes_at_the_quick_stop_and_an_unknown_plan_says_so() {
+        let plans = cruise(0.02);
+        let mut m = AxesMotion::default();
+        for k in 0..=1000u64 {
+            m.motion(
+                &CFG,
+                0.2,
+                Some(&plans),
+                Some(DriveState::Enabled),
+                k * 1_000_000,
+                true,
+            );
+        }
+        m.start_halt(&CFG, Some(&plans), 1_000_000_000);
+        // A sample measured when the quick stop was commanded saw the axes
+        // cruising (the drives act on it after that instant).
+        let qs = Some(DriveState::QuickStop);
+        let before = m.motion(&CFG, 0.2, None, qs, 1_000_000_000, false);
+        assert!(before.accel_mps2.z.abs() < 1e-3, "{before:?}");
+        assert!((before.velocity_mps.z - 0.02).abs() < 1e-6);
+        let braking = m.motion(&CFG, 0.2, None, qs, 1_005_000_000, false);
+        assert_eq!(braking.accel_mps2.z, -2.0);
+        assert!((braking.velocity_mps.z - (0.02 - 2.0 * 0.005)).abs() < 1e-6);
+        let rest = m.motion(
+            &CFG,
+            0.2,
+            None,
+            Some(DriveState::QuickStop),
+            1_020_000_000,
+            true,
+        );
+        assert_eq!(rest, CarriageMotion::REST);
+        // A second quick stop (the drives reported Enabled) keeps the ramp.
+        let ramp = m.halt;
+        m.start_halt(&CFG, None, 1_010_000_000);
+        assert_eq!(m.halt, ramp);
+        // Faulted drives: unknown; at rest by the encoders, exactly.
+        let fault = Some(DriveState::Fault {
+            axis: None,
+            code: 1,
+        });
+        let unknown = m.motion(&CFG, 0.2, None, fault, 1_021_000_000, false);
+        assert_eq!(unknown.accel_mps2, Vec3::zeros());
+        assert_eq!(unknown.accel_std_mps2, 2.0);
+        assert_eq!(
+            m.motion(&CFG, 0.2, None, fault, 1_022_000_000, true),
+            CarriageMotion::REST
+        );
+        m.restart();
+        assert_eq!(m, AxesMotion::default());
+    }
+
+    #[test]
+    fn the_settings_are_checked() {
+        assert_eq!(CFG.check(0.2), Ok(()));
+        let bad = |f: fn(&mut MotionConfig)| {
+            let mut c = CFG;
+            f(&mut c);
+            c.check(0.2).unwrap_err().0
+        };
+        assert_eq!(bad(|c| c.brake_decel_mps2 = 3.0), "brake_decel_mps2");
+        assert_eq!(bad(|c| c.brake_decel_mps2 = 0.1), "brake_decel_mps2");
+        assert_eq!(bad(|c| c.servo_bandwidth_hz = 400.0), "servo_bandwidth_hz");
+        assert_eq!(bad(|c| c.servo_damping = 0.0), "servo_damping");
+        assert_eq!(
+            bad(|c| c.quick_stop_decel_mps2 = f64::NAN),
+            "quick_stop_decel_mps2"
+        );
+        assert_eq!(
+            bad(|c| c.sensor_latency_ns = 60_000_000),
+            "sensor_latency_s"
+        );
+    }
+}
