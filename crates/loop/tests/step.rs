@@ -334,8 +334,10 @@ fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
     assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
     let mut worst_error_m: f64 = 0.0;
     let mut span_m = [0.0f64; 3];
+    let mut peak_accel_mps2: f64 = 0.0;
     for k in 0..3100 {
         let d = rig.step();
+        peak_accel_mps2 = peak_accel_mps2.max(d.motion.accel_mps2.norm());
         assert_eq!(d.estimate.guard_state, GuardState::Ok, "{:?}", d.estimate);
         if k < 2990 {
             assert!(matches!(d.action, DriveAction::Stream(_)), "{:?}", d.action);
@@ -355,6 +357,18 @@ fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
             assert!(matches!(r.detail, ReplyDetail::AxesMoving { .. }));
         }
     }
+    // The estimator is handed the excitation's motion (the servo model
+    // following its set points): its peak near the largest axis's A w^2.
+    let planned_mps2 = request
+        .amplitude_m
+        .iter()
+        .zip(request.freq_hz)
+        .map(|(a, f)| a * (std::f64::consts::TAU * f).powi(2))
+        .fold(0.0, f64::max);
+    assert!(
+        peak_accel_mps2 > 0.8 * planned_mps2 && peak_accel_mps2 < 1.6 * planned_mps2,
+        "motion's peak {peak_accel_mps2} m/s^2, the plan's {planned_mps2}"
+    );
     for (s, a) in span_m.iter().zip(request.amplitude_m) {
         assert!(*s > 0.8 * a && *s < 1.05 * a, "span {span_m:?}");
     }
@@ -387,7 +401,7 @@ fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
         assert_eq!(d.estimate.guard_state, GuardState::Ok, "{:?}", d.estimate);
     }
     println!(
-        "excitation: worst following error {:.1} um, spans {span_m:?} m",
+        "excitation: worst following error {:.1} um, spans {span_m:?} m, motion's peak {peak_accel_mps2:.3} m/s^2 (plan {planned_mps2:.3})",
         worst_error_m * 1e6
     );
     rig.replays_bit_for_bit();
