@@ -209,16 +209,15 @@ fn identify_dynamic_live_identifies_the_rods_inertia() {
     let prefix = format!("sar-iddyn-{}", std::process::id());
     let dir = std::env::temp_dir().join(&prefix);
     std::fs::create_dir_all(&dir).unwrap();
-    let i_true = 2.593 * 0.35 * 0.35 / 12.0;
-    let scenario = scenario()
-        .replace(
-            "com_m = 0.103\n",
-            &format!("com_m = 0.103\ninertia_perp_kgm2 = {i_true}\n"),
-        )
-        .replace(
-            "max_accel_mps2 = 0.2\n",
-            "max_accel_mps2 = 0.2\nservo_bandwidth_hz = 30.0\nservo_damping = 0.7\nservo_max_accel_mps2 = 5.0\n",
-        );
+    // The demo's rod: I_perp = m L^2 / 12, rounded.
+    let i_true = 0.02647;
+    // The demo's axes have their servos (30 Hz, 0.7), its rod its inertia.
+    let scenario = scenario();
+    assert!(scenario.contains("servo_bandwidth_hz = 30.0"), "{scenario}");
+    assert!(
+        scenario.contains("inertia_perp_kgm2 = 0.02647\n"),
+        "{scenario}"
+    );
     let scenario_path = dir.join("scenario.toml");
     std::fs::write(&scenario_path, scenario).unwrap();
     let config_path = dir.join("robot.toml");
