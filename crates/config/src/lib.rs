@@ -1404,6 +1404,11 @@ impl Config {
             publisher_stall_ns: self.loop_.publisher_stall_ns,
             force_control: self.force_control,
             motion: self.axes.motion,
+            excite: sar_loop::excite::ExciteLimits {
+                max_speed_mps: self.identify.excitation_max_speed_mps,
+                max_accel_mps2: self.identify.excitation_max_accel_mps2,
+                axes_max_speed_mps: self.axes.max_speed_mps,
+            },
         }
     }
 }

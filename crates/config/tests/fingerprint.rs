@@ -11,7 +11,7 @@ use sar_estimator::cycle::Bias;
 use sar_loop::step::LoopStep;
 
 /// The fingerprint of the built-in configuration's loop step.
-const DEFAULT_FINGERPRINT: u64 = 0x4976_3085_0e18_4737;
+const DEFAULT_FINGERPRINT: u64 = 0xe1b6_d84e_046a_0e8f;
 
 fn step_of(cfg: &sar_config::Config, bias: Bias) -> LoopStep {
     LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap()
@@ -60,7 +60,7 @@ fn every_part_of_the_configuration_changes_it() {
     let cfg = sar_config::builtin().unwrap();
     let base = fingerprint_of(&cfg);
     type Edit = fn(&mut sar_config::Config);
-    let edits: [(&str, Edit); 9] = [
+    let edits: [(&str, Edit); 10] = [
         ("axes.following_tolerance_m", |c| {
             c.axes.following_tolerance_m *= 2.0;
         }),
@@ -96,6 +96,9 @@ fn every_part_of_the_configuration_changes_it() {
         }),
         ("the adapter's mass", |c| {
             c.estimator.inertia.adapter_mass_kg = 0.1;
+        }),
+        ("the excitation's speed limit", |c| {
+            c.identify.excitation_max_speed_mps *= 0.5;
         }),
     ];
     for (what, edit) in edits {

@@ -3,6 +3,7 @@
 //! edges and nothing of files, configuration or transport.
 //!
 //! - [`step`]: the pure step, a function of the cycle's recorded inputs.
+//! - [`excite`]: the dynamic identification's excitation, run by the step.
 //! - [`control`]: the controller: gathers a cycle's inputs from the drivers,
 //!   runs the step, carries out its outputs.
 //! - [`reply`]: what the operator's queues carry (a request with its id,
@@ -20,6 +21,7 @@
 //! - [`runloop`]: the fixed-rate loop itself.
 
 pub mod control;
+pub mod excite;
 pub mod logq;
 pub mod motion;
 pub mod notify;

@@ -324,6 +324,10 @@ fn request_text(r: &crate::step::Request) -> String {
         Request::Hold { max_force_n } => format!("force control: hold below {max_force_n} N"),
         Request::Push { axial_n } => format!("force control: push {axial_n} N along the rod"),
         Request::Position => "position control".to_owned(),
+        Request::Excite(e) => format!(
+            "excitation of {} s (fades {} s): amplitudes {:?} m at {:?} Hz",
+            e.duration_s, e.fade_s, e.amplitude_m, e.freq_hz
+        ),
     }
 }
 

@@ -184,9 +184,30 @@ pub fn request_of(c: &CommandMsg) -> Option<Request> {
                 axial_n: c.limits_n[0],
             }),
             command_kind::POSITION => Some(Request::Position),
+            command_kind::EXCITE => Some(Request::Excite(excite_of(c.tip_m, c.limits_n))),
             _ => None,
         }
     }
+}
+
+/// An excitation's request from its fields on the wire and in a recording
+/// (`tip_m` / `move_tip_m`: the amplitudes; `limits_n`: the frequencies,
+/// the duration, the fade).
+pub fn excite_of(amplitude_m: [f64; 3], limits_n: [f64; 6]) -> crate::excite::ExciteRequest {
+    let [f1, f2, f3, duration_s, fade_s, _] = limits_n;
+    crate::excite::ExciteRequest {
+        amplitude_m,
+        freq_hz: [f1, f2, f3],
+        duration_s,
+        fade_s,
+    }
+}
+
+/// An excitation's request as its wire and recording fields (the inverse
+/// of [`excite_of`]).
+pub fn excite_fields(e: &crate::excite::ExciteRequest) -> ([f64; 3], [f64; 6]) {
+    let [f1, f2, f3] = e.freq_hz;
+    (e.amplitude_m, [f1, f2, f3, e.duration_s, e.fade_s, 0.0])
 }
 
 /// The reply as published, with the guard's limits.

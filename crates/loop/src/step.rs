@@ -47,6 +47,12 @@
 //!   stop during a halt), where the sensor sample was measured. A guarded
 //!   move brakes hard (`[axes] brake_decel_mps2`), streamed; the warn
 //!   rule's brake stays at the planned deceleration.
+//! - An excitation (issue 26, [`Request::Excite`], [`crate::excite`]):
+//!   accepted in Ok with the drives enabled and the axes at rest, within
+//!   `[identify]`'s limits and the travel; streamed one period ahead about
+//!   where the axes rest. A Warn, a Stop or a new move ends it (braked from
+//!   its position and velocity, or quick-stopped); so does a commanded
+//!   speed or acceleration above the limits.
 //! - A host fault: the publishing thread (the operator's commands and the
 //!   published state) without progress for longer than the configured
 //!   stall time is a Fault ([`Reason::PublisherStalled`]), from the
@@ -57,6 +63,7 @@
 //!
 //! Fixed-size state; no allocation, no panic.
 
+use crate::excite::{Excitation, ExciteLimits, ExciteRefusal, ExciteRequest};
 use crate::motion::{AxesMotion, MotionConfig, Told};
 use sar_drivers::DriveState;
 use sar_drivers::motion::{AxisPlan, AxisState, Limits};
@@ -120,6 +127,9 @@ pub enum Request {
     },
     /// End force control: hold the tip where it is (position control).
     Position,
+    /// The dynamic identification's excitation about where the axes rest
+    /// (issue 26, [`crate::excite`]).
+    Excite(ExciteRequest),
 }
 
 /// Where a guarded move stopped, and why.
@@ -207,7 +217,8 @@ pub enum ReplyDetail {
     /// A force-control mode asked for outside Ok.
     NotInOk(GuardState),
     /// A tare refused by its mean at rest or its rate limit (not at rest
-    /// long enough, not steady, too soon after the last).
+    /// long enough, not steady, too soon after the last). Shown without
+    /// CommandRefused's own "tare refused: " (sarctl says it).
     Tare(sar_estimator::cycle::TareRefused),
     /// A guarded move asked for while the tip force already reaches its
     /// limit.
@@ -217,6 +228,9 @@ pub enum ReplyDetail {
         /// The move's limit, N.
         max_force_n: f64,
     },
+    /// An excitation refused by its parameters or limits
+    /// ([`crate::excite::judge`]).
+    Excitation(ExciteRefusal),
 }
 
 impl ReplyDetail {
@@ -318,7 +332,6 @@ impl core::fmt::Display for ReplyDetail {
                 Shown(*max_n),
                 Shown(*force_n)
             ),
-            // Without CommandRefused's own "tare refused: " (sarctl says it).
             Self::Tare(refusal) => write!(f, "{refusal}"),
             Self::NotInOk(state) => write!(
                 f,
@@ -332,6 +345,7 @@ impl core::fmt::Display for ReplyDetail {
                 "the tip force is already {force_n:.2} N, at or above the move's {} N",
                 Shown(*max_force_n)
             ),
+            Self::Excitation(refusal) => write!(f, "{refusal}"),
         }
     }
 }
@@ -399,7 +413,8 @@ impl LoopInput {
                     | Request::GuardedMove { .. }
                     | Request::Hold { .. }
                     | Request::Push { .. }
-                    | Request::Position,
+                    | Request::Position
+                    | Request::Excite(_),
                 )
                 | None => None,
             },
@@ -487,6 +502,8 @@ pub struct StepConfig {
     /// The drives as the loop models them: their servo, quick stop, and a
     /// guarded move's brake ([`crate::motion`]).
     pub motion: MotionConfig,
+    /// An excitation's limits (`[identify]`, issue 26).
+    pub excite: ExciteLimits,
 }
 
 /// Why a [`StepConfig`] cannot be used.
@@ -521,6 +538,9 @@ struct Trajectory {
     /// A guarded move's force limit, N (braked when the force is
     /// anticipated to reach it).
     max_force_n: Option<f64>,
+    /// An excitation under way: then it is the trajectory (`axes` hold
+    /// its centre).
+    excite: Option<Excitation>,
 }
 
 impl Trajectory {
@@ -531,11 +551,15 @@ impl Trajectory {
             end_ns: now_ns,
             streamed: false,
             max_force_n: None,
+            excite: None,
         }
     }
 
     fn at(&self, t_ns: u64) -> [AxisState; 3] {
-        self.axes.map(|p| p.at(t_ns))
+        match &self.excite {
+            Some(e) => e.at(t_ns).0,
+            None => self.axes.map(|p| p.at(t_ns)),
+        }
     }
 
     fn position(&self, t_ns: u64) -> ActiveJoints {
@@ -557,6 +581,7 @@ impl Trajectory {
             end_ns,
             streamed: false,
             max_force_n: None,
+            excite: None,
         }
     }
 }
@@ -822,6 +847,7 @@ impl LoopStep {
         }
         self.update_guarded_rate(input, &estimate);
         d.planned |= self.brake_if_due(input, &estimate);
+        self.end_excitation_if_due(input, &estimate);
         // Act: what the drives are told of the trajectory.
         self.motion_action(input, &estimate, &mut d);
         self.undo_move_not_carried_out(&mut d);
@@ -844,6 +870,9 @@ impl LoopStep {
     /// stamp less the sensor's latency), from the trajectory commanded so
     /// far and the drives' quick stop ([`crate::motion`]).
     fn carriage_motion(&mut self, input: &LoopInput) -> CarriageMotion {
+        if let Some(m) = self.excitation_motion(input) {
+            return m;
+        }
         let plans = self.trajectory.as_ref().map(|t| &t.axes);
         self.motion.motion(
             &self.config.motion,
@@ -856,6 +885,17 @@ impl LoopStep {
                 .saturating_sub(self.config.motion.sensor_latency_ns),
             self.speed_mps <= REST_SPEED_MPS,
         )
+    }
+
+    /// An excitation's own motion for ideal drives (no servo model, which
+    /// otherwise follows its streamed set points), at the sensor sample's
+    /// instant; `None` otherwise.
+    fn excitation_motion(&self, input: &LoopInput) -> Option<CarriageMotion> {
+        let e = self.trajectory?.excite?;
+        let ideal = self.config.motion.servo_wn_rad_s() <= 0.0;
+        let enabled = input.drive_state == Some(DriveState::Enabled);
+        let stamp_ns = (input.sensor.stamp_ns).saturating_sub(self.config.motion.sensor_latency_ns);
+        (ideal && enabled && self.motion.halt.is_none()).then(|| e.carriage_motion(stamp_ns))
     }
 
     /// The trajectory at the joint sample's stamp, which the estimator
@@ -1029,6 +1069,15 @@ impl LoopStep {
             Some(Request::Position) => {
                 self.end_force(input.now_ns);
                 d.reply = Some((ReplyStatus::Accepted, ReplyDetail::None));
+                return;
+            }
+            Some(Request::Excite(r)) => {
+                let before = self.trajectory;
+                let answer = self.start_excitation(input, estimate, &r);
+                if answer.0 == ReplyStatus::Accepted {
+                    d.undo_move = Some(before);
+                }
+                d.reply = Some(answer);
                 return;
             }
             Some(Request::MoveTip { tip_m }) => MoveTarget::Tip(tip_m, None),
@@ -1295,6 +1344,84 @@ impl LoopStep {
         (ReplyStatus::Accepted, ReplyDetail::None)
     }
 
+    /// Starts an excitation ([`crate::excite`]): Ok only, the drives
+    /// enabled, the axes at rest; within `[identify]`'s limits and the
+    /// travel about where they rest. It ends force control.
+    fn start_excitation(
+        &mut self,
+        input: &LoopInput,
+        estimate: &CycleOutput,
+        request: &ExciteRequest,
+    ) -> Answer {
+        use ReplyStatus::Halted;
+        let halted = estimate.guard_state.is_halting();
+        let (Some(from), Some(now_ns), false) = (self.trajectory, input.now_ns, halted) else {
+            return (Halted, ReplyDetail::Reason(estimate.guard_reason));
+        };
+        if estimate.guard_state != GuardState::Ok {
+            return (
+                ReplyStatus::NotOk,
+                ReplyDetail::NotInOk(estimate.guard_state),
+            );
+        }
+        if input.drive_state != Some(DriveState::Enabled) {
+            return (
+                ReplyStatus::DrivesRefused,
+                ReplyDetail::DrivesNotEnabled(input.drive_state),
+            );
+        }
+        let planned_mps = from
+            .at(now_ns)
+            .iter()
+            .fold(0.0, |m: f64, s| m.max(s.v_mps.abs()));
+        let speed_mps = self.speed_mps.max(planned_mps);
+        if speed_mps > REST_SPEED_MPS || planned_mps > 0.0 {
+            return (
+                ReplyStatus::AxesMoving,
+                ReplyDetail::AxesMoving { speed_mps },
+            );
+        }
+        let centre_m = joints_array(&from.position(now_ns));
+        let c = &self.config;
+        if let Err(refusal) = crate::excite::judge(request, &centre_m, &c.travel_m, &c.excite) {
+            return excite_refused(refusal);
+        }
+        let excite = Excitation {
+            request: *request,
+            centre_m,
+            start_ns: now_ns,
+        };
+        let mut t = Trajectory::hold(now_ns, &from.position(now_ns));
+        t.end_ns = excite.end_ns();
+        t.streamed = true;
+        t.excite = Some(excite);
+        self.trajectory = Some(t);
+        self.force.stop();
+        (ReplyStatus::Accepted, ReplyDetail::None)
+    }
+
+    /// An excitation under way is braked (from its position and velocity,
+    /// at the planned deceleration) under a Warn or when its commanded
+    /// speed or acceleration is above the limits; at its end it becomes a
+    /// hold at its centre.
+    fn end_excitation_if_due(&mut self, input: &LoopInput, estimate: &CycleOutput) {
+        let (Some(t), Some(now_ns)) = (self.trajectory, input.now_ns) else {
+            return;
+        };
+        let Some(e) = t.excite else {
+            return;
+        };
+        if now_ns >= t.end_ns {
+            let mut hold = Trajectory::hold(now_ns, &t.position(now_ns));
+            (hold.streamed, hold.end_ns) = (true, t.end_ns);
+            self.trajectory = Some(hold);
+        } else if estimate.guard_state == GuardState::Warn
+            || !e.within_limits(now_ns, &self.config.excite)
+        {
+            self.brake(&t, now_ns, false);
+        }
+    }
+
     /// Ends force control, holding the last set point.
     fn end_force(&mut self, now_ns: Option<u64>) {
         if self.force.mode().is_none() {
@@ -1512,6 +1639,28 @@ fn back_out_tip(estimate: &CycleOutput, distance_m: f64) -> Result<Vec3, Answer>
     Ok(pose.tip_m - pose.rod_dir * distance_m)
 }
 
+/// The answer to an excitation refused by [`crate::excite::judge`]: outside
+/// the travel as a move's, else a bad argument.
+fn excite_refused(refusal: ExciteRefusal) -> Answer {
+    match refusal {
+        ExciteRefusal::OutsideTravel {
+            axis,
+            value_m,
+            min_m,
+            max_m,
+        } => (
+            ReplyStatus::Unreachable,
+            ReplyDetail::OutsideTravel {
+                axis,
+                value_m,
+                min_m,
+                max_m,
+            },
+        ),
+        refusal => (ReplyStatus::BadArgument, ReplyDetail::Excitation(refusal)),
+    }
+}
+
 /// How the drives are released after an accepted reset, from their state.
 fn release(drive_state: Option<DriveState>) -> DriveAction {
     match drive_state {
@@ -1593,6 +1742,7 @@ sar_snapshot::snap_struct!(Trajectory {
     end_ns,
     streamed,
     max_force_n,
+    excite,
 });
 // The configuration fingerprint (names and values, never `Debug`).
 sar_snapshot::config_struct!(StepConfig {
@@ -1604,6 +1754,7 @@ sar_snapshot::config_struct!(StepConfig {
     publisher_stall_ns,
     force_control,
     motion,
+    excite,
 });
 sar_snapshot::snap_state!(LoopStep {
     state: [

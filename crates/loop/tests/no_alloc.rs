@@ -69,6 +69,7 @@ fn a_cycle_allocates_nothing() {
     let mut seen_push = false;
     let mut seen_hold = false;
     let mut seen_back = false;
+    let mut seen_excite = false;
     for i in 0..17_000u64 {
         if i % 1000 == 10 {
             let request = match (i / 1000) % 5 {
@@ -95,6 +96,14 @@ fn a_cycle_allocates_nothing() {
             400 => Some(Request::Hold { max_force_n: 5.0 }),
             700 => Some(Request::Position),
             1500 => Some(Request::Push { axial_n: 2.0 }),
+            // The dynamic identification's excitation (issue 26), at rest
+            // after the hold, ended before the contact.
+            750 => Some(Request::Excite(sar_loop::excite::ExciteRequest {
+                amplitude_m: [0.0003; 3],
+                freq_hz: [3.0, 3.5, 2.5],
+                duration_s: 0.15,
+                fade_s: 0.06,
+            })),
             _ => None,
         };
         if let Some(request) = request {
@@ -103,6 +112,9 @@ fn a_cycle_allocates_nothing() {
         let out = step(&mut c);
         seen_hold |= matches!(c.decision().force_mode, Some(ForceMode::Hold { .. }));
         seen_back |= i > 700 && i < 1000 && c.decision().force_mode.is_none();
+        seen_excite |= i > 760
+            && i < 880
+            && matches!(c.decision().action, sar_loop::step::DriveAction::Stream(_));
         if i % 500 == 0 || c.decision().force_mode.is_some() && i % 50 == 0 {
             c.loop_step().snapshot(&mut snapshot).unwrap();
             snapshots += 1;
@@ -114,6 +126,7 @@ fn a_cycle_allocates_nothing() {
     let after = process_allocations();
     assert!(seen_warn && seen_stop, "warn {seen_warn} stop {seen_stop}");
     assert!(seen_push, "force control never ran");
+    assert!(seen_excite, "the excitation never ran");
     assert!(
         seen_hold && seen_back,
         "hold {seen_hold}, position {seen_back}"

@@ -298,3 +298,111 @@ fn a_move_into_a_warning_force_is_braked_and_a_run_replays_bit_for_bit() {
     assert!(rig.log.len() > 3000);
     rig.replays_bit_for_bit();
 }
+
+/// An excitation (issue 26, `Request::Excite`): accepted at rest, streamed
+/// one period ahead about where the axes rest (the axes follow it within a
+/// small fraction of the tolerance, they move by about its amplitude, it
+/// ends at rest at its centre); refused above `[identify]`'s limits and
+/// while the axes move, each with its exact detail; a new move ends one
+/// under way from its position and velocity. The run replays bit for bit.
+#[test]
+fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
+    use sar_loop::excite::ExciteRequest;
+    use sar_loop::step::ReplyDetail;
+    let cfg = config::builtin().unwrap();
+    let mut rig = Rig::new(quiet(), None);
+    let centre = rig.joints();
+    // Peaks 0.012, 0.016, 0.009 m/s (below the drives' 0.02 m/s).
+    let request = ExciteRequest {
+        amplitude_m: [0.0015, 0.0015, 0.003],
+        freq_hz: [1.3, 1.7, 0.5],
+        duration_s: 3.0,
+        fade_s: 1.0,
+    };
+    // 1 cm at 1.3 Hz: 0.082 m/s, above the 0.04 m/s of [identify].
+    let too_fast = ExciteRequest {
+        amplitude_m: [0.01, 0.0, 0.0],
+        ..request
+    };
+    let r = rig.0.request(1, Request::Excite(too_fast));
+    assert_eq!(r.status, ReplyStatus::BadArgument);
+    assert_eq!(
+        r.detail.to_string(),
+        "the excitation of q1 peaks at 0.0817 m/s, above [identify] excitation_max_speed_mps = 0.04 m/s"
+    );
+    let r = rig.0.request(2, Request::Excite(request));
+    assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+    let mut worst_error_m: f64 = 0.0;
+    let mut span_m = [0.0f64; 3];
+    let mut peak_accel_mps2: f64 = 0.0;
+    for k in 0..3100 {
+        let d = rig.step();
+        peak_accel_mps2 = peak_accel_mps2.max(d.motion.accel_mps2.norm());
+        assert_eq!(d.estimate.guard_state, GuardState::Ok, "{:?}", d.estimate);
+        if k < 2990 {
+            assert!(matches!(d.action, DriveAction::Stream(_)), "{:?}", d.action);
+        }
+        let q = rig.joints();
+        let r = d.reference.unwrap();
+        for (m, c) in q.iter().zip([r.q1_m, r.q2_m, r.q3_m]) {
+            worst_error_m = worst_error_m.max((m - c).abs());
+        }
+        for ((s, a), c) in span_m.iter_mut().zip(q).zip(centre) {
+            *s = s.max((a - c).abs());
+        }
+        if k == 500 {
+            // Moving: a second excitation is refused.
+            let r = rig.0.request(3, Request::Excite(request));
+            assert_eq!(r.status, ReplyStatus::AxesMoving);
+            assert!(matches!(r.detail, ReplyDetail::AxesMoving { .. }));
+        }
+    }
+    // The estimator is handed the excitation's motion (the servo model
+    // following its set points): its peak near the largest axis's A w^2.
+    let planned_mps2 = request
+        .amplitude_m
+        .iter()
+        .zip(request.freq_hz)
+        .map(|(a, f)| a * (std::f64::consts::TAU * f).powi(2))
+        .fold(0.0, f64::max);
+    assert!(
+        peak_accel_mps2 > 0.8 * planned_mps2 && peak_accel_mps2 < 1.6 * planned_mps2,
+        "motion's peak {peak_accel_mps2} m/s^2, the plan's {planned_mps2}"
+    );
+    for (s, a) in span_m.iter().zip(request.amplitude_m) {
+        assert!(*s > 0.8 * a && *s < 1.05 * a, "span {span_m:?}");
+    }
+    for (m, c) in rig.joints().iter().zip(centre) {
+        assert!(
+            (m - c).abs() < 2e-6,
+            "ended at {:?}, centre {centre:?}",
+            rig.joints()
+        );
+    }
+    assert!(
+        worst_error_m < 0.3 * cfg.axes.following_tolerance_m,
+        "worst following error {worst_error_m} m"
+    );
+    // A move during an excitation ends it, from where it is and how fast.
+    assert_eq!(
+        rig.request(4, Request::Excite(request)),
+        ReplyStatus::Accepted
+    );
+    for _ in 0..1500 {
+        rig.step();
+    }
+    let tip = rig.c.output().pose.unwrap().tip_m;
+    assert_eq!(
+        rig.request(5, Request::MoveTip { tip_m: tip }),
+        ReplyStatus::Accepted
+    );
+    for _ in 0..1500 {
+        let d = rig.step();
+        assert_eq!(d.estimate.guard_state, GuardState::Ok, "{:?}", d.estimate);
+    }
+    println!(
+        "excitation: worst following error {:.1} um, spans {span_m:?} m, motion's peak {peak_accel_mps2:.3} m/s^2 (plan {planned_mps2:.3})",
+        worst_error_m * 1e6
+    );
+    rig.replays_bit_for_bit();
+}

@@ -637,6 +637,10 @@ code_enum!(
         Push = 14,
         /// End force control: position control again.
         Position = 15,
+        /// The dynamic identification's excitation about where the axes
+        /// rest (`move_tip_m`: each axis's amplitude, m; `limits_n`: each
+        /// axis's frequency, Hz, then the duration and the fade, s).
+        Excite = 16,
     }
 );
 

@@ -296,6 +296,11 @@ pub mod command_kind {
     pub const PUSH: u32 = CommandKindCode::Push as u32;
     /// End force control (`sarctl position`).
     pub const POSITION: u32 = CommandKindCode::Position as u32;
+    /// The dynamic identification's excitation about where the axes rest
+    /// (`sarctl identify --dynamic --live`): `tip_m` is each axis's
+    /// amplitude (q1, q2, q3), m; `limits_n` each axis's frequency, Hz,
+    /// then the duration and the fade, s.
+    pub const EXCITE: u32 = CommandKindCode::Excite as u32;
 
     /// Read the guard's limits (answered without the loop; not recorded).
     pub const LIMITS: u32 = 128;

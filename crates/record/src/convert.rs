@@ -333,6 +333,10 @@ fn record_request(m: &mut CycleInputMsg, request: Option<Request>, cycle: u64) {
             m.command_values[0] = axial_n;
         }
         Some(Request::Position) => m.command_kind = CommandKindCode::Position,
+        Some(Request::Excite(e)) => {
+            m.command_kind = CommandKindCode::Excite;
+            (m.move_tip_m, m.limits_n) = sar_loop::publish::excite_fields(&e);
+        }
     }
 }
 
@@ -383,6 +387,10 @@ pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
             axial_n: m.command_values[0],
         }),
         CommandKindCode::Position => Some(Request::Position),
+        CommandKindCode::Excite => Some(Request::Excite(sar_loop::publish::excite_of(
+            m.move_tip_m,
+            m.limits_n,
+        ))),
         _ => None,
     };
     LoopInput {

@@ -48,18 +48,19 @@ pub struct IdentifyArgs {
     /// condition number and the accuracy it promises, and move nothing.
     #[arg(long, requires = "dynamic", conflicts_with_all = ["input", "live"])]
     pub plan: bool,
-    /// With --dynamic --plan: the excitation's centre, joints Q1,Q2,Q3, m
-    /// (default: the U-joint 0.2 m behind the support along X0).
+    /// With --dynamic --plan or --live: the excitation's centre, joints
+    /// Q1,Q2,Q3, m (default: the U-joint 0.2 m behind the support along X0).
     #[arg(
         long,
         value_name = "Q1,Q2,Q3",
         value_delimiter = ',',
-        requires = "plan",
+        requires = "dynamic",
         allow_hyphen_values = true
     )]
     pub centre_m: Option<Vec<f64>>,
-    /// With --dynamic --plan: the sensor's sample rate, Hz.
-    #[arg(long, default_value_t = 500.0, value_name = "HZ", requires = "plan")]
+    /// With --dynamic --plan or --live: the sensor's sample rate, Hz (for
+    /// the plan's expected accuracy).
+    #[arg(long, default_value_t = 500.0, value_name = "HZ", requires = "dynamic")]
     pub sensor_rate_hz: f64,
     /// Do not estimate the support's friction (assume a frictionless support).
     #[arg(long)]
@@ -178,7 +179,7 @@ pub fn run(
     let config =
         sar_config::parse(&text, &config_path.display().to_string()).map_err(|e| e.to_string())?;
     if args.dynamic {
-        return run_dynamic(config_path, &text, &config, json, args);
+        return run_dynamic(config_path, &text, &config, json, (prefix, args));
     }
     let options = args.options()?;
     let result = match &args.input {
@@ -238,15 +239,22 @@ fn run_dynamic(
     text: &str,
     config: &sar_config::Config,
     json: bool,
-    args: &IdentifyArgs,
+    (prefix, args): (&str, &IdentifyArgs),
 ) -> Result<(), String> {
     if args.plan {
         return print_plan(config, json, args);
     }
     let options = args.dynamic_options()?;
-    let Some(input) = &args.input else {
-        return Err("identify --dynamic --live is not available yet (the daemon cannot stream the excitation): record an excitation (sines per axis, the tip free; identify --dynamic --plan prints one) and run identify --dynamic --input REC.mcap".into());
+    let input = match &args.input {
+        Some(input) => input.clone(),
+        None => super::identify_excite::record_excitation(
+            config,
+            prefix,
+            centre_of(config, args)?,
+            args,
+        )?,
     };
+    let input = &input;
     let result = identify::dynamic::identify_file(input, config, &options)
         .map_err(|e| format!("{}: {e}", input.display()))?;
     if let Some(path) = &args.plot {
@@ -272,16 +280,7 @@ fn run_dynamic(
 
 /// `sarctl identify --dynamic --plan`: the excitation and its promise.
 fn print_plan(config: &sar_config::Config, json: bool, args: &IdentifyArgs) -> Result<(), String> {
-    let centre_m = match args.centre_m.as_deref() {
-        None => excitation::default_centre_m(&config.estimator.calibration),
-        Some(&[q1, q2, q3]) => [q1, q2, q3],
-        Some(other) => {
-            return Err(format!(
-                "--centre-m needs 3 values Q1,Q2,Q3, got {}",
-                other.len()
-            ));
-        }
-    };
+    let centre_m = centre_of(config, args)?;
     let plan = excitation::Plan::new(config, centre_m, args.sensor_rate_hz)?;
     if json {
         println!("{}", plan.to_json());
@@ -289,6 +288,18 @@ fn print_plan(config: &sar_config::Config, json: bool, args: &IdentifyArgs) -> R
         println!("{}", plan.to_text());
     }
     Ok(())
+}
+
+/// The excitation's centre: `--centre-m`, else the default.
+fn centre_of(config: &sar_config::Config, args: &IdentifyArgs) -> Result<[f64; 3], String> {
+    match args.centre_m.as_deref() {
+        None => Ok(excitation::default_centre_m(&config.estimator.calibration)),
+        Some(&[q1, q2, q3]) => Ok([q1, q2, q3]),
+        Some(other) => Err(format!(
+            "--centre-m needs 3 values Q1,Q2,Q3, got {}",
+            other.len()
+        )),
+    }
 }
 
 /// The live procedure against a running daemon.

@@ -6,6 +6,7 @@
 pub mod completions;
 pub mod export;
 pub mod identify;
+pub mod identify_excite;
 pub mod limits;
 pub mod monitor;
 pub mod record;

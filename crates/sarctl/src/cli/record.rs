@@ -35,6 +35,21 @@ pub fn run(client: &Client, start: bool, json: bool) -> Result<(), String> {
     Ok(())
 }
 
+/// Starts the daemon's recording and waits until it records (for another
+/// command: nothing printed).
+pub fn start(client: &Client) -> Result<(), String> {
+    let reply = ask(client, true, "record start")?;
+    wait_for_state(client, true, "record start", reply.cycle).map(|_| ())
+}
+
+/// Stops the daemon's recording and waits until it no longer records; the
+/// recording's first file (empty: none ran).
+pub fn stop(client: &Client) -> Result<String, String> {
+    let reply = ask(client, false, "record stop")?;
+    wait_for_state(client, false, "record stop", reply.cycle)?;
+    Ok(reply.detail_text().to_owned())
+}
+
 /// Asks the daemon to start (or stop) recording; its answer when it did.
 fn ask(client: &Client, start: bool, what: &str) -> Result<ReplyMsg, String> {
     let kind = if start {

@@ -1,0 +1,169 @@
+//! `sarctl identify --dynamic --live` (issue 26 section 3): the excitation
+//! of `[identify]`'s limits ([`crate::identify::excitation::Plan`]), its
+//! condition number and expected accuracy printed (stderr) before anything
+//! moves; then, on the running daemon: a move of the tip to the
+//! excitation's centre, a recording started, the excitation asked of the
+//! loop (`command_kind::EXCITE`, which the loop judges and streams, the
+//! guard on), followed until it ends at rest, the recording stopped. The
+//! recording is then identified offline as `--input` would be.
+
+use super::identify::IdentifyArgs;
+use super::record;
+use super::request::command_msg;
+use crate::identify::excitation::Plan;
+use sar_config::Config;
+use sar_kinematics::{ActiveJoints, forward};
+use sar_msgs::wire::{
+    StateMsg, command_kind, guard_code, guard_state_name, reason_name, status_name,
+};
+use sar_shm::{Client, StateSubscription};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Joints within this of the centre count as arrived, m.
+const ARRIVED_M: f64 = 50e-6;
+
+/// Plans the excitation about `centre_m`, runs it on the daemon and
+/// records it; the recording's (first) file.
+pub fn record_excitation(
+    config: &Config,
+    prefix: &str,
+    centre_m: [f64; 3],
+    args: &IdentifyArgs,
+) -> Result<PathBuf, String> {
+    let plan = Plan::new(config, centre_m, args.sensor_rate_hz)?;
+    eprintln!("identify --dynamic --live: {}", plan.to_text());
+    let client = Client::new(prefix).map_err(|e| e.to_string())?;
+    let sub = client.subscribe().map_err(|e| e.to_string())?;
+    let s = sub
+        .latest(Duration::from_secs(2))
+        .ok_or("no state from the daemon within 2 s: is sard running (with this --prefix)?")?;
+    if s.guard_state != guard_code::OK || !s.drives_enabled() {
+        return Err(format!(
+            "the guard is {} ({}) and the drives {}: the excitation needs Ok and enabled drives (sarctl reset)",
+            guard_state_name(s.guard_state),
+            reason_name(s.guard_reason),
+            if s.drives_enabled() {
+                "enabled"
+            } else {
+                "not enabled"
+            }
+        ));
+    }
+    move_to_centre(config, &client, &sub, centre_m)?;
+    record::start(&client)?;
+    let ran = excite(&client, &sub, &plan);
+    let stopped = record::stop(&client);
+    ran?;
+    let path = stopped?;
+    if path.is_empty() {
+        return Err("record stop named no file: the excitation was not recorded".into());
+    }
+    eprintln!("identify --dynamic --live: recorded in {path}; identifying");
+    Ok(PathBuf::from(path))
+}
+
+/// Moves the tip to where the joints are `centre_m` and waits until they
+/// are there.
+fn move_to_centre(
+    config: &Config,
+    client: &Client,
+    sub: &StateSubscription,
+    centre_m: [f64; 3],
+) -> Result<(), String> {
+    let [q1_m, q2_m, q3_m] = centre_m;
+    let q = ActiveJoints { q1_m, q2_m, q3_m };
+    let est = &config.estimator;
+    let pose = forward(&est.calibration, &est.profile, &q)
+        .map_err(|e| format!("the excitation's centre {centre_m:?} m has no pose: {e}"))?;
+    let reply = client
+        .command(
+            command_msg(command_kind::MOVE_TIP, pose.tip_m.into(), [0.0; 6]),
+            Duration::from_secs(2),
+        )
+        .map_err(|e| e.to_string())?;
+    if reply.status != 0 {
+        return Err(format!(
+            "the move to the excitation's centre was refused: {}: {}",
+            status_name(reply.status),
+            reply.detail_text()
+        ));
+    }
+    let at = |s: &StateMsg| {
+        s.q_m
+            .iter()
+            .zip(centre_m)
+            .all(|(a, b)| (a - b).abs() <= ARRIVED_M)
+    };
+    follow(sub, Duration::from_secs(60), at)
+        .map_err(|e| format!("on the way to the excitation's centre: {e}"))?
+        .then_some(())
+        .ok_or_else(|| "the excitation's centre was not reached within 60 s".to_owned())
+}
+
+/// Asks the loop for the excitation and follows it to its end at rest.
+fn excite(client: &Client, sub: &StateSubscription, plan: &Plan) -> Result<(), String> {
+    let e = &plan.excitation;
+    let [f1, f2, f3] = e.spec.sines.map(|s| s.freq_hz);
+    let limits_n = [f1, f2, f3, e.spec.duration_s, e.spec.fade_s, 0.0];
+    let reply = client
+        .command(
+            command_msg(command_kind::EXCITE, e.amplitude_m, limits_n),
+            Duration::from_secs(2),
+        )
+        .map_err(|e| e.to_string())?;
+    if reply.status != 0 {
+        return Err(format!(
+            "the excitation was refused: {}: {}",
+            status_name(reply.status),
+            reply.detail_text()
+        ));
+    }
+    eprintln!(
+        "identify --dynamic --live: excitation running, {} s",
+        e.spec.duration_s
+    );
+    let end = Instant::now() + Duration::from_secs_f64(e.spec.duration_s);
+    follow(sub, Duration::from_secs_f64(e.spec.duration_s + 1.0), |s| {
+        Instant::now() >= end
+            && s.q_m
+                .iter()
+                .zip(e.spec.centre_m)
+                .all(|(a, b)| (a - b).abs() <= ARRIVED_M)
+    })?
+    .then_some(())
+    .ok_or_else(|| {
+        "the excitation did not end at its centre (braked by a Warn or its limits?)".to_owned()
+    })
+}
+
+/// Reads the state for at most `duration` until `done` holds (`false`:
+/// it did not); a Warn, a Stop or a Fault is an error.
+fn follow(
+    sub: &StateSubscription,
+    duration: Duration,
+    done: impl Fn(&StateMsg) -> bool,
+) -> Result<bool, String> {
+    let start = Instant::now();
+    while start.elapsed() < duration {
+        let mut last = None;
+        let mut bad = None;
+        sub.wait(Duration::from_millis(20), |s| {
+            if s.guard_state != guard_code::OK && bad.is_none() {
+                bad = Some(*s);
+            }
+            last = Some(*s);
+        });
+        if let Some(s) = bad {
+            return Err(format!(
+                "the guard went to {} ({}): the excitation stopped",
+                guard_state_name(s.guard_state),
+                reason_name(s.guard_reason)
+            ));
+        }
+        if last.as_ref().is_some_and(&done) {
+            return Ok(true);
+        }
+    }
+    Ok(false)
+}
