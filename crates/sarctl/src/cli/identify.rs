@@ -41,9 +41,10 @@ pub struct IdentifyArgs {
     /// when it was measured), s.
     #[arg(long, default_value_t = 0.0, value_name = "S", requires = "dynamic")]
     pub sensor_latency_s: f64,
-    /// With --dynamic: the mass between the sensor and the U-joint, kg.
-    #[arg(long, default_value_t = 0.0, value_name = "KG", requires = "dynamic")]
-    pub adapter_mass_kg: f64,
+    /// With --dynamic: the mass between the sensor and the U-joint, kg
+    /// (default: the configuration's `[sensor] adapter_mass_kg`).
+    #[arg(long, value_name = "KG", requires = "dynamic")]
+    pub adapter_mass_kg: Option<f64>,
     /// With --dynamic: print the excitation of `[identify]`'s limits, its
     /// condition number and the accuracy it promises, and move nothing.
     #[arg(long, requires = "dynamic", conflicts_with_all = ["input", "live"])]
@@ -147,7 +148,9 @@ impl IdentifyArgs {
     }
 
     /// The options of `--dynamic` these arguments give.
-    pub fn dynamic_options(&self) -> Result<DynamicOptions, String> {
+    /// `config_adapter_mass_kg`: the configuration's `[sensor]
+    /// adapter_mass_kg`, used unless `--adapter-mass-kg` is given.
+    pub fn dynamic_options(&self, config_adapter_mass_kg: f64) -> Result<DynamicOptions, String> {
         let static_options = self.options()?;
         Ok(DynamicOptions {
             tare_n: static_options.tare_n,
@@ -156,7 +159,7 @@ impl IdentifyArgs {
                 span_s: self.smoother_span_s,
             },
             sensor_latency_s: self.sensor_latency_s,
-            adapter_mass_kg: self.adapter_mass_kg,
+            adapter_mass_kg: self.adapter_mass_kg.unwrap_or(config_adapter_mass_kg),
             friction: !self.no_friction,
             max_condition: self.max_condition,
             max_chi2_dof: self.max_chi2_dof,
@@ -244,7 +247,7 @@ fn run_dynamic(
     if args.plan {
         return print_plan(config, json, args);
     }
-    let options = args.dynamic_options()?;
+    let options = args.dynamic_options(config.estimator.inertia.adapter_mass_kg)?;
     let input = match &args.input {
         Some(input) => input.clone(),
         None => super::identify_excite::record_excitation(
