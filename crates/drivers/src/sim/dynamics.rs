@@ -100,6 +100,16 @@ pub(crate) struct Inertial {
     pub adapter_force_n: Vec3,
 }
 
+impl Inertial {
+    /// At rest: nothing added (the statics, bit for bit).
+    pub const NONE: Self = Self {
+        force_n: Vec3::new(0.0, 0.0, 0.0),
+        moment_a_nm: Vec3::new(0.0, 0.0, 0.0),
+        tip_accel_mps2: Vec3::new(0.0, 0.0, 0.0),
+        adapter_force_n: Vec3::new(0.0, 0.0, 0.0),
+    };
+}
+
 /// The rod's angular velocity and acceleration and the rates of u and w.
 struct Turning {
     omega: Vec3,

@@ -57,15 +57,9 @@ pub(crate) fn equilibrium(
     pose: &Pose,
     loads: &Loads,
 ) -> Option<Equilibrium> {
-    let g = cal.gravity_mps2();
-    let r_b = cal.support_m() - pose.ujoint_m;
-    let r_c = pose.com_m - pose.ujoint_m;
-    let r_d = pose.tip_m - pose.ujoint_m;
-    let rod_weight = g * profile.mass_kg();
-    let tip_load = -loads.tip_force_n + g * loads.tip_mass_kg;
-    let known_force = rod_weight + tip_load + loads.friction_n;
-    let known_moment = r_c.cross(&rod_weight) + r_d.cross(&tip_load) + r_b.cross(&loads.friction_n);
-    solve(cal, pose, &known_force, &known_moment)
+    // The rod at rest: the equations in motion with nothing added (every
+    // inertial term an exact zero, so the same numbers bit for bit).
+    equilibrium_in_motion(cal, profile, pose, loads, &Inertial::NONE)
 }
 
 /// The Newton-Euler equations of the rod in motion (MODEL.md 10), as the

@@ -405,7 +405,7 @@ fn figure_points(
             &s.accel_mps2,
         )?;
         out.push(FitPoint {
-            t_s: (t - t0) as f64 * 1e-9,
+            t_s: t.saturating_sub(t0) as f64 * 1e-9,
             measured_n: sar_estimator::ujoint_force_n(cal, &s.reading_n, &tare)
                 - s.accel_mps2 * options.adapter_mass_kg,
             model_n: model_force_n(&params, &rod, &s.accel_mps2, &cal.gravity_mps2()),

@@ -92,36 +92,11 @@ pub struct Excitation {
     pub peak_accel_mps2: [f64; 3],
 }
 
-/// The fade's value and its first and second derivatives at `t`.
-fn fade(t: f64, spec: &ExcitationSpec) -> (f64, f64, f64) {
-    let (tf, d) = (spec.fade_s, spec.duration_s);
-    let k = std::f64::consts::PI / tf;
-    let rise = |x: f64| {
-        let (s, c) = (k * x).sin_cos();
-        (0.5 * (1.0 - c), 0.5 * k * s, 0.5 * k * k * c)
-    };
-    if t <= 0.0 || t >= d {
-        (0.0, 0.0, 0.0)
-    } else if t < tf {
-        rise(t)
-    } else if t > d - tf {
-        let (e, e1, e2) = rise(d - t);
-        (e, -e1, e2)
-    } else {
-        (1.0, 0.0, 0.0)
-    }
-}
-
-/// Position offset, speed and acceleration of one axis of unit amplitude at `t`.
+/// Position offset, speed and acceleration of one axis of unit amplitude at
+/// `t`: the loop's own formula ([`sar_loop::excite::unit_axis`]), so that
+/// the plan printed and checked here is the motion the loop runs.
 fn unit_axis(t: f64, freq_hz: f64, spec: &ExcitationSpec) -> (f64, f64, f64) {
-    let w = 2.0 * std::f64::consts::PI * freq_hz;
-    let (s, c) = (w * t).sin_cos();
-    let (e, e1, e2) = fade(t, spec);
-    (
-        e * s,
-        e1 * s + e * w * c,
-        e2 * s + 2.0 * e1 * w * c - e * w * w * s,
-    )
+    sar_loop::excite::unit_axis(t, freq_hz, spec.duration_s, spec.fade_s)
 }
 
 /// Time step of the plan's scans, s.

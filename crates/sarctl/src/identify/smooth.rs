@@ -43,6 +43,10 @@ pub struct Weights {
     pub derivative: [Vec<f64>; 3],
 }
 
+/// The widest smoothing window, in samples each side of its centre (2 s
+/// each side at 1 kHz).
+pub const MAX_HALF_SAMPLES: usize = 2000;
+
 /// The centred least-squares polynomial's weights: with V the window's
 /// Vandermonde matrix on k / half (k = -half..=half), row d of
 /// d! (V^T V)^-1 V^T / (half dt)^d.
@@ -53,7 +57,17 @@ pub fn weights(spec: &SmootherSpec, dt_s: f64) -> Result<Weights, String> {
             spec.order, spec.span_s
         ));
     }
+    // Saturating float-to-int; a window this wide is refused before its
+    // matrices are built (a long span or a recording's tiny period would
+    // otherwise allocate without bound).
     let half = (0.5 * spec.span_s / dt_s).round() as usize;
+    if !(dt_s.is_finite() && dt_s > 0.0) || half > MAX_HALF_SAMPLES {
+        return Err(format!(
+            "the smoother's window of {} s at {dt_s} s a sample holds more than {} samples: give a shorter --smoother-span-s",
+            spec.span_s,
+            2 * MAX_HALF_SAMPLES + 1
+        ));
+    }
     let n = 2 * half + 1;
     if n < spec.order + 2 {
         return Err(format!(
@@ -208,6 +222,10 @@ pub fn interpolate(
     if span_ns as f64 * 1e-9 > 1.5 * dt_s {
         return None;
     }
+    if span_ns == 0 {
+        // Two samples at one stamp (the sample's own): no interpolation.
+        return Some(Smoothed { stamp_ns, ..*a });
+    }
     let t = (stamp_ns - a.stamp_ns) as f64 / span_ns as f64;
     let lerp = |x: [f64; 3], y: [f64; 3]| -> [f64; 3] {
         let mut r = x;
@@ -227,6 +245,20 @@ pub fn interpolate(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A window wider than [`MAX_HALF_SAMPLES`] each side (a long span, or
+    /// a recording's tiny sample period) is refused in one line before any
+    /// matrix is built; the widest accepted one is built.
+    #[test]
+    fn a_window_beyond_its_bound_is_refused() {
+        let spec = |span_s| SmootherSpec { order: 6, span_s };
+        let e = weights(&spec(1e9), 1e-3).err().unwrap_or_default();
+        assert!(e.contains("--smoother-span-s"), "{e}");
+        assert!(weights(&spec(0.2), 1e-12).is_err());
+        assert!(weights(&spec(0.2), 0.0).is_err());
+        let widest = weights(&spec(2.0 * MAX_HALF_SAMPLES as f64 * 1e-3), 1e-3);
+        assert_eq!(widest.map(|w| w.half).ok(), Some(MAX_HALF_SAMPLES));
+    }
 
     /// The acceleration's gain at the excitation's frequencies (0.05 to
     /// 2 Hz) within 0.5 % for the default (order 6 over 0.2 s) and order 4
