@@ -41,8 +41,14 @@ travel_m = [[-0.3, 0.3], [0.18, 0.38], [0.0, 0.6]]
 max_speed_mps = 0.05
 
 [guard]
-max_sensor_age_s = 0.05
-max_joints_age_s = 0.05
+# A test machine without real-time scheduling (a VM, two CPU hogs beside
+# it) stalls even a SCHED_FIFO thread now and then for tens of ms
+# (cyclictest's largest wake-up beside two hogs: 23 ms; sard's, 33 ms);
+# beyond the age the guard faults (`cycle_gap`) and the procedure stops.
+# Within it a late cycle is carried on (issue 33): what these tests are
+# about is the identification, so they give the host 0.2 s.
+max_sensor_age_s = 0.2
+max_joints_age_s = 0.2
 
 [plausibility]
 max_counter_gap = 25
