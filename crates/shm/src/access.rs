@@ -1,23 +1,37 @@
-//! The access model (issue 25): where the daemon and its clients meet, who
-//! may, and the checks made before iceoryx2 is called.
+//! The access model (issues 25 and 35): where the daemon and its clients
+//! meet, who may, and the checks made before iceoryx2 is called.
 //!
 //! Every iceoryx2 file of a daemon lives in its runtime directory
-//! ([`DEFAULT_RUNTIME_DIR`], or `SAR_RUNTIME_DIR`): under systemd
-//! `RuntimeDirectory=sar`, owned by the daemon's user and its group `sar`,
-//! mode 2770 (set-group-ID). The daemon's user and the members of the directory's group
-//! (the operators) read and command; nobody else can enter the directory,
-//! so nobody else can read, command, create or damage anything there.
+//! ([`DEFAULT_RUNTIME_DIR`], or `SAR_RUNTIME_DIR`: an absolute path):
+//! under systemd `RuntimeDirectory=sar`, owned by the daemon's user and its
+//! group `sar`, mode 3770 (set-group-ID, sticky). The daemon's user and the
+//! members of the directory's group (the operators) read and command;
+//! nobody else can enter the directory, so nobody else can read, command,
+//! create or damage anything there. A member may watch and command, but
+//! must not be able to stop the guard or corrupt what it shows:
 //!
-//! - The daemon creates the directory when it is missing (mode 2770), refuses
-//!   one that is not a directory or belongs to another user, and takes the
-//!   other users' access away when the mode gives them any.
+//! - The directory and iceoryx2's [`NODES_DIR`] are sticky: a member removes
+//!   or renames none of the daemon's files; [`SERVICES_DIR`] and the
+//!   daemon's node directory are the daemon's alone to write.
+//! - The daemon's data segments are the group's to read only (the clients
+//!   map them read-only: [`fence_own_files`]). The files a member must write
+//!   to talk to the daemon (a service's dynamic configuration, a connection,
+//!   an event's) it can truncate: the daemon then stops cleanly on the
+//!   SIGBUS (`sar_loop::rt::install_bus_guard`).
+//! - The daemon creates the directory when it is missing (mode 3770), refuses
+//!   one that is not a directory or belongs to another user, takes the
+//!   other users' access away when the mode gives them any, and writes a
+//!   fresh management file in place of a damaged or foreign one.
 //! - A client never creates it: a missing directory means no daemon runs;
 //!   one it may not enter is refused at once, naming the user and the group.
-//! - Both check iceoryx2's management file before creating a node: a
-//!   truncated or foreign one made iceoryx2 spin forever (finding 2).
+//! - A client checks iceoryx2's management file before creating a node: a
+//!   truncated or foreign one made iceoryx2 spin forever (issue 25).
+//! - The daemon removes what dead clients left ([`sweep_half_made_nodes`]
+//!   and iceoryx2's own cleaning, every second).
 //!
 //! The `unsafe` here: `libc` calls (user and group names, `faccessat`,
-//! `getgroups`) on buffers owned by the caller.
+//! `getgroups`, `open` with `O_PATH`, `fstat`, `chmod`) on buffers owned
+//! by the caller.
 #![allow(unsafe_code)]
 
 use crate::ShmError;
@@ -32,9 +46,10 @@ pub const DEFAULT_RUNTIME_DIR: &str = "/run/sar";
 /// The environment variable that names the runtime directory (the daemon and
 /// its clients must agree; tests give each daemon its own).
 pub const RUNTIME_DIR_ENV: &str = "SAR_RUNTIME_DIR";
-/// The mode the daemon gives a runtime directory it creates: the user's and
-/// the group's, and set-group-ID, so that every file in it (an operator's
-/// too) belongs to the directory's group.
+/// The mode the daemon gives a runtime directory it creates (and every one
+/// it starts in): the user's and the group's, set-group-ID, so that every
+/// file in it (an operator's too) belongs to the directory's group, and
+/// sticky, so that nobody but the daemon removes or renames another's file.
 pub const RUNTIME_DIR_MODE: u32 = 0o3770;
 /// How the name of iceoryx2's management segment in the runtime directory
 /// ends (iceoryx2 0.10: `iox2_<hash>_node.0_10_0.global_mgmt`).
@@ -845,8 +860,9 @@ mod tests {
         d
     }
 
-    /// The daemon creates a missing directory 2770, takes other users'
-    /// access away from one it owns, and refuses a file; a client creates
+    /// The daemon creates a missing directory 3770, takes other users'
+    /// access away from one it owns, makes iceoryx2's subdirectories and
+    /// management file its own, and refuses a file; a client creates
     /// nothing.
     #[test]
     fn the_daemon_makes_and_fences_its_directory_and_a_client_creates_nothing() {
