@@ -631,67 +631,76 @@ fn events(
     Ok((notifier, wake))
 }
 
-/// Removes the services under `names` that no living daemon serves: a
-/// killed daemon's services outlive it while a client still has them open
-/// (the dead daemon's ports are cleaned, but a service is removed only once
-/// no process has it open), and the new daemon could not create its own
-/// ("another sard runs"). Such a service has no publisher (no server, no
-/// notifier, no wake-up listener): it is removed by force; its clients keep
-/// their mappings and time out. A service with its daemon's port is left
-/// alone (a living daemon: the creation then refuses).
-fn reclaim_orphaned_services(node: &Node<SarIpc>, names: &Names) {
-    let orphaned = |name: &str, pattern: MessagingPattern| -> Option<ServiceName> {
-        let service = service_name(name).ok()?;
+/// How long a starting daemon waits for the clients of a daemon that is
+/// gone to let go of its services (a client lets go at once when it finds
+/// no daemon's port in a service it opens; one that had it open before
+/// lets go at its deadline, 2 s at most for a command or `status`).
+pub const ORPHAN_WAIT: Duration = Duration::from_millis(1500);
+
+/// The services under `names` that exist with no daemon's port (no
+/// publisher, server, notifier or wake-up listener): a killed daemon's,
+/// kept by the clients that still have them open (its dead ports were
+/// cleaned; a service goes once no process has it open). Each is opened
+/// and let go of: the last process to let go removes it (iceoryx2 removes
+/// a service nobody has open), so once its clients are gone it is gone.
+/// Returns how many there were.
+fn release_orphaned_services(node: &Node<SarIpc>, names: &Names) -> usize {
+    let orphaned = |name: &str, pattern: MessagingPattern| -> bool {
+        let Ok(service) = service_name(name) else {
+            return false;
+        };
         let builder = node.service_builder(&service);
+        let opened = |e: &dyn std::fmt::Debug| {
+            let e = format!("{e:?}");
+            if e == "IsMarkedForDestruction" || e == "ServiceInCorruptedState" {
+                // Its last client let go but could not remove the daemon's
+                // files (a member may not: the directory is sticky): the
+                // daemon, their owner, removes them.
+                // SAFETY (iceoryx2's contract: no other process uses it):
+                // a service marked for destruction has no owner left.
+                #[allow(unsafe_code)]
+                let removed = unsafe { node.force_remove_service(&service, pattern) };
+                if removed.is_ok_and(|r| r) {
+                    tracing::info!("removed the service {name:?} of a sard that is gone");
+                    return Ok(0);
+                }
+            }
+            Err(())
+        };
         let daemon_ports = match pattern {
-            MessagingPattern::PublishSubscribe => builder
-                .publish_subscribe::<StateMsg>()
-                .open()
-                .ok()?
-                .dynamic_config()
-                .number_of_publishers(),
+            MessagingPattern::PublishSubscribe => {
+                builder.publish_subscribe::<StateMsg>().open().map_or_else(
+                    |e| opened(&e),
+                    |s| Ok(s.dynamic_config().number_of_publishers()),
+                )
+            }
             MessagingPattern::RequestResponse => builder
                 .request_response::<CommandMsg, ReplyMsg>()
                 .open()
-                .ok()?
-                .dynamic_config()
-                .number_of_servers(),
-            _ if name == names.wake => builder
-                .event()
-                .open()
-                .ok()?
-                .dynamic_config()
-                .number_of_listeners(),
-            _ => builder
-                .event()
-                .open()
-                .ok()?
-                .dynamic_config()
-                .number_of_notifiers(),
+                .map_or_else(
+                    |e| opened(&e),
+                    |s| Ok(s.dynamic_config().number_of_servers()),
+                ),
+            _ if name == names.wake => builder.event().open().map_or_else(
+                |e| opened(&e),
+                |s| Ok(s.dynamic_config().number_of_listeners()),
+            ),
+            _ => builder.event().open().map_or_else(
+                |e| opened(&e),
+                |s| Ok(s.dynamic_config().number_of_notifiers()),
+            ),
         };
-        (daemon_ports == 0).then_some(service)
+        daemon_ports == Ok(0)
     };
-    for (name, pattern) in [
+    [
         (&names.command, MessagingPattern::RequestResponse),
         (&names.state, MessagingPattern::PublishSubscribe),
         (&names.event, MessagingPattern::Event),
         (&names.wake, MessagingPattern::Event),
-    ] {
-        if let Some(service) = orphaned(name, pattern) {
-            // SAFETY (iceoryx2's contract: no other process uses it): no
-            // daemon serves it; the clients that still have it open only
-            // wait for a daemon that is gone, and keep their mappings.
-            #[allow(unsafe_code)]
-            let removed = unsafe { node.force_remove_service(&service, pattern) };
-            match removed {
-                Ok(true) => tracing::warn!(
-                    "removed the service {name:?} of a sard that is gone (clients still had it open)"
-                ),
-                Ok(false) => {}
-                Err(e) => tracing::warn!("cannot remove the orphaned service {name:?}: {e:?}"),
-            }
-        }
-    }
+    ]
+    .into_iter()
+    .filter(|(name, pattern)| orphaned(name, *pattern))
+    .count()
 }
 
 impl ShmWorker {
@@ -718,12 +727,42 @@ impl ShmWorker {
         }
         let names = Names::new(prefix);
         let node = node_in(dir, Side::Daemon)?;
-        reclaim_orphaned_services(&node, &names);
-        // The command service first: a client that finds the state finds
-        // the command server too.
-        let server = command_server(&node, &names, prefix)?;
-        let (state, publisher) = state_publisher(&node, &names, prefix)?;
-        let (notifier, wake) = events(&node, &names, prefix)?;
+        // The services of a daemon that is gone, which its clients still
+        // have open, go as they let go (bounded: then "another sard runs",
+        // with the cause).
+        let start = std::time::Instant::now();
+        let (server, (state, publisher), (notifier, wake)) = loop {
+            // The command service first: a client that finds the state finds
+            // the command server too.
+            let made = command_server(&node, &names, prefix).and_then(|server| {
+                let state = state_publisher(&node, &names, prefix)?;
+                Ok((server, state, events(&node, &names, prefix)?))
+            });
+            match made {
+                Err(ShmError::DaemonRuns { .. }) if start.elapsed() < ORPHAN_WAIT => {
+                    if release_orphaned_services(&node, &names) == 0 {
+                        // A living daemon's: refused below, at once.
+                        break made?;
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(ShmError::DaemonRuns {
+                    prefix,
+                    service,
+                    detail,
+                }) if release_orphaned_services(&node, &names) > 0 => {
+                    return Err(ShmError::DaemonRuns {
+                        prefix,
+                        service,
+                        detail: format!(
+                            "{detail}; no sard serves it: a client of a sard that is gone still has it open after {} ms (end it)",
+                            ORPHAN_WAIT.as_millis()
+                        ),
+                    });
+                }
+                made => break made?,
+            }
+        };
         // The daemon's node directory: the group reads it, only the daemon
         // writes (its tags are made; nobody else adds or removes one).
         let (node_dir, node_files) = access::node_paths(dir, node.id().value());
@@ -1275,6 +1314,16 @@ impl Client {
         }
     }
 
+    /// A service that no daemon serves (a killed daemon's, not yet cleaned
+    /// by the next one; or one starting): let go of at once, so that the
+    /// next daemon can clean it and make its own.
+    fn gone(&self, service: &str) -> ShmError {
+        ShmError::NoDaemon {
+            service: service.to_owned(),
+            detail: "no sard serves it: the one that made it is gone (a new sard replaces it at its start)".to_owned(),
+        }
+    }
+
     /// This client's own node files (for [`access::fence_own_files`]).
     fn own_paths(&self) -> (Vec<std::path::PathBuf>, Vec<std::path::PathBuf>) {
         match self.node.get() {
@@ -1322,6 +1371,14 @@ impl Client {
             .publish_subscribe::<StateMsg>()
             .open()
             .map_err(|e| self.open_error(&self.names.state, e))?;
+        let mut alive = false;
+        state.dynamic_config().list_publishers(|p| {
+            alive |= process_alive(&p.node_id);
+            CallbackProgression::Continue
+        });
+        if !alive {
+            return Err(self.gone(&self.names.state));
+        }
         let subscriber = state
             .subscriber_builder()
             .buffer_size(STATE_BUFFER)
@@ -1370,6 +1427,14 @@ impl Client {
             .request_response::<CommandMsg, ReplyMsg>()
             .open()
             .map_err(|e| self.open_error(&self.names.command, e))?;
+        let mut alive = false;
+        service.dynamic_config().list_servers(|p| {
+            alive |= process_alive(&p.node_id);
+            CallbackProgression::Continue
+        });
+        if !alive {
+            return Err(self.gone(&self.names.command));
+        }
         let client =
             service
                 .client_builder()
@@ -1402,6 +1467,20 @@ impl Client {
             timeout_ms: timeout.as_millis(),
         })
     }
+}
+
+/// Whether the process that made the node `id` lives (its process id, from
+/// the id: a signal 0 to it is delivered or refused for want of
+/// permission). No file of the node is read (a member could make one
+/// block the reader).
+fn process_alive(id: &iceoryx2::identifiers::UniqueNodeId) -> bool {
+    let Ok(pid) = id.pid::<SarIpc>() else {
+        return true;
+    };
+    // SAFETY: a plain query; signal 0 is never delivered.
+    #[allow(unsafe_code)]
+    let rc = unsafe { libc::kill(pid.value(), 0) };
+    rc == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
 }
 
 /// A subscription to the state.
