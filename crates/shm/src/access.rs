@@ -524,10 +524,13 @@ fn own_open_files(dir: &Path) -> Vec<PathBuf> {
     if let Ok(maps) = std::fs::read("/proc/self/maps") {
         for line in maps.split(|b| *b == b'\n') {
             // address perms offset dev inode path
-            let Some(start) = line.iter().position(|b| *b == b'/') else {
+            let Some(path) = line
+                .iter()
+                .position(|b| *b == b'/')
+                .and_then(|start| line.get(start..))
+            else {
                 continue;
             };
-            let path = &line[start..];
             if under(path) && !path.ends_with(b" (deleted)") {
                 out.push(PathBuf::from(std::ffi::OsStr::from_bytes(path)));
             }
@@ -601,10 +604,13 @@ pub fn sweep_half_made_nodes(dir: &Path) -> usize {
         let name = e.file_name();
         let name = name.as_bytes();
         if let Some(rest) = name.strip_prefix(b"iox2_") {
-            if let Some(dot) = rest.iter().position(|b| *b == b'.')
-                && rest[..dot].iter().all(u8::is_ascii_digit)
+            if let Some(id) = rest
+                .iter()
+                .position(|b| *b == b'.')
+                .and_then(|dot| rest.get(..dot))
+                && id.iter().all(u8::is_ascii_digit)
             {
-                monitors.insert(rest[..dot].to_vec());
+                monitors.insert(id.to_vec());
             }
         } else if !name.is_empty() && name.iter().all(u8::is_ascii_digit) {
             dirs.insert(name.to_vec());
@@ -659,10 +665,11 @@ pub fn sweep_half_made_nodes(dir: &Path) -> usize {
     removed += sweep_half_made_ports(dir);
     for id in dirs.iter().filter(|id| !monitors.contains(*id)) {
         let path = nodes.join(String::from_utf8_lossy(id).as_ref());
-        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_dir()) && old(&path) {
-            if std::fs::remove_dir_all(&path).is_ok() {
-                removed += 1;
-            }
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_dir())
+            && old(&path)
+            && std::fs::remove_dir_all(&path).is_ok()
+        {
+            removed += 1;
         }
     }
     removed
@@ -933,6 +940,7 @@ mod tests {
             std::fs::OpenOptions::new()
                 .write(true)
                 .create(true)
+                .truncate(true)
                 .mode(0o666)
                 .open(d.join(format!("iox2_junk_{i:05}")))
                 .unwrap()
@@ -950,6 +958,7 @@ mod tests {
                     .read(true)
                     .write(true)
                     .create(true)
+                    .truncate(true)
                     .open(p)
                     .unwrap();
                 f.set_permissions(std::fs::Permissions::from_mode(0o666))
@@ -967,7 +976,7 @@ mod tests {
         let own = d.join(NODES_DIR).join("1234");
         std::fs::create_dir_all(&own).unwrap();
         std::os::unix::fs::symlink(&target, own.join("iox2_link.port_tag")).unwrap();
-        let changed = fence_own_files(&d, &[own.clone()], &[]);
+        let changed = fence_own_files(&d, std::slice::from_ref(&own), &[]);
         let mode = |p: &Path| std::fs::metadata(p).unwrap().mode() & 0o7777;
         assert_eq!(mode(&data), 0o640, "a data segment: the group reads only");
         assert_eq!(mode(&other), 0o660);
