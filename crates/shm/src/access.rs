@@ -631,7 +631,17 @@ pub fn sweep_half_made_nodes(dir: &Path) -> usize {
         let context = monitor_file(id, "node_monitor_context");
         let starting = std::fs::symlink_metadata(&context)
             .is_ok_and(|m| m.file_type().is_file() && m.mode() & 0o777 == 0o200);
-        if starting && old(&context) {
+        // Or its state file gone (a process killed while it let go of its
+        // node removes that one first): iceoryx2 lists nodes by it.
+        let state = monitor_file(id, "node_monitor");
+        let ending = std::fs::symlink_metadata(&state)
+            .is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound);
+        let made = if context.exists() {
+            context.clone()
+        } else {
+            monitor_file(id, "node_monitor_owner_lock")
+        };
+        if (starting || ending) && old(&made) {
             for kind in [
                 "node_monitor",
                 "node_monitor_owner_lock",
@@ -701,8 +711,12 @@ fn sweep_half_made_ports(dir: &Path) -> usize {
         if !age_ok.elapsed().is_ok_and(|a| a >= HALF_MADE_NODE_AGE) {
             continue;
         }
+        let name = path
+            .file_name()
+            .map(|n| n.as_bytes().to_vec())
+            .unwrap_or_default();
         let stale = if m.file_type().is_file() {
-            matches!(m.mode() & 0o777, 0o200 | 0o600)
+            matches!(m.mode() & 0o777, 0o200 | 0o600) || listener_gone(dir, &name)
         } else if m.file_type().is_socket() {
             nobody_listens(&path)
         } else {
@@ -713,6 +727,31 @@ fn sweep_half_made_ports(dir: &Path) -> usize {
         }
     }
     removed
+}
+
+/// Whether `name` is an event listener's storage
+/// (`iox2_HASH_PORT.event_mgmt`) whose socket (`iox2_PORT.event`) is gone:
+/// its listener died while it let go of its port (the socket removed, the
+/// storage not yet).
+fn listener_gone(dir: &Path, name: &[u8]) -> bool {
+    let Some(stem) = name.strip_suffix(b".event_mgmt") else {
+        return false;
+    };
+    let Some(port) = stem
+        .iter()
+        .rposition(|b| *b == b'_')
+        .and_then(|i| stem.get(i + 1..))
+        .filter(|p| !p.is_empty() && p.iter().all(u8::is_ascii_digit))
+    else {
+        return false;
+    };
+    let mut socket = b"iox2_".to_vec();
+    socket.extend_from_slice(port);
+    socket.extend_from_slice(b".event");
+    matches!(
+        std::fs::symlink_metadata(dir.join(std::ffi::OsStr::from_bytes(&socket))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound
+    )
 }
 
 /// Whether nobody is bound to the datagram socket at `path` (connecting to
