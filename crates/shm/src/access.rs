@@ -445,8 +445,9 @@ fn ensure_mgmt(dir: &Path) -> Result<(), ShmError> {
 /// not a link) and changed through that descriptor: a link swapped in
 /// after a check is never followed. Files still being made (iceoryx2's
 /// write-only initial modes: no other users' bits yet) are left alone.
-/// Returns how many it changed. The daemon's publishing thread calls it
-/// every [`FENCE_PERIOD`], a client after making its ports.
+/// Returns how many it changed. The daemon calls it when it has made its
+/// services and then on its maintenance thread every
+/// [`crate::REAP_PERIOD`], a client after making its ports.
 pub fn fence_own_files(dir: &Path, own_dirs: &[PathBuf], own_files: &[PathBuf]) -> usize {
     let Ok(group) = std::fs::metadata(dir).map(|m| m.gid()) else {
         return 0;
@@ -573,8 +574,6 @@ fn own_open_files(dir: &Path) -> Vec<PathBuf> {
     out
 }
 
-/// How often the daemon takes other users' access away from its new files.
-pub const FENCE_PERIOD: std::time::Duration = std::time::Duration::from_secs(1);
 /// Entries of one of a process's own directories a fence looks at, at most.
 pub const FENCE_LIMIT: usize = 4096;
 
