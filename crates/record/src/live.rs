@@ -238,6 +238,35 @@ impl LiveRecorder {
         }
     }
 
+    /// At the start of a cycle: hands back a held recorder first (while one
+    /// is held, no new recording is taken: at most one is ever held); ends
+    /// the recording on a stop request or a writer that failed (a full
+    /// disk: the manager closes it and says why); takes a new one the
+    /// manager opened. Wait-free, allocation-free.
+    fn switch_recorder(&mut self) {
+        let holding = self.hand_back_held();
+        if let Some(rec) = self.active.as_ref().filter(|r| r.failed()) {
+            // Published from this cycle on (the manager's close confirms it).
+            self.switch.failure.store(
+                sar_msgs::wire::recording_code::failed(rec.os_error()),
+                Ordering::Relaxed,
+            );
+            self.release();
+        }
+        if self.switch.take_stop() {
+            self.release();
+        }
+        if self.active.is_none()
+            && !holding
+            && let Some(rec) = self.incoming.pop()
+        {
+            self.active = Some(rec);
+            self.last_joints_stamp_ns = None;
+            self.next_snapshot_ns = None;
+            self.switch.recording.store(true, Ordering::Release);
+        }
+    }
+
     /// Hands back the recorder [`LiveRecorder::release`] had to hold (the
     /// queue was full), once the manager has made room. Whether one is
     /// still held.
@@ -262,31 +291,7 @@ impl LiveRecorder {
 /// friction_force_n`, with every new sensor sample, stamped as the cycle.
 impl Sink for LiveRecorder {
     fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
-        // A recorder the hand-back queue had no room for goes first; while it
-        // is held, no new recording is taken (at most one is ever held).
-        let holding = self.hand_back_held();
-        // A stop request, or a writer that failed (a full disk): the
-        // recording ends here and the manager closes it (and says why).
-        if let Some(rec) = self.active.as_ref().filter(|r| r.failed()) {
-            // Published from this cycle on (the manager's close confirms it).
-            self.switch.failure.store(
-                sar_msgs::wire::recording_code::failed(rec.os_error()),
-                Ordering::Relaxed,
-            );
-            self.release();
-        }
-        if self.switch.take_stop() {
-            self.release();
-        }
-        if self.active.is_none()
-            && !holding
-            && let Some(rec) = self.incoming.pop()
-        {
-            self.active = Some(rec);
-            self.last_joints_stamp_ns = None;
-            self.next_snapshot_ns = None;
-            self.switch.recording.store(true, Ordering::Release);
-        }
+        self.switch_recorder();
         let truth = c.truth;
         let mut dropped = self.dropped_before;
         if let Some(rec) = &mut self.active {

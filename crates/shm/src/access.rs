@@ -217,22 +217,7 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
                     dir: dir.display().to_string(),
                 });
             }
-            Side::Daemon => {
-                // Never open to others, not even before the mode is set (a
-                // daemon making it at the same moment is no error).
-                use std::os::unix::fs::DirBuilderExt;
-                match std::fs::DirBuilder::new().mode(0o770).create(dir) {
-                    Ok(()) => std::fs::set_permissions(
-                        dir,
-                        std::fs::Permissions::from_mode(RUNTIME_DIR_MODE),
-                    )
-                    .map_err(|e| dir_error(dir, format!("cannot set its mode: {e}")))?,
-                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-                    Err(e) => return Err(dir_error(dir, format!("cannot create it: {e}"))),
-                }
-                std::fs::symlink_metadata(dir)
-                    .map_err(|e| dir_error(dir, format!("cannot read it: {e}")))?
-            }
+            Side::Daemon => create_dir(dir)?,
         },
         Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
             return Err(denied(dir, None));
@@ -242,32 +227,8 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
     if !meta.file_type().is_dir() {
         return Err(dir_error(dir, "not a directory"));
     }
-    let me = euid();
     if side == Side::Daemon {
-        if meta.uid() != me {
-            return Err(dir_error(
-                dir,
-                format!(
-                    "it belongs to {}, not to sard's user {}: remove it, or start sard as its owner",
-                    user_name(meta.uid()),
-                    user_name(me)
-                ),
-            ));
-        }
-        let mode = meta.mode() & 0o7777;
-        // Other users keep nothing (the directory is the fence); sticky and
-        // set-group-ID.
-        let wanted = (mode & 0o0770) | 0o3000;
-        if wanted != mode {
-            std::fs::set_permissions(dir, std::fs::Permissions::from_mode(wanted))
-                .map_err(|e| dir_error(dir, format!("cannot set its mode {wanted:04o}: {e}")))?;
-            let why = if mode & 0o007 != 0 {
-                "took other users' access away"
-            } else {
-                "made it sticky and set-group-ID"
-            };
-            tracing::warn!("{}: {why} (mode {mode:04o} -> {wanted:04o})", dir.display());
-        }
+        own_dir_mode(dir, &meta)?;
     }
     if may(dir, libc::R_OK | libc::W_OK | libc::X_OK).is_err() {
         return Err(denied(dir, Some(&meta)));
@@ -278,6 +239,50 @@ pub fn prepare(dir: &Path, side: Side) -> Result<(), ShmError> {
         ensure_mgmt(dir)?;
     }
     check_mgmt(dir)
+}
+
+/// The daemon makes the missing runtime directory `dir`, never open to
+/// others, not even before its mode is set (a daemon making it at the same
+/// moment is no error).
+fn create_dir(dir: &Path) -> Result<std::fs::Metadata, ShmError> {
+    use std::os::unix::fs::DirBuilderExt;
+    match std::fs::DirBuilder::new().mode(0o770).create(dir) {
+        Ok(()) => std::fs::set_permissions(dir, std::fs::Permissions::from_mode(RUNTIME_DIR_MODE))
+            .map_err(|e| dir_error(dir, format!("cannot set its mode: {e}")))?,
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(dir_error(dir, format!("cannot create it: {e}"))),
+    }
+    std::fs::symlink_metadata(dir).map_err(|e| dir_error(dir, format!("cannot read it: {e}")))
+}
+
+/// The daemon's runtime directory `dir` (read as `meta`): its own (else
+/// refused, naming both users), other users keep nothing (the directory is
+/// the fence), sticky and set-group-ID (changes logged).
+fn own_dir_mode(dir: &Path, meta: &std::fs::Metadata) -> Result<(), ShmError> {
+    let me = euid();
+    if meta.uid() != me {
+        return Err(dir_error(
+            dir,
+            format!(
+                "it belongs to {}, not to sard's user {}: remove it, or start sard as its owner",
+                user_name(meta.uid()),
+                user_name(me)
+            ),
+        ));
+    }
+    let mode = meta.mode() & 0o7777;
+    let wanted = (mode & 0o0770) | 0o3000;
+    if wanted != mode {
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(wanted))
+            .map_err(|e| dir_error(dir, format!("cannot set its mode {wanted:04o}: {e}")))?;
+        let why = if mode & 0o007 != 0 {
+            "took other users' access away"
+        } else {
+            "made it sticky and set-group-ID"
+        };
+        tracing::warn!("{}: {why} (mode {mode:04o} -> {wanted:04o})", dir.display());
+    }
+    Ok(())
 }
 
 /// iceoryx2's directory of the nodes in the runtime directory (its default
@@ -594,71 +599,14 @@ pub const HALF_MADE_NODE_AGE: std::time::Duration = std::time::Duration::from_se
 /// directory is the daemon's and sticky: it may remove anything in it).
 pub fn sweep_half_made_nodes(dir: &Path) -> usize {
     let nodes = dir.join(NODES_DIR);
-    let Ok(entries) = std::fs::read_dir(&nodes) else {
-        return 0;
-    };
-    let mut dirs = std::collections::BTreeSet::new();
-    let mut monitors = std::collections::BTreeSet::new();
-    for e in entries.flatten() {
-        let name = e.file_name();
-        let name = name.as_bytes();
-        if let Some(rest) = name.strip_prefix(b"iox2_") {
-            if let Some(id) = rest
-                .iter()
-                .position(|b| *b == b'.')
-                .and_then(|dot| rest.get(..dot))
-                && id.iter().all(u8::is_ascii_digit)
-            {
-                monitors.insert(id.to_vec());
-            }
-        } else if !name.is_empty() && name.iter().all(u8::is_ascii_digit) {
-            dirs.insert(name.to_vec());
-        }
-    }
-    let old = |p: &Path| {
-        std::fs::symlink_metadata(p).is_ok_and(|m| {
-            let changed = std::time::UNIX_EPOCH
-                + std::time::Duration::new(m.ctime().max(0).unsigned_abs(), 0)
-                    .max(std::time::Duration::new(m.mtime().max(0).unsigned_abs(), 0));
-            changed.elapsed().is_ok_and(|age| age >= HALF_MADE_NODE_AGE)
-        })
-    };
-    let monitor_file =
-        |id: &[u8], kind: &str| nodes.join(format!("iox2_{}.{kind}", String::from_utf8_lossy(id)));
-    let mut removed = 0;
-    for id in &monitors {
-        let context = monitor_file(id, "node_monitor_context");
-        let starting = std::fs::symlink_metadata(&context)
-            .is_ok_and(|m| m.file_type().is_file() && m.mode() & 0o777 == 0o200);
-        // Or its state file gone (a process killed while it let go of its
-        // node removes that one first): iceoryx2 lists nodes by it.
-        let state = monitor_file(id, "node_monitor");
-        let ending = std::fs::symlink_metadata(&state)
-            .is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound);
-        let made = if context.exists() {
-            context.clone()
-        } else {
-            monitor_file(id, "node_monitor_owner_lock")
-        };
-        if (starting || ending) && old(&made) {
-            for kind in [
-                "node_monitor",
-                "node_monitor_owner_lock",
-                "node_monitor_context",
-            ] {
-                let _ = std::fs::remove_file(monitor_file(id, kind));
-            }
-            let _ = std::fs::remove_dir_all(nodes.join(String::from_utf8_lossy(id).as_ref()));
-            removed += 1;
-        }
-    }
+    let (dirs, monitors) = node_entries(&nodes);
+    let mut removed = sweep_half_made_monitors(&nodes, &monitors);
     // A tag (a node's record of a port or a service, made before the port's
     // resources) still in its initial mode: its maker died making it; it
     // stopped iceoryx2's cleaning of that dead node for good (the node
     // stayed, with every file it had).
     for id in &dirs {
-        let path = nodes.join(String::from_utf8_lossy(id).as_ref());
-        let Ok(tags) = std::fs::read_dir(&path) else {
+        let Ok(tags) = std::fs::read_dir(nodes.join(id)) else {
             continue;
         };
         for t in tags.flatten().take(FENCE_LIMIT) {
@@ -666,18 +614,93 @@ pub fn sweep_half_made_nodes(dir: &Path) -> usize {
             let half_made = std::fs::symlink_metadata(&p).is_ok_and(|m| {
                 m.file_type().is_file() && matches!(m.mode() & 0o777, 0o600 | 0o200)
             });
-            if half_made && old(&p) && std::fs::remove_file(&p).is_ok() {
+            if half_made && is_old(&p) && std::fs::remove_file(&p).is_ok() {
                 removed += 1;
             }
         }
     }
     removed += sweep_half_made_ports(dir);
     for id in dirs.iter().filter(|id| !monitors.contains(*id)) {
-        let path = nodes.join(String::from_utf8_lossy(id).as_ref());
+        let path = nodes.join(id);
         if std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_dir())
-            && old(&path)
+            && is_old(&path)
             && std::fs::remove_dir_all(&path).is_ok()
         {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// The node ids of [`NODES_DIR`]'s entries: those with a directory
+/// (`ID/`), and those with a monitor file (`iox2_ID.node_monitor*`).
+fn node_entries(
+    nodes: &Path,
+) -> (
+    std::collections::BTreeSet<String>,
+    std::collections::BTreeSet<String>,
+) {
+    let mut dirs = std::collections::BTreeSet::new();
+    let mut monitors = std::collections::BTreeSet::new();
+    let digits = |b: &[u8]| !b.is_empty() && b.iter().all(u8::is_ascii_digit);
+    for e in std::fs::read_dir(nodes).into_iter().flatten().flatten() {
+        let name = e.file_name();
+        let name = name.as_bytes();
+        if let Some(rest) = name.strip_prefix(b"iox2_") {
+            if let Some(id) = rest
+                .iter()
+                .position(|b| *b == b'.')
+                .and_then(|dot| rest.get(..dot))
+                .filter(|id| digits(id))
+            {
+                monitors.insert(String::from_utf8_lossy(id).into_owned());
+            }
+        } else if digits(name) {
+            dirs.insert(String::from_utf8_lossy(name).into_owned());
+        }
+    }
+    (dirs, monitors)
+}
+
+/// Whether `path` last changed (its contents or its inode) at least
+/// [`HALF_MADE_NODE_AGE`] ago.
+fn is_old(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok_and(|m| {
+        let secs = m.ctime().max(m.mtime()).max(0).unsigned_abs();
+        (std::time::UNIX_EPOCH + std::time::Duration::new(secs, 0))
+            .elapsed()
+            .is_ok_and(|age| age >= HALF_MADE_NODE_AGE)
+    })
+}
+
+/// Removes the monitor files (and the directory) of the nodes in `nodes`
+/// whose making or ending was cut: the context file still write-only (a
+/// process killed while it made its node), or the state file gone (one
+/// killed while it let go of it removes that one first; iceoryx2 lists
+/// nodes by it). Returns how many.
+fn sweep_half_made_monitors(nodes: &Path, ids: &std::collections::BTreeSet<String>) -> usize {
+    let file = |id: &str, kind: &str| nodes.join(format!("iox2_{id}.{kind}"));
+    let mut removed = 0;
+    for id in ids {
+        let context = file(id, "node_monitor_context");
+        let starting = std::fs::symlink_metadata(&context)
+            .is_ok_and(|m| m.file_type().is_file() && m.mode() & 0o777 == 0o200);
+        let ending = std::fs::symlink_metadata(file(id, "node_monitor"))
+            .is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound);
+        let made = if context.exists() {
+            context
+        } else {
+            file(id, "node_monitor_owner_lock")
+        };
+        if (starting || ending) && is_old(&made) {
+            for kind in [
+                "node_monitor",
+                "node_monitor_owner_lock",
+                "node_monitor_context",
+            ] {
+                let _ = std::fs::remove_file(file(id, kind));
+            }
+            let _ = std::fs::remove_dir_all(nodes.join(id));
             removed += 1;
         }
     }
@@ -705,9 +728,7 @@ fn sweep_half_made_ports(dir: &Path) -> usize {
         let Ok(m) = std::fs::symlink_metadata(&path) else {
             continue;
         };
-        let age_ok = std::time::UNIX_EPOCH
-            + std::time::Duration::new(m.ctime().max(m.mtime()).max(0).unsigned_abs(), 0);
-        if !age_ok.elapsed().is_ok_and(|a| a >= HALF_MADE_NODE_AGE) {
+        if !is_old(&path) {
             continue;
         }
         let name = path

@@ -703,6 +703,70 @@ fn release_orphaned_services(node: &Node<SarIpc>, names: &Names) -> usize {
     .count()
 }
 
+/// Every port of the daemon's services under `names`: the command server
+/// first (a client that finds the state finds the command server too), the
+/// state's publisher, the events. The services of a daemon that is gone,
+/// which its clients still have open, go as they let go: waited for up to
+/// [`ORPHAN_WAIT`], then "another sard runs" with the cause.
+type DaemonPorts = (
+    CommandServer,
+    (StateService, StatePublisher),
+    (Notifier<SarIpc>, Listener<SarIpc>),
+);
+
+fn services(node: &Node<SarIpc>, names: &Names, prefix: &str) -> Result<DaemonPorts, ShmError> {
+    let start = std::time::Instant::now();
+    loop {
+        let made = command_server(node, names, prefix).and_then(|server| {
+            let state = state_publisher(node, names, prefix)?;
+            Ok((server, state, events(node, names, prefix)?))
+        });
+        match made {
+            Err(ShmError::DaemonRuns { .. }) if start.elapsed() < ORPHAN_WAIT => {
+                if release_orphaned_services(node, names) == 0 {
+                    // A living daemon's: refused at once.
+                    return made;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(ShmError::DaemonRuns {
+                prefix,
+                service,
+                detail,
+            }) if release_orphaned_services(node, names) > 0 => {
+                return Err(ShmError::DaemonRuns {
+                    prefix,
+                    service,
+                    detail: format!(
+                        "{detail}; no sard serves it: a client of a sard that is gone still has it open after {} ms (end it)",
+                        ORPHAN_WAIT.as_millis()
+                    ),
+                });
+            }
+            made => return made,
+        }
+    }
+}
+
+/// The daemon's files once its services are made: its node directory the
+/// group's to read only (its tags are made; nobody else adds or removes
+/// one), and every file fenced ([`access::fence_own_files`]: as every later
+/// one, from the maintenance thread).
+fn fence_at_start(dir: &Path, node: &Node<SarIpc>) {
+    let (node_dir, node_files) = access::node_paths(dir, node.id().value());
+    if let Err(e) = std::fs::set_permissions(
+        &node_dir,
+        std::os::unix::fs::PermissionsExt::from_mode(access::OWN_NODE_DIR_MODE),
+    ) {
+        tracing::warn!("{}: cannot set its mode: {e}", node_dir.display());
+    }
+    access::fence_own_files(
+        dir,
+        &[node_dir, dir.join(access::SERVICES_DIR)],
+        &node_files,
+    );
+}
+
 impl ShmWorker {
     /// Cleans dead nodes' resources, then creates the services under
     /// `prefix`; refuses when a living daemon has them.
@@ -727,59 +791,8 @@ impl ShmWorker {
         }
         let names = Names::new(prefix);
         let node = node_in(dir, Side::Daemon)?;
-        // The services of a daemon that is gone, which its clients still
-        // have open, go as they let go (bounded: then "another sard runs",
-        // with the cause).
-        let start = std::time::Instant::now();
-        let (server, (state, publisher), (notifier, wake)) = loop {
-            // The command service first: a client that finds the state finds
-            // the command server too.
-            let made = command_server(&node, &names, prefix).and_then(|server| {
-                let state = state_publisher(&node, &names, prefix)?;
-                Ok((server, state, events(&node, &names, prefix)?))
-            });
-            match made {
-                Err(ShmError::DaemonRuns { .. }) if start.elapsed() < ORPHAN_WAIT => {
-                    if release_orphaned_services(&node, &names) == 0 {
-                        // A living daemon's: refused below, at once.
-                        break made?;
-                    }
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                Err(ShmError::DaemonRuns {
-                    prefix,
-                    service,
-                    detail,
-                }) if release_orphaned_services(&node, &names) > 0 => {
-                    return Err(ShmError::DaemonRuns {
-                        prefix,
-                        service,
-                        detail: format!(
-                            "{detail}; no sard serves it: a client of a sard that is gone still has it open after {} ms (end it)",
-                            ORPHAN_WAIT.as_millis()
-                        ),
-                    });
-                }
-                made => break made?,
-            }
-        };
-        // The daemon's node directory: the group reads it, only the daemon
-        // writes (its tags are made; nobody else adds or removes one).
-        let (node_dir, node_files) = access::node_paths(dir, node.id().value());
-        if let Err(e) = std::fs::set_permissions(
-            &node_dir,
-            std::os::unix::fs::PermissionsExt::from_mode(access::OWN_NODE_DIR_MODE),
-        ) {
-            tracing::warn!("{}: cannot set its mode: {e}", node_dir.display());
-        }
-        // The daemon's files: its user's and group's only, its data
-        // segments the group's to read only (as every later one, from the
-        // maintenance thread: `Maintenance`).
-        access::fence_own_files(
-            dir,
-            &[node_dir, dir.join(access::SERVICES_DIR)],
-            &node_files,
-        );
+        let (server, (state, publisher), (notifier, wake)) = services(&node, &names, prefix)?;
+        fence_at_start(dir, &node);
         Ok(Self {
             node,
             state,
@@ -1000,6 +1013,55 @@ impl ShmWorker {
     }
 }
 
+/// Waits for the publishing thread's start (`ready`: the node id, or why
+/// not) at most `timeout`, returning early when `stop` says so.
+fn wait_ready(
+    ready: &std::sync::mpsc::Receiver<Result<u128, ShmError>>,
+    dir: &Path,
+    stop: &dyn Fn() -> bool,
+    timeout: Duration,
+) -> Result<Result<u128, ShmError>, ShmError> {
+    let start = std::time::Instant::now();
+    loop {
+        match ready.recv_timeout(Duration::from_millis(20)) {
+            Ok(r) => return Ok(r),
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Ok(Err(ShmError::Thread {
+                    detail: "it ended at start".to_owned(),
+                }));
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+        }
+        if stop() {
+            return Err(ShmError::Stopped);
+        }
+        if start.elapsed() >= timeout {
+            return Err(ShmError::Stuck {
+                dir: dir.display().to_string(),
+                timeout_ms: timeout.as_millis(),
+            });
+        }
+    }
+}
+
+/// Starts the maintenance thread `sard-reap` of the daemon whose node is
+/// `node_id` in the runtime directory `dir` ([`maintain`]).
+fn spawn_maintenance(
+    dir: &Path,
+    node_id: u128,
+    shared: &Arc<Shared>,
+) -> Result<std::thread::JoinHandle<()>, ShmError> {
+    let (node_dir, node_files) = access::node_paths(dir, node_id);
+    let own_dirs = vec![node_dir, dir.join(access::SERVICES_DIR)];
+    let (dir, shared) = (dir.to_owned(), shared.clone());
+    std::thread::Builder::new()
+        .name("sard-reap".into())
+        .spawn(move || maintain(&dir, &own_dirs, &node_files, &shared))
+        .map_err(|e| ShmError::Thread {
+            detail: format!("cannot start the maintenance thread: {e}"),
+        })
+}
+
 impl DaemonShm {
     /// Starts the publishing thread `sard-shm`, which cleans dead nodes'
     /// resources and then creates the services under `prefix`; refuses
@@ -1066,27 +1128,9 @@ impl DaemonShm {
                     detail: format!("cannot start it: {e}"),
                 })?
         };
-        let start = std::time::Instant::now();
-        let started = loop {
-            match ready_rx.recv_timeout(Duration::from_millis(20)) {
-                Ok(r) => break r,
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                    break Err(ShmError::Thread {
-                        detail: "it ended at start".to_owned(),
-                    });
-                }
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-            }
-            if stop() {
-                return Err(ShmError::Stopped);
-            }
-            if start.elapsed() >= timeout {
-                return Err(ShmError::Stuck {
-                    dir: dir.display().to_string(),
-                    timeout_ms: timeout.as_millis(),
-                });
-            }
-        };
+        // On a timeout or a stop, the thread (stuck in iceoryx2) is left
+        // behind: it ends with the process.
+        let started = wait_ready(&ready_rx, dir, stop, timeout)?;
         let node_id = match started {
             Ok(id) => id,
             Err(e) => {
@@ -1094,17 +1138,7 @@ impl DaemonShm {
                 return Err(e);
             }
         };
-        let maintenance = {
-            let (node_dir, node_files) = access::node_paths(dir, node_id);
-            let own_dirs = vec![node_dir, dir.join(access::SERVICES_DIR)];
-            let (dir, shared) = (dir.to_owned(), shared.clone());
-            std::thread::Builder::new()
-                .name("sard-reap".into())
-                .spawn(move || maintain(&dir, &own_dirs, &node_files, &shared))
-                .map_err(|e| ShmError::Thread {
-                    detail: format!("cannot start the maintenance thread: {e}"),
-                })
-        };
+        let maintenance = spawn_maintenance(dir, node_id, &shared);
         let maintenance = match maintenance {
             Ok(t) => t,
             Err(e) => {

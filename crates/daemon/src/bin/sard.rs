@@ -511,47 +511,14 @@ impl Run<'_> {
             }
             None => String::new(),
         };
-        // The last recording closed (its writer drains the queue first).
-        self.recorder.release();
-        if !self.recording.finish() {
-            tracing::error!(
-                "sard: the recording's thread did not end within {} s: its last file may be cut short (`sarctl recover` rewrites it)",
-                sar_record::live::FINISH_WAIT.as_secs()
-            );
-        }
-        if self.recorder.take_held().is_some() {
-            tracing::error!(
-                "sard: a recording handed back at the end was never taken by the recording's thread: its file may be cut short"
-            );
-        }
-        if let Some(t) = log_thread
-            && !t.finish()
-        {
-            tracing::error!(
-                "sard: the logging thread did not end in time: its last lines may be lost"
-            );
-        }
+        close_recording_and_log(&mut self.recorder, self.recording, log_thread);
         say_stopped(&controller, &stats, &health, &by);
         // The devices (the RDT sensor's receive thread: bounded), then the
         // publishing and maintenance threads, bounded (a thread stuck on
         // a truncated file is left behind and named below).
         drop(controller);
         drop(self.shm);
-        let behind = sar_drivers::join::left_behind();
-        if !behind.is_empty() {
-            tracing::error!(
-                "sard: threads left behind at the end: {}",
-                behind.join(", ")
-            );
-        }
-        match rt::bus_faults() {
-            Some((faults, address)) => Err(format!(
-                "stopped on SIGBUS: a shared-memory file of the runtime directory was truncated under sard \
-                 (first at address {address:#x}; {faults} thread(s) parked there); drives halted, recording closed \
-                 (a member of the operators' group may write the files the daemon shares with its clients)"
-            )),
-            None => Ok(()),
-        }
+        say_left_behind()
     }
 
     /// The controller on the sensor and the drives, with the operator's
@@ -610,6 +577,53 @@ impl Run<'_> {
                 log,
             },
         )
+    }
+}
+
+/// The last recording closed (its writer drains the queue first), then
+/// the logging thread ended, each waited for within its bound.
+fn close_recording_and_log(
+    recorder: &mut LiveRecorder,
+    recording: RecordManager,
+    log_thread: Option<logq::LogThread>,
+) {
+    recorder.release();
+    if !recording.finish() {
+        tracing::error!(
+            "sard: the recording's thread did not end within {} s: its last file may be cut short (`sarctl recover` rewrites it)",
+            sar_record::live::FINISH_WAIT.as_secs()
+        );
+    }
+    if recorder.take_held().is_some() {
+        tracing::error!(
+            "sard: a recording handed back at the end was never taken by the recording's thread: its file may be cut short"
+        );
+    }
+    if let Some(t) = log_thread
+        && !t.finish()
+    {
+        tracing::error!("sard: the logging thread did not end in time: its last lines may be lost");
+    }
+}
+
+/// The threads the stop left behind (named), and a stop on SIGBUS (a
+/// shared-memory file truncated under `sard`): a failure (exit 1, systemd
+/// restarts it), said in one line.
+fn say_left_behind() -> Result<(), String> {
+    let behind = sar_drivers::join::left_behind();
+    if !behind.is_empty() {
+        tracing::error!(
+            "sard: threads left behind at the end: {}",
+            behind.join(", ")
+        );
+    }
+    match rt::bus_faults() {
+        Some((faults, address)) => Err(format!(
+            "stopped on SIGBUS: a shared-memory file of the runtime directory was truncated under sard \
+             (first at address {address:#x}; {faults} thread(s) parked there); drives halted, recording closed \
+             (a member of the operators' group may write the files the daemon shares with its clients)"
+        )),
+        None => Ok(()),
     }
 }
 
