@@ -633,9 +633,11 @@ fn events(
 
 /// How long a starting daemon waits for the clients of a daemon that is
 /// gone to let go of its services (a client lets go at once when it finds
-/// no daemon's port in a service it opens; one that had it open before
-/// lets go at its deadline, 2 s at most for a command or `status`).
-pub const ORPHAN_WAIT: Duration = Duration::from_millis(1500);
+/// no living daemon's port in a service it opens; one that had it open
+/// before lets go at its deadline, 2 s at most for a command or `status`:
+/// then the start is refused, naming the cause, and systemd's next start
+/// a second later succeeds). Well within [`START_TIMEOUT`].
+pub const ORPHAN_WAIT: Duration = Duration::from_secs(1);
 
 /// The services under `names` that exist with no daemon's port (no
 /// publisher, server, notifier or wake-up listener): a killed daemon's,
