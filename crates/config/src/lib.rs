@@ -956,18 +956,71 @@ fn geometry(ctx: &Ctx<'_>, g: &GeometryToml) -> Result<Calibration, ConfigError>
 /// The longest manipulator name, characters.
 pub const MAX_NAME_CHARS: usize = 100;
 
+/// Whether `c` is a format character (Unicode's general category Cf: the
+/// bidirectional controls U+061C, U+200E, U+200F, U+202A-U+202E,
+/// U+2066-U+2069, the invisible and zero-width ones, the tags) or a line or
+/// paragraph separator (U+2028, U+2029): characters that are not shown as
+/// themselves but change how the text around them is shown. (Unicode 15's
+/// Cf list, written out: the crate links no Unicode tables.)
+pub fn is_format_char(c: char) -> bool {
+    matches!(
+        u32::from(c),
+        0x00AD
+            | 0x0600..=0x0605
+            | 0x061C
+            | 0x06DD
+            | 0x070F
+            | 0x0890..=0x0891
+            | 0x08E2
+            | 0x180E
+            | 0x200B..=0x200F
+            | 0x2028..=0x202E
+            | 0x2060..=0x2064
+            | 0x2066..=0x206F
+            | 0xFEFF
+            | 0xFFF9..=0xFFFB
+            | 0x110BD
+            | 0x110CD
+            | 0x13430..=0x1343F
+            | 0x1BCA0..=0x1BCA3
+            | 0x1D173..=0x1D17A
+            | 0xE0001
+            | 0xE0020..=0xE007F
+    )
+}
+
 /// `[manipulator]`, through the kinematics' own checks.
 fn manipulator(ctx: &Ctx<'_>, m: &ManipulatorToml) -> Result<Profile, ConfigError> {
     if m.name.trim().is_empty() {
         return Err(ctx.err("manipulator.name", "must not be empty"));
     }
-    // Shown by `--check-config`, `sarctl status` and the recordings.
+    // Shown by `--check-config`, the log and the recordings: one line,
+    // shown as written (a control character broke the line; a bidi override
+    // such as U+202E reversed how the rest of a log line reads).
     let chars = m.name.chars().count();
-    if chars > MAX_NAME_CHARS || m.name.chars().any(char::is_control) {
+    if chars > MAX_NAME_CHARS {
+        return Err(ctx.err(
+            "manipulator.name",
+            format!("must be at most {MAX_NAME_CHARS} characters, got {chars} characters"),
+        ));
+    }
+    if let Some((at, c)) = m.name.chars().enumerate().find(|(_, c)| c.is_control()) {
         return Err(ctx.err(
             "manipulator.name",
             format!(
-                "must be one line of at most {MAX_NAME_CHARS} characters, got {chars} characters"
+                "must not hold a control character, got U+{:04X} at character {}",
+                u32::from(c),
+                at + 1
+            ),
+        ));
+    }
+    if let Some((at, c)) = m.name.chars().enumerate().find(|(_, c)| is_format_char(*c)) {
+        return Err(ctx.err(
+            "manipulator.name",
+            format!(
+                "must not hold an invisible or direction-changing character (it changes how the log and the tools show the text), got U+{:04X} at character {}",
+                u32::from(c),
+                at + 1
             ),
         ));
     }

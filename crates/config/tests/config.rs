@@ -620,6 +620,47 @@ fn only_a_regular_file_of_at_most_1_mb_is_read() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Issue 35 (finding 12): a control character in `manipulator.name` was
+/// reported as "too long" (a 5-character name), and a bidi override
+/// (U+202E, which reverses how the rest of a log line reads) was accepted.
+/// Each is refused with its own reason, naming the character and where.
+#[test]
+fn a_name_with_a_control_or_a_direction_changing_character_is_refused_as_such() {
+    let named =
+        |name: &str| MINIMUM.replace("name = \"manipulator-2\"", &format!("name = \"{name}\""));
+    let msg = bad(&named("rod\\u0007x")).to_string();
+    assert!(
+        msg.contains("manipulator.name")
+            && msg.contains("must not hold a control character, got U+0007 at character 4"),
+        "{msg}"
+    );
+    assert!(!msg.contains("at most"), "{msg}");
+    for (c, code) in [
+        ("\\u202E", "U+202E"),
+        ("\\u2066", "U+2066"),
+        ("\\u200F", "U+200F"),
+        ("\\u200B", "U+200B"),
+        ("\\u2028", "U+2028"),
+        ("\\uFEFF", "U+FEFF"),
+        ("\\U000E0041", "U+E0041"),
+    ] {
+        let msg = bad(&named(&format!("rod-{c}2"))).to_string();
+        assert!(
+            msg.contains(&format!("must not hold an invisible or direction-changing character (it changes how the log and the tools show the text), got {code} at character 5")),
+            "{code}: {msg}"
+        );
+    }
+    let msg = bad(&named(&"m".repeat(101))).to_string();
+    assert!(
+        msg.contains("must be at most 100 characters, got 101 characters"),
+        "{msg}"
+    );
+    // Letters of every script stay welcome (Hebrew is right-to-left by
+    // itself, without an override).
+    let c = config::parse(&named("Zervikal-Manipulator μ2 שלום"), "t.toml").unwrap();
+    assert_eq!(c.manipulator_name, "Zervikal-Manipulator μ2 שלום");
+}
+
 /// An error about a nested array printed 200 KB: every error is one line
 /// of at most a few hundred characters (values are cut).
 #[test]

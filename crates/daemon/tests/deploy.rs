@@ -244,7 +244,8 @@ fn sard_runs_its_loop_on_the_rdt_driver_against_the_emulator() {
 
 /// The unit states the access model (issue 25, README "Access"): the
 /// runtime directory where `sard` and its clients meet is systemd's
-/// `RuntimeDirectory=sar` (the transport's default), the group's (2770),
+/// `RuntimeDirectory=sar` (the transport's default), the group's and
+/// sticky (3770: a member removes or renames none of `sard`'s files),
 /// nothing is shared through /dev/shm or /tmp, and the comment says how an
 /// operator is added.
 #[test]
@@ -256,7 +257,7 @@ fn the_unit_states_the_access_model() {
         "User=sar",
         "Group=sar",
         "RuntimeDirectory=sar",
-        "RuntimeDirectoryMode=2770",
+        "RuntimeDirectoryMode=3770",
         "UMask=0027",
         "PrivateTmp=yes",
         "ReadWritePaths=/run/sar",

@@ -14,6 +14,7 @@ pub mod clock;
 mod convert;
 pub mod drives;
 pub mod error;
+pub mod join;
 pub mod motion;
 pub mod rdt;
 pub mod runner;

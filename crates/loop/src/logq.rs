@@ -121,6 +121,9 @@ impl LogWaker {
     }
 }
 
+/// How long [`LogThread::finish`] waits for the logging thread at most.
+pub const LOG_JOIN_WAIT: std::time::Duration = std::time::Duration::from_millis(500);
+
 /// Makes the queue (allocated here, once) and, when `spawn`, the thread
 /// that writes its events with `tracing`.
 pub fn channel(spawn: bool) -> (LogSender, Option<LogThread>, LogQueue) {
@@ -157,12 +160,17 @@ impl LogThread {
         self.waker.clone()
     }
 
-    /// Writes what is left and ends the thread.
-    pub fn finish(mut self) {
+    /// Writes what is left and ends the thread, waiting for it at most
+    /// [`LOG_JOIN_WAIT`] (a log pipe whose reader stalls holds it): false
+    /// when it was left behind (`sar_drivers::join::left_behind` names it).
+    pub fn finish(mut self) -> bool {
         self.stop.store(true, Ordering::SeqCst);
-        if let Some(h) = self.handle.take() {
-            h.thread().unpark();
-            let _ = h.join();
+        match self.handle.take() {
+            Some(h) => {
+                h.thread().unpark();
+                sar_drivers::join::join_within(h, LOG_JOIN_WAIT).is_some()
+            }
+            None => true,
         }
     }
 }

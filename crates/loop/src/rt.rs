@@ -1,11 +1,13 @@
 //! The few system calls of the real-time loop: the monotonic clock, absolute
 //! sleeps (`clock_nanosleep` with `TIMER_ABSTIME`), memory locking, SCHED_FIFO
 //! and CPU pinning, and the stop flag that SIGTERM, SIGINT, SIGHUP and every
-//! other terminating signal that can be caught set ([`STOP_SIGNALS`]). Each call says why it failed;
-//! none allocates.
+//! other terminating signal that can be caught set ([`STOP_SIGNALS`]), and
+//! the guard against a shared-memory file truncated under the process
+//! ([`install_bus_guard`]: its SIGBUS stops cleanly). Each call says why it
+//! failed; none allocates.
 #![allow(unsafe_code)]
 
-use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, AtomicUsize, Ordering};
 
 /// `CLOCK_MONOTONIC` in ns, or `None` when it cannot be read (the drivers'
 /// clock: one place reads it).
@@ -170,7 +172,9 @@ extern "C" fn on_signal(sig: libc::c_int) {
 /// Not among them: SIGKILL and SIGSTOP (cannot be caught); SIGSEGV, SIGBUS,
 /// SIGFPE, SIGILL, SIGSYS, SIGTRAP, SIGABRT (a fault of the process itself
 /// or a debugger's: the process cannot be trusted to go on, the drives'
-/// heartbeat consumer stops them, SAFETY.md D4); SIGPIPE and SIGXFSZ
+/// heartbeat consumer stops them, SAFETY.md D4), except the one SIGBUS that
+/// is no fault of the process, a read or write beyond the end of a mapped
+/// file that someone else truncated ([`install_bus_guard`]); SIGPIPE and SIGXFSZ
 /// (ignored instead: they come from a write to a closed pipe or socket, or
 /// beyond the file-size limit, and that write then fails with EPIPE or
 /// EFBIG, which its writer reports; a closed log pipe or a recording at
@@ -259,6 +263,9 @@ pub fn signal_name(sig: libc::c_int) -> String {
     if let Some((_, name)) = STOP_SIGNALS.iter().find(|(s, _)| *s == sig) {
         return (*name).to_owned();
     }
+    if sig == libc::SIGBUS {
+        return "SIGBUS".to_owned();
+    }
     if (libc::SIGRTMIN()..=libc::SIGRTMAX()).contains(&sig) {
         return format!("SIGRTMIN+{}", sig - libc::SIGRTMIN());
     }
@@ -268,6 +275,82 @@ pub fn signal_name(sig: libc::c_int) -> String {
 /// Asks the loop to stop (as a signal would).
 pub fn request_stop() {
     STOP.store(true, Ordering::SeqCst);
+}
+
+/// SIGBUS faults the guard took (see [`install_bus_guard`]).
+static BUS_FAULTS: AtomicU64 = AtomicU64::new(0);
+/// The first address such a fault touched.
+static BUS_ADDRESS: AtomicUsize = AtomicUsize::new(0);
+
+/// The SIGBUS handler: a fault beyond the end of a mapped file
+/// (`BUS_ADRERR`: the file was truncated under the mapping, e.g. an iceoryx2
+/// file of the runtime directory by a member of its group) asks the loop to
+/// stop, as SIGTERM does (remembering the signal and the address), and
+/// parks the faulting thread for good: it never returns into the code that
+/// read a file that is gone (iceoryx2, given zeros there, panics in a
+/// destructor and aborts the process). The loop, which maps no file, halts
+/// the drives at its next cycle and `sard` ends; the parked thread (the
+/// publishing or the maintenance thread) is left behind, named, and ends
+/// with the process. Every other thread that touches the file parks the
+/// same way. Any other SIGBUS (a misaligned access, a hardware memory
+/// error) gets the default action back and faults again: the process ends
+/// by SIGBUS as before.
+extern "C" fn on_sigbus(sig: libc::c_int, info: *mut libc::siginfo_t, _ctx: *mut libc::c_void) {
+    // SAFETY: the kernel passes a valid siginfo_t to an SA_SIGINFO handler.
+    let (code, addr) = unsafe { ((*info).si_code, (*info).si_addr() as usize) };
+    if code == libc::BUS_ADRERR {
+        let _ = BUS_ADDRESS.compare_exchange(0, addr, Ordering::SeqCst, Ordering::SeqCst);
+        BUS_FAULTS.fetch_add(1, Ordering::SeqCst);
+        let _ = STOP_SIGNAL.compare_exchange(0, sig, Ordering::SeqCst, Ordering::SeqCst);
+        STOP.store(true, Ordering::SeqCst);
+        loop {
+            // SAFETY: async-signal-safe; returns after each caught signal.
+            unsafe { libc::pause() };
+        }
+    }
+    // SAFETY: restores the default action (async-signal-safe); the access
+    // faults again when the handler returns and the process ends by SIGBUS.
+    unsafe {
+        let mut action: libc::sigaction = std::mem::zeroed();
+        action.sa_sigaction = libc::SIG_DFL;
+        libc::sigemptyset(&mut action.sa_mask);
+        libc::sigaction(libc::SIGBUS, &action, std::ptr::null_mut());
+    }
+}
+
+/// Installs the SIGBUS guard of the daemon's shared memory: a member of the
+/// operators' group may write (so truncate) the iceoryx2 files the daemon
+/// maps read-write (a service's dynamic configuration, a connection); a
+/// truncated one used to kill `sard` at its next access (SIGBUS, exit 135,
+/// no log line, no halt). With the guard, the thread that touched it parks
+/// for good and the loop stops cleanly at its next cycle (drives halted,
+/// recording closed); [`bus_faults`] says what happened.
+pub fn install_bus_guard() -> std::io::Result<()> {
+    // SAFETY: a zeroed sigaction is valid; the handler stores atomics and
+    // then only calls pause (async-signal-safe).
+    let rc = unsafe {
+        let mut action: libc::sigaction = std::mem::zeroed();
+        action.sa_sigaction = on_sigbus
+            as extern "C" fn(libc::c_int, *mut libc::siginfo_t, *mut libc::c_void)
+            as libc::sighandler_t;
+        action.sa_flags = libc::SA_SIGINFO | libc::SA_RESTART;
+        libc::sigemptyset(&mut action.sa_mask);
+        libc::sigaction(libc::SIGBUS, &action, std::ptr::null_mut())
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// The SIGBUS faults [`install_bus_guard`] took so far, and the first
+/// address (`None`: none).
+pub fn bus_faults() -> Option<(u64, usize)> {
+    match BUS_FAULTS.load(Ordering::SeqCst) {
+        0 => None,
+        n => Some((n, BUS_ADDRESS.load(Ordering::SeqCst))),
+    }
 }
 
 #[cfg(test)]

@@ -198,6 +198,9 @@ pub struct LiveRecorder {
     incoming: Arc<ArrayQueue<Recorder>>,
     outgoing: Arc<ArrayQueue<Recorder>>,
     active: Option<Recorder>,
+    /// A recorder handed back while the hand-back queue was full: kept, and
+    /// handed back at the next cycle (never dropped on the loop's thread).
+    held: Option<Recorder>,
     /// Drops of the recordings already handed back.
     dropped_before: u64,
     last_joints_stamp_ns: Option<u64>,
@@ -209,27 +212,39 @@ pub struct LiveRecorder {
 }
 
 impl LiveRecorder {
-    /// Hands the active recorder back to the manager (at shutdown).
+    /// Hands the active recorder back to the manager (a stop, a failed
+    /// writer, the end). Never drops it on the loop's thread (freeing its
+    /// queue would be a large deallocation there): when the hand-back queue
+    /// is full it is held and handed back at the next cycle
+    /// ([`LiveRecorder::hand_back_held`]), and no new recording is taken
+    /// meanwhile, so at most one is ever held.
     pub fn release(&mut self) {
+        self.hand_back_held();
         if let Some(rec) = self.active.take() {
             self.dropped_before += rec.dropped();
             // Handed over before the flag falls: the manager that reads
             // "not recording" finds the recorder to close.
             if let Err(rec) = self.outgoing.push(rec) {
-                drop(rec);
+                if self.held.is_none() {
+                    self.held = Some(rec);
+                } else {
+                    // Unreachable (a recorder is held only while none is
+                    // active); kept recording rather than dropped here.
+                    self.active = Some(rec);
+                    return;
+                }
             }
             self.switch.recording.store(false, Ordering::Release);
         }
     }
-}
 
-/// The simulator's truth of a cycle ([`Cycle::truth`]) is recorded on
-/// `/sar/sim/tip_wrench_truth`: the visible part, `tip_force_n -
-/// friction_force_n`, with every new sensor sample, stamped as the cycle.
-impl Sink for LiveRecorder {
-    fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
-        // A stop request, or a writer that failed (a full disk): the
-        // recording ends here and the manager closes it (and says why).
+    /// At the start of a cycle: hands back a held recorder first (while one
+    /// is held, no new recording is taken: at most one is ever held); ends
+    /// the recording on a stop request or a writer that failed (a full
+    /// disk: the manager closes it and says why); takes a new one the
+    /// manager opened. Wait-free, allocation-free.
+    fn switch_recorder(&mut self) {
+        let holding = self.hand_back_held();
         if let Some(rec) = self.active.as_ref().filter(|r| r.failed()) {
             // Published from this cycle on (the manager's close confirms it).
             self.switch.failure.store(
@@ -242,6 +257,7 @@ impl Sink for LiveRecorder {
             self.release();
         }
         if self.active.is_none()
+            && !holding
             && let Some(rec) = self.incoming.pop()
         {
             self.active = Some(rec);
@@ -249,6 +265,33 @@ impl Sink for LiveRecorder {
             self.next_snapshot_ns = None;
             self.switch.recording.store(true, Ordering::Release);
         }
+    }
+
+    /// Hands back the recorder [`LiveRecorder::release`] had to hold (the
+    /// queue was full), once the manager has made room. Whether one is
+    /// still held.
+    pub fn hand_back_held(&mut self) -> bool {
+        if let Some(rec) = self.held.take()
+            && let Err(rec) = self.outgoing.push(rec)
+        {
+            self.held = Some(rec);
+        }
+        self.held.is_some()
+    }
+
+    /// The recorder still held at the end (the manager never made room):
+    /// for the caller to stop off the loop's thread.
+    pub fn take_held(&mut self) -> Option<Recorder> {
+        self.held.take()
+    }
+}
+
+/// The simulator's truth of a cycle ([`Cycle::truth`]) is recorded on
+/// `/sar/sim/tip_wrench_truth`: the visible part, `tip_force_n -
+/// friction_force_n`, with every new sensor sample, stamped as the cycle.
+impl Sink for LiveRecorder {
+    fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
+        self.switch_recorder();
         let truth = c.truth;
         let mut dropped = self.dropped_before;
         if let Some(rec) = &mut self.active {
@@ -421,6 +464,7 @@ impl RecordManager {
                 incoming,
                 outgoing,
                 active: None,
+                held: None,
                 dropped_before: 0,
                 last_joints_stamp_ns: None,
                 snapshot: Box::new(sar_snapshot::Snapshot::new()),
@@ -431,15 +475,25 @@ impl RecordManager {
     }
 
     /// After the loop: closes every recording (call after
-    /// [`LiveRecorder::release`]).
-    pub fn finish(mut self) {
+    /// [`LiveRecorder::release`]), waiting for the manager thread at most
+    /// [`FINISH_WAIT`] (a disk that stalls holds its last write): false when
+    /// it was left behind (`sar_drivers::join::left_behind` names it; the
+    /// file is then cut short, and `sarctl recover` rewrites it).
+    pub fn finish(mut self) -> bool {
         self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            t.thread().unpark();
-            let _ = t.join();
+        match self.thread.take() {
+            Some(t) => {
+                t.thread().unpark();
+                sar_drivers::join::join_within(t, FINISH_WAIT).is_some()
+            }
+            None => true,
         }
     }
 }
+
+/// How long [`RecordManager::finish`] waits for the recordings to close at
+/// most (the unit's `TimeoutStopSec` is 5 s for the whole stop).
+pub const FINISH_WAIT: Duration = Duration::from_secs(3);
 
 /// Megabytes (10^6 bytes), for the messages.
 fn mb(bytes: u64) -> f64 {
@@ -706,4 +760,64 @@ fn start_one(
     *watch = Some(rec.failure_watch(std::thread::current()));
     let _ = incoming.push(rec);
     Ok(first_file(&settings.directory, name).display().to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+
+    use super::*;
+
+    /// A paused recorder (no writer thread) into `dir`.
+    fn recorder(dir: &Path, name: &str) -> Recorder {
+        Recorder::new_paused(RecorderConfig::new(FileOptions::new(dir, name))).unwrap()
+    }
+
+    /// Issue 35: with the hand-back queue full (a manager that has not yet
+    /// closed what it was handed), `release` dropped the whole recorder on
+    /// the loop's thread (its queue freed there, its recording lost). Now
+    /// it is held, handed back once there is room, and no new recording is
+    /// taken meanwhile: every recorder reaches the manager.
+    #[test]
+    fn a_full_hand_back_queue_holds_the_recorder_instead_of_dropping_it() {
+        let dir = std::env::temp_dir().join(format!("sar-live-hold-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let switch = Arc::new(RecordSwitch::default());
+        let incoming = Arc::new(ArrayQueue::new(1));
+        let outgoing = Arc::new(ArrayQueue::new(4));
+        for i in 0..4 {
+            assert!(outgoing.push(recorder(&dir, &format!("old{i}"))).is_ok());
+        }
+        let mut live = LiveRecorder {
+            switch: Arc::clone(&switch),
+            incoming: Arc::clone(&incoming),
+            outgoing: Arc::clone(&outgoing),
+            active: Some(recorder(&dir, "active")),
+            held: None,
+            dropped_before: 0,
+            last_joints_stamp_ns: None,
+            snapshot: Box::new(sar_snapshot::Snapshot::new()),
+            snapshot_period_ns: 1,
+            next_snapshot_ns: None,
+        };
+        switch.recording.store(true, Ordering::Release);
+        live.release();
+        // Not dropped: held, the recording flag down.
+        assert!(live.held.is_some(), "the recorder was dropped");
+        assert!(live.active.is_none());
+        assert!(!switch.recording());
+        // Still no room: still held.
+        assert!(live.hand_back_held());
+        // The manager closes one: the held one goes at the next cycle.
+        let mut closed = vec![outgoing.pop().unwrap()];
+        assert!(!live.hand_back_held());
+        while let Some(r) = outgoing.pop() {
+            closed.push(r);
+        }
+        assert_eq!(closed.len(), 5, "every recorder reached the manager");
+        assert!(live.take_held().is_none());
+        drop(closed);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -62,8 +62,9 @@ enum Cmd {
     Status,
     /// The live state (`--format json`: one JSON line per sample).
     Monitor {
-        /// Stop after this many samples (default: until interrupted).
-        #[arg(long)]
+        /// Stop after this many samples, at least 1 (default: until
+        /// interrupted).
+        #[arg(long, value_parser = sarctl::cli::monitor::parse_count)]
         count: Option<u64>,
     },
     /// Leave Stop or Fault (refused while a fault persists; with a force

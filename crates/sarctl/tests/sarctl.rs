@@ -458,7 +458,7 @@ fn whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named() 
     let daemon = start_daemon_as_user(&base, &run, &prefix);
     let meta = std::fs::metadata(&run).unwrap();
     assert_eq!((meta.uid(), meta.gid()), (DAEMON_UID, SAR_GID));
-    assert_eq!(meta.mode() & 0o7777, 0o2770, "{:o}", meta.mode());
+    assert_eq!(meta.mode() & 0o7777, 0o3770, "{:o}", meta.mode());
 
     // An operator commands (a reset of the running daemon is answered).
     let out = sarctl_as(Some((OPERATOR_UID, SAR_GID)), &run, &prefix, &["reset"]);
@@ -530,35 +530,51 @@ fn whoever_starts_first_the_daemon_owns_the_directory_and_outsiders_are_named() 
     let _ = std::fs::remove_dir_all(&base);
 }
 
-/// Finding 2: iceoryx2's management segment was a world-writable file in
-/// /dev/shm; truncated, every new `sarctl` and `sard` spun on it forever
-/// (and `sard` ignored SIGTERM); with garbage, `UnableToGenerateUniqueNodeId`.
-/// Now it lives in the runtime directory, and a damaged one (empty, short,
-/// garbage, not the caller's) is named within a second by both.
+/// Finding 2 (issue 25): iceoryx2's management segment was a world-writable
+/// file in /dev/shm; truncated, every new `sarctl` and `sard` spun on it
+/// forever (and `sard` ignored SIGTERM); with garbage,
+/// `UnableToGenerateUniqueNodeId`. Now it lives in the runtime directory,
+/// and a damaged one (empty, short, garbage, a FIFO, not the caller's) is
+/// named within a second by a client. Issue 35 (finding 12): a member of
+/// the group could so keep `sard` from starting (and a FIFO gave
+/// `UnableToGenerateUniqueNodeId` without the file's name): `sard` now
+/// writes a fresh one in its place (the directory is its own), names the
+/// damaged one in its log, and starts.
 #[test]
 fn a_damaged_management_file_is_named_within_a_second() {
     let prefix = format!("sar-acc2-{}", std::process::id());
     let (base, run) = access_dirs("damaged");
-    // A healthy one, as iceoryx2 writes it (and its size, as the check
-    // expects it).
+    // A healthy one, as iceoryx2 writes it (and its size and name, as the
+    // check expects them).
     drop(sar_shm::node_in(&run, sar_shm::Side::Daemon).unwrap());
     let mgmt = std::fs::read_dir(&run)
         .unwrap()
         .map(|e| e.unwrap().path())
         .find(|p| p.to_string_lossy().ends_with(".global_mgmt"))
         .unwrap();
+    assert_eq!(
+        mgmt.file_name().unwrap().to_string_lossy(),
+        sar_shm::access::GLOBAL_MGMT_FILE
+    );
     let healthy = std::fs::read(&mgmt).unwrap();
     assert_eq!(healthy.len() as u64, sar_shm::access::GLOBAL_MGMT_SIZE);
     assert_eq!(
         healthy[..8],
         sar_shm::access::GLOBAL_MGMT_VERSION.to_le_bytes()
     );
-    for (what, bytes) in [
-        ("empty", Vec::new()),
-        ("short", healthy[..8].to_vec()),
-        ("garbage", vec![0xA5; healthy.len()]),
+    for (what, detail) in [
+        ("empty", "0 bytes, not 16"),
+        ("short", "8 bytes, not 16"),
+        ("garbage", "version field 0xa5a5a5a5a5a5a5a5"),
+        ("fifo", "not a regular file"),
     ] {
-        std::fs::write(&mgmt, &bytes).unwrap();
+        let _ = std::fs::remove_file(&mgmt);
+        match what {
+            "empty" => std::fs::write(&mgmt, b"").unwrap(),
+            "short" => std::fs::write(&mgmt, &healthy[..8]).unwrap(),
+            "garbage" => std::fs::write(&mgmt, vec![0xA5; healthy.len()]).unwrap(),
+            _ => support::mkfifo(&mgmt),
+        }
         let t = Instant::now();
         let out = sarctl_as(None, &run, &prefix, &["status"]);
         assert!(
@@ -570,29 +586,33 @@ fn a_damaged_management_file_is_named_within_a_second() {
         assert!(!out.status.success(), "{what}");
         assert_eq!(err.lines().count(), 1, "{what}: {err}");
         assert!(
-            err.contains("management file") && err.contains("is damaged"),
+            err.contains(&format!(
+                "management file {} is damaged ({detail}",
+                mgmt.display()
+            )),
             "{what}: {err}"
         );
-        let t = Instant::now();
+        // sard replaces it, says so naming it, and runs.
         let out = Command::new(&*SARD)
-            .arg("--sim")
+            .args(["--sim", "--max-cycles", "20"])
             .current_dir(&base)
             .env("SAR_SERVICE_PREFIX", &prefix)
             .env("SAR_RUNTIME_DIR", &run)
             .output()
             .unwrap();
-        assert!(
-            t.elapsed() < Duration::from_secs(2),
-            "{what}: {:?}",
-            t.elapsed()
-        );
-        assert!(!out.status.success(), "{what}");
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains("is damaged"), "{what}: {err}");
+        assert!(out.status.success(), "{what}: {err}");
+        assert!(
+            err.contains(&format!(
+                "the shared-memory management file {} was damaged ({detail}",
+                mgmt.display()
+            )) && err.contains("replaced by a fresh one"),
+            "{what}: {err}"
+        );
+        assert_eq!(std::fs::read(&mgmt).unwrap()[..8], healthy[..8], "{what}");
     }
     // A dead node's details file that blocks whoever reads it (a FIFO): a
     // client never reads other nodes' files, so it answers at once.
-    std::fs::write(&mgmt, &healthy).unwrap();
     std::fs::create_dir_all(run.join("nodes/111")).unwrap();
     std::fs::write(run.join("nodes/iox2_111.node_monitor"), b"").unwrap();
     let fifo = run.join("nodes/111/iox2_node.details");
@@ -628,6 +648,488 @@ fn the_daemon_refuses_a_directory_of_another_user() {
         )
     );
     let _ = std::fs::remove_dir_all(&base);
+}
+
+/// `PROGRAM ARGS` as `who` (uid, gid): its output.
+fn run_as(who: (u32, u32), program: &str, args: &[&std::ffi::OsStr]) -> Output {
+    use std::os::unix::process::CommandExt;
+    Command::new(program)
+        .args(args)
+        .uid(who.0)
+        .gid(who.1)
+        .output()
+        .unwrap()
+}
+
+/// Issue 35, finding 1: one `truncate -s 0` of the daemon's `iox2_*.data`
+/// file by any member of the operators' group killed `sard` with SIGBUS
+/// (exit 135: no log line, no halt, no recording closed), and the runtime
+/// directory (2770, not sticky) let every member truncate, rename or
+/// remove the daemon's files. Now the directory is sticky (a member removes
+/// or renames none of the daemon's files, nor replaces its management
+/// file), the daemon's data segments are the group's to read only (the
+/// clients map them read-only), and what the members must write to talk to
+/// the daemon (a service's dynamic configuration) stops `sard` cleanly when
+/// truncated: the SIGBUS is caught, the loop halts the drives, the stop is
+/// logged, exit 1 (systemd restarts it).
+#[test]
+#[cfg_attr(sar_skip_root_tests, ignore = "needs root (SAR_SKIP_ROOT_TESTS=1)")]
+fn a_member_cannot_truncate_remove_or_replace_the_daemons_files_and_a_truncation_stops_sard_cleanly()
+ {
+    require_root(
+        "a_member_cannot_truncate_remove_or_replace_the_daemons_files_and_a_truncation_stops_sard_cleanly",
+    );
+    use std::os::unix::fs::MetadataExt;
+    use std::os::unix::process::ExitStatusExt;
+    let prefix = format!("sar-acc35-{}", std::process::id());
+    let (base, run) = access_dirs("member");
+    let mut daemon = start_daemon_as_user(&base, &run, &prefix);
+    let member = (OPERATOR_UID, SAR_GID);
+    let meta = std::fs::metadata(&run).unwrap();
+    assert_eq!(meta.mode() & 0o7777, 0o3770, "{:o}", meta.mode());
+    // The daemon's files (after its fence, within a second of the start).
+    let daemons = |suffix: &str| -> Vec<std::path::PathBuf> {
+        std::fs::read_dir(&run)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| {
+                p.to_string_lossy().ends_with(suffix)
+                    && std::fs::symlink_metadata(p).unwrap().uid() == DAEMON_UID
+            })
+            .collect()
+    };
+    let data = daemons(".data");
+    assert!(data.len() >= 2, "{data:?}");
+    for f in &data {
+        let before = std::fs::metadata(f).unwrap().len();
+        let out = run_as(
+            member,
+            "truncate",
+            &["-s".as_ref(), "0".as_ref(), f.as_os_str()],
+        );
+        assert!(!out.status.success(), "{} truncated", f.display());
+        assert_eq!(std::fs::metadata(f).unwrap().len(), before);
+        let out = run_as(member, "rm", &["-f".as_ref(), f.as_os_str()]);
+        assert!(
+            !out.status.success() && f.exists(),
+            "{} removed",
+            f.display()
+        );
+        let aside = f.with_extension("aside");
+        let out = run_as(member, "mv", &[f.as_os_str(), aside.as_os_str()]);
+        assert!(
+            !out.status.success() && f.exists(),
+            "{} renamed",
+            f.display()
+        );
+    }
+    // The management file: neither removed nor replaced (by a FIFO).
+    let mgmt = run.join(sar_shm::access::GLOBAL_MGMT_FILE);
+    let aside = run.join("aside");
+    for (program, args) in [
+        ("rm", [std::ffi::OsStr::new("-f"), mgmt.as_os_str()]),
+        ("mv", [mgmt.as_os_str(), aside.as_os_str()]),
+    ] {
+        let out = run_as(member, program, &args);
+        assert!(
+            !out.status.success(),
+            "{program}: {}",
+            support::text(&out.stderr)
+        );
+        assert!(
+            std::fs::symlink_metadata(&mgmt)
+                .unwrap()
+                .file_type()
+                .is_file()
+        );
+    }
+    // The daemon runs on, and an operator still commands it.
+    let out = sarctl_as(Some(member), &run, &prefix, &["status", "--format", "json"]);
+    assert!(out.status.success(), "{}", support::text(&out.stderr));
+    // What the members must write: its truncation stops sard cleanly.
+    let dynamic = daemons(".dynamic");
+    assert!(!dynamic.is_empty());
+    let t = Instant::now();
+    for f in &dynamic {
+        let out = run_as(
+            member,
+            "truncate",
+            &["-s".as_ref(), "0".as_ref(), f.as_os_str()],
+        );
+        assert!(out.status.success(), "{}", support::text(&out.stderr));
+    }
+    let status = loop {
+        if let Some(s) = daemon.0.try_wait().unwrap() {
+            break s;
+        }
+        assert!(t.elapsed() < Duration::from_secs(20), "sard still runs");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    eprintln!(
+        "sard ended {:?} after the truncation: {status:?}",
+        t.elapsed()
+    );
+    assert_eq!(status.signal(), None, "sard was killed: {status:?}");
+    assert_eq!(status.code(), Some(1), "{status:?}");
+    let log = std::fs::read_to_string(base.join("sard.log")).unwrap();
+    for line in [
+        "sard: SIGBUS received: stopping (drives halted, recording closed)",
+        "stopped after",
+        "on SIGBUS, drives halted",
+        "sard: stopped on SIGBUS: a shared-memory file of the runtime directory was truncated under sard",
+    ] {
+        assert!(log.contains(line), "{line:?} not in\n{log}");
+    }
+    // A member truncates the management file (the group writes it) while
+    // sard is down: the next sard repairs it and starts.
+    let out = run_as(
+        member,
+        "truncate",
+        &["-s".as_ref(), "0".as_ref(), mgmt.as_os_str()],
+    );
+    assert!(out.status.success(), "{}", support::text(&out.stderr));
+    let again = start_daemon_as_user(&base, &run, &prefix);
+    let log = std::fs::read_to_string(base.join("sard.log")).unwrap();
+    assert!(
+        log.contains("was damaged (0 bytes, not 16): replaced by a fresh one"),
+        "{log}"
+    );
+    drop(again);
+    let _ = std::fs::remove_dir_all(&base);
+}
+
+/// `sard --sim` under `prefix` with the runtime directory `run` (made by
+/// it), its log to `dir/sard.log`; waits until `sarctl status` answers.
+fn start_daemon_in(
+    dir: &std::path::Path,
+    run: &std::path::Path,
+    prefix: &str,
+    extra: &[&str],
+) -> Daemon {
+    let log = std::fs::File::create(dir.join("sard.log")).unwrap();
+    let daemon = Daemon::spawn(
+        sard(prefix)
+            .arg("--sim")
+            .args(extra)
+            .current_dir(dir)
+            .env("SAR_RUNTIME_DIR", run)
+            .stderr(log),
+    );
+    let start = Instant::now();
+    while !sarctl_as(None, run, prefix, &["status"]).status.success() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "sard did not come up"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    daemon
+}
+
+/// Issue 35, finding 3: suspended (Ctrl-Z) or idle clients took every
+/// place: 8 `sarctl` commands suspended in flight locked out every command,
+/// the reset after a Stop included (`ExceedsMaxSupportedClients`); 16
+/// `sarctl monitor` locked out `status`; 20-30 suspended clients made
+/// `status` say "no daemon runs" while sard ran (iceoryx2's 20 processes a
+/// service). The places here are held by this process's own ports, as a
+/// suspended client holds its own (a port is the place, whichever process
+/// holds it). Now the limits are sized for real use (64 command clients, 64
+/// subscribers, 129 processes), and a full service names its limit,
+/// never "no daemon runs".
+#[test]
+fn suspended_clients_never_lock_out_the_reset_and_a_full_service_names_its_limit() {
+    use sar_msgs::wire::{CommandMsg, ReplyMsg, StateMsg};
+    let prefix = format!("sar-slots-{}", std::process::id());
+    let dir = scratch("slots");
+    let run = dir.join("run");
+    let _daemon = start_daemon_in(&dir, &run, &prefix, &[]);
+    let names = sar_shm::Names::new(&prefix);
+    let node = sar_shm::node_in(&run, sar_shm::Side::Client).unwrap();
+    let command = node
+        .service_builder(&names.command.as_str().try_into().unwrap())
+        .request_response::<CommandMsg, ReplyMsg>()
+        .open()
+        .unwrap();
+    let state = node
+        .service_builder(&names.state.as_str().try_into().unwrap())
+        .publish_subscribe::<StateMsg>()
+        .open()
+        .unwrap();
+    // What the probe held: 8 commands in flight, 16 subscribers, 30
+    // processes with the state open.
+    let mut clients = Vec::new();
+    let mut in_flight = Vec::new();
+    for _ in 0..8 {
+        let c = command.client_builder().create().unwrap();
+        in_flight.push(c.send_copy(CommandMsg::default()).unwrap());
+        clients.push(c);
+    }
+    let mut subscribers: Vec<_> = (0..16)
+        .map(|_| state.subscriber_builder().create().unwrap())
+        .collect();
+    let mut nodes = Vec::new();
+    for _ in 0..30 {
+        let n = sar_shm::node_in(&run, sar_shm::Side::Client).unwrap();
+        let s = n
+            .service_builder(&names.state.as_str().try_into().unwrap())
+            .publish_subscribe::<StateMsg>()
+            .open()
+            .unwrap();
+        nodes.push((s, n));
+    }
+    // The daemon answers (a reset may be refused by the guard itself, never
+    // for want of a place).
+    let answered = |args: &[&str]| {
+        let out = sarctl_as(None, &run, &prefix, args);
+        let err = support::text(&out.stderr);
+        assert!(
+            out.status.success() || err.starts_with(&format!("sarctl: {}: ", args[0])),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("connected to the daemon"), "{args:?}: {err}");
+    };
+    for args in [
+        &["reset"][..],
+        &["limits"],
+        &["status"],
+        &["monitor", "--count", "1"],
+    ] {
+        answered(args);
+    }
+    // Every place taken: each refusal names its limit, at once.
+    let refusal = |args: &[&str]| {
+        let t = Instant::now();
+        let out = sarctl_as(None, &run, &prefix, args);
+        let took = t.elapsed();
+        assert!(!out.status.success(), "{args:?}");
+        let err = support::text(&out.stderr);
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(!err.contains("no daemon runs"), "{err}");
+        eprintln!("{args:?} refused in {took:?}: {err}");
+        err
+    };
+    while let Ok(c) = command.client_builder().create() {
+        clients.push(c);
+    }
+    assert_eq!(clients.len(), sar_shm::MAX_CLIENTS);
+    let err = refusal(&["reset"]);
+    assert!(
+        err.starts_with("sarctl: 64 command clients are connected to the daemon; the limit is 64 (a suspended or hung sarctl keeps its place until it ends"),
+        "{err}"
+    );
+    while let Ok(s) = state.subscriber_builder().create() {
+        subscribers.push(s);
+    }
+    assert_eq!(subscribers.len(), sar_shm::MAX_SUBSCRIBERS);
+    let err = refusal(&["status"]);
+    assert!(
+        err.starts_with(
+            "sarctl: 64 subscribers of the state are connected to the daemon; the limit is 64"
+        ),
+        "{err}"
+    );
+    subscribers.truncate(8);
+    for _ in 0..2 * sar_shm::MAX_NODES {
+        let n = sar_shm::node_in(&run, sar_shm::Side::Client).unwrap();
+        match n
+            .service_builder(&names.state.as_str().try_into().unwrap())
+            .publish_subscribe::<StateMsg>()
+            .open()
+        {
+            Ok(s) => nodes.push((s, n)),
+            Err(_) => break,
+        }
+    }
+    let err = refusal(&["status"]);
+    assert!(
+        err.starts_with(&format!(
+            "sarctl: {0} processes are connected to the daemon; the limit is {0}",
+            sar_shm::MAX_NODES
+        )),
+        "{err}"
+    );
+    // The places come back as their holders end.
+    drop((nodes, subscribers, in_flight, clients));
+    for args in [&["reset"][..], &["limits"], &["status"]] {
+        answered(args);
+    }
+}
+
+/// Issue 35, finding 4: clients killed with -9 leaked: dead nodes were
+/// cleaned only when `sard` started (and by a client opening a service,
+/// which left a node half cleaned for good when it was killed itself);
+/// after about 12,500 kills of `sarctl monitor` at random moments `status`
+/// and `monitor` failed for good (`ExceedsMaxSupportedSubscribers`) and
+/// the runtime directory held 20,216 entries. Now the daemon reclaims dead
+/// clients' ports and files while it runs, half-made ones included: 200
+/// kills at seeded random moments (0-60 ms after the start: most in the
+/// middle of making the node or the ports), and the directory is back to
+/// what it held before, `status` and `monitor` answer.
+#[test]
+fn clients_killed_at_random_moments_leave_nothing_behind() {
+    use rand::{Rng, SeedableRng};
+    let prefix = format!("sar-kills-{}", std::process::id());
+    let dir = scratch("kills");
+    let run = dir.join("run");
+    let _daemon = start_daemon_in(&dir, &run, &prefix, &[]);
+    let entries = || walk(&run).len();
+    let before = entries();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(35);
+    let kills = 200;
+    let t = Instant::now();
+    let mut running: Vec<(std::process::Child, Instant)> = Vec::new();
+    let mut done = 0;
+    while done < kills {
+        while running.len() < 4 && done + running.len() < kills {
+            let child = Command::new(SARCTL)
+                .args(["monitor"])
+                .env("SAR_SERVICE_PREFIX", &prefix)
+                .env("SAR_RUNTIME_DIR", &run)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap();
+            let at = Instant::now() + Duration::from_micros(rng.random_range(0..60_000));
+            running.push((child, at));
+        }
+        std::thread::sleep(Duration::from_millis(1));
+        let now = Instant::now();
+        running.retain_mut(|(child, at)| {
+            if now < *at {
+                return true;
+            }
+            child.kill().unwrap();
+            child.wait().unwrap();
+            done += 1;
+            false
+        });
+    }
+    let after_kills = entries();
+    let killed_in = t.elapsed();
+    let t = Instant::now();
+    loop {
+        let now = entries();
+        if now <= before {
+            break;
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "{now} entries in the runtime directory, {before} before {kills} kills"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    eprintln!(
+        "{kills} kills in {killed_in:?}: {after_kills} entries right after, {before} again {:?} later",
+        t.elapsed()
+    );
+    for args in [&["status"][..], &["monitor", "--count", "3"]] {
+        let out = sarctl_as(None, &run, &prefix, args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            support::text(&out.stderr)
+        );
+    }
+    let log = std::fs::read_to_string(dir.join("sard.log")).unwrap();
+    assert!(
+        log.contains("reclaimed the shared-memory ports and files of"),
+        "{log}"
+    );
+}
+
+/// Issue 35, finding 7: `sarctl retreat --distance 0.5` (or NaN, or 0)
+/// cleared a latched Stop (the reset was accepted, the drives released,
+/// the guard in Retreat), and only then was the back-out refused (exit 1).
+/// Now the distance is checked first: nothing is sent, the Stop stays.
+#[test]
+fn a_bad_retreat_distance_is_refused_before_the_reset_and_the_stop_stays_latched() {
+    let prefix = format!("sar-retreat-{}", std::process::id());
+    let dir = scratch("retreat");
+    let demo = sar_daemon::sim::DEMO_SCENARIO_TOML;
+    let head = demo.split("[[contact]]").next().unwrap();
+    // 20 N along the rod (above the 12 N axial stop limit) from 2 s on.
+    let scenario = dir.join("push.toml");
+    std::fs::write(
+        &scenario,
+        format!(
+            "{head}\n[[contact]]\nt_s = 1.5\nforce_n = [0.0, 0.0, 0.0]\n[[contact]]\nt_s = 2.0\nforce_n = [20.0, 0.0, 0.0]\n[[contact]]\nt_s = 600.0\nforce_n = [20.0, 0.0, 0.0]\n"
+        ),
+    )
+    .unwrap();
+    let run = dir.join("run");
+    let _daemon = start_daemon_in(
+        &dir,
+        &run,
+        &prefix,
+        &["--scenario", scenario.to_str().unwrap()],
+    );
+    let guard = || {
+        let out = sarctl_as(None, &run, &prefix, &["status", "--format", "json"]);
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_default();
+        v["guard"].as_str().unwrap_or_default().to_owned()
+    };
+    let t = Instant::now();
+    while guard() != "stop" {
+        assert!(t.elapsed() < Duration::from_secs(30), "no Stop");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    for bad in ["0.5", "NaN", "0", "-0.01", "1e-320000"] {
+        let arg = format!("--distance={bad}");
+        let out = sarctl_as(None, &run, &prefix, &["retreat", &arg]);
+        assert!(!out.status.success(), "{bad}");
+        let err = support::text(&out.stderr);
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            err.starts_with("sarctl: retreat: --distance must be within 0 < d <= 0.1 m, got"),
+            "{bad}: {err}"
+        );
+        assert!(err.len() < 250, "{err}");
+        // Still latched: nothing was reset.
+        std::thread::sleep(Duration::from_millis(100));
+        assert_eq!(guard(), "stop", "{bad}: the Stop was cleared");
+    }
+}
+
+/// Issue 35, finding 11: an empty `SAR_RUNTIME_DIR` counted as unset (the
+/// production directory), a relative one was taken from each process's
+/// working directory (so `sard` and `sarctl` disagreed); both are refused
+/// in one line, by both. Finding 12: `monitor --count 0` printed a sample.
+#[test]
+fn an_empty_or_relative_runtime_dir_and_a_count_of_zero_are_refused() {
+    let dir = scratch("runtime_env");
+    for (value, words) in [
+        ("", "SAR_RUNTIME_DIR is set but empty"),
+        ("run", "SAR_RUNTIME_DIR=run is a relative path"),
+    ] {
+        let out = Command::new(SARCTL)
+            .args(["status"])
+            .env("SAR_RUNTIME_DIR", value)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let err = support::text(&out.stderr);
+        assert!(!out.status.success());
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.starts_with(&format!("sarctl: {words}")), "{err}");
+        let out = Command::new(&*SARD)
+            .args(["--sim", "--max-cycles", "10"])
+            .env("SAR_RUNTIME_DIR", value)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let err = support::text(&out.stderr);
+        assert!(!out.status.success());
+        assert!(err.contains(&format!("sard: {words}")), "{err}");
+        assert!(!dir.join("run").exists());
+    }
+    let out = Command::new(SARCTL)
+        .args(["monitor", "--count", "0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(out.stdout.is_empty());
+    let err = support::text(&out.stderr);
+    assert!(err.contains("must be at least 1"), "{err}");
 }
 
 /// Every entry under `dir` (path, owner, group, mode), depth first.

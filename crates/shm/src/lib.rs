@@ -59,10 +59,22 @@ pub const DEFAULT_PREFIX: &str = "sar";
 pub const STATE_BUFFER: usize = 64;
 /// Samples a new subscriber may get from the history.
 pub const STATE_HISTORY: usize = 1;
-/// Subscribers of the state at most.
-pub const MAX_SUBSCRIBERS: usize = 16;
-/// Command clients at most.
-pub const MAX_CLIENTS: usize = 8;
+/// Subscribers of the state at most (`status`, `monitor`, `view`,
+/// `retreat`, `identify --live`, each one while it runs). An operator's
+/// station runs a few; a suspended (Ctrl-Z) or hung one keeps its place
+/// until it ends, so the limit is far above real use (16 `monitor`s used to
+/// lock out `status`): 64, for 2.3 MB of the publisher's segment (36 KB a
+/// subscriber) and a cost only for those connected.
+pub const MAX_SUBSCRIBERS: usize = 64;
+/// Command clients at most (each `sarctl` command while it waits for its
+/// answer, at most 2 s; a suspended one keeps its place until it ends: 8
+/// suspended commands used to lock out the reset after a Stop).
+pub const MAX_CLIENTS: usize = 64;
+/// Processes (iceoryx2 nodes) that may have one of the daemon's services
+/// open at once: every client and subscriber, and the daemon (iceoryx2's
+/// default, 20, made `status` say "no daemon runs" beside 20-30 suspended
+/// clients).
+pub const MAX_NODES: usize = MAX_CLIENTS + MAX_SUBSCRIBERS + 1;
 /// Samples a state subscriber may hold at once (borrowed, not yet released).
 pub const STATE_BORROWED: usize = 2;
 /// States queued from the loop to the publishing thread at most (cycles of
@@ -150,6 +162,25 @@ pub enum ShmError {
     NoReply {
         /// How long the client waited, ms.
         timeout_ms: u128,
+    },
+    /// Every place of a service is taken (by clients that run, are
+    /// suspended or hang: each keeps its place until it ends).
+    #[error(
+        "{count} {what} are connected to the daemon; the limit is {limit} (a suspended or hung sarctl keeps its place until it ends: end it, `jobs` and `kill %N` in its shell)"
+    )]
+    Full {
+        /// What is counted: "clients", "subscribers", "processes", ...
+        what: &'static str,
+        /// How many are connected.
+        count: usize,
+        /// The limit.
+        limit: usize,
+    },
+    /// `SAR_RUNTIME_DIR` is set to something unusable.
+    #[error("{detail}")]
+    RuntimeDirEnv {
+        /// What is wrong with it.
+        detail: String,
     },
     /// A client found no runtime directory: no daemon runs there.
     #[error(
@@ -251,14 +282,18 @@ pub fn config(dir: &Path, side: Side) -> Result<Config, ShmError> {
         Side::Client => CLIENT_CREATION_TIMEOUT,
     };
     if side == Side::Client {
-        // The daemon removes dead nodes' resources at its start; a client
-        // never lists every node (one damaged, e.g. a details file that is a
-        // FIFO, would block it). It still cleans the dead owners of a
-        // service it opens (iceoryx2's default): else it would keep a
-        // killed daemon's service alive, and the new daemon would find it
-        // taken.
+        // Only the daemon removes dead nodes' resources (at its start and
+        // every [`REAP_PERIOD`] while it runs): a client never lists every
+        // node (one damaged, e.g. a details file that is a FIFO, would
+        // block it) and never cleans a dead node, not even the dead owners
+        // of a service it opens (iceoryx2's default). A client killed in
+        // the middle of cleaning left the dead node it cleaned half done
+        // for good (its ports kept their places: after about 12,500 kills
+        // of `sarctl monitor`, no subscriber could connect), and a member
+        // may not remove the daemon's files (the directory is sticky).
         config.global.node.cleanup_dead_nodes_on_creation = false;
         config.global.node.cleanup_dead_nodes_on_destruction = false;
+        config.global.service.cleanup_dead_nodes_on_open = false;
     }
     Ok(config)
 }
@@ -278,18 +313,26 @@ pub fn node_in(dir: &Path, side: Side) -> Result<Node<SarIpc>, ShmError> {
         .config(&config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<SarIpc>()
-        .map_err(|e| ShmError::Port {
-            what: "cannot create the iceoryx2 node",
-            detail: format!(
-                "{e:?} (a damaged file in the runtime directory {}?)",
-                dir.display()
-            ),
+        .map_err(|e| {
+            // The management file may have been damaged since it was
+            // checked (a member swapped a FIFO in): named, not guessed.
+            if let Err(damaged @ ShmError::Damaged { .. }) = access::check_mgmt(dir) {
+                return damaged;
+            }
+            ShmError::Port {
+                what: "cannot create the iceoryx2 node",
+                detail: format!(
+                    "{e:?} (a damaged file in the runtime directory {}? its management file is {})",
+                    dir.display(),
+                    dir.join(access::GLOBAL_MGMT_FILE).display()
+                ),
+            }
         })
 }
 
 /// A client's node in the runtime directory [`runtime_dir`].
 pub fn node() -> Result<Node<SarIpc>, ShmError> {
-    node_in(&runtime_dir(), Side::Client)
+    node_in(&runtime_dir()?, Side::Client)
 }
 
 /// Removes the resources of dead nodes in the runtime directory `dir`;
@@ -300,19 +343,36 @@ pub fn clean_dead_nodes_in(dir: &Path) -> usize {
     };
     let mut cleaned = 0;
     let _ = Node::<SarIpc>::list(&config, |state| {
-        if let NodeState::Dead(view) = state
-            && view.try_remove_stale_resources().is_ok()
-        {
-            cleaned += 1;
+        if let NodeState::Dead(view) = state {
+            use iceoryx2::node::NodeView;
+            let done = match view.details() {
+                Some(_) => view.try_remove_stale_resources(),
+                // A node whose details file is gone (its process died while
+                // making it, or a cleaning was cut after removing it):
+                // iceoryx2 would clean it in its default directory
+                // (`/tmp/iceoryx2`), never here; it is cleaned with this
+                // directory's configuration (iceoryx2 0.10's hidden entry
+                // for that, pinned with the crate).
+                None => {
+                    iceoryx2::node::DeadNodeView::<SarIpc>::__internal_try_remove_stale_resources(
+                        *view.id(),
+                        iceoryx2::node::NodeDetails::__internal_new(&None, &config),
+                    )
+                }
+            };
+            if done.is_ok() {
+                cleaned += 1;
+            }
         }
         CallbackProgression::Continue
     });
     cleaned
 }
 
-/// [`clean_dead_nodes_in`] the runtime directory [`runtime_dir`].
+/// [`clean_dead_nodes_in`] the runtime directory [`runtime_dir`] (0 when
+/// it cannot be named).
 pub fn clean_dead_nodes() -> usize {
-    clean_dead_nodes_in(&runtime_dir())
+    runtime_dir().map_or(0, |d| clean_dead_nodes_in(&d))
 }
 
 type StatePublisher = Publisher<SarIpc, StateMsg, ()>;
@@ -336,6 +396,49 @@ struct Shared {
     record_switch: std::sync::OnceLock<Arc<dyn RecordCommands>>,
     /// The logging thread, woken at each round when the loop queued events.
     log: std::sync::OnceLock<sar_loop::logq::LogWaker>,
+    /// Dead processes whose resources the maintenance thread reclaimed.
+    reclaimed: AtomicU64,
+}
+
+/// How often the daemon's maintenance thread (`sard-reap`) reclaims the
+/// ports and files of dead clients (killed with SIGKILL, crashed) and takes
+/// other users' access away from the daemon's newest files.
+pub const REAP_PERIOD: Duration = Duration::from_secs(1);
+/// How long dropping the daemon's side waits for each of its threads (the
+/// publishing thread, the maintenance thread) at most, then leaves it
+/// behind (`sar_drivers::join::left_behind` names it).
+pub const JOIN_WAIT: Duration = Duration::from_millis(700);
+
+/// The maintenance thread's body: every [`REAP_PERIOD`] until the daemon
+/// side is dropped, the resources of the dead processes in `dir` are
+/// removed (their ports leave the services: the places they held are free
+/// again) and the daemon's own files are fenced
+/// ([`access::fence_own_files`]). It is not the publishing thread: a
+/// listing that blocks on a member's damaged file (a FIFO for a node's
+/// details) stops the reclaiming, never the states or the commands.
+fn maintain(
+    dir: &Path,
+    own_dirs: &[std::path::PathBuf],
+    own_files: &[std::path::PathBuf],
+    shared: &Shared,
+) {
+    loop {
+        std::thread::park_timeout(REAP_PERIOD);
+        if shared.stop.load(Ordering::Acquire) {
+            return;
+        }
+        let cleaned = clean_dead_nodes_in(dir) + access::sweep_half_made_nodes(dir);
+        if cleaned > 0 {
+            let total = shared
+                .reclaimed
+                .fetch_add(cleaned as u64, Ordering::Relaxed)
+                + cleaned as u64;
+            tracing::info!(
+                "reclaimed the shared-memory ports and files of {cleaned} dead client process(es) ({total} since the start)"
+            );
+        }
+        access::fence_own_files(dir, own_dirs, own_files);
+    }
 }
 
 /// Where the commands `record start|stop` go: the recording's switch, wired
@@ -383,6 +486,8 @@ pub struct DaemonShm {
     /// by hand).
     wake: Option<std::thread::Thread>,
     thread: Option<std::thread::JoinHandle<()>>,
+    /// The maintenance thread (`None` with a worker driven by hand).
+    maintenance: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Shared>,
     queue_drops: u64,
 }
@@ -402,9 +507,7 @@ impl std::fmt::Debug for DaemonShm {
 /// thread with [`DaemonShm::create_manual`], which then calls
 /// [`ShmWorker::pump`] when it likes (deterministic tests).
 pub struct ShmWorker {
-    _node: Node<SarIpc>,
-    /// The runtime directory (fenced every `access::FENCE_PERIOD`).
-    dir: std::path::PathBuf,
+    node: Node<SarIpc>,
     /// The state's service (how many subscribe).
     state: StateService,
     publisher: StatePublisher,
@@ -455,6 +558,7 @@ fn command_server(
         .request_response::<CommandMsg, ReplyMsg>()
         .max_servers(1)
         .max_clients(MAX_CLIENTS)
+        .max_nodes(MAX_NODES)
         .max_active_requests_per_client(1)
         .max_response_buffer_size(1)
         .enable_safe_overflow_for_requests(true)
@@ -477,6 +581,7 @@ fn state_publisher(
         .publish_subscribe::<StateMsg>()
         .max_publishers(1)
         .max_subscribers(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
         .subscriber_max_buffer_size(STATE_BUFFER)
         .subscriber_max_borrowed_samples(STATE_BORROWED)
         .history_size(STATE_HISTORY)
@@ -506,6 +611,7 @@ fn events(
         .event()
         .max_notifiers(1)
         .max_listeners(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
         .create()
         .map_err(|e| exists(prefix, &names.event, e))?
         .notifier_builder()
@@ -516,12 +622,151 @@ fn events(
         .event()
         .max_notifiers(MAX_CLIENTS + MAX_SUBSCRIBERS)
         .max_listeners(1)
+        .max_nodes(MAX_NODES)
         .create()
         .map_err(|e| exists(prefix, &names.wake, e))?
         .listener_builder()
         .create()
         .map_err(|e| port("cannot create the wake-up listener", e))?;
     Ok((notifier, wake))
+}
+
+/// How long a starting daemon waits for the clients of a daemon that is
+/// gone to let go of its services (a client lets go at once when it finds
+/// no living daemon's port in a service it opens; one that had it open
+/// before lets go at its deadline, 2 s at most for a command or `status`:
+/// then the start is refused, naming the cause, and systemd's next start
+/// a second later succeeds). Well within [`START_TIMEOUT`].
+pub const ORPHAN_WAIT: Duration = Duration::from_secs(1);
+
+/// The services under `names` that exist with no daemon's port (no
+/// publisher, server, notifier or wake-up listener): a killed daemon's,
+/// kept by the clients that still have them open (its dead ports were
+/// cleaned; a service goes once no process has it open). Each is opened
+/// and let go of: the last process to let go removes it (iceoryx2 removes
+/// a service nobody has open), so once its clients are gone it is gone.
+/// Returns how many there were.
+fn release_orphaned_services(node: &Node<SarIpc>, names: &Names) -> usize {
+    let orphaned = |name: &str, pattern: MessagingPattern| -> bool {
+        let Ok(service) = service_name(name) else {
+            return false;
+        };
+        let builder = node.service_builder(&service);
+        let opened = |e: &dyn std::fmt::Debug| {
+            let e = format!("{e:?}");
+            if e == "IsMarkedForDestruction" || e == "ServiceInCorruptedState" {
+                // Its last client let go but could not remove the daemon's
+                // files (a member may not: the directory is sticky): the
+                // daemon, their owner, removes them.
+                // SAFETY (iceoryx2's contract: no other process uses it):
+                // a service marked for destruction has no owner left.
+                #[allow(unsafe_code)]
+                let removed = unsafe { node.force_remove_service(&service, pattern) };
+                if removed.is_ok_and(|r| r) {
+                    tracing::info!("removed the service {name:?} of a sard that is gone");
+                    return Ok(0);
+                }
+            }
+            Err(())
+        };
+        let daemon_ports = match pattern {
+            MessagingPattern::PublishSubscribe => {
+                builder.publish_subscribe::<StateMsg>().open().map_or_else(
+                    |e| opened(&e),
+                    |s| Ok(s.dynamic_config().number_of_publishers()),
+                )
+            }
+            MessagingPattern::RequestResponse => builder
+                .request_response::<CommandMsg, ReplyMsg>()
+                .open()
+                .map_or_else(
+                    |e| opened(&e),
+                    |s| Ok(s.dynamic_config().number_of_servers()),
+                ),
+            _ if name == names.wake => builder.event().open().map_or_else(
+                |e| opened(&e),
+                |s| Ok(s.dynamic_config().number_of_listeners()),
+            ),
+            _ => builder.event().open().map_or_else(
+                |e| opened(&e),
+                |s| Ok(s.dynamic_config().number_of_notifiers()),
+            ),
+        };
+        daemon_ports == Ok(0)
+    };
+    [
+        (&names.command, MessagingPattern::RequestResponse),
+        (&names.state, MessagingPattern::PublishSubscribe),
+        (&names.event, MessagingPattern::Event),
+        (&names.wake, MessagingPattern::Event),
+    ]
+    .into_iter()
+    .filter(|(name, pattern)| orphaned(name, *pattern))
+    .count()
+}
+
+/// Every port of the daemon's services under `names`: the command server
+/// first (a client that finds the state finds the command server too), the
+/// state's publisher, the events. The services of a daemon that is gone,
+/// which its clients still have open, go as they let go: waited for up to
+/// [`ORPHAN_WAIT`], then "another sard runs" with the cause.
+type DaemonPorts = (
+    CommandServer,
+    (StateService, StatePublisher),
+    (Notifier<SarIpc>, Listener<SarIpc>),
+);
+
+fn services(node: &Node<SarIpc>, names: &Names, prefix: &str) -> Result<DaemonPorts, ShmError> {
+    let start = std::time::Instant::now();
+    loop {
+        let made = command_server(node, names, prefix).and_then(|server| {
+            let state = state_publisher(node, names, prefix)?;
+            Ok((server, state, events(node, names, prefix)?))
+        });
+        match made {
+            Err(ShmError::DaemonRuns { .. }) if start.elapsed() < ORPHAN_WAIT => {
+                if release_orphaned_services(node, names) == 0 {
+                    // A living daemon's: refused at once.
+                    return made;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(ShmError::DaemonRuns {
+                prefix,
+                service,
+                detail,
+            }) if release_orphaned_services(node, names) > 0 => {
+                return Err(ShmError::DaemonRuns {
+                    prefix,
+                    service,
+                    detail: format!(
+                        "{detail}; no sard serves it: a client of a sard that is gone still has it open after {} ms (end it)",
+                        ORPHAN_WAIT.as_millis()
+                    ),
+                });
+            }
+            made => return made,
+        }
+    }
+}
+
+/// The daemon's files once its services are made: its node directory the
+/// group's to read only (its tags are made; nobody else adds or removes
+/// one), and every file fenced ([`access::fence_own_files`]: as every later
+/// one, from the maintenance thread).
+fn fence_at_start(dir: &Path, node: &Node<SarIpc>) {
+    let (node_dir, node_files) = access::node_paths(dir, node.id().value());
+    if let Err(e) = std::fs::set_permissions(
+        &node_dir,
+        std::os::unix::fs::PermissionsExt::from_mode(access::OWN_NODE_DIR_MODE),
+    ) {
+        tracing::warn!("{}: cannot set its mode: {e}", node_dir.display());
+    }
+    access::fence_own_files(
+        dir,
+        &[node_dir, dir.join(access::SERVICES_DIR)],
+        &node_files,
+    );
 }
 
 impl ShmWorker {
@@ -548,17 +793,10 @@ impl ShmWorker {
         }
         let names = Names::new(prefix);
         let node = node_in(dir, Side::Daemon)?;
-        // The command service first: a client that finds the state finds
-        // the command server too.
-        let server = command_server(&node, &names, prefix)?;
-        let (state, publisher) = state_publisher(&node, &names, prefix)?;
-        let (notifier, wake) = events(&node, &names, prefix)?;
-        // The daemon's files: its user's and group's only (as every later
-        // one, from the publishing thread).
-        access::fence_own_files(dir, access::FENCE_LIMIT);
+        let (server, (state, publisher), (notifier, wake)) = services(&node, &names, prefix)?;
+        fence_at_start(dir, &node);
         Ok(Self {
-            _node: node,
-            dir: dir.to_owned(),
+            node,
             state,
             publisher,
             notifier,
@@ -759,12 +997,7 @@ impl ShmWorker {
     /// is queued.
     fn run(mut self) {
         self.operator.publisher.watch();
-        let mut fenced = std::time::Instant::now();
         loop {
-            if fenced.elapsed() >= access::FENCE_PERIOD {
-                access::fence_own_files(&self.dir, access::FENCE_LIMIT);
-                fenced = std::time::Instant::now();
-            }
             // A sign of life per wake-up (at least every WORKER_WAIT): the
             // loop faults when it stops (`Reason::PublisherStalled`).
             self.operator.publisher.beat();
@@ -782,6 +1015,55 @@ impl ShmWorker {
     }
 }
 
+/// Waits for the publishing thread's start (`ready`: the node id, or why
+/// not) at most `timeout`, returning early when `stop` says so.
+fn wait_ready(
+    ready: &std::sync::mpsc::Receiver<Result<u128, ShmError>>,
+    dir: &Path,
+    stop: &dyn Fn() -> bool,
+    timeout: Duration,
+) -> Result<Result<u128, ShmError>, ShmError> {
+    let start = std::time::Instant::now();
+    loop {
+        match ready.recv_timeout(Duration::from_millis(20)) {
+            Ok(r) => return Ok(r),
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Ok(Err(ShmError::Thread {
+                    detail: "it ended at start".to_owned(),
+                }));
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+        }
+        if stop() {
+            return Err(ShmError::Stopped);
+        }
+        if start.elapsed() >= timeout {
+            return Err(ShmError::Stuck {
+                dir: dir.display().to_string(),
+                timeout_ms: timeout.as_millis(),
+            });
+        }
+    }
+}
+
+/// Starts the maintenance thread `sard-reap` of the daemon whose node is
+/// `node_id` in the runtime directory `dir` ([`maintain`]).
+fn spawn_maintenance(
+    dir: &Path,
+    node_id: u128,
+    shared: &Arc<Shared>,
+) -> Result<std::thread::JoinHandle<()>, ShmError> {
+    let (node_dir, node_files) = access::node_paths(dir, node_id);
+    let own_dirs = vec![node_dir, dir.join(access::SERVICES_DIR)];
+    let (dir, shared) = (dir.to_owned(), shared.clone());
+    std::thread::Builder::new()
+        .name("sard-reap".into())
+        .spawn(move || maintain(&dir, &own_dirs, &node_files, &shared))
+        .map_err(|e| ShmError::Thread {
+            detail: format!("cannot start the maintenance thread: {e}"),
+        })
+}
+
 impl DaemonShm {
     /// Starts the publishing thread `sard-shm`, which cleans dead nodes'
     /// resources and then creates the services under `prefix`; refuses
@@ -793,7 +1075,7 @@ impl DaemonShm {
     /// priority and never competes with the loop.
     pub fn create(prefix: &str, operator: Operator, limits_n: [f64; 6]) -> Result<Self, ShmError> {
         Self::start(
-            &runtime_dir(),
+            &runtime_dir()?,
             prefix,
             operator,
             limits_n,
@@ -826,7 +1108,8 @@ impl DaemonShm {
     ) -> Result<Self, ShmError> {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
-        let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<(), ShmError>>(1);
+        // The worker's node id once it is made (for the maintenance thread).
+        let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel::<Result<u128, ShmError>>(1);
         let thread = {
             let (dir, prefix, shared) = (dir.to_owned(), prefix.to_owned(), shared.clone());
             std::thread::Builder::new()
@@ -834,7 +1117,7 @@ impl DaemonShm {
                 .spawn(move || {
                     match ShmWorker::create(&dir, &prefix, operator, limits_n, consumer, shared) {
                         Ok(worker) => {
-                            if ready_tx.send(Ok(())).is_ok() {
+                            if ready_tx.send(Ok(worker.node.id().value())).is_ok() {
                                 worker.run();
                             }
                         }
@@ -847,35 +1130,31 @@ impl DaemonShm {
                     detail: format!("cannot start it: {e}"),
                 })?
         };
-        let start = std::time::Instant::now();
-        let started = loop {
-            match ready_rx.recv_timeout(Duration::from_millis(20)) {
-                Ok(r) => break r,
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                    break Err(ShmError::Thread {
-                        detail: "it ended at start".to_owned(),
-                    });
-                }
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-            }
-            if stop() {
-                return Err(ShmError::Stopped);
-            }
-            if start.elapsed() >= timeout {
-                return Err(ShmError::Stuck {
-                    dir: dir.display().to_string(),
-                    timeout_ms: timeout.as_millis(),
-                });
+        // On a timeout or a stop, the thread (stuck in iceoryx2) is left
+        // behind: it ends with the process.
+        let started = wait_ready(&ready_rx, dir, stop, timeout)?;
+        let node_id = match started {
+            Ok(id) => id,
+            Err(e) => {
+                let _ = sar_drivers::join::join_within(thread, JOIN_WAIT);
+                return Err(e);
             }
         };
-        if let Err(e) = started {
-            let _ = thread.join();
-            return Err(e);
-        }
+        let maintenance = spawn_maintenance(dir, node_id, &shared);
+        let maintenance = match maintenance {
+            Ok(t) => t,
+            Err(e) => {
+                shared.stop.store(true, Ordering::Release);
+                thread.thread().unpark();
+                let _ = sar_drivers::join::join_within(thread, JOIN_WAIT);
+                return Err(e);
+            }
+        };
         Ok(Self {
             states: producer,
             wake: Some(thread.thread().clone()),
             thread: Some(thread),
+            maintenance: Some(maintenance),
             shared,
             queue_drops: 0,
         })
@@ -892,7 +1171,7 @@ impl DaemonShm {
         let (producer, consumer) = rtrb::RingBuffer::new(STATE_QUEUE);
         let shared = Arc::new(Shared::default());
         let worker = ShmWorker::create(
-            &runtime_dir(),
+            &runtime_dir()?,
             prefix,
             operator,
             limits_n,
@@ -904,6 +1183,7 @@ impl DaemonShm {
                 states: producer,
                 wake: None,
                 thread: None,
+                maintenance: None,
                 shared,
                 queue_drops: 0,
             },
@@ -950,13 +1230,22 @@ impl DaemonShm {
 }
 
 impl Drop for DaemonShm {
+    /// Stops the publishing thread (it sends what is queued first) and the
+    /// maintenance thread, waiting for each at most [`JOIN_WAIT`]: a thread
+    /// stuck in iceoryx2 (a damaged file, a page of a truncated file) is
+    /// left behind and named (`sar_drivers::join::left_behind`), never
+    /// waited for without bound.
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);
         if let Some(t) = &self.wake {
             t.unpark();
         }
         if let Some(t) = self.thread.take() {
-            let _ = t.join();
+            let _ = sar_drivers::join::join_within(t, JOIN_WAIT);
+        }
+        if let Some(t) = self.maintenance.take() {
+            t.thread().unpark();
+            let _ = sar_drivers::join::join_within(t, JOIN_WAIT);
         }
     }
 }
@@ -996,7 +1285,7 @@ impl Client {
     /// A client for the daemon with `prefix` in the runtime directory
     /// [`runtime_dir`].
     pub fn new(prefix: &str) -> Result<Self, ClientError> {
-        Self::in_dir(&runtime_dir(), prefix)
+        Self::in_dir(&runtime_dir()?, prefix)
     }
 
     /// A client for the daemon with `prefix` in the runtime directory `dir`:
@@ -1037,11 +1326,55 @@ impl Client {
         Ok(self.node.get_or_init(|| n))
     }
 
-    fn no_daemon(&self, service: &str, e: impl std::fmt::Debug) -> ShmError {
+    /// Why a service could not be opened: "no daemon runs" only when it
+    /// does not exist (or is being removed); every place taken names the
+    /// limit; anything else says what failed.
+    fn open_error(&self, service: &str, e: impl std::fmt::Debug) -> ShmError {
+        let name = format!("{e:?}");
+        match name.as_str() {
+            "DoesNotExist" | "IsMarkedForDestruction" => ShmError::NoDaemon {
+                service: service.to_owned(),
+                detail: name,
+            },
+            // Every place taken: the open itself failed, so the places are
+            // all taken (the count is the limit).
+            "ExceedsMaxNumberOfNodes" => ShmError::Full {
+                what: "processes",
+                count: MAX_NODES,
+                limit: MAX_NODES,
+            },
+            _ => ShmError::Port {
+                what: "cannot open the daemon's service",
+                detail: format!("{service}: {name}"),
+            },
+        }
+    }
+
+    /// A service that no daemon serves (a killed daemon's, not yet cleaned
+    /// by the next one; or one starting): let go of at once, so that the
+    /// next daemon can clean it and make its own.
+    fn gone(&self, service: &str) -> ShmError {
         ShmError::NoDaemon {
             service: service.to_owned(),
-            detail: format!("{e:?}"),
+            detail: "no sard serves it: the one that made it is gone (a new sard replaces it at its start)".to_owned(),
         }
+    }
+
+    /// This client's own node files (for [`access::fence_own_files`]).
+    fn own_paths(&self) -> (Vec<std::path::PathBuf>, Vec<std::path::PathBuf>) {
+        match self.node.get() {
+            Some(n) => {
+                let (dir, files) = access::node_paths(&self.dir, n.id().value());
+                (vec![dir], files)
+            }
+            None => (Vec::new(), Vec::new()),
+        }
+    }
+
+    /// Takes other users' access away from this client's own files.
+    fn fence(&self) {
+        let (dirs, files) = self.own_paths();
+        access::fence_own_files(&self.dir, &dirs, &files);
     }
 
     /// Wakes the daemon's publishing thread (`PREFIX/wake`) so that it
@@ -1065,30 +1398,54 @@ impl Client {
         }
     }
 
-    /// Subscribes to the state; `Err` when no daemon runs.
+    /// Subscribes to the state; `Err` when no daemon runs, or when every
+    /// place is taken (the limit named).
     pub fn subscribe(&self) -> Result<StateSubscription, ClientError> {
         let state = self
             .node(&self.names.state)?
             .service_builder(&service_name(&self.names.state)?)
             .publish_subscribe::<StateMsg>()
             .open()
-            .map_err(|e| self.no_daemon(&self.names.state, e))?;
+            .map_err(|e| self.open_error(&self.names.state, e))?;
+        let mut alive = false;
+        state.dynamic_config().list_publishers(|p| {
+            alive |= process_alive(&p.node_id);
+            CallbackProgression::Continue
+        });
+        if !alive {
+            return Err(self.gone(&self.names.state));
+        }
         let subscriber = state
             .subscriber_builder()
             .buffer_size(STATE_BUFFER)
             .create()
-            .map_err(|e| port("cannot subscribe to the state", e))?;
+            .map_err(|e| match format!("{e:?}").as_str() {
+                "ExceedsMaxSupportedSubscribers" => ShmError::Full {
+                    what: "subscribers of the state",
+                    count: state.dynamic_config().number_of_subscribers(),
+                    limit: state.static_config().max_subscribers(),
+                },
+                _ => port("cannot subscribe to the state", e),
+            })?;
         let event = self
             .node(&self.names.event)?
             .service_builder(&service_name(&self.names.event)?)
             .event()
             .open()
-            .map_err(|e| self.no_daemon(&self.names.event, e))?;
-        let listener = event
-            .listener_builder()
-            .create()
-            .map_err(|e| port("cannot listen to the state event", e))?;
-        access::fence_own_files(&self.dir, access::FENCE_LIMIT);
+            .map_err(|e| self.open_error(&self.names.event, e))?;
+        let listener =
+            event
+                .listener_builder()
+                .create()
+                .map_err(|e| match format!("{e:?}").as_str() {
+                    "ExceedsMaxSupportedListeners" => ShmError::Full {
+                        what: "listeners of the state's event",
+                        count: event.dynamic_config().number_of_listeners(),
+                        limit: event.static_config().max_listeners(),
+                    },
+                    _ => port("cannot listen to the state event", e),
+                })?;
+        self.fence();
         self.wake_daemon();
         Ok(StateSubscription {
             subscriber,
@@ -1096,18 +1453,36 @@ impl Client {
         })
     }
 
-    /// Sends a command and waits up to `timeout` for its reply.
+    /// Sends a command and waits up to `timeout` for its reply; its port is
+    /// given up when the answer came or the time is up (a suspended client
+    /// keeps it until it runs again: then it gives it up at once).
     pub fn command(&self, command: CommandMsg, timeout: Duration) -> Result<ReplyMsg, ClientError> {
         let service = self
             .node(&self.names.command)?
             .service_builder(&service_name(&self.names.command)?)
             .request_response::<CommandMsg, ReplyMsg>()
             .open()
-            .map_err(|e| self.no_daemon(&self.names.command, e))?;
-        let client = service
-            .client_builder()
-            .create()
-            .map_err(|e| port("cannot create the command client", e))?;
+            .map_err(|e| self.open_error(&self.names.command, e))?;
+        let mut alive = false;
+        service.dynamic_config().list_servers(|p| {
+            alive |= process_alive(&p.node_id);
+            CallbackProgression::Continue
+        });
+        if !alive {
+            return Err(self.gone(&self.names.command));
+        }
+        let client =
+            service
+                .client_builder()
+                .create()
+                .map_err(|e| match format!("{e:?}").as_str() {
+                    "ExceedsMaxSupportedClients" => ShmError::Full {
+                        what: "command clients",
+                        count: service.dynamic_config().number_of_clients(),
+                        limit: service.static_config().max_clients(),
+                    },
+                    _ => port("cannot create the command client", e),
+                })?;
         let pending = client
             .send_copy(command)
             .map_err(|e| port("cannot send the command", e))?;
@@ -1116,7 +1491,7 @@ impl Client {
         let mut fenced = false;
         while start.elapsed() < timeout {
             if !fenced {
-                access::fence_own_files(&self.dir, access::FENCE_LIMIT);
+                self.fence();
                 fenced = true;
             }
             if let Ok(Some(reply)) = pending.receive() {
@@ -1128,6 +1503,20 @@ impl Client {
             timeout_ms: timeout.as_millis(),
         })
     }
+}
+
+/// Whether the process that made the node `id` lives (its process id, from
+/// the id: a signal 0 to it is delivered or refused for want of
+/// permission). No file of the node is read (a member could make one
+/// block the reader).
+fn process_alive(id: &iceoryx2::identifiers::UniqueNodeId) -> bool {
+    let Ok(pid) = id.pid::<SarIpc>() else {
+        return true;
+    };
+    // SAFETY: a plain query; signal 0 is never delivered.
+    #[allow(unsafe_code)]
+    let rc = unsafe { libc::kill(pid.value(), 0) };
+    rc == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
 }
 
 /// A subscription to the state.

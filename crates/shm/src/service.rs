@@ -5,7 +5,7 @@
 //! `/dev/shm` is one directory for every user of the host (mode 1777): a
 //! name there can be taken, truncated or filled with garbage by anyone who
 //! can guess it (issue 25, findings 2 and 3). Files under the runtime
-//! directory (`/run/sar`, mode 2770, the daemon's user and group) are out of
+//! directory (`/run/sar`, mode 3770, the daemon's user and group) are out of
 //! reach of everyone else. The runtime directory is a tmpfs under systemd
 //! (`/run`), so the mappings are as fast as `/dev/shm`'s.
 //!

@@ -91,6 +91,9 @@ fn run(args: &Args) -> Result<(), String> {
     let cfg = configuration(args)?;
     let (rdt, canopen) = chosen_devices(args, &cfg)?;
     rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
+    // A shared-memory file truncated under sard (by a member of the
+    // operators' group) stops it cleanly instead of killing it (SIGBUS).
+    rt::install_bus_guard().map_err(|e| format!("cannot install the SIGBUS handler: {e}"))?;
     // The sensor first: its receive thread keeps the normal priority.
     let real_sensor = rdt.map(connect_sensor).transpose()?;
     let (simulated, scenario_name) = simulator(args, &cfg, real_sensor.is_some(), &canopen)?;
@@ -185,8 +188,9 @@ fn start_shm(
     cfg: &config::Config,
     operator: &Operator,
 ) -> Result<Option<DaemonShm>, String> {
+    let dir = sar_shm::runtime_dir().map_err(|e| e.to_string())?;
     match DaemonShm::create_in(
-        &sar_shm::runtime_dir(),
+        &dir,
         &args.prefix,
         operator.clone(),
         cfg.estimator.guard.force_limits().to_array(),
@@ -514,14 +518,14 @@ impl Run<'_> {
             }
             None => String::new(),
         };
-        // The last recording closed (its writer drains the queue first).
-        self.recorder.release();
-        self.recording.finish();
-        if let Some(t) = log_thread {
-            t.finish();
-        }
+        close_recording_and_log(&mut self.recorder, self.recording, log_thread);
         say_stopped(&controller, &stats, &health, &by);
-        Ok(())
+        // The devices (the RDT sensor's receive thread: bounded), then the
+        // publishing and maintenance threads, bounded (a thread stuck on
+        // a truncated file is left behind and named below).
+        drop(controller);
+        drop(self.shm);
+        say_left_behind()
     }
 
     /// The controller on the sensor and the drives, with the operator's
@@ -580,6 +584,53 @@ impl Run<'_> {
                 log,
             },
         )
+    }
+}
+
+/// The last recording closed (its writer drains the queue first), then
+/// the logging thread ended, each waited for within its bound.
+fn close_recording_and_log(
+    recorder: &mut LiveRecorder,
+    recording: RecordManager,
+    log_thread: Option<logq::LogThread>,
+) {
+    recorder.release();
+    if !recording.finish() {
+        tracing::error!(
+            "sard: the recording's thread did not end within {} s: its last file may be cut short (`sarctl recover` rewrites it)",
+            sar_record::live::FINISH_WAIT.as_secs()
+        );
+    }
+    if recorder.take_held().is_some() {
+        tracing::error!(
+            "sard: a recording handed back at the end was never taken by the recording's thread: its file may be cut short"
+        );
+    }
+    if let Some(t) = log_thread
+        && !t.finish()
+    {
+        tracing::error!("sard: the logging thread did not end in time: its last lines may be lost");
+    }
+}
+
+/// The threads the stop left behind (named), and a stop on SIGBUS (a
+/// shared-memory file truncated under `sard`): a failure (exit 1, systemd
+/// restarts it), said in one line.
+fn say_left_behind() -> Result<(), String> {
+    let behind = sar_drivers::join::left_behind();
+    if !behind.is_empty() {
+        tracing::error!(
+            "sard: threads left behind at the end: {}",
+            behind.join(", ")
+        );
+    }
+    match rt::bus_faults() {
+        Some((faults, address)) => Err(format!(
+            "stopped on SIGBUS: a shared-memory file of the runtime directory was truncated under sard \
+             (first at address {address:#x}; {faults} thread(s) parked there); drives halted, recording closed \
+             (a member of the operators' group may write the files the daemon shares with its clients)"
+        )),
+        None => Ok(()),
     }
 }
 

@@ -423,14 +423,18 @@ impl ForceSensor for RdtSensor {
     }
 }
 
+/// How long dropping an [`RdtSensor`] waits for its receive thread at most.
+pub const RECEIVE_JOIN_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
+
 impl Drop for RdtSensor {
     /// Stops the stream (best effort) and the receive thread (it ends within
-    /// its socket timeout, at most 50 ms).
+    /// its socket timeout, 50 ms; waited for at most [`RECEIVE_JOIN_WAIT`],
+    /// then left behind and named: `crate::join::left_behind`).
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);
         let _ = self.send(Request::stop());
         if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
+            let _ = crate::join::join_within(thread, RECEIVE_JOIN_WAIT);
         }
     }
 }

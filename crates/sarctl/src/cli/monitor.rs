@@ -11,6 +11,18 @@ use sar_shm::{Client, StateSubscription};
 use std::io::{IsTerminal, Write};
 use std::time::{Duration, Instant};
 
+/// `--count N`: at least one sample (0 printed one sample before; a count
+/// of nothing has no use, so it is refused, not taken as "none").
+pub fn parse_count(text: &str) -> Result<u64, String> {
+    match text.parse::<u64>() {
+        Ok(0) => {
+            Err("must be at least 1 (without --count, monitor runs until interrupted)".to_owned())
+        }
+        Ok(n) => Ok(n),
+        Err(e) => Err(format!("{e}")),
+    }
+}
+
 /// Runs the command; `count` stops after that many samples.
 pub fn run(client: &Client, json: bool, count: Option<u64>) -> Result<(), String> {
     let sub = client.subscribe().map_err(|e| e.to_string())?;
@@ -151,6 +163,19 @@ fn bar(s: &StateMsg) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 35: `monitor --count 0` printed one sample; 0 is refused.
+    #[test]
+    fn a_count_of_zero_is_refused() {
+        assert!(
+            parse_count("0")
+                .unwrap_err()
+                .starts_with("must be at least 1")
+        );
+        assert_eq!(parse_count("1"), Ok(1));
+        assert_eq!(parse_count("5"), Ok(5));
+        assert!(parse_count("-1").is_err());
+    }
 
     #[test]
     fn the_history_legend_matches_the_glyphs() {

@@ -79,7 +79,9 @@ pub fn run_cli(
         .parse()
         .map_err(|e| format!("--bind {bind:?}: {e} (expected ADDR:PORT)"))?;
     if !(scene_hz.is_finite() && scene_hz > 0.0) {
-        return Err(format!("--scene-hz {scene_hz}: must be a positive number"));
+        return Err(format!(
+            "--scene-hz {scene_hz:?}: must be a positive number"
+        ));
     }
     sar_loop::rt::install_stop_handler()
         .map_err(|e| format!("cannot install signal handlers: {e}"))?;
