@@ -235,10 +235,27 @@ pub struct ReplayReport {
     /// byte; a difference is reported on `/sar/cycle/snapshot`).
     pub snapshots_compared: u64,
     /// Corrupt parts passed over (a chunk whose data, CRC or content is
-    /// bad): reading went on after each; the cycles after one are replayed
-    /// again from the next snapshot (their state is unknown before it).
+    /// bad; a run of corrupt records one after the other is one part), and
+    /// cycles found missing: reading went on after each; the cycles after
+    /// one are replayed again from the next snapshot (their state is
+    /// unknown before it). The first [`MAX_GAPS_SHOWN`] only (memory
+    /// bounded whatever the file holds): `gaps_total` counts them all.
     pub gaps: Vec<Gap>,
+    /// Every gap, shown in `gaps` or not.
+    pub gaps_total: u64,
+    /// Every corrupt record passed over.
+    pub corrupt_records: u64,
+    /// Their bytes.
+    pub corrupt_bytes: u64,
 }
+
+/// The most gaps a [`ReplayReport`] holds in detail.
+pub const MAX_GAPS_SHOWN: usize = 16;
+
+/// The largest step forward of a cycle number taken as cycles missing; a
+/// larger one is a step back below cycle 0 (a lean batch's difference
+/// wraps).
+const MAX_FORWARD: u64 = i64::MAX as u64;
 
 impl ReplayReport {
     /// The report before the first cycle.
@@ -261,6 +278,9 @@ impl ReplayReport {
             skipped_cycles: 0,
             snapshots_compared: 0,
             gaps: Vec::new(),
+            gaps_total: 0,
+            corrupt_records: 0,
+            corrupt_bytes: 0,
         }
     }
 }
@@ -330,6 +350,21 @@ pub enum ReplayError {
     /// Neither `/sar/cycle/input` nor `/sar/sensor/wrench` messages.
     #[error("no inputs: the recording has no /sar/cycle/input and no /sar/sensor/wrench messages")]
     NoInputs,
+    /// No input read, and corrupt records passed over: they may have held
+    /// the inputs.
+    #[error(
+        "no inputs read: no /sar/cycle/input and no /sar/sensor/wrench messages outside {records} corrupt records ({bytes} bytes in {parts} part(s) passed over; the first: {first})"
+    )]
+    NoInputsAmidCorrupt {
+        /// Corrupt records passed over.
+        records: u64,
+        /// Their bytes.
+        bytes: u64,
+        /// The gaps.
+        parts: u64,
+        /// The first, described.
+        first: String,
+    },
     /// The comparison's reference topic has no usable message.
     #[error("--compare {topic}: {why}")]
     Compare {
@@ -418,6 +453,9 @@ struct Replayer {
     lacking: Vec<Topic>,
     /// What the cycles add up to beyond the report's counts.
     tally: Tally,
+    /// The latest gap beyond [`MAX_GAPS_SHOWN`] (counted, not in the
+    /// report).
+    unshown_gap: Option<Gap>,
     references: Vec<(u64, [f64; 3])>,
     last_cycle: u64,
     /// Whether the step's state is known (from the first cycle, or restored
@@ -500,6 +538,7 @@ impl Replayer {
             comparing: options.check_recorded,
             lacking: Vec::new(),
             tally: Tally::new(options.compare.is_some() || options.keep_series),
+            unshown_gap: None,
             references: Vec::new(),
             last_cycle: 0,
             // A recording whose files start with snapshots waits for one,
@@ -533,21 +572,44 @@ impl Replayer {
         self.recorded.clear();
     }
 
-    /// Cycles missing from the recording before `cycle` (dropped by its
-    /// recorder, or a corrupt chunk `sarctl recover` passed over): a gap,
-    /// as a corrupt chunk is.
-    fn missing_cycles(&mut self, file: Option<PathBuf>, cycle: u64) {
+    /// Before a recorded `cycle` of `file`, while stepping: cycles missing
+    /// before it (dropped by its recorder, or a corrupt chunk `sarctl
+    /// recover` passed over), or a cycle number that goes back (repeated,
+    /// earlier, or below 0 by a lean batch's difference), make a gap, as a
+    /// corrupt chunk does; each named as what it is.
+    fn follows(&mut self, file: Option<PathBuf>, cycle: u64) {
+        if !(self.anchored && self.stepped) {
+            return;
+        }
+        let last = self.last_cycle;
+        let step = cycle.wrapping_sub(last);
+        let why = match step {
+            1 => return,
+            2..=MAX_FORWARD => format!(
+                "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
+                last + 1,
+                cycle - 1
+            ),
+            0 => format!(
+                "cycle {cycle} is recorded twice: the recording's cycle numbers go back (corrupt or crafted)"
+            ),
+            _ if cycle < last => format!(
+                "cycle {cycle} follows cycle {last}: the recording's cycle numbers go back by {} (corrupt or crafted)",
+                last - cycle
+            ),
+            _ => format!(
+                "cycle {cycle} follows cycle {last}: the recording's cycle numbers go back by {} below cycle 0 (corrupt or crafted)",
+                last.wrapping_sub(cycle)
+            ),
+        };
         let skipped = super::reader::Skipped {
             offset: 0,
             bytes: 0,
             log_time_ns: None,
-            why: format!(
-                "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
-                self.last_cycle + 1,
-                cycle - 1
-            ),
+            records: 0,
+            why,
         };
-        self.gap(Gap::new(file, skipped, Some(self.last_cycle)), false);
+        self.gap(Gap::new(file, skipped, Some(last)), false);
     }
 
     /// A corrupt record of `file` passed over.
@@ -561,9 +623,10 @@ impl Replayer {
     /// unknown (before the first snapshot, or after a gap before the next
     /// one), counted then as skipped or not replayed.
     fn replayable(&mut self, cycle: u64) -> bool {
-        if let Some(gap) = self.report.gaps.last_mut() {
+        let anchored = self.anchored;
+        if let Some(gap) = self.last_gap() {
             gap.first_cycle_after.get_or_insert(cycle);
-            if !self.anchored {
+            if !anchored {
                 // After a corrupt part, before a snapshot.
                 gap.cycles_not_replayed += 1;
                 return false;
@@ -736,7 +799,7 @@ impl Replayer {
             self.step.restore(&m.data).map_err(failed)?;
             self.anchored = true;
             self.stepped = true;
-            if let Some(gap) = self.report.gaps.last_mut() {
+            if let Some(gap) = self.last_gap() {
                 // Replay goes on after a corrupt part.
                 gap.resumed_after_cycle = Some(m.after_cycle);
                 self.last_cycle = m.after_cycle;
@@ -818,7 +881,37 @@ impl Replayer {
         self.recorded.clear();
         self.anchored = false;
         self.stepped = false;
-        self.report.gaps.push(gap);
+        self.report.corrupt_records = self
+            .report
+            .corrupt_records
+            .saturating_add(gap.skipped.records);
+        self.report.corrupt_bytes = self.report.corrupt_bytes.saturating_add(gap.skipped.bytes);
+        // A corrupt record right after the last one, nothing read between
+        // them: one part (a run of them is never a list of its records).
+        if let Some(last) = self.last_gap()
+            && last.first_cycle_after.is_none()
+            && last.file == gap.file
+            && last.skipped.absorb(&gap.skipped)
+        {
+            return;
+        }
+        self.report.gaps_total = self.report.gaps_total.saturating_add(1);
+        if self.report.gaps.len() < MAX_GAPS_SHOWN {
+            self.report.gaps.push(gap);
+        } else {
+            // Counted, not kept: the latest stands for the state's
+            // bookkeeping (memory bounded whatever the file holds).
+            self.unshown_gap = Some(gap);
+        }
+    }
+
+    /// The latest gap (kept in the report, or the latest beyond
+    /// [`MAX_GAPS_SHOWN`]).
+    fn last_gap(&mut self) -> Option<&mut Gap> {
+        match &mut self.unshown_gap {
+            Some(g) => Some(g),
+            None => self.report.gaps.last_mut(),
+        }
     }
 
     /// `complete`: the recording was not cut short (a recovered file says
@@ -1403,9 +1496,7 @@ impl<'o> SetReplay<'o> {
         file.check_start(m.cycle)?;
         self.r.quiet = self.before_range(m.stamp_ns)?;
         let r = &mut self.r;
-        if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
-            r.missing_cycles(file.path.clone(), m.cycle);
-        }
+        r.follows(file.path.clone(), m.cycle);
         if !r.replayable(m.cycle) {
             return Ok(());
         }
@@ -1438,9 +1529,7 @@ impl<'o> SetReplay<'o> {
             file.check_start(m.cycle)?;
             self.r.quiet = self.before_range(m.stamp_ns)?;
             let r = &mut self.r;
-            if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
-                r.missing_cycles(file.path.clone(), m.cycle);
-            }
+            r.follows(file.path.clone(), m.cycle);
             if !r.replayable(m.cycle) {
                 continue;
             }
@@ -1507,7 +1596,16 @@ impl<'o> SetReplay<'o> {
             );
         } else {
             if self.inputs_only.sensors_seen == 0 {
-                return Err(ReplayError::NoInputs);
+                let rep = &r.report;
+                return Err(match rep.gaps.first() {
+                    Some(g) if rep.corrupt_records > 0 => ReplayError::NoInputsAmidCorrupt {
+                        records: rep.corrupt_records,
+                        bytes: rep.corrupt_bytes,
+                        parts: rep.gaps_total,
+                        first: g.skipped.describe(),
+                    },
+                    _ => ReplayError::NoInputs,
+                });
             }
             r.inputs_only_mode();
             self.inputs_only.finish(r)?;

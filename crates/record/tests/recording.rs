@@ -87,9 +87,9 @@ fn recording_reads_back_bit_for_bit() {
     for t in Topic::FULL {
         let c = reader.channel_of(t.name()).unwrap();
         assert_eq!(c.message_encoding, "cdr");
-        assert_eq!(c.schema_encoding, "ros2msg");
-        assert_eq!(c.schema_name, t.type_name());
-        assert_eq!(c.schema_data, t.schema().as_bytes());
+        assert_eq!(c.schema_encoding(), "ros2msg");
+        assert_eq!(c.schema_name(), t.type_name());
+        assert_eq!(c.schema_data(), t.schema().as_bytes());
     }
     // The pushed messages, in order, byte for byte; then the final status.
     let (data, status) = msgs.split_at(pushed.len());

@@ -36,18 +36,15 @@ pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String
         return Err(format!(
             "{}: recovered nothing: no complete chunk with a message{}",
             input.display(),
-            match (&r.stopped, r.skipped.first()) {
-                (Some(e), _) => format!(" ({e})"),
-                (None, Some(s)) => format!(" (corrupt: {})", s.why),
-                (None, None) => " (the file holds none)".to_owned(),
+            match (&r.stopped, r.skipped.is_empty()) {
+                (Some(e), true) => format!(" ({e})"),
+                (Some(e), false) => format!(" ({e}; {})", r.skipped.summary()),
+                (None, false) => format!(" ({})", r.skipped.summary()),
+                (None, true) => " (the file holds none)".to_owned(),
             }
         ));
     }
-    let skipped: Vec<String> = r
-        .skipped
-        .iter()
-        .map(|s| format!("{} bytes at byte {} ({})", s.bytes, s.offset, s.why))
-        .collect();
+    let skipped: Vec<String> = r.skipped.shown.iter().map(|s| s.describe()).collect();
     if json {
         println!(
             "{}",
@@ -55,6 +52,9 @@ pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String
                    "messages": r.messages, "channels": r.channels,
                    "input_complete": r.input_complete,
                    "skipped": skipped,
+                   "skipped_records": r.skipped.records,
+                   "skipped_bytes": r.skipped.bytes,
+                   "skipped_parts": r.skipped.parts,
                    "stopped": r.stopped.as_ref().map(ToString::to_string)})
         );
     } else {
@@ -72,6 +72,9 @@ pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String
         );
         for s in &skipped {
             println!("corrupt, passed over (its messages are lost): {s}");
+        }
+        if !r.skipped.is_empty() {
+            println!("{}", r.skipped.summary());
         }
     }
     Ok(())

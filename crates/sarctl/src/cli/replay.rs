@@ -57,12 +57,16 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
         "from_snapshot": r.from_snapshot,
         "skipped_cycles": r.skipped_cycles,
         "snapshots_compared": r.snapshots_compared,
+        "gaps_total": r.gaps_total,
+        "corrupt_records": r.corrupt_records,
+        "corrupt_bytes": r.corrupt_bytes,
         "gaps": r.gaps.iter().map(|g| json!({
             "file": g.file.as_ref().map(|f| f.display().to_string()),
             "offset": g.skipped.offset,
             "bytes": g.skipped.bytes,
             "log_time_ns": g.skipped.log_time_ns,
             "why": g.skipped.why,
+            "corrupt_records": g.skipped.records,
             "last_cycle_before": g.last_cycle_before,
             "first_cycle_after": g.first_cycle_after,
             "cycles_lost": g.cycles_lost(),
@@ -186,6 +190,13 @@ fn print_text(r: &ReplayReport, shown: &str) {
     for g in &r.gaps {
         println!("{}", gap_line(g));
     }
+    if r.gaps_total > r.gaps.len() as u64 {
+        println!(
+            "... and {} more part(s) not replayed (the first {} named)",
+            r.gaps_total - r.gaps.len() as u64,
+            r.gaps.len()
+        );
+    }
     if let Some(e) = &r.stopped {
         println!("the input is cut short: replayed up to its last complete chunk ({e})");
     }
@@ -218,8 +229,16 @@ fn comparison_line(c: &Comparison) -> String {
 fn verdict(r: &ReplayReport, shown: &str, files: usize) -> Result<(), String> {
     if let Some(g) = r.gaps.first() {
         return Err(format!(
-            "{shown}: {} part(s) not replayed (corrupt, or cycles missing); the first: {}",
-            r.gaps.len(),
+            "{shown}: {} part(s) not replayed (corrupt, or cycles missing){}; the first: {}",
+            r.gaps_total,
+            if r.corrupt_records > 0 {
+                format!(
+                    ", {} corrupt records ({} bytes) passed over",
+                    r.corrupt_records, r.corrupt_bytes
+                )
+            } else {
+                String::new()
+            },
             gap_line(g)
         ));
     }
@@ -283,9 +302,14 @@ fn gap_line(g: &sar_record::replay::Gap) -> String {
         );
     }
     format!(
-        "corrupt part passed over: {} bytes at byte {}{}{} ({}); {}{}",
+        "corrupt part passed over: {} bytes at byte {}{}{}{} ({}); {}{}",
         g.skipped.bytes,
         g.skipped.offset,
+        if g.skipped.records > 1 {
+            format!(" ({} corrupt records in a row)", g.skipped.records)
+        } else {
+            String::new()
+        },
         g.file
             .as_ref()
             .map(|f| format!(" of {}", f.display()))
