@@ -1351,9 +1351,10 @@ pub enum RecoverError {
         /// The cause.
         source: mcap::McapError,
     },
-    /// The output is the input.
-    #[error("the output {0} is the input: recover writes a new file")]
-    SamePath(PathBuf),
+    /// The output is the input (the same file, by any name), or too
+    /// little space is free for it.
+    #[error("{0}")]
+    Output(#[from] crate::output::OutputError),
 }
 
 /// Rewrites `input` (complete or cut short) into `output`, a complete file
@@ -1361,20 +1362,20 @@ pub enum RecoverError {
 /// with its channel, sequence and times, its metadata, and metadata
 /// `sar_recover` saying where and why the input stopped.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
-    // The same file by another spelling (./x.mcap, a link) counts too: the
-    // output is truncated first, which would lose the input.
-    let same_file = std::fs::canonicalize(output)
-        .ok()
-        .is_some_and(|o| std::fs::canonicalize(input).ok() == Some(o));
-    if input == output || same_file {
-        return Err(RecoverError::SamePath(output.to_path_buf()));
-    }
+    use crate::output::{PendingFile, SpaceWatch, check_outputs};
+    // The same file by any name (./x.mcap, a hard or symbolic link) is
+    // refused; and the output is written beside itself and renamed at the
+    // end, so that nothing in its place is ever cut.
+    check_outputs(&[output], &[input])?;
     let reader = McapReader::open(input)?;
+    let pending = PendingFile::new(output)?;
+    // The output holds at most the input's messages, with its summary.
+    let space = SpaceWatch::before(output, pending.tmp_path(), reader.total_bytes())?;
     let io = |source| RecoverError::Io {
         path: output.to_path_buf(),
         source,
     };
-    let (file, handle, _) = CountingFile::create(output).map_err(io)?;
+    let (file, handle, position) = CountingFile::create(pending.tmp_path()).map_err(io)?;
     let mut recovery = Recovery {
         reader,
         output,
@@ -1386,10 +1387,16 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
         messages: 0,
         skipped: SkippedTally::default(),
         stopped: None,
+        space,
+        position,
     };
     recovery.copy_messages()?;
     recovery.finish(input)?;
     handle.sync_all().map_err(io)?;
+    if recovery.messages > 0 {
+        pending.commit()?;
+    }
+    // (Nothing recovered: the temporary file is removed, nothing renamed.)
     Ok(recovery.report())
 }
 
@@ -1411,6 +1418,10 @@ struct Recovery<'p> {
     messages: u64,
     skipped: SkippedTally,
     stopped: Option<ReadError>,
+    /// The output's file system's free space.
+    space: crate::output::SpaceWatch,
+    /// Bytes written to the output so far.
+    position: Arc<std::sync::atomic::AtomicU64>,
 }
 
 /// The channel `c` (and its schema) under the same ids.
@@ -1510,6 +1521,8 @@ impl Recovery<'_> {
             w.write_to_known_channel(&header, &msg.data)
                 .map_err(&mcap_err)?;
             self.messages += 1;
+            self.space
+                .written(self.position.load(std::sync::atomic::Ordering::Relaxed))?;
         }
         Ok(())
     }
@@ -1520,9 +1533,10 @@ impl Recovery<'_> {
         let mcap_err = self.mcap_err();
         let mut w = match self.writer.take() {
             Some(w) => w,
-            None => self
-                .make_writer()?
-                .ok_or_else(|| RecoverError::SamePath(self.output.to_path_buf()))?,
+            None => self.make_writer()?.ok_or_else(|| RecoverError::Io {
+                path: self.output.to_path_buf(),
+                source: std::io::Error::other("the output's writer was made twice"),
+            })?,
         };
         for c in self.reader.channels().values() {
             if !self.known.contains_key(&c.id) {

@@ -25,6 +25,7 @@
 use super::convert::{self, REPLAY_METADATA, bias_from_metadata};
 use super::file::{FileOptions, RotatingWriter, WriteError};
 use super::lean;
+use super::output::{OutputError, PendingFile, SpaceWatch, check_outputs};
 use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
@@ -373,9 +374,10 @@ pub enum ReplayError {
         /// What is wrong.
         why: &'static str,
     },
-    /// The output would overwrite the input.
-    #[error("the output {0} is the input")]
-    OutputIsInput(PathBuf),
+    /// The output would overwrite an input (the same file by any name),
+    /// or too little space is free for it.
+    #[error("{0}")]
+    Output(#[from] OutputError),
     /// `--from`/`--to` out of order or not finite and >= 0.
     #[error("the time range: {0}")]
     Range(String),
@@ -426,13 +428,32 @@ pub enum ReplayError {
 struct Sink {
     writer: Option<RotatingWriter>,
     status: RecorderDrops,
+    /// The output's temporary file, renamed over the output once the
+    /// replay has written all of it; removed if it stops before.
+    pending: Option<PendingFile>,
+    /// The output's file system's free space.
+    space: Option<SpaceWatch>,
 }
 
 impl Sink {
-    fn write(&mut self, m: &Outgoing) -> Result<(), WriteError> {
+    fn write(&mut self, m: &Outgoing) -> Result<(), ReplayError> {
         if let Some(w) = &mut self.writer {
             self.status.stamp_ns = self.status.stamp_ns.max(m.stamp_ns());
             w.write(m, &self.status)?;
+            if let Some(space) = &mut self.space {
+                space.written(w.open_file_bytes())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The output closed and renamed over its path.
+    fn finish(&mut self) -> Result<(), ReplayError> {
+        if let Some(w) = &mut self.writer {
+            w.close(&self.status)?;
+        }
+        if let Some(p) = self.pending.take() {
+            p.commit()?;
         }
         Ok(())
     }
@@ -518,12 +539,26 @@ impl Tally {
 impl Replayer {
     /// A replayer at the start of a set: the estimator and the step from
     /// the configuration and the set's start bias, the output opened.
-    fn new(options: &ReplayOptions, start: &SetStart) -> Result<Self, ReplayError> {
+    /// `input_bytes`: the inputs' length (the output of a full recording
+    /// is about as long; a lean one's is longer).
+    fn new(
+        options: &ReplayOptions,
+        start: &SetStart,
+        input_bytes: u64,
+    ) -> Result<Self, ReplayError> {
         let estimator = Estimator::with_bias(&options.config, start.bias)
             .map_err(|e| ReplayError::Setting(e.to_string()))?;
         let step = LoopStep::new(&options.config, start.bias, options.step)
             .map_err(|e| ReplayError::Setting(e.to_string()))?;
-        let writer = output_writer(options, start)?;
+        let (pending, space) = match &options.output {
+            Some(out) => {
+                let pending = PendingFile::new(out)?;
+                let space = SpaceWatch::before(out, pending.tmp_path(), input_bytes)?;
+                (Some(pending), Some(space))
+            }
+            None => (None, None),
+        };
+        let writer = output_writer(options, start, pending.as_ref())?;
         Ok(Self {
             scratch: Vec::with_capacity(8),
             estimator,
@@ -531,6 +566,8 @@ impl Replayer {
             sink: Sink {
                 writer,
                 status: RecorderDrops::default(),
+                pending,
+                space,
             },
             report: ReplayReport::start(options.output.clone(), start.from_first_cycle),
             replayed: BTreeMap::new(),
@@ -1062,12 +1099,9 @@ pub fn replay_files(
     if inputs.is_empty() {
         return Err(ReplayError::NoInputs);
     }
-    for input in inputs {
-        if let Some(out) = &options.output
-            && same_file(input, out)
-        {
-            return Err(ReplayError::OutputIsInput(out.clone()));
-        }
+    if let Some(out) = &options.output {
+        let paths: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+        check_outputs(&[out], &paths)?;
     }
     let inputs: Vec<Input<'_>> = inputs.iter().map(|p| Input::File(p)).collect();
     replay_with(&inputs, options)
@@ -1092,6 +1126,13 @@ impl<'b> Input<'b> {
         match self {
             Input::Bytes(_) => None,
             Input::File(p) => Some(p.to_path_buf()),
+        }
+    }
+    /// Its length, bytes (0 when it cannot be read: the reader says why).
+    fn len(&self) -> u64 {
+        match self {
+            Input::Bytes(b) => b.len() as u64,
+            Input::File(p) => std::fs::metadata(p).map_or(0, |m| m.len()),
         }
     }
 }
@@ -1185,15 +1226,17 @@ impl SetStart {
     }
 }
 
-/// The output file of a replay (`options.output`; `None`: not written).
+/// The output file of a replay (`options.output`; `None`: not written),
+/// written into `pending`'s temporary file.
 fn output_writer(
     options: &ReplayOptions,
     start: &SetStart,
+    pending: Option<&PendingFile>,
 ) -> Result<Option<RotatingWriter>, WriteError> {
-    let Some(path) = &options.output else {
+    let Some(pending) = pending else {
         return Ok(None);
     };
-    let mut o = FileOptions::single(path);
+    let mut o = FileOptions::single(pending.tmp_path());
     // The replayed file holds every cycle of its input.
     o.metadata = start
         .metadata
@@ -1318,11 +1361,15 @@ impl FileVisit {
 impl<'o> SetReplay<'o> {
     /// Opens the set: the first file's metadata read, the estimator, the
     /// step and the output made.
-    fn open(first: &Input<'_>, options: &'o ReplayOptions) -> Result<Self, ReplayError> {
+    fn open(
+        first: &Input<'_>,
+        options: &'o ReplayOptions,
+        input_bytes: u64,
+    ) -> Result<Self, ReplayError> {
         let start = SetStart::read(first)?;
         let range_ns = |s: Option<f64>| s.map(|v| (v * 1e9).round() as u64);
         Ok(Self {
-            r: Replayer::new(options, &start)?,
+            r: Replayer::new(options, &start, input_bytes)?,
             options,
             from_ns: range_ns(options.from_s),
             to_ns: range_ns(options.to_s),
@@ -1616,9 +1663,7 @@ impl<'o> SetReplay<'o> {
         if self.options.keep_series {
             r.report.series = r.series();
         }
-        if let Some(w) = &mut r.sink.writer {
-            w.close(&r.sink.status)?;
-        }
+        r.sink.finish()?;
         Ok(self.r.report)
     }
 }
@@ -1628,7 +1673,11 @@ impl<'o> SetReplay<'o> {
 fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
     check_range(options)?;
     let first = inputs.first().ok_or(ReplayError::NoInputs)?;
-    let mut set = SetReplay::open(first, options)?;
+    let input_bytes = inputs
+        .iter()
+        .map(Input::len)
+        .fold(0u64, u64::saturating_add);
+    let mut set = SetReplay::open(first, options, input_bytes)?;
     for (index, input) in inputs.iter().enumerate() {
         if inputs.len() > 1 {
             set.chain(input)?;
@@ -1886,18 +1935,5 @@ fn compare(r: &mut Replayer, topic: &str) -> Result<Comparison, ReplayError> {
 
 /// Replays the file at `input` (refuses an `output` that is the input).
 pub fn replay_file(input: &Path, options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
-    if let Some(out) = &options.output
-        && same_file(input, out)
-    {
-        return Err(ReplayError::OutputIsInput(out.clone()));
-    }
     replay_files(std::slice::from_ref(&input.to_path_buf()), options)
-}
-
-/// Whether two paths name the same existing file.
-pub fn same_file(a: &Path, b: &Path) -> bool {
-    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => false,
-    }
 }

@@ -21,6 +21,7 @@ mod readers;
 mod snapshot_recording;
 
 use sar_msgs::msgs::*;
+use sar_record::output::OutputError;
 use sar_record::reader::ReadError;
 use sar_record::*;
 use std::path::Path;
@@ -287,13 +288,22 @@ fn recover_refuses_to_overwrite_its_input_and_non_mcap() {
     let dir = sar_test_support::scratch!("recover_refuses");
     let p = dir.join("x.mcap");
     std::fs::write(&p, b"not an mcap file").unwrap();
-    assert!(matches!(recover(&p, &p), Err(RecoverError::SamePath(_))));
-    // The same file spelt another way is refused too, and left as it was.
+    let same = |r: Result<RecoverReport, RecoverError>| {
+        matches!(r, Err(RecoverError::Output(OutputError::IsInput { .. })))
+    };
+    assert!(same(recover(&p, &p)));
+    // The same file spelt another way, or by a hard or a symbolic link, is
+    // refused too (compared by device and inode), and left as it was.
     let other_spelling = dir.join(".").join("x.mcap");
-    assert!(matches!(
-        recover(&p, &other_spelling),
-        Err(RecoverError::SamePath(_))
-    ));
+    assert!(same(recover(&p, &other_spelling)));
+    let hard = dir.join("hard.mcap");
+    let _ = std::fs::remove_file(&hard);
+    std::fs::hard_link(&p, &hard).unwrap();
+    assert!(same(recover(&p, &hard)));
+    let soft = dir.join("soft.mcap");
+    let _ = std::fs::remove_file(&soft);
+    std::os::unix::fs::symlink(&p, &soft).unwrap();
+    assert!(same(recover(&p, &soft)));
     assert_eq!(std::fs::read(&p).unwrap(), b"not an mcap file");
     assert!(matches!(
         recover(&p, &dir.join("y.mcap")),

@@ -22,6 +22,7 @@ use crate::identify::dwell::DwellOptions;
 use crate::identify::dynamic::DynamicOptions;
 use crate::identify::smooth::SmootherSpec;
 use crate::identify::{self, IdentifyOptions, excitation, plot, plot_dynamic, writeback};
+use sar_record::output::{PendingFile, check_outputs};
 use std::path::{Path, PathBuf};
 
 /// The arguments of `sarctl identify` (besides the global `--config` and `--format`).
@@ -178,6 +179,7 @@ pub fn run(
 ) -> Result<(), String> {
     let config_path =
         config_path.ok_or("identify needs --config FILE (the configuration to identify for)")?;
+    check_plot(config_path, args)?;
     let text = sar_config::read_text(config_path).map_err(|e| e.to_string())?;
     let config =
         sar_config::parse(&text, &config_path.display().to_string()).map_err(|e| e.to_string())?;
@@ -195,8 +197,7 @@ pub fn run(
         }
     };
     if let Some(path) = &args.plot {
-        let svg = plot::svg(&result)?;
-        std::fs::write(path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
+        write_whole(path, plot::svg(&result)?.as_bytes())?;
     }
     let written = if args.dry_run {
         None
@@ -218,6 +219,27 @@ pub fn run(
         result.to_text(written.as_deref())
     };
     println!("{out}");
+    Ok(())
+}
+
+/// Writes `bytes` to `path` through a temporary file beside it, renamed
+/// over it once whole (never a file cut in place).
+fn write_whole(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let pending = PendingFile::new(path).map_err(|e| err(&e))?;
+    std::fs::write(pending.tmp_path(), bytes).map_err(|e| err(&e))?;
+    pending.commit().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// `--plot` is neither the configuration nor the recording (compared as
+/// files: a hard or symbolic link is the file).
+fn check_plot(config_path: &Path, args: &IdentifyArgs) -> Result<(), String> {
+    if let Some(plot) = &args.plot {
+        let mut read = vec![config_path];
+        read.extend(args.input.as_deref());
+        check_outputs(&[plot], &read).map_err(|e| e.to_string())?;
+    }
     Ok(())
 }
 
@@ -262,7 +284,7 @@ fn run_dynamic(
         .map_err(|e| format!("{}: {e}", input.display()))?;
     if let Some(path) = &args.plot {
         let svg = plot_dynamic::svg(&result, config.estimator.calibration.gravity_mps2().into())?;
-        std::fs::write(path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
+        write_whole(path, svg.as_bytes())?;
     }
     let written = if args.dry_run {
         None

@@ -9,6 +9,7 @@
 //! article's Figure 9). Without `--config`, the configuration the recording
 //! carries (`sar_config` metadata, written by `sard`).
 
+use sar_record::output::{PendingFile, check_outputs};
 use sar_record::replay::{
     AxisError, Comparison, ReplayOptions, ReplayReport, SeriesPoint, replay_files,
 };
@@ -88,6 +89,12 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
 pub fn run(a: &Args<'_>) -> Result<(), String> {
     let inputs = input_files(a.input)?;
     let first = inputs.first().ok_or("replay needs --input REC.mcap")?;
+    // Every file written is none of the files read (by device and inode:
+    // a hard or symbolic link is the file), and --output and --plot differ.
+    let mut read: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    read.extend(a.config);
+    let written: Vec<&Path> = a.output.into_iter().chain(a.plot).collect();
+    check_outputs(&written, &read).map_err(|e| e.to_string())?;
     let cfg = configuration(a.config, first)?;
     let options = ReplayOptions {
         output: a.output.map(Path::to_path_buf),
@@ -381,7 +388,10 @@ pub fn plot_svg(
     let t_max = series.last().map_or(1.0, |p| p.t_s).max(1e-3);
     let (lo, hi) = force_range_n(series);
     let pad = ((hi - lo) * 0.05).max(0.1);
-    let root = SVGBackend::new(path, (1200, 900)).into_drawing_area();
+    // Drawn into a temporary file beside it, renamed over it once whole.
+    let pending = PendingFile::new(path).map_err(|e| err(&e))?;
+    let tmp = pending.tmp_path().to_path_buf();
+    let root = SVGBackend::new(&tmp, (1200, 900)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let panels = root.split_evenly((3, 1));
     for (k, area) in panels.iter().enumerate() {
@@ -393,6 +403,8 @@ pub fn plot_svg(
         draw_panel(area, &panel, series, reference).map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))?;
+    drop(root);
+    pending.commit().map_err(|e| err(&e))?;
     Ok(())
 }
 
