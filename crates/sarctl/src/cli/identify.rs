@@ -121,7 +121,168 @@ pub struct IdentifyArgs {
     pub max_condition: f64,
 }
 
+/// One numeric argument's range: (option, value, least, most, unit, what
+/// it is). The bounds are inclusive; NaN is never in range.
+type Range = (&'static str, f64, f64, f64, &'static str, &'static str);
+
+/// `value` against `[lo, hi]`, or the one-line reason.
+fn in_range((option, value, lo, hi, unit, what): Range) -> Result<(), String> {
+    use sar_kinematics::Shown;
+    if value >= lo && value <= hi {
+        return Ok(());
+    }
+    Err(format!(
+        "{option} {} is out of range: {what} must be {} to {}{unit}",
+        if value.is_nan() {
+            "NaN".to_owned()
+        } else {
+            Shown(value).to_string()
+        },
+        Shown(lo),
+        Shown(hi)
+    ))
+}
+
+/// Largest sensor rate accepted, Hz (ATI's Net F/T streams 7 kHz; the time
+/// the plan's promise takes is linear in it).
+pub const MAX_SENSOR_RATE_HZ: f64 = 10_000.0;
+
+/// Longest hold of a pose of `--live`, s.
+pub const MAX_HOLD_S: f64 = 600.0;
+
 impl IdentifyArgs {
+    /// Every numeric argument against its range, before anything runs
+    /// (nothing read, nothing asked of the daemon): the first out of range
+    /// is the one-line reason. NaN and infinities are out of every range.
+    pub fn check_ranges(&self) -> Result<(), String> {
+        let smoother_order = self.smoother_order as f64;
+        let mut ranges: Vec<Range> = vec![
+            (
+                "--smoother-order",
+                smoother_order,
+                2.0,
+                12.0,
+                "",
+                "the smoothing polynomial's order",
+            ),
+            (
+                "--smoother-span-s",
+                self.smoother_span_s,
+                0.01,
+                4.0,
+                " s",
+                "the smoothing window's span",
+            ),
+            (
+                "--sensor-latency-s",
+                self.sensor_latency_s,
+                0.0,
+                0.1,
+                " s",
+                "the sensor's latency",
+            ),
+            (
+                "--sensor-rate-hz",
+                self.sensor_rate_hz,
+                1.0,
+                MAX_SENSOR_RATE_HZ,
+                " Hz",
+                "the sensor's sample rate",
+            ),
+            (
+                "--still-tolerance-m",
+                self.still_tolerance_m,
+                1e-7,
+                0.01,
+                " m",
+                "a dwell's joint range",
+            ),
+            (
+                "--settle-s",
+                self.settle_s,
+                0.0,
+                60.0,
+                " s",
+                "the time discarded after each move",
+            ),
+            (
+                "--min-dwell-s",
+                self.min_dwell_s,
+                0.001,
+                600.0,
+                " s",
+                "the shortest dwell",
+            ),
+            (
+                "--max-chi2-dof",
+                self.max_chi2_dof,
+                1e-3,
+                1e6,
+                "",
+                "the chi-square per degree of freedom accepted",
+            ),
+            (
+                "--max-condition",
+                self.max_condition,
+                1.0,
+                1e15,
+                "",
+                "the condition number accepted",
+            ),
+        ];
+        // Only with --live: the pose's hold (its default is checked too).
+        if self.live && !self.dynamic {
+            let least = self.settle_s + self.min_dwell_s;
+            ranges.push((
+                "--hold-s",
+                self.hold_s,
+                least,
+                MAX_HOLD_S,
+                " s",
+                "each pose's hold (more than --settle-s + --min-dwell-s)",
+            ));
+        }
+        if let Some(m) = self.adapter_mass_kg {
+            ranges.push((
+                "--adapter-mass-kg",
+                m,
+                0.0,
+                5.0,
+                " kg",
+                "the adapter's mass",
+            ));
+        }
+        for v in self.tare_n.iter().flatten() {
+            ranges.push((
+                "--tare-n",
+                *v,
+                -1000.0,
+                1000.0,
+                " N",
+                "each component of the tare",
+            ));
+        }
+        for v in self.centre_m.iter().flatten() {
+            ranges.push((
+                "--centre-m",
+                *v,
+                -2.0,
+                2.0,
+                " m",
+                "each joint of the excitation's centre",
+            ));
+        }
+        ranges.into_iter().try_for_each(in_range)?;
+        if self.live && !self.dynamic && self.hold_s <= self.settle_s + self.min_dwell_s {
+            return Err(format!(
+                "--hold-s {} must exceed --settle-s + --min-dwell-s ({} s)",
+                sar_kinematics::Shown(self.hold_s),
+                sar_kinematics::Shown(self.settle_s + self.min_dwell_s)
+            ));
+        }
+        Ok(())
+    }
+
     /// The options these arguments give.
     pub fn options(&self) -> Result<IdentifyOptions, String> {
         let tare_n = match self.tare_n.as_deref() {
@@ -177,6 +338,7 @@ pub fn run(
     prefix: &str,
     args: &IdentifyArgs,
 ) -> Result<(), String> {
+    args.check_ranges()?;
     let config_path =
         config_path.ok_or("identify needs --config FILE (the configuration to identify for)")?;
     check_plot(config_path, args)?;
