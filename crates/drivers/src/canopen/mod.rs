@@ -27,7 +27,9 @@ pub mod socketcan;
 
 pub use bus::{MemBus, MemBusError, MemCan};
 pub use host::{CanOpenDrives, CycleReport};
-pub use slave::{FOLLOWING_WINDOW_M, SimCia402Drive, SimDriveFault, SimDriveSpec, serve};
+pub use slave::{
+    FOLLOWING_WINDOW_M, SimCia402Drive, SimDriveFault, SimDriveSpec, StopOptions, serve,
+};
 
 use crate::{Error, ErrorKind};
 
@@ -367,6 +369,55 @@ impl CanOpenConfig {
                 2,
             ),
             (od::MAX_TORQUE, 0, u32::from(self.max_torque_permille), 2),
+        ]
+    }
+
+    /// How each drive stops, written at start-up and read back beside its
+    /// limits, `(index, sub, value, bytes)`: a control outside the software
+    /// (SAFETY.md), each a ramp, never the motor left to coast:
+    /// - 0x605A quick stop option = 6: the quick stop ramp (0x6085), then
+    ///   stay in Quick stop active;
+    /// - 0x605B shutdown option = 1 and 0x605C disable operation option =
+    ///   1: slow down on the slow down ramp (0x6084), then disable (the
+    ///   host's disable is a shutdown);
+    /// - 0x605E fault reaction option = 2: the quick stop ramp (0: coast,
+    ///   many drives' default);
+    /// - 0x6007 abort connection option = 3: a quick stop when the host's
+    ///   heartbeat is lost (the drives' consumer of it, 0x1016);
+    /// - 0x6084 profile deceleration: the slow down ramp, the quick stop's
+    ///   deceleration (counts/s^2, to the nearest).
+    pub fn safe_stop_objects(&self) -> [(u16, u8, u32, u8); 6] {
+        use frame::od;
+        let count = self.m_per_count();
+        let code = |v: i16| u32::from(v as u16);
+        [
+            (
+                od::QUICK_STOP_OPTION,
+                0,
+                code(frame::QUICK_STOP_RAMP_AND_HOLD),
+                2,
+            ),
+            (od::SHUTDOWN_OPTION, 0, code(frame::DISABLE_AFTER_RAMP), 2),
+            (
+                od::DISABLE_OPERATION_OPTION,
+                0,
+                code(frame::DISABLE_AFTER_RAMP),
+                2,
+            ),
+            (
+                od::FAULT_REACTION_OPTION,
+                0,
+                code(frame::FAULT_REACTION_QUICK_STOP_RAMP),
+                2,
+            ),
+            (od::ABORT_CONNECTION, 0, code(frame::ABORT_QUICK_STOP), 2),
+            (
+                od::PROFILE_DECELERATION,
+                0,
+                // Saturating; `validate` keeps it within u32.
+                (self.quick_stop_decel_mps2 / count).round().max(0.0) as u32,
+                4,
+            ),
         ]
     }
 
