@@ -256,6 +256,7 @@ prop_compose! {
         more in prop::array::uniform6(f3()),
         decision in (0u8..8, any::<u8>(), any::<u16>()),
         host in (any::<u64>(), any::<u64>().prop_map(f64::from_bits), any::<u64>().prop_map(f64::from_bits)),
+        drained in (any::<bool>(), any::<u16>(), any::<u16>()),
     ) -> CycleInput {
         CycleInput {
             stamp_ns,
@@ -289,6 +290,9 @@ prop_compose! {
             publisher_idle_ns: host.0,
             back_out_m: host.1,
             move_max_force_n: host.2,
+            sensor_drained_counted: drained.0,
+            sensor_drained_samples: drained.1,
+            sensor_drained_jumps: drained.2,
         }
     }
 }

@@ -992,17 +992,6 @@ fn own_limits_of(c: &CanOpenConfig, axis: usize) -> Vec<(u16, u8, u32)> {
         .collect()
 }
 
-/// The SDO uploads (reads) the host sent to `node`.
-fn sdo_reads(sent: &[RawFrame], node: u8) -> Vec<(u16, u8)> {
-    sent.iter()
-        .filter(|f| f.cob_id == COB_SDO_RX + u16::from(node))
-        .filter_map(|f| match Sdo::decode(f.payload()) {
-            Some(Sdo::Upload { index, sub }) => Some((index, sub)),
-            _ => None,
-        })
-        .collect()
-}
-
 /// One SDO request the host sent a node: a write (index, sub, value) or a
 /// read (index, sub).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1854,6 +1854,7 @@ impl InputsOnly {
                 status: 0,
                 stamp_ns: w.stamp_ns,
                 valid: finite,
+                drained: sar_estimator::cycle::DrainedSamples::default(),
             },
             joints: JointSample {
                 joints: ActiveJoints { q1_m, q2_m, q3_m },
