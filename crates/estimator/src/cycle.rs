@@ -1477,6 +1477,32 @@ impl Estimator {
                     range: *range,
                 });
         }
+        let spike = self.new_values(sensor, new_sample, finite);
+        if let FrozenCheck::On { repeats } = self.limits.frozen
+            && self.repeats >= repeats
+        {
+            fault = fault.or(Some(Reason::SensorFrozen {
+                repeats: self.repeats,
+            }));
+        }
+        if let Some(limits) = self.limits.spikes
+            && self.spike_window_left > 0
+            && self.spikes >= limits.max_spikes
+        {
+            fault = fault.or(Some(Reason::SensorSpikes {
+                spikes: self.spikes,
+                window: limits.window_samples,
+            }));
+        }
+        SampleVerdict { fault, spike }
+    }
+
+    /// A cycle's sample for the frozen and spike memories: whether it is a
+    /// spike. The memories move with new samples (a NaN restarts them);
+    /// when the loop counted the samples it drained since the previous
+    /// cycle, the spike check takes its counts (new sample or not).
+    fn new_values(&mut self, sensor: &SensorSample, new_sample: bool, finite: bool) -> bool {
+        let (f, t) = (&sensor.force_n, &sensor.torque_nm);
         let mut spike = false;
         if new_sample {
             if finite {
@@ -1507,23 +1533,7 @@ impl Estimator {
         {
             spike = self.count_drained(&limits, sensor.drained);
         }
-        if let FrozenCheck::On { repeats } = self.limits.frozen
-            && self.repeats >= repeats
-        {
-            fault = fault.or(Some(Reason::SensorFrozen {
-                repeats: self.repeats,
-            }));
-        }
-        if let Some(limits) = self.limits.spikes
-            && self.spike_window_left > 0
-            && self.spikes >= limits.max_spikes
-        {
-            fault = fault.or(Some(Reason::SensorSpikes {
-                spikes: self.spikes,
-                window: limits.window_samples,
-            }));
-        }
-        SampleVerdict { fault, spike }
+        spike
     }
 
     /// The samples the loop drained this cycle for the spike check: the

@@ -608,29 +608,9 @@ impl<'a> McapReader<'a> {
     /// what the reader holds would exceed [`retained_limit`] (a crafted
     /// file: small records in a compressed chunk, or many of them).
     fn apply(&mut self, record: Record<'_>, offset: u64) -> Result<(), ReadError> {
-        let cost = match &record {
-            Record::Schema { header, data } => {
-                let same = self.schemas.get(&header.id).is_some_and(|s| {
-                    s.name == header.name && s.encoding == header.encoding && *s.data == **data
-                });
-                if same {
-                    // Written again (some writers repeat it per chunk).
-                    return Ok(());
-                }
-                entry_cost([header.name.len(), header.encoding.len(), data.len()])
-            }
-            Record::Channel(c) => {
-                if self.channels.get(&c.id).is_some_and(|k| same_channel(k, c)) {
-                    return Ok(());
-                }
-                entry_cost([
-                    c.topic.len(),
-                    c.message_encoding.len(),
-                    map_bytes(&c.metadata),
-                ])
-            }
-            Record::Metadata(m) => entry_cost([m.name.len(), map_bytes(&m.metadata), 0]),
-            _ => 0,
+        let Some(cost) = self.cost_of(&record) else {
+            // Written again (some writers repeat them per chunk).
+            return Ok(());
         };
         let retained = self.retained.saturating_add(cost);
         let limit = retained_limit(self.total_bytes());
@@ -677,6 +657,35 @@ impl<'a> McapReader<'a> {
             _ => {}
         }
         Ok(())
+    }
+
+    /// What a schema, channel or metadata record would add to what the
+    /// reader holds ([`McapReader::retained_bytes`]); `None` for one that
+    /// says again what it holds.
+    fn cost_of(&self, record: &Record<'_>) -> Option<u64> {
+        Some(match record {
+            Record::Schema { header, data } => {
+                let same = self.schemas.get(&header.id).is_some_and(|s| {
+                    s.name == header.name && s.encoding == header.encoding && *s.data == **data
+                });
+                if same {
+                    return None;
+                }
+                entry_cost([header.name.len(), header.encoding.len(), data.len()])
+            }
+            Record::Channel(c) => {
+                if self.channels.get(&c.id).is_some_and(|k| same_channel(k, c)) {
+                    return None;
+                }
+                entry_cost([
+                    c.topic.len(),
+                    c.message_encoding.len(),
+                    map_bytes(&c.metadata),
+                ])
+            }
+            Record::Metadata(m) => entry_cost([m.name.len(), map_bytes(&m.metadata), 0]),
+            _ => 0,
+        })
     }
 
     /// Whether a channel record with this id has been read.

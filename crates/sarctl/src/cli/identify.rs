@@ -143,6 +143,63 @@ fn in_range((option, value, lo, hi, unit, what): Range) -> Result<(), String> {
     ))
 }
 
+/// The ranges of the numeric arguments every run checks, in the order of
+/// [`IdentifyArgs::check_ranges`]'s values: (option, least, most, unit,
+/// what it is).
+const RANGES: [(&str, f64, f64, &str, &str); 9] = [
+    (
+        "--smoother-order",
+        2.0,
+        12.0,
+        "",
+        "the smoothing polynomial's order",
+    ),
+    (
+        "--smoother-span-s",
+        0.01,
+        4.0,
+        " s",
+        "the smoothing window's span",
+    ),
+    ("--sensor-latency-s", 0.0, 0.1, " s", "the sensor's latency"),
+    (
+        "--sensor-rate-hz",
+        1.0,
+        MAX_SENSOR_RATE_HZ,
+        " Hz",
+        "the sensor's sample rate",
+    ),
+    (
+        "--still-tolerance-m",
+        1e-7,
+        0.01,
+        " m",
+        "a dwell's joint range",
+    ),
+    (
+        "--settle-s",
+        0.0,
+        60.0,
+        " s",
+        "the time discarded after each move",
+    ),
+    ("--min-dwell-s", 0.001, 600.0, " s", "the shortest dwell"),
+    (
+        "--max-chi2-dof",
+        1e-3,
+        1e6,
+        "",
+        "the chi-square per degree of freedom accepted",
+    ),
+    (
+        "--max-condition",
+        1.0,
+        1e15,
+        "",
+        "the condition number accepted",
+    ),
+];
+
 /// Largest sensor rate accepted, Hz (ATI's Net F/T streams 7 kHz; the time
 /// the plan's promise takes is linear in it).
 pub const MAX_SENSOR_RATE_HZ: f64 = 10_000.0;
@@ -155,130 +212,62 @@ impl IdentifyArgs {
     /// (nothing read, nothing asked of the daemon): the first out of range
     /// is the one-line reason. NaN and infinities are out of every range.
     pub fn check_ranges(&self) -> Result<(), String> {
-        let smoother_order = self.smoother_order as f64;
-        let mut ranges: Vec<Range> = vec![
-            (
-                "--smoother-order",
-                smoother_order,
-                2.0,
-                12.0,
-                "",
-                "the smoothing polynomial's order",
-            ),
-            (
-                "--smoother-span-s",
-                self.smoother_span_s,
-                0.01,
-                4.0,
-                " s",
-                "the smoothing window's span",
-            ),
-            (
-                "--sensor-latency-s",
-                self.sensor_latency_s,
-                0.0,
-                0.1,
-                " s",
-                "the sensor's latency",
-            ),
-            (
-                "--sensor-rate-hz",
-                self.sensor_rate_hz,
-                1.0,
-                MAX_SENSOR_RATE_HZ,
-                " Hz",
-                "the sensor's sample rate",
-            ),
-            (
-                "--still-tolerance-m",
-                self.still_tolerance_m,
-                1e-7,
-                0.01,
-                " m",
-                "a dwell's joint range",
-            ),
-            (
-                "--settle-s",
-                self.settle_s,
-                0.0,
-                60.0,
-                " s",
-                "the time discarded after each move",
-            ),
-            (
-                "--min-dwell-s",
-                self.min_dwell_s,
-                0.001,
-                600.0,
-                " s",
-                "the shortest dwell",
-            ),
-            (
-                "--max-chi2-dof",
-                self.max_chi2_dof,
-                1e-3,
-                1e6,
-                "",
-                "the chi-square per degree of freedom accepted",
-            ),
-            (
-                "--max-condition",
-                self.max_condition,
-                1.0,
-                1e15,
-                "",
-                "the condition number accepted",
-            ),
+        let fixed = [
+            self.smoother_order as f64,
+            self.smoother_span_s,
+            self.sensor_latency_s,
+            self.sensor_rate_hz,
+            self.still_tolerance_m,
+            self.settle_s,
+            self.min_dwell_s,
+            self.max_chi2_dof,
+            self.max_condition,
         ];
-        // Only with --live: the pose's hold (its default is checked too).
-        if self.live && !self.dynamic {
-            let least = self.settle_s + self.min_dwell_s;
-            ranges.push((
-                "--hold-s",
-                self.hold_s,
-                least,
-                MAX_HOLD_S,
-                " s",
-                "each pose's hold (more than --settle-s + --min-dwell-s)",
-            ));
+        for ((option, lo, hi, unit, what), value) in RANGES.into_iter().zip(fixed) {
+            in_range((option, value, lo, hi, unit, what))?;
         }
         if let Some(m) = self.adapter_mass_kg {
-            ranges.push((
+            in_range((
                 "--adapter-mass-kg",
                 m,
                 0.0,
                 5.0,
                 " kg",
                 "the adapter's mass",
-            ));
+            ))?;
         }
         for v in self.tare_n.iter().flatten() {
-            ranges.push((
+            in_range((
                 "--tare-n",
                 *v,
                 -1000.0,
                 1000.0,
                 " N",
                 "each component of the tare",
-            ));
+            ))?;
         }
         for v in self.centre_m.iter().flatten() {
-            ranges.push((
+            in_range((
                 "--centre-m",
                 *v,
                 -2.0,
                 2.0,
                 " m",
                 "each joint of the excitation's centre",
-            ));
+            ))?;
         }
-        ranges.into_iter().try_for_each(in_range)?;
-        if self.live && !self.dynamic && self.hold_s <= self.settle_s + self.min_dwell_s {
-            return Err(format!(
-                "--hold-s {} must exceed --settle-s + --min-dwell-s ({} s)",
-                sar_kinematics::Shown(self.hold_s),
-                sar_kinematics::Shown(self.settle_s + self.min_dwell_s)
-            ));
+        // Only with --live: the pose's hold (its default is checked too).
+        if self.live && !self.dynamic {
+            let least = self.settle_s + self.min_dwell_s;
+            let what = "each pose's hold (more than --settle-s + --min-dwell-s)";
+            in_range(("--hold-s", self.hold_s, least, MAX_HOLD_S, " s", what))?;
+            if self.hold_s <= least {
+                return Err(format!(
+                    "--hold-s {} must exceed --settle-s + --min-dwell-s ({} s)",
+                    sar_kinematics::Shown(self.hold_s),
+                    sar_kinematics::Shown(least)
+                ));
+            }
         }
         Ok(())
     }
