@@ -38,6 +38,13 @@ for index, sub, data in [
     (0x1017, 0, struct.pack("<H", 10)),
 ]:
     sdo.download(index, sub, data)
+# How the drive stops (CiA 402 option codes): it powers on coasting on a
+# fault (0x605E = 0, as many drives), takes the quick stop ramp when told
+# (2) and says so when asked; the same for the abort connection option.
+assert struct.unpack("<h", sdo.upload(0x605E, 0))[0] == 0
+for index, value in [(0x605A, 6), (0x605C, 1), (0x605E, 2), (0x6007, 3)]:
+    sdo.download(index, 0, struct.pack("<h", value))
+    assert struct.unpack("<h", sdo.upload(index, 0))[0] == value, hex(index)
 try:
     sdo.upload(0x2000, 0)
     sys.exit("no abort for a missing object")
@@ -56,4 +63,4 @@ sw, pos = struct.unpack("<Hi", got[0])
 assert pos == round(0.28 / (LEAD_M / COUNTS)), pos
 assert sw & 0x8000 and sw & 0x4F == 0x40, hex(sw)
 net.disconnect()
-print("python-canopen peer: OK (SDO, abort, NMT, heartbeat, PDO mapping, SYNC/TPDO)")
+print("python-canopen peer: OK (SDO, abort, NMT, heartbeat, PDO mapping, SYNC/TPDO, stop options)")

@@ -662,4 +662,182 @@ mod dynamic {
         assert!(msg.contains("condition number"), "{msg}");
         assert!(!msg.contains('\n'));
     }
+
+    /// The messages of a recording, decoded, in file order.
+    fn messages(path: &std::path::Path) -> Vec<sar_record::Outgoing> {
+        let bytes = std::fs::read(path).unwrap();
+        sar_record::McapReader::new(&bytes)
+            .unwrap()
+            .decoded()
+            .map(|m| m.unwrap().2)
+            .collect()
+    }
+
+    /// `msgs` written in their order into `dir/{name}.mcap`.
+    fn rewrite(msgs: &[sar_record::Outgoing], dir: &std::path::Path, name: &str) -> PathBuf {
+        use sar_msgs::msgs::RecorderDrops;
+        let tmp = dir.join(format!(".{name}-tmp"));
+        let mut w =
+            sar_record::RotatingWriter::new(sar_record::FileOptions::new(&tmp, name)).unwrap();
+        for m in msgs {
+            w.write(m, &RecorderDrops::default()).unwrap();
+        }
+        w.close(&RecorderDrops::default()).unwrap();
+        let out = dir.join(format!("{name}.mcap"));
+        std::fs::rename(&w.files()[0], &out).unwrap();
+        std::fs::remove_dir(&tmp).unwrap();
+        out
+    }
+
+    /// Issue 35, findings 12 and 13: a recording the fit cannot trust is
+    /// refused, naming what is wrong, in one line. Before: one NaN sensor
+    /// sample refused the whole fit as a "non-finite motion sample";
+    /// joint stamps out of order were sorted silently; sensor stamps
+    /// shifted on every other sample (3 ms, or 1.2 ms at 500 Hz) were
+    /// fitted silently; a recording whose excitation ended in a Fault (and
+    /// the drives' quick stop) was fitted. Each of these is made from one
+    /// good recording of the simulator (which fits).
+    #[test]
+    fn a_recording_the_fit_cannot_trust_is_refused_naming_what_is_wrong() {
+        use sar_msgs::msgs::{GuardEvent, GuardStateCode, Topic};
+        use sar_record::Outgoing;
+        let dir = scratch("untrusted");
+        let config = config(TRUE_B);
+        let text = dynamic_recordings::scenario_text(0.0265, 0.0, 2616);
+        let ex = excitation(&config, 12.0);
+        let good = dynamic_recordings::write(&text, &ex, &dir, "good");
+        identify_file(&good, &config, &options()).unwrap_or_else(|e| panic!("{e}"));
+        let msgs = messages(&good);
+        let refused = |msgs: &[Outgoing], name: &str| {
+            let path = rewrite(msgs, &dir, name);
+            let e = identify_file(&path, &config, &options()).unwrap_err();
+            let text = e.to_string();
+            println!("{name}: {text}");
+            assert!(
+                !text.contains('\n') && !text.contains("motion sample"),
+                "{text}"
+            );
+            e
+        };
+        let sensor_at = |k: usize| {
+            msgs.iter()
+                .enumerate()
+                .filter(|(_, m)| m.topic() == Topic::SensorWrench)
+                .nth(k)
+                .unwrap()
+                .0
+        };
+        // One NaN force: named, with its place and stamp.
+        let mut nan = msgs.clone();
+        let i = sensor_at(3000);
+        let Outgoing::SensorWrench(w) = &mut nan[i] else {
+            unreachable!()
+        };
+        w.force_n[1] = f64::NAN;
+        let stamp = w.stamp_ns;
+        let e = refused(&nan, "nan");
+        assert!(
+            matches!(e, DynamicError::NonFinite { topic: "/sar/sensor/wrench", index: 3000, stamp_ns, .. } if stamp_ns == stamp),
+            "{e}"
+        );
+        // Two joint samples swapped: the stamps go back.
+        let mut swapped = msgs.clone();
+        let joints: Vec<usize> = msgs
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.topic() == Topic::Joints)
+            .map(|(i, _)| i)
+            .collect();
+        swapped.swap(joints[5000], joints[5001]);
+        let e = refused(&swapped, "swapped");
+        assert!(
+            matches!(
+                e,
+                DynamicError::StampsBack {
+                    topic: "/sar/joints",
+                    index: 5001,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        // Sensor stamps shifted on every other sample: 3 ms (they go
+        // back: the sensor's period is 2 ms), then 1.2 ms (off the grid).
+        for (shift_ns, name) in [(3_000_000u64, "shift_3ms"), (1_200_000, "shift_1_2ms")] {
+            let mut shifted = msgs.clone();
+            let mut k = 0;
+            for m in &mut shifted {
+                if let Outgoing::SensorWrench(w) = m {
+                    if k % 2 == 1 {
+                        w.stamp_ns += shift_ns;
+                    }
+                    k += 1;
+                }
+            }
+            let e = refused(&shifted, name);
+            match (shift_ns, &e) {
+                (
+                    3_000_000,
+                    DynamicError::StampsBack {
+                        topic: "/sar/sensor/wrench",
+                        ..
+                    },
+                ) => {}
+                (
+                    1_200_000,
+                    DynamicError::IrregularStamps {
+                        topic: "/sar/sensor/wrench",
+                        irregular,
+                        steps,
+                        ..
+                    },
+                ) => {
+                    assert!(2 * *irregular + 1 >= *steps, "{e}")
+                }
+                _ => panic!("{name}: {e}"),
+            }
+        }
+        // The guard leaves Ok (a Fault) half way through the excitation.
+        let mut faulted = msgs.clone();
+        let i = sensor_at(3000);
+        let at_ns = faulted[i].stamp_ns();
+        faulted.insert(
+            i,
+            Outgoing::GuardEvent(GuardEvent {
+                stamp_ns: at_ns,
+                cycle: 6000,
+                from_state: GuardStateCode::Ok,
+                to_state: GuardStateCode::Fault,
+                reason_code: 1,
+                ..GuardEvent::default()
+            }),
+        );
+        let e = refused(&faulted, "faulted");
+        assert!(
+            matches!(
+                e,
+                DynamicError::GuardLeftOk {
+                    state: "fault",
+                    cycle: 6000,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        // A transition that does not leave Ok (the first reset, before
+        // the excitation) is no reason to refuse.
+        let mut reset = msgs.clone();
+        reset.insert(
+            0,
+            Outgoing::GuardEvent(GuardEvent {
+                stamp_ns: msgs[0].stamp_ns(),
+                cycle: 1,
+                from_state: GuardStateCode::Fault,
+                to_state: GuardStateCode::Ok,
+                ..GuardEvent::default()
+            }),
+        );
+        let path = rewrite(&reset, &dir, "reset");
+        identify_file(&path, &config, &options()).unwrap_or_else(|e| panic!("{e}"));
+    }
 }

@@ -53,7 +53,8 @@
 //!   INTERFACES.md): `max_torque_permille` (1000; 1..=3000), their
 //!   max torque (0x6072) in per mille of the motor's rated torque. The
 //!   drives' other limits come from `[axes]` and `[plausibility]` (see
-//!   `sar-daemon`'s `devices::canopen_config`).
+//!   [`devices::canopen_drives`]; a configuration that loads is one the
+//!   drivers' own checks at start take).
 //! - `[identify]`: the limits of `sarctl identify --dynamic`'s excitation
 //!   (not the operator's move limits): `excitation_max_speed_mps` (0.02;
 //!   at most `[axes] max_speed_mps`, below `[plausibility]
@@ -84,6 +85,7 @@
 //! ([`scenario`]: TOML -> `sar_drivers::scenario::Scenario`), with the same
 //! machinery and the same error type.
 
+pub mod devices;
 mod exact;
 mod identify;
 mod locate;
@@ -910,7 +912,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     // After the plausible ranges: the slender rod's default is m L^2 / 12
     // of a plausible rod.
     let (inertia, inertia_measured) = inertia(ctx, &f.manipulator, &f.sensor, &profile)?;
-    Ok(Config {
+    let config = Config {
         origin: ctx.origin.to_owned(),
         manipulator_name: f.manipulator.name.clone(),
         estimator: EstimatorConfig {
@@ -933,7 +935,11 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         force_control,
         inertia_measured,
         identify,
-    })
+    };
+    // What the drivers' own checks at start would refuse (one conversion
+    // for the start and for every load, `--check-config` included).
+    devices::check(ctx, &config)?;
+    Ok(config)
 }
 
 /// `[geometry]`, through the kinematics' own checks.

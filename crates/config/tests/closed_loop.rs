@@ -445,6 +445,7 @@ fn sensor_input(sample: &WrenchSample) -> SensorSample {
         status: sample.status.0,
         stamp_ns: sample.received_ns,
         valid: sample.is_valid(),
+        drained: sar_estimator::cycle::DrainedSamples::default(),
     }
 }
 

@@ -1008,3 +1008,56 @@ fn the_identify_keys() {
     }
     assert!(config::DEFAULT_TOML.contains("\n[identify]"));
 }
+
+/// Issue 35, finding 8: a configuration that loads is one the CANopen
+/// drives' own checks at start take (`CanOpenConfig::validate`, run on the
+/// one conversion `sar_config::devices::canopen_drives` that `sard` starts
+/// the drives with). Before, `sard --check-config` said "valid" for a
+/// quick stop of 4.3e15 counts/s^2 (a lead of 10 um over 2^32 - 1 counts),
+/// a travel of 2.6e14 counts, and 1 m per count (the following window
+/// below one count), all refused by the drivers at start. Each is refused
+/// at load now, naming the key it comes from and the drives' units.
+#[test]
+fn canopen_limits_the_drives_refuse_are_refused_at_load() {
+    let canopen = |lead: &str, cpt: &str| {
+        format!(
+            "{MINIMUM}\n[drivers.axes]\nkind = \"canopen\"\ninterface = \"can0\"\nnode_ids = [1, 2, 3]\nlead_m = {lead}\ncounts_per_turn = {cpt}\nquick_stop_decel_mps2 = 10.0\n"
+        )
+    };
+    // A lead of 10 um over 2^32 - 1 counts (2.3e-15 m a count): the
+    // travel's 0.6 m is 2.6e14 counts, beyond the drives' 32-bit position.
+    let e = bad(&canopen("0.00001", "4294967295"));
+    assert_eq!(e.key(), Some("axes.travel_m"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("the CANopen drives would refuse it at start"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("32-bit position"), "{e}");
+    // The travel within 32 bits (2.8e-10 m a count), the quick stop not:
+    // 10 m/s^2 is 3.6e10 counts/s^2, beyond 0x6085's 32 bits.
+    let text = canopen("0.001", "3579139");
+    expect(
+        &text,
+        "drivers.axes.quick_stop_decel_mps2",
+        Some("quick_stop_decel_mps2"),
+        "the CANopen drives would refuse it at start",
+    );
+    assert!(
+        bad(&text).to_string().contains("3.57914e10 counts/s^2"),
+        "{}",
+        bad(&text)
+    );
+    // 1 m per count: the following window (2 x 1 mm) is below one count.
+    let text = canopen("1.0", "1");
+    let e = bad(&text);
+    assert_eq!(e.key(), Some("axes.following_tolerance_m"), "{e}");
+    assert!(e.to_string().contains("at least one count"), "{e}");
+    // The shipped robot's configuration loads, and its drives take it.
+    let robot = config::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../deploy/robot.toml"),
+    )
+    .unwrap();
+    let (_, c) = config::devices::canopen_drives(&robot).unwrap();
+    c.validate().unwrap();
+}

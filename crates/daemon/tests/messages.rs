@@ -256,6 +256,7 @@ prop_compose! {
         more in prop::array::uniform6(f3()),
         decision in (0u8..8, any::<u8>(), any::<u16>()),
         host in (any::<u64>(), any::<u64>().prop_map(f64::from_bits), any::<u64>().prop_map(f64::from_bits)),
+        drained in (any::<bool>(), any::<u16>(), any::<u16>()),
     ) -> CycleInput {
         CycleInput {
             stamp_ns,
@@ -289,6 +290,9 @@ prop_compose! {
             publisher_idle_ns: host.0,
             back_out_m: host.1,
             move_max_force_n: host.2,
+            sensor_drained_counted: drained.0,
+            sensor_drained_samples: drained.1,
+            sensor_drained_jumps: drained.2,
         }
     }
 }
@@ -392,10 +396,12 @@ proptest! {
         for m in common::cycle_messages(k) {
             let mut b = Vec::new();
             m.encode(&mut b).unwrap();
-            // A CycleInput of before issue 14 (24 bytes shorter) and of
-            // before issue 15 (8 bytes shorter) decode; any other cut fails.
+            // A CycleInput of before issue 14 (30 bytes shorter), of before
+            // issue 15 (14 bytes shorter) and of before issue 35 (6 bytes
+            // shorter: a bool, a pad byte, two u16) decode; any other cut
+            // fails.
             let older_ends = if m.topic() == Topic::CycleInput {
-                vec![b.len() - 24, b.len() - 8]
+                vec![b.len() - 30, b.len() - 14, b.len() - 6]
             } else {
                 Vec::new()
             };
@@ -489,9 +495,25 @@ fn an_older_cycle_input_without_the_new_fields_decodes() {
         ..CycleInput::default()
     };
     let mut bytes = Vec::new();
+    let m = CycleInput {
+        sensor_drained_counted: true,
+        sensor_drained_samples: 2,
+        sensor_drained_jumps: 1,
+        ..m
+    };
     m.encode(&mut bytes).unwrap();
     let full = CycleInput::decode(&bytes).unwrap();
     assert_eq!(full, m);
+    // Without issue 35's drained counts (a bool, a pad byte, two u16): not
+    // counted (the step then compares new samples itself).
+    bytes.truncate(bytes.len() - 6);
+    let issue15 = CycleInput::decode(&bytes).unwrap();
+    assert!(!issue15.sensor_drained_counted);
+    assert_eq!(
+        (issue15.sensor_drained_samples, issue15.sensor_drained_jumps),
+        (0, 0)
+    );
+    assert_eq!(issue15.move_max_force_n, 2.5);
     // Without issue 15's trailing field (a guarded move's limit).
     bytes.truncate(bytes.len() - 8);
     let issue14 = CycleInput::decode(&bytes).unwrap();

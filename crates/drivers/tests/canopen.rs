@@ -19,7 +19,7 @@ use sar_drivers::canopen::frame::{
 };
 use sar_drivers::canopen::{
     CanOpenConfig, CanOpenDrives, CanOpenError, FOLLOWING_WINDOW_M, MemBus, MemBusError, MemCan,
-    SimCia402Drive, SimDriveFault, SimDriveSpec,
+    SimCia402Drive, SimDriveFault, SimDriveSpec, StopOptions,
 };
 use sar_drivers::sim::{AxesSpec, ContactKey, Fault, PlantSpec, SensorSpec, SimSpec, Simulator};
 use sar_drivers::{AxisDrives, DriveState, Error, ErrorKind, SimClock};
@@ -993,47 +993,104 @@ fn own_limits_of(c: &CanOpenConfig, axis: usize) -> Vec<(u16, u8, u32)> {
         .collect()
 }
 
-/// The SDO uploads (reads) the host sent to `node`.
-fn sdo_reads(sent: &[RawFrame], node: u8) -> Vec<(u16, u8)> {
+/// One SDO request the host sent a node: a write (index, sub, value) or a
+/// read (index, sub).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SdoRequest {
+    Write(u16, u8, u32),
+    Read(u16, u8),
+}
+
+/// The SDO requests the host sent to `node`, in the order sent.
+fn sdo_requests(sent: &[RawFrame], node: u8) -> Vec<SdoRequest> {
     sent.iter()
         .filter(|f| f.cob_id == COB_SDO_RX + u16::from(node))
         .filter_map(|f| match Sdo::decode(f.payload()) {
-            Some(Sdo::Upload { index, sub }) => Some((index, sub)),
+            Some(Sdo::Download {
+                index, sub, value, ..
+            }) => Some(SdoRequest::Write(index, sub, value)),
+            Some(Sdo::Upload { index, sub }) => Some(SdoRequest::Read(index, sub)),
             _ => None,
         })
         .collect()
 }
 
+/// Every limit, every object of how the drive stops and the heartbeat
+/// consumer is written once and read back by the very next request to that
+/// node (issue 35: the test used to check only that a read existed, not
+/// that it followed its write), with the value in the drive's units; the
+/// drive then holds them.
 #[test]
 fn start_up_writes_the_drives_own_limits_and_reads_each_back() {
     let rig = Rig::new();
     let sent = rig.bus.take_sent();
     let c = config();
     for (axis, node) in NODES.iter().enumerate() {
-        let writes = sdo_writes(&sent, *node);
-        let reads = sdo_reads(&sent, *node);
+        let requests = sdo_requests(&sent, *node);
         let limits = own_limits_of(&c, axis);
         assert_eq!(limits.len(), 7);
-        for (index, sub, value) in &limits {
-            let w = writes
+        let stops: Vec<(u16, u8, u32)> = c
+            .safe_stop_objects()
+            .iter()
+            .map(|(i, s, v, _)| (*i, *s, *v))
+            .collect();
+        let consumer = (
+            0x1016,
+            1,
+            (127 << 16) | u32::from(c.host_heartbeat_timeout_ms),
+        );
+        for (index, sub, value) in limits.iter().chain(&stops).chain([&consumer]) {
+            let writes: Vec<usize> = requests
                 .iter()
-                .position(|x| x == &(*index, *sub, *value))
-                .unwrap_or_else(|| panic!("node {node}: {index:#x}:{sub} not written"));
-            // Read back after its write (the n-th read of that object
-            // follows the n-th write).
-            assert!(
-                reads.contains(&(*index, *sub)),
-                "node {node}: {index:#x}:{sub} not read back"
+                .enumerate()
+                .filter(|(_, r)| matches!(r, SdoRequest::Write(i, s, _) if i == index && s == sub))
+                .map(|(k, _)| k)
+                .collect();
+            assert_eq!(
+                writes.len(),
+                1,
+                "node {node}: {index:#x}:{sub} written {} times",
+                writes.len()
             );
-            let _ = w;
+            let w = writes[0];
+            assert_eq!(
+                requests[w],
+                SdoRequest::Write(*index, *sub, *value),
+                "node {node}: {index:#x}:{sub}"
+            );
+            // Read back by the next request to the node, after its write.
+            assert_eq!(
+                requests.get(w + 1),
+                Some(&SdoRequest::Read(*index, *sub)),
+                "node {node}: {index:#x}:{sub} not read back right after its write"
+            );
         }
-        // The watchdog's settings are read back too.
-        for object in [(0x605A, 0), (0x6007, 0), (0x1016, 1)] {
-            assert!(reads.contains(&object), "node {node}: {object:x?}");
-        }
+        // How the drive stops: ramps, never the motor left to coast.
+        assert_eq!(
+            stops.iter().map(|(i, _, v)| (*i, *v)).collect::<Vec<_>>(),
+            [
+                (0x605A, 6),
+                (0x605B, 1),
+                (0x605C, 1),
+                (0x605E, 2),
+                (0x6007, 3),
+                (0x6084, 409_600)
+            ]
+        );
         // The drive holds them, in its units (counts).
         rig.drive(axis, |d, _, _| {
             assert!((d.quick_stop_decel_mps2() - c.quick_stop_decel_mps2).abs() < count_m());
+            assert!((d.profile_decel_mps2() - c.quick_stop_decel_mps2).abs() < count_m());
+            assert_eq!(
+                d.stop_options(),
+                StopOptions {
+                    quick_stop: 6,
+                    shutdown: 1,
+                    disable_operation: 1,
+                    fault_reaction: 2,
+                    abort_connection: 3,
+                }
+            );
             let (lo, hi) = d.position_limits_m();
             let (t_lo, t_hi) = c.travel_m[axis];
             // The travel, rounded outwards by less than a count.
@@ -1051,6 +1108,117 @@ fn start_up_writes_the_drives_own_limits_and_reads_each_back() {
     assert!(q1.contains(&(0x6065, 0, 820)), "{q1:?}");
     assert!(q1.contains(&(0x6066, 0, 10)), "{q1:?}");
     assert!(q1.contains(&(0x6072, 0, 1000)), "{q1:?}");
+}
+
+/// A drive that keeps its own way of stopping (stores another value of
+/// 0x605A, 0x605B, 0x605C, 0x605E, 0x6007 or 0x6084 than written: a coast,
+/// many drives' default) refuses the start, naming the node, the object
+/// and both values; the drives are never enabled.
+#[test]
+fn a_drive_that_keeps_its_own_way_of_stopping_refuses_the_start() {
+    let c = config();
+    for (index, sub, value, _) in c.safe_stop_objects() {
+        // A coast for an option code; half the deceleration for 0x6084.
+        let other = if index == 0x6084 { value / 2 } else { 0 };
+        let (clock, bus) = bus_with(|axis, d| {
+            if axis == 2 {
+                d.store_instead(index, sub, other);
+            }
+        });
+        let err = CanOpenDrives::start(bus.can(), clock.clone(), config()).unwrap_err();
+        match &err {
+            CanOpenError::LimitMismatch {
+                node: 3,
+                index: i,
+                written,
+                read,
+                ..
+            } if *i == index && *written == i64::from(value) && *read == i64::from(other) => {}
+            other => panic!("{index:#x}: {other}"),
+        }
+        assert!(err.to_string().contains(frame::od::name(index)), "{err}");
+        for axis in 0..3 {
+            assert_ne!(
+                bus.with_drive(axis, |d, _, _| d.state()).unwrap(),
+                Cia402State::OperationEnabled
+            );
+        }
+    }
+}
+
+/// Writes `value` into `axis`'s drive's object `index` (sub 0) over SDO
+/// from outside the host (a service tool), after the start-up.
+fn sdo_write_behind(rig: &Rig, axis: usize, index: u16, value: u32) {
+    let request = Sdo::Download {
+        index,
+        sub: 0,
+        value,
+        size: 2,
+    };
+    let f = RawFrame::new_data(COB_SDO_RX + u16::from(NODES[axis]), &request.encode()).unwrap();
+    rig.drive(axis, |d, now, out| d.on_frame(&f, now, out));
+}
+
+/// The third axis moving at full speed (0.05 m/s), then `stop` applied;
+/// how far it runs from there in 300 ms, and its speed then.
+fn run_on_after(rig: &mut Rig, stop: impl FnOnce(&mut Rig)) -> (f64, f64) {
+    rig.enable();
+    rig.drives.set_targets(target()).unwrap();
+    rig.run(400 * MS);
+    assert!((rig.drive(2, |d, now, _| d.velocity_mps(now)) - V_MAX).abs() < 1e-9);
+    let x0 = rig.true_position(2);
+    stop(rig);
+    rig.run(300 * MS);
+    (
+        rig.true_position(2) - x0,
+        rig.drive(2, |d, now, _| d.velocity_mps(now)),
+    )
+}
+
+/// The drives' safe stop, a control outside the software: a drive that
+/// faults mid-move reacts as 0x605E (written 2 at start-up, read back)
+/// says, a ramp at its quick stop deceleration (v^2 / 2a = 0.625 mm at 2
+/// m/s^2 from 0.05 m/s); the same drive set to coast (0x605E = 0 behind
+/// the host's back, many drives' default) runs on at its speed (15 mm in
+/// 300 ms). The host's disable (a shutdown) ramps as 0x605B = 1 says, at
+/// the profile deceleration 0x6084 (the quick stop's); set to 0, the axis
+/// coasts.
+#[test]
+fn the_drives_fault_reaction_and_disable_ramp_as_written_and_would_coast_otherwise() {
+    let mut c = config();
+    c.quick_stop_decel_mps2 = 2.0;
+    let ramp_m = V_MAX * V_MAX / (2.0 * 2.0);
+    let fault = |rig: &mut Rig| rig.drive(2, |d, now, out| d.inject_fault(0x5000, false, now, out));
+    let mut rig = Rig::with_config(c.clone());
+    let (run_on, v) = run_on_after(&mut rig, fault);
+    assert_eq!(v, 0.0);
+    assert!(
+        (run_on - ramp_m).abs() < 1e-9,
+        "fault reaction: {run_on} m, not {ramp_m}"
+    );
+    assert_eq!(rig.cia402(2), Cia402State::Fault);
+    let mut rig = Rig::with_config(c.clone());
+    sdo_write_behind(&rig, 2, 0x605E, 0);
+    let (run_on, v) = run_on_after(&mut rig, fault);
+    // Coasting at its speed (the last set points' step, in whole counts).
+    assert!(v > 0.95 * V_MAX, "coasting: {v} m/s");
+    assert!((run_on - 0.3 * v).abs() < 1e-9, "coasting: {run_on} m");
+    // The host's disable.
+    let disable = |rig: &mut Rig| rig.drives.disable().unwrap();
+    let mut rig = Rig::with_config(c.clone());
+    let (run_on, v) = run_on_after(&mut rig, disable);
+    assert_eq!(v, 0.0);
+    // (The shutdown reaches the drive at the next SYNC: up to 2 ms at speed.)
+    assert!(
+        run_on >= ramp_m && run_on - ramp_m <= 2.0e-3 * V_MAX + 1e-9,
+        "disable: {run_on} m"
+    );
+    assert_eq!(rig.cia402(2), Cia402State::ReadyToSwitchOn);
+    let mut rig = Rig::with_config(c);
+    sdo_write_behind(&rig, 2, 0x605B, 0);
+    let (run_on, v) = run_on_after(&mut rig, disable);
+    assert!(v > 0.95 * V_MAX, "coasting: {v} m/s");
+    assert!(run_on > 0.25 * V_MAX, "coasting: {run_on} m");
 }
 
 /// The bus and three drives at power-on, `hook` applied to each drive.

@@ -154,6 +154,22 @@ fn drives_and_host(
     let sim = Drives::spawn(clock);
     let socket = canopen::socketcan::open(&interface()).unwrap();
     let host = CanOpenDrives::start(socket, clock, config()).unwrap();
+    // How each drive stops, written over vcan0 and read back by the host:
+    // held by every drive (ramps, never a coast).
+    for d in sim.drives.lock().unwrap().iter() {
+        assert_eq!(
+            d.stop_options(),
+            canopen::StopOptions {
+                quick_stop: 6,
+                shutdown: 1,
+                disable_operation: 1,
+                fault_reaction: 2,
+                abort_connection: 3,
+            },
+            "node {}",
+            d.node_id()
+        );
+    }
     (sim, host)
 }
 

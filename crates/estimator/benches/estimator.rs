@@ -128,6 +128,7 @@ fn cycle_input(cycle: u64, reading: &Vector3<f64>, torque_nm: &Vector3<f64>) -> 
             status: 0,
             stamp_ns: now_ns,
             valid: true,
+            drained: sar_estimator::cycle::DrainedSamples::default(),
         },
         joints: JointSample {
             joints: joints(),

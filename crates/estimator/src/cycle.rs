@@ -57,6 +57,29 @@ pub struct SensorSample {
     pub stamp_ns: u64,
     /// The driver's word that the sample is good (transport, framing).
     pub valid: bool,
+    /// Every sample the driver received since the previous cycle, as the
+    /// loop counted them for the spike check ([`DrainedSamples`]).
+    pub drained: DrainedSamples,
+}
+
+/// The samples the sensor's driver received since the previous cycle, the
+/// step's own among them (it reads only the newest), as the loop counted
+/// them while draining the sensor (`sar_loop::control`): how many, and how
+/// many steps between consecutive ones (from the previous cycle's last on)
+/// jump beyond the spike threshold ([`SpikeLimits::is_jump`]). Recorded
+/// with the cycle's input, so that the spike check sees every sample (a
+/// late cycle reads several) and a replay makes the same decisions.
+/// `counted` false (a caller that does not drain the sensor, a recording
+/// older than the count): the check compares each new sample with the
+/// previous new one itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DrainedSamples {
+    /// Whether the loop counted them (the two counts are its).
+    pub counted: bool,
+    /// Samples received since the previous cycle.
+    pub samples: u16,
+    /// Steps between consecutive received samples beyond the threshold.
+    pub jumps: u16,
 }
 
 /// One set of axis positions as the drive driver delivers it.
@@ -584,6 +607,18 @@ pub struct SpikeLimits {
     pub max_spikes: u32,
     /// The window, new samples (>= 1).
     pub window_samples: u32,
+}
+
+impl SpikeLimits {
+    /// Whether `next` jumps from `previous` (forces, sensor frame, N) by
+    /// more than `jump_sigma * sqrt(2)` times the noise `noise_n` on any
+    /// axis: one formula for the estimator's own check and the loop's count
+    /// of the samples it drains ([`DrainedSamples`]).
+    pub fn is_jump(&self, noise_n: &Vec3, previous: &Vec3, next: &Vec3) -> bool {
+        let threshold_n = noise_n * (self.jump_sigma * core::f64::consts::SQRT_2);
+        let jump = (next - previous).abs();
+        jump.iter().zip(threshold_n.iter()).any(|(j, t)| j > t)
+    }
 }
 
 impl Default for SpikeLimits {
@@ -1476,27 +1511,7 @@ impl Estimator {
                     range: *range,
                 });
         }
-        let mut spike = false;
-        if new_sample {
-            if finite {
-                let bits = [f.x, f.y, f.z, t.x, t.y, t.z].map(f64::to_bits);
-                self.repeats = if self.last_values == Some(bits) {
-                    self.repeats.saturating_add(1)
-                } else {
-                    0
-                };
-                self.last_values = Some(bits);
-                if let Some(limits) = self.limits.spikes {
-                    spike = self.count_spike(&limits, f);
-                }
-                self.last_force_n = Some(*f);
-            } else {
-                // NaN is a fault of its own; the memories restart after it.
-                self.last_values = None;
-                self.repeats = 0;
-                self.last_force_n = None;
-            }
-        }
+        let spike = self.new_values(sensor, new_sample, finite);
         if let FrozenCheck::On { repeats } = self.limits.frozen
             && self.repeats >= repeats
         {
@@ -1516,6 +1531,70 @@ impl Estimator {
         SampleVerdict { fault, spike }
     }
 
+    /// A cycle's sample for the frozen and spike memories: whether it is a
+    /// spike. The memories move with new samples (a NaN restarts them);
+    /// when the loop counted the samples it drained since the previous
+    /// cycle, the spike check takes its counts (new sample or not).
+    fn new_values(&mut self, sensor: &SensorSample, new_sample: bool, finite: bool) -> bool {
+        let (f, t) = (&sensor.force_n, &sensor.torque_nm);
+        let mut spike = false;
+        if new_sample {
+            if finite {
+                let bits = [f.x, f.y, f.z, t.x, t.y, t.z].map(f64::to_bits);
+                self.repeats = if self.last_values == Some(bits) {
+                    self.repeats.saturating_add(1)
+                } else {
+                    0
+                };
+                self.last_values = Some(bits);
+                if let Some(limits) = self.limits.spikes
+                    && !sensor.drained.counted
+                {
+                    spike = self.count_spike(&limits, f);
+                }
+                self.last_force_n = Some(*f);
+            } else {
+                // NaN is a fault of its own; the memories restart after it.
+                self.last_values = None;
+                self.repeats = 0;
+                self.last_force_n = None;
+            }
+        }
+        // The loop counted every sample received since the previous cycle:
+        // the check takes its counts (new sample or not).
+        if let Some(limits) = self.limits.spikes
+            && sensor.drained.counted
+        {
+            spike = self.count_drained(&limits, sensor.drained);
+        }
+        spike
+    }
+
+    /// The samples the loop drained this cycle for the spike check: the
+    /// window moves by them, and their jumps (counted at the last of them)
+    /// open or fill it, as [`Estimator::count_spike`] does one new sample
+    /// at a time. Whether any jumped.
+    fn count_drained(&mut self, limits: &SpikeLimits, drained: DrainedSamples) -> bool {
+        let samples = u32::from(drained.samples);
+        // At most one jump per sample received.
+        let jumps = u32::from(drained.jumps).min(samples);
+        if self.spike_window_left > 0 {
+            self.spike_window_left = self.spike_window_left.saturating_sub(samples);
+            if self.spike_window_left == 0 {
+                self.spikes = 0;
+            }
+        }
+        if jumps == 0 {
+            return false;
+        }
+        if self.spike_window_left == 0 {
+            self.spike_window_left = limits.window_samples;
+            self.spikes = 0;
+        }
+        self.spikes = self.spikes.saturating_add(jumps).min(limits.window_samples);
+        true
+    }
+
     /// One new finite sample for the spike check: whether it is a spike.
     fn count_spike(&mut self, limits: &SpikeLimits, force_n: &Vec3) -> bool {
         if self.spike_window_left > 0 {
@@ -1527,9 +1606,7 @@ impl Estimator {
         let Some(previous) = self.last_force_n else {
             return false;
         };
-        let threshold_n = self.noise_n * (limits.jump_sigma * core::f64::consts::SQRT_2);
-        let jump = (force_n - previous).abs();
-        let spike = jump.iter().zip(threshold_n.iter()).any(|(j, t)| j > t);
+        let spike = limits.is_jump(&self.noise_n, &previous, force_n);
         if spike {
             if self.spike_window_left == 0 {
                 self.spike_window_left = limits.window_samples;

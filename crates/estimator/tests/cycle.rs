@@ -102,6 +102,7 @@ impl Rig {
                 status: 0,
                 stamp_ns: now_ns - 300_000,
                 valid: true,
+                drained: sar_estimator::cycle::DrainedSamples::default(),
             },
             joints: joint_sample(q, now_ns - 100_000),
             command: None,
@@ -516,6 +517,7 @@ fn debounce_counts_new_samples_not_loop_cycles() {
                     status: 0,
                     stamp_ns,
                     valid: true,
+                    drained: sar_estimator::cycle::DrainedSamples::default(),
                 },
                 joints: joint_sample(NOMINAL_Q, now_ns - 50_000),
                 command: None,
@@ -1081,6 +1083,7 @@ fn the_torque_check_and_the_tare_hold_with_a_rod_offset_and_a_turned_sensor() {
             status: 0,
             stamp_ns: 1_000_000_000 + cycle * PERIOD_NS,
             valid: true,
+            drained: sar_estimator::cycle::DrainedSamples::default(),
         },
         joints: JointSample {
             joints: q,

@@ -153,6 +153,7 @@ fn scripted_inputs(cycles: u64) -> Vec<CycleInput> {
                     status,
                     stamp_ns: sensor_stamp_ns,
                     valid: true,
+                    drained: sar_estimator::cycle::DrainedSamples::default(),
                 },
                 joints: joint_sample(q, now_ns - 100_000),
                 command,

@@ -17,7 +17,8 @@ use crossbeam_queue::ArrayQueue;
 use sar_drivers::{AxisDrives, DriveState, ForceSensor, WrenchSample};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
-    CommandAccepted, CycleInput, CycleOutput, EstimatorConfig, JointSample, SensorSample,
+    CommandAccepted, CycleInput, CycleOutput, DrainedSamples, EstimatorConfig, JointSample,
+    SensorSample, SpikeLimits,
 };
 use sar_kinematics::ActiveJoints;
 use std::sync::Arc;
@@ -131,6 +132,16 @@ pub struct Controller<S: ForceSensor, D: AxisDrives> {
     /// fixed at construction.
     drained: [WrenchSample; DRAIN_CAPACITY],
     drained_count: usize,
+    /// The spike check's limits and the sensor's noise: every drained
+    /// sample's step from the one before it is judged with them
+    /// ([`DrainedSamples`], recorded with the cycle's input).
+    spikes: Option<SpikeLimits>,
+    noise_n: Vec3,
+    /// The force of the last finite sample drained (the chain of jumps goes
+    /// on from it across cycles).
+    last_drained_force_n: Option<Vec3>,
+    /// This cycle's count of what was drained.
+    drained_samples: DrainedSamples,
 }
 
 /// Sensor samples handed to the recorder per cycle at most (16 kHz at a
@@ -149,6 +160,8 @@ fn sensor_sample(s: &WrenchSample) -> SensorSample {
         status: s.status.0,
         stamp_ns: s.received_ns,
         valid: s.is_valid(),
+        // Set by `gather` for every cycle's input.
+        drained: DrainedSamples::default(),
     }
 }
 
@@ -178,6 +191,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             status: 0,
             stamp_ns: 0,
             valid: false,
+            drained: DrainedSamples::default(),
         };
         let joints = JointSample {
             joints: ActiveJoints::default(),
@@ -213,6 +227,10 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 received_ns: 0,
             }; DRAIN_CAPACITY],
             drained_count: 0,
+            spikes: config.plausibility.limits().spikes,
+            noise_n: config.noise.std_n(),
+            last_drained_force_n: None,
+            drained_samples: DrainedSamples::default(),
         })
     }
 
@@ -334,10 +352,12 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         let beats = self.operator.publisher.read();
         let now_ns = now();
         let publisher_idle_ns = self.publisher_idle_ns(beats, now_ns);
+        let mut sensor = self.last_input.sensor;
+        sensor.drained = self.drained_samples;
         self.last_input = LoopInput {
             cycle,
             now_ns,
-            sensor: self.last_input.sensor,
+            sensor,
             joints: self.last_input.joints,
             drive_state,
             request,
@@ -350,7 +370,8 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     /// recorder ([`Controller::sensor_samples`]), counting those the driver
     /// lost.
     fn drain_sensor(&mut self) {
-        self.drained_count = match self.sensor.drain(&mut self.drained) {
+        let drained = self.sensor.drain(&mut self.drained);
+        self.drained_count = match drained {
             Ok(d) => {
                 if d.lost > 0 {
                     self.counts.sensor_samples_lost += d.lost;
@@ -359,6 +380,38 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             }
             Err(_) => 0,
         };
+        self.drained_samples = DrainedSamples {
+            counted: drained.is_ok(),
+            samples: u16::try_from(self.drained_count).unwrap_or(u16::MAX),
+            jumps: self.count_jumps(),
+        };
+    }
+
+    /// The jumps beyond the spike threshold among the samples drained this
+    /// cycle, each from the finite sample received before it (across
+    /// cycles); a non-finite one breaks the chain, as it restarts the
+    /// estimator's own check. Never allocates.
+    fn count_jumps(&mut self) -> u16 {
+        let mut jumps = 0u16;
+        let count = self.drained_count;
+        for s in self.drained.iter().take(count) {
+            let finite = s
+                .force_n
+                .iter()
+                .chain(s.torque_nm.iter())
+                .all(|v| v.is_finite());
+            if !finite {
+                self.last_drained_force_n = None;
+                continue;
+            }
+            if let (Some(limits), Some(previous)) = (self.spikes, self.last_drained_force_n)
+                && limits.is_jump(&self.noise_n, &previous, &s.force_n)
+            {
+                jumps = jumps.saturating_add(1);
+            }
+            self.last_drained_force_n = Some(s.force_n);
+        }
+        jumps
     }
 
     /// The newest sensor sample into the input (kept when there is none; a

@@ -41,6 +41,9 @@ fn cycle_input() -> CycleInput {
         publisher_idle_ns: 1_000,
         back_out_m: 0.0,
         move_max_force_n: 0.0,
+        sensor_drained_counted: true,
+        sensor_drained_samples: 1,
+        sensor_drained_jumps: 0,
     }
 }
 

@@ -902,6 +902,17 @@ ros_message! {
         /// recordings older than this field).
         move_max_force_n: f64,
     }
+    // Added with issue 35 (the spike check sees every sample).
+    since {
+        /// Whether the loop counted the samples it drained this cycle
+        /// (false in recordings older than this field: the step then
+        /// compares new samples itself).
+        sensor_drained_counted: bool,
+        /// Samples the driver received since the previous cycle.
+        sensor_drained_samples: u16,
+        /// Steps between consecutive ones beyond the spike threshold.
+        sensor_drained_jumps: u16,
+    }
 }
 
 ros_message! {

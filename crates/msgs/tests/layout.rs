@@ -45,6 +45,9 @@ fn samples() -> Vec<(&'static str, Outgoing)> {
                 publisher_idle_ns: 1000,
                 back_out_m: 0.125,
                 move_max_force_n: 2.5,
+                sensor_drained_counted: true,
+                sensor_drained_samples: 3,
+                sensor_drained_jumps: 1,
             }),
         ),
         (
@@ -150,6 +153,8 @@ fn pinned(name: &str) -> &'static str {
             "6666e63fff002c01000000000000000000002240000000000000204000000000",
             "00001c40000000000000184000000000000014400000000000001040e8030000",
             "00000000000000000000c03f0000000000000440",
+            // Issue 35: counted, 3 samples, 1 jump.
+            "010003000100",
         ),
         "estimator_state" => concat!(
             "0001000005000000010000000500000062617365000000000000000001000000",
@@ -561,6 +566,7 @@ fn the_cycle_batch_is_its_msg_file_and_round_trips() {
         extra_wrench: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
         command_cycles: vec![2],
         commands: vec![command],
+        drained_counts: vec![2, 0, 0, 0, 17, 3],
     };
     let mut bytes = Vec::new();
     b.encode(&mut bytes).unwrap();
@@ -570,7 +576,17 @@ fn the_cycle_batch_is_its_msg_file_and_round_trips() {
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&back.sensor_raw), bits(&b.sensor_raw));
     assert_eq!(back.commands, b.commands);
+    // A lean file older than the drained counts ends before them: it
+    // reads them empty (not counted); every other cut is refused.
+    let older = bytes.len() - (4 + 2 * b.drained_counts.len());
     for cut in 0..bytes.len() {
-        assert!(CycleBatch::decode(&bytes[..cut]).is_err(), "cut at {cut}");
+        let decoded = CycleBatch::decode(&bytes[..cut]);
+        if cut == older {
+            let old = decoded.unwrap();
+            assert!(old.drained_counts.is_empty());
+            assert_eq!(old.commands, b.commands);
+        } else {
+            assert!(decoded.is_err(), "cut at {cut}");
+        }
     }
 }

@@ -66,6 +66,7 @@ fn reset_cycle(estimator: &mut Estimator, joints: ActiveJoints, force_n: Vec3) -
             status: 0,
             stamp_ns: 1_000,
             valid: true,
+            drained: sar_estimator::cycle::DrainedSamples::default(),
         },
         joints: JointSample {
             joints,
@@ -241,6 +242,7 @@ pub extern "C" fn sar_nostd_cycle_in_motion(
                 status: 0,
                 stamp_ns: 1_000,
                 valid: true,
+                drained: sar_estimator::cycle::DrainedSamples::default(),
             },
             joints: JointSample {
                 joints: ActiveJoints { q1_m, q2_m, q3_m },

@@ -15,7 +15,9 @@
 use sar_config::ConfigSource;
 use sar_drivers::DriveState;
 use sar_estimator::Vec3;
-use sar_estimator::cycle::{Bias, CycleInput, CycleOutput, JointSample, SensorSample, TipOutcome};
+use sar_estimator::cycle::{
+    Bias, CycleInput, CycleOutput, DrainedSamples, JointSample, SensorSample, TipOutcome,
+};
 use sar_estimator::guard::{ForceLimits, GuardState};
 use sar_kinematics::ActiveJoints;
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request};
@@ -289,6 +291,12 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
     };
     record_request(&mut m, input.request, input.cycle);
     m.publisher_idle_ns = input.publisher_idle_ns;
+    let d = input.sensor.drained;
+    (
+        m.sensor_drained_counted,
+        m.sensor_drained_samples,
+        m.sensor_drained_jumps,
+    ) = (d.counted, d.samples, d.jumps);
     (m.drive_action, m.setpoint_q_m) = drive_action_fields(decision.action);
     if let Some((status, reason)) = decision.reply {
         m.reply_status = u8::try_from(status as u16).unwrap_or(REPLY_NONE);
@@ -403,6 +411,11 @@ pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
             status: m.sensor_status,
             stamp_ns: m.sensor_stamp_ns,
             valid: m.sensor_valid,
+            drained: DrainedSamples {
+                counted: m.sensor_drained_counted,
+                samples: m.sensor_drained_samples,
+                jumps: m.sensor_drained_jumps,
+            },
         },
         joints: JointSample {
             joints: joints_of(&m.joints_q_m),

@@ -436,6 +436,11 @@ impl RotatingWriter {
         self.written
     }
 
+    /// Bytes written so far into the file open now (0 when none is).
+    pub fn open_file_bytes(&self) -> u64 {
+        self.current.as_ref().map_or(0, OpenFile::writer_position)
+    }
+
     fn open(&mut self) -> Result<&mut OpenFile, WriteError> {
         let path = self.options.path(self.next_index);
         self.next_index += 1;

@@ -145,6 +145,7 @@ impl BatchBuilder {
             drive_state: Vec::with_capacity(cap),
             drive_fault_axis: Vec::with_capacity(cap),
             drive_fault_code: Vec::with_capacity(cap),
+            drained_counts: Vec::with_capacity(2 * cap),
             ..CycleBatch::default()
         };
         Self {
@@ -182,6 +183,7 @@ impl BatchBuilder {
         b.sensor_status.clear();
         b.drive_fault_axis.clear();
         b.drive_fault_code.clear();
+        b.drained_counts.clear();
         b.extra_cycles.clear();
         b.extra_stamp_ns.clear();
         b.command_cycles.clear();
@@ -231,6 +233,14 @@ impl BatchBuilder {
         b.drive_state.push(m.drive_state as u8);
         b.drive_fault_axis.push(m.drive_fault_axis);
         b.drive_fault_code.push(m.drive_fault_code);
+        b.drained_counts.extend([
+            if m.sensor_drained_counted {
+                m.sensor_drained_samples.saturating_add(1)
+            } else {
+                0
+            },
+            m.sensor_drained_jumps,
+        ]);
         if has_command(m) {
             b.command_cycles.push(at);
             b.commands.push(*m);
@@ -588,6 +598,13 @@ fn unbatch_one(
         .map_err(|_| c.err("a drive state out of range"))?;
     m.drive_fault_axis = at(&b.drive_fault_axis, i, c, short)?;
     m.drive_fault_code = at(&b.drive_fault_code, i, c, short)?;
+    // (None in a lean file older than the counts: not counted.)
+    if !b.drained_counts.is_empty() {
+        let samples = at(&b.drained_counts, 2 * i, c, short)?;
+        m.sensor_drained_counted = samples > 0;
+        m.sensor_drained_samples = samples.saturating_sub(1);
+        m.sensor_drained_jumps = at(&b.drained_counts, 2 * i + 1, c, short)?;
+    }
     let w = sensor_of(b, i, f, c, p)?;
     m.sensor_force_n = [w[0], w[1], w[2]];
     m.sensor_torque_nm = [w[3], w[4], w[5]];

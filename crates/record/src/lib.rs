@@ -11,6 +11,8 @@
 //! - [`rosbag2`]: a rosbag2 directory (`metadata.yaml`) of recordings.
 //! - [`convert`]: the loop's cycle as recorded messages, and back.
 //! - [`lean`]: the lean recording mode's batches of cycle inputs.
+//! - [`output`]: the files the tools write: never an input, written
+//!   whole or not at all, within the disk's free space.
 //! - [`live`]: the loop's recording sink and the recordings' manager.
 //! - [`replay`]: bit-exact replay of recordings and rotated sets.
 
@@ -18,6 +20,7 @@ pub mod convert;
 pub mod file;
 pub mod lean;
 pub mod live;
+pub mod output;
 pub mod reader;
 pub mod recorder;
 pub mod replay;

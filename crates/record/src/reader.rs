@@ -13,6 +13,7 @@ use sar_msgs::cdr::CdrError;
 use sar_msgs::msgs::{Outgoing, RosMessage, Topic};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Why reading stopped or a message could not be decoded.
 #[non_exhaustive]
@@ -97,6 +98,21 @@ pub enum ReadError {
         /// The limit.
         limit: u64,
     },
+    /// The schemas, channels and metadata read would hold more than a file
+    /// of this length can honestly need ([`retained_limit`]).
+    #[error(
+        "the schemas, channels and metadata read up to byte {offset} would hold {retained} bytes, more than {limit} for a file of {file_bytes} bytes: corrupt or crafted"
+    )]
+    TooMuchMetadata {
+        /// The record (or its chunk) that would exceed the limit.
+        offset: u64,
+        /// What the reader would hold with it, bytes.
+        retained: u64,
+        /// The limit, bytes.
+        limit: u64,
+        /// The file's length.
+        file_bytes: u64,
+    },
     /// A chunk's content is not what its header says.
     #[error("chunk at byte {offset}: {why} (at byte {at} of its content)")]
     BadChunkContent {
@@ -137,6 +153,19 @@ pub enum ReadError {
     },
 }
 
+/// A schema of the recording, shared by every channel that names it (one
+/// copy, however many channels: a schema of 2 MiB named by 4000 channels
+/// is 2 MiB, not 8 GB).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SchemaInfo {
+    /// Schema name (the ROS 2 type).
+    pub name: String,
+    /// Schema encoding (`ros2msg`).
+    pub encoding: String,
+    /// Schema text.
+    pub data: Vec<u8>,
+}
+
 /// A channel of the recording with its schema.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ChannelInfo {
@@ -148,14 +177,26 @@ pub struct ChannelInfo {
     pub message_encoding: String,
     /// Schema id (0: none).
     pub schema_id: u16,
-    /// Schema name (the ROS 2 type), empty without schema.
-    pub schema_name: String,
-    /// Schema encoding (`ros2msg`).
-    pub schema_encoding: String,
-    /// Schema text.
-    pub schema_data: Vec<u8>,
+    /// The schema (`None`: no schema, or one not defined before the
+    /// channel), shared with the reader and the other channels.
+    pub schema: Option<Arc<SchemaInfo>>,
     /// Channel metadata.
     pub metadata: BTreeMap<String, String>,
+}
+
+impl ChannelInfo {
+    /// Schema name (the ROS 2 type), empty without schema.
+    pub fn schema_name(&self) -> &str {
+        self.schema.as_deref().map_or("", |s| s.name.as_str())
+    }
+    /// Schema encoding (`ros2msg`), empty without schema.
+    pub fn schema_encoding(&self) -> &str {
+        self.schema.as_deref().map_or("", |s| s.encoding.as_str())
+    }
+    /// Schema text, empty without schema.
+    pub fn schema_data(&self) -> &[u8] {
+        self.schema.as_deref().map_or(&[], |s| s.data.as_slice())
+    }
 }
 
 /// One message as recorded.
@@ -217,13 +258,6 @@ impl<E, F> OnMessage<E> for F where
 {
 }
 
-#[derive(Debug, Clone)]
-struct SchemaInfo {
-    name: String,
-    encoding: String,
-    data: Vec<u8>,
-}
-
 /// Where a reader's bytes come from: memory, or a file read record by
 /// record into one reused buffer (memory bounded by the largest record,
 /// whatever the file's length).
@@ -255,8 +289,12 @@ enum Source<'a> {
 pub struct McapReader<'a> {
     source: Source<'a>,
     pos: usize,
-    schemas: BTreeMap<u16, SchemaInfo>,
+    schemas: BTreeMap<u16, Arc<SchemaInfo>>,
     channels: BTreeMap<u16, ChannelInfo>,
+    /// The bytes the schemas, channels and metadata read so far hold
+    /// (counted as [`McapReader::retained_bytes`] says), against
+    /// [`retained_limit`].
+    retained: u64,
     /// The ids of `channels`, one bit each (bit `id % 64` of word `id / 64`):
     /// the check that every message's channel is known, without a map
     /// lookup per message.
@@ -276,7 +314,8 @@ pub struct McapReader<'a> {
     current: Option<(u64, u64)>,
 }
 
-/// A corrupt record passed over by [`McapReader::skip_bad_record`].
+/// A corrupt record passed over by [`McapReader::skip_bad_record`], or a
+/// run of them one after the other ([`Skipped::absorb`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Skipped {
     /// Its offset in the file.
@@ -285,8 +324,105 @@ pub struct Skipped {
     pub bytes: u64,
     /// The log times of its messages (a chunk's header, when readable), ns.
     pub log_time_ns: Option<(u64, u64)>,
-    /// Why it was refused.
+    /// Why it was refused (the first of a run).
     pub why: String,
+    /// The corrupt records in it: 1, or a run's length.
+    pub records: u64,
+}
+
+impl Skipped {
+    /// Takes `next` into this one when it starts where this one ends (a
+    /// run of corrupt records is one part passed over); false otherwise.
+    pub fn absorb(&mut self, next: &Skipped) -> bool {
+        if self.bytes == 0
+            || next.bytes == 0
+            || self.offset.saturating_add(self.bytes) != next.offset
+        {
+            return false;
+        }
+        self.bytes = self.bytes.saturating_add(next.bytes);
+        self.records = self.records.saturating_add(next.records);
+        self.log_time_ns = match (self.log_time_ns, next.log_time_ns) {
+            (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
+            (a, b) => a.or(b),
+        };
+        true
+    }
+
+    /// "N bytes at byte X (why)", with the records of a run.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} bytes at byte {}{} ({})",
+            self.bytes,
+            self.offset,
+            if self.records > 1 {
+                format!(", {} corrupt records in a row", self.records)
+            } else {
+                String::new()
+            },
+            self.why
+        )
+    }
+}
+
+/// The most corrupt parts kept in detail ([`SkippedTally`]); the rest are
+/// counted.
+pub const MAX_SKIPPED_SHOWN: usize = 16;
+
+/// The corrupt records a reading passed over, in bounded memory: the first
+/// [`MAX_SKIPPED_SHOWN`] parts in detail (a run of records one after the
+/// other is one part), and the count and bytes of every one.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SkippedTally {
+    /// The first parts, in file order.
+    pub shown: Vec<Skipped>,
+    /// Every corrupt record passed over.
+    pub records: u64,
+    /// Their bytes.
+    pub bytes: u64,
+    /// The parts (runs) in all, shown or not.
+    pub parts: u64,
+}
+
+impl SkippedTally {
+    /// Counts `s`; kept in detail if it continues the last part or there
+    /// is room.
+    pub fn add(&mut self, s: Skipped) {
+        self.records = self.records.saturating_add(s.records);
+        self.bytes = self.bytes.saturating_add(s.bytes);
+        if let Some(last) = self.shown.last_mut()
+            && last.absorb(&s)
+        {
+            return;
+        }
+        self.parts = self.parts.saturating_add(1);
+        if self.shown.len() < MAX_SKIPPED_SHOWN {
+            self.shown.push(s);
+        }
+    }
+
+    /// Whether nothing was passed over.
+    pub fn is_empty(&self) -> bool {
+        self.records == 0
+    }
+
+    /// One line: how many records and bytes in how many parts, the first
+    /// ones named.
+    pub fn summary(&self) -> String {
+        let shown: Vec<String> = self.shown.iter().map(Skipped::describe).collect();
+        format!(
+            "{} corrupt records ({} bytes) in {} part(s) passed over{}: {}",
+            self.records,
+            self.bytes,
+            self.parts,
+            if self.parts > self.shown.len() as u64 {
+                format!(", the first {} named", self.shown.len())
+            } else {
+                String::new()
+            },
+            shown.join("; ")
+        )
+    }
 }
 
 /// A reused zstd decompression context.
@@ -350,6 +486,7 @@ impl<'a> McapReader<'a> {
             pos: mcap::MAGIC.len(),
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
+            retained: 0,
             known_channels: Vec::new(),
             metadata: Vec::new(),
             profile: None,
@@ -386,6 +523,7 @@ impl<'a> McapReader<'a> {
             bytes,
             log_time_ns,
             why: why.to_string(),
+            records: 1,
         })
     }
 
@@ -457,29 +595,53 @@ impl<'a> McapReader<'a> {
         self.pos as u64
     }
 
-    fn apply(&mut self, record: Record<'_>) {
+    /// The bytes the schemas, channels and metadata read so far hold: each
+    /// distinct schema once (every channel shares it), each channel and
+    /// metadata record with its strings, plus a fixed allowance per entry
+    /// for the maps. At most [`retained_limit`] of the file's length.
+    pub fn retained_bytes(&self) -> u64 {
+        self.retained
+    }
+
+    /// Notes a schema, channel or metadata record read at `offset` (a
+    /// record of the data section, or of the chunk there); refused when
+    /// what the reader holds would exceed [`retained_limit`] (a crafted
+    /// file: small records in a compressed chunk, or many of them).
+    fn apply(&mut self, record: Record<'_>, offset: u64) -> Result<(), ReadError> {
+        let Some(cost) = self.cost_of(&record) else {
+            // Written again (some writers repeat them per chunk).
+            return Ok(());
+        };
+        let retained = self.retained.saturating_add(cost);
+        let limit = retained_limit(self.total_bytes());
+        if retained > limit {
+            return Err(ReadError::TooMuchMetadata {
+                offset,
+                retained,
+                limit,
+                file_bytes: self.total_bytes(),
+            });
+        }
+        self.retained = retained;
         match record {
             Record::Header(h) => self.profile = Some(h.profile),
             Record::Schema { header, data } => {
                 self.schemas.insert(
                     header.id,
-                    SchemaInfo {
+                    Arc::new(SchemaInfo {
                         name: header.name,
                         encoding: header.encoding,
                         data: data.into_owned(),
-                    },
+                    }),
                 );
             }
             Record::Channel(c) => {
-                let schema = self.schemas.get(&c.schema_id);
                 let info = ChannelInfo {
                     id: c.id,
                     topic: c.topic,
                     message_encoding: c.message_encoding,
                     schema_id: c.schema_id,
-                    schema_name: schema.map(|s| s.name.clone()).unwrap_or_default(),
-                    schema_encoding: schema.map(|s| s.encoding.clone()).unwrap_or_default(),
-                    schema_data: schema.map(|s| s.data.clone()).unwrap_or_default(),
+                    schema: self.schemas.get(&c.schema_id).cloned(),
                     metadata: c.metadata,
                 };
                 let (word, bit) = (usize::from(c.id / 64), c.id % 64);
@@ -494,6 +656,36 @@ impl<'a> McapReader<'a> {
             Record::Metadata(m) => self.metadata.push(m),
             _ => {}
         }
+        Ok(())
+    }
+
+    /// What a schema, channel or metadata record would add to what the
+    /// reader holds ([`McapReader::retained_bytes`]); `None` for one that
+    /// says again what it holds.
+    fn cost_of(&self, record: &Record<'_>) -> Option<u64> {
+        Some(match record {
+            Record::Schema { header, data } => {
+                let same = self.schemas.get(&header.id).is_some_and(|s| {
+                    s.name == header.name && s.encoding == header.encoding && *s.data == **data
+                });
+                if same {
+                    return None;
+                }
+                entry_cost([header.name.len(), header.encoding.len(), data.len()])
+            }
+            Record::Channel(c) => {
+                if self.channels.get(&c.id).is_some_and(|k| same_channel(k, c)) {
+                    return None;
+                }
+                entry_cost([
+                    c.topic.len(),
+                    c.message_encoding.len(),
+                    map_bytes(&c.metadata),
+                ])
+            }
+            Record::Metadata(m) => entry_cost([m.name.len(), map_bytes(&m.metadata), 0]),
+            _ => 0,
+        })
     }
 
     /// Whether a channel record with this id has been read.
@@ -692,7 +884,7 @@ impl<'a> McapReader<'a> {
             }
             op::HEADER | op::SCHEMA | op::CHANNEL | op::METADATA => {
                 let record = mcap::parse_record(op_byte, body).map_err(corrupt(offset, op_byte))?;
-                self.apply(record);
+                self.apply(record, offset)?;
             }
             _ => {}
         }
@@ -767,7 +959,7 @@ impl<'a> McapReader<'a> {
             } else if matches!(inner_op, op::SCHEMA | op::CHANNEL) {
                 let record =
                     mcap::parse_record(inner_op, body).map_err(corrupt(offset, op::CHUNK))?;
-                self.apply(record);
+                self.apply(record, offset)?;
             }
             at += RECORD_PREFIX + body.len();
         }
@@ -787,11 +979,11 @@ impl<'a> McapReader<'a> {
             if matches!(topic, Topic::StateSnapshot | Topic::CycleBatch) {
                 return Pick::Skip;
             }
-            if channel.schema_name != topic.type_name() {
+            if channel.schema_name() != topic.type_name() {
                 return Pick::Fail(ReadError::WrongType {
                     topic: channel.topic.clone(),
                     expected: topic.type_name(),
-                    found: channel.schema_name.clone(),
+                    found: channel.schema_name().to_owned(),
                 });
             }
             Pick::Give(
@@ -818,11 +1010,11 @@ impl<'a> McapReader<'a> {
                 return Pick::Skip;
             }
             if checked != Some(msg.channel_id) {
-                if channel.schema_name != M::TYPE_NAME {
+                if channel.schema_name() != M::TYPE_NAME {
                     return Pick::Fail(ReadError::WrongType {
                         topic: topic.to_owned(),
                         expected: M::TYPE_NAME,
-                        found: channel.schema_name.clone(),
+                        found: channel.schema_name().to_owned(),
                     });
                 }
                 checked = Some(msg.channel_id);
@@ -943,6 +1135,49 @@ fn record_parts(rest: &[u8], offset: u64, available: u64) -> Result<(u8, &[u8], 
             available,
         })?;
     Ok((op_byte, body, needed))
+}
+
+/// What a reader may hold of schemas, channels and metadata for a file
+/// (or bytes) of `file_bytes`: [`RETAINED_PER_FILE_BYTE`] times its length
+/// plus [`RETAINED_BASE_BYTES`]. With one chunk's buffer (at most
+/// [`MAX_CHUNK_BYTES`]) and its messages, this bounds a reader's memory by
+/// the file's size and a constant.
+pub fn retained_limit(file_bytes: u64) -> u64 {
+    file_bytes
+        .saturating_mul(RETAINED_PER_FILE_BYTE)
+        .saturating_add(RETAINED_BASE_BYTES)
+}
+
+/// Bytes a reader may hold per byte of its file ([`retained_limit`]): a
+/// record's strings cost their length and a fixed allowance, a compressed
+/// chunk may hold a few times its length of them.
+pub const RETAINED_PER_FILE_BYTE: u64 = 8;
+
+/// Bytes a reader may hold whatever its file's length ([`retained_limit`]).
+pub const RETAINED_BASE_BYTES: u64 = 16 * 1024 * 1024;
+
+/// The allowance of one map entry (its node and its allocations), bytes.
+const ENTRY_OVERHEAD: u64 = 128;
+
+/// What an entry of strings of these lengths holds, bytes.
+fn entry_cost(lens: [usize; 3]) -> u64 {
+    lens.iter()
+        .fold(ENTRY_OVERHEAD, |a, n| a.saturating_add(*n as u64))
+}
+
+/// The bytes of a string map's keys and values, with an allowance per entry.
+fn map_bytes(m: &BTreeMap<String, String>) -> usize {
+    m.iter()
+        .map(|(k, v)| k.len() + v.len() + 64)
+        .fold(0usize, usize::saturating_add)
+}
+
+/// Whether a channel record says again what `known` holds.
+fn same_channel(known: &ChannelInfo, c: &mcap::records::Channel) -> bool {
+    known.topic == c.topic
+        && known.message_encoding == c.message_encoding
+        && known.schema_id == c.schema_id
+        && known.metadata == c.metadata
 }
 
 /// The largest record read from a file (a chunk's compressed bytes and its
@@ -1097,8 +1332,9 @@ pub struct RecoverReport {
     pub input_complete: bool,
     /// Where and why the input stopped, when it was cut short.
     pub stopped: Option<ReadError>,
-    /// The corrupt records passed over (the chunks after them are kept).
-    pub skipped: Vec<Skipped>,
+    /// The corrupt records passed over (the chunks after them are kept):
+    /// counted, the first ones in detail.
+    pub skipped: SkippedTally,
 }
 
 /// Why [`recover`] failed.
@@ -1124,9 +1360,10 @@ pub enum RecoverError {
         /// The cause.
         source: mcap::McapError,
     },
-    /// The output is the input.
-    #[error("the output {0} is the input: recover writes a new file")]
-    SamePath(PathBuf),
+    /// The output is the input (the same file, by any name), or too
+    /// little space is free for it.
+    #[error("{0}")]
+    Output(#[from] crate::output::OutputError),
 }
 
 /// Rewrites `input` (complete or cut short) into `output`, a complete file
@@ -1134,20 +1371,20 @@ pub enum RecoverError {
 /// with its channel, sequence and times, its metadata, and metadata
 /// `sar_recover` saying where and why the input stopped.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverError> {
-    // The same file by another spelling (./x.mcap, a link) counts too: the
-    // output is truncated first, which would lose the input.
-    let same_file = std::fs::canonicalize(output)
-        .ok()
-        .is_some_and(|o| std::fs::canonicalize(input).ok() == Some(o));
-    if input == output || same_file {
-        return Err(RecoverError::SamePath(output.to_path_buf()));
-    }
+    use crate::output::{PendingFile, SpaceWatch, check_outputs};
+    // The same file by any name (./x.mcap, a hard or symbolic link) is
+    // refused; and the output is written beside itself and renamed at the
+    // end, so that nothing in its place is ever cut.
+    check_outputs(&[output], &[input])?;
     let reader = McapReader::open(input)?;
+    let pending = PendingFile::new(output)?;
+    // The output holds at most the input's messages, with its summary.
+    let space = SpaceWatch::before(output, pending.tmp_path(), reader.total_bytes())?;
     let io = |source| RecoverError::Io {
         path: output.to_path_buf(),
         source,
     };
-    let (file, handle, _) = CountingFile::create(output).map_err(io)?;
+    let (file, handle, position) = CountingFile::create(pending.tmp_path()).map_err(io)?;
     let mut recovery = Recovery {
         reader,
         output,
@@ -1157,12 +1394,18 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecoverErro
         known: BTreeMap::new(),
         metadata_copied: 0,
         messages: 0,
-        skipped: Vec::new(),
+        skipped: SkippedTally::default(),
         stopped: None,
+        space,
+        position,
     };
     recovery.copy_messages()?;
     recovery.finish(input)?;
     handle.sync_all().map_err(io)?;
+    if recovery.messages > 0 {
+        pending.commit()?;
+    }
+    // (Nothing recovered: the temporary file is removed, nothing renamed.)
     Ok(recovery.report())
 }
 
@@ -1182,8 +1425,12 @@ struct Recovery<'p> {
     /// copied at the start (where readers such as replay look for them).
     metadata_copied: usize,
     messages: u64,
-    skipped: Vec<Skipped>,
+    skipped: SkippedTally,
     stopped: Option<ReadError>,
+    /// The output's file system's free space.
+    space: crate::output::SpaceWatch,
+    /// Bytes written to the output so far.
+    position: Arc<std::sync::atomic::AtomicU64>,
 }
 
 /// The channel `c` (and its schema) under the same ids.
@@ -1194,9 +1441,9 @@ fn copy_channel<W: std::io::Write + std::io::Seek>(
     if c.schema_id != 0 {
         w.add_schema_with_id(
             c.schema_id,
-            &c.schema_name,
-            &c.schema_encoding,
-            &c.schema_data,
+            c.schema_name(),
+            c.schema_encoding(),
+            c.schema_data(),
         )?;
     }
     w.add_channel_with_id(
@@ -1227,7 +1474,7 @@ impl Recovery<'_> {
             match self.reader.next()? {
                 Ok(m) => return Some(m),
                 Err(e) => match self.reader.skip_bad_record(&e) {
-                    Some(s) => self.skipped.push(s),
+                    Some(s) => self.skipped.add(s),
                     None => {
                         self.stopped = Some(e);
                         return None;
@@ -1283,6 +1530,8 @@ impl Recovery<'_> {
             w.write_to_known_channel(&header, &msg.data)
                 .map_err(&mcap_err)?;
             self.messages += 1;
+            self.space
+                .written(self.position.load(std::sync::atomic::Ordering::Relaxed))?;
         }
         Ok(())
     }
@@ -1293,9 +1542,10 @@ impl Recovery<'_> {
         let mcap_err = self.mcap_err();
         let mut w = match self.writer.take() {
             Some(w) => w,
-            None => self
-                .make_writer()?
-                .ok_or_else(|| RecoverError::SamePath(self.output.to_path_buf()))?,
+            None => self.make_writer()?.ok_or_else(|| RecoverError::Io {
+                path: self.output.to_path_buf(),
+                source: std::io::Error::other("the output's writer was made twice"),
+            })?,
         };
         for c in self.reader.channels().values() {
             if !self.known.contains_key(&c.id) {
@@ -1330,14 +1580,7 @@ impl Recovery<'_> {
             info.insert("stopped".to_owned(), e.to_string());
         }
         if !self.skipped.is_empty() {
-            info.insert(
-                "skipped".to_owned(),
-                self.skipped
-                    .iter()
-                    .map(|s| format!("{} bytes at byte {}: {}", s.bytes, s.offset, s.why))
-                    .collect::<Vec<_>>()
-                    .join("; "),
-            );
+            info.insert("skipped".to_owned(), self.skipped.summary());
         }
         mcap::records::Metadata {
             name: "sar_recover".into(),

@@ -25,6 +25,7 @@
 use super::convert::{self, REPLAY_METADATA, bias_from_metadata};
 use super::file::{FileOptions, RotatingWriter, WriteError};
 use super::lean;
+use super::output::{OutputError, PendingFile, SpaceWatch, check_outputs};
 use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
@@ -235,10 +236,27 @@ pub struct ReplayReport {
     /// byte; a difference is reported on `/sar/cycle/snapshot`).
     pub snapshots_compared: u64,
     /// Corrupt parts passed over (a chunk whose data, CRC or content is
-    /// bad): reading went on after each; the cycles after one are replayed
-    /// again from the next snapshot (their state is unknown before it).
+    /// bad; a run of corrupt records one after the other is one part), and
+    /// cycles found missing: reading went on after each; the cycles after
+    /// one are replayed again from the next snapshot (their state is
+    /// unknown before it). The first [`MAX_GAPS_SHOWN`] only (memory
+    /// bounded whatever the file holds): `gaps_total` counts them all.
     pub gaps: Vec<Gap>,
+    /// Every gap, shown in `gaps` or not.
+    pub gaps_total: u64,
+    /// Every corrupt record passed over.
+    pub corrupt_records: u64,
+    /// Their bytes.
+    pub corrupt_bytes: u64,
 }
+
+/// The most gaps a [`ReplayReport`] holds in detail.
+pub const MAX_GAPS_SHOWN: usize = 16;
+
+/// The largest step forward of a cycle number taken as cycles missing; a
+/// larger one is a step back below cycle 0 (a lean batch's difference
+/// wraps).
+const MAX_FORWARD: u64 = i64::MAX as u64;
 
 impl ReplayReport {
     /// The report before the first cycle.
@@ -261,6 +279,9 @@ impl ReplayReport {
             skipped_cycles: 0,
             snapshots_compared: 0,
             gaps: Vec::new(),
+            gaps_total: 0,
+            corrupt_records: 0,
+            corrupt_bytes: 0,
         }
     }
 }
@@ -330,6 +351,21 @@ pub enum ReplayError {
     /// Neither `/sar/cycle/input` nor `/sar/sensor/wrench` messages.
     #[error("no inputs: the recording has no /sar/cycle/input and no /sar/sensor/wrench messages")]
     NoInputs,
+    /// No input read, and corrupt records passed over: they may have held
+    /// the inputs.
+    #[error(
+        "no inputs read: no /sar/cycle/input and no /sar/sensor/wrench messages outside {records} corrupt records ({bytes} bytes in {parts} part(s) passed over; the first: {first})"
+    )]
+    NoInputsAmidCorrupt {
+        /// Corrupt records passed over.
+        records: u64,
+        /// Their bytes.
+        bytes: u64,
+        /// The gaps.
+        parts: u64,
+        /// The first, described.
+        first: String,
+    },
     /// The comparison's reference topic has no usable message.
     #[error("--compare {topic}: {why}")]
     Compare {
@@ -338,9 +374,10 @@ pub enum ReplayError {
         /// What is wrong.
         why: &'static str,
     },
-    /// The output would overwrite the input.
-    #[error("the output {0} is the input")]
-    OutputIsInput(PathBuf),
+    /// The output would overwrite an input (the same file by any name),
+    /// or too little space is free for it.
+    #[error("{0}")]
+    Output(#[from] OutputError),
     /// `--from`/`--to` out of order or not finite and >= 0.
     #[error("the time range: {0}")]
     Range(String),
@@ -391,13 +428,32 @@ pub enum ReplayError {
 struct Sink {
     writer: Option<RotatingWriter>,
     status: RecorderDrops,
+    /// The output's temporary file, renamed over the output once the
+    /// replay has written all of it; removed if it stops before.
+    pending: Option<PendingFile>,
+    /// The output's file system's free space.
+    space: Option<SpaceWatch>,
 }
 
 impl Sink {
-    fn write(&mut self, m: &Outgoing) -> Result<(), WriteError> {
+    fn write(&mut self, m: &Outgoing) -> Result<(), ReplayError> {
         if let Some(w) = &mut self.writer {
             self.status.stamp_ns = self.status.stamp_ns.max(m.stamp_ns());
             w.write(m, &self.status)?;
+            if let Some(space) = &mut self.space {
+                space.written(w.open_file_bytes())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The output closed and renamed over its path.
+    fn finish(&mut self) -> Result<(), ReplayError> {
+        if let Some(w) = &mut self.writer {
+            w.close(&self.status)?;
+        }
+        if let Some(p) = self.pending.take() {
+            p.commit()?;
         }
         Ok(())
     }
@@ -418,6 +474,9 @@ struct Replayer {
     lacking: Vec<Topic>,
     /// What the cycles add up to beyond the report's counts.
     tally: Tally,
+    /// The latest gap beyond [`MAX_GAPS_SHOWN`] (counted, not in the
+    /// report).
+    unshown_gap: Option<Gap>,
     references: Vec<(u64, [f64; 3])>,
     last_cycle: u64,
     /// Whether the step's state is known (from the first cycle, or restored
@@ -480,12 +539,26 @@ impl Tally {
 impl Replayer {
     /// A replayer at the start of a set: the estimator and the step from
     /// the configuration and the set's start bias, the output opened.
-    fn new(options: &ReplayOptions, start: &SetStart) -> Result<Self, ReplayError> {
+    /// `input_bytes`: the inputs' length (the output of a full recording
+    /// is about as long; a lean one's is longer).
+    fn new(
+        options: &ReplayOptions,
+        start: &SetStart,
+        input_bytes: u64,
+    ) -> Result<Self, ReplayError> {
         let estimator = Estimator::with_bias(&options.config, start.bias)
             .map_err(|e| ReplayError::Setting(e.to_string()))?;
         let step = LoopStep::new(&options.config, start.bias, options.step)
             .map_err(|e| ReplayError::Setting(e.to_string()))?;
-        let writer = output_writer(options, start)?;
+        let (pending, space) = match &options.output {
+            Some(out) => {
+                let pending = PendingFile::new(out)?;
+                let space = SpaceWatch::before(out, pending.tmp_path(), input_bytes)?;
+                (Some(pending), Some(space))
+            }
+            None => (None, None),
+        };
+        let writer = output_writer(options, start, pending.as_ref())?;
         Ok(Self {
             scratch: Vec::with_capacity(8),
             estimator,
@@ -493,6 +566,8 @@ impl Replayer {
             sink: Sink {
                 writer,
                 status: RecorderDrops::default(),
+                pending,
+                space,
             },
             report: ReplayReport::start(options.output.clone(), start.from_first_cycle),
             replayed: BTreeMap::new(),
@@ -500,6 +575,7 @@ impl Replayer {
             comparing: options.check_recorded,
             lacking: Vec::new(),
             tally: Tally::new(options.compare.is_some() || options.keep_series),
+            unshown_gap: None,
             references: Vec::new(),
             last_cycle: 0,
             // A recording whose files start with snapshots waits for one,
@@ -533,21 +609,44 @@ impl Replayer {
         self.recorded.clear();
     }
 
-    /// Cycles missing from the recording before `cycle` (dropped by its
-    /// recorder, or a corrupt chunk `sarctl recover` passed over): a gap,
-    /// as a corrupt chunk is.
-    fn missing_cycles(&mut self, file: Option<PathBuf>, cycle: u64) {
+    /// Before a recorded `cycle` of `file`, while stepping: cycles missing
+    /// before it (dropped by its recorder, or a corrupt chunk `sarctl
+    /// recover` passed over), or a cycle number that goes back (repeated,
+    /// earlier, or below 0 by a lean batch's difference), make a gap, as a
+    /// corrupt chunk does; each named as what it is.
+    fn follows(&mut self, file: Option<PathBuf>, cycle: u64) {
+        if !(self.anchored && self.stepped) {
+            return;
+        }
+        let last = self.last_cycle;
+        let step = cycle.wrapping_sub(last);
+        let why = match step {
+            1 => return,
+            2..=MAX_FORWARD => format!(
+                "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
+                last + 1,
+                cycle - 1
+            ),
+            0 => format!(
+                "cycle {cycle} is recorded twice: the recording's cycle numbers go back (corrupt or crafted)"
+            ),
+            _ if cycle < last => format!(
+                "cycle {cycle} follows cycle {last}: the recording's cycle numbers go back by {} (corrupt or crafted)",
+                last - cycle
+            ),
+            _ => format!(
+                "cycle {cycle} follows cycle {last}: the recording's cycle numbers go back by {} below cycle 0 (corrupt or crafted)",
+                last.wrapping_sub(cycle)
+            ),
+        };
         let skipped = super::reader::Skipped {
             offset: 0,
             bytes: 0,
             log_time_ns: None,
-            why: format!(
-                "cycles {}..={} are missing from the recording (dropped by its recorder, or a corrupt chunk passed over by `sarctl recover`)",
-                self.last_cycle + 1,
-                cycle - 1
-            ),
+            records: 0,
+            why,
         };
-        self.gap(Gap::new(file, skipped, Some(self.last_cycle)), false);
+        self.gap(Gap::new(file, skipped, Some(last)), false);
     }
 
     /// A corrupt record of `file` passed over.
@@ -561,9 +660,10 @@ impl Replayer {
     /// unknown (before the first snapshot, or after a gap before the next
     /// one), counted then as skipped or not replayed.
     fn replayable(&mut self, cycle: u64) -> bool {
-        if let Some(gap) = self.report.gaps.last_mut() {
+        let anchored = self.anchored;
+        if let Some(gap) = self.last_gap() {
             gap.first_cycle_after.get_or_insert(cycle);
-            if !self.anchored {
+            if !anchored {
                 // After a corrupt part, before a snapshot.
                 gap.cycles_not_replayed += 1;
                 return false;
@@ -736,7 +836,7 @@ impl Replayer {
             self.step.restore(&m.data).map_err(failed)?;
             self.anchored = true;
             self.stepped = true;
-            if let Some(gap) = self.report.gaps.last_mut() {
+            if let Some(gap) = self.last_gap() {
                 // Replay goes on after a corrupt part.
                 gap.resumed_after_cycle = Some(m.after_cycle);
                 self.last_cycle = m.after_cycle;
@@ -818,7 +918,37 @@ impl Replayer {
         self.recorded.clear();
         self.anchored = false;
         self.stepped = false;
-        self.report.gaps.push(gap);
+        self.report.corrupt_records = self
+            .report
+            .corrupt_records
+            .saturating_add(gap.skipped.records);
+        self.report.corrupt_bytes = self.report.corrupt_bytes.saturating_add(gap.skipped.bytes);
+        // A corrupt record right after the last one, nothing read between
+        // them: one part (a run of them is never a list of its records).
+        if let Some(last) = self.last_gap()
+            && last.first_cycle_after.is_none()
+            && last.file == gap.file
+            && last.skipped.absorb(&gap.skipped)
+        {
+            return;
+        }
+        self.report.gaps_total = self.report.gaps_total.saturating_add(1);
+        if self.report.gaps.len() < MAX_GAPS_SHOWN {
+            self.report.gaps.push(gap);
+        } else {
+            // Counted, not kept: the latest stands for the state's
+            // bookkeeping (memory bounded whatever the file holds).
+            self.unshown_gap = Some(gap);
+        }
+    }
+
+    /// The latest gap (kept in the report, or the latest beyond
+    /// [`MAX_GAPS_SHOWN`]).
+    fn last_gap(&mut self) -> Option<&mut Gap> {
+        match &mut self.unshown_gap {
+            Some(g) => Some(g),
+            None => self.report.gaps.last_mut(),
+        }
     }
 
     /// `complete`: the recording was not cut short (a recovered file says
@@ -969,12 +1099,9 @@ pub fn replay_files(
     if inputs.is_empty() {
         return Err(ReplayError::NoInputs);
     }
-    for input in inputs {
-        if let Some(out) = &options.output
-            && same_file(input, out)
-        {
-            return Err(ReplayError::OutputIsInput(out.clone()));
-        }
+    if let Some(out) = &options.output {
+        let paths: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+        check_outputs(&[out], &paths)?;
     }
     let inputs: Vec<Input<'_>> = inputs.iter().map(|p| Input::File(p)).collect();
     replay_with(&inputs, options)
@@ -999,6 +1126,13 @@ impl<'b> Input<'b> {
         match self {
             Input::Bytes(_) => None,
             Input::File(p) => Some(p.to_path_buf()),
+        }
+    }
+    /// Its length, bytes (0 when it cannot be read: the reader says why).
+    fn len(&self) -> u64 {
+        match self {
+            Input::Bytes(b) => b.len() as u64,
+            Input::File(p) => std::fs::metadata(p).map_or(0, |m| m.len()),
         }
     }
 }
@@ -1092,15 +1226,17 @@ impl SetStart {
     }
 }
 
-/// The output file of a replay (`options.output`; `None`: not written).
+/// The output file of a replay (`options.output`; `None`: not written),
+/// written into `pending`'s temporary file.
 fn output_writer(
     options: &ReplayOptions,
     start: &SetStart,
+    pending: Option<&PendingFile>,
 ) -> Result<Option<RotatingWriter>, WriteError> {
-    let Some(path) = &options.output else {
+    let Some(pending) = pending else {
         return Ok(None);
     };
-    let mut o = FileOptions::single(path);
+    let mut o = FileOptions::single(pending.tmp_path());
     // The replayed file holds every cycle of its input.
     o.metadata = start
         .metadata
@@ -1225,11 +1361,15 @@ impl FileVisit {
 impl<'o> SetReplay<'o> {
     /// Opens the set: the first file's metadata read, the estimator, the
     /// step and the output made.
-    fn open(first: &Input<'_>, options: &'o ReplayOptions) -> Result<Self, ReplayError> {
+    fn open(
+        first: &Input<'_>,
+        options: &'o ReplayOptions,
+        input_bytes: u64,
+    ) -> Result<Self, ReplayError> {
         let start = SetStart::read(first)?;
         let range_ns = |s: Option<f64>| s.map(|v| (v * 1e9).round() as u64);
         Ok(Self {
-            r: Replayer::new(options, &start)?,
+            r: Replayer::new(options, &start, input_bytes)?,
             options,
             from_ns: range_ns(options.from_s),
             to_ns: range_ns(options.to_s),
@@ -1403,9 +1543,7 @@ impl<'o> SetReplay<'o> {
         file.check_start(m.cycle)?;
         self.r.quiet = self.before_range(m.stamp_ns)?;
         let r = &mut self.r;
-        if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
-            r.missing_cycles(file.path.clone(), m.cycle);
-        }
+        r.follows(file.path.clone(), m.cycle);
         if !r.replayable(m.cycle) {
             return Ok(());
         }
@@ -1438,9 +1576,7 @@ impl<'o> SetReplay<'o> {
             file.check_start(m.cycle)?;
             self.r.quiet = self.before_range(m.stamp_ns)?;
             let r = &mut self.r;
-            if r.anchored && r.stepped && m.cycle > r.last_cycle.saturating_add(1) {
-                r.missing_cycles(file.path.clone(), m.cycle);
-            }
+            r.follows(file.path.clone(), m.cycle);
             if !r.replayable(m.cycle) {
                 continue;
             }
@@ -1507,7 +1643,16 @@ impl<'o> SetReplay<'o> {
             );
         } else {
             if self.inputs_only.sensors_seen == 0 {
-                return Err(ReplayError::NoInputs);
+                let rep = &r.report;
+                return Err(match rep.gaps.first() {
+                    Some(g) if rep.corrupt_records > 0 => ReplayError::NoInputsAmidCorrupt {
+                        records: rep.corrupt_records,
+                        bytes: rep.corrupt_bytes,
+                        parts: rep.gaps_total,
+                        first: g.skipped.describe(),
+                    },
+                    _ => ReplayError::NoInputs,
+                });
             }
             r.inputs_only_mode();
             self.inputs_only.finish(r)?;
@@ -1518,9 +1663,7 @@ impl<'o> SetReplay<'o> {
         if self.options.keep_series {
             r.report.series = r.series();
         }
-        if let Some(w) = &mut r.sink.writer {
-            w.close(&r.sink.status)?;
-        }
+        r.sink.finish()?;
         Ok(self.r.report)
     }
 }
@@ -1530,7 +1673,11 @@ impl<'o> SetReplay<'o> {
 fn replay_with(inputs: &[Input<'_>], options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
     check_range(options)?;
     let first = inputs.first().ok_or(ReplayError::NoInputs)?;
-    let mut set = SetReplay::open(first, options)?;
+    let input_bytes = inputs
+        .iter()
+        .map(Input::len)
+        .fold(0u64, u64::saturating_add);
+    let mut set = SetReplay::open(first, options, input_bytes)?;
     for (index, input) in inputs.iter().enumerate() {
         if inputs.len() > 1 {
             set.chain(input)?;
@@ -1707,6 +1854,7 @@ impl InputsOnly {
                 status: 0,
                 stamp_ns: w.stamp_ns,
                 valid: finite,
+                drained: sar_estimator::cycle::DrainedSamples::default(),
             },
             joints: JointSample {
                 joints: ActiveJoints { q1_m, q2_m, q3_m },
@@ -1788,18 +1936,5 @@ fn compare(r: &mut Replayer, topic: &str) -> Result<Comparison, ReplayError> {
 
 /// Replays the file at `input` (refuses an `output` that is the input).
 pub fn replay_file(input: &Path, options: &ReplayOptions) -> Result<ReplayReport, ReplayError> {
-    if let Some(out) = &options.output
-        && same_file(input, out)
-    {
-        return Err(ReplayError::OutputIsInput(out.clone()));
-    }
     replay_files(std::slice::from_ref(&input.to_path_buf()), options)
-}
-
-/// Whether two paths name the same existing file.
-pub fn same_file(a: &Path, b: &Path) -> bool {
-    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => false,
-    }
 }

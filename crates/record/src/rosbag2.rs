@@ -221,10 +221,12 @@ fn check_ros2(reader: &McapReader<'_>) -> Result<(), String> {
         ));
     }
     for c in reader.channels().values() {
-        if c.message_encoding != "cdr" || c.schema_encoding != "ros2msg" {
+        if c.message_encoding != "cdr" || c.schema_encoding() != "ros2msg" {
             return Err(format!(
                 "channel {} is {}/{}, not cdr/ros2msg",
-                c.topic, c.message_encoding, c.schema_encoding
+                c.topic,
+                c.message_encoding,
+                c.schema_encoding()
             ));
         }
     }
@@ -247,12 +249,12 @@ fn add_topics(
             .unwrap_or_default();
         match topics
             .iter_mut()
-            .find(|t| t.topic == c.topic && t.type_name == c.schema_name)
+            .find(|t| t.topic == c.topic && t.type_name == c.schema_name())
         {
             Some(t) => t.messages += n,
             None => topics.push(TopicCount {
                 topic: c.topic.clone(),
-                type_name: c.schema_name.clone(),
+                type_name: c.schema_name().to_owned(),
                 offered_qos_profiles: qos,
                 messages: n,
             }),

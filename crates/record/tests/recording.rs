@@ -21,6 +21,7 @@ mod readers;
 mod snapshot_recording;
 
 use sar_msgs::msgs::*;
+use sar_record::output::OutputError;
 use sar_record::reader::ReadError;
 use sar_record::*;
 use std::path::Path;
@@ -87,9 +88,9 @@ fn recording_reads_back_bit_for_bit() {
     for t in Topic::FULL {
         let c = reader.channel_of(t.name()).unwrap();
         assert_eq!(c.message_encoding, "cdr");
-        assert_eq!(c.schema_encoding, "ros2msg");
-        assert_eq!(c.schema_name, t.type_name());
-        assert_eq!(c.schema_data, t.schema().as_bytes());
+        assert_eq!(c.schema_encoding(), "ros2msg");
+        assert_eq!(c.schema_name(), t.type_name());
+        assert_eq!(c.schema_data(), t.schema().as_bytes());
     }
     // The pushed messages, in order, byte for byte; then the final status.
     let (data, status) = msgs.split_at(pushed.len());
@@ -249,9 +250,15 @@ fn truncated_files_read_to_last_complete_chunk_and_recover() {
             let input = dir.join("cut.mcap");
             let output = dir.join("recovered.mcap");
             std::fs::write(&input, bytes).unwrap();
+            let _ = std::fs::remove_file(&output);
             let r = recover(&input, &output).unwrap();
             assert_eq!(r.messages as usize, expected);
             assert_eq!(r.input_complete, r.stopped.is_none());
+            if expected == 0 {
+                // Nothing recovered: nothing written in the output's place.
+                assert!(!output.exists(), "cut {cut}");
+                continue;
+            }
             let out = read_file(&output).unwrap();
             let (msgs, end, reader) = read_all(&out);
             assert!(end.is_none(), "recovered cut {cut}: {end:?}");
@@ -287,13 +294,22 @@ fn recover_refuses_to_overwrite_its_input_and_non_mcap() {
     let dir = sar_test_support::scratch!("recover_refuses");
     let p = dir.join("x.mcap");
     std::fs::write(&p, b"not an mcap file").unwrap();
-    assert!(matches!(recover(&p, &p), Err(RecoverError::SamePath(_))));
-    // The same file spelt another way is refused too, and left as it was.
+    let same = |r: Result<RecoverReport, RecoverError>| {
+        matches!(r, Err(RecoverError::Output(OutputError::IsInput { .. })))
+    };
+    assert!(same(recover(&p, &p)));
+    // The same file spelt another way, or by a hard or a symbolic link, is
+    // refused too (compared by device and inode), and left as it was.
     let other_spelling = dir.join(".").join("x.mcap");
-    assert!(matches!(
-        recover(&p, &other_spelling),
-        Err(RecoverError::SamePath(_))
-    ));
+    assert!(same(recover(&p, &other_spelling)));
+    let hard = dir.join("hard.mcap");
+    let _ = std::fs::remove_file(&hard);
+    std::fs::hard_link(&p, &hard).unwrap();
+    assert!(same(recover(&p, &hard)));
+    let soft = dir.join("soft.mcap");
+    let _ = std::fs::remove_file(&soft);
+    std::os::unix::fs::symlink(&p, &soft).unwrap();
+    assert!(same(recover(&p, &soft)));
     assert_eq!(std::fs::read(&p).unwrap(), b"not an mcap file");
     assert!(matches!(
         recover(&p, &dir.join("y.mcap")),

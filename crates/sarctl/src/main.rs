@@ -253,6 +253,8 @@ fn run(args: &Args) -> Result<(), String> {
             cli::workspace::run(config, &args.prefix, json)
         }
         Cmd::Identify(a) => {
+            // Every number in range before anything is read or asked.
+            a.check_ranges()?;
             check_config(args)?;
             cli::identify::run(config, json, &args.prefix, a)
         }

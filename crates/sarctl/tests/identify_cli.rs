@@ -243,3 +243,103 @@ fn dynamic_plan_and_a_refused_recording() {
     assert_eq!(std::fs::read_to_string(&config).unwrap(), before);
     std::fs::remove_dir_all(config.parent().unwrap()).unwrap();
 }
+
+/// Issue 35, finding 9: every numeric argument of `identify` is checked
+/// against its range before anything runs, in one line naming the option,
+/// the range and what it is. Before: `--dynamic --plan --sensor-rate-hz
+/// 1e12` ran for months (the plan's time is linear in the rate), 0 and NaN
+/// gave an unrelated message; `--live --hold-s 1e300` and
+/// `--still-tolerance-m NaN` reached the daemon. With no daemon under the
+/// prefix, the refusal is the range, never "no daemon runs"; each within
+/// seconds.
+#[test]
+fn every_numeric_argument_is_checked_against_its_range_first() {
+    let config = temp_config("ranges");
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["--dynamic", "--plan", "--sensor-rate-hz", "1e12"],
+            "--sensor-rate-hz 1e12 is out of range",
+        ),
+        (
+            &["--dynamic", "--plan", "--sensor-rate-hz", "0"],
+            "--sensor-rate-hz 0 is out of range",
+        ),
+        (
+            &["--dynamic", "--plan", "--sensor-rate-hz", "NaN"],
+            "--sensor-rate-hz NaN is out of range",
+        ),
+        (
+            &["--dynamic", "--live", "--sensor-rate-hz", "1e12"],
+            "--sensor-rate-hz 1e12 is out of range",
+        ),
+        (
+            &["--live", "--yes", "--hold-s", "1e300"],
+            "--hold-s 1e300 is out of range",
+        ),
+        (
+            &["--live", "--yes", "--still-tolerance-m", "NaN"],
+            "--still-tolerance-m NaN is out of range",
+        ),
+        (
+            &["--live", "--yes", "--settle-s=-1"],
+            "--settle-s -1 is out of range",
+        ),
+        (
+            &["--dynamic", "--plan", "--smoother-span-s", "inf"],
+            "--smoother-span-s inf is out of range",
+        ),
+        (
+            &["--dynamic", "--plan", "--centre-m", "0,1e9,0"],
+            "--centre-m 1e9 is out of range",
+        ),
+        (
+            &["--dynamic", "--plan", "--max-condition", "0.5"],
+            "--max-condition 0.5 is out of range",
+        ),
+    ];
+    for (args, expected) in cases {
+        let start = std::time::Instant::now();
+        let out = Command::new(env!("CARGO_BIN_EXE_sarctl"))
+            .arg("--config")
+            .arg(&config)
+            .arg("identify")
+            .args(*args)
+            .env(
+                "SAR_SERVICE_PREFIX",
+                format!("sar-no-daemon-{}", std::process::id()),
+            )
+            .output()
+            .unwrap();
+        let took = start.elapsed();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} ran");
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(
+            err.contains(expected) && err.contains(" must be "),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("daemon"), "{args:?}: {err}");
+        assert!(
+            took < std::time::Duration::from_secs(10),
+            "{args:?}: {took:?}"
+        );
+    }
+    // In range, the plan is made at once (the default rate, 500 Hz).
+    let out = Command::new(env!("CARGO_BIN_EXE_sarctl"))
+        .arg("--config")
+        .arg(&config)
+        .args([
+            "identify",
+            "--dynamic",
+            "--plan",
+            "--sensor-rate-hz",
+            "7000",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

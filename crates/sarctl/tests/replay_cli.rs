@@ -222,7 +222,7 @@ fn recover_refuses_to_overwrite_its_input() {
         .unwrap();
     assert!(!out.status.success());
     assert!(
-        text(&out.stderr).contains("overwrite"),
+        text(&out.stderr).contains("refusing to write over the input"),
         "{}",
         text(&out.stderr)
     );
@@ -686,4 +686,203 @@ fn bad_files_exit_non_zero_and_say_what_was_not_done() {
         "{}",
         text(&out.stderr)
     );
+}
+
+/// Runs `sarctl args` (no daemon): (success, stdout, stderr).
+fn run_sarctl(args: &[&std::ffi::OsStr]) -> (bool, String, String) {
+    let out = Command::new(SARCTL).args(args).output().unwrap();
+    (out.status.success(), text(&out.stdout), text(&out.stderr))
+}
+
+/// Issue 35, finding 2: an output is never one of the inputs, by any
+/// name. "The output is the input" compared paths, not files: `recover
+/// cut.mcap --output cut_hard.mcap` through a hard link cut the recording
+/// (474,946 bytes to 463); after `export --rosbag2 bag rec.mcap` (which
+/// hard-links), `replay --input rec.mcap --output bag/rec.mcap` cut the
+/// original; `replay --plot rec.mcap` and `identify ... --plot REC`
+/// replaced the recording with an SVG, exit 0. Now every file written is
+/// compared by (device, inode) with every file read (the configuration
+/// too) and with the other outputs, and refused in one line; the input is
+/// left byte for byte; an output that replaces an older file (not an
+/// input) is written beside it and renamed, leaving no temporary file.
+#[test]
+fn an_output_is_never_an_input_by_any_name() {
+    let dir = support::scratch("replay_cli_output_is_input");
+    let bytes = std::fs::read(fixtures().join("fault_daemon.mcap")).unwrap();
+    let os = |p: &Path| p.as_os_str().to_owned();
+    let refused = |args: &[std::ffi::OsString], kept: &Path, expected: &[u8]| {
+        let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+        let (ok, _, err) = run_sarctl(&args);
+        assert!(!ok, "{args:?} was not refused");
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(
+            err.contains("refusing to write over the input") || err.contains("same file"),
+            "{args:?}: {err}"
+        );
+        assert!(
+            std::fs::read(kept).unwrap() == expected,
+            "{args:?}: {} changed",
+            kept.display()
+        );
+    };
+    // recover through a hard link of the crash-cut recording.
+    let cut = dir.join("cut.mcap");
+    let cut_bytes = &bytes[..bytes.len() * 2 / 3];
+    std::fs::write(&cut, cut_bytes).unwrap();
+    let cut_hard = dir.join("cut_hard.mcap");
+    std::fs::hard_link(&cut, &cut_hard).unwrap();
+    refused(
+        &["recover".into(), os(&cut), "--output".into(), os(&cut_hard)],
+        &cut,
+        cut_bytes,
+    );
+    // replay into the rosbag2 directory export made of the same file.
+    let rec = dir.join("rec.mcap");
+    std::fs::write(&rec, &bytes).unwrap();
+    let bag = dir.join("bag");
+    let (ok, _, err) = run_sarctl(&[
+        "export".as_ref(),
+        "--rosbag2".as_ref(),
+        bag.as_os_str(),
+        rec.as_os_str(),
+    ]);
+    assert!(ok, "{err}");
+    let config = dir.join("config.toml");
+    std::fs::copy(fixtures().join("config.toml"), &config).unwrap();
+    let config_bytes = std::fs::read(&config).unwrap();
+    let replay = |more: &[std::ffi::OsString]| {
+        let mut a: Vec<std::ffi::OsString> = vec![
+            "replay".into(),
+            "--config".into(),
+            os(&config),
+            "--input".into(),
+            os(&rec),
+        ];
+        a.extend_from_slice(more);
+        a
+    };
+    refused(
+        &replay(&["--output".into(), os(&bag.join("rec.mcap"))]),
+        &rec,
+        &bytes,
+    );
+    // A symbolic link, and the plot over the recording or the configuration.
+    let soft = dir.join("soft.mcap");
+    std::os::unix::fs::symlink(&rec, &soft).unwrap();
+    refused(&replay(&["--output".into(), os(&soft)]), &rec, &bytes);
+    refused(&replay(&["--plot".into(), os(&rec)]), &rec, &bytes);
+    refused(
+        &replay(&["--plot".into(), os(&config)]),
+        &config,
+        &config_bytes,
+    );
+    // --output and --plot the same file (one of them not there yet).
+    let (ok, _, err) = run_sarctl(
+        &replay(&[
+            "--output".into(),
+            os(&dir.join("o.mcap")),
+            "--plot".into(),
+            os(&dir.join(".").join("o.mcap")),
+        ])
+        .iter()
+        .map(|a| a.as_os_str())
+        .collect::<Vec<_>>(),
+    );
+    assert!(!ok && err.contains("are the same file"), "{err}");
+    assert!(!dir.join("o.mcap").exists());
+    // identify's plot over its recording or its configuration.
+    let id_rec = dir.join("identify.mcap");
+    std::fs::copy(
+        fixtures().join("../identify/identify_manipulator_1.mcap"),
+        &id_rec,
+    )
+    .unwrap();
+    let id_bytes = std::fs::read(&id_rec).unwrap();
+    let identify = |plot: &Path| -> Vec<std::ffi::OsString> {
+        vec![
+            "--config".into(),
+            os(&config),
+            "identify".into(),
+            "--dry-run".into(),
+            "--input".into(),
+            os(&id_rec),
+            "--plot".into(),
+            os(plot),
+        ]
+    };
+    refused(&identify(&id_rec), &id_rec, &id_bytes);
+    refused(&identify(&config), &config, &config_bytes);
+    // An older output (not an input) is replaced whole, through a
+    // temporary file renamed over it: none is left beside it.
+    let older = dir.join("older.mcap");
+    std::fs::write(&older, b"an older output").unwrap();
+    let (ok, _, err) = run_sarctl(
+        &replay(&["--output".into(), os(&older)])
+            .iter()
+            .map(|a| a.as_os_str())
+            .collect::<Vec<_>>(),
+    );
+    assert!(ok, "{err}");
+    assert_eq!(&std::fs::read(&older).unwrap()[..8], b"\x89MCAP0\r\n");
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    assert_eq!(std::fs::read(&rec).unwrap(), bytes);
+    assert_eq!(std::fs::read(&cut).unwrap(), cut_bytes);
+}
+
+/// Issue 35, finding 10: `replay --output` writes what its input expands
+/// to (a crafted lean file expanded 1,500 times, 242 KB to 379 MB) with no
+/// look at the disk. Now the output's file system must have the inputs'
+/// length free beyond a reserve (a twentieth of it, at most 256 MiB)
+/// before anything is written, and the free space is checked while
+/// writing: an output that would eat into the reserve stops with a clear
+/// message, and nothing is left in its place (an older file there is kept
+/// as it was, the temporary file removed). Shown on a small tmpfs with an
+/// input whose replay (2.4 MB) is larger than the file system (2.35 MB).
+#[test]
+fn a_replay_stops_before_its_output_fills_the_disk_and_leaves_nothing_in_its_place() {
+    let dir = support::scratch("replay_cli_expansion");
+    let small = dir.join("small");
+    let fs = Tmpfs::mount(&small, "size=2300k");
+    let out = small.join("out.mcap");
+    std::fs::write(&out, b"an older output").unwrap();
+    let input = fixtures().join("contact_inputs.mcap");
+    let config = fixtures().join("config.toml");
+    let replay = |out: &Path| {
+        run_sarctl(&[
+            "replay".as_ref(),
+            "--config".as_ref(),
+            config.as_os_str(),
+            "--input".as_ref(),
+            input.as_os_str(),
+            "--output".as_ref(),
+            out.as_os_str(),
+        ])
+    };
+    let (ok, _, err) = replay(&out);
+    println!("{err}");
+    assert!(!ok);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("stopped while writing") && err.contains("must stay free"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), b"an older output");
+    let files: Vec<_> = std::fs::read_dir(&small)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(files, ["out.mcap"], "nothing beside the older output");
+    assert!(fs.used() < 64 * 1024, "{} bytes used", fs.used());
+    // Less free than the input's length and the reserve: refused before
+    // anything is written.
+    fs.remount("size=1200k");
+    let (ok, _, err) = replay(&small.join("other.mcap"));
+    assert!(!ok);
+    assert!(err.contains("refused before writing"), "{err}");
+    assert!(!small.join("other.mcap").exists());
 }

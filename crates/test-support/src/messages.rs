@@ -78,6 +78,9 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             publisher_idle_ns: mix(k + 23) % 1_000_000_000,
             back_out_m: v3(k + 24)[0],
             move_max_force_n: v3(k + 25)[0],
+            sensor_drained_counted: !k.is_multiple_of(13),
+            sensor_drained_samples: (k % 17) as u16,
+            sensor_drained_jumps: (k % 3) as u16,
         }),
         Outgoing::SensorWrench(WrenchStamped::sensor(t - 90_000, v3(k), v3(k + 1))),
         Outgoing::Joints(ActiveJointState {

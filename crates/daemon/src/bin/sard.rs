@@ -393,7 +393,7 @@ fn scenario(args: &Args, cfg: &config::Config) -> Result<config::scenario::Scena
         .spec
         .axes
         .drive_max_speed_mps
-        .get_or_insert(devices::drive_max_speed_mps(cfg, 0.0));
+        .get_or_insert(config::devices::drive_max_speed_mps(cfg, 0.0));
     Ok(scenario)
 }
 

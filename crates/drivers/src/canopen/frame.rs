@@ -71,6 +71,17 @@ pub mod od {
     pub const STATUSWORD: u16 = 0x6041;
     /// Quick stop option code (i16; 6 = quick stop ramp, stay in quick stop active).
     pub const QUICK_STOP_OPTION: u16 = 0x605A;
+    /// Shutdown option code (i16; 1 = slow down on the slow down ramp, then
+    /// disable; 0 = disable at once, the motor free to coast).
+    pub const SHUTDOWN_OPTION: u16 = 0x605B;
+    /// Disable operation option code (i16; 1 = slow down on the slow down
+    /// ramp, then disable; 0 = disable at once, the motor free to coast).
+    pub const DISABLE_OPERATION_OPTION: u16 = 0x605C;
+    /// Fault reaction option code (i16; 0 = disable at once, the motor free
+    /// to coast; 1 = the slow down ramp; 2 = the quick stop ramp).
+    pub const FAULT_REACTION_OPTION: u16 = 0x605E;
+    /// Profile deceleration (u32, counts/s^2): the slow down ramp.
+    pub const PROFILE_DECELERATION: u16 = 0x6084;
     /// Modes of operation (i8; 8 = cyclic synchronous position).
     pub const MODES_OF_OPERATION: u16 = 0x6060;
     /// Modes of operation display (i8).
@@ -99,6 +110,10 @@ pub mod od {
             PRODUCER_HEARTBEAT => "producer heartbeat time",
             ABORT_CONNECTION => "abort connection option code",
             QUICK_STOP_OPTION => "quick stop option code",
+            SHUTDOWN_OPTION => "shutdown option code",
+            DISABLE_OPERATION_OPTION => "disable operation option code",
+            FAULT_REACTION_OPTION => "fault reaction option code",
+            PROFILE_DECELERATION => "profile deceleration",
             MODES_OF_OPERATION => "modes of operation",
             FOLLOWING_ERROR_WINDOW => "following error window",
             FOLLOWING_ERROR_TIMEOUT => "following error time out",
@@ -129,6 +144,14 @@ pub const MODE_CSP: i8 = 8;
 pub const ABORT_QUICK_STOP: i16 = 3;
 /// Quick stop option: quick stop ramp, then stay in Quick stop active (0x605A).
 pub const QUICK_STOP_RAMP_AND_HOLD: i16 = 6;
+/// Shutdown option (0x605B) and disable operation option (0x605C): slow
+/// down on the slow down ramp (0x6084), then disable the drive function
+/// (0: disable at once, the motor coasting).
+pub const DISABLE_AFTER_RAMP: i16 = 1;
+/// Fault reaction option (0x605E): slow down on the quick stop ramp
+/// (0x6085), as the quick stop and the host's loss do (0: the motor free to
+/// coast, the default of many drives).
+pub const FAULT_REACTION_QUICK_STOP_RAMP: i16 = 2;
 /// EMCY code of a heartbeat (life guard) event.
 pub const EMCY_HEARTBEAT: u16 = crate::drives::FAULT_HEARTBEAT_LOST;
 /// EMCY code of a following error.

@@ -4,8 +4,11 @@
 //! Start-up ([`CanOpenDrives::start`]): per drive an NMT reset node and its
 //! boot-up, then over expedited SDO: TPDO1 = status word + position actual,
 //! RPDO1 = control word + target position, both synchronous (every SYNC);
-//! mode 8 (CSP) written in 0x6060 and checked in 0x6061; 0x6007 = 3 (quick
-//! stop on loss of the host) with 0x605A = 6 (quick stop ramp, then hold);
+//! mode 8 (CSP) written in 0x6060 and checked in 0x6061; how the drive
+//! stops ([`CanOpenConfig::safe_stop_objects`]: 0x6007 = 3, a quick stop on
+//! loss of the host; 0x605A = 6, the quick stop ramp, then hold; 0x605B =
+//! 0x605C = 1, the host's disable ramps at 0x6084; 0x605E = 2, the fault
+//! reaction ramps at 0x6085, never coasts);
 //! the drive's heartbeat producer; the host as its heartbeat consumer; the
 //! drive's own limits ([`CanOpenConfig::drive_limit_objects`]: quick stop
 //! deceleration 0x6085, software position limits 0x607D, max profile
@@ -40,10 +43,9 @@
 //! `CanOpenError::Bus`; a bus that stays off loses the heartbeats, a Fault.
 
 use super::frame::{
-    ABORT_QUICK_STOP, COB_EMCY, COB_HEARTBEAT, COB_NMT, COB_RPDO1, COB_SDO_RX, COB_SDO_TX,
-    COB_SYNC, COB_TPDO1, Cia402State, Emcy, FAULT_GENERIC, FAULT_LOST, MODE_CSP,
-    QUICK_STOP_RAMP_AND_HOLD, RawFrame, STATUS_REFERENCED, Sdo, control, encode_rpdo, heartbeat,
-    mapping, nmt, od,
+    COB_EMCY, COB_HEARTBEAT, COB_NMT, COB_RPDO1, COB_SDO_RX, COB_SDO_TX, COB_SYNC, COB_TPDO1,
+    Cia402State, Emcy, FAULT_GENERIC, FAULT_LOST, MODE_CSP, RawFrame, STATUS_REFERENCED, Sdo,
+    control, encode_rpdo, heartbeat, mapping, nmt, od,
 };
 use super::{CanOpenConfig, CanOpenError};
 use crate::clock::Clock;
@@ -448,22 +450,12 @@ impl<C: Can, K: Clock> CanOpenDrives<C, K> {
         if mode != MODE_CSP {
             return Err(CanOpenError::WrongMode { node, mode });
         }
-        // Watchdog: quick stop (and hold) when the host's heartbeat is lost;
-        // each value read back.
-        self.write_checked(
-            node,
-            od::QUICK_STOP_OPTION,
-            0,
-            u32::from(QUICK_STOP_RAMP_AND_HOLD as u16),
-            2,
-        )?;
-        self.write_checked(
-            node,
-            od::ABORT_CONNECTION,
-            0,
-            u32::from(ABORT_QUICK_STOP as u16),
-            2,
-        )?;
+        // How the drive stops (a ramp, never coasting: the quick stop, the
+        // host's disable, its own fault reaction, and a quick stop when the
+        // host's heartbeat is lost), each read back.
+        for (index, sub, value, size) in self.config.safe_stop_objects() {
+            self.write_checked(node, index, sub, value, size)?;
+        }
         self.write(
             node,
             od::PRODUCER_HEARTBEAT,

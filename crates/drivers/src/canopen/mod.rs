@@ -27,7 +27,9 @@ pub mod socketcan;
 
 pub use bus::{MemBus, MemBusError, MemCan};
 pub use host::{CanOpenDrives, CycleReport};
-pub use slave::{FOLLOWING_WINDOW_M, SimCia402Drive, SimDriveFault, SimDriveSpec, serve};
+pub use slave::{
+    FOLLOWING_WINDOW_M, SimCia402Drive, SimDriveFault, SimDriveSpec, StopOptions, serve,
+};
 
 use crate::{Error, ErrorKind};
 
@@ -90,9 +92,14 @@ pub struct CanOpenConfig {
     pub max_torque_permille: u16,
 }
 
-/// The error naming a bad setting and its value.
-fn invalid(field: &'static str, value: String) -> Result<(), CanOpenError> {
-    Err(CanOpenError::InvalidConfig { field, value })
+/// A number as an operator reads it (six significant digits).
+fn shown(v: f64) -> String {
+    sar_kinematics::Shown(v).to_string()
+}
+
+/// The error naming a bad setting, its value and what it must be.
+fn invalid(field: &'static str, value: String, why: &'static str) -> Result<(), CanOpenError> {
+    Err(CanOpenError::InvalidConfig { field, value, why })
 }
 
 impl CanOpenConfig {
@@ -129,7 +136,10 @@ impl CanOpenConfig {
         }
     }
 
-    /// Checks the values; the first bad one is named.
+    /// Checks the values; the first bad one is named, with what it must be.
+    /// What the drivers' start runs (`CanOpenDrives::start`), and what
+    /// `sar_config` runs on every configuration that names CANopen drives
+    /// (so `sard --check-config` refuses what the start would).
     pub fn validate(&self) -> Result<(), CanOpenError> {
         self.check_nodes()?;
         self.check_scale()?;
@@ -147,10 +157,18 @@ impl CanOpenConfig {
             || ids[1] == ids[2]
             || ids[0] == ids[2]
         {
-            return invalid("node_ids", format!("{ids:?}"));
+            return invalid(
+                "node_ids",
+                format!("{ids:?}"),
+                "three distinct node ids, 1 to 127",
+            );
         }
         if self.host_node_id == 0 || self.host_node_id > 127 || ids.contains(&self.host_node_id) {
-            return invalid("host_node_id", self.host_node_id.to_string());
+            return invalid(
+                "host_node_id",
+                self.host_node_id.to_string(),
+                "1 to 127, none of the drives'",
+            );
         }
         Ok(())
     }
@@ -158,10 +176,10 @@ impl CanOpenConfig {
     /// A positive lead and counts per turn.
     fn check_scale(&self) -> Result<(), CanOpenError> {
         if !(self.lead_m.is_finite() && self.lead_m > 0.0) {
-            return invalid("lead_m", self.lead_m.to_string());
+            return invalid("lead_m", self.lead_m.to_string(), "a finite lead > 0 m");
         }
         if self.counts_per_turn == 0 {
-            return invalid("counts_per_turn", "0".into());
+            return invalid("counts_per_turn", "0".into(), "at least 1");
         }
         Ok(())
     }
@@ -170,15 +188,27 @@ impl CanOpenConfig {
     /// at least once in that wait.
     fn check_timing(&self) -> Result<(), CanOpenError> {
         if !(100_000..=1_000_000_000).contains(&self.sync_period_ns) {
-            return invalid("sync_period_ns", self.sync_period_ns.to_string());
+            return invalid(
+                "sync_period_ns",
+                self.sync_period_ns.to_string(),
+                "0.1 ms to 1 s (the loop's period)",
+            );
         }
         // The TPDOs of a SYNC are awaited within its period, or positions of
         // two SYNCs could mix; the bus is polled at least once in that wait.
         if !(1..self.sync_period_ns).contains(&self.pdo_wait_ns) {
-            return invalid("pdo_wait_ns", self.pdo_wait_ns.to_string());
+            return invalid(
+                "pdo_wait_ns",
+                self.pdo_wait_ns.to_string(),
+                "within the SYNC period",
+            );
         }
         if !(1..=self.pdo_wait_ns).contains(&self.poll_interval_ns) {
-            return invalid("poll_interval_ns", self.poll_interval_ns.to_string());
+            return invalid(
+                "poll_interval_ns",
+                self.poll_interval_ns.to_string(),
+                "within the PDOs' wait",
+            );
         }
         Ok(())
     }
@@ -187,10 +217,14 @@ impl CanOpenConfig {
     /// empty, and within the drives' i32 counts.
     fn check_motion(&self) -> Result<(), CanOpenError> {
         if !(self.max_speed_mps.is_finite() && self.max_speed_mps > 0.0) {
-            return invalid("max_speed_mps", self.max_speed_mps.to_string());
+            return invalid("max_speed_mps", self.max_speed_mps.to_string(), "> 0 m/s");
         }
         if !(self.max_accel_mps2.is_finite() && self.max_accel_mps2 > 0.0) {
-            return invalid("max_accel_mps2", self.max_accel_mps2.to_string());
+            return invalid(
+                "max_accel_mps2",
+                self.max_accel_mps2.to_string(),
+                "> 0 m/s^2",
+            );
         }
         for (lo, hi) in self.travel_m {
             // Every target in travel must fit the drives' i32 counts (a cast
@@ -198,7 +232,16 @@ impl CanOpenConfig {
             let widest_counts = lo.abs().max(hi.abs()) / self.m_per_count();
             if !(lo.is_finite() && hi.is_finite() && lo < hi) || widest_counts > f64::from(i32::MAX)
             {
-                return invalid("travel_m", format!("{:?}", self.travel_m));
+                return invalid(
+                    "travel_m",
+                    format!(
+                        "{:?} m ({} counts of {} m)",
+                        self.travel_m,
+                        shown(widest_counts),
+                        shown(self.m_per_count())
+                    ),
+                    "each bound within the drives' 32-bit position (2^31 - 1 counts), min < max",
+                );
             }
         }
         Ok(())
@@ -210,6 +253,7 @@ impl CanOpenConfig {
             return invalid(
                 "host_heartbeat_timeout_ms",
                 self.host_heartbeat_timeout_ms.to_string(),
+                "above the host's heartbeat period",
             );
         }
         if self.drive_heartbeat_ms == 0
@@ -218,6 +262,7 @@ impl CanOpenConfig {
             return invalid(
                 "drive_heartbeat_timeout_ms",
                 self.drive_heartbeat_timeout_ms.to_string(),
+                "above the drives' heartbeat period",
             );
         }
         Ok(())
@@ -228,13 +273,22 @@ impl CanOpenConfig {
     /// count, all within the drive's u32 units; the torque 1 to 10000 per mille.
     fn check_drive_limits(&self) -> Result<(), CanOpenError> {
         let per_s = |v: f64| v / self.m_per_count();
+        let with_counts = |v: f64, unit: &str| {
+            format!(
+                "{} {unit} ({} counts{})",
+                shown(v),
+                shown(per_s(v)),
+                unit.trim_start_matches('m')
+            )
+        };
         if !(self.quick_stop_decel_mps2.is_finite()
             && self.quick_stop_decel_mps2 >= self.max_accel_mps2
             && per_s(self.quick_stop_decel_mps2) <= f64::from(u32::MAX))
         {
             return invalid(
                 "quick_stop_decel_mps2",
-                self.quick_stop_decel_mps2.to_string(),
+                with_counts(self.quick_stop_decel_mps2, "m/s^2"),
+                "at least the planned acceleration, and at most 2^32 - 1 counts/s^2 (0x6085 is 32 bits)",
             );
         }
         // The host's plans, rounded to whole counts, move at most
@@ -244,17 +298,29 @@ impl CanOpenConfig {
             && self.drive_max_speed_mps >= self.max_speed_mps + rounding_mps
             && per_s(self.drive_max_speed_mps) <= f64::from(u32::MAX))
         {
-            return invalid("drive_max_speed_mps", self.drive_max_speed_mps.to_string());
+            return invalid(
+                "drive_max_speed_mps",
+                with_counts(self.drive_max_speed_mps, "m/s"),
+                "above the planned speed by two counts a SYNC, and at most 2^32 - 1 counts/s (0x607F is 32 bits)",
+            );
         }
         if !(self.following_window_m.is_finite()
             && self.following_window_m >= self.m_per_count()
             // 0xFFFF_FFFF switches a CiA 402 drive's following check off.
             && per_s(self.following_window_m) < f64::from(u32::MAX))
         {
-            return invalid("following_window_m", self.following_window_m.to_string());
+            return invalid(
+                "following_window_m",
+                with_counts(self.following_window_m, "m"),
+                "at least one count, and below 2^32 - 1 counts (that value switches the drive's check off)",
+            );
         }
         if !(1..=10_000).contains(&self.max_torque_permille) {
-            return invalid("max_torque_permille", self.max_torque_permille.to_string());
+            return invalid(
+                "max_torque_permille",
+                self.max_torque_permille.to_string(),
+                "1 to 10000 per mille of the rated torque",
+            );
         }
         Ok(())
     }
@@ -306,6 +372,55 @@ impl CanOpenConfig {
         ]
     }
 
+    /// How each drive stops, written at start-up and read back beside its
+    /// limits, `(index, sub, value, bytes)`: a control outside the software
+    /// (SAFETY.md), each a ramp, never the motor left to coast:
+    /// - 0x605A quick stop option = 6: the quick stop ramp (0x6085), then
+    ///   stay in Quick stop active;
+    /// - 0x605B shutdown option = 1 and 0x605C disable operation option =
+    ///   1: slow down on the slow down ramp (0x6084), then disable (the
+    ///   host's disable is a shutdown);
+    /// - 0x605E fault reaction option = 2: the quick stop ramp (0: coast,
+    ///   many drives' default);
+    /// - 0x6007 abort connection option = 3: a quick stop when the host's
+    ///   heartbeat is lost (the drives' consumer of it, 0x1016);
+    /// - 0x6084 profile deceleration: the slow down ramp, the quick stop's
+    ///   deceleration (counts/s^2, to the nearest).
+    pub fn safe_stop_objects(&self) -> [(u16, u8, u32, u8); 6] {
+        use frame::od;
+        let count = self.m_per_count();
+        let code = |v: i16| u32::from(v as u16);
+        [
+            (
+                od::QUICK_STOP_OPTION,
+                0,
+                code(frame::QUICK_STOP_RAMP_AND_HOLD),
+                2,
+            ),
+            (od::SHUTDOWN_OPTION, 0, code(frame::DISABLE_AFTER_RAMP), 2),
+            (
+                od::DISABLE_OPERATION_OPTION,
+                0,
+                code(frame::DISABLE_AFTER_RAMP),
+                2,
+            ),
+            (
+                od::FAULT_REACTION_OPTION,
+                0,
+                code(frame::FAULT_REACTION_QUICK_STOP_RAMP),
+                2,
+            ),
+            (od::ABORT_CONNECTION, 0, code(frame::ABORT_QUICK_STOP), 2),
+            (
+                od::PROFILE_DECELERATION,
+                0,
+                // Saturating; `validate` keeps it within u32.
+                (self.quick_stop_decel_mps2 / count).round().max(0.0) as u32,
+                4,
+            ),
+        ]
+    }
+
     /// Metres per encoder count.
     pub fn m_per_count(&self) -> f64 {
         self.lead_m / f64::from(self.counts_per_turn)
@@ -317,12 +432,14 @@ impl CanOpenConfig {
 #[non_exhaustive]
 pub enum CanOpenError {
     /// A configuration value is wrong.
-    #[error("CANopen configuration: {field} = {value} is not valid")]
+    #[error("CANopen configuration: {field} = {value}: must be {why}")]
     InvalidConfig {
         /// The field.
         field: &'static str,
         /// Its value.
         value: String,
+        /// What it must be.
+        why: &'static str,
     },
     /// No SDO response within the bound.
     #[error("node {node}: no SDO response for {index:#06x}:{sub} within {timeout_ns} ns")]

@@ -27,19 +27,33 @@
 //!   point that jumps farther than the window from the previous one is one
 //!   at once;
 //! - quick stop deceleration (0x6085, counts/s^2; default the spec's
-//!   acceleration limit): the ramp of every quick stop (the control word's,
-//!   the watchdog's) and of the fault reaction (0x605E = 2, slow down on the
-//!   quick stop ramp);
+//!   acceleration limit): the quick stop ramp;
+//! - profile deceleration (0x6084, counts/s^2; default the spec's
+//!   acceleration limit): the slow down ramp;
 //! - max torque (0x6072, per mille of the rated torque; default 1000):
 //!   stored and read back only (this model has no load, so no torque).
 //!
-//! Halt and disable brake at the acceleration limit (the planner's `brake`)
-//! and hold.
+//! How it stops, as CiA 402's option codes say (stored as the limits are),
+//! each honoured:
+//! - quick stop (0x605A; default 2): 0 the motor free (it coasts on at its
+//!   speed: this model has no friction), 1 and 5 the slow down ramp, 2 and
+//!   6 the quick stop ramp, 3, 4, 7, 8 (current or voltage limit) braking
+//!   at the acceleration limit; 0 to 4 then Switch on disabled, 5 to 8 stay
+//!   in Quick stop active;
+//! - shutdown (0x605B, Operation enabled to Ready to switch on) and
+//!   disable operation (0x605C, to Switched on): 0 the motor free
+//!   (coasting), 1 the slow down ramp; default 0, as a drive that coasts;
+//! - fault reaction (0x605E): 0 the motor free (coasting; the default, as
+//!   many drives'), 1 the slow down ramp, 2 the quick stop ramp, 3 and 4
+//!   braking at the acceleration limit;
+//! - abort connection (0x6007; default 1): with the host's heartbeat
+//!   configured in 0x1016, a heartbeat older than the consumer time sends
+//!   EMCY 0x8130 and acts: 1 a fault (its reaction as 0x605E says), 2 a
+//!   disable voltage, 3 a quick stop (as 0x605A says), 0 nothing.
 //!
-//! Watchdog: with the host's heartbeat configured in 0x1016, a heartbeat older
-//! than the consumer time sends EMCY 0x8130 and acts as 0x6007 says (1 fault,
-//! 2 disable voltage, 3 quick stop, 0 nothing). Quick stop option (0x605A) 6:
-//! quick stop ramp, then stay in Quick stop active.
+//! Halt and disable voltage brake at the acceleration limit (the planner's
+//! `brake`) and hold (a real drive's disable voltage leaves the motor free;
+//! this model keeps the brake the host never relies on).
 //!
 //! The encoder is absolute and multiturn; the drive reports it referenced in
 //! status word bit 15 ([`STATUS_REFERENCED`]), cleared by
@@ -181,6 +195,34 @@ impl PdoParams {
     }
 }
 
+/// The option codes of how a drive stops (CiA 402), as a drive stores them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StopOptions {
+    /// 0x605A.
+    pub quick_stop: i16,
+    /// 0x605B.
+    pub shutdown: i16,
+    /// 0x605C.
+    pub disable_operation: i16,
+    /// 0x605E.
+    pub fault_reaction: i16,
+    /// 0x6007.
+    pub abort_connection: i16,
+}
+
+/// How the axis is brought to rest by an option code's reaction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ramp {
+    /// The motor free: the axis coasts on.
+    Coast,
+    /// The slow down ramp (0x6084).
+    SlowDown,
+    /// The quick stop ramp (0x6085).
+    QuickStop,
+    /// At the current or voltage limit: the acceleration limit here.
+    Limit,
+}
+
 /// One simulated CiA 402 drive (see the module doc).
 #[derive(Debug, Clone)]
 pub struct SimCia402Drive {
@@ -193,6 +235,12 @@ pub struct SimCia402Drive {
     mode: i8,
     abort_option: i16,
     quick_stop_option: i16,
+    /// 0x605B.
+    shutdown_option: i16,
+    /// 0x605C.
+    disable_option: i16,
+    /// 0x605E.
+    fault_reaction: i16,
     consumer: u32,
     producer_ms: u16,
     controlword: u16,
@@ -236,6 +284,7 @@ pub struct SimCia402Drive {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct OwnLimits {
     quick_stop_decel: u32,
+    profile_decel: u32,
     position_min: i32,
     position_max: i32,
     max_velocity: u32,
@@ -251,6 +300,7 @@ impl OwnLimits {
         // Saturating float-to-int conversions.
         Self {
             quick_stop_decel: ((spec.max_accel_mps2 / count).round() as u32).max(1),
+            profile_decel: ((spec.max_accel_mps2 / count).round() as u32).max(1),
             position_min: i32::MIN,
             position_max: i32::MAX,
             max_velocity: u32::MAX,
@@ -278,6 +328,9 @@ impl SimCia402Drive {
             mode: 0,
             abort_option: 1,
             quick_stop_option: 2,
+            shutdown_option: 0,
+            disable_option: 0,
+            fault_reaction: 0,
             consumer: 0,
             producer_ms: 0,
             controlword: 0,
@@ -317,6 +370,23 @@ impl SimCia402Drive {
     /// The quick stop deceleration in force (0x6085), m/s^2.
     pub fn quick_stop_decel_mps2(&self) -> f64 {
         f64::from(self.own.quick_stop_decel) * self.m_per_count()
+    }
+
+    /// The slow down ramp in force (0x6084), m/s^2.
+    pub fn profile_decel_mps2(&self) -> f64 {
+        f64::from(self.own.profile_decel) * self.m_per_count()
+    }
+
+    /// How it stops, as stored: the option codes (0x605A, 0x605B, 0x605C,
+    /// 0x605E, 0x6007).
+    pub fn stop_options(&self) -> StopOptions {
+        StopOptions {
+            quick_stop: self.quick_stop_option,
+            shutdown: self.shutdown_option,
+            disable_operation: self.disable_option,
+            fault_reaction: self.fault_reaction,
+            abort_connection: self.abort_option,
+        }
     }
 
     /// The software position limits in force (0x607D), m.
@@ -489,16 +559,51 @@ impl SimCia402Drive {
         self.stop_following();
     }
 
-    /// Quick stop and fault reaction: braked at the quick stop deceleration
-    /// (0x6085).
-    fn brake_quick(&mut self, now_ns: u64) {
+    /// Brings the axis to rest by `ramp` from `now_ns` (coasting: it runs
+    /// on at its speed).
+    fn stop_by(&mut self, ramp: Ramp, now_ns: u64) {
+        let decel_mps2 = match ramp {
+            Ramp::Coast => {
+                let s = self.axis_state(now_ns);
+                self.motion = Motion::Follow {
+                    x_m: s.x_m,
+                    v_mps: s.v_mps,
+                    at_ns: now_ns,
+                };
+                self.stop_following();
+                return;
+            }
+            Ramp::SlowDown => self.profile_decel_mps2(),
+            Ramp::QuickStop => self.quick_stop_decel_mps2(),
+            Ramp::Limit => self.limits.max_accel_mps2,
+        };
         let s = self.axis_state(now_ns);
         let limits = Limits {
             max_speed_mps: self.limits.max_speed_mps,
-            max_accel_mps2: self.quick_stop_decel_mps2(),
+            max_accel_mps2: decel_mps2,
         };
         self.motion = Motion::Plan(AxisPlan::brake(now_ns, s, limits));
         self.stop_following();
+    }
+
+    /// The ramp of the fault reaction (0x605E).
+    fn fault_ramp(&self) -> Ramp {
+        match self.fault_reaction {
+            1 => Ramp::SlowDown,
+            2 => Ramp::QuickStop,
+            3 | 4 => Ramp::Limit,
+            _ => Ramp::Coast,
+        }
+    }
+
+    /// The ramp of a shutdown (0x605B) or disable operation (0x605C) with
+    /// this option code.
+    fn disable_ramp(option: i16) -> Ramp {
+        if option == 1 {
+            Ramp::SlowDown
+        } else {
+            Ramp::Coast
+        }
     }
 
     fn stop_following(&mut self) {
@@ -522,7 +627,7 @@ impl SimCia402Drive {
     }
 
     fn enter_fault(&mut self, code: u16, now_ns: u64, out: &mut Vec<RawFrame>) {
-        self.brake_quick(now_ns);
+        self.stop_by(self.fault_ramp(), now_ns);
         self.state = Cia402State::Fault;
         self.fault_code = code;
         self.emcy(code, 0x01, out);
@@ -614,7 +719,7 @@ impl SimCia402Drive {
         self.emcy(EMCY_HEARTBEAT, 0x11, out);
         match self.abort_option {
             1 if self.state != Cia402State::Fault => {
-                self.brake_quick(now_ns);
+                self.stop_by(self.fault_ramp(), now_ns);
                 self.state = Cia402State::Fault;
                 self.fault_code = EMCY_HEARTBEAT;
             }
@@ -623,15 +728,20 @@ impl SimCia402Drive {
         }
     }
 
+    /// A quick stop (as 0x605A says) or a disable voltage (braked at the
+    /// acceleration limit).
     fn quick_stop_or_disable(&mut self, disable: bool, now_ns: u64) {
         use Cia402State::*;
         match self.state {
             OperationEnabled => {
-                if disable {
-                    self.brake(now_ns);
-                } else {
-                    self.brake_quick(now_ns);
-                }
+                let ramp = match (disable, self.quick_stop_option) {
+                    (true, _) => Ramp::Limit,
+                    (false, 1 | 5) => Ramp::SlowDown,
+                    (false, 2 | 6) => Ramp::QuickStop,
+                    (false, 3 | 4 | 7 | 8) => Ramp::Limit,
+                    (false, _) => Ramp::Coast,
+                };
+                self.stop_by(ramp, now_ns);
                 self.state = if disable || !(5..=8).contains(&self.quick_stop_option) {
                     SwitchOnDisabled
                 } else {
@@ -655,6 +765,9 @@ impl SimCia402Drive {
                 self.mode = 0;
                 self.abort_option = 1;
                 self.quick_stop_option = 2;
+                self.shutdown_option = 0;
+                self.disable_option = 0;
+                self.fault_reaction = 0;
                 self.controlword = 0;
                 self.own = OwnLimits::defaults(&self.spec);
                 if !self.fault_persists {
@@ -828,7 +941,12 @@ impl SimCia402Drive {
         };
         let was_enabled = self.state == OperationEnabled;
         if was_enabled && next != OperationEnabled {
-            self.brake(now_ns);
+            match next {
+                // Shutdown and disable operation, as their option codes say.
+                ReadyToSwitchOn => self.stop_by(Self::disable_ramp(self.shutdown_option), now_ns),
+                SwitchedOn => self.stop_by(Self::disable_ramp(self.disable_option), now_ns),
+                _ => self.brake(now_ns),
+            }
         }
         let enabling = !was_enabled && next == OperationEnabled;
         if enabling {
@@ -940,6 +1058,10 @@ impl SimCia402Drive {
             (od::CONTROLWORD, 0) => (u32::from(self.controlword), 2),
             (od::STATUSWORD, 0) => (u32::from(self.statusword()), 2),
             (od::QUICK_STOP_OPTION, 0) => (u32::from(self.quick_stop_option as u16), 2),
+            (od::SHUTDOWN_OPTION, 0) => (u32::from(self.shutdown_option as u16), 2),
+            (od::DISABLE_OPERATION_OPTION, 0) => (u32::from(self.disable_option as u16), 2),
+            (od::FAULT_REACTION_OPTION, 0) => (u32::from(self.fault_reaction as u16), 2),
+            (od::PROFILE_DECELERATION, 0) => (self.own.profile_decel, 4),
             (od::MODES_OF_OPERATION | od::MODES_OF_OPERATION_DISPLAY, 0) => {
                 (u32::from(self.mode as u8), 1)
             }
@@ -1001,6 +1123,15 @@ impl SimCia402Drive {
             (od::RPDO1_MAP | od::TPDO1_MAP, _) => self.write_pdo_map(index, sub, value, pre_op)?,
             (od::ABORT_CONNECTION, 0) => self.abort_option = value as u16 as i16,
             (od::QUICK_STOP_OPTION, 0) => self.quick_stop_option = value as u16 as i16,
+            (od::SHUTDOWN_OPTION, 0) => self.shutdown_option = value as u16 as i16,
+            (od::DISABLE_OPERATION_OPTION, 0) => self.disable_option = value as u16 as i16,
+            (od::FAULT_REACTION_OPTION, 0) => self.fault_reaction = value as u16 as i16,
+            (od::PROFILE_DECELERATION, 0) => {
+                if value == 0 {
+                    return Err(SDO_ABORT_RANGE);
+                }
+                self.own.profile_decel = value;
+            }
             (od::CONTROLWORD, 0) => self.controlword_pending = Some(value as u16),
             (od::MODES_OF_OPERATION, 0) => {
                 let mode = value as u8 as i8;

@@ -516,6 +516,7 @@ fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
                 status: s.status.0,
                 stamp_ns: s.received_ns,
                 valid: s.is_valid(),
+                drained: sar_estimator::cycle::DrainedSamples::default(),
             },
             joints: JointSample {
                 joints: truth.joints,

@@ -82,7 +82,8 @@ fn get_seq<T: SeqElem>(r: &mut CdrReader<'_>) -> Result<Vec<T>, CdrError> {
 
 /// Defines the batch message from one list of its fields in wire order
 /// (after the header, whose frame id is empty): scalars (`float64`), then
-/// arrays (`Vec<T>`, `T[]`).
+/// arrays (`Vec<T>`, `T[]`), then arrays added later (a message that ends
+/// before one reads it empty).
 macro_rules! batch_message {
     (
         $(#[$m:meta])*
@@ -90,6 +91,7 @@ macro_rules! batch_message {
         $(#[$sm:meta])* $stamp:ident;
         scalars { $( $(#[$fm:meta])* $field:ident: f64, )* }
         arrays { $( $(#[$am:meta])* $array:ident: Vec<$elem:ty>, )* }
+        later { $( $(#[$lm:meta])* $later:ident: Vec<$lelem:ty>, )* }
     ) => {
         $(#[$m])*
         pub struct $name {
@@ -97,6 +99,7 @@ macro_rules! batch_message {
             pub $stamp: u64,
             $( $(#[$fm])* pub $field: f64, )*
             $( $(#[$am])* pub $array: Vec<$elem>, )*
+            $( $(#[$lm])* pub $later: Vec<$lelem>, )*
         }
 
         impl $name {
@@ -110,6 +113,11 @@ macro_rules! batch_message {
                     array_len: None,
                     name: stringify!($array),
                 }, )*
+                $( MsgField {
+                    ros_type: <$lelem as SeqElem>::ROS_SEQ,
+                    array_len: None,
+                    name: stringify!($later),
+                }, )*
             ];
         }
 
@@ -121,6 +129,7 @@ macro_rules! batch_message {
                 w.string("");
                 $( w.f64(self.$field); )*
                 $( put_seq(w, &self.$array)?; )*
+                $( put_seq(w, &self.$later)?; )*
                 Ok(())
             }
             fn decode_fields(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
@@ -128,7 +137,9 @@ macro_rules! batch_message {
                 let _frame_id = r.str()?;
                 $( let $field = r.f64()?; )*
                 $( let $array = get_seq(r)?; )*
-                Ok(Self { $stamp, $( $field, )* $( $array, )* })
+                // Added later: a message that ends before one reads it empty.
+                $( let $later = if r.remaining() == 0 { Vec::new() } else { get_seq(r)? }; )*
+                Ok(Self { $stamp, $( $field, )* $( $array, )* $( $later, )* })
             }
         }
     };
@@ -198,6 +209,12 @@ batch_message! {
         extra_stamp_ns: Vec<u64>,
         /// Six per extra sensor message.
         extra_wrench: Vec<f64>,
+    }
+    later {
+        /// Issue 35 (empty in older lean files): two per cycle, the samples
+        /// the loop drained plus one (0: not counted) and the jumps among
+        /// them (`CycleInput`'s `sensor_drained_*`).
+        drained_counts: Vec<u16>,
     }
 }
 

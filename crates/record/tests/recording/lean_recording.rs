@@ -490,3 +490,65 @@ fn batches_give_back_every_input_bit_for_bit() {
         format!("{:?}", &got[..cycles.len()])
     );
 }
+
+/// Issue 35, finding 12: a lean batch whose cycle number goes back (a
+/// difference below cycle 0: 1, then 1 - 2 wrapping to 2^64 - 1) is named
+/// as a cycle that goes back; it used to read "cycles 2..=
+/// 18446744073709551614 are missing". A cycle that goes back is a gap (the
+/// state after it is unknown until a snapshot), never stepped.
+#[test]
+fn a_lean_cycle_that_goes_back_is_named_as_such() {
+    use sar_msgs::msgs::{CycleBatch, batch_flags};
+    let dir = sar_test_support::scratch!("lean_cycle_back");
+    let raw = batch_flags::SENSOR_RAW | batch_flags::JOINTS_RAW | batch_flags::SENSOR_VALID;
+    let batch = CycleBatch {
+        stamp_ns: 1_001_000_000,
+        flags: vec![raw | batch_flags::JOINTS_VALID; 2],
+        cycle: vec![1, -2],
+        now_ns: vec![1_001_000_000, 1_000_000],
+        clock_status: vec![0, 0],
+        publisher_idle_ns: vec![0, 0],
+        sensor_counter: vec![1, 1],
+        sensor_status: vec![0, 0],
+        sensor_stamp_ns: vec![1_000_900_000, 1_000_000],
+        sensor_counts: vec![0; 12],
+        sensor_raw: [0.1, 0.2, -20.0, 0.01, 0.02, 0.0].repeat(2),
+        joints_stamp_ns: vec![1_000_950_000, 1_000_000],
+        joint_counts: vec![0; 6],
+        joints_raw: [0.0, 0.28, 0.25].repeat(2),
+        drive_state: vec![0, 0],
+        drive_fault_axis: vec![-1, -1],
+        drive_fault_code: vec![0, 0],
+        ..CycleBatch::default()
+    };
+    let cycles = sar_record::lean::unbatch(&batch).unwrap();
+    assert_eq!(
+        cycles.iter().map(|c| c.input.cycle).collect::<Vec<_>>(),
+        [1, u64::MAX]
+    );
+    let path = dir.join("back.mcap");
+    let mut o = sar_record::FileOptions::single(&path);
+    o.lean = true;
+    let (name, mut metadata) = sar_record::convert::replay_metadata(
+        &sar_estimator::cycle::Bias::force_only(Vec3::zeros()),
+        true,
+    );
+    metadata.insert(
+        sar_record::lean::RECORD_MODE_KEY.to_owned(),
+        "inputs".to_owned(),
+    );
+    o.metadata = vec![(name, metadata)];
+    let mut w = sar_record::RotatingWriter::new(o).unwrap();
+    w.write_batch(&batch, &RecorderDrops::default()).unwrap();
+    w.close(&RecorderDrops::default()).unwrap();
+    let cfg = config::builtin().unwrap();
+    let r = replay_file(&path, &ReplayOptions::from_config(&cfg)).unwrap();
+    assert_eq!(r.cycles, 1, "the cycle that goes back is not stepped");
+    let why = &r.gaps.first().expect("a gap").skipped.why;
+    assert!(
+        why.contains("cycle 18446744073709551615 follows cycle 1")
+            && why.contains("go back by 2 below cycle 0")
+            && !why.contains("missing"),
+        "{why}"
+    );
+}

@@ -156,7 +156,10 @@ fn fields(m: &Outgoing) -> String {
                 .fa("limits_in_use_n", &c.limits_in_use_n)
                 .i("publisher_idle_ns", c.publisher_idle_ns)
                 .f("back_out_m", c.back_out_m)
-                .f("move_max_force_n", c.move_max_force_n);
+                .f("move_max_force_n", c.move_max_force_n)
+                .b("sensor_drained_counted", c.sensor_drained_counted)
+                .i("sensor_drained_samples", c.sensor_drained_samples)
+                .i("sensor_drained_jumps", c.sensor_drained_jumps);
         }
         Outgoing::RecorderDrops(d) => {
             l.header(d.stamp_ns, "")

@@ -22,6 +22,7 @@ use crate::identify::dwell::DwellOptions;
 use crate::identify::dynamic::DynamicOptions;
 use crate::identify::smooth::SmootherSpec;
 use crate::identify::{self, IdentifyOptions, excitation, plot, plot_dynamic, writeback};
+use sar_record::output::{PendingFile, check_outputs};
 use std::path::{Path, PathBuf};
 
 /// The arguments of `sarctl identify` (besides the global `--config` and `--format`).
@@ -120,7 +121,157 @@ pub struct IdentifyArgs {
     pub max_condition: f64,
 }
 
+/// One numeric argument's range: (option, value, least, most, unit, what
+/// it is). The bounds are inclusive; NaN is never in range.
+type Range = (&'static str, f64, f64, f64, &'static str, &'static str);
+
+/// `value` against `[lo, hi]`, or the one-line reason.
+fn in_range((option, value, lo, hi, unit, what): Range) -> Result<(), String> {
+    use sar_kinematics::Shown;
+    if value >= lo && value <= hi {
+        return Ok(());
+    }
+    Err(format!(
+        "{option} {} is out of range: {what} must be {} to {}{unit}",
+        if value.is_nan() {
+            "NaN".to_owned()
+        } else {
+            Shown(value).to_string()
+        },
+        Shown(lo),
+        Shown(hi)
+    ))
+}
+
+/// The ranges of the numeric arguments every run checks, in the order of
+/// [`IdentifyArgs::check_ranges`]'s values: (option, least, most, unit,
+/// what it is).
+const RANGES: [(&str, f64, f64, &str, &str); 9] = [
+    (
+        "--smoother-order",
+        2.0,
+        12.0,
+        "",
+        "the smoothing polynomial's order",
+    ),
+    (
+        "--smoother-span-s",
+        0.01,
+        4.0,
+        " s",
+        "the smoothing window's span",
+    ),
+    ("--sensor-latency-s", 0.0, 0.1, " s", "the sensor's latency"),
+    (
+        "--sensor-rate-hz",
+        1.0,
+        MAX_SENSOR_RATE_HZ,
+        " Hz",
+        "the sensor's sample rate",
+    ),
+    (
+        "--still-tolerance-m",
+        1e-7,
+        0.01,
+        " m",
+        "a dwell's joint range",
+    ),
+    (
+        "--settle-s",
+        0.0,
+        60.0,
+        " s",
+        "the time discarded after each move",
+    ),
+    ("--min-dwell-s", 0.001, 600.0, " s", "the shortest dwell"),
+    (
+        "--max-chi2-dof",
+        1e-3,
+        1e6,
+        "",
+        "the chi-square per degree of freedom accepted",
+    ),
+    (
+        "--max-condition",
+        1.0,
+        1e15,
+        "",
+        "the condition number accepted",
+    ),
+];
+
+/// Largest sensor rate accepted, Hz (ATI's Net F/T streams 7 kHz; the time
+/// the plan's promise takes is linear in it).
+pub const MAX_SENSOR_RATE_HZ: f64 = 10_000.0;
+
+/// Longest hold of a pose of `--live`, s.
+pub const MAX_HOLD_S: f64 = 600.0;
+
 impl IdentifyArgs {
+    /// Every numeric argument against its range, before anything runs
+    /// (nothing read, nothing asked of the daemon): the first out of range
+    /// is the one-line reason. NaN and infinities are out of every range.
+    pub fn check_ranges(&self) -> Result<(), String> {
+        let fixed = [
+            self.smoother_order as f64,
+            self.smoother_span_s,
+            self.sensor_latency_s,
+            self.sensor_rate_hz,
+            self.still_tolerance_m,
+            self.settle_s,
+            self.min_dwell_s,
+            self.max_chi2_dof,
+            self.max_condition,
+        ];
+        for ((option, lo, hi, unit, what), value) in RANGES.into_iter().zip(fixed) {
+            in_range((option, value, lo, hi, unit, what))?;
+        }
+        if let Some(m) = self.adapter_mass_kg {
+            in_range((
+                "--adapter-mass-kg",
+                m,
+                0.0,
+                5.0,
+                " kg",
+                "the adapter's mass",
+            ))?;
+        }
+        for v in self.tare_n.iter().flatten() {
+            in_range((
+                "--tare-n",
+                *v,
+                -1000.0,
+                1000.0,
+                " N",
+                "each component of the tare",
+            ))?;
+        }
+        for v in self.centre_m.iter().flatten() {
+            in_range((
+                "--centre-m",
+                *v,
+                -2.0,
+                2.0,
+                " m",
+                "each joint of the excitation's centre",
+            ))?;
+        }
+        // Only with --live: the pose's hold (its default is checked too).
+        if self.live && !self.dynamic {
+            let least = self.settle_s + self.min_dwell_s;
+            let what = "each pose's hold (more than --settle-s + --min-dwell-s)";
+            in_range(("--hold-s", self.hold_s, least, MAX_HOLD_S, " s", what))?;
+            if self.hold_s <= least {
+                return Err(format!(
+                    "--hold-s {} must exceed --settle-s + --min-dwell-s ({} s)",
+                    sar_kinematics::Shown(self.hold_s),
+                    sar_kinematics::Shown(least)
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The options these arguments give.
     pub fn options(&self) -> Result<IdentifyOptions, String> {
         let tare_n = match self.tare_n.as_deref() {
@@ -176,8 +327,10 @@ pub fn run(
     prefix: &str,
     args: &IdentifyArgs,
 ) -> Result<(), String> {
+    args.check_ranges()?;
     let config_path =
         config_path.ok_or("identify needs --config FILE (the configuration to identify for)")?;
+    check_plot(config_path, args)?;
     let text = sar_config::read_text(config_path).map_err(|e| e.to_string())?;
     let config =
         sar_config::parse(&text, &config_path.display().to_string()).map_err(|e| e.to_string())?;
@@ -195,8 +348,7 @@ pub fn run(
         }
     };
     if let Some(path) = &args.plot {
-        let svg = plot::svg(&result)?;
-        std::fs::write(path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
+        write_whole(path, plot::svg(&result)?.as_bytes())?;
     }
     let written = if args.dry_run {
         None
@@ -218,6 +370,27 @@ pub fn run(
         result.to_text(written.as_deref())
     };
     println!("{out}");
+    Ok(())
+}
+
+/// Writes `bytes` to `path` through a temporary file beside it, renamed
+/// over it once whole (never a file cut in place).
+fn write_whole(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let pending = PendingFile::new(path).map_err(|e| err(&e))?;
+    std::fs::write(pending.tmp_path(), bytes).map_err(|e| err(&e))?;
+    pending.commit().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// `--plot` is neither the configuration nor the recording (compared as
+/// files: a hard or symbolic link is the file).
+fn check_plot(config_path: &Path, args: &IdentifyArgs) -> Result<(), String> {
+    if let Some(plot) = &args.plot {
+        let mut read = vec![config_path];
+        read.extend(args.input.as_deref());
+        check_outputs(&[plot], &read).map_err(|e| e.to_string())?;
+    }
     Ok(())
 }
 
@@ -262,7 +435,7 @@ fn run_dynamic(
         .map_err(|e| format!("{}: {e}", input.display()))?;
     if let Some(path) = &args.plot {
         let svg = plot_dynamic::svg(&result, config.estimator.calibration.gravity_mps2().into())?;
-        std::fs::write(path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
+        write_whole(path, svg.as_bytes())?;
     }
     let written = if args.dry_run {
         None

@@ -2,13 +2,14 @@
 //! crash, a full disk) with its summary and index, up to its last complete
 //! chunk; a corrupt chunk on the way is passed over (named: where, how many
 //! bytes) and the good chunks after it are kept. Never overwrites the
-//! input; the default output is `FILE` with `.recovered.mcap` in place of
-//! `.mcap`. Recovering nothing (a file cut before its first complete
-//! chunk, a magic-only file) is an error: no output is left, the exit is
-//! non-zero.
+//! input (compared as files: a hard or symbolic link is the input), and
+//! writes a temporary file renamed over the output at the end; the
+//! default output is `FILE` with `.recovered.mcap` in place of `.mcap`.
+//! Recovering nothing (a file cut before its first complete chunk, a
+//! magic-only file) is an error: nothing is left in the output's place,
+//! the exit is non-zero.
 
 use sar_record::reader::recover;
-use sar_record::replay::same_file;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 
@@ -24,30 +25,22 @@ pub fn default_output(input: &Path) -> PathBuf {
 /// Runs the command; `json` prints one JSON object.
 pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String> {
     let output = output.map_or_else(|| default_output(input), Path::to_path_buf);
-    if output == input || same_file(input, &output) {
-        return Err(format!(
-            "{}: refusing to overwrite the input; give another --output",
-            output.display()
-        ));
-    }
+    // (recover refuses an output that is the input by any name, and
+    // writes nothing in its place when it recovers nothing.)
     let r = recover(input, &output).map_err(|e| e.to_string())?;
     if r.messages == 0 {
-        let _ = std::fs::remove_file(&output);
         return Err(format!(
             "{}: recovered nothing: no complete chunk with a message{}",
             input.display(),
-            match (&r.stopped, r.skipped.first()) {
-                (Some(e), _) => format!(" ({e})"),
-                (None, Some(s)) => format!(" (corrupt: {})", s.why),
-                (None, None) => " (the file holds none)".to_owned(),
+            match (&r.stopped, r.skipped.is_empty()) {
+                (Some(e), true) => format!(" ({e})"),
+                (Some(e), false) => format!(" ({e}; {})", r.skipped.summary()),
+                (None, false) => format!(" ({})", r.skipped.summary()),
+                (None, true) => " (the file holds none)".to_owned(),
             }
         ));
     }
-    let skipped: Vec<String> = r
-        .skipped
-        .iter()
-        .map(|s| format!("{} bytes at byte {} ({})", s.bytes, s.offset, s.why))
-        .collect();
+    let skipped: Vec<String> = r.skipped.shown.iter().map(|s| s.describe()).collect();
     if json {
         println!(
             "{}",
@@ -55,6 +48,9 @@ pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String
                    "messages": r.messages, "channels": r.channels,
                    "input_complete": r.input_complete,
                    "skipped": skipped,
+                   "skipped_records": r.skipped.records,
+                   "skipped_bytes": r.skipped.bytes,
+                   "skipped_parts": r.skipped.parts,
                    "stopped": r.stopped.as_ref().map(ToString::to_string)})
         );
     } else {
@@ -72,6 +68,9 @@ pub fn run(input: &Path, output: Option<&Path>, json: bool) -> Result<(), String
         );
         for s in &skipped {
             println!("corrupt, passed over (its messages are lost): {s}");
+        }
+        if !r.skipped.is_empty() {
+            println!("{}", r.skipped.summary());
         }
     }
     Ok(())

@@ -9,6 +9,7 @@
 //! article's Figure 9). Without `--config`, the configuration the recording
 //! carries (`sar_config` metadata, written by `sard`).
 
+use sar_record::output::{PendingFile, check_outputs};
 use sar_record::replay::{
     AxisError, Comparison, ReplayOptions, ReplayReport, SeriesPoint, replay_files,
 };
@@ -57,12 +58,16 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
         "from_snapshot": r.from_snapshot,
         "skipped_cycles": r.skipped_cycles,
         "snapshots_compared": r.snapshots_compared,
+        "gaps_total": r.gaps_total,
+        "corrupt_records": r.corrupt_records,
+        "corrupt_bytes": r.corrupt_bytes,
         "gaps": r.gaps.iter().map(|g| json!({
             "file": g.file.as_ref().map(|f| f.display().to_string()),
             "offset": g.skipped.offset,
             "bytes": g.skipped.bytes,
             "log_time_ns": g.skipped.log_time_ns,
             "why": g.skipped.why,
+            "corrupt_records": g.skipped.records,
             "last_cycle_before": g.last_cycle_before,
             "first_cycle_after": g.first_cycle_after,
             "cycles_lost": g.cycles_lost(),
@@ -84,6 +89,12 @@ pub fn report_json(r: &ReplayReport) -> serde_json::Value {
 pub fn run(a: &Args<'_>) -> Result<(), String> {
     let inputs = input_files(a.input)?;
     let first = inputs.first().ok_or("replay needs --input REC.mcap")?;
+    // Every file written is none of the files read (by device and inode:
+    // a hard or symbolic link is the file), and --output and --plot differ.
+    let mut read: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    read.extend(a.config);
+    let written: Vec<&Path> = a.output.into_iter().chain(a.plot).collect();
+    check_outputs(&written, &read).map_err(|e| e.to_string())?;
     let cfg = configuration(a.config, first)?;
     let options = ReplayOptions {
         output: a.output.map(Path::to_path_buf),
@@ -186,6 +197,13 @@ fn print_text(r: &ReplayReport, shown: &str) {
     for g in &r.gaps {
         println!("{}", gap_line(g));
     }
+    if r.gaps_total > r.gaps.len() as u64 {
+        println!(
+            "... and {} more part(s) not replayed (the first {} named)",
+            r.gaps_total - r.gaps.len() as u64,
+            r.gaps.len()
+        );
+    }
     if let Some(e) = &r.stopped {
         println!("the input is cut short: replayed up to its last complete chunk ({e})");
     }
@@ -218,8 +236,16 @@ fn comparison_line(c: &Comparison) -> String {
 fn verdict(r: &ReplayReport, shown: &str, files: usize) -> Result<(), String> {
     if let Some(g) = r.gaps.first() {
         return Err(format!(
-            "{shown}: {} part(s) not replayed (corrupt, or cycles missing); the first: {}",
-            r.gaps.len(),
+            "{shown}: {} part(s) not replayed (corrupt, or cycles missing){}; the first: {}",
+            r.gaps_total,
+            if r.corrupt_records > 0 {
+                format!(
+                    ", {} corrupt records ({} bytes) passed over",
+                    r.corrupt_records, r.corrupt_bytes
+                )
+            } else {
+                String::new()
+            },
             gap_line(g)
         ));
     }
@@ -283,9 +309,14 @@ fn gap_line(g: &sar_record::replay::Gap) -> String {
         );
     }
     format!(
-        "corrupt part passed over: {} bytes at byte {}{}{} ({}); {}{}",
+        "corrupt part passed over: {} bytes at byte {}{}{}{} ({}); {}{}",
         g.skipped.bytes,
         g.skipped.offset,
+        if g.skipped.records > 1 {
+            format!(" ({} corrupt records in a row)", g.skipped.records)
+        } else {
+            String::new()
+        },
         g.file
             .as_ref()
             .map(|f| format!(" of {}", f.display()))
@@ -357,7 +388,10 @@ pub fn plot_svg(
     let t_max = series.last().map_or(1.0, |p| p.t_s).max(1e-3);
     let (lo, hi) = force_range_n(series);
     let pad = ((hi - lo) * 0.05).max(0.1);
-    let root = SVGBackend::new(path, (1200, 900)).into_drawing_area();
+    // Drawn into a temporary file beside it, renamed over it once whole.
+    let pending = PendingFile::new(path).map_err(|e| err(&e))?;
+    let tmp = pending.tmp_path().to_path_buf();
+    let root = SVGBackend::new(&tmp, (1200, 900)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let panels = root.split_evenly((3, 1));
     for (k, area) in panels.iter().enumerate() {
@@ -369,6 +403,8 @@ pub fn plot_svg(
         draw_panel(area, &panel, series, reference).map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))?;
+    drop(root);
+    pending.commit().map_err(|e| err(&e))?;
     Ok(())
 }
 

@@ -24,7 +24,7 @@ use sar_estimator::identification::dynamic::{
     DynamicIdentification, DynamicResult, MotionSample, model_force_n, rod_motion,
 };
 use sar_estimator::{Calibration, Vec3};
-use sar_msgs::msgs::{ActiveJointState, Topic, WrenchStamped};
+use sar_msgs::msgs::{ActiveJointState, GuardEvent, GuardStateCode, Topic, WrenchStamped};
 use sar_record::{McapReader, ReadError};
 use serde_json::json;
 
@@ -152,7 +152,91 @@ pub enum DynamicError {
     /// Any other refusal of the estimator.
     #[error("the dynamic identification refused: {0}")]
     Fit(IdentificationError),
+    /// A recorded sample is not finite.
+    #[error(
+        "{topic}: sample {index} (stamped {stamp_ns} ns) is not finite ({what}): a reading the device did not give (the loop faults on it); identify --dynamic refuses the recording rather than guess around it"
+    )]
+    NonFinite {
+        /// The topic.
+        topic: &'static str,
+        /// The sample's place in the recording (0: the first).
+        index: usize,
+        /// Its stamp, ns.
+        stamp_ns: u64,
+        /// Its values.
+        what: String,
+    },
+    /// The stamps of a topic go back.
+    #[error(
+        "{topic}: sample {index} is stamped {stamp_ns} ns, before the sample recorded ahead of it ({previous_ns} ns): the stamps go back (the device's clock, or a corrupt recording); identify --dynamic needs them in time order"
+    )]
+    StampsBack {
+        /// The topic.
+        topic: &'static str,
+        /// The sample's place in the recording.
+        index: usize,
+        /// Its stamp, ns.
+        stamp_ns: u64,
+        /// The stamp before it, ns.
+        previous_ns: u64,
+    },
+    /// The sensor's stamps are not on a regular grid.
+    #[error(
+        "{topic}: {irregular} of {steps} stamp steps differ from the median step ({median_ms} ms) by more than half of it (the largest, {worst_ms} ms, after sample {at}): the stamps are not when the samples were measured (the device's clock, or the recording); identify --dynamic interpolates the joints at them"
+    )]
+    IrregularStamps {
+        /// The topic.
+        topic: &'static str,
+        /// Steps off the grid.
+        irregular: usize,
+        /// Steps in all.
+        steps: usize,
+        /// The median step, ms.
+        median_ms: sar_kinematics::Shown,
+        /// The step furthest from it, ms.
+        worst_ms: sar_kinematics::Shown,
+        /// The sample before that step.
+        at: usize,
+    },
+    /// More samples than an excitation's recording holds.
+    #[error(
+        "the recording holds more than {limit} {topic} samples (over an hour at 1 kHz): identify --dynamic reads the recording of one excitation, a few minutes"
+    )]
+    TooLong {
+        /// The topic.
+        topic: &'static str,
+        /// [`MAX_SERIES_SAMPLES`].
+        limit: usize,
+    },
+    /// The guard left Ok during the samples fitted: what follows is a
+    /// braking, a contact or a fault, not the excitation.
+    #[error(
+        "the guard went from Ok to {state} ({reason}) at cycle {cycle}, {at_s} s into the samples fitted: the excitation did not run to its end with the tip free (a quick stop's braking, a contact or a fault follows, and the readings after it cannot be trusted); reset and record the excitation again (sarctl identify --dynamic --live)"
+    )]
+    GuardLeftOk {
+        /// The state entered.
+        state: &'static str,
+        /// Why.
+        reason: &'static str,
+        /// The cycle.
+        cycle: u64,
+        /// When, from the first sample fitted, s.
+        at_s: sar_kinematics::Shown,
+    },
 }
+
+/// The most samples of a topic read for one identification (about 67
+/// minutes of a 1 kHz sensor; 128 MB of samples): a crafted recording of
+/// highly compressed messages cannot make the reader hold more.
+pub const MAX_SERIES_SAMPLES: usize = 4_000_000;
+
+/// A step off the grid differs from the median step by more than this
+/// fraction of it.
+pub const MAX_SENSOR_STEP_JITTER: f64 = 0.5;
+
+/// The largest share of the sensor's stamp steps off the grid accepted
+/// (sample losses, a busy host's bunched packets).
+pub const MAX_IRREGULAR_SHARE: f64 = 0.1;
 
 impl From<IdentificationError> for DynamicError {
     fn from(e: IdentificationError) -> Self {
@@ -196,47 +280,156 @@ pub struct DynamicIdentified {
     pub points: Vec<FitPoint>,
 }
 
-/// The recording's joints and sensor forces, in stamp order.
+/// The recording's joints and sensor forces, in stamp order, and the
+/// guard's transitions.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Series {
     /// (stamp ns, q1, q2, q3 m).
     pub joints: Vec<(u64, [f64; 3])>,
     /// (stamp ns, force in the sensor frame N).
     pub sensor: Vec<(u64, [f64; 3])>,
+    /// The guard's transitions (`/sar/guard/events`), as recorded.
+    pub guard: Vec<GuardEvent>,
+}
+
+/// Appends `item` to `v`, up to [`MAX_SERIES_SAMPLES`].
+fn push_bounded<T>(v: &mut Vec<T>, item: T, topic: &'static str) -> Result<(), DynamicError> {
+    if v.len() >= MAX_SERIES_SAMPLES {
+        return Err(DynamicError::TooLong {
+            topic,
+            limit: MAX_SERIES_SAMPLES,
+        });
+    }
+    v.push(item);
+    Ok(())
+}
+
+/// Refuses a non-finite sample or a stamp that goes back, as recorded
+/// (before they are sorted), naming the sample.
+fn check_recorded(v: &[(u64, [f64; 3])], topic: &'static str) -> Result<(), DynamicError> {
+    let mut previous: Option<u64> = None;
+    for (index, &(stamp_ns, x)) in v.iter().enumerate() {
+        if !x.iter().all(|c| c.is_finite()) {
+            return Err(DynamicError::NonFinite {
+                topic,
+                index,
+                stamp_ns,
+                what: sar_kinematics::ShownAll(&x).to_string(),
+            });
+        }
+        if let Some(previous_ns) = previous
+            && stamp_ns < previous_ns
+        {
+            return Err(DynamicError::StampsBack {
+                topic,
+                index,
+                stamp_ns,
+                previous_ns,
+            });
+        }
+        previous = Some(stamp_ns);
+    }
+    Ok(())
+}
+
+/// Refuses sensor stamps off a regular grid: more than
+/// [`MAX_IRREGULAR_SHARE`] of the steps (ascending, distinct stamps)
+/// differ from the median step by more than [`MAX_SENSOR_STEP_JITTER`] of
+/// it (a clock shifted on every other sample; lost samples and a busy
+/// host's bunched packets stay below).
+fn check_grid(v: &[(u64, [f64; 3])], topic: &'static str) -> Result<(), DynamicError> {
+    let steps: Vec<u64> = v
+        .windows(2)
+        .filter_map(|w| Some(w.get(1)?.0 - w.first()?.0))
+        .collect();
+    let mut sorted = steps.clone();
+    sorted.sort_unstable();
+    let Some(&median) = sorted.get(sorted.len() / 2) else {
+        return Ok(());
+    };
+    let median = median as f64;
+    let off = |step: u64| (step as f64 - median).abs();
+    let irregular = steps
+        .iter()
+        .filter(|s| off(**s) > MAX_SENSOR_STEP_JITTER * median)
+        .count();
+    if (irregular as f64) <= MAX_IRREGULAR_SHARE * steps.len() as f64 {
+        return Ok(());
+    }
+    let (at, worst) = steps
+        .iter()
+        .enumerate()
+        .max_by(|a, b| off(*a.1).total_cmp(&off(*b.1)))
+        .map_or((0, 0), |(i, s)| (i, *s));
+    Err(DynamicError::IrregularStamps {
+        topic,
+        irregular,
+        steps: steps.len(),
+        median_ms: sar_kinematics::Shown(median * 1e-6),
+        worst_ms: sar_kinematics::Shown(worst as f64 * 1e-6),
+        at,
+    })
+}
+
+/// Refuses samples fitted across the guard leaving Ok (a Warn, a Stop, a
+/// Fault, a Retreat: a contact or a fault, and the drives' quick stop)
+/// between the first and the last sample fitted (`t0_ns..=t1_ns`).
+fn check_guard(guard: &[GuardEvent], t0_ns: u64, t1_ns: u64) -> Result<(), DynamicError> {
+    let left = guard.iter().find(|e| {
+        (t0_ns..=t1_ns).contains(&e.stamp_ns)
+            && e.from_state == GuardStateCode::Ok
+            && e.to_state != GuardStateCode::Ok
+    });
+    let Some(e) = left else {
+        return Ok(());
+    };
+    Err(DynamicError::GuardLeftOk {
+        state: sar_msgs::wire::guard_state_name(u32::from(e.to_state.code())),
+        reason: sar_msgs::wire::reason_name(u32::from(e.reason_code)),
+        cycle: e.cycle,
+        at_s: sar_kinematics::Shown(e.stamp_ns.saturating_sub(t0_ns) as f64 * 1e-9),
+    })
 }
 
 /// Reads the joints and the sensor's forces of a recording file (full or lean).
 pub fn read_series(path: &std::path::Path) -> Result<Series, DynamicError> {
     let open = || McapReader::open(path);
     let mut s = Series::default();
+    let (joints, sensor) = (Topic::Joints.name(), Topic::SensorWrench.name());
     if sar_record::lean::is_lean(open()?) {
         for c in sar_record::lean::cycles(open()?) {
             let c = c?;
             if c.joints_message {
-                s.joints.push((c.input.joints_stamp_ns, c.input.joints_q_m));
+                let j = (c.input.joints_stamp_ns, c.input.joints_q_m);
+                push_bounded(&mut s.joints, j, joints)?;
             }
-            s.sensor
-                .extend(c.sensors.iter().map(|w| (w.stamp_ns, w.force_n)));
+            for w in &c.sensors {
+                push_bounded(&mut s.sensor, (w.stamp_ns, w.force_n), sensor)?;
+            }
         }
     }
-    for item in open()?.typed::<ActiveJointState>(Topic::Joints.name()) {
+    for item in open()?.typed::<ActiveJointState>(joints) {
         let (_, js) = item?;
-        s.joints.push((js.stamp_ns, js.q_m));
+        push_bounded(&mut s.joints, (js.stamp_ns, js.q_m), joints)?;
     }
-    for item in open()?.typed::<WrenchStamped>(Topic::SensorWrench.name()) {
+    for item in open()?.typed::<WrenchStamped>(sensor) {
         let (_, w) = item?;
-        s.sensor.push((w.stamp_ns, w.force_n));
+        push_bounded(&mut s.sensor, (w.stamp_ns, w.force_n), sensor)?;
     }
-    for (v, topic) in [
-        (&mut s.joints, Topic::Joints.name()),
-        (&mut s.sensor, Topic::SensorWrench.name()),
-    ] {
+    for item in open()?.typed::<GuardEvent>(Topic::GuardEvents.name()) {
+        let (_, e) = item?;
+        push_bounded(&mut s.guard, e, Topic::GuardEvents.name())?;
+    }
+    for (v, topic) in [(&mut s.joints, joints), (&mut s.sensor, sensor)] {
         if v.is_empty() {
             return Err(DynamicError::MissingTopic { topic });
         }
-        v.sort_by_key(|x| x.0);
+        // As recorded: finite, in time order (a sample recorded twice, at
+        // the same stamp, once).
+        check_recorded(v, topic)?;
         v.dedup_by_key(|x| x.0);
     }
+    check_grid(&s.sensor, sensor)?;
     Ok(s)
 }
 
@@ -299,6 +492,9 @@ pub fn identify_series(
     options: &DynamicOptions,
 ) -> Result<DynamicIdentified, DynamicError> {
     check_options(config, options)?;
+    check_recorded(&series.joints, Topic::Joints.name())?;
+    check_recorded(&series.sensor, Topic::SensorWrench.name())?;
+    check_grid(&series.sensor, Topic::SensorWrench.name())?;
     let est = &config.estimator;
     let cal = &est.calibration;
     let (smoothed, period_s) =
@@ -330,6 +526,9 @@ pub fn identify_series(
         id.add(&sample)?;
         used.push(sample);
         stamps.push(measured_ns);
+    }
+    if let (Some(&t0), Some(&t1)) = (stamps.first(), stamps.last()) {
+        check_guard(&series.guard, t0, t1)?;
     }
     if used.is_empty() {
         return Err(DynamicError::Smoothing(format!(
