@@ -522,10 +522,10 @@ fn a_file_cut_short_replays_to_its_last_chunk_and_is_recovered() {
     });
     // Never over the input, under any spelling.
     let e = sarctl::cli::recover::run(&cut, Some(&cut), false).unwrap_err();
-    assert!(e.contains("overwrite"), "{e}");
+    assert!(e.contains("refusing to write over the input"), "{e}");
     let spelled = dir.join(".").join("cut.mcap");
     let e = sarctl::cli::recover::run(&cut, Some(&spelled), false).unwrap_err();
-    assert!(e.contains("overwrite"), "{e}");
+    assert!(e.contains("refusing to write over the input"), "{e}");
     assert_eq!(std::fs::read(&cut).unwrap(), &bytes[..bytes.len() / 2]);
 }
 
@@ -595,5 +595,8 @@ fn replay_of_bytes_in_memory_equals_replay_of_the_file() {
         &options(Some(fixture(FAULT_DAEMON)), None),
     )
     .unwrap_err();
-    assert!(e.to_string().contains("is the input"), "{e}");
+    assert!(
+        e.to_string().contains("refusing to write over the input"),
+        "{e}"
+    );
 }

@@ -18,7 +18,7 @@ use sar_drivers::sim::{
 };
 use sar_drivers::{AxisDrives, DriveState, ForceSensor, SimClock, Vec3, WrenchSample};
 use sar_kinematics::ActiveJoints;
-use sar_test_support::counting::{Counting, process_allocations};
+use sar_test_support::counting::{Counting, thread_allocations};
 use std::path::Path;
 
 #[global_allocator]
@@ -126,7 +126,7 @@ fn the_simulator_with_every_fault_and_a_tissue_allocates_nothing_per_cycle() {
     // Warm up outside the count (nothing here allocates either, but the
     // count is about the cycles).
     drives.enable().unwrap();
-    let before = process_allocations();
+    let before = thread_allocations();
     let mut samples = 0u64;
     let mut faults_seen = 0u64;
     let mut drive_faults = 0u64;
@@ -155,7 +155,7 @@ fn the_simulator_with_every_fault_and_a_tissue_allocates_nothing_per_cycle() {
             _ => {}
         }
     }
-    let allocations = process_allocations() - before;
+    let allocations = thread_allocations() - before;
     assert_eq!(allocations, 0, "{allocations} allocations in 500 cycles");
     // The run did what it says: samples came, the NaN sample was among
     // them, the drives faulted, the tip is in the tissue.
@@ -196,7 +196,7 @@ fn plant_in_motion_allocates_nothing(path: &Path) {
     let (mut sensor, mut drives) = (sim.sensor(), sim.drives());
     let start = scenario.script.start;
     drives.enable().unwrap();
-    let before = process_allocations();
+    let before = thread_allocations();
     let mut moving_accel = 0.0f64;
     for cycle in 0..400u64 {
         clock.advance_ns(MS);
@@ -223,7 +223,7 @@ fn plant_in_motion_allocates_nothing(path: &Path) {
             _ => {}
         }
     }
-    let allocations = process_allocations() - before;
+    let allocations = thread_allocations() - before;
     assert_eq!(
         allocations, 0,
         "{allocations} allocations in 400 cycles in motion"
