@@ -58,6 +58,9 @@
 //!   (not the operator's move limits): `excitation_max_speed_mps` (0.04;
 //!   below `[plausibility] max_joint_speed_mps`), `excitation_max_accel_mps2`
 //!   (1; at most 5), `excitation_duration_s` (60; 10..=600).
+//! - `[ros2]`: the ROS 2 bridge's (`sar-ros2`; `sard` only checks it): the
+//!   DDS domain, the local addresses DDS uses, each topic's rate
+//!   (`Ros2Settings`, module `ros2`).
 //!
 //! Every error names the file, the dotted key, the line where the file has it,
 //! and the problem ([`ConfigError`]), on one line of at most about 700
@@ -86,6 +89,7 @@ mod exact;
 mod identify;
 mod locate;
 mod plausible;
+mod ros2;
 pub mod scenario;
 mod toml_file;
 
@@ -110,6 +114,7 @@ use std::path::{Path, PathBuf};
 use toml_file::Ctx;
 
 pub use identify::IdentifySettings;
+pub use ros2::{MAX_DOMAIN_ID, Ros2Rates, Ros2Settings, TopicRate};
 
 /// The configuration of the built-in demo (`sard --sim` without `--config`):
 /// the example robot of INTERFACES.md 2, every optional section written out
@@ -143,6 +148,8 @@ struct FileToml {
     force_control: ForceControlToml,
     #[serde(default)]
     identify: identify::IdentifyToml,
+    #[serde(default)]
+    ros2: ros2::Ros2Toml,
 }
 
 /// `[force_control]` (FORCE_CONTROL.md): the admittance law's settings.
@@ -607,6 +614,9 @@ pub struct Config {
     pub inertia_measured: bool,
     /// The limits of `sarctl identify --dynamic`'s excitation (`[identify]`).
     pub identify: IdentifySettings,
+    /// The ROS 2 bridge's settings (`[ros2]`; `sar-ros2` reads them, `sard`
+    /// only checks them).
+    pub ros2: Ros2Settings,
 }
 
 /// The recording's settings (`[record]`).
@@ -896,6 +906,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         (f.axes.servo_bandwidth_hz, f.axes.servo_damping),
     )?;
     let identify = identify::identify(ctx, &f.identify, f.plausibility.max_joint_speed_mps)?;
+    let ros2 = ros2::ros2(ctx, &f.ros2, record.scene_period_ns)?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
     plausible::check(ctx, &f)?;
@@ -926,6 +937,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         force_control,
         inertia_measured,
         identify,
+        ros2,
     })
 }
 

@@ -1,0 +1,25 @@
+//! `sar-ros2`: the daemon's outputs on a ROS 2 network, read-only, in a
+//! process of its own. It subscribes to the daemon's state over iceoryx2
+//! like `sarctl monitor` (a member of the operators' group; a slow or
+//! stalled bridge loses states, never makes the loop wait) and publishes on
+//! a DDS domain with ROS 2's conventions: the topics of a full recording
+//! and the 3D scene, with the recordings' types and CDR, values equal to a
+//! recording of the same cycle.
+//!
+//! - [`names`]: ROS 2's names on DDS (`rt/` topics, `pkg::msg::dds_::Type_`).
+//! - [`topics`]: what is published and with which QoS.
+//! - [`plan`]: what each state gives (pure, no DDS): the recording's
+//!   messages (`sar_scene::topics::messages`), decimated per topic, and the
+//!   scene drawn as the recorder draws it.
+//! - [`dds`]: the DDS participant and writers (RustDDS, pure Rust).
+//! - [`run`]: the process: domain, subscription, summary.
+//!
+//! Read-only by construction: it holds a state subscription and DDS
+//! writers, no DDS reader and no command port (`sar_shm::Client::command` is
+//! never called; a test checks the sources). `sard` does not link it.
+
+pub mod dds;
+pub mod names;
+pub mod plan;
+pub mod run;
+pub mod topics;
