@@ -678,4 +678,48 @@ mod tests {
         assert!(reply.detail[3..].iter().all(|b| *b == 0));
         assert_eq!((reply.id, reply.cycle), (1, 2));
     }
+
+    #[test]
+    fn a_reason_travels_whole_and_its_sentence_is_the_same() {
+        use sar_estimator::guard::{Axis, ForcePart, Reason, RestResidual, SensorChannel};
+        // The reasons with the most facts (a tag and up to three numbers),
+        // extreme values, and one without facts.
+        let reasons = [
+            Reason::TorqueImplausible {
+                axis: Axis::Z,
+                residual_nm: -f64::MAX,
+                std_nm: f64::MIN_POSITIVE,
+                max_sigma: 7.0,
+            },
+            Reason::MountingMismatch {
+                residual: RestResidual::Torque(Axis::Y),
+                value: 8.2,
+                allowed: 1.2,
+            },
+            Reason::SensorSaturated {
+                channel: SensorChannel::Tx,
+                value: f64::INFINITY,
+                range: 1e300,
+            },
+            Reason::AboveStop {
+                part: ForcePart::Lateral,
+                force_n: 12.345_678_9,
+                limit_n: 10.0,
+            },
+            Reason::CycleOutOfOrder {
+                previous: u64::MAX,
+                got: 0,
+            },
+            Reason::Reset,
+        ];
+        for r in reasons {
+            let bytes = reason_bytes(&r);
+            assert!(bytes.iter().any(|b| *b != 0), "{r:?} did not fit");
+            let back = reason_of(&bytes).unwrap();
+            assert_eq!(back, r);
+            assert_eq!(format!("{back}"), format!("{r}"));
+        }
+        assert_eq!(reason_of(&[0; REASON_BYTES]), None);
+        assert_eq!(StateMsg::default().guard_reason_bytes, [0; REASON_BYTES]);
+    }
 }
