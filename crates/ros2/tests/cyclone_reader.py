@@ -195,6 +195,22 @@ def stamp_ns(flat):
     return None if sec is None else sec * 1_000_000_000 + nsec
 
 
+# Static frames: their stamp says when they were sent (the recording's at its
+# first scene, the bridge's at its own), not what they are; tf2 ignores it.
+STAMPLESS = {"/tf_static"}
+
+
+def unstamped(name, flat):
+    """A message as compared: without its header stamps on STAMPLESS topics."""
+    if name not in STAMPLESS:
+        return flat
+    return [item for item in flat if "header.stamp." not in item.split("=", 1)[0]]
+
+
+def key_of(name, flat):
+    return None if name in STAMPLESS else stamp_ns(flat)
+
+
 def percentile(sorted_values, q):
     if not sorted_values:
         return None
@@ -290,7 +306,7 @@ def compare(path, published, received, late_received, discovered):
     for name, _, kind in published:
         by_stamp = {}
         for log_time, flat in recorded.get(name, []):
-            by_stamp.setdefault(stamp_ns(flat), []).append(flat)
+            by_stamp.setdefault(key_of(name, flat), []).append(unstamped(name, flat))
         got = received[name]
         matched = mismatched = unrecorded = 0
         first_mismatch = None
@@ -299,7 +315,8 @@ def compare(path, published, received, late_received, discovered):
         for recv_ns, flat in got:
             s = stamp_ns(flat)
             latencies.append(recv_ns - s)
-            candidates = by_stamp.get(s)
+            candidates = by_stamp.get(key_of(name, flat))
+            flat = unstamped(name, flat)
             if candidates is None:
                 unrecorded += 1
                 unrecorded_stamps.append(s)
@@ -325,7 +342,8 @@ def compare(path, published, received, late_received, discovered):
                            latencies[-1] if latencies else None],
         }
     for name, msgs in late_received.items():
-        recorded_flat = [f for _, f in recorded.get(name, [])]
+        recorded_flat = [unstamped(name, f) for _, f in recorded.get(name, [])]
+        msgs = [unstamped(name, m) for m in msgs]
         summary["late"][name] = {
             "received": len(msgs),
             "all_recorded": all(m in recorded_flat for m in msgs),
