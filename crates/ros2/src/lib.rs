@@ -15,8 +15,8 @@
 //! - [`run`]: the process: domain, subscription, summary.
 //!
 //! Read-only by construction: it holds a state subscription and DDS
-//! writers, no DDS reader and no command port (`sar_shm::Client::command` is
-//! never called; a test checks the sources). `sard` does not link it.
+//! writers, no DDS reader and no command port (the daemon's command service
+//! is never opened; a test checks the sources). `sard` does not link it.
 
 pub mod dds;
 pub mod names;
