@@ -1,6 +1,6 @@
-//! What the bridge publishes: the topics of a full recording (INTERFACES.md
-//! 1) but the step's input, and the 3D scene, each with its ROS 2 type and
-//! the QoS a ROS 2 user expects of it ([`Qos`]).
+//! What the bridge publishes: the topics of a full recording (section 1 of
+//! INTERFACES.md) but the step's input, and the 3D scene, each with its ROS 2
+//! type and the QoS a ROS 2 user expects of it ([`Qos`]).
 
 use sar_config::{Ros2Rates, TopicRate};
 use sar_msgs::msgs::{RosMessage, SceneStatus, Topic};

@@ -79,8 +79,15 @@ fn cyclone_dds_reads_every_topic_equal_to_the_recording() {
         .args(["--exact", NAME, "--nocapture", "--test-threads", "1"])
         .env(IN_NETNS, "1");
     let mut child = cmd.spawn().expect("unshare (util-linux)");
-    let status = wait_for(&mut child, Duration::from_secs(240), "the test in its namespace");
-    assert!(status.success(), "the test in its network namespace failed: {status}");
+    let status = wait_for(
+        &mut child,
+        Duration::from_secs(240),
+        "the test in its namespace",
+    );
+    assert!(
+        status.success(),
+        "the test in its network namespace failed: {status}"
+    );
 }
 
 /// Whether this process runs as root (`id -u`: no `unsafe` for `geteuid`).
@@ -226,7 +233,10 @@ fn in_netns() {
         )
         .env("PYTHONDONTWRITEBYTECODE", "1")
         .env("PYTHONNOUSERSITE", "1")
-        .env("CYCLONEDDS_URI", format!("file://{}", cyclone_xml.display()))
+        .env(
+            "CYCLONEDDS_URI",
+            format!("file://{}", cyclone_xml.display()),
+        )
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .spawn()

@@ -13,7 +13,13 @@ packages (from the schemas it carries). Both sides are flattened into
 field=value lists (floats as their IEEE bits) and compared exactly.
 
 Usage: cyclone_reader.py --msg-dir DIR --domain N
+       cyclone_reader.py --msg-dir DIR --domain N --figures SECONDS
   (CYCLONEDDS_URI names the participant's configuration)
+With --figures (scripts/ros2-figures.sh): reads /sar/estimate/state and
+/sar/scene/status for SECONDS after the first message (or until SIGTERM),
+keeping only each message's cycle, stamp and receive time, and prints their
+latency from the loop's cycle (p50, p99, max) and the cycles missing
+between the first and the last received.
 stdin:  "late"            create late-joining readers (transient local topics)
         "stop RECORDING"  stop reading, compare with RECORDING.mcap
 stdout: {"ready": ...} once the readers exist, then one JSON summary.
@@ -221,7 +227,11 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--msg-dir", required=True)
     ap.add_argument("--domain", type=int, required=True)
+    ap.add_argument("--figures", type=float)
     args = ap.parse_args()
+    if args.figures is not None:
+        figures(args)
+        return
 
     dp = DomainParticipant(args.domain)
     published = topics(args.msg_dir)
@@ -286,6 +296,49 @@ def main():
             break
 
     print(json.dumps(compare(stop_path, published, received, late_received, discovered)), flush=True)
+
+
+def figures(args):
+    """Latency and loss of the estimate (1 kHz) and the scene's status."""
+    import signal
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    dp = DomainParticipant(args.domain)
+    chosen = {n: (typ, kind) for n, typ, kind in topics(args.msg_dir)
+              if n in ("/sar/estimate/state", "/sar/scene/status")}
+    waitset = WaitSet(dp)
+    readers = []
+    for name, (typ, kind) in chosen.items():
+        r = DataReader(dp, Topic(dp, "rt" + name, typ), qos=qos(kind, 4096))
+        readers.append((name, r))
+        waitset.attach(ReadCondition(r, SampleState.Any | ViewState.Any | InstanceState.Any))
+    print(json.dumps({"ready": True}), flush=True)
+    got = {name: [] for name in chosen}
+    first = None
+    while not stop and (first is None or time.monotonic() - first < args.figures):
+        waitset.wait(duration(milliseconds=50))
+        now = time.monotonic_ns()
+        for name, r in readers:
+            for s in r.take(N=4096):
+                stamp = s.header.stamp.sec * 1_000_000_000 + s.header.stamp.nanosec
+                got[name].append((s.cycle, now - stamp))
+                if first is None:
+                    first = time.monotonic()
+    out = {}
+    for name, samples in got.items():
+        cycles = sorted(c for c, _ in samples)
+        lat = sorted(l for _, l in samples)
+        span = cycles[-1] - cycles[0] + 1 if cycles else 0
+        out[name] = {
+            "received": len(samples),
+            "first_cycle": cycles[0] if cycles else None,
+            "last_cycle": cycles[-1] if cycles else None,
+            "duplicates": len(cycles) - len(set(cycles)),
+            "latency_ns": [percentile(lat, 0.5), percentile(lat, 0.99), lat[-1] if lat else None],
+        }
+        if name == "/sar/estimate/state":
+            out[name]["missing_cycles"] = span - len(set(cycles))
+    print(json.dumps(out), flush=True)
 
 
 def recorded_messages(path):

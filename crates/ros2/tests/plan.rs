@@ -17,7 +17,7 @@
 )]
 
 use sar_config as config;
-use sar_config::{RecordMode, RecordSettings, Rotation, Ros2Settings, TopicRate};
+use sar_config::{RecordMode, RecordSettings, Ros2Settings, Rotation, TopicRate};
 use sar_estimator::Vec3;
 use sar_loop::control::{Envelope, Request};
 use sar_loop::publish::{SimTruth, StateParts, state_msg};
@@ -169,10 +169,13 @@ fn run(name: &str, settings: &[Ros2Settings]) -> (Messages, Vec<Messages>) {
 
 #[test]
 fn every_bridged_topic_is_the_recording_byte_for_byte() {
-    let (recorded, bridged) = run("bridge_is_recording", &[Ros2Settings {
-        scene_period_ns: Some(SCENE_PERIOD_NS),
-        ..Ros2Settings::default()
-    }]);
+    let (recorded, bridged) = run(
+        "bridge_is_recording",
+        &[Ros2Settings {
+            scene_period_ns: Some(SCENE_PERIOD_NS),
+            ..Ros2Settings::default()
+        }],
+    );
     let bridged = &bridged[0];
     for topic in ALL {
         let name = topic.name();
@@ -181,7 +184,12 @@ fn every_bridged_topic_is_the_recording_byte_for_byte() {
         assert!(!want.is_empty(), "{name}: the recording has none");
         assert_eq!(got.len(), want.len(), "{name}: message count");
         for (i, (a, b)) in want.iter().zip(got).enumerate() {
-            assert!(a == b, "{name}: message {i} differs (log time {} / {})", a.0, b.0);
+            assert!(
+                a == b,
+                "{name}: message {i} differs (log time {} / {})",
+                a.0,
+                b.0
+            );
         }
     }
     // What the run must hold for this to show something: transitions into
@@ -194,15 +202,20 @@ fn every_bridged_topic_is_the_recording_byte_for_byte() {
 
 #[test]
 fn decimated_topics_keep_a_subset_at_their_rate_and_zero_is_off() {
-    let mut rates = config::Ros2Rates::default();
-    rates.estimate = TopicRate::PeriodNs(10_000_000);
-    rates.sensor_wrench = TopicRate::PeriodNs(50_000_000);
-    rates.joints = TopicRate::Off;
-    let (recorded, bridged) = run("bridge_decimated", &[Ros2Settings {
-        rates,
-        scene_period_ns: None,
-        ..Ros2Settings::default()
-    }]);
+    let rates = config::Ros2Rates {
+        estimate: TopicRate::PeriodNs(10_000_000),
+        sensor_wrench: TopicRate::PeriodNs(50_000_000),
+        joints: TopicRate::Off,
+        ..config::Ros2Rates::default()
+    };
+    let (recorded, bridged) = run(
+        "bridge_decimated",
+        &[Ros2Settings {
+            rates,
+            scene_period_ns: None,
+            ..Ros2Settings::default()
+        }],
+    );
     let bridged = &bridged[0];
     for (topic, period_ns, at_least) in [
         (Topic::EstimatorState, 10_000_000, 399),
@@ -210,7 +223,11 @@ fn decimated_topics_keep_a_subset_at_their_rate_and_zero_is_off() {
     ] {
         let got = &bridged[topic.name()];
         let all = &recorded[topic.name()];
-        assert!(got.len() >= at_least && got.len() <= at_least + 2, "{topic:?}: {}", got.len());
+        assert!(
+            got.len() >= at_least && got.len() <= at_least + 2,
+            "{topic:?}: {}",
+            got.len()
+        );
         // A subset of the recording, in order, at most one per period.
         let mut k = 0;
         for m in got {
@@ -229,4 +246,36 @@ fn decimated_topics_keep_a_subset_at_their_rate_and_zero_is_off() {
         recorded[Topic::GuardEvents.name()]
     );
     let _ = Published::Scene;
+}
+
+#[test]
+fn states_not_received_are_counted_and_a_restart_starts_again() {
+    let cfg = config::builtin().unwrap();
+    let mut plan = Plan::new(PlanOptions::from_config(&cfg));
+    let state = |cycle: u64| sar_msgs::wire::StateMsg {
+        cycle,
+        now_ns: 1_000_000_000 + cycle * 1_000_000,
+        joints_stamp_ns: 1_000_000_000 + cycle * 1_000_000,
+        flags: sar_msgs::wire::flags::NOW,
+        ..sar_msgs::wire::StateMsg::default()
+    };
+    let mut joints = 0;
+    let mut count = |plan: &mut Plan, cycle: u64| {
+        plan.on_state(&state(cycle), |topic, _, _| {
+            if topic == Published::Record(Topic::Joints) {
+                joints += 1;
+            }
+        });
+    };
+    for cycle in [10, 11, 12, 20, 21, 30] {
+        count(&mut plan, cycle);
+    }
+    let c = plan.counts();
+    assert_eq!((c.states, c.states_lost, c.encode_errors), (6, 7 + 8, 0));
+    // A restarted daemon: its cycles start again; no gap is counted across.
+    plan.restart();
+    count(&mut plan, 1);
+    count(&mut plan, 2);
+    assert_eq!(plan.counts().states_lost, 15);
+    assert_eq!(joints, 8, "a joint sample per new stamp");
 }

@@ -78,7 +78,10 @@ fn the_package_is_the_msg_files_and_hands_each_to_rosidl() {
         .filter_map(|w| w.trim_matches('"').strip_prefix("msg/").map(str::to_owned))
         .collect();
     assert_eq!(listed, ours.keys().cloned().collect::<Vec<_>>(), "{call}");
-    assert!(call.contains("DEPENDENCIES std_msgs builtin_interfaces"), "{call}");
+    assert!(
+        call.contains("DEPENDENCIES std_msgs builtin_interfaces"),
+        "{call}"
+    );
     assert!(cmake.contains("project(sar_msgs)"));
     let xml = std::fs::read_to_string(package().join("package.xml")).unwrap();
     for needed in [
@@ -131,8 +134,7 @@ fn rosidl_of_ros2_jazzy_turns_every_msg_file_into_idl() {
         String::from_utf8_lossy(&out.stderr)
     );
     let stdout = String::from_utf8(out.stdout).unwrap();
-    let parsed: serde_json::Value =
-        serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let parsed: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
     let files = msg_files(&package().join("msg"));
     for (name, bytes) in &files {
         let m = &parsed[name];

@@ -67,7 +67,11 @@ mod tests {
         // Another stream of the same stamps that starts later picks the
         // same ones from its second message on.
         let mut late = Decimator::new(period);
-        let picked: Vec<u64> = stamps[50..].iter().copied().filter(|t| late.due(*t)).collect();
+        let picked: Vec<u64> = stamps[50..]
+            .iter()
+            .copied()
+            .filter(|t| late.due(*t))
+            .collect();
         assert_eq!(picked[0], stamps[50]);
         assert_eq!(&picked[1..], &due[2..]);
         // After a gap of ten periods: the first message after it, then the
