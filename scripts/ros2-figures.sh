@@ -40,7 +40,15 @@ dir=$(mktemp -d)
 pids=()
 # The logs of the last run are kept in target/ros2-figures/.
 keep=$PWD/target/ros2-figures
-trap 'for p in "${pids[@]}"; do kill -CONT "$p" 2>/dev/null; kill "$p" 2>/dev/null || true; done; sleep 0.5; rm -rf "$keep"; mkdir -p "$keep"; cp "$dir"/*.log "$dir"/*.json "$dir"/*.out "$keep"/ 2>/dev/null; rm -rf "$dir"' EXIT
+cleanup() {
+  for p in "${pids[@]}"; do kill -CONT "$p" 2>/dev/null; kill "$p" 2>/dev/null || true; done
+  sleep 1
+  rm -rf "$keep"; mkdir -p "$keep"
+  cp "$dir"/*.log "$dir"/*.json "$dir"/*.out "$keep"/ 2>/dev/null || true
+  rm -rf "$dir"
+}
+trap cleanup EXIT
+trap 'exit 1' INT TERM
 cc -O2 -o "$dir/bare-loop" scripts/bare-loop.c
 tick=$(getconf CLK_TCK)
 
@@ -59,9 +67,11 @@ EOF
 export SAR_RUNTIME_DIR="$dir/run" SAR_SERVICE_PREFIX="ros2-figures-$$" ROS_DOMAIN_ID=0
 export CYCLONEDDS_URI="file://$dir/cyclonedds.xml" PYTHONPATH="$readers/dds" PYTHONDONTWRITEBYTECODE=1
 reader=(python3 crates/ros2/tests/cyclone_reader.py --msg-dir crates/msgs/msg --domain 0)
-ticks() {
-  [ -d /proc/"$1" ] || { echo "ros2-figures: process $1 ended early; its logs are in $keep" >&2; exit 1; }
-  awk '{print $14 + $15}' /proc/"$1"/task/*/stat | awk '{s += $1} END {print s}'
+ticks() { awk '{print $14 + $15}' /proc/"$1"/task/*/stat | awk '{s += $1} END {print s}'; }
+alive() {
+  for p in "$@"; do
+    [ -d /proc/"$p" ] || { echo "ros2-figures: process $p ended early (its logs: $keep)" >&2; exit 1; }
+  done
 }
 status() { "$PWD/target/debug/sarctl" status --format json; }
 # One line of sard's published figures (`sarctl status --format json`).
@@ -87,7 +97,10 @@ EOF
 said() { python3 "$dir/said.py" "$@"; }
 figures() { python3 "$dir/figures.py" "$@"; }
 
-(cd "$dir" && exec "$rel/sard" --sim --config "$dir/sim.toml") 2>"$dir/sard.log" &
+# A copy of sard under a name of its own: a clean-up elsewhere on a shared
+# machine that stops processes named `sard` does not end this measurement.
+cp "$rel/sard" "$dir/sard-figures"
+(cd "$dir" && exec "$dir/sard-figures" --sim --config "$dir/sim.toml") 2>"$dir/sard.log" &
 sard=$!; pids+=("$sard")
 for _ in $(seq 100); do status >/dev/null 2>&1 && break; sleep 0.1; done
 "$rel/sar-ros2" --config "$dir/sim.toml" 2>"$dir/bridge.log" &
@@ -98,10 +111,12 @@ echo "== 1. latency and loss over ${seconds} s, CPU over the same seconds"
 "${reader[@]}" --figures "$seconds" >"$dir/figures.json" &
 fig=$!; pids+=("$fig")
 sleep 3   # discovery
+alive "$sard" "$bridge"
 s0=$(ticks "$sard"); b0=$(ticks "$bridge"); t0=$(date +%s.%N)
 rss() { awk '/VmRSS/ {print $2 " kB"}' /proc/"$1"/status; }
 "$dir/bare-loop" $((seconds * 1000)) >"$dir/bare" &
 wait $!
+alive "$sard" "$bridge"
 s1=$(ticks "$sard"); b1=$(ticks "$bridge"); t1=$(date +%s.%N)
 wait "$fig" || true
 figures "$dir/figures.json" ""
