@@ -41,7 +41,7 @@ pids=()
 # The logs of the last run are kept in target/ros2-figures/.
 keep=$PWD/target/ros2-figures
 cleanup() {
-  for p in "${pids[@]}"; do kill -CONT "$p" 2>/dev/null; kill "$p" 2>/dev/null || true; done
+  for p in "${pids[@]}"; do kill -CONT "$p" 2>/dev/null || true; kill "$p" 2>/dev/null || true; done
   sleep 1
   rm -rf "$keep"; mkdir -p "$keep"
   cp "$dir"/*.log "$dir"/*.json "$dir"/*.out "$keep"/ 2>/dev/null || true

@@ -493,7 +493,7 @@ mod dynamic {
     /// 0.04 m/s and 1 m/s^2 per axis.
     fn excitation(config: &Config, duration_s: f64) -> Excitation {
         Excitation::plan(
-            &ExcitationSpec::around(CENTRE_M, duration_s, 0.04, 1.0),
+            &ExcitationSpec::around(CENTRE_M, duration_s, (0.04, 1.0, 10.0)),
             config,
         )
         .unwrap()
@@ -630,7 +630,7 @@ mod dynamic {
         let dir = scratch("refused");
         let config = config(TRUE_B);
         let text = dynamic_recordings::scenario_text(0.0265, 0.0, 2614);
-        let mut rest = ExcitationSpec::around(CENTRE_M, 8.0, 0.04, 1.0);
+        let mut rest = ExcitationSpec::around(CENTRE_M, 8.0, (0.04, 1.0, 10.0));
         for s in &mut rest.sines {
             s.amplitude_m = 0.0;
         }
@@ -645,7 +645,7 @@ mod dynamic {
         );
         assert!(!msg.contains('\n'));
 
-        let mut along = ExcitationSpec::around(CENTRE_M, 8.0, 0.04, 1.0);
+        let mut along = ExcitationSpec::around(CENTRE_M, 8.0, (0.04, 1.0, 10.0));
         along.sines[0].amplitude_m = 0.0;
         along.sines[1].amplitude_m = 0.0;
         along.sines[2].freq_hz = 1.1;

@@ -1,9 +1,12 @@
 //! `[identify]`: the limits of `sarctl identify --dynamic`'s excitation
 //! (MODEL.md 10, issue 26 section 3), its own and not the operator's move
-//! limits: `excitation_max_speed_mps` (0.04; below `[plausibility]
-//! max_joint_speed_mps`, whose check faults faster joints),
-//! `excitation_max_accel_mps2` (1.0; at most 5) and `excitation_duration_s`
-//! (60; 10..=600).
+//! limits: `excitation_max_speed_mps` (0.02; at most `[axes]
+//! max_speed_mps`, beyond which the drives refuse a streamed set point, and
+//! below `[plausibility] max_joint_speed_mps`, whose check faults faster
+//! joints), `excitation_max_accel_mps2` (1.0; at most 5),
+//! `excitation_max_jerk_mps3` (10; at most 1000) and
+//! `excitation_duration_s` (60; 10..=600). The loop judges every
+//! excitation against them, fades included (`sar_loop::excite::judge`).
 
 use crate::ConfigError;
 use crate::toml_file::Ctx;
@@ -15,6 +18,7 @@ use serde::Deserialize;
 pub(crate) struct IdentifyToml {
     excitation_max_speed_mps: f64,
     excitation_max_accel_mps2: f64,
+    excitation_max_jerk_mps3: f64,
     excitation_duration_s: f64,
 }
 
@@ -24,6 +28,7 @@ impl Default for IdentifyToml {
         Self {
             excitation_max_speed_mps: d.excitation_max_speed_mps,
             excitation_max_accel_mps2: d.excitation_max_accel_mps2,
+            excitation_max_jerk_mps3: d.excitation_max_jerk_mps3,
             excitation_duration_s: d.excitation_duration_s,
         }
     }
@@ -36,6 +41,8 @@ pub struct IdentifySettings {
     pub excitation_max_speed_mps: f64,
     /// Largest joint acceleration of the excitation, m/s^2.
     pub excitation_max_accel_mps2: f64,
+    /// Largest joint jerk of the excitation, m/s^3.
+    pub excitation_max_jerk_mps3: f64,
     /// The excitation's duration, s.
     pub excitation_duration_s: f64,
 }
@@ -43,8 +50,9 @@ pub struct IdentifySettings {
 impl Default for IdentifySettings {
     fn default() -> Self {
         Self {
-            excitation_max_speed_mps: 0.04,
+            excitation_max_speed_mps: 0.02,
             excitation_max_accel_mps2: 1.0,
+            excitation_max_jerk_mps3: 10.0,
             excitation_duration_s: 60.0,
         }
     }
@@ -54,11 +62,16 @@ impl Default for IdentifySettings {
 /// a ball-screw axis's own limit).
 const MAX_EXCITATION_ACCEL_MPS2: f64 = 5.0;
 
-/// Checks `[identify]` (each error names its key).
+/// Largest `excitation_max_jerk_mps3`, m/s^3.
+const MAX_EXCITATION_JERK_MPS3: f64 = 1000.0;
+
+/// Checks `[identify]` (each error names its key) against the speeds of
+/// `[plausibility]` and `[axes]`.
 pub(crate) fn identify(
     ctx: &Ctx<'_>,
     t: &IdentifyToml,
     max_joint_speed_mps: f64,
+    axes_max_speed_mps: f64,
 ) -> Result<IdentifySettings, ConfigError> {
     let speed = t.excitation_max_speed_mps;
     if !(speed.is_finite() && speed > 0.0 && speed < max_joint_speed_mps) {
@@ -69,11 +82,26 @@ pub(crate) fn identify(
             ),
         ));
     }
+    if speed > axes_max_speed_mps {
+        return Err(ctx.err(
+            "identify.excitation_max_speed_mps",
+            format!(
+                "{speed} m/s is above axes.max_speed_mps ({axes_max_speed_mps} m/s): the drives refuse a streamed set point faster than that, so `sarctl identify --dynamic --live` would be refused; lower it or raise axes.max_speed_mps"
+            ),
+        ));
+    }
     let accel = t.excitation_max_accel_mps2;
     if !(accel.is_finite() && accel > 0.0 && accel <= MAX_EXCITATION_ACCEL_MPS2) {
         return Err(ctx.err(
             "identify.excitation_max_accel_mps2",
             format!("{accel} m/s^2 must be > 0 and at most {MAX_EXCITATION_ACCEL_MPS2} m/s^2"),
+        ));
+    }
+    let jerk = t.excitation_max_jerk_mps3;
+    if !(jerk.is_finite() && jerk > 0.0 && jerk <= MAX_EXCITATION_JERK_MPS3) {
+        return Err(ctx.err(
+            "identify.excitation_max_jerk_mps3",
+            format!("{jerk} m/s^3 must be > 0 and at most {MAX_EXCITATION_JERK_MPS3} m/s^3"),
         ));
     }
     let duration = t.excitation_duration_s;
@@ -86,6 +114,7 @@ pub(crate) fn identify(
     Ok(IdentifySettings {
         excitation_max_speed_mps: speed,
         excitation_max_accel_mps2: accel,
+        excitation_max_jerk_mps3: jerk,
         excitation_duration_s: duration,
     })
 }

@@ -55,9 +55,11 @@
 //!   drives' other limits come from `[axes]` and `[plausibility]` (see
 //!   `sar-daemon`'s `devices::canopen_config`).
 //! - `[identify]`: the limits of `sarctl identify --dynamic`'s excitation
-//!   (not the operator's move limits): `excitation_max_speed_mps` (0.04;
-//!   below `[plausibility] max_joint_speed_mps`), `excitation_max_accel_mps2`
-//!   (1; at most 5), `excitation_duration_s` (60; 10..=600).
+//!   (not the operator's move limits): `excitation_max_speed_mps` (0.02;
+//!   at most `[axes] max_speed_mps`, below `[plausibility]
+//!   max_joint_speed_mps`), `excitation_max_accel_mps2` (1; at most 5),
+//!   `excitation_max_jerk_mps3` (10; at most 1000), `excitation_duration_s`
+//!   (60; 10..=600).
 //! - `[ros2]`: the ROS 2 bridge's (`sar-ros2`; `sard` only checks it): the
 //!   DDS domain, the local addresses DDS uses, each topic's rate
 //!   (`Ros2Settings`, module `ros2`).
@@ -892,8 +894,8 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
     let mut axes = axes(ctx, &f.axes, f.plausibility.max_joint_speed_mps)?;
     let guard = guard(ctx, &f.guard)?;
     let sensor_driver = sensor_driver(ctx, f.drivers.sensor.as_ref())?;
-    let plausibility = plausibility(ctx, &f.plausibility, &f.sensor, &sensor_driver)?;
     let tip = tip(ctx, &f.tip)?;
+    let plausibility = plausibility(ctx, &f.plausibility, &f.sensor, &sensor_driver, &tip)?;
     let loop_ = loop_config(ctx, &f.loop_)?;
     let mut record = record(ctx, &f.record)?;
     let axes_driver = axes_driver(ctx, f.drivers.axes.as_ref(), axes.max_accel_mps2)?;
@@ -905,7 +907,12 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         (tip.sample_rate_hz, loop_.rate_hz),
         (f.axes.servo_bandwidth_hz, f.axes.servo_damping),
     )?;
-    let identify = identify::identify(ctx, &f.identify, f.plausibility.max_joint_speed_mps)?;
+    let identify = identify::identify(
+        ctx,
+        &f.identify,
+        f.plausibility.max_joint_speed_mps,
+        f.axes.max_speed_mps,
+    )?;
     let ros2 = ros2::ros2(ctx, &f.ros2, record.scene_period_ns)?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
@@ -1182,6 +1189,7 @@ fn plausibility(
     p: &PlausibilityToml,
     sensor: &SensorToml,
     sensor_driver: &SensorDriver,
+    tip: &Tip,
 ) -> Result<PlausibilityConfig, ConfigError> {
     let gap = ctx.range_u32(
         "plausibility.max_counter_gap",
@@ -1201,6 +1209,8 @@ fn plausibility(
         max_joint_speed_mps: p.max_joint_speed_mps,
         joint_margin_m: p.joint_margin_m,
         max_counter_gap: gap,
+        // Checked finite and > 0 by `tip`.
+        sample_period_ns: (1e9 / tip.sample_rate_hz).round() as u64,
         torque,
         frozen: frozen_check(ctx, p, sensor, torque.as_ref(), sensor_driver)?,
         range: Some(SensorRange {
@@ -1419,7 +1429,9 @@ impl Config {
             excite: sar_loop::excite::ExciteLimits {
                 max_speed_mps: self.identify.excitation_max_speed_mps,
                 max_accel_mps2: self.identify.excitation_max_accel_mps2,
+                max_jerk_mps3: self.identify.excitation_max_jerk_mps3,
                 axes_max_speed_mps: self.axes.max_speed_mps,
+                period_ns: self.loop_.period_ns,
             },
         }
     }

@@ -898,12 +898,40 @@ fn the_inertia_keys_have_stated_defaults_and_are_checked_by_key() {
 }
 
 /// `[identify]` (issue 26): defaults, a value read, and each key's refusal
-/// naming it (the speed must stay below the plausibility check's).
+/// naming it (the speed must stay below the plausibility check's, and at
+/// most the drives' streamed speed, `[axes] max_speed_mps`: issue 33, where
+/// the shipped 0.04 m/s above the axes' 0.02 made `identify --dynamic
+/// --live` refused by the loop after the tool had moved and recorded).
 #[test]
 fn the_identify_keys() {
     let c = config::parse(MINIMUM, "robot.toml").unwrap();
     assert_eq!(c.identify, config::IdentifySettings::default());
-    assert_eq!(c.identify.excitation_max_speed_mps, 0.04);
+    assert_eq!(c.identify.excitation_max_speed_mps, 0.02);
+    assert_eq!(c.identify.excitation_max_jerk_mps3, 10.0);
+    // The shipped configurations run the excitation as shipped.
+    for c in [config::builtin().unwrap(), c] {
+        assert!(c.identify.excitation_max_speed_mps <= c.axes.max_speed_mps);
+    }
+    let e = config::parse(
+        &format!("{MINIMUM}\n[identify]\nexcitation_max_speed_mps = 0.03\n"),
+        "robot.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("identify.excitation_max_speed_mps")
+            && e.contains("above axes.max_speed_mps (0.02 m/s)"),
+        "{e}"
+    );
+    // Raised with the axes' speed, it is accepted.
+    let c = config::parse(
+        &format!(
+            "{MINIMUM}\n[axes]\nmax_speed_mps = 0.03\n[identify]\nexcitation_max_speed_mps = 0.03\n"
+        ),
+        "robot.toml",
+    )
+    .unwrap();
+    assert_eq!(c.identify.excitation_max_speed_mps, 0.03);
     let c = config::parse(
         &format!("{MINIMUM}\n[identify]\nexcitation_duration_s = 30.0\n"),
         "robot.toml",
@@ -922,6 +950,14 @@ fn the_identify_keys() {
         (
             "excitation_duration_s = 5.0",
             "identify.excitation_duration_s",
+        ),
+        (
+            "excitation_max_jerk_mps3 = 0.0",
+            "identify.excitation_max_jerk_mps3",
+        ),
+        (
+            "excitation_max_jerk_mps3 = 2000.0",
+            "identify.excitation_max_jerk_mps3",
         ),
     ] {
         let e = config::parse(&format!("{MINIMUM}\n[identify]\n{line}\n"), "robot.toml")

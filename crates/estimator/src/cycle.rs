@@ -14,8 +14,11 @@
 //!
 //! Plausibility, decided from the inputs alone, each a latched Fault of its own
 //! reason (limits in [`PlausibilityLimits`]): a clock that cannot be read or
-//! does not advance; a sensor counter that jumps by more than
-//! `max_counter_gap`; a sample whose counter has not changed for longer than
+//! does not advance; a cycle that comes longer after the previous one than
+//! the sensor's accepted age (a stall; a late cycle within it is an input the
+//! loop carries on from, issue 33); a sensor counter that jumps by more than
+//! `max_counter_gap` beyond the samples the stamps' difference explains; a
+//! sample whose counter has not changed for longer than
 //! the guard's `max_sensor_age_ns` (the age runs from the stamp of the sample
 //! that first carried the counter); a device status other than 0; a joint
 //! that moves between two joint samples by more than `max_joint_speed_mps`
@@ -379,8 +382,17 @@ pub struct PlausibilityLimits {
     /// (finite, >= 0): quantisation, stamp jitter. Default 0.2 mm.
     pub joint_margin_m: f64,
     /// The largest accepted step of the sensor counter between two new
-    /// samples (1 = no sample lost; >= 1). Default 3.
+    /// samples beyond the samples their stamps' difference explains
+    /// (1 = no sample lost; >= 1). Default 3. A late cycle (the loop did not
+    /// look) explains its samples by the time that passed: the newest sample
+    /// then is `round(dt / sample_period_ns)` after the last one judged, and
+    /// that many less one are added to the accepted step; the time itself is
+    /// judged by the cycle gap ([`Reason::CycleGap`]).
     pub max_counter_gap: u32,
+    /// The sensor's sample period, ns (> 0; `[tip] sample_rate_hz`):
+    /// explains a counter step by the stamps' difference. Default 2 ms
+    /// (500 Hz).
+    pub sample_period_ns: u64,
     /// The torque check; `None` switches it off (a sensor without torque).
     /// Default on, with [`TorqueLimits`]' defaults.
     pub torque: Option<TorqueLimits>,
@@ -408,6 +420,7 @@ impl Default for PlausibilityLimits {
             max_joint_speed_mps: 0.05,
             joint_margin_m: 2e-4,
             max_counter_gap: 3,
+            sample_period_ns: 2_000_000,
             torque: Some(TorqueLimits {
                 noise_nm: Vec3::new(x, y, z),
                 max_sigma: TorqueLimits::DEFAULT_MAX_SIGMA,
@@ -747,6 +760,12 @@ impl PlausibilityConfig {
             0.0,
             "must be >= 1",
         )?;
+        require(
+            limits.sample_period_ns != 0,
+            "sample_period_ns",
+            0.0,
+            "must be > 0",
+        )?;
         if let Some(t) = limits.torque {
             t.check()?;
         }
@@ -978,7 +997,8 @@ struct InputChecks {
     clock_fault: Option<Reason>,
     /// The sensor sample is a new one (its counter changed).
     new_sample: bool,
-    /// Samples were lost since the previous new one.
+    /// The counter jumped beyond what the time explains (the filter
+    /// restarts; an explained gap is stepped over, [`TipFilter::update_counted`]).
     lost_samples: bool,
     counter_fault: Option<Reason>,
     status_fault: Option<Reason>,
@@ -1363,7 +1383,10 @@ impl Estimator {
         debug_assert_eq!(out.guard_state, self.guard.state());
     }
 
-    /// The clock: no reading, or one that does not advance, trusts nothing.
+    /// The clock: no reading, or one that does not advance, trusts nothing;
+    /// a cycle later after the previous one than the sensor's accepted age
+    /// is a Fault of its own (a stall: nothing was judged meanwhile), its
+    /// time trusted.
     fn check_clock(&mut self, now_ns: Option<u64>) -> (Option<u64>, Option<Reason>) {
         match now_ns {
             None => (None, Some(Reason::ClockFailed)),
@@ -1375,9 +1398,14 @@ impl Estimator {
                         now_ns,
                     }),
                 ),
-                _ => {
+                previous => {
                     self.last_now_ns = Some(now_ns);
-                    (Some(now_ns), None)
+                    let max_ns = self.guard.config().limits().max_sensor_age_ns;
+                    let gap = previous
+                        .map(|p| now_ns - p)
+                        .filter(|&gap_ns| gap_ns > max_ns)
+                        .map(|gap_ns| Reason::CycleGap { gap_ns, max_ns });
+                    (Some(now_ns), gap)
                 }
             },
         }
@@ -1385,19 +1413,25 @@ impl Estimator {
 
     /// The sensor counter: a new sample, a gap, or the same sample again
     /// (whose age runs from its first stamp, however it was re-stamped).
-    /// Returns (new sample, samples lost since the last one, fault).
+    /// Returns (new sample, samples lost beyond what the time explains,
+    /// fault).
     fn check_counter(&mut self, sensor: &SensorSample) -> (bool, bool, Option<Reason>) {
         let new_sample = self.last_counter != Some(sensor.counter);
-        // Samples were lost since the last one (the filter restarts: it
-        // steps once per sample and would lag by the lost ones).
-        let lost_samples = new_sample
-            && self
-                .last_counter
-                .is_some_and(|previous| sensor.counter.wrapping_sub(previous) != 1);
         let mut fault = None;
         if new_sample {
             if let Some(previous) = self.last_counter {
-                let max_gap = self.limits.max_counter_gap;
+                // Samples the time since the last one explains (a late
+                // cycle): that many, less the one step of no loss.
+                let explained = sensor
+                    .stamp_ns
+                    .saturating_sub(self.counter_stamp_ns)
+                    .saturating_add(self.limits.sample_period_ns / 2);
+                let explained = explained / self.limits.sample_period_ns.max(1);
+                let explained = u32::try_from(explained).unwrap_or(u32::MAX);
+                let max_gap = self
+                    .limits
+                    .max_counter_gap
+                    .saturating_add(explained.saturating_sub(1));
                 if sensor.counter.wrapping_sub(previous) > max_gap {
                     fault = Some(Reason::SensorCounterGap {
                         previous,
@@ -1409,7 +1443,7 @@ impl Estimator {
             self.last_counter = Some(sensor.counter);
             self.counter_stamp_ns = sensor.stamp_ns;
         }
-        (new_sample, lost_samples, fault)
+        (new_sample, fault.is_some(), fault)
     }
 
     /// The sensor's own values: saturation (this cycle's sample), frozen
@@ -1621,8 +1655,9 @@ impl Estimator {
         }
     }
 
-    /// The filter: stepped with each new sample's observable estimate,
-    /// reset when there is none (no stale state carried over a gap).
+    /// The filter: stepped with each new sample's observable estimate (a
+    /// gap the time explains stepped over with the sample held), reset when
+    /// there is none or samples were lost (no stale state carried over).
     fn step_filter(&mut self, lost_samples: bool, counter: u32) {
         let out = &mut self.last;
         out.filtered = None;
@@ -2150,6 +2185,7 @@ sar_snapshot::config_struct!(PlausibilityLimits {
     max_joint_speed_mps,
     joint_margin_m,
     max_counter_gap,
+    sample_period_ns,
     torque,
     frozen,
     range,

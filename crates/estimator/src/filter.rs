@@ -34,6 +34,11 @@
 use crate::Vec3;
 use nalgebra::ComplexField;
 
+/// The longest counter gap [`TipFilter::update_counted`] steps over with the
+/// new sample held (64 samples: 128 ms at 500 Hz, beyond any accepted input
+/// age); a longer one restarts the filter.
+pub const MAX_HELD_SAMPLES: u32 = 64;
+
 /// Settings of the tip-force low-pass.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FilterConfig {
@@ -279,20 +284,42 @@ impl TipFilter {
 
     /// As [`TipFilter::update`], for a loop faster than the sensor: a sample
     /// whose `counter` equals the last one stepped is a repeat, and the last
-    /// output is returned without stepping. (A gap in the counter is stepped
-    /// as one sample: the caller's plausibility checks judge gaps.)
+    /// output is returned without stepping. A gap in the counter (samples the
+    /// loop did not see: a late cycle, or lost) of `k` samples, at most
+    /// [`MAX_HELD_SAMPLES`], is stepped `k` times with this sample held, each
+    /// step with its deviation times `sqrt(k)`: the filter keeps its time
+    /// scale and its state (no restart, no jump), and the deviation stays an
+    /// upper bound (the held steps' noise is one sample's, whose variance
+    /// through the `k` steps is `sigma^2 (sum h)^2 <= k sigma^2 sum h^2`).
+    /// A longer gap (or a counter that went back) restarts the filter at
+    /// this sample. The caller's plausibility checks judge gaps.
     pub fn update_counted(
         &mut self,
         counter: u32,
         force_n: &Vec3,
         std_n: &Vec3,
     ) -> Result<Filtered, FilterError> {
-        if let Some(state) = &self.state
-            && state.counter == Some(counter)
-        {
-            return Ok(state.last);
+        let gap = match &self.state {
+            Some(state) if state.counter == Some(counter) => return Ok(state.last),
+            Some(State {
+                counter: Some(last),
+                ..
+            }) => counter.wrapping_sub(*last),
+            _ => 1,
+        };
+        if gap <= 1 {
+            return self.step(force_n, std_n, Some(counter));
         }
-        self.step(force_n, std_n, Some(counter))
+        if gap > MAX_HELD_SAMPLES {
+            self.reset();
+            return self.step(force_n, std_n, Some(counter));
+        }
+        let held_std_n = std_n * ComplexField::sqrt(f64::from(gap));
+        let mut out = self.step(force_n, &held_std_n, Some(counter))?;
+        for _ in 1..gap {
+            out = self.step(force_n, &held_std_n, Some(counter))?;
+        }
+        Ok(out)
     }
 
     /// One step: the sample checked (an invalid one resets the filter), the

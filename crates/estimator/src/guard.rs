@@ -1045,6 +1045,22 @@ reasons! {
             f,
             "the wrench at rest is still being measured ({samples} of {needed} samples): keep the robot still and reset again"
         ),
+        /// The loop ran longer after its previous cycle than the sensor
+        /// sample's accepted age (`[guard] max_sensor_age_s`): for that long
+        /// nothing was judged (a stalled host, a suspended process). A late
+        /// cycle within the age is an input the loop carries on from (issue
+        /// 33); this is the stall beyond it.
+        CycleGap {
+            /// Time since the previous cycle, ns.
+            gap_ns: u64,
+            /// The accepted age, ns.
+            max_ns: u64,
+        } = 38, "cycle_gap" => write!(
+            f,
+            "the loop ran {} ms after its previous cycle, longer than the sensor's accepted age of {} ms: nothing was judged meanwhile",
+            sar_kinematics::Shown(gap_ns as f64 * 1e-6),
+            sar_kinematics::Shown(max_ns as f64 * 1e-6)
+        ),
     }
 }
 

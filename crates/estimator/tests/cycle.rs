@@ -979,12 +979,18 @@ fn the_filtered_tip_force_is_stepped_per_new_sample_and_reset_without_input() {
     let out = *rig.estimator.cycle(&repeat);
     assert!(!out.new_sample);
     assert_eq!(out.filtered, filtered_before);
-    // A lost sample (counter + 2): the filter restarts at the new estimate
-    // rather than lag by the samples it never saw.
+    // A sample missed (counter + 2, within the accepted gap: a late cycle,
+    // issue 33): the filter steps over the gap with the new sample held,
+    // each step with its deviation times sqrt(2) (an upper bound), rather
+    // than restart at one noisy sample or lag by the samples it never saw.
     rig.counter = rig.counter.wrapping_add(1);
     let out = rig.push(NOMINAL_Q, &Vector3::new(2.5, 0.0, 0.0));
     let e = estimate(&out);
-    assert_eq!(out.filtered.unwrap().force_n, e.force_n);
+    let held_std_n = e.std_n * 2f64.sqrt();
+    reference.update(&e.force_n, &held_std_n).unwrap();
+    let expected = reference.update(&e.force_n, &held_std_n).unwrap();
+    assert_eq!(out.filtered, Some(expected));
+    assert_ne!(out.filtered.unwrap().force_n, e.force_n);
     // No estimate (invalid joints): no filtered output, and the filter resets.
     let mut bad = rig.at_rest();
     bad.joints.valid = false;

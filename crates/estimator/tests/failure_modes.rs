@@ -1081,6 +1081,10 @@ fn every_reason() -> Vec<Reason> {
             samples: 12,
             needed: 500,
         },
+        Reason::CycleGap {
+            gap_ns: 120_000_000,
+            max_ns: 50_000_000,
+        },
     ];
     for r in &all {
         match r {
@@ -1120,7 +1124,8 @@ fn every_reason() -> Vec<Reason> {
             | Reason::ForceRising { .. }
             | Reason::PublisherStalled { .. }
             | Reason::DriveFault { .. }
-            | Reason::RestIncomplete { .. } => {}
+            | Reason::RestIncomplete { .. }
+            | Reason::CycleGap { .. } => {}
         }
     }
     all

@@ -138,6 +138,10 @@ fn reason(code: u16, a: u64, b: u32, x: f64, y: f64, z: f64, k: u8) -> Reason {
             samples: b,
             needed: b / 2,
         },
+        38 => Reason::CycleGap {
+            gap_ns: u64::from(b),
+            max_ns: u64::from(b / 2),
+        },
         other => panic!("no reason has code {other}"),
     }
 }
@@ -188,7 +192,7 @@ proptest! {
 
 #[test]
 fn an_unknown_reason_tag_is_refused() {
-    for tag in [0u8, 38, 255] {
+    for tag in [0u8, 39, 255] {
         let buf = [tag, 0, 0, 0];
         let e = Reason::get(&mut Reader::new(&buf)).unwrap_err();
         assert!(e.to_string().contains("Reason"), "{e}");

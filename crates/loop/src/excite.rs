@@ -5,14 +5,19 @@
 //! analytically each cycle ([`Excitation::at`], no allocation, fixed size)
 //! and streams it to the drives one period ahead.
 //!
-//! A request is judged by [`judge`]: its parameters finite and in range, each
-//! axis's peak speed and acceleration of the middle part (`A w`, `A w^2`)
-//! within `[identify] excitation_max_speed_mps`, `excitation_max_accel_mps2`
-//! (with [`PEAK_ALLOWANCE`] for the planner's sampled peaks) and the peak
-//! speed within the drives' `[axes] max_speed_mps`, and the sweep
-//! (`centre +- A`: the fade never exceeds 1) within the travel. The fades'
-//! own peaks are checked every cycle ([`Excitation::within_limits`]): above
-//! the limits the excitation is braked.
+//! A request is judged by [`judge`] before anything moves (issue 33): its
+//! parameters finite and in range, each fade at least [`MIN_FADE_PERIODS`]
+//! of the loop's periods, each axis's peak speed, acceleration and jerk over
+//! the whole faded motion ([`unit_peaks`]: an upper bound, the fades
+//! included, so that no client can make the loop stream a step) within
+//! `[identify] excitation_max_speed_mps`, `excitation_max_accel_mps2`,
+//! `excitation_max_jerk_mps3` (with [`PEAK_ALLOWANCE`]) and the peak speed
+//! within the drives' `[axes] max_speed_mps`, and the sweep (`centre +- A`:
+//! the fade never exceeds 1) within the travel. `sarctl identify --dynamic`
+//! scales its amplitudes with the same [`unit_peaks`], so that what it plans
+//! the loop accepts. The peaks are checked again every cycle
+//! ([`Excitation::within_limits`]): above the limits the excitation is
+//! braked.
 //!
 //! The estimator is handed its motion as any streamed motion's
 //! ([`crate::motion`]: the servo model follows the streamed set points);
@@ -38,15 +43,15 @@ pub enum ExciteRefusal {
         /// Its value.
         value: f64,
     },
-    /// A peak speed or acceleration above a limit.
+    /// A peak speed, acceleration or jerk above a limit.
     AboveLimit {
         /// 1, 2 or 3 (q1, q2, q3).
         axis: u8,
         /// The key, with its section.
         key: &'static str,
-        /// The unit: m/s or m/s^2.
+        /// The unit: m/s, m/s^2 or m/s^3.
         unit: &'static str,
-        /// The peak, m/s or m/s^2.
+        /// The peak, m/s, m/s^2 or m/s^3.
         value: f64,
         /// The key's value.
         limit: f64,
@@ -74,9 +79,10 @@ impl core::fmt::Display for ExciteRefusal {
                 }
                 write!(
                     f,
-                    " = {} is out of range (amplitude >= 0, frequency > 0, 0 < 2 fade <= \
-                     duration <= {} s)",
+                    " = {} is out of range (amplitude >= 0, frequency > 0, {} periods of the \
+                     loop <= fade, 2 fade <= duration <= {} s)",
                     Shown(*value),
+                    MIN_FADE_PERIODS,
                     Shown(MAX_DURATION_S)
                 )
             }
@@ -88,7 +94,8 @@ impl core::fmt::Display for ExciteRefusal {
                 limit,
             } => write!(
                 f,
-                "the excitation of q{axis} peaks at {value:.4} {unit}, above {key} = {} {unit}",
+                "the excitation of q{axis} peaks at {} {unit} (its fades included), above {key} = {} {unit}",
+                Shown(*value),
                 Shown(*limit)
             ),
             Self::OutsideTravel {
@@ -114,14 +121,60 @@ pub struct ExciteLimits {
     pub max_speed_mps: f64,
     /// The largest joint acceleration, m/s^2.
     pub max_accel_mps2: f64,
+    /// The largest joint jerk, m/s^3.
+    pub max_jerk_mps3: f64,
     /// The drives' speed limit (`[axes] max_speed_mps`: a streamed set
     /// point further than this over a period is refused by them), m/s.
     pub axes_max_speed_mps: f64,
+    /// The loop's period, ns: a fade is at least [`MIN_FADE_PERIODS`] of
+    /// them.
+    pub period_ns: u64,
 }
 
-/// The relative allowance over the limits for the excitation planner's
-/// peaks, which it finds on a 1 ms grid (a sine's sampled peak is below its
-/// true one by about `(w dt)^2 / 2`, 6e-5 at 1.7 Hz).
+/// The shortest fade, in the loop's periods: the fade is the excitation's
+/// own ramp from rest; shorter, it is a step however small the limits
+/// judge it (the peaks below judge how fast it may be).
+pub const MIN_FADE_PERIODS: u32 = 100;
+
+/// The fade's phases [`unit_peaks`] evaluates the envelope at (0..=pi).
+const FADE_SAMPLES: u32 = 1024;
+
+/// The peak speed, acceleration and jerk of one axis of unit amplitude at
+/// `freq_hz` faded in and out over `fade_s` (the raised cosine of
+/// [`fade`]), over the whole excitation: an upper bound, exact where the
+/// sine runs through its phases within the fade. With `x = e(t) sin(w t)`,
+/// each derivative is `alpha sin + beta cos` of the fade's value and
+/// derivatives, so at most `sqrt(alpha^2 + beta^2)`, taken over the fade's
+/// phase (the fade out mirrors the fade in: the same magnitudes) and the
+/// middle part (`w`, `w^2`, `w^3`). No allocation; [`FADE_SAMPLES`] phases.
+pub fn unit_peaks(freq_hz: f64, fade_s: f64) -> [f64; 3] {
+    let w = core::f64::consts::TAU * freq_hz;
+    let k = core::f64::consts::PI / fade_s;
+    let hyp = |a: f64, b: f64| (a * a + b * b).sqrt();
+    let mut peaks = [w, w * w, w * w * w];
+    for i in 0..=FADE_SAMPLES {
+        let phase = core::f64::consts::PI * f64::from(i) / f64::from(FADE_SAMPLES);
+        let (sin, cos) = phase.sin_cos();
+        let e = 0.5 * (1.0 - cos);
+        let e1 = 0.5 * k * sin;
+        let e2 = 0.5 * k * k * cos;
+        let e3 = -0.5 * k * k * k * sin;
+        let now = [
+            hyp(e1, e * w),
+            hyp(e2 - e * w * w, 2.0 * e1 * w),
+            hyp(e3 - 3.0 * e1 * w * w, 3.0 * e2 * w - e * w * w * w),
+        ];
+        for (p, n) in peaks.iter_mut().zip(now) {
+            *p = p.max(n);
+        }
+    }
+    peaks
+}
+
+/// The relative allowance over the limits: for the rounding of a planner
+/// that scales its amplitudes to the limits by [`unit_peaks`], whose
+/// envelope found on [`FADE_SAMPLES`] phases is below its true peak by far
+/// less (the phase step is 0.003 rad).
 pub const PEAK_ALLOWANCE: f64 = 1e-3;
 
 /// The longest excitation a request may ask for, s.
@@ -267,7 +320,8 @@ pub fn judge(
     if !(d.is_finite() && d > 0.0 && d <= MAX_DURATION_S) {
         return Err(bad("duration_s", d));
     }
-    if !(f.is_finite() && f > 0.0 && 2.0 * f <= d) {
+    let min_fade_s = f64::from(MIN_FADE_PERIODS) * limits.period_ns as f64 * 1e-9;
+    if !(f.is_finite() && f >= min_fade_s && 2.0 * f <= d) {
         return Err(bad("fade_s", f));
     }
     for (i, (((&a_m, &f_hz), &c_m), &travel)) in request
@@ -279,16 +333,16 @@ pub fn judge(
         .enumerate()
     {
         let axis = u8::try_from(i + 1).unwrap_or(0);
-        judge_axis(axis, (a_m, f_hz, c_m), travel, limits)?;
+        judge_axis(axis, (a_m, f_hz, c_m, f), travel, limits)?;
     }
     Ok(())
 }
 
 /// One axis of [`judge`]: its amplitude and frequency in range, its peaks
-/// within the limits, its sweep within the travel.
+/// (the fades included) within the limits, its sweep within the travel.
 fn judge_axis(
     axis: u8,
-    (a_m, f_hz, c_m): (f64, f64, f64),
+    (a_m, f_hz, c_m, fade_s): (f64, f64, f64, f64),
     (lo, hi): (f64, f64),
     limits: &ExciteLimits,
 ) -> Result<(), ExciteRefusal> {
@@ -299,11 +353,13 @@ fn judge_axis(
     if !(f_hz.is_finite() && f_hz > 0.0) {
         return Err(bad("freq_hz", f_hz));
     }
-    let w = 2.0 * core::f64::consts::PI * f_hz;
+    let [speed, accel, jerk] = unit_peaks(f_hz, fade_s);
     let k = 1.0 + PEAK_ALLOWANCE;
     let above = |value: f64, limit: f64, key: &'static str| {
         let unit = if key.contains("accel") {
             "m/s^2"
+        } else if key.contains("jerk") {
+            "m/s^3"
         } else {
             "m/s"
         };
@@ -315,12 +371,14 @@ fn judge_axis(
             limit,
         })
     };
-    let speed_mps = a_m * w;
+    let speed_mps = a_m * speed;
     let speed_key = "[identify] excitation_max_speed_mps";
     let accel_key = "[identify] excitation_max_accel_mps2";
+    let jerk_key = "[identify] excitation_max_jerk_mps3";
     if let Some(e) = above(speed_mps, limits.max_speed_mps, speed_key)
         .or_else(|| above(speed_mps, limits.axes_max_speed_mps, "[axes] max_speed_mps"))
-        .or_else(|| above(a_m * w * w, limits.max_accel_mps2, accel_key))
+        .or_else(|| above(a_m * accel, limits.max_accel_mps2, accel_key))
+        .or_else(|| above(a_m * jerk, limits.max_jerk_mps3, jerk_key))
     {
         return Err(e);
     }
@@ -351,5 +409,7 @@ sar_snapshot::snap_struct!(Excitation {
 sar_snapshot::config_struct!(ExciteLimits {
     max_speed_mps,
     max_accel_mps2,
+    max_jerk_mps3,
     axes_max_speed_mps,
+    period_ns,
 });

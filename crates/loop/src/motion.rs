@@ -21,6 +21,14 @@
 //!   the standard deviation [`MotionConfig::unknown_accel_std_mps2`] (the
 //!   hardest the drives brake).
 //!
+//! A late cycle (issue 33) is stepped through: the model runs on its own
+//! grid from its last sample, against the reference the drives had (a
+//! streamed set point held until the next), for gaps of up to
+//! [`MAX_MODEL_GAP_NS`]; so after a stall the drives' quick stop starts from
+//! where the axes are ([`AxesMotion::start_halt`]), and for an excitation
+//! with ideal drives from the streamed set points, not the trajectory's
+//! centre.
+//!
 //! The standard deviation of a known motion is [`ACCEL_STD_FRACTION`] of
 //! its acceleration plus, while the axes move, [`ACCEL_STD_FLOOR_MPS2`]
 //! (for real drives, which the model only approximates; against the
@@ -37,9 +45,15 @@ use sar_estimator::motion::CarriageMotion;
 /// the simulator's physics step).
 pub const MODEL_STEP_NS: u64 = 100_000;
 
-/// A gap longer than this between two evaluations (samples lost, the first
-/// cycle) restarts the model on the trajectory, ns.
-pub const MAX_MODEL_GAP_NS: u64 = 50_000_000;
+/// A gap longer than this between two evaluations (the first cycle, or a
+/// stall far beyond any the guard accepts) restarts the model: at rest on
+/// the streamed set points' reference when there are some (the drives held
+/// the last one that long), else on the trajectory, ns. A shorter gap (a
+/// late cycle, a stall the guard faults on) is stepped through, at most
+/// `MAX_MODEL_GAP_NS / MODEL_STEP_NS` = 20,000 samples of the model: the
+/// axes' state after a stall, from which the drives' quick stop starts, is
+/// what they did meanwhile (issue 33).
+pub const MAX_MODEL_GAP_NS: u64 = 2_000_000_000;
 
 /// The standard deviation of a known acceleration: this fraction of it...
 pub const ACCEL_STD_FRACTION: f64 = 0.1;
@@ -237,12 +251,24 @@ pub struct Streamed {
 impl Streamed {
     /// The drives' reference at `t_ns` (`None` without streamed set points).
     fn reference(&self, t_ns: u64) -> Option<[f64; 3]> {
+        self.reference_moving(t_ns).map(|axes| axes.map(|a| a.x_m))
+    }
+
+    /// The drives' reference at `t_ns` and its speed (constant over each
+    /// period, 0 once a set point is reached; no acceleration): what ideal
+    /// drives do (`None` without streamed set points).
+    fn reference_moving(&self, t_ns: u64) -> Option<Axes> {
         let n = usize::from(self.len).min(STREAMED);
         if n == 0 {
             return None;
         }
+        let still = |x_m: f64| ServoAxis {
+            x_m,
+            v_mps: 0.0,
+            a_mps2: 0.0,
+        };
         let Some(i) = self.at_ns.iter().take(n).rposition(|&at| at <= t_ns) else {
-            return Some(self.from_m);
+            return Some(self.from_m.map(still));
         };
         let prev = match i.checked_sub(1) {
             Some(p) => self.q_m.get(p).copied().unwrap_or(self.from_m),
@@ -250,14 +276,18 @@ impl Streamed {
         };
         let to = self.q_m.get(i).copied().unwrap_or(prev);
         let at = self.at_ns.get(i).copied().unwrap_or(t_ns);
-        let frac = ((t_ns - at) as f64 / self.period_ns.max(1) as f64).min(1.0);
-        let [p1, p2, p3] = prev;
-        let [t1, t2, t3] = to;
-        Some([
-            p1 + (t1 - p1) * frac,
-            p2 + (t2 - p2) * frac,
-            p3 + (t3 - p3) * frac,
-        ])
+        let period_s = self.period_ns.max(1) as f64 * 1e-9;
+        let elapsed_s = (t_ns - at) as f64 * 1e-9;
+        let moving = elapsed_s < period_s;
+        let frac = (elapsed_s / period_s).min(1.0);
+        let mut axes = prev.map(still);
+        for ((axis, p), t) in axes.iter_mut().zip(prev).zip(to) {
+            axis.x_m = p + (t - p) * frac;
+            if moving {
+                axis.v_mps = (t - p) / period_s;
+            }
+        }
+        Some(axes)
     }
 
     /// A set point streamed at `at_ns`; `before_m`: the drives' reference
@@ -322,7 +352,11 @@ impl AxesMotion {
             Some(m) if t_ns >= m.t_ns && t_ns - m.t_ns <= MAX_MODEL_GAP_NS => m,
             _ => ServoModel {
                 t_ns,
-                axes: on_plans,
+                axes: match self.streamed.reference_moving(t_ns) {
+                    // Held that long: at rest there.
+                    Some(r) => r.map(|a| ServoAxis { v_mps: 0.0, ..a }),
+                    None => on_plans,
+                },
             },
         };
         while t_ns - model.t_ns >= MODEL_STEP_NS {
@@ -385,9 +419,17 @@ impl AxesMotion {
             return;
         }
         let known = plans.is_some();
-        let axes = match plans {
-            Some(plans) => self.follow(cfg, plans, now_ns),
-            None => {
+        let ideal_streamed = if cfg.servo_wn_rad_s() > 0.0 {
+            None
+        } else {
+            self.streamed.reference_moving(now_ns)
+        };
+        let axes = match (plans, ideal_streamed) {
+            // Ideal drives on streamed set points (an excitation's plans
+            // hold its centre): where the set points put them.
+            (Some(_), Some(axes)) => axes,
+            (Some(plans), None) => self.follow(cfg, plans, now_ns),
+            (None, _) => {
                 [ServoAxis {
                     x_m: 0.0,
                     v_mps: 0.0,

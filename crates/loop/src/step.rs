@@ -49,10 +49,25 @@
 //!   rule's brake stays at the planned deceleration.
 //! - An excitation (issue 26, [`Request::Excite`], [`crate::excite`]):
 //!   accepted in Ok with the drives enabled and the axes at rest, within
-//!   `[identify]`'s limits and the travel; streamed one period ahead about
+//!   `[identify]`'s limits (its fades' peaks included) and the travel;
+//!   streamed one period ahead about
 //!   where the axes rest. A Warn, a Stop or a new move ends it (braked from
 //!   its position and velocity, or quick-stopped); so does a commanded
 //!   speed or acceleration above the limits.
+//! - A late cycle is an input, not a fault (issue 33): a cycle that comes
+//!   more than a period after the last streamed set point delays the
+//!   streamed trajectory by the excess before anything evaluates it
+//!   ([`LoopStep::absorb_late_cycle`]), so that its set point follows the
+//!   last one by one period of the trajectory's time: the drives, which
+//!   held the last set point meanwhile, are never asked for a jump, and the
+//!   servo model, which follows the set points as streamed, knows what
+//!   they did. A late cycle beyond the sensor's accepted age is the
+//!   estimator's `cycle_gap` Fault; the quick stop then starts from the axes
+//!   as the model has them, so a reset is accepted once they rest.
+//! - A guarded move anticipates its force's rise only once it is in contact
+//!   (the force along its way significant against its noise:
+//!   [`GUARDED_CONTACT_SIGMA`]), so that noise never brakes it; a limit
+//!   within the noise is refused.
 //! - A host fault: the publishing thread (the operator's commands and the
 //!   published state) without progress for longer than the configured
 //!   stall time is a Fault ([`Reason::PublisherStalled`]), from the
@@ -231,6 +246,15 @@ pub enum ReplyDetail {
     /// An excitation refused by its parameters or limits
     /// ([`crate::excite::judge`]).
     Excitation(ExciteRefusal),
+    /// A guarded move's force limit within the tip force's noise (it would
+    /// stop the move on noise).
+    WithinNoise {
+        /// The limit given, N.
+        max_force_n: f64,
+        /// [`GUARDED_CONTACT_SIGMA`] times the norm of the force's standard
+        /// deviations now, N.
+        noise_n: f64,
+    },
 }
 
 impl ReplyDetail {
@@ -274,6 +298,35 @@ fn outside_travel(
         Shown(min_m),
         Shown(max_m),
         Shown(by_m)
+    )
+}
+
+/// [`ReplyDetail::AlreadyAtForce`] in words.
+fn already_at_force(
+    f: &mut core::fmt::Formatter<'_>,
+    force_n: f64,
+    max_force_n: f64,
+) -> core::fmt::Result {
+    write!(
+        f,
+        "the tip force is already {force_n:.2} N, at or above the move's {} N",
+        Shown(max_force_n)
+    )
+}
+
+/// [`ReplyDetail::WithinNoise`] in words.
+fn within_noise(
+    f: &mut core::fmt::Formatter<'_>,
+    max_force_n: f64,
+    noise_n: f64,
+) -> core::fmt::Result {
+    write!(
+        f,
+        "the guarded move's force {} N is within the tip force's noise here ({} N, {} \
+         standard deviations): it would stop on noise; give a larger force",
+        Shown(max_force_n),
+        Shown(noise_n),
+        Shown(GUARDED_CONTACT_SIGMA)
     )
 }
 
@@ -340,12 +393,12 @@ impl core::fmt::Display for ReplyDetail {
             Self::AlreadyAtForce {
                 force_n,
                 max_force_n,
-            } => write!(
-                f,
-                "the tip force is already {force_n:.2} N, at or above the move's {} N",
-                Shown(*max_force_n)
-            ),
+            } => already_at_force(f, *force_n, *max_force_n),
             Self::Excitation(refusal) => write!(f, "{refusal}"),
+            Self::WithinNoise {
+                max_force_n,
+                noise_n,
+            } => within_noise(f, *max_force_n, *noise_n),
         }
     }
 }
@@ -571,6 +624,18 @@ impl Trajectory {
         }
     }
 
+    /// The same trajectory `dt_ns` later (issue 33): what a streamed
+    /// trajectory becomes when the loop comes late, so that the late
+    /// cycle's set point follows the last one by one period of the
+    /// trajectory's time and never jumps by the time the loop was late.
+    fn delay(&mut self, dt_ns: u64) {
+        self.axes = self.axes.map(|p| p.delayed(dt_ns));
+        self.end_ns = self.end_ns.saturating_add(dt_ns);
+        if let Some(e) = &mut self.excite {
+            e.start_ns = e.start_ns.saturating_add(dt_ns);
+        }
+    }
+
     fn from_plans(start_ns: u64, axes: [AxisPlan; 3], target_tip_m: Option<Vec3>) -> Self {
         let longest_s = axes.iter().map(AxisPlan::duration_s).fold(0.0, f64::max);
         // Saturating float-to-int: a non-finite duration ends "never".
@@ -619,6 +684,9 @@ pub struct LoopStep {
     force: ForceController,
     /// How the axes move: the servo model, the drives' quick stop.
     motion: AxesMotion,
+    /// The clock of the last cycle, if it streamed a set point: a streamed
+    /// trajectory's time runs from it (issue 33, [`LoopStep::absorb_late_cycle`]).
+    last_stream_ns: Option<u64>,
     out: LoopOutput,
     /// The fingerprint of the configuration parts, for snapshots (computed
     /// at construction: the configuration never changes after it).
@@ -788,6 +856,7 @@ impl LoopStep {
             sample_period_s,
             force: ForceController::new(config.force_control)?,
             motion: AxesMotion::default(),
+            last_stream_ns: None,
             out,
             snapshot_fingerprint: 0,
         };
@@ -814,6 +883,8 @@ impl LoopStep {
     /// Decides one cycle (see the module documentation). The result stays
     /// readable as [`LoopStep::last`] until the next cycle.
     pub fn step(&mut self, input: &LoopInput) -> &LoopOutput {
+        // A late cycle: the streamed trajectory waits for it.
+        self.absorb_late_cycle(input);
         // Gather: what the estimator judges (a held reset is not passed on).
         let reference = self.following_reference(input);
         self.measure_speed(&input.joints);
@@ -863,7 +934,34 @@ impl LoopStep {
             self.motion
                 .commanded(told, now_ns, plans_before.as_ref(), period_ns);
         }
+        self.last_stream_ns = match d.action {
+            DriveAction::Stream(_) => input.now_ns,
+            _ => None,
+        };
         self.finish(estimate, reference, d)
+    }
+
+    /// A cycle later than one period after the last streamed set point:
+    /// the streamed trajectory is delayed by the excess, before anything
+    /// evaluates it, so that this cycle's set point is one period of its
+    /// time after the last one (the drives held that one meanwhile, as the
+    /// servo model knows: it follows the set points as streamed). The
+    /// set points never jump by the time the loop was late; the trajectory
+    /// ends that much later. An early cycle delays nothing (its set point
+    /// comes less than a period after the last: slower, never faster).
+    fn absorb_late_cycle(&mut self, input: &LoopInput) {
+        let (Some(last_ns), Some(now_ns)) = (self.last_stream_ns, input.now_ns) else {
+            return;
+        };
+        let late_ns = now_ns
+            .saturating_sub(last_ns)
+            .saturating_sub(self.config.period_ns);
+        if let Some(t) = &mut self.trajectory
+            && t.streamed
+            && late_ns > 0
+        {
+            t.delay(late_ns);
+        }
     }
 
     /// The carriage's motion where the sensor sample was measured (its
@@ -1132,7 +1230,7 @@ impl LoopStep {
     /// The guarded force's rate, per new sensor sample.
     fn update_guarded_rate(&mut self, input: &LoopInput, estimate: &CycleOutput) {
         match guarded_force(estimate).filter(|_| self.sample_period_s > 0.0) {
-            Some(f) => {
+            Some((f, _)) => {
                 let counter = input.sensor.counter;
                 let m = f.norm();
                 match self.guarded_last {
@@ -1195,7 +1293,8 @@ impl LoopStep {
     /// limit: the magnitude of the filtered tip force when the filter is on
     /// (the unfiltered one's noise would stop it early at random), plus its
     /// rise over the filter's lag, the drives' lag (`2 zeta / wn`) and the
-    /// braking (at `brake_decel_mps2`, v / 2a at the mean speed).
+    /// braking (at `brake_decel_mps2`, v / 2a at the mean speed), once the
+    /// move is in contact ([`in_contact`]).
     fn guarded_limit_reached(
         &self,
         t: &Trajectory,
@@ -1203,7 +1302,7 @@ impl LoopStep {
         estimate: &CycleOutput,
     ) -> Option<Vec3> {
         let max_force_n = t.max_force_n?;
-        let force_n = guarded_force(estimate)?;
+        let (force_n, std_n) = guarded_force(estimate)?;
         let speed_mps = t
             .at(now_ns)
             .iter()
@@ -1211,10 +1310,14 @@ impl LoopStep {
         let drives = &self.config.motion;
         let horizon_s =
             self.guarded_lag_s + drives.servo_lag_s() + speed_mps / (2.0 * drives.brake_decel_mps2);
-        // Anticipated once in contact (a quarter of the limit), so that the
-        // rate's noise in free space brakes nothing.
         let m = force_n.norm();
-        let rise_n = if m >= 0.25 * max_force_n {
+        let contact = estimate
+            .pose
+            .zip(t.target_tip_m)
+            .is_some_and(|(pose, target)| {
+                in_contact(&force_n, &std_n, &(target - pose.tip_m), max_force_n)
+            });
+        let rise_n = if contact {
             self.guarded_rate_n_per_s.max(0.0) * horizon_s
         } else {
             0.0
@@ -1526,7 +1629,7 @@ impl LoopStep {
                 },
             ));
         }
-        let Some(force_n) = guarded_force(estimate) else {
+        let Some((force_n, std_n)) = guarded_force(estimate) else {
             return Err((ReplyStatus::NoEstimate, ReplyDetail::NoEstimate));
         };
         if force_n.norm() >= max_force_n {
@@ -1535,6 +1638,19 @@ impl LoopStep {
                 ReplyDetail::AlreadyAtForce {
                     force_n: force_n.norm(),
                     max_force_n,
+                },
+            ));
+        }
+        // A limit within the force's noise would stop the move on noise:
+        // |F| crosses z |std| with probability at most 2 Phi(-z) per sample
+        // whatever the axes' correlation (Szekely and Bakirov 2003).
+        let noise_n = GUARDED_CONTACT_SIGMA * std_n.norm();
+        if max_force_n < noise_n {
+            return Err((
+                ReplyStatus::BadArgument,
+                ReplyDetail::WithinNoise {
+                    max_force_n,
+                    noise_n,
                 },
             ));
         }
@@ -1671,14 +1787,45 @@ fn release(drive_state: Option<DriveState>) -> DriveAction {
     }
 }
 
-/// The tip force a guarded move watches: the filtered one when the filter
-/// is on, else this cycle's estimate; `None` without either.
-fn guarded_force(estimate: &CycleOutput) -> Option<Vec3> {
+/// The tip force a guarded move watches and its standard deviation per
+/// axis: the filtered one when the filter is on, else this cycle's
+/// estimate; `None` without either.
+fn guarded_force(estimate: &CycleOutput) -> Option<(Vec3, Vec3)> {
     match (estimate.filtered, estimate.tip) {
-        (Some(f), _) => Some(f.force_n),
-        (None, TipOutcome::Estimate(e)) => Some(e.force_n),
+        (Some(f), _) => Some((f.force_n, f.std_n)),
+        (None, TipOutcome::Estimate(e)) => Some((e.force_n, e.std_n)),
         (None, _) => None,
     }
+}
+
+/// The significance, in standard deviations, at which a guarded move's
+/// force along its way says that it is in contact, and its anticipated rise
+/// counts (issue 33 section 3; [`in_contact`]).
+pub const GUARDED_CONTACT_SIGMA: f64 = 6.0;
+
+/// Whether a guarded move whose tip still has `to_target_m` to go is in
+/// contact: the tip force's component along its way (what a passive tissue
+/// it drives into pushes back with: the tip does work on it, `F . v > 0`) at
+/// least a quarter of the move's limit and [`GUARDED_CONTACT_SIGMA`] of that
+/// component's standard deviation (bounded by `sum |u_i| std_i`, whatever
+/// the axes' correlation). Before it, the force's rate (its noise's
+/// derivative, amplified by the horizon) anticipates nothing: in free air
+/// the component is the filtered noise, a Gaussian process that crosses
+/// `z sigma` upwards `f_c exp(-z^2 / 2)` times per second (Rice; for the
+/// second-order Butterworth the ratio of the derivative's deviation to the
+/// process's is `2 pi f_c`): at the 5 Hz filter and z = 6, 7.6e-8 per
+/// second, 2.7e-4 per hour of guarded moves, and a crossing is needed, not
+/// sufficient, to brake. The level alone (`|F| >= N`) brakes in any case.
+fn in_contact(force_n: &Vec3, std_n: &Vec3, to_target_m: &Vec3, max_force_n: f64) -> bool {
+    let distance_m = to_target_m.norm();
+    // Arrived (or no finite way): no direction to be in contact along.
+    if distance_m.is_nan() || distance_m <= 0.0 {
+        return false;
+    }
+    let way = to_target_m / distance_m;
+    let along_n = force_n.dot(&way);
+    let std_along_n = way.abs().dot(std_n);
+    along_n >= (0.25 * max_force_n).max(GUARDED_CONTACT_SIGMA * std_along_n)
 }
 
 /// Where a move goes.
@@ -1766,6 +1913,7 @@ sar_snapshot::snap_state!(LoopStep {
         guarded_last,
         guarded_rate_n_per_s,
         motion,
+        last_stream_ns,
     ],
     nested: [estimator, force],
     config: [calibration, profile, config, guarded_lag_s, sample_period_s],

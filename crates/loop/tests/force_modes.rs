@@ -18,6 +18,10 @@ mod drive_decel;
 mod force_figures;
 #[path = "force/force_properties.rs"]
 mod force_properties;
+#[path = "force/guarded_noise.rs"]
+mod guarded_noise;
+#[path = "force/late_cycles.rs"]
+mod late_cycles;
 #[path = "force/motion_figures.rs"]
 mod motion_figures;
 #[path = "force/rig.rs"]

@@ -80,12 +80,16 @@ fn a_cycle_allocates_nothing() {
                     tip_m: Vec3::new(0.6, 0.2, 0.001),
                 },
                 // A guarded move along the rising contact force (+X0), its
-                // limit 0.5 N above the filtered force now: reached on the
+                // limit 0.5 N above the filtered force now or just above
+                // its noise (a limit within it is refused): reached on the
                 // way (the contact rises 2 N/s; the move lasts 1.6 s), and
                 // the move is braked.
                 _ => Request::GuardedMove {
                     tip_m: Vec3::new(0.63, 0.2, 0.0),
-                    max_force_n: c.output().filtered.map_or(1.0, |f| f.force_n.norm() + 0.5),
+                    max_force_n: c.output().filtered.map_or(2.0, |f| {
+                        (f.force_n.norm() + 0.5)
+                            .max(sar_loop::step::GUARDED_CONTACT_SIGMA * f.std_n.norm() + 0.1)
+                    }),
                 },
             };
             operator.requests.push(Envelope { id: i, request }).unwrap();
@@ -95,14 +99,14 @@ fn a_cycle_allocates_nothing() {
         let request = match i {
             400 => Some(Request::Hold { max_force_n: 5.0 }),
             700 => Some(Request::Position),
-            1500 => Some(Request::Push { axial_n: 2.0 }),
+            1900 => Some(Request::Push { axial_n: 2.0 }),
             // The dynamic identification's excitation (issue 26), at rest
             // after the hold, ended before the contact.
             750 => Some(Request::Excite(sar_loop::excite::ExciteRequest {
-                amplitude_m: [0.0003; 3],
+                amplitude_m: [0.0002; 3],
                 freq_hz: [3.0, 3.5, 2.5],
-                duration_s: 0.15,
-                fade_s: 0.06,
+                duration_s: 0.25,
+                fade_s: 0.12,
             })),
             _ => None,
         };

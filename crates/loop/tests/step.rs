@@ -307,7 +307,7 @@ fn a_move_into_a_warning_force_is_braked_and_a_run_replays_bit_for_bit() {
 /// under way from its position and velocity. The run replays bit for bit.
 #[test]
 fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
-    use sar_loop::excite::ExciteRequest;
+    use sar_loop::excite::{ExciteRefusal, ExciteRequest};
     use sar_loop::step::ReplyDetail;
     let cfg = config::builtin().unwrap();
     let mut rig = Rig::new(quiet(), None);
@@ -319,7 +319,7 @@ fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
         duration_s: 3.0,
         fade_s: 1.0,
     };
-    // 1 cm at 1.3 Hz: 0.082 m/s, above the 0.04 m/s of [identify].
+    // 1 cm at 1.3 Hz: 0.082 m/s, above the 0.02 m/s of [identify].
     let too_fast = ExciteRequest {
         amplitude_m: [0.01, 0.0, 0.0],
         ..request
@@ -328,7 +328,56 @@ fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
     assert_eq!(r.status, ReplyStatus::BadArgument);
     assert_eq!(
         r.detail.to_string(),
-        "the excitation of q1 peaks at 0.0817 m/s, above [identify] excitation_max_speed_mps = 0.04 m/s"
+        "the excitation of q1 peaks at 0.0816814 m/s (its fades included), above [identify] excitation_max_speed_mps = 0.02 m/s"
+    );
+    // Issue 33: a fade of 1 us, of one period (1 ms) or of 50 periods
+    // would end in a step of the set points: refused before anything
+    // moves (below 100 periods), whatever the amplitude; a slow sine of
+    // 3 cm whose peaks are within the limits but whose 0.2 s fade is not
+    // (0.24 m/s), refused by its faded peaks.
+    let sweep = ExciteRequest {
+        amplitude_m: [0.0, 0.0, 0.03],
+        freq_hz: [1.0, 1.0, 0.05],
+        duration_s: 10.0,
+        fade_s: 1e-6,
+    };
+    for (id, fade_s) in [(11, 1e-6), (12, 1e-3), (13, 0.05)] {
+        let r = rig
+            .0
+            .request(id, Request::Excite(ExciteRequest { fade_s, ..sweep }));
+        assert_eq!(r.status, ReplyStatus::BadArgument, "fade {fade_s} s");
+        assert!(
+            matches!(
+                r.detail,
+                ReplyDetail::Excitation(ExciteRefusal::Bad {
+                    field: "fade_s",
+                    ..
+                })
+            ),
+            "fade {fade_s} s: {}",
+            r.detail
+        );
+        assert!(r.detail.to_string().contains("100 periods"), "{}", r.detail);
+    }
+    let r = rig.0.request(
+        14,
+        Request::Excite(ExciteRequest {
+            fade_s: 0.2,
+            ..sweep
+        }),
+    );
+    assert_eq!(r.status, ReplyStatus::BadArgument);
+    assert!(
+        r.detail
+            .to_string()
+            .starts_with("the excitation of q3 peaks at 0.236"),
+        "{}",
+        r.detail
+    );
+    assert!(
+        matches!(rig.c.decision().action, DriveAction::None),
+        "{:?}",
+        rig.c.decision().action
     );
     let r = rig.0.request(2, Request::Excite(request));
     assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);

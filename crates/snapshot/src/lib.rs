@@ -55,8 +55,10 @@ pub const CAPACITY: usize = 4096;
 /// names and values explicitly ([`fingerprint`](mod@fingerprint)); 3: the
 /// estimator's tare over a mean at rest (its running mean and the last
 /// tare's time) is part of the snapshotted state; 4: the loop's model of
-/// the axes' motion (issue 26: the servo model, the drives' quick stop).
-pub const VERSION: u16 = 4;
+/// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
+/// the clock of the last streamed set point (issue 33: a late cycle delays
+/// the streamed trajectory).
+pub const VERSION: u16 = 5;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";
@@ -918,7 +920,7 @@ mod tests {
         fmt::write(&mut text, format_args!("{e}")).unwrap();
         assert_eq!(
             text.as_str(),
-            "snapshot format version 1; this build reads version 4"
+            "snapshot format version 1; this build reads version 5"
         );
     }
 

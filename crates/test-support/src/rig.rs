@@ -44,8 +44,15 @@ impl<D: AxisDrives> SimRig<D> {
     /// One cycle, 1 ms of simulated time after the last: its decision (the
     /// input and the decision kept in [`SimRig::log`]).
     pub fn step(&mut self) -> LoopOutput {
+        self.step_after(1_000_000)
+    }
+
+    /// One cycle `dt_ns` of simulated time after the last (more than the
+    /// 1 ms period: a late cycle; the simulator ran on meanwhile): its
+    /// decision, kept as [`SimRig::step`]'s.
+    pub fn step_after(&mut self, dt_ns: u64) -> LoopOutput {
         self.cycle += 1;
-        self.clock.advance_ns(1_000_000);
+        self.clock.advance_ns(dt_ns);
         let clock = self.clock.clone();
         self.c.step(self.cycle, || Some(clock.now_ns()));
         let d = *self.c.decision();

@@ -220,6 +220,16 @@ impl AxisPlan {
         0.0
     }
 
+    /// The same motion `dt_ns` later (its start moved on; saturating): what
+    /// a streamed trajectory becomes when the loop came late and its next
+    /// set point follows the last one by one period (issue 33).
+    pub fn delayed(&self, dt_ns: u64) -> Self {
+        Self {
+            start_ns: self.start_ns.saturating_add(dt_ns),
+            ..*self
+        }
+    }
+
     /// Where the plan ends (and holds), m.
     pub fn end_m(&self) -> f64 {
         self.end_m

@@ -147,6 +147,54 @@ impl Rig {
         rig
     }
 
+    /// [`Rig::with_plant`] running `cfg` instead of the built-in
+    /// configuration (the simulated drives' limits set from it, as `sard
+    /// --sim` sets them).
+    pub fn with_config(
+        tissues: Vec<Tissue>,
+        contact: Vec<ContactKey>,
+        plant: Plant,
+        cfg: &sar_config::Config,
+    ) -> Self {
+        let seed = sim::demo_scenario().unwrap().spec.seed;
+        Self::with_config_seed(tissues, contact, plant, cfg, seed)
+    }
+
+    /// [`Rig::with_config`] with the simulator's noise seeded by `seed`.
+    pub fn with_config_seed(
+        tissues: Vec<Tissue>,
+        contact: Vec<ContactKey>,
+        plant: Plant,
+        cfg: &sar_config::Config,
+        seed: u64,
+    ) -> Self {
+        let mut scenario = sim::demo_scenario().unwrap();
+        scenario.spec.seed = seed;
+        scenario.spec.contact = if contact.is_empty() {
+            vec![ContactKey {
+                t_ns: 0,
+                force_n: Vec3::zeros(),
+            }]
+        } else {
+            contact
+        };
+        scenario.spec.tissue = tissues;
+        scenario.spec.plant = plant.spec(&scenario.spec);
+        scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
+        scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
+        let mut rig = Self(RigBuilder::new(&scenario).config(cfg).build());
+        for _ in 0..READY_MS {
+            rig.step();
+        }
+        assert_eq!(
+            rig.c.output().guard_state,
+            GuardState::Ok,
+            "{:?}",
+            rig.c.output().guard_reason
+        );
+        rig
+    }
+
     /// [`Rig::with`] without the rod's inertia (the demo's servos kept),
     /// for a test whose figure is not the motion's.
     pub fn without_inertia(tissues: Vec<Tissue>, contact: Vec<ContactKey>) -> Self {

@@ -124,13 +124,20 @@ fn excite(client: &Client, sub: &StateSubscription, plan: &Plan) -> Result<(), S
         e.spec.duration_s
     );
     let end = Instant::now() + Duration::from_secs_f64(e.spec.duration_s);
-    follow(sub, Duration::from_secs_f64(e.spec.duration_s + 1.0), |s| {
-        Instant::now() >= end
-            && s.q_m
-                .iter()
-                .zip(e.spec.centre_m)
-                .all(|(a, b)| (a - b).abs() <= ARRIVED_M)
-    })?
+    // A late cycle of the loop delays the excitation by as much (issue 33:
+    // its set points never jump), so it may end later than planned.
+    let slack_s = (0.5 * e.spec.duration_s).max(10.0);
+    follow(
+        sub,
+        Duration::from_secs_f64(e.spec.duration_s + slack_s),
+        |s| {
+            Instant::now() >= end
+                && s.q_m
+                    .iter()
+                    .zip(e.spec.centre_m)
+                    .all(|(a, b)| (a - b).abs() <= ARRIVED_M)
+        },
+    )?
     .then_some(())
     .ok_or_else(|| {
         "the excitation did not end at its centre (braked by a Warn or its limits?)".to_owned()

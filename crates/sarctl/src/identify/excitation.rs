@@ -1,8 +1,10 @@
 //! The excitation of `sarctl identify --dynamic` (MODEL.md 10, issue 26
 //! section 3): a sine per axis around a centre pose, of distinct frequencies,
 //! faded in and out by a raised cosine so that it starts and ends at rest,
-//! scaled so that no axis exceeds the excitation's own speed and
-//! acceleration limits, and checked inside the travel. [`Excitation::plan`]
+//! scaled so that no axis exceeds the excitation's own speed, acceleration
+//! and jerk limits (their peaks over the whole run, fades included, by the
+//! loop's own bound, [`sar_loop::excite::unit_peaks`]: what is planned here
+//! the loop accepts), and checked inside the travel. [`Excitation::plan`]
 //! gives, before anything moves, the condition number and the standard
 //! errors that the fit will have: the covariance of the least squares on the
 //! planned trajectory with the sensor's noise (noise-free readings of the
@@ -45,15 +47,17 @@ pub struct ExcitationSpec {
     pub max_speed_mps: f64,
     /// Largest joint acceleration, m/s^2.
     pub max_accel_mps2: f64,
+    /// Largest joint jerk, m/s^3.
+    pub max_jerk_mps3: f64,
 }
 
 impl ExcitationSpec {
-    /// The default sines about `centre_m` (see the module's doc).
+    /// The default sines about `centre_m` (see the module's doc) under the
+    /// limits `(speed m/s, acceleration m/s^2, jerk m/s^3)`.
     pub fn around(
         centre_m: [f64; 3],
         duration_s: f64,
-        max_speed_mps: f64,
-        max_accel_mps2: f64,
+        (max_speed_mps, max_accel_mps2, max_jerk_mps3): (f64, f64, f64),
     ) -> Self {
         Self {
             centre_m,
@@ -75,6 +79,7 @@ impl ExcitationSpec {
             fade_s: 3.0,
             max_speed_mps,
             max_accel_mps2,
+            max_jerk_mps3,
         }
     }
 }
@@ -99,24 +104,27 @@ fn unit_axis(t: f64, freq_hz: f64, spec: &ExcitationSpec) -> (f64, f64, f64) {
     sar_loop::excite::unit_axis(t, freq_hz, spec.duration_s, spec.fade_s)
 }
 
-/// Time step of the plan's scans, s.
-const SCAN_STEP_S: f64 = 1e-3;
-
 impl Excitation {
-    /// Scales each axis's amplitude down to its speed and acceleration
-    /// limits (its peaks over the whole run, fades included) and checks the
-    /// sweep in the configured travel.
+    /// Scales each axis's amplitude down to its speed, acceleration and
+    /// jerk limits (its peaks over the whole run, fades included: the
+    /// loop's [`sar_loop::excite::unit_peaks`]) and checks the sweep in the
+    /// configured travel.
     pub fn plan(spec: &ExcitationSpec, config: &Config) -> Result<Self, String> {
         let ok = |x: f64| x.is_finite() && x > 0.0;
         if !(ok(spec.duration_s)
             && ok(spec.fade_s)
             && 2.0 * spec.fade_s <= spec.duration_s
             && ok(spec.max_speed_mps)
-            && ok(spec.max_accel_mps2))
+            && ok(spec.max_accel_mps2)
+            && ok(spec.max_jerk_mps3))
         {
             return Err(format!(
-                "the excitation needs a duration of at least two fades ({} s, fade {} s) and positive limits ({} m/s, {} m/s^2)",
-                spec.duration_s, spec.fade_s, spec.max_speed_mps, spec.max_accel_mps2
+                "the excitation needs a duration of at least two fades ({} s, fade {} s) and positive limits ({} m/s, {} m/s^2, {} m/s^3)",
+                spec.duration_s,
+                spec.fade_s,
+                spec.max_speed_mps,
+                spec.max_accel_mps2,
+                spec.max_jerk_mps3
             ));
         }
         let mut amplitude_m = [0.0; 3];
@@ -135,17 +143,12 @@ impl Excitation {
                     i + 1
                 ));
             }
-            let steps = (spec.duration_s / SCAN_STEP_S).ceil() as u64;
-            let (mut v, mut a) = (0.0f64, 0.0f64);
-            for k in 0..=steps {
-                let (_, vk, ak) = unit_axis(k as f64 * SCAN_STEP_S, sine.freq_hz, spec);
-                v = v.max(vk.abs());
-                a = a.max(ak.abs());
-            }
+            let [v, a, j] = sar_loop::excite::unit_peaks(sine.freq_hz, spec.fade_s);
             let amp = sine
                 .amplitude_m
                 .min(spec.max_speed_mps / v)
-                .min(spec.max_accel_mps2 / a);
+                .min(spec.max_accel_mps2 / a)
+                .min(spec.max_jerk_mps3 / j);
             let (lo, hi) = *range;
             if centre - amp < lo || centre + amp > hi {
                 return Err(format!(
@@ -167,6 +170,22 @@ impl Excitation {
             peak_speed_mps,
             peak_accel_mps2,
         })
+    }
+
+    /// The loop's own judgement of this excitation about its centre
+    /// ([`sar_loop::excite::judge`], with the configuration's limits: the
+    /// drives' speed, the loop's period, the travel), before anything
+    /// moves: `Err` is the refusal the loop would give, in its words.
+    pub fn judged_by_the_loop(&self, config: &Config) -> Result<(), String> {
+        let step = config.step_config();
+        let request = sar_loop::excite::ExciteRequest {
+            amplitude_m: self.amplitude_m,
+            freq_hz: self.spec.sines.map(|s| s.freq_hz),
+            duration_s: self.spec.duration_s,
+            fade_s: self.spec.fade_s,
+        };
+        sar_loop::excite::judge(&request, &self.spec.centre_m, &step.travel_m, &step.excite)
+            .map_err(|refusal| format!("the loop would refuse this excitation: {refusal}"))
     }
 
     /// The joints (q1, q2, q3) at `t`, their speeds and accelerations.
@@ -251,10 +270,14 @@ impl Plan {
         let spec = ExcitationSpec::around(
             centre_m,
             limits.excitation_duration_s,
-            limits.excitation_max_speed_mps,
-            limits.excitation_max_accel_mps2,
+            (
+                limits.excitation_max_speed_mps,
+                limits.excitation_max_accel_mps2,
+                limits.excitation_max_jerk_mps3,
+            ),
         );
         let excitation = Excitation::plan(&spec, config)?;
+        excitation.judged_by_the_loop(config)?;
         let p = &config.estimator.profile;
         let rod = InertialParameters {
             mass_kg: p.mass_kg(),
