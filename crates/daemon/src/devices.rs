@@ -84,13 +84,7 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
             // Above the planned speed by 25 % and by the host's rounding to
             // whole counts (at most one count per SYNC more; 2 allowed).
             let rounding_mps = 2.0 * c.m_per_count() / (c.sync_period_ns as f64 * 1e-9);
-            c.drive_max_speed_mps = config
-                .estimator
-                .plausibility
-                .limits()
-                .max_joint_speed_mps
-                .max(1.25 * config.axes.max_speed_mps)
-                .max((config.axes.max_speed_mps + rounding_mps) * (1.0 + 1e-9));
+            c.drive_max_speed_mps = drive_max_speed_mps(config, rounding_mps);
             c.following_window_m = 2.0 * config.axes.following_tolerance_m;
             c.quick_stop_decel_mps2 = *quick_stop_decel_mps2;
             c.max_torque_permille = *max_torque_permille;
@@ -98,6 +92,24 @@ pub fn canopen_config(config: &Config) -> Option<(String, CanOpenConfig)> {
         }
         _ => None,
     }
+}
+
+/// The drives' own velocity limit (CiA 402 0x607F), m/s: `[plausibility]
+/// max_joint_speed_mps` (the speed sard calls an encoder jump beyond), but
+/// at least 1.25 x `[axes] max_speed_mps` (the margin over the planned and
+/// streamed speed for the loop's jitter: a set point streamed early asks
+/// the drives for more over what is left of the period) and that speed
+/// plus `rounding_mps` (a host's rounding to whole counts). The CANopen
+/// drives are written it at start; `sard --sim`'s simulated drives refuse a
+/// streamed set point beyond it.
+pub fn drive_max_speed_mps(config: &Config, rounding_mps: f64) -> f64 {
+    config
+        .estimator
+        .plausibility
+        .limits()
+        .max_joint_speed_mps
+        .max(1.25 * config.axes.max_speed_mps)
+        .max((config.axes.max_speed_mps + rounding_mps) * (1.0 + 1e-9))
 }
 
 /// The CANopen drives' per-cycle exchange (SYNC, TPDOs, RPDOs, supervision),

@@ -693,6 +693,7 @@ fn fault_file_spec(seed: u64, fault: Fault) -> SimSpec {
         friction_n: 0.3,
         axes: AxesSpec {
             max_speed_mps: 0.05,
+            drive_max_speed_mps: None,
             max_accel_mps2: 0.5,
             lead_m_per_turn: 0.005,
             counts_per_turn: 4096,

@@ -92,6 +92,7 @@ fn base_spec() -> SimSpec {
         friction_n: 0.0,
         axes: AxesSpec {
             max_speed_mps: V_MAX,
+            drive_max_speed_mps: None,
             max_accel_mps2: A_MAX,
             lead_m_per_turn: LEAD_M,
             counts_per_turn: COUNTS,

@@ -370,7 +370,7 @@ fn an_excitation_runs_about_the_rest_and_replays_bit_for_bit() {
     assert!(
         r.detail
             .to_string()
-            .starts_with("the excitation of q3 peaks at 0.236"),
+            .starts_with("the excitation of q3 peaks at 0.2356"),
         "{}",
         r.detail
     );

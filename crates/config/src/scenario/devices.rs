@@ -34,6 +34,7 @@ impl Axes {
     pub fn spec(&self, start: ActiveJoints) -> AxesSpec {
         AxesSpec {
             max_speed_mps: self.max_speed_mps,
+            drive_max_speed_mps: None,
             max_accel_mps2: self.max_accel_mps2,
             lead_m_per_turn: self.lead_m_per_turn,
             counts_per_turn: self.counts_per_turn,

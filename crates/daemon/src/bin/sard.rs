@@ -383,6 +383,13 @@ fn scenario(args: &Args, cfg: &config::Config) -> Result<config::scenario::Scena
     };
     scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
     scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
+    // The velocity limit CANopen drives are written (0x607F): the same
+    // margin for the loop's jitter over a stream at the planned speed.
+    scenario
+        .spec
+        .axes
+        .drive_max_speed_mps
+        .get_or_insert(devices::drive_max_speed_mps(cfg, 0.0));
     Ok(scenario)
 }
 

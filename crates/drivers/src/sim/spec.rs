@@ -128,8 +128,16 @@ pub struct ServoSpec {
 /// The three prismatic axes (q1, q2, q3; index 0, 1, 2 in arrays).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AxesSpec {
-    /// Speed limit of each axis, m/s.
+    /// Speed limit of each axis, m/s (the drives' own planner's).
     pub max_speed_mps: f64,
+    /// The drives' own velocity limit (CiA 402 0x607F max profile
+    /// velocity), m/s: a streamed set point farther than it allows over a
+    /// period from the drives' reference is refused. `None`:
+    /// `max_speed_mps`. `sard --sim` sets what it writes into CANopen
+    /// drives (`sar_daemon::devices::drive_max_speed_mps`), so that a
+    /// stream at the planned speed has the same margin for the loop's
+    /// jitter as on the robot.
+    pub drive_max_speed_mps: Option<f64>,
     /// Acceleration limit of each axis, m/s^2.
     pub max_accel_mps2: f64,
     /// Screw lead, metres per motor turn.

@@ -395,6 +395,9 @@ fn check_spec(spec: &SimSpec) -> Result<(), SimError> {
 /// start within its travel.
 fn check_axes(axes: &AxesSpec) -> Result<(), SimError> {
     check_positive("axes.max_speed_mps", axes.max_speed_mps)?;
+    if let Some(v) = axes.drive_max_speed_mps {
+        check_positive("axes.drive_max_speed_mps", v)?;
+    }
     check_positive("axes.max_accel_mps2", axes.max_accel_mps2)?;
     check_positive("axes.lead_m_per_turn", axes.lead_m_per_turn)?;
     check_positive("axes.counts_per_turn", f64::from(axes.counts_per_turn))?;
@@ -1307,7 +1310,12 @@ impl<C: Clock> World<C> {
         let now = self.done_ns;
         self.servos_follow(now);
         let states = self.reference_at(now);
-        let reach_m = self.limits.max_speed_mps * ns_to_s(period_ns.max(1)) * (1.0 + 1e-9);
+        let speed_mps = self
+            .spec
+            .axes
+            .drive_max_speed_mps
+            .unwrap_or(self.limits.max_speed_mps);
+        let reach_m = speed_mps * ns_to_s(period_ns.max(1)) * (1.0 + 1e-9);
         for (axis, (state, target)) in states.iter().zip(wanted).enumerate() {
             if (target - state.x_m).abs() > reach_m {
                 return Err(SimError::SetPointTooFar {

@@ -296,7 +296,7 @@ fn print_plan(config: &sar_config::Config, json: bool, args: &IdentifyArgs) -> R
 /// The excitation's centre: `--centre-m`, else the default.
 fn centre_of(config: &sar_config::Config, args: &IdentifyArgs) -> Result<[f64; 3], String> {
     match args.centre_m.as_deref() {
-        None => Ok(excitation::default_centre_m(&config.estimator.calibration)),
+        None => excitation::default_centre_m(config),
         Some(&[q1, q2, q3]) => Ok([q1, q2, q3]),
         Some(other) => Err(format!(
             "--centre-m needs 3 values Q1,Q2,Q3, got {}",

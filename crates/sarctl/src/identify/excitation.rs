@@ -21,6 +21,7 @@ use sar_estimator::identification::dynamic::{
     DynamicIdentification, DynamicResult, InertialParameters, MotionSample, model_force_n,
     rod_motion,
 };
+use sar_estimator::tip_force::TipForceEstimator;
 use sar_estimator::{Calibration, Vec3};
 
 /// One axis's sine.
@@ -188,6 +189,56 @@ impl Excitation {
             .map_err(|refusal| format!("the loop would refuse this excitation: {refusal}"))
     }
 
+    /// The estimate's noise along the planned motion against the guard's
+    /// warn limits, before anything moves (issue 33: at the old default
+    /// centre the sweep brought the tip so near the support that the noise
+    /// alone, growing as a / (L - a), crossed the lateral warn limit within
+    /// 10 s and the Warn ended the excitation). At every
+    /// [`NOISE_CHECK_STEP_S`] of the plan the tip force's deviations
+    /// (`|std_n|` bounds every part's, whatever their correlation) must
+    /// leave the guard's margin (`std_margin |std_n|`, added to each part)
+    /// and [`NOISE_SIGMA`] deviations of noise below the smallest warn
+    /// limit. The worst pose is the error's, in one line.
+    pub fn noise_within_warn(&self, config: &Config) -> Result<(), String> {
+        let est = &config.estimator;
+        let tip = TipForceEstimator::new(&est.calibration, &est.profile, &est.noise, est.tip)
+            .map_err(|e| e.to_string())?;
+        let guard = est.guard.limits();
+        let f = guard.force;
+        let warn_n = f.warn_total_n.min(f.warn_axial_n).min(f.warn_lateral_n);
+        let zero = Vec3::zeros();
+        let steps = (self.spec.duration_s / NOISE_CHECK_STEP_S).ceil() as u64;
+        let mut worst: Option<(f64, f64, [f64; 3])> = None;
+        for k in 0..=steps {
+            let t_s = (k as f64 * NOISE_CHECK_STEP_S).min(self.spec.duration_s);
+            let (q, _, _) = self.at(t_s);
+            let [q1_m, q2_m, q3_m] = q;
+            let joints = sar_kinematics::ActiveJoints { q1_m, q2_m, q3_m };
+            let pose = sar_kinematics::forward(&est.calibration, &est.profile, &joints)
+                .map_err(|e| format!("the excitation at {t_s} s has no pose: {e}"))?;
+            let std_n = tip
+                .estimate(&pose, &zero, &zero)
+                .map_err(|e| format!("the excitation at {t_s} s: {e}"))?
+                .std_n
+                .norm();
+            let reach_n = (guard.std_margin + NOISE_SIGMA) * std_n;
+            if worst.is_none_or(|(w, _, _)| reach_n > w) {
+                worst = Some((reach_n, pose.support_distance_m, q));
+            }
+        }
+        match worst {
+            Some((reach_n, a_m, q)) if reach_n > warn_n => Err(format!(
+                "the excitation would end in a Warn on noise: at q = ({:.3}, {:.3}, {:.3}) m the tip is {:.3} m past the support (a = {a_m:.3} m) and the estimate's noise with the guard's margin ({} x its deviation) reaches {reach_n:.2} N, above the smallest warn limit {warn_n} N; centre it nearer the support (--centre-m with a larger q3)",
+                q[0],
+                q[1],
+                q[2],
+                est.profile.length_m() - a_m,
+                guard.std_margin + NOISE_SIGMA,
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// The joints (q1, q2, q3) at `t`, their speeds and accelerations.
     pub fn at(&self, t_s: f64) -> ([f64; 3], [f64; 3], [f64; 3]) {
         let mut q = self.spec.centre_m;
@@ -238,17 +289,67 @@ impl Excitation {
     }
 }
 
-/// The default centre of the excitation, joints (q1, q2, q3), m: the
-/// U-joint [`DEFAULT_SUPPORT_DISTANCE_M`] behind the support along X0, the
-/// rod horizontal (for the example robot, MODEL.md 10's nominal pose).
-pub fn default_centre_m(cal: &Calibration) -> [f64; 3] {
-    let a = cal.support_m() - Vec3::new(DEFAULT_SUPPORT_DISTANCE_M, 0.0, 0.0);
+/// The step of [`Excitation::noise_within_warn`]'s scan of the plan, s.
+pub const NOISE_CHECK_STEP_S: f64 = 0.01;
+
+/// The deviations of noise [`Excitation::noise_within_warn`] keeps below
+/// the warn limits beside the guard's margin: a part crosses it with a
+/// probability of at most `2 Phi(-4.5)` = 7e-6 per sample (Szekely and
+/// Bakirov 2003), and the guard needs three such samples (its debounce).
+pub const NOISE_SIGMA: f64 = 4.5;
+
+/// The centre of the excitation with the U-joint `a_m` behind the support
+/// along X0, the rod horizontal, joints (q1, q2, q3), m.
+pub fn centre_at_m(cal: &Calibration, a_m: f64) -> [f64; 3] {
+    let a = cal.support_m() - Vec3::new(a_m, 0.0, 0.0);
     let q = a - cal.p_home_m() - cal.ujoint_offset_m();
     [q.z, q.y, q.x]
 }
 
-/// The default centre's distance from the support, m.
+/// The default centre of the excitation for `config`, joints (q1, q2, q3),
+/// m: [`centre_at_m`] at the largest support distance from
+/// [`DEFAULT_SUPPORT_DISTANCE_M`] (MODEL.md 10's nominal pose) down to
+/// [`MIN_SUPPORT_DISTANCE_M`] in 1 cm steps whose excitation the loop
+/// accepts and whose noise stays clear of the warn limits
+/// ([`Excitation::noise_within_warn`]: the sweep along the rod brings the
+/// tip nearer the support, where the noise grows); the nearest's refusal
+/// when none is.
+pub fn default_centre_m(config: &Config) -> Result<[f64; 3], String> {
+    let limits = &config.identify;
+    let cal = &config.estimator.calibration;
+    let mut refusal = String::new();
+    let mut a_m = DEFAULT_SUPPORT_DISTANCE_M;
+    while a_m >= MIN_SUPPORT_DISTANCE_M - 1e-9 {
+        let centre_m = centre_at_m(cal, a_m);
+        let spec = ExcitationSpec::around(
+            centre_m,
+            limits.excitation_duration_s,
+            (
+                limits.excitation_max_speed_mps,
+                limits.excitation_max_accel_mps2,
+                limits.excitation_max_jerk_mps3,
+            ),
+        );
+        let checked = Excitation::plan(&spec, config).and_then(|e| {
+            e.judged_by_the_loop(config)?;
+            e.noise_within_warn(config)
+        });
+        match checked {
+            Ok(()) => return Ok(centre_m),
+            Err(e) => refusal = e,
+        }
+        a_m -= 0.01;
+    }
+    Err(format!(
+        "no default centre from a = {DEFAULT_SUPPORT_DISTANCE_M} m to {MIN_SUPPORT_DISTANCE_M} m suits this robot (at the nearest: {refusal}); give one (--centre-m)"
+    ))
+}
+
+/// The default centre's largest distance from the support, m.
 pub const DEFAULT_SUPPORT_DISTANCE_M: f64 = 0.2;
+
+/// The default centre's smallest distance from the support, m.
+pub const MIN_SUPPORT_DISTANCE_M: f64 = 0.1;
 
 /// The planned excitation and its promise, as `identify --dynamic --plan`
 /// prints it before anything moves.
@@ -278,6 +379,7 @@ impl Plan {
         );
         let excitation = Excitation::plan(&spec, config)?;
         excitation.judged_by_the_loop(config)?;
+        excitation.noise_within_warn(config)?;
         let p = &config.estimator.profile;
         let rod = InertialParameters {
             mass_kg: p.mass_kg(),
