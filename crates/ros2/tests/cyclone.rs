@@ -69,7 +69,7 @@ fn cyclone_dds_reads_every_topic_equal_to_the_recording() {
     sard();
     // Again, alone, in a network namespace of its own (root: `unshare -n`;
     // another user: in a user namespace of its own too, `-r`).
-    let root = unsafe_free_is_root();
+    let root = is_root();
     let mut cmd = Command::new("unshare");
     if !root {
         cmd.arg("-r");
@@ -91,7 +91,7 @@ fn cyclone_dds_reads_every_topic_equal_to_the_recording() {
 }
 
 /// Whether this process runs as root (`id -u`: no `unsafe` for `geteuid`).
-fn unsafe_free_is_root() -> bool {
+fn is_root() -> bool {
     Command::new("id")
         .arg("-u")
         .output()
