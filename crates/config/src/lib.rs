@@ -61,6 +61,9 @@
 //!   max_joint_speed_mps`), `excitation_max_accel_mps2` (1; at most 5),
 //!   `excitation_max_jerk_mps3` (10; at most 1000), `excitation_duration_s`
 //!   (60; 10..=600).
+//! - `[ros2]`: the ROS 2 bridge's (`sar-ros2`; `sard` only checks it): the
+//!   DDS domain, the local addresses DDS uses, each topic's rate
+//!   (`Ros2Settings`, module `ros2`).
 //!
 //! Every error names the file, the dotted key, the line where the file has it,
 //! and the problem ([`ConfigError`]), on one line of at most about 700
@@ -90,6 +93,7 @@ mod exact;
 mod identify;
 mod locate;
 mod plausible;
+mod ros2;
 pub mod scenario;
 mod toml_file;
 
@@ -114,6 +118,7 @@ use std::path::{Path, PathBuf};
 use toml_file::Ctx;
 
 pub use identify::IdentifySettings;
+pub use ros2::{MAX_DOMAIN_ID, Ros2Rates, Ros2Settings, TopicRate};
 
 /// The configuration of the built-in demo (`sard --sim` without `--config`):
 /// the example robot of INTERFACES.md 2, every optional section written out
@@ -147,6 +152,8 @@ struct FileToml {
     force_control: ForceControlToml,
     #[serde(default)]
     identify: identify::IdentifyToml,
+    #[serde(default)]
+    ros2: ros2::Ros2Toml,
 }
 
 /// `[force_control]` (FORCE_CONTROL.md): the admittance law's settings.
@@ -611,6 +618,9 @@ pub struct Config {
     pub inertia_measured: bool,
     /// The limits of `sarctl identify --dynamic`'s excitation (`[identify]`).
     pub identify: IdentifySettings,
+    /// The ROS 2 bridge's settings (`[ros2]`; `sar-ros2` reads them, `sard`
+    /// only checks them).
+    pub ros2: Ros2Settings,
 }
 
 /// The recording's settings (`[record]`).
@@ -905,6 +915,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         f.plausibility.max_joint_speed_mps,
         f.axes.max_speed_mps,
     )?;
+    let ros2 = ros2::ros2(ctx, &f.ros2, record.scene_period_ns)?;
     // Valid values, then plausible ones (a unit mistake is named with its
     // range), then the geometry against the travel.
     plausible::check(ctx, &f)?;
@@ -935,6 +946,7 @@ fn build(ctx: &Ctx<'_>, f: FileToml) -> Result<Config, ConfigError> {
         force_control,
         inertia_measured,
         identify,
+        ros2,
     };
     // What the drivers' own checks at start would refuse (one conversion
     // for the start and for every load, `--check-config` included).

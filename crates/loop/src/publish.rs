@@ -6,11 +6,17 @@
 use crate::reply::Reply;
 use crate::stats::LoopStats;
 use crate::step::{LoopInput, LoopOutput, Request, reason_code};
+use sar_drivers::WrenchSample;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{CycleOutput, TipOutcome};
+use sar_msgs::msgs::TipOutcomeCode;
 use sar_msgs::wire::{
-    CommandMsg, ReplyMsg, StateMsg, command_kind, drive_state_code, flags, guard_state_code,
+    CommandMsg, ReplyMsg, STATE_SENSOR_SAMPLES, StateMsg, command_kind, drive_state_code, flags,
+    guard_state_code, reason_bytes,
 };
+
+// Every sample the loop drains in a cycle fits a state.
+const _: () = assert!(crate::control::DRAIN_CAPACITY <= STATE_SENSOR_SAMPLES);
 
 fn arr(v: &Vec3) -> [f64; 3] {
     [v.x, v.y, v.z]
@@ -33,6 +39,9 @@ pub struct StateParts<'a> {
     pub recording: u64,
     /// The simulator's truth, when simulated.
     pub truth: Option<SimTruth>,
+    /// Every sensor sample received since the previous cycle, oldest first
+    /// (`Cycle::sensor_samples`: the recorder's `/sar/sensor/wrench`).
+    pub sensor_samples: &'a [WrenchSample],
 }
 
 /// What the simulator says is true at the moment a cycle is published.
@@ -68,9 +77,75 @@ pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
     if let Some(t) = p.truth {
         m.flags |= flags::SIM_TRUTH;
         m.truth_tip_force_n = arr(&t.tip_force_n);
+        m.truth_friction_n = arr(&t.friction_force_n);
         m.truth_elapsed_ns = t.elapsed_ns;
     }
+    add_recorded(&mut m, p);
     m
+}
+
+/// The recording's `TIP_*` code of a tip outcome (the recorder's and the
+/// published state's one mapping).
+pub fn tip_outcome_code(tip: &TipOutcome) -> TipOutcomeCode {
+    match tip {
+        TipOutcome::Estimate(_) => TipOutcomeCode::Estimate,
+        TipOutcome::Refused(_) => TipOutcomeCode::Refused,
+        TipOutcome::PoseInvalid(_) => TipOutcomeCode::PoseInvalid,
+        TipOutcome::SensorInvalid => TipOutcomeCode::SensorInvalid,
+        TipOutcome::JointsInvalid => TipOutcomeCode::JointsInvalid,
+    }
+}
+
+/// What the recorder writes of the cycle beyond the rest of the state: the
+/// inputs' validity, the filter, the torsion, the outcome, the reasons
+/// whole, the transition and the sensor samples (a reader makes the
+/// recording's messages of it: `sar_scene::topics::messages`).
+fn add_recorded(m: &mut StateMsg, p: &StateParts<'_>) {
+    let (i, o) = (p.input, &p.decision.estimate);
+    if i.now_ns.is_some() {
+        m.flags |= flags::NOW;
+    }
+    if i.sensor.valid {
+        m.flags |= flags::SENSOR_VALID;
+    }
+    if i.joints.valid {
+        m.flags |= flags::JOINTS_VALID;
+    }
+    if let Some(f) = o.filtered {
+        m.flags |= flags::FILTERED;
+        m.tip_force_filtered_n = arr(&f.force_n);
+    }
+    if let TipOutcome::Estimate(e) = o.tip {
+        m.torsion_nm = e.torsion_nm;
+    }
+    m.tip_outcome = u32::from(tip_outcome_code(&o.tip).code());
+    m.guard_reason_bytes = reason_bytes(&o.guard_reason);
+    if let Some(t) = o.transition {
+        m.flags |= flags::TRANSITION;
+        m.transition_cycle = t.cycle;
+        m.transition_from = guard_state_code(t.from);
+        m.transition_to = guard_state_code(t.to);
+        m.transition_reason_bytes = reason_bytes(&t.reason);
+    }
+    let mut n = 0;
+    for (k, s) in p
+        .sensor_samples
+        .iter()
+        .take(STATE_SENSOR_SAMPLES)
+        .enumerate()
+    {
+        if let (Some(stamp), Some(force), Some(torque)) = (
+            m.sensor_received_ns.get_mut(k),
+            m.sensor_force_n.get_mut(k),
+            m.sensor_torque_nm.get_mut(k),
+        ) {
+            *stamp = s.received_ns;
+            *force = arr(&s.force_n);
+            *torque = arr(&s.torque_nm);
+            n += 1;
+        }
+    }
+    m.sensor_samples = n;
 }
 
 /// The fields every published cycle has: stamps, ages, joints, the guard's

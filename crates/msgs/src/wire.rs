@@ -22,6 +22,53 @@ pub mod flags {
     pub const HALTED: u32 = 1 << 4;
     /// `truth_tip_force_n` holds the simulator's truth.
     pub const SIM_TRUTH: u32 = 1 << 5;
+    /// The cycle's clock was read: `now_ns` is its time (else 0, and the
+    /// recording stamps the cycle with the newer input stamp).
+    pub const NOW: u32 = 1 << 6;
+    /// The sensor sample was valid (the driver's word).
+    pub const SENSOR_VALID: u32 = 1 << 7;
+    /// The joint sample was valid (the driver's word).
+    pub const JOINTS_VALID: u32 = 1 << 8;
+    /// `tip_force_filtered_n` is the filter's output.
+    pub const FILTERED: u32 = 1 << 9;
+    /// The guard changed state in this cycle (`transition_*`).
+    pub const TRANSITION: u32 = 1 << 10;
+}
+
+/// Sensor samples a [`StateMsg`] carries at most: every sample the loop
+/// drained in the cycle (`sar_loop::control::DRAIN_CAPACITY`, checked at
+/// compile time there), as the recorder writes them.
+pub const STATE_SENSOR_SAMPLES: usize = 16;
+
+/// A guard reason whole, with its facts: the `sar_snapshot::Snap` bytes of a
+/// `sar_estimator::guard::Reason` ([`reason_bytes`]), so that a reader
+/// writes the recording's sentence (`Display`) from the shared memory. All
+/// zeros: none.
+pub type ReasonBytes = [u8; REASON_BYTES];
+/// The size of [`ReasonBytes`] (a reason takes at most 26: its tag and
+/// three numbers).
+pub const REASON_BYTES: usize = 64;
+
+/// A reason as [`ReasonBytes`] (all zeros if it did not fit, which a test
+/// rules out for every reason).
+pub fn reason_bytes(reason: &sar_estimator::guard::Reason) -> ReasonBytes {
+    use sar_snapshot::Snap;
+    let mut out = [0u8; REASON_BYTES];
+    let mut w = sar_snapshot::Writer::new(&mut out);
+    reason.put(&mut w);
+    if w.overflowed() {
+        return [0u8; REASON_BYTES];
+    }
+    out
+}
+
+/// The reason of [`ReasonBytes`] (`None`: none, or bytes that are not one).
+pub fn reason_of(bytes: &ReasonBytes) -> Option<sar_estimator::guard::Reason> {
+    use sar_snapshot::Snap;
+    if bytes.iter().all(|b| *b == 0) {
+        return None;
+    }
+    sar_estimator::guard::Reason::get(&mut sar_snapshot::Reader::new(bytes)).ok()
 }
 
 /// Guard state codes: `GuardState::code` (Ok 0, Warn 1, Stop 2, Fault 3,
@@ -208,6 +255,40 @@ pub struct StateMsg {
     pub force_mode: u32,
     /// Its setpoint, N (hold: the force; push: the axial force).
     pub force_setpoint_n: f64,
+
+    // What the recorder writes of the cycle beyond the above (issue 37: a
+    // reader such as `sar-ros2` makes the recording's messages of it, bit
+    // for bit; `sar_scene::topics::messages`).
+    /// The torsion about the rod, N m (with [`flags::ESTIMATE`]).
+    pub torsion_nm: f64,
+    /// The causal filtered F_tip, base frame, N (with [`flags::FILTERED`]).
+    pub tip_force_filtered_n: [f64; 3],
+    /// The support's friction on the rod in the simulator's truth, N (with
+    /// [`flags::SIM_TRUTH`]): `truth_tip_force_n` less it is what the
+    /// recording's `/sar/sim/tip_wrench_truth` holds.
+    pub truth_friction_n: [f64; 3],
+    /// The cycle the guard's transition names (with [`flags::TRANSITION`]).
+    pub transition_cycle: u64,
+    /// The state it left ([`guard_code`]).
+    pub transition_from: u32,
+    /// The state it entered ([`guard_code`]).
+    pub transition_to: u32,
+    /// What became of the tip force, the recording's `TIP_*` code
+    /// (`sar_msgs::msgs::TipOutcomeCode`).
+    pub tip_outcome: u32,
+    /// How many of `sensor_*` hold samples: every sensor sample received
+    /// since the previous cycle, oldest first.
+    pub sensor_samples: u32,
+    /// Each sample's receive stamp, ns.
+    pub sensor_received_ns: [u64; STATE_SENSOR_SAMPLES],
+    /// Each sample's force, sensor frame, N.
+    pub sensor_force_n: [[f64; 3]; STATE_SENSOR_SAMPLES],
+    /// Each sample's torque, sensor frame, N m.
+    pub sensor_torque_nm: [[f64; 3]; STATE_SENSOR_SAMPLES],
+    /// The guard's reason, whole ([`reason_of`]).
+    pub guard_reason_bytes: ReasonBytes,
+    /// The transition's reason, whole ([`reason_of`]).
+    pub transition_reason_bytes: ReasonBytes,
 }
 
 impl Default for StateMsg {
@@ -248,6 +329,19 @@ impl Default for StateMsg {
             guarded_stop_force_n: [0.0; 3],
             force_mode: 0,
             force_setpoint_n: 0.0,
+            torsion_nm: 0.0,
+            tip_force_filtered_n: [0.0; 3],
+            truth_friction_n: [0.0; 3],
+            transition_cycle: 0,
+            transition_from: 0,
+            transition_to: 0,
+            tip_outcome: 0,
+            sensor_samples: 0,
+            sensor_received_ns: [0; STATE_SENSOR_SAMPLES],
+            sensor_force_n: [[0.0; 3]; STATE_SENSOR_SAMPLES],
+            sensor_torque_nm: [[0.0; 3]; STATE_SENSOR_SAMPLES],
+            guard_reason_bytes: [0; REASON_BYTES],
+            transition_reason_bytes: [0; REASON_BYTES],
         }
     }
 }
@@ -583,5 +677,49 @@ mod tests {
         assert_eq!(reply.detail_text(), "ré");
         assert!(reply.detail[3..].iter().all(|b| *b == 0));
         assert_eq!((reply.id, reply.cycle), (1, 2));
+    }
+
+    #[test]
+    fn a_reason_travels_whole_and_its_sentence_is_the_same() {
+        use sar_estimator::guard::{Axis, ForcePart, Reason, RestResidual, SensorChannel};
+        // The reasons with the most facts (a tag and up to three numbers),
+        // extreme values, and one without facts.
+        let reasons = [
+            Reason::TorqueImplausible {
+                axis: Axis::Z,
+                residual_nm: -f64::MAX,
+                std_nm: f64::MIN_POSITIVE,
+                max_sigma: 7.0,
+            },
+            Reason::MountingMismatch {
+                residual: RestResidual::Torque(Axis::Y),
+                value: 8.2,
+                allowed: 1.2,
+            },
+            Reason::SensorSaturated {
+                channel: SensorChannel::Tx,
+                value: f64::INFINITY,
+                range: 1e300,
+            },
+            Reason::AboveStop {
+                part: ForcePart::Lateral,
+                force_n: 12.345_678_9,
+                limit_n: 10.0,
+            },
+            Reason::CycleOutOfOrder {
+                previous: u64::MAX,
+                got: 0,
+            },
+            Reason::Reset,
+        ];
+        for r in reasons {
+            let bytes = reason_bytes(&r);
+            assert!(bytes.iter().any(|b| *b != 0), "{r:?} did not fit");
+            let back = reason_of(&bytes).unwrap();
+            assert_eq!(back, r);
+            assert_eq!(format!("{back}"), format!("{r}"));
+        }
+        assert_eq!(reason_of(&[0; REASON_BYTES]), None);
+        assert_eq!(StateMsg::default().guard_reason_bytes, [0; REASON_BYTES]);
     }
 }

@@ -24,7 +24,7 @@ use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request};
 use sar_msgs::msgs::{
     ActiveJointState, ClockStatusCode, CommandKindCode, CycleInput as CycleInputMsg,
     DriveActionCode, DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
-    PassiveJointState, REPLY_NONE, ReasonText, TipOutcomeCode, WrenchStamped, flags,
+    PassiveJointState, REPLY_NONE, ReasonText, WrenchStamped, flags,
 };
 use std::fmt::Write as _;
 
@@ -178,13 +178,7 @@ pub fn estimator_state(input: &CycleInput, o: &CycleOutput) -> EstimatorState {
         guard_reason_text: reason_text,
         ..EstimatorState::default()
     };
-    m.tip_outcome = match o.tip {
-        TipOutcome::Estimate(_) => TipOutcomeCode::Estimate,
-        TipOutcome::Refused(_) => TipOutcomeCode::Refused,
-        TipOutcome::PoseInvalid(_) => TipOutcomeCode::PoseInvalid,
-        TipOutcome::SensorInvalid => TipOutcomeCode::SensorInvalid,
-        TipOutcome::JointsInvalid => TipOutcomeCode::JointsInvalid,
-    };
+    m.tip_outcome = sar_loop::publish::tip_outcome_code(&o.tip);
     if let Some(pose) = o.pose {
         m.flags |= flags::POSE_VALID;
         m.ujoint_m = arr(&pose.ujoint_m);

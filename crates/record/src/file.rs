@@ -330,7 +330,7 @@ pub struct RotatingWriter {
 /// file's end) closes it, whatever their order.
 struct SceneState {
     options: SceneOptions,
-    next_ns: Option<u64>,
+    rate: sar_scene::rate::Decimator,
     cycle: Option<SceneCycle>,
     /// The limits in use (the last `/sar/cycle/input`'s).
     limits_n: [f64; 6],
@@ -408,7 +408,7 @@ impl RotatingWriter {
             written: 0,
             scene: options.scene.map(|o| SceneState {
                 options: o,
-                next_ns: None,
+                rate: sar_scene::rate::Decimator::new(o.period_ns),
                 cycle: None,
                 limits_n: o.limits_n,
                 q_m: [0.0; 3],
@@ -664,7 +664,7 @@ impl RotatingWriter {
             Outgoing::PassiveJoints(p) => cycle.passive = Some(*p),
             Outgoing::SimTruth(t) => cycle.truth_n = Some(t.force_n),
             Outgoing::CycleInput(c) => {
-                if c.limits_in_use_n.iter().all(|v| v.is_finite() && *v > 0.0) {
+                if sar_scene::topics::valid_limits(&c.limits_in_use_n) {
                     state.limits_n = c.limits_in_use_n;
                 }
                 state.q_m = c.joints_q_m;
@@ -691,31 +691,19 @@ impl RotatingWriter {
         else {
             return Ok(());
         };
-        if state.next_ns.is_some_and(|next| log_ns < next) {
+        if !state.rate.due(log_ns) {
             return Ok(());
         }
-        let period = state.options.period_ns.max(1);
-        state.next_ns = Some(match state.next_ns {
-            Some(next) => next + (log_ns - next) / period * period + period,
-            None => log_ns + period,
-        });
         let Some(channels) = file.scene.as_mut() else {
             return Ok(());
         };
-        let joints = sar_msgs::msgs::ActiveJointState {
-            stamp_ns: estimator.joints_stamp_ns,
+        let published = sar_scene::topics::scene_state(&sar_scene::topics::SceneInput {
+            estimator,
+            passive,
             q_m: state.q_m,
-        };
-        let mut published = sar_scene::topics::state_from_recorded(
-            &estimator,
-            &joints,
-            passive.as_ref(),
-            state.limits_n,
-        );
-        if let Some(truth_n) = truth_n {
-            published.truth_tip_force_n = truth_n;
-            published.flags |= sar_msgs::wire::flags::SIM_TRUTH;
-        }
+            limits_n: state.limits_n,
+            truth_n,
+        });
         let geometry = &state.options.geometry;
         let mut out = SceneOut {
             writer: &mut file.writer,

@@ -340,47 +340,105 @@ fn the_recorded_messages_of_a_cycle_draw_the_same_scene() {
 }
 
 #[test]
-fn topics_of_a_state_follow_its_flags_and_the_guards_transitions() {
-    use sar_msgs::msgs::{GuardStateCode, Outgoing, Topic};
+fn topics_of_a_state_are_the_recorders_messages_of_its_cycle() {
+    use sar_estimator::guard::{ForcePart, Reason};
+    use sar_msgs::msgs::{GuardStateCode, Outgoing, TipOutcomeCode, Topic};
+    use sar_msgs::wire::reason_bytes;
     use sar_scene::topics;
     let cfg = config(0.0);
-    let ok = state(&cfg, POSES[0], [1.0, 0.0, 0.0], guard_code::OK);
-    let mut warn = ok;
-    warn.cycle += 1;
-    warn.guard_state = guard_code::WARN;
-    warn.guard_reason = 22;
+    let mut ok = state(&cfg, POSES[0], [1.0, 0.0, 0.0], guard_code::OK);
+    ok.flags |= flags::NOW | flags::SENSOR_VALID | flags::JOINTS_VALID;
+    ok.joints_stamp_ns = ok.now_ns - 100_000;
     let mut out = Vec::new();
     let names = |out: &[Outgoing]| out.iter().map(|m| m.topic()).collect::<Vec<_>>();
 
+    // The recorder's order; the joints when their sample is new.
     topics::messages(&ok, None, &mut out);
     assert_eq!(
         names(&out),
         [
             Topic::Joints,
+            Topic::EstimatorState,
             Topic::TipWrench,
-            Topic::PassiveJoints,
-            Topic::EstimatorState
+            Topic::PassiveJoints
         ]
     );
     topics::messages(&ok, Some(&ok), &mut out);
-    assert!(!names(&out).contains(&Topic::GuardEvents));
+    assert_eq!(
+        names(&out),
+        [
+            Topic::EstimatorState,
+            Topic::TipWrench,
+            Topic::PassiveJoints
+        ]
+    );
+
+    // The loop's own transition, with its reason whole (the recording's
+    // sentence, not only its name).
+    let reason = Reason::AboveWarn {
+        part: ForcePart::Axial,
+        force_n: 8.25,
+        limit_n: 8.0,
+    };
+    let mut warn = ok;
+    warn.cycle += 1;
+    warn.now_ns += 1_000_000;
+    warn.guard_state = guard_code::WARN;
+    warn.guard_reason = 22;
+    warn.guard_reason_bytes = reason_bytes(&reason);
+    warn.flags |= flags::TRANSITION;
+    warn.transition_cycle = warn.cycle;
+    warn.transition_from = guard_code::OK;
+    warn.transition_to = guard_code::WARN;
+    warn.transition_reason_bytes = reason_bytes(&reason);
     topics::messages(&warn, Some(&ok), &mut out);
     let Some(Outgoing::GuardEvent(e)) = out.last() else {
         panic!("{out:?}")
     };
     assert_eq!(
-        (e.from_state, e.to_state, e.reason_code, e.cycle),
-        (GuardStateCode::Ok, GuardStateCode::Warn, 22, warn.cycle)
+        (e.from_state, e.to_state, e.reason_code, e.cycle, e.stamp_ns),
+        (
+            GuardStateCode::Ok,
+            GuardStateCode::Warn,
+            22,
+            warn.cycle,
+            warn.now_ns
+        )
     );
-    assert_eq!(e.reason_text.as_str(), "above_warn");
+    assert_eq!(e.reason_text.as_str(), reason.to_string());
+    let Some(Outgoing::EstimatorState(st)) = out.first() else {
+        panic!("{out:?}")
+    };
+    assert_eq!(st.guard_reason_text.as_str(), reason.to_string());
+    // A state that differs from the one before without the loop's
+    // transition (states lost between them): no event is made up.
+    let mut later = warn;
+    later.cycle += 5;
+    later.guard_state = guard_code::STOP;
+    later.flags &= !flags::TRANSITION;
+    topics::messages(&later, Some(&ok), &mut out);
+    assert!(!names(&out).contains(&Topic::GuardEvents));
 
-    // No pose, no estimate: the joints and the state only.
+    // No pose, no estimate: the state alone, with the outcome the loop
+    // recorded; each sensor sample received first, in order.
     let mut none = ok;
-    none.flags = 0;
+    none.flags = flags::NOW;
+    none.tip_outcome = u32::from(TipOutcomeCode::SensorInvalid.code());
+    none.sensor_samples = 2;
+    none.sensor_received_ns[0] = 7;
+    none.sensor_received_ns[1] = 8;
     topics::messages(&none, Some(&ok), &mut out);
-    assert_eq!(names(&out), [Topic::Joints, Topic::EstimatorState]);
+    assert_eq!(
+        names(&out),
+        [
+            Topic::SensorWrench,
+            Topic::SensorWrench,
+            Topic::EstimatorState
+        ]
+    );
+    assert_eq!(out[1].stamp_ns(), 8);
     let Some(Outgoing::EstimatorState(st)) = out.last() else {
         panic!()
     };
-    assert_eq!(st.tip_outcome, sar_msgs::msgs::TipOutcomeCode::PoseInvalid);
+    assert_eq!(st.tip_outcome, TipOutcomeCode::SensorInvalid);
 }

@@ -10,10 +10,13 @@
 //!   `tf2_msgs/TFMessage` ([`TF_STATIC_TOPIC`], [`TF_TOPIC`]); the messages
 //!   are `sar_msgs::scene`'s.
 //! - [`topics`]: the recordings' messages made from the published state, and
-//!   a state made from recorded messages.
+//!   the scene's state made from recorded messages.
+//! - [`rate`]: decimation by the cycles' stamps (the scene's rate, the ROS 2
+//!   bridge's per-topic rates).
 
 pub mod draw;
 pub mod geometry;
+pub mod rate;
 pub mod topics;
 
 /// The 3D scene's topic (`visualization_msgs/msg/MarkerArray`).

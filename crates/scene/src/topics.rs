@@ -1,23 +1,29 @@
 //! The recordings' messages (INTERFACES.md 1) made from the published state,
-//! so that the live view carries the same topics, types and encodings as a
-//! recording (one Foxglove layout for both).
+//! so that the live view and the ROS 2 bridge (`sar-ros2`) carry the same
+//! topics, types, encodings and values as a recording of the same cycle.
 //!
-//! What the state holds gives `/sar/joints`, `/sar/estimate/tip_wrench`,
-//! `/sar/estimate/passive_joints`, `/sar/estimate/state` and
-//! `/sar/guard/events` (a transition between two consecutive states the
-//! view received). The state does not carry the raw sensor reading, the
-//! filtered tip force, the torsion nor the cycle's full input, so
-//! `/sar/sensor/wrench`, `/sar/estimate/tip_wrench_filtered` and
-//! `/sar/cycle/input` are not served, and in `/sar/estimate/state` the
-//! filtered force and the torsion are 0 (flag `FILTERED_VALID` clear) and a
-//! cycle without an estimate is `TIP_POSE_INVALID` without a pose, else
-//! `TIP_REFUSED` (the state does not say which input was refused).
+//! A published state holds what the recorder writes of its cycle
+//! (`sar_msgs::wire::StateMsg`: the inputs' validity, the filter, the
+//! torsion, the outcome, the guard's reasons whole, the transition and every
+//! sensor sample received), so [`messages`] gives the recorder's messages of
+//! the cycle (`sar_record::convert::cycle_record_samples` and the simulator's
+//! truth), bit for bit, in the recorder's order: `/sar/sensor/wrench` (each
+//! sample), `/sar/joints` (when new), `/sar/estimate/state`,
+//! `/sar/estimate/tip_wrench`, `.../tip_wrench_filtered`,
+//! `.../passive_joints`, `/sar/guard/events`, `/sar/sim/tip_wrench_truth`.
+//! Only `/sar/cycle/input` (the step's whole input, for replay) is not made.
+//!
+//! The 3D scene of a cycle is drawn from its recorded messages
+//! ([`scene_state`]) by the recorder's writer and by `sar-ros2` alike.
 
+use core::fmt::Write as _;
 use sar_msgs::msgs::{
     self, ActiveJointState, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
     PassiveJointState, ReasonText, SceneStatus, TipOutcomeCode, WrenchStamped,
 };
-use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
+use sar_msgs::wire::{
+    ReasonBytes, STATE_SENSOR_SAMPLES, StateMsg, flags, guard_state_name, reason_name, reason_of,
+};
 
 /// The recording's guard state of a wire code (the same numbers; an unknown
 /// one is Fault).
@@ -38,85 +44,193 @@ fn reason_text(code: u32) -> ReasonText {
     ReasonText::truncating(reason_name(code))
 }
 
-/// `/sar/estimate/state` of a published state.
-pub fn estimator_state(s: &StateMsg) -> EstimatorState {
-    let tip_outcome = if s.flags & flags::ESTIMATE != 0 {
-        TipOutcomeCode::Estimate
-    } else if s.flags & flags::POSE == 0 {
-        TipOutcomeCode::PoseInvalid
-    } else {
-        TipOutcomeCode::Refused
-    };
-    let mut f = 0;
-    for (wire, rec) in [
-        (flags::POSE, msgs::flags::POSE_VALID),
-        (flags::ESTIMATE, msgs::flags::TIP_VALID),
-        (flags::OBSERVABLE, msgs::flags::OBSERVABLE),
-    ] {
-        if s.flags & wire != 0 {
-            f |= rec;
+/// The sentence of a reason carried whole (the recording's
+/// `guard_reason_text`, `reason_text`: its `Display`, cut at the text's
+/// size), and its recorded code; a reason that does not read back gives its
+/// code's name and `REASON_OTHER`.
+fn reason_whole(bytes: &ReasonBytes) -> (u8, ReasonText) {
+    let mut text = ReasonText::default();
+    match reason_of(bytes) {
+        Some(r) => {
+            let _ = write!(text, "{r}");
+            (r.recorded_code(), text)
         }
+        None => (
+            sar_estimator::guard::recorded_code(u32::MAX),
+            ReasonText::truncating("unknown"),
+        ),
     }
-    EstimatorState {
-        stamp_ns: s.now_ns,
+}
+
+/// The cycle's stamp as the recorder writes it (its `now`; when the clock
+/// could not be read, the newer input stamp: `sar_record::convert::cycle_stamp_ns`).
+pub fn cycle_stamp_ns(s: &StateMsg) -> u64 {
+    if s.flags & flags::NOW != 0 {
+        s.now_ns
+    } else {
+        s.sensor_stamp_ns.max(s.joints_stamp_ns)
+    }
+}
+
+/// `/sar/estimate/state` of a published state: the recorder's message of
+/// the cycle.
+pub fn estimator_state(s: &StateMsg) -> EstimatorState {
+    let mut m = EstimatorState {
+        stamp_ns: cycle_stamp_ns(s),
         cycle: s.cycle,
         now_ns: s.now_ns,
         sensor_stamp_ns: s.sensor_stamp_ns,
         joints_stamp_ns: s.joints_stamp_ns,
         sensor_age_ns: s.sensor_age_ns,
         joints_age_ns: s.joints_age_ns,
-        tip_outcome,
-        ujoint_m: s.ujoint_m,
-        tip_m: s.tip_m,
-        support_distance_m: s.support_distance_m,
-        ujoint_force_n: s.ujoint_force_n,
-        tip_force_n: s.tip_force_n,
-        tip_force_std_n: s.tip_std_n,
-        axial_n: s.tip_axial_lateral_n[0],
-        lateral_n: s.tip_axial_lateral_n[1],
-        torsion_nm: 0.0,
-        tip_force_filtered_n: [0.0; 3],
         guard_state: guard_state(s.guard_state),
-        guard_reason_code: reason_code(s.guard_reason),
-        guard_reason_text: reason_text(s.guard_reason),
-        flags: f,
+        ..EstimatorState::default()
+    };
+    (m.guard_reason_code, m.guard_reason_text) = reason_whole(&s.guard_reason_bytes);
+    m.tip_outcome = u8::try_from(s.tip_outcome)
+        .ok()
+        .and_then(|c| TipOutcomeCode::from_code(c).ok())
+        .unwrap_or(TipOutcomeCode::Refused);
+    if s.flags & flags::POSE != 0 {
+        m.flags |= msgs::flags::POSE_VALID;
+        m.ujoint_m = s.ujoint_m;
+        m.tip_m = s.tip_m;
+        m.support_distance_m = s.support_distance_m;
     }
+    if s.flags & flags::ESTIMATE != 0 {
+        m.flags |= msgs::flags::TIP_VALID;
+        if s.flags & flags::OBSERVABLE != 0 {
+            m.flags |= msgs::flags::OBSERVABLE;
+        }
+        m.ujoint_force_n = s.ujoint_force_n;
+        m.tip_force_n = s.tip_force_n;
+        m.tip_force_std_n = s.tip_std_n;
+        m.axial_n = s.tip_axial_lateral_n[0];
+        m.lateral_n = s.tip_axial_lateral_n[1];
+        m.torsion_nm = s.torsion_nm;
+    }
+    if s.flags & flags::FILTERED != 0 {
+        m.flags |= msgs::flags::FILTERED_VALID;
+        m.tip_force_filtered_n = s.tip_force_filtered_n;
+    }
+    if s.flags & flags::SENSOR_VALID != 0 {
+        m.flags |= msgs::flags::SENSOR_VALID;
+    }
+    if s.flags & flags::JOINTS_VALID != 0 {
+        m.flags |= msgs::flags::JOINTS_VALID;
+    }
+    // The sensor's age is known when the clock advanced.
+    if s.sensor_age_ns != u64::MAX {
+        m.flags |= msgs::flags::CLOCK_ADVANCES;
+    }
+    m
 }
 
-/// The messages of one published state, in topic order, into `out`
-/// (cleared first). `previous` is the state received before it (for the
-/// guard's transitions).
+/// The messages of one published state, in the recorder's order, into `out`
+/// (cleared first). `previous` is the state received before it: the joints
+/// are written when their stamp changed since (the recorder's rule; every
+/// time without one).
 pub fn messages(s: &StateMsg, previous: Option<&StateMsg>, out: &mut Vec<Outgoing>) {
     out.clear();
-    out.push(Outgoing::Joints(ActiveJointState {
-        stamp_ns: s.joints_stamp_ns,
-        q_m: s.q_m,
-    }));
+    let stamp_ns = cycle_stamp_ns(s);
+    let samples = usize::try_from(s.sensor_samples)
+        .unwrap_or(STATE_SENSOR_SAMPLES)
+        .min(STATE_SENSOR_SAMPLES);
+    for k in 0..samples {
+        if let (Some(stamp), Some(force), Some(torque)) = (
+            s.sensor_received_ns.get(k),
+            s.sensor_force_n.get(k),
+            s.sensor_torque_nm.get(k),
+        ) {
+            out.push(Outgoing::SensorWrench(WrenchStamped::sensor(
+                *stamp, *force, *torque,
+            )));
+        }
+    }
+    if previous.is_none_or(|p| p.joints_stamp_ns != s.joints_stamp_ns) {
+        out.push(Outgoing::Joints(ActiveJointState {
+            stamp_ns: s.joints_stamp_ns,
+            q_m: s.q_m,
+        }));
+    }
+    out.push(Outgoing::EstimatorState(estimator_state(s)));
     if s.flags & flags::ESTIMATE != 0 {
         out.push(Outgoing::TipWrench(WrenchStamped::base_force(
-            s.now_ns,
+            stamp_ns,
             s.tip_force_n,
+        )));
+    }
+    if s.flags & flags::FILTERED != 0 {
+        out.push(Outgoing::TipWrenchFiltered(WrenchStamped::base_force(
+            stamp_ns,
+            s.tip_force_filtered_n,
         )));
     }
     if s.flags & flags::POSE != 0 {
         out.push(Outgoing::PassiveJoints(PassiveJointState {
-            stamp_ns: s.now_ns,
+            stamp_ns,
             q_rad: s.q45_rad,
         }));
     }
-    out.push(Outgoing::EstimatorState(estimator_state(s)));
-    if let Some(p) = previous
-        && p.guard_state != s.guard_state
-    {
+    if s.flags & flags::TRANSITION != 0 {
+        let (reason_code, reason_text) = reason_whole(&s.transition_reason_bytes);
         out.push(Outgoing::GuardEvent(GuardEvent {
-            stamp_ns: s.now_ns,
-            cycle: s.cycle,
-            from_state: guard_state(p.guard_state),
-            to_state: guard_state(s.guard_state),
-            reason_code: reason_code(s.guard_reason),
-            reason_text: reason_text(s.guard_reason),
+            stamp_ns,
+            cycle: s.transition_cycle,
+            from_state: guard_state(s.transition_from),
+            to_state: guard_state(s.transition_to),
+            reason_code,
+            reason_text,
         }));
     }
+    // The simulator's visible truth with every new sample, as recorded.
+    if s.flags & flags::SIM_TRUTH != 0 && s.flags & flags::NEW_SAMPLE != 0 {
+        let [t, f] = [s.truth_tip_force_n, s.truth_friction_n];
+        out.push(Outgoing::SimTruth(WrenchStamped::base_force(
+            stamp_ns,
+            [t[0] - f[0], t[1] - f[1], t[2] - f[2]],
+        )));
+    }
+}
+
+/// What the scene of a cycle is drawn from, as the recorder's writer gathers
+/// it from the cycle's recorded messages: `/sar/estimate/state`,
+/// `/sar/estimate/passive_joints`, the joints of `/sar/cycle/input` (or
+/// `/sar/joints`), the limits in use, `/sar/sim/tip_wrench_truth`. The
+/// recorder and `sar-ros2` both draw from [`scene_state`] of it, so a live
+/// scene equals the recorded one of the same cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneInput {
+    /// The cycle's `/sar/estimate/state`.
+    pub estimator: EstimatorState,
+    /// Its `/sar/estimate/passive_joints`, if any.
+    pub passive: Option<PassiveJointState>,
+    /// The last joints, m.
+    pub q_m: [f64; 3],
+    /// The limits in use (the last valid ones: [`valid_limits`]).
+    pub limits_n: [f64; 6],
+    /// Its `/sar/sim/tip_wrench_truth`, N, if any.
+    pub truth_n: Option<[f64; 3]>,
+}
+
+/// Whether `limits_n` are limits in use (every one a positive number); the
+/// scene keeps the last such.
+pub fn valid_limits(limits_n: &[f64; 6]) -> bool {
+    limits_n.iter().all(|v| v.is_finite() && *v > 0.0)
+}
+
+/// The state the scene of a cycle is drawn from ([`SceneInput`]).
+pub fn scene_state(i: &SceneInput) -> StateMsg {
+    let joints = ActiveJointState {
+        stamp_ns: i.estimator.joints_stamp_ns,
+        q_m: i.q_m,
+    };
+    let mut s = state_from_recorded(&i.estimator, &joints, i.passive.as_ref(), i.limits_n);
+    if let Some(truth_n) = i.truth_n {
+        s.truth_tip_force_n = truth_n;
+        s.flags |= flags::SIM_TRUTH;
+    }
+    s
 }
 
 /// A state for the scene (`draw::scene`) from the recorded messages of one

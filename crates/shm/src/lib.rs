@@ -1262,6 +1262,7 @@ impl Sink for DaemonShm {
             recorder_drops: health.recorder_drops,
             recording: health.recording,
             truth: c.truth,
+            sensor_samples: c.sensor_samples,
         });
         state.publish_queue_drops = self.queue_drops;
         self.push_state(state);
