@@ -855,7 +855,7 @@ fn the_name_check_refuses_a_stale_name() {
     // Real ones pass...
     for ok in [
         "LoopStep::step",
-        "sar_drivers::motion",
+        "sar_hal::motion",
         "Estimator::cycle_checked",
         "crates/loop/src/step.rs",
         "sar-loop",

@@ -16,11 +16,11 @@
 )]
 
 use sar_config::scenario::parse;
-use sar_drivers::sim::Simulator;
-use sar_drivers::{AxisDrives, ForceSensor, SimClock};
+use sar_hal::{AxisDrives, ForceSensor, SimClock};
 use sar_kinematics::ActiveJoints;
 use sar_msgs::msgs::{ActiveJointState, RecorderDrops, WrenchStamped};
 use sar_record::{FileOptions, Outgoing, RotatingWriter};
+use sar_sim::Simulator;
 use sarctl::identify::excitation::Excitation;
 use std::path::{Path, PathBuf};
 

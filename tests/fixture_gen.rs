@@ -16,14 +16,14 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::SimClock;
-use sar_drivers::sim::{Simulator, Truth};
 use sar_estimator::Vec3;
+use sar_hal::SimClock;
 use sar_loop::control::{Envelope, Operator, Request};
 use sar_loop::logq;
 use sar_msgs::msgs::{Outgoing, RecorderDrops, WrenchStamped};
 use sar_record::convert;
 use sar_record::{FileOptions, RotatingWriter};
+use sar_sim::{Simulator, Truth};
 use sar_test_support::rig::controller;
 use sar_test_support::truth::run_tapped;
 use std::path::Path;

@@ -30,11 +30,11 @@
 )]
 
 use sar_config::scenario::{Scenario, parse};
-use sar_drivers::SimClock;
-use sar_drivers::runner::{EndReason, RunOptions, run};
-use sar_drivers::sim::Simulator;
+use sar_hal::SimClock;
 use sar_msgs::msgs::{ActiveJointState, RecorderDrops, WrenchStamped};
 use sar_record::{FileOptions, Outgoing, RotatingWriter};
+use sar_sim::Simulator;
+use sar_sim::runner::{EndReason, RunOptions, run};
 use std::path::{Path, PathBuf};
 
 /// Host time at the start of every run, ns.

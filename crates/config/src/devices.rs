@@ -10,8 +10,8 @@
 
 use crate::toml_file::Ctx;
 use crate::{AxesDriver, Config, ConfigError, SensorDriver};
-use sar_drivers::canopen::{CanOpenConfig, CanOpenError};
-use sar_drivers::rdt::{RdtConfig, RdtError};
+use sar_canopen::{CanOpenConfig, CanOpenError};
+use sar_rdt::{RdtConfig, RdtError};
 
 /// The CANopen drives' configuration for `[drivers.axes] kind = "canopen"`:
 /// the file's node ids, lead and counts per turn, SYNC at the loop's rate,

@@ -85,7 +85,7 @@
 //! comes last.
 //!
 //! The simulator's scenario files (`scenarios/`) are read here too
-//! ([`scenario`]: TOML -> `sar_drivers::scenario::Scenario`), with the same
+//! ([`scenario`]: TOML -> `sar_sim::scenario::Scenario`), with the same
 //! machinery and the same error type.
 
 pub mod devices;
@@ -1475,7 +1475,7 @@ impl Config {
     pub fn step_config(&self) -> sar_loop::step::StepConfig {
         sar_loop::step::StepConfig {
             travel_m: self.axes.travel_m,
-            axis_limits: sar_drivers::motion::Limits {
+            axis_limits: sar_hal::motion::Limits {
                 max_speed_mps: self.axes.max_speed_mps,
                 max_accel_mps2: self.axes.max_accel_mps2,
             },

@@ -4,8 +4,8 @@
 //! `scenarios/README.md`).
 //!
 //! [`load`] and [`parse`] check every value and build a [`Scenario`]
-//! (`sar_drivers::scenario`'s typed data): the simulator's `SimSpec` and a
-//! [`MotionScript`] for `sar_drivers::runner`. A bad file is a
+//! (`sar_sim::scenario`'s typed data): the simulator's `SimSpec` and a
+//! [`MotionScript`] for `sar_sim::runner`. A bad file is a
 //! [`ConfigError`] whose message names the file, the key (dotted, e.g.
 //! `motion[3].hold_s`) and what is wrong; TOML syntax errors keep toml's line
 //! and column.
@@ -20,13 +20,13 @@ mod robot;
 mod script;
 mod support;
 
-pub use sar_drivers::scenario::{MotionScript, MotionStep, Scenario};
+pub use sar_sim::scenario::{MotionScript, MotionStep, Scenario};
 
 use crate::ConfigError;
 use crate::toml_file::{self, Ctx};
 use raw::FileToml;
-use sar_drivers::scenario::seconds_to_ns_saturating;
-use sar_drivers::sim::{SimError, SimSpec};
+use sar_sim::scenario::seconds_to_ns_saturating;
+use sar_sim::{SimError, SimSpec};
 use script::{Machine, MotionFile};
 use std::path::Path;
 
@@ -168,7 +168,7 @@ fn build(ctx: &Ctx<'_>, file: FileToml) -> Result<Scenario, ConfigError> {
     // The simulator's own checks (e.g. more samples in flight than it holds,
     // times equal once in ns), so that it never refuses a loaded file later
     // with an error that cannot name the file.
-    sar_drivers::sim::validate(&spec).map_err(|e| ctx.err(&sim_error_key(&e), e.to_string()))?;
+    sar_sim::validate(&spec).map_err(|e| ctx.err(&sim_error_key(&e), e.to_string()))?;
     Ok(Scenario {
         name: file.name,
         description: file.description.unwrap_or_default(),

@@ -20,7 +20,7 @@
 //!   whose sensor does not fail on purpose.
 //!
 //! Run with `--nocapture` to see the figures. (Here, beside the scenario
-//! loader, since `sar-drivers` reads no scenario file.)
+//! loader, since `sar-sim` reads no scenario file.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -29,10 +29,6 @@
 )]
 
 use sar_config::scenario::{Scenario, load, parse};
-use sar_drivers::motion::SLIDE_THRESHOLD_M;
-use sar_drivers::runner::{EndReason, Run, RunEvent, RunOptions, run};
-use sar_drivers::sim::{Fault, Simulator, Truth};
-use sar_drivers::{JointPositions, SimClock, Vec3, WrenchSample};
 use sar_estimator::SensorNoise;
 use sar_estimator::StaticPose;
 use sar_estimator::cycle::{
@@ -43,7 +39,11 @@ use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState, Reason};
 use sar_estimator::identification::{Identification, IdentificationOptions, IdentificationResult};
 use sar_estimator::support::{SupportCalibration, SupportOptions};
 use sar_estimator::tip_force::TipForceConfig;
+use sar_hal::motion::SLIDE_THRESHOLD_M;
+use sar_hal::{JointPositions, SimClock, Vec3, WrenchSample};
 use sar_kinematics::{ActiveJoints, SlideSign, forward};
+use sar_sim::runner::{EndReason, Run, RunEvent, RunOptions, run};
+use sar_sim::{Fault, Simulator, Truth};
 use sar_test_support::truth::{run_tapped, truth_at};
 use std::path::{Path, PathBuf};
 

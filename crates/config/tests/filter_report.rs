@@ -19,7 +19,7 @@
 //! is its group delay (within a bound derived from the cutoff); the filter's
 //! propagated deviation is the one the residual noise shows where the force is
 //! steady. Run with `--nocapture` to see the table. (Here, beside the
-//! scenario loader, since `sar-drivers` reads no scenario file.)
+//! scenario loader, since `sar-sim` reads no scenario file.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -28,14 +28,14 @@
 )]
 
 use sar_config::scenario::{Scenario, load};
-use sar_drivers::runner::EndReason;
-use sar_drivers::sim::Simulator;
-use sar_drivers::{JointPositions, SimClock, Vec3};
 use sar_estimator::SensorNoise;
 use sar_estimator::error_measure::absolute_relative_error;
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
+use sar_hal::{JointPositions, SimClock, Vec3};
 use sar_kinematics::{ActiveJoints, forward};
+use sar_sim::Simulator;
+use sar_sim::runner::EndReason;
 use sar_test_support::truth::{run_tapped, truth_at};
 use std::f64::consts::PI;
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! independently of how the loader built it); every kind of bad file is
 //! refused with a message naming the file and the key; the runner does what
 //! its doc says on simple fake drives and a fake sensor. (Here, beside the
-//! loader, since `sar-drivers`, the runner's crate, reads no TOML.)
+//! loader, since `sar-sim`, the runner's crate, reads no TOML.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -15,18 +15,18 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config as ProptestConfig, RngSeed};
 use sar_config::ConfigError;
 use sar_config::scenario::{Scenario, load, parse};
-use sar_drivers::motion::{
+use sar_hal::motion::{
     SLIDE_THRESHOLD_M, SlideTracker, axis_move_time_s, axis_progress_m, move_time_s,
 };
-use sar_drivers::runner::{EndReason, RunError, RunEvent, RunOptions, run};
-use sar_drivers::sim::{
-    Breathing, Fault, PlantSpec, RodInertia, ServoSpec, Simulator, Tissue, TissueModel, TissueShift,
-};
-use sar_drivers::{
+use sar_hal::{
     AxisDrives, DriveState, ErrorKind, ForceSensor, JointPositions, Rail, SensorStatus, SimClock,
     Vec3, WrenchSample,
 };
 use sar_kinematics::{ActiveJoints, SlideSign, forward};
+use sar_sim::runner::{EndReason, RunError, RunEvent, RunOptions, run};
+use sar_sim::{
+    Breathing, Fault, PlantSpec, RodInertia, ServoSpec, Simulator, Tissue, TissueModel, TissueShift,
+};
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
@@ -356,7 +356,7 @@ fn the_encoder_frozen_file_freezes_q3_while_it_moves() {
     // The fault must come during a move, where only the following check can
     // see it: the first move runs from 1.0 s for the slowest axis's time.
     let s = load_named("fault_encoder_frozen.toml");
-    let first_move_s = sar_drivers::motion::move_time_s(
+    let first_move_s = sar_hal::motion::move_time_s(
         &s.script.start,
         &s.script.steps[1].target,
         s.script.max_speed_mps,
@@ -437,9 +437,9 @@ fn the_tissue_file_is_a_breathing_tissue_at_the_tip() {
     let sim = Simulator::new(s.spec.clone(), clock.clone()).unwrap();
     let t = sim.truth().unwrap();
     assert!((t.pose.tip_m - Vec3::new(0.6, 0.2, 0.0)).norm() < 1e-12);
-    sar_drivers::Clock::sleep_until_ns(&clock, 1_000_000_000);
+    sar_hal::Clock::sleep_until_ns(&clock, 1_000_000_000);
     assert_eq!(sim.truth().unwrap().tissue_force_n, Vec3::zeros());
-    sar_drivers::Clock::sleep_until_ns(&clock, 3_000_000_000);
+    sar_hal::Clock::sleep_until_ns(&clock, 3_000_000_000);
     let f = sim.truth().unwrap().tissue_force_n;
     assert!((f - Vec3::new(0.9, 0.0, 0.0)).norm() < 1e-9, "{f}");
 }
@@ -1482,7 +1482,7 @@ impl std::fmt::Display for FakeError {
     }
 }
 
-impl sar_drivers::Error for FakeError {
+impl sar_hal::Error for FakeError {
     fn kind(&self) -> ErrorKind {
         self.0
     }
@@ -1658,7 +1658,7 @@ impl ForceSensor for FakeSensor {
         Err(FakeError(ErrorKind::Unsupported))
     }
 
-    fn drain(&mut self, _out: &mut [WrenchSample]) -> Result<sar_drivers::Drained, FakeError> {
+    fn drain(&mut self, _out: &mut [WrenchSample]) -> Result<sar_hal::Drained, FakeError> {
         Err(FakeError(ErrorKind::Unsupported))
     }
 }
@@ -1881,12 +1881,12 @@ fn support_shifts_are_read_and_checked() {
     assert_eq!(
         shifts,
         vec![
-            sar_drivers::sim::SupportShift {
+            sar_sim::SupportShift {
                 t_ns: 2_000_000_000,
                 shift_m: Vec3::new(0.0, 0.005, 0.0),
                 duration_ns: 500_000_000,
             },
-            sar_drivers::sim::SupportShift {
+            sar_sim::SupportShift {
                 t_ns: 4_000_000_000,
                 shift_m: Vec3::new(0.0, 0.0, -0.02),
                 duration_ns: 0,

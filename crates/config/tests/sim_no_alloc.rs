@@ -5,7 +5,7 @@
 //! and a breathing, shifting, damped tissue, then the plant in motion: the
 //! rod's inertia, the servos and the quick stop). One test in this binary, so
 //! that no other test's allocations count. (Here, beside the scenario
-//! loader, since `sar-drivers` reads no scenario file.)
+//! loader, since `sar-sim` reads no scenario file.)
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -13,11 +13,11 @@
     clippy::panic
 )]
 
-use sar_drivers::sim::{
+use sar_hal::{AxisDrives, DriveState, ForceSensor, SimClock, Vec3, WrenchSample};
+use sar_kinematics::ActiveJoints;
+use sar_sim::{
     Breathing, Fault, PlantSpec, RodInertia, ServoSpec, Simulator, Tissue, TissueModel, TissueShift,
 };
-use sar_drivers::{AxisDrives, DriveState, ForceSensor, SimClock, Vec3, WrenchSample};
-use sar_kinematics::ActiveJoints;
 use sar_test_support::counting::{Counting, thread_allocations};
 use std::path::Path;
 
@@ -186,9 +186,9 @@ fn plant_in_motion_allocates_nothing(path: &Path) {
         quick_stop_decel_mps2: Some(2.0),
     };
     // The support moving under it (issue 26), ramped over the moves.
-    spec.support_shifts = vec![sar_drivers::sim::SupportShift {
+    spec.support_shifts = vec![sar_sim::SupportShift {
         t_ns: 50_000_000,
-        shift_m: sar_drivers::Vec3::new(0.0, 0.005, -0.002),
+        shift_m: sar_hal::Vec3::new(0.0, 0.005, -0.002),
         duration_ns: 200_000_000,
     }];
     let clock = SimClock::new(1_000_000_000);

@@ -10,7 +10,7 @@ mod support;
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::MonotonicClock;
+use sar_hal::MonotonicClock;
 use sar_loop::control::Operator;
 use sar_loop::notify::Watchdog;
 use sar_loop::runloop::{self, Edges, RunLimits};

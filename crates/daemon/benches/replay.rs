@@ -48,7 +48,7 @@ mod support;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::{DriveState, SimClock};
+use sar_hal::{DriveState, SimClock};
 use sar_loop::control::{Operator, Request};
 use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopStep};

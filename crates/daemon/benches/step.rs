@@ -21,12 +21,12 @@ mod support;
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::SimClock;
-use sar_drivers::sim::{Tissue, TissueModel};
 use sar_estimator::Vec3;
+use sar_hal::SimClock;
 use sar_loop::control::{Envelope, Operator, Request};
 use sar_loop::logq;
 use sar_loop::step::{LoopInput, LoopStep};
+use sar_sim::{Tissue, TissueModel};
 use std::hint::black_box;
 
 /// Cycles measured per batch.

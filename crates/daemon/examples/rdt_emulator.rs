@@ -9,7 +9,7 @@
 //! one packet every PERIOD_US (default 1000) until it is killed.
 
 use sar_daemon::sim;
-use sar_drivers::rdt::emulator::{Emulator, EmulatorConfig, Pacing, counts_for};
+use sar_rdt::emulator::{Emulator, EmulatorConfig, Pacing, counts_for};
 
 fn main() -> Result<(), String> {
     let mut args = std::env::args().skip(1);
@@ -25,10 +25,9 @@ fn main() -> Result<(), String> {
     scenario.spec.sensor.noise_n = sar_estimator::Vec3::zeros();
     scenario.spec.sensor.noise_nm = sar_estimator::Vec3::zeros();
     let (_sim, mut sensor, _drives, bias) =
-        sim::simulated(&scenario, sar_drivers::SimClock::new(1_000_000_000))
+        sim::simulated(&scenario, sar_hal::SimClock::new(1_000_000_000))
             .map_err(|e| e.to_string())?;
-    let s =
-        sar_drivers::ForceSensor::wait(&mut sensor, 1_000_000_000).map_err(|e| e.to_string())?;
+    let s = sar_hal::ForceSensor::wait(&mut sensor, 1_000_000_000).map_err(|e| e.to_string())?;
     let (f, t) = (s.force_n - bias.force_n, s.torque_nm - bias.torque_nm);
     let mut emu = EmulatorConfig::new(Pacing::Periodic {
         period_ns: period_us.saturating_mul(1000),

@@ -4,10 +4,10 @@
 //! the per-cycle hook of the CANopen drives ([`canopen_cycle`]), which the
 //! controller calls once per period in its gather phase.
 
+use sar_canopen::{CanOpenConfig, CanOpenDrives};
 use sar_config::Config;
-use sar_drivers::canopen::{CanOpenConfig, CanOpenDrives};
-use sar_drivers::rdt::{RdtConfig, RdtSensor};
-use sar_drivers::{AxisDrives, Clock, DriveState, ForceSensor};
+use sar_hal::{AxisDrives, Clock, DriveState, ForceSensor};
+use sar_rdt::{RdtConfig, RdtSensor};
 
 /// The RDT driver's configuration for `[drivers.sensor] kind = "rdt"`
 /// (`sar_config::devices::rdt_sensor`, checked when the file was loaded);

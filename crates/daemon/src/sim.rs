@@ -5,9 +5,9 @@
 
 use sar_config::ConfigError;
 use sar_config::scenario::{self, Scenario};
-use sar_drivers::Clock;
-use sar_drivers::sim::{SimDrives, SimError, SimSensor, Simulator};
 use sar_estimator::cycle::Bias;
+use sar_hal::Clock;
+use sar_sim::{SimDrives, SimError, SimSensor, Simulator};
 
 /// The built-in demo scenario (a tip contact rising into Warn).
 pub const DEMO_SCENARIO_TOML: &str = include_str!("demo_scenario.toml");

@@ -14,8 +14,8 @@
 
 use sar_config::{self as config, AxesDriver, SensorDriver};
 use sar_daemon::sim;
-use sar_drivers::ForceSensor;
-use sar_drivers::rdt::emulator::{Emulator, EmulatorConfig, Pacing};
+use sar_hal::ForceSensor;
+use sar_rdt::emulator::{Emulator, EmulatorConfig, Pacing};
 use std::io::Read;
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
@@ -158,7 +158,7 @@ fn sard_runs_its_loop_on_the_rdt_driver_against_the_emulator() {
     // without its bias (a real sensor starts with no bias): an estimate.
     let scenario = sim::demo_scenario().unwrap();
     let (_sim, mut sensor, _drives, bias) =
-        sim::simulated(&scenario, sar_drivers::SimClock::new(1_000_000_000)).unwrap();
+        sim::simulated(&scenario, sar_hal::SimClock::new(1_000_000_000)).unwrap();
     let s = sensor.wait(1_000_000_000).unwrap();
     let f = s.force_n - bias.force_n;
     let t = s.torque_nm - bias.torque_nm;

@@ -26,12 +26,12 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::ForceSensor;
-use sar_drivers::rdt::emulator::{Emulator, EmulatorConfig, Pacing, SensorFault};
+use sar_hal::ForceSensor;
 use sar_loop::rt;
 use sar_msgs::wire::{
     CommandMsg, ReplyMsg, StateMsg, command_kind, flags, guard_code, guard_state_name, reason_name,
 };
+use sar_rdt::emulator::{Emulator, EmulatorConfig, Pacing, SensorFault};
 use sar_shm::{Client, StateSubscription};
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
@@ -578,19 +578,15 @@ fn rdt_emulator() -> Emulator {
     scenario.spec.sensor.noise_n = sar_estimator::Vec3::zeros();
     scenario.spec.sensor.noise_nm = sar_estimator::Vec3::zeros();
     let (_sim, mut sensor, _drives, bias) =
-        sim::simulated(&scenario, sar_drivers::SimClock::new(1_000_000_000)).unwrap();
+        sim::simulated(&scenario, sar_hal::SimClock::new(1_000_000_000)).unwrap();
     let s = sensor.wait(1_000_000_000).unwrap();
     let f = s.force_n - bias.force_n;
     let t = s.torque_nm - bias.torque_nm;
     let mut emu = EmulatorConfig::new(Pacing::Periodic {
         period_ns: 2_000_000,
     });
-    emu.counts = sar_drivers::rdt::emulator::counts_for(
-        [f.x, f.y, f.z],
-        [t.x, t.y, t.z],
-        10_000.0,
-        100_000.0,
-    );
+    emu.counts =
+        sar_rdt::emulator::counts_for([f.x, f.y, f.z], [t.x, t.y, t.z], 10_000.0, 100_000.0);
     emu.noise_counts = [2000.0, 2000.0, 8000.0, 1000.0, 1000.0, 200.0];
     emu.seed = 0x5afe;
     Emulator::start(emu).unwrap()

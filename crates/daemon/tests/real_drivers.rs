@@ -13,21 +13,21 @@
     clippy::indexing_slicing
 )]
 
-use sar_config as config;
-use sar_daemon::{devices, sim};
-use sar_drivers::canopen::{
+use sar_canopen::{
     CanOpenDrives, FOLLOWING_WINDOW_M, MemBus, MemCan, SimCia402Drive, SimDriveSpec, frame,
 };
-use sar_drivers::rdt::emulator::{Action, Emulator, EmulatorConfig, Pacing};
-use sar_drivers::rdt::{RdtConfig, RdtSensor};
-use sar_drivers::{
-    AxisDrives, DriveState, ForceSensor, MonotonicClock, SensorStatus, SimClock, WrenchSample,
-};
+use sar_config as config;
+use sar_daemon::{devices, sim};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{GuardState, Reason};
+use sar_hal::{
+    AxisDrives, DriveState, ForceSensor, MonotonicClock, SensorStatus, SimClock, WrenchSample,
+};
 use sar_kinematics::ActiveJoints;
 use sar_loop::control::{Controller, Envelope, Operator, ReplyStatus, Request};
 use sar_loop::{logq, rt};
+use sar_rdt::emulator::{Action, Emulator, EmulatorConfig, Pacing};
+use sar_rdt::{RdtConfig, RdtSensor};
 use sar_test_support::rig::controller;
 use std::cell::Cell;
 use std::rc::Rc;
@@ -47,9 +47,9 @@ fn test_config() -> config::Config {
 }
 
 /// The demo scenario without its tip contact.
-fn quiet_scenario() -> sar_drivers::scenario::Scenario {
+fn quiet_scenario() -> sar_sim::scenario::Scenario {
     let mut scenario = sim::demo_scenario().unwrap();
-    scenario.spec.contact = vec![sar_drivers::sim::ContactKey {
+    scenario.spec.contact = vec![sar_sim::ContactKey {
         t_ns: 0,
         force_n: Vec3::zeros(),
     }];
@@ -59,7 +59,7 @@ fn quiet_scenario() -> sar_drivers::scenario::Scenario {
 // ---------------------------------------------------------------------------
 // RDT sensor over loopback UDP, simulated axes.
 
-type RdtController = Controller<RdtSensor, sar_drivers::sim::SimDrives<MonotonicClock>>;
+type RdtController = Controller<RdtSensor, sar_sim::SimDrives<MonotonicClock>>;
 
 /// The emulator (manual pacing: one packet per cycle, sent by the test), the
 /// controller on the RDT driver connected to it, and the emulator reading
@@ -375,7 +375,7 @@ impl<S: ForceSensor> ForceSensor for Switchable<S> {
     fn clear_tare(&mut self) -> Result<(), S::Error> {
         self.inner.clear_tare()
     }
-    fn drain(&mut self, out: &mut [WrenchSample]) -> Result<sar_drivers::Drained, S::Error> {
+    fn drain(&mut self, out: &mut [WrenchSample]) -> Result<sar_hal::Drained, S::Error> {
         self.inner.drain(out)
     }
 }
@@ -390,7 +390,7 @@ impl<S> Switchable<S> {
 }
 
 type CanController =
-    Controller<Switchable<sar_drivers::sim::SimSensor<SimClock>>, CanOpenDrives<MemCan, SimClock>>;
+    Controller<Switchable<sar_sim::SimSensor<SimClock>>, CanOpenDrives<MemCan, SimClock>>;
 
 struct CanRig {
     clock: SimClock,

@@ -12,9 +12,9 @@
     clippy::panic
 )]
 
+use sar_canopen::{self as canopen, SimCia402Drive, SimDriveSpec};
 use sar_config as config;
-use sar_drivers::canopen::{self, SimCia402Drive, SimDriveSpec};
-use sar_drivers::{Clock, MonotonicClock};
+use sar_hal::{Clock, MonotonicClock};
 use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -9,7 +9,7 @@
 //! G' = m (g - a_C), and the moment equation about A (a point fixed in the
 //! rod) gains the couple -H', H the angular momentum about C. An adapter of
 //! mass m_s between the sensor and the U-joint (lumped at A, as the
-//! simulator has it: `sar_drivers::sim::statics::ideal_wrench_in_motion`)
+//! simulator has it: `sar_sim::statics::ideal_wrench_in_motion`)
 //! makes the sensor read -F_A - m_s A'' (its gravity is in the bias), so
 //! -R_0s (f - b_f) = F_A + m_s A'' and the rod's F_A is that minus m_s A''.
 //! Every change is linear in the loads, so the tip force in motion is the

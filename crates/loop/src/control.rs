@@ -14,12 +14,12 @@ use crate::step::{
 };
 pub use crate::step::{ReplyStatus, Request, reason_code, recorded_reason_code};
 use crossbeam_queue::ArrayQueue;
-use sar_drivers::{AxisDrives, DriveState, ForceSensor, WrenchSample};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     CommandAccepted, CycleInput, CycleOutput, DrainedSamples, EstimatorConfig, JointSample,
     SensorSample, SpikeLimits,
 };
+use sar_hal::{AxisDrives, DriveState, ForceSensor, WrenchSample};
 use sar_kinematics::ActiveJoints;
 use std::sync::Arc;
 
@@ -223,7 +223,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 force_n: Vec3::zeros(),
                 torque_nm: Vec3::zeros(),
                 counter: 0,
-                status: sar_drivers::SensorStatus(u32::MAX),
+                status: sar_hal::SensorStatus(u32::MAX),
                 received_ns: 0,
             }; DRAIN_CAPACITY],
             drained_count: 0,
@@ -426,7 +426,7 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 // Its cause, a static text: no allocation here.
                 self.log.send(LogEvent::SensorPollFailed {
                     cycle,
-                    cause: sar_drivers::Error::cause(&e),
+                    cause: sar_hal::Error::cause(&e),
                 });
             }
         }

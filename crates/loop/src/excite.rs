@@ -25,9 +25,9 @@
 //! acceleration ([`Excitation::carriage_motion`]).
 
 use crate::motion::{ACCEL_STD_FLOOR_MPS2, ACCEL_STD_FRACTION};
-use sar_drivers::motion::AxisState;
 use sar_estimator::Vec3;
 use sar_estimator::motion::CarriageMotion;
+use sar_hal::motion::AxisState;
 use sar_kinematics::Shown;
 
 /// Why an excitation is refused ([`judge`]); its `Display` is the reply's

@@ -56,7 +56,7 @@ pub enum LogEvent {
         /// The cycle.
         cycle: u64,
         /// The new state.
-        state: Option<sar_drivers::DriveState>,
+        state: Option<sar_hal::DriveState>,
     },
     /// A cycle ended after the next deadline.
     Overrun {
@@ -162,13 +162,13 @@ impl LogThread {
 
     /// Writes what is left and ends the thread, waiting for it at most
     /// [`LOG_JOIN_WAIT`] (a log pipe whose reader stalls holds it): false
-    /// when it was left behind (`sar_drivers::join::left_behind` names it).
+    /// when it was left behind (`sar_hal::join::left_behind` names it).
     pub fn finish(mut self) -> bool {
         self.stop.store(true, Ordering::SeqCst);
         match self.handle.take() {
             Some(h) => {
                 h.thread().unpark();
-                sar_drivers::join::join_within(h, LOG_JOIN_WAIT).is_some()
+                sar_hal::join::join_within(h, LOG_JOIN_WAIT).is_some()
             }
             None => true,
         }
@@ -340,8 +340,8 @@ fn request_text(r: &crate::step::Request) -> String {
 }
 
 /// The drives' state in words (`None`: it could not be read).
-fn drive_state_text(state: Option<sar_drivers::DriveState>) -> String {
-    use sar_drivers::DriveState;
+fn drive_state_text(state: Option<sar_hal::DriveState>) -> String {
+    use sar_hal::DriveState;
     match state {
         None => "state unreadable".to_owned(),
         Some(DriveState::Ready) => "ready".to_owned(),

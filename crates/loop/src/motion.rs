@@ -7,7 +7,8 @@
 //! - While a trajectory is commanded to enabled drives (planned moves,
 //!   streamed set points, holds), the drives' response to it: a model of
 //!   their position loop ([`ServoAxis`]: `x'' = wn^2 (r - x) - 2 zeta wn x'`,
-//!   the simulator's servo, sampled every [`MODEL_STEP_NS`] with the
+//!   `sar_hal::servo`, the one model the simulator's servo runs too, without
+//!   its acceleration limit; sampled every [`MODEL_STEP_NS`] with the
 //!   acceleration held between samples) driven by the trajectory's
 //!   position; with `servo_bandwidth_hz = 0` (ideal drives) the trajectory
 //!   itself.
@@ -36,10 +37,11 @@
 //!
 //! Fixed-size state; no allocation, no panic.
 
-use sar_drivers::DriveState;
-use sar_drivers::motion::{AxisPlan, AxisState, Limits};
 use sar_estimator::Vec3;
 use sar_estimator::motion::CarriageMotion;
+use sar_hal::DriveState;
+use sar_hal::motion::{AxisPlan, AxisState, Limits};
+pub use sar_hal::servo::ServoAxis;
 
 /// The servo model's sampling step, ns (a drive's position loop at 10 kHz,
 /// the simulator's physics step).
@@ -156,50 +158,6 @@ impl MotionConfig {
             ));
         }
         Ok(())
-    }
-}
-
-/// One axis of the servo model: position and velocity at its last sample
-/// and the acceleration it applies from there to the next.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ServoAxis {
-    /// m.
-    pub x_m: f64,
-    /// m/s.
-    pub v_mps: f64,
-    /// m/s^2.
-    pub a_mps2: f64,
-}
-
-impl ServoAxis {
-    /// A plan's state at `t_ns` (the drives exactly on it).
-    fn on(plan: &AxisPlan, t_ns: u64) -> Self {
-        let s = plan.at(t_ns);
-        Self {
-            x_m: s.x_m,
-            v_mps: s.v_mps,
-            a_mps2: plan.accel_at(t_ns),
-        }
-    }
-
-    /// Position and velocity `dt_ns` after its sample, the acceleration
-    /// held.
-    fn after(&self, dt_ns: u64) -> Self {
-        let dt = dt_ns as f64 * 1e-9;
-        Self {
-            x_m: self.x_m + self.v_mps * dt + 0.5 * self.a_mps2 * dt * dt,
-            v_mps: self.v_mps + self.a_mps2 * dt,
-            a_mps2: self.a_mps2,
-        }
-    }
-
-    /// Moves `dt_ns` on and samples the loop there against `reference_m`.
-    fn step(&mut self, dt_ns: u64, reference_m: f64, wn: f64, damping: f64) {
-        let now = self.after(dt_ns);
-        *self = Self {
-            a_mps2: wn * wn * (reference_m - now.x_m) - 2.0 * damping * wn * now.v_mps,
-            ..now
-        };
     }
 }
 
@@ -366,7 +324,7 @@ impl AxesMotion {
                 .reference(model.t_ns)
                 .unwrap_or_else(|| plans.map(|p| p.at(model.t_ns).x_m));
             for (axis, r) in model.axes.iter_mut().zip(reference) {
-                axis.step(MODEL_STEP_NS, r, wn, cfg.servo_damping);
+                axis.step(MODEL_STEP_NS, r, wn, cfg.servo_damping, None);
             }
         }
         self.servo = Some(model);
@@ -520,7 +478,6 @@ fn carriage(axes: &Axes) -> CarriageMotion {
     }
 }
 
-sar_snapshot::snap_struct!(ServoAxis { x_m, v_mps, a_mps2 });
 sar_snapshot::snap_struct!(ServoModel { t_ns, axes });
 sar_snapshot::snap_struct!(Halt {
     start_ns,

@@ -6,12 +6,12 @@
 use crate::reply::Reply;
 use crate::stats::LoopStats;
 use crate::step::{LoopInput, LoopOutput, Request, reason_code};
-use sar_drivers::WrenchSample;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{CycleOutput, TipOutcome};
+use sar_hal::{DriveState, WrenchSample};
 use sar_msgs::msgs::TipOutcomeCode;
 use sar_msgs::wire::{
-    CommandMsg, ReplyMsg, STATE_SENSOR_SAMPLES, StateMsg, command_kind, drive_state_code, flags,
+    CommandMsg, ReplyMsg, STATE_SENSOR_SAMPLES, StateMsg, command_kind, drive_code, flags,
     guard_state_code, reason_bytes,
 };
 
@@ -20,6 +20,18 @@ const _: () = assert!(crate::control::DRAIN_CAPACITY <= STATE_SENSOR_SAMPLES);
 
 fn arr(v: &Vec3) -> [f64; 3] {
     [v.x, v.y, v.z]
+}
+
+/// The drives' state as the wire's code ([`drive_code`]; `None`: not read
+/// in this cycle).
+pub fn drive_state_code(s: Option<DriveState>) -> u32 {
+    match s {
+        None => drive_code::UNREAD,
+        Some(DriveState::Ready) => drive_code::READY,
+        Some(DriveState::Enabled) => drive_code::ENABLED,
+        Some(DriveState::QuickStop) => drive_code::QUICK_STOP,
+        Some(DriveState::Fault { .. }) => drive_code::FAULT,
+    }
 }
 
 /// Everything a [`StateMsg`] is made from.

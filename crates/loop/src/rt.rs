@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, AtomicUsize, Ordering}
 
 /// `CLOCK_MONOTONIC` in ns, or `None` when it cannot be read (the drivers'
 /// clock: one place reads it).
-pub use sar_drivers::clock::monotonic_ns;
+pub use sar_hal::clock::monotonic_ns;
 
 /// Sleeps until the monotonic clock reads `deadline_ns` (absolute: a late
 /// wake-up never shifts later deadlines). Interrupted sleeps are resumed; a

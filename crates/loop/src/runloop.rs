@@ -17,8 +17,8 @@ use crate::publish::SimTruthFn;
 use crate::rt;
 use crate::sink::{Cycle, Sink, SinkHealth};
 use crate::stats::LoopStats;
-use sar_drivers::{AxisDrives, ForceSensor};
 use sar_estimator::cycle::TipOutcome;
+use sar_hal::{AxisDrives, ForceSensor};
 
 /// The fixed-rate loop's settings.
 #[derive(Debug, Clone, Copy, PartialEq)]

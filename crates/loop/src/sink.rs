@@ -12,7 +12,7 @@ use crate::control::Controller;
 use crate::publish::SimTruth;
 use crate::stats::LoopStats;
 use crate::step::{LoopInput, LoopOutput, LoopStep};
-use sar_drivers::{AxisDrives, ForceSensor, WrenchSample};
+use sar_hal::{AxisDrives, ForceSensor, WrenchSample};
 
 /// One cycle as the loop hands it to its sinks.
 #[derive(Debug, Clone, Copy)]

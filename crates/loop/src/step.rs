@@ -16,7 +16,7 @@
 //! - An accepted reset brings the drives back (the way depends on their
 //!   state) and holds the axes where they were measured.
 //! - A move is planned here, with the time-optimal axis planner of
-//!   [`sar_drivers::motion`] under the configured speed and acceleration,
+//!   [`sar_hal::motion`] under the configured speed and acceleration,
 //!   from where the trajectory is now. The drives get the plan's end point
 //!   once, when it is planned (or braked), and run the same planner under the
 //!   same limits (the simulator's axes and the CANopen host take theirs from
@@ -80,8 +80,6 @@
 
 use crate::excite::{Excitation, ExciteLimits, ExciteRefusal, ExciteRequest};
 use crate::motion::{AxesMotion, MotionConfig, Told};
-use sar_drivers::DriveState;
-use sar_drivers::motion::{AxisPlan, AxisState, Limits};
 use sar_estimator::cycle::{
     Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
     EstimatorConfig, FollowingReference, JointSample, SensorSample, TipOutcome,
@@ -91,6 +89,8 @@ use sar_estimator::force_control::{ForceControlConfig, ForceController, ForceMod
 use sar_estimator::guard::{ForceLimits, GuardState, Reason, reduces_force};
 use sar_estimator::motion::CarriageMotion;
 use sar_estimator::{SettingError, Vec3};
+use sar_hal::DriveState;
+use sar_hal::motion::{AxisPlan, AxisState, Limits};
 use sar_kinematics::{ActiveJoints, Calibration, PoseError, Profile, Shown, inverse};
 
 /// An operator request, applied in the cycle whose input carries it.

@@ -13,8 +13,8 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::{Drained, ForceSensor, SimClock, WrenchSample};
 use sar_estimator::guard::{GuardState, Reason};
+use sar_hal::{Drained, ForceSensor, SimClock, WrenchSample};
 use sar_loop::control::{Controller, Operator};
 use sar_loop::logq;
 use sar_loop::step::LoopStep;

@@ -21,13 +21,13 @@ mod snapshot;
 mod step_properties;
 
 use sar_config as config;
-use sar_drivers::sim::{SimDrives, SimError};
-use sar_drivers::{AxisDrives, DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{ForceLimits, GuardState, Reason};
+use sar_hal::{AxisDrives, DriveState, SimClock};
 use sar_kinematics::{ActiveJoints, inverse};
 use sar_loop::control::{ReplyStatus, Request};
 use sar_loop::step::DriveAction;
+use sar_sim::{SimDrives, SimError};
 use sar_test_support::drives::{DriveHook, Hooked};
 use sar_test_support::rig::{RigBuilder, SimRig};
 
@@ -60,7 +60,7 @@ struct Rig(SimRig<Hooked<SimDrives<SimClock>, Blockable>>);
 sar_test_support::deref_rig!(Rig => SimRig<Hooked<SimDrives<SimClock>, Blockable>>);
 
 impl Rig {
-    fn new(contact: Vec<sar_drivers::sim::ContactKey>, block_after: Option<u32>) -> Self {
+    fn new(contact: Vec<sar_sim::ContactKey>, block_after: Option<u32>) -> Self {
         let hook = Blockable {
             setpoints: 0,
             block_after,
@@ -88,7 +88,7 @@ impl Rig {
     }
 }
 
-fn quiet() -> Vec<sar_drivers::sim::ContactKey> {
+fn quiet() -> Vec<sar_sim::ContactKey> {
     sar_test_support::messages::contact_pulse(0, 1, 2, 3, Vec3::zeros())
 }
 

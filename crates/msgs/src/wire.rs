@@ -5,7 +5,6 @@
 
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
-use sar_drivers::DriveState;
 use sar_estimator::guard::GuardState;
 
 /// Flag bits of [`StateMsg::flags`].
@@ -131,19 +130,9 @@ pub mod drive_code {
     pub const UNREAD: u32 = DriveStateCode::Unread as u32;
 }
 
-/// The drive state's code ([`drive_code`]).
-pub fn drive_state_code(s: Option<DriveState>) -> u32 {
-    match s {
-        None => drive_code::UNREAD,
-        Some(DriveState::Ready) => drive_code::READY,
-        Some(DriveState::Enabled) => drive_code::ENABLED,
-        Some(DriveState::QuickStop) => drive_code::QUICK_STOP,
-        Some(DriveState::Fault { .. }) => drive_code::FAULT,
-    }
-}
-
-/// The name of a [`drive_state_code`]: "unknown", "ready", "enabled",
-/// "quick_stop", "fault" (anything else: "invalid").
+/// The name of a [`drive_code`] (the loop's `publish::drive_state_code`):
+/// "unknown", "ready", "enabled", "quick_stop", "fault" (anything else:
+/// "invalid").
 pub fn drive_state_name(code: u32) -> &'static str {
     match code {
         drive_code::UNREAD => "unknown",
@@ -217,7 +206,7 @@ pub struct StateMsg {
     pub guard_state: u32,
     /// The guard's reason code.
     pub guard_reason: u32,
-    /// [`drive_state_code`].
+    /// The drives' state, a [`drive_code`].
     pub drive_state: u32,
     /// Warn and stop limits: total, axial, lateral (warn, stop each), N:
     /// `sar_estimator::guard::ForceLimits::to_array`, named by its `NAMES`.

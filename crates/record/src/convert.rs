@@ -13,12 +13,12 @@
 //! Nothing here allocates (the recorder's push side calls it every cycle).
 
 use sar_config::ConfigSource;
-use sar_drivers::DriveState;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     Bias, CycleInput, CycleOutput, DrainedSamples, JointSample, SensorSample, TipOutcome,
 };
 use sar_estimator::guard::{ForceLimits, GuardState};
+use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request};
 use sar_msgs::msgs::{
@@ -125,7 +125,7 @@ pub fn cycle_record_samples(
     input: &LoopInput,
     decision: &LoopOutput,
     joints_new: bool,
-    samples: &[sar_drivers::WrenchSample],
+    samples: &[sar_hal::WrenchSample],
     emit: impl FnMut(Outgoing),
 ) {
     let sensor = samples

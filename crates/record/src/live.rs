@@ -477,14 +477,14 @@ impl RecordManager {
     /// After the loop: closes every recording (call after
     /// [`LiveRecorder::release`]), waiting for the manager thread at most
     /// [`FINISH_WAIT`] (a disk that stalls holds its last write): false when
-    /// it was left behind (`sar_drivers::join::left_behind` names it; the
+    /// it was left behind (`sar_hal::join::left_behind` names it; the
     /// file is then cut short, and `sarctl recover` rewrites it).
     pub fn finish(mut self) -> bool {
         self.stop.store(true, Ordering::Release);
         match self.thread.take() {
             Some(t) => {
                 t.thread().unpark();
-                sar_drivers::join::join_within(t, FINISH_WAIT).is_some()
+                sar_hal::join::join_within(t, FINISH_WAIT).is_some()
             }
             None => true,
         }

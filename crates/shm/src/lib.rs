@@ -406,7 +406,7 @@ struct Shared {
 pub const REAP_PERIOD: Duration = Duration::from_secs(1);
 /// How long dropping the daemon's side waits for each of its threads (the
 /// publishing thread, the maintenance thread) at most, then leaves it
-/// behind (`sar_drivers::join::left_behind` names it).
+/// behind (`sar_hal::join::left_behind` names it).
 pub const JOIN_WAIT: Duration = Duration::from_millis(700);
 
 /// The maintenance thread's body: every [`REAP_PERIOD`] until the daemon
@@ -1136,7 +1136,7 @@ impl DaemonShm {
         let node_id = match started {
             Ok(id) => id,
             Err(e) => {
-                let _ = sar_drivers::join::join_within(thread, JOIN_WAIT);
+                let _ = sar_hal::join::join_within(thread, JOIN_WAIT);
                 return Err(e);
             }
         };
@@ -1146,7 +1146,7 @@ impl DaemonShm {
             Err(e) => {
                 shared.stop.store(true, Ordering::Release);
                 thread.thread().unpark();
-                let _ = sar_drivers::join::join_within(thread, JOIN_WAIT);
+                let _ = sar_hal::join::join_within(thread, JOIN_WAIT);
                 return Err(e);
             }
         };
@@ -1233,7 +1233,7 @@ impl Drop for DaemonShm {
     /// Stops the publishing thread (it sends what is queued first) and the
     /// maintenance thread, waiting for each at most [`JOIN_WAIT`]: a thread
     /// stuck in iceoryx2 (a damaged file, a page of a truncated file) is
-    /// left behind and named (`sar_drivers::join::left_behind`), never
+    /// left behind and named (`sar_hal::join::left_behind`), never
     /// waited for without bound.
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::Release);
@@ -1241,11 +1241,11 @@ impl Drop for DaemonShm {
             t.unpark();
         }
         if let Some(t) = self.thread.take() {
-            let _ = sar_drivers::join::join_within(t, JOIN_WAIT);
+            let _ = sar_hal::join::join_within(t, JOIN_WAIT);
         }
         if let Some(t) = self.maintenance.take() {
             t.thread().unpark();
-            let _ = sar_drivers::join::join_within(t, JOIN_WAIT);
+            let _ = sar_hal::join::join_within(t, JOIN_WAIT);
         }
     }
 }

@@ -176,7 +176,7 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
 /// ends the run (as a signal would) once it has its replies.
 #[test]
 fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
-    use sar_drivers::MonotonicClock;
+    use sar_hal::MonotonicClock;
     use sar_loop::notify::Watchdog;
     use sar_loop::runloop::{self, Edges, RunLimits};
 

@@ -4,7 +4,7 @@
 //! faulty drives are a hook of a few lines: a blocked axis ignores set
 //! points, flaky drives refuse a quick stop, a tap records the truth.
 
-use sar_drivers::{AxisDrives, DriveState, JointPositions};
+use sar_hal::{AxisDrives, DriveState, JointPositions};
 use sar_kinematics::ActiveJoints;
 
 /// What a test changes of the drives it wraps: every method forwards to

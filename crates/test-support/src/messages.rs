@@ -2,9 +2,9 @@
 //! tests push them), and the simulator's contact pulses.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
-use sar_drivers::sim::ContactKey;
 use sar_msgs::cdr::FixedStr;
 use sar_msgs::msgs::*;
+use sar_sim::ContactKey;
 
 /// splitmix64: a deterministic stream of bits.
 pub fn mix(mut x: u64) -> u64 {

@@ -8,13 +8,13 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::scenario::Scenario;
-use sar_drivers::sim::{ContactKey, SimDrives, SimSensor, Simulator};
-use sar_drivers::{AxisDrives, ForceSensor, SimClock};
 use sar_estimator::cycle::Bias;
+use sar_hal::{AxisDrives, ForceSensor, SimClock};
 use sar_loop::control::{Controller, Envelope, Operator, Reply, Request};
 use sar_loop::logq::{self, LogQueue, LogSender};
 use sar_loop::step::{LoopInput, LoopOutput, LoopStep, StepConfig, StepConfigError};
+use sar_sim::scenario::Scenario;
+use sar_sim::{ContactKey, SimDrives, SimSensor, Simulator};
 
 /// What a rig is made of.
 pub struct SimRig<D: AxisDrives> {

@@ -2,10 +2,10 @@
 //! generic runner): the runner stays generic, the test sees the truth.
 
 use crate::drives::{DriveHook, Hooked};
-use sar_drivers::runner::{Run, RunError, RunOptions, run};
-use sar_drivers::scenario::MotionScript;
-use sar_drivers::sim::{SimDrives, SimError, Simulator, Truth};
-use sar_drivers::{AxisDrives, JointPositions, SimClock};
+use sar_hal::{AxisDrives, JointPositions, SimClock};
+use sar_sim::runner::{Run, RunError, RunOptions, run};
+use sar_sim::scenario::MotionScript;
+use sar_sim::{SimDrives, SimError, Simulator, Truth};
 
 /// The hook that takes the simulator's truth before each position read.
 pub struct TruthTap {

@@ -4,8 +4,8 @@
 use super::raw::{ContactToml, TissueModelName, TissueToml};
 use crate::ConfigError;
 use crate::toml_file::Ctx;
-use sar_drivers::Vec3;
-use sar_drivers::sim::{Breathing, ContactKey, Tissue, TissueModel, TissueShift};
+use sar_hal::Vec3;
+use sar_sim::{Breathing, ContactKey, Tissue, TissueModel, TissueShift};
 
 /// Largest tissue stiffness accepted, N/m (soft tissue: about 100 to 5000).
 pub const MAX_STIFFNESS_N_PER_M: f64 = 1e6;

@@ -5,8 +5,8 @@
 use super::MAX_TIME_S;
 use crate::ConfigError;
 use crate::toml_file::Ctx;
-use sar_drivers::Vec3;
-use sar_drivers::scenario::seconds_to_ns_saturating;
+use sar_hal::Vec3;
+use sar_sim::scenario::seconds_to_ns_saturating;
 
 /// The scenario loader's checks of a value.
 impl Ctx<'_> {

@@ -9,9 +9,9 @@ use super::{
     DEFAULT_TRAVEL_M,
 };
 use crate::toml_file::Ctx;
-use sar_drivers::Vec3;
-use sar_drivers::sim::{AxesSpec, SensorSpec};
+use sar_hal::Vec3;
 use sar_kinematics::ActiveJoints;
+use sar_sim::{AxesSpec, SensorSpec};
 
 /// `[axes]`, checked (the start is checked later, against the kinematics).
 pub(super) struct Axes {

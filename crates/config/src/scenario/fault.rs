@@ -4,8 +4,8 @@
 use super::raw::{AxisName, ChannelName, FaultKind, FaultToml, RailName};
 use crate::ConfigError;
 use crate::toml_file::Ctx;
-use sar_drivers::sim::Fault;
-use sar_drivers::{Channels, Rail, Vec3};
+use sar_hal::{Channels, Rail, Vec3};
+use sar_sim::Fault;
 
 /// Largest offset an encoder fault may put on a position, m.
 pub const MAX_ENCODER_OFFSET_M: f64 = 1.0;
@@ -130,7 +130,7 @@ impl Table<'_, '_> {
                         &format!("{}.axes[{i}]", self.key),
                         format!(
                             "names {} twice",
-                            sar_drivers::sensor::CHANNEL_NAMES
+                            sar_hal::sensor::CHANNEL_NAMES
                                 .get(c)
                                 .copied()
                                 .unwrap_or("?")

@@ -12,8 +12,8 @@ use super::raw::FileToml;
 use super::{DEFAULT_SERVO_BANDWIDTH_HZ, DEFAULT_SERVO_DAMPING, DEFAULT_SERVO_MAX_ACCEL_MPS2};
 use crate::ConfigError;
 use crate::toml_file::Ctx;
-use sar_drivers::sim::{PlantSpec, RodInertia, ServoSpec};
 use sar_kinematics::Profile;
+use sar_sim::{PlantSpec, RodInertia, ServoSpec};
 
 /// The plant's keys, checked (each error names its key).
 pub(super) fn plant(

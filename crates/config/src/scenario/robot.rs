@@ -4,7 +4,7 @@
 use super::raw::{ManipulatorToml, RobotToml};
 use crate::ConfigError;
 use crate::toml_file::Ctx;
-use sar_drivers::Vec3;
+use sar_hal::Vec3;
 use sar_kinematics::{
     Calibration, CalibrationSpec, ConfigError as KinematicsError, Mat3, Profile, ProfileSpec,
 };

@@ -11,8 +11,8 @@ use super::{
 use crate::toml_file::Ctx;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sar_drivers::Vec3;
-use sar_drivers::motion::{SlideTracker, axis_progress_m, move_time_s};
+use sar_hal::Vec3;
+use sar_hal::motion::{SlideTracker, axis_progress_m, move_time_s};
 use sar_kinematics::{
     ActiveJoints, Calibration, MIN_DISTANCE_M, PoseError, Profile, ShownAll, forward, inverse,
 };

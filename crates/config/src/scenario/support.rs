@@ -8,8 +8,8 @@
 use super::raw::SupportShiftToml;
 use crate::ConfigError;
 use crate::toml_file::Ctx;
-use sar_drivers::Vec3;
-use sar_drivers::sim::{MAX_SUPPORT_SHIFT_M, SupportShift};
+use sar_hal::Vec3;
+use sar_sim::{MAX_SUPPORT_SHIFT_M, SupportShift};
 
 /// The `[[support_shift]]` tables, each key checked under its name.
 pub(super) fn support_shifts(

@@ -5,11 +5,11 @@
 use sar_config::Config;
 use sar_config::scenario::Scenario;
 use sar_daemon::sim;
-use sar_drivers::Clock;
-use sar_drivers::sim::{SimDrives, SimSensor, Simulator};
 use sar_estimator::cycle::Bias;
+use sar_hal::Clock;
 use sar_loop::control::{Controller, Operator};
 use sar_loop::logq::LogSender;
+use sar_sim::{SimDrives, SimSensor, Simulator};
 
 /// The controller of the simulated robot.
 pub type SimController<C> = Controller<SimSensor<C>, SimDrives<C>>;

@@ -4,16 +4,16 @@
 use clap::Parser;
 use sar_config as config;
 use sar_daemon::{devices, sim};
-use sar_drivers::rdt::RdtSensor;
-use sar_drivers::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::Bias;
+use sar_hal::{AxisDrives, ForceSensor, MonotonicClock};
 use sar_loop::control::{Controller, DrivesCycle, Operator};
 use sar_loop::notify::{Notifier, Watchdog};
 use sar_loop::publish::SimTruthFn;
 use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::LoopStats;
 use sar_loop::{logq, rt};
+use sar_rdt::RdtSensor;
 use sar_record::SceneOptions;
 use sar_record::live::{LiveRecorder, RecordManager, RecordSwitch};
 use sar_shm::{DaemonShm, RecordCommands};
@@ -136,7 +136,7 @@ fn run(args: &Args) -> Result<(), String> {
 }
 
 /// The RDT sensor, connected and streaming (its first sample came in time).
-fn connect_sensor(config: sar_drivers::rdt::RdtConfig) -> Result<RdtSensor, String> {
+fn connect_sensor(config: sar_rdt::RdtConfig) -> Result<RdtSensor, String> {
     let mut sensor = devices::connect_rdt(config)?;
     devices::first_sample(&mut sensor, FIRST_SAMPLE_TIMEOUT_NS)?;
     Ok(sensor)
@@ -148,7 +148,7 @@ fn simulator(
     args: &Args,
     cfg: &config::Config,
     real_sensor: bool,
-    canopen: &Option<(String, sar_drivers::canopen::CanOpenConfig)>,
+    canopen: &Option<(String, sar_canopen::CanOpenConfig)>,
 ) -> Result<(Option<Simulated>, String), String> {
     if real_sensor && canopen.is_some() {
         if let Some(path) = &args.scenario {
@@ -248,7 +248,7 @@ fn start_recording(
 fn run_on(
     run: Run<'_>,
     real_sensor: Option<RdtSensor>,
-    canopen: Option<(String, sar_drivers::canopen::CanOpenConfig)>,
+    canopen: Option<(String, sar_canopen::CanOpenConfig)>,
     simulated: Option<Simulated>,
     sensor_what: &str,
 ) -> Result<(), String> {
@@ -341,8 +341,8 @@ fn say_inertia(cfg: &config::Config) {
 
 /// The real sensor and drives a configuration names (`None`: simulated).
 type RealDevices = (
-    Option<sar_drivers::rdt::RdtConfig>,
-    Option<(String, sar_drivers::canopen::CanOpenConfig)>,
+    Option<sar_rdt::RdtConfig>,
+    Option<(String, sar_canopen::CanOpenConfig)>,
 );
 
 /// The real devices to run: with --sim none; otherwise those the file names
@@ -398,7 +398,7 @@ fn scenario(args: &Args, cfg: &config::Config) -> Result<config::scenario::Scena
 }
 
 /// The simulator's truth, asked once per cycle by the loop.
-fn truth_of(simulator: sar_drivers::sim::Simulator<MonotonicClock>) -> SimTruthFn {
+fn truth_of(simulator: sar_sim::Simulator<MonotonicClock>) -> SimTruthFn {
     Box::new(move || {
         simulator.truth().ok().map(|t| sar_loop::publish::SimTruth {
             tip_force_n: t.tip_force_n,
@@ -434,15 +434,12 @@ fn real_time(cfg: &config::Config) -> Option<std::fs::File> {
 #[cfg(all(feature = "socketcan", target_os = "linux"))]
 fn start_canopen(
     interface: &str,
-    config: sar_drivers::canopen::CanOpenConfig,
-) -> Result<
-    sar_drivers::canopen::CanOpenDrives<sar_drivers::canopen::socketcan::CanSocket, MonotonicClock>,
-    String,
-> {
-    let socket = sar_drivers::canopen::socketcan::open(interface).map_err(|e| e.to_string())?;
+    config: sar_canopen::CanOpenConfig,
+) -> Result<sar_canopen::CanOpenDrives<sar_canopen::socketcan::CanSocket, MonotonicClock>, String> {
+    let socket = sar_canopen::socketcan::open(interface).map_err(|e| e.to_string())?;
     let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
     let period_ns = config.sync_period_ns;
-    let mut drives = sar_drivers::canopen::CanOpenDrives::start(socket, clock, config)
+    let mut drives = sar_canopen::CanOpenDrives::start(socket, clock, config)
         .map_err(|e| format!("CANopen drives on {interface}: {e}"))?;
     let mut next_ns = rt::monotonic_ns().unwrap_or(0);
     devices::bring_up(&mut drives, interface, 200, || {
@@ -617,7 +614,7 @@ fn close_recording_and_log(
 /// shared-memory file truncated under `sard`): a failure (exit 1, systemd
 /// restarts it), said in one line.
 fn say_left_behind() -> Result<(), String> {
-    let behind = sar_drivers::join::left_behind();
+    let behind = sar_hal::join::left_behind();
     if !behind.is_empty() {
         tracing::error!(
             "sard: threads left behind at the end: {}",

@@ -20,10 +20,10 @@
 )]
 
 use crate::rig::{Plant, Rig, TIP_M};
-use sar_drivers::sim::ContactKey;
 use sar_estimator::Vec3;
 use sar_estimator::guard::{GuardState, Reason};
 use sar_loop::control::{ReplyStatus, Request};
+use sar_sim::ContactKey;
 
 /// The carriage's position, m (q1, q2, q3).
 fn joints_m(rig: &Rig) -> Vec3 {

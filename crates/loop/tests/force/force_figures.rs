@@ -27,10 +27,10 @@
 )]
 
 use crate::rig::{Plant, Rig, TIP_M, rms, tissue};
-use sar_drivers::sim::TissueShift;
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{ReplyStatus, Request};
+use sar_sim::TissueShift;
 
 const STIFFNESSES: [f64; 4] = [100.0, 300.0, 1000.0, 3000.0];
 

@@ -13,13 +13,13 @@
 
 use crate::rig::{Plant, Rig, TIP_M, tissue};
 use sar_config as config;
-use sar_drivers::sim::ContactKey;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{GuardState, Reason};
 use sar_loop::control::{ReplyStatus, Request};
 use sar_loop::excite::ExciteRequest;
 use sar_loop::step::{DriveAction, LoopOutput};
+use sar_sim::ContactKey;
 
 /// The motions a late cycle may fall into.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -25,12 +25,12 @@
 
 use crate::rig::{Rig, TIP_M, rms};
 use sar_config as config;
-use sar_drivers::sim::Tissue;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{Estimator, TipOutcome};
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{ReplyStatus, Request};
 use sar_loop::step::{DriveAction, LoopOutput};
+use sar_sim::Tissue;
 use sar_test_support::rig::RigBuilder;
 
 const STIFFNESSES: [f64; 4] = [100.0, 300.0, 1000.0, 3000.0];
@@ -50,7 +50,7 @@ fn rig_with(tissues: Vec<Tissue>, cfg: &config::Config) -> Rig {
     scenario.spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
     scenario.spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
     scenario.spec.plant.quick_stop_decel_mps2 = Some(cfg.axes.motion.quick_stop_decel_mps2);
-    scenario.spec.contact = vec![sar_drivers::sim::ContactKey {
+    scenario.spec.contact = vec![sar_sim::ContactKey {
         t_ns: 0,
         force_n: Vec3::zeros(),
     }];

@@ -5,13 +5,13 @@
 #![allow(dead_code, clippy::unwrap_used)]
 
 use sar_daemon::sim;
-use sar_drivers::SimClock;
-use sar_drivers::sim::{
+use sar_estimator::Vec3;
+use sar_estimator::guard::GuardState;
+use sar_hal::SimClock;
+use sar_sim::{
     Breathing, ContactKey, PlantSpec, RodInertia, ServoSpec, SimDrives, SimSpec, Tissue,
     TissueModel, TissueShift,
 };
-use sar_estimator::Vec3;
-use sar_estimator::guard::GuardState;
 use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// The tip at rest, base frame, m (the demo's start); the rod points +X0.

@@ -19,11 +19,11 @@
 )]
 
 use crate::rig::{Plant, Rig, TIP_M};
-use sar_drivers::sim::{ContactKey, SupportShift};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{CycleOutput, TipOutcome};
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{ReplyStatus, Request};
+use sar_sim::{ContactKey, SupportShift};
 
 /// When the shift starts (after the rig is ready at 1.1 s), ns.
 const SHIFT_AT_NS: u64 = 1_300_000_000;

@@ -6,11 +6,11 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::sim::{SimDrives, SimError};
-use sar_drivers::{AxisDrives, DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::GuardState;
+use sar_hal::{AxisDrives, DriveState, SimClock};
 use sar_loop::control::{Envelope, ReplyStatus, Request};
+use sar_sim::{SimDrives, SimError};
 use sar_test_support::drives::{DriveHook, Hooked};
 use sar_test_support::messages::rod_push_20n;
 use sar_test_support::rig::RigBuilder;

@@ -10,12 +10,12 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use sar_daemon::sim;
-use sar_drivers::sim::{ContactKey, SimDrives};
-use sar_drivers::{DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::guard::{GuardState, Reason};
+use sar_hal::{DriveState, SimClock};
 use sar_loop::control::{Envelope, ReplyStatus, Request};
 use sar_loop::step::{DriveAction, ReplyDetail};
+use sar_sim::{ContactKey, SimDrives};
 use sar_test_support::rig::{RigBuilder, SimRig};
 
 /// The demo robot on the simulator, ready (see [`SimRig`]).
@@ -30,7 +30,7 @@ impl Rig {
     }
 
     /// [`Rig::new`] with faults on demand.
-    fn with_faults(contact: Vec<ContactKey>, faults: Vec<sar_drivers::sim::Fault>) -> Self {
+    fn with_faults(contact: Vec<ContactKey>, faults: Vec<sar_sim::Fault>) -> Self {
         let mut scenario = sim::demo_scenario().unwrap();
         scenario.spec.contact = contact;
         scenario.spec.faults = faults;
@@ -358,7 +358,7 @@ fn the_record_switch_loses_no_request() {
 fn a_drive_fault_is_a_guard_fault_and_a_reset_brings_the_drives_back() {
     let mut rig = Rig::with_faults(
         Vec::new(),
-        vec![sar_drivers::sim::Fault::DriveFault {
+        vec![sar_sim::Fault::DriveFault {
             at_ns: 1_500_000_000,
             code: 0x8130,
         }],

@@ -17,14 +17,14 @@
 
 use sar_config as config;
 use sar_daemon::sim;
-use sar_drivers::sim::{ContactKey, SimDrives, SimError};
-use sar_drivers::{AxisDrives, DriveState, SimClock};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::TipOutcome;
 use sar_estimator::guard::{ForceLimits, GuardState};
+use sar_hal::{AxisDrives, DriveState, SimClock};
 use sar_kinematics::ActiveJoints;
 use sar_loop::control::{Envelope, ReplyStatus, Request};
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, LoopStep};
+use sar_sim::{ContactKey, SimDrives, SimError};
 use sar_test_support::drives::{DriveHook, Hooked};
 use sar_test_support::messages::mix;
 use sar_test_support::rig::{RigBuilder, SimRig};
