@@ -17,7 +17,7 @@ use crate::{Calibration, Mat3, Pose, Profile, SensorNoise, Vec3};
 pub(super) struct TorqueCheck {
     /// The residual's standard deviation per sensor axis with d = 0, N m.
     std_nm: Vec3,
-    /// The lever's cross-product matrix [l]x, sensor frame.
+    /// The lever's cross-product matrix \[l\]x, sensor frame.
     cross: Mat3,
     /// The force noise's variance per sensor axis, N^2.
     force_var_n2: Vec3,
