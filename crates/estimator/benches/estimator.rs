@@ -425,12 +425,15 @@ fn bench_good_path<O>(
 /// The carriage's motion of the "in motion" benchmarks: a move at about
 /// 0.6 m/s^2 with an uncertain acceleration (MODEL.md 10), small enough that
 /// the compensated force stays on the good path.
-const MOTION: CycleContext = CycleContext {
-    motion: CarriageMotion {
-        velocity_mps: Vector3::new(0.02, 0.01, -0.01),
-        accel_mps2: Vector3::new(0.5, -0.3, 0.2),
-        accel_std_mps2: 0.05,
-    },
+const MOTION: CarriageMotion = CarriageMotion {
+    velocity_mps: Vector3::new(0.02, 0.01, -0.01),
+    accel_mps2: Vector3::new(0.5, -0.3, 0.2),
+    accel_std_mps2: 0.05,
+};
+
+/// The cycle's context with the carriage moving at [`MOTION`].
+const IN_MOTION: CycleContext = CycleContext {
+    motion: MOTION,
     ..CycleContext::AT_REST
 };
 
@@ -446,7 +449,7 @@ fn bench_good_path_in_motion(
     bench_both(c, name, || {
         cycle += 1;
         let input = cycle_input(cycle, reading, torque);
-        let out = estimator.cycle(black_box(&input), black_box(&MOTION));
+        let out = estimator.cycle(black_box(&input), black_box(&IN_MOTION));
         black_box(out.guard_state)
     });
     assert_eq!(

@@ -70,11 +70,7 @@ impl InputChecks {
 
 /// The following-error verdict of finite joints `q` against `r`.
 fn following_fault(q: &ActiveJoints, r: &FollowingReference) -> Option<Reason> {
-    let errors = [
-        (1, (q.q1_m - r.joints.q1_m).abs()),
-        (2, (q.q2_m - r.joints.q2_m).abs()),
-        (3, (q.q3_m - r.joints.q3_m).abs()),
-    ];
+    let errors = axis_moves(q, &r.joints);
     let tolerance_m = r.tolerance_m;
     let tolerance_ok = tolerance_m.is_finite() && tolerance_m > 0.0;
     errors
@@ -88,16 +84,28 @@ fn following_fault(q: &ActiveJoints, r: &FollowingReference) -> Option<Reason> {
         })
 }
 
-/// The largest |dq| over the three axes, with its axis (1, 2, 3).
-pub(super) fn largest_move(a: &ActiveJoints, b: &ActiveJoints) -> (u8, f64) {
-    let moves = [
+/// |a - b| on each of the three axes, with its axis (1, 2, 3).
+fn axis_moves(a: &ActiveJoints, b: &ActiveJoints) -> [(u8, f64); 3] {
+    [
         (1, (a.q1_m - b.q1_m).abs()),
         (2, (a.q2_m - b.q2_m).abs()),
         (3, (a.q3_m - b.q3_m).abs()),
-    ];
-    moves
+    ]
+}
+
+/// The largest |dq| over the three axes, with its axis (1, 2, 3).
+fn largest_move(a: &ActiveJoints, b: &ActiveJoints) -> (u8, f64) {
+    axis_moves(a, b)
         .into_iter()
         .fold((1, 0.0), |acc, m| if m.1 > acc.1 { m } else { acc })
+}
+
+/// Whether a mean at rest taken at the joints `since` restarts at `q`:
+/// none was started, or the joints moved beyond `margin_m` (the joint
+/// margin) on some axis. One rule for the tare's mean and the first
+/// reset's.
+pub(super) fn moved_since(since: Option<ActiveJoints>, q: &ActiveJoints, margin_m: f64) -> bool {
+    since.is_none_or(|p| largest_move(q, &p).1 > margin_m)
 }
 
 impl Estimator {

@@ -6,7 +6,7 @@
 //! than calibrated, or a wrong profile, refuses the first reset.
 
 use super::Estimator;
-use super::input_checks::largest_move;
+use super::input_checks::moved_since;
 use super::plausibility::MountingLimits;
 use super::vocabulary::TipOutcome;
 use crate::Vec3;
@@ -53,10 +53,7 @@ impl Estimator {
             *rest = RestMean::EMPTY;
             return;
         };
-        let moved = rest
-            .joints
-            .is_some_and(|p| largest_move(q, &p).1 > self.limits.joint_margin_m);
-        if moved || rest.joints.is_none() {
+        if moved_since(rest.joints, q, self.limits.joint_margin_m) {
             *rest = RestMean {
                 joints: Some(*q),
                 ..RestMean::EMPTY

@@ -7,7 +7,7 @@
 //! ([`super::TareRefused`]).
 
 use super::Estimator;
-use super::input_checks::largest_move;
+use super::input_checks::moved_since;
 use super::torque_residual::predicted_torque_nm;
 use super::vocabulary::{Bias, CommandRefused, CycleInput, SensorSample, TareRefused, TipOutcome};
 use crate::guard::{Axis, Reason};
@@ -95,10 +95,7 @@ impl Estimator {
             *mean = TareMean::EMPTY;
             return;
         }
-        let moved = mean
-            .joints
-            .is_some_and(|p| largest_move(q, &p).1 > self.limits.joint_margin_m);
-        if moved || mean.joints.is_none() {
+        if moved_since(mean.joints, q, self.limits.joint_margin_m) {
             *mean = TareMean {
                 joints: Some(*q),
                 ..TareMean::EMPTY
