@@ -645,7 +645,7 @@ fn torque_stats(s: &Scenario) -> TorqueStats {
             next += 1;
         }
         let Some(sample) = latest else { continue };
-        let out = *est.cycle(&CycleInput {
+        let input = CycleInput {
             cycle: i as u64 + 1,
             now_ns: Some(p.stamp_ns),
             sensor: sensor_input(sample),
@@ -655,7 +655,8 @@ fn torque_stats(s: &Scenario) -> TorqueStats {
                 valid: p.valid,
             },
             command: None,
-        });
+        };
+        let out = *est.cycle(&input, &CycleContext::AT_REST);
         if out.new_sample
             && let Some(t) = out.torque
             && !matches!(out.guard_reason, Reason::JointJump { .. })
