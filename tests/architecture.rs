@@ -856,7 +856,7 @@ fn the_name_check_refuses_a_stale_name() {
     for ok in [
         "LoopStep::step",
         "sar_hal::motion",
-        "Estimator::cycle_checked",
+        "Estimator::cycle",
         "crates/loop/src/step.rs",
         "sar-loop",
         "snap_struct!",

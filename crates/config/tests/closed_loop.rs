@@ -32,8 +32,8 @@ use sar_config::scenario::{Scenario, load, parse};
 use sar_estimator::SensorNoise;
 use sar_estimator::StaticPose;
 use sar_estimator::cycle::{
-    Bias, Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig,
-    PlausibilityLimits, SensorSample, TipOutcome, TorqueLimits,
+    Bias, Command, CycleContext, CycleInput, Estimator, EstimatorConfig, JointSample,
+    PlausibilityConfig, PlausibilityLimits, SensorSample, TipOutcome, TorqueLimits,
 };
 use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState, Reason};
 use sar_estimator::identification::{Identification, IdentificationOptions, IdentificationResult};
@@ -494,7 +494,7 @@ fn tip_force_comes_back_within_the_noise_and_the_guard_stops_the_push() {
     for (cycle, (sample, measured_ns, joints)) in (1..).zip(measured_samples(run, latency_ns)) {
         let reset = transitions.is_empty();
         let input = cycle_input(cycle, sample.received_ns, sample, &joints, reset);
-        let out = *est.cycle(&input);
+        let out = *est.cycle(&input, &CycleContext::AT_REST);
         if let Some(t) = out.transition {
             transitions.push((measured_ns, t.to, t.reason));
         }
@@ -645,7 +645,7 @@ fn torque_stats(s: &Scenario) -> TorqueStats {
             next += 1;
         }
         let Some(sample) = latest else { continue };
-        let out = *est.cycle(&CycleInput {
+        let input = CycleInput {
             cycle: i as u64 + 1,
             now_ns: Some(p.stamp_ns),
             sensor: sensor_input(sample),
@@ -655,7 +655,8 @@ fn torque_stats(s: &Scenario) -> TorqueStats {
                 valid: p.valid,
             },
             command: None,
-        });
+        };
+        let out = *est.cycle(&input, &CycleContext::AT_REST);
         if out.new_sample
             && let Some(t) = out.torque
             && !matches!(out.guard_reason, Reason::JointJump { .. })
@@ -957,7 +958,10 @@ fn daemon_loop(s: &Scenario, run: &Run) -> (Vec<GuardEvent>, Vec<(u64, Vec3)>) {
         let Some(sample) = latest else { continue };
         let cycle = i as u64 + 1;
         let reset = transitions.is_empty();
-        let out = *est.cycle(&cycle_input(cycle, now, sample, p, reset));
+        let out = *est.cycle(
+            &cycle_input(cycle, now, sample, p, reset),
+            &CycleContext::AT_REST,
+        );
         if let Some(t) = out.transition {
             transitions.push((now, t.to, t.reason));
         }
@@ -1140,7 +1144,7 @@ fn tip_force_with_a_rod_offset_comes_back_within_the_noise_and_the_guard_stops_t
     for (cycle, (sample, measured_ns, joints)) in (1..).zip(measured_samples(run, latency_ns)) {
         let reset = transitions.is_empty();
         let input = cycle_input(cycle, sample.received_ns, sample, &joints, reset);
-        let out = *est.cycle(&input);
+        let out = *est.cycle(&input, &CycleContext::AT_REST);
         if let Some(t) = out.transition {
             transitions.push((measured_ns, t.to, t.reason));
         }

@@ -19,7 +19,8 @@ use common::*;
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
 use sar_estimator::cycle::{
-    CycleInput, CycleOutput, Estimator, EstimatorConfig, JointSample, SensorSample, TipOutcome,
+    CycleContext, CycleInput, CycleOutput, Estimator, EstimatorConfig, JointSample, SensorSample,
+    TipOutcome,
 };
 use sar_estimator::guard::{Guard, GuardConfig, GuardInput, GuardLimits, TipInput};
 use sar_estimator::identification::{Identification, IdentificationOptions};
@@ -391,7 +392,7 @@ fn start(estimator: &mut Estimator, reading: &Vector3<f64>, torque: &Vector3<f64
         cycle += 1;
         let mut input = cycle_input(cycle, reading, torque);
         input.command = Some(sar_estimator::cycle::Command::Reset);
-        let out = estimator.cycle(&input);
+        let out = estimator.cycle(&input, &CycleContext::AT_REST);
         if out.guard_state == sar_estimator::guard::GuardState::Ok {
             return cycle;
         }
@@ -414,7 +415,9 @@ fn bench_good_path<O>(
     bench_both(c, name, || {
         cycle += 1;
         let input = cycle_input(cycle, reading, torque);
-        black_box(pick(estimator.cycle(black_box(&input))))
+        black_box(pick(
+            estimator.cycle(black_box(&input), black_box(&CycleContext::AT_REST)),
+        ))
     });
     cycle
 }
@@ -426,6 +429,12 @@ const MOTION: CarriageMotion = CarriageMotion {
     velocity_mps: Vector3::new(0.02, 0.01, -0.01),
     accel_mps2: Vector3::new(0.5, -0.3, 0.2),
     accel_std_mps2: 0.05,
+};
+
+/// The cycle's context with the carriage moving at [`MOTION`].
+const IN_MOTION: CycleContext = CycleContext {
+    motion: MOTION,
+    ..CycleContext::AT_REST
 };
 
 /// [`bench_good_path`] with the carriage moving ([`MOTION`]): the cycle's
@@ -440,7 +449,7 @@ fn bench_good_path_in_motion(
     bench_both(c, name, || {
         cycle += 1;
         let input = cycle_input(cycle, reading, torque);
-        let out = estimator.cycle_in_motion(black_box(&input), None, None, black_box(&MOTION));
+        let out = estimator.cycle(black_box(&input), black_box(&IN_MOTION));
         black_box(out.guard_state)
     });
     assert_eq!(
@@ -544,7 +553,7 @@ fn per_cycle(c: &mut Criterion) {
         let mut exact = cycle_input(cycle + 1, &reading, &torque);
         exact.sensor.force_n = reading;
         exact.sensor.torque_nm = torque;
-        let full = estimator.cycle(&exact);
+        let full = estimator.cycle(&exact, &CycleContext::AT_REST);
         // Every check passed: the benchmark measures the good path.
         assert_eq!(
             full.guard_state,

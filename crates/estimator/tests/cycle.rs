@@ -11,9 +11,9 @@ mod common;
 use common::*;
 use nalgebra::Vector3;
 use sar_estimator::cycle::{
-    Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
-    EstimatorConfig, JointSample, PlausibilityConfig, PlausibilityLimits, SensorSample, TipOutcome,
-    TorqueLimits,
+    Bias, Command, CommandAccepted, CommandRefused, CycleContext, CycleInput, CycleOutput,
+    Estimator, EstimatorConfig, JointSample, PlausibilityConfig, PlausibilityLimits, SensorSample,
+    TipOutcome, TorqueLimits,
 };
 use sar_estimator::filter::TipFilter;
 use sar_estimator::guard::{Axis, ForcePart, GuardState, Reason};
@@ -122,7 +122,7 @@ impl Rig {
         let reading = example_reading(q, tip_force_n, &self.bias_n);
         let mut input = self.input(q, reading);
         input.command = command;
-        *self.estimator.cycle(&input)
+        *self.estimator.cycle(&input, &CycleContext::AT_REST)
     }
 
     /// The next input at the nominal pose with nothing at the tip.
@@ -316,7 +316,7 @@ fn bad_inputs_fault_the_guard() {
     // A NaN reading.
     let mut rig = Rig::armed();
     let input = rig.input(NOMINAL_Q, Vector3::new(f64::NAN, 0.0, 0.0));
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert_eq!(out.tip, TipOutcome::SensorInvalid);
     assert_eq!(
         (out.guard_state, out.guard_reason),
@@ -327,7 +327,7 @@ fn bad_inputs_fault_the_guard() {
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
     input.sensor.stamp_ns = input.now_ns.unwrap() + 1;
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert_eq!(
         (out.guard_state, out.guard_reason),
         (GuardState::Fault, Reason::SensorInvalid)
@@ -337,7 +337,7 @@ fn bad_inputs_fault_the_guard() {
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
     input.sensor.stamp_ns = input.now_ns.unwrap() - 6_000_000;
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert_eq!(out.sensor_age_ns, Some(6_000_000));
     assert_eq!(out.guard_state, GuardState::Fault);
     assert!(matches!(
@@ -351,12 +351,12 @@ fn bad_inputs_fault_the_guard() {
     // Stale joints: the drives keep delivering the same old sample.
     let mut rig = Rig::armed();
     let first = rig.at_rest();
-    rig.estimator.cycle(&first);
+    rig.estimator.cycle(&first, &CycleContext::AT_REST);
     let mut out = *rig.estimator.last();
     for _ in 0..5 {
         let mut input = rig.at_rest();
         input.joints.stamp_ns = first.joints.stamp_ns;
-        out = *rig.estimator.cycle(&input);
+        out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     }
     assert_eq!(out.joints_age_ns, Some(5_100_000));
     assert!(
@@ -369,7 +369,7 @@ fn bad_inputs_fault_the_guard() {
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
     input.joints.valid = false;
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert!(out.pose.is_none());
     assert_eq!(out.tip, TipOutcome::JointsInvalid);
     assert_eq!(
@@ -381,7 +381,7 @@ fn bad_inputs_fault_the_guard() {
     let mut rig = Rig::armed();
     let q_at_b = [0.0, 0.28, 0.45];
     let input = rig.input(q_at_b, Vector3::zeros());
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert!(out.pose.is_none());
     assert!(matches!(out.tip, TipOutcome::PoseInvalid(_)));
     assert_eq!(
@@ -427,7 +427,7 @@ fn reported_std_matches_the_scatter_with_sensor_noise() {
         let mut reported = Vector3::zeros();
         for _ in 0..n {
             let input = rig.input(q, sensor.sample(&ideal));
-            let e = estimate(rig.estimator.cycle(&input));
+            let e = estimate(rig.estimator.cycle(&input, &CycleContext::AT_REST));
             let err = e.force_n - tip;
             sq += err.component_mul(&err);
             reported = e.std_n;
@@ -522,7 +522,7 @@ fn debounce_counts_new_samples_not_loop_cycles() {
                 joints: joint_sample(NOMINAL_Q, now_ns - 50_000),
                 command: None,
             };
-            let out = *rig.estimator.cycle(&input);
+            let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
             assert_eq!(
                 out.guard_state,
                 GuardState::Ok,
@@ -652,7 +652,7 @@ fn a_tare_is_refused_above_warn_and_outside_ok() {
     let mut input = rig.at_rest();
     input.sensor.force_n.y = f64::NAN;
     input.command = Some(Command::Tare);
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert!(matches!(
         out.command.unwrap().result,
         Err(CommandRefused::NotOk {
@@ -755,7 +755,7 @@ fn clock_failures_are_faults_with_their_own_reason() {
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
     input.now_ns = None;
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert_eq!((out.sensor_age_ns, out.joints_age_ns), (None, None));
     assert_eq!(
         (out.guard_state, out.guard_reason),
@@ -770,8 +770,13 @@ fn clock_failures_are_faults_with_their_own_reason() {
     stuck.now_ns = Some(t);
     stuck.sensor.stamp_ns = t;
     stuck.joints.stamp_ns = t;
-    assert_eq!(rig.estimator.cycle(&first).guard_state, GuardState::Ok);
-    let out = *rig.estimator.cycle(&stuck);
+    assert_eq!(
+        rig.estimator
+            .cycle(&first, &CycleContext::AT_REST)
+            .guard_state,
+        GuardState::Ok
+    );
+    let out = *rig.estimator.cycle(&stuck, &CycleContext::AT_REST);
     assert_eq!((out.sensor_age_ns, out.joints_age_ns), (None, None));
     assert_eq!(
         (out.guard_state, out.guard_reason),
@@ -817,8 +822,8 @@ fn a_joint_jump_is_a_fault() {
     let first = rig.at_rest();
     let mut back = rig.at_rest();
     back.joints.stamp_ns = first.joints.stamp_ns - 1;
-    rig.estimator.cycle(&first);
-    let out = *rig.estimator.cycle(&back);
+    rig.estimator.cycle(&first, &CycleContext::AT_REST);
+    let out = *rig.estimator.cycle(&back, &CycleContext::AT_REST);
     assert!(matches!(
         out.guard_reason,
         Reason::JointsStampBackwards { .. }
@@ -858,13 +863,13 @@ fn the_sensor_counter_and_status_are_checked() {
     let mut rig = Rig::armed();
     let first = rig.at_rest();
     let counter = first.sensor.counter;
-    rig.estimator.cycle(&first);
+    rig.estimator.cycle(&first, &CycleContext::AT_REST);
     let mut last = None;
     for _ in 0..6 {
         let mut input = rig.at_rest();
         input.sensor.counter = counter;
         rig.counter = counter;
-        let out = *rig.estimator.cycle(&input);
+        let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
         assert!(!out.new_sample);
         last = Some(out);
     }
@@ -882,7 +887,7 @@ fn the_sensor_counter_and_status_are_checked() {
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
     input.sensor.status = 0x10;
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     assert_eq!(out.guard_reason, Reason::SensorStatus { status: 0x10 });
 }
 
@@ -899,7 +904,7 @@ fn an_implausible_sensor_torque_is_a_fault() {
     assert!((t.std_nm.z - (0.002f64.powi(2) + (0.05f64 * 0.2).powi(2)).sqrt()).abs() < 1e-12);
     let mut input = rig.at_rest();
     input.sensor.torque_nm.z += 8.0 * t.std_nm.z;
-    let out = *rig.estimator.cycle(&input);
+    let out = *rig.estimator.cycle(&input, &CycleContext::AT_REST);
     match out.guard_reason {
         Reason::TorqueImplausible {
             axis: Axis::Z,
@@ -916,7 +921,12 @@ fn an_implausible_sensor_torque_is_a_fault() {
     let mut rig = Rig::armed();
     let mut input = rig.at_rest();
     input.sensor.torque_nm.x -= 6.0 * t.std_nm.x;
-    assert_eq!(rig.estimator.cycle(&input).guard_state, GuardState::Ok);
+    assert_eq!(
+        rig.estimator
+            .cycle(&input, &CycleContext::AT_REST)
+            .guard_state,
+        GuardState::Ok
+    );
 }
 
 /// The guard acts on the estimator's observability flag, with the
@@ -978,7 +988,7 @@ fn the_filtered_tip_force_is_stepped_per_new_sample_and_reset_without_input() {
     );
     rig.counter = rig.counter.wrapping_sub(1);
     repeat.sensor.counter = rig.counter;
-    let out = *rig.estimator.cycle(&repeat);
+    let out = *rig.estimator.cycle(&repeat, &CycleContext::AT_REST);
     assert!(!out.new_sample);
     assert_eq!(out.filtered, filtered_before);
     // A sample missed (counter + 2, within the accepted gap: a late cycle,
@@ -996,7 +1006,7 @@ fn the_filtered_tip_force_is_stepped_per_new_sample_and_reset_without_input() {
     // No estimate (invalid joints): no filtered output, and the filter resets.
     let mut bad = rig.at_rest();
     bad.joints.valid = false;
-    let out = *rig.estimator.cycle(&bad);
+    let out = *rig.estimator.cycle(&bad, &CycleContext::AT_REST);
     assert_eq!(out.filtered, None);
     assert_eq!(out.guard_state, GuardState::Fault);
     // With the next estimate the filter restarts at it: no memory of the ramp.
@@ -1092,7 +1102,10 @@ fn the_torque_check_and_the_tare_hold_with_a_rod_offset_and_a_turned_sensor() {
         },
         command: Some(Command::Reset),
     };
-    let out = *estimator.cycle(&input(1, reading(&q, &tip_n, 1.0, true)));
+    let out = *estimator.cycle(
+        &input(1, reading(&q, &tip_n, 1.0, true)),
+        &CycleContext::AT_REST,
+    );
     assert_eq!(out.guard_state, GuardState::Ok, "{:?}", out.guard_reason);
     let e = estimate(&out);
     assert!(e.torsion_nm.abs() > 1e-3, "the pose must load the torsion");
@@ -1109,7 +1122,10 @@ fn the_torque_check_and_the_tare_hold_with_a_rod_offset_and_a_turned_sensor() {
             },
         )
         .unwrap();
-        let out = *rig.cycle(&input(1, reading(&q, &tip_n, sign, transpose)));
+        let out = *rig.cycle(
+            &input(1, reading(&q, &tip_n, sign, transpose)),
+            &CycleContext::AT_REST,
+        );
         let r = out.torque.unwrap();
         // Far from round-off (the model's error, not noise, is measured).
         assert!(
@@ -1121,11 +1137,11 @@ fn the_torque_check_and_the_tare_hold_with_a_rod_offset_and_a_turned_sensor() {
     // A tare at rest: the next reading at rest gives zero tip force.
     let mut tare = input(2, reading(&q, &Vector3::zeros(), 1.0, true));
     tare.command = Some(Command::Tare);
-    let out = *estimator.cycle(&tare);
+    let out = *estimator.cycle(&tare, &CycleContext::AT_REST);
     assert!(out.command.unwrap().result.is_ok(), "{:?}", out.command);
     let mut after = input(3, reading(&q, &Vector3::zeros(), 1.0, true));
     after.command = None;
-    let out = *estimator.cycle(&after);
+    let out = *estimator.cycle(&after, &CycleContext::AT_REST);
     assert!(estimate(&out).force_n.norm() < 1e-9);
     assert!(out.torque.unwrap().residual_nm.norm() < 1e-12);
 }
@@ -1145,20 +1161,24 @@ fn leaving_the_commanded_trajectory_is_a_fault() {
         },
         tolerance_m,
     };
+    let following = |reference: FollowingReference| CycleContext {
+        reference: Some(reference),
+        ..CycleContext::AT_REST
+    };
     let mut rig = Rig::armed();
     let mut commanded = NOMINAL_Q;
     commanded[1] += 0.000_9;
     let input = rig.at_rest();
     let out = *rig
         .estimator
-        .cycle_following(&input, Some(&reference(commanded, 0.001)));
+        .cycle(&input, &following(reference(commanded, 0.001)));
     assert_eq!(out.guard_state, GuardState::Ok);
     // 1.1 mm off on q2 with a 1 mm tolerance.
     commanded[1] += 0.000_2;
     let input = rig.at_rest();
     let out = *rig
         .estimator
-        .cycle_following(&input, Some(&reference(commanded, 0.001)));
+        .cycle(&input, &following(reference(commanded, 0.001)));
     assert_eq!(out.guard_state, GuardState::Fault);
     match out.guard_reason {
         Reason::FollowingError {
@@ -1177,7 +1197,7 @@ fn leaving_the_commanded_trajectory_is_a_fault() {
     input.command = Some(Command::Reset);
     let out = *rig
         .estimator
-        .cycle_following(&input, Some(&reference(commanded, 0.001)));
+        .cycle(&input, &following(reference(commanded, 0.001)));
     assert!(matches!(
         out.command.unwrap().result,
         Err(CommandRefused::Reset {
@@ -1189,7 +1209,7 @@ fn leaving_the_commanded_trajectory_is_a_fault() {
     input.command = Some(Command::Reset);
     let out = *rig
         .estimator
-        .cycle_following(&input, Some(&reference(NOMINAL_Q, 0.001)));
+        .cycle(&input, &following(reference(NOMINAL_Q, 0.001)));
     assert_eq!(out.guard_state, GuardState::Ok);
     // A NaN reference and a zero tolerance fault.
     for (q, tol) in [
@@ -1199,9 +1219,7 @@ fn leaving_the_commanded_trajectory_is_a_fault() {
     ] {
         let mut rig = Rig::armed();
         let input = rig.at_rest();
-        let out = *rig
-            .estimator
-            .cycle_following(&input, Some(&reference(q, tol)));
+        let out = *rig.estimator.cycle(&input, &following(reference(q, tol)));
         assert!(
             matches!(out.guard_reason, Reason::FollowingError { axis: 1, .. }),
             "{q:?} {tol}: {:?}",
@@ -1305,9 +1323,8 @@ fn force_limits_change_at_run_time_within_their_ceiling() {
     ));
 }
 
-/// MODEL.md 10 in the cycle: with `CarriageMotion::REST` the cycle in motion
-/// is the plain cycle to the bit (a recording made without the motion
-/// replays the same); in motion the guard judges the compensated force with
+/// MODEL.md 10 in the cycle (at `CarriageMotion::REST` the estimate is the
+/// static one to the bit: `tip_force.rs`); in motion the guard judges the compensated force with
 /// the grown standard deviation. A reading without the rod's inertial part
 /// while the loop says the carriage accelerates at 4 m/s^2 along the rod is
 /// a tip force of m A'' = 10.4 N against the rod: the guard acts on it.
@@ -1316,7 +1333,6 @@ fn in_motion_the_guard_judges_the_compensated_force() {
     use sar_estimator::motion::CarriageMotion;
     let mut plain = Rig::armed();
     let mut moving = Rig::armed();
-    let mut rest = Rig::armed();
     let accel = CarriageMotion {
         velocity_mps: Vector3::new(0.05, 0.0, 0.0),
         accel_mps2: Vector3::new(4.0, 0.0, 0.0),
@@ -1325,16 +1341,12 @@ fn in_motion_the_guard_judges_the_compensated_force() {
     let mut last = None;
     for _ in 0..6 {
         let input = plain.at_rest();
-        let expected = *plain.estimator.cycle(&input);
-        let out = *rest
-            .estimator
-            .cycle_in_motion(&input, None, None, &CarriageMotion::REST);
-        assert_eq!(out, expected);
-        assert_eq!(format!("{out:?}"), format!("{expected:?}"));
-        last = Some((
-            *moving.estimator.cycle_in_motion(&input, None, None, &accel),
-            expected,
-        ));
+        let expected = *plain.estimator.cycle(&input, &CycleContext::AT_REST);
+        let in_motion = CycleContext {
+            motion: accel,
+            ..CycleContext::AT_REST
+        };
+        last = Some((*moving.estimator.cycle(&input, &in_motion), expected));
     }
     let (out, still) = last.unwrap();
     let (e, s) = (estimate(&out), estimate(&still));

@@ -16,9 +16,9 @@ mod common;
 use common::*;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use sar_estimator::cycle::{
-    Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
-    EstimatorConfig, FrozenCheck, MountingLimits, PlausibilityConfig, PlausibilityLimits,
-    SensorRange, SensorSample, SpikeLimits, TareLimits, TareRefused,
+    Bias, Command, CommandAccepted, CommandRefused, CycleContext, CycleInput, CycleOutput,
+    Estimator, EstimatorConfig, FrozenCheck, MountingLimits, PlausibilityConfig,
+    PlausibilityLimits, SensorRange, SensorSample, SpikeLimits, TareLimits, TareRefused,
     frozen_false_alarms_in_ten_years, frozen_repeat_probability, frozen_repeats,
 };
 use sar_estimator::guard::{
@@ -161,7 +161,7 @@ impl Rig {
             joints: joint_sample(q, now_ns - 100_000),
             command,
         };
-        *self.estimator.cycle(&input)
+        *self.estimator.cycle(&input, &CycleContext::AT_REST)
     }
 }
 
@@ -255,7 +255,7 @@ fn the_same_sample_read_again_is_not_frozen() {
             joints: joint_sample(NOMINAL_Q, now_ns - 100_000),
             command: None,
         };
-        *rig.estimator.cycle(&input)
+        *rig.estimator.cycle(&input, &CycleContext::AT_REST)
     };
     for _ in 0..3 {
         let out = input_cycle(&mut rig);

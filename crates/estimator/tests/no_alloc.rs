@@ -74,7 +74,8 @@ use common::*;
 use nalgebra::Vector3;
 use sar_estimator::SensorNoise;
 use sar_estimator::cycle::{
-    Bias, Command, CycleInput, Estimator, PlausibilityConfig, PlausibilityLimits, SensorSample,
+    Bias, Command, CycleContext, CycleInput, Estimator, PlausibilityConfig, PlausibilityLimits,
+    SensorSample,
 };
 use sar_estimator::guard::Reason;
 
@@ -199,7 +200,7 @@ fn the_per_cycle_path_allocates_nothing() {
             if estimator.last().guard_state.is_halting() && input.command.is_none() {
                 input.command = Some(Command::Reset);
             }
-            let out = estimator.cycle(input);
+            let out = estimator.cycle(input, &CycleContext::AT_REST);
             if let Some(event) = out.command {
                 commands[usize::from(event.result.is_ok())] += 1;
             }
@@ -390,8 +391,12 @@ fn the_per_cycle_path_with_a_rod_offset_allocates_nothing() {
                 accel_mps2: Vector3::new(2.0 * phase.sin(), -0.5, 1.0 * phase.cos()),
                 accel_std_mps2: 0.1,
             };
-            slender.cycle_in_motion(input, None, None, &motion);
-            let out = estimator.cycle_in_motion(input, None, None, &motion);
+            let in_motion = CycleContext {
+                motion,
+                ..CycleContext::AT_REST
+            };
+            slender.cycle(input, &in_motion);
+            let out = estimator.cycle(input, &in_motion);
             if let sar_estimator::cycle::TipOutcome::Estimate(e) = out.tip {
                 estimates += 1;
                 assert!(out.torque.is_some());

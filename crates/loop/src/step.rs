@@ -81,8 +81,8 @@
 use crate::excite::{Excitation, ExciteLimits, ExciteRefusal, ExciteRequest};
 use crate::motion::{AxesMotion, MotionConfig, Told};
 use sar_estimator::cycle::{
-    Bias, Command, CommandAccepted, CommandRefused, CycleInput, CycleOutput, Estimator,
-    EstimatorConfig, FollowingReference, JointSample, SensorSample, TipOutcome,
+    Bias, Command, CommandAccepted, CommandRefused, CycleContext, CycleInput, CycleOutput,
+    Estimator, EstimatorConfig, FollowingReference, JointSample, SensorSample, TipOutcome,
 };
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::force_control::{ForceControlConfig, ForceController, ForceMode};
@@ -897,10 +897,12 @@ impl LoopStep {
         let motion = self.carriage_motion(input);
         let plans_before = self.trajectory.map(|t| t.axes);
         // Judge: the estimator and its guard.
-        let estimate =
-            *self
-                .estimator
-                .cycle_in_motion(&cycle_input, reference.as_ref(), host_fault, &motion);
+        let context = CycleContext {
+            reference,
+            host_fault,
+            motion,
+        };
+        let estimate = *self.estimator.cycle(&cycle_input, &context);
         // Decide: the answer to the guard, then to the request, force
         // control's period, a brake.
         let mut d = Decision {

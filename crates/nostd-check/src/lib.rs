@@ -5,7 +5,7 @@
 #![no_std]
 
 use sar_estimator::cycle::{
-    Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig, SensorSample,
+    Command, CycleContext, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig, SensorSample,
 };
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::guard::{GuardConfig, GuardLimits};
@@ -56,7 +56,7 @@ fn config() -> Option<EstimatorConfig> {
 /// (and the torque the model predicts: (A - S) x f with A - S = (0, -0.05,
 /// 0)), a reset requested: the guard state as a number.
 fn reset_cycle(estimator: &mut Estimator, joints: ActiveJoints, force_n: Vec3) -> i32 {
-    let out = estimator.cycle(&CycleInput {
+    let input = CycleInput {
         cycle: 1,
         now_ns: Some(1_000),
         sensor: SensorSample {
@@ -74,7 +74,8 @@ fn reset_cycle(estimator: &mut Estimator, joints: ActiveJoints, force_n: Vec3) -
             valid: true,
         },
         command: Some(Command::Reset),
-    });
+    };
+    let out = estimator.cycle(&input, &CycleContext::AT_REST);
     out.guard_state as i32
 }
 
@@ -226,12 +227,15 @@ pub extern "C" fn sar_nostd_cycle_in_motion(
     let Ok(mut estimator) = Estimator::new(&config, Vec3::zeros()) else {
         return -1;
     };
-    let motion = CarriageMotion {
-        velocity_mps: Vec3::new(0.01, 0.0, 0.0),
-        accel_mps2: Vec3::new(ax_mps2, 0.0, 0.0),
-        accel_std_mps2: 0.05,
+    let context = CycleContext {
+        motion: CarriageMotion {
+            velocity_mps: Vec3::new(0.01, 0.0, 0.0),
+            accel_mps2: Vec3::new(ax_mps2, 0.0, 0.0),
+            accel_std_mps2: 0.05,
+        },
+        ..CycleContext::AT_REST
     };
-    let out = estimator.cycle_in_motion(
+    let out = estimator.cycle(
         &CycleInput {
             cycle: 1,
             now_ns: Some(1_000),
@@ -251,9 +255,7 @@ pub extern "C" fn sar_nostd_cycle_in_motion(
             },
             command: None,
         },
-        None,
-        None,
-        &motion,
+        &context,
     );
     out.guard_state as i32
 }

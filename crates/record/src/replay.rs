@@ -29,8 +29,8 @@ use super::output::{OutputError, PendingFile, SpaceWatch, check_outputs};
 use super::reader::{ChannelInfo, McapReader, MessageRef, ReadError};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
-    Bias, Command, CommandAccepted, CycleInput, CycleOutput, Estimator, EstimatorConfig,
-    JointSample, SensorSample, TipOutcome,
+    Bias, Command, CommandAccepted, CycleContext, CycleInput, CycleOutput, Estimator,
+    EstimatorConfig, JointSample, SensorSample, TipOutcome,
 };
 use sar_kinematics::ActiveJoints;
 use sar_loop::step::{LoopInput, LoopStep, StepConfig};
@@ -727,7 +727,7 @@ impl Replayer {
 
     /// One cycle of an inputs-only recording: the estimator alone.
     fn estimator_cycle(&mut self, input: &CycleInput) -> Result<(), ReplayError> {
-        let out = *self.estimator.cycle(input);
+        let out = *self.estimator.cycle(input, &CycleContext::AT_REST);
         self.emit_outputs(input, &out)
     }
 

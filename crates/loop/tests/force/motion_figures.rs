@@ -26,7 +26,7 @@
 use crate::rig::{Rig, TIP_M, rms};
 use sar_config as config;
 use sar_estimator::Vec3;
-use sar_estimator::cycle::{Estimator, TipOutcome};
+use sar_estimator::cycle::{CycleContext, Estimator, TipOutcome};
 use sar_estimator::guard::GuardState;
 use sar_loop::control::{ReplyStatus, Request};
 use sar_loop::step::{DriveAction, LoopOutput};
@@ -70,13 +70,21 @@ fn compensates(rig: &Rig) -> bool {
     let mut a = Estimator::with_bias(&rig.cfg.estimator, rig.bias).unwrap();
     let mut b = a.clone();
     let cycle = input.cycle_input();
-    let still = a.cycle_checked(&cycle, None, None).tip;
+    let still = a.cycle(&cycle, &CycleContext::AT_REST).tip;
     let moving = sar_estimator::motion::CarriageMotion {
         velocity_mps: Vec3::zeros(),
         accel_mps2: Vec3::new(1.0, 1.0, 1.0),
         accel_std_mps2: 0.0,
     };
-    let moved = b.cycle_in_motion(&cycle, None, None, &moving).tip;
+    let moved = b
+        .cycle(
+            &cycle,
+            &CycleContext {
+                motion: moving,
+                ..CycleContext::AT_REST
+            },
+        )
+        .tip;
     match (still, moved) {
         (TipOutcome::Estimate(s), TipOutcome::Estimate(m)) => (s.force_n - m.force_n).norm() > 0.1,
         other => panic!("no estimate to judge the compensation by: {other:?}"),
@@ -200,7 +208,7 @@ fn phantoms(run: &FreeRun) -> (Vec<f64>, Vec<f64>) {
     let mut last_counter = None;
     for (k, (input, out)) in run.rig.log.iter().enumerate() {
         let cycle = input.cycle_input();
-        let uncomp = plain.cycle_checked(&cycle, None, None).tip;
+        let uncomp = plain.cycle(&cycle, &CycleContext::AT_REST).tip;
         let new = last_counter != Some(input.sensor.counter);
         last_counter = Some(input.sensor.counter);
         if k < first || !new {

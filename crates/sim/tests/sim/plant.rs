@@ -453,8 +453,8 @@ fn the_estimators_compensation_recovers_the_simulators_tip_force() {
 #[test]
 fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
     use sar_estimator::cycle::{
-        Bias, Command, CycleInput, Estimator, EstimatorConfig, JointSample, PlausibilityConfig,
-        PlausibilityLimits, SensorSample, TorqueLimits,
+        Bias, Command, CycleContext, CycleInput, Estimator, EstimatorConfig, JointSample,
+        PlausibilityConfig, PlausibilityLimits, SensorSample, TorqueLimits,
     };
     use sar_estimator::guard::{GuardConfig, GuardLimits, GuardState};
     let rod = inertia(MASS_KG * LENGTH_M * LENGTH_M / 12.0, 0.002, 0.3);
@@ -525,7 +525,7 @@ fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
             },
             command: (k < 50).then_some(Command::Reset),
         };
-        let still = uncompensated.cycle(&input);
+        let still = uncompensated.cycle(&input, &CycleContext::AT_REST);
         if let (true, sar_estimator::cycle::TipOutcome::Estimate(e)) = (k >= 50, still.tip) {
             largest_still_n = largest_still_n.max(e.force_n.norm());
         }
@@ -535,7 +535,11 @@ fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
             accel_std_mps2: 0.05,
             ..carriage_motion(&truth)
         };
-        let out = compensated.cycle_in_motion(&input, None, None, &motion);
+        let in_motion = CycleContext {
+            motion,
+            ..CycleContext::AT_REST
+        };
+        let out = compensated.cycle(&input, &in_motion);
         if let (Some(a), Some(b)) = (out.torque.map(|t| t.std_nm), still_torque_std) {
             assert!((a - b).min() >= 0.0, "{a:?} vs {b:?}");
             if (a - b).max() > 0.0 {
