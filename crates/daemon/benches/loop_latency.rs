@@ -42,6 +42,7 @@ fn daemon() -> LoopStats {
     let mut stats = LoopStats::default();
     runloop::run(
         &mut c,
+        &sar_loop::time::RealTime,
         &cfg.loop_,
         RunLimits {
             max_cycles: Some(CYCLES),

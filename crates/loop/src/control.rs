@@ -105,6 +105,28 @@ pub struct ActionCounts {
     pub sensor_samples_lost: u64,
 }
 
+/// A cycle's time, read once after its inputs are gathered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CycleTime {
+    /// The loop's clock (the cycle's `now`; simulated on a simulated
+    /// clock), ns; `None`: it could not be read.
+    pub now_ns: Option<u64>,
+    /// The host's monotonic clock, ns, against which the publishing
+    /// thread's silence is measured (it runs in real time whatever the
+    /// loop's clock).
+    pub host_ns: Option<u64>,
+}
+
+/// One reading for both (real time: the loop's clock is the host's).
+impl From<Option<u64>> for CycleTime {
+    fn from(now_ns: Option<u64>) -> Self {
+        Self {
+            now_ns,
+            host_ns: now_ns,
+        }
+    }
+}
+
 /// The per-cycle controller.
 #[derive(Debug)]
 pub struct Controller<S: ForceSensor, D: AxisDrives> {
@@ -319,10 +341,14 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         let _ = self.drives.disable();
     }
 
-    /// Runs one cycle. `now` reads the clock (`None`: it could not be read);
-    /// it is called once, after the inputs are gathered, so that no input is
-    /// stamped after the cycle's time.
-    pub fn step(&mut self, cycle: u64, now: impl FnOnce() -> Option<u64>) -> &CycleOutput {
+    /// Runs one cycle. `now` reads the clocks (`None`: one could not be
+    /// read); it is called once, after the inputs are gathered, so that no
+    /// input is stamped after the cycle's time.
+    pub fn step<T: Into<CycleTime>>(
+        &mut self,
+        cycle: u64,
+        now: impl FnOnce() -> T,
+    ) -> &CycleOutput {
         // Gather: the cycle's input (and the request's envelope, for the
         // reply).
         let envelope = self.gather(cycle, now);
@@ -339,7 +365,11 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
     /// the recorder and the newest for the step, the drives' positions and
     /// state, the operator's request, the publishing thread's silence, and
     /// last the clock. Returns the request's envelope.
-    fn gather(&mut self, cycle: u64, now: impl FnOnce() -> Option<u64>) -> Option<Envelope> {
+    fn gather<T: Into<CycleTime>>(
+        &mut self,
+        cycle: u64,
+        now: impl FnOnce() -> T,
+    ) -> Option<Envelope> {
         self.drain_sensor();
         self.poll_sensor(cycle);
         self.read_joints(cycle);
@@ -350,8 +380,8 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
             None => self.auto_reset.then_some(Request::Reset),
         };
         let beats = self.operator.publisher.read();
-        let now_ns = now();
-        let publisher_idle_ns = self.publisher_idle_ns(beats, now_ns);
+        let CycleTime { now_ns, host_ns } = now().into();
+        let publisher_idle_ns = self.publisher_idle_ns(beats, host_ns);
         let mut sensor = self.last_input.sensor;
         sensor.drained = self.drained_samples;
         self.last_input = LoopInput {

@@ -19,6 +19,8 @@
 //! - [`sink`]: what the loop hands each cycle to (one interface, one
 //!   shared health struct).
 //! - [`runloop`]: the fixed-rate loop itself.
+//! - [`time`]: the loop's clock: real time, or simulated time paced or as
+//!   fast as the machine allows.
 
 pub mod control;
 pub mod excite;
@@ -32,3 +34,4 @@ pub mod runloop;
 pub mod sink;
 pub mod stats;
 pub mod step;
+pub mod time;

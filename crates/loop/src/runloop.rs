@@ -1,5 +1,6 @@
-//! The fixed-rate loop: absolute deadlines on the monotonic clock
-//! (`clock_nanosleep`, `TIMER_ABSTIME`; never "sleep for the period"), one
+//! The fixed-rate loop: absolute deadlines on its clock ([`crate::time`]:
+//! the monotonic clock's `clock_nanosleep`, `TIMER_ABSTIME`, never "sleep
+//! for the period"; or simulated time), one
 //! [`Controller::step`] per deadline, then the cycle handed to the sinks
 //! ([`crate::sink`]). Every cycle is measured
 //! (wake-up latency, compute time) into fixed-size histograms; a cycle that
@@ -10,13 +11,14 @@
 //! stay consecutive: a skipped period is no cycle). Ends on a stop signal
 //! (`rt::STOP_SIGNALS`, or after `max_cycles`) with the drives halted.
 
-use crate::control::Controller;
+use crate::control::{Controller, CycleTime};
 use crate::logq::{LogEvent, LogSender};
 use crate::notify::Watchdog;
 use crate::publish::SimTruthFn;
 use crate::rt;
 use crate::sink::{Cycle, Sink, SinkHealth};
 use crate::stats::LoopStats;
+use crate::time::LoopClock;
 use sar_estimator::cycle::TipOutcome;
 use sar_hal::{AxisDrives, ForceSensor};
 
@@ -97,10 +99,16 @@ pub fn next_deadline(deadline_ns: u64, period_ns: u64, end_ns: u64) -> NextDeadl
     }
 }
 
-/// Runs the loop until a stop is requested; the drives are halted at the
-/// end. Returns the sinks' last health.
-pub fn run<S: ForceSensor, D: AxisDrives, K: Sink>(
+/// Runs the loop on `clock` until a stop is requested; the drives are
+/// halted at the end. Returns the sinks' last health.
+///
+/// On a simulated clock ([`LoopClock::simulated`]) a cycle takes no
+/// simulated time (no overrun, no wake-up latency), and the loop waits for
+/// its sinks' room before each cycle ([`Sink::has_room`]) instead of letting
+/// them drop: waiting costs no simulated time.
+pub fn run<S: ForceSensor, D: AxisDrives, K: Sink, C: LoopClock>(
     controller: &mut Controller<S, D>,
+    clock: &C,
     config: &LoopConfig,
     limits: RunLimits,
     stats: &mut LoopStats,
@@ -114,7 +122,7 @@ pub fn run<S: ForceSensor, D: AxisDrives, K: Sink>(
     } = edges;
     let mut health = SinkHealth::default();
     let period_ns = config.period_ns;
-    let mut next_ns = rt::monotonic_ns().unwrap_or(0).saturating_add(period_ns);
+    let mut next_ns = clock.now_ns().unwrap_or(0).saturating_add(period_ns);
     let mut cycle: u64 = 0;
     while !rt::stop_requested() {
         if limits.max_cycles.is_some_and(|m| cycle >= m) {
@@ -125,23 +133,37 @@ pub fn run<S: ForceSensor, D: AxisDrives, K: Sink>(
             rt::sleep_until_ns(rt::monotonic_ns().unwrap_or(0).saturating_add(10_000_000));
             continue;
         }
-        rt::sleep_until_ns(next_ns);
+        if clock.simulated() {
+            wait_for_room(&sinks);
+        }
+        clock.sleep_until_ns(next_ns);
         if rt::stop_requested() {
             break;
         }
-        let woke = rt::monotonic_ns();
+        let woke = clock.now_ns();
         let woke_ns = woke.unwrap_or(next_ns);
         stats.wakeup.record(woke_ns.saturating_sub(next_ns));
         cycle += 1;
         sinks.before_cycle();
-        let out = *controller.step(cycle, rt::monotonic_ns);
+        let out = *controller.step(cycle, || {
+            let now_ns = clock.now_ns();
+            CycleTime {
+                now_ns,
+                // One reading in real time (the loop's clock is the host's).
+                host_ns: if clock.simulated() {
+                    clock.host_ns()
+                } else {
+                    now_ns
+                },
+            }
+        });
         let truth_now = truth.as_mut().and_then(|f| f());
         sinks.cycle(&Cycle::of(controller, stats, truth_now), &mut health);
         // The watchdog is fed from here, the loop itself: a stuck loop stops
         // feeding it.
         let estimate = matches!(out.tip, TipOutcome::Estimate(_));
         watchdog.after_cycle(cycle, out.guard_state, &out.guard_reason, estimate);
-        let end_ns = rt::monotonic_ns().unwrap_or(woke_ns);
+        let end_ns = clock.now_ns().unwrap_or(woke_ns);
         stats.compute.record(end_ns.saturating_sub(woke_ns));
         stats.cycles = cycle;
         let grid = next_deadline(next_ns, period_ns, end_ns);
@@ -160,6 +182,14 @@ pub fn run<S: ForceSensor, D: AxisDrives, K: Sink>(
     watchdog.stopping();
     controller.shutdown();
     health
+}
+
+/// Waits (in real time, a simulated clock standing still) until every
+/// sink has room for a cycle, or a stop is requested.
+fn wait_for_room<K: Sink>(sinks: &K) {
+    while !sinks.has_room() && !rt::stop_requested() {
+        std::thread::sleep(std::time::Duration::from_micros(200));
+    }
 }
 
 #[cfg(test)]

@@ -77,6 +77,12 @@ pub trait Sink {
     /// Called on the loop thread after every cycle; must not block. Writes
     /// only its own counters in `health`.
     fn cycle(&mut self, cycle: &Cycle<'_>, health: &mut SinkHealth);
+    /// Whether the sink can take a cycle without dropping. Asked only on a
+    /// simulated clock, where the loop waits for it ([`crate::time`]); in
+    /// real time a full sink drops and counts.
+    fn has_room(&self) -> bool {
+        true
+    }
 }
 
 /// No sink.
@@ -94,6 +100,9 @@ impl<A: Sink, B: Sink> Sink for (A, B) {
         self.0.cycle(cycle, health);
         self.1.cycle(cycle, health);
     }
+    fn has_room(&self) -> bool {
+        self.0.has_room() && self.1.has_room()
+    }
 }
 
 /// A sink borrowed.
@@ -103,5 +112,8 @@ impl<T: Sink + ?Sized> Sink for &mut T {
     }
     fn cycle(&mut self, cycle: &Cycle<'_>, health: &mut SinkHealth) {
         (**self).cycle(cycle, health);
+    }
+    fn has_room(&self) -> bool {
+        (**self).has_room()
     }
 }

@@ -286,10 +286,24 @@ impl LiveRecorder {
     }
 }
 
+/// The free places in a recording's queue that a simulated clock waits for
+/// before a cycle (or half the queue, if smaller): more than one cycle
+/// pushes, its snapshot's chunks included.
+pub const ROOM_FOR_A_CYCLE: usize = 2 * sar_msgs::msgs::SNAPSHOT_CHUNKS_MAX + 64;
+
 /// The simulator's truth of a cycle ([`Cycle::truth`]) is recorded on
 /// `/sar/sim/tip_wrench_truth`: the visible part, `tip_force_n -
 /// friction_force_n`, with every new sensor sample, stamped as the cycle.
 impl Sink for LiveRecorder {
+    /// Room for a cycle: at least [`ROOM_FOR_A_CYCLE`] free places in the
+    /// recording's queue (a cycle with a snapshot pushes its chunks), or no
+    /// recording. Asked on a simulated clock only.
+    fn has_room(&self) -> bool {
+        self.active
+            .as_ref()
+            .is_none_or(|rec| rec.free_slots() >= ROOM_FOR_A_CYCLE.min(rec.capacity() / 2))
+    }
+
     fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
         self.switch_recorder();
         let truth = c.truth;

@@ -255,6 +255,11 @@ impl Recorder {
         self.producer.slots()
     }
 
+    /// The queue's capacity (`queue_capacity`), messages.
+    pub fn capacity(&self) -> usize {
+        self.producer.buffer().capacity()
+    }
+
     /// Stops: the writer drains the queue, writes the final status and closes
     /// the last file. A paused writer is started first, so nothing queued is
     /// lost.

@@ -285,3 +285,110 @@ fn export_refuses_bad_input_with_one_line() {
     assert!(bag.join("metadata.yaml").exists());
     assert!(bag.join("rec.mcap").exists());
 }
+
+/// Every message of `file`, by topic, in order.
+fn messages(file: &Path) -> std::collections::BTreeMap<String, Vec<Vec<u8>>> {
+    let bytes = std::fs::read(file).unwrap();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let mut by_id: Vec<(u16, Vec<u8>)> = Vec::new();
+    for m in reader.by_ref() {
+        let m = m.unwrap();
+        by_id.push((m.channel_id, m.data.to_vec()));
+    }
+    let mut out = std::collections::BTreeMap::<String, Vec<Vec<u8>>>::new();
+    for (id, data) in by_id {
+        let topic = reader.channels()[&id].topic.clone();
+        out.entry(topic).or_default().push(data);
+    }
+    out
+}
+
+/// A cycle's recorded input with the one input measured on the host's own
+/// clock (the publishing thread's silence, which runs in real time) set
+/// aside.
+fn input_without_host_time(data: &[u8]) -> sar_msgs::msgs::CycleInput {
+    match sar_msgs::msgs::Outgoing::decode(sar_msgs::msgs::Topic::CycleInput, data).unwrap() {
+        sar_msgs::msgs::Outgoing::CycleInput(mut m) => {
+            m.publisher_idle_ns = 0;
+            m
+        }
+        other => panic!("not a cycle input: {other:?}"),
+    }
+}
+
+/// Time as an input (issue 36): `sard --sim --speed max` runs the same
+/// loop, recorder and services in simulated time. Two runs of the demo are
+/// one run: every recorded message is equal, byte for byte, but for the
+/// publishing thread's silence in the cycles' inputs (measured on the
+/// host's clock by design); each replays bit for bit; and the run does
+/// not wait for real time (no late cycle: the wake-up and compute are 0).
+#[test]
+fn two_runs_in_simulated_time_are_one_run_and_each_replays_bit_for_bit() {
+    let dir = support::scratch("simtime");
+    let (config, rec_dir) = support::recording_config(&dir);
+    let mut files = Vec::new();
+    for run in 0..2 {
+        let out = Command::new(&*support::SARD)
+            .args(["--sim", "--speed", "max", "--config"])
+            .arg(&config)
+            // 20 s of the demo: its contact rises into Warn at about 8.3 s.
+            .args(["--max-cycles", "20000"])
+            .env(
+                "SAR_SERVICE_PREFIX",
+                format!("sar-simtime-{}-{run}", std::process::id()),
+            )
+            .output()
+            .unwrap();
+        let log = text(&out.stderr);
+        assert!(out.status.success(), "sard: {log}");
+        assert!(
+            log.contains("0 overruns (0 periods skipped)")
+                && log.contains("wake-up latency p50 0 us p99 0 us max 0 us"),
+            "{log}"
+        );
+        assert!(log.contains("0 messages dropped by the recorder"), "{log}");
+        let now: Vec<PathBuf> = recordings(&rec_dir)
+            .into_iter()
+            .filter(|f| !files.contains(f))
+            .collect();
+        assert_eq!(now.len(), 1, "{now:?}");
+        files.push(now[0].clone());
+    }
+    let (a, b) = (messages(&files[0]), messages(&files[1]));
+    assert_eq!(
+        a.keys().collect::<Vec<_>>(),
+        b.keys().collect::<Vec<_>>(),
+        "the same topics"
+    );
+    for (topic, left) in &a {
+        let right = &b[topic];
+        assert_eq!(left.len(), right.len(), "{topic}: message counts");
+        if topic == "/sar/cycle/input" {
+            assert_eq!(left.len(), 20_000);
+            for (i, (l, r)) in left.iter().zip(right).enumerate() {
+                assert_eq!(
+                    input_without_host_time(l),
+                    input_without_host_time(r),
+                    "cycle {i}'s input differs"
+                );
+            }
+        } else {
+            let differ = left.iter().zip(right).filter(|(l, r)| l != r).count();
+            assert_eq!(
+                differ,
+                0,
+                "{topic}: {differ} of {} messages differ",
+                left.len()
+            );
+        }
+    }
+    // The demo's Warn is in both, at the same cycle.
+    assert_eq!(a["/sar/guard/events"].len(), 2, "reset accepted, then Warn");
+    for file in &files {
+        let out = sarctl(&["--format", "json", "replay", "--input"], &[file]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["identical"], true, "{v}");
+        assert_eq!(v["cycles"], 20_000, "{v}");
+    }
+}

@@ -238,6 +238,7 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
     counted(|| {
         runloop::run(
             &mut c,
+            &sar_loop::time::RealTime,
             &cfg.loop_,
             RunLimits {
                 max_cycles: Some(120_000),

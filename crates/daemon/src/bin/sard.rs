@@ -6,12 +6,13 @@ use sar_config as config;
 use sar_daemon::{devices, sim};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::Bias;
-use sar_hal::{AxisDrives, ForceSensor, MonotonicClock};
+use sar_hal::{AxisDrives, Clock, ForceSensor, MonotonicClock, SimClock};
 use sar_loop::control::{Controller, DrivesCycle, Operator};
 use sar_loop::notify::{Notifier, Watchdog};
 use sar_loop::publish::SimTruthFn;
 use sar_loop::runloop::{self, Edges, RunLimits};
 use sar_loop::stats::LoopStats;
+use sar_loop::time::{LoopClock, RealTime, SimulatedTime, Speed};
 use sar_loop::{logq, rt};
 use sar_rdt::RdtSensor;
 use sar_record::SceneOptions;
@@ -47,6 +48,12 @@ struct Args {
     /// Prefix of the shared-memory service names (one daemon per prefix).
     #[arg(long, env = "SAR_SERVICE_PREFIX", default_value = sar_shm::DEFAULT_PREFIX)]
     prefix: String,
+    /// With --sim: run in simulated time, N times as fast as real time
+    /// (0 < N <= 1000) or as fast as the machine allows (`max`); a cycle
+    /// then takes no simulated time, so a run is the same whatever the
+    /// host's load. Default: real time.
+    #[arg(long, value_name = "N|max", requires = "sim", value_parser = Speed::parse)]
+    speed: Option<Speed>,
     /// Stop after this many cycles (tests and benchmarks).
     #[arg(long, hide = true)]
     max_cycles: Option<u64>,
@@ -55,8 +62,13 @@ struct Args {
     stall_after_cycles: Option<u64>,
 }
 
-/// The simulated parts on the monotonic clock.
-type Simulated = sim::Simulated<MonotonicClock>;
+/// The simulated parts on the simulator's clock `C` (the monotonic clock in
+/// real time, the loop's simulated clock with `--speed`).
+type Simulated<C> = sim::Simulated<C>;
+
+/// Where simulated time (`--speed`) starts, ns: one second, so that no
+/// stamp is 0.
+const SIMULATED_EPOCH_NS: u64 = 1_000_000_000;
 
 /// A real sensor must send its first sample within this at start, ns.
 const FIRST_SAMPLE_TIMEOUT_NS: u64 = 2_000_000_000;
@@ -90,13 +102,39 @@ fn run(args: &Args) -> Result<(), String> {
     }
     let cfg = configuration(args)?;
     let (rdt, canopen) = chosen_devices(args, &cfg)?;
+    match args.speed {
+        None => {
+            let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
+            run_on_clock(args, &cfg, (rdt, canopen), clock, &RealTime)
+        }
+        Some(speed) => {
+            // Simulated time starts at a fixed time, not the host's: two
+            // runs of a scenario are the same run, stamps included.
+            let clock = SimClock::new(SIMULATED_EPOCH_NS);
+            let time = SimulatedTime::new(clock.clone(), speed);
+            run_on_clock(args, &cfg, (rdt, canopen), clock, &time)
+        }
+    }
+}
+
+/// The daemon on its clocks: the simulator's `sim_clock`, the loop's
+/// `loop_clock` (the host's in real time; one simulated clock with
+/// `--speed`).
+fn run_on_clock<C: Clock + Clone + 'static, L: LoopClock>(
+    args: &Args,
+    cfg: &config::Config,
+    (rdt, canopen): RealDevices,
+    sim_clock: C,
+    loop_clock: &L,
+) -> Result<(), String> {
     rt::install_stop_handler().map_err(|e| format!("cannot install the signal handler: {e}"))?;
     // A shared-memory file truncated under sard (by a member of the
     // operators' group) stops it cleanly instead of killing it (SIGBUS).
     rt::install_bus_guard().map_err(|e| format!("cannot install the SIGBUS handler: {e}"))?;
     // The sensor first: its receive thread keeps the normal priority.
     let real_sensor = rdt.map(connect_sensor).transpose()?;
-    let (simulated, scenario_name) = simulator(args, &cfg, real_sensor.is_some(), &canopen)?;
+    let (simulated, scenario_name) =
+        simulator(args, &cfg, real_sensor.is_some(), &canopen, sim_clock)?;
     let (bias, truth) = start_bias(real_sensor.is_some(), simulated.as_ref());
     let operator = Operator::new();
     let Some(shm) = start_shm(args, &cfg, &operator)? else {
@@ -112,7 +150,15 @@ fn run(args: &Args) -> Result<(), String> {
     if let Some(waker) = log_thread.as_ref().and_then(logq::LogThread::waker) {
         shm.wake_log(waker);
     }
-    let _latency = real_time(&cfg);
+    let _latency = if loop_clock.simulated() {
+        tracing::info!(
+            "sard: simulated time ({:?}): no real-time settings (a cycle takes no simulated time)",
+            args.speed.unwrap_or(Speed::Max)
+        );
+        None
+    } else {
+        real_time(&cfg)
+    };
     // Once the devices are up: a refusal at start stays one line.
     say_inertia(&cfg);
     let run = Run {
@@ -132,7 +178,14 @@ fn run(args: &Args) -> Result<(), String> {
         Some(s) => format!("the RDT sensor at {}", s.config().address),
         None => format!("the simulated sensor of {scenario_name:?}"),
     };
-    run_on(run, real_sensor, canopen, simulated, &sensor_what)
+    run_on(
+        run,
+        real_sensor,
+        canopen,
+        simulated,
+        &sensor_what,
+        loop_clock,
+    )
 }
 
 /// The RDT sensor, connected and streaming (its first sample came in time).
@@ -144,12 +197,13 @@ fn connect_sensor(config: sar_rdt::RdtConfig) -> Result<RdtSensor, String> {
 
 /// The simulator for the parts that are simulated (none on the real robot:
 /// a `--scenario` is then refused), and its scenario's name.
-fn simulator(
+fn simulator<C: Clock + Clone>(
     args: &Args,
     cfg: &config::Config,
     real_sensor: bool,
     canopen: &Option<(String, sar_canopen::CanOpenConfig)>,
-) -> Result<(Option<Simulated>, String), String> {
+    clock: C,
+) -> Result<(Option<Simulated<C>>, String), String> {
     if real_sensor && canopen.is_some() {
         if let Some(path) = &args.scenario {
             return Err(format!(
@@ -161,7 +215,6 @@ fn simulator(
         return Ok((None, String::new()));
     }
     let scenario = scenario(args, cfg)?;
-    let clock = MonotonicClock::new().map_err(|e| e.to_string())?;
     let simulated =
         sim::simulated(&scenario, clock).map_err(|e| format!("{}: {e}", scenario.origin))?;
     Ok((Some(simulated), scenario.name))
@@ -171,7 +224,10 @@ fn simulator(
 /// real sensor starts with none, the operator tares; the simulated one with
 /// the scenario's, as if measured beforehand), and the simulator's true tip
 /// force where the sensor is simulated.
-fn start_bias(real_sensor: bool, simulated: Option<&Simulated>) -> (Bias, Option<SimTruthFn>) {
+fn start_bias<C: Clock + Clone + 'static>(
+    real_sensor: bool,
+    simulated: Option<&Simulated<C>>,
+) -> (Bias, Option<SimTruthFn>) {
     match simulated {
         Some((simulator, _, _, sim_bias)) if !real_sensor => {
             (*sim_bias, Some(truth_of(simulator.clone())))
@@ -211,9 +267,9 @@ fn start_shm(
 /// (which opens and closes the files, never the loop) starts here, before
 /// the real-time settings, so that it and the writer threads it starts keep
 /// the normal priority and every CPU.
-fn start_recording(
+fn start_recording<C: Clock + Clone>(
     cfg: &config::Config,
-    simulated: Option<&Simulated>,
+    simulated: Option<&Simulated<C>>,
     bias: Bias,
 ) -> Result<(RecordManager, LiveRecorder, std::sync::Arc<RecordSwitch>), String> {
     tracing::info!(
@@ -245,12 +301,13 @@ fn start_recording(
 
 /// Runs the loop on the sensor and the drives: the real ones the
 /// configuration names, the simulated ones for the rest.
-fn run_on(
+fn run_on<C: Clock + Clone, L: LoopClock>(
     run: Run<'_>,
     real_sensor: Option<RdtSensor>,
     canopen: Option<(String, sar_canopen::CanOpenConfig)>,
-    simulated: Option<Simulated>,
+    simulated: Option<Simulated<C>>,
     sensor_what: &str,
+    clock: &L,
 ) -> Result<(), String> {
     match (real_sensor, canopen, simulated) {
         (None, None, Some((_, sensor, drives, _))) => run.run(
@@ -258,12 +315,14 @@ fn run_on(
             drives,
             None,
             &format!("{sensor_what} and the simulated axes"),
+            clock,
         ),
         (Some(sensor), None, Some((_, _, drives, _))) => run.run(
             sensor,
             drives,
             None,
             &format!("{sensor_what} and the simulated axes"),
+            clock,
         ),
         #[cfg(all(feature = "socketcan", target_os = "linux"))]
         (sensor, Some((interface, c)), simulated) => {
@@ -271,9 +330,11 @@ fn run_on(
             let axes_what = format!("the CANopen drives on {interface}");
             let what = format!("{sensor_what} and {axes_what}");
             match (sensor, simulated) {
-                (Some(sensor), _) => run.run(sensor, drives, Some(devices::canopen_cycle), &what),
+                (Some(sensor), _) => {
+                    run.run(sensor, drives, Some(devices::canopen_cycle), &what, clock)
+                }
                 (None, Some((_, sensor, _, _))) => {
-                    run.run(sensor, drives, Some(devices::canopen_cycle), &what)
+                    run.run(sensor, drives, Some(devices::canopen_cycle), &what, clock)
                 }
                 (None, None) => Err(NO_SIMULATOR.to_owned()),
             }
@@ -398,7 +459,7 @@ fn scenario(args: &Args, cfg: &config::Config) -> Result<config::scenario::Scena
 }
 
 /// The simulator's truth, asked once per cycle by the loop.
-fn truth_of(simulator: sar_sim::Simulator<MonotonicClock>) -> SimTruthFn {
+fn truth_of<C: Clock + Clone + 'static>(simulator: sar_sim::Simulator<C>) -> SimTruthFn {
     Box::new(move || {
         simulator.truth().ok().map(|t| sar_loop::publish::SimTruth {
             tip_force_n: t.tip_force_n,
@@ -486,12 +547,13 @@ struct Run<'a> {
 impl Run<'_> {
     /// Runs the loop until its end (a signal, `--max-cycles`), then stops
     /// every thread and says how it went.
-    fn run<S: ForceSensor, D: AxisDrives>(
+    fn run<S: ForceSensor, D: AxisDrives, L: LoopClock>(
         mut self,
         sensor: S,
         drives: D,
         drives_cycle: Option<DrivesCycle<D>>,
         what: &str,
+        clock: &L,
     ) -> Result<(), String> {
         let cfg = self.cfg;
         let log = self.log.clone();
@@ -504,7 +566,7 @@ impl Run<'_> {
             cfg.origin,
             cfg.loop_.rate_hz,
         );
-        let health = self.run_loop(&mut controller, &mut stats, &log);
+        let health = self.run_loop(&mut controller, &mut stats, &log, clock);
         // Which signal ended the loop (SIGTERM, SIGHUP, ...: the same clean
         // stop for each), said before the recording is closed.
         let by = match rt::stop_signal() {
@@ -554,11 +616,12 @@ impl Run<'_> {
 
     /// The fixed-rate loop with its sinks (the recorder, the shared memory)
     /// and systemd's watchdog: the sinks' last counters.
-    fn run_loop<S: ForceSensor, D: AxisDrives>(
+    fn run_loop<S: ForceSensor, D: AxisDrives, L: LoopClock>(
         &mut self,
         controller: &mut Controller<S, D>,
         stats: &mut LoopStats,
         log: &logq::LogSender,
+        clock: &L,
     ) -> sar_loop::sink::SinkHealth {
         let cfg = self.cfg;
         // Ping systemd's watchdog ten times a second from the loop.
@@ -566,6 +629,7 @@ impl Run<'_> {
         let mut watchdog = Watchdog::new(Notifier::from_env(), every);
         runloop::run(
             controller,
+            clock,
             &cfg.loop_,
             RunLimits {
                 max_cycles: self.args.max_cycles,
