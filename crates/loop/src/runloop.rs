@@ -145,18 +145,7 @@ pub fn run<S: ForceSensor, D: AxisDrives, K: Sink, C: LoopClock>(
         stats.wakeup.record(woke_ns.saturating_sub(next_ns));
         cycle += 1;
         sinks.before_cycle();
-        let out = *controller.step(cycle, || {
-            let now_ns = clock.now_ns();
-            CycleTime {
-                now_ns,
-                // One reading in real time (the loop's clock is the host's).
-                host_ns: if clock.simulated() {
-                    clock.host_ns()
-                } else {
-                    now_ns
-                },
-            }
-        });
+        let out = *controller.step(cycle, || cycle_time(clock));
         let truth_now = truth.as_mut().and_then(|f| f());
         sinks.cycle(&Cycle::of(controller, stats, truth_now), &mut health);
         // The watchdog is fed from here, the loop itself: a stuck loop stops
@@ -168,20 +157,39 @@ pub fn run<S: ForceSensor, D: AxisDrives, K: Sink, C: LoopClock>(
         stats.cycles = cycle;
         let grid = next_deadline(next_ns, period_ns, end_ns);
         next_ns = grid.deadline_ns;
-        if grid.late_ns > 0 {
-            stats.overruns += 1;
-            stats.skipped_periods = stats.skipped_periods.saturating_add(grid.skipped);
-            stats.note_overrun(cycle);
-            log.send(LogEvent::Overrun {
-                cycle,
-                late_ns: grid.late_ns,
-                skipped: grid.skipped,
-            });
-        }
+        count_overrun(&grid, cycle, stats, log);
     }
     watchdog.stopping();
     controller.shutdown();
     health
+}
+
+/// The cycle's time on `clock`: one reading in real time (the loop's clock
+/// is the host's), the host's own beside a simulated one.
+fn cycle_time<C: LoopClock>(clock: &C) -> CycleTime {
+    let now_ns = clock.now_ns();
+    CycleTime {
+        now_ns,
+        host_ns: if clock.simulated() {
+            clock.host_ns()
+        } else {
+            now_ns
+        },
+    }
+}
+
+/// An overrun (`grid.late_ns > 0`) counted and told in one log line.
+fn count_overrun(grid: &NextDeadline, cycle: u64, stats: &mut LoopStats, log: &LogSender) {
+    if grid.late_ns > 0 {
+        stats.overruns += 1;
+        stats.skipped_periods = stats.skipped_periods.saturating_add(grid.skipped);
+        stats.note_overrun(cycle);
+        log.send(LogEvent::Overrun {
+            cycle,
+            late_ns: grid.late_ns,
+            skipped: grid.skipped,
+        });
+    }
 }
 
 /// Waits (in real time, a simulated clock standing still) until every

@@ -278,6 +278,11 @@ pub struct StateMsg {
     pub guard_reason_bytes: ReasonBytes,
     /// The transition's reason, whole ([`reason_of`]).
     pub transition_reason_bytes: ReasonBytes,
+    /// The cycle time (`now_ns`) of the guard's newest transition since
+    /// `sard` started (0: none yet). With `now_ns` and `truth_elapsed_ns`
+    /// it times a detection exactly from any later state, whichever states
+    /// a reader missed.
+    pub guard_changed_ns: u64,
 }
 
 impl Default for StateMsg {
@@ -331,6 +336,7 @@ impl Default for StateMsg {
             sensor_torque_nm: [[0.0; 3]; STATE_SENSOR_SAMPLES],
             guard_reason_bytes: [0; REASON_BYTES],
             transition_reason_bytes: [0; REASON_BYTES],
+            guard_changed_ns: 0,
         }
     }
 }

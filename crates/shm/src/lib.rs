@@ -490,6 +490,8 @@ pub struct DaemonShm {
     maintenance: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Shared>,
     queue_drops: u64,
+    /// The cycle time of the guard's newest transition (`StateMsg::guard_changed_ns`).
+    guard_changed_ns: u64,
 }
 
 impl std::fmt::Debug for DaemonShm {
@@ -1157,6 +1159,7 @@ impl DaemonShm {
             maintenance: Some(maintenance),
             shared,
             queue_drops: 0,
+            guard_changed_ns: 0,
         })
     }
 
@@ -1186,6 +1189,7 @@ impl DaemonShm {
                 maintenance: None,
                 shared,
                 queue_drops: 0,
+                guard_changed_ns: 0,
             },
             worker,
         ))
@@ -1265,6 +1269,10 @@ impl Sink for DaemonShm {
             sensor_samples: c.sensor_samples,
         });
         state.publish_queue_drops = self.queue_drops;
+        if state.flags & sar_msgs::wire::flags::TRANSITION != 0 {
+            self.guard_changed_ns = state.now_ns;
+        }
+        state.guard_changed_ns = self.guard_changed_ns;
         self.push_state(state);
         health.publish_queue_drops = self.queue_drops;
     }

@@ -134,13 +134,13 @@ fn run_on_clock<C: Clock + Clone + 'static, L: LoopClock>(
     // The sensor first: its receive thread keeps the normal priority.
     let real_sensor = rdt.map(connect_sensor).transpose()?;
     let (simulated, scenario_name) =
-        simulator(args, &cfg, real_sensor.is_some(), &canopen, sim_clock)?;
+        simulator(args, cfg, real_sensor.is_some(), &canopen, sim_clock)?;
     let (bias, truth) = start_bias(real_sensor.is_some(), simulated.as_ref());
     let operator = Operator::new();
-    let Some(shm) = start_shm(args, &cfg, &operator)? else {
+    let Some(shm) = start_shm(args, cfg, &operator)? else {
         return Ok(());
     };
-    let (recording, recorder, switch) = start_recording(&cfg, simulated.as_ref(), bias)?;
+    let (recording, recorder, switch) = start_recording(cfg, simulated.as_ref(), bias)?;
     let shm = shm.with_record_commands(std::sync::Arc::new(SwitchCommands(switch)));
     // The logging thread before the real-time settings, so that it keeps the
     // normal priority (it writes to stderr: never at the loop's priority).
@@ -157,13 +157,13 @@ fn run_on_clock<C: Clock + Clone + 'static, L: LoopClock>(
         );
         None
     } else {
-        real_time(&cfg)
+        real_time(cfg)
     };
     // Once the devices are up: a refusal at start stays one line.
-    say_inertia(&cfg);
+    say_inertia(cfg);
     let run = Run {
         args,
-        cfg: &cfg,
+        cfg,
         operator,
         shm,
         recorder,
