@@ -1,0 +1,198 @@
+//! Every key of the configuration file (INTERFACES.md 2), declared once: one
+//! module per section, each with its [`section!`](crate::section) table
+//! (every key's type, default, range, one-line doc and the domain field it
+//! sets) and the functions that build the section's domain types from the
+//! keys read. [`SECTIONS`] lists the tables in the file's order; the README's
+//! table and `default_config.toml` are made from them (`crate::docs`).
+//!
+//! A new key is one line in its section's table and the code that uses the
+//! field; its serde field, default, range check, README row and
+//! `default_config.toml` line follow from the line.
+
+use crate::ConfigError;
+use crate::decl::KeyDecl;
+use crate::toml_file::Ctx;
+use sar_kinematics::Vec3;
+use serde::Deserialize;
+
+pub(crate) mod axes;
+pub(crate) mod drivers_axes;
+pub(crate) mod drivers_sensor;
+pub(crate) mod force_control;
+pub(crate) mod geometry;
+pub(crate) mod guard;
+pub(crate) mod identify;
+pub(crate) mod loop_;
+pub(crate) mod manipulator;
+pub(crate) mod plausibility;
+pub(crate) mod record;
+pub(crate) mod ros2;
+pub(crate) mod sensor;
+pub(crate) mod tip;
+
+/// Every section's keys, in the file's order (the order `default_config.toml`
+/// and the README's table list them in, and the order the ranges are
+/// checked in).
+pub const SECTIONS: &[&[KeyDecl]] = &[
+    geometry::KEYS,
+    manipulator::KEYS,
+    sensor::KEYS,
+    loop_::KEYS,
+    guard::KEYS,
+    plausibility::KEYS,
+    tip::KEYS,
+    axes::KEYS,
+    record::KEYS,
+    force_control::KEYS,
+    identify::KEYS,
+    ros2::KEYS,
+    drivers_sensor::KEYS,
+    drivers_axes::KEYS,
+];
+
+/// Each section's one-line doc, by section name (`default_config.toml`
+/// writes it above the section).
+pub(crate) const SECTION_DOCS: &[(&str, &str)] = &[
+    (geometry::SECTION, geometry::SECTION_DOC),
+    (manipulator::SECTION, manipulator::SECTION_DOC),
+    (sensor::SECTION, sensor::SECTION_DOC),
+    (loop_::SECTION, loop_::SECTION_DOC),
+    (guard::SECTION, guard::SECTION_DOC),
+    (plausibility::SECTION, plausibility::SECTION_DOC),
+    (tip::SECTION, tip::SECTION_DOC),
+    (axes::SECTION, axes::SECTION_DOC),
+    (record::SECTION, record::SECTION_DOC),
+    (force_control::SECTION, force_control::SECTION_DOC),
+    (identify::SECTION, identify::SECTION_DOC),
+    (ros2::SECTION, ros2::SECTION_DOC),
+    (drivers_sensor::SECTION, drivers_sensor::SECTION_DOC),
+    (drivers_axes::SECTION, drivers_axes::SECTION_DOC),
+];
+
+/// Every key, in the file's order.
+pub fn keys() -> impl Iterator<Item = &'static KeyDecl> {
+    SECTIONS.iter().flat_map(|s| s.iter())
+}
+
+/// The file as written: the three required sections, the others optional
+/// (each key then takes its default); unknown sections refused.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct FileRaw {
+    geometry: Option<geometry::Raw>,
+    manipulator: Option<manipulator::Raw>,
+    sensor: Option<sensor::Raw>,
+    #[serde(default, rename = "loop")]
+    loop_: loop_::Raw,
+    #[serde(default)]
+    guard: guard::Raw,
+    #[serde(default)]
+    plausibility: plausibility::Raw,
+    #[serde(default)]
+    tip: tip::Raw,
+    #[serde(default)]
+    axes: axes::Raw,
+    #[serde(default)]
+    record: record::Raw,
+    #[serde(default)]
+    force_control: force_control::Raw,
+    #[serde(default)]
+    identify: identify::Raw,
+    #[serde(default)]
+    ros2: ros2::Raw,
+    #[serde(default)]
+    drivers: DriversRaw,
+}
+
+/// `[drivers]`: the sensor's and the axes' (both optional: the simulator).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DriversRaw {
+    #[serde(default)]
+    sensor: drivers_sensor::Raw,
+    #[serde(default)]
+    axes: drivers_axes::Raw,
+}
+
+/// The file read: every key's value or its default.
+#[derive(Debug, Clone)]
+pub(crate) struct File {
+    pub geometry: geometry::Section,
+    pub manipulator: manipulator::Section,
+    pub sensor: sensor::Section,
+    pub loop_: loop_::Section,
+    pub guard: guard::Section,
+    pub plausibility: plausibility::Section,
+    pub tip: tip::Section,
+    pub axes: axes::Section,
+    pub record: record::Section,
+    pub force_control: force_control::Section,
+    pub identify: identify::Section,
+    pub ros2: ros2::Section,
+    pub drivers_sensor: drivers_sensor::Section,
+    pub drivers_axes: drivers_axes::Section,
+}
+
+impl FileRaw {
+    /// Every key's value or default; a missing required section or key is
+    /// refused (the first, in the file's order).
+    pub(crate) fn resolve(self, ctx: &Ctx<'_>) -> Result<File, ConfigError> {
+        let missing = |section: &str| ctx.err(section, "missing key");
+        let geometry = self.geometry.ok_or_else(|| missing(geometry::SECTION))?;
+        let manipulator = self
+            .manipulator
+            .ok_or_else(|| missing(manipulator::SECTION))?;
+        let sensor = self.sensor.ok_or_else(|| missing(sensor::SECTION))?;
+        Ok(File {
+            geometry: geometry.resolve(ctx)?,
+            manipulator: manipulator.resolve(ctx)?,
+            sensor: sensor.resolve(ctx)?,
+            loop_: self.loop_.resolve(ctx)?,
+            guard: self.guard.resolve(ctx)?,
+            plausibility: self.plausibility.resolve(ctx)?,
+            tip: self.tip.resolve(ctx)?,
+            axes: self.axes.resolve(ctx)?,
+            record: self.record.resolve(ctx)?,
+            force_control: self.force_control.resolve(ctx)?,
+            identify: self.identify.resolve(ctx)?,
+            ros2: self.ros2.resolve(ctx)?,
+            drivers_sensor: self.drivers.sensor.resolve(ctx)?,
+            drivers_axes: self.drivers.axes.resolve(ctx)?,
+        })
+    }
+}
+
+impl File {
+    /// Every key's declared range, in the file's order: a value outside is
+    /// refused naming the key, its line, the range and the likely unit.
+    pub(crate) fn check_ranges(&self, ctx: &Ctx<'_>) -> Result<(), ConfigError> {
+        self.geometry.check_ranges(ctx)?;
+        self.manipulator.check_ranges(ctx)?;
+        self.sensor.check_ranges(ctx)?;
+        self.loop_.check_ranges(ctx)?;
+        self.guard.check_ranges(ctx)?;
+        self.plausibility.check_ranges(ctx)?;
+        self.tip.check_ranges(ctx)?;
+        self.axes.check_ranges(ctx)?;
+        self.record.check_ranges(ctx)?;
+        self.force_control.check_ranges(ctx)?;
+        self.identify.check_ranges(ctx)?;
+        self.ros2.check_ranges(ctx)?;
+        self.drivers_sensor.check_ranges(ctx)?;
+        self.drivers_axes.check_ranges(ctx)
+    }
+}
+
+pub(crate) fn vec3(v: [f64; 3]) -> Vec3 {
+    Vec3::from(v)
+}
+
+/// Seconds to whole ns (a value within its declared range).
+pub(crate) fn ns(s: f64) -> u64 {
+    (s * 1e9).round() as u64
+}
+
+/// An integer within its declared range (within `u32`) as a `u32`.
+pub(crate) fn u32_of(v: i64) -> u32 {
+    u32::try_from(v).unwrap_or(u32::MAX)
+}
