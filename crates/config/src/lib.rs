@@ -33,7 +33,7 @@ mod decl;
 pub mod devices;
 pub mod docs;
 mod exact;
-mod keys;
+pub mod keys;
 mod locate;
 mod relations;
 pub mod scenario;
@@ -161,6 +161,11 @@ pub struct Config {
     /// The ROS 2 bridge's settings (`[ros2]`; `sar-ros2` reads them, `sard`
     /// only checks them).
     pub ros2: Ros2Settings,
+    /// Every key as the file gives it (its default where absent), each
+    /// within its declared range, every check above passed: the typed value
+    /// of each key, by section (`file.guard.stop_total_n`), for what the
+    /// domain types above do not take.
+    pub file: keys::File,
 }
 
 /// The recording's settings (`[record]`).
@@ -363,6 +368,7 @@ fn build(ctx: &Ctx<'_>, raw: keys::FileRaw) -> Result<Config, ConfigError> {
         inertia_measured,
         identify,
         ros2,
+        file: f,
     };
     // What the drivers' own checks at start would refuse (one conversion
     // for the start and for every load, `--check-config` included).

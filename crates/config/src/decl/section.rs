@@ -120,13 +120,15 @@ macro_rules! section {
             $( $key: Option<<$ty as $crate::decl::KeyType>::Raw>, )+
         }
 
-        /// The section read: each key's value, its default, or (for a key
-        /// that may be absent) `None`.
+        /// The section's keys as the file gives them: each key's value, its
+        /// default, or (for a key that may be absent) `None`; in a loaded
+        /// [`Config`](crate::Config), each within its declared range and
+        /// every check passed.
         #[derive(Debug, Clone, PartialEq)]
-        pub(crate) struct Section {
+        pub struct Section {
             $(
                 $(#[doc = $doc])+
-                pub(crate) $key: $crate::resolved_ty!($dkind, $ty),
+                pub $key: $crate::resolved_ty!($dkind, $ty),
             )+
         }
 

@@ -15,20 +15,20 @@ use crate::toml_file::Ctx;
 use sar_kinematics::Vec3;
 use serde::Deserialize;
 
-pub(crate) mod axes;
-pub(crate) mod drivers_axes;
-pub(crate) mod drivers_sensor;
-pub(crate) mod force_control;
-pub(crate) mod geometry;
-pub(crate) mod guard;
-pub(crate) mod identify;
-pub(crate) mod loop_;
-pub(crate) mod manipulator;
-pub(crate) mod plausibility;
-pub(crate) mod record;
-pub(crate) mod ros2;
-pub(crate) mod sensor;
-pub(crate) mod tip;
+pub mod axes;
+pub mod drivers_axes;
+pub mod drivers_sensor;
+pub mod force_control;
+pub mod geometry;
+pub mod guard;
+pub mod identify;
+pub mod loop_;
+pub mod manipulator;
+pub mod plausibility;
+pub mod record;
+pub mod ros2;
+pub mod sensor;
+pub mod tip;
 
 /// Every section's keys, in the file's order (the order `default_config.toml`
 /// and the README's table list them in, and the order the ranges are
@@ -114,22 +114,38 @@ struct DriversRaw {
     axes: drivers_axes::Raw,
 }
 
-/// The file read: every key's value or its default.
-#[derive(Debug, Clone)]
-pub(crate) struct File {
+/// The file read: every key's value or its default, by section (in a
+/// loaded [`Config`](crate::Config), [`Config::file`](crate::Config::file):
+/// each within its declared range and every check passed).
+#[derive(Debug, Clone, PartialEq)]
+pub struct File {
+    /// `[geometry]`.
     pub geometry: geometry::Section,
+    /// `[manipulator]`.
     pub manipulator: manipulator::Section,
+    /// `[sensor]`.
     pub sensor: sensor::Section,
+    /// `[loop]`.
     pub loop_: loop_::Section,
+    /// `[guard]`.
     pub guard: guard::Section,
+    /// `[plausibility]`.
     pub plausibility: plausibility::Section,
+    /// `[tip]`.
     pub tip: tip::Section,
+    /// `[axes]`.
     pub axes: axes::Section,
+    /// `[record]`.
     pub record: record::Section,
+    /// `[force_control]`.
     pub force_control: force_control::Section,
+    /// `[identify]`.
     pub identify: identify::Section,
+    /// `[ros2]`.
     pub ros2: ros2::Section,
+    /// `[drivers.sensor]`.
     pub drivers_sensor: drivers_sensor::Section,
+    /// `[drivers.axes]`.
     pub drivers_axes: drivers_axes::Section,
 }
 
