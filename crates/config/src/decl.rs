@@ -3,7 +3,7 @@
 //! range, one-line doc and the domain field it sets. From that one line come
 //! the serde mirror of the section (unknown keys refused), its defaults and
 //! missing-key errors, the range check of every key (a key is checked because
-//! it is declared), the table of every key ([`KEYS`](crate::KEYS), the
+//! it is declared), the table of every key ([`SECTIONS`](crate::SECTIONS), the
 //! README's table and the comments of `default_config.toml`, `crate::docs`)
 //! and the mapping of a domain type's error back to the key that set the
 //! field ([`key_of_field`]).

@@ -1,6 +1,6 @@
 //! The drivers' configurations made from a checked [`Config`]: the CANopen
 //! drives' ([`canopen_drives`]) and the RDT sensor's ([`rdt_sensor`]), and
-//! [`check`], which runs on them the drivers' own checks
+//! `check`, which runs on them the drivers' own checks
 //! (`CanOpenConfig::validate`, `RdtConfig::validate`, what the drivers run
 //! at start) while the file is loaded. One conversion for `sard`'s start
 //! and for every load (`sard --check-config` included): a configuration

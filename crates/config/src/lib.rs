@@ -1,7 +1,7 @@
 //! The daemon's configuration file (TOML, INTERFACES.md 2): parsed with serde,
 //! unknown keys refused, then checked into the estimator's validated types.
 //!
-//! Every key is declared once, in its section's table in [`keys`](crate::SECTIONS)
+//! Every key is declared once, in its section's table in [`keys`](mod@keys)
 //! (`crates/config/src/keys/`): its type, its default, its range, a one-line
 //! doc and the domain field it sets. The README's table of the keys and the
 //! built-in configuration, [`DEFAULT_TOML`], are made from the tables

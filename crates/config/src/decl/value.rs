@@ -6,7 +6,7 @@
 use serde::de::DeserializeOwned;
 
 /// What kind of value a key's type holds (the declaration's tests match it
-/// with the [`Bounds`]).
+/// with the [`Bounds`](super::Bounds)).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum Kind {
