@@ -198,6 +198,19 @@ pub struct KeyDecl {
     pub target: &'static str,
 }
 
+/// One section of the configuration: its name, its one-line doc and its
+/// keys, in the file's order.
+#[derive(Debug, Clone, Copy)]
+pub struct SectionDecl {
+    /// The section, dotted (`guard`, `drivers.axes`).
+    pub name: &'static str,
+    /// What it is, one line (`default_config.toml` writes it above the
+    /// section).
+    pub doc: &'static str,
+    /// Its keys.
+    pub keys: &'static [KeyDecl],
+}
+
 impl KeyDecl {
     /// `[section] name`, as prose names a key of another section.
     pub fn in_section(&self) -> String {

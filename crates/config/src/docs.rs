@@ -8,7 +8,7 @@
 //! `cargo run -p sar-config --example config_docs -- --write` writes them.
 
 use crate::decl::{Applies, Bounds, KeyDecl, KeyDefault, or_list};
-use crate::keys::{SECTION_DOCS, SECTIONS, guard, plausibility};
+use crate::keys::{SECTIONS, guard, plausibility};
 
 /// The line before the README's table.
 pub const README_BEGIN: &str = "<!-- The keys: made from crates/config/src/keys by `cargo run -p sar-config --example config_docs -- --write`; crates/config/tests/keys.rs compares. -->";
@@ -107,7 +107,7 @@ fn cell(text: &str) -> String {
 pub fn readme_table() -> String {
     let mut out =
         String::from("| key | default | range | also | what it is |\n|---|---|---|---|---|\n");
-    for d in SECTIONS.iter().flat_map(|s| s.iter()) {
+    for d in crate::keys::keys() {
         out.push_str(&format!(
             "| `{}` | {} | {} | {} | {} |\n",
             d.key,
@@ -170,16 +170,9 @@ fn lines_of(d: &KeyDecl) -> Vec<String> {
 /// The built-in configuration, `default_config.toml`.
 pub fn default_toml() -> String {
     let mut out = String::from(HEAD);
-    for keys in SECTIONS {
-        let Some(section) = keys.first().map(|d| d.section) else {
-            continue;
-        };
-        let doc = SECTION_DOCS
-            .iter()
-            .find(|(s, _)| *s == section)
-            .map_or("", |(_, doc)| doc.trim());
-        out.push_str(&format!("\n# {doc}\n[{section}]\n"));
-        for d in keys.iter() {
+    for section in SECTIONS {
+        out.push_str(&format!("\n# {}\n[{}]\n", section.doc.trim(), section.name));
+        for d in section.keys {
             for line in lines_of(d) {
                 out.push_str(&line);
                 out.push('\n');

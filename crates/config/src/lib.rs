@@ -39,7 +39,7 @@ mod relations;
 pub mod scenario;
 mod toml_file;
 
-pub use decl::{Applies, Bounds, KeyDecl, KeyDefault, Kind, Range};
+pub use decl::{Applies, Bounds, KeyDecl, KeyDefault, Kind, Range, SectionDecl};
 pub use keys::identify::IdentifySettings;
 pub use keys::ros2::{MAX_DOMAIN_ID, Ros2Rates, Ros2Settings, TopicRate};
 pub use keys::{SECTIONS, keys};

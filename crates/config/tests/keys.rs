@@ -149,8 +149,19 @@ fn every_key_has_a_doc_a_default_and_a_range_that_fit() {
             problems.push(format!("{}: {what} within its range: {why}", d.key));
         }
     }
-    for keys in config::SECTIONS {
-        assert!(!keys.is_empty(), "a section without keys");
+    for section in config::SECTIONS {
+        assert!(!section.keys.is_empty(), "[{}]: no keys", section.name);
+        let doc = section.doc.trim();
+        assert!(
+            !doc.is_empty() && !doc.contains('\n'),
+            "[{}]: a doc of one line",
+            section.name
+        );
+        assert!(
+            section.keys.iter().all(|d| d.section == section.name),
+            "[{}]: a key of another section",
+            section.name
+        );
     }
     let mut names: Vec<&str> = config::keys().map(|d| d.key).collect();
     let all = names.len();

@@ -107,9 +107,6 @@ macro_rules! section {
 
         $(const $cname: &str = $cval;)*
 
-        /// What the section's one-line doc says (`default_config.toml`
-        /// writes it above the section).
-        pub(crate) const SECTION_DOC: &str = concat!($($sdoc),+);
 
         /// The section as the file writes it: every key optional here
         /// (missing required keys are refused by [`Raw::resolve`]), unknown
@@ -142,7 +139,7 @@ macro_rules! section {
         pub(crate) const KEY: Keys = Keys {
             $(
                 $key: $crate::decl::KeyDecl {
-                    section: $section,
+                    section: SECTION,
                     name: stringify!($key),
                     key: concat!($section, ".", stringify!($key)),
                     doc: concat!($($doc),+),
@@ -156,6 +153,13 @@ macro_rules! section {
 
         /// The section's keys, in the file's order.
         pub(crate) const KEYS: &[$crate::decl::KeyDecl] = &[$(KEY.$key),+];
+
+        /// The section: its name, its one-line doc and its keys.
+        pub(crate) const DECL: $crate::decl::SectionDecl = $crate::decl::SectionDecl {
+            name: SECTION,
+            doc: concat!($($sdoc),+),
+            keys: KEYS,
+        };
 
         impl Raw {
             /// Each key's value or default; a missing required key refused.

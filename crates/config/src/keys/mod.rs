@@ -2,7 +2,7 @@
 //! module per section, each with its [`section!`](crate::section) table
 //! (every key's type, default, range, one-line doc and the domain field it
 //! sets) and the functions that build the section's domain types from the
-//! keys read. [`SECTIONS`] lists the tables in the file's order; the README's
+//! keys read. [`SECTIONS`] lists the sections in the file's order; the README's
 //! table and `default_config.toml` are made from them (`crate::docs`).
 //!
 //! A new key is one line in its section's table and the code that uses the
@@ -10,7 +10,7 @@
 //! `default_config.toml` line follow from the line.
 
 use crate::ConfigError;
-use crate::decl::KeyDecl;
+use crate::decl::{KeyDecl, SectionDecl};
 use crate::toml_file::Ctx;
 use sar_kinematics::Vec3;
 use serde::Deserialize;
@@ -30,48 +30,29 @@ pub mod ros2;
 pub mod sensor;
 pub mod tip;
 
-/// Every section's keys, in the file's order (the order `default_config.toml`
-/// and the README's table list them in, and the order the ranges are
-/// checked in).
-pub const SECTIONS: &[&[KeyDecl]] = &[
-    geometry::KEYS,
-    manipulator::KEYS,
-    sensor::KEYS,
-    loop_::KEYS,
-    guard::KEYS,
-    plausibility::KEYS,
-    tip::KEYS,
-    axes::KEYS,
-    record::KEYS,
-    force_control::KEYS,
-    identify::KEYS,
-    ros2::KEYS,
-    drivers_sensor::KEYS,
-    drivers_axes::KEYS,
-];
-
-/// Each section's one-line doc, by section name (`default_config.toml`
-/// writes it above the section).
-pub(crate) const SECTION_DOCS: &[(&str, &str)] = &[
-    (geometry::SECTION, geometry::SECTION_DOC),
-    (manipulator::SECTION, manipulator::SECTION_DOC),
-    (sensor::SECTION, sensor::SECTION_DOC),
-    (loop_::SECTION, loop_::SECTION_DOC),
-    (guard::SECTION, guard::SECTION_DOC),
-    (plausibility::SECTION, plausibility::SECTION_DOC),
-    (tip::SECTION, tip::SECTION_DOC),
-    (axes::SECTION, axes::SECTION_DOC),
-    (record::SECTION, record::SECTION_DOC),
-    (force_control::SECTION, force_control::SECTION_DOC),
-    (identify::SECTION, identify::SECTION_DOC),
-    (ros2::SECTION, ros2::SECTION_DOC),
-    (drivers_sensor::SECTION, drivers_sensor::SECTION_DOC),
-    (drivers_axes::SECTION, drivers_axes::SECTION_DOC),
+/// Every section, in the file's order (the order `default_config.toml` and
+/// the README's table list them in, and the order the ranges are checked
+/// in).
+pub const SECTIONS: &[SectionDecl] = &[
+    geometry::DECL,
+    manipulator::DECL,
+    sensor::DECL,
+    loop_::DECL,
+    guard::DECL,
+    plausibility::DECL,
+    tip::DECL,
+    axes::DECL,
+    record::DECL,
+    force_control::DECL,
+    identify::DECL,
+    ros2::DECL,
+    drivers_sensor::DECL,
+    drivers_axes::DECL,
 ];
 
 /// Every key, in the file's order.
 pub fn keys() -> impl Iterator<Item = &'static KeyDecl> {
-    SECTIONS.iter().flat_map(|s| s.iter())
+    SECTIONS.iter().flat_map(|s| s.keys.iter())
 }
 
 /// The file as written: the three required sections, the others optional
