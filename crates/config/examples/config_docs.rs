@@ -14,9 +14,16 @@ use sar_config::docs;
 use std::path::Path;
 
 fn main() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let write = std::env::args().any(|a| a == "--write");
     let toml = docs::default_toml();
+    if !std::env::args().any(|a| a == "--write") {
+        print!("{toml}");
+        println!();
+        print!("{}", docs::readme_table());
+        return;
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let toml_path = root.join("crates/config/src/default_config.toml");
+    std::fs::write(&toml_path, &toml).expect("default_config.toml");
     let readme_path = root.join("README.md");
     let readme = std::fs::read_to_string(&readme_path).expect("README.md");
     let (before, rest) = readme
@@ -31,18 +38,10 @@ fn main() {
         docs::readme_table(),
         docs::README_END
     );
-    if write {
-        let toml_path = root.join("crates/config/src/default_config.toml");
-        std::fs::write(&toml_path, &toml).expect("default_config.toml");
-        std::fs::write(&readme_path, readme).expect("README.md");
-        println!(
-            "wrote {} and {}",
-            toml_path.display(),
-            readme_path.display()
-        );
-    } else {
-        print!("{toml}");
-        println!();
-        print!("{}", docs::readme_table());
-    }
+    std::fs::write(&readme_path, readme).expect("README.md");
+    println!(
+        "wrote {} and {}",
+        toml_path.display(),
+        readme_path.display()
+    );
 }

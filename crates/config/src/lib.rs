@@ -12,7 +12,7 @@
 //! A file is checked in this order ([`parse`]): its syntax and its keys
 //! (unknown keys, types, arrays of their exact length, missing required
 //! keys); every key's declared range, in the file's order (issue 25: a
-//! plausible range for every physical key, so that a unit mistake is refused
+//! plausible range for every number, so that a unit mistake is refused
 //! with the likely unit, "got 35 (a value in cm? 35 cm is 0.35 m)"); the
 //! relations between keys (`relations`: a centre of mass on the rod, a force
 //! limit within the sensor's range, ...); the domain types' own checks
