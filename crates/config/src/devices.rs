@@ -1,6 +1,6 @@
 //! The drivers' configurations made from a checked [`Config`]: the CANopen
 //! drives' ([`canopen_drives`]) and the RDT sensor's ([`rdt_sensor`]), and
-//! [`check`], which runs on them the drivers' own checks
+//! `check`, which runs on them the drivers' own checks
 //! (`CanOpenConfig::validate`, `RdtConfig::validate`, what the drivers run
 //! at start) while the file is loaded. One conversion for `sard`'s start
 //! and for every load (`sard --check-config` included): a configuration
@@ -8,6 +8,8 @@
 //! "valid" for a quick stop of 4.3e15 counts/s^2 the drives refused at
 //! start).
 
+use crate::decl::key_of_field;
+use crate::keys::{axes, drivers_axes, drivers_sensor, loop_, plausibility};
 use crate::toml_file::Ctx;
 use crate::{AxesDriver, Config, ConfigError, SensorDriver};
 use sar_canopen::{CanOpenConfig, CanOpenError};
@@ -99,21 +101,21 @@ pub fn rdt_sensor(config: &Config) -> Option<RdtConfig> {
 }
 
 /// The key of the file a field of the CANopen drives' configuration comes
-/// from.
+/// from (a field [`canopen_drives`] sets from another key than its own, or
+/// the drives' key of the same name).
 fn canopen_key(field: &str) -> &'static str {
+    let (a, d) = (&axes::KEY, &drivers_axes::KEY);
     match field {
-        "node_ids" | "host_node_id" => "drivers.axes.node_ids",
-        "lead_m" => "drivers.axes.lead_m",
-        "counts_per_turn" => "drivers.axes.counts_per_turn",
-        "quick_stop_decel_mps2" => "drivers.axes.quick_stop_decel_mps2",
-        "max_torque_permille" => "drivers.axes.max_torque_permille",
-        "max_speed_mps" => "axes.max_speed_mps",
-        "max_accel_mps2" => "axes.max_accel_mps2",
-        "travel_m" => "axes.travel_m",
-        "following_window_m" => "axes.following_tolerance_m",
-        "drive_max_speed_mps" => "plausibility.max_joint_speed_mps",
-        "sync_period_ns" | "pdo_wait_ns" | "poll_interval_ns" => "loop.rate_hz",
-        _ => "drivers.axes",
+        "host_node_id" => d.node_ids.key,
+        "max_speed_mps" => a.max_speed_mps.key,
+        "max_accel_mps2" => a.max_accel_mps2.key,
+        "travel_m" => a.travel_m.key,
+        "following_window_m" => a.following_tolerance_m.key,
+        "drive_max_speed_mps" => plausibility::KEY.max_joint_speed_mps.key,
+        "sync_period_ns" | "pdo_wait_ns" | "poll_interval_ns" => loop_::KEY.rate_hz.key,
+        other => {
+            key_of_field(&[drivers_axes::KEYS], other).map_or(drivers_axes::SECTION, |k| k.key)
+        }
     }
 }
 
@@ -127,7 +129,7 @@ pub(crate) fn check(ctx: &Ctx<'_>, config: &Config) -> Result<(), ConfigError> {
     {
         let key = match &e {
             CanOpenError::InvalidConfig { field, .. } => canopen_key(field),
-            _ => "drivers.axes",
+            _ => drivers_axes::SECTION,
         };
         return Err(ctx.err(
             key,
@@ -138,13 +140,10 @@ pub(crate) fn check(ctx: &Ctx<'_>, config: &Config) -> Result<(), ConfigError> {
         && let Err(e) = r.validate()
     {
         let key = match &e {
-            RdtError::InvalidConfig { field, .. } => match *field {
-                "counts_per_n" => "drivers.sensor.counts_per_n",
-                "counts_per_nm" => "drivers.sensor.counts_per_nm",
-                _ => "drivers.sensor",
-            },
-            _ => "drivers.sensor",
-        };
+            RdtError::InvalidConfig { field, .. } => key_of_field(&[drivers_sensor::KEYS], field),
+            _ => None,
+        }
+        .map_or(drivers_sensor::SECTION, |k| k.key);
         return Err(ctx.err(
             key,
             format!("the RDT sensor's driver would refuse it at start: {e}"),

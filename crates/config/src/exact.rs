@@ -9,8 +9,10 @@
 use serde::de::{Deserialize, Deserializer, Error, IgnoredAny, SeqAccess, Visitor};
 use std::marker::PhantomData;
 
-/// An array of exactly N elements.
-struct Exact<T, const N: usize>([T; N]);
+/// An array of exactly N elements (what the configuration's keys of a
+/// fixed length read, `crate::decl::KeyType`).
+#[derive(Debug)]
+pub(crate) struct Exact<T, const N: usize>(pub(crate) [T; N]);
 
 struct ExactVisitor<T, const N: usize>(PhantomData<T>);
 

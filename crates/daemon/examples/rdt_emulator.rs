@@ -37,7 +37,7 @@ fn main() -> Result<(), String> {
     emu.seed = 0x5afe;
     let emulator = Emulator::start(emu).map_err(|e| e.to_string())?;
     let toml = sar_config::DEFAULT_TOML.replace(
-        "[drivers.sensor]\nkind = \"sim\"\n",
+        "[drivers.sensor]\nkind = \"sim\"",
         &format!(
             "[drivers.sensor]\nkind = \"rdt\"\naddress = \"{}\"\ncounts_per_n = 10000.0\ncounts_per_nm = 100000.0\n",
             emulator.address()

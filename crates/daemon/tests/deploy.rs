@@ -139,7 +139,7 @@ fn a_silent_sensor_is_refused_at_start_in_one_line_naming_it() {
     std::fs::write(
         &cfg,
         config::DEFAULT_TOML.replace(
-            "[drivers.sensor]\nkind = \"sim\"\n",
+            "[drivers.sensor]\nkind = \"sim\"",
             &format!("[drivers.sensor]\nkind = \"rdt\"\naddress = \"127.0.0.1:{port}\"\ncounts_per_n = 10000.0\ncounts_per_nm = 100000.0\n"),
         ),
     )
@@ -182,7 +182,7 @@ fn sard_runs_its_loop_on_the_rdt_driver_against_the_emulator() {
     std::fs::write(
         &cfg,
         config::DEFAULT_TOML.replace(
-            "[drivers.sensor]\nkind = \"sim\"\n",
+            "[drivers.sensor]\nkind = \"sim\"",
             &format!(
                 "[drivers.sensor]\nkind = \"rdt\"\naddress = \"{}\"\ncounts_per_n = 10000.0\ncounts_per_nm = 100000.0\n",
                 emulator.address()

@@ -597,7 +597,7 @@ fn rdt_emulator() -> Emulator {
 
 fn rdt_config(emulator: &Emulator) -> String {
     let c = config::DEFAULT_TOML.replace(
-        "[drivers.sensor]\nkind = \"sim\"\n",
+        "[drivers.sensor]\nkind = \"sim\"",
         &format!(
             "[drivers.sensor]\nkind = \"rdt\"\naddress = \"{}\"\ncounts_per_n = 10000.0\ncounts_per_nm = 100000.0\n",
             emulator.address()

@@ -94,7 +94,7 @@ fn rdt_rig(script: Vec<(u64, Action)>) -> (Emulator, RdtController, logq::LogQue
     // The daemon's own translation of [drivers.sensor] (defaults: OnRobot,
     // 500 Hz), with a silence limit for a loaded test machine.
     let text = config::DEFAULT_TOML.replace(
-        "[drivers.sensor]\nkind = \"sim\"\n",
+        "[drivers.sensor]\nkind = \"sim\"",
         &format!(
             "[drivers.sensor]\nkind = \"rdt\"\naddress = \"{}\"\ncounts_per_n = {COUNTS_PER_N:?}\ncounts_per_nm = {COUNTS_PER_NM:?}\n",
             emulator.address()

@@ -171,11 +171,15 @@ fn check_config_refuses_a_unit_mistake_and_a_non_regular_file_at_once() {
     .unwrap();
     let fifo = temp_path("config.fifo");
     mkfifo(&fifo);
+    let line = 1 + sar_config::DEFAULT_TOML
+        .lines()
+        .position(|l| l.starts_with("length_m = "))
+        .unwrap();
+    let unit_mistake = format!(
+        "manipulator.length_m (line {line}): must be within 0.1..=1.5 m, got 35 (a value in cm?"
+    );
     for (path, words) in [
-        (
-            cm.clone(),
-            "manipulator.length_m (line 19): must be within 0.1..=1.5 m, got 35 (a value in cm?",
-        ),
+        (cm.clone(), unit_mistake.as_str()),
         (
             fifo.clone(),
             "cannot read the file: not a regular file (a FIFO)",

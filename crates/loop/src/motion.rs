@@ -96,6 +96,17 @@ pub struct MotionConfig {
 /// The longest sensor latency accepted, ns.
 pub const MAX_SENSOR_LATENCY_NS: u64 = 50_000_000;
 
+/// The largest servo bandwidth the model takes, Hz: sampled every
+/// [`MODEL_STEP_NS`], the position loop needs `wn dt <= 0.2` (300 Hz: 0.19).
+/// The one bound of `[axes] servo_bandwidth_hz` (the configuration declares
+/// its range with it; [`MotionConfig::check`] refuses beyond it).
+pub const MAX_SERVO_BANDWIDTH_HZ: f64 = 300.0;
+
+const _: () = assert!(
+    core::f64::consts::TAU * MAX_SERVO_BANDWIDTH_HZ * MODEL_STEP_NS as f64 * 1e-9 <= 0.2,
+    "the model samples the fastest servo it takes too rarely"
+);
+
 impl MotionConfig {
     /// The position loop's natural frequency, rad/s (0 without a model).
     pub fn servo_wn_rad_s(&self) -> f64 {
@@ -123,20 +134,17 @@ impl MotionConfig {
     /// `(field, value, why)`), against the planned moves' acceleration.
     pub fn check(&self, max_accel_mps2: f64) -> Result<(), (&'static str, f64, &'static str)> {
         let bw = self.servo_bandwidth_hz;
-        if !(bw.is_finite() && bw >= 0.0) {
-            return Err(("servo_bandwidth_hz", bw, "must be finite and >= 0"));
+        // Sampled at MODEL_STEP_NS, as the simulator checks its own.
+        if !(0.0..=MAX_SERVO_BANDWIDTH_HZ).contains(&bw) {
+            return Err((
+                "servo_bandwidth_hz",
+                bw,
+                "must be within 0..=MAX_SERVO_BANDWIDTH_HZ (300 Hz, the model's sampling)",
+            ));
         }
         let z = self.servo_damping;
         if !(z.is_finite() && z > 0.0) {
             return Err(("servo_damping", z, "must be finite and > 0"));
-        }
-        // Sampled at MODEL_STEP_NS, as the simulator checks its own.
-        if self.servo_wn_rad_s() * MODEL_STEP_NS as f64 * 1e-9 > 0.2 {
-            return Err((
-                "servo_bandwidth_hz",
-                bw,
-                "must be at most 0.2 / (2 pi 100 us) (the model's sampling)",
-            ));
         }
         let q = self.quick_stop_decel_mps2;
         if !(q.is_finite() && q > 0.0) {

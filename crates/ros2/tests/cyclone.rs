@@ -197,11 +197,13 @@ fn in_netns() {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let (config, rec_dir) = sar_test_support::files::recording_config(&dir);
-    let mut toml = std::fs::read_to_string(&config).unwrap();
-    toml.push_str(&format!(
-        "\n[ros2]\ndomain_id = {DOMAIN}\ninterfaces = [\"127.0.0.1\"]\n"
-    ));
-    std::fs::write(&config, toml).unwrap();
+    // The built-in configuration's `[ros2]` (its keys commented out) with
+    // the domain and the loopback.
+    let toml = std::fs::read_to_string(&config).unwrap();
+    let ros2 = format!("\n[ros2]\ndomain_id = {DOMAIN}\ninterfaces = [\"127.0.0.1\"]\n");
+    let with_ros2 = toml.replacen("\n[ros2]\n", &ros2, 1);
+    assert_ne!(with_ros2, toml, "no [ros2] in the built-in configuration");
+    std::fs::write(&config, with_ros2).unwrap();
     let cyclone_xml = dir.join("cyclonedds.xml");
     std::fs::write(
         &cyclone_xml,

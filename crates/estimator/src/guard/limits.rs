@@ -41,14 +41,7 @@ impl GuardLimits {
     /// default configuration's force limits), hysteresis 1 N, debounce 3 new
     /// samples, inputs at most 5 ms old, no margin.
     pub const EXAMPLE: GuardLimits = GuardLimits {
-        force: ForceLimits {
-            warn_total_n: 10.0,
-            stop_total_n: 15.0,
-            warn_axial_n: 8.0,
-            stop_axial_n: 12.0,
-            warn_lateral_n: 6.0,
-            stop_lateral_n: 10.0,
-        },
+        force: ForceLimits::DEFAULT,
         hysteresis_n: 1.0,
         debounce_samples: 3,
         max_sensor_age_ns: 5_000_000,
@@ -81,6 +74,18 @@ pub struct ForceLimits {
 }
 
 impl ForceLimits {
+    /// The default limits, the one place they are written (the
+    /// configuration's `[guard]` defaults and [`GuardLimits::EXAMPLE`]):
+    /// total 10/15 N, axial 8/12 N, lateral 6/10 N.
+    pub const DEFAULT: ForceLimits = ForceLimits {
+        warn_total_n: 10.0,
+        stop_total_n: 15.0,
+        warn_axial_n: 8.0,
+        stop_axial_n: 12.0,
+        warn_lateral_n: 6.0,
+        stop_lateral_n: 10.0,
+    };
+
     /// The six limits' names, in the order of [`ForceLimits::to_array`]
     /// (the wire's): (warn, stop) for total, axial, lateral. They are the
     /// keys of the configuration's `[guard]`, the fields of `sarctl`'s
