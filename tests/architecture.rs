@@ -976,3 +976,59 @@ fn no_crate_has_an_import_circle_between_its_modules() {
     graph.insert("c".into(), BTreeSet::new());
     assert_eq!(circle(&graph), None);
 }
+
+/// The submodules of each module directory (`crates/K/src/A/B.rs` and
+/// `crates/K/src/A/B/mod.rs` are `B` of `K/A`) and the siblings each
+/// imports (`super::NAME` or `crate::A::NAME` in code, outside comments and
+/// `#[cfg(test)]` modules).
+fn submodule_imports() -> BTreeMap<String, BTreeMap<String, BTreeSet<String>>> {
+    let mut out: BTreeMap<String, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
+    for (path, rel) in source_files() {
+        let parts: Vec<&str> = rel.split('/').collect();
+        if parts.len() < 5 || parts[4] == "mod.rs" {
+            continue;
+        }
+        let parent = format!("{}/{}", parts[1], parts[3]);
+        let module = parts[4].trim_end_matches(".rs").to_owned();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let code = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
+        let absolute = format!("crate::{}::", parts[3]);
+        let imports = out.entry(parent).or_default().entry(module.clone()).or_default();
+        for line in code.lines() {
+            let line = line.split("//").next().unwrap_or("");
+            for prefix in ["super::", absolute.as_str()] {
+                for (i, _) in line.match_indices(prefix) {
+                    let name: String = line[i + prefix.len()..]
+                        .chars()
+                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                        .collect();
+                    if name != module && !name.is_empty() {
+                        imports.insert(name);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn no_module_has_an_import_circle_between_its_submodules() {
+    let all = submodule_imports();
+    assert!(
+        all.keys().any(|k| k == "sarctl/cli") && all.keys().any(|k| k == "estimator/cycle"),
+        "{:?}",
+        all.keys()
+    );
+    let circles: Vec<String> = all
+        .iter()
+        .filter_map(|(dir, graph)| {
+            circle(graph).map(|c| format!("crates/{dir}: {}", c.join(" -> ")))
+        })
+        .collect();
+    assert!(
+        circles.is_empty(),
+        "import circles between submodules:\n{}",
+        circles.join("\n")
+    );
+}

@@ -657,6 +657,52 @@ fn sensor_messages_of(
     Ok(sensors)
 }
 
+/// One channel of a lean batch (the sensor's wrench, the joints'
+/// positions): its flags, its per-cycle count differences and raw values.
+struct Channel<'b, const N: usize> {
+    /// The flag of a cycle that repeats the previous values.
+    repeat: u8,
+    /// The flag of a cycle whose values are raw (not counts).
+    raw: u8,
+    /// Every cycle's count differences, `N` a cycle.
+    counts: &'b [i32],
+    /// The raw cycles' values, `N` each, in order.
+    raw_values: &'b [f64],
+}
+
+/// A cycle's values of `ch`: repeated, raw (read at `*raw_at`), or the
+/// counts accumulated into `sums` and converted by `convert(component,
+/// count)`; kept in `last` for a repeat.
+fn channel_of<const N: usize>(
+    ch: &Channel<'_, N>,
+    (i, f): (usize, u8),
+    c: &Cursor<'_>,
+    raw_at: &mut usize,
+    (last, sums): (&mut Option<[f64; N]>, &mut [i32; N]),
+    convert: impl Fn(usize, i32) -> f64,
+) -> Result<[f64; N], BatchError> {
+    let short = "an array is shorter than the flags";
+    let counts: [i32; N] = ch
+        .counts
+        .get(N * i..N * i + N)
+        .and_then(|s| <[i32; N]>::try_from(s).ok())
+        .ok_or_else(|| c.err(short))?;
+    let v = if f & ch.repeat != 0 {
+        last.ok_or_else(|| c.err("the first cycle repeats no cycle"))?
+    } else if f & ch.raw != 0 {
+        take(ch.raw_values, raw_at, c, short)?
+    } else {
+        let mut v = [0.0; N];
+        for (k, ((v, d), pc)) in v.iter_mut().zip(counts).zip(sums.iter_mut()).enumerate() {
+            *pc = pc.wrapping_add(d);
+            *v = convert(k, *pc);
+        }
+        v
+    };
+    *last = Some(v);
+    Ok(v)
+}
+
 /// A cycle's force and torque (repeated, raw or counts).
 fn sensor_of(
     b: &CycleBatch,
@@ -665,39 +711,29 @@ fn sensor_of(
     c: &mut Cursor<'_>,
     p: &mut Previous,
 ) -> Result<[f64; 6], BatchError> {
-    let short = "an array is shorter than the flags";
-    let counts: [i32; 6] = b
-        .sensor_counts
-        .get(6 * i..6 * i + 6)
-        .and_then(|s| <[i32; 6]>::try_from(s).ok())
-        .ok_or_else(|| c.err(short))?;
-    let w = if f & flag::SENSOR_REPEAT != 0 {
-        p.wrench
-            .ok_or_else(|| c.err("the first cycle repeats no cycle"))?
-    } else if f & flag::SENSOR_RAW != 0 {
-        let mut next = c.raw_sensor;
-        let w = take(&b.sensor_raw, &mut next, c, short)?;
-        c.raw_sensor = next;
-        w
-    } else {
-        let mut w = [0.0; 6];
-        for (k, ((v, d), pc)) in w
-            .iter_mut()
-            .zip(counts)
-            .zip(p.sensor_counts.iter_mut())
-            .enumerate()
-        {
-            *pc = pc.wrapping_add(d);
+    let ch = Channel {
+        repeat: flag::SENSOR_REPEAT,
+        raw: flag::SENSOR_RAW,
+        counts: &b.sensor_counts,
+        raw_values: &b.sensor_raw,
+    };
+    let mut raw_at = c.raw_sensor;
+    let w = channel_of(
+        &ch,
+        (i, f),
+        c,
+        &mut raw_at,
+        (&mut p.wrench, &mut p.sensor_counts),
+        |k, count| {
             let per = if k < 3 {
                 b.force_counts_per_n
             } else {
                 b.torque_counts_per_nm
             };
-            *v = f64::from(*pc) / per;
-        }
-        w
-    };
-    p.wrench = Some(w);
+            f64::from(count) / per
+        },
+    )?;
+    c.raw_sensor = raw_at;
     Ok(w)
 }
 
@@ -709,29 +745,22 @@ fn joints_of(
     c: &mut Cursor<'_>,
     p: &mut Previous,
 ) -> Result<[f64; 3], BatchError> {
-    let short = "an array is shorter than the flags";
-    let counts: [i32; 3] = b
-        .joint_counts
-        .get(3 * i..3 * i + 3)
-        .and_then(|s| <[i32; 3]>::try_from(s).ok())
-        .ok_or_else(|| c.err(short))?;
-    let q = if f & flag::JOINTS_REPEAT != 0 {
-        p.joints
-            .ok_or_else(|| c.err("the first cycle repeats no cycle"))?
-    } else if f & flag::JOINTS_RAW != 0 {
-        let mut next = c.raw_joints;
-        let q = take(&b.joints_raw, &mut next, c, short)?;
-        c.raw_joints = next;
-        q
-    } else {
-        let mut q = [0.0; 3];
-        for ((v, d), pc) in q.iter_mut().zip(counts).zip(p.joint_counts.iter_mut()) {
-            *pc = pc.wrapping_add(d);
-            *v = f64::from(*pc) * b.joint_m_per_count;
-        }
-        q
+    let ch = Channel {
+        repeat: flag::JOINTS_REPEAT,
+        raw: flag::JOINTS_RAW,
+        counts: &b.joint_counts,
+        raw_values: &b.joints_raw,
     };
-    p.joints = Some(q);
+    let mut raw_at = c.raw_joints;
+    let q = channel_of(
+        &ch,
+        (i, f),
+        c,
+        &mut raw_at,
+        (&mut p.joints, &mut p.joint_counts),
+        |_, count| f64::from(count) * b.joint_m_per_count,
+    )?;
+    c.raw_joints = raw_at;
     Ok(q)
 }
 

@@ -427,7 +427,7 @@ fn run_dynamic(
             config,
             prefix,
             centre_of(config, args)?,
-            args,
+            args.sensor_rate_hz,
         )?,
     };
     let input = &input;

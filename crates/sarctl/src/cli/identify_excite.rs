@@ -7,7 +7,6 @@
 //! guard on), followed until it ends at rest, the recording stopped. The
 //! recording is then identified offline as `--input` would be.
 
-use super::identify::IdentifyArgs;
 use super::record;
 use super::request::command_msg;
 use crate::identify::excitation::Plan;
@@ -23,15 +22,16 @@ use std::time::{Duration, Instant};
 /// Joints within this of the centre count as arrived, m.
 const ARRIVED_M: f64 = 50e-6;
 
-/// Plans the excitation about `centre_m`, runs it on the daemon and
-/// records it; the recording's (first) file.
+/// Plans the excitation about `centre_m` for a sensor sampling at
+/// `sensor_rate_hz` (`identify --sensor-rate-hz`), runs it on the daemon
+/// and records it; the recording's (first) file.
 pub fn record_excitation(
     config: &Config,
     prefix: &str,
     centre_m: [f64; 3],
-    args: &IdentifyArgs,
+    sensor_rate_hz: f64,
 ) -> Result<PathBuf, String> {
-    let plan = Plan::new(config, centre_m, args.sensor_rate_hz)?;
+    let plan = Plan::new(config, centre_m, sensor_rate_hz)?;
     eprintln!("identify --dynamic --live: {}", plan.to_text());
     let client = Client::new(prefix).map_err(|e| e.to_string())?;
     let sub = client.subscribe().map_err(|e| e.to_string())?;
