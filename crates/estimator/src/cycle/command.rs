@@ -1,9 +1,10 @@
 //! The operator's commands, applied after a cycle's step on that cycle's
-//! input ([`super::Command`]): a reset (the first one checked against the
-//! model at rest, `mounting`), a tare or a bias (only in Ok, below
-//! every warn limit, on this cycle's estimate), new force limits (within the
-//! ceilings fixed at start); each accepted or refused with a typed reason
-//! ([`super::CommandAccepted`], [`super::CommandRefused`]).
+//! input ([`super::Command`]): a reset (the first one also checked against
+//! the model at rest: `mounting`), a tare or a bias (only in Ok, below every
+//! warn limit, on this cycle's estimate; the tare's bias is `tare`'s), new
+//! force limits (within the ceilings fixed at start); each accepted or
+//! refused with a typed reason ([`super::CommandAccepted`],
+//! [`super::CommandRefused`]).
 
 use super::Estimator;
 use super::vocabulary::{Command, CommandAccepted, CommandRefused, CycleInput, TipOutcome};

@@ -214,9 +214,9 @@ impl Estimator {
     /// Runs one control cycle and returns its result, which stays readable as
     /// [`Estimator::last`] until the next cycle (written in place: no copy of
     /// the large output on the loop's path). The one entry point of the
-    /// per-cycle path: the loop calls it once per cycle, and the tools
-    /// offline (replay, the identification's and the closed loop's tests)
-    /// with the recorded inputs. `context` is what the caller derives beside
+    /// per-cycle path: the loop calls it once per cycle; offline, the replay
+    /// of a recording of the inputs alone, the tests and the benchmarks.
+    /// `context` is what the caller derives beside
     /// the recorded input ([`CycleContext`]: the following reference, a fault
     /// of its host, the carriage's commanded motion); [`CycleContext::AT_REST`]
     /// for a caller that commands no motion. It cannot fail: every fault of
