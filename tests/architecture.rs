@@ -993,7 +993,11 @@ fn submodule_imports() -> BTreeMap<String, BTreeMap<String, BTreeSet<String>>> {
         let text = std::fs::read_to_string(&path).unwrap();
         let code = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
         let absolute = format!("crate::{}::", parts[3]);
-        let imports = out.entry(parent).or_default().entry(module.clone()).or_default();
+        let imports = out
+            .entry(parent)
+            .or_default()
+            .entry(module.clone())
+            .or_default();
         for line in code.lines() {
             let line = line.split("//").next().unwrap_or("");
             for prefix in ["super::", absolute.as_str()] {
