@@ -1278,6 +1278,35 @@ impl Sink for DaemonShm {
     }
 }
 
+/// Why a client could not open a service: "no daemon runs" only when it
+/// does not exist (or is being removed); every place taken names the
+/// limit; another message type names the likely cause (`sarctl` and `sard`
+/// from different builds); anything else says what failed.
+fn open_error(service: &str, e: impl std::fmt::Debug) -> ShmError {
+    let name = format!("{e:?}");
+    match name.as_str() {
+        "DoesNotExist" | "IsMarkedForDestruction" => ShmError::NoDaemon {
+            service: service.to_owned(),
+            detail: name,
+        },
+        // Every place taken: the open itself failed, so the places are
+        // all taken (the count is the limit).
+        "ExceedsMaxNumberOfNodes" => ShmError::Full {
+            what: "processes",
+            count: MAX_NODES,
+            limit: MAX_NODES,
+        },
+        n if n.starts_with("Incompatible") => ShmError::Port {
+            what: "the daemon's service carries another message type: sarctl and sard are from different builds (install both from one build)",
+            detail: format!("{service}: {name}"),
+        },
+        _ => ShmError::Port {
+            what: "cannot open the daemon's service",
+            detail: format!("{service}: {name}"),
+        },
+    }
+}
+
 /// A client's side: subscribes to the state, sends commands.
 #[derive(Debug)]
 pub struct Client {
@@ -1333,30 +1362,6 @@ impl Client {
             e => e,
         })?;
         Ok(self.node.get_or_init(|| n))
-    }
-
-    /// Why a service could not be opened: "no daemon runs" only when it
-    /// does not exist (or is being removed); every place taken names the
-    /// limit; anything else says what failed.
-    fn open_error(&self, service: &str, e: impl std::fmt::Debug) -> ShmError {
-        let name = format!("{e:?}");
-        match name.as_str() {
-            "DoesNotExist" | "IsMarkedForDestruction" => ShmError::NoDaemon {
-                service: service.to_owned(),
-                detail: name,
-            },
-            // Every place taken: the open itself failed, so the places are
-            // all taken (the count is the limit).
-            "ExceedsMaxNumberOfNodes" => ShmError::Full {
-                what: "processes",
-                count: MAX_NODES,
-                limit: MAX_NODES,
-            },
-            _ => ShmError::Port {
-                what: "cannot open the daemon's service",
-                detail: format!("{service}: {name}"),
-            },
-        }
     }
 
     /// A service that no daemon serves (a killed daemon's, not yet cleaned
@@ -1415,7 +1420,7 @@ impl Client {
             .service_builder(&service_name(&self.names.state)?)
             .publish_subscribe::<StateMsg>()
             .open()
-            .map_err(|e| self.open_error(&self.names.state, e))?;
+            .map_err(|e| open_error(&self.names.state, e))?;
         let mut alive = false;
         state.dynamic_config().list_publishers(|p| {
             alive |= process_alive(&p.node_id);
@@ -1441,7 +1446,7 @@ impl Client {
             .service_builder(&service_name(&self.names.event)?)
             .event()
             .open()
-            .map_err(|e| self.open_error(&self.names.event, e))?;
+            .map_err(|e| open_error(&self.names.event, e))?;
         let listener =
             event
                 .listener_builder()
@@ -1471,7 +1476,7 @@ impl Client {
             .service_builder(&service_name(&self.names.command)?)
             .request_response::<CommandMsg, ReplyMsg>()
             .open()
-            .map_err(|e| self.open_error(&self.names.command, e))?;
+            .map_err(|e| open_error(&self.names.command, e))?;
         let mut alive = false;
         service.dynamic_config().list_servers(|p| {
             alive |= process_alive(&p.node_id);
@@ -1560,5 +1565,34 @@ impl StateSubscription {
             self.wait(Duration::from_millis(50), |s| last = Some(*s));
         }
         last
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// iceoryx2's open errors by their names (as `open_error` reads them).
+    #[derive(Debug)]
+    enum Open {
+        DoesNotExist,
+        IncompatibleTypes,
+        ExceedsMaxNumberOfNodes,
+        InternalFailure,
+    }
+
+    #[test]
+    fn an_open_error_says_what_it_means() {
+        let said = |e: Open| open_error("sar/state", e).to_string();
+        assert!(said(Open::DoesNotExist).starts_with("no daemon runs"));
+        let types = said(Open::IncompatibleTypes);
+        assert!(
+            types.contains("sarctl and sard are from different builds")
+                && types.contains("sar/state: IncompatibleTypes")
+                && !types.contains("no daemon runs"),
+            "{types}"
+        );
+        assert!(said(Open::ExceedsMaxNumberOfNodes).contains("the limit is"));
+        assert!(said(Open::InternalFailure).starts_with("cannot open the daemon's service"));
     }
 }
