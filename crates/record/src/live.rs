@@ -297,11 +297,13 @@ pub const ROOM_FOR_A_CYCLE: usize = 2 * sar_msgs::msgs::SNAPSHOT_CHUNKS_MAX + 64
 impl Sink for LiveRecorder {
     /// Room for a cycle: at least [`ROOM_FOR_A_CYCLE`] free places in the
     /// recording's queue (a cycle with a snapshot pushes its chunks), or no
-    /// recording. Asked on a simulated clock only.
+    /// recording, or a failed one (its writer no longer drains the queue:
+    /// waiting would stall the simulation for good; it drops and counts, as
+    /// in real time). Asked on a simulated clock only.
     fn has_room(&self) -> bool {
-        self.active
-            .as_ref()
-            .is_none_or(|rec| rec.free_slots() >= ROOM_FOR_A_CYCLE.min(rec.capacity() / 2))
+        self.active.as_ref().is_none_or(|rec| {
+            rec.failed() || rec.free_slots() >= ROOM_FOR_A_CYCLE.min(rec.capacity() / 2)
+        })
     }
 
     fn cycle(&mut self, c: &Cycle<'_>, health: &mut SinkHealth) {
@@ -785,6 +787,42 @@ mod tests {
     /// A paused recorder (no writer thread) into `dir`.
     fn recorder(dir: &Path, name: &str) -> Recorder {
         Recorder::new_paused(RecorderConfig::new(FileOptions::new(dir, name))).unwrap()
+    }
+
+    /// On a simulated clock the loop waits for `has_room`: a full queue
+    /// has none, a failed recording (whose writer drains nothing) always
+    /// has, so a dead writer cannot stall the simulation for good.
+    #[test]
+    fn a_full_queue_has_no_room_and_a_failed_recording_always_has() {
+        let dir = std::env::temp_dir().join(format!("sar-live-room-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut config = RecorderConfig::new(FileOptions::new(&dir, "room"));
+        config.queue_capacity = 8;
+        let mut rec = Recorder::new_paused(config).unwrap();
+        for i in 0..8 {
+            assert!(rec.push(Outgoing::SimTruth(WrenchStamped::base_force(i, [0.0; 3]))));
+        }
+        let live = |active: Recorder| LiveRecorder {
+            switch: Arc::new(RecordSwitch::default()),
+            incoming: Arc::new(ArrayQueue::new(1)),
+            outgoing: Arc::new(ArrayQueue::new(1)),
+            active: Some(active),
+            held: None,
+            dropped_before: 0,
+            last_joints_stamp_ns: None,
+            snapshot: Box::new(sar_snapshot::Snapshot::new()),
+            snapshot_period_ns: 1,
+            next_snapshot_ns: None,
+        };
+        let live = live(rec);
+        assert!(!live.has_room(), "a full queue has room");
+        live.active.as_ref().unwrap().fail_for_test();
+        assert!(live.has_room(), "a failed recording stalls the loop");
+        let mut none = live;
+        none.active = None;
+        assert!(none.has_room());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// Issue 35: with the hand-back queue full (a manager that has not yet

@@ -235,6 +235,13 @@ impl Recorder {
         self.shared.failed.load(Ordering::Acquire)
     }
 
+    /// Marks the writer failed, as its own failure would (tests of what
+    /// the recorder's users do then).
+    #[cfg(test)]
+    pub(crate) fn fail_for_test(&self) {
+        self.shared.failed.store(true, Ordering::Release);
+    }
+
     /// A watch of this recorder's failure for `waker`, the thread that
     /// closes it, which the writer wakes when it fails: so the failure is
     /// closed and said at once, and nobody polls for it (the loop only

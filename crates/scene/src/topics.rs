@@ -289,14 +289,8 @@ pub fn scene_status(s: &StateMsg) -> SceneStatus {
     let estimate = s.flags & flags::ESTIMATE != 0;
     let or_nan = |v: f64| if estimate { v } else { f64::NAN };
     let f = s.tip_force_n;
-    let [
-        warn_total_n,
-        stop_total_n,
-        warn_axial_n,
-        stop_axial_n,
-        warn_lateral_n,
-        stop_lateral_n,
-    ] = s.limits_n;
+    // The wire's order of the six limits is the estimator's (one home).
+    let limits = sar_estimator::guard::ForceLimits::from_array(s.limits_n);
     SceneStatus {
         stamp_ns: s.now_ns,
         cycle: s.cycle,
@@ -306,12 +300,12 @@ pub fn scene_status(s: &StateMsg) -> SceneStatus {
         force_total_n: or_nan((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt()),
         axial_n: or_nan(s.tip_axial_lateral_n[0]),
         lateral_n: or_nan(s.tip_axial_lateral_n[1]),
-        warn_total_n,
-        stop_total_n,
-        warn_axial_n,
-        stop_axial_n,
-        warn_lateral_n,
-        stop_lateral_n,
+        warn_total_n: limits.warn_total_n,
+        stop_total_n: limits.stop_total_n,
+        warn_axial_n: limits.warn_axial_n,
+        stop_axial_n: limits.stop_axial_n,
+        warn_lateral_n: limits.warn_lateral_n,
+        stop_lateral_n: limits.stop_lateral_n,
         truth_tip_force_n: if s.flags & flags::SIM_TRUTH != 0 {
             s.truth_tip_force_n
         } else {
