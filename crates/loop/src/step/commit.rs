@@ -39,7 +39,7 @@ pub(super) struct Decision {
     /// the drives.
     pub(super) found: Option<Trajectory>,
     /// The trajectory as decided so far.
-    pub(super) trajectory: Option<Trajectory>,
+    pub(super) decided: Option<Trajectory>,
     /// A new plan (a move, or a brake) whose end point goes to the drives.
     pub(super) planned: bool,
     /// A move or an excitation accepted in this cycle: it stands only if it
@@ -67,7 +67,7 @@ impl Decision {
             action: DriveAction::None,
             reply: None,
             found,
-            trajectory: found,
+            decided: found,
             planned: false,
             accepted_motion: false,
             axes: AxesEvent::None,
@@ -79,7 +79,7 @@ impl Decision {
 
     /// A phase's change of the trajectory, applied to the working copy.
     pub(super) fn change(&mut self, change: TrajectoryChange) {
-        self.trajectory = change.applied_to(self.trajectory);
+        self.decided = change.applied_to(self.decided);
     }
 }
 
@@ -98,10 +98,10 @@ impl LoopStep {
     ) -> &LoopOutput {
         let carried_out = matches!(d.action, DriveAction::Setpoint(_) | DriveAction::Stream(_));
         if d.accepted_motion && !carried_out {
-            d.trajectory = d.found;
+            d.decided = d.found;
             d.reply = Some((ReplyStatus::NotCarriedOut, ReplyDetail::NotCarriedOut));
         }
-        self.trajectory = d.trajectory;
+        self.trajectory = d.decided;
         self.commit_axes(input, &d);
         self.last_drive_state = input.drive_state;
         if d.guarded_stop.is_some() {

@@ -290,23 +290,23 @@ impl LoopStep {
             }
         }
         self.observe_force(input, estimate);
-        if let Some(answered) = self.answer_request(input, estimate, d.trajectory.as_ref()) {
+        if let Some(answered) = self.answer_request(input, estimate, d.decided.as_ref()) {
             d.reply = Some(answered.answer);
             d.change(answered.change);
             d.planned |= answered.started == Started::Move;
             d.accepted_motion = answered.started != Started::Nothing;
         }
         if self.force.mode().is_some() && !estimate.guard_state.is_halting() {
-            let change = self.force_period(input, estimate, d.trajectory.as_ref());
+            let change = self.force_period(input, estimate, d.decided.as_ref());
             d.change(change);
         }
         self.update_guarded_rate(input, estimate);
-        if let Some(brake) = self.brake_if_due(input, estimate, d.trajectory.as_ref()) {
+        if let Some(brake) = self.brake_if_due(input, estimate, d.decided.as_ref()) {
             d.change(TrajectoryChange::Replace(brake.trajectory));
             d.planned = true;
             d.guarded_stop = brake.guarded_stop;
         }
-        d.change(self.end_excitation_if_due(input, estimate, d.trajectory.as_ref()));
+        d.change(self.end_excitation_if_due(input, estimate, d.decided.as_ref()));
         if let Some(action) = self.motion_action(input, estimate, d) {
             d.action = action;
         }
@@ -371,7 +371,7 @@ impl LoopStep {
         if estimate.guard_state.is_halting() || d.action != DriveAction::None || !enabled {
             return None;
         }
-        let (Some(t), Some(now_ns)) = (d.trajectory, input.now_ns) else {
+        let (Some(t), Some(now_ns)) = (d.decided, input.now_ns) else {
             return None;
         };
         if t.streamed {
