@@ -137,6 +137,8 @@ use drives::HeldReset;
 use moves::MoveTarget;
 use sar_estimator::cycle::{Bias, CycleContext, CycleOutput, Estimator, EstimatorConfig};
 use sar_estimator::force_control::{ForceController, ForceMode};
+#[cfg(doc)]
+use sar_estimator::guard::Reason;
 use sar_hal::DriveState;
 use sar_kinematics::{ActiveJoints, Calibration, Profile};
 use trajectory::{Trajectory, TrajectoryChange};

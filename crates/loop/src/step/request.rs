@@ -1,6 +1,8 @@
 //! The operator's requests to the loop: what a cycle's input may carry
 //! ([`super::LoopInput::request`]), each answered in that cycle.
 
+#[cfg(doc)]
+use super::LoopOutput;
 use crate::excite::ExciteRequest;
 use sar_estimator::Vec3;
 use sar_estimator::guard::ForceLimits;
