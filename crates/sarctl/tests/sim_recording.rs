@@ -427,7 +427,14 @@ fn the_demo_paced_at_real_time_records_the_run_made_at_full_speed() {
     let dir = support::scratch("simtime_paced");
     let (config, rec_dir) = support::recording_config(&dir);
     let fast = simulated_run(&config, &rec_dir, "max", 3_000, "max", &[]);
-    let paced = simulated_run(&config, &rec_dir, "1", 3_000, "paced", &[fast.clone()]);
+    let paced = simulated_run(
+        &config,
+        &rec_dir,
+        "1",
+        3_000,
+        "paced",
+        std::slice::from_ref(&fast),
+    );
     assert_one_run(&fast, &paced, 3_000);
     let out = sarctl(&["--format", "json", "replay", "--input"], &[&paced]);
     assert!(out.status.success(), "{}", text(&out.stderr));
