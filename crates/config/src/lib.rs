@@ -338,12 +338,12 @@ fn build(ctx: &Ctx<'_>, raw: keys::FileRaw) -> Result<Config, ConfigError> {
     record.scales = DeviceScales::of_drivers(&sensor_driver, &axes_driver);
     let axes = keys::axes::build(&f);
     let rates = (tip.sample_rate_hz, loop_.rate_hz);
-    let force_control = keys::force_control::build(ctx, &f, rates)?;
+    // The slender rod's default is m L^2 / 12 of the checked rod.
+    let (inertia, inertia_measured) = keys::manipulator::inertia(ctx, &f, &profile)?;
+    let force_control = keys::force_control::build(ctx, &f, rates, (&profile, &inertia))?;
     let identify = keys::identify::build(&f.identify);
     let ros2 = keys::ros2::build(ctx, &f.ros2, record.scene_period_ns)?;
     relations::check_reach(ctx, &calibration, &profile, &axes.travel_m)?;
-    // The slender rod's default is m L^2 / 12 of the checked rod.
-    let (inertia, inertia_measured) = keys::manipulator::inertia(ctx, &f, &profile)?;
     let config = Config {
         origin: ctx.origin.to_owned(),
         manipulator_name: f.manipulator.name.clone(),

@@ -34,6 +34,8 @@
 //! stability bound ([`ForceControlConfig::phase_margin_deg`]).
 
 use crate::filter::{FilterConfig, TipFilter};
+use crate::force_range::{Loop, STIFFNESS_FRACTIONS, case_margin, each_servo};
+pub use crate::force_range::{PlantRange, RangeCase, TipInertia};
 use crate::{SettingError, Vec3, positive};
 
 /// The admittance of one tip-frame part.
@@ -87,6 +89,25 @@ pub struct ForceControlLimits {
     /// Its damping ratio zeta (finite, > 0; `[axes] servo_damping`).
     pub servo_damping: f64,
 }
+
+/// The range of the defaults (FORCE_CONTROL.md, "Stability over the
+/// plant's range"): what the default law holds with its margin at the
+/// stiffest tissue for rods of up to 4.2 kg (26.5 degrees with
+/// manipulator 2 at 0.15 m past the support, 25.3 with manipulator 4): the
+/// servo within 0.95-1.05x the configured bandwidth, damping 0.65-0.75, no
+/// pure delay; I_perp 0.67-1.5x. Issue 34's range (0.4x to ideal
+/// drives, damping 0.45-1.0, a 2 ms delay) is not stable with this law:
+/// the estimator's inertia compensation, driven by the servo's model,
+/// feeds back `m s^2 (G - G_model)`.
+pub const DEFAULT_RANGE: PlantRange = PlantRange {
+    servo_bandwidth_min_ratio: 0.95,
+    servo_bandwidth_max_ratio: 1.05,
+    servo_damping_min: 0.65,
+    servo_damping_max: 0.75,
+    servo_delay_max_s: 0.0,
+    inertia_perp_ratio_min: 0.67,
+    inertia_perp_ratio_max: 1.5,
+};
 
 impl Default for ForceControlLimits {
     /// The defaults of FORCE_CONTROL.md: axial D 80 N s/m, M 0.2 kg;
@@ -204,6 +225,91 @@ impl ForceControlConfig {
         Ok(config)
     }
 
+    /// [`Self::new`], and stable over the plant's range (issue 34): the
+    /// phase margin at least `min_phase_margin_deg` for every servo and rod
+    /// of `range`, on the rod `tip` ([`Self::range_margin`]). The range and
+    /// the rod gate the start only: they are not part of the settings the
+    /// loop runs with (nor of a snapshot's fingerprint).
+    pub fn over_range(
+        limits: ForceControlLimits,
+        range: &PlantRange,
+        tip: &TipInertia,
+    ) -> Result<Self, SettingError> {
+        let config = Self::new(limits)?;
+        check_range(range, tip)?;
+        let worst = config.range_margin(range, tip);
+        if worst.margin_deg < limits.min_phase_margin_deg {
+            return Err(SettingError::NotStableOverRange {
+                field: worst_field(&limits, range, &worst),
+                case: worst,
+                min_deg: limits.min_phase_margin_deg,
+            });
+        }
+        Ok(config)
+    }
+
+    /// The smallest phase margin over the plant's `range` on the rod `tip`
+    /// (`crate::force_range`), both parts, stiffnesses up to
+    /// `max_stiffness_n_per_m`: the worst case.
+    pub fn range_margin(&self, range: &PlantRange, tip: &TipInertia) -> RangeCase {
+        let l = &self.limits;
+        let ti = tip;
+        let sweep = Loop {
+            filter: TipFilter::new(self.filter)
+                .map_or(([0.0; 3], [1.0, 0.0, 0.0]), |f| f.coefficients()),
+            sample_period_s: l.sample_period_s,
+            other_delay_s: l.other_delay_s,
+            model: (l.servo_bandwidth_hz, l.servo_damping),
+        };
+        let r = range;
+        let mut worst: Option<RangeCase> = None;
+        let mut keep = |c: RangeCase| {
+            if worst.is_none_or(|w| c.margin_deg < w.margin_deg) {
+                worst = Some(c);
+            }
+        };
+        each_servo(
+            (l.servo_bandwidth_hz, l.servo_damping),
+            r,
+            |bw, damping, delay_s| {
+                for fraction in STIFFNESS_FRACTIONS {
+                    let case = RangeCase {
+                        axial: true,
+                        servo_bandwidth_hz: bw,
+                        servo_damping: damping,
+                        servo_delay_s: delay_s,
+                        inertia_perp_ratio: 1.0,
+                        stiffness_n_per_m: fraction * l.max_stiffness_n_per_m,
+                        margin_deg: 0.0,
+                        at_rad_s: 0.0,
+                    };
+                    let ax = (l.axial.mass_kg, l.axial.damping_n_s_per_m);
+                    keep(case_margin(&sweep, case, ax, (ti.axial_kg, ti.axial_kg)));
+                    let lat = (l.lateral.mass_kg, l.lateral.damping_n_s_per_m);
+                    for ratio in [r.inertia_perp_ratio_min, 1.0, r.inertia_perp_ratio_max] {
+                        let m_true = ti.lateral_kg + (ratio - 1.0) * ti.inertia_perp_kg;
+                        let case = RangeCase {
+                            axial: false,
+                            inertia_perp_ratio: ratio,
+                            ..case
+                        };
+                        keep(case_margin(&sweep, case, lat, (ti.lateral_kg, m_true)));
+                    }
+                }
+            },
+        );
+        worst.unwrap_or(RangeCase {
+            axial: true,
+            servo_bandwidth_hz: l.servo_bandwidth_hz,
+            servo_damping: l.servo_damping,
+            servo_delay_s: 0.0,
+            inertia_perp_ratio: 1.0,
+            stiffness_n_per_m: 0.0,
+            margin_deg: 180.0,
+            at_rad_s: 0.0,
+        })
+    }
+
     /// The checked settings.
     pub fn limits(&self) -> &ForceControlLimits {
         &self.limits
@@ -253,6 +359,89 @@ impl ForceControlConfig {
     /// The low-pass of the controller.
     pub fn filter(&self) -> FilterConfig {
         self.filter
+    }
+}
+
+/// The range's own checks: every bound finite, within its sense.
+fn check_range(r: &PlantRange, ti: &TipInertia) -> Result<(), SettingError> {
+    let within = |field, v: f64, ok: bool, why| {
+        if v.is_finite() && ok {
+            Ok(())
+        } else {
+            Err(invalid(field, v, why))
+        }
+    };
+    let bw_min = r.servo_bandwidth_min_ratio;
+    within(
+        "servo_bandwidth_min_ratio",
+        bw_min,
+        bw_min > 0.0 && bw_min <= 1.0,
+        "must be within (0, 1]",
+    )?;
+    let bw_max = r.servo_bandwidth_max_ratio;
+    within(
+        "servo_bandwidth_max_ratio",
+        bw_max,
+        bw_max == 0.0 || bw_max >= 1.0,
+        "must be 0 (up to ideal drives) or at least 1",
+    )?;
+    let (z_min, z_max) = (r.servo_damping_min, r.servo_damping_max);
+    within("servo_damping_min", z_min, z_min > 0.0, "must be > 0")?;
+    within(
+        "servo_damping_max",
+        z_max,
+        z_max >= z_min,
+        "must be at least servo_damping_min",
+    )?;
+    let d = r.servo_delay_max_s;
+    within("servo_delay_max_s", d, d >= 0.0, "must be >= 0")?;
+    let (i_min, i_max) = (r.inertia_perp_ratio_min, r.inertia_perp_ratio_max);
+    within(
+        "inertia_perp_ratio_min",
+        i_min,
+        i_min > 0.0 && i_min <= 1.0,
+        "must be within (0, 1]",
+    )?;
+    within(
+        "inertia_perp_ratio_max",
+        i_max,
+        i_max >= 1.0,
+        "must be at least 1",
+    )?;
+    for (field, v) in [
+        ("tip_inertia.axial_kg", ti.axial_kg),
+        ("tip_inertia.lateral_kg", ti.lateral_kg),
+        ("tip_inertia.inertia_perp_kg", ti.inertia_perp_kg),
+    ] {
+        within(field, v, v >= 0.0, "must be finite and >= 0")?;
+    }
+    Ok(())
+}
+
+/// The range's bound the worst case sits at (the key a refusal names):
+/// the rod's inertia, else the servo's bandwidth, delay or damping, else
+/// the part's damping.
+fn worst_field(l: &ForceControlLimits, r: &PlantRange, w: &RangeCase) -> &'static str {
+    if !w.axial && w.inertia_perp_ratio < 1.0 {
+        "inertia_perp_ratio_min"
+    } else if !w.axial && w.inertia_perp_ratio > 1.0 {
+        "inertia_perp_ratio_max"
+    } else if w.servo_bandwidth_hz == 0.0 && l.servo_bandwidth_hz > 0.0 {
+        "servo_bandwidth_max_ratio"
+    } else if w.servo_bandwidth_hz < l.servo_bandwidth_hz * (1.0 - 1e-9) {
+        "servo_bandwidth_min_ratio"
+    } else if w.servo_bandwidth_hz > l.servo_bandwidth_hz * (1.0 + 1e-9) {
+        "servo_bandwidth_max_ratio"
+    } else if w.servo_delay_s > 0.0 {
+        "servo_delay_max_s"
+    } else if w.servo_damping < l.servo_damping && r.servo_damping_min < l.servo_damping {
+        "servo_damping_min"
+    } else if w.servo_damping > l.servo_damping && r.servo_damping_max > l.servo_damping {
+        "servo_damping_max"
+    } else if w.axial {
+        "axial.damping_n_s_per_m"
+    } else {
+        "lateral.damping_n_s_per_m"
     }
 }
 

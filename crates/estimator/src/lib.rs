@@ -16,6 +16,7 @@ pub mod cycle;
 pub mod error_measure;
 pub mod filter;
 pub mod force_control;
+pub mod force_range;
 pub mod guard;
 pub mod identification;
 pub mod inertial;
@@ -51,6 +52,23 @@ pub enum SettingError {
     /// The tip-force filter's settings were refused.
     #[error("filter: {0}")]
     Filter(#[from] filter::FilterError),
+    /// The force loop would not keep its phase margin over the plant's
+    /// range (issue 34; `force_range`).
+    #[error(
+        "{field}: the force control is not stable over the plant's range: {case} \
+         (at least {min_deg} deg asked); narrow the range (servo_bandwidth_min_ratio, \
+         servo_bandwidth_max_ratio, servo_damping_min, servo_damping_max, \
+         servo_delay_max_s, inertia_perp_ratio_min, inertia_perp_ratio_max, \
+         min_tip_depth_m) or slow the law (the part's damping and mass, filter_cutoff_hz)"
+    )]
+    NotStableOverRange {
+        /// The range's bound (or the law's setting) the worst case sits at.
+        field: &'static str,
+        /// The worst case.
+        case: force_range::RangeCase,
+        /// The margin asked for, degrees.
+        min_deg: f64,
+    },
 }
 
 /// `Ok` if `ok`, else the setting error naming `field`, its value and what

@@ -26,6 +26,8 @@ mod late_cycles;
 mod motion_figures;
 #[path = "force/plant_mismatch.rs"]
 mod plant_mismatch;
+#[path = "force/plant_range.rs"]
+mod plant_range;
 #[path = "force/rig.rs"]
 mod rig;
 #[path = "force/support_shift.rs"]
