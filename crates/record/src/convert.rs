@@ -81,7 +81,14 @@ pub fn cycle_record(
         .new_sample
         .then(|| sensor_wrench(&input.sensor));
     let state = cycle_state(&input.cycle_input(), &decision.estimate);
-    record_cycle(input, decision, joints_new, sensor.into_iter(), &state, emit);
+    record_cycle(
+        input,
+        decision,
+        joints_new,
+        sensor.into_iter(),
+        &state,
+        emit,
+    );
 }
 
 /// [`cycle_record`] as the daemon's recorder writes it: every sensor
