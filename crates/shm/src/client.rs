@@ -1,18 +1,10 @@
 //! A client of the daemon ([`Client`]: commands and replies, the state) and
 //! a subscription to the states ([`StateSubscription`]).
 
-use crate::Names;
-use crate::STATE_BUFFER;
-use crate::SarIpc;
-use crate::access;
-use crate::access::RUNTIME_DIR_ENV;
-use crate::access::Side;
-use crate::access::runtime_dir;
-use crate::error::ShmError;
-use crate::error::open_error;
-use crate::error::port;
-use crate::error::service_name;
+use crate::access::{RUNTIME_DIR_ENV, Side, runtime_dir};
+use crate::error::{ShmError, open_error, port, service_name};
 use crate::node::node_in;
+use crate::{Names, STATE_BUFFER, SarIpc, access};
 use iceoryx2::prelude::*;
 use sar_msgs::wire::{CommandMsg, ReplyMsg, StateMsg};
 use std::path::Path;

@@ -2,17 +2,11 @@
 //! to the publishing thread through a bounded wait-free queue (no iceoryx2
 //! call on the loop's thread), started and stopped with that thread.
 
-use crate::JOIN_WAIT;
-use crate::START_TIMEOUT;
-use crate::STATE_QUEUE;
-use crate::access;
 use crate::access::runtime_dir;
 use crate::error::ShmError;
 use crate::node::LIBRARY_START_TIMEOUT;
-use crate::worker::RecordCommands;
-use crate::worker::Shared;
-use crate::worker::ShmWorker;
-use crate::worker::maintain;
+use crate::worker::{RecordCommands, Shared, ShmWorker, maintain};
+use crate::{JOIN_WAIT, START_TIMEOUT, STATE_QUEUE, access};
 use sar_loop::control::Operator;
 use sar_loop::publish::StateParts;
 use sar_loop::sink::{Cycle, Sink, SinkHealth};

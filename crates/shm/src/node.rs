@@ -1,13 +1,9 @@
 //! The iceoryx2 node of a side (daemon or client) in the runtime directory,
 //! and the cleaning of dead nodes' resources.
 
-use crate::CLIENT_CREATION_TIMEOUT;
-use crate::DAEMON_CREATION_TIMEOUT;
-use crate::SarIpc;
-use crate::access;
-use crate::access::Side;
-use crate::access::runtime_dir;
+use crate::access::{Side, runtime_dir};
 use crate::error::ShmError;
+use crate::{CLIENT_CREATION_TIMEOUT, DAEMON_CREATION_TIMEOUT, SarIpc, access};
 use iceoryx2::prelude::*;
 use std::path::Path;
 use std::time::Duration;

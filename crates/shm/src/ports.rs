@@ -2,19 +2,11 @@
 //! the events, created at start after orphaned services are released and the
 //! runtime directory fenced.
 
-use crate::MAX_CLIENTS;
-use crate::MAX_NODES;
-use crate::MAX_SUBSCRIBERS;
-use crate::Names;
-use crate::ORPHAN_WAIT;
-use crate::STATE_BORROWED;
-use crate::STATE_BUFFER;
-use crate::STATE_HISTORY;
-use crate::SarIpc;
-use crate::access;
-use crate::error::ShmError;
-use crate::error::port;
-use crate::error::service_name;
+use crate::error::{ShmError, port, service_name};
+use crate::{
+    MAX_CLIENTS, MAX_NODES, MAX_SUBSCRIBERS, Names, ORPHAN_WAIT, STATE_BORROWED, STATE_BUFFER,
+    STATE_HISTORY, SarIpc, access,
+};
 use iceoryx2::active_request::ActiveRequest;
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::port::listener::Listener;

@@ -2,24 +2,15 @@
 //! the states the loop queued, takes the operators' commands to the loop and
 //! answers them; the maintenance thread reaps dead clients.
 
-use crate::BATCH_WAIT;
-use crate::Names;
-use crate::REAP_PERIOD;
-use crate::RECORD_ANSWER_WAIT;
-use crate::REPLY_WAIT;
-use crate::SarIpc;
-use crate::WORKER_WAIT;
-use crate::access;
 use crate::access::Side;
 use crate::error::ShmError;
-use crate::node::clean_dead_nodes_in;
-use crate::node::node_in;
-use crate::ports::CommandRequest;
-use crate::ports::CommandServer;
-use crate::ports::StatePublisher;
-use crate::ports::StateService;
-use crate::ports::fence_at_start;
-use crate::ports::services;
+use crate::node::{clean_dead_nodes_in, node_in};
+use crate::ports::{
+    CommandRequest, CommandServer, StatePublisher, StateService, fence_at_start, services,
+};
+use crate::{
+    BATCH_WAIT, Names, REAP_PERIOD, RECORD_ANSWER_WAIT, REPLY_WAIT, SarIpc, WORKER_WAIT, access,
+};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;

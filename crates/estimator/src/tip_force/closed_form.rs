@@ -1,10 +1,7 @@
 //! d = 0: the closed form of MODEL.md 4.1 with its covariance, and the
 //! errors of a pose or a support that give no number.
 
-use super::POSE_UNIT_TOLERANCE;
-use super::Raw;
-use super::TipForceError;
-use super::TipForceEstimator;
+use super::{POSE_UNIT_TOLERANCE, Raw, TipForceError, TipForceEstimator};
 use crate::{Pose, Vec3, check_finite};
 
 impl TipForceEstimator {

@@ -1,10 +1,7 @@
 //! d != 0: the six equilibrium equations of MODEL.md 4.3 eliminated by hand
 //! into a closed form, with the variance the sensor's noise gives it.
 
-use super::POSE_UNIT_TOLERANCE;
-use super::Raw;
-use super::TipForceError;
-use super::TipForceEstimator;
+use super::{POSE_UNIT_TOLERANCE, Raw, TipForceError, TipForceEstimator};
 use crate::{Pose, Vec3};
 
 impl TipForceEstimator {

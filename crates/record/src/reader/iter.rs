@@ -3,8 +3,7 @@
 
 use super::McapReader;
 use super::error::ReadError;
-use super::info::ChannelInfo;
-use super::info::RawMessage;
+use super::info::{ChannelInfo, RawMessage};
 use sar_msgs::msgs::{Outgoing, RosMessage, Topic};
 
 impl<'a> McapReader<'a> {

@@ -1,7 +1,6 @@
 //! Corrupt records passed over ([`Skipped`]) and their tally
 //! ([`SkippedTally`]).
 
-
 /// A corrupt record passed over by [`McapReader::skip_bad_record`], or a
 /// run of them one after the other ([`Skipped::absorb`]).
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -2,23 +2,15 @@
 //! metadata kept, each chunk checked whole before its messages are given to
 //! a visitor.
 
-use super::McapReader;
-use super::Source;
 use super::error::ReadError;
 use super::files::retained_limit;
-use super::info::MessageRef;
-use super::info::OnMessage;
 use super::info::{ChannelInfo, SchemaInfo};
-use super::parse::MAX_CHUNK_BYTES;
-use super::parse::MESSAGE_HEADER;
-use super::parse::RECORD_PREFIX;
-use super::parse::corrupt;
-use super::parse::decompress;
-use super::parse::entry_cost;
-use super::parse::fill_record;
-use super::parse::map_bytes;
-use super::parse::record_parts;
-use super::parse::same_channel;
+use super::info::{MessageRef, OnMessage};
+use super::parse::{
+    MAX_CHUNK_BYTES, MESSAGE_HEADER, RECORD_PREFIX, corrupt, decompress, entry_cost, fill_record,
+    map_bytes, record_parts, same_channel,
+};
+use super::{McapReader, Source};
 use mcap::records::{Record, op};
 use std::collections::BTreeMap;
 use std::sync::Arc;

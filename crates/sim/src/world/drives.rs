@@ -2,8 +2,7 @@
 //! disable, targets and streamed set points, quick stop and fault reset.
 
 use super::World;
-use super::validate::check_fault;
-use super::validate::fault_start_ns;
+use super::validate::{check_fault, fault_start_ns};
 use crate::SimError;
 use crate::spec::Fault;
 use sar_hal::convert::{joints_to_array, ns_to_s};

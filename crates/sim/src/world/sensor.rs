@@ -2,10 +2,7 @@
 //! scaled, spikes, saturation), each measurement and its reception after
 //! the latency, the samples drained, the device-side tare.
 
-use super::Physics;
-use super::World;
-use super::join6;
-use super::split6;
+use super::{Physics, World, join6, split6};
 use crate::spec::Fault;
 use crate::{STATUS_OUT_OF_MODEL, SimError};
 use rand::Rng;

@@ -2,11 +2,8 @@
 //! drive faults fired, the axes' plans and servos stepped, and the physics
 //! (calibration, bias, the rod's wrench) at any instant.
 
-use super::DRAIN_CAPACITY;
-use super::Physics;
-use super::World;
-use super::contact_at;
 use super::validate::drive_fault_event;
+use super::{DRAIN_CAPACITY, Physics, World, contact_at};
 use crate::spec::Fault;
 use crate::statics::{self, Equilibrium, Loads};
 use crate::{SimError, dynamics, tissue};

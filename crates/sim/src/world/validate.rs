@@ -1,9 +1,7 @@
 //! The checks of a simulator's specification ([`validate`]) and of each
 //! scripted fault, before anything runs: one error naming the field.
 
-use super::MAX_IN_FLIGHT;
-use super::MAX_PHYSICS_STEP_NS;
-use super::MIN_PERIOD_NS;
+use super::{MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS};
 use crate::SimError;
 use crate::spec::{
     AxesSpec, ContactKey, Fault, MAX_SUPPORT_SHIFT_M, PlantSpec, SensorSpec, SimSpec, SupportShift,
