@@ -51,7 +51,7 @@ pub use daemon::DaemonShm;
 pub use error::ShmError;
 pub use node::{clean_dead_nodes, clean_dead_nodes_in, config, log_errors_only, node, node_in};
 pub use service::Service as SarIpc;
-pub use worker::ShmWorker;
+pub use worker::{RecordCommands, ShmWorker};
 
 use std::time::Duration;
 
