@@ -1,5 +1,5 @@
 //! The replayer of one set: the step and the estimator run over the
-//! recorded inputs, their outputs written ([`output_writer`]) and matched
+//! recorded inputs, their outputs written (`super::start::output_writer`) and matched
 //! with the recorded ones topic by topic, snapshots compared, gaps counted.
 
 use super::compare::reference_at;
@@ -7,11 +7,10 @@ use super::options::{Mode, ReplayError, ReplayOptions};
 use super::report::{
     Difference, Gap, MAX_FORWARD, MAX_GAPS_SHOWN, ReplayReport, SeriesPoint, describe,
 };
-use super::start::SetStart;
+use super::start::{SetStart, output_writer};
 use super::{MAX_PENDING, OUTPUT_TOPICS};
-use crate::convert::{self, REPLAY_METADATA};
-use crate::file::{FileOptions, RotatingWriter, WriteError};
-use crate::lean;
+use crate::convert;
+use crate::file::RotatingWriter;
 use crate::output::{PendingFile, SpaceWatch};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{CycleContext, CycleInput, CycleOutput, Estimator, TipOutcome};
@@ -590,44 +589,4 @@ impl Replayer {
             self.differ(d);
         }
     }
-}
-
-/// The output file of a replay (`options.output`; `None`: not written),
-/// written into `pending`'s temporary file.
-pub(super) fn output_writer(
-    options: &ReplayOptions,
-    start: &SetStart,
-    pending: Option<&PendingFile>,
-) -> Result<Option<RotatingWriter>, WriteError> {
-    let Some(pending) = pending else {
-        return Ok(None);
-    };
-    let mut o = FileOptions::single(pending.tmp_path());
-    // The replayed file holds every cycle of its input.
-    o.metadata = start
-        .metadata
-        .as_ref()
-        .map(|m| (REPLAY_METADATA.to_owned(), m.clone()))
-        .into_iter()
-        .collect();
-    if start.lean {
-        // The full file of a lean one: its metadata as the full mode
-        // writes it (the configuration too).
-        for (_, m) in &mut o.metadata {
-            m.remove(lean::RECORD_MODE_KEY);
-        }
-        if let Some(c) = &start.config {
-            o.metadata
-                .push((convert::CONFIG_METADATA.to_owned(), c.clone()));
-        }
-    }
-    // The 3D scene, as the daemon's recorder writes it.
-    o.scene = options
-        .scene_period_ns
-        .map(|period_ns| crate::SceneOptions {
-            geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
-            limits_n: options.config.guard.force_limits().to_array(),
-            period_ns,
-        });
-    Ok(Some(RotatingWriter::new(o)?))
 }

@@ -1,10 +1,13 @@
 //! Where a set of files starts: its inputs (bytes or files), and what the
 //! first file's metadata says of the whole set ([`SetStart`]: the bias, the
-//! daemon's first cycle, snapshots, a lean recording).
+//! daemon's first cycle, snapshots, a lean recording), and the output file
+//! made from it ([`output_writer`]).
 
-use super::options::ReplayError;
+use super::options::{ReplayError, ReplayOptions};
 use crate::convert::{self, REPLAY_METADATA, bias_from_metadata};
+use crate::file::{FileOptions, RotatingWriter, WriteError};
 use crate::lean;
+use crate::output::PendingFile;
 use crate::reader::{McapReader, ReadError};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::Bias;
@@ -120,4 +123,44 @@ impl SetStart {
             config,
         })
     }
+}
+
+/// The output file of a replay (`options.output`; `None`: not written),
+/// written into `pending`'s temporary file.
+pub(super) fn output_writer(
+    options: &ReplayOptions,
+    start: &SetStart,
+    pending: Option<&PendingFile>,
+) -> Result<Option<RotatingWriter>, WriteError> {
+    let Some(pending) = pending else {
+        return Ok(None);
+    };
+    let mut o = FileOptions::single(pending.tmp_path());
+    // The replayed file holds every cycle of its input.
+    o.metadata = start
+        .metadata
+        .as_ref()
+        .map(|m| (REPLAY_METADATA.to_owned(), m.clone()))
+        .into_iter()
+        .collect();
+    if start.lean {
+        // The full file of a lean one: its metadata as the full mode
+        // writes it (the configuration too).
+        for (_, m) in &mut o.metadata {
+            m.remove(lean::RECORD_MODE_KEY);
+        }
+        if let Some(c) = &start.config {
+            o.metadata
+                .push((convert::CONFIG_METADATA.to_owned(), c.clone()));
+        }
+    }
+    // The 3D scene, as the daemon's recorder writes it.
+    o.scene = options
+        .scene_period_ns
+        .map(|period_ns| crate::SceneOptions {
+            geometry: sar_scene::geometry::SceneGeometry::from_config(&options.config),
+            limits_n: options.config.guard.force_limits().to_array(),
+            period_ns,
+        });
+    Ok(Some(RotatingWriter::new(o)?))
 }
