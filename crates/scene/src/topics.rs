@@ -355,3 +355,45 @@ pub fn scene_status(s: &StateMsg) -> SceneStatus {
         },
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every subset of the mapped flags crosses to the recording and back
+    /// whole, each to its own recorded flag; observability only with an
+    /// estimate; `CLOCK_ADVANCES` from a known sensor age alone.
+    #[test]
+    fn the_flag_mapping_reads_both_ways() {
+        let wire_all = RECORDED_FLAGS.iter().fold(0, |f, (w, _)| f | w);
+        let recorded_all = RECORDED_FLAGS.iter().fold(0, |f, (_, r)| f | r);
+        assert_eq!(wire_all.count_ones(), 6);
+        assert_eq!(recorded_all.count_ones(), 6);
+        assert_eq!(recorded_all & msgs::flags::CLOCK_ADVANCES, 0);
+        for bits in 0..64u32 {
+            let wire = RECORDED_FLAGS
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| bits & (1 << k) != 0)
+                .fold(0, |f, (_, (w, _))| f | w);
+            let s = StateMsg {
+                flags: wire | flags::NEW_SAMPLE,
+                sensor_age_ns: u64::from(bits),
+                ..StateMsg::default()
+            };
+            let recorded = recorded_flags(&s);
+            assert_ne!(recorded & msgs::flags::CLOCK_ADVANCES, 0, "{bits}");
+            let expected = if wire & flags::ESTIMATE == 0 {
+                wire & !flags::OBSERVABLE
+            } else {
+                wire
+            };
+            assert_eq!(state_flags(recorded), expected, "{bits:#b}");
+        }
+        let unknown_age = StateMsg {
+            sensor_age_ns: u64::MAX,
+            ..StateMsg::default()
+        };
+        assert_eq!(recorded_flags(&unknown_age), 0);
+    }
+}
