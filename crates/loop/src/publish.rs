@@ -1,5 +1,7 @@
 //! The loop's side of the shared-memory payloads (`sar_msgs::wire`): a
-//! cycle's input, decision and statistics as a [`StateMsg`], an operator's
+//! cycle's input, decision and statistics as a [`StateMsg`] (the cycle's
+//! state flattened once, [`cycle_state`], for shared memory and for the
+//! recording), an operator's
 //! [`CommandMsg`] as a loop [`Request`], a [`Reply`] as a [`ReplyMsg`]. The
 //! payloads themselves know nothing of the loop.
 
@@ -7,7 +9,7 @@ use crate::reply::Reply;
 use crate::stats::LoopStats;
 use crate::step::{LoopInput, LoopOutput, Request, reason_code};
 use sar_estimator::Vec3;
-use sar_estimator::cycle::{CycleOutput, TipOutcome};
+use sar_estimator::cycle::{CycleInput, CycleOutput, TipOutcome};
 use sar_hal::{DriveState, WrenchSample};
 use sar_msgs::msgs::TipOutcomeCode;
 use sar_msgs::wire::{
@@ -72,28 +74,66 @@ pub struct SimTruth {
 /// Asked once per published cycle on the loop's thread, when simulated.
 pub type SimTruthFn = Box<dyn FnMut() -> Option<SimTruth>>;
 
-/// One cycle as published.
+/// One cycle as published: [`cycle_state`] of its estimator's input and
+/// output, and what the loop adds (the drives, the limits in use, the
+/// loop's measurements and counters, force control, the simulator's truth,
+/// the sensor samples drained).
 pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
-    let o = &p.decision.estimate;
-    let mut m = state_base(p);
+    let mut m = cycle_state(&p.input.cycle_input(), &p.decision.estimate);
+    m.drive_state = drive_state_code(p.input.drive_state);
+    m.limits_n = p.decision.limits.to_array();
+    add_stats(&mut m, p);
+    add_force_control(&mut m, p.decision);
+    if let Some(t) = p.truth {
+        add_truth(&mut m, &t);
+    }
+    add_sensor_samples(&mut m, p.sensor_samples);
+    m
+}
+
+/// The cycle's state, flattened once for shared memory and the recording:
+/// what the estimator's input and output of one cycle say (stamps, ages,
+/// joints, the guard's state and reasons whole, the pose, the estimate, the
+/// filter, the inputs' validity, the outcome, the transition). The
+/// recording's messages of the cycle are made of it
+/// (`sar_scene::topics::outputs`, used by `sar_record::convert` and by the
+/// live view alike); the loop's parts are zero.
+pub fn cycle_state(input: &CycleInput, o: &CycleOutput) -> StateMsg {
+    let mut m = StateMsg {
+        cycle: o.cycle,
+        now_ns: input.now_ns.unwrap_or(0),
+        sensor_stamp_ns: input.sensor.stamp_ns,
+        joints_stamp_ns: input.joints.stamp_ns,
+        sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
+        joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
+        q_m: [
+            input.joints.joints.q1_m,
+            input.joints.joints.q2_m,
+            input.joints.joints.q3_m,
+        ],
+        guard_state: guard_state_code(o.guard_state),
+        guard_reason: u32::from(reason_code(&o.guard_reason)),
+        ..StateMsg::default()
+    };
     add_pose(&mut m, o);
     add_estimate(&mut m, o);
     if o.new_sample {
         m.flags |= flags::NEW_SAMPLE;
     }
-    add_force_control(&mut m, p.decision);
     // Halted: the guard's Stop or Fault (quick-stopped or never released).
     if o.guard_state.is_halting() {
         m.flags |= flags::HALTED;
     }
-    if let Some(t) = p.truth {
-        m.flags |= flags::SIM_TRUTH;
-        m.truth_tip_force_n = arr(&t.tip_force_n);
-        m.truth_friction_n = arr(&t.friction_force_n);
-        m.truth_elapsed_ns = t.elapsed_ns;
-    }
-    add_recorded(&mut m, p);
+    add_recorded(&mut m, input, o);
     m
+}
+
+/// The simulator's truth in a state (`flags::SIM_TRUTH`).
+pub fn add_truth(m: &mut StateMsg, t: &SimTruth) {
+    m.flags |= flags::SIM_TRUTH;
+    m.truth_tip_force_n = arr(&t.tip_force_n);
+    m.truth_friction_n = arr(&t.friction_force_n);
+    m.truth_elapsed_ns = t.elapsed_ns;
 }
 
 /// The recording's `TIP_*` code of a tip outcome (the recorder's and the
@@ -110,10 +150,8 @@ pub fn tip_outcome_code(tip: &TipOutcome) -> TipOutcomeCode {
 
 /// What the recorder writes of the cycle beyond the rest of the state: the
 /// inputs' validity, the filter, the torsion, the outcome, the reasons
-/// whole, the transition and the sensor samples (a reader makes the
-/// recording's messages of it: `sar_scene::topics::messages`).
-fn add_recorded(m: &mut StateMsg, p: &StateParts<'_>) {
-    let (i, o) = (p.input, &p.decision.estimate);
+/// whole and the transition.
+fn add_recorded(m: &mut StateMsg, i: &CycleInput, o: &CycleOutput) {
     if i.now_ns.is_some() {
         m.flags |= flags::NOW;
     }
@@ -139,13 +177,13 @@ fn add_recorded(m: &mut StateMsg, p: &StateParts<'_>) {
         m.transition_to = guard_state_code(t.to);
         m.transition_reason_bytes = reason_bytes(&t.reason);
     }
+}
+
+/// Every sensor sample received since the previous cycle (the recorder's
+/// `/sar/sensor/wrench`), up to [`STATE_SENSOR_SAMPLES`].
+fn add_sensor_samples(m: &mut StateMsg, samples: &[WrenchSample]) {
     let mut n = 0;
-    for (k, s) in p
-        .sensor_samples
-        .iter()
-        .take(STATE_SENSOR_SAMPLES)
-        .enumerate()
-    {
+    for (k, s) in samples.iter().take(STATE_SENSOR_SAMPLES).enumerate() {
         if let (Some(stamp), Some(force), Some(torque)) = (
             m.sensor_received_ns.get_mut(k),
             m.sensor_force_n.get_mut(k),
@@ -160,42 +198,22 @@ fn add_recorded(m: &mut StateMsg, p: &StateParts<'_>) {
     m.sensor_samples = n;
 }
 
-/// The fields every published cycle has: stamps, ages, joints, the guard's
-/// and the drives' state, the limits, the loop's measurements and counters.
-fn state_base(p: &StateParts<'_>) -> StateMsg {
-    let (i, o) = (p.input, &p.decision.estimate);
-    StateMsg {
-        cycle: o.cycle,
-        now_ns: i.now_ns.unwrap_or(0),
-        sensor_stamp_ns: i.sensor.stamp_ns,
-        joints_stamp_ns: i.joints.stamp_ns,
-        sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
-        joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
-        q_m: [
-            i.joints.joints.q1_m,
-            i.joints.joints.q2_m,
-            i.joints.joints.q3_m,
-        ],
-        guard_state: guard_state_code(o.guard_state),
-        guard_reason: u32::from(reason_code(&o.guard_reason)),
-        drive_state: drive_state_code(i.drive_state),
-        limits_n: p.decision.limits.to_array(),
-        wakeup_ns: [
-            p.stats.wakeup.quantile_ns(0.5),
-            p.stats.wakeup.quantile_ns(0.99),
-            p.stats.wakeup.max_ns(),
-        ],
-        compute_ns: [
-            p.stats.compute.quantile_ns(0.5),
-            p.stats.compute.quantile_ns(0.99),
-            p.stats.compute.max_ns(),
-        ],
-        overruns: p.stats.overruns,
-        quick_stops: p.quick_stops,
-        recorder_drops: p.recorder_drops,
-        recording: p.recording,
-        ..StateMsg::default()
-    }
+/// The loop's measurements and counters.
+fn add_stats(m: &mut StateMsg, p: &StateParts<'_>) {
+    m.wakeup_ns = [
+        p.stats.wakeup.quantile_ns(0.5),
+        p.stats.wakeup.quantile_ns(0.99),
+        p.stats.wakeup.max_ns(),
+    ];
+    m.compute_ns = [
+        p.stats.compute.quantile_ns(0.5),
+        p.stats.compute.quantile_ns(0.99),
+        p.stats.compute.max_ns(),
+    ];
+    m.overruns = p.stats.overruns;
+    m.quick_stops = p.quick_stops;
+    m.recorder_drops = p.recorder_drops;
+    m.recording = p.recording;
 }
 
 /// The pose, when there is one.

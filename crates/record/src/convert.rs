@@ -4,7 +4,10 @@
 //!
 //! - [`outputs`]: `CycleOutput` (+ the cycle's input) -> `/sar/estimate/tip_wrench`
 //!   (every cycle with a number, observable or not), `.../tip_wrench_filtered`,
-//!   `.../passive_joints`, `/sar/estimate/state`, `/sar/guard/events`.
+//!   `.../passive_joints`, `/sar/estimate/state`, `/sar/guard/events`: the
+//!   cycle's state flattened once (`sar_loop::publish::cycle_state`, as
+//!   published in shared memory) and made into the recording's messages by
+//!   the live view's mapping (`sar_scene::topics::outputs`), not here.
 //! - [`cycle_input_msg`] and [`loop_input`]: the loop step's `LoopInput`
 //!   (and its decision: reference, drive action, reply, limits) to
 //!   `/sar/cycle/input` and back, losslessly for every field the step reads.
@@ -17,16 +20,17 @@ use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     Bias, CycleInput, CycleOutput, DrainedSamples, JointSample, SensorSample, TipOutcome,
 };
-use sar_estimator::guard::{ForceLimits, GuardState};
+use sar_estimator::guard::ForceLimits;
 use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
+use sar_loop::publish::{SimTruth, add_truth, cycle_state};
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request};
 use sar_msgs::msgs::{
     ActiveJointState, ClockStatusCode, CommandKindCode, CycleInput as CycleInputMsg,
-    DriveActionCode, DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
-    PassiveJointState, REPLY_NONE, ReasonText, WrenchStamped, flags,
+    DriveActionCode, DriveStateCode, Outgoing, REPLY_NONE, WrenchStamped,
 };
-use std::fmt::Write as _;
+use sar_msgs::wire::StateMsg;
+use sar_scene::topics;
 
 fn arr(v: &Vec3) -> [f64; 3] {
     [v.x, v.y, v.z]
@@ -34,17 +38,6 @@ fn arr(v: &Vec3) -> [f64; 3] {
 
 fn vec3(&[x, y, z]: &[f64; 3]) -> Vec3 {
     Vec3::new(x, y, z)
-}
-
-/// The guard state's recorded code.
-pub fn guard_code(s: GuardState) -> GuardStateCode {
-    match s {
-        GuardState::Ok => GuardStateCode::Ok,
-        GuardState::Warn => GuardStateCode::Warn,
-        GuardState::Stop => GuardStateCode::Stop,
-        GuardState::Fault => GuardStateCode::Fault,
-        GuardState::Retreat => GuardStateCode::Retreat,
-    }
 }
 
 /// The stamp of every message of a cycle: its `now`; when the clock could
@@ -64,40 +57,13 @@ fn stamp_of(now_ns: Option<u64>, sensor: &SensorSample, joints: &JointSample) ->
 }
 
 /// The output messages of one cycle, in a fixed order (state, tip wrench,
-/// filtered, passive joints, guard event), each handed to `emit`.
-pub fn outputs(input: &CycleInput, output: &CycleOutput, mut emit: impl FnMut(Outgoing)) {
-    let stamp_ns = cycle_stamp_ns(input);
-    emit(Outgoing::EstimatorState(estimator_state(input, output)));
-    if let TipOutcome::Estimate(e) = output.tip {
-        emit(Outgoing::TipWrench(WrenchStamped::base_force(
-            stamp_ns,
-            arr(&e.force_n),
-        )));
-    }
-    if let Some(f) = output.filtered {
-        emit(Outgoing::TipWrenchFiltered(WrenchStamped::base_force(
-            stamp_ns,
-            arr(&f.force_n),
-        )));
-    }
-    if let Some(pose) = output.pose {
-        emit(Outgoing::PassiveJoints(PassiveJointState {
-            stamp_ns,
-            q_rad: [pose.q4_rad(), pose.q5_rad()],
-        }));
-    }
-    if let Some(t) = output.transition {
-        let mut reason_text = ReasonText::default();
-        let _ = write!(reason_text, "{}", t.reason);
-        emit(Outgoing::GuardEvent(GuardEvent {
-            stamp_ns,
-            cycle: t.cycle,
-            from_state: guard_code(t.from),
-            to_state: guard_code(t.to),
-            reason_code: t.reason.recorded_code(),
-            reason_text,
-        }));
-    }
+/// filtered, passive joints, guard event), each handed to `emit`: the
+/// cycle's state flattened once (`sar_loop::publish::cycle_state`, the
+/// published state's own) and made into messages by the live view's mapping
+/// (`sar_scene::topics::outputs`), so the recording and the live topics are
+/// one code.
+pub fn outputs(input: &CycleInput, output: &CycleOutput, emit: impl FnMut(Outgoing)) {
+    topics::outputs(&cycle_state(input, output), emit);
 }
 
 /// Every message of one cycle of a daemon recording, in the recorded order:
@@ -114,33 +80,52 @@ pub fn cycle_record(
         .estimate
         .new_sample
         .then(|| sensor_wrench(&input.sensor));
-    record_cycle(input, decision, joints_new, sensor.into_iter(), emit);
+    let state = cycle_state(&input.cycle_input(), &decision.estimate);
+    record_cycle(
+        input,
+        decision,
+        joints_new,
+        sensor.into_iter(),
+        &state,
+        emit,
+    );
 }
 
 /// [`cycle_record`] as the daemon's recorder writes it: every sensor
 /// sample received since the previous cycle (`samples`, oldest first) as
 /// `/sar/sensor/wrench`, instead of only the one the step used (its counter
-/// and stamp are in `/sar/cycle/input`; its message is among these).
+/// and stamp are in `/sar/cycle/input`; its message is among these), and
+/// on the simulator its truth, last (`/sar/sim/tip_wrench_truth` with every
+/// new sample: `sar_scene::topics::sim_truth`).
 pub fn cycle_record_samples(
     input: &LoopInput,
     decision: &LoopOutput,
     joints_new: bool,
     samples: &[sar_hal::WrenchSample],
-    emit: impl FnMut(Outgoing),
+    truth: Option<SimTruth>,
+    mut emit: impl FnMut(Outgoing),
 ) {
     let sensor = samples
         .iter()
         .map(|s| WrenchStamped::sensor(s.received_ns, arr(&s.force_n), arr(&s.torque_nm)));
-    record_cycle(input, decision, joints_new, sensor, emit);
+    let mut state = cycle_state(&input.cycle_input(), &decision.estimate);
+    if let Some(t) = truth {
+        add_truth(&mut state, &t);
+    }
+    record_cycle(input, decision, joints_new, sensor, &state, &mut emit);
+    if let Some(m) = topics::sim_truth(&state) {
+        emit(m);
+    }
 }
 
 /// One cycle's messages in their fixed order: the cycle input, the sensor
-/// messages given, the joints when new, the outputs.
+/// messages given, the joints when new, the outputs of the cycle's state.
 fn record_cycle(
     input: &LoopInput,
     decision: &LoopOutput,
     joints_new: bool,
     sensor: impl Iterator<Item = WrenchStamped>,
+    state: &StateMsg,
     mut emit: impl FnMut(Outgoing),
 ) {
     emit(Outgoing::CycleInput(cycle_input_msg(input, decision)));
@@ -150,7 +135,7 @@ fn record_cycle(
     if joints_new {
         emit(Outgoing::Joints(joints_msg(&input.joints)));
     }
-    outputs(&input.cycle_input(), &decision.estimate, emit);
+    topics::outputs(state, emit);
 }
 
 /// How many messages [`outputs`] gives for `output`.
@@ -159,58 +144,6 @@ pub fn output_count(output: &CycleOutput) -> u64 {
         + u64::from(output.filtered.is_some())
         + u64::from(output.pose.is_some())
         + u64::from(output.transition.is_some())
-}
-
-/// `/sar/estimate/state` of one cycle.
-pub fn estimator_state(input: &CycleInput, o: &CycleOutput) -> EstimatorState {
-    let mut reason_text = ReasonText::default();
-    let _ = write!(reason_text, "{}", o.guard_reason);
-    let mut m = EstimatorState {
-        stamp_ns: cycle_stamp_ns(input),
-        cycle: o.cycle,
-        now_ns: input.now_ns.unwrap_or(0),
-        sensor_stamp_ns: input.sensor.stamp_ns,
-        joints_stamp_ns: input.joints.stamp_ns,
-        sensor_age_ns: o.sensor_age_ns.unwrap_or(u64::MAX),
-        joints_age_ns: o.joints_age_ns.unwrap_or(u64::MAX),
-        guard_state: guard_code(o.guard_state),
-        guard_reason_code: o.guard_reason.recorded_code(),
-        guard_reason_text: reason_text,
-        ..EstimatorState::default()
-    };
-    m.tip_outcome = sar_loop::publish::tip_outcome_code(&o.tip);
-    if let Some(pose) = o.pose {
-        m.flags |= flags::POSE_VALID;
-        m.ujoint_m = arr(&pose.ujoint_m);
-        m.tip_m = arr(&pose.tip_m);
-        m.support_distance_m = pose.support_distance_m;
-    }
-    if let TipOutcome::Estimate(e) = o.tip {
-        m.flags |= flags::TIP_VALID;
-        if e.observable {
-            m.flags |= flags::OBSERVABLE;
-        }
-        m.ujoint_force_n = arr(&e.ujoint_force_n);
-        m.tip_force_n = arr(&e.force_n);
-        m.tip_force_std_n = arr(&e.std_n);
-        m.axial_n = e.axial_n;
-        m.lateral_n = e.lateral_n;
-        m.torsion_nm = e.torsion_nm;
-    }
-    if let Some(f) = o.filtered {
-        m.flags |= flags::FILTERED_VALID;
-        m.tip_force_filtered_n = arr(&f.force_n);
-    }
-    if input.sensor.valid {
-        m.flags |= flags::SENSOR_VALID;
-    }
-    if input.joints.valid {
-        m.flags |= flags::JOINTS_VALID;
-    }
-    if o.sensor_age_ns.is_some() {
-        m.flags |= flags::CLOCK_ADVANCES;
-    }
-    m
 }
 
 /// The drive state's recorded code, the faulted axis (-1 for none) and the

@@ -30,7 +30,7 @@ use crossbeam_queue::ArrayQueue;
 use sar_config::RecordSettings;
 use sar_estimator::cycle::Bias;
 use sar_loop::sink::{Cycle, Sink, SinkHealth};
-use sar_msgs::msgs::{Outgoing, SnapshotChunk, WrenchStamped};
+use sar_msgs::msgs::SnapshotChunk;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
@@ -319,19 +319,11 @@ impl Sink for LiveRecorder {
                 c.decision,
                 joints_new,
                 c.sensor_samples,
+                truth,
                 |m| {
                     rec.push(m);
                 },
             );
-            if let Some(t) = &truth
-                && c.decision.estimate.new_sample
-            {
-                let visible = t.tip_force_n - t.friction_force_n;
-                rec.push(Outgoing::SimTruth(WrenchStamped::base_force(
-                    convert::cycle_stamp_ns(&input.cycle_input()),
-                    [visible.x, visible.y, visible.z],
-                )));
-            }
             // The state after this cycle, at the start of a recording and
             // then periodically: replay restores it and steps the cycles
             // after it (the writer starts a rotated file with one).
@@ -783,6 +775,7 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::expect_used)]
 
     use super::*;
+    use sar_msgs::msgs::{Outgoing, WrenchStamped};
 
     /// A paused recorder (no writer thread) into `dir`.
     fn recorder(dir: &Path, name: &str) -> Recorder {

@@ -13,6 +13,11 @@
 //! `.../passive_joints`, `/sar/guard/events`, `/sar/sim/tip_wrench_truth`.
 //! Only `/sar/cycle/input` (the step's whole input, for replay) is not made.
 //!
+//! The mapping between the published state's flags and the recording's is
+//! one table, [`RECORDED_FLAGS`], read both ways. The cycle's state itself is
+//! flattened once, by `sar_loop::publish::cycle_state`; the recorder makes
+//! its output messages of that with [`outputs`].
+//!
 //! The 3D scene of a cycle is drawn from its recorded messages
 //! ([`scene_state`]) by the recorder's writer and by `sar-ros2` alike.
 
@@ -72,6 +77,49 @@ pub fn cycle_stamp_ns(s: &StateMsg) -> u64 {
     }
 }
 
+/// The published state's flags and the recording's `EstimatorState` flags
+/// they are (`sar_msgs::wire::flags` -> `sar_msgs::msgs::flags`): the one
+/// mapping, both ways ([`recorded_flags`], [`state_flags`]). The
+/// recording's `CLOCK_ADVANCES` has no flag of its own on the wire: it is a
+/// known sensor age.
+pub const RECORDED_FLAGS: [(u32, u32); 6] = [
+    (flags::POSE, msgs::flags::POSE_VALID),
+    (flags::ESTIMATE, msgs::flags::TIP_VALID),
+    (flags::OBSERVABLE, msgs::flags::OBSERVABLE),
+    (flags::FILTERED, msgs::flags::FILTERED_VALID),
+    (flags::SENSOR_VALID, msgs::flags::SENSOR_VALID),
+    (flags::JOINTS_VALID, msgs::flags::JOINTS_VALID),
+];
+
+/// The recording's flags of a published state's ([`RECORDED_FLAGS`]; an
+/// estimate's observability only with the estimate, and `CLOCK_ADVANCES`
+/// when the sensor's age is known).
+pub fn recorded_flags(s: &StateMsg) -> u32 {
+    let mut wire = s.flags;
+    if wire & flags::ESTIMATE == 0 {
+        wire &= !flags::OBSERVABLE;
+    }
+    let mut f = map_flags(wire, RECORDED_FLAGS);
+    if s.sensor_age_ns != u64::MAX {
+        f |= msgs::flags::CLOCK_ADVANCES;
+    }
+    f
+}
+
+/// The published state's flags of a recording's ([`RECORDED_FLAGS`], the
+/// inverse of [`recorded_flags`]).
+pub fn state_flags(recorded: u32) -> u32 {
+    map_flags(recorded, RECORDED_FLAGS.map(|(w, r)| (r, w)))
+}
+
+/// The flags of `to` whose `from` is set in `bits`.
+fn map_flags(bits: u32, pairs: [(u32, u32); 6]) -> u32 {
+    pairs
+        .iter()
+        .filter(|(from, _)| bits & from != 0)
+        .fold(0, |f, (_, to)| f | to)
+}
+
 /// `/sar/estimate/state` of a published state: the recorder's message of
 /// the cycle.
 pub fn estimator_state(s: &StateMsg) -> EstimatorState {
@@ -84,6 +132,7 @@ pub fn estimator_state(s: &StateMsg) -> EstimatorState {
         sensor_age_ns: s.sensor_age_ns,
         joints_age_ns: s.joints_age_ns,
         guard_state: guard_state(s.guard_state),
+        flags: recorded_flags(s),
         ..EstimatorState::default()
     };
     (m.guard_reason_code, m.guard_reason_text) = reason_whole(&s.guard_reason_bytes);
@@ -92,16 +141,11 @@ pub fn estimator_state(s: &StateMsg) -> EstimatorState {
         .and_then(|c| TipOutcomeCode::from_code(c).ok())
         .unwrap_or(TipOutcomeCode::Refused);
     if s.flags & flags::POSE != 0 {
-        m.flags |= msgs::flags::POSE_VALID;
         m.ujoint_m = s.ujoint_m;
         m.tip_m = s.tip_m;
         m.support_distance_m = s.support_distance_m;
     }
     if s.flags & flags::ESTIMATE != 0 {
-        m.flags |= msgs::flags::TIP_VALID;
-        if s.flags & flags::OBSERVABLE != 0 {
-            m.flags |= msgs::flags::OBSERVABLE;
-        }
         m.ujoint_force_n = s.ujoint_force_n;
         m.tip_force_n = s.tip_force_n;
         m.tip_force_std_n = s.tip_std_n;
@@ -110,18 +154,7 @@ pub fn estimator_state(s: &StateMsg) -> EstimatorState {
         m.torsion_nm = s.torsion_nm;
     }
     if s.flags & flags::FILTERED != 0 {
-        m.flags |= msgs::flags::FILTERED_VALID;
         m.tip_force_filtered_n = s.tip_force_filtered_n;
-    }
-    if s.flags & flags::SENSOR_VALID != 0 {
-        m.flags |= msgs::flags::SENSOR_VALID;
-    }
-    if s.flags & flags::JOINTS_VALID != 0 {
-        m.flags |= msgs::flags::JOINTS_VALID;
-    }
-    // The sensor's age is known when the clock advanced.
-    if s.sensor_age_ns != u64::MAX {
-        m.flags |= msgs::flags::CLOCK_ADVANCES;
     }
     m
 }
@@ -132,7 +165,6 @@ pub fn estimator_state(s: &StateMsg) -> EstimatorState {
 /// time without one).
 pub fn messages(s: &StateMsg, previous: Option<&StateMsg>, out: &mut Vec<Outgoing>) {
     out.clear();
-    let stamp_ns = cycle_stamp_ns(s);
     let samples = usize::try_from(s.sensor_samples)
         .unwrap_or(STATE_SENSOR_SAMPLES)
         .min(STATE_SENSOR_SAMPLES);
@@ -153,28 +185,38 @@ pub fn messages(s: &StateMsg, previous: Option<&StateMsg>, out: &mut Vec<Outgoin
             q_m: s.q_m,
         }));
     }
-    out.push(Outgoing::EstimatorState(estimator_state(s)));
+    outputs(s, |m| out.push(m));
+    out.extend(sim_truth(s));
+}
+
+/// The estimator's output messages of one cycle's state, in the recorder's
+/// fixed order (state, tip wrench, filtered, passive joints, guard event),
+/// each handed to `emit`: the recorder's (`sar_record::convert::outputs`,
+/// of `sar_loop::publish::cycle_state`) and the live view's one mapping.
+pub fn outputs(s: &StateMsg, mut emit: impl FnMut(Outgoing)) {
+    let stamp_ns = cycle_stamp_ns(s);
+    emit(Outgoing::EstimatorState(estimator_state(s)));
     if s.flags & flags::ESTIMATE != 0 {
-        out.push(Outgoing::TipWrench(WrenchStamped::base_force(
+        emit(Outgoing::TipWrench(WrenchStamped::base_force(
             stamp_ns,
             s.tip_force_n,
         )));
     }
     if s.flags & flags::FILTERED != 0 {
-        out.push(Outgoing::TipWrenchFiltered(WrenchStamped::base_force(
+        emit(Outgoing::TipWrenchFiltered(WrenchStamped::base_force(
             stamp_ns,
             s.tip_force_filtered_n,
         )));
     }
     if s.flags & flags::POSE != 0 {
-        out.push(Outgoing::PassiveJoints(PassiveJointState {
+        emit(Outgoing::PassiveJoints(PassiveJointState {
             stamp_ns,
             q_rad: s.q45_rad,
         }));
     }
     if s.flags & flags::TRANSITION != 0 {
         let (reason_code, reason_text) = reason_whole(&s.transition_reason_bytes);
-        out.push(Outgoing::GuardEvent(GuardEvent {
+        emit(Outgoing::GuardEvent(GuardEvent {
             stamp_ns,
             cycle: s.transition_cycle,
             from_state: guard_state(s.transition_from),
@@ -183,14 +225,19 @@ pub fn messages(s: &StateMsg, previous: Option<&StateMsg>, out: &mut Vec<Outgoin
             reason_text,
         }));
     }
-    // The simulator's visible truth with every new sample, as recorded.
-    if s.flags & flags::SIM_TRUTH != 0 && s.flags & flags::NEW_SAMPLE != 0 {
+}
+
+/// `/sar/sim/tip_wrench_truth` of a state: the simulator's visible truth
+/// (the true tip force less the support's friction) with every new sample,
+/// as recorded; `None` otherwise.
+pub fn sim_truth(s: &StateMsg) -> Option<Outgoing> {
+    (s.flags & flags::SIM_TRUTH != 0 && s.flags & flags::NEW_SAMPLE != 0).then(|| {
         let [t, f] = [s.truth_tip_force_n, s.truth_friction_n];
-        out.push(Outgoing::SimTruth(WrenchStamped::base_force(
-            stamp_ns,
+        Outgoing::SimTruth(WrenchStamped::base_force(
+            cycle_stamp_ns(s),
             [t[0] - f[0], t[1] - f[1], t[2] - f[2]],
-        )));
-    }
+        ))
+    })
 }
 
 /// What the scene of a cycle is drawn from, as the recorder's writer gathers
@@ -234,7 +281,9 @@ pub fn scene_state(i: &SceneInput) -> StateMsg {
 }
 
 /// A state for the scene (`draw::scene`) from the recorded messages of one
-/// cycle (the inverse of [`messages`] for what the scene needs): the
+/// cycle (the inverse of [`outputs`] for every field and flag the
+/// recording's state carries, [`state_flags`]; the guard's reason as its
+/// code, not whole): the
 /// recorder, which holds `EstimatorState`, the joints and the passive
 /// joints rather than the published state, draws the same scene with it.
 /// `limits_n` are the guard's (`ForceLimits::to_array`), which the recordings
@@ -245,16 +294,7 @@ pub fn state_from_recorded(
     passive: Option<&PassiveJointState>,
     limits_n: [f64; 6],
 ) -> StateMsg {
-    let mut f = 0;
-    for (wire, rec) in [
-        (flags::POSE, msgs::flags::POSE_VALID),
-        (flags::ESTIMATE, msgs::flags::TIP_VALID),
-        (flags::OBSERVABLE, msgs::flags::OBSERVABLE),
-    ] {
-        if est.flags & rec != 0 {
-            f |= wire;
-        }
-    }
+    let mut f = state_flags(est.flags);
     if passive.is_none() {
         f &= !flags::POSE;
     }
@@ -274,6 +314,8 @@ pub fn state_from_recorded(
         tip_force_n: est.tip_force_n,
         tip_std_n: est.tip_force_std_n,
         tip_axial_lateral_n: [est.axial_n, est.lateral_n],
+        torsion_nm: est.torsion_nm,
+        tip_force_filtered_n: est.tip_force_filtered_n,
         flags: f,
         guard_state: u32::from(est.guard_state.code()),
         guard_reason: u32::from(est.guard_reason_code),
@@ -311,5 +353,47 @@ pub fn scene_status(s: &StateMsg) -> SceneStatus {
         } else {
             [f64::NAN; 3]
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every subset of the mapped flags crosses to the recording and back
+    /// whole, each to its own recorded flag; observability only with an
+    /// estimate; `CLOCK_ADVANCES` from a known sensor age alone.
+    #[test]
+    fn the_flag_mapping_reads_both_ways() {
+        let wire_all = RECORDED_FLAGS.iter().fold(0, |f, (w, _)| f | w);
+        let recorded_all = RECORDED_FLAGS.iter().fold(0, |f, (_, r)| f | r);
+        assert_eq!(wire_all.count_ones(), 6);
+        assert_eq!(recorded_all.count_ones(), 6);
+        assert_eq!(recorded_all & msgs::flags::CLOCK_ADVANCES, 0);
+        for bits in 0..64u32 {
+            let wire = RECORDED_FLAGS
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| bits & (1 << k) != 0)
+                .fold(0, |f, (_, (w, _))| f | w);
+            let s = StateMsg {
+                flags: wire | flags::NEW_SAMPLE,
+                sensor_age_ns: u64::from(bits),
+                ..StateMsg::default()
+            };
+            let recorded = recorded_flags(&s);
+            assert_ne!(recorded & msgs::flags::CLOCK_ADVANCES, 0, "{bits}");
+            let expected = if wire & flags::ESTIMATE == 0 {
+                wire & !flags::OBSERVABLE
+            } else {
+                wire
+            };
+            assert_eq!(state_flags(recorded), expected, "{bits:#b}");
+        }
+        let unknown_age = StateMsg {
+            sensor_age_ns: u64::MAX,
+            ..StateMsg::default()
+        };
+        assert_eq!(recorded_flags(&unknown_age), 0);
     }
 }

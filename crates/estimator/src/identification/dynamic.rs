@@ -206,6 +206,15 @@ impl DynamicResult {
     }
 }
 
+/// One sample's F_A, measured and modelled ([`DynamicIdentification::forces`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampleForces {
+    /// F_A measured (tare and adapter removed), {0}, N.
+    pub measured_n: Vec3,
+    /// F_A of the fitted model, {0}, N.
+    pub model_n: Vec3,
+}
+
 /// The streaming least squares over motion samples (see the module's doc).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DynamicIdentification {
@@ -272,19 +281,8 @@ impl DynamicIdentification {
             .ok_or(IdentificationError::TooManyPoses {
                 poses: self.samples,
             })?;
+        let (x, force_a_n) = self.rows(s)?;
         let cal = &self.calibration;
-        let rod = rod_motion(
-            &cal.support_m(),
-            &s.ujoint_m,
-            &s.velocity_mps,
-            &s.accel_mps2,
-        )?;
-        let mut x = regressor(&rod, &s.accel_mps2, &cal.gravity_mps2());
-        if !self.friction {
-            x.set_column(3, &Vec3::zeros());
-        }
-        let force_a_n = crate::ujoint_force_n(cal, &s.reading_n, &self.bias_n)
-            - s.accel_mps2 * self.adapter_mass_kg;
         let plain = SMatrix::<f64, 3, WIDTH>::from_columns(&[
             x.column(0).into_owned(),
             x.column(1).into_owned(),
@@ -305,6 +303,41 @@ impl DynamicIdentification {
         self.unweighted = unweighted;
         self.samples = samples;
         Ok(())
+    }
+
+    /// A sample's three force rows as the fit takes them: the regressor X
+    /// ({0}; f's column zero without friction) and the measured F_A, the
+    /// tare and the adapter's m_s A'' taken off, {0}, N.
+    fn rows(&self, s: &MotionSample) -> Result<(SMatrix<f64, 3, 4>, Vec3), IdentificationError> {
+        let cal = &self.calibration;
+        let rod = rod_motion(
+            &cal.support_m(),
+            &s.ujoint_m,
+            &s.velocity_mps,
+            &s.accel_mps2,
+        )?;
+        let mut x = regressor(&rod, &s.accel_mps2, &cal.gravity_mps2());
+        if !self.friction {
+            x.set_column(3, &Vec3::zeros());
+        }
+        let force_a_n = crate::ujoint_force_n(cal, &s.reading_n, &self.bias_n)
+            - s.accel_mps2 * self.adapter_mass_kg;
+        Ok((x, force_a_n))
+    }
+
+    /// A sample's F_A as the fit saw it and as its result models it, {0},
+    /// N: the same rows [`Self::add`] accumulates, at `fit`'s parameters
+    /// (their difference is the sample's residual). For a figure of the fit.
+    pub fn forces(
+        &self,
+        s: &MotionSample,
+        fit: &DynamicResult,
+    ) -> Result<SampleForces, IdentificationError> {
+        let (x, measured_n) = self.rows(s)?;
+        Ok(SampleForces {
+            measured_n,
+            model_n: x * fit.parameters().theta(),
+        })
     }
 
     /// The estimate from the samples so far; refused above `max_condition`.

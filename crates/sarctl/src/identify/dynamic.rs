@@ -17,15 +17,14 @@
 //! holds no excitation"), and so is a fit whose condition number is above
 //! the limit.
 
+use super::error::{self, InputError};
 use super::smooth::{self, Smoothed, SmootherSpec};
 use sar_config::Config;
 use sar_estimator::identification::IdentificationError;
-use sar_estimator::identification::dynamic::{
-    DynamicIdentification, DynamicResult, MotionSample, model_force_n, rod_motion,
-};
+use sar_estimator::identification::dynamic::{DynamicIdentification, DynamicResult, MotionSample};
 use sar_estimator::{Calibration, Vec3};
 use sar_msgs::msgs::{ActiveJointState, GuardEvent, GuardStateCode, Topic, WrenchStamped};
-use sar_record::{McapReader, ReadError};
+use sar_record::McapReader;
 use serde_json::json;
 
 /// Default largest condition number of the dynamic fit (column-scaled), the
@@ -77,35 +76,14 @@ impl Default for DynamicOptions {
     }
 }
 
-/// Why no result: one line each.
+/// Why no result: one line each. What the static identification refuses
+/// alike is [`InputError`] (its one home, [`super::error`]).
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum DynamicError {
-    /// An option is out of range.
-    #[error("{0}")]
-    Option(String),
-    /// The recording could not be read.
-    #[error("the recording cannot be read: {0}")]
-    Read(#[from] ReadError),
-    /// A lean recording's batches cannot be read.
-    #[error("the recording cannot be read: {0}")]
-    Lean(#[from] sar_record::lean::LeanReadError),
-    /// The recording lacks a topic.
-    #[error(
-        "the recording has no {topic} messages: identify --dynamic needs the sensor's readings and the joints"
-    )]
-    MissingTopic {
-        /// The topic.
-        topic: &'static str,
-    },
-    /// d != 0 is not modelled.
-    #[error(
-        "the configured manipulator has offset_m = {offset_m}: identify --dynamic models d = 0"
-    )]
-    Offset {
-        /// d, m.
-        offset_m: f64,
-    },
+    /// A bad option or recording, an offset d: refused before any fit.
+    #[error(transparent)]
+    Input(#[from] InputError),
     /// The joints could not be smoothed, or no sensor sample lies inside them.
     #[error("the joints cannot give the carriage's acceleration: {0}")]
     Smoothing(String),
@@ -246,6 +224,18 @@ impl From<IdentificationError> for DynamicError {
             }
             other => Self::Fit(other),
         }
+    }
+}
+
+impl From<sar_record::ReadError> for DynamicError {
+    fn from(e: sar_record::ReadError) -> Self {
+        Self::Input(e.into())
+    }
+}
+
+impl From<sar_record::lean::LeanReadError> for DynamicError {
+    fn from(e: sar_record::lean::LeanReadError) -> Self {
+        Self::Input(e.into())
     }
 }
 
@@ -422,7 +412,7 @@ pub fn read_series(path: &std::path::Path) -> Result<Series, DynamicError> {
     }
     for (v, topic) in [(&mut s.joints, joints), (&mut s.sensor, sensor)] {
         if v.is_empty() {
-            return Err(DynamicError::MissingTopic { topic });
+            return Err(InputError::MissingTopic { topic }.into());
         }
         // As recorded: finite, in time order (a sample recorded twice, at
         // the same stamp, once).
@@ -442,29 +432,15 @@ pub fn identify_file(
     identify_series(&read_series(path)?, config, options)
 }
 
-fn check_options(config: &Config, o: &DynamicOptions) -> Result<(), DynamicError> {
-    let offset_m = config.estimator.profile.offset_m();
-    if offset_m != 0.0 {
-        return Err(DynamicError::Offset { offset_m });
-    }
-    let bad = |what: &str, x: f64| DynamicError::Option(format!("{what} {x} is out of range"));
-    if !o.tare_n.iter().all(|x| x.is_finite()) {
-        return Err(DynamicError::Option(format!(
-            "the tare must be finite, got {:?}",
-            o.tare_n
-        )));
-    }
+fn check_options(config: &Config, o: &DynamicOptions) -> Result<(), InputError> {
+    error::check_offset(config)?;
+    error::check_fit_limits(&o.tare_n, o.max_chi2_dof, o.max_condition)?;
+    let bad = |what: &str, x: f64| InputError::Option(format!("{what} {x} is out of range"));
     if !(o.sensor_latency_s.is_finite() && o.sensor_latency_s >= 0.0) {
         return Err(bad("the sensor latency (s, >= 0)", o.sensor_latency_s));
     }
     if !(o.adapter_mass_kg.is_finite() && o.adapter_mass_kg >= 0.0) {
         return Err(bad("the adapter mass (kg, >= 0)", o.adapter_mass_kg));
-    }
-    if o.max_chi2_dof.is_nan() || o.max_chi2_dof <= 0.0 {
-        return Err(bad("the chi-square limit (> 0)", o.max_chi2_dof));
-    }
-    if o.max_condition.is_nan() || o.max_condition < 1.0 {
-        return Err(bad("the condition limit (>= 1)", o.max_condition));
     }
     if !(o.min_peak_accel_mps2.is_finite() && o.min_peak_accel_mps2 >= 0.0) {
         return Err(bad(
@@ -546,7 +522,7 @@ pub fn identify_series(
     }
     let fit = id.solve(options.max_condition)?;
     check_fit(&fit, options)?;
-    let points = figure_points(cal, &fit, options, &used, &stamps)?;
+    let points = figure_points(&id, &fit, &used, &stamps)?;
     Ok(DynamicIdentified {
         fit,
         left_out: series.sensor.len() - used.len(),
@@ -583,31 +559,24 @@ fn method(o: &DynamicOptions, samples: usize) -> String {
     )
 }
 
-/// Evenly spaced samples with the measured and the fitted F_A.
+/// Evenly spaced samples with the measured and the fitted F_A, as the
+/// identification itself gives them ([`DynamicIdentification::forces`]: its
+/// own rows at its result, not a second model here).
 fn figure_points(
-    cal: &Calibration,
+    id: &DynamicIdentification,
     fit: &DynamicResult,
-    options: &DynamicOptions,
     used: &[MotionSample],
     stamps: &[u64],
 ) -> Result<Vec<FitPoint>, DynamicError> {
     let step = used.len().div_ceil(FIGURE_POINTS).max(1);
     let t0 = stamps.first().copied().unwrap_or(0);
-    let params = fit.parameters();
-    let tare = Vec3::from(options.tare_n);
     let mut out = Vec::new();
     for (s, &t) in used.iter().zip(stamps).step_by(step) {
-        let rod = rod_motion(
-            &cal.support_m(),
-            &s.ujoint_m,
-            &s.velocity_mps,
-            &s.accel_mps2,
-        )?;
+        let forces = id.forces(s, fit)?;
         out.push(FitPoint {
             t_s: t.saturating_sub(t0) as f64 * 1e-9,
-            measured_n: sar_estimator::ujoint_force_n(cal, &s.reading_n, &tare)
-                - s.accel_mps2 * options.adapter_mass_kg,
-            model_n: model_force_n(&params, &rod, &s.accel_mps2, &cal.gravity_mps2()),
+            measured_n: forces.measured_n,
+            model_n: forces.model_n,
             accel_mps2: s.accel_mps2,
         });
     }

@@ -22,6 +22,7 @@
 
 pub mod dwell;
 pub mod dynamic;
+pub mod error;
 pub mod excitation;
 pub mod plot;
 pub mod plot_dynamic;
@@ -30,6 +31,7 @@ pub mod smooth;
 pub mod writeback;
 
 use dwell::{Dwell, DwellFinder, DwellOptions, SensorAverager};
+use error::InputError;
 use sar_config::Config;
 use sar_estimator::cycle::EstimatorConfig;
 use sar_estimator::identification::{
@@ -41,7 +43,7 @@ use sar_estimator::support::{
 use sar_estimator::{Calibration, StaticPose, Vec3};
 use sar_kinematics::forward;
 use sar_msgs::msgs::{ActiveJointState, Topic, WrenchStamped};
-use sar_record::{McapReader, ReadError};
+use sar_record::McapReader;
 use serde_json::json;
 
 /// The poses to add, named in every refusal that more or other poses cure.
@@ -85,34 +87,14 @@ impl Default for IdentifyOptions {
 }
 
 /// Why no result: each message is one line, and where more or other poses
-/// help it says which.
+/// help it says which. What the dynamic identification refuses alike is
+/// [`InputError`] (the one home of it, [`error`]).
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum IdentifyError {
-    /// An option is out of range.
-    #[error("{0}")]
-    Option(String),
-    /// The recording could not be read.
-    #[error("the recording cannot be read: {0}")]
-    Read(#[from] ReadError),
-    /// A lean recording's batches cannot be read.
-    #[error("the recording cannot be read: {0}")]
-    Lean(#[from] sar_record::lean::LeanReadError),
-    /// The recording lacks a topic.
-    #[error(
-        "the recording has no {topic} messages: identify needs the sensor's readings and the joints"
-    )]
-    MissingTopic {
-        /// The topic.
-        topic: &'static str,
-    },
-    /// The configured manipulator has an offset d, which identification does
-    /// not model (MODEL.md 5.1: d = 0).
-    #[error("the configured manipulator has offset_m = {offset_m}: identification models d = 0")]
-    Offset {
-        /// d, m.
-        offset_m: f64,
-    },
+    /// A bad option or recording, an offset d: refused before any fit.
+    #[error(transparent)]
+    Input(#[from] InputError),
     /// Too few usable poses.
     #[error("{found} static poses found ({why}), at least {needed} needed: {ADD_POSES}")]
     TooFewPoses {
@@ -163,6 +145,18 @@ pub enum IdentifyError {
         /// The estimator's reason.
         reason: String,
     },
+}
+
+impl From<sar_record::ReadError> for IdentifyError {
+    fn from(e: sar_record::ReadError) -> Self {
+        Self::Input(e.into())
+    }
+}
+
+impl From<sar_record::lean::LeanReadError> for IdentifyError {
+    fn from(e: sar_record::lean::LeanReadError) -> Self {
+        Self::Input(e.into())
+    }
 }
 
 /// One pose as used, for the report and the figure.
@@ -249,7 +243,7 @@ fn find_dwells_in<'a>(
     config: &Config,
     options: &DwellOptions,
 ) -> Result<Vec<Dwell>, IdentifyError> {
-    options.check().map_err(IdentifyError::Option)?;
+    options.check().map_err(InputError::Option)?;
     let mut finder = DwellFinder::new(&config.estimator.calibration, *options);
     // A lean recording (`[record] mode = "inputs"`) holds the joint and
     // sensor messages in its batches.
@@ -267,9 +261,10 @@ fn find_dwells_in<'a>(
         finder.push(js.stamp_ns, js.q_m);
     }
     if finder.seen == 0 {
-        return Err(IdentifyError::MissingTopic {
+        return Err(InputError::MissingTopic {
             topic: Topic::Joints.name(),
-        });
+        }
+        .into());
     }
     let mut averager = SensorAverager::new(finder.finish());
     if lean {
@@ -284,9 +279,10 @@ fn find_dwells_in<'a>(
         averager.push(w.stamp_ns, w.force_n);
     }
     if averager.seen == 0 {
-        return Err(IdentifyError::MissingTopic {
+        return Err(InputError::MissingTopic {
             topic: Topic::SensorWrench.name(),
-        });
+        }
+        .into());
     }
     Ok(averager.finish())
 }
@@ -312,26 +308,8 @@ pub fn identify_file(
     identify_dwells(&dwells, config, options)
 }
 
-fn check_options(options: &IdentifyOptions) -> Result<(), IdentifyError> {
-    if !options.tare_n.iter().all(|x| x.is_finite()) {
-        return Err(IdentifyError::Option(format!(
-            "the tare must be finite, got {:?}",
-            options.tare_n
-        )));
-    }
-    if options.max_chi2_dof.is_nan() || options.max_chi2_dof <= 0.0 {
-        return Err(IdentifyError::Option(format!(
-            "the chi-square limit must be > 0, got {}",
-            options.max_chi2_dof
-        )));
-    }
-    if options.max_condition.is_nan() || options.max_condition < 1.0 {
-        return Err(IdentifyError::Option(format!(
-            "the condition limit must be >= 1, got {}",
-            options.max_condition
-        )));
-    }
-    Ok(())
+fn check_options(options: &IdentifyOptions) -> Result<(), InputError> {
+    error::check_fit_limits(&options.tare_n, options.max_chi2_dof, options.max_condition)
 }
 
 fn dwell_description(o: &DwellOptions) -> String {
@@ -354,11 +332,7 @@ pub fn identify_dwells(
     check_options(options)?;
     let est = &config.estimator;
     let cal = &est.calibration;
-    if est.profile.offset_m() != 0.0 {
-        return Err(IdentifyError::Offset {
-            offset_m: est.profile.offset_m(),
-        });
-    }
+    error::check_offset(config)?;
     let tare = Vec3::from(options.tare_n);
     let poses = static_poses(dwells, est, options)?;
     // 1. The linear fit at the configured support.
@@ -479,7 +453,7 @@ impl Fits<'_> {
                 friction: options.friction,
             },
         )
-        .map_err(|e| IdentifyError::Option(e.to_string()))?;
+        .map_err(|e| InputError::Option(e.to_string()))?;
         for (_, p) in poses {
             linear.add(p).map_err(|e| fit_error(e.to_string()))?;
         }
@@ -527,7 +501,7 @@ impl Fits<'_> {
         };
         let mut support =
             SupportCalibration::new(&est.calibration, &est.noise, tare, support_options)
-                .map_err(|e| IdentifyError::Option(e.to_string()))?;
+                .map_err(|e| InputError::Option(e.to_string()))?;
         for (_, p) in usable {
             support.push(p).map_err(|e| fit_error(e.to_string()))?;
         }
