@@ -501,7 +501,9 @@ fn open_socket(config: &RdtConfig) -> Result<UdpSocket, RdtError> {
     });
     let socket = UdpSocket::bind(local).map_err(io("bind"))?;
     socket.connect(config.address).map_err(io("connect"))?;
-    socket.set_nonblocking(true).map_err(io("set_nonblocking"))?;
+    socket
+        .set_nonblocking(true)
+        .map_err(io("set_nonblocking"))?;
     let granted = socket::size_receive_buffer(&socket, RECEIVE_BUFFER_REQUEST_BYTES)
         .map_err(io("SO_RCVBUF"))?;
     check_receive_buffer(granted)?;
@@ -623,9 +625,18 @@ mod tests {
     #[test]
     fn a_kernel_stamp_becomes_monotonic_within_its_bounds() {
         let (mono, real) = (5_000_000, 1_700_000_000_000_000_000);
-        assert_eq!(monotonic_stamp_ns(Some(real - 300_000), mono, real, 4_000_000), 4_700_000);
-        assert_eq!(monotonic_stamp_ns(Some(real - 3_000_000), mono, real, 4_000_000), 4_000_000);
-        assert_eq!(monotonic_stamp_ns(Some(real + 1_000), mono, real, 4_000_000), mono);
+        assert_eq!(
+            monotonic_stamp_ns(Some(real - 300_000), mono, real, 4_000_000),
+            4_700_000
+        );
+        assert_eq!(
+            monotonic_stamp_ns(Some(real - 3_000_000), mono, real, 4_000_000),
+            4_000_000
+        );
+        assert_eq!(
+            monotonic_stamp_ns(Some(real + 1_000), mono, real, 4_000_000),
+            mono
+        );
         assert_eq!(monotonic_stamp_ns(None, mono, real, 4_000_000), 4_000_000);
         assert_eq!(monotonic_stamp_ns(None, mono, real, 9_000_000), mono);
     }

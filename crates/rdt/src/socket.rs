@@ -135,8 +135,7 @@ fn kernel_stamp_ns(msg: &libc::msghdr) -> Option<u64> {
     unsafe {
         let mut cmsg = libc::CMSG_FIRSTHDR(msg);
         while !cmsg.is_null() {
-            if (*cmsg).cmsg_level == libc::SOL_SOCKET
-                && (*cmsg).cmsg_type == libc::SCM_TIMESTAMPNS
+            if (*cmsg).cmsg_level == libc::SOL_SOCKET && (*cmsg).cmsg_type == libc::SCM_TIMESTAMPNS
             {
                 let ts: libc::timespec =
                     std::ptr::read_unaligned(libc::CMSG_DATA(cmsg).cast::<libc::timespec>());

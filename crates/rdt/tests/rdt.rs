@@ -939,7 +939,11 @@ fn every_poll_failure_names_its_cause() {
         granted_bytes: 4096,
         needed_bytes: sar_rdt::MIN_RECEIVE_BUFFER_BYTES,
     };
-    assert!(small.cause().contains("receive buffer"), "{}", small.cause());
+    assert!(
+        small.cause().contains("receive buffer"),
+        "{}",
+        small.cause()
+    );
 }
 
 /// Sends `payload` as a UDP datagram from `from` to `to` through a raw socket
