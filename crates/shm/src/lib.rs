@@ -476,8 +476,7 @@ pub const RECORD_ANSWER_WAIT: Duration = Duration::from_secs(8);
 /// is a system call on the loop's path). A full ring drops the state and
 /// counts it ([`StateMsg::publish_queue_drops`]). The publishing thread (`sard-shm`,
 /// see [`ShmWorker`]) owns every iceoryx2 port and sleeps until it has
-/// work ([`ShmWorker::sleep`]): it sends the states in batches (only the
-/// newest while nobody subscribes, [`ShmWorker::pump`]), notifies the
+/// work ([`ShmWorker::sleep`]): it sends the states in batches, notifies the
 /// event, takes operator commands into the controller's bounded request
 /// queue and sends the replies the loop leaves in its reply queue. The loop
 /// never waits for it.
@@ -816,30 +815,26 @@ impl ShmWorker {
         })
     }
 
-    /// One round: sends the queued states (then notifies the event once),
+    /// One round: sends every queued state (then notifies the event once),
     /// sends the replies the loop left, takes at most one command. Never
     /// waits. Returns the states sent.
-    ///
-    /// While a subscriber is connected every queued state is sent; while
-    /// none is, only the newest (the others could reach nobody: a subscriber
-    /// that connects later gets [`STATE_HISTORY`], one state, the newest
-    /// sent), which spares the idle daemon an iceoryx2 send per cycle.
     pub fn pump(&mut self) -> usize {
         let mut sent = 0;
-        let every = self.state.dynamic_config().number_of_subscribers() > 0;
-        let mut newest = None;
-        while let Ok(state) = self.states.pop() {
+        while let Ok(mut state) = self.states.pop() {
             // The limits of the newest cycle, for the replies.
             self.limits_n = state.limits_n;
             self.last_cycle = state.cycle;
-            if every {
-                sent += usize::from(self.send_state(state));
+            state.publish_errors = self.shared.publish_errors.load(Ordering::Relaxed);
+            let ok = self
+                .publisher
+                .loan_uninit()
+                .map_err(|_| ())
+                .and_then(|s| s.write_payload(state).send().map_err(|_| ()));
+            if ok.is_ok() {
+                sent += 1;
             } else {
-                newest = Some(state);
+                self.shared.publish_errors.fetch_add(1, Ordering::Relaxed);
             }
-        }
-        if let Some(state) = newest {
-            sent += usize::from(self.send_state(state));
         }
         if sent > 0 {
             self.shared
@@ -851,21 +846,6 @@ impl ShmWorker {
         self.answer_record();
         self.take_command();
         sent
-    }
-
-    /// Sends one state (with the count of failed sends so far): whether it
-    /// went out (a failure is counted).
-    fn send_state(&mut self, mut state: StateMsg) -> bool {
-        state.publish_errors = self.shared.publish_errors.load(Ordering::Relaxed);
-        let ok = self
-            .publisher
-            .loan_uninit()
-            .map_err(|_| ())
-            .and_then(|s| s.write_payload(state).send().map_err(|_| ()));
-        if ok.is_err() {
-            self.shared.publish_errors.fetch_add(1, Ordering::Relaxed);
-        }
-        ok.is_ok()
     }
 
     /// Replies to a waiting `record start|stop` once the recorder answered

@@ -13,9 +13,7 @@
 
 use sar_loop::control::Operator;
 use sar_msgs::wire::StateMsg;
-use sar_shm::{
-    Client, DaemonShm, Names, STATE_BORROWED, STATE_BUFFER, STATE_HISTORY, STATE_QUEUE, ShmWorker,
-};
+use sar_shm::{Client, DaemonShm, Names, STATE_BORROWED, STATE_BUFFER, STATE_QUEUE, ShmWorker};
 
 fn daemon(name: &str) -> (String, DaemonShm, ShmWorker) {
     let prefix = format!("sar-slow-{name}-{}", std::process::id());
@@ -117,46 +115,4 @@ fn a_full_queue_to_the_publishing_thread_drops_and_counts_without_waiting() {
     assert_eq!(last.cycle, next);
     assert_eq!(last.publish_queue_drops, extra as u64);
     assert_eq!(last.publish_errors, 0);
-}
-
-/// Nobody subscribes: a round sends only the newest queued state (the
-/// others could reach nobody), and a subscriber that connects afterwards
-/// gets it from the history; once it is connected, every state is sent
-/// again. The replies' limits come from the newest state either way.
-#[test]
-fn without_a_subscriber_only_the_newest_state_is_sent() {
-    let (prefix, mut shm, mut worker) = daemon("idle");
-    for cycle in 1..=20 {
-        let mut s = state(cycle);
-        s.limits_n = [cycle as f64; 6];
-        shm.push_state(s);
-    }
-    assert_eq!(worker.pump(), 1);
-    assert_eq!(shm.published(), 1);
-    assert_eq!(shm.publish_queue_drops(), 0);
-    let client = Client::new(&prefix).unwrap();
-    let sub = client.subscribe().unwrap();
-    // A subscriber now: every state goes out again, after the history
-    // (iceoryx2 hands it over at the publisher's next round): the newest
-    // state of the idle rounds, 20, with its limits.
-    for cycle in 21..=25 {
-        let mut s = state(cycle);
-        s.limits_n = [cycle as f64; 6];
-        shm.push_state(s);
-    }
-    assert_eq!(worker.pump(), 5);
-    let mut got = Vec::new();
-    sub.drain(|s| got.push((s.cycle, s.limits_n[0])));
-    assert_eq!(STATE_HISTORY, 1);
-    assert_eq!(
-        got,
-        [
-            (20, 20.0),
-            (21, 21.0),
-            (22, 22.0),
-            (23, 23.0),
-            (24, 24.0),
-            (25, 25.0)
-        ]
-    );
 }
