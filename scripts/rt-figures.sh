@@ -8,11 +8,17 @@
 #   - `sard --sim` (release): the simulator;
 #   - `sard` with the RDT sensor against its emulator (the example
 #     rdt_emulator, 500 Hz as the driver asks; the axes simulated); the
-#     emulator is another process, its CPU is not counted;
+#     emulator is another process (at SCHED_FIFO 70 as root, so that the
+#     machine's load does not silence it), its CPU is not counted;
 #   - cyclictest (`cyclictest -m -p 80 -i 1000 --histogram`), the wake-up
 #     latency yardstick;
 #   - with SARD_BEFORE=PATH, the same two sards of another build beside
 #     them (e.g. main's, to show a change in the same run);
+#   - the bare loop with the RDT driver's reads in it (the example
+#     rdt_bare_loop: drain and poll each cycle, against its own emulator):
+#     the CPU the driver adds to a real-time loop, apart from sard's other
+#     work; with RDT_LOOP_BEFORE=PATH, that example built from another tree
+#     beside it;
 #   - WHICH="sim" or "rdt" measures only those sards (default both);
 #   - RDT_PERIOD_US=N: the emulator streams one packet every N us whatever
 #     the driver asks (ATI's dialect: 1000 for 1 kHz, 143 for ATI's 7 kHz).
@@ -39,9 +45,11 @@ command -v cc >/dev/null || { echo "rt-figures: cc is needed (the bare loop)" >&
 command -v cyclictest >/dev/null || { echo "rt-figures: cyclictest is needed (apt-get install rt-tests)" >&2; exit 1; }
 target=${CARGO_TARGET_DIR:-$PWD/target}
 cargo build --release --locked -p sar-daemon --bin sard --example rdt_emulator --example shm_probe >/dev/null
+cargo build --release --locked -p sar-rdt --example rdt_bare_loop >/dev/null
 SARD=${SARD:-$target/release/sard}
 emulator_bin=$target/release/examples/rdt_emulator
 probe_bin=$target/release/examples/shm_probe
+rdt_loop_bin=$target/release/examples/rdt_bare_loop
 dir=$(mktemp -d)
 pids=()
 cleanup() {
@@ -51,8 +59,13 @@ cleanup() {
 trap cleanup EXIT
 cc -O2 -o "$dir/bare-loop" scripts/bare-loop.c
 tick=$(getconf CLK_TCK)
-fifo=()
-if [ "$(id -u)" = 0 ] && command -v chrt >/dev/null; then fifo=(chrt -f "$priority"); fi
+fifo=() emulator_fifo=()
+if [ "$(id -u)" = 0 ] && command -v chrt >/dev/null; then
+  fifo=(chrt -f "$priority")
+  # A real sensor is not slowed by the host's load: its emulator runs at
+  # SCHED_FIFO too, below the loops.
+  emulator_fifo=(chrt -f $((priority - 10)))
+fi
 
 # CPU time of a whole process, us: the sum of its threads' run time
 # (/proc/PID/task/TID/schedstat, ns, precise; its threads live from start
@@ -64,7 +77,7 @@ machine() { awk '/^cpu / {print $2 + $3 + $4 + $7 + $8 + $9, $2 + $3 + $4 + $5 +
 # An emulator streaming to one sard; its config file path is printed.
 start_emulator() {
   local name=$1
-  "$emulator_bin" "$dir/$name.toml" ${RDT_PERIOD_US:+"$RDT_PERIOD_US"} >"$dir/$name.addr" &
+  "${emulator_fifo[@]}" "$emulator_bin" "$dir/$name.toml" ${RDT_PERIOD_US:+"$RDT_PERIOD_US"} >"$dir/$name.addr" &
   pids+=("$!")
   for _ in $(seq 100); do [ -s "$dir/$name.addr" ] && break; sleep 0.1; done
   [ -s "$dir/$name.addr" ] || { echo "rt-figures: the RDT emulator did not start" >&2; exit 1; }
@@ -103,6 +116,19 @@ one_run() {
     pid[$name]=$!
     pids+=("$!")
   done
+  # The bare loop with the driver's reads (and the same from another tree).
+  local -a loops=() loop_bins=()
+  if [[ " ${WHICH:-sim rdt} " == *" rdt "* ]]; then
+    loops+=("rdt reads"); loop_bins+=("$rdt_loop_bin")
+    if [ -n "${RDT_LOOP_BEFORE:-}" ]; then loops+=("rdt reads-before"); loop_bins+=("$RDT_LOOP_BEFORE"); fi
+  fi
+  for i in "${!loops[@]}"; do
+    name=${loops[$i]}
+    start_emulator "loop$i"
+    "${fifo[@]}" "${loop_bins[$i]}" "$(cat "$dir/loop$i.addr")" $(((warmup + seconds + 30) * 1000)) >/dev/null 2>"$dir/loop$i.log" &
+    pid[$name]=$!
+    pids+=("$!")
+  done
   cyclictest -m -p "$priority" -i 1000 -D "$((warmup + seconds))s" -q -h 10000 >"$dir/cyclictest" 2>/dev/null &
   local cyc=$!
   pids+=("$cyc")
@@ -126,10 +152,10 @@ one_run() {
   m0=$(machine)
   t0=$(date +%s.%N)
   c0[bare]=$(cpu_us "$bare")
-  for name in "${names[@]}"; do c0[$name]=$(cpu_us "${pid[$name]}"); done
+  for name in "${names[@]}" "${loops[@]}"; do c0[$name]=$(cpu_us "${pid[$name]}"); done
   sleep "$seconds"
   c1[bare]=$(cpu_us "$bare")
-  for name in "${names[@]}"; do c1[$name]=$(cpu_us "${pid[$name]}"); done
+  for name in "${names[@]}" "${loops[@]}"; do c1[$name]=$(cpu_us "${pid[$name]}"); done
   t1=$(date +%s.%N)
   m1=$(machine)
   load1=$(cut -d' ' -f1-3 /proc/loadavg)
@@ -145,19 +171,23 @@ one_run() {
   for name in "${names[@]}"; do kill -TERM "${pid[$name]}"; done
   for name in "${names[@]}"; do wait "${pid[$name]}" || true; done
   kill "$bare" 2>/dev/null || true
+  for name in "${loops[@]}"; do
+    kill -0 "${pid[$name]}" 2>/dev/null || echo "  $name ended early: $(cat "$dir"/loop*.log)"
+    kill "${pid[$name]}" 2>/dev/null || true
+  done
   wait "$cyc" || true
   local cp99; cp99=$(cyclictest_p99 "$dir/cyclictest")
   local rate="at the driver's 500 Hz"
   if [ -n "${RDT_PERIOD_US:-}" ]; then rate="every $RDT_PERIOD_US us"; fi
   echo "== run $run of $runs: $seconds s at 1 kHz, the RDT emulator $rate, $(nproc) CPUs; load average $load0 at the start, $load1 at the end"
   awk -v m0="$m0" -v m1="$m1" -v tick="$tick" -v own_us="$(
-      s=$((c1[bare] - c0[bare])); for name in "${names[@]}"; do s=$((s + c1[$name] - c0[$name])); done; echo $s)" 'BEGIN {
+      s=$((c1[bare] - c0[bare])); for name in "${names[@]}" "${loops[@]}"; do s=$((s + c1[$name] - c0[$name])); done; echo $s)" 'BEGIN {
     split(m0, a, " "); split(m1, b, " ")
     busy = b[1] - a[1]; total = b[2] - a[2]; own = own_us * tick / 1e6
     printf "   the machine: %.0f %% of its CPUs busy over the interval, %.0f %% of it by other processes than these\n",
       100 * busy / total, 100 * (busy - own) / total }'
-  printf '| %-22s | %9s | %12s | %9s | %13s | %9s |\n' "process" "CPU s" "% of a core" "vs bare" "wake-up p99" "vs cyclictest"
-  printf '|%s|%s|%s|%s|%s|%s|\n' "------------------------" "-----------" "--------------" "-----------" "---------------" "-----------"
+  printf '| %-26s | %9s | %12s | %9s | %13s | %13s |\n' "process" "CPU s" "% of a core" "vs bare" "wake-up p99" "vs cyclictest"
+  printf '|%s|%s|%s|%s|%s|%s|\n' "----------------------------" "-----------" "--------------" "-----------" "---------------" "---------------"
   local bare_us=$((c1[bare] - c0[bare]))
   row() {
     awk -v label="$1" -v d="$2" -v bare="$bare_us" -v t0="$t0" -v t1="$t1" -v p99="$3" -v cp="$cp99" 'BEGIN {
@@ -166,9 +196,12 @@ one_run() {
         s = d / 1e6; cpu = sprintf("%.2f", s); share = sprintf("%.2f", 100 * s / (t1 - t0))
         ratio = bare > 0 ? sprintf("%.2fx", d / bare) : "-" }
       pr = (p99 != "-" && cp != "-" && cp > 0) ? sprintf("%.2fx", p99 / cp) : "-"
-      printf "| %-22s | %9s | %12s | %9s | %10s us | %13s |\n", label, cpu, share, ratio, p99, pr }'
+      printf "| %-26s | %9s | %12s | %9s | %10s us | %13s |\n", label, cpu, share, ratio, p99, pr }'
   }
   row "bare clock_nanosleep" "$bare_us" "-"
+  for name in "${loops[@]}"; do
+    row "bare + $name" "$((c1[$name] - c0[$name]))" "-"
+  done
   row "cyclictest" "-" "$cp99"
   for name in "${names[@]}"; do
     local p99
