@@ -107,11 +107,12 @@ fn monotonic_stamp_ns(
 ///
 /// Its reads run on the caller's thread: `poll` and `drain` never block
 /// (one `recvmmsg(MSG_DONTWAIT)`, a few more after a long pause, at most
-/// [`MAX_DATAGRAMS_PER_READ`] datagrams), never allocate. A `drain` and a
-/// `poll` in a row share one read of the socket: whichever comes second in
-/// a pair takes the first one's result without a system call (the loop
-/// calls `drain`, then `poll`, once a cycle). `stats` and `is_silent` say
-/// what the reads so far found.
+/// [`MAX_DATAGRAMS_PER_READ`] datagrams), never allocate. A `poll` right
+/// after a `drain` takes that drain's read without a system call (the loop
+/// calls `drain`, then `poll`, once a cycle): the samples a cycle drains
+/// and the newest it polls come from one read, so a drained sample is
+/// never newer than the cycle's polled one. Every other call reads.
+/// `stats` and `is_silent` say what the reads so far found.
 ///
 /// `received_ns` of a sample is the kernel's receive time of its datagram
 /// (`SO_TIMESTAMPNS`), on the host's monotonic clock, kept between the last
@@ -144,10 +145,9 @@ pub struct RdtSensor {
     /// When a read last found the socket empty (read before it), ns: every
     /// datagram waiting now arrived later.
     empty_at_ns: u64,
-    /// The last read of the socket is not yet seen by `poll` (`wait`), by
-    /// `drain`: their next call takes it instead of reading again.
-    unseen_by_poll: bool,
-    unseen_by_drain: bool,
+    /// The driver's last call was a `drain`: the next `poll` takes its read
+    /// instead of reading again.
+    after_drain: bool,
     /// Ring overflows already reported by `drain`.
     overflows_reported: u64,
     /// `wait`'s longest sleep while nothing arrives, ns.
@@ -181,8 +181,7 @@ impl RdtSensor {
             last_reject: None,
             last_start_ns: started_ns,
             empty_at_ns: opened_ns,
-            unseen_by_poll: false,
-            unseen_by_drain: false,
+            after_drain: false,
             overflows_reported: 0,
             wait_step_ns: (config.silence_limit_ns / 4).clamp(MIN_WAIT_STEP_NS, MAX_WAIT_STEP_NS),
         })
@@ -260,8 +259,6 @@ impl RdtSensor {
     /// silence and restarts the stream when due. Bounded: at most
     /// [`MAX_DATAGRAMS_PER_READ`] datagrams, one batch a system call.
     fn read_socket(&mut self) {
-        self.unseen_by_poll = true;
-        self.unseen_by_drain = true;
         let before_ns = host_now_ns(&self.clock).ok();
         let mut taken = 0;
         let emptied = loop {
@@ -393,7 +390,6 @@ impl RdtSensor {
 
     /// The newest sample if `poll` or `wait` did not return it yet.
     fn take_newest(&mut self) -> Option<WrenchSample> {
-        self.unseen_by_poll = false;
         self.newest.take()
     }
 }
@@ -405,9 +401,10 @@ impl ForceSensor for RdtSensor {
     /// [`RdtError::Silent`] (kind `Disconnected`) when none came and the
     /// sensor has been silent beyond its limit, on every call until samples
     /// come back (the caller must treat its last sample as invalid). Reads
-    /// the socket without waiting, unless `drain` just did (see the type).
+    /// the socket without waiting, unless the call before was a `drain`
+    /// (see the type).
     fn poll(&mut self) -> Result<Option<WrenchSample>, RdtError> {
-        if !self.unseen_by_poll {
+        if !std::mem::take(&mut self.after_drain) {
             self.read_socket();
         }
         if let Some(sample) = self.take_newest() {
@@ -425,6 +422,7 @@ impl ForceSensor for RdtSensor {
     /// [`RdtError::Silent`] if the sensor is silent, else
     /// [`RdtError::Timeout`]. For start-up: the loop never waits.
     fn wait(&mut self, timeout_ns: u64) -> Result<WrenchSample, RdtError> {
+        self.after_drain = false;
         let deadline_ns = host_now_ns(&self.clock)?.saturating_add(timeout_ns);
         loop {
             self.read_socket();
@@ -460,13 +458,11 @@ impl ForceSensor for RdtSensor {
 
     /// Every accepted sample since the last drain, from the fixed ring of
     /// [`RdtConfig::ring_capacity`]; when it was full the NEWEST samples were
-    /// dropped (counted in `lost`). Reads the socket without waiting, unless
-    /// `poll` just did (see the type).
+    /// dropped (counted in `lost`). Reads the socket first, without
+    /// waiting.
     fn drain(&mut self, out: &mut [WrenchSample]) -> Result<Drained, RdtError> {
-        if !self.unseen_by_drain {
-            self.read_socket();
-        }
-        self.unseen_by_drain = false;
+        self.read_socket();
+        self.after_drain = true;
         let (count, remaining) = self.ring.pop_into(out);
         let overflows = self.ring.overflows();
         let lost = overflows.wrapping_sub(self.overflows_reported);

@@ -813,6 +813,43 @@ fn a_full_ring_drops_the_newest_and_says_how_many() {
     assert_eq!((d.count, d.lost, buf[0].counter), (1, 0, 1021));
 }
 
+/// The loop's pattern after the start-up's `wait`: each cycle `drain`, then
+/// `poll`. The samples a cycle drains and the newest it polls come from the
+/// same read of the socket: the polled sample is the last drained one (or
+/// neither, when nothing came), never one a cycle ahead of the drained ones
+/// (a spike seen in the drained samples belongs to the cycle's new sample).
+#[test]
+fn a_cycles_drain_and_poll_see_the_same_read() {
+    let (emulator, mut sensor) = manual(vec![]);
+    emulator.step(3);
+    let mut newest = 1003;
+    while sensor.wait(PATIENCE_NS).unwrap().counter != newest {}
+    let mut buf = [filler(); 64];
+    let mut drained_total = 0;
+    for cycle in 0..200u64 {
+        // Packets now and then, several at once sometimes.
+        emulator.step([0, 1, 1, 2, 0, 3][(cycle % 6) as usize]);
+        let d = sensor.drain(&mut buf).unwrap();
+        let polled = sensor.poll().unwrap();
+        let last_drained = buf[..d.count].last().map(|s| s.counter);
+        if cycle == 0 {
+            // The start-up's samples (1001 to 1003, the newest returned by
+            // `wait`) come first.
+            assert_eq!(buf[0].counter, 1001, "{d:?}");
+        }
+        if let Some(p) = polled {
+            assert_eq!(Some(p.counter), last_drained, "cycle {cycle}: {d:?}");
+            newest = p.counter;
+        }
+        if let Some(l) = last_drained {
+            assert!(l <= newest, "cycle {cycle}: drained {l} ahead of {newest}");
+        }
+        drained_total += d.count;
+    }
+    assert!(newest > 1100, "{newest}");
+    assert_eq!(drained_total as u64, sensor.stats().accepted);
+}
+
 /// A sensor faster than the loop: the emulator streams at 1 kHz while the
 /// "loop" polls every 5 ms; the drained samples are complete (consecutive
 /// counters, since the emulator loses none) although `poll` saw few.
