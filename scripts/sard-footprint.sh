@@ -8,6 +8,9 @@
 # cyclictest's. The yardstick is the article's control unit, an 800 MHz ARM
 # with 256 MB of RAM.
 #
+# (The figures of issue 36, every process at the same time in one run beside
+# cyclictest: scripts/rt-figures.sh.)
+#
 # Usage: scripts/sard-footprint.sh [SECONDS] [sim|rdt|both]
 #   SECONDS: each measurement's length (default 60).
 #   sim: on the simulator (`sard --sim`); rdt: the RDT sensor against its

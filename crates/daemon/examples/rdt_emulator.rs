@@ -6,7 +6,10 @@
 //! `cargo run --release -p sar-daemon --example rdt_emulator -- CONFIG [PERIOD_US]`
 //! writes to CONFIG the built-in configuration with `[drivers.sensor]` on the
 //! emulator (the axes simulated), prints the emulator's address, and streams
-//! one packet every PERIOD_US (default 1000) until it is killed.
+//! until it is killed: without PERIOD_US, at the rate the driver asks
+//! (OnRobot's rate command: 500 Hz); with it, one packet every PERIOD_US
+//! whatever the driver asks (the emulator then speaks ATI's dialect, whose
+//! rate is set on the device, e.g. 143 for ATI's 7 kHz).
 
 use sar_daemon::sim;
 use sar_rdt::emulator::{Emulator, EmulatorConfig, Pacing, counts_for};
@@ -16,9 +19,9 @@ fn main() -> Result<(), String> {
     let config = args
         .next()
         .ok_or("usage: rdt_emulator CONFIG [PERIOD_US]")?;
-    let period_us: u64 = match args.next() {
-        Some(p) => p.parse().map_err(|e| format!("PERIOD_US {p:?}: {e}"))?,
-        None => 1000,
+    let fixed_period_us: Option<u64> = match args.next() {
+        Some(p) => Some(p.parse().map_err(|e| format!("PERIOD_US {p:?}: {e}"))?),
+        None => None,
     };
     let mut scenario = sim::demo_scenario().map_err(|e| e.to_string())?;
     // The reading without noise: the emulator adds its own.
@@ -30,8 +33,12 @@ fn main() -> Result<(), String> {
     let s = sar_hal::ForceSensor::wait(&mut sensor, 1_000_000_000).map_err(|e| e.to_string())?;
     let (f, t) = (s.force_n - bias.force_n, s.torque_nm - bias.torque_nm);
     let mut emu = EmulatorConfig::new(Pacing::Periodic {
-        period_ns: period_us.saturating_mul(1000),
+        period_ns: fixed_period_us.unwrap_or(1000).saturating_mul(1000),
     });
+    if fixed_period_us.is_some() {
+        // ATI's dialect ignores the driver's rate command: the period stays.
+        emu.flavour = sar_rdt::Flavour::Ati;
+    }
     emu.counts = counts_for([f.x, f.y, f.z], [t.x, t.y, t.z], 10_000.0, 100_000.0);
     emu.noise_counts = [2000.0, 2000.0, 8000.0, 1000.0, 1000.0, 200.0];
     emu.seed = 0x5afe;

@@ -1,8 +1,12 @@
-//! The RDT driver's handoff latency: from the emulator sending a packet on
-//! loopback to the sample returned by the loop's `poll`, p50/p99, beside two
-//! baselines in the same run: a bare UDP send and recv on one thread, and a
-//! UDP send received by a thread blocked in `recv` that hands a flag to the
-//! spinning sender (the least any receive-thread design can cost).
+//! The RDT driver's latency: from the emulator sending a packet on loopback
+//! to the sample returned by the loop's `poll` (which reads the socket on
+//! the caller's thread), p50/p99, beside two baselines in the same run: a
+//! bare UDP send and recv on one thread, and a UDP send received by a
+//! thread blocked in `recv` that hands a flag to the spinning sender (the
+//! least any receive-thread design, the driver's former one, can cost).
+//! Then the cost of one cycle's reads with nothing new (`drain` then `poll`:
+//! one `recvmmsg` that finds the socket empty) beside a bare non-blocking
+//! `recv` on an empty UDP socket.
 //!
 //! Each figure is a distribution measured here (5000 rounds, printed), then
 //! criterion's own estimate of the mean of the same round.
@@ -29,6 +33,14 @@ fn now_ns(clock: &MonotonicClock) -> u64 {
 }
 
 const ROUNDS: usize = 5000;
+
+const EMPTY: sar_hal::WrenchSample = sar_hal::WrenchSample {
+    force_n: sar_hal::Vec3::new(0.0, 0.0, 0.0),
+    torque_nm: sar_hal::Vec3::new(0.0, 0.0, 0.0),
+    counter: 0,
+    status: sar_hal::SensorStatus::OK,
+    received_ns: 0,
+};
 
 /// Spins until `done`, at most 1 s (a lost packet must not hang the bench).
 fn spin_until(clock: &MonotonicClock, mut done: impl FnMut() -> bool) -> bool {
@@ -169,7 +181,7 @@ fn latency(c: &mut Criterion) {
     let mut rig = Rig::new();
     let mut bare = Bare::new();
     let mut threaded = Threaded::new();
-    println!("\nhandoff latency distributions (loopback, {ROUNDS} rounds each):");
+    println!("\npacket-to-poll latency distributions (loopback, {ROUNDS} rounds each):");
     distribution("baseline: UDP send + recv, one thread", || bare.round());
     distribution("baseline: UDP send -> recv thread -> atomic", || {
         threaded.round()
@@ -193,6 +205,19 @@ fn latency(c: &mut Criterion) {
     });
     group.bench_function("poll with nothing new", |b| {
         b.iter(|| black_box(rig.sensor.poll()))
+    });
+    let mut out = [rig.sensor.wait(0).unwrap_or(EMPTY); 8];
+    group.bench_function("one cycle's reads with nothing new (drain, poll)", |b| {
+        b.iter(|| {
+            black_box(rig.sensor.drain(&mut out).ok());
+            black_box(rig.sensor.poll().ok())
+        })
+    });
+    let empty = UdpSocket::bind("127.0.0.1:0").unwrap();
+    empty.set_nonblocking(true).unwrap();
+    group.bench_function("baseline: recv on an empty socket (non-blocking)", |b| {
+        let mut buf = [0u8; 64];
+        b.iter(|| black_box(empty.recv(&mut buf).is_err()))
     });
     group.finish();
 }

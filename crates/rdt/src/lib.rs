@@ -2,9 +2,11 @@
 //! ATI Net F/T, which stream samples over UDP with the same RDT framing.
 //!
 //! - [`codec`]: the wire format (pure, no allocation, no panic on any bytes).
-//! - [`RdtSensor`]: the [`sar_hal::ForceSensor`] driver. A receive thread owns
-//!   the socket; the loop's `poll` and `drain` read lock-free atomics
-//!   ([`handoff`]). Duplicate and reordered packets are dropped, sequence gaps
+//! - [`RdtSensor`]: the [`sar_hal::ForceSensor`] driver, without a thread:
+//!   the loop's `drain` and `poll` take what the socket holds without
+//!   waiting (one `recvmmsg` a cycle, `socket`), into a fixed ring (`ring`)
+//!   and the newest sample; no wake-up per packet. Duplicate and reordered
+//!   packets are dropped, sequence gaps
 //!   counted ([`RdtStats`]), a non-zero status makes the sample invalid, a
 //!   silence longer than [`RdtConfig::silence_limit_ns`] makes `poll` fail
 //!   (kind `Disconnected`) until samples come back, and the driver restarts
@@ -24,10 +26,14 @@ pub mod codec;
 mod driver;
 #[cfg(feature = "emulator")]
 pub mod emulator;
-pub mod handoff;
+mod ring;
+mod socket;
 
 pub use codec::Filter;
-pub use driver::{COUNTER_WINDOW, REORDER_WINDOW, RdtSensor};
+pub use driver::{
+    COUNTER_WINDOW, MAX_DATAGRAMS_PER_READ, MIN_RECEIVE_BUFFER_BYTES, RECEIVE_BUFFER_REQUEST_BYTES,
+    REORDER_WINDOW, RdtSensor,
+};
 
 use sar_hal::ErrorKind;
 use std::net::SocketAddr;
@@ -170,7 +176,7 @@ impl RdtConfig {
     }
 }
 
-/// What the receive thread has counted since the driver started.
+/// What the driver's reads of its socket have counted since it started.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RdtStats {
     /// Packets accepted as samples (each handed to `poll` and the ring).
@@ -204,7 +210,7 @@ pub struct RdtStats {
     pub clock_errors: u64,
 }
 
-/// Why a sensor is silent: the last thing the receive thread saw since the
+/// Why a sensor is silent: the last thing the driver's reads saw since the
 /// last accepted packet. (A sequence gap is never a cause: a packet after a
 /// gap is accepted, the gap counted in [`RdtStats::lost`] and judged by the
 /// loop's counter check.)
@@ -314,7 +320,7 @@ pub enum RdtError {
         last_received_ns: u64,
         /// The configured limit, ns.
         limit_ns: u64,
-        /// Why: what the receive thread last saw since then.
+        /// Why: what the driver's reads last saw since then.
         cause: SilenceCause,
         /// The sensor's address.
         address: SocketAddr,
@@ -325,9 +331,18 @@ pub enum RdtError {
         /// The timeout, ns.
         timeout_ns: u64,
     },
-    /// The receive thread is gone (it panicked, or could not start).
-    #[error("the RDT receive thread is gone")]
-    ReceiverGone,
+    /// The kernel granted the socket a receive buffer too small for
+    /// several cycles of packets between two reads (`net.core.rmem_max`
+    /// caps it at twice its value).
+    #[error(
+        "the RDT socket's receive buffer is {granted_bytes} bytes, at least {needed_bytes} are needed (raise net.core.rmem_max)"
+    )]
+    ReceiveBuffer {
+        /// What the kernel granted, bytes.
+        granted_bytes: usize,
+        /// The least the driver accepts, bytes.
+        needed_bytes: usize,
+    },
     /// The host's monotonic clock cannot be read.
     #[error("the monotonic clock cannot be read")]
     Clock,
@@ -337,7 +352,7 @@ impl sar_hal::Error for RdtError {
     fn cause(&self) -> &'static str {
         match self {
             Self::Silent { cause, .. } => cause.short(),
-            Self::ReceiverGone => "the RDT receive thread is gone",
+            Self::ReceiveBuffer { .. } => "the socket's receive buffer is too small",
             Self::Timeout { .. } => "no sample within the wait",
             Self::Io { .. } => "socket error",
             Self::Clock => "the monotonic clock cannot be read",
@@ -350,7 +365,8 @@ impl sar_hal::Error for RdtError {
         match self {
             Self::InvalidConfig { .. } => ErrorKind::InvalidArgument,
             Self::Unsupported { .. } => ErrorKind::Unsupported,
-            Self::Io { .. } | Self::Silent { .. } | Self::ReceiverGone => ErrorKind::Disconnected,
+            Self::Io { .. } | Self::Silent { .. } => ErrorKind::Disconnected,
+            Self::ReceiveBuffer { .. } => ErrorKind::Other,
             Self::Timeout { .. } => ErrorKind::Timeout,
             Self::Clock => ErrorKind::Other,
         }

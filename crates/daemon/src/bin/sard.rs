@@ -131,7 +131,8 @@ fn run_on_clock<C: Clock + Clone + 'static, L: LoopClock>(
     // A shared-memory file truncated under sard (by a member of the
     // operators' group) stops it cleanly instead of killing it (SIGBUS).
     rt::install_bus_guard().map_err(|e| format!("cannot install the SIGBUS handler: {e}"))?;
-    // The sensor first: its receive thread keeps the normal priority.
+    // The sensor first (no thread of its own: the loop reads its socket;
+    // the kernel's receive buffer keeps its packets meanwhile).
     let real_sensor = rdt.map(connect_sensor).transpose()?;
     let (simulated, scenario_name) =
         simulator(args, cfg, real_sensor.is_some(), &canopen, sim_clock)?;
@@ -579,7 +580,7 @@ impl Run<'_> {
         };
         close_recording_and_log(&mut self.recorder, self.recording, log_thread);
         say_stopped(&controller, &stats, &health, &by);
-        // The devices (the RDT sensor's receive thread: bounded), then the
+        // The devices (the RDT sensor's stop request), then the
         // publishing and maintenance threads, bounded (a thread stuck on
         // a truncated file is left behind and named below).
         drop(controller);
