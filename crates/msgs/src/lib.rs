@@ -3,6 +3,8 @@
 //! - [`wire`]: the shared-memory payloads (flat `#[repr(C)]`, numbers only)
 //!   and their codes: guard states, reasons, drive states, commands,
 //!   replies.
+//! - [`command`]: the operator's commands, declared once (the table their
+//!   wire and recorded encoders and decoders, log text and help come from).
 //! - [`cdr`]: the ROS 2 CDR encoder and decoder.
 //! - [`msgs`]: the recording's ROS 2 messages, their `.msg` schemas
 //!   (`msg/`) and topics.
@@ -12,6 +14,8 @@
 //! above this crate.
 
 pub mod cdr;
+#[macro_use]
 pub mod msgs;
+pub mod command;
 pub mod scene;
 pub mod wire;
