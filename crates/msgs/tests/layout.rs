@@ -48,6 +48,13 @@ fn samples() -> Vec<(&'static str, Outgoing)> {
                 sensor_drained_counted: true,
                 sensor_drained_samples: 3,
                 sensor_drained_jumps: 1,
+                command_layout: CommandLayoutCode::UnitNamed,
+                hold_max_force_n: 1.25,
+                push_axial_n: -2.25,
+                excite_amplitude_m: [0.01, 0.02, 0.03],
+                excite_freq_hz: [0.5, 0.7, 1.1],
+                excite_duration_s: 30.0,
+                excite_fade_s: 3.0,
             }),
         ),
         (
@@ -442,6 +449,7 @@ fn each_msg_constant_is_the_shared_code() {
         "COMMAND_QUICK_STOP",
     ];
     assert_code_list(&cycle, "COMMAND", &values!(CommandKindCode), &reserved);
+    assert_code_list(&cycle, "LAYOUT", &values!(CommandLayoutCode), &[]);
     assert_code_list(&cycle, "ACTION", &values!(DriveActionCode), &[]);
     assert_code_list(&cycle, "CLOCK", &values!(ClockStatusCode), &[]);
     let state = msg_constants("EstimatorState");
