@@ -522,7 +522,10 @@ fn an_older_cycle_input_without_the_new_fields_decodes() {
     let cut = (1..bytes.len())
         .find(|cut| CycleInput::decode(&bytes[..bytes.len() - cut]).is_ok())
         .unwrap();
-    assert!((81..=88).contains(&cut), "a u8, its padding and ten float64: {cut}");
+    assert!(
+        (81..=88).contains(&cut),
+        "a u8, its padding and ten float64: {cut}"
+    );
     bytes.truncate(bytes.len() - cut);
     let issue35 = CycleInput::decode(&bytes).unwrap();
     assert_eq!(

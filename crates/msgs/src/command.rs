@@ -231,7 +231,9 @@ impl Recorded<([f64; 3], [f64; 3], f64, f64)> for ExciteRequest {
     fn to_field(&self) -> ([f64; 3], [f64; 3], f64, f64) {
         (self.amplitude_m, self.freq_hz, self.duration_s, self.fade_s)
     }
-    fn from_field((amplitude_m, freq_hz, duration_s, fade_s): ([f64; 3], [f64; 3], f64, f64)) -> Self {
+    fn from_field(
+        (amplitude_m, freq_hz, duration_s, fade_s): ([f64; 3], [f64; 3], f64, f64),
+    ) -> Self {
         Self {
             amplitude_m,
             freq_hz,
@@ -382,9 +384,15 @@ macro_rules! req_pat {
 
 /// A row's pattern, its arguments ignored.
 macro_rules! req_any {
-    ($v:ident {}) => { Request::$v };
-    ($v:ident { $($x:tt)* }) => { Request::$v { .. } };
-    ($v:ident ( $($x:tt)* )) => { Request::$v(_) };
+    ($v:ident {}) => {
+        Request::$v
+    };
+    ($v:ident { $($x:tt)* }) => {
+        Request::$v { .. }
+    };
+    ($v:ident ( $($x:tt)* )) => {
+        Request::$v(_)
+    };
 }
 
 /// A row's arguments' names, as bound by `req_pat!`, and their `ArgInfo`.
@@ -464,15 +472,25 @@ macro_rules! req_replay {
 /// A row's recorded kind, its `RecordedAs`, what else it records, and the
 /// check of its wire code against it.
 macro_rules! rec_kind {
-    ((as $k:ident if $g:ident)) => { CommandKindCode::$k };
-    (($k:ident = $c:literal $($x:tt)*)) => { CommandKindCode::$k };
+    ((as $k:ident if $g:ident)) => {
+        CommandKindCode::$k
+    };
+    (($k:ident = $c:literal $($x:tt)*)) => {
+        CommandKindCode::$k
+    };
 }
 macro_rules! rec_as {
-    ((as $k:ident if $g:ident)) => { RecordedAs::Shared(CommandKindCode::$k, stringify!($g)) };
-    (($k:ident = $c:literal $($x:tt)*)) => { RecordedAs::Own(CommandKindCode::$k) };
+    ((as $k:ident if $g:ident)) => {
+        RecordedAs::Shared(CommandKindCode::$k, stringify!($g))
+    };
+    (($k:ident = $c:literal $($x:tt)*)) => {
+        RecordedAs::Own(CommandKindCode::$k)
+    };
 }
 macro_rules! rec_extra {
-    ($m:ident, $cycle:ident, ($k:ident = $c:literal, with cycle)) => { $m.command_arg = $cycle; };
+    ($m:ident, $cycle:ident, ($k:ident = $c:literal, with cycle)) => {
+        $m.command_arg = $cycle;
+    };
     ($m:ident, $cycle:ident, $($x:tt)*) => {};
 }
 macro_rules! rec_check {

@@ -359,8 +359,8 @@ impl StateMsg {
     }
 }
 
-pub use crate::command::command_kind;
 use crate::command::COMMAND_ARGS;
+pub use crate::command::command_kind;
 
 /// The version of [`CommandMsg`]'s layout, in its iceoryx2 type name
 /// ([`COMMAND_MSG_TYPE_NAME`]): a `sarctl` of another version opening a

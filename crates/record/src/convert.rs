@@ -22,9 +22,9 @@ use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request};
 use sar_msgs::msgs::{
-    ActiveJointState, ClockStatusCode, CycleInput as CycleInputMsg,
-    DriveActionCode, DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing,
-    PassiveJointState, REPLY_NONE, ReasonText, WrenchStamped, flags,
+    ActiveJointState, ClockStatusCode, CycleInput as CycleInputMsg, DriveActionCode,
+    DriveStateCode, EstimatorState, GuardEvent, GuardStateCode, Outgoing, PassiveJointState,
+    REPLY_NONE, ReasonText, WrenchStamped, flags,
 };
 use std::fmt::Write as _;
 

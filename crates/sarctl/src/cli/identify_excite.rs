@@ -13,9 +13,7 @@ use crate::identify::excitation::Plan;
 use sar_config::Config;
 use sar_kinematics::{ActiveJoints, forward};
 use sar_msgs::command::{ExciteRequest, Request};
-use sar_msgs::wire::{
-    StateMsg, guard_code, guard_state_name, reason_name, status_name,
-};
+use sar_msgs::wire::{StateMsg, guard_code, guard_state_name, reason_name, status_name};
 use sar_shm::{Client, StateSubscription};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
