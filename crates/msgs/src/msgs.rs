@@ -611,7 +611,8 @@ code_enum!(
 
 // `CommandKindCode` (`COMMAND_*`) and `CommandLayoutCode` (`LAYOUT_*`)
 // come from the command table (`crate::command`).
-pub use crate::command::{CommandKindCode, CommandLayoutCode};
+pub mod command;
+pub use command::{CommandKindCode, CommandLayoutCode};
 
 code_enum!(
     /// What the step told the drives (`ACTION_*`).

@@ -359,39 +359,9 @@ impl StateMsg {
     }
 }
 
-use crate::command::COMMAND_ARGS;
-pub use crate::command::command_kind;
-
-/// The version of [`CommandMsg`]'s layout, in its iceoryx2 type name
-/// ([`COMMAND_MSG_TYPE_NAME`]): a `sarctl` of another version opening a
-/// `sard`'s command service is told "different builds"
-/// (`sar_shm`'s open error), never misread. 2: issue 36 (the arguments as
-/// the command table's unit-named slots, `args`); 1 (the type's Rust
-/// path): `tip_m` and `limits_n`.
-pub const COMMAND_MSG_VERSION: u32 = 2;
-
-/// [`CommandMsg`]'s iceoryx2 type name: its path and
-/// [`COMMAND_MSG_VERSION`] (a test checks both).
-pub const COMMAND_MSG_TYPE_NAME: &str = "sar_msgs::wire::CommandMsg@2";
-
-/// An operator command: a row of the command table (`crate::command`),
-/// encoded by `Request::to_wire` or `DaemonCommand::to_wire` and decoded
-/// by `command::decode`.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("sar_msgs::wire::CommandMsg@2")]
-#[repr(C)]
-pub struct CommandMsg {
-    /// [`command_kind`].
-    pub kind: u32,
-    /// Padding, 0.
-    pub reserved: u32,
-    /// The caller's id, echoed.
-    pub id: u64,
-    /// The command's arguments in the table's order, each slot named with
-    /// its unit there (`command::COMMANDS`, `ArgInfo::parts`); unused
-    /// slots 0.
-    pub args: [f64; COMMAND_ARGS],
-}
+pub use crate::msgs::command::{
+    COMMAND_MSG_TYPE_NAME, COMMAND_MSG_VERSION, CommandMsg, command_kind,
+};
 
 /// What became of a request. The numbers are the wire codes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
