@@ -857,7 +857,7 @@ fn the_name_check_refuses_a_stale_name() {
         "LoopStep::step",
         "sar_hal::motion",
         "Estimator::cycle",
-        "crates/loop/src/step.rs",
+        "crates/loop/src/step/mod.rs",
         "sar-loop",
         "snap_struct!",
         "GuardState",

@@ -1230,6 +1230,24 @@ fn bad_files() -> Vec<(&'static str, String, &'static str, &'static str)> {
             "must be > 0",
         ),
         (
+            "servo with a negative delay",
+            format!("{MINIMAL}\n[axes]\nservo_delay_s = -0.001\n"),
+            "axes.servo_delay_s",
+            "must be >= 0",
+        ),
+        (
+            "servo with a delay beyond the simulator's",
+            format!("{MINIMAL}\n[axes]\nservo_delay_s = 0.05\n"),
+            "axes.servo_delay_s",
+            "at most 0.02 s",
+        ),
+        (
+            "servo with a negative inner loop",
+            format!("{MINIMAL}\n[axes]\nservo_inner_loop_hz = -40.0\n"),
+            "axes.servo_inner_loop_hz",
+            "must be >= 0",
+        ),
+        (
             "quick stop without deceleration",
             format!("{MINIMAL}\n[axes]\nquick_stop_decel_mps2 = 0.0\n"),
             "axes.quick_stop_decel_mps2",
@@ -1266,6 +1284,8 @@ fn the_plant_keys_are_opt_in_with_stated_defaults() {
             bandwidth_hz: 30.0,
             damping: 0.8,
             max_accel_mps2: 5.0,
+            delay_ns: 0,
+            inner_loop_hz: 0.0,
         })
     );
     assert_eq!(plant.quick_stop_decel_mps2, None);
@@ -1274,7 +1294,7 @@ fn the_plant_keys_are_opt_in_with_stated_defaults() {
         "com_m = 0.103\ninertia_perp_kgm2 = 0.03\ninertia_axial_kgm2 = 0.001\n",
     );
     let text = format!(
-        "{every}\n[axes]\nservo_bandwidth_hz = 20.0\nservo_max_accel_mps2 = 8.0\nquick_stop_decel_mps2 = 2.0\n"
+        "{every}\n[axes]\nservo_bandwidth_hz = 20.0\nservo_max_accel_mps2 = 8.0\nquick_stop_decel_mps2 = 2.0\nservo_delay_s = 0.0015\nservo_inner_loop_hz = 40.0\n"
     );
     let plant = parse(&text, ORIGIN).unwrap().spec.plant;
     assert_eq!(
@@ -1289,6 +1309,8 @@ fn the_plant_keys_are_opt_in_with_stated_defaults() {
                 bandwidth_hz: 20.0,
                 damping: 0.7,
                 max_accel_mps2: 8.0,
+                delay_ns: 1_500_000,
+                inner_loop_hz: 40.0,
             }),
             quick_stop_decel_mps2: Some(2.0),
         }

@@ -182,6 +182,8 @@ fn plant_in_motion_allocates_nothing(path: &Path) {
             bandwidth_hz: 30.0,
             damping: 0.7,
             max_accel_mps2: 5.0,
+            delay_ns: 0,
+            inner_loop_hz: 0.0,
         }),
         quick_stop_decel_mps2: Some(2.0),
     };

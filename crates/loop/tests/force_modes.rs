@@ -26,6 +26,8 @@ mod guarded_noise;
 mod late_cycles;
 #[path = "force/motion_figures.rs"]
 mod motion_figures;
+#[path = "force/plant_mismatch.rs"]
+mod plant_mismatch;
 #[path = "force/rig.rs"]
 mod rig;
 #[path = "force/support_shift.rs"]

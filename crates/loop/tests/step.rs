@@ -15,6 +15,8 @@ mod following;
 mod guard_action;
 #[path = "step/retreat.rs"]
 mod retreat;
+#[path = "step/shape.rs"]
+mod shape;
 #[path = "step/snapshot.rs"]
 mod snapshot;
 #[path = "step/step_properties.rs"]

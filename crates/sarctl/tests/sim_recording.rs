@@ -316,45 +316,53 @@ fn input_without_host_time(data: &[u8]) -> sar_msgs::msgs::CycleInput {
     }
 }
 
-/// Time as an input (issue 36): `sard --sim --speed max` runs the same
-/// loop, recorder and services in simulated time. Two runs of the demo are
-/// one run: every recorded message is equal, byte for byte, but for the
-/// publishing thread's silence in the cycles' inputs (measured on the
-/// host's clock by design); each replays bit for bit; and the run does
-/// not wait for real time (no late cycle: the wake-up and compute are 0).
-#[test]
-fn two_runs_in_simulated_time_are_one_run_and_each_replays_bit_for_bit() {
-    let dir = support::scratch("simtime");
-    let (config, rec_dir) = support::recording_config(&dir);
-    let mut files = Vec::new();
-    for run in 0..2 {
-        let out = Command::new(&*support::SARD)
-            .args(["--sim", "--speed", "max", "--config"])
-            .arg(&config)
-            // 20 s of the demo: its contact rises into Warn at about 8.3 s.
-            .args(["--max-cycles", "20000"])
-            .env(
-                "SAR_SERVICE_PREFIX",
-                format!("sar-simtime-{}-{run}", std::process::id()),
-            )
-            .output()
-            .unwrap();
-        let log = text(&out.stderr);
-        assert!(out.status.success(), "sard: {log}");
-        assert!(
-            log.contains("0 overruns (0 periods skipped)")
-                && log.contains("wake-up latency p50 0 us p99 0 us max 0 us"),
-            "{log}"
-        );
-        assert!(log.contains("0 messages dropped by the recorder"), "{log}");
-        let now: Vec<PathBuf> = recordings(&rec_dir)
-            .into_iter()
-            .filter(|f| !files.contains(f))
-            .collect();
-        assert_eq!(now.len(), 1, "{now:?}");
-        files.push(now[0].clone());
-    }
-    let (a, b) = (messages(&files[0]), messages(&files[1]));
+/// `sard --sim --speed SPEED --max-cycles CYCLES`, recording, into the
+/// recording directory of `config` (run `run` of the test `tag`): the new
+/// recording. The run must not wait for real time (no late cycle: the
+/// wake-up and compute are 0) and drop nothing.
+fn simulated_run(
+    config: &Path,
+    rec_dir: &Path,
+    speed: &str,
+    cycles: u64,
+    tag: &str,
+    seen: &[PathBuf],
+) -> PathBuf {
+    let out = Command::new(&*support::SARD)
+        .args(["--sim", "--speed", speed, "--config"])
+        .arg(config)
+        .args(["--max-cycles", &cycles.to_string()])
+        .env(
+            "SAR_SERVICE_PREFIX",
+            format!("sar-simtime-{}-{tag}", std::process::id()),
+        )
+        .output()
+        .unwrap();
+    let log = text(&out.stderr);
+    assert!(out.status.success(), "sard: {log}");
+    assert!(
+        log.contains("0 overruns (0 periods skipped)")
+            && log.contains("wake-up latency p50 0 us p99 0 us max 0 us"),
+        "{log}"
+    );
+    assert!(log.contains("0 messages dropped by the recorder"), "{log}");
+    let now: Vec<PathBuf> = recordings(rec_dir)
+        .into_iter()
+        .filter(|f| !seen.contains(f))
+        .collect();
+    assert_eq!(now.len(), 1, "{now:?}");
+    now[0].clone()
+}
+
+/// Two recordings are one run: the same topics, every message equal byte
+/// for byte, but for the publishing thread's silence in the cycles' inputs
+/// (measured on the host's clock by design). Returns the messages of `a`.
+fn assert_one_run(
+    a: &Path,
+    b: &Path,
+    cycles: usize,
+) -> std::collections::BTreeMap<String, Vec<Vec<u8>>> {
+    let (a, b) = (messages(a), messages(b));
     assert_eq!(
         a.keys().collect::<Vec<_>>(),
         b.keys().collect::<Vec<_>>(),
@@ -364,7 +372,7 @@ fn two_runs_in_simulated_time_are_one_run_and_each_replays_bit_for_bit() {
         let right = &b[topic];
         assert_eq!(left.len(), right.len(), "{topic}: message counts");
         if topic == "/sar/cycle/input" {
-            assert_eq!(left.len(), 20_000);
+            assert_eq!(left.len(), cycles);
             for (i, (l, r)) in left.iter().zip(right).enumerate() {
                 assert_eq!(
                     input_without_host_time(l),
@@ -382,6 +390,23 @@ fn two_runs_in_simulated_time_are_one_run_and_each_replays_bit_for_bit() {
             );
         }
     }
+    a
+}
+
+/// Time as an input (issue 36): `sard --sim --speed max` runs the same
+/// loop, recorder and services in simulated time. Two runs of the demo are
+/// one run ([`assert_one_run`]), and each replays bit for bit.
+#[test]
+fn two_runs_in_simulated_time_are_one_run_and_each_replays_bit_for_bit() {
+    let dir = support::scratch("simtime");
+    let (config, rec_dir) = support::recording_config(&dir);
+    let mut files = Vec::new();
+    for run in 0..2 {
+        // 20 s of the demo: its contact rises into Warn at about 8.3 s.
+        let file = simulated_run(&config, &rec_dir, "max", 20_000, &run.to_string(), &files);
+        files.push(file);
+    }
+    let a = assert_one_run(&files[0], &files[1], 20_000);
     // The demo's Warn is in both, at the same cycle.
     assert_eq!(a["/sar/guard/events"].len(), 2, "reset accepted, then Warn");
     for file in &files {
@@ -391,4 +416,28 @@ fn two_runs_in_simulated_time_are_one_run_and_each_replays_bit_for_bit() {
         assert_eq!(v["identical"], true, "{v}");
         assert_eq!(v["cycles"], 20_000, "{v}");
     }
+}
+
+/// The pace is not an input: the demo paced at real time (`--speed 1`, a
+/// cycle every millisecond of the wall clock, the publishing thread and the
+/// recorder working beside it as in a real-time run) records the same run
+/// as the demo at the machine's full speed (`--speed max`).
+#[test]
+fn the_demo_paced_at_real_time_records_the_run_made_at_full_speed() {
+    let dir = support::scratch("simtime_paced");
+    let (config, rec_dir) = support::recording_config(&dir);
+    let fast = simulated_run(&config, &rec_dir, "max", 3_000, "max", &[]);
+    let paced = simulated_run(
+        &config,
+        &rec_dir,
+        "1",
+        3_000,
+        "paced",
+        std::slice::from_ref(&fast),
+    );
+    assert_one_run(&fast, &paced, 3_000);
+    let out = sarctl(&["--format", "json", "replay", "--input"], &[&paced]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["identical"], true, "{v}");
 }

@@ -92,6 +92,8 @@ fn per_cycle(c: &mut Criterion) {
         bandwidth_hz: 30.0,
         damping: 0.7,
         max_accel_mps2: 5.0,
+        delay_ns: 0,
+        inner_loop_hz: 0.0,
     };
     let plants = [
         ("statics, ideal axes (baseline)", PlantSpec::default()),

@@ -68,7 +68,10 @@ pub use spec::{
     AxesSpec, Breathing, ContactKey, Fault, MAX_SUPPORT_SHIFT_M, PlantSpec, RodInertia, SensorSpec,
     ServoSpec, SimSpec, SupportShift, Tissue, TissueModel, TissueShift,
 };
-pub use world::{DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MIN_PERIOD_NS, validate};
+pub use world::{
+    DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MAX_SERVO_DELAY_NS, MAX_SERVO_DELAY_STEPS,
+    MIN_PERIOD_NS, validate,
+};
 
 use sar_hal::{
     AxisDrives, Clock, DriveState, ForceSensor, JointPositions, SensorStatus, Vec3, WrenchSample,

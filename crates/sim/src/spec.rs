@@ -123,6 +123,19 @@ pub struct ServoSpec {
     pub damping: f64,
     /// The servo's own acceleration limit, m/s^2 (> 0).
     pub max_accel_mps2: f64,
+    /// A pure delay of the reference, ns (0: none; at most
+    /// [`crate::MAX_SERVO_DELAY_NS`], and at most
+    /// [`crate::MAX_SERVO_DELAY_STEPS`] physics steps): the drive acts on
+    /// the set point's profile as it was this long ago (a fieldbus's, an
+    /// interpolator's delay), rounded to whole physics steps. Not in the
+    /// loop's model (issue 34: a plant that is not the model).
+    pub delay_ns: u64,
+    /// The bandwidth of the drive's inner (velocity) loop, Hz (0: none, the
+    /// loop is second order): the acceleration the position loop asks for
+    /// is reached through a first-order lag at this frequency, which makes
+    /// the axis third order, `wn^2 / (tau s^3 + s^2 + 2 zeta wn s + wn^2)`
+    /// with `tau = 1 / (2 pi inner_loop_hz)`. Not in the loop's model.
+    pub inner_loop_hz: f64,
 }
 
 /// The three prismatic axes (q1, q2, q3; index 0, 1, 2 in arrays).

@@ -40,6 +40,12 @@ use std::collections::VecDeque;
 pub const MIN_PERIOD_NS: u64 = 1_000;
 /// Longest accepted physics step, ns.
 pub const MAX_PHYSICS_STEP_NS: u64 = 10_000_000;
+/// Longest pure delay of a simulated servo's reference, ns
+/// ([`ServoSpec::delay_ns`]).
+pub const MAX_SERVO_DELAY_NS: u64 = 20_000_000;
+/// Most physics steps a simulated servo's delay may span (its delay line is
+/// fixed at start: nothing allocates while the world runs).
+pub const MAX_SERVO_DELAY_STEPS: usize = 200;
 /// Most received samples kept for [`sar_hal::ForceSensor::drain`]; the newest
 /// beyond are dropped and counted.
 pub const DRAIN_CAPACITY: usize = 4096;
@@ -468,6 +474,16 @@ fn check_plant(plant: &PlantSpec, physics_step_ns: u64) -> Result<(), SimError> 
         require(wn_dt <= 0.2, field, servo.bandwidth_hz, why)?;
         check_positive("axes.servo_damping", servo.damping)?;
         check_positive("axes.servo_max_accel_mps2", servo.max_accel_mps2)?;
+        check_non_negative("axes.servo_inner_loop_hz", servo.inner_loop_hz)?;
+        let delay_s = ns_to_s(servo.delay_ns);
+        let why = "must be at most 0.02 s and at most 200 physics steps";
+        let steps_ok = delay_steps(servo.delay_ns, physics_step_ns) <= MAX_SERVO_DELAY_STEPS;
+        require(
+            servo.delay_ns <= MAX_SERVO_DELAY_NS && steps_ok,
+            "axes.servo_delay_s",
+            delay_s,
+            why,
+        )?;
     }
     if let Some(decel) = plant.quick_stop_decel_mps2 {
         check_positive("axes.quick_stop_decel_mps2", decel)?;
@@ -492,6 +508,12 @@ fn check_contact(contact: &[ContactKey]) -> Result<(), SimError> {
     Ok(())
 }
 
+/// The physics steps a servo's delay spans (rounded to the nearest).
+fn delay_steps(delay_ns: u64, physics_step_ns: u64) -> usize {
+    let steps = (delay_ns + physics_step_ns / 2) / physics_step_ns.max(1);
+    usize::try_from(steps).unwrap_or(usize::MAX)
+}
+
 /// The servos of the three axes (with a [`ServoSpec`]): their state at the
 /// last physics step, and whether the axes follow their plans directly
 /// (the drives' own braking ramp) instead.
@@ -502,6 +524,41 @@ struct Servos {
     t_ns: u64,
     axes: [ServoAxis; 3],
     direct: bool,
+    /// The references of the last physics steps (a pure delay).
+    delay: DelayLine,
+}
+
+/// A fixed ring of the last `steps + 1` references of the three axes: what
+/// a servo with a pure delay of `steps` physics steps acts on.
+#[derive(Debug)]
+struct DelayLine {
+    ring: [[f64; 3]; MAX_SERVO_DELAY_STEPS + 1],
+    steps: usize,
+    /// Where the newest reference is.
+    head: usize,
+}
+
+impl DelayLine {
+    /// A delay of `steps` (at most [`MAX_SERVO_DELAY_STEPS`]) that has held
+    /// `r` for ever.
+    fn new(steps: usize, r: [f64; 3]) -> Self {
+        Self {
+            ring: [r; MAX_SERVO_DELAY_STEPS + 1],
+            steps: steps.min(MAX_SERVO_DELAY_STEPS),
+            head: 0,
+        }
+    }
+
+    /// Takes this step's reference and gives the one of `steps` steps ago.
+    fn delayed(&mut self, r: [f64; 3]) -> [f64; 3] {
+        let len = self.steps + 1;
+        self.head = (self.head + 1) % len;
+        if let Some(slot) = self.ring.get_mut(self.head) {
+            *slot = r;
+        }
+        let oldest = (self.head + 1) % len;
+        self.ring.get(oldest).copied().unwrap_or(r)
+    }
 }
 
 /// The simulated world. See the module doc.
@@ -571,6 +628,7 @@ impl<C: Clock> World<C> {
                 t_ns: 0,
                 axes: start.map(ServoAxis::rest),
                 direct: false,
+                delay: DelayLine::new(delay_steps(gains.delay_ns, spec.physics_step_ns), start),
             }),
             state: DriveState::Ready,
             slide: SlideDirection::new(),
@@ -744,6 +802,8 @@ impl<C: Clock> World<C> {
         {
             s.t_ns = t_ns;
             s.direct = false;
+            // The drive's delayed reference starts where it took over.
+            s.delay = DelayLine::new(s.delay.steps, states.map(|st| st.x_m));
             for ((axis, state), a_mps2) in s.axes.iter_mut().zip(states).zip(accels) {
                 *axis = ServoAxis {
                     x_m: state.x_m,
@@ -763,8 +823,19 @@ impl<C: Clock> World<C> {
             let dt_ns = t_ns.saturating_sub(s.t_ns);
             let wn_rad_s = core::f64::consts::TAU * s.gains.bandwidth_hz;
             let limit = Some(s.gains.max_accel_mps2);
-            for (axis, r) in s.axes.iter_mut().zip(references) {
-                axis.step(dt_ns, r.x_m, wn_rad_s, s.gains.damping, limit);
+            let delayed = s.delay.delayed(references.map(|r| r.x_m));
+            // The inner loop's lag over the step: the acceleration moves
+            // this fraction of the way to what the position loop asks.
+            // (None: exactly the position loop's, as without the key.)
+            let inner = (s.gains.inner_loop_hz > 0.0).then(|| {
+                1.0 - (-core::f64::consts::TAU * s.gains.inner_loop_hz * ns_to_s(dt_ns)).exp()
+            });
+            for (axis, r_m) in s.axes.iter_mut().zip(delayed) {
+                let before_mps2 = axis.a_mps2;
+                axis.step(dt_ns, r_m, wn_rad_s, s.gains.damping, limit);
+                if let Some(k) = inner {
+                    axis.a_mps2 = before_mps2 + k * (axis.a_mps2 - before_mps2);
+                }
             }
             s.t_ns = t_ns;
         }

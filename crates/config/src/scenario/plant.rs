@@ -1,12 +1,16 @@
 //! The plant in motion (issue 26): the rod's inertia (`[manipulator]
 //! inertia_perp_kgm2`, `inertia_axial_kgm2`), the adapter's mass (`[sensor]
 //! adapter_mass_kg`), the axes' servos (`[axes] servo_bandwidth_hz`,
-//! `servo_damping`, `servo_max_accel_mps2`) and the drives' quick-stop
+//! `servo_damping`, `servo_max_accel_mps2`; issue 34, a servo that is not
+//! the loop's model: `servo_delay_s`, a pure delay of the reference, and
+//! `servo_inner_loop_hz`, an inner velocity loop that makes the axis third
+//! order) and the drives' quick-stop
 //! deceleration (`[axes] quick_stop_decel_mps2`). Each group is opt-in: with
 //! none of its keys the simulator is the plant of before (no inertia, ideal
 //! axes, a quick stop at the acceleration limit), bit for bit. Within a
 //! group, a missing key takes its stated default (I_perp: the slender rod's
-//! m L^2 / 12; I_axial and the adapter: 0; the servo: 30 Hz, 0.7, 5 m/s^2).
+//! m L^2 / 12; I_axial and the adapter: 0; the servo: 30 Hz, 0.7, 5 m/s^2,
+//! no delay, no inner loop).
 
 use super::raw::FileToml;
 use super::{DEFAULT_SERVO_BANDWIDTH_HZ, DEFAULT_SERVO_DAMPING, DEFAULT_SERVO_MAX_ACCEL_MPS2};
@@ -55,7 +59,11 @@ pub(super) fn plant(
         get(|a| a.servo_damping),
         get(|a| a.servo_max_accel_mps2),
     );
-    let servo = if bandwidth.is_some() || damping.is_some() || max_accel.is_some() {
+    let (delay, inner) = (get(|a| a.servo_delay_s), get(|a| a.servo_inner_loop_hz));
+    let any_servo_key = [bandwidth, damping, max_accel, delay, inner]
+        .iter()
+        .any(Option::is_some);
+    let servo = if any_servo_key {
         let key = |k: &str, v: Option<f64>, default: f64, unit: &str| {
             v.map_or(Ok(default), |x| ctx.positive(k, x, unit))
         };
@@ -73,6 +81,10 @@ pub(super) fn plant(
                 DEFAULT_SERVO_MAX_ACCEL_MPS2,
                 "m/s^2",
             )?,
+            delay_ns: delay.map_or(Ok(0), |s| ctx.time_ns("axes.servo_delay_s", s))?,
+            inner_loop_hz: inner.map_or(Ok(0.0), |hz| {
+                ctx.non_negative("axes.servo_inner_loop_hz", hz, "Hz")
+            })?,
         })
     } else {
         None

@@ -93,6 +93,8 @@ pub(super) struct AxesToml {
     pub servo_bandwidth_hz: Option<f64>,
     pub servo_damping: Option<f64>,
     pub servo_max_accel_mps2: Option<f64>,
+    pub servo_delay_s: Option<f64>,
+    pub servo_inner_loop_hz: Option<f64>,
     pub quick_stop_decel_mps2: Option<f64>,
 }
 

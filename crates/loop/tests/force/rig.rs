@@ -80,6 +80,8 @@ impl Plant {
                     bandwidth_hz: 30.0,
                     damping: 0.7,
                     max_accel_mps2: 5.0,
+                    delay_ns: 0,
+                    inner_loop_hz: 0.0,
                 }),
                 ..spec.plant
             },

@@ -24,8 +24,8 @@
 //! `sarctl` subcommand (and, when the loop steps it, its `COMMAND_*`
 //! constant in `msg/CycleInput.msg`, which `tests/layout.rs` demands).
 
-use crate::cdr::{CdrError, CdrField, CdrReader, CdrWriter, FixedLayout};
 use super::CycleInput as CycleInputMsg;
+use crate::cdr::{CdrError, CdrField, CdrReader, CdrWriter, FixedLayout};
 use iceoryx2_bb_derive_macros::ZeroCopySend;
 use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
 use sar_estimator::Vec3;
@@ -857,25 +857,38 @@ code_enum!(
 );
 
 /// A recorded command in the unit-named layout: an older recording's
-/// ([`CommandLayoutCode::Old`]) arguments moved to their fields of now;
-/// any other message as it is. Frozen history: a new command never needs a
-/// line here.
+/// ([`CommandLayoutCode::Old`]) command re-laid as `sard` records it now
+/// (its arguments moved to their fields of now, the fields they borrowed
+/// cleared, the layout [`CommandLayoutCode::UnitNamed`]), so that it
+/// decodes, and compares byte for byte with a replay's; a cycle without a
+/// command, or a message of now, as it is. Frozen history: a new command
+/// never needs a line here.
 pub fn upgraded(m: &CycleInputMsg) -> CycleInputMsg {
     let mut u = *m;
-    if m.command_layout == CommandLayoutCode::Old {
-        let [value, ..] = m.command_values;
-        match m.command_kind {
-            CommandKindCode::Hold => u.hold_max_force_n = value,
-            CommandKindCode::Push => u.push_axial_n = value,
-            CommandKindCode::Excite => {
-                let [f1, f2, f3, duration_s, fade_s, _] = m.limits_n;
-                u.excite_amplitude_m = m.move_tip_m;
-                u.excite_freq_hz = [f1, f2, f3];
-                u.excite_duration_s = duration_s;
-                u.excite_fade_s = fade_s;
-            }
-            _ => {}
+    if m.command_layout != CommandLayoutCode::Old || m.command_kind == CommandKindCode::None {
+        return u;
+    }
+    u.command_layout = CommandLayoutCode::UnitNamed;
+    let [value, ..] = m.command_values;
+    match m.command_kind {
+        CommandKindCode::Hold => {
+            u.hold_max_force_n = value;
+            u.command_values[0] = 0.0;
         }
+        CommandKindCode::Push => {
+            u.push_axial_n = value;
+            u.command_values[0] = 0.0;
+        }
+        CommandKindCode::Excite => {
+            let [f1, f2, f3, duration_s, fade_s, _] = m.limits_n;
+            u.excite_amplitude_m = m.move_tip_m;
+            u.excite_freq_hz = [f1, f2, f3];
+            u.excite_duration_s = duration_s;
+            u.excite_fade_s = fade_s;
+            u.move_tip_m = [0.0; 3];
+            u.limits_n = [0.0; 6];
+        }
+        _ => {}
     }
     u
 }

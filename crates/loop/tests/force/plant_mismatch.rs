@@ -1,0 +1,249 @@
+//! Issue 34, when the world is not the model: free moves at 50 mm/s and
+//! 1 m/s^2 between three tips (no tissue: the true tip force is 0) through
+//! the same controller as `sard --sim`, on plants that the configuration
+//! (the built-in one, at those limits) describes wrongly: slower and less
+//! damped servos, a pure delay, an inner velocity loop, ideal drives, a rod
+//! of 1.6x the configured I_perp with an adapter the configuration leaves
+//! out, the support moving 10 mm up during the moves. Printed
+//! (`--nocapture`), one row per plant: the phantom tip force (RMS and peak
+//! over the moves, the sensor's noise 1 % of the HEX-6's so that the model
+//! error shows, not the noise), and the share of the new samples' axes
+//! (x, y, z of each) whose error lies within 3 of the estimate's own
+//! standard deviations (the configured HEX-6 noise, simulated as
+//! configured: what the guard's margin stands on; 99.73 % for a Gaussian
+//! error that the standard deviation describes).
+//!
+//! Asserted: on the plant the configuration describes, the phantom is at
+//! most 0.3 N RMS and at least 99 % of the samples' axes are within 3 standard
+//! deviations; every other plant shows a larger phantom (the harness sees
+//! each mismatch). The issue's goals for the other plants are the
+//! figures' to meet, not yet this test's.
+
+#![allow(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing
+)]
+
+use crate::rig::{Plant, READY_MS, Rig, TIP_M, rms};
+use sar_config as config;
+use sar_estimator::Vec3;
+use sar_estimator::cycle::TipOutcome;
+use sar_estimator::guard::GuardState;
+use sar_loop::control::{ReplyStatus, Request};
+use sar_sim::{ContactKey, PlantSpec, RodInertia, ServoSpec, SimSpec, SupportShift};
+use sar_test_support::rig::RigBuilder;
+
+/// The sensor's noise in the phantom runs, a fraction of the HEX-6's.
+const NOISE_FRACTION: f64 = 0.01;
+/// Cycles (ms) given to each move.
+const MOVE_MS: u64 = 1500;
+
+/// A plant the configuration does not describe: a name and the change to
+/// the simulator's spec (its plant is [`Plant::Moving`]'s first).
+struct Mismatch {
+    name: &'static str,
+    edit: fn(&mut SimSpec),
+}
+
+fn servo(spec: &SimSpec) -> ServoSpec {
+    spec.plant.servo.expect("the plant in motion has servos")
+}
+
+fn inertia(spec: &SimSpec) -> RodInertia {
+    spec.plant
+        .inertia
+        .expect("the plant in motion has a rod inertia")
+}
+
+const MISMATCHES: [Mismatch; 7] = [
+    Mismatch {
+        name: "as configured (30 Hz, damping 0.7; I_perp as configured)",
+        edit: |_| {},
+    },
+    Mismatch {
+        name: "servos at 12 Hz, damping 0.45",
+        edit: |s| {
+            s.plant.servo = Some(ServoSpec {
+                bandwidth_hz: 12.0,
+                damping: 0.45,
+                ..servo(s)
+            });
+        },
+    },
+    Mismatch {
+        name: "servos with a pure delay of 2 ms",
+        edit: |s| {
+            s.plant.servo = Some(ServoSpec {
+                delay_ns: 2_000_000,
+                ..servo(s)
+            });
+        },
+    },
+    Mismatch {
+        name: "servos with an inner velocity loop at 60 Hz (third order)",
+        edit: |s| {
+            s.plant.servo = Some(ServoSpec {
+                inner_loop_hz: 60.0,
+                ..servo(s)
+            });
+        },
+    },
+    Mismatch {
+        name: "ideal drives (no lag)",
+        edit: |s| s.plant.servo = None,
+    },
+    Mismatch {
+        name: "rod of 1.6x the configured I_perp, a 0.35 kg adapter not configured",
+        edit: |s| {
+            let rod = inertia(s);
+            s.plant.inertia = Some(RodInertia {
+                inertia_perp_kgm2: 1.6 * rod.inertia_perp_kgm2,
+                adapter_mass_kg: 0.35,
+                ..rod
+            });
+        },
+    },
+    Mismatch {
+        name: "the support shifted 10 mm up over 2 s, tip free",
+        edit: |s| {
+            s.support_shifts = vec![SupportShift {
+                t_ns: READY_MS * 1_000_000 + 200_000_000,
+                shift_m: Vec3::new(0.0, 0.01, 0.0),
+                duration_ns: 2_000_000_000,
+            }];
+        },
+    },
+];
+
+/// The built-in configuration at the fastest the plausibility check allows
+/// (50 mm/s) and 1 m/s^2.
+fn fast_config() -> config::Config {
+    let mut cfg = config::builtin().unwrap();
+    cfg.axes.max_speed_mps = 0.05;
+    cfg.axes.max_accel_mps2 = 1.0;
+    cfg
+}
+
+/// The demo on the plant in motion changed by `edit`, without tissue, the
+/// sensor's noise scaled by `noise_fraction`, the drives at `cfg`'s
+/// profile; ready (reset after the mean at rest).
+fn rig(cfg: &config::Config, edit: fn(&mut SimSpec), noise_fraction: f64) -> Rig {
+    let scenario = scenario(cfg, edit, noise_fraction);
+    let mut rig = Rig(RigBuilder::new(&scenario).config(cfg).build());
+    for _ in 0..READY_MS {
+        rig.step();
+    }
+    assert_eq!(rig.c.output().guard_state, GuardState::Ok);
+    rig
+}
+
+/// The scenario of [`rig`].
+fn scenario(
+    cfg: &config::Config,
+    edit: fn(&mut SimSpec),
+    noise_fraction: f64,
+) -> sar_config::scenario::Scenario {
+    let mut scenario = sar_daemon::sim::demo_scenario().unwrap();
+    let spec = &mut scenario.spec;
+    spec.sensor.noise_n *= noise_fraction;
+    spec.sensor.noise_nm *= noise_fraction;
+    spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
+    spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
+    spec.contact = vec![ContactKey {
+        t_ns: 0,
+        force_n: Vec3::zeros(),
+    }];
+    spec.tissue = Vec::new();
+    spec.plant = Plant::Moving.spec(spec);
+    edit(spec);
+    scenario
+}
+
+/// What the estimate did over the moves (new samples only).
+struct Figures {
+    /// |F_tip| estimated (the truth is 0), N.
+    phantom_n: Vec<f64>,
+    /// Per sample and axis: whether the error was within 3 of the axis's
+    /// standard deviations.
+    within_3_sigma: Vec<bool>,
+}
+
+/// Three free moves (out, across, back to the start) on `rig`.
+fn free_moves(mut rig: Rig) -> Figures {
+    let start = Vec3::new(TIP_M[0], TIP_M[1], TIP_M[2]);
+    let tips = [
+        start + Vec3::new(0.03, 0.015, -0.015),
+        start + Vec3::new(-0.01, -0.02, 0.02),
+        start,
+    ];
+    let (mut phantom_n, mut within_3_sigma) = (Vec::new(), Vec::new());
+    for (id, tip_m) in (1..).zip(tips) {
+        let r = rig.request(id, Request::MoveTip { tip_m });
+        assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+        for _ in 0..MOVE_MS {
+            let out = rig.step();
+            if !out.estimate.new_sample {
+                continue;
+            }
+            if let TipOutcome::Estimate(e) = out.estimate.tip {
+                phantom_n.push(e.force_n.norm());
+                within_3_sigma.extend((0..3).map(|i| e.force_n[i].abs() <= 3.0 * e.std_n[i]));
+            }
+        }
+    }
+    Figures {
+        phantom_n,
+        within_3_sigma,
+    }
+}
+
+#[test]
+fn plants_that_are_not_the_model_show_their_phantom() {
+    let cfg = fast_config();
+    let mut phantoms = Vec::new();
+    println!(
+        "| the plant, against what the configuration says | phantom tip force, RMS / peak | within 3 std |"
+    );
+    for m in &MISMATCHES {
+        let quiet = free_moves(rig(&cfg, m.edit, NOISE_FRACTION));
+        let noisy = free_moves(rig(&cfg, m.edit, 1.0));
+        let peak = quiet.phantom_n.iter().copied().fold(0.0, f64::max);
+        let share = noisy.within_3_sigma.iter().filter(|w| **w).count() as f64
+            / noisy.within_3_sigma.len() as f64;
+        println!(
+            "| {} | {:.3} N / {:.2} N | {:.2} % of {} sample axes |",
+            m.name,
+            rms(&quiet.phantom_n),
+            peak,
+            100.0 * share,
+            noisy.within_3_sigma.len()
+        );
+        phantoms.push((rms(&quiet.phantom_n), share));
+    }
+    let (matched_rms, matched_share) = phantoms[0];
+    assert!(matched_rms <= 0.3, "{matched_rms}");
+    assert!(matched_share >= 0.99, "{matched_share}");
+    for (m, (rms_n, _)) in MISMATCHES.iter().zip(&phantoms).skip(1) {
+        assert!(
+            *rms_n > matched_rms,
+            "{}: {rms_n} N, no more than the matched plant's {matched_rms} N",
+            m.name
+        );
+    }
+}
+
+/// The plant the rig builds for the matched row is the configuration's:
+/// the servo and the rod as the built-in configuration says.
+#[test]
+fn the_matched_plant_is_the_configuration() {
+    let cfg = fast_config();
+    let plant: PlantSpec = scenario(&cfg, MISMATCHES[0].edit, NOISE_FRACTION)
+        .spec
+        .plant;
+    let s = plant.servo.unwrap();
+    assert_eq!(s.bandwidth_hz, cfg.axes.motion.servo_bandwidth_hz);
+    assert_eq!(s.damping, cfg.axes.motion.servo_damping);
+    assert_eq!((s.delay_ns, s.inner_loop_hz), (0, 0.0));
+}
