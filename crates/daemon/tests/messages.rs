@@ -397,18 +397,20 @@ proptest! {
 
     /// Every strict prefix of a valid message is a typed error, except a
     /// `/sar/cycle/input` cut exactly where older recordings end (before the
-    /// fields added with issue 14: `an_older_cycle_input_without_the_new_fields_decodes`).
+    /// fields added with issues 14, 15, 35 and 36:
+    /// `an_older_cycle_input_without_the_new_fields_decodes`).
     #[test]
     fn cut_messages_are_errors(k in 0u64..1000) {
         for m in common::cycle_messages(k) {
             let mut b = Vec::new();
             m.encode(&mut b).unwrap();
-            // A CycleInput of before issue 14 (30 bytes shorter), of before
-            // issue 15 (14 bytes shorter) and of before issue 35 (6 bytes
-            // shorter: a bool, a pad byte, two u16) decode; any other cut
-            // fails.
+            // A CycleInput of before issue 36 (82 bytes shorter: a u8, a
+            // pad byte, ten f64), of before issue 35 (6 more: a bool, a pad
+            // byte, two u16), of before issue 15 (14 more) and of before
+            // issue 14 (30 more) decode; any other cut fails.
             let older_ends = if m.topic() == Topic::CycleInput {
-                vec![b.len() - 30, b.len() - 14, b.len() - 6]
+                let v36 = b.len() - 82;
+                vec![v36 - 30, v36 - 14, v36 - 6, v36]
             } else {
                 Vec::new()
             };
