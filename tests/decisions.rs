@@ -168,6 +168,14 @@ fn without_command_arguments(m: &CycleInput) -> CycleInput {
     m.limits_n = [0.0; 6];
     m.back_out_m = 0.0;
     m.move_max_force_n = 0.0;
+    // Issue 36's versioned block: the layout and the unit-named fields.
+    m.command_layout = sar_msgs::msgs::CommandLayoutCode::Old;
+    m.hold_max_force_n = 0.0;
+    m.push_axial_n = 0.0;
+    m.excite_amplitude_m = [0.0; 3];
+    m.excite_freq_hz = [0.0; 3];
+    m.excite_duration_s = 0.0;
+    m.excite_fade_s = 0.0;
     m
 }
 

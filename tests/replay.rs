@@ -8,7 +8,10 @@
 //! - `fault_daemon.mcap`: the same over `fault_encoder_jump.toml` (3 s; the
 //!   joint-jump Fault);
 //! - `contact_inputs.mcap`: the contact scenario's motion script, inputs and
-//!   truth only.
+//!   truth only;
+//! - `fault_daemon_v35.mcap`: the fault fixture as recorded before issue
+//!   36's versioned change of `CycleInput` (kept as it was: an older
+//!   layout still replays bit for bit).
 //!
 //! Each daemon fixture replays bit for bit (guard transitions included); a
 //! flipped bit in one input is reported at its cycle; the inputs-only one
@@ -42,6 +45,11 @@ mod readers;
 const CONTACT_DAEMON: &str = "contact_daemon.mcap";
 const FAULT_DAEMON: &str = "fault_daemon.mcap";
 const CONTACT_INPUTS: &str = "contact_inputs.mcap";
+/// The fault fixture as `sard` recorded it before issue 36's versioned
+/// change of `CycleInput` (its commands' arguments in unit-named fields, a
+/// new block of fields): kept, not regenerated, so that a recording of the
+/// older layout is shown to replay bit for bit.
+const FAULT_DAEMON_V35: &str = "fault_daemon_v35.mcap";
 /// Cycles and periods of the daemon fixtures.
 const CONTACT_CYCLES: u64 = 8_750;
 const CONTACT_PERIOD_NS: u64 = 2_000_000;
@@ -155,6 +163,7 @@ fn daemon_fixtures_replay_bit_for_bit_with_their_guard_transitions() {
     for (name, cycles) in [
         (CONTACT_DAEMON, CONTACT_CYCLES),
         (FAULT_DAEMON, FAULT_CYCLES),
+        (FAULT_DAEMON_V35, FAULT_CYCLES),
     ] {
         let out = dir.join(name);
         let r = replay_file(&fixture(name), &options(Some(out.clone()), None)).unwrap();
@@ -178,6 +187,10 @@ fn daemon_fixtures_replay_bit_for_bit_with_their_guard_transitions() {
         }
         let events = guard_events(&fixture(name));
         assert_eq!(events, guard_events(&out), "{name}");
+        if name == FAULT_DAEMON_V35 {
+            // The older layout's recording is the same run as today's.
+            assert_eq!(events, guard_events(&fixture(FAULT_DAEMON)), "{name}");
+        }
         assert!(events.len() >= 2, "{name}: {events:?}");
     }
     // The contact run reaches Stop (2) after Warn (1); the fault run Fault (3).

@@ -69,8 +69,7 @@ fn command(client: &Client, kind: u32) -> sar_msgs::wire::ReplyMsg {
                 kind,
                 reserved: 0,
                 id: 7,
-                tip_m: [0.0; 3],
-                limits_n: [0.0; 6],
+                args: [0.0; sar_msgs::command::COMMAND_ARGS],
             },
             Duration::from_secs(5),
         )

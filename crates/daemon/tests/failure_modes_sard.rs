@@ -117,15 +117,18 @@ fn start(
     (daemon, client, sub)
 }
 
-fn command(client: &Client, kind: u32, tip_m: [f64; 3]) -> ReplyMsg {
+/// A command of `kind` whose first arguments are `tip_m` (a move's tip;
+/// a reset or tare takes none).
+fn command(client: &Client, kind: u32, [x, y, z]: [f64; 3]) -> ReplyMsg {
+    let mut args = [0.0; sar_msgs::command::COMMAND_ARGS];
+    args[..3].copy_from_slice(&[x, y, z]);
     client
         .command(
             CommandMsg {
                 kind,
                 reserved: 0,
                 id: 11,
-                tip_m,
-                limits_n: [0.0; 6],
+                args,
             },
             Duration::from_secs(5),
         )

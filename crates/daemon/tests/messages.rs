@@ -293,6 +293,13 @@ prop_compose! {
             sensor_drained_counted: drained.0,
             sensor_drained_samples: drained.1,
             sensor_drained_jumps: drained.2,
+            command_layout: CommandLayoutCode::ALL[usize::from(codes.2) % 2],
+            hold_max_force_n: host.1,
+            push_axial_n: host.2,
+            excite_amplitude_m: more[0],
+            excite_freq_hz: more[3],
+            excite_duration_s: host.1,
+            excite_fade_s: host.2,
         }
     }
 }
@@ -390,18 +397,20 @@ proptest! {
 
     /// Every strict prefix of a valid message is a typed error, except a
     /// `/sar/cycle/input` cut exactly where older recordings end (before the
-    /// fields added with issue 14: `an_older_cycle_input_without_the_new_fields_decodes`).
+    /// fields added with issues 14, 15, 35 and 36:
+    /// `an_older_cycle_input_without_the_new_fields_decodes`).
     #[test]
     fn cut_messages_are_errors(k in 0u64..1000) {
         for m in common::cycle_messages(k) {
             let mut b = Vec::new();
             m.encode(&mut b).unwrap();
-            // A CycleInput of before issue 14 (30 bytes shorter), of before
-            // issue 15 (14 bytes shorter) and of before issue 35 (6 bytes
-            // shorter: a bool, a pad byte, two u16) decode; any other cut
-            // fails.
+            // A CycleInput of before issue 36 (82 bytes shorter: a u8, a
+            // pad byte, ten f64), of before issue 35 (6 more: a bool, a pad
+            // byte, two u16), of before issue 15 (14 more) and of before
+            // issue 14 (30 more) decode; any other cut fails.
             let older_ends = if m.topic() == Topic::CycleInput {
-                vec![b.len() - 30, b.len() - 14, b.len() - 6]
+                let v36 = b.len() - 82;
+                vec![v36 - 30, v36 - 14, v36 - 6, v36]
             } else {
                 Vec::new()
             };
@@ -501,9 +510,32 @@ fn an_older_cycle_input_without_the_new_fields_decodes() {
         sensor_drained_jumps: 1,
         ..m
     };
+    let m = CycleInput {
+        command_kind: sar_msgs::msgs::CommandKindCode::Hold,
+        command_layout: sar_msgs::msgs::CommandLayoutCode::UnitNamed,
+        hold_max_force_n: 3.5,
+        ..m
+    };
     m.encode(&mut bytes).unwrap();
     let full = CycleInput::decode(&bytes).unwrap();
     assert_eq!(full, m);
+    // Without issue 36's unit-named block (a cut within it is an error):
+    // the old layout, its fields 0.
+    let cut = (1..bytes.len())
+        .find(|cut| CycleInput::decode(&bytes[..bytes.len() - cut]).is_ok())
+        .unwrap();
+    assert!(
+        (81..=88).contains(&cut),
+        "a u8, its padding and ten float64: {cut}"
+    );
+    bytes.truncate(bytes.len() - cut);
+    let issue35 = CycleInput::decode(&bytes).unwrap();
+    assert_eq!(
+        issue35.command_layout,
+        sar_msgs::msgs::CommandLayoutCode::Old
+    );
+    assert_eq!(issue35.hold_max_force_n, 0.0);
+    assert_eq!(issue35.sensor_drained_jumps, 1);
     // Without issue 35's drained counts (a bool, a pad byte, two u16): not
     // counted (the step then compares new samples itself).
     bytes.truncate(bytes.len() - 6);

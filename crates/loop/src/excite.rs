@@ -180,20 +180,8 @@ pub const PEAK_ALLOWANCE: f64 = 1e-3;
 /// The longest excitation a request may ask for, s.
 pub const MAX_DURATION_S: f64 = 600.0;
 
-/// An excitation as requested: per axis (q1, q2, q3) an amplitude and a
-/// frequency, its duration and its fades.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ExciteRequest {
-    /// Each axis's amplitude, m (>= 0).
-    pub amplitude_m: [f64; 3],
-    /// Each axis's frequency, Hz (> 0).
-    pub freq_hz: [f64; 3],
-    /// The whole duration with the fades, s.
-    pub duration_s: f64,
-    /// The fade in and the fade out, s each (> 0, at most half the
-    /// duration).
-    pub fade_s: f64,
-}
+/// An excitation as requested: the command table's (`sar_msgs::command`).
+pub use sar_msgs::command::ExciteRequest;
 
 /// An excitation under way: the request, where the axes rested when it
 /// started (its centre) and when.
@@ -395,12 +383,6 @@ fn judge_axis(
     Ok(())
 }
 
-sar_snapshot::snap_struct!(ExciteRequest {
-    amplitude_m,
-    freq_hz,
-    duration_s,
-    fade_s,
-});
 sar_snapshot::snap_struct!(Excitation {
     request,
     centre_m,

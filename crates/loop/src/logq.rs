@@ -227,7 +227,7 @@ pub fn write(event: &LogEvent) {
             id = r.id,
             cycle = r.cycle,
             "request {}: {}",
-            request_text(&r.request),
+            r.request,
             sar_msgs::wire::status_name(r.status as u32)
         ),
         LogEvent::QuickStop { cycle, ok } => {
@@ -312,29 +312,6 @@ fn accepted_text(a: &sar_estimator::cycle::CommandAccepted) -> String {
             "accepted, limits now {} (were {})",
             limits_text(limits),
             limits_text(previous)
-        ),
-    }
-}
-
-/// An operator request in words.
-fn request_text(r: &crate::step::Request) -> String {
-    use crate::step::Request;
-    match r {
-        Request::Reset => "reset".to_owned(),
-        Request::Tare => "tare".to_owned(),
-        Request::MoveTip { tip_m } => format!("move tip to {} m", v3_text(tip_m, 4)),
-        Request::SetLimits(l) => format!("set limits ({})", limits_text(l)),
-        Request::BackOut { distance_m } => format!("back out {distance_m} m"),
-        Request::GuardedMove { tip_m, max_force_n } => format!(
-            "guarded move of the tip to {} m, braked at {max_force_n} N",
-            v3_text(tip_m, 4)
-        ),
-        Request::Hold { max_force_n } => format!("force control: hold below {max_force_n} N"),
-        Request::Push { axial_n } => format!("force control: push {axial_n} N along the rod"),
-        Request::Position => "position control".to_owned(),
-        Request::Excite(e) => format!(
-            "excitation of {} s (fades {} s): amplitudes {:?} m at {:?} Hz",
-            e.duration_s, e.fade_s, e.amplitude_m, e.freq_hz
         ),
     }
 }

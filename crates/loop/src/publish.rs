@@ -1,20 +1,19 @@
 //! The loop's side of the shared-memory payloads (`sar_msgs::wire`): a
 //! cycle's input, decision and statistics as a [`StateMsg`] (the cycle's
 //! state flattened once, [`cycle_state`], for shared memory and for the
-//! recording), an operator's
-//! [`CommandMsg`] as a loop [`Request`], a [`Reply`] as a [`ReplyMsg`]. The
-//! payloads themselves know nothing of the loop.
+//! recording), a [`Reply`] as a [`ReplyMsg`]. The payloads themselves know
+//! nothing of the loop. (An operator's `CommandMsg` is decoded by the
+//! command table, `sar_msgs::command::decode`.)
 
 use crate::reply::Reply;
 use crate::stats::LoopStats;
-use crate::step::{LoopInput, LoopOutput, Request, reason_code};
+use crate::step::{LoopInput, LoopOutput, reason_code};
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{CycleInput, CycleOutput, TipOutcome};
 use sar_hal::{DriveState, WrenchSample};
 use sar_msgs::msgs::TipOutcomeCode;
 use sar_msgs::wire::{
-    CommandMsg, ReplyMsg, STATE_SENSOR_SAMPLES, StateMsg, command_kind, drive_code, flags,
-    guard_state_code, reason_bytes,
+    ReplyMsg, STATE_SENSOR_SAMPLES, StateMsg, drive_code, flags, guard_state_code, reason_bytes,
 };
 
 // Every sample the loop drains in a cycle fits a state.
@@ -260,59 +259,6 @@ fn add_force_control(m: &mut StateMsg, decision: &LoopOutput) {
         m.guarded_stop_tip_m = arr(&g.tip_m);
         m.guarded_stop_force_n = arr(&g.force_n);
     }
-}
-
-/// The loop's request of a command, or `None` for a kind the loop does not
-/// take (LIMITS is answered without the loop; unknown kinds are refused).
-pub fn request_of(c: &CommandMsg) -> Option<Request> {
-    {
-        match c.kind {
-            command_kind::RESET => Some(Request::Reset),
-            command_kind::TARE => Some(Request::Tare),
-            command_kind::MOVE_TIP => Some(Request::MoveTip {
-                tip_m: Vec3::new(c.tip_m[0], c.tip_m[1], c.tip_m[2]),
-            }),
-            command_kind::SET_LIMITS => Some(Request::SetLimits(
-                sar_estimator::guard::ForceLimits::from_array(c.limits_n),
-            )),
-            command_kind::BACK_OUT => Some(Request::BackOut {
-                distance_m: c.tip_m[0],
-            }),
-            command_kind::GUARDED_MOVE => Some(Request::GuardedMove {
-                tip_m: Vec3::new(c.tip_m[0], c.tip_m[1], c.tip_m[2]),
-                max_force_n: c.limits_n[0],
-            }),
-            command_kind::HOLD => Some(Request::Hold {
-                max_force_n: c.limits_n[0],
-            }),
-            command_kind::PUSH => Some(Request::Push {
-                axial_n: c.limits_n[0],
-            }),
-            command_kind::POSITION => Some(Request::Position),
-            command_kind::EXCITE => Some(Request::Excite(excite_of(c.tip_m, c.limits_n))),
-            _ => None,
-        }
-    }
-}
-
-/// An excitation's request from its fields on the wire and in a recording
-/// (`tip_m` / `move_tip_m`: the amplitudes; `limits_n`: the frequencies,
-/// the duration, the fade).
-pub fn excite_of(amplitude_m: [f64; 3], limits_n: [f64; 6]) -> crate::excite::ExciteRequest {
-    let [f1, f2, f3, duration_s, fade_s, _] = limits_n;
-    crate::excite::ExciteRequest {
-        amplitude_m,
-        freq_hz: [f1, f2, f3],
-        duration_s,
-        fade_s,
-    }
-}
-
-/// An excitation's request as its wire and recording fields (the inverse
-/// of [`excite_of`]).
-pub fn excite_fields(e: &crate::excite::ExciteRequest) -> ([f64; 3], [f64; 6]) {
-    let [f1, f2, f3] = e.freq_hz;
-    (e.amplitude_m, [f1, f2, f3, e.duration_s, e.fade_s, 0.0])
 }
 
 /// The reply as published, with the guard's limits.

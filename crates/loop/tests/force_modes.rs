@@ -12,6 +12,8 @@
 
 // The force-control rig, and the other force-control tests in this binary
 // (one binary: less to link).
+#[path = "force/commands_round_trip.rs"]
+mod commands_round_trip;
 #[path = "force/drive_decel.rs"]
 mod drive_decel;
 #[path = "force/force_figures.rs"]

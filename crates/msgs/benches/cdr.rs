@@ -44,6 +44,13 @@ fn cycle_input() -> CycleInput {
         sensor_drained_counted: true,
         sensor_drained_samples: 1,
         sensor_drained_jumps: 0,
+        command_layout: CommandLayoutCode::Old,
+        hold_max_force_n: 0.0,
+        push_axial_n: 0.0,
+        excite_amplitude_m: [0.0; 3],
+        excite_freq_hz: [0.0; 3],
+        excite_duration_s: 0.0,
+        excite_fade_s: 0.0,
     }
 }
 

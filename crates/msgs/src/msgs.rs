@@ -609,40 +609,10 @@ code_enum!(
     }
 );
 
-code_enum!(
-    /// The operator command applied in a cycle (`COMMAND_*`).
-    CommandKindCode, "command_kind" {
-        /// None.
-        None = 0,
-        /// Reset the guard.
-        GuardReset = 1,
-        /// Tare the sensor (values: the bias, N).
-        Tare = 2,
-        // 3..=8 (`COMMAND_CLEAR_TARE`, `COMMAND_ENABLE`, `COMMAND_DISABLE`,
-        // `COMMAND_QUICK_STOP`, `COMMAND_FAULT_RESET`, `COMMAND_MOVE_TO` of
-        // the .msg) are reserved: no version of `sard` wrote them.
-        /// Set the sensor's bias (values: force x, y, z in N, then torque
-        /// x, y, z in N m; sensor frame). Written by older versions of
-        /// `sard`; read, it gives no request.
-        SetBias = 9,
-        /// Move the tip (`move_tip_m`, base frame, m).
-        MoveTip = 10,
-        /// Set the force limits (`limits_n`).
-        SetLimits = 11,
-        /// Back the tip out along the rod (`back_out_m`).
-        BackOut = 12,
-        /// Force control, compliant hold (`values[0]`: the force, N).
-        Hold = 13,
-        /// Force control, axial push (`values[0]`: the axial force, N).
-        Push = 14,
-        /// End force control: position control again.
-        Position = 15,
-        /// The dynamic identification's excitation about where the axes
-        /// rest (`move_tip_m`: each axis's amplitude, m; `limits_n`: each
-        /// axis's frequency, Hz, then the duration and the fade, s).
-        Excite = 16,
-    }
-);
+// `CommandKindCode` (`COMMAND_*`) and `CommandLayoutCode` (`LAYOUT_*`)
+// come from the command table (`crate::command`).
+pub mod command;
+pub use command::{CommandKindCode, CommandLayoutCode};
 
 code_enum!(
     /// What the step told the drives (`ACTION_*`).
@@ -869,13 +839,17 @@ ros_message! {
         target_valid: bool,
         /// The operator command applied.
         command_kind: CommandKindCode,
-        /// Its real arguments.
+        /// Its real arguments in recordings older than issue 36
+        /// ([`CommandLayoutCode::Old`]: HOLD's and PUSH's force, N, in the
+        /// first); 0 since.
         command_values: [f64; 6],
         /// Its integer argument.
         command_arg: u64,
         /// MOVE_TIP: the wanted tip, base frame, m.
         move_tip_m: [f64; 3],
-        /// SET_LIMITS: warn, stop of total, axial, lateral, N.
+        /// SET_LIMITS: warn, stop of total, axial, lateral, N (in
+        /// recordings older than issue 36 also EXCITE's frequencies, Hz,
+        /// duration and fade, s: [`CommandLayoutCode::Old`]).
         limits_n: [f64; 6],
         /// The step's decision: what the drives were told.
         drive_action: DriveActionCode,
@@ -912,6 +886,25 @@ ros_message! {
         sensor_drained_samples: u16,
         /// Steps between consecutive ones beyond the spike threshold.
         sensor_drained_jumps: u16,
+    }
+    // Added with issue 36 (each command argument in a field named with its
+    // unit, the command table's, `crate::command`): an older recording
+    // reads `Old` and its arguments are mapped (`command::upgraded`).
+    since {
+        /// The layout of the command's arguments (`Old` without a command).
+        command_layout: CommandLayoutCode,
+        /// HOLD: the force held below, N.
+        hold_max_force_n: f64,
+        /// PUSH: the axial force, N.
+        push_axial_n: f64,
+        /// EXCITE: each axis's amplitude (q1, q2, q3), m.
+        excite_amplitude_m: [f64; 3],
+        /// EXCITE: each axis's frequency, Hz.
+        excite_freq_hz: [f64; 3],
+        /// EXCITE: the whole duration with the fades, s.
+        excite_duration_s: f64,
+        /// EXCITE: the fade in and the fade out, s each.
+        excite_fade_s: f64,
     }
 }
 

@@ -359,66 +359,9 @@ impl StateMsg {
     }
 }
 
-/// Command kinds of [`CommandMsg::kind`]: one list with the recording's.
-/// A command the loop steps is recorded (`command_kind` of
-/// `CycleInput.msg`) and its wire kind is its recorded code
-/// ([`crate::msgs::CommandKindCode`], `COMMAND_*`); the kinds that are never recorded as
-/// themselves (answered without the loop, or recorded as another kind) are
-/// 128 and up, apart from every recorded code (a `uint8` below 128).
-pub mod command_kind {
-    use crate::msgs::CommandKindCode;
-    /// Reset the guard.
-    pub const RESET: u32 = CommandKindCode::GuardReset as u32;
-    /// Tare.
-    pub const TARE: u32 = CommandKindCode::Tare as u32;
-    /// Move the tip to `tip_m`.
-    pub const MOVE_TIP: u32 = CommandKindCode::MoveTip as u32;
-    /// Set the guard's force limits to `limits_n` (within the configured
-    /// ceilings).
-    pub const SET_LIMITS: u32 = CommandKindCode::SetLimits as u32;
-    /// Back the tip out along the rod by `tip_m[0]` metres (`sarctl
-    /// retreat`).
-    pub const BACK_OUT: u32 = CommandKindCode::BackOut as u32;
-    /// Force control: a compliant hold at `limits_n[0]` N (`sarctl hold`).
-    pub const HOLD: u32 = CommandKindCode::Hold as u32;
-    /// Force control: an axial push of `limits_n[0]` N (`sarctl push`).
-    pub const PUSH: u32 = CommandKindCode::Push as u32;
-    /// End force control (`sarctl position`).
-    pub const POSITION: u32 = CommandKindCode::Position as u32;
-    /// The dynamic identification's excitation about where the axes rest
-    /// (`sarctl identify --dynamic --live`): `tip_m` is each axis's
-    /// amplitude (q1, q2, q3), m; `limits_n` each axis's frequency, Hz,
-    /// then the duration and the fade, s.
-    pub const EXCITE: u32 = CommandKindCode::Excite as u32;
-
-    /// Read the guard's limits (answered without the loop; not recorded).
-    pub const LIMITS: u32 = 128;
-    /// Start recording (`sarctl record start`; not recorded).
-    pub const RECORD_START: u32 = 129;
-    /// Stop recording (`sarctl record stop`; not recorded).
-    pub const RECORD_STOP: u32 = 130;
-    /// A guarded move to `tip_m`, stopped when the tip force reaches
-    /// `limits_n[0]` N (`sarctl move-tip --max-force`; recorded as
-    /// `COMMAND_MOVE_TIP` with its force limit).
-    pub const GUARDED_MOVE: u32 = 131;
-}
-
-/// An operator command.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[repr(C)]
-pub struct CommandMsg {
-    /// [`command_kind`].
-    pub kind: u32,
-    /// Padding, 0.
-    pub reserved: u32,
-    /// The caller's id, echoed.
-    pub id: u64,
-    /// For MOVE_TIP: the wanted tip, base frame, m.
-    pub tip_m: [f64; 3],
-    /// For SET_LIMITS: warn, stop of total, axial, lateral, N. For
-    /// GUARDED_MOVE: `limits_n[0]` is the force that stops the move, N.
-    pub limits_n: [f64; 6],
-}
+pub use crate::msgs::command::{
+    COMMAND_MSG_TYPE_NAME, COMMAND_MSG_VERSION, CommandMsg, command_kind,
+};
 
 /// What became of a request. The numbers are the wire codes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

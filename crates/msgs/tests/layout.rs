@@ -48,6 +48,13 @@ fn samples() -> Vec<(&'static str, Outgoing)> {
                 sensor_drained_counted: true,
                 sensor_drained_samples: 3,
                 sensor_drained_jumps: 1,
+                command_layout: CommandLayoutCode::UnitNamed,
+                hold_max_force_n: 1.25,
+                push_axial_n: -2.25,
+                excite_amplitude_m: [0.01, 0.02, 0.03],
+                excite_freq_hz: [0.5, 0.7, 1.1],
+                excite_duration_s: 30.0,
+                excite_fade_s: 3.0,
             }),
         ),
         (
@@ -152,9 +159,10 @@ fn pinned(name: &str) -> &'static str {
             "00001a400600000000000000000000000000e03f333333333333e33f66666666",
             "6666e63fff002c01000000000000000000002240000000000000204000000000",
             "00001c40000000000000184000000000000014400000000000001040e8030000",
-            "00000000000000000000c03f0000000000000440",
-            // Issue 35: counted, 3 samples, 1 jump.
-            "010003000100",
+            "00000000000000000000c03f0000000000000440010003000100010000000000",
+            "0000f43f00000000000002c07b14ae47e17a843f7b14ae47e17a943fb81e85eb",
+            "51b89e3f000000000000e03f666666666666e63f9a9999999999f13f00000000",
+            "00003e400000000000000840",
         ),
         "estimator_state" => concat!(
             "0001000005000000010000000500000062617365000000000000000001000000",
@@ -442,6 +450,7 @@ fn each_msg_constant_is_the_shared_code() {
         "COMMAND_QUICK_STOP",
     ];
     assert_code_list(&cycle, "COMMAND", &values!(CommandKindCode), &reserved);
+    assert_code_list(&cycle, "LAYOUT", &values!(CommandLayoutCode), &[]);
     assert_code_list(&cycle, "ACTION", &values!(DriveActionCode), &[]);
     assert_code_list(&cycle, "CLOCK", &values!(ClockStatusCode), &[]);
     let state = msg_constants("EstimatorState");

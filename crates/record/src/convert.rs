@@ -20,14 +20,13 @@ use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     Bias, CycleInput, CycleOutput, DrainedSamples, JointSample, SensorSample, TipOutcome,
 };
-use sar_estimator::guard::ForceLimits;
 use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
 use sar_loop::publish::{SimTruth, add_truth, cycle_state};
 use sar_loop::step::{DriveAction, LoopInput, LoopOutput, Release, Request};
 use sar_msgs::msgs::{
-    ActiveJointState, ClockStatusCode, CommandKindCode, CycleInput as CycleInputMsg,
-    DriveActionCode, DriveStateCode, Outgoing, REPLY_NONE, WrenchStamped,
+    ActiveJointState, ClockStatusCode, CycleInput as CycleInputMsg, DriveActionCode,
+    DriveStateCode, Outgoing, REPLY_NONE, WrenchStamped,
 };
 use sar_msgs::wire::StateMsg;
 use sar_scene::topics;
@@ -232,46 +231,12 @@ pub fn cycle_input_msg(input: &LoopInput, decision: &LoopOutput) -> CycleInputMs
     m
 }
 
-/// The operator's request of a cycle in its `/sar/cycle/input` fields
-/// (command kind and arguments; a reset carries the cycle).
+/// The operator's request of a cycle in its `/sar/cycle/input` fields (the
+/// command table's, `sar_msgs::command`: its kind, its unit-named
+/// arguments; a reset carries the cycle).
 fn record_request(m: &mut CycleInputMsg, request: Option<Request>, cycle: u64) {
-    match request {
-        None => {}
-        Some(Request::Reset) => {
-            m.command_kind = CommandKindCode::GuardReset;
-            m.command_arg = cycle;
-        }
-        Some(Request::Tare) => m.command_kind = CommandKindCode::Tare,
-        Some(Request::MoveTip { tip_m }) => {
-            m.command_kind = CommandKindCode::MoveTip;
-            m.move_tip_m = arr(&tip_m);
-        }
-        Some(Request::GuardedMove { tip_m, max_force_n }) => {
-            m.command_kind = CommandKindCode::MoveTip;
-            m.move_tip_m = arr(&tip_m);
-            m.move_max_force_n = max_force_n;
-        }
-        Some(Request::SetLimits(l)) => {
-            m.command_kind = CommandKindCode::SetLimits;
-            m.limits_n = l.to_array();
-        }
-        Some(Request::BackOut { distance_m }) => {
-            m.command_kind = CommandKindCode::BackOut;
-            m.back_out_m = distance_m;
-        }
-        Some(Request::Hold { max_force_n }) => {
-            m.command_kind = CommandKindCode::Hold;
-            m.command_values[0] = max_force_n;
-        }
-        Some(Request::Push { axial_n }) => {
-            m.command_kind = CommandKindCode::Push;
-            m.command_values[0] = axial_n;
-        }
-        Some(Request::Position) => m.command_kind = CommandKindCode::Position,
-        Some(Request::Excite(e)) => {
-            m.command_kind = CommandKindCode::Excite;
-            (m.move_tip_m, m.limits_n) = sar_loop::publish::excite_fields(&e);
-        }
+    if let Some(r) = request {
+        r.record(m, cycle);
     }
 }
 
@@ -298,36 +263,12 @@ fn drive_action_fields(action: DriveAction) -> (DriveActionCode, [f64; 3]) {
 /// inverse of [`cycle_input_msg`] for every field the step reads). A command
 /// the step does not take (drive commands, a set bias) gives no request.
 pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
-    let request = match m.command_kind {
-        CommandKindCode::GuardReset => Some(Request::Reset),
-        CommandKindCode::Tare => Some(Request::Tare),
-        // A guarded move's limit is > 0 when it was accepted as one; a
-        // recorded 0 (or an older recording) is a plain move. A non-finite or
-        // negative recorded limit goes to the step as it was, which refuses it.
-        CommandKindCode::MoveTip if m.move_max_force_n != 0.0 => Some(Request::GuardedMove {
-            tip_m: vec3(&m.move_tip_m),
-            max_force_n: m.move_max_force_n,
-        }),
-        CommandKindCode::MoveTip => Some(Request::MoveTip {
-            tip_m: vec3(&m.move_tip_m),
-        }),
-        CommandKindCode::SetLimits => Some(Request::SetLimits(ForceLimits::from_array(m.limits_n))),
-        CommandKindCode::BackOut => Some(Request::BackOut {
-            distance_m: m.back_out_m,
-        }),
-        CommandKindCode::Hold => Some(Request::Hold {
-            max_force_n: m.command_values[0],
-        }),
-        CommandKindCode::Push => Some(Request::Push {
-            axial_n: m.command_values[0],
-        }),
-        CommandKindCode::Position => Some(Request::Position),
-        CommandKindCode::Excite => Some(Request::Excite(sar_loop::publish::excite_of(
-            m.move_tip_m,
-            m.limits_n,
-        ))),
-        _ => None,
-    };
+    // The command table's decoder (an older recording's layout mapped): a
+    // command the step does not take (a set bias) gives no request. A
+    // guarded move's limit is > 0 when it was accepted as one; a recorded
+    // 0 (or an older recording) is a plain move; a non-finite or negative
+    // recorded argument goes to the step as it was, which refuses it.
+    let request = Request::from_recorded(m);
     LoopInput {
         cycle: m.cycle,
         now_ns: (m.clock_status != ClockStatusCode::ReadFailed).then_some(m.now_ns),

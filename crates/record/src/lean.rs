@@ -113,6 +113,13 @@ fn has_command(m: &CycleInputMsg) -> bool {
         || !same_bits(&m.limits_n, &none.limits_n)
         || m.back_out_m.to_bits() != 0
         || m.move_max_force_n.to_bits() != 0
+        || m.command_layout != none.command_layout
+        || m.hold_max_force_n.to_bits() != 0
+        || m.push_axial_n.to_bits() != 0
+        || !same_bits(&m.excite_amplitude_m, &none.excite_amplitude_m)
+        || !same_bits(&m.excite_freq_hz, &none.excite_freq_hz)
+        || m.excite_duration_s.to_bits() != 0
+        || m.excite_fade_s.to_bits() != 0
 }
 
 /// Builds one batch, a cycle at a time.

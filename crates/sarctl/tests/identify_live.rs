@@ -211,7 +211,7 @@ fn identify_live_refuses_the_demo_contact_at_once() {
 /// bit.
 #[test]
 fn identify_dynamic_live_identifies_the_rods_inertia() {
-    use sar_msgs::wire::{CommandMsg, command_kind};
+    use sar_msgs::command::{ExciteRequest, Request};
     let prefix = format!("sar-iddyn-{}", std::process::id());
     let dir = std::env::temp_dir().join(&prefix);
     std::fs::create_dir_all(&dir).unwrap();
@@ -259,22 +259,21 @@ fn identify_dynamic_live_identifies_the_rods_inertia() {
     );
     wait_for(&prefix, |s| s.guard_state == sar_msgs::wire::guard_code::OK);
     let client = sar_shm::Client::new(&prefix).unwrap();
-    let ask = |kind, tip_m, limits_n| {
-        let c = CommandMsg {
-            kind,
-            id: 26,
-            tip_m,
-            limits_n,
-            ..CommandMsg::default()
-        };
-        client.command(c, Duration::from_secs(5)).unwrap()
+    let ask = |request: Request| {
+        client
+            .command(request.to_wire(26), Duration::from_secs(5))
+            .unwrap()
+    };
+    let excite = |amplitude_m| {
+        Request::Excite(ExciteRequest {
+            amplitude_m,
+            freq_hz: [1.3, 1.7, 0.07],
+            duration_s: 16.0,
+            fade_s: 3.0,
+        })
     };
     // 1 cm at 1.3 Hz is 0.082 m/s: above the 0.02 m/s limit.
-    let r = ask(
-        command_kind::EXCITE,
-        [0.01, 0.0, 0.0],
-        [1.3, 1.7, 0.07, 16.0, 3.0, 0.0],
-    );
+    let r = ask(excite([0.01, 0.0, 0.0]));
     assert_eq!(r.status, 15, "{}", r.detail_text());
     assert!(
         r.detail_text()
@@ -283,14 +282,12 @@ fn identify_dynamic_live_identifies_the_rods_inertia() {
         r.detail_text()
     );
     // While a move runs: refused, the axes move.
-    let r = ask(command_kind::MOVE_TIP, [0.62, 0.2, 0.0], [0.0; 6]);
+    let r = ask(Request::MoveTip {
+        tip_m: sar_estimator::Vec3::new(0.62, 0.2, 0.0),
+    });
     assert_eq!(r.status, 0, "{}", r.detail_text());
     std::thread::sleep(Duration::from_millis(200));
-    let r = ask(
-        command_kind::EXCITE,
-        [0.001, 0.001, 0.001],
-        [1.3, 1.7, 0.07, 16.0, 3.0, 0.0],
-    );
+    let r = ask(excite([0.001, 0.001, 0.001]));
     assert_eq!(r.status, 12, "{}", r.detail_text());
     assert!(
         r.detail_text().starts_with("the axes still move at"),

@@ -15,7 +15,8 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use sar_loop::control::{Envelope, Operator, Reply};
-use sar_msgs::wire::{ReplyMsg, StateMsg, command_kind, reply_code};
+use sar_msgs::command::{DaemonCommand, WireCommand};
+use sar_msgs::wire::{ReplyMsg, StateMsg, reply_code};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -286,8 +287,8 @@ impl ShmWorker {
             limits_n: self.limits_n,
             ..ReplyMsg::default()
         };
-        match sar_loop::publish::request_of(&command) {
-            Some(request) => {
+        match sar_msgs::command::decode(&command) {
+            Ok(WireCommand::Loop(request)) => {
                 let env = Envelope {
                     id: command.id,
                     request,
@@ -298,14 +299,12 @@ impl ShmWorker {
                     let _ = active.send_copy(immediate(reply_code::BUSY));
                 }
             }
-            None if command.kind == command_kind::LIMITS => {
+            Ok(WireCommand::Daemon(DaemonCommand::Limits)) => {
                 let _ = active.send_copy(immediate(0));
             }
-            None if matches!(
-                command.kind,
-                command_kind::RECORD_START | command_kind::RECORD_STOP
-            ) && self.shared.record_switch.get().is_some() =>
-            {
+            Ok(WireCommand::Daemon(
+                record @ (DaemonCommand::RecordStart | DaemonCommand::RecordStop),
+            )) if self.shared.record_switch.get().is_some() => {
                 // One at a time; the reply waits for the recorder's answer
                 // (the first file, or why not), other commands go on.
                 if self.record_pending.is_some() {
@@ -313,7 +312,7 @@ impl ShmWorker {
                     return;
                 }
                 let ticket = self.shared.record_switch.get().map_or(0, |s| {
-                    if command.kind == command_kind::RECORD_START {
+                    if record == DaemonCommand::RecordStart {
                         s.start()
                     } else {
                         s.stop()
@@ -325,7 +324,10 @@ impl ShmWorker {
                     std::time::Instant::now() + RECORD_ANSWER_WAIT,
                 ));
             }
-            None => {
+            // Recording asked of a daemon without a recorder, or a kind of
+            // no command of this build.
+            Ok(WireCommand::Daemon(DaemonCommand::RecordStart | DaemonCommand::RecordStop))
+            | Err(_) => {
                 let _ = active.send_copy(immediate(reply_code::UNKNOWN_COMMAND));
             }
         }

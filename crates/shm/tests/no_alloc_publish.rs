@@ -94,16 +94,23 @@ fn a_published_cycle_with_commands_allocates_nothing_on_the_loop_thread() {
             let client = Client::new(&prefix).unwrap();
             let sub = client.subscribe().unwrap();
             let mut replies = Vec::new();
+            // A move's tip (its three arguments), or the limits to set
+            // (their six).
             let mut send = |kind: u32, limits_n: [f64; 6]| {
                 let n = sub.wait(Duration::from_millis(100), |_| {});
                 received.fetch_add(n as u64, Ordering::SeqCst);
+                let mut args = [0.0; sar_msgs::command::COMMAND_ARGS];
+                if kind == command_kind::SET_LIMITS {
+                    args[..6].copy_from_slice(&limits_n);
+                } else {
+                    args[..3].copy_from_slice(&[0.6, 0.2, 0.001]);
+                }
                 let reply = client
                     .command(
                         CommandMsg {
                             kind,
                             id: replies.len() as u64 + 1,
-                            tip_m: [0.6, 0.2, 0.001],
-                            limits_n,
+                            args,
                             ..CommandMsg::default()
                         },
                         Duration::from_secs(10),
@@ -218,7 +225,7 @@ fn the_run_loop_with_publishing_allocates_nothing_on_its_thread() {
                     CommandMsg {
                         kind,
                         id: id as u64 + 1,
-                        tip_m: [0.6, 0.2, 0.001],
+                        args: [0.6, 0.2, 0.001, 0.0, 0.0, 0.0, 0.0, 0.0],
                         ..CommandMsg::default()
                     },
                     Duration::from_secs(10),

@@ -81,6 +81,13 @@ pub fn cycle_messages(k: u64) -> Vec<Outgoing> {
             sensor_drained_counted: !k.is_multiple_of(13),
             sensor_drained_samples: (k % 17) as u16,
             sensor_drained_jumps: (k % 3) as u16,
+            command_layout: CommandLayoutCode::ALL[(k % 2) as usize],
+            hold_max_force_n: v3(k + 26)[0],
+            push_axial_n: v3(k + 26)[1],
+            excite_amplitude_m: v3(k + 27),
+            excite_freq_hz: v3(k + 28),
+            excite_duration_s: v3(k + 29)[0],
+            excite_fade_s: v3(k + 29)[1],
         }),
         Outgoing::SensorWrench(WrenchStamped::sensor(t - 90_000, v3(k), v3(k + 1))),
         Outgoing::Joints(ActiveJointState {

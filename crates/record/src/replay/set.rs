@@ -304,7 +304,15 @@ impl<'o> SetReplay<'o> {
         if !r.replayable(m.cycle) {
             return Ok(());
         }
-        r.recorded_output(Topic::CycleInput, data);
+        // A message of an older recording (without the fields added since,
+        // a command in the older layout) compares as `sard` records it now
+        // (`command::upgraded`, the fields added since at their default):
+        // the same input and decision, in today's layout.
+        let mut now = Vec::with_capacity(data.len() + 64);
+        match sar_msgs::msgs::RosMessage::encode(&sar_msgs::command::upgraded(m), &mut now) {
+            Ok(()) => r.recorded_output(Topic::CycleInput, &now),
+            Err(_) => r.recorded_output(Topic::CycleInput, data),
+        }
         r.loop_cycle(&convert::loop_input(m), &[])
     }
 

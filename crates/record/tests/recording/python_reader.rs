@@ -159,7 +159,14 @@ fn fields(m: &Outgoing) -> String {
                 .f("move_max_force_n", c.move_max_force_n)
                 .b("sensor_drained_counted", c.sensor_drained_counted)
                 .i("sensor_drained_samples", c.sensor_drained_samples)
-                .i("sensor_drained_jumps", c.sensor_drained_jumps);
+                .i("sensor_drained_jumps", c.sensor_drained_jumps)
+                .i("command_layout", c.command_layout.code())
+                .f("hold_max_force_n", c.hold_max_force_n)
+                .f("push_axial_n", c.push_axial_n)
+                .fa("excite_amplitude_m", &c.excite_amplitude_m)
+                .fa("excite_freq_hz", &c.excite_freq_hz)
+                .f("excite_duration_s", c.excite_duration_s)
+                .f("excite_fade_s", c.excite_fade_s);
         }
         Outgoing::RecorderDrops(d) => {
             l.header(d.stamp_ns, "")

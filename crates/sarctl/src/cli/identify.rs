@@ -487,7 +487,8 @@ mod live {
     use crate::identify::poses::{self, PoseTarget};
     use sar_config::Config;
     use sar_kinematics::{Mat3, Vec3};
-    use sar_msgs::wire::{StateMsg, command_kind, flags, guard_code};
+    use sar_msgs::command::Request;
+    use sar_msgs::wire::{StateMsg, flags, guard_code};
     use sar_shm::{Client, StateSubscription};
     use std::io::{BufRead, Write};
     use std::time::{Duration, Instant};
@@ -663,7 +664,7 @@ mod live {
     fn ask_move(c: &Collector, client: &Client, t: &PoseTarget, what: &str) -> Result<(), String> {
         let reply = client
             .command(
-                command_msg(command_kind::MOVE_TIP, t.tip_m.into(), [0.0; 6]),
+                command_msg(Request::MoveTip { tip_m: t.tip_m }),
                 Duration::from_secs(2),
             )
             .map_err(|e| e.to_string())?;

@@ -3,7 +3,7 @@
 //! condition number and expected accuracy printed (stderr) before anything
 //! moves; then, on the running daemon: a move of the tip to the
 //! excitation's centre, a recording started, the excitation asked of the
-//! loop (`command_kind::EXCITE`, which the loop judges and streams, the
+//! loop (`Request::Excite`, which the loop judges and streams, the
 //! guard on), followed until it ends at rest, the recording stopped. The
 //! recording is then identified offline as `--input` would be.
 
@@ -12,9 +12,8 @@ use super::request::command_msg;
 use crate::identify::excitation::Plan;
 use sar_config::Config;
 use sar_kinematics::{ActiveJoints, forward};
-use sar_msgs::wire::{
-    StateMsg, command_kind, guard_code, guard_state_name, reason_name, status_name,
-};
+use sar_msgs::command::{ExciteRequest, Request};
+use sar_msgs::wire::{StateMsg, guard_code, guard_state_name, reason_name, status_name};
 use sar_shm::{Client, StateSubscription};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -78,7 +77,7 @@ fn move_to_centre(
         .map_err(|e| format!("the excitation's centre {centre_m:?} m has no pose: {e}"))?;
     let reply = client
         .command(
-            command_msg(command_kind::MOVE_TIP, pose.tip_m.into(), [0.0; 6]),
+            command_msg(Request::MoveTip { tip_m: pose.tip_m }),
             Duration::from_secs(2),
         )
         .map_err(|e| e.to_string())?;
@@ -104,11 +103,15 @@ fn move_to_centre(
 /// Asks the loop for the excitation and follows it to its end at rest.
 fn excite(client: &Client, sub: &StateSubscription, plan: &Plan) -> Result<(), String> {
     let e = &plan.excitation;
-    let [f1, f2, f3] = e.spec.sines.map(|s| s.freq_hz);
-    let limits_n = [f1, f2, f3, e.spec.duration_s, e.spec.fade_s, 0.0];
+    let request = ExciteRequest {
+        amplitude_m: e.amplitude_m,
+        freq_hz: e.spec.sines.map(|s| s.freq_hz),
+        duration_s: e.spec.duration_s,
+        fade_s: e.spec.fade_s,
+    };
     let reply = client
         .command(
-            command_msg(command_kind::EXCITE, e.amplitude_m, limits_n),
+            command_msg(Request::Excite(request)),
             Duration::from_secs(2),
         )
         .map_err(|e| e.to_string())?;

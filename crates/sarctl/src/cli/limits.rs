@@ -5,7 +5,8 @@
 
 use super::request::Daemon;
 use sar_estimator::guard::ForceLimits;
-use sar_msgs::wire::{command_kind, status_name};
+use sar_msgs::command::{DaemonCommand, Request};
+use sar_msgs::wire::status_name;
 use serde_json::json;
 
 /// The options of `sarctl limits`: one per force limit, named after
@@ -59,7 +60,7 @@ pub fn limits_json(l: &[f64; 6]) -> serde_json::Value {
 
 /// Runs the command.
 pub fn run(daemon: &Daemon<'_>, set: &LimitOptions) -> Result<(), String> {
-    let mut limits_n = daemon.send_tip(command_kind::LIMITS, [0.0; 3])?.limits_n;
+    let mut limits_n = daemon.send(DaemonCommand::Limits)?.limits_n;
     let wanted = set.wanted();
     if wanted.iter().any(Option::is_some) {
         limits_n = set_limits(daemon, limits_n, wanted)?;
@@ -85,7 +86,7 @@ fn set_limits(
             *slot = v;
         }
     }
-    let r = daemon.send(command_kind::SET_LIMITS, [0.0; 3], limits_n)?;
+    let r = daemon.send(Request::SetLimits(ForceLimits::from_array(limits_n)))?;
     if r.status != 0 {
         return Err(format!(
             "limits: {}: {}",
@@ -93,7 +94,7 @@ fn set_limits(
             r.detail_text()
         ));
     }
-    Ok(daemon.send_tip(command_kind::LIMITS, [0.0; 3])?.limits_n)
+    Ok(daemon.send(DaemonCommand::Limits)?.limits_n)
 }
 
 #[cfg(test)]

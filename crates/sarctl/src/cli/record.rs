@@ -10,7 +10,8 @@
 //! directory` when it starts).
 
 use super::request::command_msg;
-use sar_msgs::wire::{ReplyMsg, StateMsg, command_kind, recording_code, reply_code, status_name};
+use sar_msgs::command::DaemonCommand;
+use sar_msgs::wire::{ReplyMsg, StateMsg, recording_code, reply_code, status_name};
 use sar_shm::Client;
 use serde_json::json;
 use std::time::{Duration, Instant};
@@ -52,14 +53,14 @@ pub fn stop(client: &Client) -> Result<String, String> {
 
 /// Asks the daemon to start (or stop) recording; its answer when it did.
 fn ask(client: &Client, start: bool, what: &str) -> Result<ReplyMsg, String> {
-    let kind = if start {
-        command_kind::RECORD_START
+    let command = if start {
+        DaemonCommand::RecordStart
     } else {
-        command_kind::RECORD_STOP
+        DaemonCommand::RecordStop
     };
     let reply = client
         .command(
-            command_msg(kind, [0.0; 3], [0.0; 6]),
+            command_msg(command),
             // The daemon answers once the file is closed (synced to disk).
             sar_shm::RECORD_ANSWER_WAIT + Duration::from_secs(2),
         )

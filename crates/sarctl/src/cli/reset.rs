@@ -3,7 +3,7 @@
 //! 100 ms apart), then the guard's reset.
 
 use super::request::Daemon;
-use sar_msgs::wire::command_kind;
+use sar_msgs::command::Request;
 use std::time::Duration;
 
 /// Resets again after a drives' fault reset, at most this many times.
@@ -11,13 +11,13 @@ const DRIVE_RESETS: usize = 10;
 
 /// Runs the command.
 pub fn run(daemon: &Daemon<'_>) -> Result<(), String> {
-    let mut r = daemon.send_tip(command_kind::RESET, [0.0; 3])?;
+    let mut r = daemon.send(Request::Reset)?;
     for _ in 0..DRIVE_RESETS {
         if r.status != sar_msgs::wire::ReplyStatus::DrivesFaultReset as u32 {
             break;
         }
         std::thread::sleep(Duration::from_millis(100));
-        r = daemon.send_tip(command_kind::RESET, [0.0; 3])?;
+        r = daemon.send(Request::Reset)?;
     }
     daemon.report("reset", &r)
 }

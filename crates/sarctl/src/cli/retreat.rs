@@ -7,7 +7,8 @@
 //! the rod at the retreat speed.
 
 use super::request::Daemon;
-use sar_msgs::wire::{StateMsg, command_kind, flags, guard_state_name, reason_name};
+use sar_msgs::command::Request;
+use sar_msgs::wire::{StateMsg, flags, guard_state_name, reason_name};
 use sar_shm::StateSubscription;
 use std::time::{Duration, Instant};
 
@@ -19,7 +20,7 @@ pub fn run(daemon: &Daemon<'_>, distance_m: f64) -> Result<(), String> {
     check_distance(distance_m)?;
     let sub = daemon.client.subscribe().map_err(|e| e.to_string())?;
     if latest(&sub, "start")?.flags & flags::HALTED != 0 {
-        let r = daemon.send_tip(command_kind::RESET, [0.0; 3])?;
+        let r = daemon.send(Request::Reset)?;
         daemon.report("retreat: reset", &r)?;
     }
     let s = wait_for_drives(&sub)?;
@@ -32,7 +33,7 @@ pub fn run(daemon: &Daemon<'_>, distance_m: f64) -> Result<(), String> {
     }
     daemon.report(
         "retreat: back out",
-        &daemon.send_tip(command_kind::BACK_OUT, [distance_m, 0.0, 0.0])?,
+        &daemon.send(Request::BackOut { distance_m })?,
     )
 }
 
