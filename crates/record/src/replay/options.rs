@@ -136,6 +136,16 @@ pub enum ReplayError {
         /// [`INPUT_WINDOW`].
         window: usize,
     },
+    /// A lean recording whose cycles are laid out by another version of
+    /// `sard` (its `/sar/cycle/batch` schema is not this version's): its
+    /// nested cycle inputs cannot be cut apart without misreading them.
+    #[error(
+        "/sar/cycle/batch at log time {log_time_ns} ns: a lean recording of another version of sard (its cycle layout differs from this sarctl's: the fields each version added); replay it with the sarctl of the sard that recorded it"
+    )]
+    OtherLeanLayout {
+        /// The batch's log time.
+        log_time_ns: u64,
+    },
     /// `/sar/cycle/input` appears after the inputs-only replay had started
     /// (more than the window of sensor and joint messages before it).
     #[error(

@@ -240,6 +240,16 @@ impl<'o> SetReplay<'o> {
                 self.r.snapshot(&m)?;
             }
             Some(Topic::CycleBatch) => {
+                // Its cycles nest whole `CycleInput`s: only this version's
+                // layout can be cut into cycles (an older one's would be
+                // misread, its fields added since taken from the next
+                // cycle's bytes). The file's schema says which it is.
+                let schema = channels.get(&id).map(ChannelInfo::schema_data);
+                if schema != Some(Topic::CycleBatch.schema().as_bytes()) {
+                    return Err(ReplayError::OtherLeanLayout {
+                        log_time_ns: msg.log_time_ns,
+                    });
+                }
                 self.start_cycle_inputs(msg.log_time_ns)?;
                 self.cycle_batch(file, &msg)?;
             }

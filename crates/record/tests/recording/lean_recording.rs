@@ -552,3 +552,64 @@ fn a_lean_cycle_that_goes_back_is_named_as_such() {
         "{why}"
     );
 }
+
+/// Issue 36: a lean file nests whole cycle inputs, so one of another
+/// layout (an older `sard`'s, before the fields it lacks were added) cannot
+/// be cut into cycles without misreading them. The replay refuses it by
+/// name, from the file's own schema, instead of misreading it; the same
+/// file with this version's schema replays.
+#[test]
+fn a_lean_recording_of_another_layout_is_refused_by_name() {
+    let (_, lean) = run_both("lean_other_layout");
+    let cfg = config::builtin().unwrap();
+    let older = lean.with_file_name("older-layout.mcap");
+    let bytes = read_file(&lean).unwrap();
+    let mut w = mcap::Writer::new(std::io::BufWriter::new(
+        std::fs::File::create(&older).unwrap(),
+    ))
+    .unwrap();
+    let mut reader = McapReader::new(&bytes).unwrap();
+    let _ = reader.next();
+    for meta in reader.metadata() {
+        w.write_metadata(&mcap::records::Metadata {
+            name: meta.name.clone(),
+            metadata: meta.metadata.clone(),
+        })
+        .unwrap();
+    }
+    // The batch's schema as an older sard wrote it: without issue 36's
+    // fields.
+    let mut batch_channel = None;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let channel = if m.channel.topic == Topic::CycleBatch.name() {
+            batch_channel
+                .get_or_insert_with(|| {
+                    let mut c = (*m.channel).clone();
+                    let mut s = (**c.schema.as_ref().unwrap()).clone();
+                    let text = String::from_utf8(s.data.to_vec()).unwrap();
+                    assert!(text.contains("command_layout"), "{text}");
+                    let kept: Vec<&str> = text
+                        .lines()
+                        .filter(|l| !l.contains("command_layout") && !l.contains("excite_"))
+                        .collect();
+                    s.data = std::borrow::Cow::Owned(kept.join("\n").into_bytes());
+                    c.schema = Some(std::sync::Arc::new(s));
+                    std::sync::Arc::new(c)
+                })
+                .clone()
+        } else {
+            m.channel.clone()
+        };
+        w.write(&mcap::Message { channel, ..m }).unwrap();
+    }
+    w.finish().unwrap();
+    let e = replay_file(&older, &ReplayOptions::from_config(&cfg)).unwrap_err();
+    assert!(
+        matches!(e, sar_record::replay::ReplayError::OtherLeanLayout { .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("another version of sard"), "{e}");
+    let r = replay_file(&lean, &ReplayOptions::from_config(&cfg)).unwrap();
+    assert_eq!(r.first_difference, None);
+}
