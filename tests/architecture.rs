@@ -1036,3 +1036,49 @@ fn no_module_has_an_import_circle_between_its_submodules() {
         circles.join("\n")
     );
 }
+
+/// The sections of ARCHITECTURE.md's crates, by their `crates/NAME`
+/// heading, each with its text on one line (whitespace folded).
+fn crate_sections(text: &str) -> BTreeMap<String, String> {
+    let mut out = BTreeMap::new();
+    for part in text.split("\n### `crates/").skip(1) {
+        let name: String = part.chars().take_while(|c| *c != '`').collect();
+        let body = part.split("\n## ").next().unwrap_or("");
+        out.insert(name, body.split_whitespace().collect::<Vec<_>>().join(" "));
+    }
+    out
+}
+
+/// What may call a section's crate, and why its boundary is where it is,
+/// the rust-analyzer way (issue 36): missing from a section, named.
+fn sections_without_callers(text: &str) -> Vec<String> {
+    crate_sections(text)
+        .into_iter()
+        .filter(|(_, body)| {
+            let lower = body.to_lowercase();
+            !(lower.contains("who calls it") || lower.contains("who may call it"))
+                || !lower.contains("why the boundary is here")
+        })
+        .map(|(name, _)| name)
+        .collect()
+}
+
+/// Every crate's section says who calls it and why its boundary is where
+/// it is; the check finds a section without them.
+#[test]
+fn each_crates_section_says_who_calls_it_and_why_its_boundary_is_there() {
+    let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let sections = crate_sections(&text);
+    let crates_dir: BTreeSet<String> = std::fs::read_dir(root().join("crates"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(
+        sections.keys().cloned().collect::<BTreeSet<_>>(),
+        crates_dir,
+        "a section per crate"
+    );
+    assert_eq!(sections_without_callers(&text), Vec::<String>::new());
+    let bare = "x\n### `crates/a` (`a`)\nWhat it is.\n- Links: none.\n";
+    assert_eq!(sections_without_callers(bare), ["a"]);
+}
