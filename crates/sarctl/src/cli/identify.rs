@@ -481,7 +481,12 @@ fn run_servo(
         let [bw, z, d] = result.shared.params;
         let new = writeback::write_servo(text, bw, z, identify::servo::written_delay_s(d))
             .map_err(|e| format!("{}: {e}", config_path.display()))?;
-        Some(replace_config(config_path, &new)?)
+        Some(replace_config(config_path, &new).map_err(|e| {
+            format!(
+                "the servo found ({bw:.3} Hz, damping {z:.4}, delay {:.3} ms) was not written: {e}",
+                d * 1e3
+            )
+        })?)
     };
     let out = if json {
         result.to_json(written.as_deref()).to_string()
