@@ -17,6 +17,9 @@
 //! `sard --sim`), asks again a move the guard's Warn braked near the
 //! support (the estimate's noise grows as L/a there), and says on stderr
 //! which pose it is at and about how long is left.
+//!
+//! `--servo` identifies the drives' position loop instead
+//! ([`super::identify_servo`], [`crate::identify::servo`]).
 
 use crate::identify::dwell::DwellOptions;
 use crate::identify::dynamic::DynamicOptions;
