@@ -250,18 +250,37 @@ pub struct ServoFit {
 /// The Jacobian of the model (central differences) and the residuals at `p`.
 fn jacobian(segs: &[Segment], axes: &[usize], p: &Params) -> (Vec<[f64; 3]>, Vec<f64>) {
     let r0 = residuals(segs, axes, p);
-    let h = [1e-4 * p[0], 1e-4, 2e-6];
-    let mut jac = vec![[0.0; 3]; r0.len()];
-    for (k, hk) in h.iter().enumerate() {
-        let (mut up, mut down) = (*p, *p);
-        up[k] += hk;
-        down[k] -= hk;
-        let (ru, rd) = (residuals(segs, axes, &up), residuals(segs, axes, &down));
-        for ((row, u), d) in jac.iter_mut().zip(ru).zip(rd) {
+    let [f_hz, _, _] = *p;
+    let h = [1e-4 * f_hz, 1e-4, 2e-6];
+    let columns = h
+        .iter()
+        .enumerate()
+        .map(|(k, &hk)| {
+            let shifted = |by: f64| {
+                let mut q = *p;
+                q.iter_mut()
+                    .enumerate()
+                    .filter(|(i, _)| *i == k)
+                    .for_each(|(_, v)| *v += by);
+                residuals(segs, axes, &q)
+            };
+            let (ru, rd) = (shifted(hk), shifted(-hk));
             // d(model)/dp = -d(residual)/dp.
-            row[k] = (d - u) / (2.0 * hk);
-        }
-    }
+            ru.iter()
+                .zip(rd)
+                .map(|(u, d)| (d - u) / (2.0 * hk))
+                .collect::<Vec<f64>>()
+        })
+        .collect::<Vec<_>>();
+    let jac = match columns.as_slice() {
+        [a, b, c] => a
+            .iter()
+            .zip(b)
+            .zip(c)
+            .map(|((a, b), c)| [*a, *b, *c])
+            .collect(),
+        _ => Vec::new(),
+    };
     (jac, r0)
 }
 
@@ -312,12 +331,14 @@ pub fn fit(segs: &[Segment], axes: &[usize]) -> Result<ServoFit, ServoFitError> 
         for _ in 0..12 {
             let damped = a + Matrix3::from_diagonal(&a.diagonal()) * lambda;
             let step = damped.try_inverse().ok_or(ServoFitError::Singular)? * b;
-            let q = clamp([p[0] + step[0], p[1] + step[1], p[2] + step[2]]);
+            let [p0, p1, p2] = p;
+            let q = clamp([p0 + step.x, p1 + step.y, p2 + step.z]);
             let c = sum_sq(&residuals(segs, axes, &q));
             if c < cost {
-                let small = (q[0] / p[0] - 1.0).abs() < 1e-7
-                    && (q[1] - p[1]).abs() < 1e-7
-                    && (q[2] - p[2]).abs() < 1e-9;
+                let [q0, q1, q2] = q;
+                let small = (q0 / p0 - 1.0).abs() < 1e-7
+                    && (q1 - p1).abs() < 1e-7
+                    && (q2 - p2).abs() < 1e-9;
                 (p, cost, lambda, improved) = (q, c, (lambda * 0.1).max(1e-9), !small);
                 break;
             }
@@ -332,7 +353,8 @@ pub fn fit(segs: &[Segment], axes: &[usize]) -> Result<ServoFit, ServoFitError> 
     let n = r.len();
     let s2 = sum_sq(&r) / (n.saturating_sub(3).max(1)) as f64;
     let cov = a.try_inverse().ok_or(ServoFitError::Singular)? * s2;
-    let std = [0, 1, 2].map(|k| cov[(k, k)].max(0.0).sqrt());
+    let d = cov.diagonal();
+    let std = [d.x, d.y, d.z].map(|v| v.max(0.0).sqrt());
     Ok(ServoFit {
         params: p,
         std,
@@ -398,8 +420,9 @@ pub fn written_delay_s(delay_s: f64) -> f64 {
     delay_s.max(0.0)
 }
 
-fn fit_json(f: &ServoFit) -> serde_json::Value {
+fn fit_json(f: &ServoFit, axis: Option<usize>) -> serde_json::Value {
     json!({
+        "axis": axis.map(|a| format!("q{}", a + 1)),
         "bandwidth_hz": f.params[0], "bandwidth_std_hz": f.std[0],
         "damping": f.params[1], "damping_std": f.std[1],
         "delay_s": f.params[2], "delay_std_s": f.std[2],
@@ -427,13 +450,9 @@ impl ServoResult {
         let axes: Vec<_> = self
             .per_axis
             .iter()
-            .map(|(a, f)| {
-                let mut v = fit_json(f);
-                v["axis"] = json!(format!("q{}", a + 1));
-                v
-            })
+            .map(|(a, f)| fit_json(f, Some(*a)))
             .collect();
-        json!({ "servo": fit_json(&self.shared), "axes": axes, "written": written })
+        json!({ "servo": fit_json(&self.shared, None), "axes": axes, "written": written })
     }
 
     /// The report for a person.
