@@ -101,9 +101,14 @@ pub struct MotionConfig {
 }
 
 /// The longest servo delay accepted, ns (`[axes] servo_delay_s`'s bound):
-/// the [`STREAMED`] set points kept cover it and a sensor latency of a few
-/// periods at a 1 ms period.
-pub const MAX_SERVO_DELAY_NS: u64 = 10_000_000;
+/// at a 1 ms period the [`STREAMED`] set points kept cover it and a sensor
+/// latency of 2 ms.
+pub const MAX_SERVO_DELAY_NS: u64 = 5_000_000;
+
+const _: () = assert!(
+    MAX_SERVO_DELAY_NS + 2_000_000 <= (STREAMED as u64 - 1) * 1_000_000,
+    "the streamed set points kept do not cover the longest delay"
+);
 
 /// The longest sensor latency accepted, ns.
 pub const MAX_SENSOR_LATENCY_NS: u64 = 50_000_000;
@@ -162,7 +167,7 @@ impl MotionConfig {
             return Err((
                 "servo_delay_s",
                 self.servo_delay_ns as f64 * 1e-9,
-                "must be at most 0.01 s",
+                "must be at most 0.005 s",
             ));
         }
         let q = self.quick_stop_decel_mps2;
@@ -215,7 +220,7 @@ pub struct Halt {
 
 /// How many streamed set points the drives' reference is kept over (enough
 /// for the reference [`MAX_SERVO_DELAY_NS`] ago at a 1 ms period).
-pub const STREAMED: usize = 16;
+pub const STREAMED: usize = 8;
 
 /// The last set points streamed to the drives (cyclic synchronous
 /// position): their reference moves from one to the next at constant speed
@@ -654,7 +659,7 @@ mod tests {
         assert!((lag_m / (lag_s * 0.02) - 1.0).abs() < 0.02, "{lag_m}");
         assert_eq!(
             MotionConfig {
-                servo_delay_ns: 11_000_000,
+                servo_delay_ns: 6_000_000,
                 ..CFG
             }
             .check(0.2)

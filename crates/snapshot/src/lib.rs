@@ -57,7 +57,7 @@ pub const CAPACITY: usize = 4096;
 /// tare's time) is part of the snapshotted state; 4: the loop's model of
 /// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
 /// the clock of the last streamed set point (issue 33: a late cycle delays
-/// the streamed trajectory); 6: 16 streamed set points kept, not 4 (issue
+/// the streamed trajectory); 6: 8 streamed set points kept, not 4 (issue
 /// 34: the servo model's reference delay, `[axes] servo_delay_s`).
 pub const VERSION: u16 = 6;
 
@@ -583,7 +583,7 @@ snap_array!(
     3: [a, b, c],
     4: [a, b, c, d],
     6: [a, b, c, d, e, f],
-    16: [a, b, c, d, e, f, g, h, i, j, k, l, m, n, o, p]
+    8: [a, b, c, d, e, f, g, h]
 );
 
 impl Snap for Vector3<f64> {

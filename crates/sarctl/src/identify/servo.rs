@@ -470,3 +470,101 @@ impl ServoResult {
         s
     }
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+
+    /// A trajectory's knots: each axis a rest-to-rest move of 2 mm (1 m/s^2
+    /// up, down), then held; samples every ms for 0.5 s.
+    fn moves() -> Segment {
+        let x = |t_s: f64| {
+            let (a, h) = (1.0, 0.0447);
+            if t_s < 0.0 {
+                0.0
+            } else if t_s < h {
+                0.5 * a * t_s * t_s
+            } else if t_s < 2.0 * h {
+                let u = 2.0 * h - t_s;
+                a * h * h - 0.5 * a * u * u
+            } else {
+                a * h * h
+            }
+        };
+        let knots = (0..500u64)
+            .map(|k| {
+                let t = k as f64 * 1e-3;
+                (k * 1_000_000, [x(t - 0.05), x(t - 0.15), x(t - 0.25)])
+            })
+            .collect();
+        let joints = (0..500u64).map(|k| (k * 1_000_000, [0.0; 3])).collect();
+        Segment { knots, joints }
+    }
+
+    /// Encoders made by the model itself (no noise): the fit gives its
+    /// parameters back, per axis and shared.
+    #[test]
+    fn the_fit_gives_back_the_model_that_made_the_encoders() {
+        let mut seg = moves();
+        let truth = [18.0, 0.55, 0.0015];
+        let mut per_axis = Vec::new();
+        for axis in 0..3 {
+            let mut x = Vec::new();
+            simulate(&seg, axis, &truth, &mut x);
+            per_axis.push(x);
+        }
+        for (k, j) in seg.joints.iter_mut().enumerate() {
+            j.1 = [per_axis[0][k], per_axis[1][k], per_axis[2][k]];
+        }
+        let segs = [seg];
+        assert_eq!(moved_axes(&segs), vec![0, 1, 2]);
+        for axes in [&[1][..], &[0, 1, 2][..]] {
+            let f = fit(&segs, axes).unwrap();
+            for (p, t) in f.params.iter().zip(truth) {
+                assert!((p - t).abs() < 1e-6 * t.max(1.0), "{f:?}");
+            }
+            assert!(f.rms_m < 1e-10, "{f:?}");
+        }
+    }
+
+    /// Streamed set points: the reference reaches each one period after
+    /// it was sent, held before; cycles without drives enabled cut.
+    #[test]
+    fn streamed_set_points_are_reached_a_period_later() {
+        let cycle = |k: u64, action, sp: f64| CycleInput {
+            now_ns: k * 1_000_000,
+            joints_stamp_ns: k * 1_000_000,
+            joints_valid: true,
+            drive_state: DriveStateCode::Enabled,
+            target_valid: true,
+            target_q_m: [sp; 3],
+            drive_action: action,
+            setpoint_q_m: [sp; 3],
+            ..CycleInput::default()
+        };
+        let mut cycles = vec![
+            cycle(1, DriveActionCode::None, 0.0),
+            cycle(2, DriveActionCode::Stream, 0.1),
+            cycle(3, DriveActionCode::Stream, 0.2),
+        ];
+        let mut off = cycle(4, DriveActionCode::None, 0.2);
+        off.drive_state = DriveStateCode::QuickStop;
+        cycles.push(off);
+        cycles.push(cycle(5, DriveActionCode::None, 0.2));
+        cycles.push(cycle(6, DriveActionCode::None, 0.2));
+        let segs = segments(&cycles, period_of(&cycles));
+        assert_eq!(segs.len(), 2);
+        let knots: Vec<_> = segs[0].knots.iter().map(|k| (k.0, k.1[0])).collect();
+        assert_eq!(
+            knots,
+            vec![
+                (1_000_000, 0.0),
+                (2_000_000, 0.0),
+                (3_000_000, 0.1),
+                (4_000_000, 0.2)
+            ]
+        );
+        assert_eq!(segs[1].joints.len(), 2);
+    }
+}
