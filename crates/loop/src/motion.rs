@@ -10,8 +10,10 @@
 //!   `sar_hal::servo`, the one model the simulator's servo runs too, without
 //!   its acceleration limit; sampled every [`MODEL_STEP_NS`] with the
 //!   acceleration held between samples) driven by the trajectory's
-//!   position; with `servo_bandwidth_hz = 0` (ideal drives) the trajectory
-//!   itself.
+//!   position as it was [`MotionConfig::servo_delay_ns`] earlier (a pure
+//!   delay of the drives' reference: a fieldbus's, an interpolator's; the
+//!   simulator's `ServoSpec::delay_ns` is the same); with
+//!   `servo_bandwidth_hz = 0` (ideal drives) the trajectory itself.
 //! - During a halt (Stop or Fault: the drives' own quick stop, the
 //!   trajectory dropped), each axis decelerates from its modelled velocity
 //!   at the halt at the drives' quick-stop deceleration until at rest
@@ -81,6 +83,11 @@ pub struct MotionConfig {
     pub servo_bandwidth_hz: f64,
     /// Its damping ratio (finite, > 0).
     pub servo_damping: f64,
+    /// A pure delay of their reference, ns (at most
+    /// [`MAX_SERVO_DELAY_NS`]; 0: none): the position loop acts on the
+    /// trajectory (or the streamed set points) as it was this long ago.
+    /// Only with a model (`servo_bandwidth_hz > 0`).
+    pub servo_delay_ns: u64,
     /// Their own quick stop's deceleration (CiA 402 0x6085), m/s^2 (finite,
     /// > 0).
     pub quick_stop_decel_mps2: f64,
@@ -92,6 +99,16 @@ pub struct MotionConfig {
     /// sample was measured, its stamp less this.
     pub sensor_latency_ns: u64,
 }
+
+/// The longest servo delay accepted, ns (`[axes] servo_delay_s`'s bound):
+/// at a 1 ms period the [`STREAMED`] set points kept cover it and a sensor
+/// latency of 2 ms.
+pub const MAX_SERVO_DELAY_NS: u64 = 5_000_000;
+
+const _: () = assert!(
+    MAX_SERVO_DELAY_NS + 2_000_000 <= (STREAMED as u64 - 1) * 1_000_000,
+    "the streamed set points kept do not cover the longest delay"
+);
 
 /// The longest sensor latency accepted, ns.
 pub const MAX_SENSOR_LATENCY_NS: u64 = 50_000_000;
@@ -146,6 +163,13 @@ impl MotionConfig {
         if !(z.is_finite() && z > 0.0) {
             return Err(("servo_damping", z, "must be finite and > 0"));
         }
+        if self.servo_delay_ns > MAX_SERVO_DELAY_NS {
+            return Err((
+                "servo_delay_s",
+                self.servo_delay_ns as f64 * 1e-9,
+                "must be at most 0.005 s",
+            ));
+        }
         let q = self.quick_stop_decel_mps2;
         if !(q.is_finite() && q > 0.0) {
             return Err(("quick_stop_decel_mps2", q, "must be finite and > 0"));
@@ -194,8 +218,9 @@ pub struct Halt {
     pub known: bool,
 }
 
-/// How many streamed set points the drives' reference is kept over.
-pub const STREAMED: usize = 4;
+/// How many streamed set points the drives' reference is kept over (enough
+/// for the reference [`MAX_SERVO_DELAY_NS`] ago at a 1 ms period).
+pub const STREAMED: usize = 8;
 
 /// The last set points streamed to the drives (cyclic synchronous
 /// position): their reference moves from one to the next at constant speed
@@ -309,28 +334,30 @@ impl AxesMotion {
     /// (the plans themselves without a model).
     fn follow(&mut self, cfg: &MotionConfig, plans: &[AxisPlan; 3], t_ns: u64) -> Axes {
         let wn = cfg.servo_wn_rad_s();
-        let on_plans = plans.map(|p| ServoAxis::on(&p, t_ns));
         if wn <= 0.0 {
             self.servo = None;
-            return on_plans;
+            return plans.map(|p| ServoAxis::on(&p, t_ns));
         }
+        // The reference as the drives act on it: `servo_delay_ns` ago.
+        let delayed = |t: u64| t.saturating_sub(cfg.servo_delay_ns);
         let mut model = match self.servo {
             Some(m) if t_ns >= m.t_ns && t_ns - m.t_ns <= MAX_MODEL_GAP_NS => m,
             _ => ServoModel {
                 t_ns,
-                axes: match self.streamed.reference_moving(t_ns) {
+                axes: match self.streamed.reference_moving(delayed(t_ns)) {
                     // Held that long: at rest there.
                     Some(r) => r.map(|a| ServoAxis { v_mps: 0.0, ..a }),
-                    None => on_plans,
+                    None => plans.map(|p| ServoAxis::on(&p, delayed(t_ns))),
                 },
             },
         };
         while t_ns - model.t_ns >= MODEL_STEP_NS {
             model.t_ns += MODEL_STEP_NS;
+            let at_ns = delayed(model.t_ns);
             let reference = self
                 .streamed
-                .reference(model.t_ns)
-                .unwrap_or_else(|| plans.map(|p| p.at(model.t_ns).x_m));
+                .reference(at_ns)
+                .unwrap_or_else(|| plans.map(|p| p.at(at_ns).x_m));
             for (axis, r) in model.axes.iter_mut().zip(reference) {
                 axis.step(MODEL_STEP_NS, r, wn, cfg.servo_damping, None);
             }
@@ -505,13 +532,32 @@ sar_snapshot::snap_struct!(AxesMotion {
     halt,
     streamed
 });
-sar_snapshot::config_struct!(MotionConfig {
-    servo_bandwidth_hz,
-    servo_damping,
-    quick_stop_decel_mps2,
-    brake_decel_mps2,
-    sensor_latency_ns,
-});
+// By hand, as `config_struct!` would, but `servo_delay_ns` mixed in only
+// when it is not 0: a configuration without the key (before it existed) is
+// one with 0, and keeps its fingerprint.
+impl sar_snapshot::ConfigHash for MotionConfig {
+    fn hash_value(&self, h: &mut sar_snapshot::Fingerprint) {
+        let Self {
+            servo_bandwidth_hz,
+            servo_damping,
+            servo_delay_ns,
+            quick_stop_decel_mps2,
+            brake_decel_mps2,
+            sensor_latency_ns,
+        } = self;
+        servo_bandwidth_hz.hash_field("servo_bandwidth_hz", h);
+        servo_damping.hash_field("servo_damping", h);
+        if *servo_delay_ns != 0 {
+            servo_delay_ns.hash_field("servo_delay_ns", h);
+        }
+        quick_stop_decel_mps2.hash_field("quick_stop_decel_mps2", h);
+        brake_decel_mps2.hash_field("brake_decel_mps2", h);
+        sensor_latency_ns.hash_field("sensor_latency_ns", h);
+    }
+    fn hash_field(&self, _name: &str, h: &mut sar_snapshot::Fingerprint) {
+        self.hash_value(h);
+    }
+}
 
 #[cfg(test)]
 mod tests {
@@ -521,6 +567,7 @@ mod tests {
     const CFG: MotionConfig = MotionConfig {
         servo_bandwidth_hz: 30.0,
         servo_damping: 0.7,
+        servo_delay_ns: 0,
         quick_stop_decel_mps2: 2.0,
         brake_decel_mps2: 2.0,
         sensor_latency_ns: 1_000_000,
@@ -569,6 +616,57 @@ mod tests {
         );
         // Cruising, settled on the ramp: the floor, as the axes move.
         assert!((last.accel_std_mps2 - ACCEL_STD_FLOOR_MPS2).abs() < 1e-3);
+    }
+
+    /// A pure delay of the reference (`servo_delay_ns`): the model is the
+    /// undelayed one that much later, and lags a ramp by 2 zeta / wn plus the delay.
+    #[test]
+    fn a_delayed_reference_shifts_the_model_by_the_delay() {
+        let mut plans = cruise(0.02);
+        let limits = Limits {
+            max_speed_mps: 0.02,
+            max_accel_mps2: 0.2,
+        };
+        // Starting at 5 ms, at rest before.
+        plans[0] = AxisPlan::to_target(5_000_000, plans[0].at(0), 0.5, limits);
+        let delayed_cfg = MotionConfig {
+            servo_delay_ns: 2_000_000,
+            ..CFG
+        };
+        let (mut plain, mut delayed) = (AxesMotion::default(), AxesMotion::default());
+        let enabled = Some(DriveState::Enabled);
+        let mut plain_at = Vec::new();
+        for k in 0..=600u64 {
+            let t_ns = k * 1_000_000;
+            plain_at.push(plain.motion(&CFG, 0.2, Some(&plans), enabled, t_ns, true));
+            let d = delayed.motion(&delayed_cfg, 0.2, Some(&plans), enabled, t_ns, true);
+            // Once the start (the plan's acceleration taken at t = 0, in
+            // both) has died away.
+            if k >= 100 {
+                let p = plain_at[(k - 2) as usize];
+                let dv = (d.velocity_mps - p.velocity_mps).norm();
+                let da = (d.accel_mps2 - p.accel_mps2).norm();
+                assert!(dv < 1e-9 && da < 1e-7, "at {k} ms: {d:?} {p:?}");
+            }
+        }
+        let lag_m = plans[0].at(600_000_000).x_m - delayed.servo.unwrap().axes[0].x_m;
+        // Another delay gives another motion.
+        assert_ne!(
+            plain_at[300],
+            delayed.motion(&delayed_cfg, 0.2, Some(&plans), enabled, 300_000_000, true)
+        );
+        let lag_s = CFG.servo_lag_s() + 2e-3;
+        assert!((lag_m / (lag_s * 0.02) - 1.0).abs() < 0.02, "{lag_m}");
+        assert_eq!(
+            MotionConfig {
+                servo_delay_ns: 6_000_000,
+                ..CFG
+            }
+            .check(0.2)
+            .unwrap_err()
+            .0,
+            "servo_delay_s"
+        );
     }
 
     /// The drives' quick stop: each axis brakes from its modelled speed

@@ -57,8 +57,9 @@ pub const CAPACITY: usize = 4096;
 /// tare's time) is part of the snapshotted state; 4: the loop's model of
 /// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
 /// the clock of the last streamed set point (issue 33: a late cycle delays
-/// the streamed trajectory).
-pub const VERSION: u16 = 5;
+/// the streamed trajectory); 6: 8 streamed set points kept, not 4 (issue
+/// 34: the servo model's reference delay, `[axes] servo_delay_s`).
+pub const VERSION: u16 = 6;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";
@@ -577,7 +578,13 @@ macro_rules! snap_array {
         }
     )*};
 }
-snap_array!(2: [a, b], 3: [a, b, c], 4: [a, b, c, d], 6: [a, b, c, d, e, f]);
+snap_array!(
+    2: [a, b],
+    3: [a, b, c],
+    4: [a, b, c, d],
+    6: [a, b, c, d, e, f],
+    8: [a, b, c, d, e, f, g, h]
+);
 
 impl Snap for Vector3<f64> {
     fn put(&self, w: &mut Writer<'_>) {
@@ -920,7 +927,7 @@ mod tests {
         fmt::write(&mut text, format_args!("{e}")).unwrap();
         assert_eq!(
             text.as_str(),
-            "snapshot format version 1; this build reads version 5"
+            "snapshot format version 1; this build reads version 6"
         );
     }
 

@@ -6,7 +6,7 @@ use crate::AxesConfig;
 use crate::decl::{each, num};
 use crate::keys::{File, ns};
 use crate::scenario::{DEFAULT_SERVO_BANDWIDTH_HZ, DEFAULT_SERVO_DAMPING, DEFAULT_TRAVEL_M};
-use sar_loop::motion::{MAX_SERVO_BANDWIDTH_HZ, MotionConfig};
+use sar_loop::motion::{MAX_SERVO_BANDWIDTH_HZ, MAX_SERVO_DELAY_NS, MotionConfig};
 
 crate::section! {
     /// The axes: their travel, the moves the daemon plans, the drives' position loop.
@@ -32,6 +32,9 @@ crate::section! {
     /// its damping ratio
     servo_damping: f64 = value(DEFAULT_SERVO_DAMPING),
         num(0.1, 2.0, "(ratio)") => [MotionConfig.servo_damping];
+    /// a pure delay of its reference (a fieldbus's, an interpolator's; `sarctl identify --servo` measures it)
+    servo_delay_s: f64 = value(0.0),
+        num(0.0, MAX_SERVO_DELAY_NS as f64 * 1e-9, "s") => [MotionConfig.servo_delay_ns];
     /// a guarded move's brake
     brake_decel_mps2: f64 = absent("[drivers.axes] quick_stop_decel_mps2", 2.0),
         num(1e-6, 10.0, "m/s^2")
@@ -61,6 +64,7 @@ fn motion(f: &File) -> MotionConfig {
     MotionConfig {
         servo_bandwidth_hz: f.axes.servo_bandwidth_hz,
         servo_damping: f.axes.servo_damping,
+        servo_delay_ns: ns(f.axes.servo_delay_s),
         quick_stop_decel_mps2,
         brake_decel_mps2: f.axes.brake_decel_mps2.unwrap_or(quick_stop_decel_mps2),
         sensor_latency_ns: ns(f.tip.sensor_latency_s),

@@ -17,6 +17,9 @@
 //! `sard --sim`), asks again a move the guard's Warn braked near the
 //! support (the estimate's noise grows as L/a there), and says on stderr
 //! which pose it is at and about how long is left.
+//!
+//! `--servo` identifies the drives' position loop instead
+//! ([`super::identify_servo`], [`crate::identify::servo`]).
 
 use crate::identify::dwell::DwellOptions;
 use crate::identify::dynamic::DynamicOptions;
@@ -32,6 +35,12 @@ pub struct IdentifyArgs {
     /// motion instead of m, c and B from static poses (MODEL.md 10).
     #[arg(long)]
     pub dynamic: bool,
+    /// Identify the drives' position loop (bandwidth, damping, delay) from
+    /// moves of each axis instead (issue 34): `--live` makes them, or
+    /// `--input` a recording of them; writes `[axes] servo_bandwidth_hz`,
+    /// `servo_damping`, `servo_delay_s` back.
+    #[arg(long, conflicts_with_all = ["dynamic", "plot", "tare_n", "keep_support"])]
+    pub servo: bool,
     /// With --dynamic: the order of the encoders' centred smoothing polynomial.
     #[arg(long, default_value_t = SmootherSpec::default().order, value_name = "N", requires = "dynamic")]
     pub smoother_order: usize,
@@ -257,7 +266,7 @@ impl IdentifyArgs {
             ))?;
         }
         // Only with --live: the pose's hold (its default is checked too).
-        if self.live && !self.dynamic {
+        if self.live && !self.dynamic && !self.servo {
             let least = self.settle_s + self.min_dwell_s;
             let what = "each pose's hold (more than --settle-s + --min-dwell-s)";
             in_range(("--hold-s", self.hold_s, least, MAX_HOLD_S, " s", what))?;
@@ -336,6 +345,9 @@ pub fn run(
         sar_config::parse(&text, &config_path.display().to_string()).map_err(|e| e.to_string())?;
     if args.dynamic {
         return run_dynamic(config_path, &text, &config, json, (prefix, args));
+    }
+    if args.servo {
+        return run_servo(config_path, &text, &config, json, (prefix, args));
     }
     let options = args.options()?;
     let result = match &args.input {
@@ -444,6 +456,40 @@ fn run_dynamic(
         let new = writeback::write_inertia(text, f.inertia_perp_kgm2, f.inertia_perp_std_kgm2)
             .map_err(|e| format!("{}: {e}", config_path.display()))?;
         Some(replace_config(config_path, &new)?)
+    };
+    let out = if json {
+        result.to_json(written.as_deref()).to_string()
+    } else {
+        result.to_text(written.as_deref())
+    };
+    println!("{out}");
+    Ok(())
+}
+
+/// `sarctl identify --servo`: bandwidth, damping and delay from the moves
+/// of `--input` (or made `--live`), printed and, unless `--dry-run`,
+/// written back as `[axes] servo_bandwidth_hz`, `servo_damping`,
+/// `servo_delay_s` (the shared fit; a delay below 0 as 0).
+fn run_servo(
+    config_path: &Path,
+    text: &str,
+    config: &sar_config::Config,
+    json: bool,
+    (prefix, args): (&str, &IdentifyArgs),
+) -> Result<(), String> {
+    let result = super::identify_servo::identify(config, prefix, args.input.as_deref())?;
+    let written = if args.dry_run {
+        None
+    } else {
+        let [bw, z, d] = result.shared.params;
+        let new = writeback::write_servo(text, bw, z, identify::servo::written_delay_s(d))
+            .map_err(|e| format!("{}: {e}", config_path.display()))?;
+        Some(replace_config(config_path, &new).map_err(|e| {
+            format!(
+                "the servo found ({bw:.3} Hz, damping {z:.4}, delay {:.3} ms) was not written: {e}",
+                d * 1e3
+            )
+        })?)
     };
     let out = if json {
         result.to_json(written.as_deref()).to_string()

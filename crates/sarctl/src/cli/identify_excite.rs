@@ -149,7 +149,7 @@ fn excite(client: &Client, sub: &StateSubscription, plan: &Plan) -> Result<(), S
 
 /// Reads the state for at most `duration` until `done` holds (`false`:
 /// it did not); a Warn, a Stop or a Fault is an error.
-fn follow(
+pub(super) fn follow(
     sub: &StateSubscription,
     duration: Duration,
     done: impl Fn(&StateMsg) -> bool,
@@ -166,7 +166,7 @@ fn follow(
         });
         if let Some(s) = bad {
             return Err(format!(
-                "the guard went to {} ({}): the excitation stopped",
+                "the guard went to {} ({}): the motion stopped",
                 guard_state_name(s.guard_state),
                 reason_name(s.guard_reason)
             ));

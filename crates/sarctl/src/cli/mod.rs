@@ -7,6 +7,7 @@ pub mod completions;
 pub mod export;
 pub mod identify;
 pub mod identify_excite;
+pub mod identify_servo;
 pub mod limits;
 pub mod monitor;
 pub mod record;

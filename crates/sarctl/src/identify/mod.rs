@@ -27,6 +27,7 @@ pub mod excitation;
 pub mod plot;
 pub mod plot_dynamic;
 pub mod poses;
+pub mod servo;
 pub mod smooth;
 pub mod writeback;
 

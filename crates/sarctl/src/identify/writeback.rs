@@ -104,10 +104,51 @@ pub fn write_inertia(text: &str, inertia_kgm2: f64, std_kgm2: f64) -> Result<Str
     Ok(doc.to_string())
 }
 
+/// The configuration text with `[axes] servo_bandwidth_hz`, `servo_damping`
+/// and `servo_delay_s` replaced (or appended, the table too), the rest kept:
+/// rounded to 1 mHz, 1e-4 and 1 us (below their standard deviations).
+pub fn write_servo(
+    text: &str,
+    bandwidth_hz: f64,
+    damping: f64,
+    delay_s: f64,
+) -> Result<String, String> {
+    let mut doc: DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| format!("not valid TOML: {}", e.message()))?;
+    if doc.get("axes").is_none() {
+        doc.insert("axes", toml_edit::table());
+    }
+    set_float(
+        &mut doc,
+        "axes",
+        "servo_bandwidth_hz",
+        rounded(bandwidth_hz, 1e-3),
+    )?;
+    set_float(&mut doc, "axes", "servo_damping", rounded(damping, 1e-4))?;
+    set_float(&mut doc, "axes", "servo_delay_s", rounded(delay_s, 1e-6))?;
+    Ok(doc.to_string())
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_servo_keys_keep_the_file_and_a_missing_table_is_added() {
+        let text = "# robot\n[axes]\nservo_bandwidth_hz = 30.0 # as built\nmax_speed_mps = 0.02\n";
+        let out = write_servo(text, 12.0123456, 0.4512345, 0.00150049).unwrap();
+        assert_eq!(
+            out,
+            "# robot\n[axes]\nservo_bandwidth_hz = 12.012 # as built\nmax_speed_mps = 0.02\nservo_damping = 0.4512\nservo_delay_s = 0.0015\n"
+        );
+        let added = write_servo("[tip]\nx = 1\n", 30.0, 0.7, 0.0).unwrap();
+        assert!(
+            added.contains("[axes]\nservo_bandwidth_hz = 30.0\n"),
+            "{added}"
+        );
+    }
 
     #[test]
     fn keeps_comments_order_and_spacing() {
