@@ -37,7 +37,9 @@
 //!
 //! Fixed-size state; no allocation, no panic.
 
+use crate::observer::{AxisFilter, ObserverNoise, Pending, ServoFit};
 use sar_estimator::Vec3;
+use sar_estimator::cycle::JointSample;
 use sar_estimator::motion::CarriageMotion;
 use sar_hal::DriveState;
 use sar_hal::motion::{AxisPlan, AxisState, Limits};
@@ -91,6 +93,10 @@ pub struct MotionConfig {
     /// (at most [`MAX_SENSOR_LATENCY_NS`]): the motion is evaluated where the
     /// sample was measured, its stamp less this.
     pub sensor_latency_ns: u64,
+    /// One count of the encoders, m (finite, > 0): the servo observer's
+    /// measurement noise ([`crate::observer`]; `[drivers.axes]` `lead_m /
+    /// counts_per_turn`, the simulator's own count for the simulated axes).
+    pub encoder_count_m: f64,
 }
 
 /// The longest sensor latency accepted, ns.
@@ -124,6 +130,19 @@ impl MotionConfig {
         }
     }
 
+    /// The servo observer's noises ([`crate::observer`]): the encoders'
+    /// count, the disturbance's rate from the model's jerk on the hardest
+    /// acceleration the drives are told (their quick stop's; every planned
+    /// one and a guarded move's brake are at most that).
+    pub fn observer_noise(&self) -> ObserverNoise {
+        ObserverNoise::new(
+            self.encoder_count_m,
+            self.servo_wn_rad_s(),
+            self.servo_damping,
+            self.quick_stop_decel_mps2,
+        )
+    }
+
     /// The standard deviation of the acceleration when the plan is unknown
     /// and the axes move: the hardest the drives are known to brake, m/s^2.
     pub fn unknown_accel_std_mps2(&self, planned_accel_mps2: f64) -> f64 {
@@ -150,6 +169,10 @@ impl MotionConfig {
         if !(q.is_finite() && q > 0.0) {
             return Err(("quick_stop_decel_mps2", q, "must be finite and > 0"));
         }
+        let c = self.encoder_count_m;
+        if !(c.is_finite() && c > 0.0) {
+            return Err(("encoder_count_m", c, "must be finite and > 0"));
+        }
         if self.sensor_latency_ns > MAX_SENSOR_LATENCY_NS {
             return Err((
                 "sensor_latency_s",
@@ -169,13 +192,16 @@ impl MotionConfig {
     }
 }
 
-/// The servo model of the three axes at `t_ns` (on the model's grid).
+/// The servo model of the three axes at `t_ns` (on the model's grid), as
+/// the encoders correct it ([`crate::observer`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ServoModel {
     /// The last sample, ns.
     pub t_ns: u64,
     /// q1, q2, q3.
     pub axes: [ServoAxis; 3],
+    /// Each axis's observer: the disturbance and the covariance.
+    pub filters: [AxisFilter; 3],
 }
 
 /// The drives' own quick stop since a halt.
@@ -299,44 +325,111 @@ pub struct AxesMotion {
     pub halt: Option<Halt>,
     /// The set points streamed to the drives (the servo's reference then).
     pub streamed: Streamed,
+    /// The encoders' samples the model has not reached yet.
+    pub joints: Pending,
+    /// How far the axes follow the model.
+    pub fit: ServoFit,
 }
 
 /// How the axes move at an instant: q1, q2, q3.
 type Axes = [ServoAxis; 3];
 
 impl AxesMotion {
-    /// The servo model advanced along `plans` to `t_ns` and evaluated there
-    /// (the plans themselves without a model).
-    fn follow(&mut self, cfg: &MotionConfig, plans: &[AxisPlan; 3], t_ns: u64) -> Axes {
+    /// The servo model advanced along `plans` to `t_ns` and evaluated there,
+    /// corrected by the encoders' samples it passes (the plans themselves
+    /// without a model), with the acceleration's standard deviation
+    /// (`None` without a model).
+    fn follow(
+        &mut self,
+        cfg: &MotionConfig,
+        plans: &[AxisPlan; 3],
+        t_ns: u64,
+    ) -> (Axes, Option<f64>) {
         let wn = cfg.servo_wn_rad_s();
         let on_plans = plans.map(|p| ServoAxis::on(&p, t_ns));
         if wn <= 0.0 {
             self.servo = None;
-            return on_plans;
+            return (on_plans, None);
         }
+        let noise = cfg.observer_noise();
         let mut model = match self.servo {
             Some(m) if t_ns >= m.t_ns && t_ns - m.t_ns <= MAX_MODEL_GAP_NS => m,
-            _ => ServoModel {
-                t_ns,
-                axes: match self.streamed.reference_moving(t_ns) {
+            _ => {
+                let axes = match self.streamed.reference_moving(t_ns) {
                     // Held that long: at rest there.
                     Some(r) => r.map(|a| ServoAxis { v_mps: 0.0, ..a }),
                     None => on_plans,
-                },
-            },
+                };
+                ServoModel {
+                    t_ns,
+                    axes,
+                    filters: axes.map(|a| AxisFilter::new(&a, &noise)),
+                }
+            }
         };
+        let dt_s = MODEL_STEP_NS as f64 * 1e-9;
+        self.correct(&mut model, &noise);
         while t_ns - model.t_ns >= MODEL_STEP_NS {
             model.t_ns += MODEL_STEP_NS;
-            let reference = self
-                .streamed
-                .reference(model.t_ns)
-                .unwrap_or_else(|| plans.map(|p| p.at(model.t_ns).x_m));
-            for (axis, r) in model.axes.iter_mut().zip(reference) {
+            let reference = self.reference(plans, model.t_ns);
+            let axes = model.axes.iter_mut().zip(&mut model.filters);
+            for ((axis, filter), r) in axes.zip(reference) {
+                filter.predict(dt_s, axis.a_mps2, &noise);
                 axis.step(MODEL_STEP_NS, r, wn, cfg.servo_damping, None);
             }
+            self.correct(&mut model, &noise);
         }
         self.servo = Some(model);
-        model.axes.map(|a| a.after(t_ns - model.t_ns))
+        let std_mps2 = model
+            .filters
+            .iter()
+            .fold(0.0, |m: f64, f| m.max(f.accel_var()))
+            .sqrt();
+        let mut observed = model.axes;
+        for (o, f) in observed.iter_mut().zip(&model.filters) {
+            *o = f.axis(o.a_mps2).after(t_ns - model.t_ns);
+        }
+        (observed, Some(std_mps2))
+    }
+
+    /// The drives' reference at `t_ns`: the streamed set points', else the
+    /// trajectory's.
+    fn reference(&self, plans: &[AxisPlan; 3], t_ns: u64) -> [f64; 3] {
+        self.streamed
+            .reference(t_ns)
+            .unwrap_or_else(|| plans.map(|p| p.at(t_ns).x_m))
+    }
+
+    /// The observer at the model's sample corrected by the encoders' samples stamped
+    /// before its next (those older than a step before it dropped: the
+    /// model restarted after them).
+    fn correct(&mut self, model: &mut ServoModel, noise: &ObserverNoise) {
+        let next_ns = model.t_ns.saturating_add(MODEL_STEP_NS);
+        while let Some((at_ns, q_m)) = self.joints.pop_before(next_ns) {
+            if at_ns.saturating_add(MODEL_STEP_NS) < model.t_ns {
+                continue;
+            }
+            let tau_s = (at_ns as f64 - model.t_ns as f64) * 1e-9;
+            let moving = model
+                .axes
+                .iter()
+                .any(|a| a.v_mps.abs() > crate::observer::FIT_MOVING_MPS);
+            let axes = model.axes.iter().zip(&mut model.filters);
+            for (i, ((axis, filter), z)) in axes.zip(q_m).enumerate() {
+                if let Some((nu_m, s_m2)) = filter.correct(z, tau_s, axis.a_mps2, noise) {
+                    self.fit.add(i, nu_m, s_m2, at_ns, moving);
+                }
+            }
+        }
+    }
+
+    /// An encoder sample, for the model to be corrected by once it reaches
+    /// its stamp.
+    pub fn measured(&mut self, joints: &JointSample) {
+        if joints.valid {
+            let q = &joints.joints;
+            self.joints.push(joints.stamp_ns, [q.q1_m, q.q2_m, q.q3_m]);
+        }
     }
 
     /// The carriage's motion at `stamp_ns` (the sensor sample's): along the
@@ -352,15 +445,17 @@ impl AxesMotion {
         stamp_ns: u64,
         at_rest: bool,
     ) -> CarriageMotion {
-        let axes = match (self.halt, plans, drive_state) {
+        let (axes, observed_std) = match (self.halt, plans, drive_state) {
             (Some(h), _, Some(DriveState::QuickStop | DriveState::Enabled)) => {
                 if stamp_ns <= h.start_ns {
-                    h.before
+                    (h.before, None)
                 } else {
-                    h.ramps.map(|p| ServoAxis::on(&p, stamp_ns))
+                    (h.ramps.map(|p| ServoAxis::on(&p, stamp_ns)), None)
                 }
             }
-            (None, Some(plans), Some(DriveState::Enabled)) => self.follow(cfg, plans, stamp_ns),
+            (None, Some(plans), Some(DriveState::Enabled)) => {
+                self.follow(cfg, plans, stamp_ns)
+            }
             _ => {
                 self.servo = None;
                 let std = if at_rest {
@@ -374,7 +469,11 @@ impl AxesMotion {
                 };
             }
         };
-        carriage(&axes)
+        let mut motion = carriage(&axes);
+        if let Some(std) = observed_std {
+            motion.accel_std_mps2 = std;
+        }
+        motion
     }
 
     /// The drives' quick stop commanded at `now_ns` (once per halt): each
@@ -394,7 +493,7 @@ impl AxesMotion {
             // Ideal drives on streamed set points (an excitation's plans
             // hold its centre): where the set points put them.
             (Some(_), Some(axes)) => axes,
-            (Some(plans), None) => self.follow(cfg, plans, now_ns),
+            (Some(plans), None) => self.follow(cfg, plans, now_ns).0,
             (None, _) => {
                 [ServoAxis {
                     x_m: 0.0,
@@ -464,7 +563,8 @@ impl AxesMotion {
     }
 
     /// The drives released (or the plan replaced from where the axes were
-    /// measured): the halt is over, the model restarts on the next plan.
+    /// measured): the halt is over, the model restarts on the next plan
+    /// (its observer and fit with it).
     pub fn restart(&mut self) {
         *self = Self::default();
     }
@@ -486,7 +586,11 @@ fn carriage(axes: &Axes) -> CarriageMotion {
     }
 }
 
-sar_snapshot::snap_struct!(ServoModel { t_ns, axes });
+sar_snapshot::snap_struct!(ServoModel {
+    t_ns,
+    axes,
+    filters
+});
 sar_snapshot::snap_struct!(Halt {
     start_ns,
     before,
@@ -503,7 +607,9 @@ sar_snapshot::snap_struct!(Streamed {
 sar_snapshot::snap_struct!(AxesMotion {
     servo,
     halt,
-    streamed
+    streamed,
+    joints,
+    fit
 });
 sar_snapshot::config_struct!(MotionConfig {
     servo_bandwidth_hz,
@@ -511,6 +617,7 @@ sar_snapshot::config_struct!(MotionConfig {
     quick_stop_decel_mps2,
     brake_decel_mps2,
     sensor_latency_ns,
+    encoder_count_m,
 });
 
 #[cfg(test)]
@@ -524,6 +631,7 @@ mod tests {
         quick_stop_decel_mps2: 2.0,
         brake_decel_mps2: 2.0,
         sensor_latency_ns: 1_000_000,
+        encoder_count_m: 1e-6,
     };
 
     fn cruise(v_mps: f64) -> [AxisPlan; 3] {
@@ -567,8 +675,11 @@ mod tests {
             (lag_m / (CFG.servo_lag_s() * 0.02) - 1.0).abs() < 0.02,
             "{lag_m}"
         );
-        // Cruising, settled on the ramp: the floor, as the axes move.
-        assert!((last.accel_std_mps2 - ACCEL_STD_FLOOR_MPS2).abs() < 1e-3);
+        // No encoder sample: the observer knows less and less of the
+        // acceleration the model misses (its random walk).
+        let p33 = m.servo.unwrap().filters[0].p.m33;
+        assert_eq!(last.accel_std_mps2, p33.sqrt());
+        assert!(last.accel_std_mps2 > crate::observer::INITIAL_DISTURBANCE_STD_MPS2);
     }
 
     /// The drives' quick stop: each axis brakes from its modelled speed
@@ -647,5 +758,99 @@ mod tests {
             bad(|c| c.sensor_latency_ns = 60_000_000),
             "sensor_latency_s"
         );
+    }
+}
+
+#[cfg(test)]
+mod observer_tests {
+    #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::*;
+    use sar_estimator::cycle::JointSample;
+    use sar_kinematics::ActiveJoints;
+
+    pub(super) const CFG: MotionConfig = MotionConfig {
+        servo_bandwidth_hz: 30.0,
+        servo_damping: 0.7,
+        quick_stop_decel_mps2: 2.0,
+        brake_decel_mps2: 2.0,
+        sensor_latency_ns: 1_000_000,
+        encoder_count_m: 0.005 / 4096.0,
+    };
+
+    /// A move of q1 by 30 mm at 50 mm/s, 1 m/s^2 followed by a servo of
+    /// `hz`, `zeta` (exact, 10 kHz), encoders quantised; the observer's
+    /// acceleration against the true one: (RMS error, peak error, share
+    /// within 3 std), m/s^2.
+    pub(super) fn run(hz: f64, zeta: f64) -> (f64, f64, f64) {
+        let limits = Limits {
+            max_speed_mps: 0.05,
+            max_accel_mps2: 1.0,
+        };
+        let rest = AxisState {
+            x_m: 0.1,
+            v_mps: 0.0,
+        };
+        let plans = [
+            AxisPlan::to_target(0, rest, 0.13, limits),
+            AxisPlan::hold(0, 0.2),
+            AxisPlan::hold(0, 0.3),
+        ];
+        let count = CFG.encoder_count_m;
+        let wn = core::f64::consts::TAU * hz;
+        let mut truth = plans.map(|p| ServoAxis::on(&p, 0));
+        let mut m = AxesMotion::default();
+        let (mut sq, mut peak, mut within, mut n) = (0.0, 0.0f64, 0, 0);
+        for k in 0..=1200u64 {
+            let now = k * 1_000_000;
+            for s in (1..=10u64).filter(|_| k > 0) {
+                let t = now - 1_000_000 + s * 100_000;
+                for (a, p) in truth.iter_mut().zip(&plans) {
+                    if wn > 0.0 {
+                        a.step(100_000, p.at(t).x_m, wn, zeta, None);
+                    } else {
+                        *a = ServoAxis::on(p, t);
+                    }
+                }
+            }
+            let q = truth.map(|a| (a.x_m / count).round() * count);
+            m.measured(&JointSample {
+                joints: ActiveJoints {
+                    q1_m: q[0],
+                    q2_m: q[1],
+                    q3_m: q[2],
+                },
+                stamp_ns: now,
+                valid: true,
+            });
+            let c = m.motion(&CFG, 1.0, Some(&plans), Some(DriveState::Enabled), now, true);
+            let err = c.accel_mps2.z - truth[0].a_mps2;
+            sq += err * err;
+            peak = peak.max(err.abs());
+            within += usize::from(err.abs() <= 3.0 * c.accel_std_mps2);
+            n += 1;
+        }
+        (
+            (sq / f64::from(n)).sqrt(),
+            peak,
+            within as f64 / f64::from(n),
+        )
+    }
+
+    /// The observer against servos the model does not describe (a move
+    /// of 30 mm at 50 mm/s, 1 m/s^2, quantised encoders): the matched
+    /// servo's acceleration within a few hundredths of a m/s^2, a 12 Hz
+    /// servo's error well below the model's alone (0.157 m/s^2 RMS for
+    /// damping 0.45, 0.188 for 1.0), the ideal drives' below it too.
+    #[test]
+    fn the_observer_follows_servos_the_model_does_not_describe() {
+        let figures = [(30.0, 0.7), (12.0, 0.45), (12.0, 1.0), (0.0, 0.0)].map(|(hz, z)| {
+            let r = run(hz, z);
+            eprintln!("observer, servo {hz} Hz, damping {z}: acceleration error RMS {:.4} m/s^2, peak {:.4}, within 3 std {:.3}", r.0, r.1, r.2);
+            r
+        });
+        assert!(figures[0].0 < 0.02, "{:?}", figures[0]);
+        assert!(figures[1].0 < 0.1, "{:?}", figures[1]);
+        assert!(figures[2].0 < 0.1, "{:?}", figures[2]);
+        assert!(figures[3].0 < 0.157, "{:?}", figures[3]);
     }
 }

@@ -57,8 +57,10 @@ pub const CAPACITY: usize = 4096;
 /// tare's time) is part of the snapshotted state; 4: the loop's model of
 /// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
 /// the clock of the last streamed set point (issue 33: a late cycle delays
-/// the streamed trajectory).
-pub const VERSION: u16 = 5;
+/// the streamed trajectory); 6: the servo observer (issue 34: each axis's
+/// filter, the encoders' samples pending, the fit): an older snapshot is
+/// refused by its version, never restored with the observer guessed.
+pub const VERSION: u16 = 6;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";
@@ -920,7 +922,7 @@ mod tests {
         fmt::write(&mut text, format_args!("{e}")).unwrap();
         assert_eq!(
             text.as_str(),
-            "snapshot format version 1; this build reads version 5"
+            "snapshot format version 1; this build reads version 6"
         );
     }
 

@@ -57,7 +57,7 @@ fn inertia(spec: &SimSpec) -> RodInertia {
         .expect("the plant in motion has a rod inertia")
 }
 
-const MISMATCHES: [Mismatch; 7] = [
+const MISMATCHES: [Mismatch; 9] = [
     Mismatch {
         name: "as configured (30 Hz, damping 0.7; I_perp as configured)",
         edit: |_| {},
@@ -68,6 +68,25 @@ const MISMATCHES: [Mismatch; 7] = [
             s.plant.servo = Some(ServoSpec {
                 bandwidth_hz: 12.0,
                 damping: 0.45,
+                ..servo(s)
+            });
+        },
+    },
+    Mismatch {
+        name: "servos at 12 Hz, damping 1.0",
+        edit: |s| {
+            s.plant.servo = Some(ServoSpec {
+                bandwidth_hz: 12.0,
+                damping: 1.0,
+                ..servo(s)
+            });
+        },
+    },
+    Mismatch {
+        name: "servos with a pure delay of 1 ms",
+        edit: |s| {
+            s.plant.servo = Some(ServoSpec {
+                delay_ns: 1_000_000,
                 ..servo(s)
             });
         },
@@ -220,12 +239,25 @@ fn plants_that_are_not_the_model_show_their_phantom() {
             100.0 * share,
             noisy.within_3_sigma.len()
         );
-        phantoms.push((rms(&quiet.phantom_n), share));
+        phantoms.push((rms(&quiet.phantom_n), peak, share));
     }
-    let (matched_rms, matched_share) = phantoms[0];
+    // Issue 34's goal (0.3 N RMS, 1 N peak) where the servo observer meets
+    // it: the delays and the inner loop (the report gives the rest).
+    for (m, &(rms_n, peak_n, _)) in MISMATCHES.iter().zip(&phantoms) {
+        if m.name.contains("delay") || m.name.contains("inner") {
+            assert!(rms_n <= 0.3 && peak_n <= 1.0, "{}: {rms_n} N RMS, {peak_n} N peak", m.name);
+        }
+    }
+    // The servo observer keeps the guard's margin: the true error within 3
+    // standard deviations in at least 99 % of the samples' axes, on every
+    // servo of the range.
+    for (m, &(_, _, share)) in MISMATCHES.iter().zip(&phantoms).take(8) {
+        assert!(share >= 0.99, "{}: {share}", m.name);
+    }
+    let (matched_rms, _, matched_share) = phantoms[0];
     assert!(matched_rms <= 0.3, "{matched_rms}");
     assert!(matched_share >= 0.99, "{matched_share}");
-    for (m, (rms_n, _)) in MISMATCHES.iter().zip(&phantoms).skip(1) {
+    for (m, (rms_n, _, _)) in MISMATCHES.iter().zip(&phantoms).skip(1) {
         assert!(
             *rms_n > matched_rms,
             "{}: {rms_n} N, no more than the matched plant's {matched_rms} N",
