@@ -30,10 +30,18 @@
 //! with ideal drives from the streamed set points, not the trajectory's
 //! centre.
 //!
-//! The standard deviation of a known motion is [`ACCEL_STD_FRACTION`] of
-//! its acceleration plus, while the axes move, [`ACCEL_STD_FLOOR_MPS2`]
-//! (for real drives, which the model only approximates; against the
-//! simulated servo its residual is 0: README, "The robot in motion").
+//! The servo as measured (issue 34): the model is the process of an
+//! observer whose measurement is the encoders ([`crate::observer`]): each
+//! joint sample ([`AxesMotion::measured`]) corrects, once the model reaches
+//! its stamp, a Kalman filter per axis on `[x, v, d]` driven by the model's
+//! acceleration; the motion handed to the estimator is the filter's
+//! position and velocity and the model's acceleration plus `d`, with the
+//! filter's standard deviation of `d` (what the observer knows). The model
+//! itself and its reference are as before (the filter reads them).
+//!
+//! Without the observer (the drives' quick stop, ideal drives configured)
+//! the standard deviation of a known motion is [`ACCEL_STD_FRACTION`] of
+//! its acceleration plus, while the axes move, [`ACCEL_STD_FLOOR_MPS2`].
 //!
 //! Fixed-size state; no allocation, no panic.
 
@@ -453,9 +461,7 @@ impl AxesMotion {
                     (h.ramps.map(|p| ServoAxis::on(&p, stamp_ns)), None)
                 }
             }
-            (None, Some(plans), Some(DriveState::Enabled)) => {
-                self.follow(cfg, plans, stamp_ns)
-            }
+            (None, Some(plans), Some(DriveState::Enabled)) => self.follow(cfg, plans, stamp_ns),
             _ => {
                 self.servo = None;
                 let std = if at_rest {
@@ -822,7 +828,14 @@ mod observer_tests {
                 stamp_ns: now,
                 valid: true,
             });
-            let c = m.motion(&CFG, 1.0, Some(&plans), Some(DriveState::Enabled), now, true);
+            let c = m.motion(
+                &CFG,
+                1.0,
+                Some(&plans),
+                Some(DriveState::Enabled),
+                now,
+                true,
+            );
             let err = c.accel_mps2.z - truth[0].a_mps2;
             sq += err * err;
             peak = peak.max(err.abs());

@@ -317,9 +317,12 @@ impl ServoFit {
         self.innovation_ms_m2
             .iter()
             .zip(self.expected_ms_m2)
-            .fold(0.0, |m: f64, (i, e)| {
-                if e > 0.0 { m.max((i / e).sqrt()) } else { m }
-            })
+            .fold(
+                0.0,
+                |m: f64, (i, e)| {
+                    if e > 0.0 { m.max((i / e).sqrt()) } else { m }
+                },
+            )
     }
 
     /// The worst axis's innovation RMS, m.

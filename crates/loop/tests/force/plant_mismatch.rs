@@ -252,7 +252,11 @@ fn plants_that_are_not_the_model_show_their_phantom() {
     // it: the delays and the inner loop (the report gives the rest).
     for (m, &(rms_n, peak_n, _)) in MISMATCHES.iter().zip(&phantoms) {
         if m.name.contains("delay") || m.name.contains("inner") {
-            assert!(rms_n <= 0.3 && peak_n <= 1.0, "{}: {rms_n} N RMS, {peak_n} N peak", m.name);
+            assert!(
+                rms_n <= 0.3 && peak_n <= 1.0,
+                "{}: {rms_n} N RMS, {peak_n} N peak",
+                m.name
+            );
         }
     }
     // The servo observer keeps the guard's margin: the true error within 3
