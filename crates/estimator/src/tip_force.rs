@@ -260,6 +260,15 @@ impl TipForceEstimator {
         Ok(Self { inertia, ..self })
     }
 
+    /// The same estimator for the calibration `calibration` (another support
+    /// point: the support watch's finite differences, [`crate::support`]).
+    pub(crate) fn with_calibration(self, calibration: &Calibration) -> Self {
+        Self {
+            calibration: *calibration,
+            ..self
+        }
+    }
+
     /// The rod's inertia and the adapter's mass in use.
     pub fn inertia(&self) -> &RodInertia {
         &self.inertia

@@ -641,6 +641,9 @@ code_enum!(
         /// rest (`move_tip_m`: each axis's amplitude, m; `limits_n`: each
         /// axis's frequency, Hz, then the duration and the fade, s).
         Excite = 16,
+        /// The operator confirms the support as it is now (issue 34: a
+        /// named shift of the support acknowledged; `sarctl support confirm`).
+        SupportConfirm = 17,
     }
 );
 

@@ -339,6 +339,7 @@ fn record_request(m: &mut CycleInputMsg, request: Option<Request>, cycle: u64) {
             m.command_kind = CommandKindCode::Excite;
             (m.move_tip_m, m.limits_n) = sar_loop::publish::excite_fields(&e);
         }
+        Some(Request::SupportConfirm) => m.command_kind = CommandKindCode::SupportConfirm,
     }
 }
 
@@ -393,6 +394,7 @@ pub fn loop_input(m: &CycleInputMsg) -> LoopInput {
             m.move_tip_m,
             m.limits_n,
         ))),
+        CommandKindCode::SupportConfirm => Some(Request::SupportConfirm),
         _ => None,
     };
     LoopInput {

@@ -35,12 +35,15 @@
 //! before it starts with [`SupportCalibration::check_capacity`]), no
 //! allocation, no panics. Files: `model` (unknowns, model, normal equations),
 //! `solver` (scaling, factorisation, Levenberg-Marquardt), `held` (covariance,
-//! the choice of held components), `search` (the global start).
+//! the choice of held components), `search` (the global start); `watch` (the
+//! support watch: the shift of B from free-tip samples while the robot runs,
+//! issue 34).
 
 mod held;
 mod model;
 mod search;
 mod solver;
+mod watch;
 
 use crate::{
     Calibration, MIN_SUPPORT_DISTANCE_M, Mat3, PoseInputError, SensorNoise, SettingError,
@@ -50,6 +53,10 @@ use model::{Free, N_UNKNOWNS, Normal, Params, Problem};
 use nalgebra::{Cholesky, ComplexField};
 use sar_kinematics::Shown;
 use solver::{Pass, PassEnd};
+pub use watch::{
+    JACOBIAN_STEP_M, MAX_CHI2_DOF, MIN_SAMPLES, NAME_SIGMA, PRIOR_STD_M, SupportStatus,
+    SupportVerdict, SupportWatch, SupportWatchConfig,
+};
 
 /// How many static poses a [`SupportCalibration`] holds at most: the cone set
 /// of MODEL.md 5.1 has 20, so a procedure may repeat it six times.

@@ -96,6 +96,14 @@ pub enum ReplyDetail {
     /// An excitation refused by its parameters or limits
     /// ([`crate::excite::judge`]).
     Excitation(ExciteRefusal),
+    /// Force control refused: the support watch named a shift of the
+    /// support beyond its limit, not yet confirmed (issue 34 section 3).
+    SupportShifted {
+        /// The shift named, base frame, m.
+        shift_m: Vec3,
+        /// `[support] max_shift_m`.
+        max_shift_m: f64,
+    },
     /// A guarded move's force limit within the tip force's noise (it would
     /// stop the move on noise).
     WithinNoise {
@@ -249,6 +257,19 @@ impl core::fmt::Display for ReplyDetail {
                 max_force_n,
                 noise_n,
             } => within_noise(f, *max_force_n, *noise_n),
+            Self::SupportShifted {
+                shift_m,
+                max_shift_m,
+            } => write!(
+                f,
+                "the support has shifted by ({:.1}, {:.1}, {:.1}) mm, beyond its {:.1} mm \
+                 ([support] max_shift_m): the tip force is estimated about the wrong \
+                 fulcrum; re-calibrate (sarctl identify) or confirm (sarctl support confirm)",
+                shift_m.x * 1e3,
+                shift_m.y * 1e3,
+                shift_m.z * 1e3,
+                max_shift_m * 1e3
+            ),
         }
     }
 }

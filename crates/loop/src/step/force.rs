@@ -52,6 +52,15 @@ impl LoopStep {
                 ReplyDetail::BadForce { force_n, max_n },
             );
         }
+        if let Some(s) = self.support_refuses_force() {
+            return (
+                ReplyStatus::Refused,
+                ReplyDetail::SupportShifted {
+                    shift_m: s.named_m.unwrap_or(s.shift_m),
+                    max_shift_m: self.support.config().max_shift_m,
+                },
+            );
+        }
         if let Err(refused) = self.ready_at_rest(input, estimate, 0.0) {
             return refused;
         }

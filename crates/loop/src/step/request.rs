@@ -59,4 +59,8 @@ pub enum Request {
     /// The dynamic identification's excitation about where the axes rest
     /// (issue 26, [`crate::excite`]).
     Excite(ExciteRequest),
+    /// The operator confirms the support as it is now (issue 34 section 3):
+    /// a named shift becomes the acknowledged one, and force control is
+    /// no longer refused for it (`sarctl support confirm`).
+    SupportConfirm,
 }

@@ -1,0 +1,394 @@
+//! The support watch (issue 34 section 3, MODEL.md 5.1): while the tip can be
+//! taken as free, what the estimated tip force at varying poses says about
+//! the support point B, accumulated sample by sample, allocation-free and
+//! bounded (3x3 normal equations with exponential forgetting).
+//!
+//! With the tip free the true F_tip is 0, so the estimate computed with the
+//! configured B0 is the phantom of the support's shift delta = B_true - B0:
+//! to first order `F_tip(B0) = -J delta`, J = dF_tip/dB at the sample's pose
+//! (finite differences of the estimator itself, with B0 moved by
+//! [`JACOBIAN_STEP_M`] along each base axis: the kinematics, the lever and
+//! the inertia's compensation all included). Only the components across the
+//! rod are used: along it the support's Coulomb friction reads as a tip
+//! force (MODEL.md 4.1) and no shift can be told from it. One pose determines
+//! two combinations of delta at most (a horizontal rod: the vertical phantom
+//! only, which along-the-rod and vertical shifts share); the rod's turning
+//! determines the third. A weak prior ([`PRIOR_STD_M`]) keeps the solve
+//! defined: a component the poses do not determine keeps a standard error
+//! near it and is reported as not determined (above
+//! [`SupportWatchConfig::max_std_m`]).
+//!
+//! What the caller guarantees (the loop, `step/support.rs`): only samples
+//! where the tip can be taken as free (no force control, no guarded move,
+//! the guard in Ok or awaiting its first reset, the filtered tip force below
+//! [`SupportWatchConfig::free_tip_max_n`]). Whether the force was really a
+//! shift's phantom is this file's test: the chi-square of the fit per
+//! degree of freedom must stay below [`MAX_CHI2_DOF`] (a contact force does
+//! not follow the pose as a support shift does); above it the check says it
+//! could not run ([`SupportVerdict::NotFree`]).
+//!
+//! A shift is named ([`SupportVerdict::Shifted`], latched) when a determined
+//! component differs from the acknowledged one (the configured B, or the
+//! shift last confirmed) by more than [`SupportWatchConfig::max_shift_m`] and
+//! by more than [`NAME_SIGMA`] standard errors. Until
+//! [`SupportWatch::confirm`], [`SupportWatch::refuses_force`] holds.
+
+use crate::motion::CarriageMotion;
+use crate::tip_force::{TipForceEstimate, TipForceEstimator};
+use crate::{Calibration, Mat3, Profile, SettingError, Vec3, positive};
+use nalgebra::ComplexField;
+use sar_kinematics::{ActiveJoints, forward};
+
+/// The step of B for the finite-difference Jacobian, m.
+pub const JACOBIAN_STEP_M: f64 = 1e-3;
+
+/// The prior standard deviation of each component of the shift, m: what
+/// keeps the 3x3 solve defined when the poses determine fewer than three
+/// components (the largest shift MODEL.md 10 expects is 20 mm).
+pub const PRIOR_STD_M: f64 = 0.05;
+
+/// Above this chi-square per degree of freedom the samples are not those of
+/// a free tip under a shifted support: the check could not run.
+pub const MAX_CHI2_DOF: f64 = 2.0;
+
+/// A shift is named only beyond this many standard errors (besides the
+/// configured limit): the noise alone never names one.
+pub const NAME_SIGMA: f64 = 4.0;
+
+/// Fewer (forgetting-weighted) samples than this: no verdict yet.
+pub const MIN_SAMPLES: f64 = 500.0;
+
+/// The support watch's settings (`[support]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupportWatchConfig {
+    /// A shift beyond this on a determined axis is named, m (> 0).
+    pub max_shift_m: f64,
+    /// The tip is taken as free only while the filtered tip force is below
+    /// this, N (> 0).
+    pub free_tip_max_n: f64,
+    /// The forgetting's window, in samples (> 1): each sample's weight
+    /// decays by 1 - 1/window per sample after it.
+    pub window_samples: f64,
+    /// A component of the shift whose standard error exceeds this is not
+    /// determined (not judged), m (> 0).
+    pub max_std_m: f64,
+}
+
+impl SupportWatchConfig {
+    /// The built-in settings: 3 mm, 2.5 N, 10 s at 1 kHz, 1 mm.
+    pub const DEFAULT: Self = Self {
+        max_shift_m: 0.003,
+        free_tip_max_n: 2.5,
+        window_samples: 10_000.0,
+        max_std_m: 0.001,
+    };
+
+    /// Every value in its range.
+    pub fn check(&self) -> Result<(), SettingError> {
+        positive("support.max_shift_m", self.max_shift_m)?;
+        positive("support.free_tip_max_n", self.free_tip_max_n)?;
+        positive("support.max_std_m", self.max_std_m)?;
+        crate::require(
+            self.window_samples.is_finite() && self.window_samples > 1.0,
+            "support.window_samples",
+            self.window_samples,
+            "must be finite and > 1",
+        )
+    }
+}
+
+/// What the watch says of the support now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SupportVerdict {
+    /// Too few free samples yet: the check has not run.
+    NotRun,
+    /// The tip force does not follow the poses as a support shift does (a
+    /// contact, or another model error): the check could not run.
+    NotFree,
+    /// Every determined component within the limit.
+    Within,
+    /// A shift beyond the limit was named; force control is refused until
+    /// it is confirmed.
+    Shifted,
+}
+
+impl SupportVerdict {
+    /// The wire's code (the published state): 0 not run, 1 not free, 2
+    /// within, 3 shifted.
+    pub fn code(self) -> u32 {
+        match self {
+            Self::NotRun => 0,
+            Self::NotFree => 1,
+            Self::Within => 2,
+            Self::Shifted => 3,
+        }
+    }
+
+    /// In words.
+    pub fn words(self) -> &'static str {
+        match self {
+            Self::NotRun => "not run (too few poses with the tip free)",
+            Self::NotFree => "could not run (the tip force is not that of a free tip)",
+            Self::Within => "within the limit",
+            Self::Shifted => "shifted beyond the limit",
+        }
+    }
+}
+
+/// The support's estimated shift now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupportStatus {
+    /// B_true - B_configured, base frame, m.
+    pub shift_m: Vec3,
+    /// Its standard error per base axis, m (widened by sqrt(chi2/dof) when
+    /// above 1).
+    pub std_m: Vec3,
+    /// Chi-square per degree of freedom of the fit.
+    pub chi2_dof: f64,
+    /// Forgetting-weighted free samples behind it.
+    pub samples: f64,
+    /// The verdict.
+    pub verdict: SupportVerdict,
+    /// The shift named (latched until confirmed), m.
+    pub named_m: Option<Vec3>,
+}
+
+impl SupportStatus {
+    /// Before any sample.
+    pub const NONE: Self = Self {
+        shift_m: Vec3::new(0.0, 0.0, 0.0),
+        std_m: Vec3::new(PRIOR_STD_M, PRIOR_STD_M, PRIOR_STD_M),
+        chi2_dof: 0.0,
+        samples: 0.0,
+        verdict: SupportVerdict::NotRun,
+        named_m: None,
+    };
+
+    /// Whether component `axis` (0 X0, 1 Y0, 2 Z0) is determined under
+    /// `max_std_m`.
+    pub fn determined(&self, axis: usize, max_std_m: f64) -> bool {
+        self.std_m.get(axis).is_some_and(|s| *s <= max_std_m)
+    }
+}
+
+/// The accumulating support watch (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct SupportWatch {
+    config: SupportWatchConfig,
+    profile: Profile,
+    /// The calibration with B moved by [`JACOBIAN_STEP_M`] along X0, Y0, Z0.
+    shifted_cal: [Calibration; 3],
+    /// The tip-force estimator of each.
+    shifted: [TipForceEstimator; 3],
+    /// Sum of w J^T J (forgetting-weighted), 1/m^2.
+    info: Mat3,
+    /// Sum of w J^T r, 1/m.
+    rhs: Vec3,
+    /// Sum of w r^T r.
+    rr: f64,
+    /// Forgetting-weighted sample count.
+    count: f64,
+    /// The acknowledged shift (the configured B: 0; or the one confirmed), m.
+    acknowledged_m: Vec3,
+    status: SupportStatus,
+}
+
+impl SupportWatch {
+    /// A watch for the robot `base` (its estimator's calibration, profile and
+    /// tip settings, inertia included).
+    pub fn new(
+        config: SupportWatchConfig,
+        calibration: &Calibration,
+        profile: &Profile,
+        base: &TipForceEstimator,
+    ) -> Result<Self, SettingError> {
+        config.check()?;
+        let b0 = calibration.support_m();
+        let shift = |axis: Vec3| {
+            calibration
+                .with_support(b0 + axis * JACOBIAN_STEP_M)
+                .map_err(|_| SettingError::Invalid {
+                    field: "geometry.support",
+                    value: b0.norm(),
+                    why: "must be finite",
+                })
+        };
+        let shifted_cal = [shift(Vec3::x())?, shift(Vec3::y())?, shift(Vec3::z())?];
+        let with = |cal: &Calibration| base.with_calibration(cal);
+        Ok(Self {
+            config,
+            profile: *profile,
+            shifted: [
+                with(&shifted_cal[0]),
+                with(&shifted_cal[1]),
+                with(&shifted_cal[2]),
+            ],
+            shifted_cal,
+            info: Mat3::zeros(),
+            rhs: Vec3::zeros(),
+            rr: 0.0,
+            count: 0.0,
+            acknowledged_m: Vec3::zeros(),
+            status: SupportStatus::NONE,
+        })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &SupportWatchConfig {
+        &self.config
+    }
+
+    /// The status after the last sample (or confirmation).
+    pub fn status(&self) -> &SupportStatus {
+        &self.status
+    }
+
+    /// A shift was named and not yet confirmed: force control is refused.
+    pub fn refuses_force(&self) -> bool {
+        self.status.named_m.is_some()
+    }
+
+    /// The operator confirms the support as it is now: the named shift (or
+    /// the present estimate of the determined components) becomes the
+    /// acknowledged one, against which a later shift is judged.
+    pub fn confirm(&mut self) {
+        let s = self.status;
+        for axis in 0..3 {
+            if s.determined(axis, self.config.max_std_m)
+                && let (Some(a), Some(v)) = (self.acknowledged_m.get_mut(axis), s.shift_m.get(axis))
+            {
+                *a = *v;
+            }
+        }
+        if let Some(named) = s.named_m {
+            self.acknowledged_m = named;
+        }
+        self.status.named_m = None;
+        if self.status.verdict == SupportVerdict::Shifted {
+            self.status.verdict = SupportVerdict::Within;
+        }
+    }
+
+    /// One sample with the tip taken as free: the joints `q`, the raw
+    /// reading and the bias (sensor frame), the carriage's motion, and the
+    /// cycle's estimate `estimate` at `rod_dir` (computed with the
+    /// configured B). A sample whose shifted estimates cannot be computed
+    /// (a pose invalid with a shifted B) is skipped.
+    pub fn observe(
+        &mut self,
+        q: &ActiveJoints,
+        reading_n: &Vec3,
+        bias_n: &Vec3,
+        motion: &CarriageMotion,
+        estimate: &TipForceEstimate,
+        rod_dir: &Vec3,
+    ) {
+        let across = Mat3::identity() - rod_dir * rod_dir.transpose();
+        let mut jac = Mat3::zeros();
+        for (k, (cal, est)) in self.shifted_cal.iter().zip(&self.shifted).enumerate() {
+            let Ok(pose) = forward(cal, &self.profile, q) else {
+                return;
+            };
+            let Ok(e) = est.estimate_in_motion(&pose, reading_n, bias_n, motion) else {
+                return;
+            };
+            jac.set_column(
+                k,
+                &(across * (e.force_n - estimate.force_n) / JACOBIAN_STEP_M),
+            );
+        }
+        let residual = across * estimate.force_n;
+        let var_n2 = estimate.std_n.norm_squared() / 3.0;
+        if !(var_n2 > 0.0 && var_n2.is_finite() && jac.iter().all(|x| x.is_finite())) {
+            return;
+        }
+        let w = 1.0 / var_n2;
+        let keep = 1.0 - 1.0 / self.config.window_samples;
+        self.info = self.info * keep + jac.transpose() * jac * w;
+        self.rhs = self.rhs * keep + jac.transpose() * residual * w;
+        self.rr = self.rr * keep + residual.norm_squared() * w;
+        self.count = self.count * keep + 1.0;
+        self.judge();
+    }
+
+    /// The shift, its standard errors and the verdict from the sums.
+    fn judge(&mut self) {
+        let prior = Mat3::identity() / (PRIOR_STD_M * PRIOR_STD_M);
+        let Some(chol) = (self.info + prior).cholesky() else {
+            return;
+        };
+        let shift = -chol.solve(&self.rhs);
+        let covariance = chol.inverse();
+        let chi2 = self.rr + 2.0 * shift.dot(&self.rhs) + shift.dot(&(self.info * shift));
+        let dof = (2.0 * self.count - 3.0).max(1.0);
+        let chi2_dof = chi2.max(0.0) / dof;
+        let scale = chi2_dof.max(1.0);
+        let std_m = covariance
+            .diagonal()
+            .map(|v| ComplexField::sqrt(v.max(0.0) * scale));
+        let mut status = SupportStatus {
+            shift_m: shift,
+            std_m,
+            chi2_dof,
+            samples: self.count,
+            verdict: SupportVerdict::Within,
+            named_m: self.status.named_m,
+        };
+        if self.count < MIN_SAMPLES {
+            status.verdict = SupportVerdict::NotRun;
+        } else if !(chi2_dof <= MAX_CHI2_DOF) {
+            status.verdict = SupportVerdict::NotFree;
+        } else if status.named_m.is_none() && self.beyond(&status) {
+            status.named_m = Some(shift);
+        }
+        if status.named_m.is_some() {
+            status.verdict = SupportVerdict::Shifted;
+        }
+        self.status = status;
+    }
+
+    /// A determined component beyond the limit and beyond [`NAME_SIGMA`]
+    /// standard errors from the acknowledged shift.
+    fn beyond(&self, s: &SupportStatus) -> bool {
+        (0..3).any(|axis| {
+            let (Some(v), Some(a), Some(std)) = (
+                s.shift_m.get(axis),
+                self.acknowledged_m.get(axis),
+                s.std_m.get(axis),
+            ) else {
+                return false;
+            };
+            let off = (v - a).abs();
+            *std <= self.config.max_std_m && off > self.config.max_shift_m && off > NAME_SIGMA * std
+        })
+    }
+}
+
+// Snapshots: the sums, the acknowledged shift and the status are state; the
+// settings and the shifted estimators come from the configuration.
+sar_snapshot::snap_enum!(SupportVerdict {
+    0 => NotRun,
+    1 => NotFree,
+    2 => Within,
+    3 => Shifted,
+});
+sar_snapshot::snap_struct!(SupportStatus {
+    shift_m,
+    std_m,
+    chi2_dof,
+    samples,
+    verdict,
+    named_m,
+});
+sar_snapshot::config_struct!(SupportWatchConfig {
+    max_shift_m,
+    free_tip_max_n,
+    window_samples,
+    max_std_m,
+});
+sar_snapshot::snap_state!(SupportWatch {
+    state: [info, rhs, rr, count, acknowledged_m, status],
+    nested: [],
+    config: [config, profile, shifted_cal, shifted],
+    output: [],
+});
