@@ -57,8 +57,9 @@ pub const CAPACITY: usize = 4096;
 /// tare's time) is part of the snapshotted state; 4: the loop's model of
 /// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
 /// the clock of the last streamed set point (issue 33: a late cycle delays
-/// the streamed trajectory).
-pub const VERSION: u16 = 5;
+/// the streamed trajectory); 6: the support watch's sums, slide sign,
+/// acknowledged shift and status (issue 34 section 3).
+pub const VERSION: u16 = 6;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";

@@ -17,7 +17,7 @@ crate::section! {
     free_tip_max_n: f64 = value(SupportWatchConfig::DEFAULT.free_tip_max_n),
         num(0.1, 20.0, "N") => [SupportWatchConfig.free_tip_max_n];
     /// the forgetting's window (each free sample's weight decays over it)
-    window_s: f64 = value(10.0), num(1.0, 600.0, "s") => [SupportWatchConfig.window_samples];
+    window_s: f64 = value(5.0), num(1.0, 600.0, "s") => [SupportWatchConfig.window_samples];
     /// a component whose standard error exceeds this is not determined (not judged)
     max_std_m: f64 = value(SupportWatchConfig::DEFAULT.max_std_m),
         num(1e-5, 0.02, "m") => [SupportWatchConfig.max_std_m];

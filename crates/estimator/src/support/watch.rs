@@ -37,7 +37,7 @@ use crate::motion::CarriageMotion;
 use crate::tip_force::{TipForceEstimate, TipForceEstimator};
 use crate::{Calibration, Mat3, Profile, SettingError, Vec3, positive};
 use nalgebra::ComplexField;
-use sar_kinematics::{ActiveJoints, forward};
+use sar_kinematics::{ActiveJoints, Pose, forward};
 
 /// The step of B for the finite-difference Jacobian, m.
 pub const JACOBIAN_STEP_M: f64 = 1e-3;
@@ -49,14 +49,20 @@ pub const PRIOR_STD_M: f64 = 0.05;
 
 /// Above this chi-square per degree of freedom the samples are not those of
 /// a free tip under a shifted support: the check could not run.
-pub const MAX_CHI2_DOF: f64 = 2.0;
+pub const MAX_CHI2_DOF: f64 = 1.5;
 
 /// A shift is named only beyond this many standard errors (besides the
 /// configured limit): the noise alone never names one.
-pub const NAME_SIGMA: f64 = 4.0;
+pub const NAME_SIGMA: f64 = 5.0;
 
 /// Fewer (forgetting-weighted) samples than this: no verdict yet.
-pub const MIN_SAMPLES: f64 = 500.0;
+pub const MIN_SAMPLES: f64 = 250.0;
+
+/// A shift is named only after this many samples in a row found it beyond
+/// the limit (with the fit consistent): a passing excursion of the running
+/// estimate, or a contact's force before the fit's chi-square shows it, is
+/// not named.
+pub const NAME_SAMPLES: u32 = 250;
 
 /// The support watch's settings (`[support]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,11 +81,11 @@ pub struct SupportWatchConfig {
 }
 
 impl SupportWatchConfig {
-    /// The built-in settings: 3 mm, 2.5 N, 10 s at 1 kHz, 1 mm.
+    /// The built-in settings: 3 mm, 2.5 N, 5 s at 500 Hz, 1 mm.
     pub const DEFAULT: Self = Self {
         max_shift_m: 0.003,
         free_tip_max_n: 2.5,
-        window_samples: 10_000.0,
+        window_samples: 2_500.0,
         max_std_m: 0.001,
     };
 
@@ -180,18 +186,47 @@ pub struct SupportWatch {
     shifted_cal: [Calibration; 3],
     /// The tip-force estimator of each.
     shifted: [TipForceEstimator; 3],
-    /// Sum of w J^T J (forgetting-weighted), 1/m^2.
-    info: Mat3,
-    /// Sum of w J^T r, 1/m.
-    rhs: Vec3,
-    /// Sum of w r^T r.
+    /// The estimator with the configured B.
+    base: TipForceEstimator,
+    /// The covariance of one sample's F_A, {0}, N^2.
+    ujoint_covariance_n2: Mat3,
+    /// The normal equations over (shift, friction), forgetting-weighted:
+    /// the shift's block, 1/N^2 (N/m)^2 = 1/m^2.
+    info_b: Mat3,
+    /// The shift-friction block, 1/(m N).
+    info_bf: Vec3,
+    /// The friction's, 1/N^2.
+    info_ff: f64,
+    /// J^T W r over the shift, 1/m.
+    rhs_b: Vec3,
+    /// Over the friction, 1/N.
+    rhs_f: f64,
+    /// r^T W r.
     rr: f64,
+    /// Forgetting-weighted rows (3 per sample with the slide sign known, 2
+    /// without).
+    rows: f64,
     /// Forgetting-weighted sample count.
     count: f64,
+    /// The sign of the rod's last slide through the support (+1: A moved
+    /// towards B, inserting; -1: away; 0: no slide seen yet).
+    slide_sign: f64,
     /// The acknowledged shift (the configured B: 0; or the one confirmed), m.
     acknowledged_m: Vec3,
+    /// Samples in a row that found a shift beyond the limit.
+    beyond_run: u32,
     status: SupportStatus,
 }
+
+/// Below this speed of A along the rod, m/s, the rod does not slide (the
+/// last slide's sign holds).
+pub const SLIDE_MPS: f64 = 1e-4;
+
+/// The prior standard deviation of the support's friction unknown, N.
+pub const PRIOR_FRICTION_N: f64 = 5.0;
+
+type Mat4 = nalgebra::Matrix4<f64>;
+type Vec4 = nalgebra::Vector4<f64>;
 
 impl SupportWatch {
     /// A watch for the robot `base` (its estimator's calibration, profile and
@@ -224,11 +259,19 @@ impl SupportWatch {
                 with(&shifted_cal[2]),
             ],
             shifted_cal,
-            info: Mat3::zeros(),
-            rhs: Vec3::zeros(),
+            ujoint_covariance_n2: base.ujoint_covariance_n2(),
+            base: *base,
+            info_b: Mat3::zeros(),
+            info_bf: Vec3::zeros(),
+            info_ff: 0.0,
+            rhs_b: Vec3::zeros(),
+            rhs_f: 0.0,
             rr: 0.0,
+            rows: 0.0,
             count: 0.0,
+            slide_sign: 0.0,
             acknowledged_m: Vec3::zeros(),
+            beyond_run: 0,
             status: SupportStatus::NONE,
         })
     }
@@ -264,67 +307,154 @@ impl SupportWatch {
             self.acknowledged_m = named;
         }
         self.status.named_m = None;
+        self.beyond_run = 0;
         if self.status.verdict == SupportVerdict::Shifted {
             self.status.verdict = SupportVerdict::Within;
         }
     }
 
     /// One sample with the tip taken as free: the joints `q`, the raw
-    /// reading and the bias (sensor frame), the carriage's motion, and the
-    /// cycle's estimate `estimate` at `rod_dir` (computed with the
-    /// configured B). A sample whose shifted estimates cannot be computed
-    /// (a pose invalid with a shifted B) is skipped.
+    /// reading and the bias (sensor frame), the carriage's motion, the
+    /// speed of A along the rod towards B `slide_mps` (its sign is the
+    /// slide's: the friction's coefficient), and the cycle's estimate
+    /// `estimate` at `base_pose` (both computed with the configured B). A sample
+    /// whose shifted estimates cannot be computed (a pose invalid with a
+    /// shifted B) is skipped. Until the rod has slid the component along it
+    /// is not used (the support's friction there has no known sign).
+    #[allow(clippy::too_many_arguments)]
     pub fn observe(
         &mut self,
         q: &ActiveJoints,
         reading_n: &Vec3,
         bias_n: &Vec3,
         motion: &CarriageMotion,
+        slide_mps: f64,
         estimate: &TipForceEstimate,
-        rod_dir: &Vec3,
+        base_pose: &Pose,
     ) {
-        let across = Mat3::identity() - rod_dir * rod_dir.transpose();
+        let rod_dir = &base_pose.rod_dir;
+        if slide_mps > SLIDE_MPS {
+            self.slide_sign = 1.0;
+        } else if slide_mps < -SLIDE_MPS {
+            self.slide_sign = -1.0;
+        }
+        let keep_axial = self.slide_sign != 0.0;
+        let rows = if keep_axial {
+            Mat3::identity()
+        } else {
+            Mat3::identity() - rod_dir * rod_dir.transpose()
+        };
+        // The Jacobian at the reading a free tip would give here (the
+        // estimate's own noise taken out: a Jacobian from the noisy reading
+        // correlates with the residual and biases the shift, 4 standard
+        // errors in 5000 samples). F_tip = T F_A + const with T = u u^T -
+        // a/(L - a) P (MODEL.md 4.1), so the free reading is
+        // f_s + R_0s^T T^-1 F_tip, T^-1 = u u^T - (L - a)/a P.
+        let along = rod_dir * rod_dir.transpose();
+        let inverse_lever = base_pose.tip_beyond_support_m / base_pose.support_distance_m;
+        let t_inverse = along - (Mat3::identity() - along) * inverse_lever;
+        let rotation = self.shifted_cal[0].sensor_rotation();
+        let free_reading_n = reading_n + rotation.transpose() * (t_inverse * estimate.force_n);
+        let Ok(free) = self
+            .base
+            .estimate_in_motion(base_pose, &free_reading_n, bias_n, motion)
+        else {
+            return;
+        };
         let mut jac = Mat3::zeros();
         for (k, (cal, est)) in self.shifted_cal.iter().zip(&self.shifted).enumerate() {
             let Ok(pose) = forward(cal, &self.profile, q) else {
                 return;
             };
-            let Ok(e) = est.estimate_in_motion(&pose, reading_n, bias_n, motion) else {
+            let Ok(e) = est.estimate_in_motion(&pose, &free_reading_n, bias_n, motion) else {
                 return;
             };
-            jac.set_column(
-                k,
-                &(across * (e.force_n - estimate.force_n) / JACOBIAN_STEP_M),
-            );
+            jac.set_column(k, &(rows * (e.force_n - free.force_n) / JACOBIAN_STEP_M));
         }
-        let residual = across * estimate.force_n;
-        let var_n2 = estimate.std_n.norm_squared() / 3.0;
-        if !(var_n2 > 0.0 && var_n2.is_finite() && jac.iter().all(|x| x.is_finite())) {
+        // The friction reads as a tip force along the rod: sigma f u.
+        let friction = rod_dir * self.slide_sign;
+        let residual = rows * estimate.force_n;
+        let Some(w) = self.weight(estimate, base_pose, &rows, keep_axial) else {
+            return;
+        };
+        if !jac.iter().all(|x| x.is_finite()) {
             return;
         }
-        let w = 1.0 / var_n2;
         let keep = 1.0 - 1.0 / self.config.window_samples;
-        self.info = self.info * keep + jac.transpose() * jac * w;
-        self.rhs = self.rhs * keep + jac.transpose() * residual * w;
-        self.rr = self.rr * keep + residual.norm_squared() * w;
+        let jw = jac.transpose() * w;
+        self.info_b = self.info_b * keep + jw * jac;
+        self.info_bf = self.info_bf * keep + jw * friction;
+        self.info_ff = self.info_ff * keep + friction.dot(&(w * friction));
+        self.rhs_b = self.rhs_b * keep + jw * residual;
+        self.rhs_f = self.rhs_f * keep + friction.dot(&(w * residual));
+        self.rr = self.rr * keep + residual.dot(&(w * residual));
+        self.rows = self.rows * keep + if keep_axial { 3.0 } else { 2.0 };
         self.count = self.count * keep + 1.0;
         self.judge();
     }
 
+    /// The weight of one sample's rows: the inverse of the tip force's
+    /// covariance, from the sensor's (F_tip = (u u^T - a/(L - a) P) F_A
+    /// plus constants, MODEL.md 4.1), with what the motion adds on the
+    /// diagonal; over the rows across the rod only when the component along
+    /// it is not used. `None` when not finite or not invertible.
+    fn weight(
+        &self,
+        estimate: &TipForceEstimate,
+        pose: &Pose,
+        rows: &Mat3,
+        keep_axial: bool,
+    ) -> Option<Mat3> {
+        let u = pose.rod_dir;
+        let along = u * u.transpose();
+        let across = Mat3::identity() - along;
+        let lever = pose.support_distance_m / pose.tip_beyond_support_m;
+        let t = along - across * lever;
+        let mut c = t * self.ujoint_covariance_n2 * t.transpose();
+        for k in 0..3 {
+            let (Some(var), Some(std)) = (c.get_mut((k, k)), estimate.std_n.get(k)) else {
+                return None;
+            };
+            *var = var.max(std * std);
+        }
+        let w = if keep_axial {
+            c.try_inverse()?
+        } else {
+            rows * (rows * c * rows + along).try_inverse()? * rows
+        };
+        w.iter().all(|x| x.is_finite()).then_some(w)
+    }
+
+    /// The normal equations over (shift, friction) and their right-hand side.
+    fn normal(&self) -> (Mat4, Vec4) {
+        let mut info = Mat4::zeros();
+        info.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.info_b);
+        info.fixed_view_mut::<3, 1>(0, 3).copy_from(&self.info_bf);
+        info.fixed_view_mut::<1, 3>(3, 0)
+            .copy_from(&self.info_bf.transpose());
+        info[(3, 3)] = self.info_ff;
+        let rhs = Vec4::new(self.rhs_b.x, self.rhs_b.y, self.rhs_b.z, self.rhs_f);
+        (info, rhs)
+    }
+
     /// The shift, its standard errors and the verdict from the sums.
     fn judge(&mut self) {
-        let prior = Mat3::identity() / (PRIOR_STD_M * PRIOR_STD_M);
-        let Some(chol) = (self.info + prior).cholesky() else {
+        let (info, rhs) = self.normal();
+        let b = 1.0 / (PRIOR_STD_M * PRIOR_STD_M);
+        let f = 1.0 / (PRIOR_FRICTION_N * PRIOR_FRICTION_N);
+        let prior = Mat4::from_diagonal(&Vec4::new(b, b, b, f));
+        let Some(chol) = (info + prior).cholesky() else {
             return;
         };
-        let shift = -chol.solve(&self.rhs);
+        // F_tip(B0) = -(J delta + sigma u f): theta = -(N)^-1 J^T W r.
+        let theta = -chol.solve(&rhs);
         let covariance = chol.inverse();
-        let chi2 = self.rr + 2.0 * shift.dot(&self.rhs) + shift.dot(&(self.info * shift));
-        let dof = (2.0 * self.count - 3.0).max(1.0);
+        let chi2 = self.rr + 2.0 * theta.dot(&rhs) + theta.dot(&(info * theta));
+        let dof = (self.rows - 4.0).max(1.0);
         let chi2_dof = chi2.max(0.0) / dof;
         let scale = chi2_dof.max(1.0);
-        let std_m = covariance
-            .diagonal()
+        let shift = Vec3::new(theta.x, theta.y, theta.z);
+        let std_m = Vec3::new(covariance.m11, covariance.m22, covariance.m33)
             .map(|v| ComplexField::sqrt(v.max(0.0) * scale));
         let mut status = SupportStatus {
             shift_m: shift,
@@ -334,12 +464,30 @@ impl SupportWatch {
             verdict: SupportVerdict::Within,
             named_m: self.status.named_m,
         };
+        let mut beyond = false;
         if self.count < MIN_SAMPLES {
             status.verdict = SupportVerdict::NotRun;
         } else if !(chi2_dof <= MAX_CHI2_DOF) {
             status.verdict = SupportVerdict::NotFree;
-        } else if status.named_m.is_none() && self.beyond(&status) {
-            status.named_m = Some(shift);
+        } else {
+            beyond = self.beyond(&status);
+        }
+        self.beyond_run = if beyond {
+            self.beyond_run.saturating_add(1)
+        } else {
+            0
+        };
+        if status.named_m.is_none() && self.beyond_run >= NAME_SAMPLES {
+            // The determined components; the others are not known (0).
+            let max_std_m = self.config.max_std_m;
+            let named = Vec3::from_fn(|k, _| {
+                if status.determined(k, max_std_m) {
+                    shift[k]
+                } else {
+                    0.0
+                }
+            });
+            status.named_m = Some(named);
         }
         if status.named_m.is_some() {
             status.verdict = SupportVerdict::Shifted;
@@ -387,8 +535,28 @@ sar_snapshot::config_struct!(SupportWatchConfig {
     max_std_m,
 });
 sar_snapshot::snap_state!(SupportWatch {
-    state: [info, rhs, rr, count, acknowledged_m, status],
+    state: [
+        info_b,
+        info_bf,
+        info_ff,
+        rhs_b,
+        rhs_f,
+        rr,
+        rows,
+        count,
+        slide_sign,
+        acknowledged_m,
+        beyond_run,
+        status
+    ],
     nested: [],
-    config: [config, profile, shifted_cal, shifted],
+    config: [
+        config,
+        profile,
+        shifted_cal,
+        shifted,
+        base,
+        ujoint_covariance_n2
+    ],
     output: [],
 });
