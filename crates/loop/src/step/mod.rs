@@ -127,7 +127,7 @@ pub use config::{
 };
 pub use request::Request;
 pub use snapshot::SNAPSHOT_KIND_LOOP_STEP;
-pub use support::SETTLE_NS;
+pub use support::{SETTLE_NS, SUPPORT_CHECK_OFFSETS_M, SUPPORT_CHECK_ROUNDS};
 pub use vocabulary::{
     DriveAction, GuardedStop, LoopInput, LoopOutput, Release, SupportNote, SupportWhy, reason_code,
     recorded_reason_code,

@@ -27,6 +27,23 @@ use sar_estimator::support::{SupportStatus, SupportVerdict};
 /// settling poses of `sarctl support check`).
 pub const SETTLE_NS: u64 = 500_000_000;
 
+/// The poses of `sarctl support check`: the tip's offsets from where it
+/// starts, base frame, m (the rod turned up, down and to each side by
+/// 15 mm at the tip, which determines the support across it; 20 mm back
+/// along it, which changes a; then home). Run twice (longer than the
+/// default 5 s window, so that samples from before a shift weigh little).
+pub const SUPPORT_CHECK_OFFSETS_M: [[f64; 3]; 6] = [
+    [0.0, 0.015, 0.015],
+    [0.0, -0.015, 0.015],
+    [0.0, -0.015, -0.015],
+    [0.0, 0.015, -0.015],
+    [-0.02, 0.0, 0.0],
+    [0.0, 0.0, 0.0],
+];
+
+/// How many times `sarctl support check` runs [`SUPPORT_CHECK_OFFSETS_M`].
+pub const SUPPORT_CHECK_ROUNDS: usize = 2;
+
 impl LoopStep {
     /// Feeds the cycle's sample to the watch when the tip can be taken as
     /// free; `awaiting` is whether the guard waited for its first reset

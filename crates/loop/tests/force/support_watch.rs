@@ -1,7 +1,7 @@
 //! The support watch (issue 34 section 3): the simulator's support moves
 //! (`[[support_shift]]`, ramped in over 0.5 s from 1.3 s), then the tip
 //! makes the free moves of `sarctl support check` (the pose sequence of
-//! [`CHECK_OFFSETS_M`] about the start, at the configured speed) through the
+//! `SUPPORT_CHECK_OFFSETS_M` about the start, at the configured speed) through the
 //! real controller in simulated time. Asserted: a 10 mm shift upwards is
 //! named and force control is then refused with the reason, until the
 //! operator confirms; a still support over the same moves is never named;
@@ -21,25 +21,13 @@ use crate::rig::{Plant, Rig, TIP_M};
 use sar_estimator::Vec3;
 use sar_estimator::support::{SupportStatus, SupportVerdict};
 use sar_loop::control::{ReplyStatus, Request};
-use sar_loop::step::{ReplyDetail, SupportWhy};
+use sar_loop::step::{ReplyDetail, SUPPORT_CHECK_OFFSETS_M, SUPPORT_CHECK_ROUNDS, SupportWhy};
 use sar_sim::{ContactKey, SupportShift};
 
 /// When the shift starts, ns (the rig is ready at 1.1 s).
 const SHIFT_AT_NS: u64 = 1_300_000_000;
 /// Its ramp, ns.
 const RAMP_NS: u64 = 500_000_000;
-
-/// The check's poses: the tip's offsets from where it starts, m (the same
-/// sequence as `sarctl support check`: the rod turned up, down, left and
-/// right by 15 mm at the tip, and 20 mm back along it, then home).
-pub const CHECK_OFFSETS_M: [[f64; 3]; 6] = [
-    [0.0, 0.015, 0.015],
-    [0.0, -0.015, 0.015],
-    [0.0, -0.015, -0.015],
-    [0.0, 0.015, -0.015],
-    [-0.02, 0.0, 0.0],
-    [0.0, 0.0, 0.0],
-];
 
 /// What one run shows.
 struct Run {
@@ -53,12 +41,12 @@ struct Run {
     max_std_m: f64,
 }
 
-/// The moves of [`CHECK_OFFSETS_M`], each until the trajectory rests, then
+/// The moves of [`SUPPORT_CHECK_OFFSETS_M`], each until the trajectory rests, then
 /// 0.3 s at the pose; `rounds` times.
 fn check_moves(rig: &mut Rig, rounds: usize, named: &mut bool) {
     let mut id = 10;
     for _ in 0..rounds {
-        for off in CHECK_OFFSETS_M {
+        for off in SUPPORT_CHECK_OFFSETS_M {
             let tip_m = Vec3::new(TIP_M[0] + off[0], TIP_M[1] + off[1], TIP_M[2] + off[2]);
             id += 1;
             let r = rig.request(id, Request::MoveTip { tip_m });
@@ -177,7 +165,7 @@ fn a_10_mm_support_shift_is_named_and_refuses_force_control_until_confirmed() {
 
 #[test]
 fn a_still_support_is_never_named_over_the_same_moves() {
-    let (_, still) = run(Vec3::zeros(), Vec3::zeros(), 2);
+    let (_, still) = run(Vec3::zeros(), Vec3::zeros(), SUPPORT_CHECK_ROUNDS);
     println!(
         "support still, two check sequences: {:?} chi2/dof {:.2}, shift (X0, Y0, Z0) mm {}; at the first reset: {}",
         still.status.verdict,
@@ -225,7 +213,7 @@ fn support_shifts_are_estimated_within_their_standard_error() {
     ] {
         for mm in [3.0, 5.0, 10.0] {
             let truth = axis * (mm * 1e-3);
-            let (_, r) = run(truth, Vec3::zeros(), 2);
+            let (_, r) = run(truth, Vec3::zeros(), SUPPORT_CHECK_ROUNDS);
             let s = &r.status;
             println!(
                 "support {mm:>4} mm along {name}: estimated (X0, Y0, Z0) mm {}; {:?}, named: {}",
