@@ -182,10 +182,8 @@ impl SupportStatus {
 pub struct SupportWatch {
     config: SupportWatchConfig,
     profile: Profile,
-    /// The calibration with B moved by [`JACOBIAN_STEP_M`] along X0, Y0, Z0.
-    shifted_cal: [Calibration; 3],
-    /// The tip-force estimator of each.
-    shifted: [TipForceEstimator; 3],
+    /// The configured calibration (B0).
+    calibration: Calibration,
     /// The estimator with the configured B.
     base: TipForceEstimator,
     /// The covariance of one sample's F_A, {0}, N^2.
@@ -215,7 +213,30 @@ pub struct SupportWatch {
     acknowledged_m: Vec3,
     /// Samples in a row that found a shift beyond the limit.
     beyond_run: u32,
+    /// Where the model is linearised: B0 + center, m (moved to the
+    /// determined estimate once it is more than [`RECENTER_M`] away, so
+    /// that a large shift is not judged on a first-order model about the
+    /// wrong point).
+    center_m: Vec3,
+    /// The fit's chi-square said "not a free tip" (left below
+    /// [`FREE_AGAIN_CHI2_DOF`]: no flapping at the limit).
+    not_free: bool,
     status: SupportStatus,
+}
+
+/// The linearisation point moves when the estimate is this far from it, m.
+pub const RECENTER_M: f64 = 1e-3;
+
+/// Once "not a free tip", the chi-square per degree of freedom must fall
+/// below this to judge again.
+pub const FREE_AGAIN_CHI2_DOF: f64 = 1.3;
+
+/// One sample linearised about B0 + center: the pose and the estimate there,
+/// and dF_tip/dB at the free reading.
+struct Linearised {
+    pose: Pose,
+    estimate: TipForceEstimate,
+    jac: Mat3,
 }
 
 /// Below this speed of A along the rod, m/s, the rod does not slide (the
@@ -238,27 +259,10 @@ impl SupportWatch {
         base: &TipForceEstimator,
     ) -> Result<Self, SettingError> {
         config.check()?;
-        let b0 = calibration.support_m();
-        let shift = |axis: Vec3| {
-            calibration
-                .with_support(b0 + axis * JACOBIAN_STEP_M)
-                .map_err(|_| SettingError::Invalid {
-                    field: "geometry.support",
-                    value: b0.norm(),
-                    why: "must be finite",
-                })
-        };
-        let shifted_cal = [shift(Vec3::x())?, shift(Vec3::y())?, shift(Vec3::z())?];
-        let with = |cal: &Calibration| base.with_calibration(cal);
         Ok(Self {
             config,
             profile: *profile,
-            shifted: [
-                with(&shifted_cal[0]),
-                with(&shifted_cal[1]),
-                with(&shifted_cal[2]),
-            ],
-            shifted_cal,
+            calibration: *calibration,
             ujoint_covariance_n2: base.ujoint_covariance_n2(),
             base: *base,
             info_b: Mat3::zeros(),
@@ -272,6 +276,8 @@ impl SupportWatch {
             slide_sign: 0.0,
             acknowledged_m: Vec3::zeros(),
             beyond_run: 0,
+            center_m: Vec3::zeros(),
+            not_free: false,
             status: SupportStatus::NONE,
         })
     }
@@ -332,54 +338,28 @@ impl SupportWatch {
         estimate: &TipForceEstimate,
         base_pose: &Pose,
     ) {
-        let rod_dir = &base_pose.rod_dir;
         if slide_mps > SLIDE_MPS {
             self.slide_sign = 1.0;
         } else if slide_mps < -SLIDE_MPS {
             self.slide_sign = -1.0;
         }
+        let Some(lin) = self.linearise(q, reading_n, bias_n, motion, estimate, base_pose) else {
+            return;
+        };
+        let rod_dir = &lin.pose.rod_dir;
         let keep_axial = self.slide_sign != 0.0;
         let rows = if keep_axial {
             Mat3::identity()
         } else {
             Mat3::identity() - rod_dir * rod_dir.transpose()
         };
-        // The Jacobian at the reading a free tip would give here (the
-        // estimate's own noise taken out: a Jacobian from the noisy reading
-        // correlates with the residual and biases the shift, 4 standard
-        // errors in 5000 samples). F_tip = T F_A + const with T = u u^T -
-        // a/(L - a) P (MODEL.md 4.1), so the free reading is
-        // f_s + R_0s^T T^-1 F_tip, T^-1 = u u^T - (L - a)/a P.
-        let along = rod_dir * rod_dir.transpose();
-        let inverse_lever = base_pose.tip_beyond_support_m / base_pose.support_distance_m;
-        let t_inverse = along - (Mat3::identity() - along) * inverse_lever;
-        let rotation = self.shifted_cal[0].sensor_rotation();
-        let free_reading_n = reading_n + rotation.transpose() * (t_inverse * estimate.force_n);
-        let Ok(free) = self
-            .base
-            .estimate_in_motion(base_pose, &free_reading_n, bias_n, motion)
-        else {
-            return;
-        };
-        let mut jac = Mat3::zeros();
-        for (k, (cal, est)) in self.shifted_cal.iter().zip(&self.shifted).enumerate() {
-            let Ok(pose) = forward(cal, &self.profile, q) else {
-                return;
-            };
-            let Ok(e) = est.estimate_in_motion(&pose, &free_reading_n, bias_n, motion) else {
-                return;
-            };
-            jac.set_column(k, &(rows * (e.force_n - free.force_n) / JACOBIAN_STEP_M));
-        }
+        let jac = rows * lin.jac;
         // The friction reads as a tip force along the rod: sigma f u.
         let friction = rod_dir * self.slide_sign;
-        let residual = rows * estimate.force_n;
-        let Some(w) = self.weight(estimate, base_pose, &rows, keep_axial) else {
+        let residual = rows * lin.estimate.force_n;
+        let Some(w) = self.weight(&lin.estimate, &lin.pose, &rows, keep_axial) else {
             return;
         };
-        if !jac.iter().all(|x| x.is_finite()) {
-            return;
-        }
         let keep = 1.0 - 1.0 / self.config.window_samples;
         let jw = jac.transpose() * w;
         self.info_b = self.info_b * keep + jw * jac;
@@ -391,6 +371,91 @@ impl SupportWatch {
         self.rows = self.rows * keep + if keep_axial { 3.0 } else { 2.0 };
         self.count = self.count * keep + 1.0;
         self.judge();
+        if self.recenter() {
+            self.judge();
+        }
+    }
+
+    /// The sample about B0 + center: the estimate there (the cycle's own
+    /// when the center is B0) and the Jacobian at the reading a free tip
+    /// would give (the estimate's own noise taken out: a Jacobian from the
+    /// noisy reading correlates with the residual and biases the shift, 4
+    /// standard errors in 5000 samples). F_tip = T F_A + const with T =
+    /// u u^T - a/(L - a) P (MODEL.md 4.1), so the free reading is f_s +
+    /// R_0s^T T^-1 F_tip, T^-1 = u u^T - (L - a)/a P. `None` when a pose or
+    /// an estimate cannot be computed.
+    fn linearise(
+        &self,
+        q: &ActiveJoints,
+        reading_n: &Vec3,
+        bias_n: &Vec3,
+        motion: &CarriageMotion,
+        estimate: &TipForceEstimate,
+        base_pose: &Pose,
+    ) -> Option<Linearised> {
+        let b0 = self.calibration.support_m();
+        let at = |support_m: Vec3| -> Option<(TipForceEstimator, Pose)> {
+            let cal = self.calibration.with_support(support_m).ok()?;
+            let pose = forward(&cal, &self.profile, q).ok()?;
+            Some((self.base.with_calibration(&cal), pose))
+        };
+        let (center, pose, estimate) = if self.center_m == Vec3::zeros() {
+            (self.base, *base_pose, *estimate)
+        } else {
+            let (est, pose) = at(b0 + self.center_m)?;
+            let e = est.estimate_in_motion(&pose, reading_n, bias_n, motion).ok()?;
+            (est, pose, e)
+        };
+        let u = pose.rod_dir;
+        let along = u * u.transpose();
+        let inverse_lever = pose.tip_beyond_support_m / pose.support_distance_m;
+        let t_inverse = along - (Mat3::identity() - along) * inverse_lever;
+        let rotation = self.calibration.sensor_rotation();
+        let free_reading_n = reading_n + rotation.transpose() * (t_inverse * estimate.force_n);
+        let free = center
+            .estimate_in_motion(&pose, &free_reading_n, bias_n, motion)
+            .ok()?;
+        let mut jac = Mat3::zeros();
+        for (k, axis) in [Vec3::x(), Vec3::y(), Vec3::z()].iter().enumerate() {
+            let (est, shifted) = at(b0 + self.center_m + axis * JACOBIAN_STEP_M)?;
+            let e = est
+                .estimate_in_motion(&shifted, &free_reading_n, bias_n, motion)
+                .ok()?;
+            jac.set_column(k, &((e.force_n - free.force_n) / JACOBIAN_STEP_M));
+        }
+        jac.iter().all(|x| x.is_finite()).then_some(Linearised {
+            pose,
+            estimate,
+            jac,
+        })
+    }
+
+    /// Moves the linearisation point to the determined components of the
+    /// estimate when it is more than [`RECENTER_M`] away; the sums follow
+    /// (the residual about the new point is r + J dc, to first order).
+    /// Whether it moved.
+    fn recenter(&mut self) -> bool {
+        let s = self.status;
+        if s.verdict == SupportVerdict::NotRun || self.not_free {
+            return false;
+        }
+        let max_std_m = self.config.max_std_m;
+        let target = Vec3::from_fn(|k, _| {
+            if s.determined(k, max_std_m) {
+                s.shift_m[k]
+            } else {
+                self.center_m[k]
+            }
+        });
+        let dc = target - self.center_m;
+        if !(dc.norm() > RECENTER_M) {
+            return false;
+        }
+        self.rr += 2.0 * dc.dot(&self.rhs_b) + dc.dot(&(self.info_b * dc));
+        self.rhs_f += self.info_bf.dot(&dc);
+        self.rhs_b += self.info_b * dc;
+        self.center_m = target;
+        true
     }
 
     /// The weight of one sample's rows: the inverse of the tip force's
@@ -453,7 +518,7 @@ impl SupportWatch {
         let dof = (self.rows - 4.0).max(1.0);
         let chi2_dof = chi2.max(0.0) / dof;
         let scale = chi2_dof.max(1.0);
-        let shift = Vec3::new(theta.x, theta.y, theta.z);
+        let shift = self.center_m + Vec3::new(theta.x, theta.y, theta.z);
         let std_m = Vec3::new(covariance.m11, covariance.m22, covariance.m33)
             .map(|v| ComplexField::sqrt(v.max(0.0) * scale));
         let mut status = SupportStatus {
@@ -467,7 +532,7 @@ impl SupportWatch {
         let mut beyond = false;
         if self.count < MIN_SAMPLES {
             status.verdict = SupportVerdict::NotRun;
-        } else if !(chi2_dof <= MAX_CHI2_DOF) {
+        } else if self.not_free_now(chi2_dof) {
             status.verdict = SupportVerdict::NotFree;
         } else {
             beyond = self.beyond(&status);
@@ -493,6 +558,18 @@ impl SupportWatch {
             status.verdict = SupportVerdict::Shifted;
         }
         self.status = status;
+    }
+
+    /// The fit's chi-square says "not a free tip": above [`MAX_CHI2_DOF`],
+    /// and until it falls below [`FREE_AGAIN_CHI2_DOF`].
+    fn not_free_now(&mut self, chi2_dof: f64) -> bool {
+        let limit = if self.not_free {
+            FREE_AGAIN_CHI2_DOF
+        } else {
+            MAX_CHI2_DOF
+        };
+        self.not_free = !(chi2_dof <= limit);
+        self.not_free
     }
 
     /// A determined component beyond the limit and beyond [`NAME_SIGMA`]
@@ -547,14 +624,15 @@ sar_snapshot::snap_state!(SupportWatch {
         slide_sign,
         acknowledged_m,
         beyond_run,
+        center_m,
+        not_free,
         status
     ],
     nested: [],
     config: [
         config,
         profile,
-        shifted_cal,
-        shifted,
+        calibration,
         base,
         ujoint_covariance_n2
     ],
