@@ -37,6 +37,7 @@ use crate::motion::CarriageMotion;
 use crate::tip_force::{TipForceEstimate, TipForceEstimator};
 use crate::{Calibration, Mat3, Profile, SettingError, Vec3, positive};
 use nalgebra::ComplexField;
+use sar_kinematics::slide::SlideDirection;
 use sar_kinematics::{ActiveJoints, Pose, forward};
 
 /// The step of B for the finite-difference Jacobian, m.
@@ -206,9 +207,10 @@ pub struct SupportWatch {
     rows: f64,
     /// Forgetting-weighted sample count.
     count: f64,
-    /// The sign of the rod's last slide through the support (+1: A moved
-    /// towards B, inserting; -1: away; 0: no slide seen yet).
-    slide_sign: f64,
+    /// The direction of the rod's last slide through the support (from a,
+    /// with the simulator's and identification's hysteresis): the sign of
+    /// the friction's coefficient; unknown before the first slide.
+    slide: SlideDirection,
     /// The acknowledged shift (the configured B: 0; or the one confirmed), m.
     acknowledged_m: Vec3,
     /// Samples in a row that found a shift beyond the limit.
@@ -238,10 +240,6 @@ struct Linearised {
     estimate: TipForceEstimate,
     jac: Mat3,
 }
-
-/// Below this speed of A along the rod, m/s, the rod does not slide (the
-/// last slide's sign holds).
-pub const SLIDE_MPS: f64 = 1e-4;
 
 /// The prior standard deviation of the support's friction unknown, N.
 pub const PRIOR_FRICTION_N: f64 = 5.0;
@@ -273,7 +271,7 @@ impl SupportWatch {
             rr: 0.0,
             rows: 0.0,
             count: 0.0,
-            slide_sign: 0.0,
+            slide: SlideDirection::new(),
             acknowledged_m: Vec3::zeros(),
             beyond_run: 0,
             center_m: Vec3::zeros(),
@@ -320,34 +318,28 @@ impl SupportWatch {
     }
 
     /// One sample with the tip taken as free: the joints `q`, the raw
-    /// reading and the bias (sensor frame), the carriage's motion, the
-    /// speed of A along the rod towards B `slide_mps` (its sign is the
-    /// slide's: the friction's coefficient), and the cycle's estimate
+    /// reading and the bias (sensor frame), the carriage's motion, and the
+    /// cycle's estimate
     /// `estimate` at `base_pose` (both computed with the configured B). A sample
     /// whose shifted estimates cannot be computed (a pose invalid with a
     /// shifted B) is skipped. Until the rod has slid the component along it
     /// is not used (the support's friction there has no known sign).
-    #[allow(clippy::too_many_arguments)]
     pub fn observe(
         &mut self,
         q: &ActiveJoints,
         reading_n: &Vec3,
         bias_n: &Vec3,
         motion: &CarriageMotion,
-        slide_mps: f64,
         estimate: &TipForceEstimate,
         base_pose: &Pose,
     ) {
-        if slide_mps > SLIDE_MPS {
-            self.slide_sign = 1.0;
-        } else if slide_mps < -SLIDE_MPS {
-            self.slide_sign = -1.0;
-        }
+        self.slide.update(base_pose.support_distance_m);
         let Some(lin) = self.linearise(q, reading_n, bias_n, motion, estimate, base_pose) else {
             return;
         };
         let rod_dir = &lin.pose.rod_dir;
-        let keep_axial = self.slide_sign != 0.0;
+        let sigma = self.slide.sign().sigma();
+        let keep_axial = sigma.is_some();
         let rows = if keep_axial {
             Mat3::identity()
         } else {
@@ -355,7 +347,7 @@ impl SupportWatch {
         };
         let jac = rows * lin.jac;
         // The friction reads as a tip force along the rod: sigma f u.
-        let friction = rod_dir * self.slide_sign;
+        let friction = rod_dir * sigma.unwrap_or(0.0);
         let residual = rows * lin.estimate.force_n;
         let Some(w) = self.weight(&lin.estimate, &lin.pose, &rows, keep_axial) else {
             return;
@@ -621,7 +613,7 @@ sar_snapshot::snap_state!(SupportWatch {
         rr,
         rows,
         count,
-        slide_sign,
+        slide,
         acknowledged_m,
         beyond_run,
         center_m,

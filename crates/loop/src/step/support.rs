@@ -60,14 +60,11 @@ impl LoopStep {
             && let (TipOutcome::Estimate(e), Some(pose)) = (&estimate.tip, &estimate.pose)
         {
             let bias = self.estimator.bias().force_n;
-            // A towards B along the rod: the rod slides in (inserting).
-            let slide_mps = pose.rod_dir.dot(&motion.velocity_mps);
             self.support.observe(
                 &input.joints.joints,
                 &input.sensor.force_n,
                 &bias,
                 motion,
-                slide_mps,
                 e,
                 pose,
             );
