@@ -10,10 +10,10 @@ mod common;
 
 use common::*;
 use nalgebra::{Matrix3, Vector3};
+use sar_estimator::SensorNoise;
 use sar_estimator::motion::CarriageMotion;
 use sar_estimator::support::{SupportVerdict, SupportWatch, SupportWatchConfig};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
-use sar_estimator::SensorNoise;
 use sar_kinematics::ActiveJoints;
 
 /// Feeds `samples` noisy free-tip samples at each pose of a cone of half

@@ -267,14 +267,17 @@ pub fn write(event: &LogEvent) {
             g.force_n.norm(),
             g.max_force_n
         ),
-        LogEvent::Support(n) => {
-            let text = support_text(n);
-            if n.status.verdict == sar_estimator::support::SupportVerdict::Shifted {
-                tracing::error!(cycle = n.cycle, "{text}");
-            } else {
-                tracing::info!(cycle = n.cycle, "{text}");
-            }
-        }
+        LogEvent::Support(n) => write_support(n),
+    }
+}
+
+/// A support note: an error when a shift is named, else information.
+fn write_support(n: &crate::step::SupportNote) {
+    let text = support_text(n);
+    if n.status.verdict == sar_estimator::support::SupportVerdict::Shifted {
+        tracing::error!(cycle = n.cycle, "{text}");
+    } else {
+        tracing::info!(cycle = n.cycle, "{text}");
     }
 }
 
@@ -290,14 +293,10 @@ pub fn support_text(n: &crate::step::SupportNote) -> String {
     };
     let axes: Vec<String> = ["X0", "Y0", "Z0"]
         .iter()
-        .enumerate()
-        .map(|(k, name)| {
-            if s.determined(k, n.max_std_m) {
-                format!(
-                    "{name} {:+.2} +- {:.2} mm",
-                    s.shift_m[k] * 1e3,
-                    s.std_m[k] * 1e3
-                )
+        .zip(s.shift_m.iter().zip(s.std_m.iter()))
+        .map(|(name, (v, sd))| {
+            if *sd <= n.max_std_m {
+                format!("{name} {:+.2} +- {:.2} mm", v * 1e3, sd * 1e3)
             } else {
                 format!("{name} not determined")
             }

@@ -54,8 +54,9 @@ use nalgebra::{Cholesky, ComplexField};
 use sar_kinematics::Shown;
 use solver::{Pass, PassEnd};
 pub use watch::{
-    FREE_AGAIN_CHI2_DOF, JACOBIAN_STEP_M, MAX_CHI2_DOF, MIN_SAMPLES, NAME_SAMPLES, NAME_SIGMA, PRIOR_FRICTION_N, PRIOR_STD_M,
-    RECENTER_M, SupportStatus, SupportVerdict, SupportWatch, SupportWatchConfig,
+    FREE_AGAIN_CHI2_DOF, JACOBIAN_STEP_M, MAX_CHI2_DOF, MIN_SAMPLES, NAME_SAMPLES, NAME_SIGMA,
+    PRIOR_FRICTION_N, PRIOR_STD_M, RECENTER_M, SupportStatus, SupportVerdict, SupportWatch,
+    SupportWatchConfig,
 };
 
 /// How many static poses a [`SupportCalibration`] holds at most: the cone set

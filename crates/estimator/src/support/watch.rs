@@ -395,7 +395,9 @@ impl SupportWatch {
             (self.base, *base_pose, *estimate)
         } else {
             let (est, pose) = at(b0 + self.center_m)?;
-            let e = est.estimate_in_motion(&pose, reading_n, bias_n, motion).ok()?;
+            let e = est
+                .estimate_in_motion(&pose, reading_n, bias_n, motion)
+                .ok()?;
             (est, pose, e)
         };
         let u = pose.rod_dir;
@@ -432,17 +434,13 @@ impl SupportWatch {
             return false;
         }
         let max_std_m = self.config.max_std_m;
-        let target = Vec3::from_fn(|k, _| {
-            if s.determined(k, max_std_m) {
-                s.shift_m[k]
-            } else {
-                self.center_m[k]
-            }
-        });
-        let dc = target - self.center_m;
-        if !(dc.norm() > RECENTER_M) {
+        let mask = determined_mask(&s, max_std_m);
+        let dc = (s.shift_m - self.center_m).component_mul(&mask);
+        let far = dc.norm() > RECENTER_M;
+        if !far {
             return false;
         }
+        let target = self.center_m + dc;
         self.rr += 2.0 * dc.dot(&self.rhs_b) + dc.dot(&(self.info_b * dc));
         self.rhs_f += self.info_bf.dot(&dc);
         self.rhs_b += self.info_b * dc;
@@ -489,7 +487,7 @@ impl SupportWatch {
         info.fixed_view_mut::<3, 1>(0, 3).copy_from(&self.info_bf);
         info.fixed_view_mut::<1, 3>(3, 0)
             .copy_from(&self.info_bf.transpose());
-        info[(3, 3)] = self.info_ff;
+        info.m44 = self.info_ff;
         let rhs = Vec4::new(self.rhs_b.x, self.rhs_b.y, self.rhs_b.z, self.rhs_f);
         (info, rhs)
     }
@@ -536,15 +534,8 @@ impl SupportWatch {
         };
         if status.named_m.is_none() && self.beyond_run >= NAME_SAMPLES {
             // The determined components; the others are not known (0).
-            let max_std_m = self.config.max_std_m;
-            let named = Vec3::from_fn(|k, _| {
-                if status.determined(k, max_std_m) {
-                    shift[k]
-                } else {
-                    0.0
-                }
-            });
-            status.named_m = Some(named);
+            let mask = determined_mask(&status, self.config.max_std_m);
+            status.named_m = Some(shift.component_mul(&mask));
         }
         if status.named_m.is_some() {
             status.verdict = SupportVerdict::Shifted;
@@ -560,7 +551,7 @@ impl SupportWatch {
         } else {
             MAX_CHI2_DOF
         };
-        self.not_free = !(chi2_dof <= limit);
+        self.not_free = chi2_dof.is_nan() || chi2_dof > limit;
         self.not_free
     }
 
@@ -579,6 +570,12 @@ impl SupportWatch {
             *std <= self.config.max_std_m && off > self.config.max_shift_m && off > NAME_SIGMA * std
         })
     }
+}
+
+/// 1 for each component of `s` determined under `max_std_m`, 0 for the others.
+fn determined_mask(s: &SupportStatus, max_std_m: f64) -> Vec3 {
+    let one = |k| if s.determined(k, max_std_m) { 1.0 } else { 0.0 };
+    Vec3::new(one(0), one(1), one(2))
 }
 
 // Snapshots: the sums, the acknowledged shift and the status are state; the
@@ -621,12 +618,6 @@ sar_snapshot::snap_state!(SupportWatch {
         status
     ],
     nested: [],
-    config: [
-        config,
-        profile,
-        calibration,
-        base,
-        ujoint_covariance_n2
-    ],
+    config: [config, profile, calibration, base, ujoint_covariance_n2],
     output: [],
 });

@@ -120,7 +120,7 @@ mod support;
 mod trajectory;
 mod vocabulary;
 
-pub use answer::{ReplyDetail, ReplyStatus};
+pub use answer::{ReplyDetail, ReplyStatus, SupportShifted};
 pub use config::{
     GUARDED_CONTACT_SIGMA, MAX_BACK_OUT_M, RATE_LAG_FRACTION, REST_SPEED_MPS, StepConfig,
     StepConfigError,
@@ -141,9 +141,9 @@ use drives::HeldReset;
 use moves::MoveTarget;
 use sar_estimator::cycle::{Bias, CycleContext, CycleOutput, Estimator, EstimatorConfig};
 use sar_estimator::force_control::{ForceController, ForceMode};
-use sar_estimator::support::SupportWatch;
 #[cfg(doc)]
 use sar_estimator::guard::Reason;
+use sar_estimator::support::SupportWatch;
 use sar_hal::DriveState;
 use sar_kinematics::{ActiveJoints, Calibration, Profile};
 use trajectory::{Trajectory, TrajectoryChange};

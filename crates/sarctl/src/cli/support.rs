@@ -149,7 +149,9 @@ fn wait_at(sub: &StateSubscription, target: [f64; 3]) -> Result<(), String> {
 pub fn verdict_words(code: u32) -> &'static str {
     match code {
         0 => "not run (too few poses with the tip free)",
-        1 => "could not run: the tip force does not follow the poses as a support shift's would (a contact?)",
+        1 => {
+            "could not run: the tip force does not follow the poses as a support shift's would (a contact?)"
+        }
         2 => "within the limit",
         3 => "SHIFTED beyond the limit (force control refused until confirmed or re-calibrated)",
         _ => "unknown",
