@@ -223,7 +223,8 @@ pub struct SupportWatch {
     /// The fit's chi-square said "not a free tip" (left below
     /// [`FREE_AGAIN_CHI2_DOF`]: no flapping at the limit).
     not_free: bool,
-    status: SupportStatus,
+    /// The shift named (latched until confirmed), m.
+    named_m: Option<Vec3>,
 }
 
 /// The linearisation point moves when the estimate is this far from it, m.
@@ -276,7 +277,7 @@ impl SupportWatch {
             beyond_run: 0,
             center_m: Vec3::zeros(),
             not_free: false,
-            status: SupportStatus::NONE,
+            named_m: None,
         })
     }
 
@@ -285,21 +286,37 @@ impl SupportWatch {
         &self.config
     }
 
-    /// The status after the last sample (or confirmation).
-    pub fn status(&self) -> &SupportStatus {
-        &self.status
+    /// The status after the last sample (or confirmation): the shift and
+    /// its standard errors solved from the sums (a pure function of the
+    /// watch's state), the verdict.
+    pub fn status(&self) -> SupportStatus {
+        let solved = self.solve();
+        let verdict = if self.named_m.is_some() {
+            SupportVerdict::Shifted
+        } else if self.count < MIN_SAMPLES {
+            SupportVerdict::NotRun
+        } else if self.not_free {
+            SupportVerdict::NotFree
+        } else {
+            SupportVerdict::Within
+        };
+        SupportStatus {
+            verdict,
+            named_m: self.named_m,
+            ..solved
+        }
     }
 
     /// A shift was named and not yet confirmed: force control is refused.
     pub fn refuses_force(&self) -> bool {
-        self.status.named_m.is_some()
+        self.named_m.is_some()
     }
 
     /// The operator confirms the support as it is now: the named shift (or
     /// the present estimate of the determined components) becomes the
     /// acknowledged one, against which a later shift is judged.
     pub fn confirm(&mut self) {
-        let s = self.status;
+        let s = self.status();
         for axis in 0..3 {
             if s.determined(axis, self.config.max_std_m)
                 && let (Some(a), Some(v)) = (self.acknowledged_m.get_mut(axis), s.shift_m.get(axis))
@@ -310,11 +327,8 @@ impl SupportWatch {
         if let Some(named) = s.named_m {
             self.acknowledged_m = named;
         }
-        self.status.named_m = None;
+        self.named_m = None;
         self.beyond_run = 0;
-        if self.status.verdict == SupportVerdict::Shifted {
-            self.status.verdict = SupportVerdict::Within;
-        }
     }
 
     /// One sample with the tip taken as free: the joints `q`, the raw
@@ -429,7 +443,7 @@ impl SupportWatch {
     /// (the residual about the new point is r + J dc, to first order).
     /// Whether it moved.
     fn recenter(&mut self) -> bool {
-        let s = self.status;
+        let s = self.status();
         if s.verdict == SupportVerdict::NotRun || self.not_free {
             return false;
         }
@@ -494,12 +508,32 @@ impl SupportWatch {
 
     /// The shift, its standard errors and the verdict from the sums.
     fn judge(&mut self) {
+        let solved = self.solve();
+        let mut beyond = false;
+        if self.count >= MIN_SAMPLES && !self.not_free_now(solved.chi2_dof) {
+            beyond = self.beyond(&solved);
+        }
+        self.beyond_run = if beyond {
+            self.beyond_run.saturating_add(1)
+        } else {
+            0
+        };
+        if self.named_m.is_none() && self.beyond_run >= NAME_SAMPLES {
+            // The determined components; the others are not known (0).
+            let mask = determined_mask(&solved, self.config.max_std_m);
+            self.named_m = Some(solved.shift_m.component_mul(&mask));
+        }
+    }
+
+    /// The shift, its standard errors and the chi-square from the sums (the
+    /// verdict and the named shift left as before any sample).
+    fn solve(&self) -> SupportStatus {
         let (info, rhs) = self.normal();
         let b = 1.0 / (PRIOR_STD_M * PRIOR_STD_M);
         let f = 1.0 / (PRIOR_FRICTION_N * PRIOR_FRICTION_N);
         let prior = Mat4::from_diagonal(&Vec4::new(b, b, b, f));
         let Some(chol) = (info + prior).cholesky() else {
-            return;
+            return SupportStatus::NONE;
         };
         // F_tip(B0) = -(J delta + sigma u f): theta = -(N)^-1 J^T W r.
         let theta = -chol.solve(&rhs);
@@ -508,39 +542,14 @@ impl SupportWatch {
         let dof = (self.rows - 4.0).max(1.0);
         let chi2_dof = chi2.max(0.0) / dof;
         let scale = chi2_dof.max(1.0);
-        let shift = self.center_m + Vec3::new(theta.x, theta.y, theta.z);
-        let std_m = Vec3::new(covariance.m11, covariance.m22, covariance.m33)
-            .map(|v| ComplexField::sqrt(v.max(0.0) * scale));
-        let mut status = SupportStatus {
-            shift_m: shift,
-            std_m,
+        SupportStatus {
+            shift_m: self.center_m + Vec3::new(theta.x, theta.y, theta.z),
+            std_m: Vec3::new(covariance.m11, covariance.m22, covariance.m33)
+                .map(|v| ComplexField::sqrt(v.max(0.0) * scale)),
             chi2_dof,
             samples: self.count,
-            verdict: SupportVerdict::Within,
-            named_m: self.status.named_m,
-        };
-        let mut beyond = false;
-        if self.count < MIN_SAMPLES {
-            status.verdict = SupportVerdict::NotRun;
-        } else if self.not_free_now(chi2_dof) {
-            status.verdict = SupportVerdict::NotFree;
-        } else {
-            beyond = self.beyond(&status);
+            ..SupportStatus::NONE
         }
-        self.beyond_run = if beyond {
-            self.beyond_run.saturating_add(1)
-        } else {
-            0
-        };
-        if status.named_m.is_none() && self.beyond_run >= NAME_SAMPLES {
-            // The determined components; the others are not known (0).
-            let mask = determined_mask(&status, self.config.max_std_m);
-            status.named_m = Some(shift.component_mul(&mask));
-        }
-        if status.named_m.is_some() {
-            status.verdict = SupportVerdict::Shifted;
-        }
-        self.status = status;
     }
 
     /// The fit's chi-square says "not a free tip": above [`MAX_CHI2_DOF`],
@@ -615,7 +624,7 @@ sar_snapshot::snap_state!(SupportWatch {
         beyond_run,
         center_m,
         not_free,
-        status
+        named_m
     ],
     nested: [],
     config: [config, profile, calibration, base, ujoint_covariance_n2],

@@ -128,7 +128,7 @@ impl LoopStep {
             guarded_stop: self.guarded_stop,
             force_mode: self.force.mode(),
             motion: d.motion,
-            support: *self.support.status(),
+            support: self.support.status(),
             support_limits_m: (
                 self.support.config().max_shift_m,
                 self.support.config().max_std_m,

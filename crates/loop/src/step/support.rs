@@ -84,7 +84,7 @@ impl LoopStep {
         SupportNote {
             cycle,
             why,
-            status: *self.support.status(),
+            status: self.support.status(),
             max_shift_m: self.support.config().max_shift_m,
             max_std_m: self.support.config().max_std_m,
         }
@@ -112,7 +112,7 @@ impl LoopStep {
     /// A shift named and not confirmed: force control is refused.
     pub(super) fn support_refuses_force(&self) -> Option<SupportStatus> {
         let s = self.support.status();
-        (s.verdict == SupportVerdict::Shifted).then_some(*s)
+        (s.verdict == SupportVerdict::Shifted).then_some(s)
     }
 }
 
