@@ -18,8 +18,9 @@ use sar_shm::{Client, StateSubscription};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-/// Joints within this of the centre count as arrived, m.
-const ARRIVED_M: f64 = 50e-6;
+/// Joints within this of a target count as arrived, m (an encoder count is
+/// about 1 um).
+const ARRIVED_M: f64 = 20e-6;
 
 /// Plans the excitation about `centre_m` for a sensor sampling at
 /// `sensor_rate_hz` (`identify --sensor-rate-hz`), runs it on the daemon
@@ -49,7 +50,13 @@ pub fn record_excitation(
             }
         ));
     }
-    move_to_centre(config, &client, &sub, centre_m)?;
+    move_joints_to(
+        config,
+        (&client, &sub),
+        centre_m,
+        "the excitation's centre",
+        (Duration::ZERO, Duration::from_secs(60)),
+    )?;
     record::start(&client)?;
     let ran = excite(&client, &sub, &plan);
     let stopped = record::stop(&client);
@@ -62,19 +69,27 @@ pub fn record_excitation(
     Ok(PathBuf::from(path))
 }
 
-/// Moves the tip to where the joints are `centre_m` and waits until they
-/// are there.
-fn move_to_centre(
+/// Moves the tip to where the joints are `q_m` (its forward kinematics: the
+/// loop's inverse kinematics brings the joints there), follows the state for
+/// `settle`, then waits at most `within` until the joints are there; `what`
+/// names the target in the errors. The one move-to-joints of `identify
+/// --dynamic --live` (the excitation's centre) and `identify --servo
+/// --live` (each axis's steps).
+pub(super) fn move_joints_to(
     config: &Config,
-    client: &Client,
-    sub: &StateSubscription,
-    centre_m: [f64; 3],
+    (client, sub): (&Client, &StateSubscription),
+    q_m: [f64; 3],
+    what: &str,
+    (settle, within): (Duration, Duration),
 ) -> Result<(), String> {
-    let [q1_m, q2_m, q3_m] = centre_m;
-    let q = ActiveJoints { q1_m, q2_m, q3_m };
+    let [q1_m, q2_m, q3_m] = q_m;
     let est = &config.estimator;
-    let pose = forward(&est.calibration, &est.profile, &q)
-        .map_err(|e| format!("the excitation's centre {centre_m:?} m has no pose: {e}"))?;
+    let pose = forward(
+        &est.calibration,
+        &est.profile,
+        &ActiveJoints { q1_m, q2_m, q3_m },
+    )
+    .map_err(|e| format!("{what} ({q_m:?} m) has no pose: {e}"))?;
     let reply = client
         .command(
             command_msg(Request::MoveTip { tip_m: pose.tip_m }),
@@ -83,21 +98,24 @@ fn move_to_centre(
         .map_err(|e| e.to_string())?;
     if reply.status != 0 {
         return Err(format!(
-            "the move to the excitation's centre was refused: {}: {}",
+            "the move to {what} was refused: {}: {}",
             status_name(reply.status),
             reply.detail_text()
         ));
     }
-    let at = |s: &StateMsg| {
+    let arrived = |s: &StateMsg| {
         s.q_m
             .iter()
-            .zip(centre_m)
+            .zip(q_m)
             .all(|(a, b)| (a - b).abs() <= ARRIVED_M)
     };
-    follow(sub, Duration::from_secs(60), at)
-        .map_err(|e| format!("on the way to the excitation's centre: {e}"))?
+    if !settle.is_zero() {
+        let _ = follow(sub, settle, |_| false)?;
+    }
+    follow(sub, within, arrived)
+        .map_err(|e| format!("on the way to {what}: {e}"))?
         .then_some(())
-        .ok_or_else(|| "the excitation's centre was not reached within 60 s".to_owned())
+        .ok_or_else(|| format!("{what} was not reached within {} s", within.as_secs_f64()))
 }
 
 /// Asks the loop for the excitation and follows it to its end at rest.

@@ -11,15 +11,12 @@
 //! servo_bandwidth_hz`, `servo_damping` and `servo_delay_s` back (unless
 //! `--dry-run`).
 
-use super::identify_excite::follow;
+use super::identify_excite::move_joints_to;
 use super::record;
-use super::request::command_msg;
 use crate::identify::servo::{self, ServoResult};
 use sar_config::Config;
-use sar_kinematics::{ActiveJoints, forward};
-use sar_msgs::command::Request;
-use sar_msgs::wire::{StateMsg, guard_code, guard_state_name, reason_name, status_name};
-use sar_shm::{Client, StateSubscription};
+use sar_msgs::wire::{guard_code, guard_state_name, reason_name};
+use sar_shm::Client;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -39,9 +36,6 @@ pub const SETTLE_S: f64 = 0.15;
 /// The cycles given to each move with the built-in configuration (0.2 s
 /// planned, [`SETTLE_S`]), for the tests that replay the procedure.
 pub const MOVE_S_DEFAULT_MS: u64 = 350;
-
-/// Joints within this of a move's target count as arrived, m.
-const ARRIVED_M: f64 = 20e-6;
 
 /// The planned time of a move of `distance_m` at the configuration's
 /// speed and acceleration (trapezoid or triangle), s.
@@ -117,9 +111,11 @@ fn record_moves(config: &Config, prefix: &str) -> Result<PathBuf, String> {
         moves.len() as f64 * each_s
     );
     record::start(&client)?;
-    let ran = moves
-        .iter()
-        .try_for_each(|q| move_and_settle(config, &client, &sub, *q, each_s));
+    let ran = moves.iter().try_for_each(|q| {
+        let what = format!("the joints {q:?} m");
+        let times = (Duration::from_secs_f64(each_s), Duration::from_secs(5));
+        move_joints_to(config, (&client, &sub), *q, &what, times)
+    });
     let stopped = record::stop(&client);
     ran?;
     let path = stopped?;
@@ -128,45 +124,4 @@ fn record_moves(config: &Config, prefix: &str) -> Result<PathBuf, String> {
     }
     eprintln!("identify --servo --live: recorded in {path}; fitting");
     Ok(PathBuf::from(path))
-}
-
-/// One move to the joints `q_m`, followed for `each_s` and until arrived.
-fn move_and_settle(
-    config: &Config,
-    client: &Client,
-    sub: &StateSubscription,
-    q_m: [f64; 3],
-    each_s: f64,
-) -> Result<(), String> {
-    let [q1_m, q2_m, q3_m] = q_m;
-    let est = &config.estimator;
-    let pose = forward(
-        &est.calibration,
-        &est.profile,
-        &ActiveJoints { q1_m, q2_m, q3_m },
-    )
-    .map_err(|e| format!("the joints {q_m:?} m have no pose: {e}"))?;
-    let reply = client
-        .command(
-            command_msg(Request::MoveTip { tip_m: pose.tip_m }),
-            Duration::from_secs(2),
-        )
-        .map_err(|e| e.to_string())?;
-    if reply.status != 0 {
-        return Err(format!(
-            "the move to {q_m:?} m was refused: {}: {}",
-            status_name(reply.status),
-            reply.detail_text()
-        ));
-    }
-    let arrived = |s: &StateMsg| {
-        s.q_m
-            .iter()
-            .zip(q_m)
-            .all(|(a, b)| (a - b).abs() <= ARRIVED_M)
-    };
-    let _ = follow(sub, Duration::from_secs_f64(each_s), |_| false)?;
-    follow(sub, Duration::from_secs(5), arrived)?
-        .then_some(())
-        .ok_or_else(|| format!("the joints did not reach {q_m:?} m within 5 s of the move's end"))
 }
