@@ -345,7 +345,7 @@ impl InertiaWatch {
         let theta = inv * b;
         let samples = self.samples();
         let dof = 3.0 * samples - UNKNOWNS as f64;
-        if !(dof > 0.0) {
+        if dof.is_nan() || dof <= 0.0 {
             return (verdict, none);
         }
         let chi2 = (gram.m66 - theta.dot(&b)).max(0.0);
