@@ -336,6 +336,14 @@ fn the_inertia_watch_names_the_rod_and_the_adapter_and_not_the_matched_plant() {
                 );
                 assert!(s_err.abs() < 0.05, "m_s {s_err}");
                 assert!(s_err.abs() < 3.0 * v.adapter_mass_std_kg, "m_s {s_err}");
+                let line = sar_loop::logq::inertia_text(
+                    v,
+                    (configured.inertia_perp_kgm2, configured.adapter_mass_kg),
+                );
+                println!("{line}");
+                assert!(line.contains("I_perp reads 1.6"), "{line}");
+                assert!(line.contains("the adapter's mass reads 0.3"), "{line}");
+                assert!(line.contains("run `sarctl identify --dynamic`"), "{line}");
                 // Within the first move.
                 assert!(
                     w.named_after_ms.is_some_and(|ms| ms <= MOVE_MS),
