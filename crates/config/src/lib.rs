@@ -435,6 +435,7 @@ impl Config {
                 axes_max_speed_mps: self.axes.max_speed_mps,
                 period_ns: self.loop_.period_ns,
             },
+            inertia_watch: keys::manipulator::inertia_watch(&self.file.manipulator),
         }
     }
 }

@@ -19,6 +19,7 @@ pub mod force_control;
 pub mod force_range;
 pub mod guard;
 pub mod identification;
+pub mod inertia_watch;
 pub mod inertial;
 mod linalg;
 pub mod line_fit;

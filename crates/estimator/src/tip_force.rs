@@ -331,6 +331,34 @@ impl TipForceEstimator {
         })
     }
 
+    /// What one kg m^2 more of I_perp and one kg more of the adapter's m_s
+    /// add to the tip force at `pose` in `motion`, N per kg m^2 and N per
+    /// kg: the compensation is linear in both (MODEL.md 10), so a plant
+    /// whose I_perp and m_s are the configured ones plus dI and dm_s reads
+    /// `-(dI d_inertia + dm_s d_adapter)` more tip force than it applies
+    /// (the inertia watch, `crate::inertia_watch`). Zero at rest.
+    pub fn inertia_sensitivity(&self, pose: &Pose, motion: &CarriageMotion) -> (Vec3, Vec3) {
+        if motion.is_rest() {
+            return (Vec3::zeros(), Vec3::zeros());
+        }
+        let rod = |inertia_perp_kgm2: f64, adapter_mass_kg: f64| Rod {
+            mass_kg: self.mass_kg,
+            com_m: self.com_m,
+            length_m: self.length_m,
+            offset_m: self.offset_m,
+            inertia: RodInertia {
+                inertia_perp_kgm2,
+                inertia_perp_std_kgm2: 0.0,
+                adapter_mass_kg,
+                ..self.inertia
+            },
+        };
+        let base = compensation(&rod(0.0, 0.0), pose, motion).force_n;
+        let inertia = compensation(&rod(1.0, 0.0), pose, motion).force_n;
+        let adapter = compensation(&rod(0.0, 1.0), pose, motion).force_n;
+        (inertia - base, adapter - base)
+    }
+
     /// The checks of `estimate` and the static model's number and variance.
     fn raw(&self, pose: &Pose, reading_n: &Vec3, bias_n: &Vec3) -> Result<Raw, TipForceError> {
         check_finite(reading_n, |value| TipForceError::NonFinite {

@@ -507,6 +507,14 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         {
             self.log.send(LogEvent::GuardedStop(g));
         }
+        if decision.inertia.newly_named {
+            let rod = self.step.estimator().tip_estimator().inertia();
+            self.log.send(LogEvent::InertiaNamed {
+                cycle,
+                verdict: decision.inertia,
+                configured: (rod.inertia_perp_kgm2, rod.adapter_mass_kg),
+            });
+        }
         if let Some(t) = decision.estimate.transition {
             self.log.send(LogEvent::Transition(t));
             if t.to.is_halting() {

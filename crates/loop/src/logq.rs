@@ -69,6 +69,15 @@ pub enum LogEvent {
     },
     /// A guarded move was braked: its force reached the limit.
     GuardedStop(crate::step::GuardedStop),
+    /// The inertia watch named I_perp or the adapter's mass (issue 34).
+    InertiaNamed {
+        /// The cycle.
+        cycle: u64,
+        /// Its verdict.
+        verdict: sar_estimator::inertia_watch::InertiaVerdict,
+        /// The configured I_perp, kg m^2, and m_s, kg.
+        configured: (f64, f64),
+    },
 }
 
 /// The bounded queue of log events the loop fills ([`channel`]).
@@ -255,6 +264,11 @@ pub fn write(event: &LogEvent) {
             cycle,
             "cycle overran its period by {late_ns} ns: {skipped} periods skipped"
         ),
+        LogEvent::InertiaNamed {
+            cycle,
+            verdict,
+            configured,
+        } => tracing::warn!(cycle, "{}", inertia_text(verdict, *configured)),
         LogEvent::GuardedStop(g) => tracing::info!(
             cycle = g.cycle,
             "guarded move braked at tip ({:.4}, {:.4}, {:.4}) m: |F_tip| {:.2} N reached its {} N",
@@ -265,6 +279,31 @@ pub fn write(event: &LogEvent) {
             g.max_force_n
         ),
     }
+}
+
+/// The inertia watch's finding, one line: what reads off, by how much, the
+/// implied value, and what to do.
+pub fn inertia_text(
+    v: &sar_estimator::inertia_watch::InertiaVerdict,
+    (inertia_kgm2, adapter_kg): (f64, f64),
+) -> String {
+    let mut parts = Vec::new();
+    if v.named.inertia_perp {
+        parts.push(format!(
+            "I_perp reads {:.2}x the configured ({:.5} +- {:.5} kg m^2 where {:.5} is configured)",
+            v.inertia_perp_ratio, v.inertia_perp_kgm2, v.inertia_perp_std_kgm2, inertia_kgm2
+        ));
+    }
+    if v.named.adapter {
+        parts.push(format!(
+            "the adapter's mass reads {:.3} +- {:.3} kg where {adapter_kg} kg is configured",
+            v.adapter_mass_kg, v.adapter_mass_std_kg
+        ));
+    }
+    format!(
+        "inertia watch: in free motion the tip force follows the carriage's acceleration: {}: run `sarctl identify --dynamic` (it writes [manipulator] inertia_perp_kgm2 and [sensor] adapter_mass_kg)",
+        parts.join("; ")
+    )
 }
 
 /// A vector as `[x y z]` with `digits` decimals.

@@ -83,6 +83,7 @@ pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
     m.limits_n = p.decision.limits.to_array();
     add_stats(&mut m, p);
     add_force_control(&mut m, p.decision);
+    add_inertia(&mut m, p.decision);
     if let Some(t) = p.truth {
         add_truth(&mut m, &t);
     }
@@ -259,6 +260,18 @@ fn add_force_control(m: &mut StateMsg, decision: &LoopOutput) {
         m.guarded_stop_tip_m = arr(&g.tip_m);
         m.guarded_stop_force_n = arr(&g.force_n);
     }
+}
+
+/// The inertia watch's verdict (issue 34).
+fn add_inertia(m: &mut StateMsg, decision: &LoopOutput) {
+    let v = &decision.inertia;
+    m.inertia_named = v.named.code();
+    m.inertia_implied = [
+        v.inertia_perp_kgm2,
+        v.inertia_perp_std_kgm2,
+        v.adapter_mass_kg,
+        v.adapter_mass_std_kg,
+    ];
 }
 
 /// The reply as published, with the guard's limits.

@@ -283,6 +283,13 @@ pub struct StateMsg {
     /// it times a detection exactly from any later state, whichever states
     /// a reader missed.
     pub guard_changed_ns: u64,
+    /// The inertia watch (issue 34): what it has named, bit 0 I_perp, bit 1
+    /// the adapter's mass (0: nothing).
+    pub inertia_named: u32,
+    /// What the free motion implies: I_perp and its standard error, kg m^2;
+    /// the adapter's mass m_s and its standard error, kg (the configured
+    /// values and infinite errors before any free motion).
+    pub inertia_implied: [f64; 4],
 }
 
 impl Default for StateMsg {
@@ -337,6 +344,8 @@ impl Default for StateMsg {
             guard_reason_bytes: [0; REASON_BYTES],
             transition_reason_bytes: [0; REASON_BYTES],
             guard_changed_ns: 0,
+            inertia_named: 0,
+            inertia_implied: [0.0; 4],
         }
     }
 }

@@ -58,8 +58,9 @@ pub const CAPACITY: usize = 4096;
 /// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
 /// the clock of the last streamed set point (issue 33: a late cycle delays
 /// the streamed trajectory); 6: 8 streamed set points kept, not 4 (issue
-/// 34: the servo model's reference delay, `[axes] servo_delay_s`).
-pub const VERSION: u16 = 6;
+/// 34: the servo model's reference delay, `[axes] servo_delay_s`); 7: the
+/// inertia watch's window (issue 34 item 2, `sar_estimator::inertia_watch`).
+pub const VERSION: u16 = 7;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";

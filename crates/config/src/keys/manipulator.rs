@@ -6,6 +6,7 @@ use crate::decl::{num, setting_error, text};
 use crate::keys::{File, sensor};
 use crate::toml_file::Ctx;
 use crate::{Config, ConfigError, MAX_NAME_CHARS, is_format_char};
+use sar_estimator::inertia_watch::InertiaWatchConfig;
 use sar_estimator::inertial::RodInertia;
 use sar_kinematics::{Profile, ProfileSpec};
 
@@ -35,6 +36,24 @@ crate::section! {
         => [RodInertia.inertia_perp_std_kgm2];
     /// I_axial about the rod's axis (matters for d != 0)
     inertia_axial_kgm2: f64 = value(0.0), num(0.0, 0.1, "kg m^2") => [RodInertia.inertia_axial_kgm2];
+    /// the inertia watch names I_perp (or the adapter's mass) off by more than this fraction in free motion (issue 34)
+    inertia_watch_max_ratio: f64 = value(InertiaWatchConfig::default().max_ratio),
+        num(0.01, 10.0, "(ratio)") => [InertiaWatchConfig.max_ratio];
+    /// the inertia watch names the adapter's mass only when off by more than this too
+    inertia_watch_min_adapter_kg: f64 = value(InertiaWatchConfig::default().min_adapter_kg),
+        num(0.0, 5.0, "kg") => [InertiaWatchConfig.min_adapter_kg];
+    /// the free motion the inertia watch remembers (its forgetting time constant)
+    inertia_watch_window_s: f64 = value(InertiaWatchConfig::default().window_s),
+        num(0.5, 600.0, "s") => [InertiaWatchConfig.window_s];
+}
+
+/// The inertia watch's limits (`inertia_watch_*`).
+pub(crate) fn inertia_watch(m: &Section) -> InertiaWatchConfig {
+    InertiaWatchConfig {
+        max_ratio: m.inertia_watch_max_ratio,
+        min_adapter_kg: m.inertia_watch_min_adapter_kg,
+        window_s: m.inertia_watch_window_s,
+    }
 }
 
 /// The name checked, and the rod through the kinematics' own checks.

@@ -452,6 +452,12 @@ impl Estimator {
         self.guard.state()
     }
 
+    /// The tip-force estimator (its rod's inertia, the inertia watch's
+    /// sensitivities).
+    pub fn tip_estimator(&self) -> &TipForceEstimator {
+        &self.tip
+    }
+
     /// The guard's configuration (its worst-case stop time:
     /// [`GuardConfig::stop_within_ns`]).
     pub fn guard_config(&self) -> &GuardConfig {

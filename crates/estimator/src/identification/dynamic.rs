@@ -21,8 +21,14 @@
 //! covariance is diagonal there), and the same rows unweighted (for the
 //! residual RMS in newtons). The sensor reading has the tare removed as in
 //! MODEL.md 5; the adapter between the sensor and the U-joint (mass m_s) adds
-//! m_s A'' to the measured F_A, which is taken off first. Torque rows are not
-//! used (MODEL.md 10: they would cut the standard errors to about 0.6x).
+//! m_s A'' to the measured F_A, which is taken off first at the given m_s.
+//! With [`DynamicIdentification::estimating_adapter`] the adapter's mass is
+//! a fifth unknown (issue 34): its column is A'' (what m_s - given adds to
+//! -R_0s (f - b)), told apart from m's column A'' - g by the weight m g
+//! (the tare is the sensor's own bias, the rod detached; the adapter's weight
+//! is in it) and from J_A's and M's by the part of A'' along the rod. Torque
+//! rows are not used (MODEL.md 10: they would cut the standard errors to about
+//! 0.6x).
 
 use super::IdentificationError;
 use crate::{
@@ -31,8 +37,11 @@ use crate::{
 };
 use nalgebra::{ComplexField, SMatrix, SVector};
 
-/// Unknowns: m, M, J_A and the support's friction f.
-const UNKNOWNS: usize = 4;
+/// Unknowns: m, M, J_A, the support's friction f and the adapter's mass
+/// beyond the given one, dm_s.
+const UNKNOWNS: usize = 5;
+/// The adapter's column.
+const ADAPTER: usize = 4;
 /// The augmented Gram matrix's size: the unknowns and the right-hand side.
 const WIDTH: usize = UNKNOWNS + 1;
 /// An augmented Gram matrix [X y]^T [X y].
@@ -136,7 +145,7 @@ pub struct InertialParameters {
 }
 
 impl InertialParameters {
-    /// (m, M = m c, J_A = I_perp + m c^2, f).
+    /// (m, M = m c, J_A = I_perp + m c^2, f, 0): the regressor's four.
     fn theta(&self) -> Unknowns {
         let moment = self.mass_kg * self.com_m;
         Unknowns::new(
@@ -144,6 +153,7 @@ impl InertialParameters {
             moment,
             self.inertia_perp_kgm2 + moment * self.com_m,
             self.friction_n,
+            0.0,
         )
     }
 }
@@ -155,7 +165,7 @@ pub fn model_force_n(
     accel_mps2: &Vec3,
     gravity_mps2: &Vec3,
 ) -> Vec3 {
-    regressor(rod, accel_mps2, gravity_mps2) * params.theta()
+    regressor(rod, accel_mps2, gravity_mps2) * params.theta().fixed_rows::<4>(0)
 }
 
 /// The estimate with standard errors and fit diagnostics.
@@ -184,6 +194,14 @@ pub struct DynamicResult {
     pub friction_n: Option<f64>,
     /// Its standard error, N.
     pub friction_std_n: Option<f64>,
+    /// m_s, the adapter's mass between the sensor and the U-joint, kg: the
+    /// given one, or the estimate when it was estimated.
+    pub adapter_mass_kg: f64,
+    /// Its standard error when estimated, kg (`None`: held at the given one).
+    pub adapter_mass_std_kg: Option<f64>,
+    /// When estimated: the largest |correlation| of m_s's estimate with any
+    /// other unknown's (near 1: the excitation does not separate them).
+    pub adapter_correlation: Option<f64>,
     /// RMS of the unweighted force residuals per component, N.
     pub residual_rms_n: f64,
     /// Weighted residual sum of squares / (rows - unknowns).
@@ -209,7 +227,7 @@ impl DynamicResult {
 /// One sample's F_A, measured and modelled ([`DynamicIdentification::forces`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SampleForces {
-    /// F_A measured (tare and adapter removed), {0}, N.
+    /// F_A measured (tare and the given adapter removed), {0}, N.
     pub measured_n: Vec3,
     /// F_A of the fitted model, {0}, N.
     pub model_n: Vec3,
@@ -223,6 +241,7 @@ pub struct DynamicIdentification {
     inv_std_n: Vec3,
     adapter_mass_kg: f64,
     friction: bool,
+    adapter: bool,
     weighted: Gram,
     unweighted: Gram,
     samples: u32,
@@ -254,10 +273,19 @@ impl DynamicIdentification {
             inv_std_n: std_n.map(|s| 1.0 / s),
             adapter_mass_kg,
             friction,
+            adapter: false,
             weighted: Gram::zeros(),
             unweighted: Gram::zeros(),
             samples: 0,
         })
+    }
+
+    /// The adapter's mass becomes an unknown (issue 34): the given
+    /// `adapter_mass_kg` is where the fit starts, and its result is the
+    /// given one plus what the fit adds. Call before the first sample.
+    pub fn estimating_adapter(mut self) -> Self {
+        self.adapter = true;
+        self
     }
 
     /// Samples accumulated.
@@ -265,9 +293,10 @@ impl DynamicIdentification {
         self.samples
     }
 
-    /// How many unknowns are estimated (3, or 4 with friction).
+    /// How many unknowns are estimated (3, one more with friction, one more
+    /// with the adapter's mass).
     pub fn unknowns(&self) -> usize {
-        3 + usize::from(self.friction)
+        3 + usize::from(self.friction) + usize::from(self.adapter)
     }
 
     /// Adds one sample; a refused sample leaves the state unchanged.
@@ -288,6 +317,7 @@ impl DynamicIdentification {
             x.column(1).into_owned(),
             x.column(2).into_owned(),
             x.column(3).into_owned(),
+            x.column(4).into_owned(),
             force_a_n,
         ]);
         // The sensor frame, where the noise is diagonal: rows R^T [X y] / std.
@@ -306,9 +336,13 @@ impl DynamicIdentification {
     }
 
     /// A sample's three force rows as the fit takes them: the regressor X
-    /// ({0}; f's column zero without friction) and the measured F_A, the
-    /// tare and the adapter's m_s A'' taken off, {0}, N.
-    fn rows(&self, s: &MotionSample) -> Result<(SMatrix<f64, 3, 4>, Vec3), IdentificationError> {
+    /// ({0}; f's column zero without friction, the adapter's (A'') zero
+    /// unless estimated) and the measured F_A, the tare and the given
+    /// adapter's m_s A'' taken off, {0}, N.
+    fn rows(
+        &self,
+        s: &MotionSample,
+    ) -> Result<(SMatrix<f64, 3, UNKNOWNS>, Vec3), IdentificationError> {
         let cal = &self.calibration;
         let rod = rod_motion(
             &cal.support_m(),
@@ -316,9 +350,14 @@ impl DynamicIdentification {
             &s.velocity_mps,
             &s.accel_mps2,
         )?;
-        let mut x = regressor(&rod, &s.accel_mps2, &cal.gravity_mps2());
+        let four = regressor(&rod, &s.accel_mps2, &cal.gravity_mps2());
+        let mut x = SMatrix::<f64, 3, UNKNOWNS>::zeros();
+        x.fixed_columns_mut::<4>(0).copy_from(&four);
         if !self.friction {
             x.set_column(3, &Vec3::zeros());
+        }
+        if self.adapter {
+            x.set_column(ADAPTER, &s.accel_mps2);
         }
         let force_a_n = crate::ujoint_force_n(cal, &s.reading_n, &self.bias_n)
             - s.accel_mps2 * self.adapter_mass_kg;
@@ -334,9 +373,11 @@ impl DynamicIdentification {
         fit: &DynamicResult,
     ) -> Result<SampleForces, IdentificationError> {
         let (x, measured_n) = self.rows(s)?;
+        let mut theta = fit.parameters().theta();
+        theta.a = fit.adapter_mass_kg - self.adapter_mass_kg;
         Ok(SampleForces {
             measured_n,
-            model_n: x * fit.parameters().theta(),
+            model_n: x * theta,
         })
     }
 
@@ -359,9 +400,13 @@ impl DynamicIdentification {
             .weighted
             .fixed_view::<UNKNOWNS, UNKNOWNS>(0, 0)
             .into_owned();
+        // An unknown held (f at 0, dm_s at 0): its (zero) row and column
+        // become the identity.
         if !self.friction {
-            // f held at 0: its (zero) row and column become the identity.
             gram.m44 = 1.0;
+        }
+        if !self.adapter {
+            gram.m55 = 1.0;
         }
         let rhs: Unknowns = self
             .weighted
@@ -386,7 +431,7 @@ impl DynamicIdentification {
         }
         let covariance = d * scaled_inv * d;
         let theta = covariance * rhs;
-        let yy = self.weighted.m55;
+        let yy = self.weighted.m66;
         let chi2 = non_negative(yy - theta.dot(&rhs));
         let dof = rows - n as u64;
         let chi2_dof = chi2 / dof as f64;
@@ -407,7 +452,7 @@ impl DynamicIdentification {
         let u = &self.unweighted;
         let gram: Square = u.fixed_view::<UNKNOWNS, UNKNOWNS>(0, 0).into_owned();
         let xy: Unknowns = u.fixed_view::<UNKNOWNS, 1>(0, UNKNOWNS).into_owned();
-        let rss = u.m55 - 2.0 * theta.dot(&xy) + (gram * theta).dot(theta);
+        let rss = u.m66 - 2.0 * theta.dot(&xy) + (gram * theta).dot(theta);
         ComplexField::sqrt(non_negative(rss) / rows as f64)
     }
 
@@ -420,13 +465,13 @@ impl DynamicIdentification {
         condition: f64,
         residual_rms_n: f64,
     ) -> Result<DynamicResult, IdentificationError> {
-        let [m, moment, j_a, f]: [f64; UNKNOWNS] = (*theta).into();
+        let [m, moment, j_a, f, dm_s]: [f64; UNKNOWNS] = (*theta).into();
         if m.is_nan() || m <= 0.0 {
             return Err(IdentificationError::NonPositiveMass { mass_kg: m });
         }
         let c = moment / m;
-        // Gradient of I_perp = J_A - M^2 / m over (m, M, J_A, f).
-        let grad = Unknowns::new(c * c, -2.0 * c, 1.0, 0.0);
+        // Gradient of I_perp = J_A - M^2 / m over (m, M, J_A, f, dm_s).
+        let grad = Unknowns::new(c * c, -2.0 * c, 1.0, 0.0, 0.0);
         let var_i_model = non_negative((covariance * grad).dot(&grad));
         let std = |var: f64| ComplexField::sqrt(non_negative(var) * widen);
         let model_std = ComplexField::sqrt(var_i_model);
@@ -447,6 +492,9 @@ impl DynamicIdentification {
             inertia_a_kgm2: j_a,
             friction_n: self.friction.then_some(f),
             friction_std_n: self.friction.then(|| std(covariance.m44)),
+            adapter_mass_kg: self.adapter_mass_kg + dm_s,
+            adapter_mass_std_kg: self.adapter.then(|| std(covariance.m55)),
+            adapter_correlation: self.adapter.then(|| adapter_correlation(covariance)),
             residual_rms_n,
             chi2_dof,
             condition,
@@ -466,4 +514,24 @@ impl DynamicIdentification {
         )?;
         Ok(r)
     }
+}
+
+/// The largest |correlation| of the adapter's estimate with the other
+/// unknowns' (from the covariance; 0 where a variance is 0).
+fn adapter_correlation(covariance: &Square) -> f64 {
+    let var_s = covariance.m55;
+    covariance
+        .row(ADAPTER)
+        .iter()
+        .zip(covariance.diagonal().iter())
+        .take(ADAPTER)
+        .map(|(cov, var)| {
+            let denom = ComplexField::sqrt(non_negative(var_s * var));
+            if denom > 0.0 {
+                (cov / denom).abs()
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0, f64::max)
 }

@@ -125,6 +125,7 @@ impl LoopStep {
             guarded_stop: self.guarded_stop,
             force_mode: self.force.mode(),
             motion: d.motion,
+            inertia: self.out.inertia,
         };
         &self.out
     }

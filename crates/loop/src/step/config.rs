@@ -6,6 +6,7 @@ use crate::motion::MotionConfig;
 use sar_estimator::SettingError;
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::force_control::ForceControlConfig;
+use sar_estimator::inertia_watch::InertiaWatchConfig;
 use sar_hal::motion::Limits;
 
 /// Below this speed (on every axis, between two joint samples) the axes are
@@ -48,6 +49,8 @@ pub struct StepConfig {
     pub motion: MotionConfig,
     /// An excitation's limits (`[identify]`, issue 26).
     pub excite: ExciteLimits,
+    /// The inertia watch's limits (`[manipulator] inertia_watch_*`, issue 34).
+    pub inertia_watch: InertiaWatchConfig,
 }
 
 /// Why a [`StepConfig`] cannot be used.
@@ -116,6 +119,7 @@ impl StepConfig {
         if self.publisher_stall_ns == 0 {
             return Err(invalid("publisher_stall_ns", 0.0, "must be > 0"));
         }
+        self.inertia_watch.check()?;
         self.motion
             .check(l.max_accel_mps2)
             .map_err(|(field, value, why)| invalid(field, value, why))

@@ -111,6 +111,7 @@ mod excitation;
 mod force;
 mod gather;
 mod guarded;
+mod inertia;
 mod moves;
 mod request;
 mod retreat;
@@ -139,6 +140,7 @@ use sar_estimator::cycle::{Bias, CycleContext, CycleOutput, Estimator, Estimator
 use sar_estimator::force_control::{ForceController, ForceMode};
 #[cfg(doc)]
 use sar_estimator::guard::Reason;
+use sar_estimator::inertia_watch::InertiaWatch;
 use sar_hal::DriveState;
 use sar_kinematics::{ActiveJoints, Calibration, Profile};
 use trajectory::{Trajectory, TrajectoryChange};
@@ -172,6 +174,8 @@ pub struct LoopStep {
     force: ForceController,
     /// How the axes move: the servo model, the drives' quick stop.
     motion: AxesMotion,
+    /// The inertia watch (issue 34: I_perp and m_s against the free motion).
+    inertia_watch: InertiaWatch,
     /// The clock of the last cycle, if it streamed a set point: a streamed
     /// trajectory's time runs from it (issue 33, [`LoopStep::absorb_late_cycle`]).
     last_stream_ns: Option<u64>,
@@ -195,7 +199,17 @@ impl LoopStep {
         let filter = estimator.filter;
         let estimator = Estimator::with_bias(estimator, bias)?;
         let (guarded_lag_s, sample_period_s) = guarded_filter(filter)?;
-        let out = LoopOutput::first(&estimator);
+        let watch_period_s = if sample_period_s > 0.0 {
+            sample_period_s
+        } else {
+            config.period_ns as f64 * 1e-9
+        };
+        let inertia_watch = InertiaWatch::new(
+            config.inertia_watch,
+            estimator.tip_estimator().inertia(),
+            watch_period_s,
+        )?;
+        let out = LoopOutput::first(&estimator, inertia_watch.idle());
         let mut step = Self {
             calibration,
             profile,
@@ -212,6 +226,7 @@ impl LoopStep {
             sample_period_s,
             force: ForceController::new(config.force_control)?,
             motion: AxesMotion::default(),
+            inertia_watch,
             last_stream_ns: None,
             out,
             snapshot_fingerprint: 0,
@@ -257,13 +272,16 @@ impl LoopStep {
             motion,
         };
         let estimate = *self.estimator.cycle(&cycle_input, &context);
+        let inertia = self.watch_inertia(&estimate, found.as_ref(), &motion);
         // Decide, then commit once.
         let mut d = Decision::new(found, motion, axes_model);
         if let Some(h) = held {
             d.reply = Some(self.held_reply(h, input));
         }
         self.decide(input, &estimate, held, &mut d);
-        self.commit(input, estimate, reference, d)
+        self.commit(input, estimate, reference, d);
+        self.out.inertia = inertia;
+        &self.out
     }
 
     /// The phases of a cycle's decision, in order, each one's result put in

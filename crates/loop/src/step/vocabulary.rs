@@ -10,6 +10,7 @@ use sar_estimator::cycle::{
 };
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::{ForceLimits, Reason};
+use sar_estimator::inertia_watch::InertiaVerdict;
 use sar_estimator::motion::CarriageMotion;
 use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
@@ -144,11 +145,14 @@ pub struct LoopOutput {
     /// The carriage's motion handed to the estimator in this cycle
     /// ([`crate::motion`]).
     pub motion: CarriageMotion,
+    /// The inertia watch's verdict after this cycle (issue 34: I_perp and
+    /// the adapter's mass as the free motion implies them, what is named).
+    pub inertia: InertiaVerdict,
 }
 
 impl LoopOutput {
     /// The output before the first cycle: the estimator's, nothing decided.
-    pub(super) fn first(estimator: &Estimator) -> Self {
+    pub(super) fn first(estimator: &Estimator, inertia: InertiaVerdict) -> Self {
         Self {
             estimate: *estimator.last(),
             reference: None,
@@ -159,6 +163,7 @@ impl LoopOutput {
             guarded_stop: None,
             force_mode: None,
             motion: CarriageMotion::REST,
+            inertia,
         }
     }
 }

@@ -247,3 +247,110 @@ fn the_matched_plant_is_the_configuration() {
     assert_eq!(s.damping, cfg.axes.motion.servo_damping);
     assert_eq!((s.delay_ns, s.inner_loop_hz), (0, 0.0));
 }
+
+/// What the inertia watch said over free moves.
+struct Watched {
+    /// Cycles (ms) from the first move's request to the first name.
+    named_after_ms: Option<u64>,
+    /// The verdict after the moves.
+    verdict: sar_estimator::inertia_watch::InertiaVerdict,
+}
+
+/// `rounds` times the three free moves of [`free_moves`], watching the
+/// inertia watch's verdict.
+fn watched_moves(mut rig: Rig, rounds: usize) -> Watched {
+    let start = Vec3::new(TIP_M[0], TIP_M[1], TIP_M[2]);
+    let tips = [
+        start + Vec3::new(0.03, 0.015, -0.015),
+        start + Vec3::new(-0.01, -0.02, 0.02),
+        start,
+    ];
+    let mut named_after_ms = None;
+    let mut ms = 0;
+    for (id, tip_m) in (1..).zip(tips.iter().cycle().take(3 * rounds)) {
+        let r = rig.request(id, Request::MoveTip { tip_m: *tip_m });
+        assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+        ms += 1;
+        for _ in 0..MOVE_MS {
+            let out = rig.step();
+            ms += 1;
+            if named_after_ms.is_none() && out.inertia.named.any() {
+                named_after_ms = Some(ms);
+            }
+        }
+    }
+    Watched {
+        named_after_ms,
+        verdict: rig.c.decision().inertia,
+    }
+}
+
+/// Issue 34 item 2: on the free moves above, the inertia watch names the
+/// rod of 1.6x the configured I_perp and the 0.35 kg adapter left out,
+/// with the I_perp and the adapter's mass the free motion implies (within
+/// 10 % and 50 g of the truth, and within 3 of their standard errors); on
+/// the plant the configuration describes it names nothing, at the sensor's
+/// full noise and at 1 % of it. The name comes within the first move (the
+/// time from its request printed). Printed too: what each other plant of
+/// the table makes it say (measured: nothing named; the ideal drives read
+/// as 1.16-1.18x I_perp and -0.18 kg of adapter, below the limits and
+/// impossible).
+#[test]
+fn the_inertia_watch_names_the_rod_and_the_adapter_and_not_the_matched_plant() {
+    let cfg = fast_config();
+    let configured = cfg.estimator.inertia;
+    let rod_row = &MISMATCHES[5];
+    let truth = inertia(&scenario(&cfg, rod_row.edit, 1.0).spec);
+    for (fraction, rounds) in [(NOISE_FRACTION, 1), (1.0, 2)] {
+        for (i, m) in MISMATCHES.iter().enumerate() {
+            let w = watched_moves(rig(&cfg, m.edit, fraction), rounds);
+            let v = &w.verdict;
+            println!(
+                "noise x{fraction}, {}: named {:?} after {:?} ms; I_perp {:.5} +- {:.5} kg m^2 ({:.2}x the configured {:.5}), m_s {:.3} +- {:.3} kg, {:.0} free samples",
+                m.name,
+                v.named,
+                w.named_after_ms,
+                v.inertia_perp_kgm2,
+                v.inertia_perp_std_kgm2,
+                v.inertia_perp_ratio,
+                configured.inertia_perp_kgm2,
+                v.adapter_mass_kg,
+                v.adapter_mass_std_kg,
+                v.samples
+            );
+            if i == 0 {
+                assert!(!v.named.any(), "the matched plant named: {v:?}");
+                assert!(w.named_after_ms.is_none());
+            }
+            if std::ptr::eq(m, rod_row) {
+                assert!(v.named.inertia_perp && v.named.adapter, "{v:?}");
+                let i_err = v.inertia_perp_kgm2 - truth.inertia_perp_kgm2;
+                let s_err = v.adapter_mass_kg - truth.adapter_mass_kg;
+                assert!(
+                    i_err.abs() < 0.1 * truth.inertia_perp_kgm2,
+                    "I_perp {i_err}"
+                );
+                assert!(
+                    i_err.abs() < 3.0 * v.inertia_perp_std_kgm2,
+                    "I_perp {i_err}"
+                );
+                assert!(s_err.abs() < 0.05, "m_s {s_err}");
+                assert!(s_err.abs() < 3.0 * v.adapter_mass_std_kg, "m_s {s_err}");
+                let line = sar_loop::logq::inertia_text(
+                    v,
+                    (configured.inertia_perp_kgm2, configured.adapter_mass_kg),
+                );
+                println!("{line}");
+                assert!(line.contains("I_perp reads 1.6"), "{line}");
+                assert!(line.contains("the adapter's mass reads 0.3"), "{line}");
+                assert!(line.contains("run `sarctl identify --dynamic`"), "{line}");
+                // Within the first move.
+                assert!(
+                    w.named_after_ms.is_some_and(|ms| ms <= MOVE_MS),
+                    "{:?}",
+                    w.named_after_ms
+                );
+            }
+        }
+    }
+}

@@ -51,8 +51,9 @@ pub struct IdentifyArgs {
     /// when it was measured), s.
     #[arg(long, default_value_t = 0.0, value_name = "S", requires = "dynamic")]
     pub sensor_latency_s: f64,
-    /// With --dynamic: the mass between the sensor and the U-joint, kg
-    /// (default: the configuration's `[sensor] adapter_mass_kg`).
+    /// With --dynamic: the mass between the sensor and the U-joint, kg, held
+    /// there (default: estimated with I_perp, from the configuration's
+    /// `[sensor] adapter_mass_kg`, and written back).
     #[arg(long, value_name = "KG", requires = "dynamic")]
     pub adapter_mass_kg: Option<f64>,
     /// With --dynamic: print the excitation of `[identify]`'s limits, its
@@ -320,6 +321,7 @@ impl IdentifyArgs {
             },
             sensor_latency_s: self.sensor_latency_s,
             adapter_mass_kg: self.adapter_mass_kg.unwrap_or(config_adapter_mass_kg),
+            estimate_adapter: self.adapter_mass_kg.is_none(),
             friction: !self.no_friction,
             max_condition: self.max_condition,
             max_chi2_dof: self.max_chi2_dof,
@@ -453,8 +455,12 @@ fn run_dynamic(
         None
     } else {
         let f = &result.fit;
-        let new = writeback::write_inertia(text, f.inertia_perp_kgm2, f.inertia_perp_std_kgm2)
+        let mut new = writeback::write_inertia(text, f.inertia_perp_kgm2, f.inertia_perp_std_kgm2)
             .map_err(|e| format!("{}: {e}", config_path.display()))?;
+        if f.adapter_mass_std_kg.is_some() {
+            new = writeback::write_adapter(&new, f.adapter_mass_kg.max(0.0))
+                .map_err(|e| format!("{}: {e}", config_path.display()))?;
+        }
         Some(replace_config(config_path, &new)?)
     };
     let out = if json {

@@ -9,9 +9,11 @@
 //!    latency) they are interpolated linearly between the two neighbouring
 //!    joint samples, giving A, A', A'' (A = P_home + (q3, q2, q1) + a_off);
 //! 3. each sample feeds the estimator's accumulator
-//!    ([`sar_estimator::identification::dynamic`]): (m, M, J_A), and the
-//!    support's friction f unless `--no-friction`, weighted by the sensor's
-//!    noise; I_perp = J_A - M^2 / m.
+//!    ([`sar_estimator::identification::dynamic`]): (m, M, J_A), the
+//!    support's friction f unless `--no-friction` and the adapter's mass m_s
+//!    between the sensor and the U-joint unless `--adapter-mass-kg` gives it
+//!    (issue 34: an adapter left out of the configuration read as +28 % on
+//!    I_perp), weighted by the sensor's noise; I_perp = J_A - M^2 / m.
 //!
 //! A recording whose carriage never accelerates is refused ("the recording
 //! holds no excitation"), and so is a fit whose condition number is above
@@ -49,8 +51,11 @@ pub struct DynamicOptions {
     /// The sensor's latency: a sample's stamp less this is when it was
     /// measured, s.
     pub sensor_latency_s: f64,
-    /// The mass between the sensor and the U-joint, kg.
+    /// The mass between the sensor and the U-joint, kg: held there, or
+    /// where the estimate of it starts (`estimate_adapter`).
     pub adapter_mass_kg: f64,
+    /// Estimate the adapter's mass (the default; `--adapter-mass-kg` holds it).
+    pub estimate_adapter: bool,
     /// Estimate the support's Coulomb friction.
     pub friction: bool,
     /// Largest accepted condition number.
@@ -68,6 +73,7 @@ impl Default for DynamicOptions {
             smoother: SmootherSpec::default(),
             sensor_latency_s: 0.0,
             adapter_mass_kg: 0.0,
+            estimate_adapter: true,
             friction: true,
             max_condition: DEFAULT_MAX_CONDITION,
             max_chi2_dof: super::SupportOptions::DEFAULT_MAX_CHI2_DOF,
@@ -484,6 +490,9 @@ pub fn identify_series(
         options.adapter_mass_kg,
         options.friction,
     )?;
+    if options.estimate_adapter {
+        id = id.estimating_adapter();
+    }
     let mut used: Vec<MotionSample> = Vec::new();
     let mut stamps: Vec<u64> = Vec::new();
     let mut hint = 0;
@@ -552,8 +561,9 @@ fn check_fit(fit: &DynamicResult, options: &DynamicOptions) -> Result<(), Dynami
 
 fn method(o: &DynamicOptions, samples: usize) -> String {
     format!(
-        "noise-weighted least squares of (m, m c, J_A = I_perp + m c^2{}) over {samples} sensor samples' force rows (MODEL.md 10, d = 0), A'' from the encoders smoothed by a centred polynomial of order {} over {} s",
+        "noise-weighted least squares of (m, m c, J_A = I_perp + m c^2{}{}) over {samples} sensor samples' force rows (MODEL.md 10, d = 0), A'' from the encoders smoothed by a centred polynomial of order {} over {} s",
         if o.friction { ", f" } else { "" },
+        if o.estimate_adapter { ", m_s" } else { "" },
         o.smoother.order,
         o.smoother.span_s
     )
@@ -598,6 +608,9 @@ impl DynamicIdentified {
             "com_std_m": f.com_std_m,
             "friction_n": f.friction_n,
             "friction_std_n": f.friction_std_n,
+            "adapter_mass_kg": f.adapter_mass_kg,
+            "adapter_mass_std_kg": f.adapter_mass_std_kg,
+            "adapter_correlation": f.adapter_correlation,
             "chi2_dof": f.chi2_dof,
             "condition": f.condition,
             "residual_rms_n": f.residual_rms_n,
@@ -617,14 +630,34 @@ impl DynamicIdentified {
             (Some(x), Some(s)) => format!("friction f = {x:.3} +- {s:.3} N"),
             _ => "friction not estimated".to_owned(),
         };
+        let adapter = match (f.adapter_mass_std_kg, f.adapter_correlation) {
+            (Some(s), Some(r)) => format!(
+                "adapter m_s = {:.4} +- {s:.4} kg (its largest correlation with the others {r:.2}){}",
+                f.adapter_mass_kg,
+                if f.adapter_mass_kg < 0.0 {
+                    "; written as 0"
+                } else {
+                    ""
+                }
+            ),
+            _ => format!(
+                "adapter m_s held at {} kg (--adapter-mass-kg)",
+                f.adapter_mass_kg
+            ),
+        };
         let written = match written {
             Some(path) => format!(
-                "written to {path}: manipulator.inertia_perp_kgm2, manipulator.inertia_perp_std_kgm2"
+                "written to {path}: manipulator.inertia_perp_kgm2, manipulator.inertia_perp_std_kgm2{}",
+                if f.adapter_mass_std_kg.is_some() {
+                    ", sensor.adapter_mass_kg"
+                } else {
+                    ""
+                }
             ),
             None => "dry run: the configuration is unchanged".to_owned(),
         };
         format!(
-            "inertia I_perp = {:.5} +- {:.5} kg m^2 ({:.2} %; the excitation promised {:.2} %)\nmass  m = {:.4} +- {:.4} kg\ncentre c = {:.5} +- {:.5} m\n{friction}\nchi2/dof {:.2}, residual RMS {:.3} N, condition {:.1}, {} samples ({} left out), peak acceleration {:.3} m/s^2\nmethod: {}\n{written}",
+            "inertia I_perp = {:.5} +- {:.5} kg m^2 ({:.2} %; the excitation promised {:.2} %)\nmass  m = {:.4} +- {:.4} kg\ncentre c = {:.5} +- {:.5} m\n{adapter}\n{friction}\nchi2/dof {:.2}, residual RMS {:.3} N, condition {:.1}, {} samples ({} left out), peak acceleration {:.3} m/s^2\nmethod: {}\n{written}",
             f.inertia_perp_kgm2,
             f.inertia_perp_std_kgm2,
             pct(f.inertia_perp_std_kgm2, f.inertia_perp_kgm2),

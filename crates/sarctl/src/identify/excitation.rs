@@ -266,8 +266,10 @@ impl Excitation {
     ) -> Result<DynamicResult, String> {
         let est = &config.estimator;
         let cal: &Calibration = &est.calibration;
+        // As identify --dynamic fits by default: the adapter's mass estimated.
         let mut id = DynamicIdentification::new(cal, &est.noise, Vec3::zeros(), 0.0, false)
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| e.to_string())?
+            .estimating_adapter();
         let n = (self.spec.duration_s * sensor_rate_hz).floor() as u64;
         for k in 0..n {
             let (q, v, a) = self.at(k as f64 / sensor_rate_hz);

@@ -104,6 +104,24 @@ pub fn write_inertia(text: &str, inertia_kgm2: f64, std_kgm2: f64) -> Result<Str
     Ok(doc.to_string())
 }
 
+/// The configuration text with `[sensor] adapter_mass_kg` replaced (or
+/// appended, the table too), rounded to 0.01 g, the rest kept.
+pub fn write_adapter(text: &str, adapter_mass_kg: f64) -> Result<String, String> {
+    let mut doc: DocumentMut = text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| format!("not valid TOML: {}", e.message()))?;
+    if doc.get("sensor").is_none() {
+        doc.insert("sensor", toml_edit::table());
+    }
+    set_float(
+        &mut doc,
+        "sensor",
+        "adapter_mass_kg",
+        rounded(adapter_mass_kg, MASS_STEP_KG),
+    )?;
+    Ok(doc.to_string())
+}
+
 /// The configuration text with `[axes] servo_bandwidth_hz`, `servo_damping`
 /// and `servo_delay_s` replaced (or appended, the table too), the rest kept:
 /// rounded to 1 mHz, 1e-4 and 1 us (below their standard deviations).
@@ -146,6 +164,21 @@ mod tests {
         let added = write_servo("[tip]\nx = 1\n", 30.0, 0.7, 0.0).unwrap();
         assert!(
             added.contains("[axes]\nservo_bandwidth_hz = 30.0\n"),
+            "{added}"
+        );
+    }
+
+    #[test]
+    fn the_adapter_is_written_keeping_the_sensor_table() {
+        let text = "[sensor]\nnoise_n = [0.2, 0.2, 0.8]\nadapter_mass_kg = 0.0 # m_s\n";
+        let out = write_adapter(text, 0.3512345).unwrap();
+        assert_eq!(
+            out,
+            "[sensor]\nnoise_n = [0.2, 0.2, 0.8]\nadapter_mass_kg = 0.35123 # m_s\n"
+        );
+        let added = write_adapter("[tip]\nx = 1\n", 0.1).unwrap();
+        assert!(
+            added.contains("[sensor]\nadapter_mass_kg = 0.1\n"),
             "{added}"
         );
     }
