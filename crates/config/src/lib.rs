@@ -435,6 +435,7 @@ impl Config {
                 axes_max_speed_mps: self.axes.max_speed_mps,
                 period_ns: self.loop_.period_ns,
             },
+            support: keys::support::build(&self.file.support, self.file.tip.sample_rate_hz),
         }
     }
 }

@@ -507,6 +507,9 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         {
             self.log.send(LogEvent::GuardedStop(g));
         }
+        if let Some(n) = decision.support_note {
+            self.log.send(LogEvent::Support(n));
+        }
         if let Some(t) = decision.estimate.transition {
             self.log.send(LogEvent::Transition(t));
             if t.to.is_halting() {

@@ -69,6 +69,9 @@ pub enum LogEvent {
     },
     /// A guarded move was braked: its force reached the limit.
     GuardedStop(crate::step::GuardedStop),
+    /// The support watch's status (the first reset, a verdict's change, a
+    /// confirmation; issue 34).
+    Support(crate::step::SupportNote),
 }
 
 /// The bounded queue of log events the loop fills ([`channel`]).
@@ -264,7 +267,55 @@ pub fn write(event: &LogEvent) {
             g.force_n.norm(),
             g.max_force_n
         ),
+        LogEvent::Support(n) => write_support(n),
     }
+}
+
+/// A support note: an error when a shift is named, else information.
+fn write_support(n: &crate::step::SupportNote) {
+    let text = support_text(n);
+    if n.status.verdict == sar_estimator::support::SupportVerdict::Shifted {
+        tracing::error!(cycle = n.cycle, "{text}");
+    } else {
+        tracing::info!(cycle = n.cycle, "{text}");
+    }
+}
+
+/// A support note in words: why, the verdict, the shift per axis with its
+/// standard error (or "not determined").
+pub fn support_text(n: &crate::step::SupportNote) -> String {
+    use crate::step::SupportWhy;
+    let s = &n.status;
+    let why = match n.why {
+        SupportWhy::FirstReset => "support at the first reset (the mean at rest)",
+        SupportWhy::Verdict => "support check",
+        SupportWhy::Confirmed => "support confirmed by the operator",
+    };
+    let axes: Vec<String> = ["X0", "Y0", "Z0"]
+        .iter()
+        .zip(s.shift_m.iter().zip(s.std_m.iter()))
+        .map(|(name, (v, sd))| {
+            if *sd <= n.max_std_m {
+                format!("{name} {:+.2} +- {:.2} mm", v * 1e3, sd * 1e3)
+            } else {
+                format!("{name} not determined")
+            }
+        })
+        .collect();
+    let mut text = format!(
+        "{why}: {}; shift {} (limit {:.1} mm; chi2/dof {:.2}, {:.0} free samples)",
+        s.verdict.words(),
+        axes.join(", "),
+        n.max_shift_m * 1e3,
+        s.chi2_dof,
+        s.samples
+    );
+    if s.verdict == sar_estimator::support::SupportVerdict::Shifted {
+        text.push_str(
+            "; force control refused until re-calibrated (sarctl identify) or confirmed (sarctl support confirm)",
+        );
+    }
+    text
 }
 
 /// A vector as `[x y z]` with `digits` decimals.

@@ -447,6 +447,17 @@ impl Estimator {
         self.bias
     }
 
+    /// The tip-force estimator in use (its calibration, profile, inertia).
+    pub fn tip_estimator(&self) -> &TipForceEstimator {
+        &self.tip
+    }
+
+    /// The guard still waits for its first accepted reset (the tip taken
+    /// as free at rest: the first reset's mounting check).
+    pub fn awaiting_first_reset(&self) -> bool {
+        self.guard.awaiting_first_reset()
+    }
+
     /// The guard's state.
     pub fn guard_state(&self) -> GuardState {
         self.guard.state()

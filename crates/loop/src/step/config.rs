@@ -6,6 +6,7 @@ use crate::motion::MotionConfig;
 use sar_estimator::SettingError;
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::force_control::ForceControlConfig;
+use sar_estimator::support::SupportWatchConfig;
 use sar_hal::motion::Limits;
 
 /// Below this speed (on every axis, between two joint samples) the axes are
@@ -48,6 +49,8 @@ pub struct StepConfig {
     pub motion: MotionConfig,
     /// An excitation's limits (`[identify]`, issue 26).
     pub excite: ExciteLimits,
+    /// The support watch (`[support]`, issue 34 section 3).
+    pub support: SupportWatchConfig,
 }
 
 /// Why a [`StepConfig`] cannot be used.

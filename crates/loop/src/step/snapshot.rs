@@ -36,6 +36,7 @@ sar_snapshot::config_struct!(StepConfig {
     force_control,
     motion,
     excite,
+    support,
 });
 sar_snapshot::snap_state!(LoopStep {
     state: [
@@ -49,7 +50,7 @@ sar_snapshot::snap_state!(LoopStep {
         motion,
         last_stream_ns,
     ],
-    nested: [estimator, force],
+    nested: [estimator, force, support],
     config: [calibration, profile, config, guarded_lag_s, sample_period_s],
     output: [out],
     derived: [snapshot_fingerprint],
