@@ -17,7 +17,7 @@ use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
 use sar_kinematics::ActiveJoints;
 
 /// Feeds `samples` noisy free-tip samples at each pose of a cone of half
-/// angle 5 degrees about +X0 (the rod through the true support at a =
+/// angle 10 degrees about +X0 (the rod through the true support at a =
 /// 0.15, 0.2, 0.25 m), the rod sliding in then out; the watch's status.
 fn watch(
     shift_m: Vector3<f64>,
@@ -36,7 +36,7 @@ fn watch(
         ..manipulator2_truth()
     };
     let mut sensor = NoisySensor::new(noise.std_n().into(), 11);
-    let half = 5f64.to_radians();
+    let half = 10f64.to_radians();
     for _ in 0..2 {
         for k in 0..8 {
             let phi = f64::from(k) * core::f64::consts::FRAC_PI_4;
@@ -128,4 +128,56 @@ fn a_contact_is_not_taken_for_a_shift() {
     let s = w.status();
     println!("contact: {s:?}");
     assert_eq!(s.verdict, SupportVerdict::NotFree, "{s:?}");
+}
+
+/// The demo's case (tests/decisions.rs seed 2, before the fix): at one pose
+/// a small constant tip force (here 1 N along the rod and 0.5 N down, below
+/// `free_tip_max_n`) is exactly what a shift along the rod would show
+/// there. With the contact as an unknown, a single pose determines no
+/// component of the shift: nothing is named, however long it lasts.
+#[test]
+fn a_small_contact_at_one_pose_is_never_named() {
+    let cal = example_calibration();
+    let profile = manipulator2();
+    let noise = SensorNoise::hex6();
+    let base = TipForceEstimator::new(&cal, &profile, &noise, TipForceConfig::default()).unwrap();
+    let mut w = SupportWatch::new(SupportWatchConfig::DEFAULT, &cal, &profile, &base).unwrap();
+    let truth = manipulator2_truth();
+    let mut sensor = NoisySensor::new(noise.std_n().into(), 5);
+    let u = Vector3::x();
+    let a_m = truth.support_m - u * 0.2;
+    let (_, wv) = rod_frame(u.x.atan2(u.z), u.y.asin());
+    let tip_n = Vector3::new(1.0, -0.5, 0.0);
+    let (f_a, _) = ujoint_force(&truth, &a_m, &u, &wv, &tip_n, 0.0);
+    let ideal = ideal_reading(&Matrix3::identity(), &f_a, &Vector3::zeros());
+    let q = ActiveJoints {
+        q1_m: a_m.z,
+        q2_m: a_m.y + 0.08,
+        q3_m: a_m.x,
+    };
+    let pose = sar_kinematics::forward(&cal, &profile, &q).unwrap();
+    for _ in 0..20_000 {
+        let reading = sensor.sample(&ideal);
+        let e = base.estimate(&pose, &reading, &Vector3::zeros()).unwrap();
+        w.observe(
+            &q,
+            &reading,
+            &Vector3::zeros(),
+            &CarriageMotion::REST,
+            &e,
+            &pose,
+        );
+        assert_ne!(
+            w.status().verdict,
+            SupportVerdict::Shifted,
+            "{:?}",
+            w.status()
+        );
+    }
+    let s = w.status();
+    println!("one pose, 1 N along and 0.5 N down: {s:?}");
+    for k in 0..3 {
+        assert!(!s.determined(k, 1e-3), "{k}: {s:?}");
+    }
+    assert!(!w.refuses_force());
 }

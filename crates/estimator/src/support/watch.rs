@@ -56,6 +56,13 @@ pub const MAX_CHI2_DOF: f64 = 1.5;
 /// configured limit): the noise alone never names one.
 pub const NAME_SIGMA: f64 = 5.0;
 
+/// A constant tip force (the fit's contact) beyond this many standard
+/// errors on an axis says the tip is not free.
+pub const CONTACT_SIGMA: f64 = 5.0;
+
+/// ... and beyond this, N.
+pub const MIN_CONTACT_N: f64 = 0.2;
+
 /// Fewer (forgetting-weighted) samples than this: no verdict yet.
 pub const MIN_SAMPLES: f64 = 250.0;
 
@@ -107,7 +114,9 @@ impl SupportWatchConfig {
 /// What the watch says of the support now.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SupportVerdict {
-    /// Too few free samples yet: the check has not run.
+    /// Too few free samples yet, or poses that determine no component of
+    /// the shift (one pose: a contact would read the same): the check has
+    /// not run.
     NotRun,
     /// The tip force does not follow the poses as a support shift does (a
     /// contact, or another model error): the check could not run.
@@ -134,7 +143,7 @@ impl SupportVerdict {
     /// In words.
     pub fn words(self) -> &'static str {
         match self {
-            Self::NotRun => "not run (too few poses with the tip free)",
+            Self::NotRun => "not run (too few free-tip samples, or poses that determine no axis)",
             Self::NotFree => "could not run (the tip force is not that of a free tip)",
             Self::Within => "within the limit",
             Self::Shifted => "shifted beyond the limit",
@@ -150,7 +159,12 @@ pub struct SupportStatus {
     /// Its standard error per base axis, m (widened by sqrt(chi2/dof) when
     /// above 1).
     pub std_m: Vec3,
-    /// Chi-square per degree of freedom of the fit.
+    /// The constant tip force the fit with a contact finds, base frame, N
+    /// (the nuisance that keeps a single pose from naming a shift).
+    pub contact_n: Vec3,
+    /// Its standard error per base axis, N.
+    pub contact_std_n: Vec3,
+    /// Chi-square per degree of freedom of the free tip's fit.
     pub chi2_dof: f64,
     /// Forgetting-weighted free samples behind it.
     pub samples: f64,
@@ -165,6 +179,8 @@ impl SupportStatus {
     pub const NONE: Self = Self {
         shift_m: Vec3::new(0.0, 0.0, 0.0),
         std_m: Vec3::new(PRIOR_STD_M, PRIOR_STD_M, PRIOR_STD_M),
+        contact_n: Vec3::new(0.0, 0.0, 0.0),
+        contact_std_n: Vec3::new(0.0, 0.0, 0.0),
         chi2_dof: 0.0,
         samples: 0.0,
         verdict: SupportVerdict::NotRun,
@@ -196,8 +212,17 @@ pub struct SupportWatch {
     info_bf: Vec3,
     /// The friction's, 1/N^2.
     info_ff: f64,
+    /// The shift-contact block (the contact: a constant tip force, the
+    /// nuisance that a single pose cannot tell from a shift), 1/(m N).
+    info_bc: Mat3,
+    /// The friction-contact block, 1/N^2.
+    info_fc: Vec3,
+    /// The contact's block, 1/N^2.
+    info_cc: Mat3,
     /// J^T W r over the shift, 1/m.
     rhs_b: Vec3,
+    /// Over the contact, 1/N.
+    rhs_c: Vec3,
     /// Over the friction, 1/N.
     rhs_f: f64,
     /// r^T W r.
@@ -247,6 +272,8 @@ pub const PRIOR_FRICTION_N: f64 = 5.0;
 
 type Mat4 = nalgebra::Matrix4<f64>;
 type Vec4 = nalgebra::Vector4<f64>;
+type Mat7 = nalgebra::SMatrix<f64, 7, 7>;
+type Vec7 = nalgebra::SVector<f64, 7>;
 
 impl SupportWatch {
     /// A watch for the robot `base` (its estimator's calibration, profile and
@@ -267,7 +294,11 @@ impl SupportWatch {
             info_b: Mat3::zeros(),
             info_bf: Vec3::zeros(),
             info_ff: 0.0,
+            info_bc: Mat3::zeros(),
+            info_fc: Vec3::zeros(),
+            info_cc: Mat3::zeros(),
             rhs_b: Vec3::zeros(),
+            rhs_c: Vec3::zeros(),
             rhs_f: 0.0,
             rr: 0.0,
             rows: 0.0,
@@ -293,7 +324,10 @@ impl SupportWatch {
         let solved = self.solve();
         let verdict = if self.named_m.is_some() {
             SupportVerdict::Shifted
-        } else if self.count < MIN_SAMPLES {
+        } else if self.count < MIN_SAMPLES
+            || determined_mask(&solved, self.config.max_std_m) == Vec3::zeros()
+        {
+            // Too few samples, or poses that determine no component.
             SupportVerdict::NotRun
         } else if self.not_free {
             SupportVerdict::NotFree
@@ -368,10 +402,16 @@ impl SupportWatch {
         };
         let keep = 1.0 - 1.0 / self.config.window_samples;
         let jw = jac.transpose() * w;
+        // The contact's columns: a constant tip force, in the rows used.
+        let cw = rows.transpose() * w;
         self.info_b = self.info_b * keep + jw * jac;
         self.info_bf = self.info_bf * keep + jw * friction;
         self.info_ff = self.info_ff * keep + friction.dot(&(w * friction));
+        self.info_bc = self.info_bc * keep + jw * rows;
+        self.info_fc = self.info_fc * keep + cw * friction;
+        self.info_cc = self.info_cc * keep + cw * rows;
         self.rhs_b = self.rhs_b * keep + jw * residual;
+        self.rhs_c = self.rhs_c * keep + cw * residual;
         self.rhs_f = self.rhs_f * keep + friction.dot(&(w * residual));
         self.rr = self.rr * keep + residual.dot(&(w * residual));
         self.rows = self.rows * keep + if keep_axial { 3.0 } else { 2.0 };
@@ -457,6 +497,7 @@ impl SupportWatch {
         let target = self.center_m + dc;
         self.rr += 2.0 * dc.dot(&self.rhs_b) + dc.dot(&(self.info_b * dc));
         self.rhs_f += self.info_bf.dot(&dc);
+        self.rhs_c += self.info_bc.transpose() * dc;
         self.rhs_b += self.info_b * dc;
         self.center_m = target;
         true
@@ -494,15 +535,26 @@ impl SupportWatch {
         w.iter().all(|x| x.is_finite()).then_some(w)
     }
 
-    /// The normal equations over (shift, friction) and their right-hand side.
-    fn normal(&self) -> (Mat4, Vec4) {
-        let mut info = Mat4::zeros();
+    /// The normal equations over (shift, friction, contact) and their
+    /// right-hand side.
+    fn normal(&self) -> (Mat7, Vec7) {
+        let mut info = Mat7::zeros();
         info.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.info_b);
         info.fixed_view_mut::<3, 1>(0, 3).copy_from(&self.info_bf);
         info.fixed_view_mut::<1, 3>(3, 0)
             .copy_from(&self.info_bf.transpose());
-        info.m44 = self.info_ff;
-        let rhs = Vec4::new(self.rhs_b.x, self.rhs_b.y, self.rhs_b.z, self.rhs_f);
+        info.fixed_view_mut::<3, 3>(0, 4).copy_from(&self.info_bc);
+        info.fixed_view_mut::<3, 3>(4, 0)
+            .copy_from(&self.info_bc.transpose());
+        info.fixed_view_mut::<1, 3>(3, 4)
+            .copy_from(&self.info_fc.transpose());
+        info.fixed_view_mut::<3, 1>(4, 3).copy_from(&self.info_fc);
+        info.fixed_view_mut::<3, 3>(4, 4).copy_from(&self.info_cc);
+        info[(3, 3)] = self.info_ff;
+        let mut rhs = Vec7::zeros();
+        rhs.fixed_rows_mut::<3>(0).copy_from(&self.rhs_b);
+        rhs[3] = self.rhs_f;
+        rhs.fixed_rows_mut::<3>(4).copy_from(&self.rhs_c);
         (info, rhs)
     }
 
@@ -510,7 +562,7 @@ impl SupportWatch {
     fn judge(&mut self) {
         let solved = self.solve();
         let mut beyond = false;
-        if self.count >= MIN_SAMPLES && !self.not_free_now(solved.chi2_dof) {
+        if self.count >= MIN_SAMPLES && !self.not_free_now(&solved) {
             beyond = self.beyond(&solved);
         }
         self.beyond_run = if beyond {
@@ -525,42 +577,66 @@ impl SupportWatch {
         }
     }
 
-    /// The shift, its standard errors and the chi-square from the sums (the
-    /// verdict and the named shift left as before any sample).
+    /// The shift, its standard errors, the contact and the chi-square from
+    /// the sums (the verdict and the named shift left as before any
+    /// sample): the shift and the contact from the fit with the contact
+    /// (what the poses' variation determines), the chi-square from the fit
+    /// of a free tip (a contact's misfit).
     fn solve(&self) -> SupportStatus {
         let (info, rhs) = self.normal();
         let b = 1.0 / (PRIOR_STD_M * PRIOR_STD_M);
         let f = 1.0 / (PRIOR_FRICTION_N * PRIOR_FRICTION_N);
-        let prior = Mat4::from_diagonal(&Vec4::new(b, b, b, f));
-        let Some(chol) = (info + prior).cholesky() else {
+        let c = 1.0 / (self.config.free_tip_max_n * self.config.free_tip_max_n);
+        let prior = Mat7::from_diagonal(&Vec7::from_column_slice(&[b, b, b, f, c, c, c]));
+        // The free tip's fit: (shift, friction), the top-left block.
+        let info4: Mat4 = info.fixed_view::<4, 4>(0, 0).into_owned();
+        let rhs4: Vec4 = rhs.fixed_rows::<4>(0).into_owned();
+        let prior4: Mat4 = prior.fixed_view::<4, 4>(0, 0).into_owned();
+        let Some(chol4) = (info4 + prior4).cholesky() else {
             return SupportStatus::NONE;
         };
-        // F_tip(B0) = -(J delta + sigma u f): theta = -(N)^-1 J^T W r.
-        let theta = -chol.solve(&rhs);
-        let covariance = chol.inverse();
-        let chi2 = self.rr + 2.0 * theta.dot(&rhs) + theta.dot(&(info * theta));
+        // F_tip(B0) = -(J delta + sigma u f - contact): theta = -(N)^-1 X^T W r.
+        let theta4 = -chol4.solve(&rhs4);
+        let chi2 = self.rr + 2.0 * theta4.dot(&rhs4) + theta4.dot(&(info4 * theta4));
         let dof = (self.rows - 4.0).max(1.0);
         let chi2_dof = chi2.max(0.0) / dof;
         let scale = chi2_dof.max(1.0);
+        let Some(chol) = (info + prior).cholesky() else {
+            return SupportStatus::NONE;
+        };
+        let theta = -chol.solve(&rhs);
+        let covariance = chol.inverse();
+        let std = |k: usize| ComplexField::sqrt(covariance[(k, k)].max(0.0) * scale);
         SupportStatus {
-            shift_m: self.center_m + Vec3::new(theta.x, theta.y, theta.z),
-            std_m: Vec3::new(covariance.m11, covariance.m22, covariance.m33)
-                .map(|v| ComplexField::sqrt(v.max(0.0) * scale)),
+            shift_m: self.center_m + Vec3::new(theta[0], theta[1], theta[2]),
+            std_m: Vec3::new(std(0), std(1), std(2)),
+            // The contact's column is +I: it enters as -(-contact).
+            contact_n: -Vec3::new(theta[4], theta[5], theta[6]),
+            contact_std_n: Vec3::new(std(4), std(5), std(6)),
             chi2_dof,
             samples: self.count,
             ..SupportStatus::NONE
         }
     }
 
-    /// The fit's chi-square says "not a free tip": above [`MAX_CHI2_DOF`],
-    /// and until it falls below [`FREE_AGAIN_CHI2_DOF`].
-    fn not_free_now(&mut self, chi2_dof: f64) -> bool {
+    /// The samples are not those of a free tip: the free tip's fit's
+    /// chi-square per degree of freedom above [`MAX_CHI2_DOF`] (until it
+    /// falls below [`FREE_AGAIN_CHI2_DOF`]), or a constant tip force found
+    /// beyond [`CONTACT_SIGMA`] standard errors and [`MIN_CONTACT_N`] on an
+    /// axis (a contact that stays, which the poses' variation tells from a
+    /// shift).
+    fn not_free_now(&mut self, s: &SupportStatus) -> bool {
         let limit = if self.not_free {
             FREE_AGAIN_CHI2_DOF
         } else {
             MAX_CHI2_DOF
         };
-        self.not_free = chi2_dof.is_nan() || chi2_dof > limit;
+        let contact = s
+            .contact_n
+            .iter()
+            .zip(s.contact_std_n.iter())
+            .any(|(c, sd)| c.abs() > MIN_CONTACT_N && c.abs() > CONTACT_SIGMA * sd);
+        self.not_free = s.chi2_dof.is_nan() || s.chi2_dof > limit || contact;
         self.not_free
     }
 
@@ -598,6 +674,8 @@ sar_snapshot::snap_enum!(SupportVerdict {
 sar_snapshot::snap_struct!(SupportStatus {
     shift_m,
     std_m,
+    contact_n,
+    contact_std_n,
     chi2_dof,
     samples,
     verdict,
@@ -614,8 +692,12 @@ sar_snapshot::snap_state!(SupportWatch {
         info_b,
         info_bf,
         info_ff,
+        info_bc,
+        info_fc,
+        info_cc,
         rhs_b,
         rhs_f,
+        rhs_c,
         rr,
         rows,
         count,

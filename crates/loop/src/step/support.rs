@@ -29,15 +29,17 @@ pub const SETTLE_NS: u64 = 500_000_000;
 
 /// The poses of `sarctl support check`: the tip's offsets from where it
 /// starts, base frame, m (the rod turned up, down and to each side by
-/// 15 mm at the tip, which determines the support across it; 20 mm back
-/// along it, which changes a; then home). Run twice (longer than the
-/// default 5 s window, so that samples from before a shift weigh little).
+/// 30 mm at the tip, about 11 degrees at 0.15 m past the support, which
+/// determines the support across it even against a constant tip force;
+/// 40 mm back along it, which changes a and the friction's sign; then
+/// home). Run twice (longer than the default 5 s window, so that samples
+/// from before a shift weigh little).
 pub const SUPPORT_CHECK_OFFSETS_M: [[f64; 3]; 6] = [
-    [0.0, 0.015, 0.015],
-    [0.0, -0.015, 0.015],
-    [0.0, -0.015, -0.015],
-    [0.0, 0.015, -0.015],
-    [-0.02, 0.0, 0.0],
+    [0.0, 0.03, 0.03],
+    [0.0, -0.03, 0.03],
+    [0.0, -0.03, -0.03],
+    [0.0, 0.03, -0.03],
+    [-0.04, 0.0, 0.0],
     [0.0, 0.0, 0.0],
 ];
 
