@@ -1,36 +1,48 @@
 //! The support watch (issue 34 section 3, MODEL.md 5.1): while the tip can be
 //! taken as free, what the estimated tip force at varying poses says about
 //! the support point B, accumulated sample by sample, allocation-free and
-//! bounded (3x3 normal equations with exponential forgetting).
+//! bounded (7x7 normal equations with exponential forgetting).
 //!
 //! With the tip free the true F_tip is 0, so the estimate computed with the
 //! configured B0 is the phantom of the support's shift delta = B_true - B0:
 //! to first order `F_tip(B0) = -J delta`, J = dF_tip/dB at the sample's pose
 //! (finite differences of the estimator itself, with B0 moved by
 //! [`JACOBIAN_STEP_M`] along each base axis: the kinematics, the lever and
-//! the inertia's compensation all included). Only the components across the
-//! rod are used: along it the support's Coulomb friction reads as a tip
-//! force (MODEL.md 4.1) and no shift can be told from it. One pose determines
-//! two combinations of delta at most (a horizontal rod: the vertical phantom
-//! only, which along-the-rod and vertical shifts share); the rod's turning
-//! determines the third. A weak prior ([`PRIOR_STD_M`]) keeps the solve
-//! defined: a component the poses do not determine keeps a standard error
-//! near it and is reported as not determined (above
-//! [`SupportWatchConfig::max_std_m`]).
+//! the inertia's compensation all included). Along the rod the support's
+//! Coulomb friction reads as a tip force (MODEL.md 4.1): it is an unknown
+//! with the sign of the last slide (before the first slide the component
+//! along the rod is not used).
+//!
+//! A small contact reads as a shift would: at one pose a constant tip force
+//! and a shift give the same phantom (a horizontal rod: 0.5 N down is 6 mm
+//! along the rod; the demo's still support was named so before this fit).
+//! So a constant tip force (the contact, in {0}) is an unknown of the fit
+//! too, with `free_tip_max_n` as its prior standard deviation: the shift is
+//! what the phantom's change with the pose says, never the force's size at
+//! one pose. One pose determines no component of the shift (the verdict
+//! stays [`SupportVerdict::NotRun`]); turning the rod by about 11 degrees
+//! and sliding it (`sarctl support check`) determines all three. A weak
+//! prior ([`PRIOR_STD_M`]) keeps the solve defined: a component the poses
+//! do not determine keeps a standard error near it and is reported as not
+//! determined (above [`SupportWatchConfig::max_std_m`]).
 //!
 //! What the caller guarantees (the loop, `step/support.rs`): only samples
 //! where the tip can be taken as free (no force control, no guarded move,
 //! the guard in Ok or awaiting its first reset, the filtered tip force below
 //! [`SupportWatchConfig::free_tip_max_n`]). Whether the force was really a
-//! shift's phantom is this file's test: the chi-square of the fit per
-//! degree of freedom must stay below [`MAX_CHI2_DOF`] (a contact force does
-//! not follow the pose as a support shift does); above it the check says it
-//! could not run ([`SupportVerdict::NotFree`]).
+//! shift's phantom is this file's test, which judges the samples by more
+//! than their size: the chi-square per degree of freedom of the free tip's
+//! fit (shift and friction alone) must stay below [`MAX_CHI2_DOF`] (a
+//! contact force does not follow the poses as a support shift does), and
+//! the contact found must stay within [`CONTACT_SIGMA`] standard errors or
+//! [`MIN_CONTACT_N`]; otherwise the check says it could not run
+//! ([`SupportVerdict::NotFree`]).
 //!
 //! A shift is named ([`SupportVerdict::Shifted`], latched) when a determined
-//! component differs from the acknowledged one (the configured B, or the
-//! shift last confirmed) by more than [`SupportWatchConfig::max_shift_m`] and
-//! by more than [`NAME_SIGMA`] standard errors. Until
+//! component (of the fit with the contact) differs from the acknowledged one
+//! (the configured B, or the shift last confirmed) by more than
+//! [`SupportWatchConfig::max_shift_m`] and by more than [`NAME_SIGMA`]
+//! standard errors, for [`NAME_SAMPLES`] samples in a row. Until
 //! [`SupportWatch::confirm`], [`SupportWatch::refuses_force`] holds.
 
 use crate::motion::CarriageMotion;
@@ -550,10 +562,10 @@ impl SupportWatch {
             .copy_from(&self.info_fc.transpose());
         info.fixed_view_mut::<3, 1>(4, 3).copy_from(&self.info_fc);
         info.fixed_view_mut::<3, 3>(4, 4).copy_from(&self.info_cc);
-        info[(3, 3)] = self.info_ff;
+        info.fixed_view_mut::<1, 1>(3, 3).fill(self.info_ff);
         let mut rhs = Vec7::zeros();
         rhs.fixed_rows_mut::<3>(0).copy_from(&self.rhs_b);
-        rhs[3] = self.rhs_f;
+        rhs.fixed_rows_mut::<1>(3).fill(self.rhs_f);
         rhs.fixed_rows_mut::<3>(4).copy_from(&self.rhs_c);
         (info, rhs)
     }
@@ -606,13 +618,15 @@ impl SupportWatch {
         };
         let theta = -chol.solve(&rhs);
         let covariance = chol.inverse();
-        let std = |k: usize| ComplexField::sqrt(covariance[(k, k)].max(0.0) * scale);
+        let std = covariance
+            .diagonal()
+            .map(|v| ComplexField::sqrt(v.max(0.0) * scale));
         SupportStatus {
-            shift_m: self.center_m + Vec3::new(theta[0], theta[1], theta[2]),
-            std_m: Vec3::new(std(0), std(1), std(2)),
-            // The contact's column is +I: it enters as -(-contact).
-            contact_n: -Vec3::new(theta[4], theta[5], theta[6]),
-            contact_std_n: Vec3::new(std(4), std(5), std(6)),
+            shift_m: self.center_m + theta.fixed_rows::<3>(0).into_owned(),
+            std_m: std.fixed_rows::<3>(0).into_owned(),
+            // The contact's column is +I: theta holds minus the contact.
+            contact_n: -theta.fixed_rows::<3>(4).into_owned(),
+            contact_std_n: std.fixed_rows::<3>(4).into_owned(),
             chi2_dof,
             samples: self.count,
             ..SupportStatus::NONE
