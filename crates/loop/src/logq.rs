@@ -303,10 +303,11 @@ pub fn support_text(n: &crate::step::SupportNote) -> String {
         })
         .collect();
     let mut text = format!(
-        "{why}: {}; shift {} (limit {:.1} mm; chi2/dof {:.2}, {:.0} free samples)",
+        "{why}: {}; shift {} (limit {:.1} mm; a constant tip force {} N; chi2/dof {:.2}, {:.0} free samples)",
         s.verdict.words(),
         axes.join(", "),
         n.max_shift_m * 1e3,
+        v3_text(&s.contact_n, 2),
         s.chi2_dof,
         s.samples
     );
