@@ -436,6 +436,7 @@ impl Config {
                 period_ns: self.loop_.period_ns,
             },
             inertia_watch: keys::manipulator::inertia_watch(&self.file.manipulator),
+            support: keys::support::build(&self.file.support, self.file.tip.sample_rate_hz),
         }
     }
 }

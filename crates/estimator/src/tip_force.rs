@@ -260,6 +260,21 @@ impl TipForceEstimator {
         Ok(Self { inertia, ..self })
     }
 
+    /// The same estimator for the calibration `calibration` (another support
+    /// point: the support watch's finite differences, [`crate::support`]).
+    pub(crate) fn with_calibration(self, calibration: &Calibration) -> Self {
+        Self {
+            calibration: *calibration,
+            ..self
+        }
+    }
+
+    /// The covariance of one sample's F_A in {0}, N^2 (C = R_0s diag(std^2)
+    /// R_0s^T: the support watch's weights).
+    pub(crate) fn ujoint_covariance_n2(&self) -> Mat3 {
+        self.noise_factor * self.noise_factor.transpose()
+    }
+
     /// The rod's inertia and the adapter's mass in use.
     pub fn inertia(&self) -> &RodInertia {
         &self.inertia

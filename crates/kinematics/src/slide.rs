@@ -153,6 +153,14 @@ impl SlideTracker {
     }
 }
 
+// Snapshots (the support watch keeps a slide direction in the loop's state).
+sar_snapshot::snap_enum!(SlideSign {
+    0 => Unknown,
+    1 => Inserting,
+    2 => Retracting,
+});
+sar_snapshot::snap_struct!(SlideDirection { reference_m, sign });
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -515,6 +515,9 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
                 configured: (rod.inertia_perp_kgm2, rod.adapter_mass_kg),
             });
         }
+        if let Some(n) = decision.support_note {
+            self.log.send(LogEvent::Support(n));
+        }
         if let Some(t) = decision.estimate.transition {
             self.log.send(LogEvent::Transition(t));
             if t.to.is_halting() {

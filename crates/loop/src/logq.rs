@@ -78,6 +78,9 @@ pub enum LogEvent {
         /// The configured I_perp, kg m^2, and m_s, kg.
         configured: (f64, f64),
     },
+    /// The support watch's status (the first reset, a verdict's change, a
+    /// confirmation; issue 34).
+    Support(crate::step::SupportNote),
 }
 
 /// The bounded queue of log events the loop fills ([`channel`]).
@@ -278,6 +281,7 @@ pub fn write(event: &LogEvent) {
             g.force_n.norm(),
             g.max_force_n
         ),
+        LogEvent::Support(n) => write_support(n),
     }
 }
 
@@ -304,6 +308,54 @@ pub fn inertia_text(
         "inertia watch: in free motion the tip force follows the carriage's acceleration: {}: run `sarctl identify --dynamic` (it writes [manipulator] inertia_perp_kgm2 and [sensor] adapter_mass_kg)",
         parts.join("; ")
     )
+}
+
+/// A support note: an error when a shift is named, else information.
+fn write_support(n: &crate::step::SupportNote) {
+    let text = support_text(n);
+    if n.status.verdict == sar_estimator::support::SupportVerdict::Shifted {
+        tracing::error!(cycle = n.cycle, "{text}");
+    } else {
+        tracing::info!(cycle = n.cycle, "{text}");
+    }
+}
+
+/// A support note in words: why, the verdict, the shift per axis with its
+/// standard error (or "not determined").
+pub fn support_text(n: &crate::step::SupportNote) -> String {
+    use crate::step::SupportWhy;
+    let s = &n.status;
+    let why = match n.why {
+        SupportWhy::FirstReset => "support at the first reset (the mean at rest)",
+        SupportWhy::Verdict => "support check",
+        SupportWhy::Confirmed => "support confirmed by the operator",
+    };
+    let axes: Vec<String> = ["X0", "Y0", "Z0"]
+        .iter()
+        .zip(s.shift_m.iter().zip(s.std_m.iter()))
+        .map(|(name, (v, sd))| {
+            if *sd <= n.max_std_m {
+                format!("{name} {:+.2} +- {:.2} mm", v * 1e3, sd * 1e3)
+            } else {
+                format!("{name} not determined")
+            }
+        })
+        .collect();
+    let mut text = format!(
+        "{why}: {}; shift {} (limit {:.1} mm; a constant tip force {} N; chi2/dof {:.2}, {:.0} free samples)",
+        s.verdict.words(),
+        axes.join(", "),
+        n.max_shift_m * 1e3,
+        v3_text(&s.contact_n, 2),
+        s.chi2_dof,
+        s.samples
+    );
+    if s.verdict == sar_estimator::support::SupportVerdict::Shifted {
+        text.push_str(
+            "; force control refused until re-calibrated (sarctl identify) or confirmed (sarctl support confirm)",
+        );
+    }
+    text
 }
 
 /// A vector as `[x y z]` with `digits` decimals.

@@ -260,6 +260,13 @@ fn add_force_control(m: &mut StateMsg, decision: &LoopOutput) {
         m.guarded_stop_tip_m = arr(&g.tip_m);
         m.guarded_stop_force_n = arr(&g.force_n);
     }
+    let s = &decision.support;
+    m.support_shift_m = arr(&s.shift_m);
+    m.support_std_m = arr(&s.std_m);
+    m.support_verdict = s.verdict.code();
+    m.support_chi2_dof = s.chi2_dof;
+    m.support_samples = s.samples;
+    m.support_limits_m = [decision.support_limits_m.0, decision.support_limits_m.1];
 }
 
 /// The inertia watch's verdict (issue 34).

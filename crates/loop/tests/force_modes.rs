@@ -34,6 +34,9 @@ mod plant_range;
 mod rig;
 #[path = "force/support_shift.rs"]
 mod support_shift;
+#[path = "force/support_watch.rs"]
+mod support_watch;
+
 use rig::{Rig, TIP_M, rms};
 use sar_estimator::Vec3;
 use sar_estimator::force_control::ForceMode;

@@ -290,6 +290,24 @@ pub struct StateMsg {
     /// the adapter's mass m_s and its standard error, kg (the configured
     /// values and infinite errors before any free motion).
     pub inertia_implied: [f64; 4],
+
+    // The support watch (issue 34 section 3): the support's shift that the
+    // free-tip samples at varying poses show.
+    /// B_true - B_configured as estimated, base frame, m.
+    pub support_shift_m: [f64; 3],
+    /// Its standard error per base axis, m (a component above
+    /// `support_max_std_m` is not determined).
+    pub support_std_m: [f64; 3],
+    /// The verdict: 0 not run, 1 could not run (not a free tip), 2 within
+    /// the limit, 3 shifted beyond it (force control refused until `sarctl
+    /// support confirm`).
+    pub support_verdict: u32,
+    /// Chi-square per degree of freedom of the fit.
+    pub support_chi2_dof: f64,
+    /// Forgetting-weighted free samples behind it.
+    pub support_samples: f64,
+    /// `[support] max_shift_m` and `max_std_m`, m.
+    pub support_limits_m: [f64; 2],
 }
 
 impl Default for StateMsg {
@@ -346,6 +364,12 @@ impl Default for StateMsg {
             guard_changed_ns: 0,
             inertia_named: 0,
             inertia_implied: [0.0; 4],
+            support_shift_m: [0.0; 3],
+            support_std_m: [0.0; 3],
+            support_verdict: 0,
+            support_chi2_dof: 0.0,
+            support_samples: 0.0,
+            support_limits_m: [0.0; 2],
         }
     }
 }

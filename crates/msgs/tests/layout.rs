@@ -484,6 +484,7 @@ fn each_msg_constant_is_the_shared_code() {
         ("COMMAND_PUSH", command_kind::PUSH),
         ("COMMAND_POSITION", command_kind::POSITION),
         ("COMMAND_EXCITE", command_kind::EXCITE),
+        ("COMMAND_SUPPORT_CONFIRM", command_kind::SUPPORT_CONFIRM),
     ];
     for (key, code) in drive.into_iter().chain(commands) {
         assert_eq!(cycle.get(key), Some(&i64::from(code)), "{key}");

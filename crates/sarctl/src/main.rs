@@ -20,6 +20,7 @@
 //! - `workspace`: the reachable region (read-only).
 //! - `completions`: shell completions for bash, zsh or fish.
 //! - `record`: start or stop the daemon's recording.
+//! - `support`: the support point's shift: status, a check's pose sequence, confirm.
 //!
 //! The requests to the daemon and its state go over iceoryx2 (`sar-shm`):
 //! every one fails with a one-line reason when no daemon runs. The
@@ -97,6 +98,17 @@ enum Cmd {
     },
     /// End force control: the tip holds where it is (position control).
     Position,
+    /// The support point B (issue 34): `status` (the shift the daemon
+    /// estimates, per axis with its standard error), `check` (a short pose
+    /// sequence about the tip, the tip free, then the estimate; non-zero
+    /// exit when shifted beyond `[support] max_shift_m` or when it could
+    /// not run), `confirm` (the support is as it is: force control no longer
+    /// refused for a named shift).
+    Support {
+        /// What to do.
+        #[arg(value_enum)]
+        action: sarctl::cli::support::SupportAction,
+    },
     /// Move the tip to (X, Y, Z), base frame, m.
     MoveTip {
         /// X, m.
@@ -278,6 +290,7 @@ fn run(args: &Args) -> Result<(), String> {
             with_daemon(args, |d| request::move_tip(d, [*x, *y, *z], *max_force))
         }
         Cmd::Limits { set } => with_daemon(args, |d| cli::limits::run(d, set)),
+        Cmd::Support { action } => with_daemon(args, |d| cli::support::run(d, *action)),
     }
 }
 
@@ -349,7 +362,7 @@ mod tests {
             .join("\n");
         let cmd = <Args as clap::CommandFactory>::command();
         let names: Vec<&str> = cmd.get_subcommands().map(|c| c.get_name()).collect();
-        assert_eq!(names.len(), 18, "{names:?}");
+        assert_eq!(names.len(), 19, "{names:?}");
         for name in names {
             assert!(header.contains(&format!("//! - `{name}`: ")), "{name}");
         }

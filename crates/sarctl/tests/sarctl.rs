@@ -117,6 +117,25 @@ fn monitor_json_limits_status_and_commands_with_a_daemon() {
     let code = usize::try_from(v["drive_state"].as_u64().unwrap()).unwrap();
     assert_eq!(v["drive_state_name"], names[code], "{v}");
 
+    // The support watch (issue 34): its estimate and limits published;
+    // `support confirm` answered.
+    let out = sarctl(&prefix, &["support", "status", "--format", "json"]);
+    assert!(out.status.success(), "{}", support::text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["max_shift_m"], 0.003, "{v}");
+    assert!(v["verdict_code"].as_u64().unwrap() <= 3, "{v}");
+    assert_eq!(v["shift_m"].as_array().unwrap().len(), 3, "{v}");
+    let out = sarctl(&prefix, &["support", "status"]);
+    assert!(
+        support::text(&out.stdout).contains("(limit 3.0 mm;"),
+        "{}",
+        support::text(&out.stdout)
+    );
+    let out = sarctl(&prefix, &["support", "confirm", "--format", "json"]);
+    assert!(out.status.success(), "{}", support::text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["command"], "support confirm", "{v}");
+
     // The reachable region: the built-in travel, and from the present pose
     // the tip's range along base x/y/z moving one axis at a time.
     let out = sarctl(&prefix, &["workspace", "--format", "json"]);

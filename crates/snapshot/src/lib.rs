@@ -45,8 +45,11 @@ use nalgebra::{Matrix3, Vector3};
 pub mod fingerprint;
 pub use fingerprint::{ConfigHash, Fingerprint};
 
-/// Bytes in a snapshot at most (header and checksum included).
-pub const CAPACITY: usize = 4096;
+/// Bytes in a snapshot at most (header and checksum included). 8192 from
+/// version 6 (issue 34: the servo model's 8 streamed set points and the
+/// support watch took the loop step's snapshot to about 2.1 KB, past half
+/// of the 4096 before; a recording stores only the bytes used).
+pub const CAPACITY: usize = 8192;
 
 /// The format's version: raise it when the layout of any snapshotted type
 /// changes (a field added, removed or reordered), or the meaning of the
@@ -58,8 +61,9 @@ pub const CAPACITY: usize = 4096;
 /// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
 /// the clock of the last streamed set point (issue 33: a late cycle delays
 /// the streamed trajectory); 6: 8 streamed set points kept, not 4 (issue
-/// 34: the servo model's reference delay, `[axes] servo_delay_s`); 7: the
-/// inertia watch's window (issue 34 item 2, `sar_estimator::inertia_watch`).
+/// 34: the servo model's reference delay, `[axes] servo_delay_s`); 7 (issue
+/// 34): the inertia watch's window (`sar_estimator::inertia_watch`) and the
+/// support watch's sums, slide sign, acknowledged shift and status.
 pub const VERSION: u16 = 7;
 
 /// The first eight bytes of every snapshot.

@@ -28,6 +28,7 @@ pub mod plausibility;
 pub mod record;
 pub mod ros2;
 pub mod sensor;
+pub mod support;
 pub mod tip;
 
 /// Every section, in the file's order (the order `default_config.toml` and
@@ -45,6 +46,7 @@ pub const SECTIONS: &[SectionDecl] = &[
     record::DECL,
     force_control::DECL,
     identify::DECL,
+    support::DECL,
     ros2::DECL,
     drivers_sensor::DECL,
     drivers_axes::DECL,
@@ -79,6 +81,8 @@ pub(crate) struct FileRaw {
     force_control: force_control::Raw,
     #[serde(default)]
     identify: identify::Raw,
+    #[serde(default)]
+    support: support::Raw,
     #[serde(default)]
     ros2: ros2::Raw,
     #[serde(default)]
@@ -122,6 +126,8 @@ pub struct File {
     pub force_control: force_control::Section,
     /// `[identify]`.
     pub identify: identify::Section,
+    /// `[support]`.
+    pub support: support::Section,
     /// `[ros2]`.
     pub ros2: ros2::Section,
     /// `[drivers.sensor]`.
@@ -152,6 +158,7 @@ impl FileRaw {
             record: self.record.resolve(ctx)?,
             force_control: self.force_control.resolve(ctx)?,
             identify: self.identify.resolve(ctx)?,
+            support: self.support.resolve(ctx)?,
             ros2: self.ros2.resolve(ctx)?,
             drivers_sensor: self.drivers.sensor.resolve(ctx)?,
             drivers_axes: self.drivers.axes.resolve(ctx)?,
@@ -174,6 +181,7 @@ impl File {
         self.record.check_ranges(ctx)?;
         self.force_control.check_ranges(ctx)?;
         self.identify.check_ranges(ctx)?;
+        self.support.check_ranges(ctx)?;
         self.ros2.check_ranges(ctx)?;
         self.drivers_sensor.check_ranges(ctx)?;
         self.drivers_axes.check_ranges(ctx)

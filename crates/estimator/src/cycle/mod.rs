@@ -447,15 +447,21 @@ impl Estimator {
         self.bias
     }
 
+    /// The tip-force estimator in use (its calibration, profile, inertia;
+    /// the watches' sensitivities).
+    pub fn tip_estimator(&self) -> &TipForceEstimator {
+        &self.tip
+    }
+
+    /// The guard still waits for its first accepted reset (the tip taken
+    /// as free at rest: the first reset's mounting check).
+    pub fn awaiting_first_reset(&self) -> bool {
+        self.guard.awaiting_first_reset()
+    }
+
     /// The guard's state.
     pub fn guard_state(&self) -> GuardState {
         self.guard.state()
-    }
-
-    /// The tip-force estimator (its rod's inertia, the inertia watch's
-    /// sensitivities).
-    pub fn tip_estimator(&self) -> &TipForceEstimator {
-        &self.tip
     }
 
     /// The guard's configuration (its worst-case stop time:

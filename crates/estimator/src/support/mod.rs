@@ -35,13 +35,16 @@
 //! before it starts with [`SupportCalibration::check_capacity`]), no
 //! allocation, no panics. Files: `error` ([`SupportError`]), `model` (unknowns, model, normal equations),
 //! `solver` (scaling, factorisation, Levenberg-Marquardt), `held` (covariance,
-//! the choice of held components), `search` (the global start).
+//! the choice of held components), `search` (the global start); `watch` (the
+//! support watch: the shift of B from free-tip samples while the robot runs,
+//! issue 34).
 
 mod error;
 mod held;
 mod model;
 mod search;
 mod solver;
+mod watch;
 
 use crate::{
     Calibration, Mat3, SensorNoise, SettingError, SlideSign, StaticPose, Vec3, check_finite,
@@ -50,6 +53,11 @@ use crate::{
 use model::{Free, N_UNKNOWNS, Normal, Params, Problem};
 use nalgebra::{Cholesky, ComplexField};
 use solver::{Pass, PassEnd};
+pub use watch::{
+    FREE_AGAIN_CHI2_DOF, JACOBIAN_STEP_M, MAX_CHI2_DOF, MIN_SAMPLES, NAME_SAMPLES, NAME_SIGMA,
+    PRIOR_FRICTION_N, PRIOR_STD_M, RECENTER_M, SupportStatus, SupportVerdict, SupportWatch,
+    SupportWatchConfig,
+};
 
 pub use error::SupportError;
 

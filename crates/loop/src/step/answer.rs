@@ -96,6 +96,9 @@ pub enum ReplyDetail {
     /// An excitation refused by its parameters or limits
     /// ([`crate::excite::judge`]).
     Excitation(ExciteRefusal),
+    /// Force control refused: the support watch named a shift of the
+    /// support beyond its limit, not yet confirmed (issue 34 section 3).
+    SupportShifted(SupportShifted),
     /// A guarded move's force limit within the tip force's noise (it would
     /// stop the move on noise).
     WithinNoise {
@@ -124,6 +127,17 @@ fn drive_state_words(s: &DriveState) -> &'static str {
         DriveState::Enabled => "enabled",
         DriveState::QuickStop => "in quick stop",
         DriveState::Fault { .. } => "in fault",
+    }
+}
+
+/// [`ReplyDetail::DrivesNotEnabled`] in words.
+fn drives_not_enabled(
+    f: &mut core::fmt::Formatter<'_>,
+    state: Option<&DriveState>,
+) -> core::fmt::Result {
+    match state {
+        Some(s) => write!(f, "the drives are {}, not enabled", drive_state_words(s)),
+        None => f.write_str("the drives' state could not be read"),
     }
 }
 
@@ -203,10 +217,7 @@ impl core::fmt::Display for ReplyDetail {
                  along the rod are accepted; this one moves the tip by ({:.4}, {:.4}, {:.4}) m",
                 force_n.x, force_n.y, force_n.z, step_m.x, step_m.y, step_m.z
             ),
-            Self::DrivesNotEnabled(state) => match state {
-                Some(s) => write!(f, "the drives are {}, not enabled", drive_state_words(s)),
-                None => f.write_str("the drives' state could not be read"),
-            },
+            Self::DrivesNotEnabled(state) => drives_not_enabled(f, state.as_ref()),
             Self::AxesMoving { speed_mps } => write!(
                 f,
                 "the axes still move at {:.1} mm/s (wait until they are at rest)",
@@ -249,7 +260,33 @@ impl core::fmt::Display for ReplyDetail {
                 max_force_n,
                 noise_n,
             } => within_noise(f, *max_force_n, *noise_n),
+            Self::SupportShifted(s) => write!(f, "{s}"),
         }
+    }
+}
+
+/// A shift of the support named and not confirmed ([`ReplyDetail::SupportShifted`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupportShifted {
+    /// The shift named, base frame, m.
+    pub shift_m: Vec3,
+    /// `[support] max_shift_m`.
+    pub max_shift_m: f64,
+}
+
+impl core::fmt::Display for SupportShifted {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let s = self.shift_m * 1e3;
+        write!(
+            f,
+            "the support has shifted by ({:.1}, {:.1}, {:.1}) mm, beyond its {:.1} mm \
+             ([support] max_shift_m): the tip force is estimated about the wrong \
+             fulcrum; re-calibrate (sarctl identify) or confirm (sarctl support confirm)",
+            s.x,
+            s.y,
+            s.z,
+            self.max_shift_m * 1e3
+        )
     }
 }
 

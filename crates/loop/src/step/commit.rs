@@ -9,7 +9,7 @@
 use super::LoopStep;
 use super::answer::{Answer, ReplyDetail, ReplyStatus};
 use super::trajectory::{Trajectory, TrajectoryChange, joints_array};
-use super::vocabulary::{DriveAction, GuardedStop, LoopInput, LoopOutput};
+use super::vocabulary::{DriveAction, GuardedStop, LoopInput, LoopOutput, SupportNote};
 use crate::motion::{AxesMotion, Told};
 use sar_estimator::cycle::{CycleOutput, FollowingReference};
 use sar_estimator::motion::CarriageMotion;
@@ -54,6 +54,8 @@ pub(super) struct Decision {
     pub(super) guarded_stop: Option<GuardedStop>,
     /// The carriage's motion handed to the estimator.
     pub(super) motion: CarriageMotion,
+    /// The support's status to log in this cycle.
+    pub(super) support_note: Option<SupportNote>,
 }
 
 impl Decision {
@@ -74,6 +76,7 @@ impl Decision {
             axes_model,
             guarded_stop: None,
             motion,
+            support_note: None,
         }
     }
 
@@ -126,6 +129,12 @@ impl LoopStep {
             force_mode: self.force.mode(),
             motion: d.motion,
             inertia: self.out.inertia,
+            support: self.support.status(),
+            support_limits_m: (
+                self.support.config().max_shift_m,
+                self.support.config().max_std_m,
+            ),
+            support_note: d.support_note,
         };
         &self.out
     }

@@ -7,6 +7,7 @@ use sar_estimator::SettingError;
 use sar_estimator::filter::{FilterConfig, TipFilter};
 use sar_estimator::force_control::ForceControlConfig;
 use sar_estimator::inertia_watch::InertiaWatchConfig;
+use sar_estimator::support::SupportWatchConfig;
 use sar_hal::motion::Limits;
 
 /// Below this speed (on every axis, between two joint samples) the axes are
@@ -51,6 +52,8 @@ pub struct StepConfig {
     pub excite: ExciteLimits,
     /// The inertia watch's limits (`[manipulator] inertia_watch_*`, issue 34).
     pub inertia_watch: InertiaWatchConfig,
+    /// The support watch (`[support]`, issue 34 section 3).
+    pub support: SupportWatchConfig,
 }
 
 /// Why a [`StepConfig`] cannot be used.

@@ -8,7 +8,7 @@
 //! returned, for the commit point.
 
 use super::LoopStep;
-use super::answer::{Answer, ReplyDetail, ReplyStatus};
+use super::answer::{Answer, ReplyDetail, ReplyStatus, SupportShifted};
 use super::retreat::no_deeper_along;
 use super::trajectory::{Trajectory, TrajectoryChange};
 use super::vocabulary::LoopInput;
@@ -50,6 +50,15 @@ impl LoopStep {
             return (
                 ReplyStatus::BadArgument,
                 ReplyDetail::BadForce { force_n, max_n },
+            );
+        }
+        if let Some(s) = self.support_refuses_force() {
+            return (
+                ReplyStatus::Refused,
+                ReplyDetail::SupportShifted(SupportShifted {
+                    shift_m: s.named_m.unwrap_or(s.shift_m),
+                    max_shift_m: self.support.config().max_shift_m,
+                }),
             );
         }
         if let Err(refused) = self.ready_at_rest(input, estimate, 0.0) {

@@ -88,8 +88,9 @@
 //! guard's drive action, a held reset, the ready check), `retreat` (the warn
 //! rule and Retreat: which way a motion may go), `guarded` (guarded moves
 //! and the one brake), `moves` (a move judged and planned), `force` (force
-//! control), `excitation`, `commit` (the cycle's decision and the one commit
-//! point) and `snapshot`.
+//! control), `excitation`, `support` (the support watch's free-tip samples,
+//! issue 34), `commit` (the cycle's decision and the one commit point) and
+//! `snapshot`.
 //!
 //! The one commit point: the phases of [`LoopStep::step`] return what they
 //! decide (a `TrajectoryChange`, a reply, a drive action, a brake); the
@@ -116,18 +117,21 @@ mod moves;
 mod request;
 mod retreat;
 mod snapshot;
+mod support;
 mod trajectory;
 mod vocabulary;
 
-pub use answer::{ReplyDetail, ReplyStatus};
+pub use answer::{ReplyDetail, ReplyStatus, SupportShifted};
 pub use config::{
     GUARDED_CONTACT_SIGMA, MAX_BACK_OUT_M, RATE_LAG_FRACTION, REST_SPEED_MPS, StepConfig,
     StepConfigError,
 };
 pub use request::Request;
 pub use snapshot::SNAPSHOT_KIND_LOOP_STEP;
+pub use support::{SETTLE_NS, SUPPORT_CHECK_OFFSETS_M, SUPPORT_CHECK_ROUNDS};
 pub use vocabulary::{
-    DriveAction, GuardedStop, LoopInput, LoopOutput, Release, reason_code, recorded_reason_code,
+    DriveAction, GuardedStop, LoopInput, LoopOutput, Release, SupportNote, SupportWhy, reason_code,
+    recorded_reason_code,
 };
 
 use crate::motion::AxesMotion;
@@ -141,6 +145,7 @@ use sar_estimator::force_control::{ForceController, ForceMode};
 #[cfg(doc)]
 use sar_estimator::guard::Reason;
 use sar_estimator::inertia_watch::InertiaWatch;
+use sar_estimator::support::SupportWatch;
 use sar_hal::DriveState;
 use sar_kinematics::{ActiveJoints, Calibration, Profile};
 use trajectory::{Trajectory, TrajectoryChange};
@@ -176,6 +181,8 @@ pub struct LoopStep {
     motion: AxesMotion,
     /// The inertia watch (issue 34: I_perp and m_s against the free motion).
     inertia_watch: InertiaWatch,
+    /// The support watch (issue 34 section 3, `step/support.rs`).
+    support: SupportWatch,
     /// The clock of the last cycle, if it streamed a set point: a streamed
     /// trajectory's time runs from it (issue 33, [`LoopStep::absorb_late_cycle`]).
     last_stream_ns: Option<u64>,
@@ -198,6 +205,12 @@ impl LoopStep {
         let (calibration, profile) = (estimator.calibration, estimator.profile);
         let filter = estimator.filter;
         let estimator = Estimator::with_bias(estimator, bias)?;
+        let support = SupportWatch::new(
+            config.support,
+            &calibration,
+            &profile,
+            estimator.tip_estimator(),
+        )?;
         let (guarded_lag_s, sample_period_s) = guarded_filter(filter)?;
         let watch_period_s = if sample_period_s > 0.0 {
             sample_period_s
@@ -227,6 +240,7 @@ impl LoopStep {
             force: ForceController::new(config.force_control)?,
             motion: AxesMotion::default(),
             inertia_watch,
+            support,
             last_stream_ns: None,
             out,
             snapshot_fingerprint: 0,
@@ -271,10 +285,12 @@ impl LoopStep {
             host_fault,
             motion,
         };
+        let awaiting = self.estimator.awaiting_first_reset();
         let estimate = *self.estimator.cycle(&cycle_input, &context);
         let inertia = self.watch_inertia(&estimate, found.as_ref(), &motion);
         // Decide, then commit once.
         let mut d = Decision::new(found, motion, axes_model);
+        d.support_note = self.observe_support(input, &estimate, &motion, awaiting);
         if let Some(h) = held {
             d.reply = Some(self.held_reply(h, input));
         }
@@ -315,6 +331,9 @@ impl LoopStep {
             d.change(answered.change);
             d.planned |= answered.started == Started::Move;
             d.accepted_motion = answered.started != Started::Nothing;
+            if answered.note.is_some() {
+                d.support_note = answered.note;
+            }
         }
         if self.force.mode().is_some() && !estimate.guard_state.is_halting() {
             let change = self.force_period(input, estimate, d.decided.as_ref());
@@ -349,6 +368,14 @@ impl LoopStep {
             Some(Request::Push { axial_n }) => {
                 let answer = self.start_force(input, estimate, ForceMode::Push { axial_n });
                 return Some(Answered::only(answer));
+            }
+            Some(Request::SupportConfirm) => {
+                self.support.confirm();
+                let cycle = estimate.cycle;
+                return Some(Answered {
+                    note: Some(self.support_note(cycle, SupportWhy::Confirmed)),
+                    ..Answered::only((ReplyStatus::Accepted, ReplyDetail::None))
+                });
             }
             Some(Request::Position) => {
                 let change = self.end_force(input.now_ns, trajectory);
@@ -425,6 +452,8 @@ struct Answered {
     answer: Answer,
     change: TrajectoryChange,
     started: Started,
+    /// The support's status to log (a confirmation).
+    note: Option<SupportNote>,
 }
 
 impl Answered {
@@ -434,6 +463,7 @@ impl Answered {
             answer,
             change: TrajectoryChange::Keep,
             started: Started::Nothing,
+            note: None,
         }
     }
 
@@ -444,6 +474,7 @@ impl Answered {
                 answer: (ReplyStatus::Accepted, ReplyDetail::None),
                 change: TrajectoryChange::Replace(t),
                 started,
+                note: None,
             },
             Err(refused) => Self::only(refused),
         }

@@ -37,6 +37,7 @@ sar_snapshot::config_struct!(StepConfig {
     motion,
     excite,
     inertia_watch,
+    support,
 });
 sar_snapshot::snap_state!(LoopStep {
     state: [
@@ -50,7 +51,7 @@ sar_snapshot::snap_state!(LoopStep {
         motion,
         last_stream_ns,
     ],
-    nested: [estimator, force, inertia_watch],
+    nested: [estimator, force, inertia_watch, support],
     config: [calibration, profile, config, guarded_lag_s, sample_period_s],
     output: [out],
     derived: [snapshot_fingerprint],

@@ -12,6 +12,7 @@ use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::{ForceLimits, Reason};
 use sar_estimator::inertia_watch::InertiaVerdict;
 use sar_estimator::motion::CarriageMotion;
+use sar_estimator::support::SupportStatus;
 use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
 
@@ -80,7 +81,8 @@ impl LoopInput {
                     | Request::Hold { .. }
                     | Request::Push { .. }
                     | Request::Position
-                    | Request::Excite(_),
+                    | Request::Excite(_)
+                    | Request::SupportConfirm,
                 )
                 | None => None,
             },
@@ -148,6 +150,14 @@ pub struct LoopOutput {
     /// The inertia watch's verdict after this cycle (issue 34: I_perp and
     /// the adapter's mass as the free motion implies them, what is named).
     pub inertia: InertiaVerdict,
+    /// The support watch's status after this cycle (issue 34 section 3).
+    pub support: SupportStatus,
+    /// `[support] max_shift_m` and `max_std_m`, m ((0, 0) before the first
+    /// cycle).
+    pub support_limits_m: (f64, f64),
+    /// The support's status to log in this cycle (the first reset, a
+    /// verdict's change, a confirmation).
+    pub support_note: Option<SupportNote>,
 }
 
 impl LoopOutput {
@@ -164,6 +174,35 @@ impl LoopOutput {
             force_mode: None,
             motion: CarriageMotion::REST,
             inertia,
+            support: SupportStatus::NONE,
+            support_limits_m: (0.0, 0.0),
+            support_note: None,
         }
     }
+}
+
+/// Why the controller logs the support's status in a cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SupportWhy {
+    /// The first reset was accepted: what the mean at rest said.
+    FirstReset,
+    /// The verdict changed (a shift named, the check could not run, ...).
+    Verdict,
+    /// The operator confirmed the support as it is.
+    Confirmed,
+}
+
+/// A support status the controller logs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupportNote {
+    /// The cycle.
+    pub cycle: u64,
+    /// Why.
+    pub why: SupportWhy,
+    /// The status then.
+    pub status: SupportStatus,
+    /// The limit, m (`[support] max_shift_m`).
+    pub max_shift_m: f64,
+    /// A component with a larger standard error is not determined, m.
+    pub max_std_m: f64,
 }

@@ -56,6 +56,7 @@ fn request() -> impl Strategy<Value = Request> {
                     fade_s,
                 })
             }),
+        Just(Request::SupportConfirm),
     ]
 }
 
@@ -73,6 +74,7 @@ fn variant_name(r: &Request) -> &'static str {
         Request::Push { .. } => "Push",
         Request::Position => "Position",
         Request::Excite(_) => "Excite",
+        Request::SupportConfirm => "SupportConfirm",
     }
 }
 
@@ -112,7 +114,7 @@ fn every_request_round_trips_through_the_wire_and_the_recording() {
         prop_assert_eq!(replayed.cycle, with.cycle);
     });
     let seen = seen.into_inner();
-    assert_eq!(seen.len(), 10, "every variant generated: {seen:?}");
+    assert_eq!(seen.len(), 11, "every variant generated: {seen:?}");
 }
 
 #[test]
@@ -158,7 +160,7 @@ fn the_table_has_distinct_codes_help_and_unit_named_arguments() {
         }
     }
     // Every request is a row; the daemon's commands too.
-    assert_eq!(COMMANDS.len(), 10 + 3);
+    assert_eq!(COMMANDS.len(), 11 + 3);
     for d in [
         DaemonCommand::Limits,
         DaemonCommand::RecordStart,

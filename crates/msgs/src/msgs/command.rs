@@ -819,6 +819,14 @@ commands! {
                 excite.duration_s, excite.fade_s, excite.amplitude_m, excite.freq_hz
             );
             help "the dynamic identification's excitation about where the axes rest";
+
+        /// The operator confirms the support as it is now (issue 34: a named
+        /// shift of the support acknowledged; `sarctl support confirm`).
+        SupportConfirm {}
+            wire SUPPORT_CONFIRM = 17;
+            recorded (SupportConfirm = 17);
+            log("support confirmed as it is");
+            help "confirm the support as it is now (a named shift acknowledged)";
     }
     daemon {
         /// Read the guard's limits (answered without the loop; not

@@ -17,6 +17,7 @@ pub mod request;
 pub mod reset;
 pub mod retreat;
 pub mod status;
+pub mod support;
 pub mod workspace;
 
 /// A write to stdout failed. A reader that went away (`sarctl monitor | head`)
