@@ -267,11 +267,7 @@ pub fn write(event: &LogEvent) {
             cycle,
             "cycle overran its period by {late_ns} ns: {skipped} periods skipped"
         ),
-        LogEvent::InertiaNamed {
-            cycle,
-            verdict,
-            configured,
-        } => tracing::warn!(cycle, "{}", inertia_text(verdict, *configured)),
+        LogEvent::InertiaNamed { .. } => write_inertia(event),
         LogEvent::GuardedStop(g) => tracing::info!(
             cycle = g.cycle,
             "guarded move braked at tip ({:.4}, {:.4}, {:.4}) m: |F_tip| {:.2} N reached its {} N",
@@ -282,6 +278,18 @@ pub fn write(event: &LogEvent) {
             g.max_force_n
         ),
         LogEvent::Support(n) => write_support(n),
+    }
+}
+
+/// Writes [`LogEvent::InertiaNamed`] (a warning).
+fn write_inertia(event: &LogEvent) {
+    if let LogEvent::InertiaNamed {
+        cycle,
+        verdict,
+        configured,
+    } = event
+    {
+        tracing::warn!(cycle, "{}", inertia_text(verdict, *configured));
     }
 }
 

@@ -932,7 +932,7 @@ mod tests {
         fmt::write(&mut text, format_args!("{e}")).unwrap();
         assert_eq!(
             text.as_str(),
-            "snapshot format version 1; this build reads version 6"
+            "snapshot format version 1; this build reads version 7"
         );
     }
 

@@ -26,7 +26,8 @@ impl LoopStep {
         trajectory: Option<&Trajectory>,
         motion: &CarriageMotion,
     ) -> InertiaVerdict {
-        let plain_move = trajectory.is_some_and(|t| t.max_force_n.is_none() && !t.streamed);
+        let plain_move = trajectory
+            .is_some_and(|t| t.max_force_n.is_none() && (!t.streamed || t.excite.is_some()));
         let free = estimate.new_sample
             && estimate.guard_state == GuardState::Ok
             && self.force.mode().is_none()

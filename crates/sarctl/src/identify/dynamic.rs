@@ -482,17 +482,7 @@ pub fn identify_series(
     let (smoothed, period_s) =
         smooth::smooth(&series.joints, &options.smoother).map_err(DynamicError::Smoothing)?;
     let latency_ns = (options.sensor_latency_s * 1e9).round() as u64;
-    let tare = Vec3::from(options.tare_n);
-    let mut id = DynamicIdentification::new(
-        cal,
-        &est.noise,
-        tare,
-        options.adapter_mass_kg,
-        options.friction,
-    )?;
-    if options.estimate_adapter {
-        id = id.estimating_adapter();
-    }
+    let mut id = new_fit(config, options)?;
     let mut used: Vec<MotionSample> = Vec::new();
     let mut stamps: Vec<u64> = Vec::new();
     let mut hint = 0;
@@ -539,6 +529,27 @@ pub fn identify_series(
         joints_period_s: period_s,
         method: method(options, used.len()),
         points,
+    })
+}
+
+/// The empty fit of `options`: the tare, the adapter held or estimated,
+/// the friction or not.
+fn new_fit(
+    config: &Config,
+    options: &DynamicOptions,
+) -> Result<DynamicIdentification, DynamicError> {
+    let est = &config.estimator;
+    let id = DynamicIdentification::new(
+        &est.calibration,
+        &est.noise,
+        Vec3::from(options.tare_n),
+        options.adapter_mass_kg,
+        options.friction,
+    )?;
+    Ok(if options.estimate_adapter {
+        id.estimating_adapter()
+    } else {
+        id
     })
 }
 
