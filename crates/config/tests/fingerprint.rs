@@ -39,7 +39,7 @@ fn the_default_configuration_has_its_pinned_fingerprint() {
     let mut snap = sar_snapshot::Snapshot::new();
     step.snapshot(&mut snap).unwrap();
     assert_eq!(snap.fingerprint(), got);
-    assert_eq!(sar_snapshot::VERSION, 6);
+    assert_eq!(sar_snapshot::VERSION, 7);
 }
 
 #[test]

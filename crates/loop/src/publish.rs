@@ -83,6 +83,7 @@ pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
     m.limits_n = p.decision.limits.to_array();
     add_stats(&mut m, p);
     add_force_control(&mut m, p.decision);
+    add_servo_fit(&mut m, p.decision);
     if let Some(t) = p.truth {
         add_truth(&mut m, &t);
     }
@@ -259,6 +260,23 @@ fn add_force_control(m: &mut StateMsg, decision: &LoopOutput) {
         m.guarded_stop_tip_m = arr(&g.tip_m);
         m.guarded_stop_force_n = arr(&g.force_n);
     }
+}
+
+/// How far the axes follow the servo model (issue 34).
+fn add_servo_fit(m: &mut StateMsg, decision: &LoopOutput) {
+    let fit = &decision.servo_fit;
+    m.servo_follow_rms_m = fit.follow_rms_per_axis_m();
+    m.servo_disturbance_mps2 = fit.disturbance_mps2;
+    let mut bits = 0;
+    if fit.named {
+        bits |= sar_msgs::wire::servo_fit::NAMED;
+    }
+    for (i, engaged) in fit.engaged.iter().enumerate() {
+        if *engaged {
+            bits |= sar_msgs::wire::servo_fit::ENGAGED_Q1 << i;
+        }
+    }
+    m.servo_fit = bits;
 }
 
 /// The reply as published, with the guard's limits.

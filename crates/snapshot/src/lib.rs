@@ -58,8 +58,11 @@ pub const CAPACITY: usize = 4096;
 /// the axes' motion (issue 26: the servo model, the drives' quick stop); 5:
 /// the clock of the last streamed set point (issue 33: a late cycle delays
 /// the streamed trajectory); 6: 8 streamed set points kept, not 4 (issue
-/// 34: the servo model's reference delay, `[axes] servo_delay_s`).
-pub const VERSION: u16 = 6;
+/// 34: the servo model's reference delay, `[axes] servo_delay_s`); 7: the
+/// servo observer (issue 34: each axis's filter, the encoders' samples
+/// pending, the fit): an older snapshot is refused by its version, never
+/// restored with the observer guessed.
+pub const VERSION: u16 = 7;
 
 /// The first eight bytes of every snapshot.
 pub const MAGIC: [u8; 8] = *b"SARSNAP\0";
@@ -927,7 +930,7 @@ mod tests {
         fmt::write(&mut text, format_args!("{e}")).unwrap();
         assert_eq!(
             text.as_str(),
-            "snapshot format version 1; this build reads version 6"
+            "snapshot format version 1; this build reads version 7"
         );
     }
 

@@ -11,6 +11,7 @@ use sar_estimator::cycle::{
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::{ForceLimits, Reason};
 use sar_estimator::motion::CarriageMotion;
+use crate::observer::ServoFit;
 use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
 
@@ -144,6 +145,14 @@ pub struct LoopOutput {
     /// The carriage's motion handed to the estimator in this cycle
     /// ([`crate::motion`]).
     pub motion: CarriageMotion,
+    /// How far the axes follow the servo model, the servo observer's
+    /// state and whether the mismatch is named ([`crate::observer`]).
+    pub servo_fit: ServoFit,
+    /// One encoder count, m (the fit's unit; 0 before the first cycle).
+    pub encoder_count_m: f64,
+    /// The servo mismatch was named in this cycle (the controller logs it
+    /// once).
+    pub servo_named_now: bool,
 }
 
 impl LoopOutput {
@@ -159,6 +168,9 @@ impl LoopOutput {
             guarded_stop: None,
             force_mode: None,
             motion: CarriageMotion::REST,
+            servo_fit: ServoFit::default(),
+            encoder_count_m: 0.0,
+            servo_named_now: false,
         }
     }
 }
