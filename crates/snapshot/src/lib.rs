@@ -45,8 +45,10 @@ use nalgebra::{Matrix3, Vector3};
 pub mod fingerprint;
 pub use fingerprint::{ConfigHash, Fingerprint};
 
-/// Bytes in a snapshot at most (header and checksum included).
-pub const CAPACITY: usize = 4096;
+/// Bytes in a snapshot at most (header and checksum included): 8192
+/// since version 7 (the servo observer's filters, pending encoder samples
+/// and fit took the loop step's past half of 4096).
+pub const CAPACITY: usize = 8192;
 
 /// The format's version: raise it when the layout of any snapshotted type
 /// changes (a field added, removed or reordered), or the meaning of the
