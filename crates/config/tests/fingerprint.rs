@@ -11,7 +11,7 @@ use sar_estimator::cycle::Bias;
 use sar_loop::step::LoopStep;
 
 /// The fingerprint of the built-in configuration's loop step.
-const DEFAULT_FINGERPRINT: u64 = 0x8006_8b22_7632_3fa6;
+const DEFAULT_FINGERPRINT: u64 = 0x5537_723d_0949_5484;
 
 fn step_of(cfg: &sar_config::Config, bias: Bias) -> LoopStep {
     LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap()

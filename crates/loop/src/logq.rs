@@ -283,7 +283,11 @@ pub fn write(event: &LogEvent) {
             follow_rms_m,
             disturbance_mps2,
             count_m,
-        } => tracing::warn!(cycle, "{}", servo_mismatch_text(follow_rms_m, disturbance_mps2, *count_m)),
+        } => tracing::warn!(
+            cycle,
+            "{}",
+            servo_mismatch_text(follow_rms_m, disturbance_mps2, *count_m)
+        ),
     }
 }
 

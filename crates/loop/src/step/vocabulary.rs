@@ -4,6 +4,7 @@
 
 use super::answer::{ReplyDetail, ReplyStatus};
 use super::request::Request;
+use crate::observer::ServoFit;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     Command, CycleInput, CycleOutput, Estimator, JointSample, SensorSample,
@@ -11,7 +12,6 @@ use sar_estimator::cycle::{
 use sar_estimator::force_control::ForceMode;
 use sar_estimator::guard::{ForceLimits, Reason};
 use sar_estimator::motion::CarriageMotion;
-use crate::observer::ServoFit;
 use sar_hal::DriveState;
 use sar_kinematics::ActiveJoints;
 

@@ -282,7 +282,11 @@ fn plants_that_are_not_the_model_show_their_phantom() {
     assert!(matched_rms <= 0.012, "{matched_rms}");
     assert!(matched_peak <= 0.05, "{matched_peak}");
     assert!(matched_share >= 0.99, "{matched_share}");
-    assert_eq!((named_quiet, named_noisy), (None, None), "the matched plant named");
+    assert_eq!(
+        (named_quiet, named_noisy),
+        (None, None),
+        "the matched plant named"
+    );
     for (m, (rms_n, ..)) in MISMATCHES.iter().zip(&rows).skip(1) {
         assert!(
             *rms_n > matched_rms,
