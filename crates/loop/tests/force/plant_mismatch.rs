@@ -226,6 +226,16 @@ fn free_moves(mut rig: Rig) -> Figures {
             cycles += 1;
             if out.servo_fit.named && named_after_s.is_none() {
                 named_after_s = Some(cycles as f64 * 1e-3);
+                // Named once, in the cycle it happens: what the log says.
+                assert!(out.servo_named_now);
+                let text = sar_loop::logq::servo_mismatch_text(
+                    &out.servo_fit.follow_rms_per_axis_m(),
+                    &out.servo_fit.disturbance_mps2,
+                    out.encoder_count_m,
+                );
+                assert!(text.contains("run `sarctl identify --servo`"), "{text}");
+            } else {
+                assert!(!out.servo_named_now);
             }
             if !out.estimate.new_sample {
                 continue;
