@@ -378,14 +378,16 @@ type Axes = [ServoAxis; 3];
 impl AxesMotion {
     /// The servo model advanced along `plans` to `t_ns` and evaluated
     /// there, its observer corrected by the encoders' samples it passes:
-    /// the model's motion, on an engaged axis the observer's, and the
-    /// observer's acceleration variance over the engaged axes (`None`
+    /// the model's motion, on an engaged axis the observer's (its
+    /// correction bounded by `max_d_mps2`; `None`: the model's alone), and
+    /// the observer's acceleration variance over the engaged axes (`None`
     /// without a model: the plans themselves).
     fn follow(
         &mut self,
         cfg: &MotionConfig,
         plans: &[AxisPlan; 3],
         t_ns: u64,
+        max_d_mps2: Option<f64>,
     ) -> (Axes, Option<f64>) {
         let wn = cfg.servo_wn_rad_s();
         if wn <= 0.0 {
@@ -430,10 +432,23 @@ impl AxesMotion {
         let dt_ns = t_ns - model.t_ns;
         let mut var = None;
         let mut out = model.axes.map(|a| a.after(dt_ns));
+        let Some(max_d) = max_d_mps2 else {
+            return (out, None);
+        };
         let each = out.iter_mut().zip(&model.filters).zip(self.fit.engaged);
         for ((o, f), _) in each.filter(|(_, engaged)| *engaged) {
-            *o = f.axis(o.a_mps2).after(dt_ns);
-            let lag = DISTURBANCE_STD_FRACTION * f.d_mps2;
+            // The correction bounded by the planned acceleration: two
+            // servos on one plan differ by no more; an encoder that lies
+            // (frozen, jumping) moves the estimate by no more either (the
+            // following check names it, SAFETY.md D3).
+            let d = f.d_mps2.clamp(-max_d, max_d);
+            let observed = ServoAxis {
+                x_m: f.x_m,
+                v_mps: f.v_mps,
+                a_mps2: o.a_mps2 + d,
+            };
+            *o = observed.after(dt_ns);
+            let lag = DISTURBANCE_STD_FRACTION * d;
             var = Some(var.unwrap_or(0.0f64).max(f.accel_var() + lag * lag));
         }
         (out, var)
@@ -492,7 +507,9 @@ impl AxesMotion {
                     (h.ramps.map(|p| ServoAxis::on(&p, stamp_ns)), None)
                 }
             }
-            (None, Some(plans), Some(DriveState::Enabled)) => self.follow(cfg, plans, stamp_ns),
+            (None, Some(plans), Some(DriveState::Enabled)) => {
+                self.follow(cfg, plans, stamp_ns, Some(planned_accel_mps2))
+            }
             _ => {
                 self.servo = None;
                 let std = if at_rest {
@@ -530,7 +547,9 @@ impl AxesMotion {
             // Ideal drives on streamed set points (an excitation's plans
             // hold its centre): where the set points put them.
             (Some(_), Some(axes)) => axes,
-            (Some(plans), None) => self.follow(cfg, plans, now_ns).0,
+            // The model's state (the observer's is the estimate's, not the
+            // brake's reference).
+            (Some(plans), None) => self.follow(cfg, plans, now_ns, None).0,
             (None, _) => {
                 [ServoAxis {
                     x_m: 0.0,
