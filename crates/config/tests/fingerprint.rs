@@ -11,7 +11,7 @@ use sar_estimator::cycle::Bias;
 use sar_loop::step::LoopStep;
 
 /// The fingerprint of the built-in configuration's loop step.
-const DEFAULT_FINGERPRINT: u64 = 0x8bbd_72fe_94b0_c853;
+const DEFAULT_FINGERPRINT: u64 = 0x6506_bae4_6af4_6761;
 
 fn step_of(cfg: &sar_config::Config, bias: Bias) -> LoopStep {
     LoopStep::new(&cfg.estimator, bias, cfg.step_config()).unwrap()

@@ -518,6 +518,15 @@ impl<S: ForceSensor, D: AxisDrives> Controller<S, D> {
         if let Some(n) = decision.support_note {
             self.log.send(LogEvent::Support(n));
         }
+        if decision.servo_named_now {
+            let fit = &decision.servo_fit;
+            self.log.send(LogEvent::ServoMismatch {
+                cycle,
+                follow_rms_m: fit.follow_rms_per_axis_m(),
+                disturbance_mps2: fit.disturbance_mps2,
+                count_m: decision.encoder_count_m,
+            });
+        }
         if let Some(t) = decision.estimate.transition {
             self.log.send(LogEvent::Transition(t));
             if t.to.is_halting() {

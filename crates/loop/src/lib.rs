@@ -11,6 +11,8 @@
 //! - [`logq`]: the bounded queue of log events the loop hands off.
 //! - [`motion`]: the carriage's commanded motion handed to the estimator
 //!   (the trajectory through a model of the drives' servo; their quick stop).
+//! - [`observer`]: the servo observer: the model of the drives corrected
+//!   by the encoders (a Kalman filter per axis), how far they follow it.
 //! - [`stats`]: the loop's timing statistics.
 //! - [`notify`]: the guard's transitions as operator notifications.
 //! - [`rt`]: real-time setup (SCHED_FIFO, mlockall), the monotonic clock,
@@ -27,6 +29,7 @@ pub mod excite;
 pub mod logq;
 pub mod motion;
 pub mod notify;
+pub mod observer;
 pub mod publish;
 pub mod reply;
 pub mod rt;

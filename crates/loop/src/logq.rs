@@ -81,6 +81,20 @@ pub enum LogEvent {
     /// The support watch's status (the first reset, a verdict's change, a
     /// confirmation; issue 34).
     Support(crate::step::SupportNote),
+    /// The drives do not follow the servo model (issue 34): named once
+    /// until they are released.
+    ServoMismatch {
+        /// The cycle.
+        cycle: u64,
+        /// The encoders less the model's position, RMS per axis (q1, q2,
+        /// q3) over the fit's window of motion, m.
+        follow_rms_m: [f64; 3],
+        /// The acceleration the observer adds to the model's, per axis,
+        /// m/s^2.
+        disturbance_mps2: [f64; 3],
+        /// One encoder count, m.
+        count_m: f64,
+    },
 }
 
 /// The bounded queue of log events the loop fills ([`channel`]).
@@ -278,7 +292,33 @@ pub fn write(event: &LogEvent) {
             g.max_force_n
         ),
         LogEvent::Support(n) => write_support(n),
+        LogEvent::ServoMismatch {
+            cycle,
+            follow_rms_m,
+            disturbance_mps2,
+            count_m,
+        } => tracing::warn!(
+            cycle,
+            "{}",
+            servo_mismatch_text(follow_rms_m, disturbance_mps2, *count_m)
+        ),
     }
+}
+
+/// The servo mismatch in words: how far the axes follow the model, what
+/// the observer absorbs, the advice.
+pub fn servo_mismatch_text(
+    follow_rms_m: &[f64; 3],
+    disturbance_mps2: &[f64; 3],
+    count_m: f64,
+) -> String {
+    let [a, b, c] = follow_rms_m.map(|m| m * 1e3);
+    let [d1, d2, d3] = *disturbance_mps2;
+    format!(
+        "the drives do not follow the servo model ([axes] servo_*): encoders less the model, RMS over the last {} s of motion q1 {a:.3} mm, q2 {b:.3} mm, q3 {c:.3} mm (named beyond {:.4} mm); the servo observer absorbs it (model acceleration corrected by [{d1:.3} {d2:.3} {d3:.3}] m/s^2, its standard deviation in the guard's margin); run `sarctl identify --servo`",
+        crate::observer::FIT_WINDOW_S,
+        crate::observer::FIT_NAME_COUNTS * count_m * 1e3
+    )
 }
 
 /// Writes [`LogEvent::InertiaNamed`] (a warning).

@@ -84,6 +84,7 @@ pub fn state_msg(p: &StateParts<'_>) -> StateMsg {
     add_stats(&mut m, p);
     add_force_control(&mut m, p.decision);
     add_inertia(&mut m, p.decision);
+    add_servo_fit(&mut m, p.decision);
     if let Some(t) = p.truth {
         add_truth(&mut m, &t);
     }
@@ -279,6 +280,23 @@ fn add_inertia(m: &mut StateMsg, decision: &LoopOutput) {
         v.adapter_mass_kg,
         v.adapter_mass_std_kg,
     ];
+}
+
+/// How far the axes follow the servo model (issue 34).
+fn add_servo_fit(m: &mut StateMsg, decision: &LoopOutput) {
+    let fit = &decision.servo_fit;
+    m.servo_follow_rms_m = fit.follow_rms_per_axis_m();
+    m.servo_disturbance_mps2 = fit.disturbance_mps2;
+    let mut bits = 0;
+    if fit.named {
+        bits |= sar_msgs::wire::servo_fit::NAMED;
+    }
+    for (i, engaged) in fit.engaged.iter().enumerate() {
+        if *engaged {
+            bits |= sar_msgs::wire::servo_fit::ENGAGED_Q1 << i;
+        }
+    }
+    m.servo_fit = bits;
 }
 
 /// The reply as published, with the guard's limits.

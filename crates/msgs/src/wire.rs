@@ -308,6 +308,27 @@ pub struct StateMsg {
     pub support_samples: f64,
     /// `[support] max_shift_m` and `max_std_m`, m.
     pub support_limits_m: [f64; 2],
+
+    // The servo observer (issue 34 section 1): how far the axes follow the
+    // loop's servo model.
+    /// The encoders less the model's position, RMS per axis (q1, q2, q3)
+    /// over the last `sar_loop::observer::FIT_WINDOW_S` of motion, m.
+    pub servo_follow_rms_m: [f64; 3],
+    /// The acceleration the observer adds to the model's, per axis, m/s^2.
+    pub servo_disturbance_mps2: [f64; 3],
+    /// [`servo_fit`] bits: named (the drives do not follow the model: run
+    /// `sarctl identify --servo`), and the axes the observer is engaged on.
+    pub servo_fit: u32,
+}
+
+/// The bits of [`StateMsg::servo_fit`].
+pub mod servo_fit {
+    /// The servo mismatch is named: the drives do not follow the loop's
+    /// servo model (run `sarctl identify --servo`).
+    pub const NAMED: u32 = 1;
+    /// The observer's motion is handed on for q1 (the encoder left the
+    /// model); `ENGAGED_Q1 << 1` for q2, `<< 2` for q3.
+    pub const ENGAGED_Q1: u32 = 2;
 }
 
 impl Default for StateMsg {
@@ -370,6 +391,9 @@ impl Default for StateMsg {
             support_chi2_dof: 0.0,
             support_samples: 0.0,
             support_limits_m: [0.0; 2],
+            servo_follow_rms_m: [0.0; 3],
+            servo_disturbance_mps2: [0.0; 3],
+            servo_fit: 0,
         }
     }
 }

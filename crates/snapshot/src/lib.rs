@@ -45,10 +45,11 @@ use nalgebra::{Matrix3, Vector3};
 pub mod fingerprint;
 pub use fingerprint::{ConfigHash, Fingerprint};
 
-/// Bytes in a snapshot at most (header and checksum included). 8192 from
-/// version 6 (issue 34: the servo model's 8 streamed set points and the
-/// support watch took the loop step's snapshot to about 2.1 KB, past half
-/// of the 4096 before; a recording stores only the bytes used).
+/// Bytes in a snapshot at most (header and checksum included): 8192
+/// since version 7 (issue 34: the servo model's 8 streamed set points,
+/// the servo observer's filters and the inertia and support watches took
+/// the loop step's snapshot past half of 4096; a recording stores only
+/// the bytes used).
 pub const CAPACITY: usize = 8192;
 
 /// The format's version: raise it when the layout of any snapshotted type
@@ -62,8 +63,11 @@ pub const CAPACITY: usize = 8192;
 /// the clock of the last streamed set point (issue 33: a late cycle delays
 /// the streamed trajectory); 6: 8 streamed set points kept, not 4 (issue
 /// 34: the servo model's reference delay, `[axes] servo_delay_s`); 7 (issue
-/// 34): the inertia watch's window (`sar_estimator::inertia_watch`) and the
-/// support watch's sums, slide sign, acknowledged shift and status.
+/// 34): the servo observer (each axis's filter, the encoders' samples
+/// pending, the fit), the inertia watch's window
+/// (`sar_estimator::inertia_watch`) and the support watch's sums, slide
+/// sign, acknowledged shift and status: an older snapshot is refused by
+/// its version, never restored with these guessed.
 pub const VERSION: u16 = 7;
 
 /// The first eight bytes of every snapshot.

@@ -5,7 +5,10 @@
 use crate::AxesConfig;
 use crate::decl::{each, num};
 use crate::keys::{File, ns};
-use crate::scenario::{DEFAULT_SERVO_BANDWIDTH_HZ, DEFAULT_SERVO_DAMPING, DEFAULT_TRAVEL_M};
+use crate::scenario::{
+    DEFAULT_COUNTS_PER_TURN, DEFAULT_LEAD_M_PER_TURN, DEFAULT_SERVO_BANDWIDTH_HZ,
+    DEFAULT_SERVO_DAMPING, DEFAULT_TRAVEL_M,
+};
 use sar_loop::motion::{MAX_SERVO_BANDWIDTH_HZ, MAX_SERVO_DELAY_NS, MotionConfig};
 
 crate::section! {
@@ -68,5 +71,18 @@ fn motion(f: &File) -> MotionConfig {
         quick_stop_decel_mps2,
         brake_decel_mps2: f.axes.brake_decel_mps2.unwrap_or(quick_stop_decel_mps2),
         sensor_latency_ns: ns(f.tip.sensor_latency_s),
+        encoder_count_m: encoder_count_m(f),
+    }
+}
+
+/// One encoder count, m: `[drivers.axes] lead_m / counts_per_turn` for
+/// CANopen drives, the simulator's default axes' count for the simulated
+/// ones (`crate::scenario::DEFAULT_LEAD_M_PER_TURN` /
+/// `DEFAULT_COUNTS_PER_TURN`).
+fn encoder_count_m(f: &File) -> f64 {
+    let a = &f.drivers_axes;
+    match (a.lead_m, a.counts_per_turn) {
+        (Some(lead_m), Some(counts)) if counts > 0 => lead_m / counts as f64,
+        _ => DEFAULT_LEAD_M_PER_TURN / f64::from(DEFAULT_COUNTS_PER_TURN),
     }
 }

@@ -105,6 +105,7 @@ impl LoopStep {
             d.reply = Some((ReplyStatus::NotCarriedOut, ReplyDetail::NotCarriedOut));
         }
         self.trajectory = d.decided;
+        let was_named = self.motion.fit.named;
         self.commit_axes(input, &d);
         self.last_drive_state = input.drive_state;
         if d.guarded_stop.is_some() {
@@ -135,6 +136,9 @@ impl LoopStep {
                 self.support.config().max_std_m,
             ),
             support_note: d.support_note,
+            servo_fit: self.motion.fit,
+            encoder_count_m: self.config.motion.encoder_count_m,
+            servo_named_now: self.motion.fit.named && !was_named,
         };
         &self.out
     }

@@ -57,6 +57,7 @@ impl LoopStep {
         if let Some(m) = self.excitation_motion(input, trajectory) {
             return (m, axes);
         }
+        axes.measured(&input.joints);
         let motion = axes.motion(
             &self.config.motion,
             self.config.axis_limits.max_accel_mps2,

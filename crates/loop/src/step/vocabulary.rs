@@ -4,6 +4,7 @@
 
 use super::answer::{ReplyDetail, ReplyStatus};
 use super::request::Request;
+use crate::observer::ServoFit;
 use sar_estimator::Vec3;
 use sar_estimator::cycle::{
     Command, CycleInput, CycleOutput, Estimator, JointSample, SensorSample,
@@ -158,6 +159,14 @@ pub struct LoopOutput {
     /// The support's status to log in this cycle (the first reset, a
     /// verdict's change, a confirmation).
     pub support_note: Option<SupportNote>,
+    /// How far the axes follow the servo model, the servo observer's
+    /// state and whether the mismatch is named ([`crate::observer`]).
+    pub servo_fit: ServoFit,
+    /// One encoder count, m (the fit's unit; 0 before the first cycle).
+    pub encoder_count_m: f64,
+    /// The servo mismatch was named in this cycle (the controller logs it
+    /// once).
+    pub servo_named_now: bool,
 }
 
 impl LoopOutput {
@@ -177,6 +186,9 @@ impl LoopOutput {
             support: SupportStatus::NONE,
             support_limits_m: (0.0, 0.0),
             support_note: None,
+            servo_fit: ServoFit::default(),
+            encoder_count_m: 0.0,
+            servo_named_now: false,
         }
     }
 }

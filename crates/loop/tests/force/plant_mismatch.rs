@@ -13,11 +13,19 @@
 //! configured: what the guard's margin stands on; 99.73 % for a Gaussian
 //! error that the standard deviation describes).
 //!
+//! Also printed: when the daemon named the servo mismatch (the published
+//! state's `servo_fit`, `sar_loop::observer::ServoFit::named`), in seconds
+//! after the first move was requested.
+//!
 //! Asserted: on the plant the configuration describes, the phantom is at
 //! most 0.3 N RMS and at least 99 % of the samples' axes are within 3 standard
-//! deviations; every other plant shows a larger phantom (the harness sees
-//! each mismatch). The issue's goals for the other plants are the
-//! figures' to meet, not yet this test's.
+//! deviations, and the servo is never named; every other plant shows a
+//! larger phantom (the harness sees each mismatch). Issue 34's goal for the
+//! servos (bandwidth 0.4x to ideal, damping 0.45-1.0, a delay of 1-2 ms, an
+//! inner loop): the phantom within 0.3 N RMS and 1 N peak, or else the
+//! mismatch named within 2 s of motion; and on each, the true error within
+//! 3 standard deviations in at least 99 % of the samples' axes (the
+//! servo observer, `sar_loop::observer`).
 
 #![allow(
     clippy::unwrap_used,
@@ -57,7 +65,10 @@ fn inertia(spec: &SimSpec) -> RodInertia {
         .expect("the plant in motion has a rod inertia")
 }
 
-const MISMATCHES: [Mismatch; 7] = [
+/// How many rows of [`MISMATCHES`] are servos (issue 34 section 1's goal).
+const SERVO_ROWS: usize = 7;
+
+const MISMATCHES: [Mismatch; 9] = [
     Mismatch {
         name: "as configured (30 Hz, damping 0.7; I_perp as configured)",
         edit: |_| {},
@@ -68,6 +79,25 @@ const MISMATCHES: [Mismatch; 7] = [
             s.plant.servo = Some(ServoSpec {
                 bandwidth_hz: 12.0,
                 damping: 0.45,
+                ..servo(s)
+            });
+        },
+    },
+    Mismatch {
+        name: "servos at 12 Hz, damping 1.0",
+        edit: |s| {
+            s.plant.servo = Some(ServoSpec {
+                bandwidth_hz: 12.0,
+                damping: 1.0,
+                ..servo(s)
+            });
+        },
+    },
+    Mismatch {
+        name: "servos with a pure delay of 1 ms",
+        edit: |s| {
+            s.plant.servo = Some(ServoSpec {
+                delay_ns: 1_000_000,
                 ..servo(s)
             });
         },
@@ -123,6 +153,10 @@ fn fast_config() -> config::Config {
     let mut cfg = config::builtin().unwrap();
     cfg.axes.max_speed_mps = 0.05;
     cfg.axes.max_accel_mps2 = 1.0;
+    // A servo of 12 Hz, damping 1.0 lags 2 zeta / wn = 26.5 ms, 1.3 mm at
+    // 50 mm/s: beyond the built-in 1 mm following tolerance (a Fault, as
+    // it should on a robot whose servo is that slow).
+    cfg.axes.following_tolerance_m = 0.002;
     cfg
 }
 
@@ -168,6 +202,9 @@ struct Figures {
     /// Per sample and axis: whether the error was within 3 of the axis's
     /// standard deviations.
     within_3_sigma: Vec<bool>,
+    /// When the servo mismatch was named, s after the first move was
+    /// requested (`None`: never).
+    named_after_s: Option<f64>,
 }
 
 /// Three free moves (out, across, back to the start) on `rig`.
@@ -179,11 +216,27 @@ fn free_moves(mut rig: Rig) -> Figures {
         start,
     ];
     let (mut phantom_n, mut within_3_sigma) = (Vec::new(), Vec::new());
+    let mut named_after_s = None;
+    let mut cycles = 0u64;
     for (id, tip_m) in (1..).zip(tips) {
         let r = rig.request(id, Request::MoveTip { tip_m });
         assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
         for _ in 0..MOVE_MS {
             let out = rig.step();
+            cycles += 1;
+            if out.servo_fit.named && named_after_s.is_none() {
+                named_after_s = Some(cycles as f64 * 1e-3);
+                // Named once, in the cycle it happens: what the log says.
+                assert!(out.servo_named_now);
+                let text = sar_loop::logq::servo_mismatch_text(
+                    &out.servo_fit.follow_rms_per_axis_m(),
+                    &out.servo_fit.disturbance_mps2,
+                    out.encoder_count_m,
+                );
+                assert!(text.contains("run `sarctl identify --servo`"), "{text}");
+            } else {
+                assert!(!out.servo_named_now);
+            }
             if !out.estimate.new_sample {
                 continue;
             }
@@ -196,15 +249,16 @@ fn free_moves(mut rig: Rig) -> Figures {
     Figures {
         phantom_n,
         within_3_sigma,
+        named_after_s,
     }
 }
 
 #[test]
 fn plants_that_are_not_the_model_show_their_phantom() {
     let cfg = fast_config();
-    let mut phantoms = Vec::new();
+    let mut rows = Vec::new();
     println!(
-        "| the plant, against what the configuration says | phantom tip force, RMS / peak | within 3 std |"
+        "| the plant, against what the configuration says | phantom tip force, RMS / peak | named after | within 3 std |"
     );
     for m in &MISMATCHES {
         let quiet = free_moves(rig(&cfg, m.edit, NOISE_FRACTION));
@@ -212,25 +266,56 @@ fn plants_that_are_not_the_model_show_their_phantom() {
         let peak = quiet.phantom_n.iter().copied().fold(0.0, f64::max);
         let share = noisy.within_3_sigma.iter().filter(|w| **w).count() as f64
             / noisy.within_3_sigma.len() as f64;
+        let named = match quiet.named_after_s {
+            Some(s) => format!("{s:.3} s"),
+            None => "not named".to_string(),
+        };
         println!(
-            "| {} | {:.3} N / {:.2} N | {:.2} % of {} sample axes |",
+            "| {} | {:.3} N / {:.2} N | {named} | {:.2} % of {} sample axes |",
             m.name,
             rms(&quiet.phantom_n),
             peak,
             100.0 * share,
             noisy.within_3_sigma.len()
         );
-        phantoms.push((rms(&quiet.phantom_n), share));
+        rows.push((
+            rms(&quiet.phantom_n),
+            peak,
+            share,
+            quiet.named_after_s,
+            noisy.named_after_s,
+        ));
     }
-    let (matched_rms, matched_share) = phantoms[0];
-    assert!(matched_rms <= 0.3, "{matched_rms}");
+    let (matched_rms, matched_peak, matched_share, named_quiet, named_noisy) = rows[0];
+    // The matched plant as before the observer (0.011 N RMS, 0.04 N peak),
+    // and never named.
+    assert!(matched_rms <= 0.012, "{matched_rms}");
+    assert!(matched_peak <= 0.05, "{matched_peak}");
     assert!(matched_share >= 0.99, "{matched_share}");
-    for (m, (rms_n, _)) in MISMATCHES.iter().zip(&phantoms).skip(1) {
+    assert_eq!(
+        (named_quiet, named_noisy),
+        (None, None),
+        "the matched plant named"
+    );
+    for (m, (rms_n, ..)) in MISMATCHES.iter().zip(&rows).skip(1) {
         assert!(
             *rms_n > matched_rms,
             "{}: {rms_n} N, no more than the matched plant's {matched_rms} N",
             m.name
         );
+    }
+    // Issue 34's goal on the servos: within 0.3 N RMS and 1 N peak, or
+    // named within 2 s of motion; the guard's margin covers the error.
+    for (m, &(rms_n, peak_n, share, named, _)) in
+        MISMATCHES.iter().zip(&rows).take(SERVO_ROWS).skip(1)
+    {
+        let within_goal = rms_n <= 0.3 && peak_n <= 1.0;
+        assert!(
+            within_goal || named.is_some_and(|s| s <= 2.0),
+            "{}: {rms_n} N RMS, {peak_n} N peak, named {named:?}",
+            m.name
+        );
+        assert!(share >= 0.99, "{}: {share}", m.name);
     }
 }
 

@@ -307,11 +307,17 @@ fn push_and_hold_over_the_servo_and_inertia_ranges() {
         for (j, seen) in row.iter().enumerate() {
             assert!(!seen.stop, "{}", PLANTS[i].name);
             // The default law on this plant: 0.08-0.24 N above the
-            // configured plant's at 1000 and 3000 N/m; the slower law: the
-            // same within 0.02 N.
+            // configured plant's at 1000 and 3000 N/m with the servo model
+            // alone; with the servo observer (issue 34), which follows the
+            // slower servo once its encoders leave the model, 0.03 N; the
+            // slower law: the same within 0.02 N.
             let default_law = pushes[i][j + 2].rms_n - pushes[0][j + 2].rms_n;
             let slower_law = seen.rms_n - slower[0][j].rms_n;
-            assert!(default_law > 0.07, "{} {default_law}", PLANTS[i].name);
+            assert!(
+                (0.0..0.05).contains(&default_law),
+                "{} {default_law}",
+                PLANTS[i].name
+            );
             assert!(slower_law.abs() < 0.02, "{} {slower_law}", PLANTS[i].name);
         }
     }
