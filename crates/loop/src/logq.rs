@@ -292,16 +292,21 @@ pub fn write(event: &LogEvent) {
             g.max_force_n
         ),
         LogEvent::Support(n) => write_support(n),
-        LogEvent::ServoMismatch {
-            cycle,
-            follow_rms_m,
-            disturbance_mps2,
-            count_m,
-        } => tracing::warn!(
-            cycle,
-            "{}",
-            servo_mismatch_text(follow_rms_m, disturbance_mps2, *count_m)
-        ),
+        LogEvent::ServoMismatch { .. } => write_servo_mismatch(event),
+    }
+}
+
+/// The servo mismatch, a warning.
+fn write_servo_mismatch(event: &LogEvent) {
+    if let LogEvent::ServoMismatch {
+        cycle,
+        follow_rms_m,
+        disturbance_mps2,
+        count_m,
+    } = event
+    {
+        let text = servo_mismatch_text(follow_rms_m, disturbance_mps2, *count_m);
+        tracing::warn!(cycle, "{text}");
     }
 }
 

@@ -429,7 +429,19 @@ impl AxesMotion {
             self.correct(&mut model, &noise);
         }
         self.servo = Some(model);
-        let dt_ns = t_ns - model.t_ns;
+        self.observed(&model, t_ns - model.t_ns, max_d_mps2)
+    }
+
+    /// The model `dt_ns` after its last sample, on an engaged axis the
+    /// observer's (its correction bounded by `max_d_mps2`; `None`: the
+    /// model's alone), with the observer's acceleration variance over the
+    /// engaged axes.
+    fn observed(
+        &self,
+        model: &ServoModel,
+        dt_ns: u64,
+        max_d_mps2: Option<f64>,
+    ) -> (Axes, Option<f64>) {
         let mut var = None;
         let mut out = model.axes.map(|a| a.after(dt_ns));
         let Some(max_d) = max_d_mps2 else {
