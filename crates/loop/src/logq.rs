@@ -226,25 +226,7 @@ fn log_loop(queue: &ArrayQueue<LogEvent>, stop: &AtomicBool, dropped: &AtomicU64
 /// Writes one event.
 pub fn write(event: &LogEvent) {
     match event {
-        LogEvent::Transition(t) => {
-            if t.to.is_halting() {
-                tracing::error!(
-                    cycle = t.cycle,
-                    "guard {} -> {}: {}",
-                    t.from,
-                    t.to,
-                    t.reason
-                );
-            } else {
-                tracing::warn!(
-                    cycle = t.cycle,
-                    "guard {} -> {}: {}",
-                    t.from,
-                    t.to,
-                    t.reason
-                );
-            }
-        }
+        LogEvent::Transition(t) => write_transition(t),
         LogEvent::Command(c) => match &c.result {
             Ok(a) => tracing::info!("command {}: {}", command_text(&c.command), accepted_text(a)),
             Err(e) => tracing::warn!("command {} refused: {}", command_text(&c.command), e),
@@ -293,6 +275,27 @@ pub fn write(event: &LogEvent) {
         ),
         LogEvent::Support(n) => write_support(n),
         LogEvent::ServoMismatch { .. } => write_servo_mismatch(event),
+    }
+}
+
+/// A guard transition: an error when it halts, else a warning.
+fn write_transition(t: &Transition) {
+    if t.to.is_halting() {
+        tracing::error!(
+            cycle = t.cycle,
+            "guard {} -> {}: {}",
+            t.from,
+            t.to,
+            t.reason
+        );
+    } else {
+        tracing::warn!(
+            cycle = t.cycle,
+            "guard {} -> {}: {}",
+            t.from,
+            t.to,
+            t.reason
+        );
     }
 }
 
