@@ -245,6 +245,18 @@ fn write_decisions() {
     }
 }
 
+/// What the requests of each recording in SAR_DECISIONS_DIR became (a
+/// change of plant may change decisions on purpose: compare the tallies).
+#[test]
+#[ignore = "prints what the requests became in SAR_DECISIONS_DIR"]
+fn tally_decisions() {
+    let dir = env_dir("SAR_DECISIONS_DIR");
+    for seed in 1..=SEEDS {
+        let path = dir.join(format!("seed-{seed:02}.mcap"));
+        println!("{}: {}", path.display(), replies(&path));
+    }
+}
+
 /// What the requests of a recording became: "kind/status x count" (the
 /// recorded codes), so that a schedule that only meets refusals shows.
 fn replies(path: &Path) -> String {
