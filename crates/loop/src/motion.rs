@@ -713,7 +713,8 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
     use super::*;
 
-    const CFG: MotionConfig = MotionConfig {
+    /// The built-in servo model (also the observer's tests').
+    pub(super) const CFG: MotionConfig = MotionConfig {
         servo_bandwidth_hz: 30.0,
         servo_damping: 0.7,
         servo_delay_ns: 0,
@@ -901,19 +902,10 @@ mod tests {
 #[cfg(test)]
 mod observer_tests {
     #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+    use super::tests::CFG;
     use super::*;
     use sar_estimator::cycle::JointSample;
     use sar_kinematics::ActiveJoints;
-
-    const CFG: MotionConfig = MotionConfig {
-        servo_bandwidth_hz: 30.0,
-        servo_damping: 0.7,
-        servo_delay_ns: 0,
-        quick_stop_decel_mps2: 2.0,
-        brake_decel_mps2: 2.0,
-        sensor_latency_ns: 1_000_000,
-        encoder_count_m: 0.005 / 4096.0,
-    };
 
     /// What the observer handed on against the truth.
     struct Run {
