@@ -1,10 +1,23 @@
 //! `sarctl identify --servo --live` end to end (issue 34 section 1): `sard
-//! --sim` in real time on the demo's plant whose servos are 12 Hz, damping
-//! 0.45 with a pure delay of 1 ms, while the configuration says 30 Hz, 0.7,
-//! no delay. `sarctl` moves each axis alone 2 mm out and back three times
-//! (at 50 mm/s and 1 m/s^2), records it, fits, and writes `[axes]
-//! servo_bandwidth_hz`, `servo_damping`, `servo_delay_s` back (the file's
-//! comments kept); the recording replays bit for bit. About 5 s of moves.
+//! --sim --speed 1` (simulated time paced at real time) on the demo's plant
+//! whose servos are 12 Hz, damping 0.45 with a pure delay of 1 ms, while
+//! the configuration says 30 Hz, 0.7, no delay. `sarctl` moves each axis
+//! alone 2 mm out and back three times (at 50 mm/s and 1 m/s^2), records
+//! it, fits, and writes `[axes] servo_bandwidth_hz`, `servo_damping`,
+//! `servo_delay_s` back (the file's comments kept); the recording replays
+//! bit for bit. About 5 s of moves.
+//!
+//! Simulated time, not the host's clock: on the host's clock the simulated
+//! drives take a move when the loop sends it, its cycle's computing time
+//! after the cycle's clock reading that the trajectory starts from, so the
+//! delay the fit finds is the servo's plus that latency (which a real
+//! robot has too, and which the loop's model should carry: README). It
+//! depends on the machine and the build: the fit read 16 us above 1 ms in
+//! stop 40's test build, 44-58 us once the observer and the two watches
+//! ran in every cycle (that build's cycle computes for 47 us, p50), so
+//! against the host's clock the simulator's 1 ms is no truth to test the
+//! fit with. With `--speed` a cycle takes no simulated time: the drives
+//! act on exactly the servo's delay (the fit: 1.007 ms).
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -82,7 +95,7 @@ fn identify_servo_live_writes_back_the_simulated_servo() {
     std::fs::write(&run_config_path, &config).unwrap();
     let _daemon = Daemon::spawn(
         sard(&prefix)
-            .arg("--sim")
+            .args(["--sim", "--speed", "1"])
             .arg("--config")
             .arg(&run_config_path)
             .arg("--scenario")
@@ -111,13 +124,7 @@ fn identify_servo_live_writes_back_the_simulated_servo() {
     );
     assert!((bw / 12.0 - 1.0).abs() < 0.05, "{s}");
     assert!((z / 0.45 - 1.0).abs() < 0.05, "{s}");
-    // The delay within 8 %, not 5 %: since the servo observer and the two
-    // watches were merged (stop 41) this live run reads 1.044-1.058 ms for
-    // 1 ms on a quiet machine, every run and every axis alike (stop 40: 1.016
-    // ms), while the offline fits stay within 5 %. The cause is not found
-    // yet; issue 34 stays open for it. Still asserted: the bias cannot
-    // grow unseen.
-    assert!((d / 0.001 - 1.0).abs() < 0.08, "{s}");
+    assert!((d / 0.001 - 1.0).abs() < 0.05, "{s}");
     assert_eq!(json["axes"].as_array().unwrap().len(), 3, "{json}");
     let written = sar_config::load(&config_path).unwrap();
     let m = written.axes.motion;
