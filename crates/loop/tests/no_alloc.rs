@@ -2,7 +2,10 @@
 //! many simulated cycles, with operator requests (reset, tare, moves), a Warn,
 //! a Stop with its quick stop, a refused and an accepted reset, every force
 //! control mode (hold, position, push, guarded move), and the snapshots of
-//! the decision state taken between cycles.
+//! the decision state taken between cycles; and on plants that are not the
+//! model (issue 34), the paths the demo's matched plant never takes: the
+//! servo observer engaged and the mismatch named, the inertia watch naming
+//! the rod and the adapter, the support watch naming a shift.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
@@ -13,6 +16,9 @@ use sar_loop::control::{Controller, Envelope, Request};
 use sar_test_support::counting::{Counting, process_allocations};
 use sar_test_support::messages::rod_push_20n;
 use sar_test_support::rig::{RigBuilder, SimRig};
+
+#[path = "force/rig.rs"]
+mod rig;
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -151,3 +157,152 @@ fn a_cycle_allocates_nothing() {
 
 // Publishing (the loop's `Publish` calls on the daemon's shared memory) is
 // proved allocation-free in `crates/shm/tests/no_alloc_publish.rs`.
+
+/// The demo's plant in motion, changed by `edit`, no tissue and no
+/// contact, running `cfg` (the simulated drives at its profile); ready.
+fn mismatched(cfg: &sar_config::Config, edit: impl FnOnce(&mut sar_sim::SimSpec)) -> rig::Rig {
+    let mut scenario = sar_daemon::sim::demo_scenario().unwrap();
+    let spec = &mut scenario.spec;
+    spec.axes.max_speed_mps = cfg.axes.max_speed_mps;
+    spec.axes.max_accel_mps2 = cfg.axes.max_accel_mps2;
+    spec.contact = vec![sar_sim::ContactKey {
+        t_ns: 0,
+        force_n: Vec3::zeros(),
+    }];
+    spec.tissue = Vec::new();
+    spec.plant = rig::Plant::Moving.spec(spec);
+    edit(spec);
+    let mut rig = rig::Rig(RigBuilder::new(&scenario).config(cfg).build());
+    for _ in 0..rig::READY_MS {
+        rig.step();
+    }
+    assert_eq!(rig.c.output().guard_state, GuardState::Ok);
+    // Room for every cycle below: the rig's own log does not allocate in
+    // the counted window.
+    rig.log.reserve(40_000);
+    rig
+}
+
+/// What the counted cycles showed.
+#[derive(Default)]
+struct Named {
+    engaged: bool,
+    servo: bool,
+    inertia: bool,
+    support: bool,
+}
+
+/// Steps `rig` `cycles` times, draining its log, noting what was named.
+fn run(rig: &mut rig::Rig, cycles: u32, named: &mut Named) {
+    for _ in 0..cycles {
+        let d = rig.step();
+        named.engaged |= d.servo_fit.engaged.iter().any(|&e| e);
+        named.support |= d.support.verdict == sar_estimator::support::SupportVerdict::Shifted;
+        while let Some(event) = rig.queue.pop() {
+            match event {
+                sar_loop::logq::LogEvent::ServoMismatch { .. } => named.servo = true,
+                sar_loop::logq::LogEvent::InertiaNamed { .. } => named.inertia = true,
+                _ => {}
+            }
+        }
+        while rig.operator.replies.pop().is_some() {}
+    }
+}
+
+/// A move of the tip to `tip_m` (accepted), then `cycles` cycles.
+fn move_tip(rig: &mut rig::Rig, id: u64, tip_m: Vec3, cycles: u32, named: &mut Named) {
+    rig.operator
+        .requests
+        .push(Envelope {
+            id,
+            request: Request::MoveTip { tip_m },
+        })
+        .unwrap();
+    run(rig, cycles, named);
+}
+
+#[test]
+fn the_observer_and_the_watches_allocate_nothing_when_they_name() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    // The free moves of `plant_mismatch` (50 mm/s, 1 m/s^2).
+    let mut fast = sar_config::builtin().unwrap();
+    fast.axes.max_speed_mps = 0.05;
+    fast.axes.max_accel_mps2 = 1.0;
+    fast.axes.following_tolerance_m = 0.002;
+    let mut servo = mismatched(&fast, |s| {
+        let servo = s.plant.servo.unwrap();
+        s.plant.servo = Some(sar_sim::ServoSpec {
+            bandwidth_hz: 12.0,
+            damping: 0.45,
+            ..servo
+        });
+    });
+    let mut rod = mismatched(&fast, |s| {
+        let rod = s.plant.inertia.unwrap();
+        s.plant.inertia = Some(sar_sim::RodInertia {
+            inertia_perp_kgm2: 1.6 * rod.inertia_perp_kgm2,
+            adapter_mass_kg: 0.35,
+            ..rod
+        });
+    });
+    // The support 10 mm up from 1.3 s, then the check's poses at the
+    // built-in speed (`support_watch`).
+    let builtin = sar_config::builtin().unwrap();
+    let mut support = mismatched(&builtin, |s| {
+        s.friction_n = 0.3;
+        s.support_shifts = vec![sar_sim::SupportShift {
+            t_ns: 1_300_000_000,
+            shift_m: Vec3::new(0.0, 0.01, 0.0),
+            duration_ns: 500_000_000,
+        }];
+    });
+    let start = Vec3::new(rig::TIP_M[0], rig::TIP_M[1], rig::TIP_M[2]);
+    let free = [
+        start + Vec3::new(0.03, 0.015, -0.015),
+        start + Vec3::new(-0.01, -0.02, 0.02),
+        start,
+    ];
+
+    let before = process_allocations();
+    let mut named = Named::default();
+    for (id, tip_m) in (1..).zip(free) {
+        move_tip(&mut servo, id, tip_m, 1500, &mut named);
+    }
+    let servo_named = (named.engaged, named.servo);
+    let mut named = Named::default();
+    for (id, tip_m) in (1..).zip(free) {
+        move_tip(&mut rod, id, tip_m, 1500, &mut named);
+    }
+    let inertia_named = named.inertia;
+    let mut named = Named::default();
+    run(&mut support, 1300, &mut named);
+    for (id, off) in (1..).zip(sar_loop::step::SUPPORT_CHECK_OFFSETS_M) {
+        let tip_m = start + Vec3::new(off[0], off[1], off[2]);
+        // Each pose reached, then held 0.3 s (as the check's moves).
+        move_tip(&mut support, id, tip_m, 1, &mut named);
+        for _ in 0..4000 {
+            run(&mut support, 1, &mut named);
+            let last = support
+                .log
+                .last()
+                .map(|(_, d)| (d.reference, d.estimate.pose));
+            if let Some((Some(_), Some(pose))) = last
+                && (pose.tip_m - tip_m).norm() < 2e-4
+            {
+                break;
+            }
+        }
+        run(&mut support, 300, &mut named);
+    }
+    let after = process_allocations();
+
+    assert_eq!(servo_named, (true, true), "(observer engaged, servo named)");
+    assert!(inertia_named, "the inertia watch named nothing");
+    assert!(named.support, "the support watch named no shift");
+    assert_eq!(
+        after - before,
+        0,
+        "the cycles allocated {} times",
+        after - before
+    );
+}
