@@ -69,8 +69,8 @@ pub use spec::{
     ServoSpec, SimSpec, SupportShift, Tissue, TissueModel, TissueShift,
 };
 pub use world::{
-    DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MAX_SERVO_DELAY_NS, MAX_SERVO_DELAY_STEPS,
-    MIN_PERIOD_NS, validate,
+    DRAIN_CAPACITY, MAX_IN_FLIGHT, MAX_PHYSICS_STEP_NS, MAX_PLAN_CHANGES, MAX_SERVO_DELAY_NS,
+    MAX_SERVO_DELAY_STEPS, MIN_PERIOD_NS, validate,
 };
 
 use sar_hal::{
@@ -98,7 +98,10 @@ pub struct Truth {
     pub joints: ActiveJoints,
     /// The true joint speeds (q1, q2, q3), m/s.
     pub joint_speeds_mps: [f64; 3],
-    /// The true joint accelerations (q1, q2, q3), m/s^2.
+    /// The true joint accelerations (q1, q2, q3), m/s^2, as the sensor's
+    /// wrench takes them: on ideal drives the instant's plus the mean over
+    /// the sensor's period of the impulses where the velocity stepped
+    /// (a streamed set point's; the simulator's module doc).
     pub joint_accels_mps2: [f64; 3],
     /// The true pose, from the true calibration and profile (A, u, w, a, s, ...).
     pub pose: Pose,

@@ -220,6 +220,26 @@ impl AxisPlan {
         0.0
     }
 
+    /// Whether the plan holds at `t_ns` (its phases are over: the instant
+    /// a phase ends still belongs to it, as in [`AxisPlan::at`]).
+    pub fn holds_at(&self, t_ns: u64) -> bool {
+        let mut left_s = ns_to_s(t_ns.saturating_sub(self.start_ns));
+        for phase in &self.phases {
+            if left_s <= phase.duration_s {
+                return false;
+            }
+            left_s -= phase.duration_s;
+        }
+        true
+    }
+
+    /// The velocity's step where the plan starts to hold, m/s: minus the
+    /// speed at the end of its phases (a [`AxisPlan::segment`]'s own speed;
+    /// a move to a target or a brake ends at rest, so about 0).
+    pub fn end_step_mps(&self) -> f64 {
+        -self.after_s(self.duration_s()).v_mps
+    }
+
     /// The same motion `dt_ns` later (its start moved on; saturating): what
     /// a streamed trajectory becomes when the loop came late and its next
     /// set point follows the last one by one period (issue 33).
@@ -343,6 +363,28 @@ mod tests {
         assert_eq!(plan.at(1_000 + 80_000_001).x_m, plan.end_m());
         let mid = plan.at(1_000 + 40_000_000);
         assert!((mid.v_mps + 0.02).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_segment_holds_after_its_period_and_its_speed_steps_to_zero() {
+        let plan = AxisPlan::segment(5_000, 0.1, 0.1002, 1_000_000);
+        // The period's last instant still moves (as `at` evaluates it).
+        assert!(!plan.holds_at(0));
+        assert!(!plan.holds_at(1_005_000));
+        assert!(plan.holds_at(1_005_001));
+        let v_mps = plan.at(1_005_000).v_mps;
+        assert!((v_mps - 0.2).abs() < 1e-9, "{v_mps}");
+        assert_eq!(plan.at(1_005_001).v_mps, 0.0);
+        assert_eq!(plan.end_step_mps(), -v_mps);
+        // A move to a target ends at rest (no step); a hold has none.
+        let rest = AxisState {
+            x_m: 0.0,
+            v_mps: 0.0,
+        };
+        let to = AxisPlan::to_target(0, rest, 0.01, LIMITS);
+        assert!(to.end_step_mps().abs() < 1e-12);
+        assert!(!to.holds_at(100_000_000) && to.holds_at(10_000_000_000));
+        assert_eq!(AxisPlan::hold(0, 0.1).end_step_mps(), 0.0);
     }
 }
 

@@ -17,14 +17,19 @@
 //! its peak below 4 N, every hold its peak below position mode's 6.5 N; an
 //! I_perp of 0.5x or 2x changes nothing here (push and hold act along the
 //! rod, which I_perp does not enter); no Stop on any plant. Beyond the
-//! range (12 Hz, ideal drives) the pushes are measured, not held to 0.3 N:
-//! the check refuses that range with the default law
-//! (`sar-estimator`'s `force_range` tests), and the loop limit-cycles on
-//! the commanded tip's acceleration bound (their RMS at least 0.07 N above
-//! the configured plant's at 1000 and 3000 N/m); a slower law (D 130 N s/m,
-//! M 1 kg, a 12 Hz filter) is run beside and asserted to be the same on
-//! them as on the configured plant, within 0.02 N (at its own, larger,
-//! breathing error) on the 12 Hz servos; ideal drives are printed.
+//! range (12 Hz, ideal drives) the check refuses the default law
+//! (`sar-estimator`'s `force_range` tests); there the default law's pushes
+//! stay within 0.05 N of the configured plant's at 1000 and 3000 N/m (the
+//! servo observer; without it the loop limit-cycled on the commanded tip's
+//! acceleration bound, 0.07 N or more above), and a slower law (D 130 N
+//! s/m, M 1 kg, a 12 Hz filter) is run beside and asserted to be the same
+//! on them as on the configured plant within 0.02 N (at its own, larger,
+//! breathing error). Ideal drives are also held to the checked range's
+//! goals (push RMS at most 0.3 N and below 4 N; holds as the configured
+//! plant's): with the simulated sensor seeing the velocity's steps at
+//! their set points over its period (`sar_sim`'s world, issue 34 item 4)
+//! they are at most 0.29 N RMS; the 12 Hz servos (0.30 N at 3000 N/m) are
+//! printed.
 #![allow(
     clippy::unwrap_used,
     clippy::expect_used,
@@ -116,6 +121,9 @@ const PLANTS: [RangePlant; 8] = [
         checked: false,
     },
 ];
+
+/// Ideal drives' index in [`PLANTS`].
+const IDEAL: usize = 7;
 
 const STIFFNESSES: [f64; 4] = [100.0, 300.0, 1000.0, 3000.0];
 const BREATH_M: f64 = 0.003;
@@ -265,7 +273,9 @@ fn push_and_hold_over_the_servo_and_inertia_ranges() {
         for (j, k) in STIFFNESSES.iter().enumerate() {
             let (s, h) = (pushes[i][j], holds[i][j]);
             assert!(!s.stop && !h.stop, "{} at {k} N/m: a Stop", p.name);
-            if p.checked {
+            // Ideal drives meet the goal too (issue 34 item 4; 0.29 N at
+            // 3000 N/m), though the check refuses them.
+            if p.checked || i == IDEAL {
                 assert!(s.rms_n <= 0.3, "{} at {k} N/m: push RMS {s:?}", p.name);
                 assert!(s.peak_n < 4.0, "{} at {k} N/m: push {s:?}", p.name);
                 assert!(h.peak_n < 6.5, "{} at {k} N/m: hold {h:?}", p.name);
@@ -301,15 +311,16 @@ fn push_and_hold_over_the_servo_and_inertia_ranges() {
         );
         slower.push(row);
     }
-    // The 12 Hz servos; ideal drives are printed (at 3000 N/m the slower
-    // law leaves them where the default law does: FORCE_CONTROL.md).
-    for (row, i) in slower.iter().zip([0, 5, 6]).skip(1) {
+    // The 12 Hz servos and ideal drives.
+    for (row, i) in slower.iter().zip([0, 5, 6, 7]).skip(1) {
         for (j, seen) in row.iter().enumerate() {
             assert!(!seen.stop, "{}", PLANTS[i].name);
             // The default law on this plant: 0.08-0.24 N above the
             // configured plant's at 1000 and 3000 N/m with the servo model
             // alone; with the servo observer (issue 34), which follows the
-            // slower servo once its encoders leave the model, 0.03 N; the
+            // slower servo once its encoders leave the model, 0.03 N (ideal
+            // drives: 0.02 N, since the simulated sensor sees their
+            // velocity's steps over its period, `sar_sim`'s world); the
             // slower law: the same within 0.02 N.
             let default_law = pushes[i][j + 2].rms_n - pushes[0][j + 2].rms_n;
             let slower_law = seen.rms_n - slower[0][j].rms_n;

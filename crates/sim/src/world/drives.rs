@@ -81,9 +81,11 @@ impl<C: Clock> World<C> {
         let limits = self.limits;
         self.servos_follow(now);
         let states = self.reference_at(now);
-        for ((plan, state), target) in self.plans.iter_mut().zip(states).zip(wanted) {
+        let mut plans = self.plans;
+        for ((plan, state), target) in plans.iter_mut().zip(states).zip(wanted) {
             *plan = AxisPlan::to_target(now, state, target, limits);
         }
+        self.replace_plans(now, plans);
         Ok(())
     }
 
@@ -111,9 +113,11 @@ impl<C: Clock> World<C> {
                 });
             }
         }
-        for ((plan, state), target) in self.plans.iter_mut().zip(states).zip(wanted) {
+        let mut plans = self.plans;
+        for ((plan, state), target) in plans.iter_mut().zip(states).zip(wanted) {
             *plan = AxisPlan::segment(now, state.x_m, target, period_ns);
         }
+        self.replace_plans(now, plans);
         Ok(())
     }
 

@@ -19,6 +19,31 @@
 //! reverses only after the support's pre-sliding displacement
 //! ([`sar_hal::motion::SLIDE_THRESHOLD_M`]), as the runner's does.
 //!
+//! **What the sensor sees of the velocity's steps.** The rod's inertial
+//! wrench (MODEL.md 10) takes the axes' acceleration at the sample's
+//! instant: the servos' (continuous), or the plans' (piecewise constant).
+//! Ideal drives (no servo) also step their velocity: each streamed set
+//! point starts a segment of constant speed ([`AxisPlan::segment`]), and a
+//! segment not followed in time stops dead. The acceleration there is an
+//! impulse, which no sample instant meets: point-sampled, an ideal drive
+//! streaming every 1 ms would show the sensor no inertia at all, while the
+//! rod's mass takes m dv at every set point. A physical sensor does not
+//! sample a point: its converter integrates, its filters average, over its
+//! sample period. So on ideal drives each sample's acceleration is the
+//! instant's plus the mean over the sensor's period before it of the
+//! impulses (their velocity steps over the period `[sensor] rate_hz`
+//! gives: the steps at or after `t - period` and before `t`, each step
+//! seen once by the samples every period; a step at a sample's own instant,
+//! made by a command after it, falls to the next). The period is the
+//! shortest window a sensor sending one sample per period can average over
+//! (one sample's worth of signal; any longer filter is the device's own and
+//! the loop's to model); at the demo's 500 Hz, 2 ms, two set points of
+//! the loop's 1 ms. Over a segment's constant speed this is the period's
+//! mean acceleration, (v(t) - v(t - period)) / period. The continuous part
+//! stays point-sampled, as with servos (MODEL.md 10, "Sampling in step
+//! with the set points"), so planned moves and brakes read as before. The
+//! truth's accelerations are the ones the wrench is made with.
+//!
 //! The modules: `validate` (the specification and the faults checked),
 //! `timeline` (events in time order, the axes, the physics), `sensor` (the
 //! simulated sensor), `drives` (the simulated drives).
@@ -59,6 +84,13 @@ pub const DRAIN_CAPACITY: usize = 4096;
 /// Most sensor samples that may be in flight (measured, not yet received).
 pub const MAX_IN_FLIGHT: u64 = 65_536;
 
+/// Most changes of the axes' plans remembered over one sensor period (for
+/// the velocity's steps the sensor averages on ideal drives; fixed at
+/// start, nothing allocates while the world runs): beyond, the oldest are
+/// forgotten and their steps no longer seen. A loop streaming every 1 ms
+/// makes two per period of the demo's 500 Hz sensor.
+pub const MAX_PLAN_CHANGES: usize = 64;
+
 /// The tip force of the contact script at `t_ns` (piecewise linear, zero before
 /// the first key, held after the last; at equal key times the later key wins).
 pub(crate) fn contact_at(keys: &[ContactKey], t_ns: u64) -> Vec3 {
@@ -98,7 +130,9 @@ pub(crate) struct Physics {
     /// The tissues' part of `loads.tip_force_n`, {0}, N.
     pub tissue_force_n: Vec3,
     pub equilibrium: Equilibrium,
-    /// The axes' accelerations (q1, q2, q3), m/s^2.
+    /// The axes' accelerations (q1, q2, q3) the sensor's wrench is made
+    /// with (on ideal drives with the velocity's steps of the sensor's
+    /// period: see the module doc), m/s^2.
     pub accels_mps2: [f64; 3],
     /// Noise-free reading with the bias, before the tare, sensor frame.
     pub reading_n: Vec3,
@@ -176,6 +210,11 @@ pub(crate) struct World<C> {
     next_report: u64,
     /// The axes' plans: their motion, or with servos their references.
     plans: [AxisPlan; 3],
+    /// The plans replaced over the last sensor period, oldest first, each
+    /// with the time it was replaced at (ns from start; in force up to and
+    /// including it): where the velocity stepped (at most
+    /// [`MAX_PLAN_CHANGES`]).
+    past_plans: VecDeque<(u64, [AxisPlan; 3])>,
     servos: Option<Servos>,
     state: DriveState,
     /// The direction of the last slide, from s (A's foot on the rod axis to B).
@@ -222,6 +261,7 @@ impl<C: Clock> World<C> {
             next_measurement: 0,
             next_report: 0,
             plans: start.map(|x| AxisPlan::hold(0, x)),
+            past_plans: VecDeque::with_capacity(MAX_PLAN_CHANGES),
             servos: spec.plant.servo.map(|gains| Servos {
                 gains,
                 t_ns: 0,

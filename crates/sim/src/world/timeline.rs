@@ -3,7 +3,7 @@
 //! (calibration, bias, the rod's wrench) at any instant.
 
 use super::validate::drive_fault_event;
-use super::{DRAIN_CAPACITY, DelayLine, Physics, World, contact_at};
+use super::{DRAIN_CAPACITY, DelayLine, MAX_PLAN_CHANGES, Physics, World, contact_at};
 use crate::spec::Fault;
 use crate::statics::{self, Equilibrium, Loads};
 use crate::{SimError, dynamics, tissue};
@@ -109,6 +109,71 @@ impl<C: Clock> World<C> {
         }
     }
 
+    /// The accelerations the sensor's wrench is made with at `t_ns`, m/s^2:
+    /// [`World::accels_at`] and, on ideal drives (no servos), the mean over
+    /// the sensor's period of the impulses where the velocity stepped in
+    /// `[t_ns - period, t_ns)` (a set point replacing a plan, a segment
+    /// stopping at its end; see the module doc).
+    pub(super) fn sensed_accels_at(&self, t_ns: u64) -> [f64; 3] {
+        let point = self.accels_at(t_ns);
+        if self.servos.is_some() {
+            return point;
+        }
+        let period_ns = self.spec.sensor.period_ns;
+        let from_ns = t_ns.saturating_sub(period_ns);
+        let mut steps_mps = [0.0; 3];
+        // The plans in force in turn, oldest first, each with the time it
+        // was replaced at (the present ones: none).
+        let chain = self
+            .past_plans
+            .iter()
+            .map(|(until_ns, plans)| (Some(*until_ns), plans))
+            .chain(core::iter::once((None, &self.plans)));
+        let mut before: Option<(u64, &[AxisPlan; 3])> = None;
+        for (until_ns, plans) in chain {
+            if let Some((at_ns, old)) = before
+                && from_ns <= at_ns
+                && at_ns < t_ns
+            {
+                for ((step, new), old) in steps_mps.iter_mut().zip(plans).zip(old) {
+                    *step += new.at(at_ns).v_mps - old.at(at_ns).v_mps;
+                }
+            }
+            // Its own end (a segment stopping), while it was in force.
+            let last_ns = until_ns.map_or(t_ns, |u| u.min(t_ns));
+            for (step, plan) in steps_mps.iter_mut().zip(plans) {
+                if !plan.holds_at(from_ns) && plan.holds_at(last_ns) {
+                    *step += plan.end_step_mps();
+                }
+            }
+            before = until_ns.map(|u| (u, plans));
+        }
+        let period_s = ns_to_s(period_ns);
+        let mut sensed = point;
+        for (a, step) in sensed.iter_mut().zip(steps_mps) {
+            *a += step / period_s;
+        }
+        sensed
+    }
+
+    /// Replaces the axes' plans at `t_ns` (the present), remembering the
+    /// old ones for one sensor period ([`World::sensed_accels_at`]).
+    pub(super) fn replace_plans(&mut self, t_ns: u64, plans: [AxisPlan; 3]) {
+        let keep_from_ns = t_ns.saturating_sub(self.spec.sensor.period_ns);
+        while self
+            .past_plans
+            .front()
+            .is_some_and(|(until_ns, _)| *until_ns < keep_from_ns)
+        {
+            self.past_plans.pop_front();
+        }
+        if self.past_plans.len() >= MAX_PLAN_CHANGES {
+            self.past_plans.pop_front();
+        }
+        self.past_plans.push_back((t_ns, self.plans));
+        self.plans = plans;
+    }
+
     /// The plans' states at `t_ns`: the axes' own without servos, else the
     /// servos' references (the drives' set-point profiles).
     pub(super) fn reference_at(&self, t_ns: u64) -> [AxisState; 3] {
@@ -122,7 +187,8 @@ impl<C: Clock> World<C> {
             max_accel_mps2: decel_mps2,
             ..self.limits
         };
-        self.plans = self.axes_at(t_ns).map(|s| AxisPlan::brake(t_ns, s, limits));
+        let plans = self.axes_at(t_ns).map(|s| AxisPlan::brake(t_ns, s, limits));
+        self.replace_plans(t_ns, plans);
         if let Some(s) = &mut self.servos {
             s.direct = true;
         }
@@ -261,7 +327,7 @@ impl<C: Clock> World<C> {
             friction_n: pose.rod_dir
                 * (-self.slide.sign().sigma().unwrap_or(0.0) * spec.friction_n),
         };
-        let accels_mps2 = self.accels_at(t_ns);
+        let accels_mps2 = self.sensed_accels_at(t_ns);
         let (equilibrium, ideal_n, ideal_nm) =
             self.rod_wrench(&cal, &pose, &loads, (states.map(|s| s.v_mps), accels_mps2))?;
         let (bias_n, bias_nm) = self.bias_at(t_ns);

@@ -707,3 +707,51 @@ fn a_fast_move_keeps_the_guard_ok_and_the_torque_check_quiet() {
     assert!(largest_still_n > 4.0, "{largest_still_n}");
     assert!(moving > 20, "{moving} samples at 2 m/s^2");
 }
+
+/// Issue 34 item 4: ideal drives streaming set points step their velocity
+/// at each one (and stop dead when none follows); the sensor sees those
+/// impulses' mean over its period (2 ms here): at every instant, before
+/// the commands there, the accelerations are (v(t) - v(t - period)) /
+/// period of the velocities the axes had then (point-sampled they would
+/// be 0 throughout), and every sample the sensor sends reads the truth of
+/// its instant.
+#[test]
+fn ideal_drives_show_the_sensor_their_velocity_steps_over_its_period() {
+    let mut rig = Rig::new(moving_spec(0.0, inertia(0.03, 0.0, 0.2)));
+    rig.drives.enable().unwrap();
+    let mut q = axes(&rig.truth().joints);
+    let (mut speeds, mut accels, mut readings) = (Vec::new(), Vec::new(), Vec::new());
+    let mut samples = 0;
+    // 300 set points of a varying speed, then 10 ms without.
+    for k in 0..310u64 {
+        rig.run_until(k * MS);
+        let t = rig.truth();
+        speeds.push(t.joint_speeds_mps);
+        accels.push(t.joint_accels_mps2);
+        readings.push(t.reading_n);
+        if let Some(s) = rig.sensor.poll().unwrap() {
+            let at_ms = 2 * s.counter as usize;
+            assert!((s.force_n - readings[at_ms]).amax() < 1e-9, "{at_ms}");
+            samples += 1;
+        }
+        if k < 300 {
+            let v_mps = 0.05 * (k as f64 / 20.0).sin();
+            q[2] += v_mps * 1e-3;
+            q[1] -= 0.5 * v_mps * 1e-3;
+            rig.drives.stream(joints(q), MS).unwrap();
+        }
+    }
+    assert!(samples >= 150, "{samples}");
+    let mut largest = 0.0f64;
+    for k in 2..speeds.len() {
+        for axis in 0..3 {
+            let mean = (speeds[k][axis] - speeds[k - 2][axis]) / 2e-3;
+            assert!((accels[k][axis] - mean).abs() < 1e-9, "{k} {axis}");
+            largest = largest.max(mean.abs());
+        }
+    }
+    // The velocity stepping at the set points is seen (up to 0.05 / 20 /
+    // 1 ms = 2.5 m/s^2), and so is the stop after the last one.
+    assert!(largest > 2.0, "{largest}");
+    assert!(accels[301][2].abs() > 1.0, "{:?}", accels[301]);
+}
