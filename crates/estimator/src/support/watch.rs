@@ -11,7 +11,8 @@
 //! the inertia's compensation all included). Along the rod the support's
 //! Coulomb friction reads as a tip force (MODEL.md 4.1): it is an unknown
 //! with the sign of the last slide (before the first slide the component
-//! along the rod is not used).
+//! along the rod is not used, nor after a motion across the rod whose
+//! slide a shifted support could reverse: [`SLIDE_SHIFT_M`]).
 //!
 //! A small contact reads as a shift would: at one pose a constant tip force
 //! and a shift give the same phantom (a horizontal rod: 0.5 N down is 6 mm
@@ -279,6 +280,18 @@ struct Linearised {
     jac: Mat3,
 }
 
+/// The largest distance between the support and where the watch believes
+/// it (B0 + its linearisation point) against which the friction's sign is
+/// taken as known, m (the largest shift expected, SAFETY.md M5): a slide
+/// whose direction a support that far would reverse leaves the friction's
+/// sign unknown (see [`SupportWatch::observe`]). Once the estimate is
+/// determined the reach is its own error's ([`SLIDE_SIGMA`]).
+pub const SLIDE_SHIFT_M: f64 = 0.02;
+
+/// The reach of the slide's sign once the estimate is determined: its
+/// distance from the linearisation point plus this many standard errors.
+pub const SLIDE_SIGMA: f64 = 3.0;
+
 /// The prior standard deviation of the support's friction unknown, N.
 pub const PRIOR_FRICTION_N: f64 = 5.0;
 
@@ -383,7 +396,11 @@ impl SupportWatch {
     /// `estimate` at `base_pose` (both computed with the configured B). A sample
     /// whose shifted estimates cannot be computed (a pose invalid with a
     /// shifted B) is skipped. Until the rod has slid the component along it
-    /// is not used (the support's friction there has no known sign).
+    /// is not used (the support's friction there has no known sign), nor
+    /// after a motion whose slide a support as far as the estimate's reach
+    /// from where it is believed could reverse (turning the rod across it:
+    /// [`SLIDE_SHIFT_M`], [`SLIDE_SIGMA`]), until the next slide that none
+    /// reverses. The slide is followed about B0 + the linearisation point.
     pub fn observe(
         &mut self,
         q: &ActiveJoints,
@@ -393,10 +410,17 @@ impl SupportWatch {
         estimate: &TipForceEstimate,
         base_pose: &Pose,
     ) {
-        self.slide.update(base_pose.support_distance_m);
         let Some(lin) = self.linearise(q, reading_n, bias_n, motion, estimate, base_pose) else {
             return;
         };
+        // The slide about the linearisation point B0 + center (where the
+        // support is believed to be), its sign unknown after a motion whose
+        // slide a support within the estimate's reach of it could reverse.
+        let center_m = self.calibration.support_m() + self.center_m;
+        if slide_unsure(&center_m, &lin.pose, motion, self.slide_reach_m()) {
+            self.slide = SlideDirection::new();
+        }
+        self.slide.update(lin.pose.support_distance_m);
         let rod_dir = &lin.pose.rod_dir;
         let sigma = self.slide.sign().sigma();
         let keep_axial = sigma.is_some();
@@ -490,6 +514,22 @@ impl SupportWatch {
         })
     }
 
+    /// How far from B0 + center the support may be, m, for the slide's
+    /// sign: the determined estimate's distance from the center plus
+    /// [`SLIDE_SIGMA`] standard errors on each axis, at most
+    /// [`SLIDE_SHIFT_M`] (before any component is determined, the prior's
+    /// standard error makes it `SLIDE_SHIFT_M`).
+    fn slide_reach_m(&self) -> f64 {
+        let s = self.solve();
+        s.shift_m
+            .iter()
+            .zip(self.center_m.iter())
+            .zip(s.std_m.iter())
+            .map(|((v, c), sd)| (v - c).abs() + SLIDE_SIGMA * sd)
+            .fold(0.0, f64::max)
+            .min(SLIDE_SHIFT_M)
+    }
+
     /// Moves the linearisation point to the determined components of the
     /// estimate when it is more than [`RECENTER_M`] away; the sums follow
     /// (the residual about the new point is r + J dc, to first order).
@@ -512,6 +552,9 @@ impl SupportWatch {
         self.rhs_c += self.info_bc.transpose() * dc;
         self.rhs_b += self.info_b * dc;
         self.center_m = target;
+        // The slide is followed about the new point: its distance jumps,
+        // the sign is unknown until the next sure slide.
+        self.slide = SlideDirection::new();
         true
     }
 
@@ -669,6 +712,23 @@ impl SupportWatch {
             *std <= self.config.max_std_m && off > self.config.max_shift_m && off > NAME_SIGMA * std
         })
     }
+}
+
+/// Whether the carriage's motion slides the rod through the support at
+/// `support_m` one way but possibly the other way for a support up to
+/// `reach_m` from it: the distance a = |B - A| (along the rod) shrinks as
+/// (B - A) . A' > 0, and for every B within `reach_m` that sign is the
+/// same only when |(B - A) . A'| > reach_m |A'|. A move across the rod
+/// (turning it) slides it by a second-order amount whose direction depends
+/// on where B really is: with B 10 mm above the configured B, the slide
+/// about the configured B had the other sign than the true one for 13 % of
+/// the check's moving samples (0.3 N of friction read with the wrong sign
+/// along the rod), which read as a contact and a wrong shift. At rest
+/// (A' = 0) the last slide's sign stays.
+fn slide_unsure(support_m: &Vec3, pose: &Pose, motion: &CarriageMotion, reach_m: f64) -> bool {
+    let speed_mps = motion.velocity_mps.norm();
+    let towards_m = (support_m - pose.ujoint_m).dot(&motion.velocity_mps);
+    speed_mps > 0.0 && towards_m.abs() <= reach_m * speed_mps
 }
 
 /// 1 for each component of `s` determined under `max_std_m`, 0 for the others.

@@ -46,15 +46,30 @@ struct Run {
 }
 
 /// The moves of [`SUPPORT_CHECK_OFFSETS_M`], each until the trajectory rests, then
-/// 0.3 s at the pose; `rounds` times.
-fn check_moves(rig: &mut Rig, rounds: usize, named: &mut Option<u64>) {
+/// 0.3 s at the pose; `rounds` times. With `hold_ms`, each move held that
+/// many cycles instead (whether the pose was reached or not: a move slower
+/// than the hold is replaced by the next one on its way).
+fn held_moves(rig: &mut Rig, rounds: usize, hold_ms: Option<u32>, named: &mut Option<u64>) {
     let mut id = 10;
     for _ in 0..rounds {
         for off in SUPPORT_CHECK_OFFSETS_M {
             let tip_m = Vec3::new(TIP_M[0] + off[0], TIP_M[1] + off[1], TIP_M[2] + off[2]);
             id += 1;
             let r = rig.request(id, Request::MoveTip { tip_m });
-            assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+            if hold_ms.is_some() && r.status != ReplyStatus::Accepted {
+                // A move replacing one on its way may be refused (the
+                // estimate's transient at the switch): counted, not a failure.
+                println!("  move {id} refused: {}", r.detail);
+            } else {
+                assert_eq!(r.status, ReplyStatus::Accepted, "{}", r.detail);
+            }
+            if let Some(hold_ms) = hold_ms {
+                for _ in 0..hold_ms {
+                    let d = rig.step();
+                    note(named, &d, rig.cycle);
+                }
+                continue;
+            }
             for _ in 0..4000 {
                 let d = rig.step();
                 note(named, &d, rig.cycle);
@@ -82,6 +97,11 @@ fn note(named: &mut Option<u64>, d: &sar_loop::step::LoopOutput, cycle: u64) {
 /// The support shifted by `shift_m` (none: still), its friction 0.3 N, a
 /// tip force `contact_n` from 1.9 s on, then the check's moves.
 fn run(shift_m: Vec3, contact_n: Vec3, rounds: usize) -> (Rig, Run) {
+    run_held(shift_m, contact_n, rounds, None)
+}
+
+/// [`run`] with each pose held `hold_ms` cycles (see [`held_moves`]).
+fn run_held(shift_m: Vec3, contact_n: Vec3, rounds: usize, hold_ms: Option<u32>) -> (Rig, Run) {
     let key = |t_ns: u64, force_n: Vec3| ContactKey { t_ns, force_n };
     let mut rig = Rig::with_scenario(
         Vec::new(),
@@ -115,7 +135,7 @@ fn run(shift_m: Vec3, contact_n: Vec3, rounds: usize) -> (Rig, Run) {
         note(&mut named, &d, rig.cycle);
     }
     let moves_cycle = rig.cycle;
-    check_moves(&mut rig, rounds, &mut named);
+    held_moves(&mut rig, rounds, hold_ms, &mut named);
     let last = rig.log.last().unwrap().1;
     let run = Run {
         status: last.support,
@@ -263,6 +283,43 @@ fn support_shifts_are_estimated_within_their_standard_error() {
             if mm >= 5.0 {
                 assert!(r.named, "{name} {mm}: {s:?}");
             }
+        }
+    }
+}
+
+/// The estimate does not depend on how long each pose is held (issue 34
+/// item 3): each pose held a fixed 2.5 s or 3 s (the check's moves take up
+/// to about 4 s, so most are replaced on their way), one round or two, the
+/// 10 mm shift up is named and read within 3 standard errors; a still
+/// support is never named. Before the friction's sign was left unknown
+/// after the turning moves (`SLIDE_SHIFT_M`), the turns slid the rod one
+/// way about the configured B and the other way about the shifted one (13 %
+/// of the moving samples): 0.3 N of friction read with the wrong sign, one
+/// round held 2.5 s said "could not run" (a contact of -0.78 N found, Y0
+/// +12.1 mm) and two rounds read +7.49 +- 0.40 mm.
+#[test]
+fn a_shift_is_read_alike_whatever_the_holds_at_the_poses() {
+    for rounds in [1, SUPPORT_CHECK_ROUNDS] {
+        for hold_ms in [2500, 3000] {
+            let truth = Vec3::new(0.0, 0.01, 0.0);
+            let (_, shifted) = run_held(truth, Vec3::zeros(), rounds, Some(hold_ms));
+            let (_, still) = run_held(Vec3::zeros(), Vec3::zeros(), rounds, Some(hold_ms));
+            let s = &shifted.status;
+            println!(
+                "each pose held {hold_ms} ms, {rounds} round(s): up 10 mm {:?} chi2/dof {:.2}, contact {:.2?} N, shift (X0, Y0, Z0) mm {}; still {:?} {}",
+                s.verdict,
+                s.chi2_dof,
+                s.contact_n.as_slice(),
+                text(s, shifted.max_std_m),
+                still.status.verdict,
+                text(&still.status, still.max_std_m)
+            );
+            assert!(shifted.named, "{hold_ms} {rounds}: {s:?}");
+            assert!(
+                (s.shift_m.y - truth.y).abs() < 3.0 * s.std_m.y,
+                "{hold_ms} {rounds}: {s:?}"
+            );
+            assert!(!still.named, "{hold_ms} {rounds}: {:?}", still.status);
         }
     }
 }
