@@ -16,6 +16,79 @@ use sar_estimator::support::{SupportVerdict, SupportWatch, SupportWatchConfig};
 use sar_estimator::tip_force::{TipForceConfig, TipForceEstimator};
 use sar_kinematics::ActiveJoints;
 
+/// The watch on the example calibration and manipulator 2, fed the
+/// HEX-6's noisy readings of the independent statics (`tests/common`).
+struct Bench {
+    cal: sar_estimator::Calibration,
+    profile: sar_estimator::Profile,
+    base: TipForceEstimator,
+    sensor: NoisySensor,
+    w: SupportWatch,
+}
+
+impl Bench {
+    /// The watch as configured by default; the noise seeded by `seed`.
+    fn new(seed: u64) -> Self {
+        let cal = example_calibration();
+        let profile = manipulator2();
+        let noise = SensorNoise::hex6();
+        let base =
+            TipForceEstimator::new(&cal, &profile, &noise, TipForceConfig::default()).unwrap();
+        let w = SupportWatch::new(SupportWatchConfig::DEFAULT, &cal, &profile, &base).unwrap();
+        let sensor = NoisySensor::new(noise.std_n().into(), seed);
+        Self {
+            cal,
+            profile,
+            base,
+            sensor,
+            w,
+        }
+    }
+
+    /// `samples` readings at rest of the rod along `u` through `truth`'s
+    /// support, `a_m` past it (A = B - a u), the tip pushed by `tip_n` and
+    /// the friction's sign `sigma`, each fed to the watch; `after` sees the
+    /// watch after each.
+    #[allow(clippy::too_many_arguments)]
+    fn feed(
+        &mut self,
+        truth: &Truth,
+        u: Vector3<f64>,
+        a_m: f64,
+        tip_n: Vector3<f64>,
+        sigma: f64,
+        samples: u32,
+        mut after: impl FnMut(&SupportWatch),
+    ) {
+        let ujoint_m = truth.support_m - u * a_m;
+        let (_, wv) = rod_frame(u.x.atan2(u.z), u.y.asin());
+        let (f_a, _) = ujoint_force(truth, &ujoint_m, &u, &wv, &tip_n, sigma);
+        let ideal = ideal_reading(&Matrix3::identity(), &f_a, &Vector3::zeros());
+        let q = ActiveJoints {
+            q1_m: ujoint_m.z,
+            q2_m: ujoint_m.y + 0.08,
+            q3_m: ujoint_m.x,
+        };
+        let pose = sar_kinematics::forward(&self.cal, &self.profile, &q).unwrap();
+        for _ in 0..samples {
+            let reading = self.sensor.sample(&ideal);
+            let e = self
+                .base
+                .estimate(&pose, &reading, &Vector3::zeros())
+                .unwrap();
+            self.w.observe(
+                &q,
+                &reading,
+                &Vector3::zeros(),
+                &CarriageMotion::REST,
+                &e,
+                &pose,
+            );
+            after(&self.w);
+        }
+    }
+}
+
 /// Feeds `samples` noisy free-tip samples at each pose of a cone of half
 /// angle 10 degrees about +X0 (the rod through the true support at a =
 /// 0.15, 0.2, 0.25 m), the rod sliding in then out; the watch's status.
@@ -25,52 +98,26 @@ fn watch(
     tip_n: Vector3<f64>,
     samples: u32,
 ) -> SupportWatch {
-    let cal = example_calibration();
-    let profile = manipulator2();
-    let noise = SensorNoise::hex6();
-    let base = TipForceEstimator::new(&cal, &profile, &noise, TipForceConfig::default()).unwrap();
-    let mut w = SupportWatch::new(SupportWatchConfig::DEFAULT, &cal, &profile, &base).unwrap();
+    let mut bench = Bench::new(11);
     let truth = Truth {
-        support_m: cal.support_m() + shift_m,
+        support_m: bench.cal.support_m() + shift_m,
         friction_n,
         ..manipulator2_truth()
     };
-    let mut sensor = NoisySensor::new(noise.std_n().into(), 11);
     let half = 10f64.to_radians();
     for _ in 0..2 {
         for k in 0..8 {
             let phi = f64::from(k) * core::f64::consts::FRAC_PI_4;
             let u = Vector3::new(half.cos(), half.sin() * phi.cos(), half.sin() * phi.sin());
-            for (j, a) in [0.15, 0.2, 0.25].into_iter().enumerate() {
+            for (j, a_m) in [0.15, 0.2, 0.25].into_iter().enumerate() {
                 // a grows within a direction (the rod slides out, against
                 // u) and shrinks back to 0.15 m at the next (in, along u).
                 let sigma = if j == 0 { 1.0 } else { -1.0 };
-                let a_m = truth.support_m - u * a;
-                let (_, wv) = rod_frame(u.x.atan2(u.z), u.y.asin());
-                let (f_a, _) = ujoint_force(&truth, &a_m, &u, &wv, &tip_n, sigma);
-                let ideal = ideal_reading(&Matrix3::identity(), &f_a, &Vector3::zeros());
-                let q = ActiveJoints {
-                    q1_m: a_m.z,
-                    q2_m: a_m.y + 0.08,
-                    q3_m: a_m.x,
-                };
-                let pose = sar_kinematics::forward(&cal, &profile, &q).unwrap();
-                for _ in 0..samples {
-                    let reading = sensor.sample(&ideal);
-                    let e = base.estimate(&pose, &reading, &Vector3::zeros()).unwrap();
-                    w.observe(
-                        &q,
-                        &reading,
-                        &Vector3::zeros(),
-                        &CarriageMotion::REST,
-                        &e,
-                        &pose,
-                    );
-                }
+                bench.feed(&truth, u, a_m, tip_n, sigma, samples, |_| {});
             }
         }
     }
-    w
+    bench.w
 }
 
 #[test]
@@ -137,43 +184,18 @@ fn a_contact_is_not_taken_for_a_shift() {
 /// component of the shift: nothing is named, however long it lasts.
 #[test]
 fn a_small_contact_at_one_pose_is_never_named() {
-    let cal = example_calibration();
-    let profile = manipulator2();
-    let noise = SensorNoise::hex6();
-    let base = TipForceEstimator::new(&cal, &profile, &noise, TipForceConfig::default()).unwrap();
-    let mut w = SupportWatch::new(SupportWatchConfig::DEFAULT, &cal, &profile, &base).unwrap();
+    let mut bench = Bench::new(5);
     let truth = manipulator2_truth();
-    let mut sensor = NoisySensor::new(noise.std_n().into(), 5);
-    let u = Vector3::x();
-    let a_m = truth.support_m - u * 0.2;
-    let (_, wv) = rod_frame(u.x.atan2(u.z), u.y.asin());
     let tip_n = Vector3::new(1.0, -0.5, 0.0);
-    let (f_a, _) = ujoint_force(&truth, &a_m, &u, &wv, &tip_n, 0.0);
-    let ideal = ideal_reading(&Matrix3::identity(), &f_a, &Vector3::zeros());
-    let q = ActiveJoints {
-        q1_m: a_m.z,
-        q2_m: a_m.y + 0.08,
-        q3_m: a_m.x,
-    };
-    let pose = sar_kinematics::forward(&cal, &profile, &q).unwrap();
-    for _ in 0..20_000 {
-        let reading = sensor.sample(&ideal);
-        let e = base.estimate(&pose, &reading, &Vector3::zeros()).unwrap();
-        w.observe(
-            &q,
-            &reading,
-            &Vector3::zeros(),
-            &CarriageMotion::REST,
-            &e,
-            &pose,
-        );
+    bench.feed(&truth, Vector3::x(), 0.2, tip_n, 0.0, 20_000, |w| {
         assert_ne!(
             w.status().verdict,
             SupportVerdict::Shifted,
             "{:?}",
             w.status()
         );
-    }
+    });
+    let w = bench.w;
     let s = w.status();
     println!("one pose, 1 N along and 0.5 N down: {s:?}");
     for k in 0..3 {

@@ -54,10 +54,6 @@ max_speed_mps = 0.05
 max_accel_mps2 = 1.0
 servo_bandwidth_hz = 30.0               # as the drives' manual says
 
-[guard]
-# A loaded test machine stalls a thread now and then (identify_live.rs).
-max_sensor_age_s = 0.2
-max_joints_age_s = 0.2
 
 [plausibility]
 max_counter_gap = 25
