@@ -110,7 +110,14 @@ pub fn segments(cycles: &[CycleInput], period_ns: u64) -> Vec<Segment> {
         }
     };
     for c in cycles {
-        let enabled = c.drive_state == DriveStateCode::Enabled && c.joints_valid;
+        // A non-finite value (a damaged or crafted recording) cuts the
+        // segment like a cycle without drives: it never reaches the fit.
+        let finite = |q: &[f64; 3]| q.iter().all(|v| v.is_finite());
+        let enabled = c.drive_state == DriveStateCode::Enabled
+            && c.joints_valid
+            && finite(&c.joints_q_m)
+            && finite(&c.target_q_m)
+            && finite(&c.setpoint_q_m);
         let streamed = c.drive_action == DriveActionCode::Stream;
         if !enabled || !(c.target_valid || streamed) {
             close(&mut seg);
@@ -761,6 +768,10 @@ mod tests {
         cycles.push(cycle(6, DriveActionCode::None, 0.2));
         let segs = segments(&cycles, period_of(&cycles));
         assert_eq!(segs.len(), 2);
+        // A non-finite encoder value cuts like a cycle without drives.
+        let mut damaged = cycles.clone();
+        damaged[4].joints_q_m[1] = f64::NAN;
+        assert_eq!(segments(&damaged, period_of(&damaged)).len(), 1);
         let knots: Vec<_> = segs[0].knots.iter().map(|k| (k.t_ns, k.q_m[0])).collect();
         assert_eq!(
             knots,
